@@ -1,0 +1,33 @@
+"""Kinematic constraints on a point of the robot's chain.
+
+Each constraint computes, at a configuration, its structure matrix ``S`` (the paper's
+reparametrisation of the twist of ``F_a``), its joint-space rows ``A qd = b`` with drift
+feedback, and its position error. See ``base.Constraint``.
+"""
+
+from .barrier import DEFAULT_BARRIER_GAIN, Barrier
+from .base import (
+    DEFAULT_GAIN,
+    Constraint,
+    ConstraintPoint,
+    RobotLike,
+    structure_nullspace,
+    structure_paper,
+)
+from .hole import Hole
+from .plane import Plane
+from .point_lock import PointLock
+
+__all__ = [
+    "Barrier",
+    "Constraint",
+    "ConstraintPoint",
+    "DEFAULT_BARRIER_GAIN",
+    "DEFAULT_GAIN",
+    "Hole",
+    "Plane",
+    "PointLock",
+    "RobotLike",
+    "structure_nullspace",
+    "structure_paper",
+]

@@ -1,0 +1,69 @@
+"""Barrier: a point of the link stays on the positive side of a plane (one inequality)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .plane import Plane
+
+#: Default barrier gain (1/s): the point may approach the plane at most at ``K d`` m/s.
+DEFAULT_BARRIER_GAIN = 100.0
+
+
+class Barrier(Plane):
+    """One inequality: ``n . v_c >= -K d + n . v_plane`` (a velocity damper).
+
+    ``d`` is the signed distance of the link point from the plane, positive on the
+    allowed side. Far from the plane the row is inactive; the point approaches it
+    exponentially, at most at ``K d`` m/s, and never crosses it in continuous time (in
+    discrete time at period ``dt``, for ``K dt <= 1``). This is the DESIGN.md section 4
+    row ``-n^T v_c <= gamma d / dt`` with ``gamma = K dt``. A point already on the wrong
+    side (``d < 0``) is pushed back at ``K |d|``.
+
+    The QP uses the row as an inequality; the CJM switches it on as the plane equality
+    ``n . v_c = -K d + n . v_plane`` when its unconstrained solution would violate it.
+    """
+
+    is_equality = False
+
+    def __init__(
+        self,
+        link: str,
+        link_point,
+        plane_point,
+        normal,
+        gain: float = DEFAULT_BARRIER_GAIN,
+        velocity=(0.0, 0.0, 0.0),
+    ) -> None:
+        super().__init__(link, link_point, plane_point, normal, gain=gain, velocity=velocity)
+
+    @classmethod
+    def through_link_point(cls, robot, q, normal, link_point=None, distance=None, link=None,
+                           gain: float = DEFAULT_BARRIER_GAIN, tolerance: float = 1e-3,
+                           plane_point=None) -> "Barrier":
+        """A barrier plane (world ``plane_point``, ``normal``) guarding a link point.
+
+        The point (``link_point`` in link coordinates, or ``distance`` m along the link
+        axis) must be on the allowed side at ``q``: more than ``tolerance`` m behind the
+        plane raises ``ValueError`` saying how far. Without ``plane_point`` the plane
+        passes through the point's current position.
+        """
+        return super().through_link_point(robot, q, normal, link_point=link_point,
+                                          distance=distance, link=link, gain=gain,
+                                          tolerance=tolerance, plane_point=plane_point)
+
+    def _check_start(self, signed_distance: float, tolerance: float) -> None:
+        if signed_distance < -tolerance:
+            raise ValueError(
+                f"link point is {-signed_distance:.4g} m on the wrong side of the barrier "
+                f"(tolerance {tolerance:g} m)"
+            )
+
+    def penetration(self, placement: pin.SE3) -> float:
+        """How far (m) the point is behind the barrier; 0 on the allowed side."""
+        return max(0.0, -self.signed_distance(placement))
+
+    def is_violated_by(self, constraint_velocity: float, placement: pin.SE3) -> bool:
+        """Whether ``n . v_c`` = ``constraint_velocity`` breaks the row at ``placement``."""
+        return constraint_velocity < float(self.evaluate(placement).rhs[0])

@@ -1,0 +1,282 @@
+"""Common base of the kinematic constraints on a point of the robot's chain.
+
+Notation (DESIGN.md sections 2-3, paper sections 4-5). ``F_a`` is the frame of the link
+that carries the constrained point (for a URDF link driven by a joint, the frame of that
+joint); every vector below is in ``F_a`` coordinates unless it says *world*.
+
+* ``V_a = [v; w]`` the body twist of ``F_a`` (Pinocchio ``LOCAL``, linear first).
+* ``p`` the constrained point, so its velocity is ``v_c = v + w x p = v - hat(p) w``.
+* ``C`` (k x 3, orthonormal rows) the directions along which the point may not move.
+
+An equality constraint asks ``C v_c = b`` with ``b = -K e + feed_forward``, ``e`` the
+position error in metres along ``C`` (drift feedback, DESIGN.md section 3). An inequality
+(a barrier) asks ``C v_c >= b``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import numpy as np
+import pinocchio as pin
+
+#: Default drift-feedback gain (1/s). Stable at a control period dt when 0 < K dt < 2;
+#: 50 1/s at the default 1 kHz gives K dt = 0.05, a 20 ms error time constant.
+DEFAULT_GAIN = 50.0
+
+Parametrisation = Literal["nullspace", "paper"]
+
+
+class RobotLike(Protocol):
+    """What a constraint needs from a robot (``teleop.Robot`` satisfies it)."""
+
+    model: pin.Model
+    constrained_link: str | None
+    link_axis: np.ndarray
+
+
+@dataclass(frozen=True)
+class ConstraintPoint:
+    """One evaluation of a constraint at a configuration, all in ``F_a`` coordinates.
+
+    Attributes
+    ----------
+    p : (3,) constrained point in ``F_a``.
+    C : (k, 3) orthonormal rows: the constrained directions.
+    error : (k,) position error along ``C`` in metres (signed distance for a plane).
+    rhs : (k,) required ``C v_c``: ``-K e`` plus the feed-forward of moving geometry
+        (equality); the lower bound of ``C v_c`` (barrier).
+    point_world : (3,) the constrained point in the world frame.
+    """
+
+    p: np.ndarray
+    C: np.ndarray
+    error: np.ndarray
+    rhs: np.ndarray
+    point_world: np.ndarray
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def as_vector(value, size: int, name: str) -> np.ndarray:
+    """Return ``value`` as a finite float array of shape ``(size,)`` or raise ``ValueError``."""
+    array = np.asarray(value, dtype=float)
+    if array.shape != (size,):
+        raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be finite, got {array}")
+    return array.copy()
+
+
+def as_unit_vector(value, name: str, tolerance: float = 1e-6) -> np.ndarray:
+    """Return ``value`` as a unit 3-vector; zero or non-unit vectors raise ``ValueError``.
+
+    A vector whose norm differs from one by more than ``tolerance`` is refused rather than
+    silently normalised: a normal of norm 2 is almost always a bug in the caller.
+    """
+    vector = as_vector(value, 3, name)
+    norm = float(np.linalg.norm(vector))
+    if norm < 1e-12:
+        raise ValueError(f"{name} must be a unit vector, got the zero vector")
+    if abs(norm - 1.0) > tolerance:
+        raise ValueError(f"{name} must be a unit vector, got norm {norm:.6g}")
+    return vector / norm
+
+
+def orthonormal_complement(rows: np.ndarray) -> np.ndarray:
+    """Rows spanning the orthogonal complement in R^3 of the (orthonormal) ``rows``."""
+    k = rows.shape[0]
+    if k == 3:
+        return np.zeros((0, 3))
+    _, _, vt = np.linalg.svd(np.vstack([rows, np.zeros((3 - k, 3))]))
+    return vt[k:].copy()
+
+
+def perpendicular_basis(axis: np.ndarray) -> np.ndarray:
+    """Two orthonormal rows perpendicular to the unit ``axis`` (right-handed with it)."""
+    helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
+    first = np.cross(axis, helper)
+    first /= np.linalg.norm(first)
+    second = np.cross(axis, first)
+    return np.vstack([first, second])
+
+
+def resolve_frame(model: pin.Model, link: str) -> int:
+    """Frame id of ``link`` in ``model``; unknown names raise ``ValueError`` naming it."""
+    if not isinstance(link, str) or not model.existFrame(link):
+        bodies = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+        raise ValueError(f"unknown link {link!r}; the model's links are {bodies}")
+    return model.getFrameId(link)
+
+
+def default_link(robot: RobotLike, link: str | None) -> str:
+    """``link`` or the robot's constrained link; raise if neither is known."""
+    if link is not None:
+        return link
+    if robot.constrained_link is None:
+        raise ValueError(
+            "this robot has no constrained_link: pass link=... or load the robot "
+            "with constrained_link=..."
+        )
+    return robot.constrained_link
+
+
+def frame_placement(robot: RobotLike, q: np.ndarray, frame_id: int) -> pin.SE3:
+    """World placement of a frame at configuration ``q`` (validated)."""
+    model = robot.model
+    q = as_vector(q, model.nq, "q")
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    return data.oMf[frame_id].copy()
+
+
+def structure_nullspace(p: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Singularity-free structure matrix ``S`` (6 x (6-k)) of DESIGN.md section 3.
+
+    ``V_a = S [u; w]`` with ``v = C_perp^T u + C^T C hat(p) w``: the point ``p`` then
+    moves with ``C v_c = C C^T C hat(p) w - C hat(p) w = 0`` for every ``u, w``. The
+    columns span exactly ``null(C [I, -hat(p)])`` and stay well conditioned when ``p``
+    approaches the origin of ``F_a`` (where the paper's ``1/a`` form, eqs 9 and 11-13,
+    is singular).
+    """
+    k = C.shape[0]
+    S = np.zeros((6, 6 - k))
+    S[:3, : 3 - k] = orthonormal_complement(C).T
+    S[:3, 3 - k :] = C.T @ (C @ pin.skew(p))
+    S[3:, 3 - k :] = np.eye(3)
+    return S
+
+
+def structure_paper(p: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """The paper's structure matrix (eqs 9-10 plane, 11-13 hole), for any axis.
+
+    With ``p = a e`` (``a = |p|``) and constrained directions ``c_i`` perpendicular to
+    ``e``, the paper pairs each constrained linear velocity ``v_i`` with the angular
+    velocity ``(v_i / a) (c_i x e)`` that cancels it at the point. For the hole with
+    ``e = z`` this is eq 13: ``V_a = [v1, v2, v_z, v2/a, -v1/a, w_z]``. The remaining
+    columns are the free linear directions ``C_perp`` and the angular directions
+    orthogonal to every ``c_i x e``. Undefined at ``a = 0`` and when ``C p != 0``.
+    """
+    a = float(np.linalg.norm(p))
+    k = C.shape[0]
+    if a < 1e-9:
+        raise ValueError(
+            "the paper's parametrisation is singular at a = 0 (constrained point at the "
+            "origin of F_a): use parametrisation='nullspace'"
+        )
+    e = p / a
+    if k > 2 or np.max(np.abs(C @ e)) > 1e-9:
+        raise ValueError(
+            "the paper's parametrisation needs at most 2 constrained directions, all "
+            "perpendicular to the point's position p; use parametrisation='nullspace'"
+        )
+    D = np.cross(C, e)  # rows c_i x e, orthonormal since c_i ⟂ e
+    S = np.zeros((6, 6 - k))
+    S[:3, :k] = C.T
+    S[3:, :k] = D.T / a
+    S[:3, k:3] = orthonormal_complement(C).T
+    S[3:, 3:] = orthonormal_complement(D).T
+    return S
+
+
+# ----------------------------------------------------------------------------- base
+
+
+class Constraint(ABC):
+    """A constraint on one point of one link of the chain.
+
+    Subclasses say where the point is and which directions are constrained; this base
+    class turns that into the structure matrix ``S`` (for the analytical CJM) and the
+    joint-space rows ``A qd = b`` (for the general CJM and the QP).
+
+    Parameters
+    ----------
+    link : name of the link (frame) carrying the constrained point.
+    gain : drift-feedback gain ``K`` in 1/s (``C v_c = -K e``).
+    """
+
+    #: number of constrained directions k
+    dim: int
+    #: True for ``C v_c = b``, False for the one-sided ``C v_c >= b`` (barrier)
+    is_equality: bool = True
+
+    def __init__(self, link: str, gain: float = DEFAULT_GAIN) -> None:
+        if not isinstance(link, str) or not link:
+            raise ValueError(f"link must be a non-empty link name, got {link!r}")
+        gain = float(gain)
+        if not np.isfinite(gain) or gain < 0.0:
+            raise ValueError(f"gain must be a finite non-negative number (1/s), got {gain}")
+        self.link = link
+        self.gain = gain
+
+    # -- geometry, in F_a coordinates, given the link's world placement --------------
+
+    @abstractmethod
+    def point(self, placement: pin.SE3) -> np.ndarray:
+        """The constrained point ``p`` (3,) in link coordinates."""
+
+    @abstractmethod
+    def directions(self, placement: pin.SE3) -> np.ndarray:
+        """The constrained directions ``C`` (k x 3, orthonormal rows) in link coordinates."""
+
+    @abstractmethod
+    def error(self, placement: pin.SE3) -> np.ndarray:
+        """Position error (k,) in metres along ``C``."""
+
+    def feed_forward(self, placement: pin.SE3) -> np.ndarray:
+        """``C v`` for the velocity of the constraint's own geometry (moving hole/plane)."""
+        return np.zeros(self.dim)
+
+    def evaluate(self, placement: pin.SE3) -> ConstraintPoint:
+        """Everything a controller needs at one configuration, computed once."""
+        p = self.point(placement)
+        C = self.directions(placement)
+        e = self.error(placement)
+        return ConstraintPoint(
+            p=p,
+            C=C,
+            error=e,
+            rhs=-self.gain * e + self.feed_forward(placement),
+            point_world=placement.act(p),
+        )
+
+    # -- what the controllers use ------------------------------------------------------
+
+    def structure(
+        self, placement: pin.SE3, parametrisation: Parametrisation = "nullspace"
+    ) -> np.ndarray:
+        """Structure matrix ``S`` (6 x (6-k)) with ``V_a = S [free variables]``."""
+        state = self.evaluate(placement)
+        if parametrisation == "nullspace":
+            return structure_nullspace(state.p, state.C)
+        if parametrisation == "paper":
+            return structure_paper(state.p, state.C)
+        raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
+
+    def particular_twist(self, placement: pin.SE3) -> np.ndarray:
+        """A twist ``V_a0 = [C^T b; 0]`` with ``C v_c = b`` (drift and feed-forward)."""
+        state = self.evaluate(placement)
+        return np.concatenate([state.C.T @ state.rhs, np.zeros(3)])
+
+    def rows(
+        self, model: pin.Model, data: pin.Data, frame_id: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Joint-space rows ``(A, b)``: ``A qd = b`` (or ``>= b`` for a barrier).
+
+        ``A = C [I, -hat(p)] J_a`` with ``J_a`` the ``LOCAL`` Jacobian of the link. The
+        caller must have run ``pin.computeJointJacobians`` and
+        ``pin.updateFramePlacements`` on ``data`` for the current ``q``.
+        """
+        if frame_id is None:
+            frame_id = resolve_frame(model, self.link)
+        placement = data.oMf[frame_id]
+        state = self.evaluate(placement)
+        jacobian = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL)
+        point_jacobian = jacobian[:3] - pin.skew(state.p) @ jacobian[3:]
+        return state.C @ point_jacobian, state.rhs
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(link={self.link!r}, gain={self.gain})"

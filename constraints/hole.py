@@ -1,0 +1,134 @@
+"""Hole (trocar, entry point): the link may slide and turn in the hole, not move across it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .base import (
+    DEFAULT_GAIN,
+    Constraint,
+    RobotLike,
+    as_unit_vector,
+    as_vector,
+    default_link,
+    frame_placement,
+    perpendicular_basis,
+    resolve_frame,
+)
+
+#: How far (m) a hole centre may lie off the link axis when a hole is built.
+DEFAULT_AXIS_TOLERANCE = 1e-3
+
+
+class Hole(Constraint):
+    """Two equalities: no velocity of the link across its axis at the hole (paper 5.2).
+
+    The link axis is the line through the origin of ``F_a`` along ``link_axis`` (link
+    coordinates). The constrained point is the point of that line nearest the hole
+    centre, recomputed from the geometry at every evaluation (so the contact point slides
+    along the link during insertion, DESIGN.md section 3): ``p = (e . c_a) e`` with
+    ``c_a`` the hole centre in ``F_a`` coordinates. ``C`` holds two unit vectors
+    perpendicular to ``e`` and the error is the lateral offset of the axis from the
+    centre, ``C (p - c_a)``.
+
+    Parameters
+    ----------
+    link : the link that passes through the hole.
+    center : (3,) hole centre, world frame (m).
+    link_axis : (3,) unit vector along the link, link coordinates.
+    gain : drift-feedback gain K (1/s).
+    velocity : (3,) world velocity of the hole centre (m/s), fed forward.
+    """
+
+    dim = 2
+
+    def __init__(
+        self,
+        link: str,
+        center,
+        link_axis=(0.0, 0.0, 1.0),
+        gain: float = DEFAULT_GAIN,
+        velocity=(0.0, 0.0, 0.0),
+    ) -> None:
+        super().__init__(link, gain)
+        self.center = as_vector(center, 3, "hole center")
+        self.velocity = as_vector(velocity, 3, "hole velocity")
+        self.link_axis = as_unit_vector(link_axis, "link_axis")
+        self._C = perpendicular_basis(self.link_axis)
+
+    @classmethod
+    def on_link(
+        cls,
+        robot: RobotLike,
+        q: np.ndarray,
+        distance: float,
+        link: str | None = None,
+        link_axis=None,
+        gain: float = DEFAULT_GAIN,
+    ) -> "Hole":
+        """A hole where the link axis is now, ``distance`` m along the axis from ``F_a``.
+
+        ``link`` and ``link_axis`` default to the robot's ``constrained_link`` and
+        ``link_axis``.
+        """
+        distance = float(distance)
+        if not np.isfinite(distance):
+            raise ValueError(f"distance must be finite, got {distance}")
+        link = default_link(robot, link)
+        axis = as_unit_vector(robot.link_axis if link_axis is None else link_axis, "link_axis")
+        placement = frame_placement(robot, q, resolve_frame(robot.model, link))
+        center = placement.act(distance * axis)
+        return cls(link, center, link_axis=axis, gain=gain)
+
+    @classmethod
+    def at(
+        cls,
+        robot: RobotLike,
+        q: np.ndarray,
+        center,
+        link: str | None = None,
+        link_axis=None,
+        gain: float = DEFAULT_GAIN,
+        tolerance: float = DEFAULT_AXIS_TOLERANCE,
+    ) -> "Hole":
+        """A hole at a world ``center`` that must lie on the link axis at ``q``.
+
+        Raises ``ValueError`` saying by how much the centre is off the axis when the
+        offset exceeds ``tolerance`` (m).
+        """
+        link = default_link(robot, link)
+        axis = as_unit_vector(robot.link_axis if link_axis is None else link_axis, "link_axis")
+        hole = cls(link, center, link_axis=axis, gain=gain)
+        placement = frame_placement(robot, q, resolve_frame(robot.model, link))
+        offset = float(np.linalg.norm(hole.error(placement)))
+        if offset > tolerance:
+            raise ValueError(
+                f"hole centre {np.round(hole.center, 6).tolist()} is off the axis of link "
+                f"{link!r} by {offset:.4g} m (tolerance {tolerance:g} m)"
+            )
+        return hole
+
+    def move_to(self, center, velocity=(0.0, 0.0, 0.0)) -> None:
+        """Move the hole (world centre, m) and set its velocity (m/s) for feed-forward."""
+        self.center = as_vector(center, 3, "hole center")
+        self.velocity = as_vector(velocity, 3, "hole velocity")
+
+    def _center_local(self, placement: pin.SE3) -> np.ndarray:
+        return placement.actInv(self.center)
+
+    def point(self, placement: pin.SE3) -> np.ndarray:
+        return float(self.link_axis @ self._center_local(placement)) * self.link_axis
+
+    def directions(self, placement: pin.SE3) -> np.ndarray:
+        return self._C
+
+    def error(self, placement: pin.SE3) -> np.ndarray:
+        return -self._C @ self._center_local(placement)
+
+    def depth(self, placement: pin.SE3) -> float:
+        """Where the link crosses the hole: metres along the axis from ``F_a``."""
+        return float(self.link_axis @ self._center_local(placement))
+
+    def feed_forward(self, placement: pin.SE3) -> np.ndarray:
+        return self._C @ (placement.rotation.T @ self.velocity)

@@ -1,0 +1,116 @@
+"""Plane: a point of the link may move in a plane but not along its normal (paper 5.1)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .base import (
+    DEFAULT_GAIN,
+    Constraint,
+    RobotLike,
+    as_unit_vector,
+    as_vector,
+    default_link,
+    frame_placement,
+    resolve_frame,
+)
+
+#: How far (m) the link point may be from the plane when a plane is built.
+DEFAULT_PLANE_TOLERANCE = 1e-3
+
+
+class Plane(Constraint):
+    """One equality: the material point ``p`` of a link keeps zero velocity along ``n``.
+
+    The point is fixed on the link (link coordinates). The error is its signed distance
+    to the plane, ``e = n . (x_c - x_0)``, and ``C = (R_a^T n)^T``.
+
+    Parameters
+    ----------
+    link : the link carrying the point.
+    link_point : (3,) the point, link coordinates (m).
+    plane_point : (3,) a point of the plane, world frame (m).
+    normal : (3,) unit normal of the plane, world frame.
+    gain : drift-feedback gain K (1/s).
+    velocity : (3,) world velocity of the plane (translation only), fed forward.
+    """
+
+    dim = 1
+
+    def __init__(
+        self,
+        link: str,
+        link_point,
+        plane_point,
+        normal,
+        gain: float = DEFAULT_GAIN,
+        velocity=(0.0, 0.0, 0.0),
+    ) -> None:
+        super().__init__(link, gain)
+        self.link_point = as_vector(link_point, 3, "link_point")
+        self.plane_point = as_vector(plane_point, 3, "plane_point")
+        self.normal = as_unit_vector(normal, "plane normal")
+        self.velocity = as_vector(velocity, 3, "plane velocity")
+
+    @classmethod
+    def through_link_point(
+        cls,
+        robot: RobotLike,
+        q: np.ndarray,
+        normal,
+        link_point=None,
+        distance: float | None = None,
+        link: str | None = None,
+        gain: float = DEFAULT_GAIN,
+        tolerance: float = DEFAULT_PLANE_TOLERANCE,
+        plane_point=None,
+    ) -> "Plane":
+        """A plane through a link point as it is at ``q``, with a world ``normal``.
+
+        Give the point either as ``link_point`` (link coordinates) or as ``distance``
+        metres along the robot's ``link_axis``. With ``plane_point`` given, the plane
+        passes there instead, and a link point farther than ``tolerance`` from it raises
+        ``ValueError`` saying how far.
+        """
+        link = default_link(robot, link)
+        if (link_point is None) == (distance is None):
+            raise ValueError("give exactly one of link_point or distance")
+        if link_point is None:
+            link_point = float(distance) * as_unit_vector(robot.link_axis, "link_axis")
+        link_point = as_vector(link_point, 3, "link_point")
+        placement = frame_placement(robot, q, resolve_frame(robot.model, link))
+        point_world = placement.act(link_point)
+        if plane_point is None:
+            plane_point = point_world
+        plane = cls(link, link_point, plane_point, normal, gain=gain)
+        plane._check_start(plane.signed_distance(placement), tolerance)
+        return plane
+
+    def _check_start(self, signed_distance: float, tolerance: float) -> None:
+        if abs(signed_distance) > tolerance:
+            raise ValueError(
+                f"link point is {abs(signed_distance):.4g} m from the plane "
+                f"(tolerance {tolerance:g} m): the point must lie on the plane"
+            )
+
+    def move_to(self, plane_point, velocity=(0.0, 0.0, 0.0)) -> None:
+        """Move the plane (a world point on it, m) and set its velocity (m/s)."""
+        self.plane_point = as_vector(plane_point, 3, "plane_point")
+        self.velocity = as_vector(velocity, 3, "plane velocity")
+
+    def point(self, placement: pin.SE3) -> np.ndarray:
+        return self.link_point
+
+    def directions(self, placement: pin.SE3) -> np.ndarray:
+        return (placement.rotation.T @ self.normal)[None, :]
+
+    def signed_distance(self, placement: pin.SE3) -> float:
+        """Signed distance (m) of the link point from the plane, positive along ``n``."""
+        return float(self.normal @ (placement.act(self.link_point) - self.plane_point))
+
+    def error(self, placement: pin.SE3) -> np.ndarray:
+        return np.array([self.signed_distance(placement)])
+
+    def feed_forward(self, placement: pin.SE3) -> np.ndarray:
+        return np.array([float(self.normal @ self.velocity)])

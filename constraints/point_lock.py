@@ -1,0 +1,73 @@
+"""Point lock: a point of the link may not move at all (a spherical joint to the world)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .base import (
+    DEFAULT_GAIN,
+    Constraint,
+    RobotLike,
+    as_unit_vector,
+    as_vector,
+    default_link,
+    frame_placement,
+    resolve_frame,
+)
+
+
+class PointLock(Constraint):
+    """Three equalities: the material point ``p`` of a link stays at a world ``target``.
+
+    ``C = R_a`` (its rows are the world axes in link coordinates), so the error is the
+    world offset ``x_c - target`` and ``C v_c`` the world velocity of the point.
+
+    Parameters
+    ----------
+    link : the link carrying the point.
+    link_point : (3,) the point, link coordinates (m).
+    target : (3,) where it must stay, world frame (m).
+    gain : drift-feedback gain K (1/s).
+    velocity : (3,) world velocity of the target, fed forward.
+    """
+
+    dim = 3
+
+    def __init__(self, link: str, link_point, target, gain: float = DEFAULT_GAIN,
+                 velocity=(0.0, 0.0, 0.0)) -> None:
+        super().__init__(link, gain)
+        self.link_point = as_vector(link_point, 3, "link_point")
+        self.target = as_vector(target, 3, "target")
+        self.velocity = as_vector(velocity, 3, "target velocity")
+
+    @classmethod
+    def on_link(cls, robot: RobotLike, q: np.ndarray, link_point=None,
+                distance: float | None = None, link: str | None = None,
+                gain: float = DEFAULT_GAIN) -> "PointLock":
+        """Lock a link point where it is at ``q`` (``link_point`` or ``distance`` on the axis)."""
+        link = default_link(robot, link)
+        if (link_point is None) == (distance is None):
+            raise ValueError("give exactly one of link_point or distance")
+        if link_point is None:
+            link_point = float(distance) * as_unit_vector(robot.link_axis, "link_axis")
+        link_point = as_vector(link_point, 3, "link_point")
+        placement = frame_placement(robot, q, resolve_frame(robot.model, link))
+        return cls(link, link_point, placement.act(link_point), gain=gain)
+
+    def move_to(self, target, velocity=(0.0, 0.0, 0.0)) -> None:
+        """Move the lock point (world, m) and set its velocity (m/s)."""
+        self.target = as_vector(target, 3, "target")
+        self.velocity = as_vector(velocity, 3, "target velocity")
+
+    def point(self, placement: pin.SE3) -> np.ndarray:
+        return self.link_point
+
+    def directions(self, placement: pin.SE3) -> np.ndarray:
+        return placement.rotation
+
+    def error(self, placement: pin.SE3) -> np.ndarray:
+        return placement.act(self.link_point) - self.target
+
+    def feed_forward(self, placement: pin.SE3) -> np.ndarray:
+        return self.velocity.copy()

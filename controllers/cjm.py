@@ -1,0 +1,244 @@
+"""The Constrained Jacobian Matrix controller (the paper's method, sections 4-7)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable
+
+import numpy as np
+import pinocchio as pin
+
+from constraints import Constraint
+from constraints.base import Parametrisation, as_vector
+
+from .base import Controller, Kinematics
+from .linalg import DampingPolicy, damped_least_squares, nullspace
+
+#: Below this smallest singular value of J_a (the Jacobian of F_a over the joints before
+#: the constraint) F_a cannot take every twist and the analytical form hands over to the
+#: general null-space form.
+PRE_CHAIN_SINGULAR = 1e-4
+
+
+@dataclass(frozen=True)
+class ChainSplit:
+    """Velocity indices of the joints before (moving ``F_a``) and after the constraint."""
+
+    pre: np.ndarray
+    post: np.ndarray
+
+
+class CJMController(Controller):
+    """Joint velocities from an EE twist through the Constrained Jacobian Matrix.
+
+    **Analytical form** (one equality constraint, at least 6 joints before it; paper eqs
+    17-24 and 29-32, DESIGN.md section 4)::
+
+        V_a  = S [u; w] + V_a0                       (S from the constraint, V_a0 = drift)
+        V_e  = Ad_ea V_a + J_post qd_post
+        Jbar = [Ad_ea S, J_post]                     (the CJM, 6 x (6 - k + n_post))
+        [u; w; qd_post] = Jbar^-1 (V_e - Ad_ea V_a0) (eq 22; damped, eq 35, near singular)
+        qd_pre = J_a^-1 V_a                          (J_a^+ V_a + posture in null(J_a) if > 6)
+
+    The constraint holds by construction for any solution of the small system.
+
+    **General form** (several constraints, barriers switched on, fewer than 6 joints
+    before the constraint, or a singular pre-chain)::
+
+        A qd = b  ->  qd = qd_0 + N y,  N = null(A),  qd_0 = A^+ b
+        y = (J_e N)^+ (V_e - J_e qd_0)    (damped), posture in null(J_e N)
+
+    **Barriers** are held as plane equalities once the unconstrained solution would
+    break them (an active set, one barrier at a time, most violated first).
+
+    Parameters
+    ----------
+    robot, constraints, strict : see :class:`controllers.base.Controller`.
+    damping : constant DLS damping ``lambda`` (paper eq 35); 0 gives the exact inverse.
+    singular_threshold, max_damping : the rising damping near singularity
+        (:class:`controllers.linalg.DampingPolicy`).
+    parametrisation : ``"nullspace"`` (singularity-free, default) or ``"paper"`` (the
+        ``1/a`` form of eqs 9-13).
+    posture : configuration the redundancy is spent on (default ``robot.q_home``).
+    posture_gain : gain (1/s) of the null-space posture task; 0 gives minimum norm.
+    general_only : always use the general null-space form (the cross-check).
+    respect_velocity_limits : scale ``qd`` uniformly so no joint exceeds its velocity
+        limit (keeps the direction; the constraint velocity rows scale with it).
+    """
+
+    def __init__(
+        self,
+        robot,
+        constraints: Iterable[Constraint] = (),
+        damping: float = 0.0,
+        singular_threshold: float = 0.02,
+        max_damping: float = 0.05,
+        parametrisation: Parametrisation = "nullspace",
+        posture: np.ndarray | None = None,
+        posture_gain: float = 1.0,
+        general_only: bool = False,
+        respect_velocity_limits: bool = True,
+        strict: bool = False,
+    ) -> None:
+        if parametrisation not in ("nullspace", "paper"):
+            raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
+        self.policy = DampingPolicy(float(damping), float(singular_threshold), float(max_damping))
+        self.parametrisation = parametrisation
+        self.posture_gain = float(posture_gain)
+        if not np.isfinite(self.posture_gain) or self.posture_gain < 0:
+            raise ValueError(f"posture_gain must be finite and >= 0, got {posture_gain}")
+        self.general_only = bool(general_only)
+        self.respect_velocity_limits = bool(respect_velocity_limits)
+        self._splits: dict[int, ChainSplit | None] = {}
+        super().__init__(robot, constraints, strict=strict)
+        if posture is None:
+            posture = getattr(robot, "q_home", None)
+        self.posture = (pin.neutral(self.model) if posture is None
+                        else as_vector(posture, self.model.nq, "posture"))
+
+    # -- chain structure ---------------------------------------------------------------
+
+    def split(self, frame_id: int) -> ChainSplit | None:
+        """Joints before/after the link of ``frame_id`` on the path to the EE.
+
+        ``None`` when the EE is not downstream of that link (the analytical form does not
+        apply).
+        """
+        if frame_id not in self._splits:
+            self._splits[frame_id] = self._compute_split(frame_id)
+        return self._splits[frame_id]
+
+    def _compute_split(self, frame_id: int) -> ChainSplit | None:
+        model = self.model
+        joint_a = model.frames[frame_id].parentJoint
+        ee_joint = model.frames[self.ee_frame_id].parentJoint
+        pre_joints = [j for j in model.supports[joint_a] if j != 0]
+        ee_path = [j for j in model.supports[ee_joint] if j != 0]
+        if not set(pre_joints) <= set(ee_path):
+            return None
+        post_joints = [j for j in ee_path if j not in pre_joints]
+
+        def velocity_indices(joints: list[int]) -> np.ndarray:
+            return np.array(
+                [i for j in joints for i in range(model.idx_vs[j], model.idx_vs[j] + model.nvs[j])],
+                dtype=int,
+            )
+
+        return ChainSplit(pre=velocity_indices(pre_joints), post=velocity_indices(post_joints))
+
+    def constrained_jacobian(self, q: np.ndarray, index: int = 0) -> np.ndarray:
+        """The CJM ``Jbar = [Ad_ea S, J_post]`` of constraint ``index`` at ``q`` (eq 24)."""
+        q = as_vector(q, self.model.nq, "q")
+        self._kinematics(q)
+        frame_id = self.constraint_frames[index]
+        split = self.split(frame_id)
+        if split is None:
+            raise ValueError(f"the EE is not downstream of link {self.constraints[index].link!r}")
+        placement = self.data.oMf[frame_id]
+        S = self.constraints[index].structure(placement, self.parametrisation)
+        ad_ea = (self.data.oMf[self.ee_frame_id].actInv(placement)).action
+        ee_jacobian = pin.getFrameJacobian(self.model, self.data, self.ee_frame_id, pin.LOCAL)
+        return np.hstack([ad_ea @ S, ee_jacobian[:, split.post]])
+
+    # -- the step ----------------------------------------------------------------------
+
+    def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
+        equalities = [i for i, c in enumerate(self.constraints) if c.is_equality]
+        barriers = [i for i, c in enumerate(self.constraints) if not c.is_equality]
+        active = list(equalities)
+        qd = self._solve_active(kinematics, twist, active)
+        # Active set over the barriers: hold the most violated one, solve again.
+        while barriers:
+            violations = []
+            for i in barriers:
+                A, b = self.constraints[i].rows(self.model, self.data, self.constraint_frames[i])
+                violations.append(float(b[0] - A[0] @ qd))
+            worst = int(np.argmax(violations))
+            if violations[worst] <= 1e-12:
+                break
+            active.append(barriers.pop(worst))
+            qd = self._solve_active(kinematics, twist, active)
+        self.info.active_barriers = tuple(i for i in active if not self.constraints[i].is_equality)
+        qd = self._limit_velocity(qd)
+        if active:
+            A, b = self.constraint_rows(active)
+            self.info.equality_residual = float(np.max(np.abs(A @ qd - self.info.scale * b)))
+        return qd
+
+    def _solve_active(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
+        if len(active) == 1 and not self.general_only:
+            split = self.split(self.constraint_frames[active[0]])
+            if split is not None and split.pre.size >= 6:
+                qd = self._solve_analytical(kinematics, twist, active[0], split)
+                if qd is not None:
+                    return qd
+        return self._solve_general(kinematics, twist, active)
+
+    def _posture_velocity(self, q: np.ndarray) -> np.ndarray:
+        return self.posture_gain * pin.difference(self.model, q, self.posture)
+
+    def _solve_analytical(
+        self, kinematics: Kinematics, twist: np.ndarray, index: int, split: ChainSplit
+    ) -> np.ndarray | None:
+        constraint = self.constraints[index]
+        frame_id = self.constraint_frames[index]
+        placement = self.data.oMf[frame_id]
+        pre_jacobian = pin.getFrameJacobian(self.model, self.data, frame_id, pin.LOCAL)[:, split.pre]
+        u, s, vt = np.linalg.svd(pre_jacobian, full_matrices=True)
+        if s[-1] < PRE_CHAIN_SINGULAR:
+            self.info.message = (f"pre-constraint chain singular (sigma_min {s[-1]:.2e}): "
+                                 "general form used")
+            return None
+
+        S = constraint.structure(placement, self.parametrisation)
+        twist_a0 = constraint.particular_twist(placement)
+        ad_ea = kinematics.ee_placement.actInv(placement).action
+        jbar = np.hstack([ad_ea @ S, kinematics.ee_jacobian[:, split.post]])
+        solution = damped_least_squares(jbar, twist - ad_ea @ twist_a0, self.policy)
+        n_free = S.shape[1]
+        twist_a = S @ solution.x[:n_free] + twist_a0
+
+        qd = np.zeros(self.model.nv)
+        qd_pre = vt[:6].T @ ((u.T @ twist_a) / s)
+        if split.pre.size > 6 and self.posture_gain > 0.0:
+            null_basis = vt[6:]
+            qd_pre += null_basis.T @ (null_basis @ self._posture_velocity(kinematics.q)[split.pre])
+        qd[split.pre] = qd_pre
+        qd[split.post] = solution.x[n_free:]
+        self.info.method = "analytical"
+        self.info.sigma_min = solution.sigma_min
+        self.info.damping = solution.damping
+        return qd
+
+    def _solve_general(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
+        A, b = self.constraint_rows(active)
+        null_basis, a_pinv, rank = nullspace(A)
+        if rank < A.shape[0]:
+            residual = float(np.max(np.abs(A @ (a_pinv @ b) - b)))
+            if residual > 1e-9:
+                self.info.message = (f"constraints conflict (rank {rank} < {A.shape[0]} rows, "
+                                     f"least-squares residual {residual:.2e} m/s)")
+        qd0 = a_pinv @ b
+        jacobian = kinematics.ee_jacobian
+        qd = qd0.copy()
+        if null_basis.shape[1] > 0:
+            jbar = jacobian @ null_basis
+            solution = damped_least_squares(jbar, twist - jacobian @ qd0, self.policy)
+            qd += null_basis @ solution.x
+            self.info.sigma_min = solution.sigma_min
+            self.info.damping = solution.damping
+            if self.posture_gain > 0.0 and solution.row_space.shape[0] < null_basis.shape[1]:
+                z = null_basis.T @ self._posture_velocity(kinematics.q)
+                z -= solution.row_space.T @ (solution.row_space @ z)
+                qd += null_basis @ z
+        self.info.method = "general"
+        return qd
+
+    def _limit_velocity(self, qd: np.ndarray) -> np.ndarray:
+        if not self.respect_velocity_limits:
+            return qd
+        ratio = float(np.max(np.abs(qd) / self.velocity_limit))
+        if ratio > 1.0:
+            self.info.scale = 1.0 / ratio
+            return qd / ratio
+        return qd

@@ -1,0 +1,78 @@
+"""Small dense linear algebra shared by the controllers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class DampingPolicy:
+    """Damped least squares with damping that rises near singularity (paper eq 35).
+
+    ``lambda^2 = damping^2 + max_damping^2 (1 - (sigma_min / threshold)^2)`` while the
+    smallest singular value ``sigma_min`` is below ``threshold``, else ``damping^2``
+    (Nakamura and Hanafusa's variable damping). ``damping = 0`` and a well-conditioned
+    matrix give the exact inverse (paper eq 22).
+    """
+
+    damping: float = 0.0
+    threshold: float = 0.02
+    max_damping: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("damping", "threshold", "max_damping"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0.0:
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+
+    def lambda_squared(self, sigma_min: float) -> float:
+        lam2 = self.damping**2
+        if sigma_min < self.threshold:
+            lam2 += self.max_damping**2 * (1.0 - (sigma_min / self.threshold) ** 2)
+        return lam2
+
+
+@dataclass(frozen=True)
+class DampedSolution:
+    """Result of :func:`damped_least_squares`."""
+
+    x: np.ndarray
+    sigma_min: float
+    damping: float  # lambda
+    row_space: np.ndarray  # right singular vectors with non-zero singular value (rows)
+
+
+def damped_least_squares(
+    matrix: np.ndarray, rhs: np.ndarray, policy: DampingPolicy, rank_tolerance: float = 1e-10
+) -> DampedSolution:
+    """``x = J^T (J J^T + lambda^2 I)^-1 r`` computed through one SVD (paper eq 35).
+
+    Works for square, wide (minimum-norm) and tall (least-squares) ``J``; singular
+    values below ``rank_tolerance`` are dropped, so a rank-deficient ``J`` never yields a
+    non-finite ``x``.
+    """
+    u, s, vt = np.linalg.svd(matrix, full_matrices=False)
+    sigma_min = float(s[-1]) if s.size else 0.0
+    lam2 = policy.lambda_squared(sigma_min)
+    keep = s > rank_tolerance * max(1.0, float(s[0]) if s.size else 1.0)
+    gains = np.zeros_like(s)
+    gains[keep] = s[keep] / (s[keep] ** 2 + lam2)
+    x = vt.T @ (gains * (u.T @ rhs))
+    return DampedSolution(x=x, sigma_min=sigma_min, damping=float(np.sqrt(lam2)),
+                          row_space=vt[keep])
+
+
+def nullspace(matrix: np.ndarray, rank_tolerance: float = 1e-10) -> tuple[np.ndarray, np.ndarray, int]:
+    """An orthonormal basis ``N`` of ``null(A)``, the pseudo-inverse ``A^+`` and the rank.
+
+    ``N`` has shape ``(n, n - rank)``; ``A^+`` has shape ``(n, m)``.
+    """
+    m, n = matrix.shape
+    if m == 0:
+        return np.eye(n), np.zeros((n, 0)), 0
+    u, s, vt = np.linalg.svd(matrix, full_matrices=True)
+    rank = int(np.sum(s > rank_tolerance * max(1.0, float(s[0]))))
+    pinv = vt[:rank].T @ (u[:, :rank].T / s[:rank, None])
+    return vt[rank:].T.copy(), pinv, rank

@@ -1,0 +1,279 @@
+"""Robot models: a Pinocchio model plus what the teleoperation controllers need.
+
+Two robots ship with the package (primitive geometry, nothing downloaded, see DESIGN.md
+section 6): ``"sda10f"`` (torso + 7-axis arm, the paper's experiment) and
+``"ur5_instrument"`` (UR5-like arm holding a surgical instrument with a 2-DoF wrist). Any
+other URDF loads from its path.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import types
+import warnings
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+__all__ = ["Robot", "load_robot", "BUILTIN_ROBOTS"]
+
+ROBOTS_DIR = pathlib.Path(__file__).resolve().parent / "robots"
+
+#: Limits at or beyond this magnitude count as unbounded (Pinocchio uses +-DBL_MAX).
+_UNBOUNDED = 1e10
+
+#: Defaults of the shipped robots: urdf file (in ``teleop/robots``), EE frame, constrained
+#: link, link axis (in constrained-link coordinates) and home configuration.
+BUILTIN_ROBOTS: Mapping[str, Mapping[str, Any]] = types.MappingProxyType({
+    "sda10f": types.MappingProxyType({
+        "urdf": "sda10f.urdf",
+        "ee_frame": "tool0",
+        "constrained_link": "arm_link_5_r",
+        "link_axis": (0.0, 0.0, -1.0),
+        # arm reaching forward in front of the torso, elbow out, wrist bent (joint B at
+        # -1.2 rad keeps joint T away from the link axis: B = 0 makes the CJM singular)
+        "q_home": (0.0, 0.0, 1.3, 0.8, -1.1, 0.5, -1.2, 0.6),
+    }),
+    "ur5_instrument": types.MappingProxyType({
+        "urdf": "ur5_instrument.urdf",
+        "ee_frame": "tool_tip",
+        "constrained_link": "instrument_shaft",
+        "link_axis": (0.0, 0.0, 1.0),
+        # elbow up, shaft pointing straight down (world -z), tip at about (0.53, 0.11, -0.16)
+        "q_home": (np.pi, -1.4, 1.8, -0.4 - np.pi / 2, -np.pi / 2, 0.0, 0.0, 0.0),
+    }),
+})
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+def _bounds(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
+    """Position limits with unbounded entries replaced by -pi / +pi."""
+    lo = np.array(model.lowerPositionLimit, dtype=float)
+    hi = np.array(model.upperPositionLimit, dtype=float)
+    free = ~np.isfinite(lo) | ~np.isfinite(hi) | (np.abs(lo) >= _UNBOUNDED) | (np.abs(hi) >= _UNBOUNDED)
+    lo[free], hi[free] = -np.pi, np.pi
+    return lo, hi
+
+
+@dataclass(frozen=True, eq=False)
+class Robot:
+    """A kinematic model with its geometry, end-effector frame and constrained link.
+
+    Attributes
+    ----------
+    name : robot name (built-in name or the URDF's robot name).
+    model : Pinocchio kinematic model (fixed base).
+    visual_model, collision_model : geometry (empty if the meshes could not be found).
+    urdf_path : the URDF file the model was built from.
+    ee_frame : name of the end-effector frame.
+    q_home : (nq,) read-only home configuration; use ``robot.q_home.copy()``.
+    constrained_link : name of the link carrying the constraint point, or None.
+    link_axis : (3,) read-only unit vector, the link's long direction in
+        ``constrained_link`` coordinates.
+    package_dirs : directories searched for ``package://`` meshes.
+    """
+
+    name: str
+    model: pin.Model = field(repr=False)
+    visual_model: pin.GeometryModel = field(repr=False)
+    collision_model: pin.GeometryModel = field(repr=False)
+    urdf_path: pathlib.Path
+    ee_frame: str
+    q_home: np.ndarray
+    constrained_link: str | None
+    link_axis: np.ndarray
+    package_dirs: tuple[str, ...]
+
+    @property
+    def ee_frame_id(self) -> int:
+        """Frame id of the end effector."""
+        return self.model.getFrameId(self.ee_frame)
+
+    @property
+    def constrained_frame_id(self) -> int | None:
+        """Frame id of the constrained link (None when there is none)."""
+        if self.constrained_link is None:
+            return None
+        return self.model.getFrameId(self.constrained_link)
+
+    @property
+    def nq(self) -> int:
+        return self.model.nq
+
+    @property
+    def nv(self) -> int:
+        return self.model.nv
+
+    def random_configuration(self, rng: np.random.Generator, margin: float = 0.1) -> np.ndarray:
+        """Uniform configuration inside ``[lower + margin*range, upper - margin*range]``.
+
+        Unbounded coordinates are drawn in ``[-pi, pi]`` (same margin); the result is
+        normalised (``pin.normalize``) so quaternion / unit-complex joints stay valid.
+        """
+        if not 0.0 <= margin < 0.5:
+            raise ValueError(f"margin must be in [0, 0.5), got {margin}")
+        lo, hi = _bounds(self.model)
+        span = hi - lo
+        q = rng.uniform(lo + margin * span, hi - margin * span)
+        return pin.normalize(self.model, q)
+
+
+def _frame_names(model: pin.Model) -> list[str]:
+    return [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+
+
+def _check_frame(model: pin.Model, name: str, what: str) -> str:
+    if not isinstance(name, str) or not model.existFrame(name):
+        raise ValueError(f"unknown {what} {name!r}; link (body) frames of this model: {_frame_names(model)}")
+    return name
+
+
+def _check_axis(link_axis: Any) -> np.ndarray:
+    try:
+        axis = np.asarray(link_axis, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"link_axis must be a 3-vector, got {link_axis!r}") from exc
+    if axis.shape != (3,) or not np.all(np.isfinite(axis)):
+        raise ValueError(f"link_axis must be a finite 3-vector, got {link_axis!r}")
+    norm = np.linalg.norm(axis)
+    if norm < 1e-12:
+        raise ValueError(f"link_axis must be non-zero, got {link_axis!r}")
+    return axis / norm
+
+
+def _check_q_home(model: pin.Model, q_home: Any) -> np.ndarray:
+    q = np.asarray(q_home, dtype=float)
+    if q.shape != (model.nq,):
+        raise ValueError(f"q_home must have size nq = {model.nq}, got shape {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise ValueError(f"q_home has non-finite entries at indices {np.flatnonzero(~np.isfinite(q)).tolist()}")
+    bad = np.flatnonzero((q < model.lowerPositionLimit) | (q > model.upperPositionLimit))
+    if bad.size:
+        raise ValueError(
+            f"q_home is outside the position limits at indices {bad.tolist()}: "
+            f"q = {q[bad].tolist()}, lower = {model.lowerPositionLimit[bad].tolist()}, "
+            f"upper = {model.upperPositionLimit[bad].tolist()}"
+        )
+    return q
+
+
+def _build_model(urdf: pathlib.Path) -> pin.Model:
+    try:
+        return pin.buildModelFromUrdf(str(urdf))
+    except (ValueError, RuntimeError) as exc:
+        detail = str(exc)
+        try:  # the XML parser says where the file is broken; Pinocchio only that it is
+            ET.parse(urdf)
+        except ET.ParseError as xml_exc:
+            detail += f" (XML error: {xml_exc})"
+        raise ValueError(f"cannot parse URDF {urdf}: {detail}") from exc
+
+
+def _build_geometry(model: pin.Model, urdf: pathlib.Path, package_dirs: tuple[str, ...]
+                    ) -> tuple[pin.GeometryModel, pin.GeometryModel]:
+    models = []
+    for kind in (pin.GeometryType.VISUAL, pin.GeometryType.COLLISION):
+        try:
+            models.append(pin.buildGeomFromUrdf(model, str(urdf), kind, package_dirs=list(package_dirs)))
+        except (ValueError, RuntimeError) as exc:
+            warnings.warn(
+                f"{urdf}: could not load the {kind.name.lower()} geometry ({exc}); using an empty "
+                f"geometry model (kinematics unaffected). Searched package_dirs: {list(package_dirs)}",
+                stacklevel=3,
+            )
+            models.append(pin.GeometryModel())
+    return models[0], models[1]
+
+
+def load_robot(
+    name_or_urdf_path: str | os.PathLike,
+    ee_frame: str | None = None,
+    constrained_link: str | None = None,
+    link_axis: Any = None,
+    package_dirs: Any = None,
+    q_home: Any = None,
+) -> Robot:
+    """Load a built-in robot by name, or any URDF by path.
+
+    Parameters
+    ----------
+    name_or_urdf_path : a key of ``BUILTIN_ROBOTS`` or the path of a URDF file.
+    ee_frame : end-effector frame. Default: the built-in's, else the LAST body (link) frame
+        in ``model.frames``.
+    constrained_link : link carrying the constraint point. Default: the built-in's, else None.
+    link_axis : (3,) long direction of the constrained link in its own coordinates,
+        normalised. Default: the built-in's, else (0, 0, 1).
+    package_dirs : directories where ``package://`` meshes are looked up. Default: the
+        directories containing the URDF (its folder and all its ancestors).
+    q_home : (nq,) home configuration inside the limits. Default: the built-in's, else
+        ``pin.neutral(model)`` clipped to the limits.
+
+    Raises
+    ------
+    FileNotFoundError : the path does not exist (and is not a built-in name).
+    ValueError : unparsable URDF, unknown frame, bad ``link_axis`` or ``q_home``.
+
+    If the geometry cannot be loaded (e.g. missing meshes) a warning is emitted and the
+    robot gets empty geometry models: the kinematics are all the controllers need.
+    """
+    key = os.fspath(name_or_urdf_path)
+    builtin = isinstance(key, str) and key in BUILTIN_ROBOTS
+    if builtin:
+        defaults = BUILTIN_ROBOTS[key]
+        urdf = ROBOTS_DIR / defaults["urdf"]
+    else:
+        urdf = pathlib.Path(key).expanduser()
+        if not urdf.is_file():
+            raise FileNotFoundError(
+                f"no URDF file at {str(urdf)!r} and not a built-in robot name "
+                f"(built-in robots: {sorted(BUILTIN_ROBOTS)})"
+            )
+        defaults = {"ee_frame": None, "constrained_link": None, "link_axis": (0.0, 0.0, 1.0), "q_home": None}
+    urdf = urdf.resolve()
+
+    model = _build_model(urdf)
+    if package_dirs is None:
+        package_dirs = [urdf.parent, *urdf.parent.parents]
+    elif isinstance(package_dirs, (str, os.PathLike)):
+        package_dirs = [package_dirs]
+    package_dirs = tuple(os.fspath(p) for p in package_dirs)
+    visual_model, collision_model = _build_geometry(model, urdf, package_dirs)
+
+    ee_frame = ee_frame if ee_frame is not None else defaults["ee_frame"]
+    if ee_frame is None:
+        ee_frame = _frame_names(model)[-1]
+    _check_frame(model, ee_frame, "ee_frame")
+    if constrained_link is None:
+        constrained_link = defaults["constrained_link"]
+    if constrained_link is not None:
+        _check_frame(model, constrained_link, "constrained_link")
+    axis = _check_axis(link_axis if link_axis is not None else defaults["link_axis"])
+    if q_home is None:
+        q_home = defaults["q_home"]
+    if q_home is None:
+        q = np.clip(pin.neutral(model), model.lowerPositionLimit, model.upperPositionLimit)
+    else:
+        q = _check_q_home(model, q_home)
+
+    return Robot(
+        name=key if builtin else model.name,
+        model=model,
+        visual_model=visual_model,
+        collision_model=collision_model,
+        urdf_path=urdf,
+        ee_frame=ee_frame,
+        q_home=_readonly(q),
+        constrained_link=constrained_link,
+        link_axis=_readonly(axis),
+        package_dirs=package_dirs,
+    )

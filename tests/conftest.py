@@ -1,0 +1,46 @@
+"""Shared fixtures: the built-in robots, loaded once, and a hole on each."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from teleop import load_robot
+
+#: hole distance along the constrained link for each built-in robot (m)
+HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20}
+
+
+@pytest.fixture(scope="session", params=sorted(HOLE_DISTANCE))
+def robot(request):
+    return load_robot(request.param)
+
+
+@pytest.fixture(scope="session")
+def sda10f():
+    return load_robot("sda10f")
+
+
+@pytest.fixture(scope="session")
+def ur5_instrument():
+    return load_robot("ur5_instrument")
+
+
+def near_home(robot, rng: np.random.Generator, spread: float = 0.15) -> np.ndarray:
+    """A configuration a little away from home (well inside limits, non-singular)."""
+    q = robot.q_home + rng.uniform(-spread, spread, robot.model.nq)
+    return np.clip(q, robot.model.lowerPositionLimit + 0.05, robot.model.upperPositionLimit - 0.05)
+
+
+def kinematics(robot, q: np.ndarray) -> pin.Data:
+    """Fresh Pinocchio data with joint Jacobians and frame placements at ``q``."""
+    data = robot.model.createData()
+    pin.computeJointJacobians(robot.model, data, q)
+    pin.updateFramePlacements(robot.model, data)
+    return data
+
+
+def ee_jacobian(robot, q: np.ndarray) -> np.ndarray:
+    data = kinematics(robot, q)
+    return pin.getFrameJacobian(robot.model, data, robot.model.getFrameId(robot.ee_frame), pin.LOCAL)
