@@ -6,10 +6,15 @@ from typing import Iterable
 
 import numpy as np
 import qpsolvers
+import scipy.sparse
+
 
 from constraints import Constraint
 
 from .base import Controller, Kinematics, SolverError
+
+#: Backends that take sparse matrices (given dense ones, qpsolvers converts and warns).
+SPARSE_SOLVERS = frozenset({"osqp", "scs", "clarabel", "highs", "piqp", "qpalm"})
 
 #: Tolerances per backend, chosen so that proxqp and daqp hold the equality rows to
 #: 1e-9 m/s or better. OSQP (first order, ADMM) is asked for 1e-7 with polishing and
@@ -123,8 +128,14 @@ class QPController(Controller):
             G, h = -A_b, -b_b
         lb, ub = self.bounds(kinematics.q)
         bounded = np.isfinite(lb) | np.isfinite(ub)
+        if self.solver in SPARSE_SOLVERS:
+            P = scipy.sparse.csc_matrix(P)
+            A_qp = None if A is None else scipy.sparse.csc_matrix(A)
+            G_qp = None if G is None else scipy.sparse.csc_matrix(G)
+        else:
+            A_qp, G_qp = A, G
         problem = qpsolvers.Problem(
-            P, c, G, h, A, b,
+            P, c, G_qp, h, A_qp, b,
             lb=np.where(np.isfinite(lb), lb, -1e20) if bounded.any() else None,
             ub=np.where(np.isfinite(ub), ub, 1e20) if bounded.any() else None,
         )
