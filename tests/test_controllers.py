@@ -232,3 +232,19 @@ def test_barrier_is_held_by_both_controllers_when_pushed(ur5_instrument):
     qd_away = away.solve(q, -twist)
     assert away.info.active_barriers == ()
     np.testing.assert_allclose(ee_jacobian(robot, q) @ qd_away, -twist, atol=1e-10)
+
+
+def test_moving_hole_is_followed_through_the_feed_forward(ur5_instrument):
+    """A hole moving sideways at 5 mm/s: the link point moves with it, to first order."""
+    robot = ur5_instrument
+    q = robot.q_home.copy()
+    hole = Hole.on_link(robot, q, distance=0.2)
+    hole.move_to(hole.center, velocity=[0.005, -0.003, 0.001])
+    twist = np.array([0.0, 0.01, 0.0, 0.0, 0.02, 0.0])
+    for controller in (CJMController(robot, [hole], **EXACT), QPController(robot, [hole])):
+        qd = controller.solve(q, twist)
+        dt = 1e-6
+        q_next = pin.integrate(robot.model, q, qd * dt)
+        hole_next = Hole(hole.link, hole.center + dt * hole.velocity, link_axis=hole.link_axis)
+        placement = kinematics(robot, q_next).oMf[robot.model.getFrameId(hole.link)]
+        assert np.max(np.abs(hole_next.error(placement))) < 1e-6 * dt * 1e3  # O(dt^2)

@@ -1,0 +1,140 @@
+"""Chains the paper's 6-before/2-after case does not cover: fewer or more joints before
+the constraint, redundancy, and URDFs from another package (example-robot-data)."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import warnings
+
+import numpy as np
+import pytest
+
+from conftest import ee_jacobian, kinematics
+from constraints import Hole
+from controllers import CJMController, QPController
+from teleop import load_robot
+
+EXACT = dict(singular_threshold=0.0, respect_velocity_limits=False)
+
+
+def example_robot_data_share():
+    return importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share")
+
+
+@pytest.fixture(scope="module")
+def ur5():
+    share = example_robot_data_share()
+    urdf = share / "example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the meshes must be found through package_dirs
+        robot = load_robot(urdf, ee_frame="tool0", constrained_link="forearm_link",
+                           link_axis=(0, 0, 1), package_dirs=[str(share)],
+                           q_home=[0.3, -1.2, 1.6, -1.8, -1.5, 0.4])
+    assert len(robot.visual_model.geometryObjects) > 0
+    return robot
+
+
+@pytest.fixture(scope="module")
+def panda():
+    share = example_robot_data_share()
+    urdf = share / "example-robot-data/robots/panda_description/urdf/panda.urdf"
+    forearm = np.array([-0.0825, 0.384, 0.0])  # from joint 4 to joint 5, panda_link4 frame
+    return load_robot(urdf, ee_frame="panda_hand", constrained_link="panda_link4",
+                      link_axis=forearm / np.linalg.norm(forearm), package_dirs=[str(share)],
+                      q_home=[0.2, -0.3, 0.1, -2.0, 0.2, 1.8, 0.7, 0.02, 0.02])
+
+
+def constraint_residual(robot, q, constraint, qd):
+    A, b = constraint.rows(robot.model, kinematics(robot, q))
+    return float(np.max(np.abs(A @ qd - b)))
+
+
+def test_ur5_forearm_hole_three_joints_before_least_squares_in_both(ur5):
+    """3 joints before the hole: F_a cannot take any twist; 4 free DoF < 6 (least squares)."""
+    q = ur5.q_home.copy()
+    hole = Hole.on_link(ur5, q, distance=0.2)
+    twist = np.array([0.02, -0.01, 0.01, 0.05, 0.02, -0.03])
+    cjm = CJMController(ur5, [hole], **EXACT)
+    qd = cjm.solve(q, twist)
+    assert cjm.info.method == "general"
+    assert constraint_residual(ur5, q, hole, qd) <= 1e-12
+    J = ee_jacobian(ur5, q)
+    assert np.linalg.norm(J @ qd - twist) > 1e-3  # not every twist is reachable...
+    # ...and what is reached is the least-squares optimum: the residual is orthogonal to
+    # every admissible direction J N.
+    A, _ = hole.rows(ur5.model, kinematics(ur5, q))
+    N = np.linalg.svd(A)[2][2:].T
+    np.testing.assert_allclose((J @ N).T @ (J @ qd - twist), 0.0, atol=1e-12)
+    for solver in ("proxqp", "daqp"):
+        np.testing.assert_allclose(QPController(ur5, [hole], solver=solver).solve(q, twist),
+                                   qd, atol=1e-6)
+
+
+def test_sda10f_hole_on_link_7_uses_the_pseudo_inverse_of_a_7_joint_pre_chain(sda10f):
+    """Hole on the link joint B drives: 7 joints before, 1 after, Jbar 6 x 5."""
+    q = sda10f.q_home.copy()
+    hole = Hole.on_link(sda10f, q, distance=0.05, link="arm_link_6_b", link_axis=(0, 1, 0))
+    twist = np.array([0.01, -0.01, 0.02, 0.03, 0.02, -0.01])
+    cjm = CJMController(sda10f, [hole], **EXACT)
+    qd = cjm.solve(q, twist)
+    assert cjm.info.method == "analytical"
+    assert cjm.constrained_jacobian(q).shape == (6, 5)
+    assert constraint_residual(sda10f, q, hole, qd) <= 1e-12
+    J = ee_jacobian(sda10f, q)
+    # the achieved twist is unique (least squares), the joint motion is not: compare twists
+    reached_general = J @ CJMController(sda10f, [hole], general_only=True, **EXACT).solve(q, twist)
+    np.testing.assert_allclose(J @ qd, reached_general, atol=1e-9)
+    for solver in ("proxqp", "daqp"):
+        np.testing.assert_allclose(J @ QPController(sda10f, [hole], solver=solver).solve(q, twist),
+                                   J @ qd, atol=1e-6)
+    # the posture task moves only the null space of J_a: same twist at F_a and EE
+    no_posture = CJMController(sda10f, [hole], posture_gain=0.0, **EXACT).solve(q, twist)
+    q_off = q.copy()
+    q_off[:7] += 0.1
+    assert np.linalg.norm(qd - no_posture) < 1e-12  # at home the posture task is idle
+    moved = CJMController(sda10f, [hole], **EXACT).solve(q_off, twist)
+    still = CJMController(sda10f, [hole], posture_gain=0.0, **EXACT).solve(q_off, twist)
+    assert np.linalg.norm(moved - still) > 1e-3
+    J_off = ee_jacobian(sda10f, q_off)
+    np.testing.assert_allclose(J_off @ moved, J_off @ still, atol=1e-10)
+
+
+def test_panda_forearm_hole_leaves_five_dof_and_both_controllers_reach_the_same_twist(panda):
+    """4 joints before, 3 after, 2 fingers that move nothing: 7 - 2 = 5 DoF for the EE."""
+    q = panda.q_home.copy()
+    hole = Hole.on_link(panda, q, distance=0.2)
+    twist = np.array([0.02, 0.01, -0.01, 0.05, -0.02, 0.03])
+    cjm = CJMController(panda, [hole], **EXACT)
+    qd = cjm.solve(q, twist)
+    assert cjm.info.method == "general"
+    assert constraint_residual(panda, q, hole, qd) <= 1e-12
+    J = ee_jacobian(panda, q)
+    A, _ = hole.rows(panda.model, kinematics(panda, q))
+    N = np.linalg.svd(A)[2][2:].T
+    assert np.linalg.matrix_rank(J @ N, tol=1e-9) == 5
+    np.testing.assert_allclose((J @ N).T @ (J @ qd - twist), 0.0, atol=1e-12)  # least squares
+    np.testing.assert_allclose(qd[7:], 0.0, atol=1e-12)  # fingers: posture at home, idle
+    for solver in ("proxqp", "daqp"):
+        qp = QPController(panda, [hole], solver=solver)
+        qd_qp = qp.solve(q, twist)
+        assert qp.info.equality_residual <= 1e-9
+        np.testing.assert_allclose(J @ qd_qp, J @ qd, atol=1e-6)
+
+
+def test_plane_on_sda10f_leaves_seven_dof_and_the_wide_cjm_tracks_exactly(sda10f):
+    """The paper's plane (1 equality) on link 6 of 8 joints: Jbar is 6 x 7."""
+    from constraints import Plane
+
+    q = sda10f.q_home.copy()
+    plane = Plane.through_link_point(sda10f, q, normal=[0.0, 0.0, 1.0], distance=0.08)
+    twist = np.array([0.02, 0.01, -0.01, 0.05, -0.02, 0.03])
+    J = ee_jacobian(sda10f, q)
+    for general_only in (False, True):
+        cjm = CJMController(sda10f, [plane], general_only=general_only, **EXACT)
+        qd = cjm.solve(q, twist)
+        assert cjm.info.method == ("general" if general_only else "analytical")
+        assert constraint_residual(sda10f, q, plane, qd) <= 1e-12
+        np.testing.assert_allclose(J @ qd, twist, atol=1e-10)
+    assert CJMController(sda10f, [plane]).constrained_jacobian(q).shape == (6, 7)
+    qd_qp = QPController(sda10f, [plane], solver="proxqp").solve(q, twist)
+    np.testing.assert_allclose(J @ qd_qp, twist, atol=1e-6)
