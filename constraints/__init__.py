@@ -12,6 +12,7 @@ from .base import (
     ConstraintPoint,
     RobotLike,
     structure_nullspace,
+    structure_of,
     structure_paper,
 )
 from .hole import Hole
@@ -29,5 +30,6 @@ __all__ = [
     "PointLock",
     "RobotLike",
     "structure_nullspace",
+    "structure_of",
     "structure_paper",
 ]

@@ -45,17 +45,17 @@ class ConstraintPoint:
     ----------
     p : (3,) constrained point in ``F_a``.
     C : (k, 3) orthonormal rows: the constrained directions.
+    C_perp : (3 - k, 3) orthonormal rows completing ``C`` to a basis (free directions).
     error : (k,) position error along ``C`` in metres (signed distance for a plane).
     rhs : (k,) required ``C v_c``: ``-K e`` plus the feed-forward of moving geometry
         (equality); the lower bound of ``C v_c`` (barrier).
-    point_world : (3,) the constrained point in the world frame.
     """
 
     p: np.ndarray
     C: np.ndarray
+    C_perp: np.ndarray
     error: np.ndarray
     rhs: np.ndarray
-    point_world: np.ndarray
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -133,7 +133,7 @@ def frame_placement(robot: RobotLike, q: np.ndarray, frame_id: int) -> pin.SE3:
     return data.oMf[frame_id].copy()
 
 
-def structure_nullspace(p: np.ndarray, C: np.ndarray) -> np.ndarray:
+def structure_nullspace(p: np.ndarray, C: np.ndarray, C_perp: np.ndarray | None = None) -> np.ndarray:
     """Singularity-free structure matrix ``S`` (6 x (6-k)) of DESIGN.md section 3.
 
     ``V_a = S [u; w]`` with ``v = C_perp^T u + C^T C hat(p) w``: the point ``p`` then
@@ -144,7 +144,7 @@ def structure_nullspace(p: np.ndarray, C: np.ndarray) -> np.ndarray:
     """
     k = C.shape[0]
     S = np.zeros((6, 6 - k))
-    S[:3, : 3 - k] = orthonormal_complement(C).T
+    S[:3, : 3 - k] = (orthonormal_complement(C) if C_perp is None else C_perp).T
     S[:3, 3 - k :] = C.T @ (C @ pin.skew(p))
     S[3:, 3 - k :] = np.eye(3)
     return S
@@ -180,6 +180,15 @@ def structure_paper(p: np.ndarray, C: np.ndarray) -> np.ndarray:
     S[:3, k:3] = orthonormal_complement(C).T
     S[3:, 3:] = orthonormal_complement(D).T
     return S
+
+
+def structure_of(state: ConstraintPoint, parametrisation: Parametrisation = "nullspace") -> np.ndarray:
+    """Structure matrix ``S`` of an evaluated constraint in the chosen parametrisation."""
+    if parametrisation == "nullspace":
+        return structure_nullspace(state.p, state.C, state.C_perp)
+    if parametrisation == "paper":
+        return structure_paper(state.p, state.C)
+    raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
 
 
 # ----------------------------------------------------------------------------- base
@@ -226,22 +235,28 @@ class Constraint(ABC):
     def error(self, placement: pin.SE3) -> np.ndarray:
         """Position error (k,) in metres along ``C``."""
 
+    def free_directions(self, placement: pin.SE3) -> np.ndarray:
+        """Rows ``C_perp`` (3-k x 3) completing ``C``; subclasses override with closed forms."""
+        return orthonormal_complement(self.directions(placement))
+
     def feed_forward(self, placement: pin.SE3) -> np.ndarray:
         """``C v`` for the velocity of the constraint's own geometry (moving hole/plane)."""
         return np.zeros(self.dim)
 
     def evaluate(self, placement: pin.SE3) -> ConstraintPoint:
         """Everything a controller needs at one configuration, computed once."""
-        p = self.point(placement)
-        C = self.directions(placement)
         e = self.error(placement)
         return ConstraintPoint(
-            p=p,
-            C=C,
+            p=self.point(placement),
+            C=self.directions(placement),
+            C_perp=self.free_directions(placement),
             error=e,
-            rhs=-self.gain * e + self.feed_forward(placement),
-            point_world=placement.act(p),
+            rhs=self.feed_forward(placement) - self.gain * e,
         )
+
+    def point_world(self, placement: pin.SE3) -> np.ndarray:
+        """The constrained point in the world frame (m)."""
+        return placement.act(self.point(placement))
 
     # -- what the controllers use ------------------------------------------------------
 
@@ -249,12 +264,7 @@ class Constraint(ABC):
         self, placement: pin.SE3, parametrisation: Parametrisation = "nullspace"
     ) -> np.ndarray:
         """Structure matrix ``S`` (6 x (6-k)) with ``V_a = S [free variables]``."""
-        state = self.evaluate(placement)
-        if parametrisation == "nullspace":
-            return structure_nullspace(state.p, state.C)
-        if parametrisation == "paper":
-            return structure_paper(state.p, state.C)
-        raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
+        return structure_of(self.evaluate(placement), parametrisation)
 
     def particular_twist(self, placement: pin.SE3) -> np.ndarray:
         """A twist ``V_a0 = [C^T b; 0]`` with ``C v_c = b`` (drift and feed-forward)."""

@@ -8,6 +8,7 @@ import pinocchio as pin
 from .base import (
     DEFAULT_GAIN,
     Constraint,
+    ConstraintPoint,
     RobotLike,
     as_unit_vector,
     as_vector,
@@ -54,8 +55,10 @@ class Hole(Constraint):
         super().__init__(link, gain)
         self.center = as_vector(center, 3, "hole center")
         self.velocity = as_vector(velocity, 3, "hole velocity")
+        self._moving = bool(self.velocity.any())
         self.link_axis = as_unit_vector(link_axis, "link_axis")
         self._C = perpendicular_basis(self.link_axis)
+        self._C_perp = self.link_axis[None, :]
 
     @classmethod
     def on_link(
@@ -113,6 +116,7 @@ class Hole(Constraint):
         """Move the hole (world centre, m) and set its velocity (m/s) for feed-forward."""
         self.center = as_vector(center, 3, "hole center")
         self.velocity = as_vector(velocity, 3, "hole velocity")
+        self._moving = bool(self.velocity.any())
 
     def _center_local(self, placement: pin.SE3) -> np.ndarray:
         return placement.actInv(self.center)
@@ -123,8 +127,20 @@ class Hole(Constraint):
     def directions(self, placement: pin.SE3) -> np.ndarray:
         return self._C
 
+    def free_directions(self, placement: pin.SE3) -> np.ndarray:
+        return self._C_perp
+
     def error(self, placement: pin.SE3) -> np.ndarray:
         return -self._C @ self._center_local(placement)
+
+    def evaluate(self, placement: pin.SE3) -> ConstraintPoint:
+        center_local = placement.actInv(self.center)  # computed once for p, e and rhs
+        error = -self._C @ center_local
+        rhs = -self.gain * error
+        if self._moving:
+            rhs += self.feed_forward(placement)
+        return ConstraintPoint(p=float(self.link_axis @ center_local) * self.link_axis,
+                               C=self._C, C_perp=self._C_perp, error=error, rhs=rhs)
 
     def depth(self, placement: pin.SE3) -> float:
         """Where the link crosses the hole: metres along the axis from ``F_a``."""

@@ -13,6 +13,7 @@ from .base import (
     as_vector,
     default_link,
     frame_placement,
+    perpendicular_basis,
     resolve_frame,
 )
 
@@ -104,6 +105,9 @@ class Plane(Constraint):
 
     def directions(self, placement: pin.SE3) -> np.ndarray:
         return (placement.rotation.T @ self.normal)[None, :]
+
+    def free_directions(self, placement: pin.SE3) -> np.ndarray:
+        return perpendicular_basis(placement.rotation.T @ self.normal)
 
     def signed_distance(self, placement: pin.SE3) -> float:
         """Signed distance (m) of the link point from the plane, positive along ``n``."""

@@ -66,6 +66,9 @@ class PointLock(Constraint):
     def directions(self, placement: pin.SE3) -> np.ndarray:
         return placement.rotation
 
+    def free_directions(self, placement: pin.SE3) -> np.ndarray:
+        return np.zeros((0, 3))
+
     def error(self, placement: pin.SE3) -> np.ndarray:
         return placement.act(self.link_point) - self.target
 

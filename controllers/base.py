@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
@@ -10,7 +11,17 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
-from constraints.base import as_vector, resolve_frame
+from constraints.base import resolve_frame
+
+
+def checked_vector(value, size: int, name: str) -> np.ndarray:
+    """``value`` as a float array of shape ``(size,)``, finite, else ``ValueError`` (no copy)."""
+    array = np.asarray(value, dtype=float)
+    if array.shape != (size,):
+        raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"{name} must be finite, got {array}")
+    return array
 
 
 class SolverError(RuntimeError):
@@ -97,15 +108,15 @@ class Controller(ABC):
         returns zeros with ``self.info.success == False`` (or raises ``SolverError`` when
         the controller is ``strict``): never a non-finite command.
         """
-        q = as_vector(q, self.model.nq, "q")
-        twist = as_vector(twist, 6, "twist")
+        q = checked_vector(q, self.model.nq, "q")
+        twist = checked_vector(twist, 6, "twist")
         self.info = SolveInfo()
         kinematics = self._kinematics(q)
         try:
             qd = self._solve(kinematics, twist)
         except (np.linalg.LinAlgError, SolverError) as error:
             return self._fail(f"{type(error).__name__}: {error}")
-        if not np.all(np.isfinite(qd)):
+        if not math.isfinite(float(qd.sum())):  # any NaN/inf (or overflow) poisons the sum
             return self._fail("non-finite joint velocity computed")
         return qd
 

@@ -9,7 +9,8 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
-from constraints.base import Parametrisation, as_vector
+from constraints.base import Parametrisation, as_vector, structure_of
+from scipy.linalg import lapack
 
 from .base import Controller, Kinematics
 from .linalg import DampingPolicy, damped_least_squares, nullspace
@@ -90,6 +91,8 @@ class CJMController(Controller):
         self.general_only = bool(general_only)
         self.respect_velocity_limits = bool(respect_velocity_limits)
         self._splits: dict[int, ChainSplit | None] = {}
+        self._equalities: list[int] = []
+        self._barriers: list[int] = []
         super().__init__(robot, constraints, strict=strict)
         if posture is None:
             posture = getattr(robot, "q_home", None)
@@ -142,12 +145,15 @@ class CJMController(Controller):
 
     # -- the step ----------------------------------------------------------------------
 
+    def _on_constraints_changed(self) -> None:
+        self._equalities = [i for i, c in enumerate(self.constraints) if c.is_equality]
+        self._barriers = [i for i, c in enumerate(self.constraints) if not c.is_equality]
+
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
-        equalities = [i for i, c in enumerate(self.constraints) if c.is_equality]
-        barriers = [i for i, c in enumerate(self.constraints) if not c.is_equality]
-        active = list(equalities)
+        active = list(self._equalities)
         qd = self._solve_active(kinematics, twist, active)
         # Active set over the barriers: hold the most violated one, solve again.
+        barriers = list(self._barriers)
         while barriers:
             violations = []
             for i in barriers:
@@ -158,12 +164,9 @@ class CJMController(Controller):
                 break
             active.append(barriers.pop(worst))
             qd = self._solve_active(kinematics, twist, active)
-        self.info.active_barriers = tuple(i for i in active if not self.constraints[i].is_equality)
-        qd = self._limit_velocity(qd)
-        if active:
-            A, b = self.constraint_rows(active)
-            self.info.equality_residual = float(np.max(np.abs(A @ qd - self.info.scale * b)))
-        return qd
+        if self._barriers:
+            self.info.active_barriers = tuple(i for i in active if i in self._barriers)
+        return self._limit_velocity(qd)
 
     def _solve_active(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
         if len(active) == 1 and not self.general_only:
@@ -180,31 +183,47 @@ class CJMController(Controller):
     def _solve_analytical(
         self, kinematics: Kinematics, twist: np.ndarray, index: int, split: ChainSplit
     ) -> np.ndarray | None:
-        constraint = self.constraints[index]
         frame_id = self.constraint_frames[index]
         placement = self.data.oMf[frame_id]
         pre_jacobian = pin.getFrameJacobian(self.model, self.data, frame_id, pin.LOCAL)[:, split.pre]
-        u, s, vt = np.linalg.svd(pre_jacobian, full_matrices=True)
-        if s[-1] < PRE_CHAIN_SINGULAR:
-            self.info.message = (f"pre-constraint chain singular (sigma_min {s[-1]:.2e}): "
-                                 "general form used")
-            return None
-
-        S = constraint.structure(placement, self.parametrisation)
-        twist_a0 = constraint.particular_twist(placement)
-        ad_ea = kinematics.ee_placement.actInv(placement).action
-        jbar = np.hstack([ad_ea @ S, kinematics.ee_jacobian[:, split.post]])
-        solution = damped_least_squares(jbar, twist - ad_ea @ twist_a0, self.policy)
+        state = self.constraints[index].evaluate(placement)
+        S = structure_of(state, self.parametrisation)
         n_free = S.shape[1]
-        twist_a = S @ solution.x[:n_free] + twist_a0
+        ad_ea = kinematics.ee_placement.actInv(placement).action
+        # Jbar = [Ad_ea S, J_post] (eq 24); the particular twist V_a0 = [C^T b; 0] carries
+        # the drift feedback and feed-forward, so the free variables solve
+        # Jbar v_m = V_e - Ad_ea V_a0 (eq 22, damped as eq 35 near singularity).
+        jbar = np.empty((6, n_free + split.post.size))
+        jbar[:, :n_free] = ad_ea @ S
+        jbar[:, n_free:] = kinematics.ee_jacobian[:, split.post]
+        linear_a0 = state.C.T @ state.rhs
+        solution = damped_least_squares(jbar, twist - ad_ea[:, :3] @ linear_a0, self.policy)
+        twist_a = S @ solution.x[:n_free]
+        twist_a[:3] += linear_a0
+
+        if split.pre.size == 6:  # the paper's case: J_a square, one LU solve
+            lu, _, qd_pre, info = lapack.dgesv(pre_jacobian, twist_a)
+            pivots = np.abs(lu.diagonal())
+            if info != 0 or pivots.min() < PRE_CHAIN_SINGULAR * pivots.max():
+                self.info.message = "pre-constraint chain singular: general form used"
+                return None
+        else:  # redundant pre-chain: pseudo-inverse + posture in null(J_a)
+            u, s, vt = np.linalg.svd(pre_jacobian, full_matrices=True)
+            if s[-1] < PRE_CHAIN_SINGULAR:
+                self.info.message = "pre-constraint chain singular: general form used"
+                return None
+            qd_pre = vt[:6].T @ ((u.T @ twist_a) / s)
+            if self.posture_gain > 0.0:
+                null_basis = vt[6:]
+                qd_pre += null_basis.T @ (null_basis @ self._posture_velocity(kinematics.q)[split.pre])
 
         qd = np.zeros(self.model.nv)
-        qd_pre = vt[:6].T @ ((u.T @ twist_a) / s)
-        if split.pre.size > 6 and self.posture_gain > 0.0:
-            null_basis = vt[6:]
-            qd_pre += null_basis.T @ (null_basis @ self._posture_velocity(kinematics.q)[split.pre])
         qd[split.pre] = qd_pre
         qd[split.post] = solution.x[n_free:]
+        # residual of C v_c = b for the twist the pre-chain really produces
+        achieved = pre_jacobian @ qd_pre
+        point_velocity = achieved[:3] - pin.skew(state.p) @ achieved[3:]
+        self.info.equality_residual = float(np.max(np.abs(state.C @ point_velocity - state.rhs)))
         self.info.method = "analytical"
         self.info.sigma_min = solution.sigma_min
         self.info.damping = solution.damping
@@ -231,6 +250,7 @@ class CJMController(Controller):
                 z = null_basis.T @ self._posture_velocity(kinematics.q)
                 z -= solution.row_space.T @ (solution.row_space @ z)
                 qd += null_basis @ z
+        self.info.equality_residual = float(np.max(np.abs(A @ qd - b))) if A.size else 0.0
         self.info.method = "general"
         return qd
 

