@@ -10,8 +10,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from constraints import Hole
-from controllers import CJMController, QPController
 
+from .registry import make_controller
 from .robot import load_robot
 
 #: hole distance along the constrained link of each built-in robot (m)
@@ -29,22 +29,6 @@ class StepTiming:
     max_us: float
     iterations: int
     max_constraint_residual: float  # m/s, max |A qd - b| over the timed steps
-
-
-def make_controller(spec: str, robot, constraints, dt: float = 1e-3):
-    """Build a controller from a spec: ``cjm``, ``cjm:general``, ``cjm:paper``, ``qp:<solver>``."""
-    name, _, option = spec.partition(":")
-    if name == "cjm":
-        if option in ("", "analytical"):
-            return CJMController(robot, constraints)
-        if option == "general":
-            return CJMController(robot, constraints, general_only=True)
-        if option == "paper":
-            return CJMController(robot, constraints, parametrisation="paper")
-        raise ValueError(f"unknown CJM variant {option!r}: analytical, general or paper")
-    if name == "qp":
-        return QPController(robot, constraints, solver=option or "proxqp", dt=dt)
-    raise ValueError(f"unknown controller {spec!r}: cjm[:general|:paper] or qp:<solver>")
 
 
 def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,

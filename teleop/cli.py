@@ -1,4 +1,4 @@
-"""Command line: ``teleop bench`` (more subcommands come with the closed loop and the UI)."""
+"""Command line: ``teleop compare | replay | record | bench | scenarios``."""
 
 from __future__ import annotations
 
@@ -6,43 +6,129 @@ import argparse
 import sys
 from typing import Sequence
 
+DEFAULT_CONTROLLERS = "cjm,qp:proxqp,qp:daqp,qp:osqp,mink:daqp"
+
 
 def _csv(text: str) -> list[str]:
-    return [item.strip() for item in text.split(",") if item.strip()]
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError("expected a comma-separated list")
+    return items
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def _add_run_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--controllers", type=_csv, default=_csv(DEFAULT_CONTROLLERS),
+                        help=f"comma-separated controllers (default {DEFAULT_CONTROLLERS}); "
+                             "cjm[:general|:paper], qp:<solver>, mink:<solver>")
+    parser.add_argument("--rate", type=_positive, help="control rate in Hz (default 1000)")
+    parser.add_argument("--duration", type=_positive, help="seconds to run (default: all)")
+    parser.add_argument("--out", default="out", help="output directory (default ./out)")
+    parser.add_argument("--no-plots", action="store_true", help="metrics only")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="teleop",
-        description="Operational-space teleoperation under kinematic constraints (CJM, QP).")
+        description="Operational-space teleoperation under kinematic constraints (CJM, QP, mink).")
     commands = parser.add_subparsers(dest="command", required=True)
 
+    compare = commands.add_parser("compare", help="run controllers on a scripted scenario")
+    compare.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
+    _add_run_options(compare)
+
+    replay = commands.add_parser("replay", help="replay a recorded session through controllers")
+    replay.add_argument("file", help="session file (JSON lines, see README)")
+    _add_run_options(replay)
+
+    record = commands.add_parser("record", help="write a scenario's operator input as a session")
+    record.add_argument("--scenario", required=True)
+    record.add_argument("--rate", type=_positive, default=1000.0)
+    record.add_argument("--duration", type=_positive)
+    record.add_argument("file", help="session file to write")
+
+    commands.add_parser("scenarios", help="list the scenarios")
+
     bench = commands.add_parser("bench", help="one-step time of each controller on each robot")
-    bench.add_argument("--robots", type=_csv, default=["sda10f", "ur5_instrument"],
-                       help="comma-separated robot names (default: both built-ins)")
+    bench.add_argument("--robots", type=_csv, default=["sda10f", "ur5_instrument"])
     bench.add_argument("--controllers", type=_csv,
-                       default=["cjm", "cjm:general", "qp:proxqp", "qp:daqp", "qp:osqp"],
-                       help="comma-separated controller specs")
+                       default=_csv("cjm,cjm:general,qp:proxqp,qp:daqp,qp:osqp,mink:daqp,mink:proxqp"))
     bench.add_argument("--iterations", type=int, default=2000, help="timed steps per controller")
     bench.add_argument("--quick", action="store_true", help="a few iterations (CI smoke run)")
+    bench.add_argument("--no-scaling", action="store_true", help="skip the generated-chain scaling")
     bench.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     return parser
 
 
+def _run(plan, args, config) -> int:
+    from .compare import compare, format_table, metrics_document, write_outputs
+
+    duration = args.duration or plan.duration
+    results = compare(plan, args.controllers, config, duration, progress=not args.quiet)
+    paths = write_outputs(plan, results, config, duration, args.out, plots=not args.no_plots)
+    document = metrics_document(plan, results, config, duration)
+    print(f"{plan.name}: {plan.description} ({duration:g} s at {config.rate:g} Hz)")
+    print(format_table(document))
+    for spec, result in results.items():
+        if result.failure_messages:
+            print(f"  {spec}: {len(result.failure_messages)}+ failed steps, first {result.failure_messages[0]}")
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    try:
+        return _dispatch(args)
+    except ValueError as error:  # bad scenario, controller, file: one clear line
+        print(f"teleop {args.command}: {error}", file=sys.stderr)
+        return 2
+
+
+def _dispatch(args) -> int:
+    from .loop import LoopConfig
+
+    if args.command == "scenarios":
+        from .scenarios import SCENARIOS, load_scenario
+
+        for name in SCENARIOS:
+            print(f"{name:<15} {load_scenario(name).description}")
+        return 0
+    if args.command == "compare":
+        from .scenarios import load_scenario
+
+        plan = load_scenario(args.scenario)
+        return _run(plan, args, LoopConfig(rate=args.rate or 1000.0))
+    if args.command == "replay":
+        from .session import load_session, session_plan
+
+        session = load_session(args.file)
+        header = session.header
+        config = LoopConfig(rate=args.rate or header.get("rate_hz", 1000.0),
+                            kp=header.get("kp", 20.0),
+                            target_time_constant=header.get("target_time_constant_s", 0.0))
+        return _run(session_plan(session), args, config)
+    if args.command == "record":
+        from .scenarios import load_scenario
+        from .session import record_plan
+
+        path = record_plan(load_scenario(args.scenario), args.file, args.rate, args.duration)
+        print(f"wrote {path}")
+        return 0
     if args.command == "bench":
         from .bench import format_table, run_bench, write_json
 
         iterations = 20 if args.quick else args.iterations
         if iterations < 1:
-            print("teleop bench: --iterations must be >= 1", file=sys.stderr)
-            return 2
-        try:
-            results = run_bench(args.robots, args.controllers, iterations=iterations)
-        except ValueError as error:
-            print(f"teleop bench: {error}", file=sys.stderr)
-            return 2
+            raise ValueError("--iterations must be >= 1")
+        results = run_bench(args.robots, args.controllers, iterations=iterations)
         print(format_table(results))
         if args.json:
             write_json(results, args.json)

@@ -1,0 +1,195 @@
+"""Run controllers on the same plan and summarise what they did (``teleop compare``)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
+from .registry import make_controller
+from .scenarios import Plan
+
+SCHEMA_VERSION = 1
+
+#: per-controller keys of metrics.json, in order (documented in README and metrics.schema.json)
+METRIC_KEYS = (
+    "constraint_error_max_m", "constraint_error_rms_m",
+    "constraint_velocity_residual_max_mps", "barrier_penetration_max_m",
+    "ee_position_error_max_m", "ee_position_error_rms_m",
+    "ee_orientation_error_max_rad", "ee_orientation_error_rms_rad",
+    "joint_limit_violation_max_rad", "failed_steps",
+    "step_time_median_us", "step_time_p99_us", "step_time_max_us", "tick_time_median_us",
+)
+
+
+@dataclass
+class RunResult:
+    """One controller's run: per-step columns and what went wrong."""
+
+    controller: str
+    columns: dict[str, np.ndarray]
+    constraint_velocity: np.ndarray  # (steps, k) C v_c of the first equality
+    desired_linear_velocity: np.ndarray  # (steps, 3) world frame
+    actual_linear_velocity: np.ndarray  # (steps, 3) world frame
+    failure_messages: list[str] = field(default_factory=list)
+
+    @property
+    def steps(self) -> int:
+        return len(self.columns["t"])
+
+    def metrics(self) -> dict[str, float | int | str | None]:
+        """The summary of DESIGN.md section 7 (units in the key names)."""
+        c = self.columns
+
+        def rms(x: np.ndarray) -> float:
+            return float(np.sqrt(np.mean(np.square(x)))) if x.size else 0.0
+
+        def top(x: np.ndarray) -> float:
+            return float(np.max(x)) if x.size else 0.0
+
+        step = c["step_time_us"]
+        return {
+            "constraint_error_max_m": top(c["constraint_error"]),
+            "constraint_error_rms_m": rms(c["constraint_error"]),
+            "constraint_velocity_residual_max_mps": top(c["constraint_velocity_residual"]),
+            "barrier_penetration_max_m": top(c["barrier_penetration"]),
+            "ee_position_error_max_m": top(c["ee_position_error"]),
+            "ee_position_error_rms_m": rms(c["ee_position_error"]),
+            "ee_orientation_error_max_rad": top(c["ee_orientation_error"]),
+            "ee_orientation_error_rms_rad": rms(c["ee_orientation_error"]),
+            "joint_limit_violation_max_rad": top(c["joint_limit_violation"]),
+            "failed_steps": int(np.sum(c["failed"])),
+            "step_time_median_us": float(np.median(step)) if step.size else 0.0,
+            "step_time_p99_us": float(np.percentile(step, 99)) if step.size else 0.0,
+            "step_time_max_us": top(step),
+            "tick_time_median_us": float(np.median(c["tick_time_us"])) if step.size else 0.0,
+            "first_failure": self.failure_messages[0] if self.failure_messages else None,
+        }
+
+
+def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
+             duration: float | None = None,
+             on_step: Callable[[int], None] | None = None) -> RunResult:
+    """Run one controller through ``plan`` and record every tick."""
+    config = config or LoopConfig()
+    duration = plan.duration if duration is None else float(duration)
+    if not math.isfinite(duration) or duration <= 0:
+        raise ValueError(f"duration must be > 0 s, got {duration}")
+    constraints = plan.make_constraints()
+    controller = make_controller(spec, plan.robot, constraints, dt=config.dt)
+    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config)
+    steps = int(round(duration * config.rate))
+    records: list[StepRecord] = []
+    failures: list[str] = []
+    for i in range(steps):
+        t = i * config.dt
+        changed = plan.update(t, constraints)
+        if changed is not None:
+            constraints = changed
+            loop.set_constraints(constraints)
+        record = loop.tick(plan.target(t + config.dt))
+        records.append(record)
+        if record.failed and len(failures) < 10:
+            failures.append(f"t={record.t:.3f}s: {record.message}")
+        if on_step is not None:
+            on_step(i)
+    return _collect(spec, records, failures)
+
+
+def _collect(spec: str, records: Sequence[StepRecord], failures: list[str]) -> RunResult:
+    columns = {name: np.array([getattr(r, name) for r in records], dtype=float)
+               for name in RECORD_FIELDS}
+    width = max((len(r.constraint_velocity) for r in records), default=0)
+    velocity = np.zeros((len(records), width))
+    for i, r in enumerate(records):
+        velocity[i, :len(r.constraint_velocity)] = r.constraint_velocity
+    return RunResult(
+        controller=spec, columns=columns, constraint_velocity=velocity,
+        desired_linear_velocity=np.array([r.desired_linear_velocity for r in records]).reshape(-1, 3),
+        actual_linear_velocity=np.array([r.actual_linear_velocity for r in records]).reshape(-1, 3),
+        failure_messages=failures)
+
+
+def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
+            duration: float | None = None, progress: bool = True) -> dict[str, RunResult]:
+    """Run every controller spec on the same plan (fresh constraints each)."""
+    config = config or LoopConfig()
+    duration = plan.duration if duration is None else duration
+    steps = int(round(duration * config.rate))
+    for spec in specs:  # fail fast on a bad spec, before minutes of simulation
+        make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=steps * len(specs), unit="step", desc=plan.name, leave=False,
+                   disable=None)  # None: no bar when stderr is not a terminal
+    results = {}
+    try:
+        for spec in specs:
+            if bar is not None:
+                bar.set_postfix_str(spec)
+            results[spec] = run_plan(plan, spec, config, duration,
+                                     on_step=(lambda i: bar.update(1)) if bar else None)
+    finally:
+        if bar is not None:
+            bar.close()
+    return results
+
+
+def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
+                     duration: float) -> dict:
+    """The metrics.json document (schema: ``teleop/metrics.schema.json``)."""
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "scenario": plan.name,
+        "description": plan.description,
+        "robot": plan.robot.name,
+        "rate_hz": config.rate,
+        "duration_s": duration,
+        "steps": int(round(duration * config.rate)),
+        "controllers": {spec: result.metrics() for spec, result in results.items()},
+    }
+
+
+def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
+                  duration: float, out_dir: str | Path, plots: bool = True) -> list[Path]:
+    """metrics.json, metrics.csv and the PNG plots into ``out_dir``; returns the paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    document = metrics_document(plan, results, config, duration)
+    paths = [out / "metrics.json", out / "metrics.csv"]
+    paths[0].write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    with paths[1].open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["controller", *METRIC_KEYS])
+        for spec, metrics in document["controllers"].items():
+            writer.writerow([spec, *(metrics[key] for key in METRIC_KEYS)])
+    if plots:
+        from .plots import write_plots
+
+        paths += write_plots(plan, results, out)
+    return paths
+
+
+def format_table(document: dict) -> str:
+    """A short table of the headline numbers for the terminal and the README."""
+    header = ("| controller | constraint err max (m) | RMS (m) | residual max (m/s) | "
+              "EE pos RMS (mm) | EE ori RMS (mrad) | limit viol (rad) | failed | "
+              "step median/p99 (us) |")
+    lines = [header, "|" + "---|" * 9]
+    for spec, m in document["controllers"].items():
+        lines.append(
+            f"| {spec} | {m['constraint_error_max_m']:.1e} | {m['constraint_error_rms_m']:.1e} | "
+            f"{m['constraint_velocity_residual_max_mps']:.1e} | "
+            f"{1e3 * m['ee_position_error_rms_m']:.3f} | "
+            f"{1e3 * m['ee_orientation_error_rms_rad']:.3f} | "
+            f"{m['joint_limit_violation_max_rad']:.3f} | {m['failed_steps']} | "
+            f"{m['step_time_median_us']:.0f} / {m['step_time_p99_us']:.0f} |")
+    return "\n".join(lines)

@@ -1,0 +1,344 @@
+"""Recorded operator sessions: a JSON-lines file of target poses and constraint edits.
+
+Format (one JSON object per line, times ``t`` in seconds from the start, world frame, m):
+
+* ``{"type": "header", "format": "cjm-teleop-session", "version": 1, "robot": "sda10f",
+  "q0": [...], "rate_hz": 1000, "kp": 20, "target_time_constant_s": 0.05}`` - first line;
+  ``robot`` is a built-in name or a URDF path (then also ``ee_frame``,
+  ``constrained_link``, ``link_axis``).
+* ``{"type": "target", "t": 0.05, "position": [x, y, z], "quaternion_wxyz": [w, x, y, z]}``
+  - the operator's target; it holds until the next one (the loop smooths it).
+* ``{"type": "add", "t": 0.0, "id": "hole-1", "constraint": {"kind": "hole", ...}}`` - kinds
+  and fields: ``hole`` (link, center, link_axis, gain), ``plane`` and ``barrier`` (link,
+  link_point, plane_point, normal, gain), ``point_lock`` (link, link_point, target, gain).
+* ``{"type": "move", "t": 1.2, "id": "hole-1", "position": [...], "velocity": [...]}`` -
+  a hole's centre, a plane's point or a lock's target moves (velocity for feed-forward).
+* ``{"type": "remove", "t": 3.0, "id": "hole-1"}``
+* ``{"type": "end", "t": 10.0}`` - optional; the session's duration.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+import pinocchio as pin
+
+from constraints import Barrier, Constraint, Hole, Plane, PointLock
+
+from .robot import Robot, load_robot
+from .scenarios import Plan, home_pose
+
+FORMAT = "cjm-teleop-session"
+VERSION = 1
+EVENT_TYPES = ("target", "add", "move", "remove", "end")
+#: events within this of a tick's time belong to that tick (float time stamps)
+TIME_EPSILON = 1e-9
+
+
+class SessionError(ValueError):
+    """A session file that cannot be replayed, with the line that is wrong."""
+
+
+# ----------------------------------------------------------------------------- constraints
+
+
+def constraint_to_dict(constraint: Constraint) -> dict:
+    """JSON-ready description of a constraint (inverse of :func:`constraint_from_dict`)."""
+    if isinstance(constraint, Hole):
+        return {"kind": "hole", "link": constraint.link, "center": constraint.center.tolist(),
+                "link_axis": constraint.link_axis.tolist(), "gain": constraint.gain}
+    if isinstance(constraint, Plane):  # Barrier is a Plane
+        return {"kind": "barrier" if isinstance(constraint, Barrier) else "plane",
+                "link": constraint.link, "link_point": constraint.link_point.tolist(),
+                "plane_point": constraint.plane_point.tolist(),
+                "normal": constraint.normal.tolist(), "gain": constraint.gain}
+    if isinstance(constraint, PointLock):
+        return {"kind": "point_lock", "link": constraint.link,
+                "link_point": constraint.link_point.tolist(),
+                "target": constraint.target.tolist(), "gain": constraint.gain}
+    raise TypeError(f"cannot serialise {type(constraint).__name__}")
+
+
+def constraint_from_dict(data: dict) -> Constraint:
+    """Build a constraint from :func:`constraint_to_dict` output; bad fields raise ValueError."""
+    if not isinstance(data, dict):
+        raise ValueError(f"a constraint must be an object, got {data!r}")
+    kind = data.get("kind")
+    fields = {k: v for k, v in data.items() if k != "kind"}
+    builders = {"hole": Hole, "plane": Plane, "barrier": Barrier, "point_lock": PointLock}
+    if kind not in builders:
+        raise ValueError(f"unknown constraint kind {kind!r}: {', '.join(builders)}")
+    try:
+        return builders[kind](**fields)
+    except TypeError as error:
+        raise ValueError(f"bad fields for a {kind}: {error}") from error
+
+
+def _move(constraint: Constraint, position, velocity) -> None:
+    if not hasattr(constraint, "move_to"):
+        raise ValueError(f"{type(constraint).__name__} cannot move")
+    constraint.move_to(position, velocity)
+
+
+def _geometry_position(constraint: Constraint) -> np.ndarray:
+    if isinstance(constraint, Hole):
+        return constraint.center
+    if isinstance(constraint, Plane):
+        return constraint.plane_point
+    return constraint.target
+
+
+# ----------------------------------------------------------------------------- writing
+
+
+class SessionRecorder:
+    """Writes a session file as it happens (one flushed line per event).
+
+    Parameters
+    ----------
+    path : file to write (parent directories are created).
+    robot : the robot driven.
+    q0 : start configuration.
+    rate_hz, kp, target_time_constant_s : the loop settings, so a replay can use them.
+    """
+
+    def __init__(self, path: str | Path, robot: Robot, q0: np.ndarray, rate_hz: float = 1000.0,
+                 kp: float = 20.0, target_time_constant_s: float = 0.0) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file: IO[str] | None = self.path.open("w", encoding="utf-8")
+        header = {"type": "header", "format": FORMAT, "version": VERSION,
+                  "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                  "q0": [float(x) for x in q0], "rate_hz": rate_hz, "kp": kp,
+                  "target_time_constant_s": target_time_constant_s}
+        from .robot import BUILTIN_ROBOTS
+
+        if robot.name in BUILTIN_ROBOTS and robot.urdf_path.parent.name == "robots":
+            header["robot"] = robot.name
+        else:
+            header.update(robot=str(robot.urdf_path), ee_frame=robot.ee_frame,
+                          constrained_link=robot.constrained_link,
+                          link_axis=[float(x) for x in robot.link_axis])
+        self._write(header)
+        self.last_t = 0.0
+
+    def _write(self, event: dict) -> None:
+        if self._file is None:
+            raise ValueError(f"session {self.path} is closed")
+        self._file.write(json.dumps(event) + "\n")
+        self._file.flush()
+
+    def _stamp(self, t: float) -> float:
+        t = float(t)
+        if not math.isfinite(t):
+            raise ValueError(f"event time must be finite, got {t}")
+        self.last_t = max(self.last_t, t)
+        return t
+
+    def target(self, t: float, pose: pin.SE3) -> None:
+        quaternion = pin.Quaternion(pose.rotation)
+        self._write({"type": "target", "t": self._stamp(t),
+                     "position": [float(x) for x in pose.translation],
+                     "quaternion_wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]})
+
+    def add(self, t: float, constraint_id: str, constraint: Constraint) -> None:
+        self._write({"type": "add", "t": self._stamp(t), "id": str(constraint_id),
+                     "constraint": constraint_to_dict(constraint)})
+
+    def move(self, t: float, constraint_id: str, position, velocity=(0.0, 0.0, 0.0)) -> None:
+        self._write({"type": "move", "t": self._stamp(t), "id": str(constraint_id),
+                     "position": [float(x) for x in position],
+                     "velocity": [float(x) for x in velocity]})
+
+    def remove(self, t: float, constraint_id: str) -> None:
+        self._write({"type": "remove", "t": self._stamp(t), "id": str(constraint_id)})
+
+    def close(self, t: float | None = None) -> None:
+        """Write the ``end`` line (at ``t``, default the last event) and close the file."""
+        if self._file is None:
+            return
+        self._write({"type": "end", "t": self._stamp(self.last_t if t is None else t)})
+        self._file.close()
+        self._file = None
+
+    def __enter__(self) -> "SessionRecorder":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def record_plan(plan: Plan, path: str | Path, rate_hz: float = 1000.0,
+                duration: float | None = None) -> Path:
+    """Write a scenario's operator input as a session, one target per control tick.
+
+    Moving geometry is recorded as ``move`` events every tick. Replaying the file at the
+    same rate reproduces the scenario step for step.
+    """
+    duration = plan.duration if duration is None else duration
+    dt = 1.0 / rate_hz
+    constraints = plan.make_constraints()
+    ids = [f"{type(c).__name__.lower()}-{i + 1}" for i, c in enumerate(constraints)]
+    with SessionRecorder(path, plan.robot, plan.q0, rate_hz=rate_hz) as recorder:
+        for cid, constraint in zip(ids, constraints):
+            recorder.add(0.0, cid, constraint)
+        before = [_geometry_position(c).copy() for c in constraints]
+        for i in range(int(round(duration * rate_hz))):
+            t = i * dt
+            if plan.update(t, constraints) is not None:
+                raise ValueError("record_plan cannot record a plan that changes its constraint set")
+            for k, (cid, constraint) in enumerate(zip(ids, constraints)):
+                now = _geometry_position(constraint)
+                if not np.array_equal(now, before[k]) or getattr(constraint, "velocity", np.zeros(3)).any():
+                    recorder.move(t, cid, now, constraint.velocity)
+                    before[k] = now.copy()
+            recorder.target(t + dt, plan.target(t + dt))
+        recorder.close(duration)
+    return Path(path)
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+@dataclass
+class Session:
+    """A parsed session file."""
+
+    path: Path
+    header: dict
+    events: list[dict] = field(default_factory=list)
+
+    @property
+    def duration(self) -> float:
+        ends = [e["t"] for e in self.events if e["type"] == "end"]
+        return float(ends[-1]) if ends else max((e["t"] for e in self.events), default=0.0)
+
+
+def load_session(path: str | Path) -> Session:
+    """Parse and check a session file; errors name the file and line."""
+    path = Path(path)
+    if not path.is_file():
+        raise SessionError(f"no session file at {path}")
+    lines = path.read_text(encoding="utf-8").splitlines()
+    header, events = None, []
+    for number, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        where = f"{path}:{number}"
+        try:
+            event = json.loads(line)
+        except json.JSONDecodeError as error:
+            raise SessionError(f"{where}: not JSON ({error.msg})") from error
+        if not isinstance(event, dict) or "type" not in event:
+            raise SessionError(f"{where}: each line must be an object with a 'type'")
+        if header is None:
+            if event["type"] != "header" or event.get("format") != FORMAT:
+                raise SessionError(f"{where}: the first line must be a {FORMAT} header")
+            if event.get("version") != VERSION:
+                raise SessionError(f"{where}: unsupported version {event.get('version')!r}")
+            if "robot" not in event or "q0" not in event:
+                raise SessionError(f"{where}: the header needs 'robot' and 'q0'")
+            header = event
+            continue
+        if event["type"] not in EVENT_TYPES:
+            raise SessionError(f"{where}: unknown event type {event['type']!r}")
+        t = event.get("t")
+        if not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
+            raise SessionError(f"{where}: 't' must be a time >= 0 s, got {t!r}")
+        try:
+            _check_event(event)
+        except (ValueError, TypeError, KeyError) as error:
+            raise SessionError(f"{where}: {error}") from error
+        event["_line"] = number
+        events.append(event)
+    if header is None:
+        raise SessionError(f"{path}: empty session file")
+    events.sort(key=lambda e: e["t"])  # stable: equal times keep file order
+    return Session(path, header, events)
+
+
+def _check_event(event: dict) -> None:
+    kind = event["type"]
+    if kind == "target":
+        position = np.asarray(event["position"], dtype=float)
+        quaternion = np.asarray(event["quaternion_wxyz"], dtype=float)
+        if position.shape != (3,) or quaternion.shape != (4,):
+            raise ValueError("a target needs 'position' (3) and 'quaternion_wxyz' (4)")
+        if not (np.isfinite(position).all() and np.isfinite(quaternion).all()):
+            raise ValueError("target pose must be finite")
+        if abs(np.linalg.norm(quaternion) - 1.0) > 1e-6:
+            raise ValueError(f"quaternion must be unit, got norm {np.linalg.norm(quaternion):.6g}")
+    elif kind == "add":
+        if not isinstance(event.get("id"), str):
+            raise ValueError("'add' needs a string 'id'")
+        constraint_from_dict(event["constraint"])
+    elif kind == "move":
+        if not isinstance(event.get("id"), str):
+            raise ValueError("'move' needs a string 'id'")
+        for key in ("position", "velocity"):
+            value = np.asarray(event.get(key, [0.0, 0.0, 0.0]), dtype=float)
+            if value.shape != (3,) or not np.isfinite(value).all():
+                raise ValueError(f"'{key}' must be 3 finite numbers")
+    elif kind == "remove":
+        if not isinstance(event.get("id"), str):
+            raise ValueError("'remove' needs a string 'id'")
+
+
+def session_robot(session: Session) -> Robot:
+    header = session.header
+    return load_robot(header["robot"], ee_frame=header.get("ee_frame"),
+                      constrained_link=header.get("constrained_link"),
+                      link_axis=header.get("link_axis"))
+
+
+def session_plan(session: Session, robot: Robot | None = None) -> Plan:
+    """A :class:`Plan` that replays the session: zero-order hold of the targets, and the
+    constraint edits applied at their times (each run starts from no constraint)."""
+    robot = robot or session_robot(session)
+    q0 = np.asarray(session.header["q0"], dtype=float)
+    if q0.shape != (robot.model.nq,):
+        raise SessionError(f"{session.path}: q0 has {q0.size} values, the robot has nq = {robot.model.nq}")
+    start = home_pose(robot, q0)
+    targets = [e for e in session.events if e["type"] == "target"]
+    target_times = np.array([e["t"] for e in targets])
+    poses = [pin.SE3(pin.Quaternion(*e["quaternion_wxyz"]).normalized().matrix(),
+                     np.asarray(e["position"], dtype=float)) for e in targets]
+    edits = [e for e in session.events if e["type"] in ("add", "move", "remove")]
+    state = {"cursor": 0, "by_id": {}}
+
+    def make_constraints() -> list[Constraint]:
+        state["cursor"], state["by_id"] = 0, {}
+        return []
+
+    def target(t: float) -> pin.SE3:
+        index = int(np.searchsorted(target_times, t + TIME_EPSILON, side="right")) - 1
+        return start if index < 0 else poses[index]
+
+    def update(t: float, constraints: list[Constraint]) -> list[Constraint] | None:
+        changed = False
+        by_id = state["by_id"]
+        while state["cursor"] < len(edits) and edits[state["cursor"]]["t"] <= t + TIME_EPSILON:
+            event = edits[state["cursor"]]
+            state["cursor"] += 1
+            where = f"{session.path}:{event['_line']}"
+            if event["type"] == "add":
+                by_id[event["id"]] = constraint_from_dict(event["constraint"])
+                changed = True
+            elif event["id"] not in by_id:
+                raise SessionError(f"{where}: no constraint with id {event['id']!r} to {event['type']}")
+            elif event["type"] == "remove":
+                del by_id[event["id"]]
+                changed = True
+            else:
+                _move(by_id[event["id"]], event["position"], event.get("velocity", (0, 0, 0)))
+        return list(by_id.values()) if changed else None
+
+    return Plan(name=session.path.stem, robot=robot, q0=q0, duration=session.duration,
+                make_constraints=make_constraints, target=target, update=update,
+                description=f"recorded session {session.path.name}")
