@@ -70,7 +70,7 @@ def link_placement(robot: Robot, q: np.ndarray, link: str) -> pin.SE3:
 
 
 def operator_motion(start: pin.SE3, amplitude: Sequence[float], frequencies: Sequence[float],
-                    angle_amplitude: float, ramp: float = 1.0) -> Callable[[float], pin.SE3]:
+                    angle_amplitude: float, ramp: float = 2.5) -> Callable[[float], pin.SE3]:
     """Smooth, operator-like 3D motion: incommensurate sinusoids in position and attitude.
 
     Position offsets (world frame) ``A_i sin(2 pi f_i t)``; attitude wobble of
