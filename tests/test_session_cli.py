@@ -1,0 +1,144 @@
+"""Recorded sessions replay step for step; the CLI works end to end as a user runs it."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from teleop.compare import run_plan
+from teleop.scenarios import load_scenario
+from teleop.session import SessionError, load_session, record_plan, session_plan
+
+COMPARED = ("constraint_error", "constraint_velocity_residual", "barrier_penetration",
+            "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed")
+
+
+@pytest.mark.parametrize("scenario", ["trocar-circle", "moving-trocar"])
+def test_replay_of_a_recorded_scenario_reproduces_compare(scenario, tmp_path):
+    plan = load_scenario(scenario)
+    path = record_plan(plan, tmp_path / "session.jsonl", duration=0.4)
+    replayed = run_plan(session_plan(load_session(path)), "cjm")
+    direct = run_plan(plan, "cjm", duration=0.4)
+    assert replayed.steps == direct.steps == 400
+    # the only difference is the target's rotation round trip through a unit quaternion
+    for column in COMPARED:
+        np.testing.assert_allclose(replayed.columns[column], direct.columns[column],
+                                   rtol=1e-6, atol=1e-12, err_msg=column)
+    np.testing.assert_allclose(replayed.constraint_velocity, direct.constraint_velocity,
+                               rtol=1e-6, atol=1e-12)
+
+
+def write_session(path, lines):
+    path.write_text("\n".join(json.dumps(line) for line in lines) + "\n")
+    return path
+
+
+def header(robot="ur5_instrument"):
+    from teleop import load_robot
+
+    return {"type": "header", "format": "cjm-teleop-session", "version": 1, "robot": robot,
+            "q0": load_robot(robot).q_home.tolist(), "rate_hz": 1000, "kp": 20,
+            "target_time_constant_s": 0.05}
+
+
+def test_constraints_added_and_removed_mid_session(tmp_path, ur5_instrument):
+    from constraints import Hole
+    from teleop.session import constraint_to_dict
+
+    import pinocchio as pin
+
+    from teleop.scenarios import home_pose
+
+    hole = Hole.on_link(ur5_instrument, ur5_instrument.q_home, distance=0.2)
+    home = home_pose(ur5_instrument, ur5_instrument.q_home)
+    quaternion = pin.Quaternion(home.rotation)
+    path = write_session(tmp_path / "edits.jsonl", [
+        header(),
+        {"type": "add", "t": 0.1, "id": "h", "constraint": constraint_to_dict(hole)},
+        {"type": "target", "t": 0.0, "position": home.translation.tolist(),
+         "quaternion_wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]},
+        {"type": "move", "t": 0.15, "id": "h", "position": (hole.center + [0.002, 0, 0]).tolist()},
+        {"type": "remove", "t": 0.2, "id": "h"},
+        {"type": "end", "t": 0.3},
+    ])
+    session = load_session(path)
+    assert session.duration == 0.3
+    result = run_plan(session_plan(session), "qp:daqp")
+    error = result.columns["constraint_error"]
+    assert np.all(error[:99] == 0.0)  # no constraint yet
+    assert error[120] < 1e-6  # the hole, placed on the axis, is held
+    assert error[151] > 1e-3  # moved 2 mm sideways: the drift feedback pulls the link over
+    assert error[198] < error[151]
+    assert np.all(error[201:] == 0.0)  # removed
+
+
+@pytest.mark.parametrize("line, message", [
+    ("{not json", r"edits.jsonl:2: not JSON"),
+    ('{"type": "teleport", "t": 0}', r"edits.jsonl:2: unknown event type 'teleport'"),
+    ('{"type": "target", "t": -1, "position": [0,0,0], "quaternion_wxyz": [1,0,0,0]}', r"'t' must be a time"),
+    ('{"type": "target", "t": 0, "position": [0,0,0], "quaternion_wxyz": [2,0,0,0]}', r"quaternion must be unit"),
+    ('{"type": "add", "t": 0, "id": "x", "constraint": {"kind": "wormhole"}}', r"unknown constraint kind 'wormhole'"),
+])
+def test_bad_session_lines_are_named(tmp_path, line, message):
+    path = tmp_path / "edits.jsonl"
+    path.write_text(json.dumps(header()) + "\n" + line + "\n")
+    with pytest.raises(SessionError, match=message):
+        load_session(path)
+
+
+def test_moving_an_unknown_constraint_fails_at_its_line(tmp_path):
+    path = write_session(tmp_path / "s.jsonl", [
+        header(), {"type": "move", "t": 0.01, "id": "ghost", "position": [0, 0, 0]}])
+    with pytest.raises(SessionError, match=r"s.jsonl:2: no constraint with id 'ghost'"):
+        run_plan(session_plan(load_session(path)), "cjm", duration=0.05)
+
+
+def teleop(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "teleop.cli", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_cli_compare_record_replay_and_bench(tmp_path):
+    out = tmp_path / "out"
+    run = teleop("compare", "--scenario", "trocar-circle", "--controllers", "cjm,qp:daqp,mink:daqp",
+                 "--duration", "0.2", "--out", str(out), "--quiet", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    assert "| cjm |" in run.stdout and "| mink:daqp |" in run.stdout
+    document = json.loads((out / "metrics.json").read_text())
+    assert set(document["controllers"]) == {"cjm", "qp:daqp", "mink:daqp"}
+    csv_lines = (out / "metrics.csv").read_text().splitlines()
+    assert csv_lines[0].startswith("controller,constraint_error_max_m") and len(csv_lines) == 4
+
+    session = tmp_path / "circle.jsonl"
+    assert teleop("record", "--scenario", "trocar-circle", "--duration", "0.2", str(session),
+                  cwd=tmp_path).returncode == 0
+    replay = teleop("replay", str(session), "--controllers", "cjm,qp:daqp", "--out",
+                    str(tmp_path / "replay"), "--quiet", "--no-plots", cwd=tmp_path)
+    assert replay.returncode == 0, replay.stderr
+    replayed = json.loads((tmp_path / "replay" / "metrics.json").read_text())
+    for spec in ("cjm", "qp:daqp"):
+        for key in ("constraint_error_max_m", "ee_position_error_rms_m"):
+            assert replayed["controllers"][spec][key] == pytest.approx(
+                document["controllers"][spec][key], rel=1e-6, abs=1e-12)
+
+    bench = teleop("bench", "--quick", "--robots", "ur5_instrument", "--controllers",
+                   "cjm,qp:daqp,mink:daqp", "--json", str(tmp_path / "bench.json"), cwd=tmp_path)
+    assert bench.returncode == 0, bench.stderr
+    assert "ur5_instrument" in bench.stdout
+    assert json.loads((tmp_path / "bench.json").read_text())
+
+
+@pytest.mark.parametrize("args, message", [
+    (["compare", "--scenario", "nope"], "unknown scenario 'nope'"),
+    (["compare", "--scenario", "barrier", "--controllers", "lqr"], "unknown controller 'lqr'"),
+    (["compare", "--scenario", "barrier", "--controllers", "qp:cplex"], "'cplex' is not available"),
+    (["replay", "missing.jsonl"], "no session file at missing.jsonl"),
+])
+def test_cli_errors_are_one_clear_line(tmp_path, args, message):
+    run = teleop(*args, cwd=tmp_path)
+    assert run.returncode == 2
+    assert message in run.stderr and "Traceback" not in run.stderr
