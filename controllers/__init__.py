@@ -2,6 +2,8 @@
 
 * :class:`CJMController` - the paper's Constrained Jacobian Matrix (analytical + general).
 * :class:`QPController` - the same rows as hard equalities in a QP (qpsolvers backends).
+* :class:`MinkController` - the same task through mink on a MuJoCo model (the outside
+  peer); imported on first use, since MuJoCo takes a while to load.
 """
 
 from .base import Controller, SolveInfo, SolverError
@@ -13,9 +15,18 @@ __all__ = [
     "CJMController",
     "Controller",
     "DampingPolicy",
+    "MinkController",
     "QPController",
     "SolveInfo",
     "SolverError",
     "damped_least_squares",
     "nullspace",
 ]
+
+
+def __getattr__(name: str):
+    if name == "MinkController":
+        from .mink_controller import MinkController
+
+        return MinkController
+    raise AttributeError(f"module 'controllers' has no attribute {name!r}")

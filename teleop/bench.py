@@ -1,4 +1,5 @@
-"""One-step timing of every controller on the built-in robots (``teleop bench``)."""
+"""One-step timing of every controller (``teleop bench``): the built-in robots, then
+scaling over generated chains and numbers of constraints, all in one process."""
 
 from __future__ import annotations
 
@@ -11,24 +12,31 @@ import numpy as np
 
 from constraints import Hole
 
+from .chains import hole_links, load_chain
 from .registry import make_controller
-from .robot import load_robot
+from .robot import Robot, load_robot
 
 #: hole distance along the constrained link of each built-in robot (m)
 DEFAULT_HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20}
+SCALING_DOFS = (8, 16, 32, 64)
+SCALING_HOLES = (1, 2, 4, 8)
+SCALING_CONTROLLERS = ("cjm", "qp:proxqp", "qp:daqp", "mink:daqp")
 
 
 @dataclass(frozen=True)
 class StepTiming:
-    """Timing of ``solve(q, twist)`` for one controller on one robot (microseconds)."""
+    """Timing of ``solve(q, twist)`` for one controller on one problem (microseconds)."""
 
     robot: str
     controller: str
+    dof: int
+    constraint_rows: int
     median_us: float
     p99_us: float
     max_us: float
     iterations: int
     max_constraint_residual: float  # m/s, max |A qd - b| over the timed steps
+    method: str  # what the controller did (analytical / general / qp:... / mink:...)
 
 
 def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
@@ -45,15 +53,12 @@ def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
     return times
 
 
-def bench_controller(robot_name: str, spec: str, iterations: int = 2000,
-                     warmup: int = 200, seed: int = 0) -> StepTiming:
-    """Time one controller on a hole at the robot's home, over nearby configurations."""
-    robot = load_robot(robot_name)
-    q0 = robot.q_home.copy()
-    hole = Hole.on_link(robot, q0, distance=DEFAULT_HOLE_DISTANCE.get(robot_name, 0.1))
-    controller = make_controller(spec, robot, [hole])
+def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: int,
+                  warmup: int, seed: int = 0, label: str | None = None) -> StepTiming:
+    """Time one controller on ``holes`` over configurations near the robot's home."""
+    controller = make_controller(spec, robot, holes)
     rng = np.random.default_rng(seed)
-    configurations = q0 + rng.uniform(-0.02, 0.02, (iterations, robot.model.nq))
+    configurations = robot.q_home + rng.uniform(-0.02, 0.02, (iterations, robot.model.nq))
     twist = np.array([0.01, -0.02, 0.015, 0.05, -0.03, 0.02])
     residual = 0.0
 
@@ -63,27 +68,72 @@ def bench_controller(robot_name: str, spec: str, iterations: int = 2000,
         residual = max(residual, controller.info.equality_residual)
 
     times = time_steps(step, configurations, warmup)
-    return StepTiming(robot=robot_name, controller=spec, median_us=float(np.median(times)),
-                      p99_us=float(np.percentile(times, 99)), max_us=float(times.max()),
-                      iterations=iterations, max_constraint_residual=residual)
+    return StepTiming(robot=label or robot.name, controller=spec, dof=robot.model.nv,
+                      constraint_rows=sum(h.dim for h in holes),
+                      median_us=float(np.median(times)), p99_us=float(np.percentile(times, 99)),
+                      max_us=float(times.max()), iterations=iterations,
+                      max_constraint_residual=residual, method=controller.info.method)
 
 
 def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
-              controllers: Sequence[str] = ("cjm", "cjm:general", "qp:proxqp", "qp:daqp", "qp:osqp"),
+              controllers: Sequence[str] = ("cjm", "cjm:general", "qp:proxqp", "qp:daqp",
+                                            "qp:osqp", "mink:daqp"),
               iterations: int = 2000) -> list[StepTiming]:
-    return [bench_controller(r, c, iterations=iterations, warmup=max(1, iterations // 10))
-            for r in robots for c in controllers]
+    """The built-in robots, one hole each (the paper's 6-before/2-after case)."""
+    results = []
+    for name in robots:
+        robot = load_robot(name)
+        hole = Hole.on_link(robot, robot.q_home, distance=DEFAULT_HOLE_DISTANCE.get(name, 0.1))
+        results += [bench_problem(robot, [hole], spec, iterations, max(1, iterations // 10))
+                    for spec in controllers]
+    return results
+
+
+def run_scaling(iterations: int = 300, controllers: Sequence[str] = SCALING_CONTROLLERS,
+                dofs: Sequence[int] = SCALING_DOFS,
+                holes: Sequence[int] = SCALING_HOLES) -> list[StepTiming]:
+    """Generated chains: 1 hole on 8..64 DoF, then 1..8 holes on the 32-DoF chain."""
+    results = []
+    warmup = max(1, iterations // 10)
+    for dof in dofs:
+        robot = load_chain(dof)
+        problem = [Hole.on_link(robot, robot.q_home, 0.05, link=hole_links(dof, 1)[0])]
+        results += [bench_problem(robot, problem, spec, iterations, warmup, label=f"chain{dof}")
+                    for spec in controllers]
+    robot = load_chain(32)
+    for count in holes:
+        problem = [Hole.on_link(robot, robot.q_home, 0.05, link=link)
+                   for link in hole_links(32, count)]
+        results += [bench_problem(robot, problem, spec, iterations, warmup,
+                                  label=f"chain32/{count}holes") for spec in controllers]
+    return results
+
+
+def mink_ratios(results: Sequence[StepTiming]) -> dict[tuple[str, str], float]:
+    """``mink median / controller median`` per (problem, controller), same run."""
+    reference = {}
+    for r in results:
+        if r.controller.startswith("mink") and (r.robot, r.constraint_rows) not in reference:
+            reference[(r.robot, r.constraint_rows)] = r.median_us
+    return {(r.robot, r.controller): reference[(r.robot, r.constraint_rows)] / r.median_us
+            for r in results if (r.robot, r.constraint_rows) in reference}
 
 
 def format_table(results: Sequence[StepTiming]) -> str:
-    lines = [f"{'robot':<16}{'controller':<14}{'median us':>11}{'p99 us':>10}{'max us':>10}"
-             f"{'residual m/s':>14}"]
+    ratios = mink_ratios(results)
+    lines = [f"{'problem':<20}{'dof':>4}{'rows':>5}  {'controller':<13}{'median us':>10}"
+             f"{'p99 us':>9}{'max us':>10}{'x mink':>8}{'residual':>10}  method"]
     for r in results:
-        lines.append(f"{r.robot:<16}{r.controller:<14}{r.median_us:>11.1f}{r.p99_us:>10.1f}"
-                     f"{r.max_us:>10.1f}{r.max_constraint_residual:>14.1e}")
+        ratio = ratios.get((r.robot, r.controller))
+        lines.append(
+            f"{r.robot:<20}{r.dof:>4}{r.constraint_rows:>5}  {r.controller:<13}{r.median_us:>10.1f}"
+            f"{r.p99_us:>9.1f}{r.max_us:>10.1f}{'' if ratio is None else f'{ratio:.1f}':>8}"
+            f"{r.max_constraint_residual:>10.1e}  {r.method}")
     return "\n".join(lines)
 
 
 def write_json(results: Sequence[StepTiming], path: str) -> None:
+    ratios = mink_ratios(results)
+    rows = [{**asdict(r), "speedup_vs_mink": ratios.get((r.robot, r.controller))} for r in results]
     with open(path, "w", encoding="utf-8") as handle:
-        json.dump([asdict(r) for r in results], handle, indent=2)
+        json.dump(rows, handle, indent=2)

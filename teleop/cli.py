@@ -123,12 +123,16 @@ def _dispatch(args) -> int:
         print(f"wrote {path}")
         return 0
     if args.command == "bench":
-        from .bench import format_table, run_bench, write_json
+        from .bench import format_table, run_bench, run_scaling, write_json
 
         iterations = 20 if args.quick else args.iterations
         if iterations < 1:
             raise ValueError("--iterations must be >= 1")
         results = run_bench(args.robots, args.controllers, iterations=iterations)
+        if not args.no_scaling:
+            results += run_scaling(iterations=max(5, iterations // 5),
+                                   dofs=(8, 16) if args.quick else (8, 16, 32, 64),
+                                   holes=(1, 2) if args.quick else (1, 2, 4, 8))
         print(format_table(results))
         if args.json:
             write_json(results, args.json)

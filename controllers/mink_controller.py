@@ -1,0 +1,540 @@
+"""The outside peer: the same constrained teleoperation step posed to mink.
+
+mink (differential IK on a MuJoCo model) is what a user would pick instead of writing a
+controller. :class:`MinkController` poses *the same* problem as
+:class:`controllers.QPController` to it, so the three controllers can be compared step
+for step on the same robot, constraints and operator command.
+
+Conventions of mink 1.3.0 (read from ``mink/solve_ik.py``, ``mink/tasks/task.py``,
+``mink/tasks/frame_task.py``, ``mink/limits/*.py``), on which everything below rests:
+
+* The QP variable is the tangent displacement ``dq = v dt`` (MuJoCo dof order), not the
+  velocity; ``solve_ik`` returns ``v = dq / dt``, the velocity with which
+  ``configuration.integrate(v, dt)`` moves.
+* A task with error ``e(q)`` and Jacobian ``J = de/dq`` is a cost
+  ``|cost * (J dq + gain e)|^2``; in ``constraints=[task]`` it is the hard equality
+  ``J dq = -gain e`` (``gain`` must lie in [0, 1]).
+* ``FrameTask``: ``e = log(T_b^-1 T_t)`` (a body twist, ``LOCAL``, linear first: the
+  right-minus ``T_t (-) T_b``) and ``J = -Jlog(T_t^-1 T_b) J_b`` with ``J_b`` the body
+  Jacobian of the frame (see :class:`MinkController` for why this tracks ``V`` exactly).
+* A limit returns ``G dq <= h`` at step ``dt``; ``VelocityLimit`` is
+  ``|dq| <= v_max dt``, ``ConfigurationLimit`` is
+  ``gain (q_min - q) <= dq <= gain (q_max - q)`` (the QP controller's box with
+  ``limit_gain = gain``).
+* The global ``damping`` adds ``damping * I`` to the Hessian in ``dq``: since the whole
+  objective scales as ``dt^2`` it acts like the QP controller's ``mu`` on ``v``.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+
+import mink
+import mujoco
+import numpy as np
+import pinocchio as pin
+import qpsolvers
+
+from constraints import Constraint
+
+from mink.limits.limit import Constraint as LimitRows
+
+from .base import Controller, Kinematics, SolverError
+
+#: Solver settings in the units of *velocity* (rad/s, m/s); they are multiplied by ``dt``
+#: before they reach the backend, because mink's QP variable is ``dq = v dt``: a
+#: tolerance of 1e-10 on ``v`` is 1e-13 on ``dq`` at 1 kHz. daqp is an active-set solver
+#: whose equalities are exact to rounding; proxqp is asked for 1e-11 so that the
+#: equality rows hold to 1e-9 m/s or better (measured 1e-14..1e-11); OSQP (ADMM, first
+#: order) for 1e-7 with polishing (measured 1e-17 once polished), and its residual is
+#: reported, not hidden.
+VELOCITY_TOLERANCES: dict[str, dict[str, float]] = {
+    "proxqp": {"eps_abs": 1e-11},
+    "daqp": {"primal_tol": 1e-10},
+    "osqp": {"eps_abs": 1e-7},
+}
+
+#: Settings passed as they are (no unit). ``eq_reduction=1`` makes daqp eliminate the
+#: equality rows before it factorises the Hessian. Without it, mink's Hessian
+#: ``J_e^T J_e + damping I`` (rank 6 + damping on 8 joints, damping 1e-12 by default) has
+#: pivots below daqp's ``sing_tol`` (3.7e-11); daqp then switches to its automatic
+#: proximal regularisation and stops 2e-5 to 3e-3 rad/s away from the solution (measured
+#: on both built-in robots; exact again for damping >= 1e-11). ``raise_error=False``
+#: keeps OSQP's failures as a "not found" status (and silences its deprecation warning).
+FIXED_SETTINGS: dict[str, dict] = {
+    "proxqp": {"eps_rel": 0.0},
+    "daqp": {"eq_reduction": 1},
+    "osqp": {"eps_rel": 0.0, "polishing": True, "max_iter": 20000, "raise_error": False},
+}
+
+#: Pinocchio's ``[x y z qx qy qz qw]`` re-ordered into mink's ``wxyz_xyz``.
+_WXYZ_XYZ = np.array([6, 3, 4, 5, 0, 1, 2])
+
+#: Prefix of the MuJoCo sites added for the Pinocchio frames (``site_name``).
+SITE_PREFIX = "pin:"
+
+
+# ----------------------------------------------------------------------------- model
+
+
+@dataclass(frozen=True)
+class JointMap:
+    """Index maps between Pinocchio and MuJoCo coordinates, matched by joint name.
+
+    For every 1-dof joint ``k`` (revolute or prismatic): ``q_mj[mj_q[k]] = q_pin[pin_q[k]]``
+    and ``v_mj[mj_v[k]] = v_pin[pin_v[k]]``. Built-in robots have 8 revolute joints in
+    the same order in both models (``identity``, the maps then only copy), but nothing
+    here assumes it.
+    """
+
+    names: tuple[str, ...]
+    pin_q: np.ndarray
+    pin_v: np.ndarray
+    mj_q: np.ndarray
+    mj_v: np.ndarray
+    identity: bool
+
+    def q_to_mujoco(self, q_pin: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """MuJoCo ``qpos`` from a Pinocchio configuration, written into ``out``."""
+        if self.identity:
+            out[:] = q_pin
+        else:
+            out[self.mj_q] = q_pin[self.pin_q]
+        return out
+
+    def q_to_pinocchio(self, q_mj: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Pinocchio configuration from a MuJoCo ``qpos``, written into ``out``."""
+        if self.identity:
+            out[:] = q_mj
+        else:
+            out[self.pin_q] = q_mj[self.mj_q]
+        return out
+
+    def v_to_pinocchio(self, v_mj: np.ndarray) -> np.ndarray:
+        """Pinocchio velocity from a MuJoCo one (``v_mj`` itself when ``identity``)."""
+        if self.identity:
+            return v_mj
+        out = np.empty(len(self.pin_v))
+        out[self.pin_v] = v_mj[self.mj_v]
+        return out
+
+    def columns_to_mujoco(self, matrix_pin: np.ndarray) -> np.ndarray:
+        """A matrix acting on Pinocchio velocities, re-ordered to act on MuJoCo ones
+        (``matrix_pin`` itself when ``identity``)."""
+        if self.identity:
+            return matrix_pin
+        out = np.empty_like(matrix_pin)
+        out[:, self.mj_v] = matrix_pin[:, self.pin_v]
+        return out
+
+
+def site_name(frame_name: str) -> str:
+    """Name of the MuJoCo site added at the Pinocchio frame ``frame_name``."""
+    return SITE_PREFIX + frame_name
+
+
+def _kinematic_urdf(urdf_text: str) -> str:
+    """The URDF with its ``<visual>``/``<collision>`` elements removed.
+
+    MuJoCo would otherwise try to load every mesh (``package://`` URIs it cannot
+    resolve); only the kinematics matter to mink. Inertials are kept.
+    """
+    root = ET.fromstring(urdf_text)
+    if root.tag != "robot":
+        raise ValueError(f"not a URDF: root element is <{root.tag}>, expected <robot>")
+    for link in root.iter("link"):
+        for child in [c for c in link if c.tag in ("visual", "collision")]:
+            link.remove(child)
+    for extension in [c for c in root if c.tag == "mujoco"]:
+        root.remove(extension)
+    compiler = ET.SubElement(ET.SubElement(root, "mujoco"), "compiler")
+    compiler.set("discardvisual", "true")
+    compiler.set("fusestatic", "true")
+    return ET.tostring(root, encoding="unicode")
+
+
+def build_mujoco_model(
+    model: pin.Model, urdf_text: str, frames: Iterable[str]
+) -> tuple[mujoco.MjModel, JointMap]:
+    """Compile a MuJoCo model of the URDF with a site at each Pinocchio frame in ``frames``.
+
+    MuJoCo merges the bodies joined by fixed joints (``fusestatic``) and drops frames
+    that carry no body, so the end effector and the constraint links are added back as
+    sites *before* compiling. A Pinocchio frame's ``placement`` is relative to its parent
+    joint frame, which is the frame of that joint's child link: MuJoCo's body holding
+    the joint of the same name (or the world body for frames fixed to the base). The
+    site's pose in that body is that placement.
+
+    Raises ``ValueError`` when the two models' joints differ (names, or a joint that is
+    not a 1-dof revolute/prismatic joint in both).
+    """
+    spec = mujoco.MjSpec.from_string(_kinematic_urdf(urdf_text))
+    # massless links are fine for kinematics: bound mass/inertia so that they compile
+    spec.compiler.boundmass = 1e-6
+    spec.compiler.boundinertia = 1e-9
+    bodies = {}
+    for j in range(1, model.njoints):
+        name = model.names[j]
+        joint = spec.joint(name)
+        if joint is None:
+            raise ValueError(f"joint {name!r} of the Pinocchio model is not in the MuJoCo model")
+        bodies[j] = joint.parent
+    for frame_name in dict.fromkeys(frames):  # unique, in order
+        frame = model.frames[model.getFrameId(frame_name)]
+        body = spec.worldbody if frame.parentJoint == 0 else bodies[frame.parentJoint]
+        placement = frame.placement
+        quaternion = pin.Quaternion(placement.rotation)
+        body.add_site(
+            name=site_name(frame_name),
+            pos=placement.translation.copy(),
+            quat=[quaternion.w, quaternion.x, quaternion.y, quaternion.z],
+        )
+    mj_model = spec.compile()
+    return mj_model, _joint_map(model, mj_model)
+
+
+def _joint_map(model: pin.Model, mj_model: mujoco.MjModel) -> JointMap:
+    scalar = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    mj_names = [mj_model.joint(i).name for i in range(mj_model.njnt)]
+    pin_names = [model.names[j] for j in range(1, model.njoints)]
+    if sorted(mj_names) != sorted(pin_names):
+        raise ValueError(
+            f"joints differ between Pinocchio {pin_names} and MuJoCo {mj_names}")
+    names, pin_q, pin_v, mj_q, mj_v = [], [], [], [], []
+    for j in range(1, model.njoints):
+        name = model.names[j]
+        jid = mj_model.joint(name).id
+        if model.nqs[j] != 1 or model.nvs[j] != 1 or int(mj_model.jnt_type[jid]) not in scalar:
+            raise ValueError(
+                f"joint {name!r}: only 1-dof revolute/prismatic joints are supported "
+                f"(Pinocchio nq={model.nqs[j]}, nv={model.nvs[j]}, MuJoCo type "
+                f"{mujoco.mjtJoint(int(mj_model.jnt_type[jid])).name})")
+        names.append(name)
+        pin_q.append(model.idx_qs[j])
+        pin_v.append(model.idx_vs[j])
+        mj_q.append(mj_model.jnt_qposadr[jid])
+        mj_v.append(mj_model.jnt_dofadr[jid])
+    if mj_model.nq != model.nq or mj_model.nv != model.nv:
+        raise ValueError(f"MuJoCo nq/nv = {mj_model.nq}/{mj_model.nv}, "
+                         f"Pinocchio {model.nq}/{model.nv}")
+    pin_q, pin_v, mj_q, mj_v = (np.array(i, dtype=int) for i in (pin_q, pin_v, mj_q, mj_v))
+    identity = bool(np.array_equal(pin_q, mj_q) and np.array_equal(pin_v, mj_v)
+                    and np.array_equal(pin_q, np.arange(model.nq))
+                    and np.array_equal(pin_v, np.arange(model.nv)))
+    return JointMap(tuple(names), pin_q, pin_v, mj_q, mj_v, identity)
+
+
+# ----------------------------------------------------------------------------- rows
+
+
+class PinocchioRows:
+    """Our constraint rows, evaluated with Pinocchio at a mink configuration.
+
+    One Pinocchio kinematics pass per configuration, shared by all constraint tasks and
+    barrier limits; each constraint's ``(A, b)`` (Pinocchio column order, ``A qd = b``,
+    :meth:`constraints.Constraint.rows`) is then computed once and cached until the
+    configuration changes.
+    """
+
+    def __init__(self, model: pin.Model, data: pin.Data, joints: JointMap) -> None:
+        self.model = model
+        self.data = data
+        self.joints = joints
+        self._q_mj = np.full(model.nq, np.nan)
+        self._q_pin = np.empty(model.nq)
+        self.version = 0
+
+    def mark_current(self, q_mj: np.ndarray) -> None:
+        """Declare ``self.data`` up to date (joint Jacobians, frames) at ``q_mj``."""
+        self._q_mj[:] = q_mj
+        self.version += 1
+
+    def ensure(self, configuration: mink.Configuration) -> None:
+        """Bring ``self.data`` to ``configuration.q`` if it is not there already."""
+        q_mj = configuration.q
+        if (q_mj == self._q_mj).all():
+            return
+        self.joints.q_to_pinocchio(q_mj, out=self._q_pin)
+        pin.computeJointJacobians(self.model, self.data, self._q_pin)
+        pin.updateFramePlacements(self.model, self.data)
+        self.mark_current(q_mj)
+
+
+class _RowsCache:
+    """``(A_pin, A_mj, b)`` of one constraint, recomputed when the kinematics change."""
+
+    def __init__(self, constraint: Constraint, frame_id: int, rows: PinocchioRows) -> None:
+        self.constraint = constraint
+        self.frame_id = frame_id
+        self.rows = rows
+        self._version = -1
+        self.A_pin = self.A_mj = self.b = np.zeros(0)
+
+    def at(self, configuration: mink.Configuration) -> "_RowsCache":
+        rows = self.rows
+        rows.ensure(configuration)
+        if self._version != rows.version:
+            self.A_pin, self.b = self.constraint.rows(rows.model, rows.data, self.frame_id)
+            self.A_mj = rows.joints.columns_to_mujoco(self.A_pin)
+            self._version = rows.version
+        return self
+
+
+class ConstraintTask(mink.Task):
+    """An equality constraint ``A qd = b`` as a mink task, to pass in ``constraints=``.
+
+    mink holds a task in ``constraints=`` as the hard row ``J dq = -gain e`` on the
+    displacement ``dq = v dt``. With::
+
+        J = A,   e = -b dt,   gain = 1
+
+    that row is ``A v dt = b dt``, i.e. exactly ``A v = b`` in rad/s: the same rows, drift
+    feedback ``-K e_c`` and feed-forward as the CJM and QP controllers. (``e`` is the
+    *displacement* the row asks for in one step, with the sign mink expects; as a soft
+    task it would cost ``|A dq - b dt|^2``.)
+    """
+
+    def __init__(self, cache: _RowsCache, dt: float) -> None:
+        super().__init__(cost=np.ones(cache.constraint.dim), gain=1.0, lm_damping=0.0)
+        self.cache = cache
+        self.dt = float(dt)
+
+    @property
+    def constraint(self) -> Constraint:
+        return self.cache.constraint
+
+    def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
+        """``e = -b dt`` (k,), so that ``J dq = -e`` reads ``A v = b``."""
+        return -self.dt * self.cache.at(configuration).b
+
+    def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
+        """``J = A`` (k x nv), columns in MuJoCo dof order."""
+        return self.cache.at(configuration).A_mj
+
+
+class BarrierLimit(mink.Limit):
+    """A barrier ``A qd >= b`` (``n . v_c >= -K d + n . v_plane``) as a mink limit.
+
+    mink limits are ``G dq <= h`` on ``dq = v dt``, so the row is
+    ``G = -A``, ``h = -b dt`` (``A v >= b``, scaled by ``dt > 0``): the QP controller's
+    ``G qd <= h`` row, in mink's units.
+    """
+
+    def __init__(self, cache: _RowsCache) -> None:
+        self.cache = cache
+
+    @property
+    def constraint(self) -> Constraint:
+        return self.cache.constraint
+
+    def compute_qp_inequalities(
+        self, configuration: mink.Configuration, dt: float
+    ) -> LimitRows:
+        """``G dq <= h`` with ``G = -A`` (MuJoCo columns) and ``h = -b dt``."""
+        rows = self.cache.at(configuration)
+        return LimitRows(G=-rows.A_mj, h=-dt * rows.b)
+
+
+# ----------------------------------------------------------------------------- controller
+
+LimitSpec = mink.Limit | Callable[[mujoco.MjModel], mink.Limit]
+
+
+class MinkController(Controller):
+    """The constrained teleoperation step solved by mink's ``solve_ik``.
+
+    Per step, with ``T_e`` the EE pose and ``V`` the desired EE body twist::
+
+        target  = T_e exp6(V dt)                    FrameTask on the EE site (cost 1, 1)
+        min_dq  |Jlog(T_t^-1 T_e) (J_e dq - V dt)|^2 + damping |dq|^2
+        s.t.    A dq = b dt                         ConstraintTask per equality (hard)
+                -A_b dq <= -b_b dt                  BarrierLimit per barrier
+                |dq| <= qd_max dt,  g (q_min - q) <= dq <= g (q_max - q)
+        qd = dq / dt                                (solve_ik's return value)
+
+    **Why this tracks V exactly.** mink's frame error is ``e = log(T_e^-1 T_t) = V dt``
+    (for ``|V dt|`` below pi) and its Jacobian ``J = -Jlog(exp(-V dt)) J_e``, so the
+    task row ``J dq = -e`` reads ``Jr^-1(-V dt) J_e dq = V dt``. Since
+    ``Jr^-1(-x) x = x`` on SE(3) (``ad_x x = 0``), its solution is ``J_e dq = V dt``,
+    i.e. ``J_e qd = V``: whenever the constrained task is feasible (6 + k = n, the
+    built-in robots with a hole), mink's ``qd`` is the CJM's. When it is not (e.g. a
+    barrier is active) mink minimises ``|J_e qd - V|`` in the metric
+    ``W = Jr^-1(-V dt) = I + O(|V dt|)`` instead of the QP controller's identity:
+    the two least-squares answers then differ by ``O(|V dt|)`` relative.
+
+    **Accuracy floor.** mink 1.3.0 evaluates ``Jlog`` (``mink/lie/se3.py::_getQ``) with
+    ``(1 - t^2/2 - cos t) / t^4`` and a similar quintic term in closed form once ``t^2``
+    exceeds machine epsilon; at ``t = |w| dt ~ 1e-5`` rad the cancellation leaves
+    ``Jlog`` wrong by ~1e-7, so ``J_e qd`` misses ``V`` by ~1e-9 m/s and ``qd`` differs
+    from the CJM's by up to a few 1e-8 rad/s (on the built-in robots, every backend).
+
+    **Equalities.** Every equality (``Hole``, ``Plane``, ``PointLock``) is a
+    :class:`ConstraintTask` in ``solve_ik(..., constraints=...)`` and barriers are
+    :class:`BarrierLimit` rows; both evaluate the constraints' own ``rows`` with
+    Pinocchio at mink's configuration (joints mapped by name). After the solve the rows
+    are checked: ``info.equality_residual = max |A qd - b|``, and a residual above
+    ``equality_tolerance`` (infeasible equalities that a backend answered in the least
+    squares sense) is a failure like a ``NoSolutionFound``: a flagged zero command.
+
+    Parameters
+    ----------
+    robot : a ``teleop.Robot`` (``urdf_path``, ``model``, ``ee_frame``, ...). The MuJoCo
+        model is compiled from the same URDF (geometry dropped), with a site at every
+        Pinocchio link frame (``site_name(link)``, the constraint links among them) and
+        at the EE frame. Joints must be 1-dof revolute/prismatic, matched by name.
+    constraints, strict : see :class:`controllers.base.Controller`.
+    solver : any qpsolvers backend mink accepts: ``"daqp"`` (default), ``"proxqp"``,
+        ``"osqp"``, ...
+    dt : control period (s): mink's integration step.
+    damping : mink's Levenberg-Marquardt damping (on ``dq``; acts as ``mu`` on ``qd``).
+    limits : ``None`` for the defaults (``mink.ConfigurationLimit`` with gain
+        ``limit_gain``, and a ``mink.VelocityLimit`` from the Pinocchio velocity limits),
+        else a sequence of ``mink.Limit`` instances or factories ``f(mj_model) -> Limit``
+        (``mink.ConfigurationLimit`` itself is one); ``()`` for none. Barrier limits
+        are always added.
+    limit_gain : gain of the default configuration limit.
+    equality_tolerance : largest ``|A qd - b|`` (m/s) accepted from the backend.
+    solver_settings : backend keyword arguments, passed as they are (they override the
+        defaults built from ``VELOCITY_TOLERANCES`` and ``FIXED_SETTINGS``).
+    """
+
+    def __init__(
+        self,
+        robot,
+        constraints: Iterable[Constraint] = (),
+        solver: str = "daqp",
+        dt: float = 1e-3,
+        damping: float = 1e-12,
+        limits: Sequence[LimitSpec] | None = None,
+        limit_gain: float = 0.95,
+        equality_tolerance: float = 1e-6,
+        solver_settings: dict | None = None,
+        strict: bool = False,
+    ) -> None:
+        if solver not in qpsolvers.available_solvers:
+            raise ValueError(
+                f"QP solver {solver!r} is not available to mink; installed: "
+                f"{qpsolvers.available_solvers}")
+        if not np.isfinite(dt) or dt <= 0:
+            raise ValueError(f"dt must be finite and > 0, got {dt}")
+        if not np.isfinite(damping) or damping < 0:
+            raise ValueError(f"damping must be finite and >= 0, got {damping}")
+        if not 0.0 < limit_gain <= 1.0:
+            raise ValueError(f"limit_gain must be in (0, 1], got {limit_gain}")
+        if not np.isfinite(equality_tolerance) or equality_tolerance <= 0:
+            raise ValueError(f"equality_tolerance must be finite and > 0, got {equality_tolerance}")
+        self.equality_tolerance = float(equality_tolerance)
+        self.solver = solver
+        self.dt = float(dt)
+        self.damping = float(damping)
+        self.settings = {key: value * self.dt
+                         for key, value in VELOCITY_TOLERANCES.get(solver, {}).items()}
+        self.settings.update(FIXED_SETTINGS.get(solver, {}))
+        self.settings.update(solver_settings or {})
+
+        # The MuJoCo side, built once: it must exist before the base class calls
+        # set_constraints (-> _on_constraints_changed), so it is built from the robot.
+        model: pin.Model = robot.model
+        frames = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+        frames.append(robot.ee_frame)
+        self.mj_model, self.joints = build_mujoco_model(
+            model, robot.urdf_path.read_text(), frames)
+        self.site_names = {name: site_name(name) for name in frames}
+        self.ee_site = site_name(robot.ee_frame)
+        self.configuration = mink.Configuration(self.mj_model)
+        self.ee_task = mink.FrameTask(self.ee_site, "site", position_cost=1.0,
+                                      orientation_cost=1.0, gain=1.0, lm_damping=0.0)
+        self._ee_site_id = self.mj_model.site(self.ee_site).id
+        self._q_mj = np.empty(self.mj_model.nq)
+        self._base_limits = self._make_limits(robot, limits, limit_gain)
+        self._tasks = [self.ee_task]
+        self._equality_caches: list[_RowsCache] = []
+        self.constraint_tasks: list[ConstraintTask] = []
+        self.barrier_limits: list[BarrierLimit] = []
+        self._limits: list[mink.Limit] = list(self._base_limits)
+        super().__init__(robot, constraints, strict=strict)  # -> _on_constraints_changed
+
+    def _make_limits(self, robot, limits: Sequence[LimitSpec] | None,
+                     limit_gain: float) -> list[mink.Limit]:
+        if limits is None:
+            velocity = np.asarray(robot.model.velocityLimit, dtype=float)
+            bounded = {name: velocity[robot.model.idx_vs[robot.model.getJointId(name)]]
+                       for name in self.joints.names}
+            bounded = {name: value for name, value in bounded.items()
+                       if np.isfinite(value) and value > 0}
+            return [mink.ConfigurationLimit(self.mj_model, gain=limit_gain),
+                    mink.VelocityLimit(self.mj_model, bounded)]
+        made = []
+        for limit in limits:
+            made.append(limit if isinstance(limit, mink.Limit) else limit(self.mj_model))
+            if not isinstance(made[-1], mink.Limit):
+                raise TypeError(f"limits: expected mink.Limit or a factory of one, got {limit!r}")
+        return made
+
+    def _on_constraints_changed(self) -> None:
+        rows = PinocchioRows(self.model, self.data, self.joints)
+        self._rows = rows
+        caches = [_RowsCache(c, f, rows) for c, f in zip(self.constraints, self.constraint_frames)]
+        self._equality_caches = [c for c in caches if c.constraint.is_equality]
+        self.constraint_tasks = [ConstraintTask(c, self.dt) for c in self._equality_caches]
+        self.barrier_limits = [BarrierLimit(c) for c in caches if not c.constraint.is_equality]
+        self._limits = [*self._base_limits, *self.barrier_limits]
+
+    # -- the step ----------------------------------------------------------------------
+
+    def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
+        configuration = self.configuration
+        q_mj = self.joints.q_to_mujoco(kinematics.q, out=self._q_mj)
+        configuration.update(q_mj)
+        self._rows.mark_current(q_mj)  # the base class ran Pinocchio at this q already
+        data = configuration.data
+        ee = pin.SE3(data.site_xmat[self._ee_site_id].reshape(3, 3),
+                     data.site_xpos[self._ee_site_id])
+        xyz_quat = pin.SE3ToXYZQUAT(ee * pin.exp6(twist * self.dt))  # x y z qx qy qz qw
+        # (the attribute set_target would set, without its defensive copy)
+        self.ee_task.transform_target_to_world = mink.SE3(wxyz_xyz=xyz_quat[_WXYZ_XYZ])
+        self.info.method = f"mink:{self.solver}"
+        try:
+            v_mj = self._solve_ik()
+        except Exception as error:  # mink.NoSolutionFound, backend errors
+            raise SolverError(
+                f"mink.solve_ik with solver {self.solver!r} raised "
+                f"{type(error).__name__}: {error}") from error
+        if v_mj is None or not np.all(np.isfinite(v_mj)):
+            raise SolverError(f"mink.solve_ik with solver {self.solver!r} returned a "
+                              "non-finite velocity")
+        qd = self.joints.v_to_pinocchio(v_mj)
+        if self._equality_caches:
+            residual = max(float(np.max(np.abs(c.A_pin @ qd - c.b)))
+                           for c in self._equality_caches)
+            self.info.equality_residual = residual
+            if not residual <= self.equality_tolerance:  # daqp's eq_reduction: least squares
+                raise SolverError(
+                    f"mink.solve_ik with solver {self.solver!r} returned a velocity that "
+                    f"breaks the equality rows by {residual:.3g} m/s (tolerance "
+                    f"{self.equality_tolerance:g}): infeasible constraints or an "
+                    "inaccurate solve")
+        if self.barrier_limits:
+            active = []
+            for index, limit in zip(
+                    (i for i, c in enumerate(self.constraints) if not c.is_equality),
+                    self.barrier_limits):
+                rows = limit.cache.at(configuration)
+                if np.any(rows.A_pin @ qd - rows.b < 1e-9):
+                    active.append(index)
+            self.info.active_barriers = tuple(active)
+        return qd
+
+    def _solve_ik(self) -> np.ndarray:
+        return mink.solve_ik(
+            self.configuration, self._tasks, self.dt, self.solver, damping=self.damping,
+            safety_break=False, limits=self._limits, constraints=self.constraint_tasks,
+            **self.settings)
+
+    def site_pose(self, frame: str) -> pin.SE3:
+        """World pose of the MuJoCo site at Pinocchio frame ``frame`` (last ``solve``'s q)."""
+        sid = self.mj_model.site(site_name(frame)).id
+        data = self.configuration.data
+        return pin.SE3(data.site_xmat[sid].reshape(3, 3).copy(), data.site_xpos[sid].copy())
