@@ -56,6 +56,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     commands.add_parser("scenarios", help="list the scenarios")
 
+    web = commands.add_parser("web", help="browser teleoperation UI (viser)")
+    web.add_argument("--robot", default="sda10f",
+                     help="sda10f, ur5_instrument, or a URDF path (default sda10f)")
+    web.add_argument("--host", default="127.0.0.1",
+                     help="address to bind (default 127.0.0.1: this machine only; the UI "
+                          "commands a robot, open it wider only on purpose)")
+    web.add_argument("--port", type=int, default=8080)
+    web.add_argument("--controller", default="cjm", help="main robot's controller")
+    web.add_argument("--ghost", help="controller of a translucent second robot (side by side)")
+    web.add_argument("--rate", type=_positive, default=1000.0, help="control rate (Hz)")
+    web.add_argument("--record-dir", default="sessions", help="where recordings are written")
+    web.add_argument("--ee-frame", help="EE frame (URDF robots)")
+    web.add_argument("--constrained-link", help="constrained link (URDF robots)")
+
     bench = commands.add_parser("bench", help="one-step time of each controller on each robot")
     bench.add_argument("--robots", type=_csv, default=["sda10f", "ur5_instrument"])
     bench.add_argument("--controllers", type=_csv,
@@ -83,6 +97,32 @@ def _run(plan, args, config) -> int:
     return 0
 
 
+def _web(args) -> int:
+    import time
+
+    from web.ui import run_server
+
+    from .robot import load_robot
+
+    robot = load_robot(args.robot, ee_frame=args.ee_frame, constrained_link=args.constrained_link)
+    server, app, control, ui = run_server(robot, host=args.host, port=args.port,
+                                          controller=args.controller, ghost=args.ghost,
+                                          rate=args.rate, record_dir=args.record_dir)
+    print(f"teleop web: {robot.name} on http://{args.host}:{server.get_port()} "
+          f"(controller {args.controller}{', ghost ' + args.ghost if args.ghost else ''}); "
+          "Ctrl-C stops", flush=True)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        ui.stop()
+        control.stop()
+        server.stop()
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
@@ -95,6 +135,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _dispatch(args) -> int:
     from .loop import LoopConfig
 
+    if args.command == "web":
+        return _web(args)
     if args.command == "scenarios":
         from .scenarios import SCENARIOS, load_scenario
 

@@ -1,0 +1,415 @@
+"""The browser session's core, without any browser: state, actions, the control thread.
+
+Everything the UI does goes through :class:`TeleopApp`, so it can be tested without
+viser. All public methods are thread-safe (one lock); actions that cannot be done raise
+``ValueError`` with a message meant for the operator (the UI shows it as a notification).
+
+Threading (DESIGN.md section 5): :class:`ControlThread` calls :meth:`TeleopApp.step` at
+the control rate and never touches viser; the view thread reads :meth:`TeleopApp.snapshot`.
+"""
+
+from __future__ import annotations
+
+import collections
+import itertools
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from constraints import Barrier, Constraint, Hole, Plane
+from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.registry import make_controller
+from teleop.robot import Robot
+from teleop.session import SessionRecorder
+
+#: the operator's target and moved geometry are smoothed with this time constant (s)
+DEFAULT_SMOOTHING = 0.05
+#: seconds of history kept for the live plots
+HISTORY_SECONDS = 10.0
+#: history samples per second (every control tick would be 1000/s: far more than a plot needs)
+HISTORY_RATE = 50.0
+
+
+@dataclass
+class ConstraintEntry:
+    """A constraint placed by the operator, with the geometry its gizmo drives."""
+
+    id: str
+    kind: str  # "hole", "plane", "barrier"
+    constraint: Constraint
+    goal: np.ndarray  # where the operator put it (the control loop moves towards it)
+
+    @property
+    def position(self) -> np.ndarray:
+        c = self.constraint
+        return c.center if isinstance(c, Hole) else c.plane_point
+
+
+@dataclass
+class Trace:
+    """Rolling history of one robot's measures for the live plots."""
+
+    t: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
+    constraint_error: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
+    constraint_velocity: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
+    ee_error: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
+    step_time: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
+
+    def add(self, record: StepRecord) -> None:
+        self.t.append(record.t)
+        self.constraint_error.append(max(record.constraint_error, record.barrier_penetration))
+        self.constraint_velocity.append(float(np.linalg.norm(record.constraint_velocity)))
+        self.ee_error.append(record.ee_position_error)
+        self.step_time.append(record.step_time_us)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {name: np.array(getattr(self, name), dtype=float)
+                for name in ("t", "constraint_error", "constraint_velocity", "ee_error", "step_time")}
+
+
+class TeleopApp:
+    """One robot (plus an optional ghost) teleoperated from one shared target.
+
+    Parameters
+    ----------
+    robot : the robot.
+    controller : controller spec of the main robot (``cjm``, ``qp:daqp``, ``mink:daqp``...).
+    ghost : spec of a second, translucent robot driven from the same target, or None.
+    rate : control rate (Hz).
+    record_dir : where session recordings go.
+    """
+
+    def __init__(self, robot: Robot, controller: str = "cjm", ghost: str | None = None,
+                 rate: float = 1000.0, kp: float = 20.0, record_dir: str | Path = "sessions") -> None:
+        self.robot = robot
+        self._lock = threading.RLock()
+        self.config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING)
+        self.gain = 100.0
+        self.damping = 0.0
+        self.record_dir = Path(record_dir)
+        self.entries: dict[str, ConstraintEntry] = {}
+        self._ids = itertools.count(1)
+        self.specs = {"main": controller}
+        self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(controller)}
+        self.traces: dict[str, Trace] = {"main": Trace()}
+        self.last_records: dict[str, StepRecord | None] = {"main": None}
+        if ghost:
+            self.set_ghost(ghost)
+        self.target = self.loops["main"].ee_placement()
+        self.recorder: SessionRecorder | None = None
+        self._record_start = 0.0
+        self._next_history = 0.0
+        self.ticks = 0
+
+    # -- construction helpers ------------------------------------------------------------
+
+    def _make_loop(self, spec: str, q: np.ndarray | None = None) -> TeleopLoop:
+        constraints = [e.constraint for e in getattr(self, "entries", {}).values()]
+        controller = make_controller(spec, self.robot, constraints, dt=self.config.dt)
+        self._apply_damping(controller)
+        return TeleopLoop(self.robot, controller, q0=q, config=self.config)
+
+    def _apply_damping(self, controller) -> None:
+        if hasattr(controller, "policy"):  # the CJM's damped least squares
+            from controllers.linalg import DampingPolicy
+
+            old = controller.policy
+            controller.policy = DampingPolicy(self.damping, old.threshold, old.max_damping)
+
+    def _sync_constraints(self) -> None:
+        constraints = [e.constraint for e in self.entries.values()]
+        for loop in self.loops.values():
+            loop.set_constraints(constraints)
+
+    @property
+    def now(self) -> float:
+        return self.loops["main"].t
+
+    # -- operator actions ------------------------------------------------------------------
+
+    def set_target(self, position, wxyz) -> None:
+        """The operator's target pose (world position, quaternion w, x, y, z)."""
+        position = np.asarray(position, dtype=float)
+        wxyz = np.asarray(wxyz, dtype=float)
+        if position.shape != (3,) or wxyz.shape != (4,) or not (
+                np.isfinite(position).all() and np.isfinite(wxyz).all()) or np.linalg.norm(wxyz) < 1e-9:
+            raise ValueError("the target pose must be a finite position and a non-zero quaternion")
+        rotation = pin.Quaternion(wxyz[0], wxyz[1], wxyz[2], wxyz[3]).normalized().matrix()
+        with self._lock:
+            self.target = pin.SE3(rotation, position)
+            if self.recorder is not None:
+                self.recorder.target(self.now - self._record_start, self.target)
+
+    def _link_placement(self, link: str) -> pin.SE3:
+        model = self.robot.model
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, self.loops["main"].q)
+        return data.oMf[model.getFrameId(link)].copy()
+
+    def _add(self, kind: str, constraint: Constraint) -> str:
+        entry_id = f"{kind}-{next(self._ids)}"
+        position = constraint.center if isinstance(constraint, Hole) else constraint.plane_point
+        if kind != "barrier":  # a barrier keeps its own (velocity-damper) gain
+            constraint.gain = self.gain
+        self.entries[entry_id] = ConstraintEntry(entry_id, kind, constraint, position.copy())
+        self._sync_constraints()
+        if self.recorder is not None:
+            self.recorder.add(self.now - self._record_start, entry_id, constraint)
+        return entry_id
+
+    def add_hole(self, distance: float) -> str:
+        """A hole on the constrained link, ``distance`` m along its axis, where it is now."""
+        with self._lock:
+            if not math.isfinite(distance):
+                raise ValueError("the hole distance must be a number")
+            q = self.loops["main"].q
+            return self._add("hole", Hole.on_link(self.robot, q, distance=distance, gain=self.gain))
+
+    def add_plane(self, distance: float, normal, barrier: bool = False, offset: float = 0.0) -> str:
+        """A plane (or barrier) through the link point ``distance`` m along the link axis.
+
+        ``normal`` is a world direction (normalised here; zero is refused). A barrier may
+        sit ``offset`` m below the point along the normal (the point must be on its
+        positive side).
+        """
+        normal = np.asarray(normal, dtype=float)
+        if normal.shape != (3,) or not np.isfinite(normal).all() or np.linalg.norm(normal) < 1e-9:
+            raise ValueError("the plane normal must be a non-zero 3-vector")
+        normal = normal / np.linalg.norm(normal)
+        with self._lock:
+            q = self.loops["main"].q
+            point = self._link_placement(self.robot.constrained_link).act(
+                distance * np.asarray(self.robot.link_axis))
+            cls = Barrier if barrier else Plane
+            constraint = cls.through_link_point(
+                self.robot, q, normal=normal, distance=distance,
+                plane_point=point - offset * normal)
+            return self._add("barrier" if barrier else "plane", constraint)
+
+    def move_constraint(self, entry_id: str, position) -> None:
+        """Move a constraint's geometry (hole centre, plane point): the robot follows it."""
+        position = np.asarray(position, dtype=float)
+        if position.shape != (3,) or not np.isfinite(position).all():
+            raise ValueError("a constraint position must be 3 finite numbers")
+        with self._lock:
+            if entry_id not in self.entries:
+                raise ValueError(f"no constraint {entry_id!r}")
+            self.entries[entry_id].goal = position.copy()
+
+    def remove_constraint(self, entry_id: str) -> None:
+        with self._lock:
+            if self.entries.pop(entry_id, None) is None:
+                raise ValueError(f"no constraint {entry_id!r}")
+            self._sync_constraints()
+            if self.recorder is not None:
+                self.recorder.remove(self.now - self._record_start, entry_id)
+
+    def set_controller(self, spec: str) -> None:
+        """Switch the main robot's controller, keeping its state."""
+        with self._lock:
+            self._switch("main", spec)
+
+    def set_ghost(self, spec: str | None) -> None:
+        """Show a translucent second robot driven by ``spec`` (None removes it)."""
+        with self._lock:
+            if not spec:
+                for store in (self.loops, self.specs, self.traces, self.last_records):
+                    store.pop("ghost", None)
+                return
+            if "ghost" in self.loops:
+                self._switch("ghost", spec)
+                return
+            self.loops["ghost"] = self._make_loop(spec, q=self.loops["main"].q.copy())
+            self.specs["ghost"] = spec
+            self.traces["ghost"] = Trace()
+            self.last_records["ghost"] = None
+
+    def _switch(self, which: str, spec: str) -> None:
+        old = self.loops[which]
+        loop = self._make_loop(spec, q=old.q.copy())  # raises ValueError on a bad spec
+        loop.t = old.t
+        self.loops[which] = loop
+        self.specs[which] = spec
+
+    def set_gain(self, gain: float) -> None:
+        """Drift-feedback gain K (1/s) of every equality constraint."""
+        gain = float(gain)
+        if not math.isfinite(gain) or gain < 0 or gain * self.config.dt >= 2.0:
+            raise ValueError(f"gain must be in [0, {2.0 / self.config.dt:g}) 1/s at this rate")
+        with self._lock:
+            self.gain = gain
+            for entry in self.entries.values():
+                if entry.kind != "barrier":
+                    entry.constraint.gain = gain
+
+    def set_damping(self, damping: float) -> None:
+        """Constant DLS damping lambda of the CJM (paper eq 35)."""
+        damping = float(damping)
+        if not math.isfinite(damping) or damping < 0:
+            raise ValueError("damping must be >= 0")
+        with self._lock:
+            self.damping = damping
+            for loop in self.loops.values():
+                self._apply_damping(loop.controller)
+
+    def set_rate(self, rate: float) -> None:
+        """Control rate (Hz); rebuilds the loops (QP limits depend on dt), keeps the state."""
+        rate = float(rate)
+        if not math.isfinite(rate) or not 50.0 <= rate <= 5000.0:
+            raise ValueError("the control rate must be between 50 and 5000 Hz")
+        with self._lock:
+            self.config = LoopConfig(rate=rate, kp=self.config.kp,
+                                     target_time_constant=self.config.target_time_constant)
+            for which in list(self.loops):
+                self._switch(which, self.specs[which])
+
+    def home(self) -> None:
+        """Robots back home, target on the home EE pose, constraints removed."""
+        with self._lock:
+            for entry_id in list(self.entries):
+                self.remove_constraint(entry_id)
+            for loop in self.loops.values():
+                t = loop.t
+                loop.reset()
+                loop.t = t
+            self.target = self.loops["main"].ee_placement()
+            if self.recorder is not None:
+                self.recorder.target(self.now - self._record_start, self.target)
+
+    # -- recording ---------------------------------------------------------------------
+
+    def start_recording(self, path: str | Path | None = None) -> Path:
+        with self._lock:
+            if self.recorder is not None:
+                raise ValueError(f"already recording to {self.recorder.path}")
+            if path is None:
+                path = self.record_dir / f"session-{datetime.now():%Y%m%d-%H%M%S}.jsonl"
+            self.recorder = SessionRecorder(path, self.robot, self.loops["main"].q,
+                                            rate_hz=self.config.rate, kp=self.config.kp,
+                                            target_time_constant_s=self.config.target_time_constant)
+            self._record_start = self.now
+            for entry in self.entries.values():
+                self.recorder.add(0.0, entry.id, entry.constraint)
+            self.recorder.target(0.0, self.target)
+            return self.recorder.path
+
+    def stop_recording(self) -> Path:
+        with self._lock:
+            if self.recorder is None:
+                raise ValueError("not recording")
+            recorder, self.recorder = self.recorder, None
+            recorder.close(self.now - self._record_start)
+            return recorder.path
+
+    # -- the control tick ------------------------------------------------------------------
+
+    def step(self) -> None:
+        """One control period for every robot (called by the control thread)."""
+        with self._lock:
+            dt = self.config.dt
+            alpha = 1.0 - math.exp(-dt / self.config.target_time_constant)
+            for entry in self.entries.values():  # moved geometry glides, with feed-forward
+                delta = alpha * (entry.goal - entry.position)
+                if np.any(delta):
+                    moved = entry.position + delta
+                    velocity = delta / dt if np.linalg.norm(delta) > 1e-12 else np.zeros(3)
+                    entry.constraint.move_to(moved, velocity)
+                    if self.recorder is not None and self.ticks % 10 == 0:
+                        self.recorder.move(self.now - self._record_start, entry.id, moved, velocity)
+                elif getattr(entry.constraint, "velocity", np.zeros(3)).any():
+                    entry.constraint.move_to(entry.position)
+            for which, loop in self.loops.items():
+                record = loop.tick(self.target)
+                self.last_records[which] = record
+                if record.t >= self._next_history:
+                    self.traces[which].add(record)
+            if self.now >= self._next_history:
+                self._next_history = self.now + 1.0 / HISTORY_RATE
+            self.ticks += 1
+
+    # -- what the view draws -----------------------------------------------------------
+
+    def snapshot(self) -> dict:
+        """A consistent copy of everything the view shows."""
+        with self._lock:
+            robots = {}
+            for which, loop in self.loops.items():
+                record = self.last_records.get(which)
+                robots[which] = {
+                    "spec": self.specs[which], "q": loop.q.copy(), "t": loop.t,
+                    "record": record, "trace": self.traces[which].arrays(),
+                    "info": loop.controller.info,
+                }
+            entries = []
+            for entry in self.entries.values():
+                c = entry.constraint
+                placement = self._link_placement(c.link)
+                entries.append({
+                    "id": entry.id, "kind": entry.kind, "position": entry.position.copy(),
+                    "goal": entry.goal.copy(),
+                    "normal": None if isinstance(c, Hole) else c.normal.copy(),
+                    "axis": None if not isinstance(c, Hole) else placement.rotation @ c.link_axis,
+                    "point": c.point_world(placement),
+                    "error": c.error(placement).copy(),
+                })
+            return {"robots": robots, "constraints": entries,
+                    "target": self.target.copy(), "recording": self.recorder is not None,
+                    "config": self.config, "gain": self.gain, "damping": self.damping}
+
+
+class ControlThread:
+    """Runs :meth:`TeleopApp.step` at the app's control rate on its own thread.
+
+    Tracks the achieved rate and deadline misses (a tick that started later than one
+    period after it was due). Sleeps between ticks; when it falls behind it does not try
+    to catch up by bursting (the robot would see a jump), it resynchronises.
+    """
+
+    def __init__(self, app: TeleopApp) -> None:
+        self.app = app
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="control", daemon=True)
+        self.deadline_misses = 0
+        self.achieved_rate = 0.0
+        self.error: str | None = None
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        self._thread.join(timeout)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def _run(self) -> None:
+        clock = time.perf_counter
+        next_tick = clock()
+        window_start, window_ticks = clock(), 0
+        while not self._stop.is_set():
+            period = self.app.config.dt
+            try:
+                self.app.step()
+            except Exception as error:  # keep the robot still and say why
+                self.error = f"{type(error).__name__}: {error}"
+                time.sleep(0.01)
+            window_ticks += 1
+            now = clock()
+            if now - window_start >= 1.0:
+                self.achieved_rate = window_ticks / (now - window_start)
+                window_start, window_ticks = now, 0
+            next_tick += period
+            delay = next_tick - clock()
+            if delay > 0:
+                time.sleep(delay)
+            elif delay < -period:
+                self.deadline_misses += 1
+                next_tick = clock()
