@@ -11,6 +11,7 @@ the control rate and never touches viser; the view thread reads :meth:`TeleopApp
 from __future__ import annotations
 
 import collections
+import dataclasses
 import itertools
 import math
 import threading
@@ -30,6 +31,11 @@ from teleop.session import SessionRecorder
 
 #: the operator's target and moved geometry are smoothed with this time constant (s)
 DEFAULT_SMOOTHING = 0.05
+#: EE speed caps of the operator's command. A dragged gizmo jumps by centimetres; at these
+#: speeds the sda10f (about 40 rad/s of joint speed per m/s at its EE with a hole on link 6)
+#: stays within its joint-velocity limits and the hole's discretisation error below 1 um.
+MAX_LINEAR_SPEED = 0.05  # m/s
+MAX_ANGULAR_SPEED = 0.5  # rad/s
 #: seconds of history kept for the live plots
 HISTORY_SECONDS = 10.0
 #: history samples per second (every control tick would be 1000/s: far more than a plot needs)
@@ -89,7 +95,9 @@ class TeleopApp:
                  rate: float = 1000.0, kp: float = 20.0, record_dir: str | Path = "sessions") -> None:
         self.robot = robot
         self._lock = threading.RLock()
-        self.config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING)
+        self.config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING,
+                                 max_linear_speed=MAX_LINEAR_SPEED,
+                                 max_angular_speed=MAX_ANGULAR_SPEED)
         self.gain = 100.0
         self.damping = 0.0
         self.record_dir = Path(record_dir)
@@ -264,8 +272,7 @@ class TeleopApp:
         if not math.isfinite(rate) or not 50.0 <= rate <= 5000.0:
             raise ValueError("the control rate must be between 50 and 5000 Hz")
         with self._lock:
-            self.config = LoopConfig(rate=rate, kp=self.config.kp,
-                                     target_time_constant=self.config.target_time_constant)
+            self.config = dataclasses.replace(self.config, rate=rate)
             for which in list(self.loops):
                 self._switch(which, self.specs[which])
 

@@ -53,6 +53,15 @@ def _ring(center: np.ndarray, axis: np.ndarray, radius: float = 0.015, n: int = 
     return np.stack([points[:-1], points[1:]], axis=1)
 
 
+def _ring_radius(robot: Robot, minimum: float = 0.015) -> float:
+    """Radius of the hole rings: just outside the constrained link's cylinders (drawn inside them,
+    a ring would be hidden by the link it surrounds)."""
+    frame_id = robot.model.getFrameId(robot.constrained_link)
+    radii = [g.geometry.radius for g in robot.visual_model.geometryObjects
+             if g.parentFrame == frame_id and type(g.geometry).__name__ in ("Cylinder", "Capsule")]
+    return max([minimum] + [1.25 * r + 0.005 for r in radii])
+
+
 class TeleopUI:
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``."""
 
@@ -63,6 +72,7 @@ class TeleopUI:
         self._stop = threading.Event()
         self._markers: dict[str, dict] = {}
         self._visualisers: dict[str, ViserVisualizer] = {}
+        self.ring_radius = _ring_radius(app.robot)
         self._build_scene()
         self._build_panels()
         self._thread = threading.Thread(target=self._view_loop, name="view", daemon=True)
@@ -94,11 +104,9 @@ class TeleopUI:
             self._guarded(event, lambda: self.app.set_target(self.target_gizmo.position,
                                                              self.target_gizmo.wxyz))
 
-        @self.server.on_client_connect
-        def _(client: viser.ClientHandle) -> None:  # look at the tool from the front-right
-            look_at = self.app.target.translation
-            client.camera.position = look_at + np.array([0.9, -0.9, 0.6])
-            client.camera.look_at = look_at
+        look_at = self.app.target.translation  # every new browser looks at the tool
+        self.server.initial_camera.position = look_at + np.array([0.9, -0.9, 0.6])
+        self.server.initial_camera.look_at = look_at
 
     # -- panels --------------------------------------------------------------------------
 
@@ -261,7 +269,7 @@ class TeleopUI:
             if markers is None:
                 markers = self._markers[e["id"]] = self._create_markers(e)
             if e["kind"] == "hole":
-                markers["shape"].points = _ring(e["position"], e["axis"])
+                markers["shape"].points = _ring(e["position"], e["axis"], self.ring_radius)
             else:
                 markers["shape"].position = e["position"]
             markers["point"].position = e["point"]
@@ -280,8 +288,8 @@ class TeleopUI:
         color = COLORS[e["kind"]]
         markers = {}
         if e["kind"] == "hole":
-            markers["shape"] = scene.add_line_segments(f"{name}/ring", _ring(e["position"], e["axis"]),
-                                                       color, thickness=0.004)
+            ring = _ring(e["position"], e["axis"], self.ring_radius)
+            markers["shape"] = scene.add_line_segments(f"{name}/ring", ring, color, thickness=0.004)
         else:
             markers["shape"] = scene.add_box(f"{name}/plane", color, (0.3, 0.3, 0.001),
                                              opacity=0.3, side="double",
