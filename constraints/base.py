@@ -23,8 +23,8 @@ import numpy as np
 import pinocchio as pin
 
 #: Default drift-feedback gain (1/s). Stable at a control period dt when 0 < K dt < 2;
-#: 50 1/s at the default 1 kHz gives K dt = 0.05, a 20 ms error time constant.
-DEFAULT_GAIN = 50.0
+#: 100 1/s at the default 1 kHz gives K dt = 0.1, a 10 ms error time constant.
+DEFAULT_GAIN = 100.0
 
 Parametrisation = Literal["nullspace", "paper"]
 
@@ -182,6 +182,18 @@ def structure_paper(p: np.ndarray, C: np.ndarray) -> np.ndarray:
     return S
 
 
+def analytical_terms_views(out: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Views ``(B, R)`` into a flat buffer of :meth:`Constraint.analytical_terms`.
+
+    ``out`` has ``6 (7 - k) + 7 k`` entries: first ``B = [V_a0, S]`` (6 x (7 - k),
+    column-major, as LAPACK and Eigen store matrices), then ``R = [-b, C [I, -hat(p)]]``
+    (k x 7, row-major). ``B`` is the right-hand side the analytical CJM solves with
+    ``J_a``; ``R [1; V_a]`` is the residual ``C v_c - b`` of a twist ``V_a`` of ``F_a``.
+    """
+    split = 6 * (7 - k)
+    return out[:split].reshape(7 - k, 6).T, out[split:].reshape(k, 7)
+
+
 def structure_of(state: ConstraintPoint, parametrisation: Parametrisation = "nullspace") -> np.ndarray:
     """Structure matrix ``S`` of an evaluated constraint in the chosen parametrisation."""
     if parametrisation == "nullspace":
@@ -271,6 +283,25 @@ class Constraint(ABC):
         state = self.evaluate(placement)
         return np.concatenate([state.C.T @ state.rhs, np.zeros(3)])
 
+    def analytical_terms(
+        self, placement: pin.SE3, parametrisation: Parametrisation, out: np.ndarray
+    ) -> None:
+        """Write everything the analytical CJM needs at ``placement`` into ``out``.
+
+        ``out`` is a flat float buffer of ``6 (7 - k) + 7 k`` entries laid out as
+        :func:`analytical_terms_views` says: ``[V_a0, S]`` then ``[-b, C [I, -hat(p)]]``.
+        Writing into a buffer the controller owns keeps the per-step cost to a few NumPy
+        calls; subclasses override this with closed forms (``Hole``).
+        """
+        state = self.evaluate(placement)
+        B, R = analytical_terms_views(out, self.dim)
+        B[:3, 0] = state.C.T @ state.rhs
+        B[3:, 0] = 0.0
+        B[:, 1:] = structure_of(state, parametrisation)
+        R[:, 0] = -state.rhs
+        R[:, 1:4] = state.C
+        R[:, 4:] = -state.C @ pin.skew(state.p)
+
     def rows(
         self, model: pin.Model, data: pin.Data, frame_id: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -282,7 +313,7 @@ class Constraint(ABC):
         """
         if frame_id is None:
             frame_id = resolve_frame(model, self.link)
-        placement = data.oMf[frame_id]
+        placement = pin.updateFramePlacement(model, data, frame_id)  # cheaper than data.oMf[i]
         state = self.evaluate(placement)
         jacobian = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL)
         point_jacobian = jacobian[:3] - pin.skew(state.p) @ jacobian[3:]

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import math
+import operator
 from dataclasses import dataclass
 from typing import Iterable
 
+import eigenpy
 import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
-from constraints.base import Parametrisation, as_vector, structure_of
-from scipy.linalg import lapack
+from constraints.base import Parametrisation, analytical_terms_views, as_vector, structure_of
 
 from .base import Controller, Kinematics
 from .linalg import DampingPolicy, damped_least_squares, nullspace
@@ -20,6 +22,11 @@ from .linalg import DampingPolicy, damped_least_squares, nullspace
 #: general null-space form.
 PRE_CHAIN_SINGULAR = 1e-4
 
+#: The LU fast path for a square ``Jbar`` needs the certified lower bound on its smallest
+#: singular value to be at least this as well as the damping threshold, so the SVD path
+#: keeps every nearly rank-deficient case (it drops singular values below 1e-10).
+FAST_PATH_MIN_SIGMA = 1e-6
+
 
 @dataclass(frozen=True)
 class ChainSplit:
@@ -27,6 +34,43 @@ class ChainSplit:
 
     pre: np.ndarray
     post: np.ndarray
+
+
+class _SquarePlan:
+    """Buffers of the analytical CJM for one constraint on a 6-joint pre-chain.
+
+    With ``X = J_a^-1 [V_a0, S]`` (one LU solve) the joint velocities are affine in the
+    free variables ``v_m = [u; w; qd_post]``::
+
+        qd = W [1; v_m],   W = [[X, 0], [0, I]]   (rows: pre, post joints)
+
+    and ``J_e W = [J_e qd_0, Jbar]``: since ``J_e[:, pre] = Ad_ea J_a``, the columns of
+    ``J_e[:, pre] J_a^-1 S`` are ``Ad_ea S``, the CJM of eq 24, built without an adjoint
+    or an ``SE3`` object. Everything here is allocated once; each step writes into it.
+    """
+
+    def __init__(self, constraint: Constraint, frame_id: int, nv: int, split: ChainSplit) -> None:
+        self.constraint = constraint
+        self.frame_id = frame_id
+        k = constraint.dim
+        self.n_free = 6 - k
+        m = self.n_free + split.post.size  # columns of Jbar
+        pre = split.pre
+        contiguous = np.array_equal(pre, np.arange(pre[0], pre[0] + pre.size))
+        self.pre = slice(int(pre[0]), int(pre[0]) + pre.size) if contiguous else pre
+        self.terms = np.empty(6 * (7 - k) + 7 * k)
+        self.B, self.R = analytical_terms_views(self.terms, k)  # [V_a0, S], [-b, C[I, -hat p]]
+        self.W = np.zeros((nv, m + 1))
+        self.W[split.post, self.n_free + 1:] = np.eye(split.post.size)
+        self.JW = np.empty((6, m + 1))
+        self.square = m == 6
+        self.rhs = np.empty(6)
+        self.v1 = np.ones(m + 1)  # [1; v_m]
+        self.twist1 = np.ones(7)  # [1; V_a]
+        # Eigen's partial-pivoting LU through eigenpy (Pinocchio's own bindings): the same
+        # factorisation as LAPACK's dgesv, reused objects, a little less call overhead.
+        self.lu_a = eigenpy.PartialPivLU(6)
+        self.lu_bar = eigenpy.PartialPivLU(6)
 
 
 class CJMController(Controller):
@@ -48,6 +92,19 @@ class CJMController(Controller):
 
         A qd = b  ->  qd = qd_0 + N y,  N = null(A),  qd_0 = A^+ b
         y = (J_e N)^+ (V_e - J_e qd_0)    (damped), posture in null(J_e N)
+
+    **Speed.** For the paper's case (6 joints before the constraint) one step costs two
+    6 x 6 LU factorisations and a handful of NumPy calls into buffers allocated once (see
+    ``_SquarePlan``). A square ``Jbar`` is solved by its LU whenever the damping cannot
+    act: constant damping 0 and the certified bound ``sigma_min >= 1 / ||Jbar^-1||_F``
+    at or above both ``singular_threshold`` and ``FAST_PATH_MIN_SIGMA``. There the damped
+    least squares (eq 35) is the exact inverse (eq 22), so this fast path changes no
+    result beyond rounding; ``info.sigma_min`` then reports the bound, which lies within
+    a factor ``sqrt(6)`` below the true value. Anywhere else (near a singularity,
+    constant damping, a wide ``Jbar``) one SVD computes the DLS as before. (The DLS also
+    drops singular values below ``1e-10 max(1, sigma_max)``; the fast path's
+    ``sigma_min >= 1e-6`` keeps clear of that for any ``sigma_max`` below 1e4, i.e. any
+    arm shorter than kilometres.)
 
     **Barriers** are held as plane equalities once the unconstrained solution would
     break them (an active set, one barrier at a time, most violated first).
@@ -91,6 +148,7 @@ class CJMController(Controller):
         self.general_only = bool(general_only)
         self.respect_velocity_limits = bool(respect_velocity_limits)
         self._splits: dict[int, ChainSplit | None] = {}
+        self._plans: dict[int, _SquarePlan] = {}
         self._equalities: list[int] = []
         self._barriers: list[int] = []
         super().__init__(robot, constraints, strict=strict)
@@ -98,6 +156,9 @@ class CJMController(Controller):
             posture = getattr(robot, "q_home", None)
         self.posture = (pin.neutral(self.model) if posture is None
                         else as_vector(posture, self.model.nq, "posture"))
+        limit = self.velocity_limit
+        #: 1 / velocity limit per joint (0 where unlimited), as a list for a Python loop
+        self._inverse_limit = [0.0 if not np.isfinite(v) else 1.0 / v for v in limit.tolist()]
 
     # -- chain structure ---------------------------------------------------------------
 
@@ -148,8 +209,11 @@ class CJMController(Controller):
     def _on_constraints_changed(self) -> None:
         self._equalities = [i for i, c in enumerate(self.constraints) if c.is_equality]
         self._barriers = [i for i, c in enumerate(self.constraints) if not c.is_equality]
+        self._plans = {}
 
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
+        if not self._barriers:
+            return self._limit_velocity(self._solve_active(kinematics, twist, self._equalities))
         active = list(self._equalities)
         qd = self._solve_active(kinematics, twist, active)
         # Active set over the barriers: hold the most violated one, solve again.
@@ -170,6 +234,12 @@ class CJMController(Controller):
 
     def _solve_active(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
         if len(active) == 1 and not self.general_only:
+            plan = self._plans.get(active[0])  # the paper's case, seen before
+            if plan is not None:
+                qd = self._solve_square_pre_chain(kinematics, twist, plan)
+                if qd is not None:
+                    return qd
+                return self._solve_general(kinematics, twist, active)
             split = self.split(self.constraint_frames[active[0]])
             if split is not None and split.pre.size >= 6:
                 qd = self._solve_analytical(kinematics, twist, active[0], split)
@@ -183,6 +253,67 @@ class CJMController(Controller):
     def _solve_analytical(
         self, kinematics: Kinematics, twist: np.ndarray, index: int, split: ChainSplit
     ) -> np.ndarray | None:
+        if split.pre.size == 6:
+            plan = self._plans.get(index)
+            if plan is None:
+                plan = self._plans[index] = _SquarePlan(
+                    self.constraints[index], self.constraint_frames[index], self.model.nv, split)
+            return self._solve_square_pre_chain(kinematics, twist, plan)
+        return self._solve_redundant_pre_chain(kinematics, twist, index, split)
+
+    def _solve_square_pre_chain(
+        self, kinematics: Kinematics, twist: np.ndarray, plan: _SquarePlan
+    ) -> np.ndarray | None:
+        """The paper's case, ``J_a`` square: see :class:`_SquarePlan` for the algebra.
+
+        Written flat, with the buffers of the plan: from Python every NumPy or LAPACK
+        call costs about a microsecond whatever the size, so the step is counted in calls.
+        """
+        model, data, info = self.model, self.data, self.info
+        plan.constraint.analytical_terms(pin.updateFramePlacement(model, data, plan.frame_id),
+                                         self.parametrisation, plan.terms)
+        jacobian_a = pin.getFrameJacobian(model, data, plan.frame_id, pin.LOCAL)
+        # X = J_a^-1 [V_a0, S]; an LU pivot far below the largest flags a singular J_a
+        lu_a = plan.lu_a
+        lu_a.compute(jacobian_a[:, plan.pre])
+        pivots = list(map(abs, lu_a.matrixLU().diagonal().tolist()))
+        if not min(pivots) >= PRE_CHAIN_SINGULAR * max(pivots):  # NaN included
+            info.message = "pre-constraint chain singular: general form used"
+            return None
+        W = plan.W
+        W[plan.pre, :plan.n_free + 1] = lu_a.solve(plan.B)
+        JW = np.dot(kinematics.ee_jacobian, W, out=plan.JW)  # [J_e qd_0, Jbar]
+        np.subtract(twist, JW[:, 0], out=plan.rhs)  # V_e - Ad_ea V_a0 (eq 22)
+        policy = self.policy
+        solved = False
+        if plan.square and policy.damping == 0.0:
+            lu_bar = plan.lu_bar
+            lu_bar.compute(JW[:, 1:])
+            inverse = lu_bar.inverse().ravel()
+            # ||Jbar^-1||_2 <= ||Jbar^-1||_F, so this bound never exceeds sigma_min (an
+            # exactly singular Jbar gives inf or NaN here, and the SVD path)
+            bound = 1.0 / math.sqrt(float(np.dot(inverse, inverse)))
+            if bound >= policy.threshold and bound >= FAST_PATH_MIN_SIGMA:
+                plan.v1[1:] = lu_bar.solve(plan.rhs)
+                info.sigma_min = bound
+                solved = True
+        if not solved:  # near singular, damped or not square: the SVD DLS (eq 35)
+            solution = damped_least_squares(JW[:, 1:], plan.rhs, policy)
+            plan.v1[1:] = solution.x
+            info.sigma_min = solution.sigma_min
+            info.damping = solution.damping
+        qd = np.dot(W, plan.v1)  # a new array: the caller keeps it
+        # residual of C v_c = b for the twist the pre-chain really produces
+        np.dot(jacobian_a, qd, out=plan.twist1[1:])
+        residual = np.dot(plan.R, plan.twist1).tolist()
+        info.equality_residual = max(map(abs, residual))
+        info.method = "analytical"
+        return qd
+
+    def _solve_redundant_pre_chain(
+        self, kinematics: Kinematics, twist: np.ndarray, index: int, split: ChainSplit
+    ) -> np.ndarray | None:
+        """More than 6 joints move ``F_a``: SVD of ``J_a``, posture in its null space."""
         frame_id = self.constraint_frames[index]
         placement = self.data.oMf[frame_id]
         pre_jacobian = pin.getFrameJacobian(self.model, self.data, frame_id, pin.LOCAL)[:, split.pre]
@@ -201,21 +332,14 @@ class CJMController(Controller):
         twist_a = S @ solution.x[:n_free]
         twist_a[:3] += linear_a0
 
-        if split.pre.size == 6:  # the paper's case: J_a square, one LU solve
-            lu, _, qd_pre, info = lapack.dgesv(pre_jacobian, twist_a)
-            pivots = np.abs(lu.diagonal())
-            if info != 0 or pivots.min() < PRE_CHAIN_SINGULAR * pivots.max():
-                self.info.message = "pre-constraint chain singular: general form used"
-                return None
-        else:  # redundant pre-chain: pseudo-inverse + posture in null(J_a)
-            u, s, vt = np.linalg.svd(pre_jacobian, full_matrices=True)
-            if s[-1] < PRE_CHAIN_SINGULAR:
-                self.info.message = "pre-constraint chain singular: general form used"
-                return None
-            qd_pre = vt[:6].T @ ((u.T @ twist_a) / s)
-            if self.posture_gain > 0.0:
-                null_basis = vt[6:]
-                qd_pre += null_basis.T @ (null_basis @ self._posture_velocity(kinematics.q)[split.pre])
+        u, s, vt = np.linalg.svd(pre_jacobian, full_matrices=True)
+        if s[-1] < PRE_CHAIN_SINGULAR:
+            self.info.message = "pre-constraint chain singular: general form used"
+            return None
+        qd_pre = vt[:6].T @ ((u.T @ twist_a) / s)
+        if self.posture_gain > 0.0:
+            null_basis = vt[6:]
+            qd_pre += null_basis.T @ (null_basis @ self._posture_velocity(kinematics.q)[split.pre])
 
         qd = np.zeros(self.model.nv)
         qd[split.pre] = qd_pre
@@ -250,15 +374,17 @@ class CJMController(Controller):
                 z = null_basis.T @ self._posture_velocity(kinematics.q)
                 z -= solution.row_space.T @ (solution.row_space @ z)
                 qd += null_basis @ z
-        self.info.equality_residual = float(np.max(np.abs(A @ qd - b))) if A.size else 0.0
+        self.info.equality_residual = max(map(abs, (A @ qd - b).tolist())) if A.size else 0.0
         self.info.method = "general"
         return qd
 
     def _limit_velocity(self, qd: np.ndarray) -> np.ndarray:
         if not self.respect_velocity_limits:
             return qd
-        ratio = float(np.max(np.abs(qd) / self.velocity_limit))
+        # max_i |qd_i| / limit_i in plain Python beats three NumPy reductions on a few
+        # joints (a NaN in qd stays there whatever the scale: solve() flags the step)
+        ratio = max(map(operator.mul, map(abs, qd.tolist()), self._inverse_limit))
         if ratio > 1.0:
-            self.info.scale = 1.0 / ratio
-            return qd / ratio
+            self.info.scale = scale = 1.0 / ratio
+            qd *= scale  # qd is this step's own array
         return qd

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.linalg import lapack
@@ -35,9 +36,8 @@ class DampingPolicy:
         return lam2
 
 
-@dataclass(frozen=True)
-class DampedSolution:
-    """Result of :func:`damped_least_squares`."""
+class DampedSolution(NamedTuple):
+    """Result of :func:`damped_least_squares` (a named tuple: cheap to create per step)."""
 
     x: np.ndarray
     sigma_min: float
@@ -78,7 +78,12 @@ def nullspace(matrix: np.ndarray, rank_tolerance: float = 1e-10) -> tuple[np.nda
     m, n = matrix.shape
     if m == 0:
         return np.eye(n), np.zeros((n, 0)), 0
-    u, s, vt = np.linalg.svd(matrix, full_matrices=True)
-    rank = int(np.sum(s > rank_tolerance * max(1.0, float(s[0]))))
+    # LAPACK's divide-and-conquer SVD, as numpy.linalg.svd, without its Python layer
+    u, s, vt, info = lapack.dgesdd(matrix, full_matrices=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK dgesdd info {info})")
+    values = s.tolist()
+    tolerance = rank_tolerance * max(1.0, values[0]) if values else 0.0
+    rank = sum(1 for value in values if value > tolerance)
     pinv = vt[:rank].T @ (u[:, :rank].T / s[:rank, None])
     return vt[rank:].T.copy(), pinv, rank

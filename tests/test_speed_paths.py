@@ -1,0 +1,424 @@
+"""The fast paths of the controllers give what the slow paths (and fresh solves) give.
+
+Covers what the speed work added: the analytical CJM's LU fast path and its SVD fallback,
+the Hole's closed-form (affine) terms and rows, cheap input checks, buffers that must not
+leak between steps, the persistent proxqp object and the direct daqp call. No wall-clock
+assertions: timing is ``teleop bench``'s job.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import qpsolvers
+import scipy.linalg
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+import controllers.cjm as cjm_module
+from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
+from constraints import Barrier, Hole, Plane, PointLock
+from constraints.base import Constraint, analytical_terms_views
+from controllers import CJMController, QPController, damped_least_squares, nullspace
+from controllers.base import Kinematics, all_finite
+from controllers.linalg import DampingPolicy
+
+EXACT = dict(singular_threshold=0.0, respect_velocity_limits=False)
+
+finite = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False)
+vec3 = arrays(float, 3, elements=finite)
+unit3 = vec3.filter(lambda v: np.linalg.norm(v) > 0.1).map(lambda v: v / np.linalg.norm(v))
+
+
+@st.composite
+def placements(draw) -> pin.SE3:
+    axis = draw(unit3)
+    return pin.SE3(pin.exp3(draw(st.floats(-np.pi, np.pi)) * axis), draw(vec3))
+
+
+def force_svd_path(monkeypatch) -> None:
+    """No certified bound can pass an infinite floor: every square Jbar goes to the SVD."""
+    monkeypatch.setattr(cjm_module, "FAST_PATH_MIN_SIGMA", np.inf)
+
+
+# ------------------------------------------------------------------ the Hole's closed forms
+
+
+@settings(max_examples=200, deadline=None)
+@given(center=vec3, axis=unit3, velocity=vec3, gain=st.floats(0.0, 200.0),
+       placement=placements(), moving=st.booleans())
+def test_hole_affine_terms_equal_the_generic_terms(center, axis, velocity, gain, placement, moving):
+    hole = Hole("link", center, link_axis=axis, gain=gain,
+                velocity=velocity if moving else (0.0, 0.0, 0.0))
+    fast, generic = np.empty(44), np.empty(44)
+    hole.analytical_terms(placement, "nullspace", fast)
+    Constraint.analytical_terms(hole, placement, "nullspace", generic)  # evaluate + structure
+    np.testing.assert_allclose(fast, generic, atol=1e-12)
+    B, R = analytical_terms_views(fast, 2)
+    state = hole.evaluate(placement)
+    np.testing.assert_allclose(R[:, 1:] @ B[:, 1:], 0.0, atol=1e-12)  # C v_c = 0 on S
+    np.testing.assert_allclose(R[:, 1:] @ B[:, 0], state.rhs, atol=1e-12)  # V_a0 gives b
+
+
+def test_hole_rows_equal_the_generic_rows(robot):
+    rng = np.random.default_rng(1)
+    q = near_home(robot, rng)
+    data = kinematics(robot, q)
+    hole = Hole.on_link(robot, q, distance=HOLE_DISTANCE[robot.name])
+    hole.move_to(hole.center + [1e-3, -2e-3, 5e-4], velocity=[0.003, 0.001, -0.002])
+    for _ in range(2):  # moving, then still
+        A, b = hole.rows(robot.model, data)
+        A_ref, b_ref = Constraint.rows(hole, robot.model, data)
+        np.testing.assert_allclose(A, A_ref, atol=1e-13)
+        np.testing.assert_allclose(b, b_ref, atol=1e-13)
+        hole.move_to(hole.center)
+
+
+def test_changing_the_gain_after_a_solve_is_seen(sda10f):
+    q = near_home(sda10f, np.random.default_rng(2))
+    hole = Hole.on_link(sda10f, q, distance=0.08)
+    hole.move_to(hole.center + [0.0, 1e-3, 0.0])
+    twist = np.array([0.01, 0.0, -0.01, 0.02, 0.01, 0.0])
+    controller = CJMController(sda10f, [hole], **EXACT)
+    controller.solve(q, twist)
+    hole.gain = 20.0
+    fresh = CJMController(sda10f, [Hole(hole.link, hole.center, hole.link_axis, gain=20.0)], **EXACT)
+    np.testing.assert_allclose(controller.solve(q, twist), fresh.solve(q, twist), atol=1e-14)
+
+
+# ------------------------------------------------------------- the analytical CJM's paths
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_lu_fast_path_and_svd_path_give_the_same_joint_velocities(robot, seed, monkeypatch):
+    rng = np.random.default_rng(300 + seed)
+    q = near_home(robot, rng, spread=0.05)
+    hole = Hole.on_link(robot, q, distance=HOLE_DISTANCE[robot.name])
+    hole.move_to(hole.center + 1e-3 * rng.normal(size=3))
+    twist = rng.normal(size=6) * 0.02
+    policy = dict(singular_threshold=0.01, respect_velocity_limits=False)  # DLS would act < 0.01
+    fast = CJMController(robot, [hole], **policy)
+    qd_fast = fast.solve(q, twist)
+    sigma = np.linalg.svd(fast.constrained_jacobian(q), compute_uv=False)[-1]
+    assert sigma > np.sqrt(6) * fast.policy.threshold  # well conditioned: the fast path
+    assert fast.info.method == "analytical" and fast.info.damping == 0.0
+    assert sigma / np.sqrt(6) - 1e-12 <= fast.info.sigma_min <= sigma + 1e-12  # the bound
+    assert fast.info.sigma_min != pytest.approx(sigma, rel=1e-9)  # so it really was the bound
+
+    force_svd_path(monkeypatch)
+    slow = CJMController(robot, [hole], **policy)
+    qd_slow = slow.solve(q, twist)
+    assert slow.info.sigma_min == pytest.approx(sigma, rel=1e-9)  # the SVD's own value
+    np.testing.assert_allclose(qd_fast, qd_slow, rtol=0.0, atol=1e-12)
+    assert fast.info.equality_residual <= 1e-12 and slow.info.equality_residual <= 1e-12
+
+
+def test_near_singular_jbar_falls_back_to_the_svd_dls(sda10f, monkeypatch):
+    """Joint B at 1e-4 rad: sigma_min(Jbar) < 1e-3, the damping acts, the SVD decides."""
+    q = sda10f.q_home.copy()
+    q[6] = 1e-4
+    hole = Hole.on_link(sda10f, q, distance=0.08)
+    controller = CJMController(sda10f, [hole], respect_velocity_limits=False)
+    jbar = controller.constrained_jacobian(q)
+    sigma = np.linalg.svd(jbar, compute_uv=False)
+    u = np.linalg.svd(jbar)[0]
+    twist = 0.05 * u[:, -1]
+    qd = controller.solve(q, twist)
+    assert controller.info.sigma_min == pytest.approx(sigma[-1], rel=1e-6)  # exact, not a bound
+    assert controller.info.damping == pytest.approx(
+        np.sqrt(controller.policy.lambda_squared(sigma[-1])), rel=1e-6)
+    assert controller.info.damping > 0.0 and np.abs(qd).max() < 2.0
+    # same answer as the SVD path taken on purpose
+    force_svd_path(monkeypatch)
+    np.testing.assert_allclose(
+        CJMController(sda10f, [hole], respect_velocity_limits=False).solve(q, twist), qd,
+        atol=1e-12)
+
+
+def test_constant_damping_always_takes_the_svd_path(sda10f):
+    q = sda10f.q_home.copy()
+    hole = Hole.on_link(sda10f, q, distance=0.08)
+    controller = CJMController(sda10f, [hole], damping=1e-3, respect_velocity_limits=False)
+    controller.solve(q, np.array([0.01, 0.0, 0.0, 0.0, 0.02, 0.0]))
+    sigma = np.linalg.svd(controller.constrained_jacobian(q), compute_uv=False)[-1]
+    assert controller.info.sigma_min == pytest.approx(sigma, rel=1e-9)
+    assert controller.info.damping == pytest.approx(1e-3)
+
+
+def test_singular_pre_chain_hands_over_to_the_general_form(sda10f):
+    """Joint U at 0 stretches the arm: J_a (6 x 6) is singular, the general form takes over."""
+    q = sda10f.q_home.copy()
+    q[4] = 0.0
+    hole = Hole.on_link(sda10f, q, distance=0.08)
+    data = kinematics(sda10f, q)
+    J_a = pin.getFrameJacobian(sda10f.model, data, sda10f.model.getFrameId(hole.link), pin.LOCAL)
+    assert np.linalg.svd(J_a[:, :6], compute_uv=False)[-1] < 1e-4
+    controller = CJMController(sda10f, [hole])
+    qd = controller.solve(q, np.array([0.01, 0.0, 0.0, 0.0, 0.02, 0.0]))
+    assert controller.info.method == "general" and "pre-constraint" in controller.info.message
+    assert np.all(np.isfinite(qd))
+
+
+def test_plane_and_point_lock_use_the_generic_terms_in_the_analytical_form(sda10f):
+    """Constraints without closed forms go through Constraint.analytical_terms."""
+    q = sda10f.q_home.copy()
+    twist = np.array([0.02, 0.01, -0.01, 0.05, -0.02, 0.03])
+    lock = PointLock.on_link(sda10f, q, distance=0.08)
+    plane = Plane.through_link_point(sda10f, q, normal=[0.0, 0.0, 1.0], distance=0.08)
+    for constraint in (lock, plane):
+        analytical = CJMController(sda10f, [constraint], **EXACT)
+        general = CJMController(sda10f, [constraint], general_only=True, **EXACT)
+        qd = analytical.solve(q, twist)
+        assert analytical.info.method == "analytical"
+        J = ee_jacobian(sda10f, q)
+        np.testing.assert_allclose(J @ qd, J @ general.solve(q, twist), atol=1e-9)
+        A, b = constraint.rows(sda10f.model, kinematics(sda10f, q))
+        assert np.max(np.abs(A @ qd - b)) <= 1e-12
+
+
+def test_steps_do_not_share_buffers(sda10f):
+    """Each solve returns its own array: the next step must not overwrite the last."""
+    hole = Hole.on_link(sda10f, sda10f.q_home, distance=0.08)
+    rng = np.random.default_rng(4)
+    for controller in (CJMController(sda10f, [hole]), QPController(sda10f, [hole], solver="daqp"),
+                       QPController(sda10f, [hole], solver="proxqp")):
+        q1, q2 = near_home(sda10f, rng, 0.05), near_home(sda10f, rng, 0.05)
+        first = controller.solve(q1, np.full(6, 0.01))
+        kept = first.copy()
+        info = controller.info
+        second = controller.solve(q2, np.full(6, -0.01))
+        assert second is not first and controller.info is not info
+        np.testing.assert_array_equal(first, kept)
+
+
+def test_new_constraints_give_the_same_result_as_a_new_controller(sda10f):
+    q = near_home(sda10f, np.random.default_rng(5), 0.05)
+    twist = np.array([0.01, -0.01, 0.0, 0.02, 0.0, -0.01])
+    first = Hole.on_link(sda10f, q, distance=0.08)
+    second = Hole.on_link(sda10f, q, distance=0.02)
+    controller = CJMController(sda10f, [first], **EXACT)
+    controller.solve(q, twist)
+    controller.set_constraints([second])
+    np.testing.assert_allclose(controller.solve(q, twist),
+                               CJMController(sda10f, [second], **EXACT).solve(q, twist), atol=1e-14)
+
+
+# -------------------------------------------------------------------------- input checks
+
+
+def test_all_finite_is_exact_even_when_the_sum_overflows():
+    assert all_finite(np.array([1e308, 1e308, -1.0]))  # the sum overflows, the entries do not
+    assert not all_finite(np.array([1.0, np.nan]))
+    assert not all_finite(np.array([np.inf, -np.inf]))  # inf - inf is NaN: still caught
+    assert all_finite(np.zeros(0))
+
+
+def test_huge_but_finite_input_is_not_called_non_finite(sda10f):
+    hole = Hole.on_link(sda10f, sda10f.q_home, distance=0.08)
+    controller = CJMController(sda10f, [hole])
+    with np.errstate(all="ignore"):
+        qd = controller.solve(sda10f.q_home, np.array([1e308, 1e308, 0.0, 0.0, 0.0, 0.0]))
+    assert np.all(np.isfinite(qd))  # a flagged zero or a scaled command, never a ValueError
+    with pytest.raises(ValueError, match="twist must be finite"):
+        controller.solve(sda10f.q_home, np.array([1e308, np.nan, 0.0, 0.0, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="q must be finite"):
+        controller.solve(np.full(8, np.inf), np.zeros(6))
+    with pytest.raises(ValueError, match=r"twist must have shape \(6,\)"):
+        controller.solve(sda10f.q_home, [0.0] * 7)
+    np.testing.assert_array_equal(  # lists are fine
+        controller.solve(sda10f.q_home.tolist(), [0.0] * 6), controller.solve(sda10f.q_home, np.zeros(6)))
+
+
+def test_kinematics_placement_is_read_on_demand(sda10f):
+    hole = Hole.on_link(sda10f, sda10f.q_home, distance=0.08)
+    controller = CJMController(sda10f, [hole])
+    q = near_home(sda10f, np.random.default_rng(6))
+    kin = controller._kinematics(q)
+    assert isinstance(kin, Kinematics)
+    reference = kinematics(sda10f, q).oMf[controller.ee_frame_id]
+    assert kin.ee_placement.isApprox(reference, 1e-12)
+    np.testing.assert_allclose(kin.ee_jacobian, ee_jacobian(sda10f, q), atol=1e-14)
+
+
+# --------------------------------------------------------------------- shared linear algebra
+
+
+def test_nullspace_and_dls_against_scipy():
+    rng = np.random.default_rng(7)
+    for m, n in ((2, 8), (3, 8), (6, 6), (0, 5)):
+        A = rng.normal(size=(m, n))
+        N, pinv, rank = nullspace(A)
+        assert rank == m and N.shape == (n, n - m)
+        if m:
+            reference = scipy.linalg.null_space(A)
+            np.testing.assert_allclose(N @ N.T, reference @ reference.T, atol=1e-12)
+            np.testing.assert_allclose(pinv, np.linalg.pinv(A), atol=1e-12)
+    J = rng.normal(size=(6, 6))
+    solution = damped_least_squares(J, np.ones(6), DampingPolicy())
+    np.testing.assert_allclose(solution.x, np.linalg.solve(J, np.ones(6)), atol=1e-10)
+    assert solution.sigma_min == pytest.approx(np.linalg.svd(J, compute_uv=False)[-1])
+
+
+# ------------------------------------------------------------------------------- the QPs
+
+
+def reference_bounds(controller: QPController, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The joint box as the first implementation wrote it, element by element."""
+    model = controller.model
+    lower, upper = np.full(model.nv, -np.inf), np.full(model.nv, np.inf)
+    if controller.velocity_limits:
+        limit = np.asarray(model.velocityLimit, dtype=float)
+        limit = np.where(np.isfinite(limit) & (limit > 0), limit, np.inf)
+        lower, upper = -limit, limit.copy()
+    if controller.position_limits:
+        scale = controller.limit_gain / controller.dt
+        for j in range(1, model.njoints):
+            if model.nqs[j] == 1 and model.nvs[j] == 1:
+                iq, iv = model.idx_qs[j], model.idx_vs[j]
+                lo, hi = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
+                if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
+                    lower[iv] = max(lower[iv], scale * (lo - q[iq]))
+                    upper[iv] = min(upper[iv], scale * (hi - q[iq]))
+    return lower, np.maximum(upper, lower)
+
+
+@pytest.mark.parametrize("options", [{}, {"velocity_limits": False}, {"position_limits": False},
+                                     {"dt": 0.01, "limit_gain": 0.5}])
+def test_bounds_match_the_element_by_element_definition(sda10f, options):
+    controller = QPController(sda10f, [], **options)
+    rng = np.random.default_rng(8)
+    model = sda10f.model
+    for _ in range(20):  # inside, near and past the position limits
+        q = rng.uniform(model.lowerPositionLimit - 0.01, model.upperPositionLimit + 0.01)
+        for got, want in zip(controller.bounds(q), reference_bounds(controller, q)):
+            np.testing.assert_array_equal(got, want)
+
+
+def barrier_below_the_tip(robot, q):
+    data = kinematics(robot, q)
+    tip = data.oMf[robot.model.getFrameId(robot.ee_frame)].translation
+    return Barrier(robot.ee_frame, [0.0, 0.0, 0.0], tip - [0.0, 0.0, 2e-4], [0.0, 0.0, 1.0])
+
+
+def qp_sequence(robot, controller_or_none, steps=50, seed=9):
+    """A closed-loop run that changes q every step, adds a barrier at 15, drops it at 35.
+
+    Yields ``(q, twist, constraints)``; the caller solves and the run integrates ``qd``.
+    """
+    q = robot.q_home.copy()
+    hole = Hole.on_link(robot, q, distance=HOLE_DISTANCE[robot.name])
+    barrier = barrier_below_the_tip(robot, q)
+    ee = robot.model.getFrameId(robot.ee_frame)
+    rng = np.random.default_rng(seed)
+    for k in range(steps):
+        constraints = [hole, barrier] if 15 <= k < 35 else [hole]
+        rotation = kinematics(robot, q).oMf[ee].rotation
+        push = rotation.T @ np.array([0.0, 0.0, -0.05]) if 15 <= k < 35 else rng.normal(size=3) * 0.03
+        twist = np.concatenate([push, 0.05 * np.array([np.sin(k / 5), np.cos(k / 7), 0.3])])
+        qd = yield q, twist, constraints
+        q = pin.integrate(robot.model, q, qd * 1e-2)
+
+
+def fresh_qpsolvers_solution(robot, controller, q, twist, constraints, solver, **settings):
+    """The same QP, built from scratch with public calls and solved by a fresh qpsolvers call."""
+    model = robot.model
+    data = kinematics(robot, q)
+    J = ee_jacobian(robot, q)
+    rows = [c.rows(model, data) for c in constraints if c.is_equality]
+    A, b = np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows])
+    inequalities = [c.rows(model, data) for c in constraints if not c.is_equality]
+    G = -np.vstack([r[0] for r in inequalities]) if inequalities else None
+    h = -np.concatenate([r[1] for r in inequalities]) if inequalities else None
+    lb, ub = controller.bounds(q)
+    return qpsolvers.solve_qp(J.T @ J + controller.mu * np.eye(model.nv), -J.T @ twist, G, h,
+                              A, b, lb, ub, solver=solver, **settings)
+
+
+@pytest.mark.parametrize("solver, settings, tolerance", [
+    ("proxqp", {"eps_abs": 1e-10, "eps_rel": 0.0}, 1e-8),
+    ("daqp", {"primal_tol": 1e-10}, 1e-12),
+])
+def test_persistent_qp_agrees_with_fresh_solves_while_constraints_come_and_go(
+        robot, solver, settings, tolerance):
+    controller = QPController(robot, solver=solver)
+    run = qp_sequence(robot, controller)
+    q, twist, constraints = next(run)
+    barrier_held = 0
+    try:
+        while True:
+            if constraints != controller.constraints:
+                controller.set_constraints(constraints)
+            qd = controller.solve(q, twist)
+            assert controller.info.success, controller.info.message
+            assert controller.info.equality_residual <= 1e-9
+            reference = fresh_qpsolvers_solution(robot, controller, q, twist, constraints,
+                                                 solver, **settings)
+            np.testing.assert_allclose(qd, reference, rtol=0.0, atol=tolerance)
+            barrier_held += bool(controller.info.active_barriers)
+            q, twist, constraints = run.send(qd)
+    except StopIteration:
+        pass
+    assert barrier_held > 5  # the barrier really was pushed against
+
+
+def test_proxqp_warm_start_changes_results_only_within_solver_accuracy(robot):
+    """Warm starting proxqp from the previous result is an option (not the default)."""
+    default = QPController(robot, solver="proxqp")
+    warm = QPController(robot, solver="proxqp",
+                        solver_settings={"initial_guess": "WARM_START_WITH_PREVIOUS_RESULT"})
+    exact = QPController(robot, solver="daqp", solver_settings={"primal_tol": 1e-12})
+    run = qp_sequence(robot, None)
+    q, twist, constraints = next(run)
+    try:
+        while True:
+            for controller in (default, warm, exact):
+                if constraints != controller.constraints:
+                    controller.set_constraints(constraints)
+            qd = default.solve(q, twist)
+            qd_warm = warm.solve(q, twist)
+            qd_exact = exact.solve(q, twist)
+            assert default.info.success and warm.info.success
+            # proxqp at eps_abs 1e-10 is ~1e-7 from the active-set solution on these
+            # problems (mu = 1e-10 leaves directions nearly flat); both starts stay there
+            np.testing.assert_allclose(qd_warm, qd_exact, atol=1e-6)
+            np.testing.assert_allclose(qd, qd_exact, atol=1e-6)
+            np.testing.assert_allclose(qd_warm, qd, atol=1e-6)
+            assert warm.info.equality_residual <= 1e-9
+            q, twist, constraints = run.send(qd)
+    except StopIteration:
+        pass
+
+
+def test_settings_the_direct_calls_cannot_take_go_through_qpsolvers(sda10f):
+    q = sda10f.q_home.copy()
+    hole = Hole.on_link(sda10f, q, distance=0.08)
+    twist = np.array([0.01, -0.005, 0.008, 0.02, -0.01, 0.015])
+    direct = QPController(sda10f, [hole], solver="proxqp")
+    through = QPController(sda10f, [hole], solver="proxqp", solver_settings={"backend": "dense"})
+    assert direct._proxqp is not None and through._proxqp is None
+    np.testing.assert_allclose(direct.solve(q, twist), through.solve(q, twist), atol=1e-8)
+    with pytest.raises(ValueError, match="initial_guess"):
+        QPController(sda10f, [hole], solver="proxqp", solver_settings={"initial_guess": "guess"})
+    daqp_direct = QPController(sda10f, [hole], solver="daqp")
+    daqp_through = QPController(sda10f, [hole], solver="daqp", solver_settings={"verbose": False})
+    assert daqp_direct._direct_daqp and not daqp_through._direct_daqp
+    np.testing.assert_allclose(daqp_direct.solve(q, twist), daqp_through.solve(q, twist), atol=1e-12)
+
+
+def test_proxqp_recovers_after_an_infeasible_step(sda10f):
+    """A failed solve drops the persistent object; the next feasible step solves."""
+    q = sda10f.q_home.copy()
+    lock = PointLock.on_link(sda10f, q, distance=0.05)
+    other = PointLock(lock.link, lock.link_point, lock.target + [0.01, 0.0, 0.0])
+    controller = QPController(sda10f, [lock], solver="proxqp")
+    assert controller.solve(q, np.zeros(6)) is not None and controller.info.success
+    controller.set_constraints([lock, other])
+    controller.solve(q, np.zeros(6))
+    assert not controller.info.success and "proxqp" in controller.info.message
+    controller.set_constraints([lock])
+    qd = controller.solve(q, np.full(6, 0.001))
+    assert controller.info.success and controller.info.equality_residual <= 1e-9
+    np.testing.assert_allclose(
+        qd, QPController(sda10f, [lock], solver="proxqp").solve(q, np.full(6, 0.001)), atol=1e-8)
