@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 import operator
 from dataclasses import dataclass
@@ -18,9 +20,11 @@ from .base import Controller, Kinematics
 from .linalg import DampingPolicy, damped_least_squares, nullspace
 
 #: Below this smallest singular value of J_a (the Jacobian of F_a over the joints before
-#: the constraint) F_a cannot take every twist and the analytical form hands over to the
-#: general null-space form.
-PRE_CHAIN_SINGULAR = 1e-4
+#: the constraint; for the square case, the smallest/largest LU pivot ratio) F_a can no
+#: longer take every twist at a sane joint speed (``J_a^-1`` would amplify by more than
+#: ~1/PRE_CHAIN_SINGULAR), and the analytical form hands over to the general null-space
+#: form, which holds the rows exactly and damps the near-singular direction instead.
+PRE_CHAIN_SINGULAR = 1e-2
 
 #: The LU fast path for a square ``Jbar`` needs the certified lower bound on its smallest
 #: singular value to be at least this as well as the damping threshold, so the SVD path
@@ -120,8 +124,8 @@ class CJMController(Controller):
     posture : configuration the redundancy is spent on (default ``robot.q_home``).
     posture_gain : gain (1/s) of the null-space posture task; 0 gives minimum norm.
     general_only : always use the general null-space form (the cross-check).
-    respect_velocity_limits : scale ``qd`` uniformly so no joint exceeds its velocity
-        limit (keeps the direction; the constraint velocity rows scale with it).
+    respect_velocity_limits : when a joint would exceed its velocity limit, scale the
+        twist's part of ``qd`` (not the constraint's) so none does: the constraint holds.
     """
 
     def __init__(
@@ -213,7 +217,8 @@ class CJMController(Controller):
 
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
         if not self._barriers:
-            return self._limit_velocity(self._solve_active(kinematics, twist, self._equalities))
+            qd = self._solve_active(kinematics, twist, self._equalities)
+            return self._limit_velocity(qd, kinematics, self._equalities)
         active = list(self._equalities)
         qd = self._solve_active(kinematics, twist, active)
         # Active set over the barriers: hold the most violated one, solve again.
@@ -230,7 +235,7 @@ class CJMController(Controller):
             qd = self._solve_active(kinematics, twist, active)
         if self._barriers:
             self.info.active_barriers = tuple(i for i in active if i in self._barriers)
-        return self._limit_velocity(qd)
+        return self._limit_velocity(qd, kinematics, active)
 
     def _solve_active(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
         if len(active) == 1 and not self.general_only:
@@ -378,9 +383,45 @@ class CJMController(Controller):
         self.info.method = "general"
         return qd
 
-    def _limit_velocity(self, qd: np.ndarray) -> np.ndarray:
+    def _limit_velocity(self, qd: np.ndarray, kinematics: Kinematics, active: list[int]) -> np.ndarray:
+        """Slow the task down, not the constraint, when a joint would exceed its limit.
+
+        ``qd = qd_b + qd_t``: ``qd_b`` is the step for a zero twist (it holds the rows
+        ``A qd_b = b``: drift feedback, feed-forward, posture) and ``qd_t`` the twist's
+        part (``A qd_t = 0``). The command is ``qd_b + s qd_t`` with the largest
+        ``s <= 1`` inside the limits, so the constraint still holds exactly. Only if
+        ``qd_b`` alone is over a limit is everything scaled (reported in ``info.scale``
+        and ``info.message``).
+        """
         if not self.respect_velocity_limits:
             return qd
+        # max_i |qd_i| / limit_i in plain Python beats three NumPy reductions on a few
+        # joints (a NaN in qd stays there whatever the scale: solve() flags the step)
+        ratio = max(map(operator.mul, map(abs, qd.tolist()), self._inverse_limit))
+        if not ratio > 1.0:
+            return qd
+        qd = qd.copy()  # the solve below may reuse this step's buffers
+        info = dataclasses.replace(self.info)
+        qd_b = self._solve_active(kinematics, np.zeros(6), active).copy()
+        self.info = info
+        qd_t = qd - qd_b
+        limit = self.velocity_limit
+        scale = 1.0
+        for b_i, t_i, v_i in zip(qd_b.tolist(), qd_t.tolist(), limit.tolist()):
+            if t_i > 0.0:
+                scale = min(scale, (v_i - b_i) / t_i)
+            elif t_i < 0.0:
+                scale = min(scale, (-v_i - b_i) / t_i)
+        if scale >= 0.0:
+            self.info.scale = scale
+            return qd_b + scale * qd_t
+        # the constraint's own correction is over a limit: scale it too
+        ratio_b = float(np.max(np.abs(qd_b) / limit))
+        self.info.scale = 0.0
+        note = (f"constraint correction alone exceeds the velocity limits ({ratio_b:.2f}x): "
+                "scaled, the constraint converges slower")
+        self.info.message = f"{self.info.message}; {note}" if self.info.message else note
+        return qd_b / ratio_b
         # max_i |qd_i| / limit_i in plain Python beats three NumPy reductions on a few
         # joints (a NaN in qd stays there whatever the scale: solve() flags the step)
         ratio = max(map(operator.mul, map(abs, qd.tolist()), self._inverse_limit))

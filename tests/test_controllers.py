@@ -194,17 +194,24 @@ def test_near_singular_jbar_stays_bounded_and_holds_the_constraint(sda10f):
     assert np.max(np.abs(A @ qd - b)) <= 1e-12  # and the hole still holds exactly
 
 
-def test_velocity_limits_scale_the_command_uniformly(ur5_instrument):
+def test_velocity_limits_slow_the_task_and_keep_the_constraint(ur5_instrument):
+    """An over-fast twist: the twist's part is scaled, the hole (with drift) still holds."""
     robot = ur5_instrument
+    rng = np.random.default_rng(5)
     q = robot.q_home.copy()
-    hole = Hole.on_link(robot, q, distance=0.2)
+    hole = offset_hole(robot, q, rng)  # drift term active: b != 0
     twist = np.array([2.0, -1.0, 1.5, 3.0, 2.0, -1.0])
     raw = CJMController(robot, [hole], respect_velocity_limits=False).solve(q, twist)
+    drift_only = CJMController(robot, [hole], respect_velocity_limits=False).solve(q, np.zeros(6))
     controller = CJMController(robot, [hole])
     qd = controller.solve(q, twist)
-    assert controller.info.scale < 1.0
-    np.testing.assert_allclose(qd, controller.info.scale * raw, atol=1e-12)
+    assert 0.0 < controller.info.scale < 1.0
+    np.testing.assert_allclose(qd, drift_only + controller.info.scale * (raw - drift_only), atol=1e-12)
     assert np.all(np.abs(qd) <= robot.model.velocityLimit + 1e-12)
+    assert np.isclose(np.max(np.abs(qd) / robot.model.velocityLimit), 1.0)  # as fast as allowed
+    A, b = reference_hole_rows(robot, q, hole)
+    assert np.abs(b).max() > 1e-3
+    assert np.max(np.abs(A @ qd - b)) <= 1e-12
 
 
 def test_barrier_is_held_by_both_controllers_when_pushed(ur5_instrument):
