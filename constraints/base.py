@@ -124,6 +124,20 @@ def default_link(robot: RobotLike, link: str | None) -> str:
     return robot.constrained_link
 
 
+def link_point_at(robot: RobotLike, q: np.ndarray, link: str | None, link_point=None,
+                  distance: float | None = None) -> tuple[str, np.ndarray, pin.SE3]:
+    """Resolve a link point given as ``link_point`` (link coordinates) or ``distance`` m
+    along the robot's link axis: returns ``(link, point in link coordinates, link placement
+    at q)``."""
+    link = default_link(robot, link)
+    if (link_point is None) == (distance is None):
+        raise ValueError("give exactly one of link_point or distance")
+    if link_point is None:
+        link_point = float(distance) * as_unit_vector(robot.link_axis, "link_axis")
+    link_point = as_vector(link_point, 3, "link_point")
+    return link, link_point, frame_placement(robot, q, resolve_frame(robot.model, link))
+
+
 def frame_placement(robot: RobotLike, q: np.ndarray, frame_id: int) -> pin.SE3:
     """World placement of a frame at configuration ``q`` (validated)."""
     model = robot.model

@@ -11,10 +11,8 @@ from .base import (
     RobotLike,
     as_unit_vector,
     as_vector,
-    default_link,
-    frame_placement,
+    link_point_at,
     perpendicular_basis,
-    resolve_frame,
 )
 
 #: How far (m) the link point may be from the plane when a plane is built.
@@ -74,13 +72,7 @@ class Plane(Constraint):
         passes there instead, and a link point farther than ``tolerance`` from it raises
         ``ValueError`` saying how far.
         """
-        link = default_link(robot, link)
-        if (link_point is None) == (distance is None):
-            raise ValueError("give exactly one of link_point or distance")
-        if link_point is None:
-            link_point = float(distance) * as_unit_vector(robot.link_axis, "link_axis")
-        link_point = as_vector(link_point, 3, "link_point")
-        placement = frame_placement(robot, q, resolve_frame(robot.model, link))
+        link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
         point_world = placement.act(link_point)
         if plane_point is None:
             plane_point = point_world

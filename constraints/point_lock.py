@@ -9,11 +9,8 @@ from .base import (
     DEFAULT_GAIN,
     Constraint,
     RobotLike,
-    as_unit_vector,
     as_vector,
-    default_link,
-    frame_placement,
-    resolve_frame,
+    link_point_at,
 )
 
 
@@ -46,13 +43,7 @@ class PointLock(Constraint):
                 distance: float | None = None, link: str | None = None,
                 gain: float = DEFAULT_GAIN) -> "PointLock":
         """Lock a link point where it is at ``q`` (``link_point`` or ``distance`` on the axis)."""
-        link = default_link(robot, link)
-        if (link_point is None) == (distance is None):
-            raise ValueError("give exactly one of link_point or distance")
-        if link_point is None:
-            link_point = float(distance) * as_unit_vector(robot.link_axis, "link_axis")
-        link_point = as_vector(link_point, 3, "link_point")
-        placement = frame_placement(robot, q, resolve_frame(robot.model, link))
+        link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
         return cls(link, link_point, placement.act(link_point), gain=gain)
 
     def move_to(self, target, velocity=(0.0, 0.0, 0.0)) -> None:

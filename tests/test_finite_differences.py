@@ -90,7 +90,6 @@ def test_cjm_matches_finite_differences_of_the_chain(robot):
     after = placement_after(robot, q, qd, robot.ee_frame)
     np.testing.assert_allclose(pin.log6(before.actInv(after)).vector / STEP, twist, atol=1e-6)
     # and the hole point does not move sideways, to first order
-    frame = robot.model.getFrameId(hole.link)
     error_after = hole.error(placement_after(robot, q, qd, hole.link))
     assert np.max(np.abs(error_after)) / STEP < 1e-6
 

@@ -15,7 +15,8 @@ import qpsolvers
 import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from hypothesis.extra.numpy import arrays
+
+from strategies import placements, unit3, vec3
 
 import controllers.cjm as cjm_module
 from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
@@ -26,17 +27,6 @@ from controllers.base import Kinematics, all_finite
 from controllers.linalg import DampingPolicy
 
 EXACT = dict(singular_threshold=0.0, respect_velocity_limits=False)
-
-finite = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False)
-vec3 = arrays(float, 3, elements=finite)
-unit3 = vec3.filter(lambda v: np.linalg.norm(v) > 0.1).map(lambda v: v / np.linalg.norm(v))
-
-
-@st.composite
-def placements(draw) -> pin.SE3:
-    axis = draw(unit3)
-    return pin.SE3(pin.exp3(draw(st.floats(-np.pi, np.pi)) * axis), draw(vec3))
-
 
 def force_svd_path(monkeypatch) -> None:
     """No certified bound can pass an infinite floor: every square Jbar goes to the SVD."""

@@ -8,21 +8,10 @@ import pytest
 import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from hypothesis.extra.numpy import arrays
+
+from strategies import placements, unit3, vec3
 
 from constraints import Barrier, Hole, Plane, PointLock, structure_nullspace, structure_paper
-
-finite = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False)
-vec3 = arrays(float, 3, elements=finite)
-unit3 = vec3.filter(lambda v: np.linalg.norm(v) > 0.1).map(lambda v: v / np.linalg.norm(v))
-
-
-@st.composite
-def placements(draw) -> pin.SE3:
-    axis = draw(unit3)
-    angle = draw(st.floats(-np.pi, np.pi))
-    return pin.SE3(pin.exp3(angle * axis), draw(vec3))
-
 
 @st.composite
 def constraints(draw):

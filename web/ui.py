@@ -258,7 +258,6 @@ class TeleopUI:
         self._draw_status(snapshot)
 
     def _draw_constraints(self, entries: list[dict]) -> None:
-        scene = self.server.scene
         present = {e["id"] for e in entries}
         for entry_id in list(self._markers):
             if entry_id not in present:
