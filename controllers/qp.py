@@ -21,7 +21,7 @@ SPARSE_SOLVERS = frozenset({"osqp", "scs", "clarabel", "highs", "piqp", "qpalm"}
 #: 1e-9 m/s or better. OSQP (first order, ADMM) is asked for 1e-7 with polishing and
 #: usually lands between 1e-7 and 1e-9: its residuals are reported, not hidden.
 SOLVER_SETTINGS: dict[str, dict] = {
-    "proxqp": {"eps_abs": 1e-10, "eps_rel": 0.0},
+    "proxqp": {"eps_abs": 1e-10, "eps_rel": 0.0, "max_iter": 1000},  # fails fast, not in 10^4 iterations
     "daqp": {"primal_tol": 1e-10},
     "osqp": {"eps_abs": 1e-7, "eps_rel": 0.0, "polishing": True, "max_iter": 20000},
 }
