@@ -10,22 +10,30 @@ import numpy as np
 
 from .robot import Robot, load_robot
 
-_AXES = ("0 0 1", "0 1 0", "1 0 0")
+def _axes(dof: int) -> list[str]:
+    """Joint axes of a generic chain: fixed pseudo-random unit vectors (no two parallel
+    by construction of the seed), so no sub-chain is structurally singular."""
+    rng = np.random.default_rng(7)
+    axes = rng.normal(size=(dof, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    return [" ".join(f"{x:.6f}" for x in axis) for axis in axes]
 
 
 def chain_urdf(dof: int, link_length: float = 0.12) -> str:
-    """URDF text of a serial chain: ``dof`` revolute joints cycling z, y, x axes, each link
-    ``link_length`` m along its own z, then a ``tool0`` frame. Primitive geometry only."""
+    """URDF text of a serial chain: ``dof`` revolute joints about generic fixed axes, each
+    link ``link_length`` m along its own z (with a small sideways offset), then ``tool0``."""
     if dof < 1:
         raise ValueError(f"dof must be >= 1, got {dof}")
     parts = ['<?xml version="1.0"?>', f'<robot name="chain{dof}">', '  <link name="base_link"/>']
     parent = "base_link"
+    axes = _axes(dof)
     for i in range(1, dof + 1):
         origin_z = 0.0 if i == 1 else link_length
         parts += [
             f'  <joint name="joint_{i}" type="revolute">',
             f'    <parent link="{parent}"/><child link="link_{i}"/>',
-            f'    <origin xyz="0 0 {origin_z}" rpy="0 0 0"/><axis xyz="{_AXES[(i - 1) % 3]}"/>',
+            f'    <origin xyz="{0.0 if i == 1 else 0.02} 0 {origin_z}" rpy="0 0 0"/>'
+            f'<axis xyz="{axes[i - 1]}"/>',
             '    <limit lower="-3.1" upper="3.1" velocity="3.0" effort="10"/>',
             '  </joint>',
             f'  <link name="link_{i}">',
