@@ -133,7 +133,7 @@ class CJMController(Controller):
         robot,
         constraints: Iterable[Constraint] = (),
         damping: float = 0.0,
-        singular_threshold: float = 0.02,
+        singular_threshold: float = 0.01,
         max_damping: float = 0.05,
         parametrisation: Parametrisation = "nullspace",
         posture: np.ndarray | None = None,

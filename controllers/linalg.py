@@ -20,7 +20,7 @@ class DampingPolicy:
     """
 
     damping: float = 0.0
-    threshold: float = 0.02
+    threshold: float = 0.01
     max_damping: float = 0.05
 
     def __post_init__(self) -> None:

@@ -58,7 +58,8 @@ def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: in
     """Time one controller on ``holes`` over configurations near the robot's home."""
     controller = make_controller(spec, robot, holes)
     rng = np.random.default_rng(seed)
-    configurations = robot.q_home + rng.uniform(-0.02, 0.02, (iterations, robot.model.nq))
+    # near home, a little off the hole (<= 1e-3 rad per joint: sub-millimetre drift to correct)
+    configurations = robot.q_home + rng.uniform(-1e-3, 1e-3, (iterations, robot.model.nq))
     # a teleoperation-sized twist (a few mm/s, mrad/s): no joint near its velocity limit,
     # so every controller solves the plain constrained problem
     twist = np.array([0.001, -0.002, 0.0015, 0.005, -0.003, 0.002])
