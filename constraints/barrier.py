@@ -25,32 +25,11 @@ class Barrier(Plane):
     """
 
     is_equality = False
+    default_gain = DEFAULT_BARRIER_GAIN
 
-    def __init__(
-        self,
-        link: str,
-        link_point,
-        plane_point,
-        normal,
-        gain: float = DEFAULT_BARRIER_GAIN,
-        velocity=(0.0, 0.0, 0.0),
-    ) -> None:
-        super().__init__(link, link_point, plane_point, normal, gain=gain, velocity=velocity)
-
-    @classmethod
-    def through_link_point(cls, robot, q, normal, link_point=None, distance=None, link=None,
-                           gain: float = DEFAULT_BARRIER_GAIN, tolerance: float = 1e-3,
-                           plane_point=None) -> "Barrier":
-        """A barrier plane (world ``plane_point``, ``normal``) guarding a link point.
-
-        The point (``link_point`` in link coordinates, or ``distance`` m along the link
-        axis) must be on the allowed side at ``q``: more than ``tolerance`` m behind the
-        plane raises ``ValueError`` saying how far. Without ``plane_point`` the plane
-        passes through the point's current position.
-        """
-        return super().through_link_point(robot, q, normal, link_point=link_point,
-                                          distance=distance, link=link, gain=gain,
-                                          tolerance=tolerance, plane_point=plane_point)
+    # ``Barrier.through_link_point(robot, q, normal, ..., plane_point=...)`` (inherited):
+    # the point must be on the allowed side at ``q``; more than ``tolerance`` m behind the
+    # plane raises ``ValueError`` saying how far.
 
     def _check_start(self, signed_distance: float, tolerance: float) -> None:
         if signed_distance < -tolerance:

@@ -36,6 +36,8 @@ class Plane(Constraint):
     """
 
     dim = 1
+    #: drift-feedback gain used when none is given (the Barrier overrides it)
+    default_gain: float = DEFAULT_GAIN
 
     def __init__(
         self,
@@ -43,10 +45,10 @@ class Plane(Constraint):
         link_point,
         plane_point,
         normal,
-        gain: float = DEFAULT_GAIN,
+        gain: float | None = None,
         velocity=(0.0, 0.0, 0.0),
     ) -> None:
-        super().__init__(link, gain)
+        super().__init__(link, self.default_gain if gain is None else gain)
         self.link_point = as_vector(link_point, 3, "link_point")
         self.plane_point = as_vector(plane_point, 3, "plane_point")
         self.normal = as_unit_vector(normal, "plane normal")
@@ -61,7 +63,7 @@ class Plane(Constraint):
         link_point=None,
         distance: float | None = None,
         link: str | None = None,
-        gain: float = DEFAULT_GAIN,
+        gain: float | None = None,
         tolerance: float = DEFAULT_PLANE_TOLERANCE,
         plane_point=None,
     ) -> "Plane":

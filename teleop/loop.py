@@ -215,10 +215,9 @@ class TeleopLoop:
         """max |A qd - b| over the equalities and ``C v_c`` of the first one."""
         residual, velocity = 0.0, np.zeros(2)
         first = True
-        for constraint in self.constraints:
+        for constraint, frame in zip(self.constraints, self.controller.constraint_frames):
             if not constraint.is_equality:
                 continue
-            frame = self.model.getFrameId(constraint.link)
             A, b = constraint.rows(self.model, self.data, frame)
             achieved = A @ qd
             residual = max(residual, float(np.max(np.abs(achieved - b))))
@@ -230,8 +229,8 @@ class TeleopLoop:
         """After integration: max |e| over equalities, max barrier penetration."""
         pin.framesForwardKinematics(self.model, self.data, self.q)
         error, penetration = 0.0, 0.0
-        for constraint in self.constraints:
-            placement = self.data.oMf[self.model.getFrameId(constraint.link)]
+        for constraint, frame in zip(self.constraints, self.controller.constraint_frames):
+            placement = self.data.oMf[frame]
             if isinstance(constraint, Barrier):
                 penetration = max(penetration, constraint.penetration(placement))
             else:

@@ -95,6 +95,7 @@ class TeleopApp:
                  rate: float = 1000.0, kp: float = 20.0, record_dir: str | Path = "sessions") -> None:
         self.robot = robot
         self._lock = threading.RLock()
+        self._view_data = robot.model.createData()  # for geometry queries, under the lock
         self.config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING,
                                  max_linear_speed=MAX_LINEAR_SPEED,
                                  max_angular_speed=MAX_ANGULAR_SPEED)
@@ -155,10 +156,10 @@ class TeleopApp:
                 self.recorder.target(self.now - self._record_start, self.target)
 
     def _link_placement(self, link: str) -> pin.SE3:
+        """World placement of ``link`` on the main robot now (caller holds the lock)."""
         model = self.robot.model
-        data = model.createData()
-        pin.framesForwardKinematics(model, data, self.loops["main"].q)
-        return data.oMf[model.getFrameId(link)].copy()
+        pin.framesForwardKinematics(model, self._view_data, self.loops["main"].q)
+        return self._view_data.oMf[model.getFrameId(link)].copy()
 
     def _add(self, kind: str, constraint: Constraint) -> str:
         entry_id = f"{kind}-{next(self._ids)}"
