@@ -1,5 +1,9 @@
-"""Constrained operational-space teleoperation (CJM, QP baseline, browser UI)."""
+"""Constrained operational-space teleoperation: robots, the closed loop, experiments, CLI.
 
-from .robot import BUILTIN_ROBOTS, Robot, load_robot
+Subpackages: ``robots`` (models), ``loop`` (the closed teleoperation loop),
+``experiments`` (scenarios, sessions, compare, metrics, plots, bench), ``cli``.
+"""
 
-__all__ = ["Robot", "load_robot", "BUILTIN_ROBOTS"]
+from .robots import BUILTIN_ROBOTS, Robot, load_robot
+
+__all__ = ["BUILTIN_ROBOTS", "Robot", "load_robot"]

@@ -12,12 +12,13 @@ import pinocchio as pin
 import pytest
 
 from controllers import CJMController
-from teleop.compare import METRIC_KEYS, compare, metrics_document, run_plan, write_outputs
+from teleop.experiments.results import METRIC_KEYS
+from teleop.experiments.compare import compare, metrics_document, run_plan, write_outputs
 from teleop.loop import LoopConfig, TeleopLoop, saturate_twist
-from teleop.scenarios import SCENARIOS, load_scenario
+from teleop.experiments.scenarios import SCENARIOS, load_scenario
 
 ALL_CONTROLLERS = ["cjm", "qp:proxqp", "qp:daqp", "qp:osqp", "mink:daqp"]
-SCHEMA = json.loads(files("teleop").joinpath("metrics.schema.json").read_text())
+SCHEMA = json.loads(files("teleop.experiments").joinpath("metrics.schema.json").read_text())
 
 
 def test_saturation_keeps_the_direction():

@@ -9,9 +9,9 @@ import sys
 import numpy as np
 import pytest
 
-from teleop.compare import run_plan
-from teleop.scenarios import load_scenario
-from teleop.session import SessionError, load_session, record_plan, session_plan
+from teleop.experiments.compare import run_plan
+from teleop.experiments.scenarios import load_scenario
+from teleop.experiments.sessions import SessionError, load_session, record_plan, session_plan
 
 COMPARED = ("constraint_error", "constraint_velocity_residual", "barrier_penetration",
             "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed")
@@ -47,11 +47,11 @@ def header(robot="ur5_instrument"):
 
 def test_constraints_added_and_removed_mid_session(tmp_path, ur5_instrument):
     from constraints import Hole
-    from teleop.session import constraint_to_dict
+    from teleop.experiments.sessions import constraint_to_dict
 
     import pinocchio as pin
 
-    from teleop.scenarios import home_pose
+    from teleop.experiments.scenarios import home_pose
 
     hole = Hole.on_link(ur5_instrument, ur5_instrument.q_home, distance=0.2)
     home = home_pose(ur5_instrument, ur5_instrument.q_home)

@@ -8,8 +8,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from teleop.compare import run_plan
-from teleop.session import load_session, session_plan
+from teleop.experiments.compare import run_plan
+from teleop.experiments.sessions import load_session, session_plan
 from web.app import ControlThread, TeleopApp
 
 

@@ -25,9 +25,9 @@ import pinocchio as pin
 
 from constraints import Barrier, Constraint, Hole, Plane
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
-from teleop.registry import make_controller
-from teleop.robot import Robot
-from teleop.session import SessionRecorder
+from teleop.controller_specs import make_controller
+from teleop.robots import Robot
+from teleop.experiments.sessions import SessionRecorder
 
 #: the operator's target and moved geometry are smoothed with this time constant (s)
 DEFAULT_SMOOTHING = 0.05

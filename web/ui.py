@@ -24,7 +24,7 @@ import viser
 import viser.uplot as uplot
 from pinocchio.visualize import ViserVisualizer
 
-from teleop.robot import Robot
+from teleop.robots import Robot
 
 from .app import ControlThread, TeleopApp
 

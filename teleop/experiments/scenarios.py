@@ -10,7 +10,6 @@ handed a step.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
@@ -18,55 +17,9 @@ import pinocchio as pin
 
 from constraints import Barrier, Constraint, Hole, Plane
 
-from .robot import Robot, load_robot
+from teleop.robots import Robot, load_robot
 
-
-@dataclass
-class Plan:
-    """What a controller run follows: a scenario or a recorded session.
-
-    Attributes
-    ----------
-    name : scenario or session name.
-    robot : the robot.
-    q0 : start configuration.
-    duration : seconds.
-    make_constraints : returns fresh constraint objects for one run.
-    target : operator target pose at time ``t`` (world frame).
-    update : called every tick with ``(t, constraints)``; moves geometry in place and
-        returns a new list when the constraint set itself changes (else None).
-    description : one line for humans.
-    """
-
-    name: str
-    robot: Robot
-    q0: np.ndarray
-    duration: float
-    make_constraints: Callable[[], list[Constraint]]
-    target: Callable[[float], pin.SE3]
-    update: Callable[[float, list[Constraint]], list[Constraint] | None] = field(
-        default=lambda t, constraints: None)
-    description: str = ""
-
-
-def smoothstep(x: float) -> float:
-    """0 -> 1 with zero slope and curvature at both ends (quintic)."""
-    x = min(max(x, 0.0), 1.0)
-    return x * x * x * (x * (6.0 * x - 15.0) + 10.0)
-
-
-def home_pose(robot: Robot, q: np.ndarray) -> pin.SE3:
-    model = robot.model
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, q)
-    return data.oMf[model.getFrameId(robot.ee_frame)].copy()
-
-
-def link_placement(robot: Robot, q: np.ndarray, link: str) -> pin.SE3:
-    model = robot.model
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, q)
-    return data.oMf[model.getFrameId(link)].copy()
+from .plan import Plan, home_pose, link_placement, smoothstep
 
 
 def operator_motion(start: pin.SE3, amplitude: Sequence[float], frequencies: Sequence[float],

@@ -31,8 +31,8 @@ import pinocchio as pin
 
 from constraints import Barrier, Constraint, Hole, Plane, PointLock
 
-from .robot import Robot, load_robot
-from .scenarios import Plan, home_pose
+from teleop.robots import Robot, load_robot
+from .plan import Plan, home_pose
 
 FORMAT = "cjm-teleop-session"
 VERSION = 1
@@ -117,7 +117,7 @@ class SessionRecorder:
                   "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                   "q0": [float(x) for x in q0], "rate_hz": rate_hz, "kp": kp,
                   "target_time_constant_s": target_time_constant_s}
-        from .robot import BUILTIN_ROBOTS
+        from teleop.robots import BUILTIN_ROBOTS
 
         if robot.name in BUILTIN_ROBOTS and robot.urdf_path.parent.name == "robots":
             header["robot"] = robot.name

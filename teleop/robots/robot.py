@@ -22,7 +22,7 @@ import pinocchio as pin
 
 __all__ = ["Robot", "load_robot", "BUILTIN_ROBOTS"]
 
-ROBOTS_DIR = pathlib.Path(__file__).resolve().parent / "robots"
+ROBOTS_DIR = pathlib.Path(__file__).resolve().parent
 
 #: Limits at or beyond this magnitude count as unbounded (Pinocchio uses +-DBL_MAX).
 _UNBOUNDED = 1e10

@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from .compare import RunResult
-    from .scenarios import Plan
+    from .plan import Plan
+    from .results import RunResult
 
 
 def _pyplot():

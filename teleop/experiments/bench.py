@@ -12,9 +12,9 @@ import numpy as np
 
 from constraints import Hole
 
-from .chains import hole_links, load_chain
-from .registry import make_controller
-from .robot import Robot, load_robot
+from teleop.robots.chains import hole_links, load_chain
+from teleop.controller_specs import make_controller
+from teleop.robots import Robot, load_robot
 
 #: hole distance along the constrained link of each built-in robot (m)
 DEFAULT_HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20}

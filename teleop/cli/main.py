@@ -82,7 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _run(plan, args, config) -> int:
-    from .compare import compare, format_table, metrics_document, write_outputs
+    from teleop.experiments.compare import compare, format_table, metrics_document, write_outputs
 
     duration = args.duration or plan.duration
     results = compare(plan, args.controllers, config, duration, progress=not args.quiet)
@@ -102,7 +102,7 @@ def _web(args) -> int:
 
     from web.ui import run_server
 
-    from .robot import load_robot
+    from teleop.robots import load_robot
 
     robot = load_robot(args.robot, ee_frame=args.ee_frame, constrained_link=args.constrained_link)
     server, app, control, ui = run_server(robot, host=args.host, port=args.port,
@@ -133,23 +133,23 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args) -> int:
-    from .loop import LoopConfig
+    from teleop.loop import LoopConfig
 
     if args.command == "web":
         return _web(args)
     if args.command == "scenarios":
-        from .scenarios import SCENARIOS, load_scenario
+        from teleop.experiments.scenarios import SCENARIOS, load_scenario
 
         for name in SCENARIOS:
             print(f"{name:<15} {load_scenario(name).description}")
         return 0
     if args.command == "compare":
-        from .scenarios import load_scenario
+        from teleop.experiments.scenarios import load_scenario
 
         plan = load_scenario(args.scenario)
         return _run(plan, args, LoopConfig(rate=args.rate or 1000.0))
     if args.command == "replay":
-        from .session import load_session, session_plan
+        from teleop.experiments.sessions import load_session, session_plan
 
         session = load_session(args.file)
         header = session.header
@@ -158,14 +158,14 @@ def _dispatch(args) -> int:
                             target_time_constant=header.get("target_time_constant_s", 0.0))
         return _run(session_plan(session), args, config)
     if args.command == "record":
-        from .scenarios import load_scenario
-        from .session import record_plan
+        from teleop.experiments.scenarios import load_scenario
+        from teleop.experiments.sessions import record_plan
 
         path = record_plan(load_scenario(args.scenario), args.file, args.rate, args.duration)
         print(f"wrote {path}")
         return 0
     if args.command == "bench":
-        from .bench import format_table, run_bench, run_scaling, write_json
+        from teleop.experiments.bench import format_table, run_bench, run_scaling, write_json
 
         iterations = 20 if args.quick else args.iterations
         if iterations < 1:

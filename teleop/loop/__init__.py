@@ -1,0 +1,5 @@
+"""The closed teleoperation loop: operator target -> EE twist -> controller -> integrate."""
+
+from .closed_loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop, saturate_twist
+
+__all__ = ["RECORD_FIELDS", "LoopConfig", "StepRecord", "TeleopLoop", "saturate_twist"]

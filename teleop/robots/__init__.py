@@ -1,0 +1,6 @@
+"""Robot models: the built-in URDFs (the paper's SDA10F arm, a UR5 with an instrument),
+any URDF from disk, and generated serial chains for benchmarks."""
+
+from .robot import BUILTIN_ROBOTS, Robot, load_robot
+
+__all__ = ["BUILTIN_ROBOTS", "Robot", "load_robot"]
