@@ -22,6 +22,9 @@ from typing import Literal, Protocol
 import numpy as np
 import pinocchio as pin
 
+from .kinematics import frame_placement, resolve_frame
+from .validation import as_number, as_unit_vector, as_vector
+
 #: Default drift-feedback gain (1/s). Stable at a control period dt when 0 < K dt < 2;
 #: 100 1/s at the default 1 kHz gives K dt = 0.1, a 10 ms error time constant.
 DEFAULT_GAIN = 100.0
@@ -61,29 +64,8 @@ class ConstraintPoint:
 # ----------------------------------------------------------------------------- helpers
 
 
-def as_vector(value, size: int, name: str) -> np.ndarray:
-    """Return ``value`` as a finite float array of shape ``(size,)`` or raise ``ValueError``."""
-    array = np.asarray(value, dtype=float)
-    if array.shape != (size,):
-        raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite, got {array}")
-    return array.copy()
 
 
-def as_unit_vector(value, name: str, tolerance: float = 1e-6) -> np.ndarray:
-    """Return ``value`` as a unit 3-vector; zero or non-unit vectors raise ``ValueError``.
-
-    A vector whose norm differs from one by more than ``tolerance`` is refused rather than
-    silently normalised: a normal of norm 2 is almost always a bug in the caller.
-    """
-    vector = as_vector(value, 3, name)
-    norm = float(np.linalg.norm(vector))
-    if norm < 1e-12:
-        raise ValueError(f"{name} must be a unit vector, got the zero vector")
-    if abs(norm - 1.0) > tolerance:
-        raise ValueError(f"{name} must be a unit vector, got norm {norm:.6g}")
-    return vector / norm
 
 
 def orthonormal_complement(rows: np.ndarray) -> np.ndarray:
@@ -104,12 +86,6 @@ def perpendicular_basis(axis: np.ndarray) -> np.ndarray:
     return np.vstack([first, second])
 
 
-def resolve_frame(model: pin.Model, link: str) -> int:
-    """Frame id of ``link`` in ``model``; unknown names raise ``ValueError`` naming it."""
-    if not isinstance(link, str) or not model.existFrame(link):
-        bodies = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
-        raise ValueError(f"unknown link {link!r}; the model's links are {bodies}")
-    return model.getFrameId(link)
 
 
 def default_link(robot: RobotLike, link: str | None) -> str:
@@ -135,16 +111,9 @@ def link_point_at(robot: RobotLike, q: np.ndarray, link: str | None, link_point=
     if link_point is None:
         link_point = float(distance) * as_unit_vector(robot.link_axis, "link_axis")
     link_point = as_vector(link_point, 3, "link_point")
-    return link, link_point, frame_placement(robot, q, resolve_frame(robot.model, link))
+    return link, link_point, frame_placement(robot.model, q, link)
 
 
-def frame_placement(robot: RobotLike, q: np.ndarray, frame_id: int) -> pin.SE3:
-    """World placement of a frame at configuration ``q`` (validated)."""
-    model = robot.model
-    q = as_vector(q, model.nq, "q")
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, q)
-    return data.oMf[frame_id].copy()
 
 
 def structure_nullspace(p: np.ndarray, C: np.ndarray, C_perp: np.ndarray | None = None) -> np.ndarray:

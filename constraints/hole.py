@@ -83,7 +83,7 @@ class Hole(Constraint):
             raise ValueError(f"distance must be finite, got {distance}")
         link = default_link(robot, link)
         axis = as_unit_vector(robot.link_axis if link_axis is None else link_axis, "link_axis")
-        placement = frame_placement(robot, q, resolve_frame(robot.model, link))
+        placement = frame_placement(robot.model, q, link)
         center = placement.act(distance * axis)
         return cls(link, center, link_axis=axis, gain=gain)
 
@@ -106,7 +106,7 @@ class Hole(Constraint):
         link = default_link(robot, link)
         axis = as_unit_vector(robot.link_axis if link_axis is None else link_axis, "link_axis")
         hole = cls(link, center, link_axis=axis, gain=gain)
-        placement = frame_placement(robot, q, resolve_frame(robot.model, link))
+        placement = frame_placement(robot.model, q, link)
         offset = float(np.linalg.norm(hole.error(placement)))
         if offset > tolerance:
             raise ValueError(

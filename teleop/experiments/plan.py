@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
+from constraints.kinematics import frame_placement
 
 from teleop.robots import Robot
 
@@ -48,16 +49,12 @@ def smoothstep(x: float) -> float:
 
 
 def home_pose(robot: Robot, q: np.ndarray) -> pin.SE3:
-    model = robot.model
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, q)
-    return data.oMf[model.getFrameId(robot.ee_frame)].copy()
+    """World placement of the EE at ``q``."""
+    return frame_placement(robot.model, q, robot.ee_frame)
 
 
 def link_placement(robot: Robot, q: np.ndarray, link: str) -> pin.SE3:
-    model = robot.model
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, q)
-    return data.oMf[model.getFrameId(link)].copy()
+    """World placement of ``link`` at ``q``."""
+    return frame_placement(robot.model, q, link)
 
 

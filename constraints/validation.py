@@ -1,0 +1,64 @@
+"""Input checks shared by every layer: bad input raises ``ValueError`` naming the argument.
+
+This is the bottom package, so the controllers, the loop, the experiments and the UI all
+validate through these few functions instead of their own copies.
+"""
+
+from __future__ import annotations
+
+import math
+from numbers import Real
+
+import numpy as np
+
+
+def as_number(value, name: str, minimum: float | None = None, *, positive: bool = False,
+              maximum: float | None = None) -> float:
+    """``value`` as a finite float, else ``ValueError`` naming ``name``.
+
+    ``None``, strings, lists and booleans are refused (they are almost always a caller's
+    mistake, and ``float("1e3")`` would hide it). ``minimum`` is inclusive, ``positive``
+    asks for ``> 0``, ``maximum`` is inclusive.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (Real, np.number)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"{name} must be finite, got {number}")
+    if positive and not number > 0.0:
+        raise ValueError(f"{name} must be > 0, got {number:g}")
+    if minimum is not None and number < minimum:
+        raise ValueError(f"{name} must be >= {minimum:g}, got {number:g}")
+    if maximum is not None and number > maximum:
+        raise ValueError(f"{name} must be <= {maximum:g}, got {number:g}")
+    return number
+
+
+def as_vector(value, size: int, name: str) -> np.ndarray:
+    """``value`` as a new finite float array of shape ``(size,)``, else ``ValueError``."""
+    if value is None or isinstance(value, str):
+        raise ValueError(f"{name} must be an array of {size} numbers, got {value!r}")
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an array of {size} numbers, got {value!r}") from None
+    if array.shape != (size,):
+        raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"{name} must be finite, got {array}")
+    return array
+
+
+def as_unit_vector(value, name: str, tolerance: float = 1e-6) -> np.ndarray:
+    """``value`` as a unit 3-vector; zero or non-unit vectors raise ``ValueError``.
+
+    A vector whose norm differs from one by more than ``tolerance`` is refused rather than
+    silently normalised: a normal of norm 2 is almost always a bug in the caller.
+    """
+    vector = as_vector(value, 3, name)
+    norm = float(np.linalg.norm(vector))
+    if norm < 1e-12:
+        raise ValueError(f"{name} must be a unit vector, got the zero vector")
+    if abs(norm - 1.0) > tolerance:
+        raise ValueError(f"{name} must be a unit vector, got norm {norm:.6g}")
+    return vector / norm
