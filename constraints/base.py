@@ -165,16 +165,6 @@ def structure_paper(p: np.ndarray, C: np.ndarray) -> np.ndarray:
     return S
 
 
-def analytical_terms_views(out: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Views ``(B, R)`` into a flat buffer of :meth:`Constraint.analytical_terms`.
-
-    ``out`` has ``6 (7 - k) + 7 k`` entries: first ``B = [V_a0, S]`` (6 x (7 - k),
-    column-major, as LAPACK and Eigen store matrices), then ``R = [-b, C [I, -hat(p)]]``
-    (k x 7, row-major). ``B`` is the right-hand side the analytical CJM solves with
-    ``J_a``; ``R [1; V_a]`` is the residual ``C v_c - b`` of a twist ``V_a`` of ``F_a``.
-    """
-    split = 6 * (7 - k)
-    return out[:split].reshape(7 - k, 6).T, out[split:].reshape(k, 7)
 
 
 def structure_of(state: ConstraintPoint, parametrisation: Parametrisation = "nullspace") -> np.ndarray:
@@ -206,6 +196,9 @@ class Constraint(ABC):
     dim: int
     #: True for ``C v_c = b``, False for the one-sided ``C v_c >= b`` (barrier)
     is_equality: bool = True
+    #: whether the paper's ``1/a`` structure matrix (eqs 9-13) exists wherever ``a != 0``:
+    #: only when ``C`` stays perpendicular to ``p`` (a hole)
+    has_paper_form: bool = False
 
     def __init__(self, link: str, gain: float = DEFAULT_GAIN) -> None:
         if not isinstance(link, str) or not link:
@@ -266,24 +259,22 @@ class Constraint(ABC):
         state = self.evaluate(placement)
         return np.concatenate([state.C.T @ state.rhs, np.zeros(3)])
 
-    def analytical_terms(
-        self, placement: pin.SE3, parametrisation: Parametrisation, out: np.ndarray
-    ) -> None:
-        """Write everything the analytical CJM needs at ``placement`` into ``out``.
 
-        ``out`` is a flat float buffer of ``6 (7 - k) + 7 k`` entries laid out as
-        :func:`analytical_terms_views` says: ``[V_a0, S]`` then ``[-b, C [I, -hat(p)]]``.
-        Writing into a buffer the controller owns keeps the per-step cost to a few NumPy
-        calls; subclasses override this with closed forms (``Hole``).
+    # -- an affine form, for the analytical CJM's precomputed terms ----------------------
+
+    def affine_inputs(self, placement: pin.SE3) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """``(x, f)`` in ``F_a`` coordinates when :meth:`evaluate` is affine in them, else None.
+
+        A constraint returns inputs here when, for fixed gain, its ``p``, ``error`` and
+        ``rhs`` are affine functions of ``(x, f)`` (``f`` may be None: zero) and ``C``,
+        ``C_perp`` are constant; :meth:`evaluate_affine` then gives the evaluation.
+        The analytical CJM precomputes its per-step terms as one matrix product of it.
         """
-        state = self.evaluate(placement)
-        B, R = analytical_terms_views(out, self.dim)
-        B[:3, 0] = state.C.T @ state.rhs
-        B[3:, 0] = 0.0
-        B[:, 1:] = structure_of(state, parametrisation)
-        R[:, 0] = -state.rhs
-        R[:, 1:4] = state.C
-        R[:, 4:] = -state.C @ pin.skew(state.p)
+        return None
+
+    def evaluate_affine(self, x: np.ndarray, f: np.ndarray | None) -> ConstraintPoint:
+        """:meth:`evaluate` as a function of the inputs of :meth:`affine_inputs`."""
+        raise NotImplementedError(f"{type(self).__name__} has no affine form")
 
     def rows(
         self, model: pin.Model, data: pin.Data, frame_id: int | None = None

@@ -10,8 +10,6 @@ from .base import (
     Constraint,
     ConstraintPoint,
     RobotLike,
-    Parametrisation,
-    analytical_terms_views,
     as_unit_vector,
     as_vector,
     default_link,
@@ -45,6 +43,7 @@ class Hole(Constraint):
     """
 
     dim = 2
+    has_paper_form = True
 
     def __init__(
         self,
@@ -61,7 +60,6 @@ class Hole(Constraint):
         self.link_axis = as_unit_vector(link_axis, "link_axis")
         self._C = perpendicular_basis(self.link_axis)
         self._C_perp = self.link_axis[None, :]
-        self._affine: tuple | None = None  # (gain, the matrices of _affine_terms)
 
     @classmethod
     def on_link(
@@ -136,88 +134,22 @@ class Hole(Constraint):
     def error(self, placement: pin.SE3) -> np.ndarray:
         return -self._C @ self._center_local(placement)
 
-    def evaluate(self, placement: pin.SE3) -> ConstraintPoint:
-        center_local = placement.actInv(self.center)  # computed once for p, e and rhs
-        error = -self._C @ center_local
+    def affine_inputs(self, placement: pin.SE3) -> tuple[np.ndarray, np.ndarray | None]:
+        """The hole centre and (when it moves) its velocity, in ``F_a`` coordinates."""
+        velocity = placement.rotation.T @ self.velocity if self._moving else None
+        return placement.actInv(self.center), velocity
+
+    def evaluate_affine(self, x: np.ndarray, f: np.ndarray | None) -> ConstraintPoint:
+        """``p = (e . x) e``, ``error = -C x``, ``rhs = K C x + C f``: affine in ``(x, f)``."""
+        error = -self._C @ x
         rhs = -self.gain * error
-        if self._moving:
-            rhs += self.feed_forward(placement)
-        return ConstraintPoint(p=float(self.link_axis @ center_local) * self.link_axis,
+        if f is not None:
+            rhs += self._C @ f
+        return ConstraintPoint(p=float(self.link_axis @ x) * self.link_axis,
                                C=self._C, C_perp=self._C_perp, error=error, rhs=rhs)
 
-    # -- closed forms for the controllers' hot path ------------------------------------
-
-    def _affine_terms(self) -> tuple[np.ndarray, ...]:
-        """``(T_x, T_f, t_0, ...)``: the analytical terms as an affine map of two 3-vectors.
-
-        With ``x`` the hole centre and ``f`` the hole velocity, both in ``F_a``
-        coordinates, every quantity of the singularity-free parametrisation is affine in
-        ``(x, f)``: ``a = e . x``, ``p = a e``, ``C^T C hat(p) = a hat(e)`` (``C^T C`` is
-        the projector across ``e`` and ``hat(e)`` already maps there), ``b = K C x + C f``
-        and ``V_a0 = [C^T b; 0] = [K P x + P f; 0]`` with ``P = I - e e^T``. So the flat
-        terms of :meth:`Constraint.analytical_terms` are ``T_x x + T_f f + t_0`` with
-        constant matrices, rebuilt only when ``gain`` changes. Three more entries are the
-        same map restricted to ``R = [-b, C [I, -hat(p)]]`` (for :meth:`rows`).
-        """
-        cached = self._affine
-        if cached is not None and cached[0] == self.gain:
-            return cached[1:]
-        e, C, K = self.link_axis, self._C, self.gain
-        P = np.eye(3) - np.outer(e, e)
-        hat_e = pin.skew(e)
-        C_hat_e = C @ hat_e
-        size = 6 * 5 + 7 * 2
-        T_x, T_f, t_0 = np.zeros((size, 3)), np.zeros((size, 3)), np.zeros(size)
-        Bx = T_x[:30].reshape(5, 6, 3).transpose(1, 0, 2)  # same layout as the views
-        Rx = T_x[30:].reshape(2, 7, 3)
-        Bf = T_f[:30].reshape(5, 6, 3).transpose(1, 0, 2)
-        Rf = T_f[30:].reshape(2, 7, 3)
-        B0, R0 = analytical_terms_views(t_0, 2)
-        # B = [V_a0, S], S = [[e, a hat(e)], [0, I]]
-        Bx[:3, 0] = K * P
-        Bf[:3, 0] = P
-        B0[:3, 1] = e
-        Bx[:3, 2:] = hat_e[:, :, None] * e  # a hat(e), a = e . x
-        B0[3:, 2:] = np.eye(3)
-        # R = [-b, C, -a C hat(e)]
-        Rx[:, 0] = -K * C
-        Rf[:, 0] = -C
-        R0[:, 1:4] = C
-        Rx[:, 4:] = -C_hat_e[:, :, None] * e
-        self._affine = (self.gain, T_x, T_f, t_0,
-                        T_x[30:].copy(), T_f[30:].copy(), t_0[30:].reshape(2, 7).copy())
-        return self._affine[1:]
-
-    def analytical_terms(
-        self, placement: pin.SE3, parametrisation: Parametrisation, out: np.ndarray
-    ) -> None:
-        if parametrisation != "nullspace":  # the paper's 1/a form is not affine
-            super().analytical_terms(placement, parametrisation, out)
-            return
-        T_x, T_f, t_0 = self._affine_terms()[:3]
-        np.dot(T_x, placement.actInv(self.center), out=out)
-        out += t_0
-        if self._moving:
-            out += T_f @ (placement.rotation.T @ self.velocity)
-
-    def rows(
-        self, model: pin.Model, data: pin.Data, frame_id: int | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        # Same rows as Constraint.rows, from the closed form: A = C [I, -hat(p)] J_a.
-        if frame_id is None:
-            frame_id = resolve_frame(model, self.link)
-        placement = pin.updateFramePlacement(model, data, frame_id)  # cheaper than data.oMf[i]
-        T_x, T_f, t_0 = self._affine_terms()[3:]  # the [-b, C [I, -hat(p)]] part
-        R = np.dot(T_x, placement.actInv(self.center)).reshape(2, 7)
-        R += t_0
-        if self._moving:
-            R += np.dot(T_f, placement.rotation.T @ self.velocity).reshape(2, 7)
-        jacobian = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL)
-        return np.dot(R[:, 1:], jacobian), -R[:, 0]
-
-    def depth(self, placement: pin.SE3) -> float:
-        """Where the link crosses the hole: metres along the axis from ``F_a``."""
-        return float(self.link_axis @ self._center_local(placement))
+    def evaluate(self, placement: pin.SE3) -> ConstraintPoint:
+        return self.evaluate_affine(*self.affine_inputs(placement))
 
     def feed_forward(self, placement: pin.SE3) -> np.ndarray:
         return self._C @ (placement.rotation.T @ self.velocity)

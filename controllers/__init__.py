@@ -6,8 +6,9 @@
   peer); imported on first use, since MuJoCo takes a while to load.
 """
 
-from .base import Controller, SolveInfo, SolverError
+from .base import Controller, SolveInfo, SolverError, StepStatus
 from .cjm import CJMController
+from .joint_limits import JointBounds
 from .linalg import DampingPolicy, damped_least_squares, nullspace
 from .qp import QPController
 
@@ -15,10 +16,12 @@ __all__ = [
     "CJMController",
     "Controller",
     "DampingPolicy",
+    "JointBounds",
     "MinkController",
     "QPController",
     "SolveInfo",
     "SolverError",
+    "StepStatus",
     "damped_least_squares",
     "nullspace",
 ]

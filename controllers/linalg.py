@@ -43,6 +43,11 @@ class DampedSolution(NamedTuple):
     sigma_min: float
     damping: float  # lambda
     row_space: np.ndarray  # right singular vectors with non-zero singular value (rows)
+    exact: bool  # no damping, full row rank: J x == r up to rounding
+
+    @property
+    def rank(self) -> int:
+        return self.row_space.shape[0]
 
 
 def damped_least_squares(
@@ -52,7 +57,7 @@ def damped_least_squares(
 
     Works for square, wide (minimum-norm) and tall (least-squares) ``J``; singular
     values below ``rank_tolerance`` are dropped, so a rank-deficient ``J`` never yields a
-    non-finite ``x``.
+    non-finite ``x``. ``rhs`` may be (m,) or (m, k) (k right-hand sides, one SVD).
     """
     u, s, vt, info = lapack.dgesdd(matrix, full_matrices=0)  # 3x cheaper than numpy's on 6 x 6
     if info != 0:
@@ -66,8 +71,11 @@ def damped_least_squares(
         keep = s > rank_tolerance * max(1.0, sigma_max)
         gains = np.where(keep, s / (s * s + lam2 + ~keep), 0.0)
         row_space = vt[keep]
-    x = vt.T @ (gains * (u.T @ rhs))
-    return DampedSolution(x=x, sigma_min=sigma_min, damping=lam2**0.5, row_space=row_space)
+    projected = u.T @ rhs
+    x = vt.T @ ((gains[:, None] if projected.ndim == 2 else gains) * projected)
+    exact = lam2 == 0.0 and row_space.shape[0] == matrix.shape[0]
+    return DampedSolution(x=x, sigma_min=sigma_min, damping=lam2**0.5, row_space=row_space,
+                          exact=exact)
 
 
 def nullspace(matrix: np.ndarray, rank_tolerance: float = 1e-10) -> tuple[np.ndarray, np.ndarray, int]:

@@ -38,10 +38,12 @@ import pinocchio as pin
 import qpsolvers
 
 from constraints import Constraint
+from constraints.validation import as_number
 
 from mink.limits.limit import Constraint as LimitRows
 
 from .base import Controller, Kinematics, SolverError
+from .joint_limits import DEFAULT_LIMIT_GAIN
 
 #: Solver settings in the units of *velocity* (rad/s, m/s); they are multiplied by ``dt``
 #: before they reach the backend, because mink's QP variable is ``dq = v dt``: a
@@ -408,34 +410,25 @@ class MinkController(Controller):
         dt: float = 1e-3,
         damping: float = 1e-12,
         limits: Sequence[LimitSpec] | None = None,
-        limit_gain: float = 0.95,
+        limit_gain: float = DEFAULT_LIMIT_GAIN,
         equality_tolerance: float = 1e-6,
         solver_settings: dict | None = None,
         strict: bool = False,
     ) -> None:
+        super().__init__(robot, dt=dt, limit_gain=limit_gain, strict=strict)
         if solver not in qpsolvers.available_solvers:
             raise ValueError(
                 f"QP solver {solver!r} is not available to mink; installed: "
                 f"{qpsolvers.available_solvers}")
-        if not np.isfinite(dt) or dt <= 0:
-            raise ValueError(f"dt must be finite and > 0, got {dt}")
-        if not np.isfinite(damping) or damping < 0:
-            raise ValueError(f"damping must be finite and >= 0, got {damping}")
-        if not 0.0 < limit_gain <= 1.0:
-            raise ValueError(f"limit_gain must be in (0, 1], got {limit_gain}")
-        if not np.isfinite(equality_tolerance) or equality_tolerance <= 0:
-            raise ValueError(f"equality_tolerance must be finite and > 0, got {equality_tolerance}")
-        self.equality_tolerance = float(equality_tolerance)
+        self.damping = as_number(damping, "damping", 0.0)
+        self.equality_tolerance = as_number(equality_tolerance, "equality_tolerance", positive=True)
         self.solver = solver
-        self.dt = float(dt)
-        self.damping = float(damping)
         self.settings = {key: value * self.dt
                          for key, value in VELOCITY_TOLERANCES.get(solver, {}).items()}
         self.settings.update(FIXED_SETTINGS.get(solver, {}))
         self.settings.update(solver_settings or {})
 
-        # The MuJoCo side, built once: it must exist before the base class calls
-        # set_constraints (-> _on_constraints_changed), so it is built from the robot.
+        # The MuJoCo side, built once, before the constraints that use it.
         model: pin.Model = robot.model
         frames = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
         frames.append(robot.ee_frame)
@@ -454,7 +447,7 @@ class MinkController(Controller):
         self.constraint_tasks: list[ConstraintTask] = []
         self.barrier_limits: list[BarrierLimit] = []
         self._limits: list[mink.Limit] = list(self._base_limits)
-        super().__init__(robot, constraints, strict=strict)  # -> _on_constraints_changed
+        self.set_constraints(constraints)
 
     def _make_limits(self, robot, limits: Sequence[LimitSpec] | None,
                      limit_gain: float) -> list[mink.Limit]:
@@ -473,7 +466,7 @@ class MinkController(Controller):
                 raise TypeError(f"limits: expected mink.Limit or a factory of one, got {limit!r}")
         return made
 
-    def _on_constraints_changed(self) -> None:
+    def _prepare(self) -> None:
         rows = PinocchioRows(self.model, self.data, self.joints)
         self._rows = rows
         caches = [_RowsCache(c, f, rows) for c, f in zip(self.constraints, self.constraint_frames)]

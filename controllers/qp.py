@@ -9,10 +9,12 @@ import numpy as np
 import qpsolvers
 import scipy.sparse
 
-
 from constraints import Constraint
 
+from constraints.validation import as_number, as_vector
+
 from .base import Controller, Kinematics, SolverError
+from .joint_limits import DEFAULT_LIMIT_GAIN
 
 #: Backends that take sparse matrices (given dense ones, qpsolvers converts and warns).
 SPARSE_SOLVERS = frozenset({"osqp", "scs", "clarabel", "highs", "piqp", "qpalm"})
@@ -134,16 +136,15 @@ class QPController(Controller):
 
     Parameters
     ----------
-    robot, constraints, strict : see :class:`controllers.base.Controller`.
+    robot, constraints, dt, limit_gain, position_limits, velocity_limits, strict : see
+        :class:`controllers.base.Controller`.
     solver : a ``qpsolvers`` backend: ``"proxqp"`` (default), ``"daqp"``, ``"osqp"``, ...
         proxqp runs as one persistent ``proxsuite`` dense QP (``init`` once, then
         ``update`` + ``solve``; see ``_ProxQP``), daqp through ``daqp.solve`` directly, the
         others through ``qpsolvers``. ``solver_settings`` the direct calls cannot apply
         (a key that is no proxqp/daqp setting) send proxqp/daqp through ``qpsolvers`` too.
-    dt : control period (s) that scales the position limits.
     mu : Tikhonov regularisation of ``qd`` (keeps the Hessian positive definite).
     twist_weight : (6,) diagonal weight ``W`` of the twist error (default identity).
-    limit_gain : fraction ``g`` of the distance to a position limit allowed per step.
     solver_settings : extra keyword arguments for the backend (override the defaults).
     """
 
@@ -155,36 +156,26 @@ class QPController(Controller):
         dt: float = 1e-3,
         mu: float = 1e-10,
         twist_weight=None,
-        limit_gain: float = 0.95,
+        limit_gain: float = DEFAULT_LIMIT_GAIN,
         position_limits: bool = True,
         velocity_limits: bool = True,
         solver_settings: dict | None = None,
         strict: bool = False,
     ) -> None:
+        super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
+                         velocity_limits=velocity_limits, strict=strict)
         if solver not in qpsolvers.available_solvers:
             raise ValueError(
                 f"QP solver {solver!r} is not available; installed: {qpsolvers.available_solvers}"
             )
-        for name, value in (("dt", dt), ("limit_gain", limit_gain)):
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be finite and > 0, got {value}")
-        if not np.isfinite(mu) or mu < 0:
-            raise ValueError(f"mu must be finite and >= 0, got {mu}")
         self.solver = solver
-        self.dt = float(dt)
-        self.mu = float(mu)
-        self.limit_gain = float(limit_gain)
-        self.position_limits = bool(position_limits)
-        self.velocity_limits = bool(velocity_limits)
+        self.mu = as_number(mu, "mu", 0.0)
         self.settings = dict(SOLVER_SETTINGS.get(solver, {}))
         self.settings.update(solver_settings or {})
-        super().__init__(robot, constraints, strict=strict)
-        weight = np.ones(6) if twist_weight is None else np.asarray(twist_weight, dtype=float)
-        if weight.shape != (6,) or not np.all(np.isfinite(weight)) or np.any(weight < 0):
-            raise ValueError(f"twist_weight must be 6 finite non-negative numbers, got {weight}")
+        weight = np.ones(6) if twist_weight is None else as_vector(twist_weight, 6, "twist_weight")
+        if np.any(weight < 0):
+            raise ValueError(f"twist_weight must be non-negative, got {weight}")
         self.twist_weight = weight
-        self._revolute = self._scalar_joint_indices()
-        self._prepare_bounds()
         # proxqp and daqp are called directly (a persistent proxqp object; daqp.solve),
         # the other backends through qpsolvers. Settings a direct call cannot apply send
         # proxqp back through qpsolvers as well.
@@ -197,61 +188,12 @@ class QPController(Controller):
             self._daqp = daqp
         self._daqp_shape: tuple[int, int, int] | None = None
         self._mu_used, self._mu_eye = None, None
+        self.set_constraints(constraints)
 
-    def _scalar_joint_indices(self) -> tuple[np.ndarray, np.ndarray]:
-        """(q index, v index) of the joints whose position limits apply as ``q + qd dt``."""
-        model = self.model
-        qi, vi = [], []
-        for j in range(1, model.njoints):
-            if model.nqs[j] == 1 and model.nvs[j] == 1:
-                qi.append(model.idx_qs[j])
-                vi.append(model.idx_vs[j])
-        return np.array(qi, dtype=int), np.array(vi, dtype=int)
-
-    def _prepare_bounds(self) -> None:
-        """Constant parts of :meth:`bounds`: the joints with finite position limits."""
-        qi, vi = self._revolute
-        q_min = self.model.lowerPositionLimit[qi]
-        q_max = self.model.upperPositionLimit[qi]
-        finite = np.isfinite(q_min) & np.isfinite(q_max) & (q_max > q_min)
-        self._limit_q = qi[finite]
-        self._limit_v = vi[finite]
-        self._q_limits = np.vstack([q_min[finite], q_max[finite]])  # (2, n)
-        nv = self.model.nv
-        # every joint limited, in order: no index arrays in the hot path
-        self._all_limited = (self._limit_v.size == nv
-                             and np.array_equal(self._limit_v, np.arange(nv))
-                             and np.array_equal(self._limit_q, np.arange(nv)))
-        self._velocity_box = np.vstack([-self.velocity_limit, self.velocity_limit])
-
-    def bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Box ``lb <= qd <= ub`` from the velocity and (scaled) position limits."""
-        nv = self.model.nv
-        if self.velocity_limits:
-            box = self._velocity_box.copy()
-        else:
-            box = np.empty((2, nv))
-            box[0], box[1] = -np.inf, np.inf
-        if self.position_limits:
-            scale = self.limit_gain / self.dt
-            if self._all_limited:
-                position = self._q_limits - q  # (2, nv): q_min - q, q_max - q
-                position *= scale
-                np.maximum(box[0], position[0], out=box[0])
-                np.minimum(box[1], position[1], out=box[1])
-            elif self._limit_v.size:
-                position = (self._q_limits - q[self._limit_q]) * scale
-                vi = self._limit_v
-                box[0, vi] = np.maximum(box[0, vi], position[0])
-                box[1, vi] = np.minimum(box[1, vi], position[1])
-        lower, upper = box[0], box[1]
-        np.maximum(upper, lower, out=upper)  # a joint already past a limit may only come back
-        return lower, upper
-
-    def _on_constraints_changed(self) -> None:
+    def _prepare(self) -> None:
         self._equalities = [i for i, k in enumerate(self.constraints) if k.is_equality]
         self._barriers = [i for i, k in enumerate(self.constraints) if not k.is_equality]
-        if getattr(self, "_proxqp", None) is not None:
+        if self._proxqp is not None:
             self._proxqp.reset()
 
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
@@ -271,7 +213,7 @@ class QPController(Controller):
         if barriers:
             A_b, b_b = self.constraint_rows(barriers)
             G, h = -A_b, -b_b
-        lb, ub = self.bounds(kinematics.q)
+        lb, ub = self.joint_bounds.box(kinematics.q)
         if not (math.isfinite(sum(lb.tolist())) and math.isfinite(sum(ub.tolist()))):
             if not (np.isfinite(lb).any() or np.isfinite(ub).any()):
                 lb = ub = None  # nothing bounded

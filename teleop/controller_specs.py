@@ -1,29 +1,127 @@
-"""Controllers by name: ``cjm``, ``cjm:general``, ``cjm:paper``, ``qp:<solver>``, ``mink:<solver>``."""
+"""Controllers by name: the one table of known specs, and :func:`make_controller`.
+
+A spec is ``family[:option]``:
+
+* ``cjm``, ``cjm:general``, ``cjm:paper`` - the Constrained Jacobian Matrix variants;
+* ``qp:<solver>`` - the QP baseline with any installed qpsolvers backend;
+* ``mink:<solver>`` - mink (MuJoCo model) with any installed qpsolvers backend.
+
+:data:`CONTROLLER_SPECS` is the ordered table of the specs the project knows and where
+each is offered by default (``teleop compare`` / ``replay``, ``teleop bench``, the bench's
+scaling runs, the web UI's dropdowns); every list of controllers elsewhere reads it
+through :func:`default_specs`. :func:`make_controller` builds any valid spec, in the
+table or not (e.g. ``qp:clarabel`` when clarabel is installed).
+
+Nothing heavy is imported here until a controller is built, so the CLI's help is fast.
+"""
 
 from __future__ import annotations
 
-from typing import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Sequence
 
-from constraints import Constraint
-from controllers import CJMController, Controller, QPController
+if TYPE_CHECKING:
+    from constraints import Constraint
+    from controllers import Controller
 
-CONTROLLER_HELP = "cjm[:general|:paper], qp:<solver> (proxqp, daqp, osqp), mink:<solver>"
+__all__ = ["CONTEXTS", "CONTROLLER_HELP", "CONTROLLER_SPECS", "ControllerSpec",
+           "available_solvers", "default_specs", "make_controller", "spec_names"]
+
+#: Where a spec can be offered by default: ``teleop compare`` / ``replay``, ``teleop bench``
+#: on the built-in robots, the bench's generated-chain scaling runs, the web UI's dropdowns.
+CONTEXTS = ("compare", "bench", "scaling", "ui")
+
+#: The CJM variants (``cjm:<variant>``) and the CJMController keywords of each.
+CJM_VARIANTS = {"": {}, "analytical": {}, "general": {"form": "general"},
+                "paper": {"parametrisation": "paper"}}
+
+#: The spec forms in one line, for help texts (no import: ``teleop --help`` stays fast).
+CONTROLLER_HELP = ("cjm[:general|:paper], qp:<solver>, mink:<solver> with <solver> any "
+                   "installed qpsolvers backend")
+
+#: Default solver of ``qp`` and ``mink`` given without one.
+DEFAULT_SOLVERS = {"qp": "proxqp", "mink": "daqp"}
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """One row of the table: a spec string, a one-line description, its default uses."""
+
+    name: str
+    description: str
+    offered_in: frozenset[str] = frozenset()  # a subset of CONTEXTS
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "offered_in", frozenset(self.offered_in))
+        unknown = sorted(self.offered_in - set(CONTEXTS))
+        if unknown:
+            raise ValueError(f"{self.name}: unknown contexts {unknown}; known: {list(CONTEXTS)}")
+
+
+_ALL = frozenset(CONTEXTS)
+
+#: The known specs, in the order every list shows them.
+CONTROLLER_SPECS: tuple[ControllerSpec, ...] = (
+    ControllerSpec("cjm", "CJM: analytical form for one hole/plane, general null-space form "
+                   "otherwise", _ALL),
+    ControllerSpec("cjm:general", "CJM, always the general null-space form (the cross-check)",
+                   {"bench", "ui"}),
+    ControllerSpec("cjm:paper", "CJM, the paper's parametrisation (singular with the "
+                   "constraint point at the link origin)", {"ui"}),
+    ControllerSpec("qp:proxqp", "QP baseline, constraint rows as hard equalities, ProxQP", _ALL),
+    ControllerSpec("qp:daqp", "QP baseline, DAQP", _ALL),
+    ControllerSpec("qp:osqp", "QP baseline, OSQP", {"compare", "bench", "ui"}),
+    ControllerSpec("mink:daqp", "mink (differential IK on a MuJoCo model), DAQP", _ALL),
+    ControllerSpec("mink:proxqp", "mink, ProxQP", {"bench", "ui"}),
+)
+
+
+def spec_names() -> tuple[str, ...]:
+    """Names of every spec in the table, in order."""
+    return tuple(spec.name for spec in CONTROLLER_SPECS)
+
+
+def default_specs(context: str) -> tuple[str, ...]:
+    """Names of the specs offered by default in ``context`` (one of :data:`CONTEXTS`)."""
+    if context not in CONTEXTS:
+        raise ValueError(f"unknown context {context!r}; known: {list(CONTEXTS)}")
+    return tuple(spec.name for spec in CONTROLLER_SPECS if context in spec.offered_in)
+
+
+def available_solvers() -> list[str]:
+    """The qpsolvers backends installed here (what ``qp:`` and ``mink:`` accept)."""
+    import qpsolvers
+
+    return sorted(qpsolvers.available_solvers)
+
+
+def _solver(family: str, option: str) -> str:
+    solver = option or DEFAULT_SOLVERS[family]
+    installed = available_solvers()
+    if solver not in installed:
+        raise ValueError(f"QP solver {solver!r} is not available for {family}:<solver>; "
+                         f"installed: {', '.join(installed)}")
+    return solver
 
 
 def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
                     dt: float = 1e-3) -> Controller:
     """Build a controller from its spec string; unknown specs raise ``ValueError``."""
-    name, _, option = spec.strip().partition(":")
-    if name == "cjm":
-        variants = {"": {}, "analytical": {}, "general": {"general_only": True},
-                    "paper": {"parametrisation": "paper"}}
-        if option not in variants:
+    family, _, option = str(spec).strip().partition(":")
+    if family == "cjm":
+        if option not in CJM_VARIANTS:
             raise ValueError(f"unknown CJM variant {option!r}: analytical, general or paper")
-        return CJMController(robot, constraints, **variants[option])
-    if name == "qp":
-        return QPController(robot, constraints, solver=option or "proxqp", dt=dt)
-    if name == "mink":
-        from controllers import MinkController  # MuJoCo is heavy: import on demand
+        from controllers import CJMController
 
-        return MinkController(robot, constraints, solver=option or "daqp", dt=dt)
-    raise ValueError(f"unknown controller {spec!r}: {CONTROLLER_HELP}")
+        return CJMController(robot, constraints, **CJM_VARIANTS[option])
+    if family == "qp":
+        from controllers import QPController
+
+        return QPController(robot, constraints, solver=_solver(family, option), dt=dt)
+    if family == "mink":
+        solver = _solver(family, option)  # checked before MuJoCo (heavy) is imported
+        from controllers import MinkController
+
+        return MinkController(robot, constraints, solver=solver, dt=dt)
+    raise ValueError(f"unknown controller {spec!r}: known {', '.join(spec_names())}; in general "
+                     f"{CONTROLLER_HELP} ({', '.join(available_solvers())})")

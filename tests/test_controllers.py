@@ -11,7 +11,7 @@ from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
 from constraints import Barrier, Hole, Plane
 from controllers import CJMController, QPController
 
-EXACT = dict(singular_threshold=0.0, respect_velocity_limits=False)  # undamped, unscaled CJM
+EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)  # undamped, unscaled CJM
 
 
 def reference_hole_rows(robot, q, hole):
@@ -96,7 +96,7 @@ def test_general_and_paper_forms_give_the_same_joint_velocities(robot, seed):
     twist = rng.normal(size=6) * 0.02
     reference = CJMController(robot, [hole], **EXACT).solve(q, twist)
     paper = CJMController(robot, [hole], parametrisation="paper", **EXACT)
-    general = CJMController(robot, [hole], general_only=True, **EXACT)
+    general = CJMController(robot, [hole], form="general", **EXACT)
     np.testing.assert_allclose(paper.solve(q, twist), reference, atol=1e-9)
     np.testing.assert_allclose(general.solve(q, twist), reference, atol=1e-9)
     assert paper.info.method == "analytical" and general.info.method == "general"
@@ -185,7 +185,7 @@ def test_near_singular_jbar_stays_bounded_and_holds_the_constraint(sda10f):
     u, _, _ = np.linalg.svd(CJMController(robot, [hole]).constrained_jacobian(q))
     twist = 0.05 * u[:, -1]
     undamped = CJMController(robot, [hole], **EXACT).solve(q, twist)
-    damped = CJMController(robot, [hole], respect_velocity_limits=False)
+    damped = CJMController(robot, [hole], velocity_limits=False, position_limits=False)
     qd = damped.solve(q, twist)
     assert np.abs(undamped).max() > 20.0  # the exact inverse explodes
     assert np.abs(qd).max() < 2.0  # DLS keeps it bounded
@@ -201,8 +201,8 @@ def test_velocity_limits_slow_the_task_and_keep_the_constraint(ur5_instrument):
     q = robot.q_home.copy()
     hole = offset_hole(robot, q, rng)  # drift term active: b != 0
     twist = np.array([2.0, -1.0, 1.5, 3.0, 2.0, -1.0])
-    raw = CJMController(robot, [hole], respect_velocity_limits=False).solve(q, twist)
-    drift_only = CJMController(robot, [hole], respect_velocity_limits=False).solve(q, np.zeros(6))
+    raw = CJMController(robot, [hole], velocity_limits=False, position_limits=False).solve(q, twist)
+    drift_only = CJMController(robot, [hole], velocity_limits=False, position_limits=False).solve(q, np.zeros(6))
     controller = CJMController(robot, [hole])
     qd = controller.solve(q, twist)
     assert 0.0 < controller.info.scale < 1.0

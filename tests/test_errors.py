@@ -97,7 +97,7 @@ def test_bad_settings_are_refused(setup):
         CJMController(robot, [hole], damping=np.nan)
     with pytest.raises(ValueError, match="parametrisation"):
         CJMController(robot, [hole], parametrisation="euler")
-    with pytest.raises(TypeError, match="expected a Constraint"):
+    with pytest.raises(ValueError, match="must hold Constraint objects"):
         CJMController(robot, ["hole"])
 
 

@@ -22,7 +22,7 @@ from controllers import CJMController, MinkController, QPController, SolverError
 from controllers.mink_controller import JointMap, site_name
 from teleop import load_robot
 
-EXACT = dict(singular_threshold=0.0, respect_velocity_limits=False)  # undamped, unscaled CJM
+EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)  # undamped, unscaled CJM
 
 #: mink vs the exact CJM with a hole (rad/s). Measured: 2e-12 to 3e-8 on the built-in
 #: robots, for daqp, proxqp and osqp alike. The floor is not a solver tolerance nor the

@@ -14,7 +14,7 @@ from constraints import Hole
 from controllers import CJMController, QPController
 from teleop import load_robot
 
-EXACT = dict(singular_threshold=0.0, respect_velocity_limits=False)
+EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)
 
 
 def example_robot_data_share():
@@ -82,7 +82,7 @@ def test_sda10f_hole_on_link_7_uses_the_pseudo_inverse_of_a_7_joint_pre_chain(sd
     assert constraint_residual(sda10f, q, hole, qd) <= 1e-12
     J = ee_jacobian(sda10f, q)
     # the achieved twist is unique (least squares), the joint motion is not: compare twists
-    reached_general = J @ CJMController(sda10f, [hole], general_only=True, **EXACT).solve(q, twist)
+    reached_general = J @ CJMController(sda10f, [hole], form="general", **EXACT).solve(q, twist)
     np.testing.assert_allclose(J @ qd, reached_general, atol=1e-9)
     for solver in ("proxqp", "daqp"):
         np.testing.assert_allclose(J @ QPController(sda10f, [hole], solver=solver).solve(q, twist),
@@ -129,10 +129,10 @@ def test_plane_on_sda10f_leaves_seven_dof_and_the_wide_cjm_tracks_exactly(sda10f
     plane = Plane.through_link_point(sda10f, q, normal=[0.0, 0.0, 1.0], distance=0.08)
     twist = np.array([0.02, 0.01, -0.01, 0.05, -0.02, 0.03])
     J = ee_jacobian(sda10f, q)
-    for general_only in (False, True):
-        cjm = CJMController(sda10f, [plane], general_only=general_only, **EXACT)
+    for form in ("auto", "general"):
+        cjm = CJMController(sda10f, [plane], form=form, **EXACT)
         qd = cjm.solve(q, twist)
-        assert cjm.info.method == ("general" if general_only else "analytical")
+        assert cjm.info.method == ("general" if form == "general" else "analytical")
         assert constraint_residual(sda10f, q, plane, qd) <= 1e-12
         np.testing.assert_allclose(J @ qd, twist, atol=1e-10)
     assert CJMController(sda10f, [plane]).constrained_jacobian(q).shape == (6, 7)

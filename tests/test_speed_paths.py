@@ -18,19 +18,20 @@ from hypothesis import strategies as st
 
 from strategies import placements, unit3, vec3
 
-import controllers.cjm as cjm_module
+import controllers.cjm.analytical as analytical_module
 from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
 from constraints import Barrier, Hole, Plane, PointLock
-from constraints.base import Constraint, analytical_terms_views
+from constraints.base import Constraint
+from controllers.cjm.analytical import AffineTerms, terms_size, terms_views, write_terms
 from controllers import CJMController, QPController, damped_least_squares, nullspace
-from controllers.base import Kinematics, all_finite
+from controllers.base import Kinematics
 from controllers.linalg import DampingPolicy
 
-EXACT = dict(singular_threshold=0.0, respect_velocity_limits=False)
+EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)
 
 def force_svd_path(monkeypatch) -> None:
     """No certified bound can pass an infinite floor: every square Jbar goes to the SVD."""
-    monkeypatch.setattr(cjm_module, "FAST_PATH_MIN_SIGMA", np.inf)
+    monkeypatch.setattr(analytical_module, "FAST_PATH_MIN_SIGMA", np.inf)
 
 
 # ------------------------------------------------------------------ the Hole's closed forms
@@ -42,12 +43,12 @@ def force_svd_path(monkeypatch) -> None:
 def test_hole_affine_terms_equal_the_generic_terms(center, axis, velocity, gain, placement, moving):
     hole = Hole("link", center, link_axis=axis, gain=gain,
                 velocity=velocity if moving else (0.0, 0.0, 0.0))
-    fast, generic = np.empty(44), np.empty(44)
-    hole.analytical_terms(placement, "nullspace", fast)
-    Constraint.analytical_terms(hole, placement, "nullspace", generic)  # evaluate + structure
-    np.testing.assert_allclose(fast, generic, atol=1e-12)
-    B, R = analytical_terms_views(fast, 2)
+    fast, generic = np.empty(terms_size(2)), np.empty(terms_size(2))
+    AffineTerms(hole).write(*hole.affine_inputs(placement), fast)
     state = hole.evaluate(placement)
+    write_terms(state, hole.structure(placement), generic)  # evaluate + structure
+    np.testing.assert_allclose(fast, generic, atol=1e-12)
+    B, R = terms_views(fast, 2)
     np.testing.assert_allclose(R[:, 1:] @ B[:, 1:], 0.0, atol=1e-12)  # C v_c = 0 on S
     np.testing.assert_allclose(R[:, 1:] @ B[:, 0], state.rhs, atol=1e-12)  # V_a0 gives b
 
@@ -58,11 +59,18 @@ def test_hole_rows_equal_the_generic_rows(robot):
     data = kinematics(robot, q)
     hole = Hole.on_link(robot, q, distance=HOLE_DISTANCE[robot.name])
     hole.move_to(hole.center + [1e-3, -2e-3, 5e-4], velocity=[0.003, 0.001, -0.002])
+    frame = robot.model.getFrameId(hole.link)
+    placement = data.oMf[frame]
+    J_a = pin.getFrameJacobian(robot.model, data, frame, pin.LOCAL)
     for _ in range(2):  # moving, then still
         A, b = hole.rows(robot.model, data)
-        A_ref, b_ref = Constraint.rows(hole, robot.model, data)
-        np.testing.assert_allclose(A, A_ref, atol=1e-13)
-        np.testing.assert_allclose(b, b_ref, atol=1e-13)
+        state = hole.evaluate(placement)
+        point_jacobian = J_a[:3] - pin.skew(state.p) @ J_a[3:]
+        np.testing.assert_allclose(A, state.C @ point_jacobian, atol=1e-13)
+        hole_local = placement.actInv(hole.center)
+        lateral = hole_local - (hole.link_axis @ hole_local) * hole.link_axis
+        velocity = placement.rotation.T @ hole.velocity
+        np.testing.assert_allclose(b, state.C @ (hole.gain * lateral + velocity), atol=1e-12)
         hole.move_to(hole.center)
 
 
@@ -88,7 +96,7 @@ def test_lu_fast_path_and_svd_path_give_the_same_joint_velocities(robot, seed, m
     hole = Hole.on_link(robot, q, distance=HOLE_DISTANCE[robot.name])
     hole.move_to(hole.center + 1e-3 * rng.normal(size=3))
     twist = rng.normal(size=6) * 0.02
-    policy = dict(singular_threshold=0.01, respect_velocity_limits=False)  # DLS would act < 0.01
+    policy = dict(singular_threshold=0.01, velocity_limits=False, position_limits=False)  # DLS would act < 0.01
     fast = CJMController(robot, [hole], **policy)
     qd_fast = fast.solve(q, twist)
     sigma = np.linalg.svd(fast.constrained_jacobian(q), compute_uv=False)[-1]
@@ -110,7 +118,7 @@ def test_near_singular_jbar_falls_back_to_the_svd_dls(sda10f, monkeypatch):
     q = sda10f.q_home.copy()
     q[6] = 1e-4
     hole = Hole.on_link(sda10f, q, distance=0.08)
-    controller = CJMController(sda10f, [hole], respect_velocity_limits=False)
+    controller = CJMController(sda10f, [hole], velocity_limits=False, position_limits=False)
     jbar = controller.constrained_jacobian(q)
     sigma = np.linalg.svd(jbar, compute_uv=False)
     u = np.linalg.svd(jbar)[0]
@@ -123,14 +131,14 @@ def test_near_singular_jbar_falls_back_to_the_svd_dls(sda10f, monkeypatch):
     # same answer as the SVD path taken on purpose
     force_svd_path(monkeypatch)
     np.testing.assert_allclose(
-        CJMController(sda10f, [hole], respect_velocity_limits=False).solve(q, twist), qd,
+        CJMController(sda10f, [hole], velocity_limits=False, position_limits=False).solve(q, twist), qd,
         atol=1e-12)
 
 
 def test_constant_damping_always_takes_the_svd_path(sda10f):
     q = sda10f.q_home.copy()
     hole = Hole.on_link(sda10f, q, distance=0.08)
-    controller = CJMController(sda10f, [hole], damping=1e-3, respect_velocity_limits=False)
+    controller = CJMController(sda10f, [hole], damping=1e-3, velocity_limits=False, position_limits=False)
     controller.solve(q, np.array([0.01, 0.0, 0.0, 0.0, 0.02, 0.0]))
     sigma = np.linalg.svd(controller.constrained_jacobian(q), compute_uv=False)[-1]
     assert controller.info.sigma_min == pytest.approx(sigma, rel=1e-9)
@@ -152,14 +160,14 @@ def test_singular_pre_chain_hands_over_to_the_general_form(sda10f):
 
 
 def test_plane_and_point_lock_use_the_generic_terms_in_the_analytical_form(sda10f):
-    """Constraints without closed forms go through Constraint.analytical_terms."""
+    """Constraints without an affine form go through evaluate + write_terms."""
     q = sda10f.q_home.copy()
     twist = np.array([0.02, 0.01, -0.01, 0.05, -0.02, 0.03])
     lock = PointLock.on_link(sda10f, q, distance=0.08)
     plane = Plane.through_link_point(sda10f, q, normal=[0.0, 0.0, 1.0], distance=0.08)
     for constraint in (lock, plane):
         analytical = CJMController(sda10f, [constraint], **EXACT)
-        general = CJMController(sda10f, [constraint], general_only=True, **EXACT)
+        general = CJMController(sda10f, [constraint], form="general", **EXACT)
         qd = analytical.solve(q, twist)
         assert analytical.info.method == "analytical"
         J = ee_jacobian(sda10f, q)
@@ -196,13 +204,6 @@ def test_new_constraints_give_the_same_result_as_a_new_controller(sda10f):
 
 
 # -------------------------------------------------------------------------- input checks
-
-
-def test_all_finite_is_exact_even_when_the_sum_overflows():
-    assert all_finite(np.array([1e308, 1e308, -1.0]))  # the sum overflows, the entries do not
-    assert not all_finite(np.array([1.0, np.nan]))
-    assert not all_finite(np.array([np.inf, -np.inf]))  # inf - inf is NaN: still caught
-    assert all_finite(np.zeros(0))
 
 
 def test_huge_but_finite_input_is_not_called_non_finite(sda10f):
@@ -258,6 +259,7 @@ def reference_bounds(controller: QPController, q: np.ndarray) -> tuple[np.ndarra
     """The joint box as the first implementation wrote it, element by element."""
     model = controller.model
     lower, upper = np.full(model.nv, -np.inf), np.full(model.nv, np.inf)
+    limit = np.full(model.nv, np.inf)
     if controller.velocity_limits:
         limit = np.asarray(model.velocityLimit, dtype=float)
         limit = np.where(np.isfinite(limit) & (limit > 0), limit, np.inf)
@@ -271,6 +273,8 @@ def reference_bounds(controller: QPController, q: np.ndarray) -> tuple[np.ndarra
                 if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
                     lower[iv] = max(lower[iv], scale * (lo - q[iq]))
                     upper[iv] = min(upper[iv], scale * (hi - q[iq]))
+    # past a limit: come back, never faster than the velocity limit
+    lower, upper = np.minimum(lower, limit), np.maximum(upper, -limit)
     return lower, np.maximum(upper, lower)
 
 

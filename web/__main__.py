@@ -2,6 +2,6 @@
 
 import sys
 
-from teleop.cli import main
+from web.cli import main
 
-sys.exit(main(["web", *sys.argv[1:]]))
+sys.exit(main(prog="python -m web"))

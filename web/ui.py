@@ -24,12 +24,12 @@ import viser
 import viser.uplot as uplot
 from pinocchio.visualize import ViserVisualizer
 
+from teleop.controller_specs import default_specs
 from teleop.robots import Robot
 
 from .app import ControlThread, TeleopApp
 
-CONTROLLER_CHOICES = ("cjm", "cjm:general", "cjm:paper", "qp:proxqp", "qp:daqp", "qp:osqp",
-                      "mink:daqp", "mink:proxqp")
+CONTROLLER_CHOICES = default_specs("ui")  # the dropdowns (plus a spec given on the command line)
 VIEW_RATE = 30.0  # Hz: robot poses, markers, status
 PLOT_RATE = 10.0  # Hz: live plots
 ERROR_VECTOR_SCALE = 100.0
@@ -127,11 +127,12 @@ class TeleopUI:
         gui = self.server.gui
         app = self.app
         with gui.add_folder("Controller"):
-            self.controller_menu = gui.add_dropdown("main", CONTROLLER_CHOICES,
+            ghost_spec = app.specs.get("ghost", "qp:daqp")
+            choices = tuple(dict.fromkeys((*CONTROLLER_CHOICES, app.specs["main"], ghost_spec)))
+            self.controller_menu = gui.add_dropdown("main", choices,
                                                     initial_value=app.specs["main"])
             self.side_by_side = gui.add_checkbox("side by side", "ghost" in app.loops)
-            self.ghost_menu = gui.add_dropdown("ghost", CONTROLLER_CHOICES,
-                                               initial_value=app.specs.get("ghost", "qp:daqp"))
+            self.ghost_menu = gui.add_dropdown("ghost", choices, initial_value=ghost_spec)
 
         @self.controller_menu.on_update
         def _(event) -> None:

@@ -1,83 +1,139 @@
-"""Command line: ``teleop compare | replay | record | bench | scenarios``."""
+"""Command line: ``teleop compare | replay | record | scenarios | bench | web``.
+
+``teleop web`` belongs to the ``web`` layer above this one: its options live in
+:mod:`web.cli`, reached lazily in :func:`_web` only.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+from importlib import metadata
 from typing import Sequence
 
-DEFAULT_CONTROLLERS = "cjm,qp:proxqp,qp:daqp,qp:osqp,mink:daqp"
+from teleop.controller_specs import CONTROLLER_HELP, CONTROLLER_SPECS, default_specs
+from teleop.robots import BUILTIN_ROBOTS
+
+PACKAGE = "cjm-teleop"
+DEFAULT_CONTROLLERS = ", ".join(default_specs("compare"))
+DEFAULT_BENCH_CONTROLLERS = ", ".join(default_specs("bench"))
+DEFAULT_BENCH_ROBOTS = ", ".join(BUILTIN_ROBOTS)
+WEB_HELP = "browser teleoperation UI (viser); 'teleop web --help' lists its options"
 
 
-def _csv(text: str) -> list[str]:
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """Every option's help shows its default ("(default: ...)" appended unless the help
+    already says it; nothing for required options); descriptions and epilogs keep their lines."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "(default" in text or action.required:
+            return text
+        return super()._get_help_string(action)
+
+
+def package_version() -> str:
+    """The installed version of the package (``importlib.metadata``)."""
+    try:
+        return metadata.version(PACKAGE)
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+def csv_list(text: str) -> list[str]:
+    """``"a, b,c"`` -> ``["a", "b", "c"]`` (argparse type)."""
     items = [item.strip() for item in text.split(",") if item.strip()]
     if not items:
         raise argparse.ArgumentTypeError("expected a comma-separated list")
     return items
 
 
-def _positive(text: str) -> float:
-    value = float(text)
+def positive(text: str) -> float:
+    """A number > 0 (argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not value > 0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
     return value
 
 
-def _add_run_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--controllers", type=_csv, default=_csv(DEFAULT_CONTROLLERS),
-                        help=f"comma-separated controllers (default {DEFAULT_CONTROLLERS}); "
-                             "cjm[:general|:paper], qp:<solver>, mink:<solver>")
-    parser.add_argument("--rate", type=_positive, help="control rate in Hz (default 1000)")
-    parser.add_argument("--duration", type=_positive, help="seconds to run (default: all)")
-    parser.add_argument("--out", default="out", help="output directory (default ./out)")
-    parser.add_argument("--no-plots", action="store_true", help="metrics only")
+def _controllers_epilog(context: str) -> str:
+    """The known controllers, one a line; ``*`` marks those run by default."""
+    width = max(len(spec.name) for spec in CONTROLLER_SPECS)
+    lines = ["controllers (* = in the default list):"]
+    lines += [f"  {'*' if context in spec.offered_in else ' '} {spec.name:<{width}}  {spec.description}"
+              for spec in CONTROLLER_SPECS]
+    lines += ["in general: " + CONTROLLER_HELP.replace(" with ", "\n  with ")]
+    return "\n".join(lines)
+
+
+def _add_command(commands, name: str, summary: str, **kwargs) -> argparse.ArgumentParser:
+    """A subcommand whose one-line summary is both its help (in ``teleop -h``) and description."""
+    return commands.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".",
+                               formatter_class=HelpFormatter, **kwargs)
+
+
+def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
+    parser.add_argument("--controllers", type=csv_list, default=DEFAULT_CONTROLLERS,
+                        help="comma-separated controllers, see the list below")
+    if source == "session":
+        parser.add_argument("--rate", type=positive,
+                            help="control rate in Hz (default: the session's rate, else 1000)")
+    else:
+        parser.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
+    parser.add_argument("--duration", type=positive,
+                        help=f"seconds to run (default: the whole {source})")
+    parser.add_argument("--out", default="out", help="output directory")
+    parser.add_argument("--no-plots", action="store_true", help="write the metrics only, no plots")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="teleop",
+        prog="teleop", formatter_class=HelpFormatter,
         description="Operational-space teleoperation under kinematic constraints (CJM, QP, mink).")
-    commands = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument("--version", action="version", version=package_version(),
+                        help="print the installed version and exit")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    compare = commands.add_parser("compare", help="run controllers on a scripted scenario")
+    compare = _add_command(commands, "compare", "run controllers on a scripted scenario and "
+                           "write metrics and plots", epilog=_controllers_epilog("compare"))
     compare.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
-    _add_run_options(compare)
+    _add_run_options(compare, "scenario")
 
-    replay = commands.add_parser("replay", help="replay a recorded session through controllers")
+    replay = _add_command(commands, "replay", "replay a recorded session through controllers "
+                          "and write metrics and plots", epilog=_controllers_epilog("compare"))
     replay.add_argument("file", help="session file (JSON lines, see README)")
-    _add_run_options(replay)
+    _add_run_options(replay, "session")
 
-    record = commands.add_parser("record", help="write a scenario's operator input as a session")
-    record.add_argument("--scenario", required=True)
-    record.add_argument("--rate", type=_positive, default=1000.0)
-    record.add_argument("--duration", type=_positive)
+    record = _add_command(commands, "record", "write a scenario's operator input as a session file")
+    record.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
+    record.add_argument("--rate", type=positive, default=1000.0,
+                        help="control rate in Hz (one recorded target per tick)")
+    record.add_argument("--duration", type=positive,
+                        help="seconds to record (default: the whole scenario)")
     record.add_argument("file", help="session file to write")
 
-    commands.add_parser("scenarios", help="list the scenarios")
+    _add_command(commands, "scenarios", "list the scripted scenarios")
 
-    web = commands.add_parser("web", help="browser teleoperation UI (viser)")
-    web.add_argument("--robot", default="sda10f",
-                     help="sda10f, ur5_instrument, or a URDF path (default sda10f)")
-    web.add_argument("--host", default="127.0.0.1",
-                     help="address to bind (default 127.0.0.1: this machine only; the UI "
-                          "commands a robot, open it wider only on purpose)")
-    web.add_argument("--port", type=int, default=8080)
-    web.add_argument("--controller", default="cjm", help="main robot's controller")
-    web.add_argument("--ghost", help="controller of a translucent second robot (side by side)")
-    web.add_argument("--rate", type=_positive, default=1000.0, help="control rate (Hz)")
-    web.add_argument("--record-dir", default="sessions", help="where recordings are written")
-    web.add_argument("--ee-frame", help="EE frame (URDF robots)")
-    web.add_argument("--constrained-link", help="constrained link (URDF robots)")
-
-    bench = commands.add_parser("bench", help="one-step time of each controller on each robot")
-    bench.add_argument("--robots", type=_csv, default=["sda10f", "ur5_instrument"])
-    bench.add_argument("--controllers", type=_csv,
-                       default=_csv("cjm,cjm:general,qp:proxqp,qp:daqp,qp:osqp,mink:daqp,mink:proxqp"))
+    bench = _add_command(commands, "bench", "time one control step of each controller on each "
+                         "robot", epilog=_controllers_epilog("bench"))
+    bench.add_argument("--robots", type=csv_list, default=DEFAULT_BENCH_ROBOTS,
+                       help="comma-separated built-in robots")
+    bench.add_argument("--controllers", type=csv_list, default=DEFAULT_BENCH_CONTROLLERS,
+                       help="comma-separated controllers, see the list below")
     bench.add_argument("--iterations", type=int, default=2000, help="timed steps per controller")
-    bench.add_argument("--quick", action="store_true", help="a few iterations (CI smoke run)")
-    bench.add_argument("--no-scaling", action="store_true", help="skip the generated-chain scaling")
-    bench.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    bench.add_argument("--quick", action="store_true",
+                       help="20 iterations and small scaling runs (CI smoke run)")
+    bench.add_argument("--no-scaling", action="store_true",
+                       help="skip the generated-chain scaling runs")
+    bench.add_argument("--json", metavar="FILE",
+                       help="also write the results as JSON to FILE (default: no JSON)")
+
+    # web's options are web's own (web.cli); everything after 'web' is handed over to it
+    commands.add_parser("web", help=WEB_HELP, description=WEB_HELP, add_help=False)
     return parser
 
 
@@ -97,34 +153,21 @@ def _run(plan, args, config) -> int:
     return 0
 
 
-def _web(args) -> int:
-    import time
+def _web(argv: list[str]) -> int:
+    """``teleop web ...``: the one place this layer reaches ``web`` (the layer above),
+    lazily, handing it every argument after ``web`` (so ``teleop web --help`` is web's)."""
+    from web.cli import main as web_main
 
-    from web.ui import run_server
-
-    from teleop.robots import load_robot
-
-    robot = load_robot(args.robot, ee_frame=args.ee_frame, constrained_link=args.constrained_link)
-    server, app, control, ui = run_server(robot, host=args.host, port=args.port,
-                                          controller=args.controller, ghost=args.ghost,
-                                          rate=args.rate, record_dir=args.record_dir)
-    print(f"teleop web: {robot.name} on http://{args.host}:{server.get_port()} "
-          f"(controller {args.controller}{', ghost ' + args.ghost if args.ghost else ''}); "
-          "Ctrl-C stops", flush=True)
-    try:
-        while True:
-            time.sleep(1.0)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        ui.stop()
-        control.stop()
-        server.stop()
-    return 0
+    return web_main(argv, prog="teleop web")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args, rest = parser.parse_known_args(argv)
+    if args.command == "web":
+        return _web(rest)
+    if rest:
+        parser.error(f"unrecognized arguments: {' '.join(rest)}")
     try:
         return _dispatch(args)
     except ValueError as error:  # bad scenario, controller, file: one clear line
@@ -135,8 +178,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _dispatch(args) -> int:
     from teleop.loop import LoopConfig
 
-    if args.command == "web":
-        return _web(args)
     if args.command == "scenarios":
         from teleop.experiments.scenarios import SCENARIOS, load_scenario
 

@@ -13,14 +13,14 @@ import numpy as np
 from constraints import Hole
 
 from teleop.robots.chains import hole_links, load_chain
-from teleop.controller_specs import make_controller
+from teleop.controller_specs import default_specs, make_controller
 from teleop.robots import Robot, load_robot
 
 #: hole distance along the constrained link of each built-in robot (m)
 DEFAULT_HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20}
 SCALING_DOFS = (8, 16, 32, 64)
 SCALING_HOLES = (1, 2, 4, 8)
-SCALING_CONTROLLERS = ("cjm", "qp:proxqp", "qp:daqp", "mink:daqp")
+SCALING_CONTROLLERS = default_specs("scaling")
 
 
 @dataclass(frozen=True)
@@ -79,8 +79,7 @@ def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: in
 
 
 def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
-              controllers: Sequence[str] = ("cjm", "cjm:general", "qp:proxqp", "qp:daqp",
-                                            "qp:osqp", "mink:daqp"),
+              controllers: Sequence[str] = default_specs("bench"),
               iterations: int = 2000) -> list[StepTiming]:
     """The built-in robots, one hole each (the paper's 6-before/2-after case)."""
     results = []

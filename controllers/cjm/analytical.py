@@ -1,0 +1,282 @@
+"""The analytical CJM: one equality constraint with at least 6 joints before it.
+
+Paper eqs 17-24 and 29-32, docs/design.md section 4::
+
+    V_a  = S [u; w] + V_a0                       (S from the constraint, V_a0 = [C^T b; 0])
+    V_e  = Ad_ea V_a + J_post qd_post
+    Jbar = [Ad_ea S, J_post]                     (the CJM, 6 x (6 - k + n_post))
+    [u; w; qd_post] = Jbar^-1 (V_e - Ad_ea V_a0) (eq 22; damped, eq 35, near singular)
+    qd_pre = J_a^-1 V_a                          (J_a^+ V_a + posture in null(J_a) if > 6)
+
+The constraint holds by construction for any solution of the small system.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import eigenpy
+import numpy as np
+import pinocchio as pin
+
+from constraints import Constraint, ConstraintPoint, Parametrisation, structure_of
+
+from ..base import SolveInfo, StepStatus
+from ..linalg import DampedSolution, DampingPolicy, damped_least_squares
+
+#: Below this ratio of the smallest to the largest LU pivot of ``J_a`` (square
+#: pre-chain), or this smallest singular value of ``J_a`` (redundant pre-chain), ``F_a``
+#: can no longer take every twist at a sane joint speed, and the analytical form hands
+#: over to the general null-space form, which holds the rows exactly and damps instead.
+PRE_CHAIN_SINGULAR = 1e-2
+
+#: The LU fast path for a square ``Jbar`` needs the certified lower bound on its smallest
+#: singular value to be at least this as well as the damping threshold, so the SVD path
+#: keeps every nearly rank-deficient case (it drops singular values below 1e-10).
+FAST_PATH_MIN_SIGMA = 1e-6
+
+PRE_CHAIN_SINGULAR_NOTE = "pre-constraint chain singular: general form used"
+
+
+@dataclass(frozen=True)
+class ChainSplit:
+    """Velocity indices of the joints before (moving ``F_a``) and after the constraint."""
+
+    pre: np.ndarray
+    post: np.ndarray
+
+
+def chain_split(model: pin.Model, frame_id: int, ee_frame_id: int) -> ChainSplit | None:
+    """Joints before/after the link of ``frame_id`` on the path to the EE; None when the
+    EE is not downstream of that link (the analytical form does not apply)."""
+    pre_joints = [j for j in model.supports[model.frames[frame_id].parentJoint] if j != 0]
+    ee_path = [j for j in model.supports[model.frames[ee_frame_id].parentJoint] if j != 0]
+    if not set(pre_joints) <= set(ee_path):
+        return None
+    post_joints = [j for j in ee_path if j not in pre_joints]
+
+    def velocity_indices(joints: list[int]) -> np.ndarray:
+        return np.array([i for j in joints for i in range(model.idx_vs[j], model.idx_vs[j] + model.nvs[j])],
+                        dtype=int)
+
+    return ChainSplit(pre=velocity_indices(pre_joints), post=velocity_indices(post_joints))
+
+
+# -- the per-step terms, as one flat buffer ------------------------------------------------
+
+
+def terms_size(k: int) -> int:
+    """Entries of the flat terms buffer for a constraint of ``k`` rows."""
+    return 6 * (7 - k) + 7 * k
+
+
+def terms_views(terms: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Views ``(pre_rhs, residual_rows)`` into a flat terms buffer.
+
+    ``pre_rhs = [V_a0, S]`` (6 x (7 - k), column-major, as LAPACK and Eigen store it) is
+    what the pre-chain's ``J_a`` is solved against; ``residual_rows = [-b, C [I, -hat(p)]]``
+    (k x 7) gives the residual ``C v_c - b = residual_rows [1; V_a]`` of a twist of ``F_a``.
+    """
+    split = 6 * (7 - k)
+    return terms[:split].reshape(7 - k, 6).T, terms[split:].reshape(k, 7)
+
+
+def write_terms(state: ConstraintPoint, structure: np.ndarray, terms: np.ndarray) -> None:
+    """Fill a flat terms buffer from an evaluated constraint and its structure matrix."""
+    pre_rhs, residual_rows = terms_views(terms, state.C.shape[0])
+    pre_rhs[:3, 0] = state.C.T @ state.rhs
+    pre_rhs[3:, 0] = 0.0
+    pre_rhs[:, 1:] = structure
+    residual_rows[:, 0] = -state.rhs
+    residual_rows[:, 1:4] = state.C
+    residual_rows[:, 4:] = -state.C @ pin.skew(state.p)
+
+
+class AffineTerms:
+    """The terms of a constraint with an affine form, as ``T_x x + T_f f + t_0``.
+
+    When :meth:`Constraint.affine_inputs` gives ``(x, f)`` and the evaluation is affine
+    in them with constant ``C`` (a hole: ``x`` its centre, ``f`` its velocity in ``F_a``),
+    the null-space structure matrix ``[[C_perp^T, C^T C hat(p)], [0, I]]`` is affine
+    too (``hat`` is linear), so the whole buffer is. The maps are found by evaluating
+    at ``x, f = 0`` and at the unit vectors; a step is then one matrix product (about
+    2 us less than evaluating and writing the terms, measured with ``teleop bench``).
+    """
+
+    def __init__(self, constraint: Constraint) -> None:
+        k = constraint.dim
+        zero = np.zeros(3)
+
+        def terms_at(x: np.ndarray, f: np.ndarray) -> np.ndarray:
+            state = constraint.evaluate_affine(x, f)
+            terms = np.empty(terms_size(k))
+            write_terms(state, structure_of(state, "nullspace"), terms)
+            return terms
+
+        self.offset = terms_at(zero, zero)
+        self.of_x = np.column_stack([terms_at(e, zero) - self.offset for e in np.eye(3)])
+        self.of_f = np.column_stack([terms_at(zero, e) - self.offset for e in np.eye(3)])
+
+    def write(self, x: np.ndarray, f: np.ndarray | None, terms: np.ndarray) -> None:
+        np.dot(self.of_x, x, out=terms)
+        terms += self.offset
+        if f is not None:
+            terms += self.of_f @ f
+
+
+class SquarePreChain:
+    """The paper's case: one constraint, exactly 6 joints before it, buffers allocated once.
+
+    With ``pre_solution = J_a^-1 [V_a0, S]`` (one LU solve) the joint velocities are
+    affine in the free variables ``v_m = [u; w; qd_post]``::
+
+        qd = joint_map [1; v_m],   joint_map = [[pre_solution, 0], [0, I]]  (pre, post rows)
+
+    and ``J_e joint_map = [J_e qd_0, Jbar]``: since ``J_e[:, pre] = Ad_ea J_a``, the
+    columns of ``J_e[:, pre] J_a^-1 S`` are ``Ad_ea S``, the CJM of eq 24, built without
+    an adjoint or an ``SE3`` object.
+    """
+
+    def __init__(self, constraint: Constraint, frame_id: int, nv: int, split: ChainSplit,
+                 parametrisation: Parametrisation) -> None:
+        self.constraint = constraint
+        self.frame_id = frame_id
+        self.parametrisation = parametrisation
+        k = constraint.dim
+        self.n_free = 6 - k
+        n_columns = self.n_free + split.post.size  # columns of Jbar
+        pre = split.pre
+        contiguous = np.array_equal(pre, np.arange(pre[0], pre[0] + pre.size))
+        self.pre = slice(int(pre[0]), int(pre[0]) + pre.size) if contiguous else pre
+        self.terms = np.empty(terms_size(k))
+        self.pre_rhs, self.residual_rows = terms_views(self.terms, k)
+        self.joint_map = np.zeros((nv, n_columns + 1))
+        self.joint_map[split.post, self.n_free + 1:] = np.eye(split.post.size)
+        self.task_map = np.empty((6, n_columns + 1))  # [J_e qd_0, Jbar]
+        self.square = n_columns == 6
+        self.cjm_rhs = np.empty(6)
+        self.free_with_one = np.ones(n_columns + 1)  # [1; v_m]
+        self.twist_a_with_one = np.ones(7)  # [1; V_a]
+        # Eigen's partial-pivoting LU through eigenpy (Pinocchio's own bindings): the
+        # factorisation of LAPACK's dgesv, reused objects, less call overhead.
+        self.lu_pre = eigenpy.PartialPivLU(6)
+        self.lu_cjm = eigenpy.PartialPivLU(6)
+        self._affine: tuple[float, AffineTerms] | None = None  # (gain it was built for, map)
+
+    def write_terms(self, placement: pin.SE3) -> None:
+        constraint = self.constraint
+        inputs = constraint.affine_inputs(placement) if self.parametrisation == "nullspace" else None
+        if inputs is None:
+            state = constraint.evaluate(placement)
+            write_terms(state, structure_of(state, self.parametrisation), self.terms)
+            return
+        if self._affine is None or self._affine[0] != constraint.gain:
+            self._affine = (constraint.gain, AffineTerms(constraint))
+        self._affine[1].write(*inputs, self.terms)
+
+    def solve(self, model: pin.Model, data: pin.Data, ee_jacobian: np.ndarray,
+              twist: np.ndarray, policy: DampingPolicy, info: SolveInfo) -> np.ndarray | None:
+        """``qd`` for ``twist``, or None when ``J_a`` is near singular (general form then).
+
+        Written flat, with the buffers of the plan: from Python every NumPy or LAPACK call
+        costs about a microsecond whatever the size, so the step is counted in calls.
+        """
+        self.write_terms(pin.updateFramePlacement(model, data, self.frame_id))
+        jacobian_a = pin.getFrameJacobian(model, data, self.frame_id, pin.LOCAL)
+        lu_pre = self.lu_pre
+        lu_pre.compute(jacobian_a[:, self.pre])
+        pivots = list(map(abs, lu_pre.matrixLU().diagonal().tolist()))
+        if not min(pivots) >= PRE_CHAIN_SINGULAR * max(pivots):  # NaN included
+            info.message = PRE_CHAIN_SINGULAR_NOTE
+            return None
+        joint_map = self.joint_map
+        joint_map[self.pre, :self.n_free + 1] = lu_pre.solve(self.pre_rhs)
+        task_map = np.dot(ee_jacobian, joint_map, out=self.task_map)
+        np.subtract(twist, task_map[:, 0], out=self.cjm_rhs)  # V_e - Ad_ea V_a0 (eq 22)
+        if not self._solve_by_lu(task_map[:, 1:], policy, info):  # the SVD DLS (eq 35)
+            solution = damped_least_squares(task_map[:, 1:], self.cjm_rhs, policy)
+            self.free_with_one[1:] = solution.x
+            report_task_solution(solution, task_map[:, 1:], self.cjm_rhs, info)
+        qd = np.dot(joint_map, self.free_with_one)  # a new array: the caller keeps it
+        # residual of C v_c = b for the twist the pre-chain really produces
+        np.dot(jacobian_a, qd, out=self.twist_a_with_one[1:])
+        info.equality_residual = max(map(abs, np.dot(self.residual_rows, self.twist_a_with_one).tolist()))
+        info.method = "analytical"
+        return qd
+
+    def _solve_by_lu(self, cjm: np.ndarray, policy: DampingPolicy, info: SolveInfo) -> bool:
+        """Solve a square, well-conditioned ``Jbar`` by its LU, where damping cannot act.
+
+        ``||Jbar^-1||_2 <= ||Jbar^-1||_F``, so ``1 / ||Jbar^-1||_F`` is a lower bound on
+        ``sigma_min``: at or above the damping threshold the DLS (eq 35) is the exact
+        inverse (eq 22). An exactly singular ``Jbar`` gives inf or NaN here, and False.
+        """
+        if not (self.square and policy.damping == 0.0):
+            return False
+        lu_cjm = self.lu_cjm
+        lu_cjm.compute(cjm)
+        inverse = lu_cjm.inverse().ravel()
+        bound = 1.0 / math.sqrt(float(np.dot(inverse, inverse)))
+        if not (bound >= policy.threshold and bound >= FAST_PATH_MIN_SIGMA):
+            return False
+        self.free_with_one[1:] = lu_cjm.solve(self.cjm_rhs)
+        info.sigma_min = bound
+        return True
+
+
+def report_task_solution(solution: DampedSolution, matrix: np.ndarray, rhs: np.ndarray,
+                         info: SolveInfo) -> None:
+    """Record a DLS solution of the task in ``info``; a task not met is ``least_squares``."""
+    info.sigma_min = solution.sigma_min
+    info.damping = solution.damping
+    if solution.exact:
+        return
+    residual = float(np.max(np.abs(matrix @ solution.x - rhs), initial=0.0))
+    if residual > 1e-9 * (1.0 + float(np.max(np.abs(rhs), initial=0.0))):
+        note = (f"near a singularity: damped (lambda {solution.damping:.2g})" if solution.damping > 0
+                else "task not fully achievable: least squares")
+        info.report(StepStatus.LEAST_SQUARES, f"{note}, twist residual {residual:.2e}")
+
+
+def solve_redundant_pre_chain(model: pin.Model, data: pin.Data, ee_jacobian: np.ndarray,
+                              ee_placement: pin.SE3, constraint: Constraint, frame_id: int,
+                              split: ChainSplit, twist: np.ndarray, policy: DampingPolicy,
+                              parametrisation: Parametrisation, posture_velocity: np.ndarray | None,
+                              info: SolveInfo) -> np.ndarray | None:
+    """More than 6 joints move ``F_a``: SVD of ``J_a``, posture in its null space."""
+    placement = data.oMf[frame_id]
+    pre_jacobian = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL)[:, split.pre]
+    state = constraint.evaluate(placement)
+    structure = structure_of(state, parametrisation)
+    n_free = structure.shape[1]
+    ad_ea = ee_placement.actInv(placement).action
+    # Jbar = [Ad_ea S, J_post] (eq 24); the particular twist V_a0 = [C^T b; 0] carries the
+    # drift feedback and feed-forward, so the free variables solve Jbar v_m = V_e - Ad_ea V_a0
+    cjm = np.empty((6, n_free + split.post.size))
+    cjm[:, :n_free] = ad_ea @ structure
+    cjm[:, n_free:] = ee_jacobian[:, split.post]
+    particular_linear = state.C.T @ state.rhs
+    cjm_rhs = twist - ad_ea[:, :3] @ particular_linear
+    solution = damped_least_squares(cjm, cjm_rhs, policy)
+    twist_a = structure @ solution.x[:n_free]
+    twist_a[:3] += particular_linear
+
+    u, s, vt = np.linalg.svd(pre_jacobian, full_matrices=True)
+    if s[-1] < PRE_CHAIN_SINGULAR:
+        info.message = PRE_CHAIN_SINGULAR_NOTE
+        return None
+    qd_pre = vt[:6].T @ ((u.T @ twist_a) / s)
+    if posture_velocity is not None:
+        null_basis = vt[6:]
+        qd_pre += null_basis.T @ (null_basis @ posture_velocity[split.pre])
+
+    qd = np.zeros(model.nv)
+    qd[split.pre] = qd_pre
+    qd[split.post] = solution.x[n_free:]
+    achieved = pre_jacobian @ qd_pre  # the twist the pre-chain really produces
+    point_velocity = achieved[:3] - pin.skew(state.p) @ achieved[3:]
+    info.equality_residual = float(np.max(np.abs(state.C @ point_velocity - state.rhs)))
+    info.method = "analytical"
+    report_task_solution(solution, cjm, cjm_rhs, info)
+    return qd

@@ -1,0 +1,235 @@
+"""The Constrained Jacobian Matrix controller: which form solves a step, barriers, limits."""
+
+from __future__ import annotations
+
+from typing import Iterable, Literal
+
+import numpy as np
+import pinocchio as pin
+
+from constraints import Constraint, Parametrisation, RobotLike
+from constraints.validation import as_number, as_vector
+
+from ..base import Controller, Kinematics, StepStatus
+from ..joint_limits import DEFAULT_LIMIT_GAIN
+from ..linalg import DampingPolicy
+from .analytical import ChainSplit, SquarePreChain, chain_split, solve_redundant_pre_chain
+from .general import solve_general
+from .saturation import saturate_in_null_space
+
+#: A barrier row is violated when the solution undercuts it by more than this (m/s).
+BARRIER_TOLERANCE = 1e-12
+
+Form = Literal["auto", "general"]
+
+
+class CJMController(Controller):
+    """Joint velocities from an EE twist through the Constrained Jacobian Matrix.
+
+    * **Analytical form** (:mod:`controllers.cjm.analytical`): one equality constraint
+      with at least 6 joints before it, the paper's method (eqs 17-24, 29-32). For a
+      square pre-chain a step is two 6 x 6 LU factorisations into buffers allocated once.
+    * **General form** (:mod:`controllers.cjm.general`): several constraints, barriers
+      switched on, fewer than 6 joints before the constraint, or a singular pre-chain.
+    * **Barriers** are held as plane equalities once the solution would break them (an
+      active set, most violated first).
+    * **Joint limits** (:mod:`controllers.cjm.saturation`): when the command leaves the
+      joint box (velocity limits, position limits through ``dt``), saturation in the
+      null space; the rows stay hard, the task is scaled, never the constraint unless
+      its own correction cannot fit. Where no limit binds the result is the plain form's.
+
+    Parameters
+    ----------
+    robot : the robot (``model``, ``ee_frame``, ``q_home``).
+    constraints : the constraints to hold.
+    dt : control period (s), for the position limits.
+    damping : constant DLS damping ``lambda`` (paper eq 35); 0 gives the exact inverse.
+    singular_threshold, max_damping : the rising damping near singularity
+        (:class:`controllers.linalg.DampingPolicy`).
+    parametrisation : ``"nullspace"`` (singularity-free, default) or ``"paper"`` (the
+        ``1/a`` form of eqs 9-13: holes only; where ``a`` reaches 0 the step falls back
+        to the null-space form and says so).
+    posture : configuration the redundancy is spent on (default ``robot.q_home``).
+    posture_gain : gain (1/s) of the null-space posture task; 0 gives minimum norm.
+    form : ``"auto"`` (analytical where it applies) or ``"general"`` (always the
+        null-space form: the cross-check).
+    limit_gain, position_limits, velocity_limits, strict : see
+        :class:`controllers.base.Controller`.
+    """
+
+    def __init__(
+        self,
+        robot: RobotLike,
+        constraints: Iterable[Constraint] = (),
+        dt: float = 1e-3,
+        damping: float = 0.0,
+        singular_threshold: float = 0.01,
+        max_damping: float = 0.05,
+        parametrisation: Parametrisation = "nullspace",
+        posture: np.ndarray | None = None,
+        posture_gain: float = 1.0,
+        form: Form = "auto",
+        limit_gain: float = DEFAULT_LIMIT_GAIN,
+        position_limits: bool = True,
+        velocity_limits: bool = True,
+        strict: bool = False,
+    ) -> None:
+        super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
+                         velocity_limits=velocity_limits, strict=strict)
+        if parametrisation not in ("nullspace", "paper"):
+            raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
+        if form not in ("auto", "general"):
+            raise ValueError(f"unknown form {form!r}: 'auto' or 'general'")
+        self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
+                                    as_number(singular_threshold, "singular_threshold", 0.0),
+                                    as_number(max_damping, "max_damping", 0.0))
+        self.parametrisation: Parametrisation = parametrisation
+        self.posture_gain = as_number(posture_gain, "posture_gain", 0.0)
+        self.form: Form = form
+        if posture is None:
+            posture = getattr(robot, "q_home", None)
+        self.posture = (pin.neutral(self.model) if posture is None
+                        else as_vector(posture, self.model.nq, "posture"))
+        self._splits: dict[int, ChainSplit | None] = {}
+        self._square_plans: dict[int, SquarePreChain] = {}
+        self._active: list[int] = []
+        self.set_constraints(constraints)
+
+    def _prepare(self) -> None:
+        if self.parametrisation == "paper":
+            for constraint in self.constraints:
+                if not constraint.has_paper_form:
+                    raise ValueError(
+                        f"parametrisation='paper' does not cover {type(constraint).__name__} "
+                        "(its 1/a form needs the constrained directions perpendicular to p "
+                        "at every configuration, as a hole's are): use 'nullspace'")
+        self._equalities = [i for i, c in enumerate(self.constraints) if c.is_equality]
+        self._barriers = [i for i, c in enumerate(self.constraints) if not c.is_equality]
+        self._square_plans = {}
+
+    # -- chain structure ---------------------------------------------------------------
+
+    def split(self, frame_id: int) -> ChainSplit | None:
+        """Joints before/after the link of ``frame_id`` on the path to the EE (cached)."""
+        if frame_id not in self._splits:
+            self._splits[frame_id] = chain_split(self.model, frame_id, self.ee_frame_id)
+        return self._splits[frame_id]
+
+    def constrained_jacobian(self, q: np.ndarray, index: int = 0) -> np.ndarray:
+        """The CJM ``Jbar = [Ad_ea S, J_post]`` of constraint ``index`` at ``q`` (eq 24)."""
+        q = as_vector(q, self.model.nq, "q")
+        self._kinematics(q)
+        frame_id = self.constraint_frames[index]
+        split = self.split(frame_id)
+        if split is None:
+            raise ValueError(f"the EE is not downstream of link {self.constraints[index].link!r}")
+        placement = self.data.oMf[frame_id]
+        structure = self.constraints[index].structure(placement, self.parametrisation)
+        ad_ea = self.data.oMf[self.ee_frame_id].actInv(placement).action
+        ee_jacobian = pin.getFrameJacobian(self.model, self.data, self.ee_frame_id, pin.LOCAL)
+        return np.hstack([ad_ea @ structure, ee_jacobian[:, split.post]])
+
+    # -- the step ----------------------------------------------------------------------
+
+    def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
+        self._active = list(self._equalities)
+        qd = self._solve_rows(kinematics, twist, self._active)
+        if self._barriers:
+            qd = self._activate_barriers(kinematics, twist, qd)
+        return qd
+
+    def _activate_barriers(self, kinematics: Kinematics, twist: np.ndarray,
+                           qd: np.ndarray) -> np.ndarray:
+        """Active set over the barriers: hold the most violated one as an equality, again."""
+        waiting = [i for i in self._barriers if i not in self._active]
+        while waiting:
+            violations = []
+            for i in waiting:
+                rows, rhs = self.constraints[i].rows(self.model, self.data, self.constraint_frames[i])
+                violations.append(float(rhs[0] - rows[0] @ qd))
+            worst = int(np.argmax(violations))
+            if violations[worst] <= BARRIER_TOLERANCE:
+                break
+            self._active.append(waiting.pop(worst))
+            qd = self._solve_rows(kinematics, twist, self._active)
+        self.info.active_barriers = tuple(i for i in self._active if i in self._barriers)
+        return qd
+
+    def _solve_rows(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
+        """The analytical form where it applies, else the general form, for these rows."""
+        if len(active) == 1 and self.form == "auto":
+            qd = self._solve_analytical(kinematics, twist, active[0])
+            if qd is not None:
+                return qd
+        rows, rows_rhs = self.constraint_rows(active)
+        return solve_general(rows, rows_rhs, kinematics.ee_jacobian, twist, self.policy,
+                             self._posture_velocity(kinematics.q), self.info)
+
+    def _solve_analytical(self, kinematics: Kinematics, twist: np.ndarray, index: int) -> np.ndarray | None:
+        """The analytical form of constraint ``index``, or None where it does not apply."""
+        frame_id = self.constraint_frames[index]
+        if self.parametrisation == "paper" and not self._paper_form_defined(index):
+            self.info.report(StepStatus.OK, "a = 0, where the paper's 1/a form is singular: "
+                                            "null-space form used")
+            return None
+        plan = self._square_plans.get(index)  # the paper's case, seen before
+        if plan is None:
+            split = self.split(frame_id)
+            if split is None or split.pre.size < 6:
+                return None
+            if split.pre.size > 6:
+                return solve_redundant_pre_chain(
+                    self.model, self.data, kinematics.ee_jacobian, kinematics.ee_placement,
+                    self.constraints[index], frame_id, split, twist, self.policy,
+                    self.parametrisation, self._posture_velocity(kinematics.q), self.info)
+            plan = self._square_plans[index] = SquarePreChain(
+                self.constraints[index], frame_id, self.model.nv, split, self.parametrisation)
+        return plan.solve(self.model, self.data, kinematics.ee_jacobian, twist, self.policy, self.info)
+
+    def _paper_form_defined(self, index: int) -> bool:
+        """Whether the paper's ``1/a`` structure matrix exists here (``a = |p|`` not ~0)."""
+        point = self.constraints[index].point(self.data.oMf[self.constraint_frames[index]])
+        return float(np.linalg.norm(point)) >= 1e-6
+
+    def _posture_velocity(self, q: np.ndarray) -> np.ndarray | None:
+        if self.posture_gain == 0.0:
+            return None
+        return self.posture_gain * pin.difference(self.model, q, self.posture)
+
+    # -- joint limits ------------------------------------------------------------------
+
+    def _saturate(self, kinematics: Kinematics, twist: np.ndarray, qd: np.ndarray,
+                  lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+        """Saturation in the null space (module :mod:`controllers.cjm.saturation`)."""
+        info = self.info
+        for _ in range(len(self._barriers) + 1):
+            rows, rows_rhs = self.constraint_rows(self._active)
+            result = saturate_in_null_space(rows, rows_rhs, kinematics.ee_jacobian, twist,
+                                            lower, upper, self.policy)
+            waiting = [i for i in self._barriers if i not in self._active]
+            violated = [i for i in waiting if self._barrier_violation(i, result.qd) > BARRIER_TOLERANCE]
+            if not violated:
+                break
+            self._active.append(max(violated, key=lambda i: self._barrier_violation(i, result.qd)))
+        info.active_barriers = tuple(i for i in self._active if i in self._barriers)
+        info.method = "saturated"
+        info.scale = result.task_scale
+        info.saturated_joints = result.saturated
+        info.equality_residual = (float(np.max(np.abs(rows @ result.qd - rows_rhs)))
+                                  if rows.shape[0] else 0.0)
+        joints = ", ".join(str(j) for j in result.saturated)
+        if result.rows_scale < 1.0:
+            info.report(StepStatus.CONSTRAINT_DEGRADED,
+                        f"the constraint's correction exceeds the joint limits: scaled to "
+                        f"{result.rows_scale:.0%}, the constraint converges as fast as they allow")
+        elif result.task_missed:
+            info.report(StepStatus.LEAST_SQUARES, f"joints {joints} at their limits: task not fully achievable")
+        elif result.task_scale < 1.0:
+            info.report(StepStatus.SCALED, f"joint{'s' if len(result.saturated) > 1 else ''} "
+                                           f"{joints or '-'} at {'their' if len(result.saturated) > 1 else 'its'} "
+                                           f"limit: task scaled to {result.task_scale:.0%}")
+        return result.qd
+
+    def _barrier_violation(self, index: int, qd: np.ndarray) -> float:
+        rows, rhs = self.constraints[index].rows(self.model, self.data, self.constraint_frames[index])
+        return float(rhs[0] - rows[0] @ qd)

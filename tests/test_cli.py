@@ -1,0 +1,183 @@
+"""The command lines (``teleop``, ``teleop web``, ``python -m web``) and the controller registry."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+from importlib import metadata
+
+import numpy as np
+import pytest
+
+from constraints import Hole
+from teleop.cli.main import build_parser
+from teleop.controller_specs import (CONTEXTS, CONTROLLER_SPECS, ControllerSpec, default_specs,
+                                     make_controller, spec_names)
+from teleop.robots import load_robot
+from web import cli as web_cli
+
+
+def run(*args: str, module: str = "teleop.cli") -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+def subcommand_parsers() -> dict[str, argparse.ArgumentParser]:
+    """The parser behind ``teleop NAME --help`` for every subcommand (web: web's own)."""
+    (commands,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+    parsers = dict(commands.choices)
+    parsers["web"] = web_cli.build_parser()
+    return parsers
+
+
+def option_blocks(help_text: str) -> list[str]:
+    """Each option's entry in a help text (its flags and help), whitespace collapsed."""
+    blocks: list[list[str]] = []
+    current: list[str] | None = None
+    for line in help_text.splitlines():
+        if re.match(r"^  -", line):  # an option's first line
+            current = [line]
+            blocks.append(current)
+        elif current is not None and line.startswith("   ") and line.strip():
+            current.append(line)  # its help, continued
+        else:  # blank line, section title or epilog: the block is over
+            current = None
+    return [" ".join(" ".join(block).split()) for block in blocks]
+
+
+def test_version_is_the_installed_version():
+    result = run("--version")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == metadata.version("cjm-teleop")
+
+
+def test_the_subcommands_are_the_documented_ones():
+    assert set(subcommand_parsers()) == {"compare", "replay", "record", "scenarios", "bench", "web"}
+
+
+@pytest.mark.parametrize("command", sorted(subcommand_parsers()))
+def test_every_subcommand_help_shows_each_option_default(command):
+    result = run(command, "--help")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith(f"usage: teleop {command}")
+    parser = subcommand_parsers()[command]
+    assert parser.description and "\n" not in parser.description.strip()  # one line
+    blocks = option_blocks(result.stdout)
+    options = [a for a in parser._actions if a.option_strings
+               and not isinstance(a, (argparse._HelpAction, argparse._VersionAction))]
+    for action in options:
+        flag = action.option_strings[-1]
+        (block,) = [b for b in blocks if re.match(rf"{re.escape(flag)}\b", b)]
+        if action.required:
+            continue  # no default to show
+        assert "(default" in block, f"{command} {flag}: no default in {block!r}"
+        if action.default is not None:
+            shown = " ".join(str(action.default).split())
+            assert f"(default: {shown})" in block, f"{command} {flag}: {block!r}"
+
+
+def test_top_level_help_lists_each_subcommand_with_its_summary():
+    result = run("--help")
+    assert result.returncode == 0, result.stderr
+    for name, parser in subcommand_parsers().items():
+        assert re.search(rf"^\s+{name}\b", result.stdout, re.MULTILINE), name
+
+
+def test_web_help_is_webs_own_and_python_m_web_works():
+    through_teleop = run("web", "--help")
+    direct = run("--help", module="web")
+    assert through_teleop.returncode == 0 and direct.returncode == 0, direct.stderr
+    assert direct.stdout.startswith("usage: python -m web")
+    for option in ("--robot", "--ee-frame", "--constrained-link", "--link-axis", "--package-dirs",
+                   "--q-home", "--controller", "--ghost", "--host", "--port"):
+        assert option in through_teleop.stdout and option in direct.stdout, option
+    assert "(default: 127.0.0.1)" in " ".join(through_teleop.stdout.split())
+
+
+def test_web_with_a_missing_urdf_is_one_line_and_exit_2():
+    result = run("web", "--robot", "/nonexistent.urdf")
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "/nonexistent.urdf" in lines[0], result.stderr
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--robot", "sda10f", "--ee-frame", "nope"], "unknown ee_frame 'nope'"),
+    (["--robot", "sda10f", "--q-home", "0,0,0"], "q_home must have size nq = 8"),
+    (["--robot", "sda10f", "--link-axis", "0", "0", "0"], "link_axis must be non-zero"),
+    (["--robot", "sda10f", "--controller", "qp:cplex"], "'cplex' is not available"),
+])
+def test_web_bad_values_are_one_line_and_exit_2(args, message, capsys):
+    assert web_cli.main(args) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+
+
+def test_web_passes_the_urdf_options_to_load_robot(tmp_path):
+    robot = load_robot("sda10f")
+    args = web_cli.build_parser().parse_args([
+        "--robot", str(robot.urdf_path), "--ee-frame", "arm_link_5_r", "--constrained-link",
+        "arm_link_4_u", "--link-axis", "0", "0", "-2", "--package-dirs", f"{tmp_path},{tmp_path}/a",
+        "--package-dirs", f"{tmp_path}/b", "--q-home=" + ",".join(map(str, robot.q_home))])
+    loaded = web_cli._load_robot(args)
+    assert loaded.ee_frame == "arm_link_5_r" and loaded.constrained_link == "arm_link_4_u"
+    np.testing.assert_allclose(loaded.link_axis, [0.0, 0.0, -1.0])
+    np.testing.assert_allclose(loaded.q_home, robot.q_home)
+    assert loaded.package_dirs == (str(tmp_path), f"{tmp_path}/a", f"{tmp_path}/b")
+
+
+def test_teleop_reaches_web_in_one_place_only():
+    import importlib
+    import inspect
+
+    # (``import teleop.cli.main as m`` would give the function: teleop.cli exports main)
+    source = inspect.getsource(importlib.import_module("teleop.cli.main"))
+    assert len(re.findall(r"^\s*(from web\b|import web\b)", source, re.MULTILINE)) == 1
+
+
+# -- the controller registry ------------------------------------------------------------
+
+
+def test_registry_is_one_ordered_table_with_defaults_per_context():
+    names = spec_names()
+    assert len(set(names)) == len(names) and names[0] == "cjm"
+    assert all(spec.description and "\n" not in spec.description for spec in CONTROLLER_SPECS)
+    for context in CONTEXTS:
+        defaults = default_specs(context)
+        assert defaults and list(defaults) == [n for n in names if n in defaults]  # table order
+    parser = subcommand_parsers()
+    assert parser["compare"].get_default("controllers") == ", ".join(default_specs("compare"))
+    assert parser["bench"].get_default("controllers") == ", ".join(default_specs("bench"))
+    with pytest.raises(ValueError, match="unknown context"):
+        default_specs("nope")
+    with pytest.raises(ValueError, match="unknown contexts"):
+        ControllerSpec("x", "y", {"nope"})
+
+
+@pytest.fixture(scope="module")
+def sda10f():
+    return load_robot("sda10f")
+
+
+@pytest.mark.parametrize("spec", spec_names())
+@pytest.mark.parametrize("with_hole", [False, True])
+def test_every_registry_spec_builds_and_solves(spec, with_hole, sda10f):
+    q = sda10f.q_home.copy()
+    constraints = [Hole.on_link(sda10f, q, distance=0.08)] if with_hole else []
+    controller = make_controller(spec, sda10f, constraints, dt=1e-3)
+    qd = controller.solve(q, np.zeros(6))
+    assert qd.shape == (sda10f.nv,) and np.all(np.isfinite(qd))
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("lqr", "unknown controller 'lqr'"),
+    ("cjm:nope", "unknown CJM variant 'nope'"),
+    ("qp:cplex", r"'cplex' is not available .*installed: .*daqp"),
+    ("mink:cplex", r"'cplex' is not available .*installed: .*daqp"),
+])
+def test_unknown_spec_raises_value_error(spec, message, sda10f):
+    with pytest.raises(ValueError, match=message):
+        make_controller(spec, sda10f)

@@ -1,0 +1,110 @@
+"""``teleop web`` / ``python -m web``: the command line of the browser teleoperation UI.
+
+All of ``teleop web``'s options live here (``teleop`` hands every argument after ``web``
+to :func:`main`). A robot that cannot be loaded, or any other bad value, is one line on
+stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import Sequence
+
+from teleop.cli.main import HelpFormatter, csv_list, positive
+from teleop.controller_specs import CONTROLLER_HELP
+from teleop.robots import BUILTIN_ROBOTS
+
+DESCRIPTION = "Browser teleoperation UI (viser) of a built-in robot or any URDF."
+
+
+def numbers(text: str) -> list[float]:
+    """``"0, -1.2,0.5"`` -> ``[0.0, -1.2, 0.5]`` (argparse type)."""
+    try:
+        return [float(item) for item in csv_list(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+
+
+def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION,
+                                     formatter_class=HelpFormatter)
+    robot = parser.add_argument_group("robot")
+    robot.add_argument("--robot", default="sda10f",
+                       help=f"built-in robot ({', '.join(BUILTIN_ROBOTS)}) or the path of a URDF")
+    robot.add_argument("--ee-frame", metavar="FRAME",
+                       help="end-effector frame (default: the built-in robot's, else the URDF's "
+                            "last link)")
+    robot.add_argument("--constrained-link", metavar="LINK",
+                       help="link the constraints act on (default: the built-in robot's, else "
+                            "none: no hole or plane can be added)")
+    robot.add_argument("--link-axis", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                       help="long direction of the constrained link in its own coordinates "
+                            "(default: the built-in robot's, else 0 0 1)")
+    robot.add_argument("--package-dirs", action="append", type=csv_list, metavar="DIR[,DIR...]",
+                       help="where package:// meshes are looked up; repeatable (default: the "
+                            "URDF's folder and its ancestors)")
+    robot.add_argument("--q-home", type=numbers, metavar="Q1,Q2,...",
+                       help="home configuration, nq numbers; write --q-home=-0.5,... when the "
+                            "first is negative (default: the built-in robot's, else the neutral "
+                            "configuration clipped to the limits)")
+
+    control = parser.add_argument_group("control")
+    control.add_argument("--controller", default="cjm",
+                         help=f"controller of the robot: {CONTROLLER_HELP}")
+    control.add_argument("--ghost", metavar="CONTROLLER",
+                         help="controller of a translucent second robot, side by side "
+                              "(default: no second robot)")
+    control.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
+    control.add_argument("--record-dir", default="sessions",
+                         help="folder the recorded sessions are written to")
+
+    server = parser.add_argument_group("server")
+    server.add_argument("--host", default="127.0.0.1",
+                        help="address to bind; the UI commands a robot, so only this machine "
+                             "by default: open it wider only on purpose")
+    server.add_argument("--port", type=int, default=8080, help="port to serve the UI on")
+    return parser
+
+
+def _load_robot(args: argparse.Namespace):
+    from teleop.robots import load_robot
+
+    package_dirs = None
+    if args.package_dirs is not None:  # --package-dirs a,b --package-dirs c -> [a, b, c]
+        package_dirs = [directory for group in args.package_dirs for directory in group]
+    return load_robot(args.robot, ee_frame=args.ee_frame, constrained_link=args.constrained_link,
+                      link_axis=args.link_axis, package_dirs=package_dirs, q_home=args.q_home)
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
+    """Serve the UI until Ctrl-C; 2 (and one line on stderr) when it cannot start."""
+    args = build_parser(prog).parse_args(argv)
+    try:
+        robot = _load_robot(args)
+        from web.ui import run_server
+
+        server, app, control, ui = run_server(robot, host=args.host, port=args.port,
+                                              controller=args.controller, ghost=args.ghost,
+                                              rate=args.rate, record_dir=args.record_dir)
+    except (OSError, ValueError) as error:  # no such URDF, bad frame / q_home / controller, port
+        print(f"{prog}: {' '.join(str(error).split())}", file=sys.stderr)
+        return 2
+    print(f"{prog}: {robot.name} on http://{args.host}:{server.get_port()} "
+          f"(controller {args.controller}{', ghost ' + args.ghost if args.ghost else ''}); "
+          "Ctrl-C stops", flush=True)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        ui.stop()
+        control.stop()
+        server.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
