@@ -22,6 +22,11 @@ from .joint_limits import DEFAULT_LIMIT_GAIN, BoxTest, JointBounds
 EQUALITY_TOLERANCE = 1e-9
 
 
+#: ``J_e qd`` meets the twist when ``max |J_e qd - V_e|`` is at most this times
+#: ``1 + max |V_e|`` (the QP's Tikhonov term alone leaves about 1e-9 relative).
+TWIST_TOLERANCE = 1e-6
+
+
 class SolverError(RuntimeError):
     """A controller could not compute a command (raised only with ``strict=True``)."""
 
@@ -265,6 +270,14 @@ class Controller(ABC):
             if A.shape[0]:
                 self.info.equality_residual = float(np.max(np.abs(A @ clipped - b)))
         return clipped
+
+    def _report_twist_error(self, jacobian: np.ndarray, qd: np.ndarray, twist: np.ndarray) -> None:
+        """``least_squares`` when ``J_e qd`` misses the twist (optimisers trade it off)."""
+        error = float(np.max(np.abs(jacobian @ qd - twist)))
+        if error > TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(twist)))):
+            self.info.report(StepStatus.LEAST_SQUARES,
+                             f"twist not met exactly (error {error:.2e}): limits, barriers, "
+                             "constraints or a singularity")
 
     def _fail(self, message: str) -> np.ndarray:
         self.info.status = StepStatus.FAILED

@@ -518,6 +518,7 @@ class MinkController(Controller):
                 if np.any(rows.A_pin @ qd - rows.b < 1e-9):
                     active.append(index)
             self.info.active_barriers = tuple(active)
+        self._report_twist_error(kinematics.ee_jacobian, qd, twist)
         return qd
 
     def _solve_ik(self) -> np.ndarray:

@@ -232,6 +232,7 @@ class QPController(Controller):
         if G is not None:
             self.info.active_barriers = tuple(
                 barriers[i] for i in np.flatnonzero(G @ qd - h > -1e-9))
+        self._report_twist_error(J, qd, twist)
         return qd
 
     def _solve_daqp(self, P, c, A, b, G, h, lb, ub) -> np.ndarray:

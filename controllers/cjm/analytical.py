@@ -22,7 +22,7 @@ import pinocchio as pin
 
 from constraints import Constraint, ConstraintPoint, Parametrisation, structure_of
 
-from ..base import SolveInfo, StepStatus
+from ..base import TWIST_TOLERANCE, SolveInfo, StepStatus
 from ..linalg import DampedSolution, DampingPolicy, damped_least_squares
 
 #: Below this ratio of the smallest to the largest LU pivot of ``J_a`` (square
@@ -233,7 +233,7 @@ def report_task_solution(solution: DampedSolution, matrix: np.ndarray, rhs: np.n
     if solution.exact:
         return
     residual = float(np.max(np.abs(matrix @ solution.x - rhs), initial=0.0))
-    if residual > 1e-9 * (1.0 + float(np.max(np.abs(rhs), initial=0.0))):
+    if residual > TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(rhs), initial=0.0))):
         note = (f"near a singularity: damped (lambda {solution.damping:.2g})" if solution.damping > 0
                 else "task not fully achievable: least squares")
         info.report(StepStatus.LEAST_SQUARES, f"{note}, twist residual {residual:.2e}")

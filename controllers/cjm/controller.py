@@ -93,6 +93,9 @@ class CJMController(Controller):
         self._splits: dict[int, ChainSplit | None] = {}
         self._square_plans: dict[int, SquarePreChain] = {}
         self._active: list[int] = []
+        #: joint name per velocity index (a multi-dof joint repeats its name)
+        self._joint_names = [self.model.names[j] for j in range(1, self.model.njoints)
+                             for _ in range(self.model.nvs[j])]
         self.set_constraints(constraints)
 
     def _prepare(self) -> None:
@@ -205,7 +208,7 @@ class CJMController(Controller):
         for _ in range(len(self._barriers) + 1):
             rows, rows_rhs = self.constraint_rows(self._active)
             result = saturate_in_null_space(rows, rows_rhs, kinematics.ee_jacobian, twist,
-                                            lower, upper, self.policy)
+                                            lower, upper, self.velocity_limit, self.policy)
             waiting = [i for i in self._barriers if i not in self._active]
             violated = [i for i in waiting if self._barrier_violation(i, result.qd) > BARRIER_TOLERANCE]
             if not violated:
@@ -217,18 +220,22 @@ class CJMController(Controller):
         info.saturated_joints = result.saturated
         info.equality_residual = (float(np.max(np.abs(rows @ result.qd - rows_rhs)))
                                   if rows.shape[0] else 0.0)
-        joints = ", ".join(str(j) for j in result.saturated)
         if result.rows_scale < 1.0:
             info.report(StepStatus.CONSTRAINT_DEGRADED,
                         f"the constraint's correction exceeds the joint limits: scaled to "
                         f"{result.rows_scale:.0%}, the constraint converges as fast as they allow")
         elif result.task_missed:
-            info.report(StepStatus.LEAST_SQUARES, f"joints {joints} at their limits: task not fully achievable")
+            info.report(StepStatus.LEAST_SQUARES,
+                        f"{self._joint_list(result.saturated)} at a limit: task not fully achievable")
         elif result.task_scale < 1.0:
-            info.report(StepStatus.SCALED, f"joint{'s' if len(result.saturated) > 1 else ''} "
-                                           f"{joints or '-'} at {'their' if len(result.saturated) > 1 else 'its'} "
-                                           f"limit: task scaled to {result.task_scale:.0%}")
+            info.report(StepStatus.SCALED, f"{self._joint_list([result.limiting_joint])} at a limit: "
+                                           f"task scaled to {result.task_scale:.0%}")
         return result.qd
+
+    def _joint_list(self, velocity_indices: Iterable[int]) -> str:
+        """``joint arm_joint_4`` / ``joints a, b`` for velocity indices of 1-dof joints."""
+        names = [self._joint_names[i] for i in velocity_indices if 0 <= i < len(self._joint_names)]
+        return f"joint{'s' if len(names) > 1 else ''} {', '.join(names) or '-'}"
 
     def _barrier_violation(self, index: int, qd: np.ndarray) -> float:
         rows, rhs = self.constraints[index].rows(self.model, self.data, self.constraint_frames[index])

@@ -12,7 +12,9 @@ so ``qd(s) = base + s direction`` with ``A base = b`` and ``A direction = 0``: e
 iterate holds the rows, and scaling touches only the task. While some joint leaves its
 box, the joint that limits the task scale most is saturated at the bound it hits and the
 rest solved again. When saturating would cost task directions (the rank of ``J_F N_F``
-drops), the best scale found so far is kept instead. If not even the rows fit inside
+drops), the best scale found so far is kept instead. A joint held at a *position* bound
+is treated as locked, the task solved over the others (see
+:func:`saturate_in_null_space`). If not even the rows fit inside
 the box, their right-hand side (drift feedback and feed-forward) is scaled down as
 little as needed: the constraint then converges as fast as the limits allow.
 """
@@ -23,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..base import TWIST_TOLERANCE
 from ..linalg import DampingPolicy, damped_least_squares, nullspace
 
 #: The rows count as held over the free joints up to this residual (m/s).
@@ -39,6 +42,7 @@ class Saturation:
     task_scale : the factor ``s`` of the task (1: the task as asked).
     rows_scale : the factor of the rows' right-hand side (1: the constraints as asked).
     saturated : velocity indices of the joints held at a bound.
+    limiting_joint : the joint whose limit sets ``task_scale`` (-1: none).
     task_missed : ``J_e qd`` differs from ``task_scale V_e`` (a least-squares task).
     """
 
@@ -46,6 +50,7 @@ class Saturation:
     task_scale: float
     rows_scale: float
     saturated: tuple[int, ...]
+    limiting_joint: int
     task_missed: bool
 
 
@@ -118,46 +123,59 @@ def _inside(qd: np.ndarray, lower: np.ndarray, upper: np.ndarray, tolerance: flo
 
 def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
                            twist: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                           policy: DampingPolicy) -> Saturation:
-    """``qd`` inside ``[lower, upper]`` holding the rows first, the twist scaled second."""
+                           velocity_limit: np.ndarray, policy: DampingPolicy) -> Saturation:
+    """``qd`` inside ``[lower, upper]`` holding the rows first, the twist second.
+
+    A joint whose *velocity* limit binds slows the task: Flacco et al.'s scaling, the
+    direction of the twist kept. A joint whose *position* bound binds (it is at, or a
+    period away from, a position limit) is held there like a locked joint and the task
+    is solved over the others, in the least-squares sense if they cannot give all of it
+    (as the QP does); scaling for it would freeze the arm as the bound shrinks to zero.
+    """
     nv = jacobian.shape[1]
     free = np.ones(nv, dtype=bool)
     held = np.zeros(nv)
-    best: tuple[float, np.ndarray, np.ndarray] | None = None  # (scale, free, held), full rank
-    full_rank = None
+    scaled: tuple[float, np.ndarray, np.ndarray, int] | None = None  # scale, free, held, joint
+    reference_rank = None  # the task rank before any velocity saturation
     for _ in range(nv + 1):
         split = _solve_over_free(rows, rows_rhs, jacobian, twist, free, held, policy)
-        full_rank = split.task_rank if full_rank is None else full_rank
+        reference_rank = split.task_rank if reference_rank is None else reference_rank
         if split.rows_residual > ROWS_TOLERANCE:
             break  # too few free joints left for the rows
-        rank_lost = split.task_rank < full_rank
-        if rank_lost and best is not None:
+        if split.task_rank < reference_rank and scaled is not None:
             break  # Flacco et al.: keep the best scale found with every task direction
         qd = split.base + split.direction
         if _inside(qd, lower, upper):
-            return _result(qd, 1.0, 1.0, free, jacobian, twist)
+            return _result(qd, 1.0, 1.0, free, -1, jacobian, twist)
         scale, critical = task_scale_limit(split.base, split.direction, lower, upper, free)
-        if scale >= 0.0 and not rank_lost and (best is None or scale > best[0]):
-            best = (scale, free.copy(), held.copy())
         if critical < 0:
             break
-        held[critical] = upper[critical] if qd[critical] > upper[critical] else lower[critical]
+        bound = upper[critical] if qd[critical] > upper[critical] else lower[critical]
+        held[critical] = bound
         free[critical] = False
+        if abs(bound) < velocity_limit[critical] * (1.0 - 1e-12):  # a position bound
+            reference_rank, scaled = None, None
+        elif scale >= 0.0 and (scaled is None or scale > scaled[0]):
+            free[critical] = True  # the scaled candidate has it free
+            scaled = (scale, free.copy(), held.copy(), critical)
+            free[critical] = False
         if not free.any():
             break
-    if best is not None:
-        scale, free, held = best
+    if scaled is not None:
+        scale, free, held, critical = scaled
         split = _solve_over_free(rows, rows_rhs, jacobian, twist, free, held, policy)
-        return _result(split.base + scale * split.direction, scale, 1.0, free, jacobian, twist)
+        return _result(split.base + scale * split.direction, scale, 1.0, free, critical,
+                       jacobian, twist)
     return _scale_rows(rows, rows_rhs, lower, upper, jacobian, twist)
 
 
 def _result(qd: np.ndarray, task_scale: float, rows_scale: float, free: np.ndarray,
-            jacobian: np.ndarray, twist: np.ndarray) -> Saturation:
-    task_residual = float(np.max(np.abs(jacobian @ qd - task_scale * twist)))
-    achieved = task_residual <= 1e-9 * (1.0 + float(np.max(np.abs(twist))))
+            limiting_joint: int, jacobian: np.ndarray, twist: np.ndarray) -> Saturation:
+    achieved = jacobian @ qd
+    tolerance = TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(twist))))
+    missed = float(np.max(np.abs(achieved - task_scale * twist))) > tolerance
     return Saturation(qd, task_scale, rows_scale, tuple(np.flatnonzero(~free).tolist()),
-                      not achieved)
+                      limiting_joint, missed)
 
 
 def _scale_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray, upper: np.ndarray,
@@ -168,4 +186,4 @@ def _scale_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray, upper
     everything = np.ones(correction.size, dtype=bool)
     scale, _ = task_scale_limit(np.zeros_like(correction), correction, lower, upper, everything)
     scale = max(scale, 0.0)  # -inf: a joint past its limit; the caller clips
-    return _result(scale * correction, 0.0, scale, everything, jacobian, twist)
+    return _result(scale * correction, 0.0, scale, everything, -1, jacobian, twist)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import csv
 import json
 import math
@@ -59,7 +60,8 @@ def _collect(spec: str, records: Sequence[StepRecord], failures: list[str]) -> R
         controller=spec, columns=columns, constraint_velocity=velocity,
         desired_linear_velocity=np.array([r.desired_linear_velocity for r in records]).reshape(-1, 3),
         actual_linear_velocity=np.array([r.actual_linear_velocity for r in records]).reshape(-1, 3),
-        failure_messages=failures)
+        failure_messages=failures,
+        status_counts=dict(collections.Counter(r.status for r in records)))
 
 
 def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
@@ -128,8 +130,8 @@ def format_table(document: dict) -> str:
     """A short table of the headline numbers for the terminal and the README."""
     header = ("| controller | constraint err max (m) | RMS (m) | residual max (m/s) | "
               "EE pos RMS (mm) | EE ori RMS (mrad) | limit viol (rad) | failed | "
-              "step median/p99 (us) |")
-    lines = [header, "|" + "---|" * 9]
+              "step median/p99 (us) | steps by status |")
+    lines = [header, "|" + "---|" * 10]
     for spec, m in document["controllers"].items():
         lines.append(
             f"| {spec} | {m['constraint_error_max_m']:.1e} | {m['constraint_error_rms_m']:.1e} | "
@@ -137,5 +139,12 @@ def format_table(document: dict) -> str:
             f"{1e3 * m['ee_position_error_rms_m']:.3f} | "
             f"{1e3 * m['ee_orientation_error_rms_rad']:.3f} | "
             f"{m['joint_limit_violation_max_rad']:.3f} | {m['failed_steps']} | "
-            f"{m['step_time_median_us']:.0f} / {m['step_time_p99_us']:.0f} |")
+            f"{m['step_time_median_us']:.0f} / {m['step_time_p99_us']:.0f} | "
+            f"{format_status_counts(m['status_counts'])} |")
     return "\n".join(lines)
+
+
+def format_status_counts(counts: dict[str, int]) -> str:
+    """``ok 9990, scaled 10``: the statuses in order of severity, zeros left out."""
+    order = ("ok", "scaled", "least_squares", "constraint_degraded", "failed")
+    return ", ".join(f"{status} {counts[status]}" for status in order if counts.get(status))

@@ -27,6 +27,7 @@ class RunResult:
     desired_linear_velocity: np.ndarray  # (steps, 3) world frame
     actual_linear_velocity: np.ndarray  # (steps, 3) world frame
     failure_messages: list[str] = field(default_factory=list)
+    status_counts: dict[str, int] = field(default_factory=dict)  # steps per step status
 
     @property
     def steps(self) -> int:
@@ -59,6 +60,7 @@ class RunResult:
             "step_time_max_us": top(step),
             "tick_time_median_us": float(np.median(c["tick_time_us"])) if step.size else 0.0,
             "first_failure": self.failure_messages[0] if self.failure_messages else None,
+            "status_counts": dict(self.status_counts),
         }
 
 

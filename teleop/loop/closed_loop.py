@@ -83,6 +83,7 @@ class StepRecord:
     constraint_velocity: np.ndarray = field(repr=False)  # C v_c of the first equality
     desired_linear_velocity: np.ndarray = field(repr=False)  # world frame
     actual_linear_velocity: np.ndarray = field(repr=False)  # world frame
+    status: str = "ok"  # the controller's step status (controllers.StepStatus value)
     message: str = ""
 
 
@@ -177,13 +178,14 @@ class TeleopLoop:
         solve_start = time.perf_counter_ns()
         try:
             qd = self.controller.solve(self.q, twist)
-            failed = not self.controller.info.success
+            status = self.controller.info.status.value
             message = self.controller.info.message
         except ValueError as error:  # refused input: hold still, say why
-            qd, failed, message = np.zeros(model.nv), True, str(error)
+            qd, status, message = np.zeros(model.nv), "failed", str(error)
         step_time = (time.perf_counter_ns() - solve_start) * 1e-3
         if not np.isfinite(qd).all():  # never integrate a non-finite command
-            qd, failed, message = np.zeros(model.nv), True, "non-finite command replaced by zero"
+            qd, status, message = np.zeros(model.nv), "failed", "non-finite command replaced by zero"
+        failed = status == "failed"
 
         # measures at the configuration the command was computed for
         residual, velocity = self._constraint_velocity(qd)
@@ -208,7 +210,7 @@ class TeleopLoop:
             failed=failed, step_time_us=step_time,
             tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3,
             constraint_velocity=velocity, desired_linear_velocity=desired_linear,
-            actual_linear_velocity=actual_linear, message=message,
+            actual_linear_velocity=actual_linear, status=status, message=message,
         )
 
     def _constraint_velocity(self, qd: np.ndarray) -> tuple[float, np.ndarray]:
