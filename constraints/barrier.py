@@ -16,7 +16,7 @@ class Barrier(Plane):
     ``d`` is the signed distance of the link point from the plane, positive on the
     allowed side. Far from the plane the row is inactive; the point approaches it
     exponentially, at most at ``K d`` m/s, and never crosses it in continuous time (in
-    discrete time at period ``dt``, for ``K dt <= 1``). This is the DESIGN.md section 4
+    discrete time at period ``dt``, for ``K dt < 1``, which the controllers check). This is the DESIGN.md section 4
     row ``-n^T v_c <= gamma d / dt`` with ``gamma = K dt``. A point already on the wrong
     side (``d < 0``) is pushed back at ``K |d|``.
 
@@ -26,6 +26,9 @@ class Barrier(Plane):
 
     is_equality = False
     default_gain = DEFAULT_BARRIER_GAIN
+    #: ``K dt < 1`` (exclusive, like every gain bound here): the point never crosses
+    #: the plane in discrete time
+    max_gain_period = 1.0
 
     # ``Barrier.through_link_point(robot, q, normal, ..., plane_point=...)`` (inherited):
     # the point must be on the allowed side at ``q``; more than ``tolerance`` m behind the

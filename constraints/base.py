@@ -15,9 +15,12 @@ position error in metres along ``C`` (drift feedback, DESIGN.md section 3). An i
 
 from __future__ import annotations
 
+import inspect
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from functools import cache
+from typing import ClassVar, Literal, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -59,6 +62,36 @@ class ConstraintPoint:
     C_perp: np.ndarray
     error: np.ndarray
     rhs: np.ndarray
+
+
+@dataclass(frozen=True)
+class ConstraintGeometry:
+    """What a view draws of one constraint at a configuration, all in the world frame (m).
+
+    Attributes
+    ----------
+    kind : the constraint's ``kind`` ("hole", "plane", ...).
+    shape : how to draw the geometry: ``"ring"`` (around ``axis`` at ``anchor``),
+        ``"plane"`` (through ``anchor``, normal ``axis``) or ``"point"`` (at ``anchor``).
+    anchor : (3,) the geometry's reference point (hole centre, plane point, lock target):
+        :attr:`Constraint.position`.
+    point : (3,) the constrained point on the link.
+    axis : (3,) unit world axis (a hole's link axis, a plane's normal), or None.
+    error : (3,) from where the point should be to where it is (``point - error``
+        satisfies the constraint); zero when satisfied, so zero for a barrier on its
+        allowed side.
+    color : display colour, RGB 0-255.
+    label : human-readable name of the kind.
+    """
+
+    kind: str
+    shape: str
+    anchor: np.ndarray
+    point: np.ndarray
+    axis: np.ndarray | None
+    error: np.ndarray
+    color: tuple[int, int, int]
+    label: str
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -109,7 +142,7 @@ def link_point_at(robot: RobotLike, q: np.ndarray, link: str | None, link_point=
     if (link_point is None) == (distance is None):
         raise ValueError("give exactly one of link_point or distance")
     if link_point is None:
-        link_point = float(distance) * as_unit_vector(robot.link_axis, "link_axis")
+        link_point = as_number(distance, "distance") * as_unit_vector(robot.link_axis, "link_axis")
     link_point = as_vector(link_point, 3, "link_point")
     return link, link_point, frame_placement(robot.model, q, link)
 
@@ -186,6 +219,13 @@ class Constraint(ABC):
     class turns that into the structure matrix ``S`` (for the analytical CJM) and the
     joint-space rows ``A qd = b`` (for the general CJM and the QP).
 
+    A constraint also describes itself, so no other layer branches on its type: its
+    ``kind`` name, :meth:`to_dict` / :meth:`from_dict` (the constructor's arguments; the
+    kinds are listed in :mod:`constraints.registry`), the world reference point of its
+    geometry (:attr:`position`, moved by :meth:`move_to`) and what a view draws
+    (:meth:`geometry`). A new type sets the class attributes below and is one line in
+    the registry.
+
     Parameters
     ----------
     link : name of the link (frame) carrying the constrained point.
@@ -199,15 +239,35 @@ class Constraint(ABC):
     #: whether the paper's ``1/a`` structure matrix (eqs 9-13) exists wherever ``a != 0``:
     #: only when ``C`` stays perpendicular to ``p`` (a hole)
     has_paper_form: bool = False
+    #: the type's name in dicts and session files ("hole", "plane", ...)
+    kind: ClassVar[str]
+    #: the attribute holding the geometry's world reference point (:attr:`position`)
+    position_attribute: ClassVar[str]
+    #: how :meth:`geometry` says to draw it ("ring", "plane" or "point"), colour, label
+    shape: ClassVar[str] = "point"
+    color: ClassVar[tuple[int, int, int]] = (128, 128, 128)
+    label: ClassVar[str] = "constraint"
+    #: world velocity (m/s) of the reference point, fed forward (set by :meth:`move_to`)
+    velocity: np.ndarray
 
     def __init__(self, link: str, gain: float = DEFAULT_GAIN) -> None:
         if not isinstance(link, str) or not link:
             raise ValueError(f"link must be a non-empty link name, got {link!r}")
-        gain = float(gain)
-        if not np.isfinite(gain) or gain < 0.0:
-            raise ValueError(f"gain must be a finite non-negative number (1/s), got {gain}")
         self.link = link
-        self.gain = gain
+        self.gain = as_number(gain, "gain", 0.0)
+
+    #: the largest stable ``K dt`` (exclusive): drift feedback ``e+ = (1 - K dt) e``
+    #: converges for ``0 <= K dt < 2`` (docs/design.md section 3)
+    max_gain_period: float = 2.0
+
+    def check_gain(self, dt: float) -> None:
+        """Refuse a gain that is unstable at control period ``dt`` (``ValueError``)."""
+        product = self.gain * dt
+        if not product < self.max_gain_period:
+            raise ValueError(
+                f"{type(self).__name__} gain {self.gain:g} 1/s is unstable at {1.0 / dt:g} Hz "
+                f"(K dt = {product:g}, needs < {self.max_gain_period:g}): lower the gain "
+                f"below {self.max_gain_period / dt:g} 1/s or raise the rate")
 
     # -- geometry, in F_a coordinates, given the link's world placement --------------
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from .validation import as_number
 from .base import (
     DEFAULT_GAIN,
     Constraint,
@@ -76,9 +77,7 @@ class Hole(Constraint):
         ``link`` and ``link_axis`` default to the robot's ``constrained_link`` and
         ``link_axis``.
         """
-        distance = float(distance)
-        if not np.isfinite(distance):
-            raise ValueError(f"distance must be finite, got {distance}")
+        distance = as_number(distance, "distance")
         link = default_link(robot, link)
         axis = as_unit_vector(robot.link_axis if link_axis is None else link_axis, "link_axis")
         placement = frame_placement(robot.model, q, link)
@@ -106,7 +105,7 @@ class Hole(Constraint):
         hole = cls(link, center, link_axis=axis, gain=gain)
         placement = frame_placement(robot.model, q, link)
         offset = float(np.linalg.norm(hole.error(placement)))
-        if offset > tolerance:
+        if offset > as_number(tolerance, "tolerance", 0.0):
             raise ValueError(
                 f"hole centre {np.round(hole.center, 6).tolist()} is off the axis of link "
                 f"{link!r} by {offset:.4g} m (tolerance {tolerance:g} m)"

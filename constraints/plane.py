@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from .validation import as_number
 from .base import (
     DEFAULT_GAIN,
     Constraint,
@@ -79,7 +80,7 @@ class Plane(Constraint):
         if plane_point is None:
             plane_point = point_world
         plane = cls(link, link_point, plane_point, normal, gain=gain)
-        plane._check_start(plane.signed_distance(placement), tolerance)
+        plane._check_start(plane.signed_distance(placement), as_number(tolerance, "tolerance", 0.0))
         return plane
 
     def _check_start(self, signed_distance: float, tolerance: float) -> None:

@@ -205,8 +205,11 @@ class Controller(ABC):
     # -- constraints -------------------------------------------------------------------
 
     def set_constraints(self, constraints: Iterable[Constraint]) -> None:
-        """Replace the constraint set (unknown links raise ``ValueError`` here)."""
+        """Replace the constraint set; unknown links and gains unstable at ``dt`` raise
+        ``ValueError`` here. Call it again after changing a constraint's gain."""
         constraints = as_constraint_list(constraints)
+        for constraint in constraints:
+            constraint.check_gain(self.dt)
         self.constraint_frames = [resolve_frame(self.model, c.link) for c in constraints]
         self.constraints = constraints
         self._prepare()

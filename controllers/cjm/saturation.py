@@ -97,7 +97,7 @@ def task_scale_limit(base: np.ndarray, direction: np.ndarray, lower: np.ndarray,
     Flacco et al.'s *getTaskScalingFactor*: per joint the interval of ``s`` that keeps it
     inside, intersected over the free joints.
     """
-    smallest_max, critical, largest_min = np.inf, -1, -np.inf
+    smallest_max, critical, largest_min, needs_more = np.inf, -1, -np.inf, -1
     for i in np.flatnonzero(free).tolist():
         a, b = direction[i], base[i]
         if abs(a) > 1e-12:
@@ -110,10 +110,14 @@ def task_scale_limit(base: np.ndarray, direction: np.ndarray, lower: np.ndarray,
             low, high = np.inf, -np.inf  # outside whatever the scale
         if high < smallest_max:
             smallest_max, critical = high, i
-        largest_min = max(largest_min, low)
-    if largest_min > smallest_max or smallest_max < 0.0:
+        if low > largest_min:
+            largest_min, needs_more = low, i
+    largest = min(1.0, smallest_max)
+    if largest_min > largest:  # joint needs_more is outside for every s in [0, 1]
+        return -np.inf, needs_more
+    if largest < 0.0:
         return -np.inf, critical
-    return min(1.0, smallest_max), critical
+    return largest, critical
 
 
 def _inside(qd: np.ndarray, lower: np.ndarray, upper: np.ndarray, tolerance: float = 1e-12) -> bool:

@@ -3,6 +3,7 @@ scaling over generated chains and numbers of constraints, all in one process."""
 
 from __future__ import annotations
 
+import collections
 import json
 import time
 from dataclasses import asdict, dataclass
@@ -15,6 +16,8 @@ from constraints import Hole
 from teleop.robots.chains import hole_links, load_chain
 from teleop.controller_specs import default_specs, make_controller
 from teleop.robots import Robot, load_robot
+
+from .compare import format_status_counts
 
 #: hole distance along the constrained link of each built-in robot (m)
 DEFAULT_HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20}
@@ -37,6 +40,7 @@ class StepTiming:
     iterations: int
     max_constraint_residual: float  # m/s, max |A qd - b| over the timed steps
     method: str  # what the controller did (analytical / general / qp:... / mink:...)
+    status_counts: dict[str, int]  # timed steps per step status (ok, scaled, ...)
 
 
 def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
@@ -64,18 +68,23 @@ def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: in
     # so every controller solves the plain constrained problem
     twist = np.array([0.001, -0.002, 0.0015, 0.005, -0.003, 0.002])
     residual = 0.0
+    statuses: collections.Counter[str] = collections.Counter()
 
     def step(q: np.ndarray) -> None:
         nonlocal residual
         controller.solve(q, twist)
         residual = max(residual, controller.info.equality_residual)
+        statuses[controller.info.status.value] += 1
 
-    times = time_steps(step, configurations, warmup)
+    for q in configurations[:warmup]:
+        controller.solve(q, twist)
+    times = time_steps(step, configurations, warmup=0)
     return StepTiming(robot=label or robot.name, controller=spec, dof=robot.model.nv,
                       constraint_rows=sum(h.dim for h in holes),
                       median_us=float(np.median(times)), p99_us=float(np.percentile(times, 99)),
                       max_us=float(times.max()), iterations=iterations,
-                      max_constraint_residual=residual, method=controller.info.method)
+                      max_constraint_residual=residual, method=controller.info.method,
+                      status_counts=dict(statuses))
 
 
 def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
@@ -124,13 +133,13 @@ def mink_ratios(results: Sequence[StepTiming]) -> dict[tuple[str, str], float]:
 def format_table(results: Sequence[StepTiming]) -> str:
     ratios = mink_ratios(results)
     lines = [f"{'problem':<20}{'dof':>4}{'rows':>5}  {'controller':<13}{'median us':>10}"
-             f"{'p99 us':>9}{'max us':>10}{'x mink':>8}{'residual':>10}  method"]
+             f"{'p99 us':>9}{'max us':>10}{'x mink':>8}{'residual':>10}  {'method':<12}statuses"]
     for r in results:
         ratio = ratios.get((r.robot, r.controller))
         lines.append(
             f"{r.robot:<20}{r.dof:>4}{r.constraint_rows:>5}  {r.controller:<13}{r.median_us:>10.1f}"
             f"{r.p99_us:>9.1f}{r.max_us:>10.1f}{'' if ratio is None else f'{ratio:.1f}':>8}"
-            f"{r.max_constraint_residual:>10.1e}  {r.method}")
+            f"{r.max_constraint_residual:>10.1e}  {r.method:<12}{format_status_counts(r.status_counts)}")
     return "\n".join(lines)
 
 
