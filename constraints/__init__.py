@@ -2,13 +2,16 @@
 
 Each constraint computes, at a configuration, its structure matrix ``S`` (the paper's
 reparametrisation of the twist of ``F_a``), its joint-space rows ``A qd = b`` with drift
-feedback, and its position error. See ``base.Constraint``.
+feedback, and its position error. See ``base.Constraint``. Each also describes itself
+(``kind``, ``to_dict`` / ``Constraint.from_dict``, ``position`` / ``move_to``,
+``geometry``); ``registry.CONSTRAINT_TYPES`` lists the kinds.
 """
 
 from .barrier import DEFAULT_BARRIER_GAIN, Barrier
 from .base import (
     DEFAULT_GAIN,
     Constraint,
+    ConstraintGeometry,
     ConstraintPoint,
     Parametrisation,
     RobotLike,
@@ -19,10 +22,13 @@ from .base import (
 from .hole import Hole
 from .plane import Plane
 from .point_lock import PointLock
+from .registry import CONSTRAINT_TYPES
 
 __all__ = [
     "Barrier",
+    "CONSTRAINT_TYPES",
     "Constraint",
+    "ConstraintGeometry",
     "ConstraintPoint",
     "Parametrisation",
     "DEFAULT_BARRIER_GAIN",

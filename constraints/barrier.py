@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pinocchio as pin
 
 from .plane import Plane
@@ -16,8 +17,9 @@ class Barrier(Plane):
     ``d`` is the signed distance of the link point from the plane, positive on the
     allowed side. Far from the plane the row is inactive; the point approaches it
     exponentially, at most at ``K d`` m/s, and never crosses it in continuous time (in
-    discrete time at period ``dt``, for ``K dt < 1``, which the controllers check). This is the DESIGN.md section 4
-    row ``-n^T v_c <= gamma d / dt`` with ``gamma = K dt``. A point already on the wrong
+    discrete time at period ``dt``, for ``K dt < 1``, which the controllers check). This
+    is the row ``-n^T v_c <= gamma d / dt`` of docs/design.md section 12, with
+    ``gamma = K dt``. A point already on the wrong
     side (``d < 0``) is pushed back at ``K |d|``.
 
     The QP uses the row as an inequality; the CJM switches it on as the plane equality
@@ -26,6 +28,9 @@ class Barrier(Plane):
 
     is_equality = False
     default_gain = DEFAULT_BARRIER_GAIN
+    kind = "barrier"
+    color = (230, 40, 40)
+    label = "barrier"
     #: ``K dt < 1`` (exclusive, like every gain bound here): the point never crosses
     #: the plane in discrete time
     max_gain_period = 1.0
@@ -45,6 +50,10 @@ class Barrier(Plane):
         """How far (m) the point is behind the barrier; 0 on the allowed side."""
         return max(0.0, -self.signed_distance(placement))
 
-    def is_violated_by(self, constraint_velocity: float, placement: pin.SE3) -> bool:
-        """Whether ``n . v_c`` = ``constraint_velocity`` breaks the row at ``placement``."""
-        return constraint_velocity < float(self.evaluate(placement).rhs[0])
+    def violation(self, placement: pin.SE3) -> float:
+        """The :meth:`penetration`: a barrier is satisfied anywhere on its allowed side."""
+        return self.penetration(placement)
+
+    def error_world(self, placement: pin.SE3) -> np.ndarray:
+        """``min(d, 0) n``: zero on the allowed side, behind it back to the plane."""
+        return min(0.0, self.signed_distance(placement)) * self.normal

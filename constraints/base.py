@@ -1,6 +1,6 @@
 """Common base of the kinematic constraints on a point of the robot's chain.
 
-Notation (DESIGN.md sections 2-3, paper sections 4-5). ``F_a`` is the frame of the link
+Notation (docs/design.md sections 2-3, paper sections 4-5). ``F_a`` is the frame of the link
 that carries the constrained point (for a URDF link driven by a joint, the frame of that
 joint); every vector below is in ``F_a`` coordinates unless it says *world*.
 
@@ -9,7 +9,7 @@ joint); every vector below is in ``F_a`` coordinates unless it says *world*.
 * ``C`` (k x 3, orthonormal rows) the directions along which the point may not move.
 
 An equality constraint asks ``C v_c = b`` with ``b = -K e + feed_forward``, ``e`` the
-position error in metres along ``C`` (drift feedback, DESIGN.md section 3). An inequality
+position error in metres along ``C`` (drift feedback, docs/design.md section 3). An inequality
 (a barrier) asks ``C v_c >= b``.
 """
 
@@ -97,6 +97,15 @@ class ConstraintGeometry:
 # ----------------------------------------------------------------------------- helpers
 
 
+@cache
+def constructor_fields(constraint_type: type) -> dict[str, inspect.Parameter]:
+    """The named arguments of a constraint type's constructor: its :meth:`Constraint.to_dict`
+    fields, in order."""
+    return {name: parameter
+            for name, parameter in inspect.signature(constraint_type).parameters.items()
+            if parameter.kind in (parameter.POSITIONAL_OR_KEYWORD, parameter.KEYWORD_ONLY)}
+
+
 
 
 
@@ -150,7 +159,7 @@ def link_point_at(robot: RobotLike, q: np.ndarray, link: str | None, link_point=
 
 
 def structure_nullspace(p: np.ndarray, C: np.ndarray, C_perp: np.ndarray | None = None) -> np.ndarray:
-    """Singularity-free structure matrix ``S`` (6 x (6-k)) of DESIGN.md section 3.
+    """Singularity-free structure matrix ``S`` (6 x (6-k)) of docs/design.md section 3.
 
     ``V_a = S [u; w]`` with ``v = C_perp^T u + C^T C hat(p) w``: the point ``p`` then
     moves with ``C v_c = C C^T C hat(p) w - C hat(p) w = 0`` for every ``u, w``. The
@@ -306,6 +315,108 @@ class Constraint(ABC):
         """The constrained point in the world frame (m)."""
         return placement.act(self.point(placement))
 
+    # -- the geometry's world reference point ----------------------------------------------
+
+    @property
+    def position(self) -> np.ndarray:
+        """World reference point of the geometry (m): hole centre, plane point, lock
+        target (a copy: move it with :meth:`move_to`)."""
+        return getattr(self, self.position_attribute).copy()
+
+    def move_to(self, position=None, velocity=(0.0, 0.0, 0.0), **named) -> None:
+        """Move the geometry's world reference point (m) and set its velocity (m/s).
+
+        The velocity is fed forward: ``rhs`` gains ``C v`` (``v`` in ``F_a``
+        coordinates). The subclasses' own names of the point work as keywords too:
+        ``hole.move_to(center=...)``, ``plane.move_to(plane_point=...)``,
+        ``lock.move_to(target=...)``.
+        """
+        if named:
+            unexpected = sorted(set(named) - {self.position_attribute})
+            if unexpected or position is not None:
+                raise TypeError(
+                    f"{type(self).__name__}.move_to() takes the point as position or "
+                    f"{self.position_attribute}, once; got {sorted(named)}")
+            position = named[self.position_attribute]
+        position = as_vector(position, 3, self.position_attribute)
+        velocity = as_vector(velocity, 3, f"{self.kind} velocity")
+        setattr(self, self.position_attribute, position)
+        self.velocity = velocity
+        self._moved()
+
+    def _moved(self) -> None:
+        """Hook run after :meth:`move_to` (a subclass refreshes what it caches)."""
+
+    # -- what a view draws -----------------------------------------------------------------
+
+    def violation(self, placement: pin.SE3) -> float:
+        """How far (m) the point is from satisfying the constraint (0 when it does)."""
+        return float(np.linalg.norm(self.error(placement)))
+
+    def error_world(self, placement: pin.SE3) -> np.ndarray:
+        """World vector (3,) from where the point should be to where it is, ``R_a C^T e``;
+        its norm is :meth:`violation`."""
+        return placement.rotation @ (self.directions(placement).T @ self.error(placement))
+
+    def axis_world(self, placement: pin.SE3) -> np.ndarray | None:
+        """The geometry's world axis (a hole's link axis, a plane's normal), or None."""
+        return None
+
+    def geometry(self, placement: pin.SE3) -> ConstraintGeometry:
+        """Everything a view draws, in the world frame, at the link's ``placement``."""
+        return ConstraintGeometry(
+            kind=self.kind, shape=self.shape, anchor=self.position,
+            point=self.point_world(placement), axis=self.axis_world(placement),
+            error=self.error_world(placement), color=self.color, label=self.label)
+
+    # -- description: to and from a JSON-ready dict ----------------------------------------
+
+    def to_dict(self) -> dict:
+        """``kind`` and the constructor's arguments, JSON-ready (world frame, m, 1/s).
+
+        ``Constraint.from_dict(c.to_dict())`` rebuilds ``c``. Each constructor argument is
+        an attribute of the same name; ``velocity`` is left out while the geometry is at
+        rest (as in session files written before it was recorded).
+        """
+        data = {"kind": self.kind}
+        for name in constructor_fields(type(self)):
+            value = getattr(self, name)
+            if name == "velocity" and not np.any(value):
+                continue
+            data[name] = value.tolist() if isinstance(value, (np.ndarray, np.generic)) else value
+        return data
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "Constraint":
+        """Build a constraint from :meth:`to_dict` output (the ``kind`` picks the type).
+
+        Bad input raises ``ValueError`` naming the field: an unknown or missing ``kind``,
+        an unknown or missing field, or a bad value.
+        """
+        from .registry import constraint_type  # the registry imports every subclass
+
+        if not isinstance(data, Mapping):
+            raise ValueError(f"a constraint must be an object with a 'kind', got {data!r}")
+        kind_type = constraint_type(data.get("kind"))
+        kind = kind_type.kind
+        if not issubclass(kind_type, cls):
+            raise ValueError(f"kind {kind!r} is not a {cls.__name__}")
+        fields = constructor_fields(kind_type)
+        given = {name: value for name, value in data.items() if name != "kind"}
+        for name in given:
+            if name not in fields:
+                raise ValueError(f"unknown field {name!r} for a {kind} "
+                                 f"(its fields: {', '.join(fields)})")
+        missing = [repr(name) for name, parameter in fields.items()
+                   if parameter.default is inspect.Parameter.empty and name not in given]
+        if missing:
+            raise ValueError(f"a {kind} needs the field{'s' * (len(missing) > 1)} "
+                             f"{', '.join(missing)}")
+        try:
+            return kind_type(**given)
+        except ValueError as error:
+            raise ValueError(f"bad {kind}: {error}") from error
+
     # -- what the controllers use ------------------------------------------------------
 
     def structure(
@@ -313,12 +424,6 @@ class Constraint(ABC):
     ) -> np.ndarray:
         """Structure matrix ``S`` (6 x (6-k)) with ``V_a = S [free variables]``."""
         return structure_of(self.evaluate(placement), parametrisation)
-
-    def particular_twist(self, placement: pin.SE3) -> np.ndarray:
-        """A twist ``V_a0 = [C^T b; 0]`` with ``C v_c = b`` (drift and feed-forward)."""
-        state = self.evaluate(placement)
-        return np.concatenate([state.C.T @ state.rhs, np.zeros(3)])
-
 
     # -- an affine form, for the analytical CJM's precomputed terms ----------------------
 

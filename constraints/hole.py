@@ -29,7 +29,7 @@ class Hole(Constraint):
     The link axis is the line through the origin of ``F_a`` along ``link_axis`` (link
     coordinates). The constrained point is the point of that line nearest the hole
     centre, recomputed from the geometry at every evaluation (so the contact point slides
-    along the link during insertion, DESIGN.md section 3): ``p = (e . c_a) e`` with
+    along the link during insertion, docs/design.md section 3): ``p = (e . c_a) e`` with
     ``c_a`` the hole centre in ``F_a`` coordinates. ``C`` holds two unit vectors
     perpendicular to ``e`` and the error is the lateral offset of the axis from the
     centre, ``C (p - c_a)``.
@@ -45,6 +45,11 @@ class Hole(Constraint):
 
     dim = 2
     has_paper_form = True
+    kind = "hole"
+    position_attribute = "center"
+    shape = "ring"
+    color = (255, 170, 0)
+    label = "hole"
 
     def __init__(
         self,
@@ -112,11 +117,15 @@ class Hole(Constraint):
             )
         return hole
 
-    def move_to(self, center, velocity=(0.0, 0.0, 0.0)) -> None:
-        """Move the hole (world centre, m) and set its velocity (m/s) for feed-forward."""
-        self.center = as_vector(center, 3, "hole center")
-        self.velocity = as_vector(velocity, 3, "hole velocity")
+    # ``hole.move_to(center, velocity)`` (inherited) moves the centre (world, m) and sets
+    # its velocity (m/s) for feed-forward.
+
+    def _moved(self) -> None:
         self._moving = bool(self.velocity.any())
+
+    def axis_world(self, placement: pin.SE3) -> np.ndarray:
+        """The link axis in the world frame (the hole's ring is drawn around it)."""
+        return placement.rotation @ self.link_axis
 
     def _center_local(self, placement: pin.SE3) -> np.ndarray:
         return placement.actInv(self.center)

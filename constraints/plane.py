@@ -39,6 +39,11 @@ class Plane(Constraint):
     dim = 1
     #: drift-feedback gain used when none is given (the Barrier overrides it)
     default_gain: float = DEFAULT_GAIN
+    kind = "plane"
+    position_attribute = "plane_point"
+    shape = "plane"
+    color = (60, 140, 255)
+    label = "plane"
 
     def __init__(
         self,
@@ -90,10 +95,12 @@ class Plane(Constraint):
                 f"(tolerance {tolerance:g} m): the point must lie on the plane"
             )
 
-    def move_to(self, plane_point, velocity=(0.0, 0.0, 0.0)) -> None:
-        """Move the plane (a world point on it, m) and set its velocity (m/s)."""
-        self.plane_point = as_vector(plane_point, 3, "plane_point")
-        self.velocity = as_vector(velocity, 3, "plane velocity")
+    # ``plane.move_to(plane_point, velocity)`` (inherited) moves the plane (a world point
+    # on it, m) and sets its velocity (m/s).
+
+    def axis_world(self, placement: pin.SE3) -> np.ndarray:
+        """The plane's world normal."""
+        return self.normal.copy()
 
     def point(self, placement: pin.SE3) -> np.ndarray:
         return self.link_point

@@ -30,6 +30,11 @@ class PointLock(Constraint):
     """
 
     dim = 3
+    kind = "point_lock"
+    position_attribute = "target"
+    shape = "point"
+    color = (40, 170, 90)
+    label = "point lock"
 
     def __init__(self, link: str, link_point, target, gain: float = DEFAULT_GAIN,
                  velocity=(0.0, 0.0, 0.0)) -> None:
@@ -46,10 +51,8 @@ class PointLock(Constraint):
         link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
         return cls(link, link_point, placement.act(link_point), gain=gain)
 
-    def move_to(self, target, velocity=(0.0, 0.0, 0.0)) -> None:
-        """Move the lock point (world, m) and set its velocity (m/s)."""
-        self.target = as_vector(target, 3, "target")
-        self.velocity = as_vector(velocity, 3, "target velocity")
+    # ``lock.move_to(target, velocity)`` (inherited) moves the lock point (world, m) and
+    # sets its velocity (m/s).
 
     def point(self, placement: pin.SE3) -> np.ndarray:
         return self.link_point

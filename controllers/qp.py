@@ -1,4 +1,4 @@
-"""Whole-body differential-IK QP holding the same constraint rows (DESIGN.md section 4)."""
+"""Whole-body differential-IK QP holding the same constraint rows (docs/design.md section 4)."""
 
 from __future__ import annotations
 

@@ -113,7 +113,7 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
             raise ValueError(f"unknown CJM variant {option!r}: analytical, general or paper")
         from controllers import CJMController
 
-        return CJMController(robot, constraints, **CJM_VARIANTS[option])
+        return CJMController(robot, constraints, dt=dt, **CJM_VARIANTS[option])
     if family == "qp":
         from controllers import QPController
 

@@ -1,4 +1,4 @@
-"""Robot-model layer: shipped URDFs against DESIGN.md section 6, load_robot behaviour."""
+"""Robot-model layer: shipped URDFs against docs/design.md section 6, load_robot behaviour."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 from teleop import BUILTIN_ROBOTS, Robot, load_robot
 
-# DESIGN.md section 6, typed in: joint, origin xyz, origin rpy, axis, limit, velocity.
+# docs/design.md section 6, typed in: joint, origin xyz, origin rpy, axis, limit, velocity.
 SDA10F_TABLE = [
     ("torso_joint_b1", (0, 0, 0), (0, 0, 0), (0, 0, 1), 2.967, 2.269),
     ("arm_joint_1_s", (0.09996, 0.0275, 0.32214), (1.57, 0, 0), (0, 0, -1), 3.13, 2.95),

@@ -47,7 +47,6 @@ def header(robot="ur5_instrument"):
 
 def test_constraints_added_and_removed_mid_session(tmp_path, ur5_instrument):
     from constraints import Hole
-    from teleop.experiments.sessions import constraint_to_dict
 
     import pinocchio as pin
 
@@ -58,7 +57,7 @@ def test_constraints_added_and_removed_mid_session(tmp_path, ur5_instrument):
     quaternion = pin.Quaternion(home.rotation)
     path = write_session(tmp_path / "edits.jsonl", [
         header(),
-        {"type": "add", "t": 0.1, "id": "h", "constraint": constraint_to_dict(hole)},
+        {"type": "add", "t": 0.1, "id": "h", "constraint": hole.to_dict()},
         {"type": "target", "t": 0.0, "position": home.translation.tolist(),
          "quaternion_wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]},
         {"type": "move", "t": 0.15, "id": "h", "position": (hole.center + [0.002, 0, 0]).tolist()},

@@ -4,7 +4,7 @@ Everything the UI does goes through :class:`TeleopApp`, so it can be tested with
 viser. All public methods are thread-safe (one lock); actions that cannot be done raise
 ``ValueError`` with a message meant for the operator (the UI shows it as a notification).
 
-Threading (DESIGN.md section 5): :class:`ControlThread` calls :meth:`TeleopApp.step` at
+Threading (docs/design.md section 5): :class:`ControlThread` calls :meth:`TeleopApp.step` at
 the control rate and never touches viser; the view thread reads :meth:`TeleopApp.snapshot`.
 """
 
@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from constraints import Barrier, Constraint, Hole, Plane
+from constraints import Barrier, Constraint, Hole, Plane, PointLock
+from constraints.kinematics import frame_placement
+from constraints.validation import as_number, as_vector
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.controller_specs import make_controller
 from teleop.robots import Robot
@@ -47,14 +49,18 @@ class ConstraintEntry:
     """A constraint placed by the operator, with the geometry its gizmo drives."""
 
     id: str
-    kind: str  # "hole", "plane", "barrier"
     constraint: Constraint
     goal: np.ndarray  # where the operator put it (the control loop moves towards it)
 
     @property
+    def kind(self) -> str:
+        """The constraint's ``kind`` ("hole", "plane", "barrier", "point_lock")."""
+        return self.constraint.kind
+
+    @property
     def position(self) -> np.ndarray:
-        c = self.constraint
-        return c.center if isinstance(c, Hole) else c.plane_point
+        """Where the geometry is now (world reference point, a copy)."""
+        return self.constraint.position
 
 
 @dataclass
@@ -144,11 +150,10 @@ class TeleopApp:
 
     def set_target(self, position, wxyz) -> None:
         """The operator's target pose (world position, quaternion w, x, y, z)."""
-        position = np.asarray(position, dtype=float)
-        wxyz = np.asarray(wxyz, dtype=float)
-        if position.shape != (3,) or wxyz.shape != (4,) or not (
-                np.isfinite(position).all() and np.isfinite(wxyz).all()) or np.linalg.norm(wxyz) < 1e-9:
-            raise ValueError("the target pose must be a finite position and a non-zero quaternion")
+        position = as_vector(position, 3, "target position")
+        wxyz = as_vector(wxyz, 4, "target quaternion")
+        if np.linalg.norm(wxyz) < 1e-9:
+            raise ValueError("the target quaternion must be non-zero")
         rotation = pin.Quaternion(wxyz[0], wxyz[1], wxyz[2], wxyz[3]).normalized().matrix()
         with self._lock:
             self.target = pin.SE3(rotation, position)
@@ -157,28 +162,42 @@ class TeleopApp:
 
     def _link_placement(self, link: str) -> pin.SE3:
         """World placement of ``link`` on the main robot now (caller holds the lock)."""
-        model = self.robot.model
-        pin.framesForwardKinematics(model, self._view_data, self.loops["main"].q)
-        return self._view_data.oMf[model.getFrameId(link)].copy()
+        return frame_placement(self.robot.model, self.loops["main"].q, link, self._view_data)
 
-    def _add(self, kind: str, constraint: Constraint) -> str:
-        entry_id = f"{kind}-{next(self._ids)}"
-        position = constraint.center if isinstance(constraint, Hole) else constraint.plane_point
-        if kind != "barrier":  # a barrier keeps its own (velocity-damper) gain
+    def add_constraint(self, constraint: Constraint) -> str:
+        """Place a constraint of any kind where it is; it takes the app's drift gain.
+
+        Returns its id (``"<kind>-<n>"``). A constraint the controllers refuse (unknown
+        link, gain unstable at this rate) raises ``ValueError`` and is not placed.
+        """
+        if not isinstance(constraint, Constraint):
+            raise ValueError(f"expected a constraint, got {constraint!r}")
+        with self._lock:
             constraint.gain = self.gain
-        self.entries[entry_id] = ConstraintEntry(entry_id, kind, constraint, position.copy())
-        self._sync_constraints()
-        if self.recorder is not None:
-            self.recorder.add(self.now - self._record_start, entry_id, constraint)
-        return entry_id
+            entry_id = f"{constraint.kind}-{next(self._ids)}"
+            self.entries[entry_id] = ConstraintEntry(entry_id, constraint, constraint.position)
+            try:
+                self._sync_constraints()
+            except ValueError:
+                del self.entries[entry_id]
+                self._sync_constraints()
+                raise
+            if self.recorder is not None:
+                self.recorder.add(self.now - self._record_start, entry_id, constraint)
+            return entry_id
 
     def add_hole(self, distance: float) -> str:
         """A hole on the constrained link, ``distance`` m along its axis, where it is now."""
+        distance = as_number(distance, "hole distance")
         with self._lock:
-            if not math.isfinite(distance):
-                raise ValueError("the hole distance must be a number")
-            q = self.loops["main"].q
-            return self._add("hole", Hole.on_link(self.robot, q, distance=distance, gain=self.gain))
+            return self.add_constraint(Hole.on_link(self.robot, self.loops["main"].q, distance=distance))
+
+    def add_point_lock(self, distance: float) -> str:
+        """Lock the constrained link's point ``distance`` m along its axis where it is now."""
+        distance = as_number(distance, "point lock distance")
+        with self._lock:
+            return self.add_constraint(
+                PointLock.on_link(self.robot, self.loops["main"].q, distance=distance))
 
     def add_plane(self, distance: float, normal, barrier: bool = False, offset: float = 0.0) -> str:
         """A plane (or barrier) through the link point ``distance`` m along the link axis.
@@ -187,8 +206,10 @@ class TeleopApp:
         sit ``offset`` m below the point along the normal (the point must be on its
         positive side).
         """
-        normal = np.asarray(normal, dtype=float)
-        if normal.shape != (3,) or not np.isfinite(normal).all() or np.linalg.norm(normal) < 1e-9:
+        distance = as_number(distance, "plane distance")
+        offset = as_number(offset, "barrier offset")
+        normal = as_vector(normal, 3, "plane normal")
+        if np.linalg.norm(normal) < 1e-9:
             raise ValueError("the plane normal must be a non-zero 3-vector")
         normal = normal / np.linalg.norm(normal)
         with self._lock:
@@ -199,13 +220,12 @@ class TeleopApp:
             constraint = cls.through_link_point(
                 self.robot, q, normal=normal, distance=distance,
                 plane_point=point - offset * normal)
-            return self._add("barrier" if barrier else "plane", constraint)
+            return self.add_constraint(constraint)
 
     def move_constraint(self, entry_id: str, position) -> None:
-        """Move a constraint's geometry (hole centre, plane point): the robot follows it."""
-        position = np.asarray(position, dtype=float)
-        if position.shape != (3,) or not np.isfinite(position).all():
-            raise ValueError("a constraint position must be 3 finite numbers")
+        """Move a constraint's geometry (hole centre, plane point, lock target): the robot
+        follows it."""
+        position = as_vector(position, 3, "constraint position")
         with self._lock:
             if entry_id not in self.entries:
                 raise ValueError(f"no constraint {entry_id!r}")
@@ -247,21 +267,28 @@ class TeleopApp:
         self.specs[which] = spec
 
     def set_gain(self, gain: float) -> None:
-        """Drift-feedback gain K (1/s) of every equality constraint."""
-        gain = float(gain)
-        if not math.isfinite(gain) or gain < 0 or gain * self.config.dt >= 2.0:
+        """Gain K (1/s) of every constraint: the drift feedback of the equalities, the
+        approach rate of the barriers. A gain some placed constraint cannot take at this
+        rate (``K dt`` too large) raises ``ValueError`` and changes nothing."""
+        gain = as_number(gain, "gain")
+        if not 0.0 <= gain * self.config.dt < 2.0:
             raise ValueError(f"gain must be in [0, {2.0 / self.config.dt:g}) 1/s at this rate")
         with self._lock:
-            self.gain = gain
+            previous, self.gain = self.gain, gain
             for entry in self.entries.values():
-                if entry.kind != "barrier":
-                    entry.constraint.gain = gain
+                entry.constraint.gain = gain
+            try:
+                self._sync_constraints()  # the controllers check the gains and refresh
+            except ValueError:
+                self.gain = previous
+                for entry in self.entries.values():
+                    entry.constraint.gain = previous
+                self._sync_constraints()
+                raise
 
     def set_damping(self, damping: float) -> None:
         """Constant DLS damping lambda of the CJM (paper eq 35)."""
-        damping = float(damping)
-        if not math.isfinite(damping) or damping < 0:
-            raise ValueError("damping must be >= 0")
+        damping = as_number(damping, "damping", 0.0)
         with self._lock:
             self.damping = damping
             for loop in self.loops.values():
@@ -269,8 +296,8 @@ class TeleopApp:
 
     def set_rate(self, rate: float) -> None:
         """Control rate (Hz); rebuilds the loops (QP limits depend on dt), keeps the state."""
-        rate = float(rate)
-        if not math.isfinite(rate) or not 50.0 <= rate <= 5000.0:
+        rate = as_number(rate, "the control rate")
+        if not 50.0 <= rate <= 5000.0:
             raise ValueError("the control rate must be between 50 and 5000 Hz")
         with self._lock:
             self.config = dataclasses.replace(self.config, rate=rate)
@@ -323,15 +350,16 @@ class TeleopApp:
             dt = self.config.dt
             alpha = 1.0 - math.exp(-dt / self.config.target_time_constant)
             for entry in self.entries.values():  # moved geometry glides, with feed-forward
-                delta = alpha * (entry.goal - entry.position)
+                position = entry.position
+                delta = alpha * (entry.goal - position)
                 if np.any(delta):
-                    moved = entry.position + delta
+                    moved = position + delta
                     velocity = delta / dt if np.linalg.norm(delta) > 1e-12 else np.zeros(3)
                     entry.constraint.move_to(moved, velocity)
                     if self.recorder is not None and self.ticks % 10 == 0:
                         self.recorder.move(self.now - self._record_start, entry.id, moved, velocity)
-                elif getattr(entry.constraint, "velocity", np.zeros(3)).any():
-                    entry.constraint.move_to(entry.position)
+                elif entry.constraint.velocity.any():
+                    entry.constraint.move_to(position)
             for which, loop in self.loops.items():
                 record = loop.tick(self.target)
                 self.last_records[which] = record
@@ -354,18 +382,10 @@ class TeleopApp:
                     "record": record, "trace": self.traces[which].arrays(),
                     "info": loop.controller.info,
                 }
-            entries = []
-            for entry in self.entries.values():
-                c = entry.constraint
-                placement = self._link_placement(c.link)
-                entries.append({
-                    "id": entry.id, "kind": entry.kind, "position": entry.position.copy(),
-                    "goal": entry.goal.copy(),
-                    "normal": None if isinstance(c, Hole) else c.normal.copy(),
-                    "axis": None if not isinstance(c, Hole) else placement.rotation @ c.link_axis,
-                    "point": c.point_world(placement),
-                    "error": c.error(placement).copy(),
-                })
+            entries = [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),
+                        "geometry": entry.constraint.geometry(
+                            self._link_placement(entry.constraint.link))}
+                       for entry in self.entries.values()]
             return {"robots": robots, "constraints": entries,
                     "target": self.target.copy(), "recording": self.recorder is not None,
                     "config": self.config, "gain": self.gain, "damping": self.damping}

@@ -1,8 +1,9 @@
 """The viser front end: a thin layer over :class:`web.app.TeleopApp`.
 
 * scene: the robot (Pinocchio's viser visualiser), an optional translucent ghost, a
-  transform gizmo for the EE target, holes as rings on the link axis, planes as
-  translucent squares (barriers in red), the constraint point on the link, and the
+  transform gizmo for the EE target, and each constraint as its ``geometry()`` says
+  (holes as rings on the link axis, planes as translucent squares, barriers in red,
+  point locks as spheres at their target), the constraint point on the link, and the
   constraint error as a short vector (drawn x100) when it is not zero;
 * panels: controllers, side-by-side, constraints, drift gain / damping / rate, home,
   recording, status (achieved control rate, deadline misses), live plots (uPlot).
@@ -24,6 +25,7 @@ import viser
 import viser.uplot as uplot
 from pinocchio.visualize import ViserVisualizer
 
+from constraints import ConstraintGeometry
 from teleop.controller_specs import default_specs
 from teleop.robots import Robot
 
@@ -33,7 +35,6 @@ CONTROLLER_CHOICES = default_specs("ui")  # the dropdowns (plus a spec given on 
 VIEW_RATE = 30.0  # Hz: robot poses, markers, status
 PLOT_RATE = 10.0  # Hz: live plots
 ERROR_VECTOR_SCALE = 100.0
-COLORS = {"hole": (255, 170, 0), "plane": (60, 140, 255), "barrier": (230, 40, 40)}
 
 
 def _wxyz_from_z(direction: np.ndarray) -> np.ndarray:
@@ -157,6 +158,9 @@ class TeleopUI:
             self.barrier_offset = gui.add_number("barrier offset (m)", 0.01, min=0.0, step=0.005)
             self.add_plane_button = gui.add_button("Add plane")
             self.add_barrier_button = gui.add_button("Add barrier")
+            self.lock_distance = gui.add_number("point lock at (m)", 0.08, step=0.005,
+                                                hint="distance along the constrained link")
+            self.add_lock_button = gui.add_button("Add point lock")
             self.constraint_menu = gui.add_dropdown("placed", ("(none)",))
             self.remove_button = gui.add_button("Remove")
 
@@ -167,6 +171,8 @@ class TeleopUI:
         self.add_barrier_button.on_click(lambda event: self._guarded(
             event, lambda: app.add_plane(self.plane_distance.value, self.plane_normal.value,
                                          barrier=True, offset=self.barrier_offset.value)))
+        self.add_lock_button.on_click(lambda event: self._guarded(
+            event, lambda: app.add_point_lock(self.lock_distance.value)))
         self.remove_button.on_click(lambda event: self._guarded(
             event, lambda: app.remove_constraint(self.constraint_menu.value)))
 
@@ -268,33 +274,43 @@ class TeleopUI:
             markers = self._markers.get(e["id"])
             if markers is None:
                 markers = self._markers[e["id"]] = self._create_markers(e)
-            if e["kind"] == "hole":
-                markers["shape"].points = _ring(e["position"], e["axis"], self.ring_radius)
-            else:
-                markers["shape"].position = e["position"]
-            markers["point"].position = e["point"]
-            error = float(np.linalg.norm(e["error"]))
-            tip = e["position"] if e["kind"] == "hole" else e["point"] - e["error"][0] * e["normal"]
-            vector = ERROR_VECTOR_SCALE * (tip - e["point"])
-            markers["error"].points = np.array([[e["point"], e["point"] + vector]])
-            markers["error"].visible = error > 1e-6
+            geometry = e["geometry"]
+            self._update_shape(markers["shape"], geometry)
+            markers["point"].position = geometry.point
+            # from the point towards where it should be (the error points the other way)
+            vector = -ERROR_VECTOR_SCALE * geometry.error
+            markers["error"].points = np.array([[geometry.point, geometry.point + vector]])
+            markers["error"].visible = float(np.linalg.norm(geometry.error)) > 1e-6
         options = tuple(e["id"] for e in entries) or ("(none)",)
         if tuple(self.constraint_menu.options) != options:
             self.constraint_menu.options = options
 
+    def _add_shape(self, name: str, geometry: ConstraintGeometry):
+        """The scene node of a constraint's geometry, drawn as its ``shape`` says."""
+        scene = self.server.scene
+        if geometry.shape == "ring":
+            ring = _ring(geometry.anchor, geometry.axis, self.ring_radius)
+            return scene.add_line_segments(f"{name}/ring", ring, geometry.color, thickness=0.004)
+        if geometry.shape == "plane":
+            return scene.add_box(f"{name}/plane", geometry.color, (0.3, 0.3, 0.001),
+                                 opacity=0.3, side="double", wxyz=_wxyz_from_z(geometry.axis),
+                                 position=geometry.anchor)
+        return scene.add_icosphere(f"{name}/anchor", 0.012, geometry.color, opacity=0.5,
+                                   position=geometry.anchor)
+
+    def _update_shape(self, handle, geometry: ConstraintGeometry) -> None:
+        if geometry.shape == "ring":  # around the link axis, which turns with the link
+            handle.points = _ring(geometry.anchor, geometry.axis, self.ring_radius)
+        else:
+            handle.position = geometry.anchor
+
     def _create_markers(self, e: dict) -> dict:
         scene = self.server.scene
         name = f"/constraints/{e['id']}"
-        color = COLORS[e["kind"]]
-        markers = {}
-        if e["kind"] == "hole":
-            ring = _ring(e["position"], e["axis"], self.ring_radius)
-            markers["shape"] = scene.add_line_segments(f"{name}/ring", ring, color, thickness=0.004)
-        else:
-            markers["shape"] = scene.add_box(f"{name}/plane", color, (0.3, 0.3, 0.001),
-                                             opacity=0.3, side="double",
-                                             wxyz=_wxyz_from_z(e["normal"]), position=e["position"])
-        markers["point"] = scene.add_icosphere(f"{name}/point", 0.006, (20, 20, 20), position=e["point"])
+        geometry = e["geometry"]
+        markers = {"shape": self._add_shape(name, geometry)}
+        markers["point"] = scene.add_icosphere(f"{name}/point", 0.006, (20, 20, 20),
+                                               position=geometry.point)
         markers["error"] = scene.add_line_segments(f"{name}/error", np.zeros((1, 2, 3)),
                                                    (255, 0, 255), thickness=0.003)
         gizmo = scene.add_transform_controls(f"{name}/gizmo", scale=0.07, position=e["goal"],

@@ -29,8 +29,9 @@ class CJMController(Controller):
     * **Analytical form** (:mod:`controllers.cjm.analytical`): one equality constraint
       with at least 6 joints before it, the paper's method (eqs 17-24, 29-32). For a
       square pre-chain a step is two 6 x 6 LU factorisations into buffers allocated once.
-    * **General form** (:mod:`controllers.cjm.general`): several constraints, barriers
-      switched on, fewer than 6 joints before the constraint, or a singular pre-chain.
+    * **General form** (:mod:`controllers.cjm.general`): several row sets at once (an
+      equality and an active barrier, or several constraints), fewer than 6 joints before
+      the constraint, or a singular pre-chain.
     * **Barriers** are held as plane equalities once the solution would break them (an
       active set, most violated first).
     * **Joint limits** (:mod:`controllers.cjm.saturation`): when the command leaves the

@@ -1,6 +1,6 @@
-"""Joint limits in the CJM: saturation in the null space (SNS), docs/design.md section 8.
+"""Joint limits in the CJM: saturation in the null space (SNS), docs/design.md section 9.
 
-Flacco, Lee, De Luca, Khatib, "Control of redundant robots under hard joint constraints:
+Flacco, De Luca, Khatib, "Control of redundant robots under hard joint constraints:
 saturation in the null space", IEEE T-RO 2015, Algorithm 1, with the constraint rows as
 a hard first priority. Over the free joints ``F`` (the saturated ones ``W`` held at a
 bound ``qd_W``)::

@@ -34,7 +34,7 @@ class RunResult:
         return len(self.columns["t"])
 
     def metrics(self) -> dict[str, float | int | str | None]:
-        """The summary of DESIGN.md section 7 (units in the key names)."""
+        """The summary of docs/design.md section 7 (units in the key names)."""
         c = self.columns
 
         def rms(x: np.ndarray) -> float:

@@ -8,9 +8,10 @@ Format (one JSON object per line, times ``t`` in seconds from the start, world f
   ``constrained_link``, ``link_axis``).
 * ``{"type": "target", "t": 0.05, "position": [x, y, z], "quaternion_wxyz": [w, x, y, z]}``
   - the operator's target; it holds until the next one (the loop smooths it).
-* ``{"type": "add", "t": 0.0, "id": "hole-1", "constraint": {"kind": "hole", ...}}`` - kinds
-  and fields: ``hole`` (link, center, link_axis, gain), ``plane`` and ``barrier`` (link,
-  link_point, plane_point, normal, gain), ``point_lock`` (link, link_point, target, gain).
+* ``{"type": "add", "t": 0.0, "id": "hole-1", "constraint": {"kind": "hole", ...}}`` - the
+  constraint's ``to_dict()``: kinds and fields ``hole`` (link, center, link_axis, gain),
+  ``plane`` and ``barrier`` (link, link_point, plane_point, normal, gain), ``point_lock``
+  (link, link_point, target, gain), each with an optional ``velocity`` (moving geometry).
 * ``{"type": "move", "t": 1.2, "id": "hole-1", "position": [...], "velocity": [...]}`` -
   a hole's centre, a plane's point or a lock's target moves (velocity for feed-forward).
 * ``{"type": "remove", "t": 3.0, "id": "hole-1"}``
@@ -29,7 +30,8 @@ from typing import IO
 import numpy as np
 import pinocchio as pin
 
-from constraints import Barrier, Constraint, Hole, Plane, PointLock
+from constraints import Constraint
+from constraints.validation import as_vector
 
 from teleop.robots import Robot, load_robot
 from .plan import Plan, home_pose
@@ -43,55 +45,6 @@ TIME_EPSILON = 1e-9
 
 class SessionError(ValueError):
     """A session file that cannot be replayed, with the line that is wrong."""
-
-
-# ----------------------------------------------------------------------------- constraints
-
-
-def constraint_to_dict(constraint: Constraint) -> dict:
-    """JSON-ready description of a constraint (inverse of :func:`constraint_from_dict`)."""
-    if isinstance(constraint, Hole):
-        return {"kind": "hole", "link": constraint.link, "center": constraint.center.tolist(),
-                "link_axis": constraint.link_axis.tolist(), "gain": constraint.gain}
-    if isinstance(constraint, Plane):  # Barrier is a Plane
-        return {"kind": "barrier" if isinstance(constraint, Barrier) else "plane",
-                "link": constraint.link, "link_point": constraint.link_point.tolist(),
-                "plane_point": constraint.plane_point.tolist(),
-                "normal": constraint.normal.tolist(), "gain": constraint.gain}
-    if isinstance(constraint, PointLock):
-        return {"kind": "point_lock", "link": constraint.link,
-                "link_point": constraint.link_point.tolist(),
-                "target": constraint.target.tolist(), "gain": constraint.gain}
-    raise TypeError(f"cannot serialise {type(constraint).__name__}")
-
-
-def constraint_from_dict(data: dict) -> Constraint:
-    """Build a constraint from :func:`constraint_to_dict` output; bad fields raise ValueError."""
-    if not isinstance(data, dict):
-        raise ValueError(f"a constraint must be an object, got {data!r}")
-    kind = data.get("kind")
-    fields = {k: v for k, v in data.items() if k != "kind"}
-    builders = {"hole": Hole, "plane": Plane, "barrier": Barrier, "point_lock": PointLock}
-    if kind not in builders:
-        raise ValueError(f"unknown constraint kind {kind!r}: {', '.join(builders)}")
-    try:
-        return builders[kind](**fields)
-    except TypeError as error:
-        raise ValueError(f"bad fields for a {kind}: {error}") from error
-
-
-def _move(constraint: Constraint, position, velocity) -> None:
-    if not hasattr(constraint, "move_to"):
-        raise ValueError(f"{type(constraint).__name__} cannot move")
-    constraint.move_to(position, velocity)
-
-
-def _geometry_position(constraint: Constraint) -> np.ndarray:
-    if isinstance(constraint, Hole):
-        return constraint.center
-    if isinstance(constraint, Plane):
-        return constraint.plane_point
-    return constraint.target
 
 
 # ----------------------------------------------------------------------------- writing
@@ -149,7 +102,7 @@ class SessionRecorder:
 
     def add(self, t: float, constraint_id: str, constraint: Constraint) -> None:
         self._write({"type": "add", "t": self._stamp(t), "id": str(constraint_id),
-                     "constraint": constraint_to_dict(constraint)})
+                     "constraint": constraint.to_dict()})
 
     def move(self, t: float, constraint_id: str, position, velocity=(0.0, 0.0, 0.0)) -> None:
         self._write({"type": "move", "t": self._stamp(t), "id": str(constraint_id),
@@ -184,20 +137,20 @@ def record_plan(plan: Plan, path: str | Path, rate_hz: float = 1000.0,
     duration = plan.duration if duration is None else duration
     dt = 1.0 / rate_hz
     constraints = plan.make_constraints()
-    ids = [f"{type(c).__name__.lower()}-{i + 1}" for i, c in enumerate(constraints)]
+    ids = [f"{c.kind}-{i + 1}" for i, c in enumerate(constraints)]
     with SessionRecorder(path, plan.robot, plan.q0, rate_hz=rate_hz) as recorder:
         for cid, constraint in zip(ids, constraints):
             recorder.add(0.0, cid, constraint)
-        before = [_geometry_position(c).copy() for c in constraints]
+        before = [c.position for c in constraints]
         for i in range(int(round(duration * rate_hz))):
             t = i * dt
             if plan.update(t, constraints) is not None:
                 raise ValueError("record_plan cannot record a plan that changes its constraint set")
             for k, (cid, constraint) in enumerate(zip(ids, constraints)):
-                now = _geometry_position(constraint)
-                if not np.array_equal(now, before[k]) or getattr(constraint, "velocity", np.zeros(3)).any():
+                now = constraint.position
+                if not np.array_equal(now, before[k]) or constraint.velocity.any():
                     recorder.move(t, cid, now, constraint.velocity)
-                    before[k] = now.copy()
+                    before[k] = now
             recorder.target(t + dt, plan.target(t + dt))
         recorder.close(duration)
     return Path(path)
@@ -266,25 +219,19 @@ def load_session(path: str | Path) -> Session:
 def _check_event(event: dict) -> None:
     kind = event["type"]
     if kind == "target":
-        position = np.asarray(event["position"], dtype=float)
-        quaternion = np.asarray(event["quaternion_wxyz"], dtype=float)
-        if position.shape != (3,) or quaternion.shape != (4,):
-            raise ValueError("a target needs 'position' (3) and 'quaternion_wxyz' (4)")
-        if not (np.isfinite(position).all() and np.isfinite(quaternion).all()):
-            raise ValueError("target pose must be finite")
+        as_vector(event.get("position"), 3, "target 'position'")
+        quaternion = as_vector(event.get("quaternion_wxyz"), 4, "target 'quaternion_wxyz'")
         if abs(np.linalg.norm(quaternion) - 1.0) > 1e-6:
             raise ValueError(f"quaternion must be unit, got norm {np.linalg.norm(quaternion):.6g}")
     elif kind == "add":
         if not isinstance(event.get("id"), str):
             raise ValueError("'add' needs a string 'id'")
-        constraint_from_dict(event["constraint"])
+        Constraint.from_dict(event.get("constraint"))
     elif kind == "move":
         if not isinstance(event.get("id"), str):
             raise ValueError("'move' needs a string 'id'")
-        for key in ("position", "velocity"):
-            value = np.asarray(event.get(key, [0.0, 0.0, 0.0]), dtype=float)
-            if value.shape != (3,) or not np.isfinite(value).all():
-                raise ValueError(f"'{key}' must be 3 finite numbers")
+        as_vector(event.get("position"), 3, "move 'position'")
+        as_vector(event.get("velocity", (0.0, 0.0, 0.0)), 3, "move 'velocity'")
     elif kind == "remove":
         if not isinstance(event.get("id"), str):
             raise ValueError("'remove' needs a string 'id'")
@@ -328,7 +275,7 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
             state["cursor"] += 1
             where = f"{session.path}:{event['_line']}"
             if event["type"] == "add":
-                by_id[event["id"]] = constraint_from_dict(event["constraint"])
+                by_id[event["id"]] = Constraint.from_dict(event["constraint"])
                 changed = True
             elif event["id"] not in by_id:
                 raise SessionError(f"{where}: no constraint with id {event['id']!r} to {event['type']}")
@@ -336,7 +283,7 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
                 del by_id[event["id"]]
                 changed = True
             else:
-                _move(by_id[event["id"]], event["position"], event.get("velocity", (0, 0, 0)))
+                by_id[event["id"]].move_to(event["position"], event.get("velocity", (0, 0, 0)))
         return list(by_id.values()) if changed else None
 
     return Plan(name=session.path.stem, robot=robot, q0=q0, duration=session.duration,

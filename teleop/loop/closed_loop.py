@@ -1,6 +1,6 @@
 """The closed teleoperation loop: operator target -> EE twist -> controller -> integrate.
 
-One tick (DESIGN.md section 5)::
+One tick (docs/design.md section 5)::
 
     T*_f  <- T*_f exp6(alpha log6(T*_f^-1 T*))     target smoothing (browser: ~20 Hz input)
     V_ff   = log6(T*_f,prev^-1 T*_f) / dt            feed-forward: the target's own twist
@@ -8,7 +8,7 @@ One tick (DESIGN.md section 5)::
     qd     = controller.solve(q, V_e)
     q     <- pin.integrate(model, q, qd dt)
 
-and every tick records the measures of DESIGN.md section 7, computed here from Pinocchio
+and every tick records the measures of docs/design.md section 7, computed here from Pinocchio
 and the constraints themselves, not taken from the controller's own report.
 """
 
@@ -22,7 +22,8 @@ from typing import Sequence
 import numpy as np
 import pinocchio as pin
 
-from constraints import Barrier, Constraint
+from constraints import Constraint
+from constraints.kinematics import frame_placement
 
 #: Columns of the per-step record, in order (see :class:`StepRecord`).
 RECORD_FIELDS = (
@@ -130,8 +131,7 @@ class TeleopLoop:
 
     def ee_placement(self, q: np.ndarray | None = None) -> pin.SE3:
         """World placement of the EE at ``q`` (default: the current state)."""
-        pin.framesForwardKinematics(self.model, self.data, self.q if q is None else q)
-        return self.data.oMf[self.ee_frame_id].copy()
+        return frame_placement(self.model, self.q if q is None else q, self.ee_frame_id, self.data)
 
     def reset(self, q0: np.ndarray | None = None) -> None:
         """Back to ``q0`` (default home), forgetting the target history."""
@@ -228,14 +228,15 @@ class TeleopLoop:
         return residual, velocity
 
     def _constraint_errors(self) -> tuple[float, float]:
-        """After integration: max |e| over equalities, max barrier penetration."""
-        pin.framesForwardKinematics(self.model, self.data, self.q)
+        """After integration: max |e| over equalities, max inequality (barrier)
+        penetration, each the constraint's own ``violation``."""
+        pin.framesForwardKinematics(self.model, self.data, self.q)  # every frame at once
         error, penetration = 0.0, 0.0
         for constraint, frame in zip(self.constraints, self.controller.constraint_frames):
-            placement = self.data.oMf[frame]
-            if isinstance(constraint, Barrier):
-                penetration = max(penetration, constraint.penetration(placement))
+            violation = constraint.violation(self.data.oMf[frame])
+            if constraint.is_equality:
+                error = max(error, violation)
             else:
-                error = max(error, float(np.linalg.norm(constraint.error(placement))))
+                penetration = max(penetration, violation)
         return error, penetration
 

@@ -1,6 +1,6 @@
 """Robot models: a Pinocchio model plus what the teleoperation controllers need.
 
-Two robots ship with the package (primitive geometry, nothing downloaded, see DESIGN.md
+Two robots ship with the package (primitive geometry, nothing downloaded, see docs/design.md
 section 6): ``"sda10f"`` (torso + 7-axis arm, the paper's experiment) and
 ``"ur5_instrument"`` (UR5-like arm holding a surgical instrument with a 2-DoF wrist). Any
 other URDF loads from its path.

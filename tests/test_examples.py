@@ -1,0 +1,117 @@
+"""Every ``examples/*.py`` runs headless to completion and prints the numbers it promises.
+
+Each script runs in a subprocess (this interpreter, a temp working directory, 120 s at
+most). The list is the glob of the folder, so a new example is run without touching this
+file; the examples below also have their printed numbers checked.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+EXAMPLES_DIR = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLES = sorted(EXAMPLES_DIR.glob("*.py"))
+TIMEOUT = 120.0  # s, per example
+NUMBER = r"([-+]?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)"
+
+#: extra command-line arguments (``{tmp}``: the test's temp directory)
+ARGUMENTS = {
+    "02_closed_loop.py": ["{tmp}/out", "--seconds", "2"],
+    "06_embed_teleop_app.py": ["--seconds", "2"],
+}
+#: distributions an example needs beyond the package's own dependencies
+REQUIRES = {"04_any_urdf.py": "example-robot-data"}
+
+
+def numbers(pattern: str, text: str) -> list[float]:
+    """Every number captured by ``pattern`` (one group, written with NUMBER) in ``text``."""
+    return [float(value) for value in re.findall(pattern.replace("NUMBER", NUMBER), text)]
+
+
+def check_01(out: str, tmp: Path) -> None:
+    lateral = numbers(r"lateral velocity at the hole = NUMBER m/s", out)
+    assert len(lateral) == 2 and max(lateral) <= 1e-9, lateral  # CJM and QP
+    (difference,) = numbers(r"max \|qd_cjm - qd_qp\| = NUMBER", out)
+    assert difference <= 1e-5
+    assert "(analytical)" in out and "(qp:daqp)" in out
+
+
+def check_02(out: str, tmp: Path) -> None:
+    rows = {name: numbers(r"NUMBER", rest) for name, rest in
+            re.findall(r"^(cjm|qp:daqp)\s+(.*)$", out, flags=re.MULTILINE)}
+    assert set(rows) == {"cjm", "qp:daqp"}, out
+    for error_max, residual, ee_rms_mm, failed, _step_us in rows.values():
+        assert error_max <= 1e-5 and residual <= 1e-8 and ee_rms_mm <= 1.0 and failed == 0
+    (difference,) = numbers(r"\|EE RMS error cjm - qp:daqp\| = NUMBER m", out)
+    assert difference <= 1e-6
+    document = json.loads((tmp / "out" / "metrics.json").read_text())
+    assert set(document["controllers"]) == {"cjm", "qp:daqp"}
+    assert (tmp / "out" / "constraint_velocity.png").stat().st_size > 0
+
+
+def check_03(out: str, tmp: Path) -> None:
+    distances = numbers(r"min signed distance = NUMBER m", out)
+    assert len(distances) == 2 and min(distances) >= -1e-9, distances  # never behind it
+    assert numbers(r"failed steps = NUMBER", out) == [0, 0]
+    assert max(numbers(r"hole error max = NUMBER m", out)) <= 1e-5
+
+
+def check_04(out: str, tmp: Path) -> None:
+    assert "loaded panda.urdf" in out
+    lateral = numbers(r"lateral velocity at the hole = NUMBER m/s", out)
+    assert len(lateral) == 3 and max(lateral) <= 1e-9, lateral
+    (exact,) = numbers(r"max \|qd_cjm_exact - qd_qp\| = NUMBER", out)
+    assert exact <= 1e-6  # undamped CJM = the QP's least-squares optimum
+
+
+def check_05(out: str, tmp: Path) -> None:
+    (deviation,) = numbers(r"deviation max \|qd_mink - qd_cjm\| = NUMBER rad/s", out)
+    assert deviation <= 1e-6
+    lateral = numbers(r"lateral velocity at the hole = NUMBER m/s", out)
+    assert len(lateral) == 2 and max(lateral) <= 1e-9, lateral
+    assert "(mink:daqp)" in out
+
+
+def check_06(out: str, tmp: Path) -> None:
+    assert re.search(r"UI on http://127\.0\.0\.1:\d+ ", out), out
+    assert numbers(r"target moved NUMBER mm up", out) == [10.0]
+    errors = numbers(r"hole error max = NUMBER m", out)
+    assert len(errors) == 2 and max(errors) <= 1e-5, errors  # main and ghost
+
+
+CHECKS = {"01_cjm_vs_qp.py": check_01, "02_closed_loop.py": check_02, "03_barrier.py": check_03,
+          "04_any_urdf.py": check_04, "05_mink_peer.py": check_05,
+          "06_embed_teleop_app.py": check_06}
+
+
+def test_the_examples_folder_has_the_documented_scripts():
+    names = [path.name for path in EXAMPLES]
+    assert set(CHECKS) <= set(names)
+    readme = (EXAMPLES_DIR / "README.md").read_text(encoding="utf-8")
+    assert all(name in readme for name in names), "examples/README.md must list every script"
+
+
+@pytest.mark.parametrize("script", EXAMPLES, ids=[path.name for path in EXAMPLES])
+def test_example_runs_and_prints_its_numbers(script: Path, tmp_path: Path):
+    if script.name in REQUIRES:
+        try:
+            importlib.metadata.distribution(REQUIRES[script.name])
+        except importlib.metadata.PackageNotFoundError:
+            pytest.skip(f"{script.name} needs {REQUIRES[script.name]}")
+    arguments = [a.format(tmp=tmp_path) for a in ARGUMENTS.get(script.name, [])]
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONUNBUFFERED="1")
+    result = subprocess.run([sys.executable, str(script), *arguments], cwd=tmp_path, env=env,
+                            capture_output=True, text=True, timeout=TIMEOUT)
+    assert result.returncode == 0, f"{script.name} failed:\n{result.stdout}\n{result.stderr}"
+    assert result.stdout.strip(), f"{script.name} printed nothing"
+    check = CHECKS.get(script.name)
+    if check is not None:
+        check(result.stdout, tmp_path)
