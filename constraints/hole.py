@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from .validation import as_number
 from .base import (
     DEFAULT_GAIN,
     Constraint,
@@ -16,8 +15,8 @@ from .base import (
     default_link,
     frame_placement,
     perpendicular_basis,
-    resolve_frame,
 )
+from .validation import as_number
 
 #: How far (m) a hole centre may lie off the link axis when a hole is built.
 DEFAULT_AXIS_TOLERANCE = 1e-3

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from .validation import as_number
 from .base import (
     DEFAULT_GAIN,
     Constraint,
@@ -15,6 +14,7 @@ from .base import (
     link_point_at,
     perpendicular_basis,
 )
+from .validation import as_number
 
 #: How far (m) the link point may be from the plane when a plane is built.
 DEFAULT_PLANE_TOLERANCE = 1e-3

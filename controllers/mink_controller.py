@@ -36,11 +36,10 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 import qpsolvers
+from mink.limits.limit import Constraint as LimitRows
 
 from constraints import Constraint
 from constraints.validation import as_number
-
-from mink.limits.limit import Constraint as LimitRows
 
 from .base import Controller, Kinematics, SolverError
 from .joint_limits import DEFAULT_LIMIT_GAIN

@@ -10,7 +10,6 @@ import qpsolvers
 import scipy.sparse
 
 from constraints import Constraint
-
 from constraints.validation import as_number, as_vector
 
 from .base import Controller, Kinematics, SolverError

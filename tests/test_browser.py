@@ -29,11 +29,21 @@ from types import SimpleNamespace
 import numpy as np
 import pinocchio as pin
 import pytest
-
-from browser_helpers import (CHROMIUM_ARGS, Sampler, changed_fraction, chromium_executable,
-                             distinct_colours, ee_position, free_port, png_pixels, project,
-                             scene_canvas, set_camera, trace_since, wait_until)
-
+from browser_helpers import (
+    CHROMIUM_ARGS,
+    Sampler,
+    changed_fraction,
+    chromium_executable,
+    distinct_colours,
+    ee_position,
+    free_port,
+    png_pixels,
+    project,
+    scene_canvas,
+    set_camera,
+    trace_since,
+    wait_until,
+)
 from playwright.sync_api import expect, sync_playwright
 
 from teleop import load_robot

@@ -13,8 +13,14 @@ import pytest
 
 from constraints import Hole
 from teleop.cli.main import build_parser
-from teleop.controller_specs import (CONTEXTS, CONTROLLER_SPECS, ControllerSpec, default_specs,
-                                     make_controller, spec_names)
+from teleop.controller_specs import (
+    CONTEXTS,
+    CONTROLLER_SPECS,
+    ControllerSpec,
+    default_specs,
+    make_controller,
+    spec_names,
+)
 from teleop.robots import load_robot
 from web import cli as web_cli
 

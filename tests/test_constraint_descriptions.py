@@ -11,15 +11,21 @@ import json
 import numpy as np
 import pinocchio as pin
 import pytest
+from browser_helpers import free_port
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-
-from browser_helpers import free_port
 from strategies import unit3, vec3
 
-from constraints import (CONSTRAINT_TYPES, Barrier, Constraint, ConstraintGeometry, Hole,
-                         Plane, PointLock)
+from constraints import (
+    CONSTRAINT_TYPES,
+    Barrier,
+    Constraint,
+    ConstraintGeometry,
+    Hole,
+    Plane,
+    PointLock,
+)
 from constraints.kinematics import frame_placement
 from teleop import load_robot
 

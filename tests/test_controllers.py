@@ -6,8 +6,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import scipy.linalg
-
 from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
+
 from constraints import Barrier, Hole, Plane
 from controllers import CJMController, QPController
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import kinematics
+
 from constraints import Barrier, Hole, Plane, PointLock
 from controllers import CJMController, QPController, SolverError
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-
 from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
+
 from constraints import Barrier, Hole, Plane, PointLock
 from controllers import CJMController
 

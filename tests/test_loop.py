@@ -12,10 +12,15 @@ import pinocchio as pin
 import pytest
 
 from controllers import CJMController
+from teleop.experiments.compare import (
+    compare,
+    metrics_document,
+    run_plan,
+    write_outputs,
+)
 from teleop.experiments.results import METRIC_KEYS
-from teleop.experiments.compare import compare, metrics_document, run_plan, write_outputs
-from teleop.loop import LoopConfig, TeleopLoop, saturate_twist
 from teleop.experiments.scenarios import SCENARIOS, load_scenario
+from teleop.loop import LoopConfig, TeleopLoop, saturate_twist
 
 ALL_CONTROLLERS = ["cjm", "qp:proxqp", "qp:daqp", "qp:osqp", "mink:daqp"]
 SCHEMA = json.loads(files("teleop.experiments").joinpath("metrics.schema.json").read_text())

@@ -8,8 +8,8 @@ import warnings
 
 import numpy as np
 import pytest
-
 from conftest import ee_jacobian, kinematics
+
 from constraints import Hole
 from controllers import CJMController, QPController
 from teleop import load_robot

@@ -11,7 +11,13 @@ import pytest
 
 from teleop.experiments.compare import run_plan
 from teleop.experiments.scenarios import load_scenario
-from teleop.experiments.sessions import SessionError, load_session, record_plan, session_plan
+from teleop.experiments.sessions import (
+    SessionError,
+    load_session,
+    record_plan,
+    session_plan,
+)
+from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED
 
 COMPARED = ("constraint_error", "constraint_velocity_residual", "barrier_penetration",
             "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed")
@@ -46,10 +52,9 @@ def header(robot="ur5_instrument"):
 
 
 def test_constraints_added_and_removed_mid_session(tmp_path, ur5_instrument):
-    from constraints import Hole
-
     import pinocchio as pin
 
+    from constraints import Hole
     from teleop.experiments.scenarios import home_pose
 
     hole = Hole.on_link(ur5_instrument, ur5_instrument.q_home, distance=0.2)
@@ -61,18 +66,28 @@ def test_constraints_added_and_removed_mid_session(tmp_path, ur5_instrument):
         {"type": "target", "t": 0.0, "position": home.translation.tolist(),
          "quaternion_wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]},
         {"type": "move", "t": 0.15, "id": "h", "position": (hole.center + [0.002, 0, 0]).tolist()},
-        {"type": "remove", "t": 0.2, "id": "h"},
-        {"type": "end", "t": 0.3},
+        {"type": "remove", "t": 0.3, "id": "h"},
+        {"type": "end", "t": 0.4},
     ])
     session = load_session(path)
-    assert session.duration == 0.3
-    result = run_plan(session_plan(session), "qp:daqp")
+    assert session.duration == 0.4
+    plan = session_plan(session)
+    result = run_plan(plan, "qp:daqp")
     error = result.columns["constraint_error"]
     assert np.all(error[:99] == 0.0)  # no constraint yet
     assert error[120] < 1e-6  # the hole, placed on the axis, is held
-    assert error[151] > 1e-3  # moved 2 mm sideways: the drift feedback pulls the link over
-    assert error[198] < error[151]
-    assert np.all(error[201:] == 0.0)  # removed
+    # the 2 mm jump glides at MAX_GEOMETRY_SPEED (0.1 s) with feed-forward: held throughout
+    assert np.max(error[100:300]) < 1e-5
+    assert np.all(error[301:] == 0.0)  # removed
+    # the glide: replaying the edits alone, the centre moves at most 0.02 m/s and arrives
+    constraints = plan.make_constraints()
+    centres = []
+    for i in range(300):
+        constraints = plan.update(i * 1e-3, constraints, ur5_instrument.q_home) or constraints
+        centres.append(constraints[0].position.copy() if constraints else None)
+    steps = np.linalg.norm(np.diff(np.array(centres[100:299]), axis=0), axis=1)
+    assert np.max(steps) <= MAX_GEOMETRY_SPEED * 1e-3 * (1 + 1e-9)
+    np.testing.assert_allclose(centres[298], hole.center + [0.002, 0, 0], atol=1e-12)
 
 
 @pytest.mark.parametrize("line, message", [
@@ -93,6 +108,17 @@ def test_moving_an_unknown_constraint_fails_at_its_line(tmp_path):
     path = write_session(tmp_path / "s.jsonl", [
         header(), {"type": "move", "t": 0.01, "id": "ghost", "position": [0, 0, 0]}])
     with pytest.raises(SessionError, match=r"s.jsonl:2: no constraint with id 'ghost'"):
+        run_plan(session_plan(load_session(path)), "cjm", duration=0.05)
+
+
+def test_geometry_off_its_link_is_refused_at_its_line(tmp_path, ur5_instrument):
+    from constraints import Hole
+
+    hole = Hole.on_link(ur5_instrument, ur5_instrument.q_home, distance=0.2)
+    far = Hole(hole.link, hole.center + [0.1, 0.0, 0.0], link_axis=hole.link_axis)
+    path = write_session(tmp_path / "s.jsonl", [
+        header(), {"type": "add", "t": 0.01, "id": "h", "constraint": far.to_dict()}])
+    with pytest.raises(SessionError, match=r"s.jsonl:2: the hole is 0.1 m off link 'instrument_shaft'"):
         run_plan(session_plan(load_session(path)), "cjm", duration=0.05)
 
 

@@ -13,18 +13,16 @@ import pinocchio as pin
 import pytest
 import qpsolvers
 import scipy.linalg
+from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from strategies import placements, unit3, vec3
 
 import controllers.cjm.analytical as analytical_module
-from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
 from constraints import Barrier, Hole, Plane, PointLock
-from constraints.base import Constraint
-from controllers.cjm.analytical import AffineTerms, terms_size, terms_views, write_terms
 from controllers import CJMController, QPController, damped_least_squares, nullspace
 from controllers.base import Kinematics
+from controllers.cjm.analytical import AffineTerms, terms_size, terms_views, write_terms
 from controllers.linalg import DampingPolicy
 
 EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)

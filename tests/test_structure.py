@@ -8,10 +8,17 @@ import pytest
 import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from strategies import placements, unit3, vec3
 
-from constraints import Barrier, Hole, Plane, PointLock, structure_nullspace, structure_paper
+from constraints import (
+    Barrier,
+    Hole,
+    Plane,
+    PointLock,
+    structure_nullspace,
+    structure_paper,
+)
+
 
 @st.composite
 def constraints(draw):

@@ -82,6 +82,54 @@ def test_a_moving_hole_is_followed(app):
     assert app.last_records["main"].constraint_error < 1e-5
 
 
+@pytest.mark.parametrize("robot_name, move", [("sda10f", 0.05), ("sda10f", 0.20),
+                                              ("ur5_instrument", 0.05)])
+def test_a_hole_moved_far_glides_inside_the_joint_limits(robot_name, move, tmp_path):
+    """A hole dragged 5 or 20 cm: speed-capped, no joint above its limits at any tick, the
+    hole held on the way and within 1 um 2 s after it arrives."""
+    from teleop import load_robot
+    from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED
+
+    robot = load_robot(robot_name)
+    app = TeleopApp(robot, controller="cjm", record_dir=tmp_path)
+    hole_id = app.add_hole(0.08 if robot_name == "sda10f" else 0.2)
+    goal = app.entries[hole_id].position + [0.0, move, 0.0]
+    app.move_constraint(hole_id, goal)
+    controller = app.loops["main"].controller
+    dt = app.config.dt
+    glide_ticks = int(move / MAX_GEOMETRY_SPEED / dt) + int(0.5 / dt)  # + the filter's tail
+    previous = app.entries[hole_id].position
+    for tick in range(glide_ticks + int(2.0 / dt)):
+        app.step()
+        qd = app.loops["main"].last_qd
+        assert np.all(np.abs(qd) <= controller.velocity_limit * (1 + 1e-9)), tick
+        new_q = app.loops["main"].q
+        assert np.all(new_q <= robot.model.upperPositionLimit + 1e-12), tick
+        assert np.all(new_q >= robot.model.lowerPositionLimit - 1e-12), tick
+        position = app.entries[hole_id].position
+        assert np.linalg.norm(position - previous) <= MAX_GEOMETRY_SPEED * dt * (1 + 1e-9)
+        previous = position
+    np.testing.assert_allclose(app.entries[hole_id].position, goal, atol=1e-9)
+    record = app.last_records["main"]
+    print(f"{robot_name} hole moved {move} m: error {record.constraint_error:.2e} m, "
+          f"status {record.status}, EE error {record.ee_position_error:.3g} m")
+    assert record.constraint_error < 1e-6
+
+
+def test_a_rate_too_low_for_the_gain_is_refused_and_nothing_changes(app):
+    app.add_hole(0.08)
+    app.set_gain(500.0)
+    with pytest.raises(ValueError, match=r"unstable at 50 Hz \(K dt = 10"):
+        app.set_rate(50.0)
+    assert app.config.rate == 1000.0
+    assert all(loop.controller.dt == 1e-3 for loop in app.loops.values())
+    app.set_gain(80.0)
+    app.set_rate(50.0)  # K dt = 1.6 < 2: fine
+    assert all(loop.controller.dt == 0.02 for loop in app.loops.values())
+    run(app, 0.1)
+    assert app.last_records["main"].constraint_error < 1e-6
+
+
 def test_planes_and_barriers_and_removal(app):
     plane_id = app.add_plane(0.08, [0.0, 2.0, 0.0])  # any non-zero normal, normalised
     barrier_id = app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
@@ -102,6 +150,9 @@ def test_planes_and_barriers_and_removal(app):
     (lambda app: app.set_target([np.nan, 0, 0], [1, 0, 0, 0]), "finite"),
     (lambda app: app.set_rate(10.0), "between 50 and 5000"),
     (lambda app: app.set_gain(5000.0), "gain must be in"),
+    (lambda app: app.add_hole(1e6), "hole distance must be between 0 and"),
+    (lambda app: app.add_hole(-19.0), "hole distance must be between 0 and"),
+    (lambda app: app.add_hole(None), "hole distance must be a number"),
     (lambda app: app.set_damping(-1.0), "damping must be"),
     (lambda app: app.move_constraint("hole-9", [0, 0, 0]), "no constraint"),
     (lambda app: app.stop_recording(), "not recording"),

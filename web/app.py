@@ -26,10 +26,11 @@ import pinocchio as pin
 from constraints import Barrier, Constraint, Hole, Plane, PointLock
 from constraints.kinematics import frame_placement
 from constraints.validation import as_number, as_vector
-from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.controller_specs import make_controller
-from teleop.robots import Robot
 from teleop.experiments.sessions import SessionRecorder
+from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.loop.moving_geometry import advance, steer
+from teleop.robots import Robot
 
 #: the operator's target and moved geometry are smoothed with this time constant (s)
 DEFAULT_SMOOTHING = 0.05
@@ -186,15 +187,28 @@ class TeleopApp:
                 self.recorder.add(self.now - self._record_start, entry_id, constraint)
             return entry_id
 
+    def _link_distance(self, distance: float, what: str) -> float:
+        """``distance`` (m along the constrained link's axis) if it lies on the arm: between
+        the link's joint (0) and the EE's distance from it; else ``ValueError``."""
+        distance = as_number(distance, what)
+        with self._lock:
+            link = self._link_placement(self.robot.constrained_link)
+            reach = float(np.linalg.norm(link.actInv(
+                self._link_placement(self.robot.ee_frame).translation)))
+        if not 0.0 <= distance <= reach:
+            raise ValueError(f"{what} must be between 0 and {reach:.3f} m (from the joint of "
+                             f"{self.robot.constrained_link} to the tool tip), got {distance:g} m")
+        return distance
+
     def add_hole(self, distance: float) -> str:
         """A hole on the constrained link, ``distance`` m along its axis, where it is now."""
-        distance = as_number(distance, "hole distance")
+        distance = self._link_distance(distance, "hole distance")
         with self._lock:
             return self.add_constraint(Hole.on_link(self.robot, self.loops["main"].q, distance=distance))
 
     def add_point_lock(self, distance: float) -> str:
         """Lock the constrained link's point ``distance`` m along its axis where it is now."""
-        distance = as_number(distance, "point lock distance")
+        distance = self._link_distance(distance, "point lock distance")
         with self._lock:
             return self.add_constraint(
                 PointLock.on_link(self.robot, self.loops["main"].q, distance=distance))
@@ -206,7 +220,7 @@ class TeleopApp:
         sit ``offset`` m below the point along the normal (the point must be on its
         positive side).
         """
-        distance = as_number(distance, "plane distance")
+        distance = self._link_distance(distance, "plane distance")
         offset = as_number(offset, "barrier offset")
         normal = as_vector(normal, 3, "plane normal")
         if np.linalg.norm(normal) < 1e-9:
@@ -260,11 +274,15 @@ class TeleopApp:
             self.last_records["ghost"] = None
 
     def _switch(self, which: str, spec: str) -> None:
-        old = self.loops[which]
-        loop = self._make_loop(spec, q=old.q.copy())  # raises ValueError on a bad spec
-        loop.t = old.t
-        self.loops[which] = loop
+        self.loops[which] = self._rebuilt(which, spec)  # raises ValueError on a bad spec
         self.specs[which] = spec
+
+    def _rebuilt(self, which: str, spec: str) -> TeleopLoop:
+        """A new loop for robot ``which`` with ``spec`` and the current config, same state."""
+        old = self.loops[which]
+        loop = self._make_loop(spec, q=old.q.copy())
+        loop.t = old.t
+        return loop
 
     def set_gain(self, gain: float) -> None:
         """Gain K (1/s) of every constraint: the drift feedback of the equalities, the
@@ -300,9 +318,14 @@ class TeleopApp:
         if not 50.0 <= rate <= 5000.0:
             raise ValueError("the control rate must be between 50 and 5000 Hz")
         with self._lock:
+            previous = self.config
             self.config = dataclasses.replace(self.config, rate=rate)
-            for which in list(self.loops):
-                self._switch(which, self.specs[which])
+            try:  # every loop rebuilt at the new dt (gains checked), or none
+                loops = {which: self._rebuilt(which, self.specs[which]) for which in self.loops}
+            except ValueError:
+                self.config = previous
+                raise
+            self.loops.update(loops)
 
     def home(self) -> None:
         """Robots back home, target on the home EE pose, constraints removed."""
@@ -350,18 +373,16 @@ class TeleopApp:
             dt = self.config.dt
             alpha = 1.0 - math.exp(-dt / self.config.target_time_constant)
             for entry in self.entries.values():  # moved geometry glides, with feed-forward
-                position = entry.position
-                delta = alpha * (entry.goal - position)
-                if np.any(delta):
-                    moved = position + delta
-                    velocity = delta / dt if np.linalg.norm(delta) > 1e-12 else np.zeros(3)
-                    entry.constraint.move_to(moved, velocity)
-                    if self.recorder is not None and self.ticks % 10 == 0:
-                        self.recorder.move(self.now - self._record_start, entry.id, moved, velocity)
-                elif entry.constraint.velocity.any():
-                    entry.constraint.move_to(position)
+                steer(entry.constraint, entry.goal, dt, smoothing=alpha)
+                if (self.recorder is not None and self.ticks % 10 == 0
+                        and np.any(entry.constraint.velocity)):
+                    self.recorder.move(self.now - self._record_start, entry.id,
+                                       entry.constraint.position, entry.constraint.velocity)
+            pending = {which: loop.advance(self.target) for which, loop in self.loops.items()}
+            for entry in self.entries.values():  # where the period took the geometry
+                advance(entry.constraint, dt)
             for which, loop in self.loops.items():
-                record = loop.tick(self.target)
+                record = loop.measure(pending[which])
                 self.last_records[which] = record
                 if record.t >= self._next_history:
                     self.traces[which].add(record)

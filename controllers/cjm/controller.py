@@ -13,7 +13,12 @@ from constraints.validation import as_number, as_vector
 from ..base import Controller, Kinematics, StepStatus
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
-from .analytical import ChainSplit, SquarePreChain, chain_split, solve_redundant_pre_chain
+from .analytical import (
+    ChainSplit,
+    SquarePreChain,
+    chain_split,
+    solve_redundant_pre_chain,
+)
 from .general import solve_general
 from .saturation import saturate_in_null_space
 

@@ -138,7 +138,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _run(plan, args, config) -> int:
-    from teleop.experiments.compare import compare, format_table, metrics_document, write_outputs
+    from teleop.experiments.compare import (
+        compare,
+        format_table,
+        metrics_document,
+        write_outputs,
+    )
 
     duration = args.duration or plan.duration
     results = compare(plan, args.controllers, config, duration, progress=not args.quiet)
@@ -206,7 +211,12 @@ def _dispatch(args) -> int:
         print(f"wrote {path}")
         return 0
     if args.command == "bench":
-        from teleop.experiments.bench import format_table, run_bench, run_scaling, write_json
+        from teleop.experiments.bench import (
+            format_table,
+            run_bench,
+            run_scaling,
+            write_json,
+        )
 
         iterations = 20 if args.quick else args.iterations
         if iterations < 1:

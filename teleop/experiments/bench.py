@@ -12,10 +12,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from constraints import Hole
-
-from teleop.robots.chains import hole_links, load_chain
 from teleop.controller_specs import default_specs, make_controller
 from teleop.robots import Robot, load_robot
+from teleop.robots.chains import hole_links, load_chain
 
 from .compare import format_status_counts
 

@@ -11,6 +11,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from constraints import Constraint
 from teleop.controller_specs import make_controller
 from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
 
@@ -34,13 +35,24 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
     steps = int(round(duration * config.rate))
     records: list[StepRecord] = []
     failures: list[str] = []
+    edits_at_measure: list[list[Constraint]] = []
+
+    def advance_geometry(now: float) -> None:
+        """The geometry at the end of the tick, where the measures are taken."""
+        changed = plan.update(now, loop.constraints, loop.q)
+        if changed is not None:
+            edits_at_measure.append(changed)
+
     for i in range(steps):
         t = i * config.dt
-        changed = plan.update(t, constraints)
+        changed = plan.update(t, constraints, loop.q)
+        if changed is None and edits_at_measure:
+            changed = edits_at_measure.pop()
+        edits_at_measure.clear()
         if changed is not None:
             constraints = changed
             loop.set_constraints(constraints)
-        record = loop.tick(plan.target(t + config.dt))
+        record = loop.tick(plan.target(t + config.dt), advance_geometry)
         records.append(record)
         if record.failed and len(failures) < 10:
             failures.append(f"t={record.t:.3f}s: {record.message}")

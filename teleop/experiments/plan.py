@@ -10,7 +10,6 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.kinematics import frame_placement
-
 from teleop.robots import Robot
 
 
@@ -26,8 +25,9 @@ class Plan:
     duration : seconds.
     make_constraints : returns fresh constraint objects for one run.
     target : operator target pose at time ``t`` (world frame).
-    update : called every tick with ``(t, constraints)``; moves geometry in place and
-        returns a new list when the constraint set itself changes (else None).
+    update : called every tick with ``(t, constraints, q)``, ``q`` the robot's
+        configuration at ``t``; moves geometry in place and returns a new list when the
+        constraint set itself changes (else None).
     description : one line for humans.
     """
 
@@ -37,8 +37,8 @@ class Plan:
     duration: float
     make_constraints: Callable[[], list[Constraint]]
     target: Callable[[float], pin.SE3]
-    update: Callable[[float, list[Constraint]], list[Constraint] | None] = field(
-        default=lambda t, constraints: None)
+    update: Callable[[float, list[Constraint], np.ndarray], list[Constraint] | None] = field(
+        default=lambda t, constraints, q: None)
     description: str = ""
 
 

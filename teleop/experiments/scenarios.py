@@ -16,7 +16,6 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Barrier, Constraint, Hole, Plane
-
 from teleop.robots import Robot, load_robot
 
 from .plan import Plan, home_pose, link_placement, smoothstep
@@ -114,7 +113,7 @@ def _moving_trocar(robot: Robot) -> Plan:
     direction = np.array([1.0, 0.0, 1.0]) / math.sqrt(2.0)
     amplitude, frequency = 0.005, 0.25
 
-    def update(t: float, constraints: list[Constraint]) -> None:
+    def update(t: float, constraints: list[Constraint], q: np.ndarray) -> None:
         omega = 2.0 * math.pi * frequency
         constraints[0].move_to(centre + amplitude * math.sin(omega * t) * direction,
                                velocity=amplitude * omega * math.cos(omega * t) * direction)

@@ -31,9 +31,11 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
+from constraints.kinematics import frame_placement
 from constraints.validation import as_vector
-
+from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED, advance, steer
 from teleop.robots import Robot, load_robot
+
 from .plan import Plan, home_pose
 
 FORMAT = "cjm-teleop-session"
@@ -142,16 +144,18 @@ def record_plan(plan: Plan, path: str | Path, rate_hz: float = 1000.0,
         for cid, constraint in zip(ids, constraints):
             recorder.add(0.0, cid, constraint)
         before = [c.position for c in constraints]
-        for i in range(int(round(duration * rate_hz))):
+        steps = int(round(duration * rate_hz))
+        for i in range(steps + 1):  # the geometry up to the last measure, at ``duration``
             t = i * dt
-            if plan.update(t, constraints) is not None:
+            if plan.update(t, constraints, plan.q0) is not None:  # scenarios move geometry by time alone
                 raise ValueError("record_plan cannot record a plan that changes its constraint set")
             for k, (cid, constraint) in enumerate(zip(ids, constraints)):
                 now = constraint.position
                 if not np.array_equal(now, before[k]) or constraint.velocity.any():
                     recorder.move(t, cid, now, constraint.velocity)
                     before[k] = now
-            recorder.target(t + dt, plan.target(t + dt))
+            if i < steps:
+                recorder.target(t + dt, plan.target(t + dt))
         recorder.close(duration)
     return Path(path)
 
@@ -244,6 +248,23 @@ def session_robot(session: Session) -> Robot:
                       link_axis=header.get("link_axis"))
 
 
+#: How far (m) the geometry of a session's ``add`` event may be off its link when added.
+ADD_TOLERANCE = 1e-3
+
+
+def _placed(constraint: Constraint, robot: Robot, q: np.ndarray, where: str) -> Constraint:
+    """``constraint`` if its geometry is on its link at ``q``, else ``SessionError``."""
+    try:
+        placement = frame_placement(robot.model, q, constraint.link)
+    except ValueError as error:
+        raise SessionError(f"{where}: {error}") from error
+    off = constraint.violation(placement)
+    if off > ADD_TOLERANCE:
+        raise SessionError(f"{where}: the {constraint.kind} is {off:.3g} m off link "
+                           f"{constraint.link!r} when it is added (tolerance {ADD_TOLERANCE:g} m)")
+    return constraint
+
+
 def session_plan(session: Session, robot: Robot | None = None) -> Plan:
     """A :class:`Plan` that replays the session: zero-order hold of the targets, and the
     constraint edits applied at their times (each run starts from no constraint)."""
@@ -257,33 +278,51 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
     poses = [pin.SE3(pin.Quaternion(*e["quaternion_wxyz"]).normalized().matrix(),
                      np.asarray(e["position"], dtype=float)) for e in targets]
     edits = [e for e in session.events if e["type"] in ("add", "move", "remove")]
-    state = {"cursor": 0, "by_id": {}}
+    state: dict = {}
 
     def make_constraints() -> list[Constraint]:
-        state["cursor"], state["by_id"] = 0, {}
+        state.update(cursor=0, by_id={}, goals={}, t=None, dt=1.0 / float(session.header.get("rate_hz", 1000.0)))
         return []
 
     def target(t: float) -> pin.SE3:
         index = int(np.searchsorted(target_times, t + TIME_EPSILON, side="right")) - 1
         return start if index < 0 else poses[index]
 
-    def update(t: float, constraints: list[Constraint]) -> list[Constraint] | None:
+    def update(t: float, constraints: list[Constraint], q: np.ndarray) -> list[Constraint] | None:
         changed = False
-        by_id = state["by_id"]
+        by_id, goals = state["by_id"], state["goals"]
+        elapsed = 0.0 if state["t"] is None else t - state["t"]
+        state["t"] = t
+        if elapsed > 0.0:
+            state["dt"] = elapsed
+        dt = state["dt"]
+        for constraint in by_id.values():  # the motion of the period that ended
+            advance(constraint, elapsed)
+        snapped = set()
         while state["cursor"] < len(edits) and edits[state["cursor"]]["t"] <= t + TIME_EPSILON:
             event = edits[state["cursor"]]
             state["cursor"] += 1
             where = f"{session.path}:{event['_line']}"
+            cid = event["id"]
             if event["type"] == "add":
-                by_id[event["id"]] = Constraint.from_dict(event["constraint"])
+                by_id[cid] = _placed(Constraint.from_dict(event["constraint"]), robot, q, where)
                 changed = True
-            elif event["id"] not in by_id:
-                raise SessionError(f"{where}: no constraint with id {event['id']!r} to {event['type']}")
+            elif cid not in by_id:
+                raise SessionError(f"{where}: no constraint with id {cid!r} to {event['type']}")
             elif event["type"] == "remove":
-                del by_id[event["id"]]
+                del by_id[cid]
+                goals.pop(cid, None)
                 changed = True
-            else:
-                by_id[event["id"]].move_to(event["position"], event.get("velocity", (0, 0, 0)))
+            else:  # a recorded motion: its position at event time, moving at its velocity
+                position = np.asarray(event["position"], dtype=float)
+                velocity = np.asarray(event.get("velocity", (0.0, 0.0, 0.0)), dtype=float)
+                goals[cid] = (position, velocity, float(event["t"]))
+                if np.linalg.norm(position - by_id[cid].position) <= MAX_GEOMETRY_SPEED * dt:
+                    by_id[cid].move_to(position, velocity)  # on the recorded path already
+                    snapped.add(cid)
+        for cid, (position, velocity, since) in goals.items():  # else glide, speed-capped
+            if cid not in snapped:
+                steer(by_id[cid], position + velocity * (t + dt - since), dt)
         return list(by_id.values()) if changed else None
 
     return Plan(name=session.path.stem, robot=robot, q0=q0, duration=session.duration,

@@ -1,5 +1,11 @@
 """The closed teleoperation loop: operator target -> EE twist -> controller -> integrate."""
 
-from .closed_loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop, saturate_twist
+from .closed_loop import (
+    RECORD_FIELDS,
+    LoopConfig,
+    StepRecord,
+    TeleopLoop,
+    saturate_twist,
+)
 
 __all__ = ["RECORD_FIELDS", "LoopConfig", "StepRecord", "TeleopLoop", "saturate_twist"]

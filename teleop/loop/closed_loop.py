@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -86,6 +86,21 @@ class StepRecord:
     actual_linear_velocity: np.ndarray = field(repr=False)  # world frame
     status: str = "ok"  # the controller's step status (controllers.StepStatus value)
     message: str = ""
+
+
+@dataclass
+class PendingStep:
+    """What :meth:`TeleopLoop.advance` computed, waiting for the end-of-period measures."""
+
+    target: pin.SE3
+    tick_start: int  # perf_counter_ns
+    step_time_us: float
+    status: str
+    message: str
+    residual: float
+    constraint_velocity: np.ndarray
+    desired_linear_velocity: np.ndarray
+    actual_linear_velocity: np.ndarray
 
 
 def saturate_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
@@ -163,8 +178,21 @@ class TeleopLoop:
             twist += error.action @ target_twist
         return saturate_twist(twist, self.config.max_linear_speed, self.config.max_angular_speed)
 
-    def tick(self, target: pin.SE3) -> StepRecord:
-        """Advance one control period towards ``target`` and measure it."""
+    def tick(self, target: pin.SE3,
+             advance_geometry: Callable[[float], None] | None = None) -> StepRecord:
+        """Advance one control period towards ``target`` and measure it.
+
+        The measures are taken at the end of the period, against the geometry of that
+        instant: ``advance_geometry(t)`` (when moving geometry is given) is called with the
+        new time after the integration, to move the constraints there first.
+        """
+        step = self.advance(target)
+        if advance_geometry is not None:
+            advance_geometry(self.t)
+        return self.measure(step)
+
+    def advance(self, target: pin.SE3) -> "PendingStep":
+        """The first half of :meth:`tick`: command, solve, integrate (no end measures)."""
         tick_start = time.perf_counter_ns()
         dt = self.config.dt
         model, data = self.model, self.data
@@ -185,32 +213,41 @@ class TeleopLoop:
         step_time = (time.perf_counter_ns() - solve_start) * 1e-3
         if not np.isfinite(qd).all():  # never integrate a non-finite command
             qd, status, message = np.zeros(model.nv), "failed", "non-finite command replaced by zero"
-        failed = status == "failed"
 
         # measures at the configuration the command was computed for
         residual, velocity = self._constraint_velocity(qd)
         ee_jacobian = pin.getFrameJacobian(model, data, self.ee_frame_id, pin.LOCAL)
         rotation = ee.rotation
-        desired_linear = rotation @ twist[:3]
-        actual_linear = rotation @ (ee_jacobian[:3] @ qd)
 
         self.q = pin.integrate(model, self.q, qd * dt)
         self.last_qd = qd
         self.t += dt
+        return PendingStep(target=target, tick_start=tick_start, step_time_us=step_time,
+                           status=status, message=message, residual=residual,
+                           constraint_velocity=velocity,
+                           desired_linear_velocity=rotation @ twist[:3],
+                           actual_linear_velocity=rotation @ (ee_jacobian[:3] @ qd))
+
+    def measure(self, step: "PendingStep") -> StepRecord:
+        """The second half of :meth:`tick`: the measures at the end of the period."""
+        model, data = self.model, self.data
         error, penetration = self._constraint_errors()
         ee_now = data.oMf[self.ee_frame_id]
+        target = step.target
         position_error = float(np.linalg.norm(ee_now.translation - target.translation))
         orientation_error = float(np.linalg.norm(pin.log3(ee_now.rotation.T @ target.rotation)))
         violation = float(max(0.0, np.max(self.q - model.upperPositionLimit),
                               np.max(model.lowerPositionLimit - self.q)))
         return StepRecord(
-            t=self.t, constraint_error=error, constraint_velocity_residual=residual,
+            t=self.t, constraint_error=error, constraint_velocity_residual=step.residual,
             barrier_penetration=penetration, ee_position_error=position_error,
             ee_orientation_error=orientation_error, joint_limit_violation=violation,
-            failed=failed, step_time_us=step_time,
-            tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3,
-            constraint_velocity=velocity, desired_linear_velocity=desired_linear,
-            actual_linear_velocity=actual_linear, status=status, message=message,
+            failed=step.status == "failed", step_time_us=step.step_time_us,
+            tick_time_us=(time.perf_counter_ns() - step.tick_start) * 1e-3,
+            constraint_velocity=step.constraint_velocity,
+            desired_linear_velocity=step.desired_linear_velocity,
+            actual_linear_velocity=step.actual_linear_velocity, status=step.status,
+            message=step.message,
         )
 
     def _constraint_velocity(self, qd: np.ndarray) -> tuple[float, np.ndarray]:

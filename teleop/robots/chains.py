@@ -10,6 +10,7 @@ import numpy as np
 
 from .robot import Robot, load_robot
 
+
 def _axes(dof: int) -> list[str]:
     """Joint axes of a generic chain: fixed pseudo-random unit vectors (no two parallel
     by construction of the seed), so no sub-chain is structurally singular."""
