@@ -87,22 +87,27 @@ class BoxTest:
     """
 
     def __init__(self, bounds: JointBounds, nq: int, nv: int, tolerance: float = 1e-9) -> None:
+        gain = bounds.limit_gain / bounds.dt
+        # slack per joint: ``tolerance`` of its velocity limit (rad/s), so a passing qd is
+        # within ``limit (1 + tolerance)`` and ``q + qd dt`` within ``tolerance limit dt``
+        # of a position limit; far above the rounding of ``g (q_limit - q) / dt``
+        slack = [tolerance * (limit if np.isfinite(limit) else 1.0)
+                 for limit in bounds.velocity_limit.tolist()]
         rows: list[np.ndarray] = []
         for v, limit in enumerate(bounds.velocity_limit.tolist()):
             if bounds.velocity_limits and np.isfinite(limit):
-                for sign in (1.0, -1.0):  # sign qd_v - limit - tol (1 + limit) <= 0
+                for sign in (1.0, -1.0):  # sign qd_v - limit - slack <= 0
                     row = np.zeros(nv + nq + 1)
-                    row[v], row[-1] = sign, -limit - tolerance * (1.0 + limit)
+                    row[v], row[-1] = sign, -limit - slack[v]
                     rows.append(row)
         if bounds.position_limits:
-            gain = bounds.limit_gain / bounds.dt
             for c, v, q_min, q_max in zip(bounds._limited_q.tolist(), bounds._limited_v.tolist(),
                                           bounds._q_limits[0].tolist(), bounds._q_limits[1].tolist()):
                 # qd <= g (q_max - q) / dt  and  -qd <= -g (q_min - q) / dt
                 for sign, q_limit in ((1.0, q_max), (-1.0, q_min)):
                     row = np.zeros(nv + nq + 1)
                     row[v], row[nv + c] = sign, sign * gain
-                    row[-1] = -sign * gain * q_limit - tolerance * (1.0 + gain * abs(q_limit))
+                    row[-1] = -sign * gain * q_limit - slack[v]
                     rows.append(row)
         self._matrix = np.array(rows).reshape(len(rows), nv + nq + 1)
         self._stacked = np.ones(nv + nq + 1)  # [qd; q; 1]

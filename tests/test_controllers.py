@@ -255,3 +255,22 @@ def test_moving_hole_is_followed_through_the_feed_forward(ur5_instrument):
         hole_next = Hole(hole.link, hole.center + dt * hole.velocity, link_axis=hole.link_axis)
         placement = kinematics(robot, q_next).oMf[robot.model.getFrameId(hole.link)]
         assert np.max(np.abs(hole_next.error(placement))) < 1e-6 * dt * 1e3  # O(dt^2)
+
+
+@pytest.mark.parametrize("posture_gain", [0.0, 1.0, 5.0])
+def test_a_wide_cjm_spends_its_null_space_as_the_general_form(sda10f, posture_gain):
+    """A plane on link 6 leaves Jbar 6 x 7: the analytical form's spare direction goes to
+    the posture (or the minimum-norm qd) exactly as the general form's does."""
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        q = near_home(sda10f, rng, 0.1)
+        twist = rng.normal(scale=0.02, size=6)
+        plane = Plane.through_link_point(sda10f, q, normal=[0.0, 0.0, 1.0], distance=0.08)
+        options = dict(posture_gain=posture_gain, singular_threshold=0.0,
+                       velocity_limits=False, position_limits=False)
+        analytical = CJMController(sda10f, [plane], **options)
+        general = CJMController(sda10f, [plane], form="general", **options)
+        qd = analytical.solve(q, twist)
+        assert analytical.info.method == "analytical"
+        np.testing.assert_allclose(qd, general.solve(q, twist), atol=1e-12)
+        np.testing.assert_allclose(ee_jacobian(sda10f, q) @ qd, twist, atol=1e-12)

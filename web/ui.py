@@ -335,10 +335,10 @@ class TeleopUI:
             if record is None:
                 continue
             lines.append(
-                f"**{which}** `{robot['spec']}` ({info.method or '-'}): constraint "
-                f"{max(record.constraint_error, record.barrier_penetration):.1e} m, "
+                f"**{which}** `{robot['spec']}` **{record.status}** ({info.method or '-'}): "
+                f"constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
                 f"EE {1e3 * record.ee_position_error:.2f} mm, step {record.step_time_us:.0f} us"
-                + (f", **{record.message}**" if record.message else ""))
+                + (f", {record.message}" if record.message else ""))
         self.status.content = "  \n".join(lines)
 
     def _plot(self, snapshot: dict) -> None:

@@ -23,13 +23,17 @@ import pinocchio as pin
 from constraints import Constraint, ConstraintPoint, Parametrisation, structure_of
 
 from ..base import TWIST_TOLERANCE, SolveInfo, StepStatus
-from ..linalg import DampedSolution, DampingPolicy, damped_least_squares
+from ..linalg import DampedSolution, DampingPolicy, damped_least_squares, nullspace
 
-#: Below this ratio of the smallest to the largest LU pivot of ``J_a`` (square
-#: pre-chain), or this smallest singular value of ``J_a`` (redundant pre-chain), ``F_a``
-#: can no longer take every twist at a sane joint speed, and the analytical form hands
-#: over to the general null-space form, which holds the rows exactly and damps instead.
-PRE_CHAIN_SINGULAR = 1e-2
+#: Below this ratio of the smallest to the largest LU pivot of a square ``J_a``, ``F_a``
+#: can no longer take every twist at a sane joint speed (``J_a^-1`` would amplify by more
+#: than about its inverse), and the analytical form hands over to the general null-space
+#: form, which holds the rows exactly and damps instead.
+PRE_CHAIN_PIVOT_RATIO = 1e-2
+
+#: The same hand-over for a redundant pre-chain, on the smallest singular value of
+#: ``J_a`` (m/s or rad/s per rad/s).
+PRE_CHAIN_MIN_SINGULAR_VALUE = 1e-2
 
 #: The LU fast path for a square ``Jbar`` needs the certified lower bound on its smallest
 #: singular value to be at least this as well as the damping threshold, so the SVD path
@@ -176,8 +180,13 @@ class SquarePreChain:
         self._affine[1].write(*inputs, self.terms)
 
     def solve(self, model: pin.Model, data: pin.Data, ee_jacobian: np.ndarray,
-              twist: np.ndarray, policy: DampingPolicy, info: SolveInfo) -> np.ndarray | None:
+              twist: np.ndarray, policy: DampingPolicy, info: SolveInfo,
+              posture_velocity: np.ndarray | None = None) -> np.ndarray | None:
         """``qd`` for ``twist``, or None when ``J_a`` is near singular (general form then).
+
+        A wide ``Jbar`` (more free variables than 6) leaves a null space; it is spent as
+        the general form spends it: the ``qd`` closest to ``posture_velocity`` (zero: the
+        minimum-norm ``qd``) among those that meet the rows and the task.
 
         Written flat, with the buffers of the plan: from Python every NumPy or LAPACK call
         costs about a microsecond whatever the size, so the step is counted in calls.
@@ -187,7 +196,7 @@ class SquarePreChain:
         lu_pre = self.lu_pre
         lu_pre.compute(jacobian_a[:, self.pre])
         pivots = list(map(abs, lu_pre.matrixLU().diagonal().tolist()))
-        if not min(pivots) >= PRE_CHAIN_SINGULAR * max(pivots):  # NaN included
+        if not min(pivots) >= PRE_CHAIN_PIVOT_RATIO * max(pivots):  # NaN included
             info.message = PRE_CHAIN_SINGULAR_NOTE
             return None
         joint_map = self.joint_map
@@ -198,12 +207,22 @@ class SquarePreChain:
             solution = damped_least_squares(task_map[:, 1:], self.cjm_rhs, policy)
             self.free_with_one[1:] = solution.x
             report_task_solution(solution, task_map[:, 1:], self.cjm_rhs, info)
+            if solution.rank < solution.x.size:
+                self._closest_to_posture(task_map[:, 1:], posture_velocity)
         qd = np.dot(joint_map, self.free_with_one)  # a new array: the caller keeps it
         # residual of C v_c = b for the twist the pre-chain really produces
         np.dot(jacobian_a, qd, out=self.twist_a_with_one[1:])
         info.equality_residual = max(map(abs, np.dot(self.residual_rows, self.twist_a_with_one).tolist()))
         info.method = "analytical"
         return qd
+
+    def _closest_to_posture(self, cjm: np.ndarray, posture_velocity: np.ndarray | None) -> None:
+        """Move the free variables within ``null(Jbar)`` to the ``qd`` closest to the posture."""
+        null_basis, _, _ = nullspace(cjm)
+        qd = self.joint_map @ self.free_with_one
+        goal = -qd if posture_velocity is None else posture_velocity - qd
+        step, *_ = np.linalg.lstsq(self.joint_map[:, 1:] @ null_basis, goal, rcond=1e-10)
+        self.free_with_one[1:] += null_basis @ step
 
     def _solve_by_lu(self, cjm: np.ndarray, policy: DampingPolicy, info: SolveInfo) -> bool:
         """Solve a square, well-conditioned ``Jbar`` by its LU, where damping cannot act.
@@ -263,7 +282,7 @@ def solve_redundant_pre_chain(model: pin.Model, data: pin.Data, ee_jacobian: np.
     twist_a[:3] += particular_linear
 
     u, s, vt = np.linalg.svd(pre_jacobian, full_matrices=True)
-    if s[-1] < PRE_CHAIN_SINGULAR:
+    if s[-1] < PRE_CHAIN_MIN_SINGULAR_VALUE:
         info.message = PRE_CHAIN_SINGULAR_NOTE
         return None
     qd_pre = vt[:6].T @ ((u.T @ twist_a) / s)

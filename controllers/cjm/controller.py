@@ -193,7 +193,8 @@ class CJMController(Controller):
                     self.parametrisation, self._posture_velocity(kinematics.q), self.info)
             plan = self._square_plans[index] = SquarePreChain(
                 self.constraints[index], frame_id, self.model.nv, split, self.parametrisation)
-        return plan.solve(self.model, self.data, kinematics.ee_jacobian, twist, self.policy, self.info)
+        return plan.solve(self.model, self.data, kinematics.ee_jacobian, twist, self.policy, self.info,
+                          None if plan.square else self._posture_velocity(kinematics.q))
 
     def _paper_form_defined(self, index: int) -> bool:
         """Whether the paper's ``1/a`` structure matrix exists here (``a = |p|`` not ~0)."""

@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from constraints.validation import as_vector
+
 __all__ = ["Robot", "load_robot", "BUILTIN_ROBOTS"]
 
 ROBOTS_DIR = pathlib.Path(__file__).resolve().parent
@@ -139,13 +141,9 @@ def _check_frame(model: pin.Model, name: str, what: str) -> str:
 
 
 def _check_axis(link_axis: Any) -> np.ndarray:
-    try:
-        axis = np.asarray(link_axis, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"link_axis must be a 3-vector, got {link_axis!r}") from exc
-    if axis.shape != (3,) or not np.all(np.isfinite(axis)):
-        raise ValueError(f"link_axis must be a finite 3-vector, got {link_axis!r}")
-    norm = np.linalg.norm(axis)
+    """A link axis of any non-zero length, normalised (a direction, not a unit vector)."""
+    axis = as_vector(link_axis, 3, "link_axis")
+    norm = float(np.linalg.norm(axis))
     if norm < 1e-12:
         raise ValueError(f"link_axis must be non-zero, got {link_axis!r}")
     return axis / norm
@@ -155,7 +153,7 @@ def _check_q_home(model: pin.Model, q_home: Any) -> np.ndarray:
     q = np.asarray(q_home, dtype=float)
     if q.shape != (model.nq,):
         raise ValueError(f"q_home must have size nq = {model.nq}, got shape {q.shape}")
-    if not np.all(np.isfinite(q)):
+    if not np.all(np.isfinite(q)):  # which joints, not only that (as_vector would say less)
         raise ValueError(f"q_home has non-finite entries at indices {np.flatnonzero(~np.isfinite(q)).tolist()}")
     bad = np.flatnonzero((q < model.lowerPositionLimit) | (q > model.upperPositionLimit))
     if bad.size:
