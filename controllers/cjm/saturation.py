@@ -67,9 +67,9 @@ class _Split:
 def _solve_over_free(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
                      twist: np.ndarray, free: np.ndarray, held: np.ndarray,
                      policy: DampingPolicy) -> _Split:
-    """The rows exactly, then the task, over the free joints; ``held`` on the others."""
-    fixed = ~free
-    rhs = rows_rhs - rows[:, fixed] @ held[fixed]
+    """The rows exactly, then the task, over the free joints; ``held`` on the others
+    (``held`` is zero on the free joints, so products with it need no masks)."""
+    rhs = rows_rhs - rows @ held
     rows_free = rows[:, free]
     null_basis, rows_pinv, _ = nullspace(rows_free)
     x_0 = rows_pinv @ rhs
@@ -79,9 +79,8 @@ def _solve_over_free(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarra
     direction = np.zeros_like(held)
     task_rank = 0
     if null_basis.shape[1]:
-        jacobian_free = jacobian[:, free]
-        cjm = jacobian_free @ null_basis
-        task_rhs = np.column_stack([twist, -(jacobian[:, fixed] @ held[fixed]) - jacobian_free @ x_0])
+        cjm = jacobian[:, free] @ null_basis
+        task_rhs = np.column_stack([twist, -(jacobian @ base)])
         solution = damped_least_squares(cjm, task_rhs, policy)
         base[free] += null_basis @ solution.x[:, 1]
         direction[free] = null_basis @ solution.x[:, 0]
@@ -120,9 +119,8 @@ def task_scale_limit(base: np.ndarray, direction: np.ndarray, lower: np.ndarray,
     return largest, critical
 
 
-def _inside(qd: np.ndarray, lower: np.ndarray, upper: np.ndarray, tolerance: float = 1e-12) -> bool:
-    return bool(np.all(qd >= lower - tolerance * (1.0 + np.abs(lower)))
-                and np.all(qd <= upper + tolerance * (1.0 + np.abs(upper))))
+def _inside(qd: np.ndarray, box: tuple[np.ndarray, np.ndarray]) -> bool:
+    return bool((qd >= box[0]).all() and (qd <= box[1]).all())
 
 
 def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
@@ -139,6 +137,7 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
     nv = jacobian.shape[1]
     free = np.ones(nv, dtype=bool)
     held = np.zeros(nv)
+    box = (lower - 1e-12 * (1.0 + np.abs(lower)), upper + 1e-12 * (1.0 + np.abs(upper)))
     scaled: tuple[float, np.ndarray, np.ndarray, int] | None = None  # scale, free, held, joint
     reference_rank = None  # the task rank before any velocity saturation
     for _ in range(nv + 1):
@@ -149,7 +148,7 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
         if split.task_rank < reference_rank and scaled is not None:
             break  # Flacco et al.: keep the best scale found with every task direction
         qd = split.base + split.direction
-        if _inside(qd, lower, upper):
+        if _inside(qd, box):
             return _result(qd, 1.0, 1.0, free, -1, jacobian, twist)
         scale, critical = task_scale_limit(split.base, split.direction, lower, upper, free)
         if critical < 0:
@@ -160,9 +159,9 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
         if abs(bound) < velocity_limit[critical] * (1.0 - 1e-12):  # a position bound
             reference_rank, scaled = None, None
         elif scale >= 0.0 and (scaled is None or scale > scaled[0]):
-            free[critical] = True  # the scaled candidate has it free
-            scaled = (scale, free.copy(), held.copy(), critical)
-            free[critical] = False
+            candidate_free, candidate_held = free.copy(), held.copy()
+            candidate_free[critical], candidate_held[critical] = True, 0.0  # it is free there
+            scaled = (scale, candidate_free, candidate_held, critical)
         if not free.any():
             break
     if scaled is not None:
