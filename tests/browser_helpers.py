@@ -11,6 +11,8 @@ vertical). A world point therefore lands on the canvas at
 
 from __future__ import annotations
 
+import contextlib
+import faulthandler
 import io
 import math
 import os
@@ -20,9 +22,12 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
+import pytest
+from playwright.sync_api import expect
 
 CHROMIUM = os.environ.get("TELEOP_TEST_CHROMIUM", "/usr/bin/chromium")
 #: software WebGL (SwiftShader) in a headless, sandbox-less, quiet Chromium
@@ -97,16 +102,19 @@ def project(camera, box: CanvasBox, points) -> np.ndarray:
     return np.stack([u, v], axis=1)
 
 
-_ECHOES: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+#: per client handle (by identity: client ids restart at 0 on every server), the handle
+#: itself (so its id is not reused) and the camera poses its browser reported
+_ECHOES: dict[int, tuple[object, list[tuple[np.ndarray, np.ndarray]]]] = {}
 
 
 def _camera_echoes(client) -> list[tuple[np.ndarray, np.ndarray]]:
     """Camera poses (position, look at) the browser of ``client`` reported, in order."""
-    if client.client_id not in _ECHOES:
-        echoes = _ECHOES[client.client_id] = []
+    if id(client) not in _ECHOES:
+        echoes: list[tuple[np.ndarray, np.ndarray]] = []
+        _ECHOES[id(client)] = (client, echoes)
         client.camera.on_update(
             lambda camera: echoes.append((camera.position.copy(), camera.look_at.copy())))
-    return _ECHOES[client.client_id]
+    return _ECHOES[id(client)][1]
 
 
 def set_camera(client, position, look_at, timeout: float = 20.0) -> None:
@@ -216,3 +224,290 @@ class Sampler:
 
     def first(self, predicate: Callable[[Sample], bool]) -> Sample | None:
         return next((s for s in list(self.samples) if predicate(s)), None)
+
+
+# -- a served page ------------------------------------------------------------------------
+
+VIEWPORT = {"width": 1280, "height": 800}
+CONNECT_TIMEOUT = 60.0  # s: page load + WebGL start under software rendering
+TEST_HARD_LIMIT = 240.0  # s: see watchdog()
+
+
+@pytest.fixture(autouse=True)
+def watchdog():
+    """Last resort against a wedged browser (Playwright's mouse calls have no timeout): dump
+    every thread's stack and end the run if one test takes longer than this. (Import it into
+    a test module to use it there.)"""
+    faulthandler.dump_traceback_later(TEST_HARD_LIMIT, exit=True)
+    yield
+    faulthandler.cancel_dump_traceback_later()
+
+
+@contextlib.contextmanager
+def open_web(robot, record_dir, **server_options):
+    """The real server (``run_server``, port picked free) and one Chromium page connected
+    to it: a namespace with server, app, control, ui, robot, page, client, response,
+    page_errors, hole_time."""
+    from playwright.sync_api import sync_playwright
+
+    from web.ui import run_server
+
+    executable = chromium_executable()  # fails (does not skip) when Chromium is missing
+    port = free_port()
+    server, app, control, ui = run_server(robot, port=port, record_dir=record_dir,
+                                          **server_options)
+    # Rendering only, for SwiftShader on a small CI machine: with viser's shadow-casting
+    # default lights a frame takes ~2 s once the robot moves; the image-based lighting
+    # (environment map) makes each frame 2-3 times slower again, and the page handles a
+    # drag's pointer moves at the frame rate. The page, scene and app are otherwise exactly
+    # what `teleop web` serves.
+    server.scene.configure_default_lights(cast_shadow=False)
+    server.scene.configure_environment_map(None)
+    playwright = browser = None
+    page_errors: list[str] = []
+    try:
+        playwright = sync_playwright().start()
+        browser = playwright.chromium.launch(executable_path=executable, headless=True,
+                                             args=list(CHROMIUM_ARGS), timeout=60_000)
+        page = browser.new_page(viewport=VIEWPORT)
+        page.set_default_timeout(30_000)
+        page.on("pageerror", lambda error: page_errors.append(str(error)))
+        started = time.perf_counter()
+        response = page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded",
+                             timeout=30_000)
+        client = wait_until(lambda: next(iter(server.get_clients().values()), None),
+                            CONNECT_TIMEOUT, "the browser to register as a viser client "
+                            "(its WebGL view must come up)", interval=0.1)
+        print(f"\n[browser] client registered {time.perf_counter() - started:.1f} s after "
+              "the page was requested")
+        wait_for_steady_frames(page)
+        yield SimpleNamespace(server=server, app=app, control=control, ui=ui, robot=robot,
+                              page=page, client=client, response=response,
+                              page_errors=page_errors, hole_time=None)
+    finally:
+        faulthandler.dump_traceback_later(60.0, exit=True)  # a teardown must not hang either
+        try:
+            if browser is not None:
+                browser.close()
+            if playwright is not None:
+                playwright.stop()
+        finally:
+            ui.stop()
+            control.stop()
+            server.stop()
+            faulthandler.cancel_dump_traceback_later()
+
+
+# -- helpers that act through the page ---------------------------------------------------------
+
+
+def open_tab(web, name: str) -> None:
+    """Show one tab of the control panel (Teleop, Constraints, Settings, Plots)."""
+    tab = web.page.get_by_role("tab", name=name, exact=True)
+    tab.click()
+    expect(tab).to_have_attribute("aria-selected", "true")
+
+
+def input_of(page, label: str):
+    """The (first) input of the panel row labelled ``label``."""
+    text = page.get_by_text(label, exact=True)
+    row = page.locator("div").filter(has=text).filter(has=page.locator("input")).last
+    return row.locator("input").first
+
+
+def uplot_line_pixels(page, rgb: tuple[int, int, int], tolerance: int = 40) -> list[int]:
+    """For each uPlot chart in the page: how many pixels of its canvas have the colour
+    ``rgb`` (a series' stroke), read from the canvas itself."""
+    return page.evaluate("""([r, g, b, tol]) => Array.from(document.querySelectorAll('.uplot canvas'))
+        .map(canvas => {
+            const { width, height } = canvas;
+            if (!width || !height) return 0;
+            const data = canvas.getContext('2d').getImageData(0, 0, width, height).data;
+            let count = 0;
+            for (let i = 0; i < data.length; i += 4)
+                if (data[i + 3] > 0 && Math.abs(data[i] - r) <= tol
+                    && Math.abs(data[i + 1] - g) <= tol && Math.abs(data[i + 2] - b) <= tol)
+                    count++;
+            return count;
+        })""", [*rgb, tolerance])
+
+
+def hex_rgb(color: str) -> tuple[int, int, int]:
+    return tuple(int(color[i:i + 2], 16) for i in (1, 3, 5))
+
+
+def wait_for_steady_frames(page, timeout: float = 60.0) -> None:
+    """Until the page draws frames promptly: the first frames with the robot compile shaders
+    (seconds under SwiftShader) and the page answers nothing meanwhile."""
+    deadline = time.perf_counter() + timeout
+    quick = 0
+    while quick < 3:
+        remaining = deadline - time.perf_counter()
+        if remaining <= 0:
+            raise AssertionError(f"the page did not settle to steady frames in {timeout:g} s")
+        start = time.perf_counter()
+        page.wait_for_function("() => true", polling="raf", timeout=1e3 * remaining)
+        quick = quick + 1 if time.perf_counter() - start < 0.5 else 0
+        time.sleep(0.1)
+
+
+def holes(app) -> list[str]:
+    return [entry_id for entry_id, entry in list(app.entries.items()) if entry.kind == "hole"]
+
+
+def click_add_hole(web) -> str:
+    """Press the page's "Add hole" button; the id of the hole it created."""
+    before = set(holes(web.app))
+    open_tab(web, "Constraints")
+    web.page.get_by_role("button", name="Add hole").click()
+    new = wait_until(lambda: set(holes(web.app)) - before, 10.0, "the app to get a new hole")
+    (hole_id,) = new
+    web.hole_time = web.app.now  # loop time from which the hole is in force
+    return hole_id
+
+
+def ensure_hole(web) -> str:
+    existing = holes(web.app)
+    return existing[0] if existing else click_add_hole(web)
+
+
+def canvas_pixels(web) -> np.ndarray:
+    box = scene_canvas(web.page)
+    png = web.page.screenshot(clip={"x": box.x, "y": box.y, "width": box.width,
+                                    "height": box.height}, timeout=30_000)
+    return png_pixels(png)
+
+
+def wait_for_pixels(web, predicate, timeout: float, what: str) -> np.ndarray:
+    """Screenshots of the canvas until ``predicate(pixels)`` holds (bounded)."""
+    deadline = time.perf_counter() + timeout
+    while True:
+        pixels = canvas_pixels(web)
+        if predicate(pixels):
+            return pixels
+        if time.perf_counter() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(0.2)
+
+
+def look_at_target(web, distance: float = 0.3) -> None:
+    """Camera in front of the target gizmo, from the front-right and above."""
+    target = web.app.target.translation.copy()
+    direction = np.array([0.55, -0.65, 0.45])
+    set_camera(web.client, target + distance * direction / np.linalg.norm(direction), target)
+
+
+def plan_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
+    """Where to grab the target gizmo and how to move the mouse for ``distance`` m.
+
+    Grabs a translation arrow near its tip (88 % of its length: past the rotation arcs at
+    65 %), keeps the path on the free part of the canvas (not under the control panel, not
+    over the hole's own gizmo) and prefers the arrow that looks longest on screen.
+    """
+    page, camera = web.page, web.client.camera
+    box = scene_canvas(page)
+    panel = page.get_by_role("tab", name="Teleop", exact=True).bounding_box()
+    panel_left = panel["x"] - 40.0 if panel else box.x + 0.7 * box.width
+    right = pin.Quaternion(*camera.wxyz).normalized().matrix()[:, 0]  # camera x, in the world
+    avoid = []  # the constraints' own gizmos: circles on screen
+    for markers in list(web.ui._markers.values()):
+        position, scale = np.asarray(markers["gizmo"].position), markers["gizmo"].scale
+        centre, edge = project(camera, box, [position, position + scale * right])
+        avoid.append((centre, 1.2 * np.linalg.norm(edge - centre) + 10.0))
+    gizmo = web.ui.target_gizmo
+    origin = np.asarray(gizmo.position, dtype=float)
+    w, x, y, z = gizmo.wxyz
+    rotation = pin.Quaternion(w, x, y, z).normalized().matrix()
+    best = None
+    for axis in range(3):
+        for sign in (prefer_sign, -prefer_sign):
+            grab = origin + 0.88 * gizmo.scale * rotation[:, axis]
+            path = [grab + sign * distance * rotation[:, axis] * k / steps
+                    for k in range(steps + 1)]
+            screen = project(camera, box, path)
+            ok = all(box.x + 0.3 * box.width < p[0] < panel_left  # clear of notifications
+                     and box.y + 0.2 * box.height < p[1] < box.y + 0.95 * box.height
+                     for p in screen) and all(
+                np.linalg.norm(p - c) > r for p in screen for c, r in avoid)
+            length = float(np.linalg.norm(screen[-1] - screen[0]))
+            if ok and (best is None or length > best[0] * 1.5):
+                best = (length, axis, sign, screen)
+    assert best is not None, "no arrow of the target gizmo can be grabbed from this camera"
+    length, axis, sign, screen = best
+    assert length / steps >= 1.0, f"drag steps of {length / steps:.2f} px are too fine"
+    return SimpleNamespace(axis=axis, sign=sign, screen=screen, pixels=length,
+                           direction=sign * rotation[:, axis], origin=origin)
+
+
+def drag(web, plan) -> SimpleNamespace:
+    """The real mouse: press on the arrow, move step by step, release. Wall times."""
+    mouse = web.page.mouse
+    mouse.move(*plan.screen[0])
+    mouse.down()
+    moves, handled = [], []
+    for u, v in plan.screen[1:]:
+        start = time.perf_counter()
+        mouse.move(float(u), float(v))  # returns once the page has handled the event
+        moves.append(start)
+        handled.append(time.perf_counter() - start)
+    up = time.perf_counter()
+    mouse.up()
+    return SimpleNamespace(moves=moves, handled=np.array(handled), first=moves[0], up=up)
+
+
+def measured_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
+    """Plan and do a drag of the target gizmo while sampling the server; the measures."""
+    app = web.app
+    plan = plan_drag(web, distance, steps, prefer_sign)
+    target0, ee0 = app.target.translation.copy(), ee_position(app)
+    with Sampler(app) as sampler:
+        times = drag(web, plan)
+        moved = wait_until(
+            lambda: np.linalg.norm(app.target.translation - target0) > 0.5 * distance, 5.0,
+            "the server-side target to follow the drag (did the mouse grab the gizmo?)")
+        target1 = app.target.translation.copy()
+        unit = (target1 - target0) / np.linalg.norm(target1 - target0)
+        wait_until(lambda: np.linalg.norm(ee_position(app) - app.target.translation) < 1e-4,
+                   5.0, "the EE to reach the dragged target")
+        settled = time.perf_counter()
+        time.sleep(0.2)
+    assert moved
+    samples = list(sampler.samples)
+    target_changed = next(s for s in samples if np.linalg.norm(s.target - target0) > 1e-9)
+    ee_moved = next(s for s in samples if (s.ee - ee0) @ unit > 1e-3)
+    per_move = []
+    for k, start in enumerate(times.moves, start=1):  # when each move reached the server
+        expected = distance * k / steps
+        hit = next((s for s in samples if s.wall >= start
+                    and (s.target - target0) @ unit >= expected - 0.3e-3), None)
+        if hit is not None:
+            per_move.append(hit.wall - start)
+    return SimpleNamespace(
+        plan=plan, target0=target0, target1=target1, ee0=ee0, ee1=ee_position(app),
+        samples=samples, drag_time=times.up - times.first,
+        target_latency=target_changed.wall - times.first,
+        ee_latency=ee_moved.wall - times.first,
+        per_move=np.array(per_move), handled=times.handled, moves=len(times.moves),
+        settle_after_up=settled - times.up,
+        max_sampled_error=float(np.nanmax([s.constraint_error for s in samples])))
+
+
+def report_drag(label: str, result, control) -> None:
+    print(f"\n[{label}] drag of {1e3 * np.linalg.norm(result.target1 - result.target0):.1f} mm "
+          f"along gizmo axis {result.plan.axis} ({result.plan.pixels:.0f} px, "
+          f"{result.moves} mouse moves in {result.drag_time:.2f} s)")
+    print(f"[{label}] first mouse move -> server target changed: "
+          f"{1e3 * result.target_latency:.0f} ms; -> EE moved 1 mm toward the new target: "
+          f"{1e3 * result.ee_latency:.0f} ms")
+    print(f"[{label}] the page handles a drag mouse move in: median "
+          f"{1e3 * np.median(result.handled):.0f} ms, max {1e3 * result.handled.max():.0f} ms")
+    if result.per_move.size:
+        print(f"[{label}] each mouse move -> server target ({result.per_move.size} matched): "
+              f"median {1e3 * np.median(result.per_move):.0f} ms, "
+              f"max {1e3 * result.per_move.max():.0f} ms")
+    print(f"[{label}] mouse up -> EE within 0.1 mm of the final target: "
+          f"{1e3 * result.settle_after_up:.0f} ms")
+    print(f"[{label}] max hole error while dragging: {result.max_sampled_error:.2e} m "
+          f"({len(result.samples)} samples)")
+    print(f"[{label}] control rate {control.achieved_rate:.0f} Hz achieved (target "
+          f"{1.0 / control.app.config.dt:.0f} Hz), {control.deadline_misses} deadline misses")

@@ -3,10 +3,12 @@
 The server runs in-process (``run_server``), the browser is Playwright's Chromium with
 software WebGL (SwiftShader), so these tests need no GPU and no display. They check what
 an operator sees and does: the page loads and registers as a viser client (viser counts a
-browser only once its WebGL view is up), the robot is drawn, a *real mouse drag* of the
-target gizmo moves the end effector while a hole holds the link (constraint error
-<= 1e-6 m), "Add hole" creates a hole and its ring, the controller menu switches the
-controller, an impossible action becomes a notification, and a screenshot is saved.
+browser only once its WebGL view is up), the robot is drawn, the live plots draw their
+lines (read from the uPlot canvases), a *real mouse drag* of the target gizmo moves the end
+effector while a hole holds the link (constraint error <= 1e-6 m), "Add hole" creates a hole
+and its ring, the controller menu switches the controller, an impossible action becomes a
+notification, and the README's screenshot is taken. tests/test_browser_console.py drives
+the console features (clutch, scenes, the ghost beside the robot) and the Panda's meshes.
 
 Dragging the gizmo: the test puts the browser's camera at a known pose (and waits until
 the browser reports that pose back), projects a point of one translation arrow of the
@@ -21,276 +23,50 @@ Every wait is bounded. Run with ``-s`` to see the measured control rate and late
 
 from __future__ import annotations
 
-import faulthandler
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
 import pytest
-from browser_helpers import (
-    CHROMIUM_ARGS,
-    Sampler,
+from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    VIEWPORT,
+    canvas_pixels,
     changed_fraction,
-    chromium_executable,
+    click_add_hole,
     distinct_colours,
-    ee_position,
-    free_port,
+    ensure_hole,
+    hex_rgb,
+    look_at_target,
+    measured_drag,
+    open_tab,
+    open_web,
     png_pixels,
     project,
+    report_drag,
     scene_canvas,
     set_camera,
     trace_since,
+    uplot_line_pixels,
+    wait_for_pixels,
     wait_until,
+    watchdog,
 )
-from playwright.sync_api import expect, sync_playwright
+from playwright.sync_api import expect
 
 from teleop import load_robot
-from web.ui import run_server
+from web.ui import GHOST_COLOR, MAIN_COLOR
 
-VIEWPORT = {"width": 1280, "height": 800}
-CONNECT_TIMEOUT = 60.0  # s: page load + WebGL start under software rendering
 HOLE_TOLERANCE = 1e-6  # m
-TEST_HARD_LIMIT = 240.0  # s: see watchdog()
 ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
+PLOT_DEADLINE = 3.0  # s: the live plots draw their lines within this
 
 
 @pytest.fixture(scope="module")
 def web(tmp_path_factory):
-    """The real server (port picked free) and one Chromium page connected to it."""
-    executable = chromium_executable()  # fails (does not skip) when Chromium is missing
-    robot = load_robot("sda10f")
-    port = free_port()
-    server, app, control, ui = run_server(robot, port=port,
-                                          record_dir=tmp_path_factory.mktemp("sessions"))
-    # Rendering only, for SwiftShader on a small CI machine: with viser's shadow-casting
-    # default lights a frame takes ~2 s once the robot moves; the image-based lighting
-    # (environment map) makes each frame 2-3 times slower again, and the page handles a
-    # drag's pointer moves at the frame rate. The page, scene and app are otherwise exactly
-    # what `teleop web` serves.
-    server.scene.configure_default_lights(cast_shadow=False)
-    server.scene.configure_environment_map(None)
-    playwright = browser = None
-    page_errors: list[str] = []
-    try:
-        playwright = sync_playwright().start()
-        browser = playwright.chromium.launch(executable_path=executable, headless=True,
-                                             args=list(CHROMIUM_ARGS), timeout=60_000)
-        page = browser.new_page(viewport=VIEWPORT)
-        page.set_default_timeout(30_000)
-        page.on("pageerror", lambda error: page_errors.append(str(error)))
-        started = time.perf_counter()
-        response = page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded",
-                             timeout=30_000)
-        client = wait_until(lambda: next(iter(server.get_clients().values()), None),
-                            CONNECT_TIMEOUT, "the browser to register as a viser client "
-                            "(its WebGL view must come up)", interval=0.1)
-        print(f"\n[browser] client registered {time.perf_counter() - started:.1f} s after "
-              "the page was requested")
-        wait_for_steady_frames(page)
-        yield SimpleNamespace(server=server, app=app, control=control, ui=ui, robot=robot,
-                              page=page, client=client, response=response,
-                              page_errors=page_errors, hole_time=None)
-    finally:
-        faulthandler.dump_traceback_later(60.0, exit=True)  # a teardown must not hang either
-        try:
-            if browser is not None:
-                browser.close()
-            if playwright is not None:
-                playwright.stop()
-        finally:
-            ui.stop()
-            control.stop()
-            server.stop()
-            faulthandler.cancel_dump_traceback_later()
-
-
-@pytest.fixture(autouse=True)
-def watchdog():
-    """Last resort against a wedged browser (Playwright's mouse calls have no timeout): dump
-    every thread's stack and end the run if one test takes longer than this."""
-    faulthandler.dump_traceback_later(TEST_HARD_LIMIT, exit=True)
-    yield
-    faulthandler.cancel_dump_traceback_later()
-
-
-# -- helpers that act through the page ---------------------------------------------------------
-
-def wait_for_steady_frames(page, timeout: float = 60.0) -> None:
-    """Until the page draws frames promptly: the first frames with the robot compile shaders
-    (seconds under SwiftShader) and the page answers nothing meanwhile."""
-    deadline = time.perf_counter() + timeout
-    quick = 0
-    while quick < 3:
-        remaining = deadline - time.perf_counter()
-        if remaining <= 0:
-            raise AssertionError(f"the page did not settle to steady frames in {timeout:g} s")
-        start = time.perf_counter()
-        page.wait_for_function("() => true", polling="raf", timeout=1e3 * remaining)
-        quick = quick + 1 if time.perf_counter() - start < 0.5 else 0
-        time.sleep(0.1)
-
-
-def holes(app) -> list[str]:
-    return [entry_id for entry_id, entry in list(app.entries.items()) if entry.kind == "hole"]
-
-
-def click_add_hole(web) -> str:
-    """Press the page's "Add hole" button; the id of the hole it created."""
-    before = set(holes(web.app))
-    web.page.get_by_role("button", name="Add hole").click()
-    new = wait_until(lambda: set(holes(web.app)) - before, 10.0, "the app to get a new hole")
-    (hole_id,) = new
-    web.hole_time = web.app.now  # loop time from which the hole is in force
-    return hole_id
-
-
-def ensure_hole(web) -> str:
-    existing = holes(web.app)
-    return existing[0] if existing else click_add_hole(web)
-
-
-def canvas_pixels(web) -> np.ndarray:
-    box = scene_canvas(web.page)
-    png = web.page.screenshot(clip={"x": box.x, "y": box.y, "width": box.width,
-                                    "height": box.height}, timeout=30_000)
-    return png_pixels(png)
-
-
-def wait_for_pixels(web, predicate, timeout: float, what: str) -> np.ndarray:
-    """Screenshots of the canvas until ``predicate(pixels)`` holds (bounded)."""
-    deadline = time.perf_counter() + timeout
-    while True:
-        pixels = canvas_pixels(web)
-        if predicate(pixels):
-            return pixels
-        if time.perf_counter() > deadline:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.2)
-
-
-def look_at_target(web, distance: float = 0.3) -> None:
-    """Camera in front of the target gizmo, from the front-right and above."""
-    target = web.app.target.translation.copy()
-    direction = np.array([0.55, -0.65, 0.45])
-    set_camera(web.client, target + distance * direction / np.linalg.norm(direction), target)
-
-
-def plan_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
-    """Where to grab the target gizmo and how to move the mouse for ``distance`` m.
-
-    Grabs a translation arrow near its tip (88 % of its length: past the rotation arcs at
-    65 %), keeps the path on the free part of the canvas (not under the control panel, not
-    over the hole's own gizmo) and prefers the arrow that looks longest on screen.
-    """
-    page, camera = web.page, web.client.camera
-    box = scene_canvas(page)
-    panel = page.get_by_role("button", name="Add hole").bounding_box()
-    panel_left = panel["x"] - 40.0 if panel else box.x + 0.7 * box.width
-    right = pin.Quaternion(*camera.wxyz).normalized().matrix()[:, 0]  # camera x, in the world
-    avoid = []  # the constraints' own gizmos: circles on screen
-    for markers in list(web.ui._markers.values()):
-        position, scale = np.asarray(markers["gizmo"].position), markers["gizmo"].scale
-        centre, edge = project(camera, box, [position, position + scale * right])
-        avoid.append((centre, 1.2 * np.linalg.norm(edge - centre) + 10.0))
-    gizmo = web.ui.target_gizmo
-    origin = np.asarray(gizmo.position, dtype=float)
-    w, x, y, z = gizmo.wxyz
-    rotation = pin.Quaternion(w, x, y, z).normalized().matrix()
-    best = None
-    for axis in range(3):
-        for sign in (prefer_sign, -prefer_sign):
-            grab = origin + 0.88 * gizmo.scale * rotation[:, axis]
-            path = [grab + sign * distance * rotation[:, axis] * k / steps
-                    for k in range(steps + 1)]
-            screen = project(camera, box, path)
-            ok = all(box.x + 0.3 * box.width < p[0] < panel_left  # clear of notifications
-                     and box.y + 0.2 * box.height < p[1] < box.y + 0.95 * box.height
-                     for p in screen) and all(
-                np.linalg.norm(p - c) > r for p in screen for c, r in avoid)
-            length = float(np.linalg.norm(screen[-1] - screen[0]))
-            if ok and (best is None or length > best[0] * 1.5):
-                best = (length, axis, sign, screen)
-    assert best is not None, "no arrow of the target gizmo can be grabbed from this camera"
-    length, axis, sign, screen = best
-    assert length / steps >= 1.0, f"drag steps of {length / steps:.2f} px are too fine"
-    return SimpleNamespace(axis=axis, sign=sign, screen=screen, pixels=length,
-                           direction=sign * rotation[:, axis], origin=origin)
-
-
-def drag(web, plan) -> SimpleNamespace:
-    """The real mouse: press on the arrow, move step by step, release. Wall times."""
-    mouse = web.page.mouse
-    mouse.move(*plan.screen[0])
-    mouse.down()
-    moves, handled = [], []
-    for u, v in plan.screen[1:]:
-        start = time.perf_counter()
-        mouse.move(float(u), float(v))  # returns once the page has handled the event
-        moves.append(start)
-        handled.append(time.perf_counter() - start)
-    up = time.perf_counter()
-    mouse.up()
-    return SimpleNamespace(moves=moves, handled=np.array(handled), first=moves[0], up=up)
-
-
-def measured_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
-    """Plan and do a drag of the target gizmo while sampling the server; the measures."""
-    app = web.app
-    plan = plan_drag(web, distance, steps, prefer_sign)
-    target0, ee0 = app.target.translation.copy(), ee_position(app)
-    with Sampler(app) as sampler:
-        times = drag(web, plan)
-        moved = wait_until(
-            lambda: np.linalg.norm(app.target.translation - target0) > 0.5 * distance, 5.0,
-            "the server-side target to follow the drag (did the mouse grab the gizmo?)")
-        target1 = app.target.translation.copy()
-        unit = (target1 - target0) / np.linalg.norm(target1 - target0)
-        wait_until(lambda: np.linalg.norm(ee_position(app) - app.target.translation) < 1e-4,
-                   5.0, "the EE to reach the dragged target")
-        settled = time.perf_counter()
-        time.sleep(0.2)
-    assert moved
-    samples = list(sampler.samples)
-    target_changed = next(s for s in samples if np.linalg.norm(s.target - target0) > 1e-9)
-    ee_moved = next(s for s in samples if (s.ee - ee0) @ unit > 1e-3)
-    per_move = []
-    for k, start in enumerate(times.moves, start=1):  # when each move reached the server
-        expected = distance * k / steps
-        hit = next((s for s in samples if s.wall >= start
-                    and (s.target - target0) @ unit >= expected - 0.3e-3), None)
-        if hit is not None:
-            per_move.append(hit.wall - start)
-    return SimpleNamespace(
-        plan=plan, target0=target0, target1=target1, ee0=ee0, ee1=ee_position(app),
-        samples=samples, drag_time=times.up - times.first,
-        target_latency=target_changed.wall - times.first,
-        ee_latency=ee_moved.wall - times.first,
-        per_move=np.array(per_move), handled=times.handled, moves=len(times.moves),
-        settle_after_up=settled - times.up,
-        max_sampled_error=float(np.nanmax([s.constraint_error for s in samples])))
-
-
-def report_drag(label: str, result, control) -> None:
-    print(f"\n[{label}] drag of {1e3 * np.linalg.norm(result.target1 - result.target0):.1f} mm "
-          f"along gizmo axis {result.plan.axis} ({result.plan.pixels:.0f} px, "
-          f"{result.moves} mouse moves in {result.drag_time:.2f} s)")
-    print(f"[{label}] first mouse move -> server target changed: "
-          f"{1e3 * result.target_latency:.0f} ms; -> EE moved 1 mm toward the new target: "
-          f"{1e3 * result.ee_latency:.0f} ms")
-    print(f"[{label}] the page handles a drag mouse move in: median "
-          f"{1e3 * np.median(result.handled):.0f} ms, max {1e3 * result.handled.max():.0f} ms")
-    if result.per_move.size:
-        print(f"[{label}] each mouse move -> server target ({result.per_move.size} matched): "
-              f"median {1e3 * np.median(result.per_move):.0f} ms, "
-              f"max {1e3 * result.per_move.max():.0f} ms")
-    print(f"[{label}] mouse up -> EE within 0.1 mm of the final target: "
-          f"{1e3 * result.settle_after_up:.0f} ms")
-    print(f"[{label}] max hole error while dragging: {result.max_sampled_error:.2e} m "
-          f"({len(result.samples)} samples)")
-    print(f"[{label}] control rate {control.achieved_rate:.0f} Hz achieved (target "
-          f"{1.0 / control.app.config.dt:.0f} Hz), {control.deadline_misses} deadline misses")
+    """The real server and one Chromium page connected to it (browser_helpers.open_web)."""
+    with open_web(load_robot("sda10f"), tmp_path_factory.mktemp("sessions")) as served:
+        yield served
 
 
 # -- the tests ---------------------------------------------------------------------------------
@@ -300,16 +76,24 @@ def test_page_loads_and_the_browser_registers_as_a_client(web):
     assert web.page.title() == "Viser"
     clients = web.server.get_clients()
     assert len(clients) == 1  # registered: viser counts a client once its WebGL view is up
-    for folder in ("Controller", "Constraints", "Control", "Record", "Status"):
-        expect(web.page.get_by_text(folder, exact=True)).to_be_visible()
+    expect(web.page.get_by_text("Status", exact=True)).to_be_visible()
+    for tab in ("Teleop", "Constraints", "Settings", "Plots"):
+        expect(web.page.get_by_role("tab", name=tab, exact=True)).to_be_visible()
     camera = web.client.camera  # the browser reports its camera: the 3D view is running
     box = scene_canvas(web.page)
     assert camera.fov > 0 and (camera.image_width, camera.image_height) == (round(box.width),
                                                                            round(box.height))
     # the view thread publishes the status (control rate) into the page
     expect(web.page.get_by_text("Hz achieved")).to_be_visible(timeout=15_000)
-    print(f"\n[browser] control rate with the browser connected: "
-          f"{web.control.achieved_rate:.0f} Hz (target {1.0 / web.app.config.dt:.0f} Hz)")
+    expect(web.page.get_by_text("lateness p99", exact=False)).to_be_visible()
+    time.sleep(3.0)  # a few seconds with the browser connected and drawing
+    timing = web.control.timing()
+    print(f"\n[browser] control with the browser connected: {timing.achieved_rate:.0f} Hz "
+          f"(target {1.0 / web.app.config.dt:.0f} Hz), lateness p50 "
+          f"{timing.lateness_p50_ms:.3f} ms, p99 {timing.lateness_p99_ms:.3f} ms, tick p50 "
+          f"{timing.tick_p50_us:.0f} us ({timing.overhead_p50_us:.0f} us beyond the "
+          f"controller), {timing.deadline_misses} deadline misses")
+    assert timing.ticks > 1000 and np.isfinite(timing.lateness_p99_ms)
 
 
 def test_robot_is_in_the_scene(web):
@@ -337,6 +121,31 @@ def test_robot_is_in_the_scene(web):
                     "the robot to be drawn again")
     print(f"\n[browser] the robot covers {100 * fraction:.1f} % of the canvas; "
           f"{distinct_colours(shown)} distinct colours")
+
+
+def wait_for_plot_lines(web, colors: dict[str, tuple[int, int, int]], count: int,
+                        since: float, minimum: int = 60) -> dict[str, list[int]]:
+    """Until ``count`` uPlot canvases each hold at least ``minimum`` pixels of every colour
+    in ``colors`` (read from the canvases), at most PLOT_DEADLINE s after ``since``."""
+    def lines():
+        found = {name: uplot_line_pixels(web.page, rgb) for name, rgb in colors.items()}
+        drawn = all(len(c) == count and min(c) >= minimum for c in found.values())
+        return found if drawn else None
+
+    found = wait_until(lines, PLOT_DEADLINE - (time.perf_counter() - since),
+                       f"{count} live plots to draw their {', '.join(colors)} lines", 0.05)
+    print(f"\n[browser] plot lines drawn {time.perf_counter() - since:.2f} s after the "
+          f"request; pixels of each line per plot: {found}")
+    return found
+
+
+def test_live_plots_draw_their_lines_within_3_s(web):
+    started = time.perf_counter()
+    open_tab(web, "Plots")
+    wait_for_plot_lines(web, {"main": hex_rgb(MAIN_COLOR)}, count=4, since=started)
+    titles = web.page.locator(".uplot .u-title").all_inner_texts()
+    assert titles[0] == "constraint error (nm)" and titles[3] == "controller step time (µs)", titles
+    assert web.page_errors == [], web.page_errors
 
 
 def test_add_hole_button_creates_a_hole_and_its_ring(web):
@@ -410,6 +219,7 @@ def test_switching_controller_in_the_page_keeps_the_hole(web):
     app, page = web.app, web.page
     ensure_hole(web)
     assert app.specs["main"] == "cjm"
+    open_tab(web, "Teleop")
     menu = page.get_by_label("main", exact=True)
     menu.click()
     page.get_by_role("option", name="qp:daqp", exact=True).click()
@@ -434,7 +244,8 @@ def test_switching_controller_in_the_page_keeps_the_hole(web):
 def test_impossible_action_shows_a_notification(web):
     app, page, ui = web.app, web.page, web.ui
     planes_before = [e for e in app.entries.values() if e.kind != "hole"]
-    label = page.get_by_text("plane normal", exact=True)
+    open_tab(web, "Constraints")
+    label = page.get_by_text("plane normal (world)", exact=True)
     row = page.locator("div").filter(has=label).filter(has=page.locator("input")).last
     inputs = row.locator("input")
     expect(inputs).to_have_count(3)
@@ -453,22 +264,56 @@ def test_impossible_action_shows_a_notification(web):
                "the plane normal to be restored")
 
 
-def test_screenshot_with_the_hole_and_side_by_side(web, tmp_path):
-    app, page = web.app, web.page
+def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(web, tmp_path):
+    app, page, ui = web.app, web.page, web.ui
     ensure_hole(web)
-    # the whole robot, its ghost, the hole's ring and the gizmos, with the panels
-    target = app.target.translation
-    centre = 0.5 * (target + np.array([0.0, 0.0, 0.3])) + np.array([0.05, 0.0, 0.0])
-    set_camera(web.client, centre + np.array([0.5, -0.85, 0.42]), centre)
-    alone = canvas_pixels(web)
+    open_tab(web, "Teleop")
+    menu = page.get_by_label("main", exact=True)
+    if app.specs["main"] != "cjm":  # CJM beside the QP
+        menu.click()
+        page.get_by_role("option", name="cjm", exact=True).click()
+        wait_until(lambda: app.specs["main"] == "cjm", 10.0, "the app to switch to cjm")
     checkbox = page.get_by_label("side by side")
+    started = time.perf_counter()
     checkbox.check()
-    wait_until(lambda: "ghost" in app.loops and "ghost" in web.ui._visualisers, 10.0,
-               "the ghost robot")
-    expect(checkbox).to_be_checked()
-    # the translucent ghost over the robot changes the robot's pixels (a few % of the canvas)
-    wait_for_pixels(web, lambda p: changed_fraction(p, alone, threshold=8) > 0.005, 20.0,
-                    "the ghost robot to be drawn")
+    open_tab(web, "Plots")
+    wait_until(lambda: "ghost" in app.loops, 3.0, "the ghost robot")
+    # a line per plot, however short (the ghost's history starts now, on a 10 s axis)
+    found = wait_for_plot_lines(web, {"ghost": hex_rgb(GHOST_COLOR)}, count=5, since=started,
+                                minimum=15)
+    assert app.specs["ghost"] == "qp:daqp"
+    # the ghost draws over the main robot's line where they agree; the step times differ
+    main = uplot_line_pixels(page, hex_rgb(MAIN_COLOR))
+    assert main[3] >= 15, (main, found)
+    expect(page.get_by_text("joint-velocity deviation", exact=False)).to_be_visible()
+
+    # the nudge buttons move the target by the step, the gizmo staying (the target drawn
+    # apart); both robots follow, and the plots show how
+    open_tab(web, "Teleop")
+    target0 = app.target.translation.copy()
+    for label in ("+y", "+y", "+y", "-z", "-z"):
+        page.get_by_role("button", name=label, exact=True).click()
+        time.sleep(0.3)
+    wait_until(lambda: np.linalg.norm(app.target.translation - target0 - [0, 0.015, -0.01]) < 1e-9,
+               10.0, "the target nudged by (0, 15, -10) mm")
+    assert web.ui.target_marker.visible
+    open_tab(web, "Plots")
+    time.sleep(2.0)
+
+    # the README's screenshot: the hole, CJM and QP as two robots side by side, the plots
+    wait_until(lambda: "ghost" in ui._views, 10.0, "the ghost drawn")
+    offset = app.ghost_offset
+    model = app.robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, app.loops["main"].q)
+    joints = np.array([placement.translation for placement in data.oMi[1:]])
+    centre = joints.mean(axis=0) + 0.5 * offset + np.array([0.0, 0.0, -0.05])
+    side = offset / np.linalg.norm(offset)
+    front = np.cross(side, [0.0, 0.0, 1.0])
+    set_camera(web.client, centre + 1.15 * front - 0.35 * side + np.array([0.0, 0.0, 0.6]), centre)
+    for close in page.locator(".mantine-Notification-closeButton").all():  # e.g. WebGL notice
+        close.click()
+    time.sleep(1.0)
     png = page.screenshot(timeout=30_000)
     ARTIFACTS.mkdir(exist_ok=True)
     saved = []

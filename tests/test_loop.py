@@ -88,7 +88,7 @@ def test_paper_hole_and_trocar_circle_hold_the_hole_to_a_micrometre(scenario, tm
     plan = load_scenario(scenario)
     config = LoopConfig()
     specs = ["cjm", "qp:proxqp", "qp:daqp", "qp:osqp"]
-    results = compare(plan, specs, config, progress=False)
+    results = compare(plan, specs, config, progress=False, agreement=False)  # tested apart
     for spec in specs[:3]:
         metrics = results[spec].metrics()
         assert metrics["constraint_error_max_m"] <= 1e-6, (spec, metrics)
@@ -104,6 +104,19 @@ def test_paper_hole_and_trocar_circle_hold_the_hole_to_a_micrometre(scenario, tm
     for path in paths:
         if path.suffix == ".png":
             assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 10_000
+
+
+def test_moving_trocar_every_controller_holds_the_hole_to_a_micrometre():
+    """The trocar breathes +-5 mm at 0.25 Hz for 10 s; measured at the instant the robot is
+    at, against the geometry of that instant, every controller stays within 1 um."""
+    results = compare(load_scenario("moving-trocar"), ALL_CONTROLLERS, progress=False,
+                      agreement=False)
+    for spec, result in results.items():
+        metrics = result.metrics()
+        print(f"moving-trocar {spec}: hole error max {metrics['constraint_error_max_m']:.2e} m")
+        assert result.steps == 10_000
+        assert metrics["constraint_error_max_m"] <= 1e-6, (spec, metrics)
+        assert metrics["failed_steps"] == 0, (spec, metrics["first_failure"])
 
 
 def test_barrier_scenario_stops_every_controller_at_the_floor():

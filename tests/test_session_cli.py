@@ -137,6 +137,7 @@ def test_cli_compare_record_replay_and_bench(tmp_path):
     assert set(document["controllers"]) == {"cjm", "qp:daqp", "mink:daqp"}
     csv_lines = (out / "metrics.csv").read_text().splitlines()
     assert csv_lines[0].startswith("controller,constraint_error_max_m") and len(csv_lines) == 4
+    assert (out / "report.html").stat().st_size > 50_000  # the plots are in it
 
     session = tmp_path / "circle.jsonl"
     assert teleop("record", "--scenario", "trocar-circle", "--duration", "0.2", str(session),
@@ -144,6 +145,7 @@ def test_cli_compare_record_replay_and_bench(tmp_path):
     replay = teleop("replay", str(session), "--controllers", "cjm,qp:daqp", "--out",
                     str(tmp_path / "replay"), "--quiet", "--no-plots", cwd=tmp_path)
     assert replay.returncode == 0, replay.stderr
+    assert not (tmp_path / "replay" / "report.html").exists()  # --no-plots: metrics only
     replayed = json.loads((tmp_path / "replay" / "metrics.json").read_text())
     for spec in ("cjm", "qp:daqp"):
         for key in ("constraint_error_max_m", "ee_position_error_rms_m"):
@@ -157,11 +159,59 @@ def test_cli_compare_record_replay_and_bench(tmp_path):
     assert json.loads((tmp_path / "bench.json").read_text())
 
 
+def test_cli_imperfect_robot_options_are_recorded(tmp_path):
+    out = tmp_path / "out"
+    run = teleop("compare", "--scenario", "paper-hole", "--controllers", "cjm", "--duration",
+                 "0.1", "--encoder-noise", "1e-4", "--latency", "2", "--joint-time-constant",
+                 "0.005", "--seed", "9", "--no-plots", "--out", str(out), "--quiet", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    assert "encoder noise 0.0001 rad, latency 2 periods, joint time constant 0.005 s (seed 9)" \
+        in run.stdout
+    document = json.loads((out / "metrics.json").read_text())
+    assert document["imperfections"] == {"encoder_noise_rad": 1e-4, "latency_periods": 2,
+                                         "joint_time_constant_s": 0.005, "seed": 9}
+
+
+def test_cli_replay_keeps_the_solver_off_the_console(tmp_path, ur5_instrument):
+    """A session with no constraint: OSQP has no active set on any step and prints from C
+    every time; the run's output is the table alone, the lines are counted in metrics.json."""
+    import pinocchio as pin
+
+    from teleop.experiments.scenarios import home_pose
+
+    home = home_pose(ur5_instrument, ur5_instrument.q_home)
+    quaternion = pin.Quaternion(home.rotation)
+    path = write_session(tmp_path / "free.jsonl", [
+        header(),
+        {"type": "target", "t": 0.0, "position": (home.translation + [0.005, 0, 0]).tolist(),
+         "quaternion_wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]},
+        {"type": "end", "t": 0.1},
+    ])
+    run = teleop("replay", str(path), "--controllers", "qp:osqp", "--out", str(tmp_path / "out"),
+                 "--no-plots", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    assert "Polishing" not in run.stdout + run.stderr
+    assert run.stderr == ""
+    assert "qp:osqp: the solver wrote 100 lines (1 distinct), kept in metrics.json" in run.stdout
+    document = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert document["controllers"]["qp:osqp"]["solver_messages"] == {
+        "Polishing not needed - no active set detected at optimal point": 100}
+
+
+@pytest.mark.parametrize("option, value", [("--encoder-noise", "-1e-4"), ("--latency", "1.5"),
+                                           ("--joint-time-constant", "inf"), ("--seed", "-1")])
+def test_cli_refuses_a_bad_imperfection_by_name(tmp_path, option, value):
+    run = teleop("compare", "--scenario", "barrier", option, value, cwd=tmp_path)
+    assert run.returncode == 2
+    assert f"argument {option}" in run.stderr and "Traceback" not in run.stderr
+
+
 @pytest.mark.parametrize("args, message", [
     (["compare", "--scenario", "nope"], "unknown scenario 'nope'"),
     (["compare", "--scenario", "barrier", "--controllers", "lqr"], "unknown controller 'lqr'"),
     (["compare", "--scenario", "barrier", "--controllers", "qp:cplex"], "'cplex' is not available"),
     (["replay", "missing.jsonl"], "no session file at missing.jsonl"),
+    (["compare", "--scenario", "barrier", "--controllers", "cjm,cjm"], "specs lists 'cjm' twice"),
 ])
 def test_cli_errors_are_one_clear_line(tmp_path, args, message):
     run = teleop(*args, cwd=tmp_path)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -164,13 +166,23 @@ def test_impossible_actions_raise_a_message_for_the_operator(app, action, messag
     assert np.isfinite(app.loops["main"].q).all()
 
 
-def test_home_resets_robot_target_and_constraints(app):
-    app.add_hole(0.08)
+def test_home_keeps_the_constraints_and_clear_removes_them(app):
+    hole_id = app.add_hole(0.08)
     nudge(app, [0.01, 0.0, 0.0])
     run(app, 0.2)
-    app.home()
+    app.home()  # with a constraint: the target goes home, the robot drives there
+    assert list(app.entries) == [hole_id]
+    home = app.loops["main"].ee_placement(app.robot.q_home)
+    np.testing.assert_allclose(app.target.translation, home.translation, atol=1e-12)
+    np.testing.assert_allclose(app.gizmo.translation, home.translation, atol=1e-12)
+    run(app, 0.6)
+    assert np.linalg.norm(ee_position(app) - home.translation) < 1e-4
+    assert app.last_records["main"].constraint_error < 1e-6  # held on the way
+    assert app.clear_constraints() == 1 and not app.entries
+    nudge(app, [0.01, 0.0, 0.0])
+    run(app, 0.1)
+    app.home()  # without constraints: a reset, at once
     np.testing.assert_array_equal(app.loops["main"].q, app.robot.q_home)
-    assert not app.entries
     np.testing.assert_allclose(app.target.translation, ee_position(app))
 
 
@@ -206,3 +218,330 @@ def test_control_thread_runs_and_reports_its_rate(app):
     finally:
         control.stop()
     assert not control.alive
+
+
+# -- plots: one time base, the ghost's history, readable units ------------------------------
+
+
+def test_plot_history_is_finite_and_the_ghost_turned_on_later_fills_its_own(app):
+    from web.ui import PLOTS, plot_series
+
+    app.add_hole(0.08)
+    nudge(app, [0.005, 0.0, 0.0])
+    run(app, 0.5)
+    snapshot = app.snapshot()
+    for spec in PLOTS:
+        t, series = plot_series(snapshot, spec)
+        if spec.ghost_only:
+            assert series == {}  # no ghost: no deviation plot
+            continue
+        assert t.size == 25 and list(series) == ["main"]  # 0.5 s at 50 Hz
+        assert np.isfinite(t).all() and np.isfinite(series["main"]).all()
+    app.set_ghost("qp:daqp")  # as the checkbox does, 0.5 s into the session
+    assert app.loops["ghost"].t == app.now
+    nudge(app, [0.0, 0.005, 0.0])
+    run(app, 0.3)
+    snapshot = app.snapshot()
+    main, ghost = snapshot["robots"]["main"]["trace"], snapshot["robots"]["ghost"]["trace"]
+    assert ghost["t"].size == 15  # its own samples since it joined, at the main's times
+    np.testing.assert_array_equal(ghost["t"], main["t"][-15:])
+    for spec in PLOTS:
+        t, series = plot_series(snapshot, spec)
+        assert t.size == 15 and all(s.size == 15 and np.isfinite(s).all() for s in series.values())
+        assert list(series) == (["ghost"] if spec.ghost_only else ["main", "ghost"])
+    # the two controllers differ a little while they move: the deviation plot says how much
+    t, series = plot_series(snapshot, PLOTS[-1])
+    assert 0.0 < series["ghost"].max() < 1.0, series["ghost"]
+
+
+@pytest.mark.parametrize("values, quantity, unit", [
+    ([0.0, 2e-7, 5e-8], "m", "nm"),  # 200 nm, not "0, 0, 0" m
+    ([0.0, 3e-5], "m", "µm"),
+    ([0.012, 0.004], "m", "mm"),
+    ([0.0, 0.0], "m", "nm"),  # an all-zero trace: 0 ... 1 nm
+    ([25.0, 90.0], "us", "µs"),
+    ([0.0, 4e-4], "rad/s", "µrad/s"),
+])
+def test_plot_units_make_small_values_readable(values, quantity, unit):
+    from web.ui import display_unit
+
+    name, size = display_unit(np.array(values), quantity)
+    assert name == unit
+    peak = max(values) / size
+    assert peak == 0.0 or 1.0 <= peak < 1000.0
+    # hysteresis: a peak that drifts a little below the unit keeps it
+    assert display_unit(np.array(values) * 0.8, quantity, current=name)[0] == name
+
+
+# -- side by side ---------------------------------------------------------------------------
+
+
+def test_ghost_offset_is_beside_the_robot_and_checked(app):
+    offset = app.ghost_offset
+    assert abs(offset[2]) < 1e-12 and 0.5 < np.linalg.norm(offset) < 2.0  # beside, on the floor
+    app.set_ghost_offset([0.0, 0.0, 0.0])  # overlay
+    np.testing.assert_array_equal(app.ghost_offset, np.zeros(3))
+    for bad, message in (([0.0, 9.0, 0.0], "at most 5 m"), ([np.nan, 0, 0], "finite"),
+                         ([1.0, 2.0], "shape")):
+        with pytest.raises(ValueError, match=message):
+            app.set_ghost_offset(bad)
+    np.testing.assert_array_equal(app.ghost_offset, np.zeros(3))
+
+
+# -- the operator's console: clutch, motion scaling, nudges ----------------------------------
+
+
+def move_gizmo_by(app, displacement):
+    gizmo = app.gizmo
+    quaternion = pin.Quaternion(gizmo.rotation)
+    app.move_gizmo(gizmo.translation + displacement,
+                   [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
+
+
+def test_motion_scaling_moves_the_target_by_scale_times_the_gizmo(app):
+    start = app.target.translation.copy()
+    app.set_motion_scale(0.2)
+    move_gizmo_by(app, [0.10, 0.0, 0.0])  # a 10 cm gizmo move ...
+    np.testing.assert_allclose(app.target.translation - start, [0.02, 0.0, 0.0], atol=1e-12)
+    move_gizmo_by(app, [0.0, -0.05, 0.0])  # ... displacement since the last clutch, scaled
+    np.testing.assert_allclose(app.target.translation - start, [0.02, -0.01, 0.0], atol=1e-12)
+    app.set_motion_scale(1.0)  # a new scale does not move the target
+    np.testing.assert_allclose(app.target.translation - start, [0.02, -0.01, 0.0], atol=1e-12)
+    move_gizmo_by(app, [0.0, 0.0, 0.01])
+    np.testing.assert_allclose(app.target.translation - start, [0.02, -0.01, 0.01], atol=1e-12)
+    for bad in (0.0, -1.0, 11.0, np.nan, None):
+        with pytest.raises(ValueError, match="motion scale"):
+            app.set_motion_scale(bad)
+
+
+def test_clutch_decouples_the_gizmo_and_release_does_not_jump(app):
+    start = app.target.copy()
+    app.set_clutch(True)
+    move_gizmo_by(app, [0.05, 0.03, -0.02])  # repositioning the hand, the target holds
+    assert app.target.isApprox(start)
+    run(app, 0.2)
+    np.testing.assert_allclose(ee_position(app), start.translation, atol=1e-9)
+    app.set_clutch(False)
+    assert app.target.isApprox(start)  # no jump on release
+    move_gizmo_by(app, [0.0, 0.0, 0.01])  # then it continues from where it was
+    np.testing.assert_allclose(app.target.translation, start.translation + [0, 0, 0.01], atol=1e-12)
+    # the gizmo's own rotation since the release turns the target by as much
+    app.set_clutch(True)
+    app.set_clutch(False)
+    turn = pin.exp3(np.array([0.0, 0.0, 0.3]))
+    gizmo = app.gizmo
+    quaternion = pin.Quaternion(turn @ gizmo.rotation)
+    app.move_gizmo(gizmo.translation, [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
+    before = start.rotation
+    np.testing.assert_allclose(app.target.rotation, turn @ before, atol=1e-9)
+    with pytest.raises(ValueError, match="engaged"):
+        app.set_clutch("yes")
+
+
+def test_nudges_and_gizmo_to_target(app):
+    start = app.target.translation.copy()
+    app.nudge_target([0.0, 0.0, 0.005])
+    np.testing.assert_allclose(app.target.translation, start + [0, 0, 0.005], atol=1e-12)
+    np.testing.assert_allclose(app.gizmo.translation, start, atol=1e-12)  # the gizmo stays
+    run(app, 0.5)
+    np.testing.assert_allclose(ee_position(app), app.target.translation, atol=1e-4)
+    with pytest.raises(ValueError, match="at most 0.1 m"):
+        app.nudge_target([0.0, 0.2, 0.0])
+    pose = app.gizmo_to_target()
+    np.testing.assert_allclose(pose.translation, app.target.translation)
+    move_gizmo_by(app, [0.01, 0.0, 0.0])
+    np.testing.assert_allclose(app.target.translation, start + [0.01, 0, 0.005], atol=1e-12)
+
+
+# -- what limits the robot, in words ------------------------------------------------------------
+
+
+def test_an_unreachable_target_is_said_in_words(app):
+    app.add_hole(0.08)
+    assert app.limitation().words == "on target" and app.limitation().status == "ok"
+    nudge(app, [0.5, 0.0, 0.0])  # half a metre ahead, through a hole: not reachable
+    run(app, 0.2)
+    moving = app.limitation()
+    assert moving.distance > 0.4 and "moving to the target" in moving.words or \
+        "at its limit" in moving.words
+    run(app, 8.0)
+    stuck = app.limitation()
+    print(f"unreachable target: {stuck.status}: {stuck.words} ({1e3 * stuck.distance:.1f} mm)")
+    assert stuck.distance > 0.05
+    assert "target out of reach" in stuck.words
+    assert stuck.status in ("least_squares", "scaled", "ok")
+    assert app.last_records["main"].constraint_error < 1e-6  # the hole held all along
+
+
+def test_a_joint_at_its_limit_is_named():
+    from controllers import SolveInfo, StepStatus
+    from web.app import describe_limitation
+
+    info = SolveInfo(status=StepStatus.LEAST_SQUARES, saturated_joints=(4,),
+                     message="joint 4 at a limit")
+    names = ["j0", "j1", "j2", "j3", "arm_joint_4_u"]
+    stalled = SimpleNamespace(commanded_linear_velocity=np.array([0.05, 0.0, 0.0]),
+                              actual_linear_velocity=np.array([0.004, 0.003, 0.0]))
+    words = describe_limitation(info, stalled, 0.02, names)
+    assert words.status == "least_squares"
+    assert words.words == "target out of reach; joint arm_joint_4_u at its limit"
+    following = SimpleNamespace(commanded_linear_velocity=np.array([0.05, 0.0, 0.0]),
+                                actual_linear_velocity=np.array([0.045, 0.01, 0.0]))
+    assert describe_limitation(info, following, 0.02, names).words == \
+        "joint arm_joint_4_u at its limit"
+    degraded = describe_limitation(SolveInfo(status=StepStatus.CONSTRAINT_DEGRADED,
+                                             message="residual 1e-6 m/s"), None, 0.0, names)
+    assert degraded.words == "constraint degraded: residual 1e-6 m/s"
+    scaled = describe_limitation(SolveInfo(status=StepStatus.SCALED, scale=0.25), None, 0.0, names)
+    assert scaled.words == "slowed to 25 % by the joint limits"
+
+
+def test_active_barriers_are_listed(app):
+    barrier_id = app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.002)
+    assert app.active_barriers() == []
+    nudge(app, [0.0, 0.0, -0.05])  # down, into the barrier
+    run(app, 1.0)
+    assert app.active_barriers() == [barrier_id]
+    assert app.last_records["main"].barrier_penetration < 1e-6
+    geometry = app.snapshot()["constraints"][0]["geometry"]
+    assert np.linalg.norm(geometry.error) < 1e-9  # held on the plane: no error to draw
+
+
+def test_a_satisfied_barrier_has_no_error_to_draw(app):
+    app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
+    run(app, 0.05)
+    (entry,) = app.snapshot()["constraints"]
+    assert entry["kind"] == "barrier" and np.linalg.norm(entry["geometry"].error) == 0.0
+    assert app.last_records["main"].barrier_penetration == 0.0
+
+
+def test_a_robot_without_a_constrained_link_says_how_to_get_one(tmp_path):
+    from teleop import load_robot
+
+    robot = load_robot(str(load_robot("sda10f").urdf_path))  # a URDF path: no constrained link
+    app = TeleopApp(robot, record_dir=tmp_path)
+    with pytest.raises(ValueError, match="no constrained link: start `teleop web` with "
+                                         "--constrained-link"):
+        app.add_hole(0.08)
+
+
+# -- scenes ---------------------------------------------------------------------------------
+
+
+def test_a_scene_saved_and_loaded_restores_constraints_and_settings(app, tmp_path):
+    hole_id = app.add_hole(0.08)
+    barrier_id = app.add_plane(0.04, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
+    app.set_ghost("qp:daqp")
+    app.set_ghost_offset([0.0, -0.7, 0.0])
+    app.set_gain(80.0)
+    app.set_damping(0.01)
+    app.set_rate(500.0)
+    app.set_motion_scale(0.2)
+    nudge(app, [0.005, 0.0, 0.0])
+    run(app, 0.3)
+    app.move_constraint(hole_id, app.entries[hole_id].goal + [0.0, 0.0, 0.002])
+    saved = app.save_scene(tmp_path / "scenes" / "a.json")
+    scene = json.loads(saved.read_text())
+    assert scene["format"] == "cjm-teleop-scene" and scene["robot"]["source"] == "sda10f"
+    assert [c["id"] for c in scene["constraints"]] == [hole_id, barrier_id]
+    q_saved = app.loops["main"].q.copy()
+    goals = {i: e.goal.copy() for i, e in app.entries.items()}
+    target = app.target.copy()
+
+    # change everything, then load
+    app.clear_constraints()
+    app.set_ghost(None)
+    app.set_rate(1000.0)
+    app.set_gain(100.0)
+    app.set_motion_scale(1.0)
+    app.home()
+    run(app, 0.1)
+    app.load_scene(saved)
+    assert list(app.entries) == [hole_id, barrier_id]
+    assert [e.kind for e in app.entries.values()] == ["hole", "barrier"]
+    for entry_id, goal in goals.items():
+        np.testing.assert_allclose(app.entries[entry_id].goal, goal, atol=1e-12)
+    assert app.specs == {"main": "cjm", "ghost": "qp:daqp"}
+    assert (app.gain, app.damping, app.config.rate, app.motion_scale) == (80.0, 0.01, 500.0, 0.2)
+    np.testing.assert_allclose(app.ghost_offset, [0.0, -0.7, 0.0])
+    np.testing.assert_allclose(app.loops["main"].q, q_saved, atol=1e-12)
+    assert app.target.isApprox(target, 1e-9)
+    assert all(e.constraint.gain == 80.0 for e in app.entries.values())
+    assert app.add_hole(0.1) == "hole-3"  # new ids after the loaded ones
+    run(app, 0.3)
+    assert app.last_records["main"].constraint_error < 1e-6
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda s: s.update(format="x"), "not a scene file"),
+    (lambda s: s["robot"].update(source="ur5_instrument"), "this scene is for robot 'ur5_instrument'"),
+    (lambda s: s["controllers"].update(main="pid"), "unknown controller 'pid'"),
+    (lambda s: s.update(rate=10.0), "between 50 and 5000 Hz"),
+    (lambda s: s["q"].update(main=[0.0] * 3), "q.main must have shape"),
+    (lambda s: s["q"].update(main=[9.0] * 8), "outside the joint limits"),
+    (lambda s: s["constraints"].append({"id": "x-1", "constraint": {"kind": "trocar"}}),
+     r"constraints\[1\]: unknown constraint kind"),
+    (lambda s: s.update(gain=5000.0), "unstable at 1000 Hz"),
+])
+def test_a_bad_scene_is_refused_and_changes_nothing(app, change, message):
+    app.add_hole(0.08)
+    scene = app.scene()
+    change(scene)
+    app.clear_constraints()
+    app.set_gain(50.0)
+    with pytest.raises(ValueError, match=message):
+        app.apply_scene(scene)
+    assert not app.entries and app.gain == 50.0 and app.specs == {"main": "cjm"}
+    run(app, 0.01)
+
+
+def test_scene_files_that_cannot_be_read(app, tmp_path):
+    with pytest.raises(ValueError, match="no scene file at"):
+        app.load_scene(tmp_path / "none.json")
+    (tmp_path / "bad.json").write_text("{nope")
+    with pytest.raises(ValueError, match="is not JSON"):
+        app.load_scene(tmp_path / "bad.json")
+    (tmp_path / "dir").mkdir()
+    with pytest.raises(ValueError, match="cannot write scene file"):
+        app.save_scene(tmp_path / "dir")
+
+
+# -- the light tick ---------------------------------------------------------------------------
+
+
+def test_measures_are_taken_at_the_history_rate_only(app, monkeypatch):
+    app.add_hole(0.08)
+    app.set_ghost("qp:daqp")
+    measured = []
+    for loop in app.loops.values():
+        original = loop.measure
+        monkeypatch.setattr(loop, "measure", lambda step, f=original: measured.append(1) or f(step))
+    nudge(app, [0.002, 0.0, 0.0])
+    run(app, 1.0)  # 1000 ticks, 2 robots
+    assert len(measured) == 2 * 50
+    qd = app.loops["main"].last_qd
+    assert np.all(np.isfinite(qd)) and np.any(qd != 0.0)  # every tick commands the robot
+    # what a light tick costs beyond the controllers (printed; the status shows it live)
+    app.set_ghost(None)
+    costs = []
+    for _ in range(2000):
+        start = time.perf_counter()
+        solve_us = app.step()
+        costs.append(1e6 * (time.perf_counter() - start) - solve_us)
+    print(f"\ntick beyond the controller: median {np.median(costs):.1f} us, "
+          f"p90 {np.percentile(costs, 90):.1f} us")
+    assert np.isfinite(costs).all()
+
+
+def test_control_thread_reports_lateness_percentiles(app):
+    control = ControlThread(app)
+    control.start()
+    try:
+        time.sleep(1.5)
+        timing = control.timing()
+    finally:
+        control.stop()
+    print(f"\n{timing}")
+    assert timing.ticks > 500 and timing.achieved_rate > 100
+    assert 0.0 <= timing.lateness_p50_ms <= timing.lateness_p99_ms < 1e3
+    assert 0.0 < timing.tick_p50_us <= timing.tick_p99_us

@@ -4,8 +4,15 @@ Everything the UI does goes through :class:`TeleopApp`, so it can be tested with
 viser. All public methods are thread-safe (one lock); actions that cannot be done raise
 ``ValueError`` with a message meant for the operator (the UI shows it as a notification).
 
-Threading (docs/design.md section 5): :class:`ControlThread` calls :meth:`TeleopApp.step` at
-the control rate and never touches viser; the view thread reads :meth:`TeleopApp.snapshot`.
+Threading (docs/design.md section 5.3): :class:`ControlThread` calls :meth:`TeleopApp.step`
+at the control rate and never touches viser; the view thread reads
+:meth:`TeleopApp.snapshot`.
+
+The operator's input device is the target gizmo (:meth:`TeleopApp.move_gizmo`). As on a
+surgical or industrial console, a **clutch** (:meth:`TeleopApp.set_clutch`) decouples it
+from the target, and **motion scaling** (:meth:`TeleopApp.set_motion_scale`) maps a gizmo
+displacement ``d`` since the last clutch release to a target displacement ``scale d``
+(orientation follows the gizmo's rotation since then, unscaled).
 """
 
 from __future__ import annotations
@@ -14,6 +21,7 @@ import collections
 import dataclasses
 import itertools
 import math
+import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -26,11 +34,23 @@ import pinocchio as pin
 from constraints import Barrier, Constraint, Hole, Plane, PointLock
 from constraints.kinematics import frame_placement
 from constraints.validation import as_number, as_vector
+from controllers import StepStatus
 from teleop.controller_specs import make_controller
 from teleop.experiments.sessions import SessionRecorder
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.moving_geometry import advance, steer
 from teleop.robots import Robot
+
+from .scene import FORMAT as SCENE_FORMAT
+from .scene import VERSION as SCENE_VERSION
+from .scene import (
+    parse_scene,
+    read_scene_file,
+    robot_source,
+    robot_to_dict,
+    same_robot,
+    write_scene_file,
+)
 
 #: the operator's target and moved geometry are smoothed with this time constant (s)
 DEFAULT_SMOOTHING = 0.05
@@ -41,8 +61,23 @@ MAX_LINEAR_SPEED = 0.05  # m/s
 MAX_ANGULAR_SPEED = 0.5  # rad/s
 #: seconds of history kept for the live plots
 HISTORY_SECONDS = 10.0
-#: history samples per second (every control tick would be 1000/s: far more than a plot needs)
+#: history samples per second: the measures (constraint errors, EE error, ...) are taken
+#: on these ticks only; every other tick computes just what the controller needs
 HISTORY_RATE = 50.0
+#: the motion scale is a number in (0, MAX_MOTION_SCALE]
+MAX_MOTION_SCALE = 10.0
+#: the ghost's offset from the main robot is at most this long (m)
+MAX_GHOST_OFFSET = 5.0
+#: the EE is "on target" within this distance (m); it does not follow its target when it
+#: approaches it at less than FOLLOWING of the commanded speed, or moves at less than
+#: STALLED_SPEED (m/s) when the command is that slow
+ON_TARGET = 1e-3
+FOLLOWING = 0.2
+STALLED_SPEED = 1e-3
+
+_HISTORY_LENGTH = int(HISTORY_SECONDS * HISTORY_RATE)
+#: the plotted measures of each robot, in the order of the plots
+TRACE_COLUMNS = ("constraint_error", "constraint_velocity", "ee_error", "step_time")
 
 
 @dataclass
@@ -52,6 +87,7 @@ class ConstraintEntry:
     id: str
     constraint: Constraint
     goal: np.ndarray  # where the operator put it (the control loop moves towards it)
+    settled: bool = True  # at its goal and at rest: the tick leaves it alone
 
     @property
     def kind(self) -> str:
@@ -64,26 +100,139 @@ class ConstraintEntry:
         return self.constraint.position
 
 
+def _deque() -> collections.deque:
+    return collections.deque(maxlen=_HISTORY_LENGTH)
+
+
 @dataclass
 class Trace:
-    """Rolling history of one robot's measures for the live plots."""
+    """Rolling history of one robot's measures for the live plots (app time ``t``)."""
 
-    t: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
-    constraint_error: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
-    constraint_velocity: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
-    ee_error: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
-    step_time: collections.deque = field(default_factory=lambda: collections.deque(maxlen=int(HISTORY_SECONDS * HISTORY_RATE)))
+    t: collections.deque = field(default_factory=_deque)
+    constraint_error: collections.deque = field(default_factory=_deque)
+    constraint_velocity: collections.deque = field(default_factory=_deque)
+    ee_error: collections.deque = field(default_factory=_deque)
+    step_time: collections.deque = field(default_factory=_deque)
+    #: |qd - qd_main| (rad/s): the ghost's deviation from the main robot's command
+    qd_deviation: collections.deque = field(default_factory=_deque)
 
-    def add(self, record: StepRecord) -> None:
+    def add(self, record: StepRecord, qd_deviation: float = 0.0) -> None:
         self.t.append(record.t)
         self.constraint_error.append(max(record.constraint_error, record.barrier_penetration))
         self.constraint_velocity.append(float(np.linalg.norm(record.constraint_velocity)))
         self.ee_error.append(record.ee_position_error)
         self.step_time.append(record.step_time_us)
+        self.qd_deviation.append(qd_deviation)
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {name: np.array(getattr(self, name), dtype=float)
-                for name in ("t", "constraint_error", "constraint_velocity", "ee_error", "step_time")}
+                for name in ("t", *TRACE_COLUMNS, "qd_deviation")}
+
+
+class AppLoop(TeleopLoop):
+    """The closed loop with a light tick: :meth:`control_step` computes only what the
+    controller needs (target filter, EE pose, command, solve, integrate); the full
+    :meth:`advance` + :meth:`measure` run on the history ticks only."""
+
+    refused: str = ""  # why the controller refused the last light step's input, if it did
+
+    def control_step(self, target: pin.SE3) -> float:
+        """One period without the measures; the controller's solve time (us)."""
+        model, data = self.model, self.data
+        target = self.filter_target(target)
+        pin.forwardKinematics(model, data, self.q)
+        ee = pin.updateFramePlacement(model, data, self.ee_frame_id)
+        twist = self.command(ee, target)
+        self._previous_target = target.copy()
+        start = time.perf_counter_ns()
+        try:
+            qd = self.controller.solve(self.q, twist)
+            self.refused = ""
+        except ValueError as error:  # refused input: hold still, say why
+            qd, self.refused = np.zeros(model.nv), str(error)
+        solve_us = (time.perf_counter_ns() - start) * 1e-3
+        if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
+            qd = np.zeros(model.nv)
+        self.q = pin.integrate(model, self.q, qd * self.config.dt)
+        self.last_qd = qd
+        self.t += self.config.dt
+        return solve_us
+
+
+@dataclass(frozen=True)
+class Limitation:
+    """What limits a robot now: the step status (it colours the EE-target line) and why,
+    in words."""
+
+    status: str  # a StepStatus value
+    words: str
+    distance: float  # EE to target (m)
+
+
+def velocity_joint_names(robot: Robot) -> list[str]:
+    """The joint name of each velocity index."""
+    model = robot.model
+    names = [""] * model.nv
+    for joint_id in range(1, model.njoints):
+        joint = model.joints[joint_id]
+        for k in range(joint.nv):
+            names[joint.idx_v + k] = model.names[joint_id]
+    return names
+
+
+def _not_following(record: StepRecord) -> bool:
+    """Whether the EE moves towards its target at less than :data:`FOLLOWING` of the
+    commanded speed (or hardly at all): something keeps it from the target."""
+    desired = np.asarray(record.commanded_linear_velocity)
+    speed = float(np.linalg.norm(desired))
+    if speed < STALLED_SPEED:
+        return float(np.linalg.norm(record.actual_linear_velocity)) < STALLED_SPEED
+    return float(np.asarray(record.actual_linear_velocity) @ desired) / speed < FOLLOWING * speed
+
+
+def describe_limitation(info, record: StepRecord | None, distance: float,
+                        joint_names: list[str], refused: str = "") -> Limitation:
+    """In words, what keeps the EE from its target (``info`` the controller's last
+    :class:`controllers.SolveInfo`, ``record`` the last measured tick, ``distance`` the
+    EE-target distance in m)."""
+    status = info.status.value if isinstance(info.status, StepStatus) else str(info.status)
+    if refused:
+        return Limitation("failed", f"command refused: {refused}", distance)
+    if status == "failed":
+        return Limitation(status, f"no command: {info.message or 'the controller failed'}",
+                          distance)
+    if status == "constraint_degraded":
+        return Limitation(status, f"constraint degraded: {info.message}", distance)
+    parts = []
+    if distance > ON_TARGET and record is not None and _not_following(record):
+        parts.append("target out of reach")
+    if info.saturated_joints:
+        names = [joint_names[i] for i in info.saturated_joints]
+        parts.append(f"joint {', '.join(names)} at {'its limit' if len(names) == 1 else 'their limits'}")
+    if status == "scaled":
+        parts.append(f"slowed to {100 * info.scale:.0f} % by the joint limits")
+    elif status == "least_squares" and not info.saturated_joints:
+        parts.append(f"closest motion: {info.message}" if info.message else "closest motion")
+    if not parts:
+        parts.append(f"moving to the target ({1e3 * distance:.1f} mm away)"
+                     if distance > ON_TARGET else "on target")
+    return Limitation(status, "; ".join(parts), distance)
+
+
+def default_ghost_offset(robot: Robot) -> np.ndarray:
+    """Where the ghost goes beside the main robot: sideways from the direction the arm
+    reaches at home, by the robot's width in that direction plus a margin."""
+    model = robot.model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, robot.q_home)
+    points = np.array([frame.translation for frame in data.oMf])
+    reach = data.oMf[robot.ee_frame_id].translation - data.oMf[0].translation
+    reach[2] = 0.0
+    if np.linalg.norm(reach) < 1e-6:
+        reach = np.array([1.0, 0.0, 0.0])
+    side = np.cross([0.0, 0.0, 1.0], reach / np.linalg.norm(reach))
+    width = float(np.ptp(points @ side))
+    return (width + 0.4) * side
 
 
 class TeleopApp:
@@ -93,31 +242,43 @@ class TeleopApp:
     ----------
     robot : the robot.
     controller : controller spec of the main robot (``cjm``, ``qp:daqp``, ``mink:daqp``...).
-    ghost : spec of a second, translucent robot driven from the same target, or None.
+    ghost : spec of a second robot driven from the same target, drawn beside the main
+        one (``ghost_offset``), or None.
     rate : control rate (Hz).
     record_dir : where session recordings go.
+    scene_dir : where scenes are saved by default.
     """
 
     def __init__(self, robot: Robot, controller: str = "cjm", ghost: str | None = None,
-                 rate: float = 1000.0, kp: float = 20.0, record_dir: str | Path = "sessions") -> None:
+                 rate: float = 1000.0, kp: float = 20.0, record_dir: str | Path = "sessions",
+                 scene_dir: str | Path = "scenes") -> None:
         self.robot = robot
         self._lock = threading.RLock()
         self._view_data = robot.model.createData()  # for geometry queries, under the lock
+        self.joint_names = velocity_joint_names(robot)
         self.config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING,
                                  max_linear_speed=MAX_LINEAR_SPEED,
                                  max_angular_speed=MAX_ANGULAR_SPEED)
         self.gain = 100.0
         self.damping = 0.0
         self.record_dir = Path(record_dir)
+        self.scene_dir = Path(scene_dir)
         self.entries: dict[str, ConstraintEntry] = {}
         self._ids = itertools.count(1)
         self.specs = {"main": controller}
-        self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(controller)}
+        self.loops: dict[str, AppLoop] = {"main": self._make_loop(controller)}
         self.traces: dict[str, Trace] = {"main": Trace()}
         self.last_records: dict[str, StepRecord | None] = {"main": None}
+        self.ghost_offset = default_ghost_offset(robot)
         if ghost:
             self.set_ghost(ghost)
         self.target = self.loops["main"].ee_placement()
+        # the input mapping: gizmo -> target (clutch, motion scale)
+        self.gizmo = self.target.copy()
+        self.motion_scale = 1.0
+        self.clutch = False
+        self._gizmo_anchor = self.gizmo.copy()
+        self._target_anchor = self.target.copy()
         self.recorder: SessionRecorder | None = None
         self._record_start = 0.0
         self._next_history = 0.0
@@ -125,18 +286,23 @@ class TeleopApp:
 
     # -- construction helpers ------------------------------------------------------------
 
-    def _make_loop(self, spec: str, q: np.ndarray | None = None) -> TeleopLoop:
-        constraints = [e.constraint for e in getattr(self, "entries", {}).values()]
-        controller = make_controller(spec, self.robot, constraints, dt=self.config.dt)
+    def _make_loop(self, spec: str, q: np.ndarray | None = None,
+                   constraints: list[Constraint] | None = None,
+                   config: LoopConfig | None = None) -> AppLoop:
+        if constraints is None:
+            constraints = [e.constraint for e in getattr(self, "entries", {}).values()]
+        config = config or self.config
+        controller = make_controller(spec, self.robot, constraints, dt=config.dt)
         self._apply_damping(controller)
-        return TeleopLoop(self.robot, controller, q0=q, config=self.config)
+        return AppLoop(self.robot, controller, q0=q, config=config)
 
-    def _apply_damping(self, controller) -> None:
+    def _apply_damping(self, controller, damping: float | None = None) -> None:
         if hasattr(controller, "policy"):  # the CJM's damped least squares
             from controllers.linalg import DampingPolicy
 
             old = controller.policy
-            controller.policy = DampingPolicy(self.damping, old.threshold, old.max_damping)
+            controller.policy = DampingPolicy(self.damping if damping is None else damping,
+                                              old.threshold, old.max_damping)
 
     def _sync_constraints(self) -> None:
         constraints = [e.constraint for e in self.entries.values()]
@@ -147,25 +313,97 @@ class TeleopApp:
     def now(self) -> float:
         return self.loops["main"].t
 
-    # -- operator actions ------------------------------------------------------------------
+    # -- the operator's input: target, gizmo, clutch, motion scale --------------------------
+
+    def _set_target(self, target: pin.SE3) -> None:
+        """The target pose (caller holds the lock); recorded when recording."""
+        self.target = target
+        if self.recorder is not None:
+            self.recorder.target(self.now - self._record_start, self.target)
+
+    def _reanchor(self) -> None:
+        """From now on the target moves by the gizmo's motion since this instant."""
+        self._gizmo_anchor = self.gizmo.copy()
+        self._target_anchor = self.target.copy()
+
+    @staticmethod
+    def _pose(position, wxyz, what: str) -> pin.SE3:
+        position = as_vector(position, 3, f"{what} position")
+        wxyz = as_vector(wxyz, 4, f"{what} quaternion")
+        if np.linalg.norm(wxyz) < 1e-9:
+            raise ValueError(f"the {what} quaternion must be non-zero")
+        rotation = pin.Quaternion(wxyz[0], wxyz[1], wxyz[2], wxyz[3]).normalized().matrix()
+        return pin.SE3(rotation, position)
 
     def set_target(self, position, wxyz) -> None:
-        """The operator's target pose (world position, quaternion w, x, y, z)."""
-        position = as_vector(position, 3, "target position")
-        wxyz = as_vector(wxyz, 4, "target quaternion")
-        if np.linalg.norm(wxyz) < 1e-9:
-            raise ValueError("the target quaternion must be non-zero")
-        rotation = pin.Quaternion(wxyz[0], wxyz[1], wxyz[2], wxyz[3]).normalized().matrix()
+        """The operator's target pose directly (world position, quaternion w, x, y, z).
+
+        The gizmo's later motion continues from this target.
+        """
+        target = self._pose(position, wxyz, "target")
         with self._lock:
-            self.target = pin.SE3(rotation, position)
-            if self.recorder is not None:
-                self.recorder.target(self.now - self._record_start, self.target)
+            self._set_target(target)
+            self._reanchor()
 
-    def _link_placement(self, link: str) -> pin.SE3:
-        """World placement of ``link`` on the main robot now (caller holds the lock)."""
-        return frame_placement(self.robot.model, self.loops["main"].q, link, self._view_data)
+    def move_gizmo(self, position, wxyz) -> None:
+        """The input gizmo's pose. Unless the clutch is engaged, the target moves by
+        ``motion_scale`` times the gizmo's displacement since the last clutch release
+        (and turns with the gizmo's rotation since then)."""
+        gizmo = self._pose(position, wxyz, "gizmo")
+        with self._lock:
+            self.gizmo = gizmo
+            if self.clutch:
+                return
+            anchor, start = self._gizmo_anchor, self._target_anchor
+            position = start.translation + self.motion_scale * (gizmo.translation - anchor.translation)
+            rotation = gizmo.rotation @ anchor.rotation.T @ start.rotation
+            self._set_target(pin.SE3(rotation, position))
 
-    def add_constraint(self, constraint: Constraint) -> str:
+    def set_clutch(self, engaged: bool) -> None:
+        """Engage (the gizmo moves alone) or release the clutch; on release the target
+        continues from where it is, so it does not jump."""
+        if not isinstance(engaged, (bool, np.bool_)):
+            raise ValueError(f"the clutch is engaged (True) or released (False), got {engaged!r}")
+        with self._lock:
+            self.clutch = bool(engaged)
+            if not self.clutch:
+                self._reanchor()
+
+    def set_motion_scale(self, scale: float) -> None:
+        """Target displacement per gizmo displacement, in (0, 10]; the target does not jump."""
+        scale = as_number(scale, "motion scale")
+        if not 0.0 < scale <= MAX_MOTION_SCALE:
+            raise ValueError(f"motion scale must be in (0, {MAX_MOTION_SCALE:g}], got {scale:g}")
+        with self._lock:
+            self.motion_scale = scale
+            self._reanchor()
+
+    def nudge_target(self, displacement) -> None:
+        """Move the target by ``displacement`` (world, m), the gizmo staying where it is."""
+        displacement = as_vector(displacement, 3, "nudge")
+        if np.linalg.norm(displacement) > 0.1:
+            raise ValueError("a nudge moves the target by at most 0.1 m")
+        with self._lock:
+            target = self.target.copy()
+            target.translation = target.translation + displacement
+            self._set_target(target)
+            self._reanchor()
+
+    def gizmo_to_target(self) -> pin.SE3:
+        """Put the gizmo on the target (the UI moves its handle there); returns the pose."""
+        with self._lock:
+            self.gizmo = self.target.copy()
+            self._reanchor()
+            return self.gizmo.copy()
+
+    # -- constraints ---------------------------------------------------------------------
+
+    def _link_placement(self, link: str, which: str = "main") -> pin.SE3:
+        """World placement of ``link`` on robot ``which`` now (caller holds the lock)."""
+        return frame_placement(self.robot.model, self.loops[which].q, link, self._view_data)
+
+    def add_constraint(self, constraint: Constraint, entry_id: str | None = None,
+                       goal: np.ndarray | None = None) -> str:
         """Place a constraint of any kind where it is; it takes the app's drift gain.
 
         Returns its id (``"<kind>-<n>"``). A constraint the controllers refuse (unknown
@@ -175,8 +413,12 @@ class TeleopApp:
             raise ValueError(f"expected a constraint, got {constraint!r}")
         with self._lock:
             constraint.gain = self.gain
-            entry_id = f"{constraint.kind}-{next(self._ids)}"
-            self.entries[entry_id] = ConstraintEntry(entry_id, constraint, constraint.position)
+            entry_id = entry_id or f"{constraint.kind}-{next(self._ids)}"
+            if entry_id in self.entries:
+                raise ValueError(f"a constraint {entry_id!r} is already placed")
+            goal = constraint.position if goal is None else np.asarray(goal, dtype=float).copy()
+            self.entries[entry_id] = ConstraintEntry(
+                entry_id, constraint, goal, settled=bool(np.array_equal(goal, constraint.position)))
             try:
                 self._sync_constraints()
             except ValueError:
@@ -191,6 +433,9 @@ class TeleopApp:
         """``distance`` (m along the constrained link's axis) if it lies on the arm: between
         the link's joint (0) and the EE's distance from it; else ``ValueError``."""
         distance = as_number(distance, what)
+        if self.robot.constrained_link is None:
+            raise ValueError(f"this robot has no constrained link: start `teleop web` with "
+                             f"--constrained-link LINK (and --link-axis X Y Z) to place a {what.split()[0]}")
         with self._lock:
             link = self._link_placement(self.robot.constrained_link)
             reach = float(np.linalg.norm(link.actInv(
@@ -216,9 +461,10 @@ class TeleopApp:
     def add_plane(self, distance: float, normal, barrier: bool = False, offset: float = 0.0) -> str:
         """A plane (or barrier) through the link point ``distance`` m along the link axis.
 
-        ``normal`` is a world direction (normalised here; zero is refused). A barrier may
-        sit ``offset`` m below the point along the normal (the point must be on its
-        positive side).
+        ``normal`` is a direction in **world** coordinates (normalised here; zero is
+        refused); a barrier's allowed side is the one it points to. A barrier may sit
+        ``offset`` m below the point along the normal (the point must be on its positive
+        side).
         """
         distance = self._link_distance(distance, "plane distance")
         offset = as_number(offset, "barrier offset")
@@ -243,7 +489,9 @@ class TeleopApp:
         with self._lock:
             if entry_id not in self.entries:
                 raise ValueError(f"no constraint {entry_id!r}")
-            self.entries[entry_id].goal = position.copy()
+            entry = self.entries[entry_id]
+            entry.goal = position.copy()
+            entry.settled = False
 
     def remove_constraint(self, entry_id: str) -> None:
         with self._lock:
@@ -253,13 +501,26 @@ class TeleopApp:
             if self.recorder is not None:
                 self.recorder.remove(self.now - self._record_start, entry_id)
 
+    def clear_constraints(self) -> int:
+        """Remove every constraint; how many there were."""
+        with self._lock:
+            ids = list(self.entries)
+            for entry_id in ids:
+                self.remove_constraint(entry_id)
+            return len(ids)
+
+    # -- controllers and settings ----------------------------------------------------------
+
     def set_controller(self, spec: str) -> None:
         """Switch the main robot's controller, keeping its state."""
         with self._lock:
             self._switch("main", spec)
 
     def set_ghost(self, spec: str | None) -> None:
-        """Show a translucent second robot driven by ``spec`` (None removes it)."""
+        """Show a second robot driven by ``spec`` from the same target (None removes it).
+
+        It starts where the main robot is, at the same time, so the two histories line up.
+        """
         with self._lock:
             if not spec:
                 for store in (self.loops, self.specs, self.traces, self.last_records):
@@ -268,16 +529,28 @@ class TeleopApp:
             if "ghost" in self.loops:
                 self._switch("ghost", spec)
                 return
-            self.loops["ghost"] = self._make_loop(spec, q=self.loops["main"].q.copy())
+            main = self.loops["main"]
+            ghost = self._make_loop(spec, q=main.q.copy())
+            ghost.t = main.t
+            self.loops["ghost"] = ghost
             self.specs["ghost"] = spec
             self.traces["ghost"] = Trace()
             self.last_records["ghost"] = None
+
+    def set_ghost_offset(self, offset) -> None:
+        """Where the ghost is drawn, from the main robot (world, m); zero overlays them."""
+        offset = as_vector(offset, 3, "ghost offset")
+        if np.linalg.norm(offset) > MAX_GHOST_OFFSET:
+            raise ValueError(f"the ghost offset must be at most {MAX_GHOST_OFFSET:g} m long, "
+                             f"got {np.linalg.norm(offset):.3g} m")
+        with self._lock:
+            self.ghost_offset = offset
 
     def _switch(self, which: str, spec: str) -> None:
         self.loops[which] = self._rebuilt(which, spec)  # raises ValueError on a bad spec
         self.specs[which] = spec
 
-    def _rebuilt(self, which: str, spec: str) -> TeleopLoop:
+    def _rebuilt(self, which: str, spec: str) -> AppLoop:
         """A new loop for robot ``which`` with ``spec`` and the current config, same state."""
         old = self.loops[which]
         loop = self._make_loop(spec, q=old.q.copy())
@@ -328,17 +601,110 @@ class TeleopApp:
             self.loops.update(loops)
 
     def home(self) -> None:
-        """Robots back home, target on the home EE pose, constraints removed."""
+        """Target and gizmo on the home EE pose. The constraints stay
+        (:meth:`clear_constraints` removes them), so the robots drive there through their
+        controllers, the constraints held; with no constraint placed they are also put
+        back at ``q_home`` at once (a reset)."""
         with self._lock:
-            for entry_id in list(self.entries):
-                self.remove_constraint(entry_id)
-            for loop in self.loops.values():
-                t = loop.t
-                loop.reset()
+            if not self.entries:
+                for loop in self.loops.values():
+                    t = loop.t
+                    loop.reset()
+                    loop.t = t
+            home = frame_placement(self.robot.model, self.robot.q_home, self.robot.ee_frame_id,
+                                   self._view_data)
+            self._set_target(home)
+            self.gizmo = self.target.copy()
+            self._reanchor()
+
+    # -- scenes ----------------------------------------------------------------------------
+
+    def scene(self) -> dict:
+        """The scene as a JSON-ready dict (format in :mod:`web.scene`)."""
+        with self._lock:
+            quaternion = pin.Quaternion(self.target.rotation)
+            return {
+                "format": SCENE_FORMAT, "version": SCENE_VERSION,
+                "created": datetime.now().isoformat(timespec="seconds"),
+                "robot": robot_to_dict(self.robot),
+                "controllers": {"main": self.specs["main"], "ghost": self.specs.get("ghost")},
+                "gain": self.gain, "damping": self.damping, "rate": self.config.rate,
+                "motion_scale": self.motion_scale,
+                "ghost_offset": [float(x) for x in self.ghost_offset],
+                "q": {which: [float(x) for x in loop.q] for which, loop in self.loops.items()},
+                "target": {"position": [float(x) for x in self.target.translation],
+                           "wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]},
+                "constraints": [{"id": e.id, "goal": [float(x) for x in e.goal],
+                                 "constraint": e.constraint.to_dict()}
+                                for e in self.entries.values()],
+            }
+
+    def save_scene(self, path: str | Path | None = None) -> Path:
+        """Write the scene to ``path`` (default: a new file in ``scene_dir``)."""
+        if path is None or str(path).strip() == "":
+            path = self.scene_dir / f"scene-{datetime.now():%Y%m%d-%H%M%S}.json"
+        return write_scene_file(path, self.scene())
+
+    def load_scene(self, path: str | Path) -> None:
+        """Read a scene file and apply it (:meth:`apply_scene`)."""
+        self.apply_scene(read_scene_file(path))
+
+    def apply_scene(self, data: dict) -> None:
+        """Put the app in the state a scene describes: robots' configurations, constraints,
+        target, controllers, gain, damping, rate, motion scale, ghost offset. All or
+        nothing: a scene that cannot be applied raises ``ValueError`` and changes nothing.
+        The scene must be for this robot (another robot needs ``teleop web --scene``)."""
+        scene = parse_scene(data, self.robot.model.nq)
+        if not same_robot(self.robot, scene.robot):
+            raise ValueError(f"this scene is for robot {scene.robot.get('source')!r}, this UI "
+                             f"runs {robot_source(self.robot)!r}: start "
+                             "`teleop web --scene FILE` to open it with its robot")
+        model = self.robot.model
+        for which, q in scene.q.items():
+            outside = np.flatnonzero((q < model.lowerPositionLimit - 1e-9)
+                                     | (q > model.upperPositionLimit + 1e-9))
+            if outside.size:
+                raise ValueError(f"scene q.{which} is outside the joint limits of "
+                                 f"{[self.joint_names[i] for i in outside]}")
+        if not 50.0 <= scene.rate <= 5000.0:
+            raise ValueError("scene rate must be between 50 and 5000 Hz")
+        if not 0.0 < scene.motion_scale <= MAX_MOTION_SCALE:
+            raise ValueError(f"scene motion_scale must be in (0, {MAX_MOTION_SCALE:g}]")
+        if np.linalg.norm(scene.ghost_offset) > MAX_GHOST_OFFSET:
+            raise ValueError(f"scene ghost_offset must be at most {MAX_GHOST_OFFSET:g} m long")
+        constraints = [placed.constraint for placed in scene.constraints]
+        for constraint in constraints:
+            constraint.gain = scene.gain
+        config = dataclasses.replace(self.config, rate=scene.rate)
+        with self._lock:
+            t = self.now
+            specs = {"main": scene.main, **({"ghost": scene.ghost} if scene.ghost else {})}
+            loops = {}
+            for which, spec in specs.items():  # raises ValueError: nothing changed yet
+                loop = self._make_loop(spec, q=scene.q[which], constraints=constraints,
+                                       config=config)
+                self._apply_damping(loop.controller, scene.damping)
                 loop.t = t
-            self.target = self.loops["main"].ee_placement()
-            if self.recorder is not None:
-                self.recorder.target(self.now - self._record_start, self.target)
+                loops[which] = loop
+            self.config, self.gain, self.damping = config, scene.gain, scene.damping
+            self.specs, self.loops = specs, loops
+            self.traces = {which: Trace() for which in loops}
+            self.last_records = {which: None for which in loops}
+            self.entries = {}
+            for placed in scene.constraints:
+                self.entries[placed.id] = ConstraintEntry(
+                    placed.id, placed.constraint, placed.goal.copy(),
+                    settled=bool(np.array_equal(placed.goal, placed.constraint.position)))
+            numbers = [int(p.id.rsplit("-", 1)[1]) for p in scene.constraints
+                       if p.id.rsplit("-", 1)[-1].isdigit()]
+            self._ids = itertools.count(max(numbers, default=0) + 1)
+            self.ghost_offset = scene.ghost_offset.copy()
+            self.motion_scale = scene.motion_scale
+            self.clutch = False
+            self._set_target(self._pose(scene.target_position, scene.target_wxyz, "target"))
+            self.gizmo = self.target.copy()
+            self._reanchor()
+            self._next_history = t
 
     # -- recording ---------------------------------------------------------------------
 
@@ -367,57 +733,153 @@ class TeleopApp:
 
     # -- the control tick ------------------------------------------------------------------
 
-    def step(self) -> None:
-        """One control period for every robot (called by the control thread)."""
+    def step(self) -> float:
+        """One control period for every robot (called by the control thread); returns the
+        time the controllers took (us).
+
+        Every tick computes what the controllers need; the measures of the live plots and
+        the status (constraint errors, EE error, ...) are taken on the history ticks only
+        (:data:`HISTORY_RATE`).
+        """
         with self._lock:
             dt = self.config.dt
-            alpha = 1.0 - math.exp(-dt / self.config.target_time_constant)
-            for entry in self.entries.values():  # moved geometry glides, with feed-forward
-                steer(entry.constraint, entry.goal, dt, smoothing=alpha)
-                if (self.recorder is not None and self.ticks % 10 == 0
-                        and np.any(entry.constraint.velocity)):
-                    self.recorder.move(self.now - self._record_start, entry.id,
-                                       entry.constraint.position, entry.constraint.velocity)
-            pending = {which: loop.advance(self.target) for which, loop in self.loops.items()}
-            for entry in self.entries.values():  # where the period took the geometry
-                advance(entry.constraint, dt)
-            for which, loop in self.loops.items():
-                record = loop.measure(pending[which])
-                self.last_records[which] = record
-                if record.t >= self._next_history:
-                    self.traces[which].add(record)
-            if self.now >= self._next_history:
-                self._next_history = self.now + 1.0 / HISTORY_RATE
+            moving = [entry for entry in self.entries.values() if not entry.settled]
+            if moving:
+                self._steer(moving, dt)
+            target, start = self.target, self.now
+            if start >= self._next_history - 0.5 * dt:
+                solve_us = self._measured_step(target, moving, dt)
+                self._next_history = start + 1.0 / HISTORY_RATE
+            else:
+                solve_us = 0.0
+                for loop in self.loops.values():
+                    solve_us += loop.control_step(target)
+                for entry in moving:  # where the period took the geometry
+                    advance(entry.constraint, dt)
             self.ticks += 1
+            return solve_us
+
+    def _steer(self, moving: list[ConstraintEntry], dt: float) -> None:
+        """Moved geometry glides towards its goal, with feed-forward; settles there."""
+        alpha = 1.0 - math.exp(-dt / self.config.target_time_constant)
+        for entry in moving:
+            constraint = entry.constraint
+            if float(np.linalg.norm(entry.goal - constraint.position)) < 1e-12:
+                constraint.move_to(entry.goal, (0.0, 0.0, 0.0))
+                entry.settled = True
+                continue
+            steer(constraint, entry.goal, dt, smoothing=alpha)
+            if (self.recorder is not None and self.ticks % 10 == 0
+                    and np.any(constraint.velocity)):
+                self.recorder.move(self.now - self._record_start, entry.id,
+                                   constraint.position, constraint.velocity)
+
+    def _measured_step(self, target: pin.SE3, moving: list[ConstraintEntry], dt: float) -> float:
+        """A full tick with the measures, appended to the history."""
+        pending = {which: loop.advance(target) for which, loop in self.loops.items()}
+        for entry in moving:
+            advance(entry.constraint, dt)
+        main_qd = self.loops["main"].last_qd
+        for which, loop in self.loops.items():
+            record = loop.measure(pending[which])
+            self.last_records[which] = record
+            deviation = 0.0 if which == "main" else float(np.linalg.norm(loop.last_qd - main_qd))
+            self.traces[which].add(record, deviation)
+        return sum(step.step_time_us for step in pending.values())
 
     # -- what the view draws -----------------------------------------------------------
 
-    def snapshot(self) -> dict:
-        """A consistent copy of everything the view shows."""
+    def limitation(self, which: str = "main") -> Limitation:
+        """What limits robot ``which`` now, in words (:func:`describe_limitation`)."""
         with self._lock:
+            loop = self.loops[which]
+            ee = frame_placement(self.robot.model, loop.q, self.robot.ee_frame_id, self._view_data)
+            return self._limitation(which, ee)
+
+    def _limitation(self, which: str, ee: pin.SE3) -> Limitation:
+        loop = self.loops[which]
+        distance = float(np.linalg.norm(ee.translation - self.target.translation))
+        return describe_limitation(loop.controller.info, self.last_records.get(which),
+                                   distance, self.joint_names, loop.refused)
+
+    def active_barriers(self, which: str = "main") -> list[str]:
+        """Ids of the barriers robot ``which``'s controller holds as equalities now."""
+        with self._lock:
+            controller = self.loops[which].controller
+            ids = {id(e.constraint): e.id for e in self.entries.values()}
+            constraints = controller.constraints
+            return [ids.get(id(constraints[i]), f"#{i}") for i in controller.info.active_barriers
+                    if i < len(constraints)]
+
+    def snapshot(self, history: bool = True) -> dict:
+        """A consistent copy of everything the view shows (``history``: with the plots'
+        data)."""
+        with self._lock:
+            model = self.robot.model
             robots = {}
+            axis = np.asarray(self.robot.link_axis, dtype=float)
             for which, loop in self.loops.items():
-                record = self.last_records.get(which)
+                q = loop.q.copy()
+                pin.framesForwardKinematics(model, self._view_data, q)
+                placements = self._view_data.oMf
+                constraints = {}
+                for entry in self.entries.values():
+                    link = model.getFrameId(entry.constraint.link)
+                    placement = placements[link]
+                    constraints[entry.id] = {
+                        "geometry": entry.constraint.geometry(placement),
+                        "link_axis": (placement.rotation @ axis
+                                      if entry.constraint.link == self.robot.constrained_link
+                                      else None)}
+                ee = placements[self.robot.ee_frame_id].copy()
                 robots[which] = {
-                    "spec": self.specs[which], "q": loop.q.copy(), "t": loop.t,
-                    "record": record, "trace": self.traces[which].arrays(),
-                    "info": loop.controller.info,
+                    "spec": self.specs[which], "q": q, "t": loop.t, "ee": ee,
+                    "record": self.last_records.get(which),
+                    "trace": self.traces[which].arrays() if history else None,
+                    "info": loop.controller.info, "constraints": constraints,
+                    "limitation": self._limitation(which, ee),
+                    "active_barriers": self.active_barriers(which),
                 }
             entries = [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),
-                        "geometry": entry.constraint.geometry(
-                            self._link_placement(entry.constraint.link))}
+                        **robots["main"]["constraints"][entry.id]}  # geometry, link_axis
                        for entry in self.entries.values()]
             return {"robots": robots, "constraints": entries,
-                    "target": self.target.copy(), "recording": self.recorder is not None,
+                    "target": self.target.copy(), "gizmo": self.gizmo.copy(),
+                    "clutch": self.clutch, "motion_scale": self.motion_scale,
+                    "ghost_offset": self.ghost_offset.copy(),
+                    "recording": self.recorder is not None,
                     "config": self.config, "gain": self.gain, "damping": self.damping}
+
+
+#: ticks of timing kept by the control thread (a few seconds at 1 kHz)
+TIMING_WINDOW = 4096
+#: the control thread asks the interpreter to switch threads this often (s): a thread
+#: waking for its deadline waits at most about this long for the others (Python's default
+#: 5 ms would make the 1 kHz loop late by up to 5 periods whenever the view thread works)
+SWITCH_INTERVAL = 2e-4
+
+
+@dataclass(frozen=True)
+class Timing:
+    """The control thread's timing over its last :data:`TIMING_WINDOW` ticks."""
+
+    achieved_rate: float  # Hz, over the last second
+    lateness_p50_ms: float  # how late a tick starts after its deadline
+    lateness_p99_ms: float
+    tick_p50_us: float  # the whole tick (TeleopApp.step)
+    tick_p99_us: float
+    overhead_p50_us: float  # the tick minus the controllers' own solve time
+    deadline_misses: int
+    ticks: int
 
 
 class ControlThread:
     """Runs :meth:`TeleopApp.step` at the app's control rate on its own thread.
 
-    Tracks the achieved rate and deadline misses (a tick that started later than one
-    period after it was due). Sleeps between ticks; when it falls behind it does not try
-    to catch up by bursting (the robot would see a jump), it resynchronises.
+    Tracks the achieved rate, each tick's lateness (start minus deadline) and cost, and
+    deadline misses (a tick that started later than one period after it was due). Sleeps
+    between ticks; when it falls behind it does not try to catch up by bursting (the robot
+    would see a jump), it resynchronises.
     """
 
     def __init__(self, app: TeleopApp) -> None:
@@ -427,17 +889,43 @@ class ControlThread:
         self.deadline_misses = 0
         self.achieved_rate = 0.0
         self.error: str | None = None
+        self._lateness = np.zeros(TIMING_WINDOW)
+        self._tick = np.zeros(TIMING_WINDOW)
+        self._solve = np.zeros(TIMING_WINDOW)
+        self._count = 0
+        self._switch_interval: float | None = None
 
     def start(self) -> None:
+        self._switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(min(self._switch_interval, SWITCH_INTERVAL))
         self._thread.start()
 
     def stop(self, timeout: float = 2.0) -> None:
         self._stop.set()
         self._thread.join(timeout)
+        if self._switch_interval is not None:
+            sys.setswitchinterval(self._switch_interval)
+            self._switch_interval = None
 
     @property
     def alive(self) -> bool:
         return self._thread.is_alive()
+
+    def timing(self) -> Timing:
+        """Percentiles of the recent ticks (computed here, off the control thread)."""
+        n = min(self._count, TIMING_WINDOW)
+        if n == 0:
+            return Timing(self.achieved_rate, math.nan, math.nan, math.nan, math.nan,
+                          math.nan, self.deadline_misses, 0)
+        lateness, tick, solve = self._lateness[:n].copy(), self._tick[:n].copy(), self._solve[:n].copy()
+        return Timing(
+            achieved_rate=self.achieved_rate,
+            lateness_p50_ms=1e3 * float(np.percentile(lateness, 50)),
+            lateness_p99_ms=1e3 * float(np.percentile(lateness, 99)),
+            tick_p50_us=1e6 * float(np.percentile(tick, 50)),
+            tick_p99_us=1e6 * float(np.percentile(tick, 99)),
+            overhead_p50_us=float(np.percentile(1e6 * tick - solve, 50)),
+            deadline_misses=self.deadline_misses, ticks=self._count)
 
     def _run(self) -> None:
         clock = time.perf_counter
@@ -445,16 +933,23 @@ class ControlThread:
         window_start, window_ticks = clock(), 0
         while not self._stop.is_set():
             period = self.app.config.dt
+            start = clock()
+            solve_us = 0.0
             try:
-                self.app.step()
+                solve_us = self.app.step()
             except Exception as error:  # keep the robot still and say why
                 self.error = f"{type(error).__name__}: {error}"
                 time.sleep(0.01)
+            end = clock()
+            slot = self._count % TIMING_WINDOW
+            self._lateness[slot] = max(0.0, start - next_tick)
+            self._tick[slot] = end - start
+            self._solve[slot] = solve_us
+            self._count += 1
             window_ticks += 1
-            now = clock()
-            if now - window_start >= 1.0:
-                self.achieved_rate = window_ticks / (now - window_start)
-                window_start, window_ticks = now, 0
+            if end - window_start >= 1.0:
+                self.achieved_rate = window_ticks / (end - window_start)
+                window_start, window_ticks = end, 0
             next_tick += period
             delay = next_tick - clock()
             if delay > 0:

@@ -1,8 +1,9 @@
 """``teleop web`` / ``python -m web``: the command line of the browser teleoperation UI.
 
 All of ``teleop web``'s options live here (``teleop`` hands every argument after ``web``
-to :func:`main`). A robot that cannot be loaded, or any other bad value, is one line on
-stderr and exit code 2.
+to :func:`main`). A robot or scene that cannot be loaded, or any other bad value, is one
+line on stderr and exit code 2. Geometry that cannot be drawn as the URDF says (a mesh
+that cannot be read) is a warning line, and the UI draws a fallback and says so.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 from typing import Sequence
 
 from teleop.cli.main import HelpFormatter, csv_list, positive
@@ -31,8 +33,13 @@ def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION,
                                      formatter_class=HelpFormatter)
     robot = parser.add_argument_group("robot")
-    robot.add_argument("--robot", default="sda10f",
-                       help=f"built-in robot ({', '.join(BUILTIN_ROBOTS)}) or the path of a URDF")
+    robot.add_argument("--robot",
+                       help=f"built-in robot ({', '.join(BUILTIN_ROBOTS)}) or the path of a URDF "
+                            "(default: sda10f, or the robot of --scene)")
+    robot.add_argument("--scene", metavar="FILE",
+                       help="open a scene saved from the UI (its robot, constraints, target, "
+                            "controllers, gain, damping, rate); the other robot options must "
+                            "not be given with it (default: none)")
     robot.add_argument("--ee-frame", metavar="FRAME",
                        help="end-effector frame (default: the built-in robot's, else the URDF's "
                             "last link)")
@@ -54,7 +61,8 @@ def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
     control.add_argument("--controller", default="cjm",
                          help=f"controller of the robot: {CONTROLLER_HELP}")
     control.add_argument("--ghost", metavar="CONTROLLER",
-                         help="controller of a translucent second robot, side by side "
+                         help="controller of a second robot (the ghost) driven from the same "
+                              "target, drawn beside the main one; a scene's own wins "
                               "(default: no second robot)")
     control.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
     control.add_argument("--record-dir", default="sessions",
@@ -68,33 +76,66 @@ def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
     return parser
 
 
+ROBOT_OPTIONS = ("robot", "ee_frame", "constrained_link", "link_axis", "package_dirs", "q_home")
+
+
 def _load_robot(args: argparse.Namespace):
     from teleop.robots import load_robot
 
     package_dirs = None
     if args.package_dirs is not None:  # --package-dirs a,b --package-dirs c -> [a, b, c]
         package_dirs = [directory for group in args.package_dirs for directory in group]
-    return load_robot(args.robot, ee_frame=args.ee_frame, constrained_link=args.constrained_link,
-                      link_axis=args.link_axis, package_dirs=package_dirs, q_home=args.q_home)
+    return load_robot(args.robot or "sda10f", ee_frame=args.ee_frame,
+                      constrained_link=args.constrained_link, link_axis=args.link_axis,
+                      package_dirs=package_dirs, q_home=args.q_home)
+
+
+def _load(args: argparse.Namespace):
+    """The robot and the scene (or None) the options ask for."""
+    if args.scene is None:
+        return _load_robot(args), None
+    given = [f"--{name.replace('_', '-')}" for name in ROBOT_OPTIONS
+             if getattr(args, name) is not None]
+    if given:
+        raise ValueError(f"--scene sets the robot: drop {', '.join(given)}")
+    from web.scene import read_scene_file, robot_from_dict
+
+    scene = read_scene_file(args.scene)
+    if not isinstance(scene, dict):
+        raise ValueError(f"scene file {args.scene!r} does not hold a JSON object")
+    return robot_from_dict(scene.get("robot")), scene
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
     """Serve the UI until Ctrl-C; 2 (and one line on stderr) when it cannot start."""
     args = build_parser(prog).parse_args(argv)
     try:
-        robot = _load_robot(args)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            robot, scene = _load(args)
+        notes = [_one_line(w.message) for w in caught]
+        for note in notes:  # e.g. meshes not found: the UI draws a fallback and says so
+            print(f"{prog}: warning: {note}", file=sys.stderr)
         from web.ui import run_server
 
         server, app, control, ui = run_server(robot, host=args.host, port=args.port,
                                               controller=args.controller, ghost=args.ghost,
-                                              rate=args.rate, record_dir=args.record_dir)
-    except (OSError, ValueError) as error:  # no such URDF, bad frame / q_home / controller, port
-        print(f"{prog}: {' '.join(str(error).split())}", file=sys.stderr)
+                                              rate=args.rate, record_dir=args.record_dir,
+                                              scene=scene, notes=notes)
+    except (OSError, ValueError) as error:  # no such URDF/scene, bad frame / q_home / spec, port
+        print(f"{prog}: {_one_line(error)}", file=sys.stderr)
         return 2
-    print(f"{prog}: {robot.name} on http://{args.host}:{server.get_port()} "
-          f"(controller {args.controller}{', ghost ' + args.ghost if args.ghost else ''}); "
-          "Ctrl-C stops", flush=True)
+    except KeyboardInterrupt:  # Ctrl-C while loading
+        return 130
     try:
+        ghost = app.specs.get("ghost")
+        print(f"{prog}: {robot.name} on http://{args.host}:{server.get_port()} "
+              f"(controller {app.specs['main']}{', ghost ' + ghost if ghost else ''}); "
+              "Ctrl-C stops", flush=True)
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:

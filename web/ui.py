@@ -1,12 +1,16 @@
 """The viser front end: a thin layer over :class:`web.app.TeleopApp`.
 
-* scene: the robot (Pinocchio's viser visualiser), an optional translucent ghost, a
-  transform gizmo for the EE target, and each constraint as its ``geometry()`` says
-  (holes as rings on the link axis, planes as translucent squares, barriers in red,
-  point locks as spheres at their target), the constraint point on the link, and the
-  constraint error as a short vector (drawn x100) when it is not zero;
-* panels: controllers, side-by-side, constraints, drift gain / damping / rate, home,
-  recording, status (achieved control rate, deadline misses), live plots (uPlot).
+* scene: the robot (:class:`web.robot_view.RobotView`: any URDF, meshes or fallbacks), an
+  optional ghost robot drawn beside it (``ghost_offset``; zero overlays them), the grid
+  at the robot's base; the input gizmo and, where it differs, the target itself; per robot
+  a line from the EE to its target coloured by the step status, and each constraint as its
+  ``geometry()`` says (holes as rings on the link axis, planes as translucent squares,
+  barriers in red with an arrow to their allowed side, point locks as spheres at their
+  target), the constraint point as a collar around the link, the constraint error as a
+  short vector (drawn x100) when it is not zero;
+* panels: a status (rate, lateness, what limits each robot in words, active barriers),
+  then tabs: Teleop (controllers, side by side, clutch, motion scale, nudges, home),
+  Constraints, Settings (gain, damping, rate, scenes, recording), Plots (uPlot).
 
 Several browsers may connect: they share one target and one scene (the last drag wins).
 A browser that disconnects mid-drag leaves the target where it last was, so the robot
@@ -17,24 +21,43 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import viser
 import viser.uplot as uplot
-from pinocchio.visualize import ViserVisualizer
 
 from constraints import ConstraintGeometry
 from teleop.controller_specs import default_specs
 from teleop.robots import Robot
 
-from .app import ControlThread, TeleopApp
+from .app import HISTORY_SECONDS, ControlThread, TeleopApp, default_ghost_offset
+from .robot_view import RobotView, floor_height
 
 CONTROLLER_CHOICES = default_specs("ui")  # the dropdowns (plus a spec given on the command line)
 VIEW_RATE = 30.0  # Hz: robot poses, markers, status
 PLOT_RATE = 10.0  # Hz: live plots
+STATUS_RATE = 5.0  # Hz: the status text (readable, and light on the browser)
+GHOST_PLOTS_FIRST = 0.5  # s: a new ghost is drawn once the plots show it, or after this
 ERROR_VECTOR_SCALE = 100.0
+MAIN_COLOR = "#d97706"
+GHOST_COLOR = "#2563eb"
+GHOST_DASH = (6.0, 4.0)  # the ghost's plot lines are dashed: the main one shows where they agree
+GHOST_RGBA = (0.45, 0.7, 1.0, 0.8)  # beside the main robot
+GHOST_OVERLAY_RGBA = (0.25, 0.5, 0.95, 0.4)  # on it: see-through
+#: the EE-target line's colour for each step status
+STATUS_COLORS = {"ok": (30, 160, 70), "scaled": (230, 170, 0), "least_squares": (240, 110, 0),
+                 "constraint_degraded": (220, 30, 30), "failed": (150, 0, 150)}
+NUDGES = {"-x": (-1, 0, 0), "+x": (1, 0, 0), "-y": (0, -1, 0), "+y": (0, 1, 0),
+          "-z": (0, 0, -1), "+z": (0, 0, 1)}
+BARRIER_ARROW = 0.08  # m
+
+
+def _wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    quaternion = pin.Quaternion(rotation)
+    return quaternion.w, quaternion.x, quaternion.y, quaternion.z
 
 
 def _wxyz_from_z(direction: np.ndarray) -> np.ndarray:
@@ -43,126 +66,311 @@ def _wxyz_from_z(direction: np.ndarray) -> np.ndarray:
     return np.array([rotation.w, rotation.x, rotation.y, rotation.z])
 
 
-def _ring(center: np.ndarray, axis: np.ndarray, radius: float = 0.015, n: int = 32) -> np.ndarray:
-    """Line segments (n, 2, 3) of a circle around ``axis`` through ``center``."""
+def _perpendicular(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
     u = np.cross(axis, helper)
     u /= np.linalg.norm(u)
-    v = np.cross(axis, u)
+    return u, np.cross(axis, u)
+
+
+def _ring(center: np.ndarray, axis: np.ndarray, radius: float = 0.015, n: int = 32) -> np.ndarray:
+    """Line segments (n, 2, 3) of a circle around ``axis`` through ``center``."""
+    u, v = _perpendicular(np.asarray(axis, dtype=float))
     angles = np.linspace(0.0, 2.0 * np.pi, n + 1)
     points = center + radius * (np.outer(np.cos(angles), u) + np.outer(np.sin(angles), v))
     return np.stack([points[:-1], points[1:]], axis=1)
 
 
+def _arrow(start: np.ndarray, direction: np.ndarray, length: float) -> np.ndarray:
+    """Line segments (5, 2, 3) of an arrow from ``start`` along the unit ``direction``."""
+    tip = start + length * direction
+    u, v = _perpendicular(direction)
+    head = 0.25 * length
+    barbs = [tip - head * direction + 0.5 * head * side for side in (u, -u, v, -v)]
+    return np.array([[start, tip], *[[tip, barb] for barb in barbs]])
+
+
+def _link_radius(robot: Robot, link: str | None) -> float:
+    """Radius of the cylinders drawn for ``link`` (0 when it has none)."""
+    if link is None or not robot.model.existFrame(link):
+        return 0.0
+    frame_id = robot.model.getFrameId(link)
+    radii = [g.geometry.radius for g in robot.visual_model.geometryObjects
+             if g.parentFrame == frame_id and type(g.geometry).__name__ in ("Cylinder", "Capsule")]
+    return max(radii, default=0.0)
+
+
 def _ring_radius(robot: Robot, minimum: float = 0.015) -> float:
     """Radius of the hole rings: just outside the constrained link's cylinders (drawn inside them,
     a ring would be hidden by the link it surrounds)."""
-    frame_id = robot.model.getFrameId(robot.constrained_link)
-    radii = [g.geometry.radius for g in robot.visual_model.geometryObjects
-             if g.parentFrame == frame_id and type(g.geometry).__name__ in ("Cylinder", "Capsule")]
-    return max([minimum] + [1.25 * r + 0.005 for r in radii])
+    return max(minimum, 1.25 * _link_radius(robot, robot.constrained_link) + 0.005)
+
+
+# -- plots ---------------------------------------------------------------------------------
+
+#: display units per quantity: (name, size in SI units), largest first
+UNITS = {"m": (("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("nm", 1e-9)),
+         "m/s": (("m/s", 1.0), ("mm/s", 1e-3), ("µm/s", 1e-6), ("nm/s", 1e-9)),
+         "us": (("µs", 1.0),),
+         "rad/s": (("rad/s", 1.0), ("mrad/s", 1e-3), ("µrad/s", 1e-6), ("nrad/s", 1e-9))}
+
+
+def display_unit(values: np.ndarray, quantity: str, current: str | None = None) -> tuple[str, float]:
+    """The unit that shows ``values`` as readable numbers (the largest with a peak >= 1),
+    kept while the peak stays within [0.5, 2000) of ``current`` (no flicker)."""
+    units = UNITS[quantity]
+    finite = values[np.isfinite(values)]
+    peak = float(np.max(np.abs(finite))) if finite.size else 0.0
+    sizes = dict(units)
+    if current in sizes and 0.5 <= peak / sizes[current] < 2000.0:
+        return current, sizes[current]
+    for name, size in units:
+        if peak >= size:
+            return name, size
+    return units[-1]
+
+
+@dataclass(frozen=True)
+class PlotSpec:
+    key: str  # a Trace column
+    title: str
+    quantity: str  # a key of UNITS
+    ghost_only: bool = False
+
+
+PLOTS = (PlotSpec("constraint_error", "constraint error", "m"),
+         PlotSpec("constraint_velocity", "constraint velocity |C v_c|", "m/s"),
+         PlotSpec("ee_error", "EE position error", "m"),
+         PlotSpec("step_time", "controller step time", "us"),
+         PlotSpec("qd_deviation", "joint-velocity deviation |qd_ghost - qd_main|", "rad/s",
+                  ghost_only=True))
+
+#: x: the last 10 s, "now" at 0. A fixed range: an auto-ranged x axis of a plot updated
+#: while its tab is hidden keeps a stale range in viser's client (the lines fall outside)
+X_RANGE = (-HISTORY_SECONDS, 0.0)
+#: y from 0 (the measures are norms), at least up to 1 display unit: an all-zero trace
+#: reads "0 ... 1 nm", not uPlot's default 0-100
+Y_RANGE = {"min": {"pad": 0.0, "soft": 0.0, "mode": 1}, "max": {"pad": 0.1, "soft": 1.0, "mode": 1}}
+
+
+def plot_series(snapshot: dict, spec: PlotSpec) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Time and the series of one plot, all finite and of one length: with a ghost, the
+    samples since it joined (both robots measured at the same ticks)."""
+    robots = snapshot["robots"]
+    traces = {which: robot["trace"] for which, robot in robots.items()}
+    shown = ["ghost"] if spec.ghost_only else list(traces)
+    if spec.ghost_only and "ghost" not in traces:
+        return np.zeros(0), {}
+    n = min(traces[which]["t"].size for which in traces)
+    t = traces["main"]["t"][-n:] if n else np.zeros(0)
+    series = {which: traces[which][spec.key][-n:] for which in shown} if n else {}
+    return t, series
 
 
 class TeleopUI:
-    """Builds the scene and panels on ``server`` and keeps them in sync with ``app``."""
+    """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
-    def __init__(self, server: viser.ViserServer, app: TeleopApp, control: ControlThread) -> None:
+    ``notes`` are what the caller wants the operator told on connecting (e.g. the
+    warnings of loading the robot), with the meshes' own fallbacks.
+    """
+
+    def __init__(self, server: viser.ViserServer, app: TeleopApp, control: ControlThread,
+                 notes: list[str] | tuple[str, ...] = ()) -> None:
         self.server = server
         self.app = app
         self.control = control
         self._stop = threading.Event()
-        self._markers: dict[str, dict] = {}
-        self._visualisers: dict[str, ViserVisualizer] = {}
+        self._markers: dict[str, dict] = {}  # main robot: entry id -> handles
+        self._ghost_markers: dict[str, dict] = {}
+        self._views: dict[str, RobotView] = {}
+        self._ghost_root = None
+        self._ghost_style: tuple | None = None
+        self._syncing = False  # widgets being set from the app: their callbacks do nothing
+        self._plots: dict[str, object] = {}
+        self._plot_keys: dict[str, tuple] = {}
+        self._line_colors: dict[str, tuple] = {}  # the EE-target lines' current colours
+        self._plotted: set[str] = set()  # the robots the plots show
+        self._ghost_seen: float | None = None  # when the view first saw the ghost
+        self._saved_offset = app.ghost_offset.copy()
         self.ring_radius = _ring_radius(app.robot)
+        self.collar_radius = 1.15 * _link_radius(app.robot, app.robot.constrained_link) + 0.004
+        self.floor = floor_height(app.robot)
+        self.notes = list(notes)
         self._build_scene()
+        self.notes += self._views["main"].problems
         self._build_panels()
+        server.on_client_connect(self._greet)
         self._thread = threading.Thread(target=self._view_loop, name="view", daemon=True)
+
+    @property
+    def _visualisers(self) -> dict[str, RobotView]:
+        """The robots' views by name ("main", "ghost")."""
+        return self._views
 
     # -- scene ---------------------------------------------------------------------------
 
-    def _visualiser(self, which: str) -> ViserVisualizer:
-        robot: Robot = self.app.robot
-        visualiser = ViserVisualizer(robot.model, robot.collision_model, robot.visual_model)
-        visualiser.initViewer(viewer=self.server)  # our server: never a new one on 0.0.0.0
-        color = None if which == "main" else [0.35, 0.65, 1.0, 0.35]
-        visualiser.loadViewerModel(rootNodeName=f"/{which}", visual_color=color)
-        visualiser.displayCollisions(False)
-        visualiser.displayFrames(False)
-        return visualiser
-
     def _build_scene(self) -> None:
         scene = self.server.scene
-        scene.add_grid("/grid", width=2.0, height=2.0, cell_size=0.1, position=(0.0, 0.0, -0.4))
-        self._visualisers["main"] = self._visualiser("main")
+        self.grid = scene.add_grid("/grid", width=4.0, height=4.0, cell_size=0.1,
+                                   section_size=0.5, position=(0.0, 0.0, self.floor))
+        self._views["main"] = RobotView(self.app.robot, self.server, "/main")
         target = self.app.target
-        quaternion = pin.Quaternion(target.rotation)
         self.target_gizmo = scene.add_transform_controls(
-            "/target", scale=0.12, position=target.translation,
-            wxyz=(quaternion.w, quaternion.x, quaternion.y, quaternion.z))
+            "/gizmo", scale=0.12, position=target.translation, wxyz=_wxyz(target.rotation))
 
         @self.target_gizmo.on_update
         def _(event) -> None:
-            self._guarded(event, lambda: self.app.set_target(self.target_gizmo.position,
+            self._guarded(event, lambda: self.app.move_gizmo(self.target_gizmo.position,
                                                              self.target_gizmo.wxyz))
 
-        look_at = self.app.target.translation  # every new browser looks at the tool
-        self.server.initial_camera.position = look_at + np.array([0.9, -0.9, 0.6])
+        self.target_marker = scene.add_frame("/target", axes_length=0.05, axes_radius=0.004,
+                                             origin_radius=0.008, visible=False)
+        self.reach_line = scene.add_line_segments("/reach", np.zeros((1, 2, 3)),
+                                                  STATUS_COLORS["ok"], thickness=4.0,
+                                                  thickness_units="screen")
+        # every new browser looks at the tool from the front (where the arm reaches), the
+        # ghost to the right of the main robot
+        side = default_ghost_offset(self.app.robot)
+        side /= np.linalg.norm(side)
+        front = np.cross(side, [0.0, 0.0, 1.0])
+        look_at = self.app.target.translation.copy()
+        distance = 1.0
+        if "ghost" in self.app.loops:
+            look_at += 0.5 * self.app.ghost_offset
+            distance += 0.8 * float(np.linalg.norm(self.app.ghost_offset))
+        direction = 0.8 * front - 0.3 * side + np.array([0.0, 0.0, 0.5])
+        self.server.initial_camera.position = look_at + distance * direction / np.linalg.norm(direction)
         self.server.initial_camera.look_at = look_at
+
+    def _ghost_rgba(self) -> tuple[float, float, float, float]:
+        overlay = float(np.linalg.norm(self.app.ghost_offset)) < 1e-9
+        return GHOST_OVERLAY_RGBA if overlay else GHOST_RGBA
+
+    def _add_ghost(self, offset: np.ndarray) -> None:
+        scene = self.server.scene
+        self._ghost_root = scene.add_frame("/ghost", show_axes=False, position=offset)
+        rgba = self._ghost_rgba()
+        self._views["ghost"] = RobotView(self.app.robot, self.server, "/ghost/robot", color=rgba)
+        self._ghost_style = rgba
+        self.ghost_target = scene.add_frame("/ghost/target", axes_length=0.05,
+                                            axes_radius=0.004, origin_radius=0.008)
+        self.ghost_reach = scene.add_line_segments("/ghost/reach", np.zeros((1, 2, 3)),
+                                                   STATUS_COLORS["ok"], thickness=4.0,
+                                                   thickness_units="screen")
+
+    def _remove_ghost(self) -> None:
+        self._line_colors.pop("ghost", None)
+        if self._ghost_root is not None:
+            self._ghost_root.remove()  # and every node under /ghost
+        self._ghost_root = None
+        self._views.pop("ghost", None)
+        self._ghost_markers.clear()
 
     # -- panels --------------------------------------------------------------------------
 
     def _guarded(self, event, action) -> None:
         """Run an operator action; an impossible one becomes a notification, not a traceback."""
+        if self._syncing:
+            return
         try:
             action()
         except ValueError as error:
             self.notify(event, "Not possible", str(error))
 
-    def notify(self, event, title: str, body: str) -> None:
+    def notify(self, event, title: str, body: str, color: str = "red") -> None:
         clients = [event.client] if event is not None and event.client is not None else \
             list(self.server.get_clients().values())
         for client in clients:
-            client.add_notification(title, body, auto_close_seconds=6.0, color="red")
+            client.add_notification(title, body, auto_close_seconds=8.0, color=color)
+
+    def _greet(self, client: viser.ClientHandle) -> None:
+        """Tell a new browser what could not be loaded as asked."""
+        if self.notes:
+            client.add_notification("Robot loaded with fallbacks", "\n".join(self.notes),
+                                    auto_close_seconds=20.0, color="yellow")
 
     def _build_panels(self) -> None:
         gui = self.server.gui
-        app = self.app
-        with gui.add_folder("Controller"):
-            ghost_spec = app.specs.get("ghost", "qp:daqp")
-            choices = tuple(dict.fromkeys((*CONTROLLER_CHOICES, app.specs["main"], ghost_spec)))
-            self.controller_menu = gui.add_dropdown("main", choices,
-                                                    initial_value=app.specs["main"])
-            self.side_by_side = gui.add_checkbox("side by side", "ghost" in app.loops)
-            self.ghost_menu = gui.add_dropdown("ghost", choices, initial_value=ghost_spec)
+        with gui.add_folder("Status"):
+            self.status = gui.add_markdown("starting...")
+        self.tabs = gui.add_tab_group()
+        with self.tabs.add_tab("Teleop"):
+            self._build_teleop_panel()
+        with self.tabs.add_tab("Constraints"):
+            self._build_constraint_panel()
+        with self.tabs.add_tab("Settings"):
+            self._build_settings_panel()
+        self._plot_tab = self.tabs.add_tab("Plots")
+        with self._plot_tab:
+            self.plot_note = gui.add_markdown("the last 10 s, measured at 50 Hz; with a ghost, "
+                                              "since it joined")
+        if self.notes:
+            with self.tabs.add_tab("Robot"):
+                gui.add_markdown("**Loaded with fallbacks:**\n\n" +
+                                 "\n".join(f"* {note}" for note in self.notes))
 
-        @self.controller_menu.on_update
-        def _(event) -> None:
-            self._guarded(event, lambda: app.set_controller(self.controller_menu.value))
+    def _build_teleop_panel(self) -> None:
+        gui, app = self.server.gui, self.app
+        ghost_spec = app.specs.get("ghost", "qp:daqp")
+        choices = tuple(dict.fromkeys((*CONTROLLER_CHOICES, app.specs["main"], ghost_spec)))
+        self.controller_menu = gui.add_dropdown("main", choices, initial_value=app.specs["main"])
+        self.side_by_side = gui.add_checkbox("side by side", "ghost" in app.loops,
+                                             hint="a second robot, driven by the ghost "
+                                                  "controller from the same target")
+        self.ghost_menu = gui.add_dropdown("ghost", choices, initial_value=ghost_spec)
+        self.ghost_offset = gui.add_vector3("ghost offset (m)", tuple(app.ghost_offset), step=0.05,
+                                            hint="where the ghost is drawn from the main robot, "
+                                                 "world coordinates")
+        self.overlay = gui.add_checkbox("overlay", bool(np.linalg.norm(app.ghost_offset) < 1e-9),
+                                        hint="draw the ghost on the main robot (offset 0)")
+        self.clutch_button = gui.add_button("Clutch", hint="engaged: moving the gizmo does not "
+                                            "move the target; released: the target continues "
+                                            "from where it is")
+        self.motion_scale = gui.add_number("motion scale", app.motion_scale, min=0.01,
+                                           max=10.0, step=0.05,
+                                           hint="target displacement per gizmo displacement")
+        self.nudge_step = gui.add_number("nudge step (m)", 0.005, min=0.0005, max=0.1,
+                                         step=0.0005)
+        self.nudge_buttons = gui.add_button_group("nudge target", tuple(NUDGES))
+        self.gizmo_button = gui.add_button("Gizmo to target")
+        self.home_button = gui.add_button("Home", hint="the target to the home pose; the "
+                                          "constraints stay")
 
-        @self.side_by_side.on_update
-        def _(event) -> None:
-            self._guarded(event, lambda: app.set_ghost(
-                self.ghost_menu.value if self.side_by_side.value else None))
+        self.controller_menu.on_update(lambda event: self._guarded(
+            event, lambda: app.set_controller(self.controller_menu.value)))
+        self.side_by_side.on_update(lambda event: self._guarded(event, lambda: app.set_ghost(
+            self.ghost_menu.value if self.side_by_side.value else None)))
+        self.ghost_menu.on_update(lambda event: self._guarded(event, lambda: (
+            app.set_ghost(self.ghost_menu.value) if self.side_by_side.value else None)))
+        self.ghost_offset.on_update(lambda event: self._guarded(event, self._offset_changed))
+        self.overlay.on_update(lambda event: self._guarded(event, self._overlay_changed))
+        self.clutch_button.on_click(lambda event: self._guarded(
+            event, lambda: app.set_clutch(not app.clutch)))
+        self.motion_scale.on_update(lambda event: self._guarded(
+            event, lambda: app.set_motion_scale(self.motion_scale.value)))
+        self.nudge_buttons.on_click(lambda event: self._guarded(event, lambda: app.nudge_target(
+            self.nudge_step.value * np.asarray(NUDGES[self.nudge_buttons.value], dtype=float))))
+        self.gizmo_button.on_click(lambda event: self._guarded(event, self._gizmo_to_target))
+        self.home_button.on_click(lambda event: self._guarded(event, self._home))
 
-        @self.ghost_menu.on_update
-        def _(event) -> None:
-            if self.side_by_side.value:
-                self._guarded(event, lambda: app.set_ghost(self.ghost_menu.value))
-
-        with gui.add_folder("Constraints"):
-            self.hole_distance = gui.add_number("hole at (m)", 0.08, step=0.005,
-                                                hint="distance along the constrained link")
-            self.add_hole_button = gui.add_button("Add hole")
-            self.plane_distance = gui.add_number("plane point at (m)", 0.08, step=0.005)
-            self.plane_normal = gui.add_vector3("plane normal", (0.0, 1.0, 0.0), step=0.1)
-            self.barrier_offset = gui.add_number("barrier offset (m)", 0.01, min=0.0, step=0.005)
-            self.add_plane_button = gui.add_button("Add plane")
-            self.add_barrier_button = gui.add_button("Add barrier")
-            self.lock_distance = gui.add_number("point lock at (m)", 0.08, step=0.005,
-                                                hint="distance along the constrained link")
-            self.add_lock_button = gui.add_button("Add point lock")
-            self.constraint_menu = gui.add_dropdown("placed", ("(none)",))
-            self.remove_button = gui.add_button("Remove")
+    def _build_constraint_panel(self) -> None:
+        gui, app = self.server.gui, self.app
+        self.hole_distance = gui.add_number("hole at (m)", 0.08, step=0.005,
+                                            hint="distance along the constrained link")
+        self.add_hole_button = gui.add_button("Add hole")
+        self.plane_distance = gui.add_number("plane point at (m)", 0.08, step=0.005)
+        self.plane_normal = gui.add_vector3("plane normal (world)", (0.0, 1.0, 0.0), step=0.1,
+                                            hint="in world coordinates; a barrier keeps the "
+                                                 "point on the side the normal points to")
+        self.barrier_offset = gui.add_number("barrier offset (m)", 0.01, min=0.0, step=0.005)
+        self.add_plane_button = gui.add_button("Add plane")
+        self.add_barrier_button = gui.add_button("Add barrier")
+        self.lock_distance = gui.add_number("point lock at (m)", 0.08, step=0.005,
+                                            hint="distance along the constrained link")
+        self.add_lock_button = gui.add_button("Add point lock")
+        self.constraint_menu = gui.add_dropdown("placed", ("(none)",))
+        self.remove_button = gui.add_button("Remove")
+        self.clear_button = gui.add_button("Clear constraints")
 
         self.add_hole_button.on_click(lambda event: self._guarded(
             event, lambda: app.add_hole(self.hole_distance.value)))
@@ -175,48 +383,93 @@ class TeleopUI:
             event, lambda: app.add_point_lock(self.lock_distance.value)))
         self.remove_button.on_click(lambda event: self._guarded(
             event, lambda: app.remove_constraint(self.constraint_menu.value)))
+        self.clear_button.on_click(lambda event: self._guarded(event, app.clear_constraints))
 
-        with gui.add_folder("Control"):
-            self.gain_slider = gui.add_slider("drift gain K (1/s)", 0.0, 500.0, 5.0, app.gain)
-            self.damping_slider = gui.add_slider("damping lambda", 0.0, 0.2, 0.001, app.damping)
-            self.rate_number = gui.add_number("rate (Hz)", app.config.rate, min=50, max=5000, step=50)
-            self.home_button = gui.add_button("Home / reset")
+    def _build_settings_panel(self) -> None:
+        gui, app = self.server.gui, self.app
+        self.gain_slider = gui.add_slider("drift gain K (1/s)", 0.0, 500.0, 5.0, app.gain)
+        self.damping_slider = gui.add_slider("damping lambda", 0.0, 0.2, 0.001, app.damping)
+        self.rate_number = gui.add_number("rate (Hz)", app.config.rate, min=50, max=5000, step=50)
+        self.scene_path = gui.add_text("scene file", str(app.scene_dir / "scene.json"))
+        self.save_scene_button = gui.add_button("Save scene")
+        self.load_scene_button = gui.add_button("Load scene")
+        self.scene_status = gui.add_markdown("")
+        self.record_button = gui.add_button("Start recording")
+        self.record_status = gui.add_markdown("not recording")
+
         self.gain_slider.on_update(lambda event: self._guarded(
             event, lambda: app.set_gain(self.gain_slider.value)))
         self.damping_slider.on_update(lambda event: self._guarded(
             event, lambda: app.set_damping(self.damping_slider.value)))
         self.rate_number.on_update(lambda event: self._guarded(
             event, lambda: app.set_rate(self.rate_number.value)))
-        self.home_button.on_click(lambda event: self._guarded(event, self._home))
-
-        with gui.add_folder("Record"):
-            self.record_button = gui.add_button("Start recording")
-            self.record_status = gui.add_markdown("not recording")
+        self.save_scene_button.on_click(lambda event: self._guarded(event, self._save_scene))
+        self.load_scene_button.on_click(lambda event: self._guarded(event, self._load_scene))
         self.record_button.on_click(lambda event: self._guarded(event, self._toggle_recording))
 
-        with gui.add_folder("Status"):
-            self.status = gui.add_markdown("starting...")
+    # -- actions that also update widgets ---------------------------------------------------
 
-        with gui.add_folder("Plots (last 10 s)"):
-            self.plots = {}
-            for key, title in (("constraint_error", "constraint error (m)"),
-                               ("constraint_velocity", "|C v_c| (m/s)"),
-                               ("ee_error", "EE position error (m)"),
-                               ("step_time", "step time (us)")):
-                self.plots[key] = gui.add_uplot(
-                    data=(np.zeros(1), np.zeros(1), np.zeros(1)),
-                    series=(uplot.Series(label="t (s)"),
-                            uplot.Series(label="main", stroke="#d97706", width=1.5),
-                            uplot.Series(label="ghost", stroke="#3b82f6", width=1.5)),
-                    title=title, aspect=2.0,
-                    scales={"x": uplot.Scale(time=False, auto=True), "y": uplot.Scale(auto=True)})
+    def _move_gizmo_handle(self, pose: pin.SE3) -> None:
+        self.target_gizmo.position = pose.translation
+        self.target_gizmo.wxyz = _wxyz(pose.rotation)
 
     def _home(self) -> None:
         self.app.home()
-        target = self.app.target
-        quaternion = pin.Quaternion(target.rotation)
-        self.target_gizmo.position = target.translation
-        self.target_gizmo.wxyz = (quaternion.w, quaternion.x, quaternion.y, quaternion.z)
+        self._move_gizmo_handle(self.app.gizmo)
+
+    def _gizmo_to_target(self) -> None:
+        self._move_gizmo_handle(self.app.gizmo_to_target())
+
+    def _offset_changed(self) -> None:
+        self.app.set_ghost_offset(np.asarray(self.ghost_offset.value, dtype=float))
+        overlay = float(np.linalg.norm(self.app.ghost_offset)) < 1e-9
+        if not overlay:
+            self._saved_offset = self.app.ghost_offset.copy()
+        self._sync(lambda: setattr(self.overlay, "value", overlay))
+
+    def _overlay_changed(self) -> None:
+        offset = np.zeros(3) if self.overlay.value else self._saved_offset
+        self.app.set_ghost_offset(offset)
+        self._sync(lambda: setattr(self.ghost_offset, "value", tuple(float(x) for x in offset)))
+
+    def _save_scene(self) -> None:
+        path = self.app.save_scene(self.scene_path.value)
+        self.scene_status.content = f"saved `{path}`"
+
+    def _load_scene(self) -> None:
+        self.app.load_scene(self.scene_path.value)
+        self._sync(self._widgets_from_app)
+        self._move_gizmo_handle(self.app.gizmo)
+        self.scene_status.content = f"loaded `{self.scene_path.value}`"
+
+    def _sync(self, action) -> None:
+        """Set widgets from the app without their callbacks acting."""
+        self._syncing = True
+        try:
+            action()
+        finally:
+            self._syncing = False
+
+    def _widgets_from_app(self) -> None:
+        app = self.app
+        choices = tuple(self.controller_menu.options)
+        for menu, spec in ((self.controller_menu, app.specs["main"]),
+                           (self.ghost_menu, app.specs.get("ghost"))):
+            if spec is None:
+                continue
+            if spec not in choices:
+                choices = (*choices, spec)
+                self.controller_menu.options = self.ghost_menu.options = choices
+            menu.value = spec
+        self.side_by_side.value = "ghost" in app.loops
+        self.ghost_offset.value = tuple(float(x) for x in app.ghost_offset)
+        self.overlay.value = bool(np.linalg.norm(app.ghost_offset) < 1e-9)
+        if not self.overlay.value:
+            self._saved_offset = app.ghost_offset.copy()
+        self.motion_scale.value = app.motion_scale
+        self.gain_slider.value = app.gain
+        self.damping_slider.value = app.damping
+        self.rate_number.value = app.config.rate
 
     def _toggle_recording(self) -> None:
         if self.app.recorder is None:
@@ -238,49 +491,97 @@ class TeleopUI:
         self._thread.join(2.0)
 
     def _view_loop(self) -> None:
-        next_plot = 0.0
+        next_plot = next_status = 0.0
         while not self._stop.is_set():
             start = time.perf_counter()
             try:
-                snapshot = self.app.snapshot()
+                plot = start >= next_plot
+                status = start >= next_status
+                snapshot = self.app.snapshot(history=plot)
                 with self.server.atomic():
-                    self._draw(snapshot)
-                if start >= next_plot:
+                    self._draw(snapshot, status=status)
+                if status:
+                    next_status = start + 1.0 / STATUS_RATE
+                if plot:
                     self._plot(snapshot)
                     next_plot = start + 1.0 / PLOT_RATE
             except Exception as error:  # the view must never take the control loop down
                 self.status.content = f"view error: {type(error).__name__}: {error}"
             time.sleep(max(0.0, 1.0 / VIEW_RATE - (time.perf_counter() - start)))
 
-    def _draw(self, snapshot: dict) -> None:
+    def _draw(self, snapshot: dict, status: bool = True) -> None:
         robots = snapshot["robots"]
-        if "ghost" in robots and "ghost" not in self._visualisers:
-            self._visualisers["ghost"] = self._visualiser("ghost")
-        if "ghost" not in robots and "ghost" in self._visualisers:
-            self.server.scene.remove_by_name("/ghost")  # noqa: the visualiser's root node
-            del self._visualisers["ghost"]
-        for which, visualiser in self._visualisers.items():
-            visualiser.display(robots[which]["q"])
-        self._draw_constraints(snapshot["constraints"])
-        self._draw_status(snapshot)
+        if "ghost" in robots:
+            if "ghost" in self._views and self._ghost_style != self._ghost_rgba():
+                self._remove_ghost()  # overlay <-> beside: see-through or not
+            if "ghost" not in self._views and self._ghost_due():
+                self._add_ghost(snapshot["ghost_offset"])
+            if self._ghost_root is not None:
+                self._ghost_root.position = snapshot["ghost_offset"]
+        else:
+            self._ghost_seen = None
+            if "ghost" in self._views:
+                self._remove_ghost()
+        for which, view in self._views.items():
+            view.display(robots[which]["q"])
+        self._draw_target(snapshot)
+        ghost = snapshot["robots"].get("ghost") if "ghost" in self._views else None
+        self._draw_constraints(snapshot["constraints"],
+                               None if ghost is None else ghost["constraints"])
+        if status:
+            self._draw_status(snapshot)
 
-    def _draw_constraints(self, entries: list[dict]) -> None:
-        present = {e["id"] for e in entries}
-        for entry_id in list(self._markers):
-            if entry_id not in present:
-                for handle in self._markers.pop(entry_id).values():
-                    handle.remove()
-        for e in entries:
-            markers = self._markers.get(e["id"])
-            if markers is None:
-                markers = self._markers[e["id"]] = self._create_markers(e)
-            geometry = e["geometry"]
-            self._update_shape(markers["shape"], geometry)
-            markers["point"].position = geometry.point
-            # from the point towards where it should be (the error points the other way)
-            vector = -ERROR_VECTOR_SCALE * geometry.error
-            markers["error"].points = np.array([[geometry.point, geometry.point + vector]])
-            markers["error"].visible = float(np.linalg.norm(geometry.error)) > 1e-6
+    def _ghost_due(self) -> bool:
+        """Whether to draw a ghost that just joined: once the plots show it (or after
+        GHOST_PLOTS_FIRST s). A browser compiles the shaders of new meshes on their first
+        frame, which holds a software-rendered page for seconds: the plots go first."""
+        now = time.perf_counter()
+        if self._ghost_seen is None:
+            self._ghost_seen = now
+        return ("ghost" in self._plotted or now - self._ghost_seen > GHOST_PLOTS_FIRST)
+
+    def _draw_target(self, snapshot: dict) -> None:
+        target, gizmo = snapshot["target"], snapshot["gizmo"]
+        apart = (np.linalg.norm(target.translation - gizmo.translation) > 1e-3
+                 or np.linalg.norm(pin.log3(gizmo.rotation.T @ target.rotation)) > 1e-2)
+        self.target_marker.visible = bool(apart or snapshot["clutch"])
+        self.target_marker.position = target.translation
+        self.target_marker.wxyz = _wxyz(target.rotation)
+        lines = {"main": self.reach_line}
+        if "ghost" in self._views:
+            self.ghost_target.position = target.translation
+            self.ghost_target.wxyz = _wxyz(target.rotation)
+            lines["ghost"] = self.ghost_reach
+        for which, line in lines.items():
+            robot = snapshot["robots"][which]
+            limitation = robot["limitation"]
+            line.points = np.array([[robot["ee"].translation, target.translation]])
+            color = STATUS_COLORS.get(limitation.status, STATUS_COLORS["failed"])
+            if self._line_colors.get(which) != color:
+                line.colors = np.tile(np.array(color, dtype=np.uint8), (1, 2, 1))
+                self._line_colors[which] = color
+            line.visible = limitation.distance > 2e-4
+
+    def _draw_constraints(self, entries: list[dict], ghost: dict | None = None) -> None:
+        """The main robot's constraint markers (``snapshot["constraints"]``) and, given the
+        ghost's drawings (``snapshot["robots"]["ghost"]["constraints"]``), the ghost's."""
+        goals = {e["id"]: e["goal"] for e in entries}
+        main = {e["id"]: e for e in entries}
+        for drawn, markers_of, prefix in ((main, self._markers, "/constraints"),
+                                          (ghost, self._ghost_markers, "/ghost/constraints")):
+            if drawn is None:
+                continue
+            for entry_id in list(markers_of):
+                if entry_id not in drawn:
+                    for handle in markers_of.pop(entry_id).values():
+                        handle.remove()
+            for entry_id, drawing in drawn.items():
+                markers = markers_of.get(entry_id)
+                if markers is None:
+                    markers = markers_of[entry_id] = self._create_markers(
+                        f"{prefix}/{entry_id}", entry_id, drawing, goals[entry_id],
+                        gizmo=markers_of is self._markers)
+                self._update_markers(markers, drawing)
         options = tuple(e["id"] for e in entries) or ("(none)",)
         if tuple(self.constraint_menu.options) != options:
             self.constraint_menu.options = options
@@ -304,63 +605,145 @@ class TeleopUI:
         else:
             handle.position = geometry.anchor
 
-    def _create_markers(self, e: dict) -> dict:
+    def _point_marker(self, drawing: dict) -> np.ndarray | None:
+        """The collar around the link at the constrained point (None: draw a sphere)."""
+        axis = drawing["link_axis"]
+        if axis is None or self.collar_radius <= 0.004:
+            return None
+        return _ring(drawing["geometry"].point, axis, self.collar_radius, n=24)
+
+    def _create_markers(self, name: str, entry_id: str, drawing: dict, goal: np.ndarray,
+                        gizmo: bool) -> dict:
         scene = self.server.scene
-        name = f"/constraints/{e['id']}"
-        geometry = e["geometry"]
+        geometry: ConstraintGeometry = drawing["geometry"]
         markers = {"shape": self._add_shape(name, geometry)}
-        markers["point"] = scene.add_icosphere(f"{name}/point", 0.006, (20, 20, 20),
-                                               position=geometry.point)
+        collar = self._point_marker(drawing)
+        if collar is not None:  # outside the link cylinder: visible, unlike a point inside
+            markers["point"] = scene.add_line_segments(f"{name}/point", collar, (20, 20, 20),
+                                                       thickness=0.004)
+        else:
+            markers["point"] = scene.add_icosphere(f"{name}/point", 0.008, (20, 20, 20),
+                                                   position=geometry.point)
         markers["error"] = scene.add_line_segments(f"{name}/error", np.zeros((1, 2, 3)),
                                                    (255, 0, 255), thickness=0.003)
-        gizmo = scene.add_transform_controls(f"{name}/gizmo", scale=0.07, position=e["goal"],
-                                             disable_rotations=True)
-        entry_id = e["id"]
+        if geometry.kind == "barrier":  # the allowed side
+            markers["arrow"] = scene.add_line_segments(
+                f"{name}/arrow", _arrow(geometry.anchor, geometry.axis, BARRIER_ARROW),
+                geometry.color, thickness=0.004)
+        if gizmo:  # drawn over the links (depth_test off): never hidden inside one
+            handle = scene.add_transform_controls(f"{name}/gizmo", scale=0.07, position=goal,
+                                                  disable_rotations=True, depth_test=False)
 
-        @gizmo.on_update
-        def _(event) -> None:
-            self._guarded(event, lambda: self.app.move_constraint(entry_id, gizmo.position))
+            @handle.on_update
+            def _(event) -> None:
+                self._guarded(event, lambda: self.app.move_constraint(entry_id, handle.position))
 
-        markers["gizmo"] = gizmo
+            markers["gizmo"] = handle
         return markers
 
+    def _update_markers(self, markers: dict, drawing: dict) -> None:
+        geometry: ConstraintGeometry = drawing["geometry"]
+        self._update_shape(markers["shape"], geometry)
+        collar = self._point_marker(drawing)
+        if collar is not None:
+            markers["point"].points = collar
+        else:
+            markers["point"].position = geometry.point
+        # from the point towards where it should be (the error points the other way)
+        vector = -ERROR_VECTOR_SCALE * geometry.error
+        markers["error"].points = np.array([[geometry.point, geometry.point + vector]])
+        markers["error"].visible = float(np.linalg.norm(geometry.error)) > 1e-6
+        if "arrow" in markers:
+            markers["arrow"].points = _arrow(geometry.anchor, geometry.axis, BARRIER_ARROW)
+
     def _draw_status(self, snapshot: dict) -> None:
-        lines = [f"**control** {self.control.achieved_rate:.0f} Hz achieved "
-                 f"(target {snapshot['config'].rate:.0f} Hz), "
-                 f"{self.control.deadline_misses} deadline misses"]
+        timing = self.control.timing()
+        control = (f"**control** {timing.achieved_rate:.0f} Hz achieved (target "
+                   f"{snapshot['config'].rate:.0f} Hz), lateness p99 "
+                   f"{timing.lateness_p99_ms:.2f} ms, tick {timing.tick_p50_us:.0f} us "
+                   f"({timing.overhead_p50_us:.0f} us beyond the controllers), "
+                   f"{timing.deadline_misses} deadline misses")
+        lines = [control]
         if self.control.error:
             lines.append(f"**control error** {self.control.error}")
         for which, robot in snapshot["robots"].items():
-            record, info = robot["record"], robot["info"]
-            if record is None:
-                continue
-            lines.append(
-                f"**{which}** `{robot['spec']}` **{record.status}** ({info.method or '-'}): "
-                f"constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
-                f"EE {1e3 * record.ee_position_error:.2f} mm, step {record.step_time_us:.0f} us"
-                + (f", {record.message}" if record.message else ""))
+            record, limitation = robot["record"], robot["limitation"]
+            words = (f"**{which}** `{robot['spec']}` **{limitation.status}**: {limitation.words}")
+            if record is not None:
+                words += (f" (constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
+                          f"EE {1e3 * limitation.distance:.2f} mm from the target, "
+                          f"step {record.step_time_us:.0f} us)")
+            if robot["active_barriers"]:
+                words += f"; active barriers: {', '.join(robot['active_barriers'])}"
+            lines.append(words)
+        console = [f"motion scale {snapshot['motion_scale']:g}"]
+        if snapshot["clutch"]:
+            console.insert(0, "**clutch engaged**: the gizmo moves alone")
+        lines.append(", ".join(console))
         self.status.content = "  \n".join(lines)
+        label = "Release clutch" if snapshot["clutch"] else "Clutch"
+        if self.clutch_button.label != label:
+            self.clutch_button.label = label
 
     def _plot(self, snapshot: dict) -> None:
         robots = snapshot["robots"]
-        main = robots["main"]["trace"]
-        ghost = robots.get("ghost", {}).get("trace")
-        if main["t"].size < 2:
-            return
-        for key, plot in self.plots.items():
-            other = ghost[key] if ghost is not None and ghost[key].size == main[key].size \
-                else np.full(main[key].size, np.nan)
-            plot.data = (main["t"], main[key], other)
+        shown: set[str] = set()
+        for spec in PLOTS:
+            t, series = plot_series(snapshot, spec)
+            if t.size < 2:
+                if spec.ghost_only and spec.key in self._plots and "ghost" not in robots:
+                    self._plots.pop(spec.key).remove()
+                    self._plot_keys.pop(spec.key, None)
+                continue
+            values = np.concatenate(list(series.values()))
+            current = self._plot_keys.get(spec.key, (None,))[0]
+            unit, size = display_unit(values, spec.quantity, current)
+            labels = tuple(f"{which} ({robots[which]['spec']})" for which in series)
+            key = (unit, labels)
+            data = (t - snapshot["robots"]["main"]["t"],  # seconds before now: a fixed x axis
+                    *[column / size for column in series.values()])
+            if self._plot_keys.get(spec.key) != key:
+                self._replace_plot(spec, unit, series, labels, data)
+                self._plot_keys[spec.key] = key
+            else:
+                self._plots[spec.key].data = data
+            shown.update(series)
+        self._plotted = shown
+
+    def _replace_plot(self, spec: PlotSpec, unit: str, series: dict, labels: tuple,
+                      data: tuple) -> None:
+        """A new uPlot for a new unit or set of series, where the old one was."""
+        old = self._plots.pop(spec.key, None)
+        order = old.order if old is not None else None
+        if old is not None:
+            old.remove()
+        colors = {"main": MAIN_COLOR, "ghost": GHOST_COLOR}
+        with self._plot_tab:
+            self._plots[spec.key] = self.server.gui.add_uplot(
+                data=data,
+                series=(uplot.Series(label="t - now (s)"),
+                        *[uplot.Series(label=label, stroke=colors[which], width=1.5,
+                                       **({} if which == "main" else {"dash": GHOST_DASH}))
+                          for which, label in zip(series, labels)]),
+                title=f"{spec.title} ({unit})", aspect=2.2, order=order,
+                scales={"x": uplot.Scale(time=False, auto=False, range=X_RANGE),
+                        "y": uplot.Scale(auto=True, range=Y_RANGE)})
 
 
 def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                controller: str = "cjm", ghost: str | None = None, rate: float = 1000.0,
-               record_dir: str | Path = "sessions") -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
-    """Start the app: server bound to ``host`` (loopback by default), control and view threads."""
+               record_dir: str | Path = "sessions", scene: dict | None = None,
+               notes: list[str] | tuple[str, ...] = ()
+               ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
+    """Start the app: server bound to ``host`` (loopback by default), control and view
+    threads. ``scene`` (a scene dict for this robot) is applied before anything runs."""
     app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir)
+    if scene is not None:
+        app.apply_scene(scene)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     control = ControlThread(app)
-    ui = TeleopUI(server, app, control)
+    ui = TeleopUI(server, app, control, notes=notes)
     control.start()
     ui.start()
     return server, app, control, ui
+

@@ -59,6 +59,28 @@ def positive(text: str) -> float:
     return value
 
 
+def nonnegative(text: str) -> float:
+    """A finite number >= 0 (argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return value
+
+
+def count(text: str) -> int:
+    """An integer >= 0 (argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
 def _controllers_epilog(context: str) -> str:
     """The known controllers, one a line; ``*`` marks those run by default."""
     width = max(len(spec.name) for spec in CONTROLLER_SPECS)
@@ -86,8 +108,19 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     parser.add_argument("--duration", type=positive,
                         help=f"seconds to run (default: the whole {source})")
     parser.add_argument("--out", default="out", help="output directory")
-    parser.add_argument("--no-plots", action="store_true", help="write the metrics only, no plots")
+    parser.add_argument("--no-plots", action="store_true",
+                        help="write the metrics only, no plots and no report.html")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    robot = parser.add_argument_group(
+        "a robot that is not perfect", "the same for every controller; off by default "
+        "(docs/design.md section 15.1)")
+    robot.add_argument("--encoder-noise", type=nonnegative, default=0.0, metavar="RAD",
+                       help="std of the Gaussian noise on each measured joint, every period")
+    robot.add_argument("--latency", type=count, default=0, metavar="PERIODS",
+                       help="control periods between a command and the joints")
+    robot.add_argument("--joint-time-constant", type=nonnegative, default=0.0, metavar="S",
+                       help="first-order response of the joint velocities to their command")
+    robot.add_argument("--seed", type=count, default=0, help="seed of the encoder noise")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -144,16 +177,25 @@ def _run(plan, args, config) -> int:
         metrics_document,
         write_outputs,
     )
+    from teleop.experiments.imperfect import Imperfections
 
+    imperfections = Imperfections(args.encoder_noise, args.latency, args.joint_time_constant,
+                                  args.seed)
     duration = args.duration or plan.duration
-    results = compare(plan, args.controllers, config, duration, progress=not args.quiet)
-    paths = write_outputs(plan, results, config, duration, args.out, plots=not args.no_plots)
-    document = metrics_document(plan, results, config, duration)
-    print(f"{plan.name}: {plan.description} ({duration:g} s at {config.rate:g} Hz)")
+    results = compare(plan, args.controllers, config, duration, progress=not args.quiet,
+                      imperfections=imperfections)
+    paths = write_outputs(plan, results, config, duration, args.out, plots=not args.no_plots,
+                          imperfections=imperfections)
+    document = metrics_document(plan, results, config, duration, imperfections)
+    print(f"{plan.name}: {plan.description} ({duration:g} s at {config.rate:g} Hz, "
+          f"{imperfections.describe()})")
     print(format_table(document))
     for spec, result in results.items():
         if result.failure_messages:
             print(f"  {spec}: {len(result.failure_messages)}+ failed steps, first {result.failure_messages[0]}")
+        if result.solver_messages:
+            print(f"  {spec}: the solver wrote {sum(result.solver_messages.values())} lines "
+                  f"({len(result.solver_messages)} distinct), kept in metrics.json")
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0
 
@@ -227,6 +269,11 @@ def _dispatch(args) -> int:
                                    dofs=(8, 16) if args.quick else (8, 16, 32, 64),
                                    holes=(1, 2) if args.quick else (1, 2, 4, 8))
         print(format_table(results))
+        for r in results:
+            if r.solver_messages:
+                print(f"  {r.robot} {r.controller}: the solver wrote "
+                      f"{sum(r.solver_messages.values())} lines, kept in solver_messages"
+                      + (" of the JSON" if args.json else " (--json FILE writes them)"))
         if args.json:
             write_json(results, args.json)
         return 0

@@ -1,12 +1,18 @@
 """One-step timing of every controller (``teleop bench``): the built-in robots, then
-scaling over generated chains and numbers of constraints, all in one process."""
+scaling over generated chains and numbers of constraints, all in one process.
+
+Every controller of a problem solves the same configurations with the same twist, so their
+commands are compared too: each one's largest ``|qd - qd_ref|`` against the first
+controller listed (docs/design.md section 15.3). The solvers' console output is kept off the
+console (section 15.5), in each timing's ``solver_messages``.
+"""
 
 from __future__ import annotations
 
 import collections
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -17,6 +23,7 @@ from teleop.robots import Robot, load_robot
 from teleop.robots.chains import hole_links, load_chain
 
 from .compare import format_status_counts
+from .solver_output import SolverOutputCapture
 
 #: hole distance along the constrained link of each built-in robot (m)
 DEFAULT_HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20}
@@ -40,6 +47,10 @@ class StepTiming:
     max_constraint_residual: float  # m/s, max |A qd - b| over the timed steps
     method: str  # what the controller did (analytical / general / qp:... / mink:...)
     status_counts: dict[str, int]  # timed steps per step status (ok, scaled, ...)
+    #: max over the configurations of max_j |qd_j - qd_ref,j| against the problem's first
+    #: controller (rad/s; 0 for that one)
+    joint_velocity_deviation_max: float = 0.0
+    solver_messages: dict[str, int] = field(default_factory=dict)  # kept off the console
 
 
 def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
@@ -57,8 +68,10 @@ def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
 
 
 def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: int,
-                  warmup: int, seed: int = 0, label: str | None = None) -> StepTiming:
-    """Time one controller on ``holes`` over configurations near the robot's home."""
+                  warmup: int, seed: int = 0,
+                  label: str | None = None) -> tuple[StepTiming, np.ndarray]:
+    """Time one controller on ``holes`` over configurations near the robot's home; returns
+    the timing and the commands, one row per configuration."""
     controller = make_controller(spec, robot, holes)
     rng = np.random.default_rng(seed)
     # near home, a little off the hole (<= 1e-3 rad per joint: sub-millimetre drift to correct)
@@ -68,22 +81,42 @@ def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: in
     twist = np.array([0.001, -0.002, 0.0015, 0.005, -0.003, 0.002])
     residual = 0.0
     statuses: collections.Counter[str] = collections.Counter()
+    commands = np.empty((iterations, robot.model.nv))
+    index = 0
 
     def step(q: np.ndarray) -> None:
-        nonlocal residual
-        controller.solve(q, twist)
+        nonlocal residual, index
+        commands[index] = controller.solve(q, twist)
+        index += 1
         residual = max(residual, controller.info.equality_residual)
         statuses[controller.info.status.value] += 1
 
     for q in configurations[:warmup]:
         controller.solve(q, twist)
     times = time_steps(step, configurations, warmup=0)
-    return StepTiming(robot=label or robot.name, controller=spec, dof=robot.model.nv,
-                      constraint_rows=sum(h.dim for h in holes),
-                      median_us=float(np.median(times)), p99_us=float(np.percentile(times, 99)),
-                      max_us=float(times.max()), iterations=iterations,
-                      max_constraint_residual=residual, method=controller.info.method,
-                      status_counts=dict(statuses))
+    timing = StepTiming(robot=label or robot.name, controller=spec, dof=robot.model.nv,
+                        constraint_rows=sum(h.dim for h in holes),
+                        median_us=float(np.median(times)),
+                        p99_us=float(np.percentile(times, 99)), max_us=float(times.max()),
+                        iterations=iterations, max_constraint_residual=residual,
+                        method=controller.info.method, status_counts=dict(statuses))
+    return timing, commands
+
+
+def bench_controllers(robot: Robot, holes: Sequence[Hole], specs: Sequence[str],
+                      iterations: int, warmup: int, label: str | None = None) -> list[StepTiming]:
+    """:func:`bench_problem` for every spec on one problem, each with its largest joint-
+    velocity deviation from the first spec's commands and its solvers' console output."""
+    timings = []
+    reference = None
+    with SolverOutputCapture() as capture:
+        for spec in specs:
+            timing, commands = bench_problem(robot, holes, spec, iterations, warmup, label=label)
+            reference = commands if reference is None else reference
+            timings.append(replace(
+                timing, joint_velocity_deviation_max=float(np.max(np.abs(commands - reference))),
+                solver_messages=capture.collect()))
+    return timings
 
 
 def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
@@ -94,8 +127,8 @@ def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
     for name in robots:
         robot = load_robot(name)
         hole = Hole.on_link(robot, robot.q_home, distance=DEFAULT_HOLE_DISTANCE.get(name, 0.1))
-        results += [bench_problem(robot, [hole], spec, iterations, max(1, iterations // 10))
-                    for spec in controllers]
+        results += bench_controllers(robot, [hole], controllers, iterations,
+                                     max(1, iterations // 10))
     return results
 
 
@@ -108,14 +141,14 @@ def run_scaling(iterations: int = 300, controllers: Sequence[str] = SCALING_CONT
     for dof in dofs:
         robot = load_chain(dof)
         problem = [Hole.on_link(robot, robot.q_home, 0.05, link=hole_links(dof, 1)[0])]
-        results += [bench_problem(robot, problem, spec, iterations, warmup, label=f"chain{dof}")
-                    for spec in controllers]
+        results += bench_controllers(robot, problem, controllers, iterations, warmup,
+                                     label=f"chain{dof}")
     robot = load_chain(32)
     for count in holes:
         problem = [Hole.on_link(robot, robot.q_home, 0.05, link=link)
                    for link in hole_links(32, count)]
-        results += [bench_problem(robot, problem, spec, iterations, warmup,
-                                  label=f"chain32/{count}holes") for spec in controllers]
+        results += bench_controllers(robot, problem, controllers, iterations, warmup,
+                                     label=f"chain32/{count}holes")
     return results
 
 
@@ -130,15 +163,19 @@ def mink_ratios(results: Sequence[StepTiming]) -> dict[tuple[str, str], float]:
 
 
 def format_table(results: Sequence[StepTiming]) -> str:
+    """One line per timing; ``qd dev``: the joint-velocity deviation from the problem's
+    first controller (rad/s)."""
     ratios = mink_ratios(results)
-    lines = [f"{'problem':<20}{'dof':>4}{'rows':>5}  {'controller':<13}{'median us':>10}"
-             f"{'p99 us':>9}{'max us':>10}{'x mink':>8}{'residual':>10}  {'method':<12}statuses"]
+    lines = [(f"{'problem':<20}{'dof':>4}{'rows':>5}  {'controller':<13}{'median us':>10}"
+              f"{'p99 us':>9}{'max us':>10}{'x mink':>8}{'residual':>10}{'qd dev':>10}  "
+              f"{'method':<12}statuses")]
     for r in results:
         ratio = ratios.get((r.robot, r.controller))
         lines.append(
             f"{r.robot:<20}{r.dof:>4}{r.constraint_rows:>5}  {r.controller:<13}{r.median_us:>10.1f}"
             f"{r.p99_us:>9.1f}{r.max_us:>10.1f}{'' if ratio is None else f'{ratio:.1f}':>8}"
-            f"{r.max_constraint_residual:>10.1e}  {r.method:<12}{format_status_counts(r.status_counts)}")
+            f"{r.max_constraint_residual:>10.1e}{r.joint_velocity_deviation_max:>10.1e}  "
+            f"{r.method:<12}{format_status_counts(r.status_counts)}")
     return "\n".join(lines)
 
 

@@ -15,24 +15,57 @@ from constraints import Constraint
 from teleop.controller_specs import make_controller
 from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
 
+from .imperfect import Imperfections
 from .plan import Plan
 from .results import METRIC_KEYS, RunResult
+from .solver_output import SolverOutputCapture
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+
+
+def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
+    """Control periods in ``duration`` s (default: the plan's); ValueError unless > 0 s."""
+    duration = plan.duration if duration is None else float(duration)
+    if not math.isfinite(duration) or duration <= 0:
+        raise ValueError(f"duration must be > 0 s, got {duration}")
+    return int(round(duration * config.rate))
+
+
+def _check_specs(specs: Sequence[str]) -> list[str]:
+    """``specs`` as a list: at least one, none twice (results are keyed by spec)."""
+    specs = list(specs)
+    if not specs:
+        raise ValueError("specs must name at least one controller")
+    repeated = sorted({spec for spec in specs if specs.count(spec) > 1})
+    if repeated:
+        raise ValueError(f"specs lists {', '.join(map(repr, repeated))} twice")
+    return specs
 
 
 def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
              duration: float | None = None,
-             on_step: Callable[[int], None] | None = None) -> RunResult:
-    """Run one controller through ``plan`` and record every tick."""
+             on_step: Callable[[int], None] | None = None,
+             imperfections: Imperfections | None = None) -> RunResult:
+    """Run one controller through ``plan`` and record every tick.
+
+    ``imperfections`` (docs/design.md section 15.1) puts a robot that is not perfect under
+    the loop; None or the default: the perfect robot.
+    """
     config = config or LoopConfig()
-    duration = plan.duration if duration is None else float(duration)
-    if not math.isfinite(duration) or duration <= 0:
-        raise ValueError(f"duration must be > 0 s, got {duration}")
+    steps = _steps(plan, config, duration)
     constraints = plan.make_constraints()
     controller = make_controller(spec, plan.robot, constraints, dt=config.dt)
-    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config)
-    steps = int(round(duration * config.rate))
+    records, failures = _drive(plan, controller, constraints, config, steps, imperfections,
+                               on_step)
+    return _collect(spec, records, failures)
+
+
+def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopConfig,
+           steps: int, imperfections: Imperfections | None,
+           on_step: Callable[[int], None] | None) -> tuple[list[StepRecord], list[str]]:
+    """Tick ``controller`` (holding ``constraints``) through ``steps`` periods of ``plan``."""
+    plant = (imperfections or Imperfections()).plant(plan.robot.model, config.dt)
+    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config, plant=plant)
     records: list[StepRecord] = []
     failures: list[str] = []
     edits_at_measure: list[list[Constraint]] = []
@@ -58,54 +91,155 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
             failures.append(f"t={record.t:.3f}s: {record.message}")
         if on_step is not None:
             on_step(i)
-    return _collect(spec, records, failures)
+    return records, failures
 
 
 def _collect(spec: str, records: Sequence[StepRecord], failures: list[str]) -> RunResult:
+    """The records as columns; constraint rows by label, NaN where a row did not exist."""
     columns = {name: np.array([getattr(r, name) for r in records], dtype=float)
                for name in RECORD_FIELDS}
-    width = max((len(r.constraint_velocity) for r in records), default=0)
-    velocity = np.zeros((len(records), width))
+    labels = list(dict.fromkeys(label for r in records for label in r.constraint_velocity_labels))
+    index = {label: j for j, label in enumerate(labels)}
+    velocity = np.full((len(records), len(labels)), np.nan)
+    drift = np.full((len(records), len(labels)), np.nan)
     for i, r in enumerate(records):
-        velocity[i, :len(r.constraint_velocity)] = r.constraint_velocity
+        where = [index[label] for label in r.constraint_velocity_labels]
+        velocity[i, where] = r.constraint_velocity
+        drift[i, where] = r.drift_velocity
+
+    def vectors(name: str) -> np.ndarray:
+        return np.array([getattr(r, name) for r in records]).reshape(-1, 3)
+
     return RunResult(
         controller=spec, columns=columns, constraint_velocity=velocity,
-        desired_linear_velocity=np.array([r.desired_linear_velocity for r in records]).reshape(-1, 3),
-        actual_linear_velocity=np.array([r.actual_linear_velocity for r in records]).reshape(-1, 3),
+        constraint_velocity_labels=labels, drift_velocity=drift,
+        operator_linear_velocity=vectors("operator_linear_velocity"),
+        commanded_linear_velocity=vectors("commanded_linear_velocity"),
+        actual_linear_velocity=vectors("actual_linear_velocity"),
+        statuses=np.array([r.status for r in records], dtype=str),
         failure_messages=failures,
         status_counts=dict(collections.Counter(r.status for r in records)))
 
 
-def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
-            duration: float | None = None, progress: bool = True) -> dict[str, RunResult]:
-    """Run every controller spec on the same plan (fresh constraints each)."""
+class ShadowedController:
+    """The reference controller, with every other controller evaluated beside it
+    (docs/design.md section 15.3).
+
+    The loop sees only the reference: its command, its ``info``, its constraints. At each
+    ``solve(q, twist)`` every shadow also solves at the same ``q`` and twist, and
+    ``max_j |qd_shadow,j - qd_ref,j|`` is recorded (NaN for a step the reference refused).
+    """
+
+    def __init__(self, reference, shadows: dict[str, object]) -> None:
+        self.reference = reference
+        self.shadows = shadows
+        self.deviations: dict[str, list[float]] = {spec: [] for spec in shadows}
+
+    @property
+    def info(self):
+        return self.reference.info
+
+    @property
+    def constraints(self) -> list[Constraint]:
+        return self.reference.constraints
+
+    @property
+    def constraint_frames(self) -> list[int]:
+        return self.reference.constraint_frames
+
+    def set_constraints(self, constraints: Sequence[Constraint]) -> None:
+        for controller in (self.reference, *self.shadows.values()):
+            controller.set_constraints(list(constraints))
+
+    def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        try:
+            qd = self.reference.solve(q, twist)
+        except ValueError:
+            for series in self.deviations.values():
+                series.append(math.nan)
+            raise
+        for spec, shadow in self.shadows.items():
+            try:
+                other = shadow.solve(q, twist)
+            except ValueError:  # refused: the loop would hold still
+                other = np.zeros_like(qd)
+            self.deviations[spec].append(float(np.max(np.abs(other - qd))))
+        return qd
+
+
+def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
+                             duration: float | None = None,
+                             imperfections: Imperfections | None = None,
+                             on_step: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+    """Per step, ``max_j |qd_spec,j - qd_ref,j|`` (rad/s) of every spec against the first,
+    all solved at the same ``q`` and twist along the first spec's closed-loop run (a shadow
+    evaluation, docs/design.md section 15.3); zeros for the first spec itself."""
+    specs = _check_specs(specs)
     config = config or LoopConfig()
-    duration = plan.duration if duration is None else duration
-    steps = int(round(duration * config.rate))
+    steps = _steps(plan, config, duration)
+    constraints = plan.make_constraints()
+    reference = make_controller(specs[0], plan.robot, constraints, dt=config.dt)
+    shadows = {spec: make_controller(spec, plan.robot, constraints, dt=config.dt)
+               for spec in specs[1:]}
+    shadowed = ShadowedController(reference, shadows)
+    _drive(plan, shadowed, constraints, config, steps, imperfections, on_step)
+    return {specs[0]: np.zeros(steps),
+            **{spec: np.array(series) for spec, series in shadowed.deviations.items()}}
+
+
+def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
+            duration: float | None = None, progress: bool = True,
+            imperfections: Imperfections | None = None,
+            agreement: bool = True) -> dict[str, RunResult]:
+    """Run every controller spec on the same plan (fresh constraints each).
+
+    With ``agreement`` and two or more specs, one more run of the first spec evaluates the
+    others beside it (:func:`joint_velocity_agreement`). The solvers' console output and
+    warnings are kept off the console, in each result's ``solver_messages`` (those of the
+    agreement run repeat the runs' and are dropped).
+    """
+    config = config or LoopConfig()
+    steps = _steps(plan, config, duration)
+    specs = _check_specs(specs)
     for spec in specs:  # fail fast on a bad spec, before minutes of simulation
         make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=steps * len(specs), unit="step", desc=plan.name, leave=False,
-                   disable=None)  # None: no bar when stderr is not a terminal
+    agreement = agreement and len(specs) > 1
     results = {}
-    try:
-        for spec in specs:
+    with SolverOutputCapture() as capture:
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=steps * (len(specs) + agreement), unit="step", desc=plan.name,
+                       leave=False, file=capture.console,
+                       disable=None)  # None: no bar when the console is not a terminal
+        tick = (lambda i: bar.update(1)) if bar is not None else None
+        try:
+            for spec in specs:
+                if bar is not None:
+                    bar.set_postfix_str(spec)
+                results[spec] = run_plan(plan, spec, config, duration, tick, imperfections)
+                results[spec].solver_messages = capture.collect()
+            if agreement:
+                if bar is not None:
+                    bar.set_postfix_str(f"joint velocities against {specs[0]}")
+                deviations = joint_velocity_agreement(plan, specs, config, duration,
+                                                      imperfections, tick)
+                capture.collect()
+                for spec, deviation in deviations.items():
+                    results[spec].joint_velocity_deviation = deviation
+        finally:
             if bar is not None:
-                bar.set_postfix_str(spec)
-            results[spec] = run_plan(plan, spec, config, duration,
-                                     on_step=(lambda i: bar.update(1)) if bar else None)
-    finally:
-        if bar is not None:
-            bar.close()
+                bar.close()
     return results
 
 
 def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
-                     duration: float) -> dict:
-    """The metrics.json document (schema: ``teleop/metrics.schema.json``)."""
+                     duration: float, imperfections: Imperfections | None = None) -> dict:
+    """The metrics.json document (schema: ``teleop/experiments/metrics.schema.json``)."""
+    first = next(iter(results.values()), None)
+    reference = (next(iter(results)) if first is not None
+                 and first.joint_velocity_deviation is not None else None)
     return {
         "schema_version": SCHEMA_VERSION,
         "scenario": plan.name,
@@ -114,16 +248,20 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
         "rate_hz": config.rate,
         "duration_s": duration,
         "steps": int(round(duration * config.rate)),
+        "imperfections": (imperfections or Imperfections()).to_dict(),
+        "joint_velocity_reference": reference,
         "controllers": {spec: result.metrics() for spec, result in results.items()},
     }
 
 
 def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
-                  duration: float, out_dir: str | Path, plots: bool = True) -> list[Path]:
-    """metrics.json, metrics.csv and the PNG plots into ``out_dir``; returns the paths."""
+                  duration: float, out_dir: str | Path, plots: bool = True,
+                  imperfections: Imperfections | None = None) -> list[Path]:
+    """metrics.json, metrics.csv and, with ``plots``, the PNG plots and report.html into
+    ``out_dir``; returns the paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    document = metrics_document(plan, results, config, duration)
+    document = metrics_document(plan, results, config, duration, imperfections)
     paths = [out / "metrics.json", out / "metrics.csv"]
     paths[0].write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     with paths[1].open("w", newline="", encoding="utf-8") as handle:
@@ -133,26 +271,50 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
             writer.writerow([spec, *(metrics[key] for key in METRIC_KEYS)])
     if plots:
         from .plots import write_plots
+        from .report import write_report
 
-        paths += write_plots(plan, results, out)
+        figures = write_plots(plan, results, out)
+        paths += [figure.path for figure in figures]
+        paths.append(write_report(document, figures, out / "report.html"))
     return paths
+
+
+#: The table's numeric columns: header, metrics key, format (a callable on the value).
+TABLE_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (
+    ("constraint err max (m)", "constraint_error_max_m", lambda v: f"{v:.1e}"),
+    ("RMS (m)", "constraint_error_rms_m", lambda v: f"{v:.1e}"),
+    ("residual max (m/s)", "constraint_velocity_residual_max_mps", lambda v: f"{v:.1e}"),
+    ("C v_c max (m/s)", "constraint_velocity_max_mps", lambda v: f"{v:.1e}"),
+    ("EE pos RMS (mm)", "ee_position_error_rms_m", lambda v: f"{1e3 * v:.3f}"),
+    ("EE ori RMS (mrad)", "ee_orientation_error_rms_rad", lambda v: f"{1e3 * v:.3f}"),
+    ("limit viol (rad)", "joint_limit_violation_max_rad", lambda v: f"{v:.3f}"),
+    ("failed", "failed_steps", lambda v: f"{v}"),
+    ("step median (us)", "step_time_median_us", lambda v: f"{v:.0f}"),
+    ("step p99 (us)", "step_time_p99_us", lambda v: f"{v:.0f}"),
+    ("qd dev max (rad/s)", "joint_velocity_deviation_max_radps", lambda v: f"{v:.1e}"),
+)
+
+
+def table_cells(metrics: dict) -> list[str]:
+    """One controller's row of :data:`TABLE_COLUMNS` (``-`` for a value not computed)."""
+    return ["-" if metrics[key] is None else fmt(metrics[key]) for _, key, fmt in TABLE_COLUMNS]
+
+
+def table_headers(document: dict) -> list[str]:
+    """The headers of :data:`TABLE_COLUMNS`, the deviation's naming its reference."""
+    reference = document.get("joint_velocity_reference")
+    return [header if key != "joint_velocity_deviation_max_radps" or reference is None
+            else f"qd dev max vs {reference} (rad/s)" for header, key, _ in TABLE_COLUMNS]
 
 
 def format_table(document: dict) -> str:
     """A short table of the headline numbers for the terminal and the README."""
-    header = ("| controller | constraint err max (m) | RMS (m) | residual max (m/s) | "
-              "EE pos RMS (mm) | EE ori RMS (mrad) | limit viol (rad) | failed | "
-              "step median/p99 (us) | steps by status |")
-    lines = [header, "|" + "---|" * 10]
+    headers = table_headers(document)
+    lines = ["| controller | " + " | ".join(headers) + " | steps by status |",
+             "|" + "---|" * (len(headers) + 2)]
     for spec, m in document["controllers"].items():
-        lines.append(
-            f"| {spec} | {m['constraint_error_max_m']:.1e} | {m['constraint_error_rms_m']:.1e} | "
-            f"{m['constraint_velocity_residual_max_mps']:.1e} | "
-            f"{1e3 * m['ee_position_error_rms_m']:.3f} | "
-            f"{1e3 * m['ee_orientation_error_rms_rad']:.3f} | "
-            f"{m['joint_limit_violation_max_rad']:.3f} | {m['failed_steps']} | "
-            f"{m['step_time_median_us']:.0f} / {m['step_time_p99_us']:.0f} | "
-            f"{format_status_counts(m['status_counts'])} |")
+        lines.append(f"| {spec} | " + " | ".join(table_cells(m))
+                     + f" | {format_status_counts(m['status_counts'])} |")
     return "\n".join(lines)
 
 

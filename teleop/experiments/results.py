@@ -6,48 +6,83 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: per-controller keys of metrics.json, in order (documented in README and metrics.schema.json)
+#: per-controller numeric keys of metrics.json, in order (the CSV's columns; documented in
+#: metrics.schema.json and docs/design.md sections 7 and 15)
 METRIC_KEYS = (
     "constraint_error_max_m", "constraint_error_rms_m",
-    "constraint_velocity_residual_max_mps", "barrier_penetration_max_m",
+    "constraint_velocity_residual_max_mps", "constraint_velocity_max_mps",
+    "constraint_velocity_rms_mps", "barrier_penetration_max_m",
     "ee_position_error_max_m", "ee_position_error_rms_m",
     "ee_orientation_error_max_rad", "ee_orientation_error_rms_rad",
     "joint_limit_violation_max_rad", "failed_steps",
     "step_time_median_us", "step_time_p99_us", "step_time_max_us", "tick_time_median_us",
+    "joint_velocity_deviation_max_radps",
 )
 
 
 @dataclass
 class RunResult:
-    """One controller's run: per-step columns and what went wrong."""
+    """One controller's run: per-step columns and what went wrong.
+
+    Attributes
+    ----------
+    controller : the controller spec.
+    columns : per-step scalars, one array per ``teleop.loop.RECORD_FIELDS`` name.
+    constraint_velocity : (steps, rows) every equality row's ``C v_c`` relative to its
+        geometry (m/s, docs/design.md section 15.2), NaN where the row does not exist.
+    constraint_velocity_labels : the rows' names in words, one per column.
+    drift_velocity : (steps, rows) the drift correction ``-K e`` of each row (m/s).
+    operator_linear_velocity, commanded_linear_velocity, actual_linear_velocity :
+        (steps, 3) world-frame EE linear velocities: the filtered target's, the commanded
+        twist's, the one achieved.
+    statuses : (steps,) the controller's step status each step.
+    joint_velocity_deviation : (steps,) ``max_j |qd_j - qd_ref,j|`` of this controller's
+        solve at the reference run's ``q`` and twist (rad/s, docs/design.md section 15.3),
+        zeros for the reference itself; None when not computed.
+    failure_messages : the first failures, with their time.
+    status_counts : steps per step status.
+    solver_messages : what the solvers wrote or warned during the run, each distinct line
+        with its count (docs/design.md section 15.5).
+    """
 
     controller: str
     columns: dict[str, np.ndarray]
-    constraint_velocity: np.ndarray  # (steps, k) C v_c of the first equality
-    desired_linear_velocity: np.ndarray  # (steps, 3) world frame
-    actual_linear_velocity: np.ndarray  # (steps, 3) world frame
+    constraint_velocity: np.ndarray
+    constraint_velocity_labels: list[str]
+    drift_velocity: np.ndarray
+    operator_linear_velocity: np.ndarray
+    commanded_linear_velocity: np.ndarray
+    actual_linear_velocity: np.ndarray
+    statuses: np.ndarray
+    joint_velocity_deviation: np.ndarray | None = None
     failure_messages: list[str] = field(default_factory=list)
-    status_counts: dict[str, int] = field(default_factory=dict)  # steps per step status
+    status_counts: dict[str, int] = field(default_factory=dict)
+    solver_messages: dict[str, int] = field(default_factory=dict)
 
     @property
     def steps(self) -> int:
         return len(self.columns["t"])
 
-    def metrics(self) -> dict[str, float | int | str | None]:
-        """The summary of docs/design.md section 7 (units in the key names)."""
+    def metrics(self) -> dict[str, float | int | str | dict | None]:
+        """The summary of docs/design.md sections 7 and 15 (units in the key names)."""
         c = self.columns
 
         def rms(x: np.ndarray) -> float:
+            x = x[np.isfinite(x)]
             return float(np.sqrt(np.mean(np.square(x)))) if x.size else 0.0
 
         def top(x: np.ndarray) -> float:
-            return float(np.max(x)) if x.size else 0.0
+            x = x[np.isfinite(x)]
+            return float(np.max(np.abs(x))) if x.size else 0.0
 
         step = c["step_time_us"]
+        deviation = self.joint_velocity_deviation
         return {
             "constraint_error_max_m": top(c["constraint_error"]),
             "constraint_error_rms_m": rms(c["constraint_error"]),
             "constraint_velocity_residual_max_mps": top(c["constraint_velocity_residual"]),
+            "constraint_velocity_max_mps": top(self.constraint_velocity.ravel()),
+            "constraint_velocity_rms_mps": rms(self.constraint_velocity.ravel()),
             "barrier_penetration_max_m": top(c["barrier_penetration"]),
             "ee_position_error_max_m": top(c["ee_position_error"]),
             "ee_position_error_rms_m": rms(c["ee_position_error"]),
@@ -59,8 +94,8 @@ class RunResult:
             "step_time_p99_us": float(np.percentile(step, 99)) if step.size else 0.0,
             "step_time_max_us": top(step),
             "tick_time_median_us": float(np.median(c["tick_time_us"])) if step.size else 0.0,
+            "joint_velocity_deviation_max_radps": None if deviation is None else top(deviation),
             "first_failure": self.failure_messages[0] if self.failure_messages else None,
             "status_counts": dict(self.status_counts),
+            "solver_messages": dict(self.solver_messages),
         }
-
-

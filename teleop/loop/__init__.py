@@ -3,9 +3,12 @@
 from .closed_loop import (
     RECORD_FIELDS,
     LoopConfig,
+    Plant,
     StepRecord,
     TeleopLoop,
+    row_labels,
     saturate_twist,
 )
 
-__all__ = ["RECORD_FIELDS", "LoopConfig", "StepRecord", "TeleopLoop", "saturate_twist"]
+__all__ = ["RECORD_FIELDS", "LoopConfig", "Plant", "StepRecord", "TeleopLoop", "row_labels",
+           "saturate_twist"]

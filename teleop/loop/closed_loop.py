@@ -10,6 +10,11 @@ One tick (docs/design.md section 5)::
 
 and every tick records the measures of docs/design.md section 7, computed here from Pinocchio
 and the constraints themselves, not taken from the controller's own report.
+
+A :class:`Plant` (docs/design.md section 15.1) may stand between the loop and the robot's
+true joints: the loop then computes the command from the configuration the plant senses,
+and the robot moves with the joint velocity the plant applies; the measures stay on the
+true configuration.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -29,8 +34,15 @@ from constraints.kinematics import frame_placement
 RECORD_FIELDS = (
     "t", "constraint_error", "constraint_velocity_residual", "barrier_penetration",
     "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed",
-    "step_time_us", "tick_time_us",
+    "step_time_us", "tick_time_us", "constraint_velocity_floor", "twist_saturated",
 )
+
+#: What the velocity along a constraint's rows is called, by its number of rows k
+#: (a plane: its normal; a hole: the two directions across the link; a lock: world x, y, z).
+ROW_WORDS = {1: ("normal velocity at {name}",),
+             2: ("lateral velocity at {name}, direction 1",
+                 "lateral velocity at {name}, direction 2"),
+             3: ("x velocity at {name}", "y velocity at {name}", "z velocity at {name}")}
 
 
 @dataclass(frozen=True)
@@ -67,9 +79,44 @@ class LoopConfig:
         return 1.0 / self.rate
 
 
+class Plant(Protocol):
+    """What stands between the controller and the robot's true joints (docs/design.md
+    section 15.1): the loop reads the configuration through :meth:`sense` and moves the
+    robot with what :meth:`actuate` returns."""
+
+    def sense(self, q: np.ndarray) -> np.ndarray:
+        """The configuration the loop measures when the robot's true one is ``q``."""
+
+    def actuate(self, qd: np.ndarray) -> np.ndarray:
+        """The mean joint velocity over the coming period, given this period's command."""
+
+    def reset(self) -> None:
+        """Back to rest: no command in flight, joints still."""
+
+
+def row_labels(constraints: Sequence[Constraint]) -> tuple[str, ...]:
+    """Words for every equality row, in order: ``"lateral velocity at hole 1, direction 1
+    (m/s)"``; constraints are numbered by kind in list order (docs/design.md section 15.2)."""
+    labels, numbers = [], {}
+    for constraint in constraints:
+        if not constraint.is_equality:
+            continue
+        numbers[constraint.label] = numbers.get(constraint.label, 0) + 1
+        name = f"{constraint.label} {numbers[constraint.label]}"
+        labels += [f"{words.format(name=name)} (m/s)" for words in ROW_WORDS[constraint.dim]]
+    return tuple(labels)
+
+
 @dataclass
 class StepRecord:
-    """What one tick measured. Errors in m / rad, velocities in m/s, times in us."""
+    """What one tick measured. Errors in m / rad, velocities in m/s, times in us.
+
+    The velocities are those the robot moves with over the period, at its true
+    configuration (docs/design.md section 15.2): every equality row's ``C v_c`` relative to
+    the constraint's moving geometry, and the EE's linear velocity, world frame. Beside the
+    achieved EE velocity: the operator's (filtered) target velocity and the commanded twist's
+    linear part, which also carries the pose-error term and the speed caps.
+    """
 
     t: float
     constraint_error: float  # max over equality constraints of |e|
@@ -81,8 +128,13 @@ class StepRecord:
     failed: bool
     step_time_us: float
     tick_time_us: float
-    constraint_velocity: np.ndarray = field(repr=False)  # C v_c of the first equality
-    desired_linear_velocity: np.ndarray = field(repr=False)  # world frame
+    constraint_velocity_floor: float  # float64 round-off of C v_c (m/s, _constraint_velocity)
+    twist_saturated: bool  # the speed caps scaled the commanded twist down
+    constraint_velocity: np.ndarray = field(repr=False)  # C v_c - C v_geom, every equality row
+    constraint_velocity_labels: tuple[str, ...] = field(repr=False)  # one per row (row_labels)
+    drift_velocity: np.ndarray = field(repr=False)  # -K e per row at the true configuration
+    operator_linear_velocity: np.ndarray = field(repr=False)  # the filtered target's, world
+    commanded_linear_velocity: np.ndarray = field(repr=False)  # of the commanded twist, world
     actual_linear_velocity: np.ndarray = field(repr=False)  # world frame
     status: str = "ok"  # the controller's step status (controllers.StepStatus value)
     message: str = ""
@@ -98,8 +150,13 @@ class PendingStep:
     status: str
     message: str
     residual: float
+    twist_saturated: bool
+    floor: float
     constraint_velocity: np.ndarray
-    desired_linear_velocity: np.ndarray
+    drift_velocity: np.ndarray
+    labels: tuple[str, ...]
+    operator_linear_velocity: np.ndarray
+    commanded_linear_velocity: np.ndarray
     actual_linear_velocity: np.ndarray
 
 
@@ -119,21 +176,26 @@ class TeleopLoop:
     controller : any controller with ``solve(q, twist)``, ``info`` and ``set_constraints``.
     q0 : initial configuration (default ``robot.q_home``).
     config : :class:`LoopConfig`.
+    plant : what stands between the loop and the true joints (:class:`Plant`,
+        docs/design.md section 15.1); None: the loop reads and drives them exactly.
     """
 
     def __init__(self, robot, controller, q0: np.ndarray | None = None,
-                 config: LoopConfig | None = None) -> None:
+                 config: LoopConfig | None = None, plant: Plant | None = None) -> None:
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
         self.controller = controller
         self.config = config or LoopConfig()
+        self.plant = plant
         self.ee_frame_id = self.model.getFrameId(robot.ee_frame)
         self.q = np.array(robot.q_home if q0 is None else q0, dtype=float)
         self.t = 0.0
         self._filtered_target: pin.SE3 | None = None
         self._previous_target: pin.SE3 | None = None
         self.last_qd = np.zeros(self.model.nv)
+        self._labels_key: tuple[int, ...] = ()
+        self._labels: tuple[str, ...] = ()
 
     # -- state -------------------------------------------------------------------------
 
@@ -149,12 +211,15 @@ class TeleopLoop:
         return frame_placement(self.model, self.q if q is None else q, self.ee_frame_id, self.data)
 
     def reset(self, q0: np.ndarray | None = None) -> None:
-        """Back to ``q0`` (default home), forgetting the target history."""
+        """Back to ``q0`` (default home), forgetting the target history (and the plant's
+        commands in flight)."""
         self.q = np.array(self.robot.q_home if q0 is None else q0, dtype=float)
         self.t = 0.0
         self._filtered_target = None
         self._previous_target = None
         self.last_qd = np.zeros(self.model.nv)
+        if self.plant is not None:
+            self.plant.reset()
 
     # -- one tick ----------------------------------------------------------------------
 
@@ -171,11 +236,18 @@ class TeleopLoop:
 
     def command(self, ee: pin.SE3, target: pin.SE3) -> np.ndarray:
         """EE body twist ``K_p log6(T_e^-1 T*) + Ad_(T_e^-1 T*) V_ff``, saturated."""
+        return self._saturate(self._pose_twist(ee, target))
+
+    def _pose_twist(self, ee: pin.SE3, target: pin.SE3) -> np.ndarray:
+        """:meth:`command` before the speed caps."""
         error = ee.actInv(target)
         twist = self.config.kp * pin.log6(error).vector
         if self.config.feed_forward and self._previous_target is not None:
             target_twist = pin.log6(self._previous_target.actInv(target)).vector / self.config.dt
             twist += error.action @ target_twist
+        return twist
+
+    def _saturate(self, twist: np.ndarray) -> np.ndarray:
         return saturate_twist(twist, self.config.max_linear_speed, self.config.max_angular_speed)
 
     def tick(self, target: pin.SE3,
@@ -197,15 +269,22 @@ class TeleopLoop:
         dt = self.config.dt
         model, data = self.model, self.data
         target = self.filter_target(target)
-        pin.computeJointJacobians(model, data, self.q)
+        sensed = self.q if self.plant is None else self.plant.sense(self.q)
+        pin.computeJointJacobians(model, data, sensed)
         pin.updateFramePlacements(model, data)
         ee = data.oMf[self.ee_frame_id].copy()
-        twist = self.command(ee, target)
+        requested = self._pose_twist(ee, target)
+        twist = self._saturate(requested)
+        saturated = not np.array_equal(twist, requested)
+        previous = self._previous_target
+        operator = (np.zeros(3) if previous is None
+                    else (target.translation - previous.translation) / dt)
         self._previous_target = target.copy()
+        commanded = ee.rotation @ twist[:3]
 
         solve_start = time.perf_counter_ns()
         try:
-            qd = self.controller.solve(self.q, twist)
+            qd = self.controller.solve(sensed, twist)
             status = self.controller.info.status.value
             message = self.controller.info.message
         except ValueError as error:  # refused input: hold still, say why
@@ -214,19 +293,27 @@ class TeleopLoop:
         if not np.isfinite(qd).all():  # never integrate a non-finite command
             qd, status, message = np.zeros(model.nv), "failed", "non-finite command replaced by zero"
 
-        # measures at the configuration the command was computed for
-        residual, velocity = self._constraint_velocity(qd)
+        # the command's residual at the configuration it was computed for; the velocities
+        # the joints move with, at the true configuration
+        residual, velocity, drift, floor = self._constraint_velocity(qd)
+        moved = qd
+        if self.plant is not None:
+            moved = self.plant.actuate(qd)
+            pin.computeJointJacobians(model, data, self.q)
+            pin.updateFramePlacements(model, data)
+            _, velocity, drift, floor = self._constraint_velocity(moved)
         ee_jacobian = pin.getFrameJacobian(model, data, self.ee_frame_id, pin.LOCAL)
-        rotation = ee.rotation
+        actual = data.oMf[self.ee_frame_id].rotation @ (ee_jacobian[:3] @ moved)
 
-        self.q = pin.integrate(model, self.q, qd * dt)
+        self.q = pin.integrate(model, self.q, moved * dt)
         self.last_qd = qd
         self.t += dt
         return PendingStep(target=target, tick_start=tick_start, step_time_us=step_time,
                            status=status, message=message, residual=residual,
-                           constraint_velocity=velocity,
-                           desired_linear_velocity=rotation @ twist[:3],
-                           actual_linear_velocity=rotation @ (ee_jacobian[:3] @ qd))
+                           twist_saturated=saturated, floor=floor,
+                           constraint_velocity=velocity, drift_velocity=drift,
+                           labels=self._row_labels(), operator_linear_velocity=operator,
+                           commanded_linear_velocity=commanded, actual_linear_velocity=actual)
 
     def measure(self, step: "PendingStep") -> StepRecord:
         """The second half of :meth:`tick`: the measures at the end of the period."""
@@ -244,25 +331,46 @@ class TeleopLoop:
             ee_orientation_error=orientation_error, joint_limit_violation=violation,
             failed=step.status == "failed", step_time_us=step.step_time_us,
             tick_time_us=(time.perf_counter_ns() - step.tick_start) * 1e-3,
+            constraint_velocity_floor=step.floor, twist_saturated=step.twist_saturated,
             constraint_velocity=step.constraint_velocity,
-            desired_linear_velocity=step.desired_linear_velocity,
+            constraint_velocity_labels=step.labels, drift_velocity=step.drift_velocity,
+            operator_linear_velocity=step.operator_linear_velocity,
+            commanded_linear_velocity=step.commanded_linear_velocity,
             actual_linear_velocity=step.actual_linear_velocity, status=step.status,
             message=step.message,
         )
 
-    def _constraint_velocity(self, qd: np.ndarray) -> tuple[float, np.ndarray]:
-        """max |A qd - b| over the equalities and ``C v_c`` of the first one."""
-        residual, velocity = 0.0, np.zeros(2)
-        first = True
+    def _row_labels(self) -> tuple[str, ...]:
+        """:func:`row_labels` of the current constraints, recomputed when the set changes."""
+        key = tuple(map(id, self.constraints))
+        if key != self._labels_key:
+            self._labels_key, self._labels = key, row_labels(self.constraints)
+        return self._labels
+
+    def _constraint_velocity(self, qd: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, float]:
+        """At the kinematics in ``self.data``: ``max |A qd - b|`` over the equalities, every
+        equality row's ``C v_c - C v_geom`` (the point's velocity relative to its moving
+        geometry), its drift correction ``-K e``, and the round-off floor of those
+        velocities, ``eps max (sum_j |A_ij qd_j| + K |x|)`` with ``x`` the point's world
+        position, from which ``e`` is computed (m/s; docs/design.md section 15.2)."""
+        residual, floor = 0.0, 0.0
+        velocity, drift = [], []
         for constraint, frame in zip(self.constraints, self.controller.constraint_frames):
             if not constraint.is_equality:
                 continue
             A, b = constraint.rows(self.model, self.data, frame)
             achieved = A @ qd
             residual = max(residual, float(np.max(np.abs(achieved - b))))
-            if first:
-                velocity, first = achieved, False
-        return residual, velocity
+            placement = self.data.oMf[frame]  # rows() updated it
+            correction = -constraint.gain * constraint.error(placement)
+            velocity.append(achieved - (b - correction))
+            drift.append(correction)
+            position = float(np.linalg.norm(constraint.point_world(placement)))
+            floor = max(floor, float(np.max(np.abs(A) @ np.abs(qd))) + constraint.gain * position)
+        if not velocity:
+            return 0.0, np.zeros(0), np.zeros(0), 0.0
+        return (residual, np.concatenate(velocity), np.concatenate(drift),
+                floor * np.finfo(float).eps)
 
     def _constraint_errors(self) -> tuple[float, float]:
         """After integration: max |e| over equalities, max inequality (barrier)
@@ -276,4 +384,3 @@ class TeleopLoop:
             else:
                 penetration = max(penetration, violation)
         return error, penetration
-

@@ -1,0 +1,123 @@
+"""A robot that is not perfect (docs/design.md section 15.1): encoder noise on the measured
+configuration, a command latency and a first-order joint velocity response.
+
+:class:`Imperfections` is the setting, the same for every controller of a run (off by
+default); :class:`ImperfectPlant` is the :class:`teleop.loop.Plant` one run's loop uses. The
+controller sees the noisy measured ``q``; the true ``q`` moves with the delayed, filtered
+command; the loop takes its measures on the true ``q``.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+
+@dataclass(frozen=True)
+class Imperfections:
+    """How the robot differs from the ideal one the controllers assume.
+
+    Attributes
+    ----------
+    encoder_noise : standard deviation (rad) of the Gaussian noise added to every joint of
+        the measured configuration, drawn afresh each control period.
+    latency : control periods between a command and the joints receiving it (the joints
+        keep still until the first one arrives).
+    joint_time_constant : time constant (s) of the first-order response of each joint's
+        velocity to the command it receives; 0: the joints follow at once.
+    seed : seed of the noise; one run per controller, each from this seed, so every
+        controller meets the same noise sequence.
+    """
+
+    encoder_noise: float = 0.0
+    latency: int = 0
+    joint_time_constant: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("encoder_noise", "joint_time_constant"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+        for name in ("latency", "seed"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+
+    @property
+    def perfect(self) -> bool:
+        """No noise, no latency, no lag: the loop reads and drives the joints exactly."""
+        return self.encoder_noise == 0 and self.latency == 0 and self.joint_time_constant == 0
+
+    def to_dict(self) -> dict[str, float | int]:
+        """The ``imperfections`` entry of metrics.json (units in the key names)."""
+        return {"encoder_noise_rad": float(self.encoder_noise),
+                "latency_periods": int(self.latency),
+                "joint_time_constant_s": float(self.joint_time_constant),
+                "seed": int(self.seed)}
+
+    def describe(self) -> str:
+        """One line for humans: ``perfect robot`` or what is on."""
+        if self.perfect:
+            return "perfect robot (no encoder noise, latency or joint lag)"
+        parts = []
+        if self.encoder_noise:
+            parts.append(f"encoder noise {self.encoder_noise:g} rad")
+        if self.latency:
+            parts.append(f"latency {self.latency} period{'s' * (self.latency > 1)}")
+        if self.joint_time_constant:
+            parts.append(f"joint time constant {self.joint_time_constant:g} s")
+        return ", ".join(parts) + f" (seed {self.seed})"
+
+    def plant(self, model: pin.Model, dt: float) -> "ImperfectPlant | None":
+        """A fresh plant for one run, or None for the perfect robot."""
+        return None if self.perfect else ImperfectPlant(self, model, dt)
+
+
+class ImperfectPlant:
+    """The :class:`teleop.loop.Plant` of :class:`Imperfections` (docs/design.md section 15.1).
+
+    Each period, :meth:`actuate` queues the command, takes the one ``latency`` periods old
+    and returns the mean joint velocity over the period of the first-order response to it,
+    ``v(t) = u + (v0 - u) exp(-t / tau)``:
+    ``mean = u + (v0 - u) tau (1 - exp(-dt / tau)) / dt``, exact for a command held over the
+    period. :meth:`sense` adds the encoder noise in the tangent space.
+    """
+
+    def __init__(self, imperfections: Imperfections, model: pin.Model, dt: float) -> None:
+        if not math.isfinite(dt) or dt <= 0:
+            raise ValueError(f"dt must be finite and > 0, got {dt}")
+        self.imperfections = imperfections
+        self.model = model
+        self.dt = float(dt)
+        self._rng = np.random.default_rng(imperfections.seed)
+        tau = imperfections.joint_time_constant
+        self._decay = math.exp(-dt / tau) if tau > 0 else 0.0
+        self._mean_gain = tau * (1.0 - self._decay) / dt if tau > 0 else 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        """No command in flight, joints still (the noise sequence goes on)."""
+        nv = self.model.nv
+        self._queue = collections.deque(np.zeros(nv) for _ in range(self.imperfections.latency))
+        self._velocity = np.zeros(nv)
+
+    def sense(self, q: np.ndarray) -> np.ndarray:
+        """``q`` with Gaussian encoder noise on every joint."""
+        sigma = self.imperfections.encoder_noise
+        if sigma == 0:
+            return q
+        return pin.integrate(self.model, q, self._rng.normal(0.0, sigma, self.model.nv))
+
+    def actuate(self, qd: np.ndarray) -> np.ndarray:
+        """The mean joint velocity over the coming period (delayed, then filtered)."""
+        self._queue.append(np.array(qd, dtype=float))
+        command = self._queue.popleft()
+        start = self._velocity
+        self._velocity = command + (start - command) * self._decay
+        return command + (start - command) * self._mean_gain

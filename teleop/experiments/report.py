@@ -1,0 +1,160 @@
+"""``report.html``: one self-contained page per comparison (docs/design.md section 15.4).
+
+The scenario, the robot and how it was imperfect, the package versions, the metrics table
+with the best value of each column marked, the steps per status, the joint-velocity
+agreement, what the solvers said, and every plot embedded as base64: the page needs no
+network and no other file.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import platform
+from importlib import metadata
+from pathlib import Path
+from typing import Sequence
+
+from .compare import TABLE_COLUMNS, format_status_counts, table_cells, table_headers
+from .plots import Figure
+
+#: The distributions whose versions the report lists (importlib.metadata names).
+PACKAGES = ("cjm-teleop", "pin", "numpy", "qpsolvers", "proxsuite", "daqp", "osqp", "mink")
+
+STYLE = """
+body { font-family: sans-serif; margin: 2em; max-width: 1400px; color: #222; }
+table { border-collapse: collapse; margin: 1em 0; font-size: 0.9em; }
+th, td { border: 1px solid #bbb; padding: 0.3em 0.6em; text-align: right; }
+th:first-child, td:first-child { text-align: left; }
+td.best { font-weight: bold; background: #e3f4e3; }
+figure { margin: 2em 0; }
+figure img { max-width: 100%; border: 1px solid #ddd; }
+figcaption { font-size: 0.9em; color: #444; margin-top: 0.4em; }
+.note { font-size: 0.9em; color: #444; }
+"""
+
+
+def package_versions(packages: Sequence[str] = PACKAGES) -> dict[str, str]:
+    """Installed version of each distribution (``not installed`` when absent)."""
+    versions = {}
+    for name in packages:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def best_rows(document: dict) -> dict[str, set[str]]:
+    """Per metrics key of :data:`TABLE_COLUMNS`, the controllers showing the smallest value
+    as printed (ties all marked); none when every controller shows the same. The deviation
+    from the reference controller is ranked without the reference (trivially 0)."""
+    controllers = document["controllers"]
+    reference = document.get("joint_velocity_reference")
+    best: dict[str, set[str]] = {}
+    for column, (_, key, fmt) in enumerate(TABLE_COLUMNS):
+        shown = {spec: (m[key], table_cells(m)[column]) for spec, m in controllers.items()
+                 if m[key] is not None
+                 and not (key == "joint_velocity_deviation_max_radps" and spec == reference)}
+        if len({text for _, text in shown.values()}) < 2:
+            best[key] = set()
+            continue
+        smallest = min(value for value, _ in shown.values())
+        best[key] = {spec for spec, (_, text) in shown.items() if text == fmt(smallest)}
+    return best
+
+
+def render_report(document: dict, figures: Sequence[Figure]) -> str:
+    """The report page for a metrics document and its figures, as one HTML string."""
+    e = html.escape
+    imperfect = document["imperfections"]
+    reference = document.get("joint_velocity_reference")
+    parts = [
+        "<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+        f"<title>{e(document['scenario'])}: controller comparison</title>",
+        f"<style>{STYLE}</style>", "</head>", "<body>",
+        f"<h1>{e(document['scenario'])}</h1>",
+        f"<p>{e(document.get('description', ''))}</p>",
+        "<ul>",
+        f"<li>robot: <b>{e(document['robot'])}</b></li>",
+        (f"<li>{document['duration_s']:g} s at {document['rate_hz']:g} Hz "
+         f"({document['steps']} steps)</li>"),
+        (f"<li>robot imperfections: encoder noise {imperfect['encoder_noise_rad']:g} rad, "
+         f"latency {imperfect['latency_periods']} periods, joint time constant "
+         f"{imperfect['joint_time_constant_s']:g} s, seed {imperfect['seed']}</li>"),
+        "</ul>",
+        "<h2>Metrics</h2>", _metrics_table(document),
+        '<p class="note">Bold: the smallest value of a column as printed (ties all '
+        "marked; a column where every controller shows the same value has no mark)."
+        + (f" qd dev: the largest |qd - qd_{e(reference)}| at the same q and twist along "
+           f"{e(reference)}'s run (design 15.3)." if reference else "") + "</p>",
+        "<h2>Steps by status</h2>", _status_table(document),
+        "<h2>What the solvers said</h2>", _solver_messages(document),
+        "<h2>Plots</h2>",
+    ]
+    for figure in figures:
+        data = base64.b64encode(Path(figure.path).read_bytes()).decode("ascii")
+        parts += ["<figure>", f"<h3>{e(figure.title)}</h3>",
+                  f'<img alt="{e(figure.path.name)}" src="data:image/png;base64,{data}">',
+                  f"<figcaption>{e(figure.path.name)}: {e(figure.caption)}</figcaption>",
+                  "</figure>"]
+    versions = package_versions()
+    parts += ["<h2>Versions</h2>", "<table>", "<tr><th>package</th><th>version</th></tr>",
+              f"<tr><td>python</td><td>{e(platform.python_version())}</td></tr>"]
+    parts += [f"<tr><td>{e(name)}</td><td>{e(version)}</td></tr>"
+              for name, version in versions.items()]
+    parts += ["</table>", "</body>", "</html>"]
+    return "\n".join(parts) + "\n"
+
+
+def write_report(document: dict, figures: Sequence[Figure], path: str | Path) -> Path:
+    """Write :func:`render_report` to ``path`` and return it."""
+    path = Path(path)
+    path.write_text(render_report(document, figures), encoding="utf-8")
+    return path
+
+
+def _metrics_table(document: dict) -> str:
+    e = html.escape
+    best = best_rows(document)
+    rows = ["<table>", "<tr><th>controller</th>"
+            + "".join(f"<th>{e(header)}</th>" for header in table_headers(document)) + "</tr>"]
+    for spec, metrics in document["controllers"].items():
+        cells = [f'<td class="best">{e(text)}</td>' if spec in best[key] else f"<td>{e(text)}</td>"
+                 for (_, key, _), text in zip(TABLE_COLUMNS, table_cells(metrics))]
+        rows.append(f"<tr><td>{e(spec)}</td>" + "".join(cells) + "</tr>")
+    rows.append("</table>")
+    return "\n".join(rows)
+
+
+def _status_table(document: dict) -> str:
+    e = html.escape
+    statuses = ("ok", "scaled", "least_squares", "constraint_degraded", "failed")
+    rows = ["<table>", "<tr><th>controller</th>"
+            + "".join(f"<th>{status}</th>" for status in statuses)
+            + "<th>first failure</th></tr>"]
+    for spec, metrics in document["controllers"].items():
+        counts = metrics["status_counts"]
+        rows.append(f"<tr><td>{e(spec)}</td>"
+                    + "".join(f"<td>{counts.get(status, 0)}</td>" for status in statuses)
+                    + f"<td>{e(metrics['first_failure'] or '-')}</td></tr>")
+    rows.append("</table>")
+    summary = "; ".join(f"{spec}: {format_status_counts(m['status_counts'])}"
+                        for spec, m in document["controllers"].items())
+    return "\n".join(rows) + f'\n<p class="note">{e(summary)}</p>'
+
+
+def _solver_messages(document: dict) -> str:
+    e = html.escape
+    lines = [(spec, message, count) for spec, m in document["controllers"].items()
+             for message, count in m["solver_messages"].items()]
+    if not lines:
+        return "<p>Nothing: no solver printed or warned during the runs.</p>"
+    rows = [('<p class="note">Kept off the console during the runs (design 15.5): each '
+             "distinct line with the number of times it came.</p>"), "<table>",
+            "<tr><th>controller</th><th>times</th><th>message</th></tr>"]
+    rows += [f"<tr><td>{e(spec)}</td><td>{count}</td>"
+             f'<td style="text-align:left">{e(message)}</td></tr>'
+             for spec, message, count in lines]
+    rows.append("</table>")
+    return "\n".join(rows)

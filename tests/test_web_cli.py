@@ -1,0 +1,100 @@
+"""``teleop web`` as a user starts it: any URDF with its meshes, scenes, one-line errors."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pinocchio as pin
+import pytest
+
+from web import cli as web_cli
+from web.app import TeleopApp
+
+PANDA = Path(pin.__file__).resolve().parents[4] / "share/example-robot-data/robots/" \
+    "panda_description/urdf/panda.urdf"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def serve(*args: str, timeout: float = 90.0) -> tuple[str, str, int]:
+    """Start ``python -m web ARGS``, wait for its "on http://" line, Ctrl-C it."""
+    process = subprocess.Popen([sys.executable, "-m", "web", "--port", str(free_port()), *args],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    deadline = time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline:
+            line = process.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            if "Ctrl-C stops" in line:
+                break
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    return "".join(lines) + out, err, process.returncode
+
+
+def test_the_panda_opens_with_its_meshes():
+    out, err, code = serve("--robot", str(PANDA), "--ee-frame", "panda_hand",
+                           "--constrained-link", "panda_link4", "--link-axis", "-0.0825", "0.384", "0")
+    assert code == 0, err
+    assert "panda on http://127.0.0.1:" in out
+    assert "warning" not in err and "Traceback" not in err, err
+
+
+def test_a_urdf_whose_meshes_are_missing_opens_with_a_warning_line_each(tmp_path):
+    urdf = tmp_path / "panda.urdf"
+    urdf.write_text(PANDA.read_text())  # its package:// meshes are not found from here
+    out, err, code = serve("--robot", str(urdf))
+    assert code == 0, err
+    assert "panda on http://" in out and "Traceback" not in err
+    warnings = [line for line in err.splitlines() if "warning:" in line]
+    assert len(warnings) == 2 and "could not load the visual geometry" in warnings[0]
+
+
+def test_a_scene_opens_with_its_robot(sda10f, tmp_path):
+    app = TeleopApp(sda10f, record_dir=tmp_path)
+    app.add_hole(0.08)
+    app.set_ghost("qp:daqp")
+    path = app.save_scene(tmp_path / "scene.json")
+    args = web_cli.build_parser().parse_args(["--scene", str(path)])
+    robot, scene = web_cli._load(args)
+    assert robot.name == "sda10f" and scene["constraints"][0]["id"] == "hole-1"
+    out, err, code = serve("--scene", str(path))
+    assert code == 0, err
+    assert "sda10f on http://" in out and "(controller cjm, ghost qp:daqp)" in out
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--robot", "/nonexistent.urdf"], "no URDF file at '/nonexistent.urdf'"),
+    (["--scene", "/nonexistent.json"], "no scene file at '/nonexistent.json'"),
+    (["--scene", "x.json", "--robot", "ur5_instrument", "--q-home=0"],
+     "--scene sets the robot: drop --robot, --q-home"),
+])
+def test_what_cannot_be_opened_is_one_line_and_exit_2(args, message, capsys):
+    assert web_cli.main(args) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+
+
+def test_a_scene_file_that_is_not_a_scene_is_one_line(tmp_path, capsys):
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps({"robot": {"source": "sda10f"}, "format": "nope"}))
+    assert web_cli.main(["--scene", str(path), "--port", str(free_port())]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "not a scene file" in err, err

@@ -1,0 +1,252 @@
+"""The viser view on a real viser server, without a browser: what it draws and where.
+
+The view thread is not started: each test takes a snapshot of the app and draws it
+(``ui._draw``, ``ui._plot``) itself, then reads the scene nodes' and GUI handles' state.
+What a browser makes of it is tests/test_browser.py's.
+"""
+
+from __future__ import annotations
+
+import socket
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import viser
+
+from teleop import load_robot
+from web.app import ControlThread, TeleopApp
+from web.robot_view import RobotView, floor_height
+from web.ui import PLOTS, STATUS_COLORS, TeleopUI, _link_radius
+
+PANDA = Path(pin.__file__).resolve().parents[4] / "share/example-robot-data/robots/" \
+    "panda_description/urdf/panda.urdf"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture()
+def server():
+    server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    yield server
+    server.stop()
+
+
+@pytest.fixture()
+def ui(sda10f, server, tmp_path):
+    app = TeleopApp(sda10f, record_dir=tmp_path / "sessions", scene_dir=tmp_path / "scenes")
+    return TeleopUI(server, app, ControlThread(app))
+
+
+def run(app, seconds):
+    for _ in range(int(seconds * app.config.rate)):
+        app.step()
+
+
+def draw(ui, plot=False):
+    snapshot = ui.app.snapshot()
+    ui._draw(snapshot)
+    if plot:
+        ui._plot(snapshot)
+    return snapshot
+
+
+def nudge(app, offset):
+    target = app.target
+    quaternion = pin.Quaternion(target.rotation)
+    app.set_target(target.translation + offset,
+                   [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
+
+
+def test_the_grid_is_at_the_robots_base(ui, ur5_instrument):
+    assert ui.floor == pytest.approx(-0.1)  # the sda10f's base cylinder reaches 0.1 m down
+    np.testing.assert_allclose(ui.grid.position, [0.0, 0.0, -0.1])
+    assert floor_height(ur5_instrument) == pytest.approx(-0.01)
+    panda = load_robot(PANDA)
+    assert floor_height(panda) == pytest.approx(0.0, abs=1e-6)  # link0's mesh stands on z = 0
+
+
+def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
+    app = ui.app
+    hole_id = app.add_hole(0.08)
+    app.set_ghost("qp:daqp")
+    nudge(app, [0.0, 0.01, 0.0])
+    run(app, 0.1)
+    draw(ui)
+    assert "ghost" not in ui._views  # the plots show a new ghost first (then its meshes)
+    draw(ui, plot=True)
+    draw(ui)
+    offset = app.ghost_offset
+    np.testing.assert_allclose(ui._ghost_root.position, offset)
+    assert ui._ghost_root.name == "/ghost"
+    ghost = ui._views["ghost"]
+    names = [g.name for g in app.robot.visual_model.geometryObjects]
+    assert all(f"/ghost/robot/visual/{name}" in ghost.frames for name in names)
+    assert ui._ghost_style == (0.45, 0.7, 1.0, 0.8)  # beside: nearly opaque
+    # its own hole drawing, under the offset node, at its own link
+    markers = ui._ghost_markers[hole_id]
+    assert markers["shape"].name == f"/ghost/constraints/{hole_id}/ring"
+    assert "gizmo" not in markers  # one gizmo per hole: the main robot's
+    assert ui._markers[hole_id]["gizmo"].name == f"/constraints/{hole_id}/gizmo"
+    # moved the ghost: the whole subtree goes with it
+    app.set_ghost_offset([0.0, -1.0, 0.0])
+    draw(ui)
+    np.testing.assert_allclose(ui._ghost_root.position, [0.0, -1.0, 0.0])
+    app.set_ghost_offset([0.0, 0.0, 0.0])  # overlay: redrawn see-through
+    draw(ui)
+    assert ui._ghost_style[3] < 0.5
+    np.testing.assert_allclose(ui._ghost_root.position, [0.0, 0.0, 0.0])
+    app.set_ghost(None)
+    draw(ui)
+    assert "ghost" not in ui._views and not ui._ghost_markers
+
+
+def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_side(ui):
+    app = ui.app
+    barrier_id = app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
+    run(app, 0.05)
+    draw(ui)
+    markers = ui._markers[barrier_id]
+    assert markers["error"].visible is False  # was a 1 m magenta line
+    arrow = np.asarray(markers["arrow"].points)
+    anchor = app.entries[barrier_id].position
+    np.testing.assert_allclose(arrow[0, 0], anchor, atol=1e-6)  # viser keeps float32
+    np.testing.assert_allclose(arrow[0, 1] - anchor, [0.0, 0.0, 0.08], atol=1e-6)  # +n, 8 cm
+    assert ui.plane_normal.label == "plane normal (world)"
+    assert "world coordinates" in ui.plane_normal.hint
+
+
+def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
+    app = ui.app
+    hole_id = app.add_hole(0.08)
+    lock_id = app.add_point_lock(0.05)
+    draw(ui)
+    link_radius = _link_radius(app.robot, app.robot.constrained_link)
+    assert link_radius == pytest.approx(0.04)  # arm_link_5_r's cylinder
+    for entry_id in (hole_id, lock_id):
+        markers = ui._markers[entry_id]
+        collar = np.asarray(markers["point"].points).reshape(-1, 3)
+        point = app.snapshot()["robots"]["main"]["constraints"][entry_id]["geometry"].point
+        radii = np.linalg.norm(collar - point, axis=1)
+        assert radii.min() > link_radius + 0.005  # a collar around the link, not a dot inside
+        assert markers["gizmo"].depth_test is False  # drawn over the link that hides its centre
+
+
+def test_the_ee_target_line_takes_the_step_status_colour(ui):
+    app = ui.app
+    app.add_hole(0.08)
+    draw(ui)
+    assert ui.reach_line.visible is False  # on target: nothing to show
+    assert ui.target_marker.visible is False  # the target is at the gizmo
+    nudge(app, [0.5, 0.0, 0.0])  # out of reach through the hole
+    run(app, 6.0)
+    snapshot = draw(ui)
+    limitation = snapshot["robots"]["main"]["limitation"]
+    assert limitation.status == "least_squares" and "target out of reach" in limitation.words
+    assert ui.reach_line.visible is True
+    np.testing.assert_allclose(ui.reach_line.points[0, 1], app.target.translation, atol=1e-6)
+    np.testing.assert_allclose(ui.reach_line.colors[0, 0], STATUS_COLORS["least_squares"])
+    assert ui.target_marker.visible is True  # drawn apart from the gizmo
+    assert "target out of reach" in ui.status.content
+
+
+def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
+    app = ui.app
+    app.add_hole(0.08)
+    nudge(app, [0.004, 0.0, 0.0])
+    run(app, 0.3)
+    draw(ui, plot=True)
+    assert set(ui._plots) == {spec.key for spec in PLOTS if not spec.ghost_only}
+    for plot in ui._plots.values():
+        assert len(plot.series) == 2 == len(plot.data)
+        assert all(np.isfinite(column).all() and column.size == 15 for column in plot.data)
+    t = ui._plots["ee_error"].data[0]  # seconds before now, on a fixed 10 s axis
+    assert -0.02 <= t[-1] <= 0.0 and t[-1] - t[0] == pytest.approx(0.28)  # 15 samples, 50 Hz
+    assert np.all(np.diff(t) > 0)
+    assert ui._plots["ee_error"].scales["x"]["range"] == (-10.0, 0.0)
+    title = ui._plots["ee_error"].title
+    assert title.startswith("EE position error (") and title.endswith("m)")
+    ee = ui._plots["ee_error"].data[1]
+    assert 1.0 <= ee.max() < 2000.0  # readable numbers in the unit of the title
+    app.set_ghost("qp:daqp")
+    run(app, 0.2)
+    draw(ui, plot=True)
+    assert set(ui._plots) == {spec.key for spec in PLOTS}
+    for plot in ui._plots.values():
+        assert all(np.isfinite(column).all() and column.size == 10 for column in plot.data)
+    assert [s["label"] for s in ui._plots["constraint_error"].series] == [
+        "t - now (s)", "main (cjm)", "ghost (qp:daqp)"]
+    app.set_ghost(None)
+    draw(ui, plot=True)
+    assert "qd_deviation" not in ui._plots
+    assert len(ui._plots["constraint_error"].series) == 2
+
+
+def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
+    app = ui.app
+    app.add_hole(0.08)
+    app.set_gain(60.0)
+    app.set_motion_scale(0.5)
+    app.set_ghost("qp:daqp")
+    ui.scene_path.value = str(tmp_path / "s.json")
+    ui._save_scene()
+    assert "saved" in ui.scene_status.content
+    app.set_gain(100.0)
+    app.set_motion_scale(1.0)
+    app.set_ghost(None)
+    app.clear_constraints()
+    ui._load_scene()
+    assert list(app.entries) == ["hole-1"] and app.gain == 60.0
+    assert ui.gain_slider.value == 60.0 and ui.motion_scale.value == 0.5
+    assert ui.side_by_side.value is True and ui.ghost_menu.value == "qp:daqp"
+    np.testing.assert_allclose(ui.ghost_offset.value, app.ghost_offset)
+
+
+def test_the_panda_draws_its_meshes(server):
+    panda = load_robot(PANDA, ee_frame="panda_hand")
+    view = RobotView(panda, server, "/panda")
+    assert view.problems == []
+    for geometry in panda.visual_model.geometryObjects:
+        handle = view.frames[f"/panda/visual/{geometry.name}"]
+        assert type(handle).__name__ == "GlbHandle"  # the .dae with its materials
+
+
+def test_a_mesh_that_cannot_be_read_falls_back_and_says_so(server, monkeypatch, sda10f, tmp_path):
+    import trimesh
+
+    def no_collada(*args, **kwargs):
+        raise ImportError("missing `pip install pycollada`")
+
+    monkeypatch.setattr(trimesh, "load_scene", no_collada)
+    panda = load_robot(PANDA, ee_frame="panda_hand")
+    app = TeleopApp(panda, record_dir=tmp_path)
+    ui = TeleopUI(server, app, ControlThread(app))
+    view = ui._views["main"]
+    assert len(view.problems) == len(panda.visual_model.geometryObjects)
+    assert view.problems[0] == ("link0.dae: missing `pip install pycollada`; drawn from the "
+                                "mesh Pinocchio read, without its materials")
+    for geometry in panda.visual_model.geometryObjects:  # every one drawn, as a plain mesh
+        assert type(view.frames[f"/main/visual/{geometry.name}"]).__name__ == "MeshHandle"
+    assert ui.notes == view.problems  # told to every browser that connects
+    draw(ui)  # and it moves like any other
+
+
+def test_a_robot_without_geometry_is_a_skeleton(server, tmp_path):
+    urdf = tmp_path / "panda.urdf"
+    urdf.write_text(PANDA.read_text())  # package:// meshes not found from here
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        panda = load_robot(urdf, ee_frame="panda_hand")
+    assert [str(w.message).split(" (")[0].split(": ", 1)[1] for w in caught] == [
+        "could not load the visual geometry", "could not load the collision geometry"]
+    view = RobotView(panda, server, "/bare")
+    assert view.problems == ["no geometry could be loaded: drawing a skeleton"]
+    spheres = [name for name in view.frames if "skeleton_joint_" in name]
+    assert len(spheres) == panda.model.njoints - 1
+    view.display(panda.q_home)
