@@ -22,6 +22,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -45,6 +46,11 @@ def chromium_executable() -> str:
             "Install it (Debian/Ubuntu: `apt-get install chromium`) or point "
             "TELEOP_TEST_CHROMIUM at a Chromium binary.")
     return path
+
+
+#: example-robot-data's Panda, installed beside Pinocchio by the ``example-robot-data`` wheel
+PANDA = Path(pin.__file__).resolve().parents[4] / "share/example-robot-data/robots/" \
+    "panda_description/urdf/panda.urdf"
 
 
 def free_port() -> int:

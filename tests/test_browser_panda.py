@@ -8,11 +8,10 @@ browser at a time (Playwright's sync API runs one instance per thread).
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    PANDA,
     changed_fraction,
     click_add_hole,
     distinct_colours,
@@ -23,9 +22,6 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
 )
 
 from teleop import load_robot
-
-PANDA = Path(pin.__file__).resolve().parents[4] / "share/example-robot-data/robots/" \
-    "panda_description/urdf/panda.urdf"
 
 
 def test_the_panda_opens_with_its_meshes(tmp_path):

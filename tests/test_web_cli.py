@@ -4,26 +4,15 @@ from __future__ import annotations
 
 import json
 import signal
-import socket
 import subprocess
 import sys
 import time
-from pathlib import Path
 
-import pinocchio as pin
 import pytest
+from browser_helpers import PANDA, free_port
 
 from web import cli as web_cli
 from web.app import TeleopApp
-
-PANDA = Path(pin.__file__).resolve().parents[4] / "share/example-robot-data/robots/" \
-    "panda_description/urdf/panda.urdf"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def serve(*args: str, timeout: float = 90.0) -> tuple[str, str, int]:

@@ -7,28 +7,18 @@ What a browser makes of it is tests/test_browser.py's.
 
 from __future__ import annotations
 
-import socket
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 import viser
+from browser_helpers import PANDA, free_port
 
 from teleop import load_robot
 from web.app import ControlThread, TeleopApp
 from web.robot_view import RobotView, floor_height
 from web.ui import PLOTS, STATUS_COLORS, TeleopUI, _link_radius
-
-PANDA = Path(pin.__file__).resolve().parents[4] / "share/example-robot-data/robots/" \
-    "panda_description/urdf/panda.urdf"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture()
