@@ -27,8 +27,9 @@ Conventions of mink 1.3.0 (read from ``mink/solve_ik.py``, ``mink/tasks/task.py`
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import mink
@@ -39,10 +40,11 @@ import qpsolvers
 from mink.limits.limit import Constraint as LimitRows
 
 from constraints import Constraint
-from constraints.validation import as_number
+from constraints.validation import as_number, as_vector
 
 from .base import Controller, Kinematics, SolverError
 from .joint_limits import DEFAULT_LIMIT_GAIN
+from .qp import PROXQP_RHO
 
 #: Solver settings in the units of *velocity* (rad/s, m/s); they are multiplied by ``dt``
 #: before they reach the backend, because mink's QP variable is ``dq = v dt``: a
@@ -69,6 +71,20 @@ FIXED_SETTINGS: dict[str, dict] = {
     "daqp": {"eq_reduction": 1},
     "osqp": {"eps_rel": 0.0, "polishing": True, "max_iter": 20000, "raise_error": False},
 }
+
+#: Cost of the posture task relative to the task's scale (``MinkController.posture_cost``:
+#: mink's cost is ``c = posture_cost * sqrt(s)``). The posture bends the twist by about
+#: ``c^2 / sigma^2``, and for ``c`` too small mink's solve no longer resolves the posture
+#: (``c^2`` in ``dq`` units against tolerances of 1e-13). The choice is measured against
+#: the CJM with no limit binding in docs/design.md section 10.
+DEFAULT_POSTURE_COST = 1e-5
+
+#: mink's ``damping`` without a posture task: it keeps mink's Hessian ``J_e^T J_e``
+#: definite on a redundant robot. A posture task does that itself (``c^2 I``), and a
+#: damping then pulls the redundancy towards zero with a weight ``damping / c^2``
+#: (1e-12 against ``c = 1e-4``: 7e-6 rad/s off the CJM's posture on the Panda), so it
+#: defaults to 0 there.
+DEFAULT_DAMPING = 1e-12
 
 #: Pinocchio's ``[x y z qx qy qz qw]`` re-ordered into mink's ``wxyz_xyz``.
 _WXYZ_XYZ = np.array([6, 3, 4, 5, 0, 1, 2])
@@ -136,11 +152,15 @@ def site_name(frame_name: str) -> str:
     return SITE_PREFIX + frame_name
 
 
-def _kinematic_urdf(urdf_text: str) -> str:
-    """The URDF with its ``<visual>``/``<collision>`` elements removed.
+def _kinematic_urdf(urdf_text: str, locked_joints: Mapping[str, Sequence[float]]) -> str:
+    """The URDF with its ``<visual>``/``<collision>`` elements removed and the locked joints
+    made fixed.
 
     MuJoCo would otherwise try to load every mesh (``package://`` URIs it cannot
-    resolve); only the kinematics matter to mink. Inertials are kept.
+    resolve); only the kinematics matter to mink. Inertials are kept. A joint the robot
+    was loaded with locked (``teleop.load_robot(..., locked_joints=...)``, Pinocchio's
+    ``buildReducedModel``) becomes a fixed joint whose origin carries its motion at the
+    locked position, so both models have the same joints and the same frames.
     """
     root = ET.fromstring(urdf_text)
     if root.tag != "robot":
@@ -148,6 +168,11 @@ def _kinematic_urdf(urdf_text: str) -> str:
     for link in root.iter("link"):
         for child in [c for c in link if c.tag in ("visual", "collision")]:
             link.remove(child)
+    joints = {joint.get("name"): joint for joint in root.iter("joint")}
+    for name, position in locked_joints.items():
+        if name not in joints:
+            raise ValueError(f"locked joint {name!r} is not in the URDF")
+        _fix_joint(joints[name], position)
     for extension in [c for c in root if c.tag == "mujoco"]:
         root.remove(extension)
     compiler = ET.SubElement(ET.SubElement(root, "mujoco"), "compiler")
@@ -156,8 +181,45 @@ def _kinematic_urdf(urdf_text: str) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def _fix_joint(joint: ET.Element, position: Sequence[float]) -> None:
+    """Turn a URDF ``<joint>`` into a fixed one at ``position`` (its Pinocchio coordinates:
+    an angle, a displacement, or ``(cos, sin)`` for a continuous joint).
+
+    The new origin is ``T_origin * T_motion(position)``: a rotation about the joint axis
+    (revolute, continuous) or a translation along it (prismatic), in URDF conventions
+    (``rpy`` is ``Rz(y) Ry(p) Rx(r)``, Pinocchio's ``rpyToMatrix``).
+    """
+    kind = joint.get("type")
+    axis_element = joint.find("axis")
+    axis = np.array([float(x) for x in (axis_element.get("xyz", "1 0 0") if axis_element is not None
+                                        else "1 0 0").split()])
+    axis /= np.linalg.norm(axis)
+    values = [float(x) for x in position]
+    if kind in ("revolute", "continuous"):
+        angle = math.atan2(values[1], values[0]) if len(values) == 2 else values[0]
+        motion = pin.SE3(pin.exp3(angle * axis), np.zeros(3))
+    elif kind == "prismatic":
+        motion = pin.SE3(np.eye(3), values[0] * axis)
+    else:
+        raise ValueError(f"joint {joint.get('name')!r}: locking a {kind!r} joint is not supported "
+                         "(revolute, continuous and prismatic only)")
+    origin_element = joint.find("origin")
+    if origin_element is None:
+        origin_element = ET.SubElement(joint, "origin")
+    xyz = [float(x) for x in origin_element.get("xyz", "0 0 0").split()]
+    rpy = [float(x) for x in origin_element.get("rpy", "0 0 0").split()]
+    fixed = pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(xyz)) * motion
+    origin_element.set("xyz", " ".join(repr(float(x)) for x in fixed.translation))
+    origin_element.set("rpy", " ".join(repr(float(x)) for x in pin.rpy.matrixToRpy(fixed.rotation)))
+    joint.set("type", "fixed")
+    for child in [c for c in joint if c.tag in ("axis", "limit", "mimic", "dynamics",
+                                                 "safety_controller", "calibration")]:
+        joint.remove(child)
+
+
 def build_mujoco_model(
-    model: pin.Model, urdf_text: str, frames: Iterable[str]
+    model: pin.Model, urdf_text: str, frames: Iterable[str],
+    locked_joints: Mapping[str, Sequence[float]] | None = None,
 ) -> tuple[mujoco.MjModel, JointMap]:
     """Compile a MuJoCo model of the URDF with a site at each Pinocchio frame in ``frames``.
 
@@ -168,10 +230,13 @@ def build_mujoco_model(
     the joint of the same name (or the world body for frames fixed to the base). The
     site's pose in that body is that placement.
 
+    ``locked_joints`` (the robot's, joint name to its Pinocchio coordinates) are made
+    fixed at those positions, as ``model`` has them.
+
     Raises ``ValueError`` when the two models' joints differ (names, or a joint that is
     not a 1-dof revolute/prismatic joint in both).
     """
-    spec = mujoco.MjSpec.from_string(_kinematic_urdf(urdf_text))
+    spec = mujoco.MjSpec.from_string(_kinematic_urdf(urdf_text, locked_joints or {}))
     # massless links are fine for kinematics: bound mass/inertia so that they compile
     spec.compiler.boundmass = 1e-6
     spec.compiler.boundinertia = 1e-9
@@ -349,7 +414,7 @@ class MinkController(Controller):
     Per step, with ``T_e`` the EE pose and ``V`` the desired EE body twist::
 
         target  = T_e exp6(V dt)                    FrameTask on the EE site (cost 1, 1)
-        min_dq  |Jlog(T_t^-1 T_e) (J_e dq - V dt)|^2 + damping |dq|^2
+        min_dq  |Jlog(T_t^-1 T_e) (J_e dq - V dt)|^2 + c^2 |dq - qd_posture dt|^2 + damping |dq|^2
         s.t.    A dq = b dt                         ConstraintTask per equality (hard)
                 -A_b dq <= -b_b dt                  BarrierLimit per barrier
                 |dq| <= qd_max dt,  g (q_min - q) <= dq <= g (q_max - q)
@@ -371,6 +436,15 @@ class MinkController(Controller):
     ``Jlog`` wrong by ~1e-7, so ``J_e qd`` misses ``V`` by ~1e-9 m/s and ``qd`` differs
     from the CJM's by up to a few 1e-8 rad/s (on the built-in robots, every backend).
 
+    **Posture.** A ``mink.PostureTask`` towards ``posture`` with gain
+    ``posture_gain * dt`` (mink's gain is per step) asks for the CJM's and the QP
+    controller's posture velocity ``qd_posture = posture_gain * (posture (-) q)``. mink
+    sums its tasks, so the posture's cost ``c`` trades the twist for the posture by about
+    ``c^2 / sigma^2`` (``sigma`` the task's singular values): the QP controller's
+    weighted formulation with ``mu s = c^2``, never its lexicographic one. The default
+    cost is about as small as mink's solve still resolves the posture with:
+    docs/design.md section 10 gives the deviation from the CJM that remains.
+
     **Equalities.** Every equality (``Hole``, ``Plane``, ``PointLock``) is a
     :class:`ConstraintTask` in ``solve_ik(..., constraints=...)`` and barriers are
     :class:`BarrierLimit` rows; both evaluate the constraints' own ``rows`` with
@@ -390,6 +464,16 @@ class MinkController(Controller):
         ``"osqp"``, ...
     dt : control period (s): mink's integration step.
     damping : mink's Levenberg-Marquardt damping (on ``dq``; acts as ``mu`` on ``qd``).
+        Default: 0 with a posture task, :data:`DEFAULT_DAMPING` without.
+    posture : configuration the redundancy is spent on (default ``robot.q_home``), as the
+        CJM's.
+    posture_gain : gain (1/s) of the posture velocity, as the CJM's (at most ``1 / dt``:
+        mink's per-step gain is ``posture_gain * dt`` and must not exceed 1).
+    posture_cost : the posture task's cost relative to the task's scale: mink's cost is
+        ``c = posture_cost * sqrt(s)``, ``s = |J_e|_F^2 / 6`` (as the QP controller's ``s``),
+        set every step (0: no posture task). With proxqp, its ``rho`` follows as
+        ``PROXQP_RHO c^2`` (``controllers.qp``): proxqp's own 1e-6 against the curvature
+        ``c^2`` failed every step of the 64-DoF chains with binding limits.
     limits : ``None`` for the defaults (``mink.ConfigurationLimit`` with gain
         ``limit_gain``, and a ``mink.VelocityLimit`` from the Pinocchio velocity limits),
         else a sequence of ``mink.Limit`` instances or factories ``f(mj_model) -> Limit``
@@ -407,7 +491,10 @@ class MinkController(Controller):
         constraints: Iterable[Constraint] = (),
         solver: str = "daqp",
         dt: float = 1e-3,
-        damping: float = 1e-12,
+        damping: float | None = None,
+        posture: np.ndarray | None = None,
+        posture_gain: float = 1.0,
+        posture_cost: float = DEFAULT_POSTURE_COST,
         limits: Sequence[LimitSpec] | None = None,
         limit_gain: float = DEFAULT_LIMIT_GAIN,
         equality_tolerance: float = 1e-6,
@@ -419,6 +506,10 @@ class MinkController(Controller):
             raise ValueError(
                 f"QP solver {solver!r} is not available to mink; installed: "
                 f"{qpsolvers.available_solvers}")
+        self.posture_gain = as_number(posture_gain, "posture_gain", 0.0, maximum=1.0 / self.dt)
+        self.posture_cost = as_number(posture_cost, "posture_cost", 0.0)
+        if damping is None:
+            damping = 0.0 if self.posture_cost > 0.0 else DEFAULT_DAMPING
         self.damping = as_number(damping, "damping", 0.0)
         self.equality_tolerance = as_number(equality_tolerance, "equality_tolerance", positive=True)
         self.solver = solver
@@ -426,13 +517,16 @@ class MinkController(Controller):
                          for key, value in VELOCITY_TOLERANCES.get(solver, {}).items()}
         self.settings.update(FIXED_SETTINGS.get(solver, {}))
         self.settings.update(solver_settings or {})
+        #: proxqp's rho follows the posture cost, unless the user set it
+        self._proxqp_rho_tuned = (solver == "proxqp" and self.posture_cost > 0.0
+                                  and "rho" not in (solver_settings or {}))
 
         # The MuJoCo side, built once, before the constraints that use it.
         model: pin.Model = robot.model
         frames = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
         frames.append(robot.ee_frame)
         self.mj_model, self.joints = build_mujoco_model(
-            model, robot.urdf_path.read_text(), frames)
+            model, robot.urdf_path.read_text(), frames, getattr(robot, "locked_joints", None))
         self.site_names = {name: site_name(name) for name in frames}
         self.ee_site = site_name(robot.ee_frame)
         self.configuration = mink.Configuration(self.mj_model)
@@ -441,7 +535,14 @@ class MinkController(Controller):
         self._ee_site_id = self.mj_model.site(self.ee_site).id
         self._q_mj = np.empty(self.mj_model.nq)
         self._base_limits = self._make_limits(robot, limits, limit_gain)
-        self._tasks = [self.ee_task]
+        if posture is None:
+            posture = robot.q_home
+        self.posture = as_vector(posture, model.nq, "posture")
+        self.posture_task = mink.PostureTask(self.mj_model, cost=self.posture_cost,
+                                             gain=self.posture_gain * self.dt, lm_damping=0.0)
+        self.posture_task.set_target(
+            self.joints.q_to_mujoco(self.posture, np.empty(self.mj_model.nq)))
+        self._tasks = [self.ee_task, self.posture_task] if self.posture_cost else [self.ee_task]
         self._equality_caches: list[_RowsCache] = []
         self.constraint_tasks: list[ConstraintTask] = []
         self.barrier_limits: list[BarrierLimit] = []
@@ -488,6 +589,12 @@ class MinkController(Controller):
         # (the attribute set_target would set, without its defensive copy)
         self.ee_task.transform_target_to_world = mink.SE3(wxyz_xyz=xyz_quat[_WXYZ_XYZ])
         self.info.method = f"mink:{self.solver}"
+        if self.posture_cost > 0.0:  # c = posture_cost * sqrt(s), s the task's scale
+            cost = self.posture_cost * math.sqrt(
+                float(np.vdot(kinematics.ee_jacobian, kinematics.ee_jacobian)) / 6.0)
+            self.posture_task.cost[:] = cost  # (set_cost, without its checks)
+            if self._proxqp_rho_tuned:
+                self.settings["rho"] = PROXQP_RHO * cost**2
         try:
             v_mj = self._solve_ik()
         except Exception as error:  # mink.NoSolutionFound, backend errors

@@ -21,7 +21,8 @@ Tolerance on the box: ``1e-9 limit_i`` (the velocity limit of the joint), i.e. t
 ``|qd_i| <= limit_i (1 + 1e-9)`` of the velocity limits carried over to the position
 bounds (a bound near zero has no meaningful relative tolerance of its own).
 
-Known QP-backend bugs are pinned at the end of the file as strict xfails.
+The QP backends' false infeasibilities once seen here are kept at the end of the file
+as regression tests (the lexicographic QP, docs/design.md section 10, solves them).
 """
 
 from __future__ import annotations
@@ -341,8 +342,8 @@ def test_with_limits_active_cjm_and_qp_stay_inside_and_the_qp_tracks_no_worse(ca
     qd_qp = qp.solve(q, twist)
     assert_inside_the_limits(qp, q, qd_qp)
     if not qp.info.success:
-        # daqp now and then declares a feasible problem infeasible (see the xfail repros
-        # below); the fallback must then be honest: zero, and said so
+        # should a backend still declare a feasible problem infeasible, the fallback
+        # must be honest: zero, and said so
         event("qp failed")
         assert qp.info.status is StepStatus.FAILED and not np.any(qd_qp), qp.info
         return
@@ -456,14 +457,13 @@ def test_hole_and_lock_at_the_hole_point_one_centimetre_apart_are_degraded(name)
         assert equality > ROWS_HELD and controller.info.status is StepStatus.CONSTRAINT_DEGRADED
 
 
-# ------------------------------------------------------------ known bugs, pinned (xfail)
+# ------------------------------------------------- QP false infeasibilities (regressions)
 #
-# Each of these fails today and should pass once the controller is fixed (strict=True:
-# a fix turns them into XPASS, then remove the mark).
+# Each was a feasible problem a backend once declared infeasible (a zero command).
 
 
 def require(condition: bool, message: str) -> None:
-    """A premise of a pinned bug: if it breaks, the test fails (it is not the xfail)."""
+    """A premise of a regression case: if it breaks, the test fails with that message."""
     if not condition:
         pytest.fail(f"premise broken: {message}")
 
@@ -504,9 +504,6 @@ def test_command_at_a_position_limit_is_saturated(gap):
                                                     controller.info.status)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="daqp declares a "
-                   "feasible QP infeasible (qd = 0 is feasible) at a degenerate corner: "
-                   "every joint at its lower limit")
 def test_qp_solves_at_a_corner_of_the_joint_box():
     robot = robot_named("sda10f")
     q = robot.model.lowerPositionLimit.copy()  # inside the limits, on every lower one
@@ -517,9 +514,6 @@ def test_qp_solves_at_a_corner_of_the_joint_box():
     assert qp.info.success, qp.info.message
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="with |V| = 100 daqp "
-                   "and proxqp declare infeasible a QP "
-                   "whose feasible set (independent of V) holds the CJM's command")
 @pytest.mark.parametrize("solver", ["daqp", "proxqp"])
 def test_qp_feasibility_does_not_depend_on_the_twist(solver):
     robot = robot_named("sda10f")
@@ -542,9 +536,6 @@ def test_qp_feasibility_does_not_depend_on_the_twist(solver):
     assert qp.info.success, qp.info.message
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="daqp declares "
-                   "infeasible a QP that holds the CJM's "
-                   "command (proxqp and osqp solve it), with a still twist, far from the limits")
 def test_daqp_solves_a_feasible_hole_and_barrier_step():
     robot = robot_named("ur5_instrument")
     q = np.array([0.23511409910469272, -1.5862009815180764, 4.773375721800587, 5.802998937847679,

@@ -13,7 +13,7 @@ import pathlib
 import types
 import warnings
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -83,6 +83,9 @@ class Robot:
     link_axis : (3,) read-only unit vector, the link's long direction in
         ``constrained_link`` coordinates.
     package_dirs : directories searched for ``package://`` meshes.
+    locked_joints : the URDF joints frozen out of ``model`` by ``load_robot(...,
+        locked_joints=...)``, each with the configuration coordinates it is held at
+        (``model`` has none of them; the URDF at ``urdf_path`` still does). Read-only.
     """
 
     name: str
@@ -95,6 +98,8 @@ class Robot:
     constrained_link: str | None
     link_axis: np.ndarray
     package_dirs: tuple[str, ...]
+    locked_joints: Mapping[str, tuple[float, ...]] = field(
+        default_factory=lambda: types.MappingProxyType({}))
 
     @property
     def ee_frame_id(self) -> int:
@@ -149,20 +154,71 @@ def _check_axis(link_axis: Any) -> np.ndarray:
     return axis / norm
 
 
-def _check_q_home(model: pin.Model, q_home: Any) -> np.ndarray:
-    q = np.asarray(q_home, dtype=float)
+def _check_q_home(model: pin.Model, q_home: Any, what: str = "q_home",
+                  checked: np.ndarray | None = None) -> np.ndarray:
+    """``q_home`` as a finite (nq,) array inside the position limits at the indices
+    ``checked`` (default: all), else ``ValueError`` naming ``what``."""
+    try:
+        q = np.asarray(q_home, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be a vector of {model.nq} numbers, got {q_home!r}") from None
     if q.shape != (model.nq,):
-        raise ValueError(f"q_home must have size nq = {model.nq}, got shape {q.shape}")
+        raise ValueError(f"{what} must have size nq = {model.nq}, got shape {q.shape}")
     if not np.all(np.isfinite(q)):  # which joints, not only that (as_vector would say less)
-        raise ValueError(f"q_home has non-finite entries at indices {np.flatnonzero(~np.isfinite(q)).tolist()}")
-    bad = np.flatnonzero((q < model.lowerPositionLimit) | (q > model.upperPositionLimit))
+        raise ValueError(f"{what} has non-finite entries at indices {np.flatnonzero(~np.isfinite(q)).tolist()}")
+    outside = (q < model.lowerPositionLimit) | (q > model.upperPositionLimit)
+    if checked is not None:
+        outside &= np.isin(np.arange(model.nq), checked)
+    bad = np.flatnonzero(outside)
     if bad.size:
         raise ValueError(
-            f"q_home is outside the position limits at indices {bad.tolist()}: "
+            f"{what} is outside the position limits at indices {bad.tolist()}: "
             f"q = {q[bad].tolist()}, lower = {model.lowerPositionLimit[bad].tolist()}, "
             f"upper = {model.upperPositionLimit[bad].tolist()}"
         )
     return q
+
+
+def _joint_ids_to_lock(model: pin.Model, locked_joints: Any) -> list[int]:
+    """Pinocchio joint ids of the joint names in ``locked_joints`` (``ValueError`` otherwise)."""
+    if isinstance(locked_joints, (str, bytes)) or not isinstance(locked_joints, Iterable):
+        raise ValueError(f"locked_joints must be a list of joint names, got {locked_joints!r}")
+    names = list(locked_joints)
+    movable = [model.names[j] for j in range(1, model.njoints)]
+    for name in names:
+        if not isinstance(name, str) or name not in movable:
+            raise ValueError(f"locked_joints: unknown joint {name!r}; the movable joints of this "
+                             f"model are {movable}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"locked_joints names a joint twice: {names}")
+    if len(names) == len(movable):
+        raise ValueError(f"locked_joints would lock every joint {movable}: nothing left to control")
+    return sorted(model.getJointId(name) for name in names)
+
+
+def _lock_joints(model: pin.Model, geometry: tuple[pin.GeometryModel, pin.GeometryModel],
+                 joint_ids: list[int], configuration: np.ndarray
+                 ) -> tuple[pin.Model, pin.GeometryModel, pin.GeometryModel, np.ndarray,
+                            dict[str, tuple[float, ...]]]:
+    """``model`` with the joints ``joint_ids`` frozen at ``configuration`` (Pinocchio's
+    ``buildReducedModel``), its two geometry models, the configuration indices of the
+    kept coordinates, and each locked joint's name with the coordinates it is held at.
+
+    Every frame keeps its name; its placement at a configuration of the reduced model is
+    the full model's at the same kept coordinates, the locked ones from ``configuration``.
+    """
+    reduced, (visual, collision) = pin.buildReducedModel(model, list(geometry), joint_ids,
+                                                         configuration)
+    kept = np.setdiff1d(np.arange(model.nq), _coordinates(model, joint_ids))
+    locked = {model.names[j]: tuple(float(x) for x in configuration[_coordinates(model, [j])])
+              for j in joint_ids}
+    return reduced, visual, collision, kept, locked
+
+
+def _coordinates(model: pin.Model, joint_ids: list[int]) -> np.ndarray:
+    """Configuration indices of the joints ``joint_ids``, in order."""
+    return np.array([i for j in joint_ids
+                     for i in range(model.idx_qs[j], model.idx_qs[j] + model.nqs[j])], dtype=int)
 
 
 def _build_model(urdf: pathlib.Path) -> pin.Model:
@@ -200,6 +256,8 @@ def load_robot(
     link_axis: Any = None,
     package_dirs: Any = None,
     q_home: Any = None,
+    locked_joints: Iterable[str] | None = None,
+    locked_configuration: Any = None,
 ) -> Robot:
     """Load a built-in robot by name, or any URDF by path.
 
@@ -213,13 +271,20 @@ def load_robot(
         normalised. Default: the built-in's, else (0, 0, 1).
     package_dirs : directories where ``package://`` meshes are looked up. Default: the
         directories containing the URDF (its folder and all its ancestors).
-    q_home : (nq,) home configuration inside the limits. Default: the built-in's, else
-        ``pin.neutral(model)`` clipped to the limits.
+    q_home : (nq,) home configuration inside the limits, of the URDF's joints (the
+        locked ones included). Default: the built-in's, else ``pin.neutral(model)``
+        clipped to the limits.
+    locked_joints : names of URDF joints to freeze (grippers, fingers): the robot's model
+        is Pinocchio's ``buildReducedModel`` of the URDF's without them, so no controller
+        sees or moves them. The frames they carry stay, rigidly attached to the parent.
+    locked_configuration : (nq,) configuration of the URDF's joints the locked joints
+        are held at (only their entries are read). Default: ``q_home``.
 
     Raises
     ------
     FileNotFoundError : the path does not exist (and is not a built-in name).
-    ValueError : unparsable URDF, unknown frame, bad ``link_axis`` or ``q_home``.
+    ValueError : unparsable URDF, unknown frame, bad ``link_axis``, ``q_home``,
+        ``locked_joints`` or ``locked_configuration``.
 
     If the geometry cannot be loaded (e.g. missing meshes) a warning is emitted and the
     robot gets empty geometry models: the kinematics are all the controllers need.
@@ -240,12 +305,30 @@ def load_robot(
     urdf = urdf.resolve()
 
     model = _build_model(urdf)
+    joint_ids_to_lock = [] if locked_joints is None else _joint_ids_to_lock(model, locked_joints)
+    if locked_configuration is not None and not joint_ids_to_lock:
+        raise ValueError("locked_configuration is given but locked_joints names no joint")
     if package_dirs is None:
         package_dirs = [urdf.parent, *urdf.parent.parents]
     elif isinstance(package_dirs, (str, os.PathLike)):
         package_dirs = [package_dirs]
     package_dirs = tuple(os.fspath(p) for p in package_dirs)
     visual_model, collision_model = _build_geometry(model, urdf, package_dirs)
+
+    if q_home is None:
+        q_home = defaults["q_home"]
+    if q_home is None:
+        q = np.clip(pin.neutral(model), model.lowerPositionLimit, model.upperPositionLimit)
+    else:
+        q = _check_q_home(model, q_home)
+    locked: dict[str, tuple[float, ...]] = {}
+    if joint_ids_to_lock:
+        held = q if locked_configuration is None else _check_q_home(
+            model, locked_configuration, "locked_configuration",
+            checked=_coordinates(model, joint_ids_to_lock))
+        model, visual_model, collision_model, kept, locked = _lock_joints(
+            model, (visual_model, collision_model), joint_ids_to_lock, held)
+        q = q[kept]
 
     ee_frame = ee_frame if ee_frame is not None else defaults["ee_frame"]
     if ee_frame is None:
@@ -256,12 +339,6 @@ def load_robot(
     if constrained_link is not None:
         _check_frame(model, constrained_link, "constrained_link")
     axis = _check_axis(link_axis if link_axis is not None else defaults["link_axis"])
-    if q_home is None:
-        q_home = defaults["q_home"]
-    if q_home is None:
-        q = np.clip(pin.neutral(model), model.lowerPositionLimit, model.upperPositionLimit)
-    else:
-        q = _check_q_home(model, q_home)
 
     return Robot(
         name=key if builtin else model.name,
@@ -274,4 +351,5 @@ def load_robot(
         constrained_link=constrained_link,
         link_axis=_readonly(axis),
         package_dirs=package_dirs,
+        locked_joints=types.MappingProxyType(locked),
     )
