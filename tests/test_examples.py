@@ -7,7 +7,6 @@ file; the examples below also have their printed numbers checked.
 
 from __future__ import annotations
 
-import importlib.metadata
 import json
 import os
 import re
@@ -28,9 +27,6 @@ ARGUMENTS = {
     "06_embed_teleop_app.py": ["--seconds", "2"],
 }
 #: distributions an example needs beyond the package's own dependencies
-REQUIRES = {"04_any_urdf.py": "example-robot-data"}
-
-
 def numbers(pattern: str, text: str) -> list[float]:
     """Every number captured by ``pattern`` (one group, written with NUMBER) in ``text``."""
     return [float(value) for value in re.findall(pattern.replace("NUMBER", NUMBER), text)]
@@ -101,11 +97,6 @@ def test_the_examples_folder_has_the_documented_scripts():
 
 @pytest.mark.parametrize("script", EXAMPLES, ids=[path.name for path in EXAMPLES])
 def test_example_runs_and_prints_its_numbers(script: Path, tmp_path: Path):
-    if script.name in REQUIRES:
-        try:
-            importlib.metadata.distribution(REQUIRES[script.name])
-        except importlib.metadata.PackageNotFoundError:
-            pytest.skip(f"{script.name} needs {REQUIRES[script.name]}")
     arguments = [a.format(tmp=tmp_path) for a in ARGUMENTS.get(script.name, [])]
     env = dict(os.environ, MPLBACKEND="Agg", PYTHONUNBUFFERED="1")
     result = subprocess.run([sys.executable, str(script), *arguments], cwd=tmp_path, env=env,
