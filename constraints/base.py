@@ -41,6 +41,14 @@ class RobotLike(Protocol):
     model: pin.Model
     constrained_link: str | None
     link_axis: np.ndarray
+    link_axes: Mapping[str, np.ndarray]
+
+
+def link_axis_of(robot: RobotLike, link: str) -> np.ndarray:
+    """The long axis of ``link`` in its own coordinates: the robot's axis for that
+    constrained link (a robot with several, one per arm), else its ``link_axis``."""
+    axes = getattr(robot, "link_axes", None) or {}
+    return as_unit_vector(axes[link] if link in axes else robot.link_axis, "link_axis")
 
 
 @dataclass(frozen=True)
@@ -151,7 +159,7 @@ def link_point_at(robot: RobotLike, q: np.ndarray, link: str | None, link_point=
     if (link_point is None) == (distance is None):
         raise ValueError("give exactly one of link_point or distance")
     if link_point is None:
-        link_point = as_number(distance, "distance") * as_unit_vector(robot.link_axis, "link_axis")
+        link_point = as_number(distance, "distance") * link_axis_of(robot, link)
     link_point = as_vector(link_point, 3, "link_point")
     return link, link_point, frame_placement(robot.model, q, link)
 

@@ -14,6 +14,7 @@ from .base import (
     as_vector,
     default_link,
     frame_placement,
+    link_axis_of,
     perpendicular_basis,
 )
 from .validation import as_number
@@ -78,12 +79,13 @@ class Hole(Constraint):
     ) -> "Hole":
         """A hole where the link axis is now, ``distance`` m along the axis from ``F_a``.
 
-        ``link`` and ``link_axis`` default to the robot's ``constrained_link`` and
-        ``link_axis``.
+        ``link`` defaults to the robot's ``constrained_link``, ``link_axis`` to the
+        robot's axis of that link (``robot.link_axes``, else ``robot.link_axis``).
         """
         distance = as_number(distance, "distance")
         link = default_link(robot, link)
-        axis = as_unit_vector(robot.link_axis if link_axis is None else link_axis, "link_axis")
+        axis = (link_axis_of(robot, link) if link_axis is None
+                else as_unit_vector(link_axis, "link_axis"))
         placement = frame_placement(robot.model, q, link)
         center = placement.act(distance * axis)
         return cls(link, center, link_axis=axis, gain=gain)
@@ -105,7 +107,8 @@ class Hole(Constraint):
         offset exceeds ``tolerance`` (m).
         """
         link = default_link(robot, link)
-        axis = as_unit_vector(robot.link_axis if link_axis is None else link_axis, "link_axis")
+        axis = (link_axis_of(robot, link) if link_axis is None
+                else as_unit_vector(link_axis, "link_axis"))
         hole = cls(link, center, link_axis=axis, gain=gain)
         placement = frame_placement(robot.model, q, link)
         offset = float(np.linalg.norm(hole.error(placement)))

@@ -108,9 +108,10 @@ class Kinematics:
     Attributes
     ----------
     q : the configuration.
-    ee_jacobian : (6, nv) ``LOCAL`` Jacobian of the EE frame.
-    ee_placement : world placement of the EE frame (read from ``data`` on first use, so
-        the controllers that do not need it do not pay for an ``SE3`` object).
+    ee_jacobian : (6 n, nv) ``LOCAL`` Jacobians of the robot's n EE frames, stacked in
+        ``robot.ee_frames`` order (the task Jacobian ``J_e``).
+    ee_placement : world placement of the first EE frame (read from ``data`` on first
+        use, so the controllers that do not need it do not pay for an ``SE3`` object).
     """
 
     __slots__ = ("q", "ee_jacobian", "_data", "_ee_frame_id", "_ee_placement")
@@ -158,7 +159,8 @@ class Controller(ABC):
 
     Parameters
     ----------
-    robot : a ``teleop.Robot`` (anything with ``model``, ``ee_frame``, ``q_home``).
+    robot : a ``teleop.Robot`` (anything with ``model``, ``ee_frame``, ``q_home``; several
+        end effectors when it has ``ee_frames``: the twist then stacks 6 entries per frame).
     dt : control period (s): how far a joint may go towards a position limit per step.
     limit_gain : fraction of the distance to a position limit allowed per step.
     position_limits, velocity_limits : enforce these limits (False: a bare solver, for
@@ -172,7 +174,11 @@ class Controller(ABC):
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
-        self.ee_frame_id = resolve_frame(self.model, robot.ee_frame)
+        self.ee_frame_ids = [resolve_frame(self.model, name)
+                             for name in getattr(robot, "ee_frames", None) or (robot.ee_frame,)]
+        self.ee_frame_id = self.ee_frame_ids[0]
+        #: entries of the stacked EE twist: 6 per end effector
+        self.task_size = 6 * len(self.ee_frame_ids)
         self.strict = bool(strict)
         self.info = SolveInfo()
         self.joint_bounds = JointBounds(self.model, dt, limit_gain, position_limits, velocity_limits)
@@ -220,7 +226,8 @@ class Controller(ABC):
     # -- the step ----------------------------------------------------------------------
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
-        """Joint velocities (nv,) for the desired EE body twist ``[v; w]`` (``LOCAL``).
+        """Joint velocities (nv,) for the desired EE body twist ``[v; w]`` (``LOCAL``),
+        6 entries per end effector in ``robot.ee_frames`` order (docs/design.md section 12).
 
         Bad input (wrong size, NaN or inf) raises ``ValueError``. A numerical failure
         returns zeros with ``self.info.status == "failed"`` (or raises ``SolverError``
@@ -230,10 +237,10 @@ class Controller(ABC):
         q = np.asarray(q, dtype=float)
         twist = np.asarray(twist, dtype=float)
         # one cheap test for the common case; as_vector says what is wrong otherwise
-        if (q.shape != (self.model.nq,) or twist.shape != (6,)
+        if (q.shape != (self.model.nq,) or twist.shape != (self.task_size,)
                 or not math.isfinite(sum(q.tolist()) + sum(twist.tolist()))):
             q = as_vector(q, self.model.nq, "q")
-            twist = as_vector(twist, 6, "twist")
+            twist = as_vector(twist, self.task_size, "twist")
         self.info = SolveInfo()
         kinematics = self._kinematics(q)
         try:
@@ -293,8 +300,12 @@ class Controller(ABC):
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
-        return Kinematics(q, pin.getFrameJacobian(model, data, self.ee_frame_id, pin.LOCAL),
-                          data, self.ee_frame_id)
+        if len(self.ee_frame_ids) == 1:
+            ee_jacobian = pin.getFrameJacobian(model, data, self.ee_frame_id, pin.LOCAL)
+        else:
+            ee_jacobian = np.vstack([pin.getFrameJacobian(model, data, frame, pin.LOCAL)
+                                     for frame in self.ee_frame_ids])
+        return Kinematics(q, ee_jacobian, data, self.ee_frame_id)
 
     @abstractmethod
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:

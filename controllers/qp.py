@@ -352,7 +352,8 @@ class QPController(Controller):
     The posture then bends the task by about ``mu / lambda`` along a task direction of
     normalised curvature ``lambda``; section 10 gives the measured deviation.
 
-    **Scale.** Both objectives are divided by ``s = |W^1/2 J_e|_F^2 / 6``, the mean
+    **Scale.** Both objectives are divided by ``s = |W^1/2 J_e|_F^2 / m`` (``m`` rows: 6
+    per end effector), the mean
     squared singular value of the weighted task Jacobian, and carry ``1/2 |A qd - b|^2``,
     which is zero on the feasible set: the task Hessian is then
     ``M^T M``, ``M = [A; W^1/2 J_e / sqrt(s)]``, of order one whatever the robot's size
@@ -377,7 +378,8 @@ class QPController(Controller):
         minimum-norm ``qd`` among those the rows and the task leave.
     mu : weight of the posture term in the weighted QP, relative to the task's scale
         ``s`` (the lexicographic solve has no such weight).
-    twist_weight : (6,) diagonal weight ``W`` of the twist error (default identity).
+    twist_weight : (6,) diagonal weight ``W`` of each EE's twist error, or one weight per
+        entry of the stacked twist (default identity).
     solver_settings : extra keyword arguments for the backend (override the defaults,
         the tolerances set from the curvature included).
     """
@@ -417,7 +419,11 @@ class QPController(Controller):
                         else as_vector(posture, self.model.nq, "posture"))
         user_settings = dict(solver_settings or {})
         self.settings = {**SOLVER_SETTINGS.get(solver, {}), **user_settings}
-        weight = np.ones(6) if twist_weight is None else as_vector(twist_weight, 6, "twist_weight")
+        weight = np.ones(self.task_size)
+        if twist_weight is not None:  # one weight per EE twist entry, or 6 for every EE
+            twist_weight = np.asarray(twist_weight, dtype=float)
+            size = 6 if twist_weight.shape == (6,) else self.task_size
+            weight = np.tile(as_vector(twist_weight, size, "twist_weight"), self.task_size // size)
         if np.any(weight < 0):
             raise ValueError(f"twist_weight must be non-negative, got {weight}")
         self.twist_weight = weight
@@ -462,12 +468,13 @@ class QPController(Controller):
         k = 0 if A is None else A.shape[0]
         # M = [A; W^1/2 J / sqrt(s)]: the task Hessian is M^T M, and the objective
         # 1/2 |J qd - V|_W^2 / s + 1/2 |A qd - b|^2 has gradient -M^T [b; W^1/2 V / sqrt(s)]
-        if self._stacked.shape[0] != k + 6:
-            self._stacked, self._stacked_target = np.empty((k + 6, nv)), np.empty(k + 6)
+        m = self.task_size
+        if self._stacked.shape[0] != k + m:
+            self._stacked, self._stacked_target = np.empty((k + m, nv)), np.empty(k + m)
         stacked, stacked_target = self._stacked, self._stacked_target
         weighted_jacobian = jacobian if self._unit_weight else self._twist_rows * jacobian
         square_sum = float(np.vdot(weighted_jacobian, weighted_jacobian))
-        inverse_root_scale = math.sqrt(6.0 / square_sum) if square_sum > 0.0 else 1.0
+        inverse_root_scale = math.sqrt(m / square_sum) if square_sum > 0.0 else 1.0
         np.multiply(weighted_jacobian, inverse_root_scale, out=stacked[k:])
         np.multiply(twist if self._unit_weight else self._twist_scale * twist,
                     inverse_root_scale, out=stacked_target[k:])

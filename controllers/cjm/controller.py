@@ -31,12 +31,14 @@ Form = Literal["auto", "general"]
 class CJMController(Controller):
     """Joint velocities from an EE twist through the Constrained Jacobian Matrix.
 
-    * **Analytical form** (:mod:`controllers.cjm.analytical`): one equality constraint
-      with at least 6 joints before it, the paper's method (eqs 17-24, 29-32). For a
+    * **Analytical form** (:mod:`controllers.cjm.analytical`): one end effector and one
+      equality constraint with at least 6 joints before it, the paper's method (eqs
+      17-24, 29-32). For a
       square pre-chain a step is two 6 x 6 LU factorisations into buffers allocated once.
     * **General form** (:mod:`controllers.cjm.general`): several row sets at once (an
-      equality and an active barrier, or several constraints), fewer than 6 joints before
-      the constraint, or a singular pre-chain.
+      equality and an active barrier, or several constraints), several end effectors
+      (their twists stacked: docs/design.md section 12), fewer than 6 joints before the
+      constraint, or a singular pre-chain.
     * **Barriers** are held as plane equalities once the solution would break them (an
       active set, most violated first).
     * **Joint limits** (:mod:`controllers.cjm.saturation`): when the command leaves the
@@ -125,7 +127,8 @@ class CJMController(Controller):
         return self._splits[frame_id]
 
     def constrained_jacobian(self, q: np.ndarray, index: int = 0) -> np.ndarray:
-        """The CJM ``Jbar = [Ad_ea S, J_post]`` of constraint ``index`` at ``q`` (eq 24)."""
+        """The CJM ``Jbar = [Ad_ea S, J_post]`` of constraint ``index`` at ``q`` (eq 24), for
+        the first end effector."""
         q = as_vector(q, self.model.nq, "q")
         self._kinematics(q)
         frame_id = self.constraint_frames[index]
@@ -166,7 +169,7 @@ class CJMController(Controller):
 
     def _solve_rows(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
         """The analytical form where it applies, else the general form, for these rows."""
-        if len(active) == 1 and self.form == "auto":
+        if len(active) == 1 and self.form == "auto" and self.task_size == 6:
             qd = self._solve_analytical(kinematics, twist, active[0])
             if qd is not None:
                 return qd

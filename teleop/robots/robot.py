@@ -74,14 +74,21 @@ class Robot:
     Attributes
     ----------
     name : robot name (built-in name or the URDF's robot name).
-    model : Pinocchio kinematic model (fixed base).
+    model : Pinocchio kinematic model (fixed base, or on a planar root joint: then
+        ``nq != nv``).
     visual_model, collision_model : geometry (empty if the meshes could not be found).
     urdf_path : the URDF file the model was built from.
-    ee_frame : name of the end-effector frame.
+    ee_frame : name of the (first) end-effector frame.
     q_home : (nq,) read-only home configuration; use ``robot.q_home.copy()``.
-    constrained_link : name of the link carrying the constraint point, or None.
-    link_axis : (3,) read-only unit vector, the link's long direction in
-        ``constrained_link`` coordinates.
+    constrained_link : name of the (first) link carrying a constraint point, or None.
+    link_axis : (3,) read-only unit vector, the long direction of ``constrained_link`` in
+        its own coordinates.
+    ee_frames : every end-effector frame, ``ee_frame`` first. Controllers take a twist of
+        6 entries per frame, in this order (docs/design.md section 12).
+    constrained_links : every link that carries an instrument through a constraint (one
+        per arm), ``constrained_link`` first; empty when there is none.
+    link_axes : the long axis of each of ``constrained_links``, read-only.
+    root_joint : ``"fixed"``, or ``"planar"`` for a mobile base (x, y, heading).
     package_dirs : directories searched for ``package://`` meshes.
     locked_joints : the URDF joints frozen out of ``model`` by ``load_robot(...,
         locked_joints=...)``, each with the configuration coordinates it is held at
@@ -100,11 +107,36 @@ class Robot:
     package_dirs: tuple[str, ...]
     locked_joints: Mapping[str, tuple[float, ...]] = field(
         default_factory=lambda: types.MappingProxyType({}))
+    ee_frames: tuple[str, ...] = ()
+    constrained_links: tuple[str, ...] = ()
+    link_axes: Mapping[str, np.ndarray] = field(
+        default_factory=lambda: types.MappingProxyType({}))
+    root_joint: str = "fixed"
+
+    def __post_init__(self) -> None:
+        # a Robot built field by field (single EE) gets the tuples from the single names
+        if not self.ee_frames:
+            object.__setattr__(self, "ee_frames", (self.ee_frame,))
+        if not self.constrained_links and self.constrained_link is not None:
+            object.__setattr__(self, "constrained_links", (self.constrained_link,))
+        if not self.link_axes and self.constrained_link is not None:
+            object.__setattr__(self, "link_axes", types.MappingProxyType(
+                {self.constrained_link: self.link_axis}))
 
     @property
     def ee_frame_id(self) -> int:
         """Frame id of the end effector."""
         return self.model.getFrameId(self.ee_frame)
+
+    @property
+    def ee_frame_ids(self) -> tuple[int, ...]:
+        """Frame ids of every end effector, in ``ee_frames`` order."""
+        return tuple(self.model.getFrameId(name) for name in self.ee_frames)
+
+    @property
+    def task_size(self) -> int:
+        """Entries of the stacked EE twist a controller takes: 6 per end effector."""
+        return 6 * len(self.ee_frames)
 
     @property
     def constrained_frame_id(self) -> int | None:
@@ -221,8 +253,14 @@ def _coordinates(model: pin.Model, joint_ids: list[int]) -> np.ndarray:
                      for i in range(model.idx_qs[j], model.idx_qs[j] + model.nqs[j])], dtype=int)
 
 
-def _build_model(urdf: pathlib.Path) -> pin.Model:
+#: Root joints a robot may stand on: a fixed base, or a mobile base moving in the plane.
+ROOT_JOINTS = ("fixed", "planar")
+
+
+def _build_model(urdf: pathlib.Path, root_joint: str = "fixed") -> pin.Model:
     try:
+        if root_joint == "planar":
+            return pin.buildModelFromUrdf(str(urdf), pin.JointModelPlanar())
         return pin.buildModelFromUrdf(str(urdf))
     except (ValueError, RuntimeError) as exc:
         detail = str(exc)
@@ -258,6 +296,9 @@ def load_robot(
     q_home: Any = None,
     locked_joints: Iterable[str] | None = None,
     locked_configuration: Any = None,
+    ee_frames: Iterable[str] | None = None,
+    root_joint: str | None = None,
+    root_velocity_limit: Any = None,
 ) -> Robot:
     """Load a built-in robot by name, or any URDF by path.
 
@@ -279,6 +320,11 @@ def load_robot(
         sees or moves them. The frames they carry stay, rigidly attached to the parent.
     locked_configuration : (nq,) configuration of the URDF's joints the locked joints
         are held at (only their entries are read). Default: ``q_home``.
+    ee_frames : several end-effector frames (one per arm), instead of ``ee_frame``.
+    root_joint : ``"fixed"`` (default) or ``"planar"``: the URDF's root link on a mobile
+        base moving in the plane (x, y, heading: 4 configuration, 3 velocity coordinates).
+    root_velocity_limit : (3,) velocity limits of a planar root joint (m/s, m/s, rad/s).
+        Default: the built-in's, else (0.5, 0.5, 1.0).
 
     Raises
     ------
@@ -304,7 +350,15 @@ def load_robot(
         defaults = {"ee_frame": None, "constrained_link": None, "link_axis": (0.0, 0.0, 1.0), "q_home": None}
     urdf = urdf.resolve()
 
-    model = _build_model(urdf)
+    root_joint = root_joint if root_joint is not None else defaults.get("root_joint", "fixed")
+    if root_joint not in ROOT_JOINTS:
+        raise ValueError(f"unknown root_joint {root_joint!r}: one of {list(ROOT_JOINTS)}")
+    model = _build_model(urdf, root_joint)
+    if root_joint == "planar":
+        _limit_root_velocity(model, root_velocity_limit if root_velocity_limit is not None
+                             else defaults.get("root_velocity_limit", DEFAULT_ROOT_VELOCITY_LIMIT))
+    elif root_velocity_limit is not None:
+        raise ValueError("root_velocity_limit is given but the robot has no planar root joint")
     joint_ids_to_lock = [] if locked_joints is None else _joint_ids_to_lock(model, locked_joints)
     if locked_configuration is not None and not joint_ids_to_lock:
         raise ValueError("locked_configuration is given but locked_joints names no joint")
@@ -330,15 +384,13 @@ def load_robot(
             model, (visual_model, collision_model), joint_ids_to_lock, held)
         q = q[kept]
 
-    ee_frame = ee_frame if ee_frame is not None else defaults["ee_frame"]
-    if ee_frame is None:
-        ee_frame = _frame_names(model)[-1]
-    _check_frame(model, ee_frame, "ee_frame")
-    if constrained_link is None:
-        constrained_link = defaults["constrained_link"]
-    if constrained_link is not None:
-        _check_frame(model, constrained_link, "constrained_link")
-    axis = _check_axis(link_axis if link_axis is not None else defaults["link_axis"])
+    frames = _ee_frames(model, ee_frame, ee_frames, defaults)
+    links = _constrained_links(model, constrained_link, link_axis, defaults)
+    # the first link's axis; a robot without one keeps the axis for links named later
+    axis = next(iter(links.values()), None)
+    if axis is None:
+        axis = _readonly(_check_axis(link_axis if link_axis is not None
+                                     else defaults.get("link_axis", (0.0, 0.0, 1.0))))
 
     return Robot(
         name=key if builtin else model.name,
@@ -346,10 +398,65 @@ def load_robot(
         visual_model=visual_model,
         collision_model=collision_model,
         urdf_path=urdf,
-        ee_frame=ee_frame,
+        ee_frame=frames[0],
         q_home=_readonly(q),
-        constrained_link=constrained_link,
-        link_axis=_readonly(axis),
+        constrained_link=next(iter(links), None),
+        link_axis=axis,
         package_dirs=package_dirs,
         locked_joints=types.MappingProxyType(locked),
+        ee_frames=frames,
+        constrained_links=tuple(links),
+        link_axes=types.MappingProxyType(links),
+        root_joint=root_joint,
     )
+
+
+#: Default velocity limits of a planar root joint: (m/s, m/s, rad/s).
+DEFAULT_ROOT_VELOCITY_LIMIT = (0.5, 0.5, 1.0)
+
+
+def _limit_root_velocity(model: pin.Model, limit: Any) -> None:
+    """Give the planar root joint (velocity indices 0-2) finite velocity limits."""
+    limit = as_vector(limit, 3, "root_velocity_limit")
+    if np.any(limit <= 0.0):
+        raise ValueError(f"root_velocity_limit must be positive, got {limit.tolist()}")
+    velocity = np.array(model.velocityLimit, dtype=float)
+    velocity[:3] = limit
+    model.velocityLimit = velocity
+
+
+def _ee_frames(model: pin.Model, ee_frame: str | None, ee_frames: Iterable[str] | None,
+               defaults: Mapping[str, Any]) -> tuple[str, ...]:
+    """The end-effector frames: given, else the built-in's, else the last body frame."""
+    if ee_frame is not None and ee_frames is not None:
+        raise ValueError("give ee_frame or ee_frames, not both")
+    if ee_frames is not None:
+        if isinstance(ee_frames, (str, bytes)) or not isinstance(ee_frames, Iterable):
+            raise ValueError(f"ee_frames must be a list of frame names, got {ee_frames!r}")
+        frames = tuple(ee_frames)
+    elif ee_frame is not None:
+        frames = (ee_frame,)
+    elif defaults.get("ee_frames"):
+        frames = tuple(defaults["ee_frames"])
+    elif defaults.get("ee_frame"):
+        frames = (defaults["ee_frame"],)
+    else:
+        frames = (_frame_names(model)[-1],)
+    if not frames:
+        raise ValueError("ee_frames is empty: name at least one end-effector frame")
+    if len(set(frames)) != len(frames):
+        raise ValueError(f"ee_frames names a frame twice: {list(frames)}")
+    return tuple(_check_frame(model, name, "ee_frame") for name in frames)
+
+
+def _constrained_links(model: pin.Model, constrained_link: str | None, link_axis: Any,
+                       defaults: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Each constrained link with its read-only unit axis, in order (maybe none)."""
+    if constrained_link is None and link_axis is None and defaults.get("constrained_links"):
+        pairs = list(defaults["constrained_links"])
+    else:
+        link = constrained_link if constrained_link is not None else defaults.get("constrained_link")
+        axis = link_axis if link_axis is not None else defaults.get("link_axis", (0.0, 0.0, 1.0))
+        pairs = [] if link is None else [(link, axis)]
+    return {_check_frame(model, link, "constrained_link"): _readonly(_check_axis(axis))
+            for link, axis in pairs}
