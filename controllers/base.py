@@ -227,7 +227,7 @@ class Controller(ABC):
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """Joint velocities (nv,) for the desired EE body twist ``[v; w]`` (``LOCAL``),
-        6 entries per end effector in ``robot.ee_frames`` order (docs/design.md section 12).
+        6 entries per end effector in ``robot.ee_frames`` order (docs/design.md section 11).
 
         Bad input (wrong size, NaN or inf) raises ``ValueError``. A numerical failure
         returns zeros with ``self.info.status == "failed"`` (or raises ``SolverError``

@@ -37,7 +37,7 @@ class CJMController(Controller):
       square pre-chain a step is two 6 x 6 LU factorisations into buffers allocated once.
     * **General form** (:mod:`controllers.cjm.general`): several row sets at once (an
       equality and an active barrier, or several constraints), several end effectors
-      (their twists stacked: docs/design.md section 12), fewer than 6 joints before the
+      (their twists stacked: docs/design.md section 11), fewer than 6 joints before the
       constraint, or a singular pre-chain.
     * **Barriers** are held as plane equalities once the solution would break them (an
       active set, most violated first).

@@ -84,7 +84,7 @@ class Robot:
     link_axis : (3,) read-only unit vector, the long direction of ``constrained_link`` in
         its own coordinates.
     ee_frames : every end-effector frame, ``ee_frame`` first. Controllers take a twist of
-        6 entries per frame, in this order (docs/design.md section 12).
+        6 entries per frame, in this order (docs/design.md section 11).
     constrained_links : every link that carries an instrument through a constraint (one
         per arm), ``constrained_link`` first; empty when there is none.
     link_axes : the long axis of each of ``constrained_links``, read-only.
