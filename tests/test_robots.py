@@ -65,20 +65,25 @@ def dh_forward(theta: np.ndarray) -> np.ndarray:
     return T
 
 
-def pre_post_split(robot: Robot) -> tuple[int, int]:
-    """(joints supporting the constrained link, joints after it up to the EE)."""
+def pre_post_split(robot: Robot, link: str, ee_frame: str) -> tuple[int, int]:
+    """(DoF supporting ``link``, DoF after it up to ``ee_frame``)."""
     model = robot.model
-    link_joint = model.frames[robot.constrained_frame_id].parentJoint
-    ee_joint = model.frames[robot.ee_frame_id].parentJoint
+    link_joint = model.frames[model.getFrameId(link)].parentJoint
+    ee_joint = model.frames[model.getFrameId(ee_frame)].parentJoint
     pre = [j for j in model.supports[link_joint] if j != 0]
     post = [j for j in model.supports[ee_joint] if j not in model.supports[link_joint]]
-    return len(pre), len(post)
+    return sum(model.nvs[j] for j in pre), sum(model.nvs[j] for j in post)
 
 
 # ---------------------------------------------------------------- built-ins
 
+#: (nq, nv) of each built-in robot; the mobile one's planar base has 4 and 3
+SIZES = {"sda10f": (8, 8), "ur5_instrument": (8, 8), "sda10f_dual": (15, 15),
+         "sda10f_dual_mobile": (19, 18)}
+
+
 def test_builtins_load_with_geometry(robot: Robot) -> None:
-    assert robot.nq == robot.nv == 8
+    assert (robot.nq, robot.nv) == SIZES[robot.name]
     assert robot.visual_model.ngeoms > 0 and robot.collision_model.ngeoms > 0
     assert robot.urdf_path.is_file()
     assert np.isclose(np.linalg.norm(robot.link_axis), 1.0)
@@ -91,7 +96,12 @@ def test_builtins_load_with_geometry(robot: Robot) -> None:
 
 
 def test_builtin_six_before_two_after(robot: Robot) -> None:
-    assert pre_post_split(robot) == (6, 2)
+    """Each arm's trocar link has the paper's 6 DoF before it (9 on the mobile base: the
+    planar joint's 3 too) and 2 after it, up to that arm's EE."""
+    assert len(robot.constrained_links) == len(robot.ee_frames)
+    before = 9 if robot.root_joint == "planar" else 6
+    for link, ee_frame in zip(robot.constrained_links, robot.ee_frames):
+        assert pre_post_split(robot, link, ee_frame) == (before, 2), link
 
 
 def test_sda10f_matches_design_table(sda10f: Robot) -> None:
@@ -172,9 +182,13 @@ def test_ur5_q_home_shaft_points_down_into_workspace(ur5: Robot) -> None:
 
 def test_random_configuration_inside_margin(robot: Robot) -> None:
     rng = np.random.default_rng(0)
-    lo, hi = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+    bounded = np.abs(robot.model.lowerPositionLimit) < 1e10  # not a planar base's
+    lo, hi = robot.model.lowerPositionLimit[bounded], robot.model.upperPositionLimit[bounded]
     qs = np.array([robot.random_configuration(rng, margin=0.2) for _ in range(200)])
-    assert np.all(qs >= lo + 0.2 * (hi - lo)) and np.all(qs <= hi - 0.2 * (hi - lo))
+    assert np.all(qs[:, bounded] >= lo + 0.2 * (hi - lo))
+    assert np.all(qs[:, bounded] <= hi - 0.2 * (hi - lo))
+    if robot.root_joint == "planar":  # (x, y, cos, sin): a unit heading
+        np.testing.assert_allclose(np.hypot(qs[:, 2], qs[:, 3]), 1.0, atol=1e-12)
 
 
 def test_builtin_overrides() -> None:

@@ -1,9 +1,11 @@
 """Robot models: a Pinocchio model plus what the teleoperation controllers need.
 
-Two robots ship with the package (primitive geometry, nothing downloaded, see docs/design.md
-section 6): ``"sda10f"`` (torso + 7-axis arm, the paper's experiment) and
-``"ur5_instrument"`` (UR5-like arm holding a surgical instrument with a 2-DoF wrist). Any
-other URDF loads from its path.
+Four robots ship with the package (primitive geometry, nothing downloaded, see docs/design.md
+sections 6 and 11): ``"sda10f"`` (torso + 7-axis arm, the paper's experiment),
+``"ur5_instrument"`` (UR5-like arm holding a surgical instrument with a 2-DoF wrist),
+``"sda10f_dual"`` (torso + both arms, an EE and a trocar link per arm) and
+``"sda10f_dual_mobile"`` (the same on a planar mobile base). Any other URDF loads from its
+path.
 """
 
 from __future__ import annotations
@@ -29,8 +31,8 @@ ROBOTS_DIR = pathlib.Path(__file__).resolve().parent
 #: Limits at or beyond this magnitude count as unbounded (Pinocchio uses +-DBL_MAX).
 _UNBOUNDED = 1e10
 
-#: Defaults of the shipped robots: urdf file (in ``teleop/robots``), EE frame, constrained
-#: link, link axis (in constrained-link coordinates) and home configuration.
+#: Defaults of the shipped robots: urdf file (in ``teleop/robots``), EE frame(s), constrained
+#: link(s) with the link axis (in constrained-link coordinates), root joint, home configuration.
 BUILTIN_ROBOTS: Mapping[str, Mapping[str, Any]] = types.MappingProxyType({
     "sda10f": types.MappingProxyType({
         "urdf": "sda10f.urdf",
@@ -48,6 +50,28 @@ BUILTIN_ROBOTS: Mapping[str, Mapping[str, Any]] = types.MappingProxyType({
         "link_axis": (0.0, 0.0, 1.0),
         # elbow up, shaft pointing straight down (world -z), tip at about (0.53, 0.11, -0.16)
         "q_home": (np.pi, -1.4, 1.8, -0.4 - np.pi / 2, -np.pi / 2, 0.0, 0.0, 0.0),
+    }),
+    # the torso and both arms (left: the sda10f's), a trocar on each arm's link 6; joint L
+    # at 0.9 (not 1.3): at 1.3 the left tool crosses the mid-plane and the mirrored arms collide
+    "sda10f_dual": types.MappingProxyType({
+        "urdf": "sda10f_dual.urdf",
+        "ee_frames": ("arm_left_link_tool0", "arm_right_link_tool0"),
+        "constrained_links": (("arm_left_link_5_r", (0.0, 0.0, -1.0)),
+                              ("arm_right_link_5_r", (0.0, 0.0, -1.0))),
+        "q_home": (0.0, 0.0, 0.9, 0.8, -1.1, 0.5, -1.2, 0.6,
+                   0.0, 0.9, 0.8, -1.1, 0.5, -1.2, 0.6),
+    }),
+    # the same on a mobile base (planar root joint: x, y, cos, sin of the heading)
+    "sda10f_dual_mobile": types.MappingProxyType({
+        "urdf": "sda10f_dual_mobile.urdf",
+        "root_joint": "planar",
+        "root_velocity_limit": (0.5, 0.5, 1.0),
+        "ee_frames": ("arm_left_link_tool0", "arm_right_link_tool0"),
+        "constrained_links": (("arm_left_link_5_r", (0.0, 0.0, -1.0)),
+                              ("arm_right_link_5_r", (0.0, 0.0, -1.0))),
+        "q_home": (0.0, 0.0, 1.0, 0.0,
+                   0.0, 0.0, 0.9, 0.8, -1.1, 0.5, -1.2, 0.6,
+                   0.0, 0.9, 0.8, -1.1, 0.5, -1.2, 0.6),
     }),
 })
 
