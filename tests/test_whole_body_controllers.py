@@ -243,3 +243,30 @@ def test_a_barrier_on_the_base_is_never_crossed(mobile):
         # bounds to |a| dt / (2 K) (9e-7 m here, docs/design.md section 11.3)
         assert closest >= -1e-6, spec
         assert closest < 0.02, f"{spec}: the base never came near the wall ({closest:.3f} m)"
+
+
+@PROPERTY
+@given(seed=SEEDS, magnitude=st.sampled_from([1e-3, 0.1, 10.0, 1e4]),
+       robot_name=st.sampled_from(["sda10f_dual", "sda10f_dual_mobile"]))
+def test_commands_stay_inside_the_joint_box(dual, mobile, seed, magnitude, robot_name):
+    """Configurations near the position limits, twists from 1 mm/s to 10 km/s: every
+    command is finite and inside the box; the holes are held unless the step says so."""
+    robot = dual if robot_name == "sda10f_dual" else mobile
+    rng = np.random.default_rng(seed)
+    q = robot.random_configuration(rng, margin=0.0)
+    bounded = np.abs(robot.model.lowerPositionLimit) < 1e10
+    near_limit = bounded & (rng.uniform(size=robot.model.nq) < 0.3)
+    q[near_limit] = np.where(rng.uniform(size=near_limit.sum()) < 0.5,
+                             robot.model.lowerPositionLimit[near_limit] + 1e-4,
+                             robot.model.upperPositionLimit[near_limit] - 1e-4)
+    holes = holes_on_both_arms(robot, q)
+    twist = rng.normal(scale=magnitude, size=robot.task_size)
+    for controller in (CJMController(robot, holes), QPController(robot, holes, solver="daqp")):
+        qd = controller.solve(q, twist)
+        lower, upper = controller.bounds(q)
+        assert np.all(np.isfinite(qd))
+        assert np.all(qd >= lower - 1e-9 * (1 + np.abs(lower)))
+        assert np.all(qd <= upper + 1e-9 * (1 + np.abs(upper)))
+        if controller.info.status.value != "constraint_degraded":
+            rows, rhs = hole_rows(robot, q, holes)
+            assert np.max(np.abs(rows @ qd - rhs)) <= 1e-9, type(controller).__name__
