@@ -5,10 +5,12 @@ from .closed_loop import (
     LoopConfig,
     Plant,
     StepRecord,
+    Targets,
     TeleopLoop,
+    constraint_names,
     row_labels,
     saturate_twist,
 )
 
-__all__ = ["RECORD_FIELDS", "LoopConfig", "Plant", "StepRecord", "TeleopLoop", "row_labels",
-           "saturate_twist"]
+__all__ = ["RECORD_FIELDS", "LoopConfig", "Plant", "StepRecord", "Targets", "TeleopLoop",
+           "constraint_names", "row_labels", "saturate_twist"]

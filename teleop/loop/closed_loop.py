@@ -1,12 +1,12 @@
 """The closed teleoperation loop: operator target -> EE twist -> controller -> integrate.
 
-One tick (docs/design.md section 5)::
+One tick (docs/design.md section 5), for every end effector ``i`` of ``robot.ee_frames``::
 
-    T*_f  <- T*_f exp6(alpha log6(T*_f^-1 T*))     target smoothing (browser: ~20 Hz input)
-    V_ff   = log6(T*_f,prev^-1 T*_f) / dt            feed-forward: the target's own twist
-    V_e    = K_p log6(T_e^-1 T*_f) + Ad V_ff         EE body twist, then saturated
-    qd     = controller.solve(q, V_e)
-    q     <- pin.integrate(model, q, qd dt)
+    T*_f,i <- T*_f,i exp6(alpha log6(T*_f,i^-1 T*_i))   target smoothing (browser: ~20 Hz input)
+    V_ff,i  = log6(T*_f,i,prev^-1 T*_f,i) / dt           feed-forward: the target's own twist
+    V_e,i   = K_p log6(T_e,i^-1 T*_f,i) + Ad V_ff,i      EE body twist, then saturated
+    qd      = controller.solve(q, [V_e,1; V_e,2; ...])   stacked, 6 per EE (section 11)
+    q      <- pin.integrate(model, q, qd dt)             nq != nv on a mobile base
 
 and every tick records the measures of docs/design.md section 7, computed here from Pinocchio
 and the constraints themselves, not taken from the controller's own report.
@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Protocol, Sequence, Union
 
 import numpy as np
 import pinocchio as pin
@@ -36,6 +36,9 @@ RECORD_FIELDS = (
     "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed",
     "step_time_us", "tick_time_us", "constraint_velocity_floor", "twist_saturated",
 )
+
+#: An operator target: one pose for a single-EE robot, else one per ``robot.ee_frames`` entry.
+Targets = Union[pin.SE3, Sequence[pin.SE3]]
 
 #: What the velocity along a constraint's rows is called, by its number of rows k
 #: (a plane: its normal; a hole: the two directions across the link; a lock: world x, y, z).
@@ -107,44 +110,87 @@ def row_labels(constraints: Sequence[Constraint]) -> tuple[str, ...]:
     return tuple(labels)
 
 
+def constraint_names(constraints: Sequence[Constraint]) -> tuple[str, ...]:
+    """One name per constraint, in order: ``"hole 2 (arm_right_link_5_r)"``, numbered by
+    kind in list order (equalities and barriers alike) and naming the link it holds."""
+    names, numbers = [], {}
+    for constraint in constraints:
+        numbers[constraint.label] = numbers.get(constraint.label, 0) + 1
+        names.append(f"{constraint.label} {numbers[constraint.label]} ({constraint.link})")
+    return tuple(names)
+
+
 @dataclass
 class StepRecord:
     """What one tick measured. Errors in m / rad, velocities in m/s, times in us.
 
     The velocities are those the robot moves with over the period, at its true
     configuration (docs/design.md section 15.2): every equality row's ``C v_c`` relative to
-    the constraint's moving geometry, and the EE's linear velocity, world frame. Beside the
+    the constraint's moving geometry, and each EE's linear velocity, world frame. Beside the
     achieved EE velocity: the operator's (filtered) target velocity and the commanded twist's
     linear part, which also carries the pose-error term and the speed caps.
+
+    Per end effector (``robot.ee_frames`` order): ``ee_position_errors``,
+    ``ee_orientation_errors`` and the ``*_linear_velocities`` rows. The single-EE names
+    read them: ``ee_position_error`` and ``ee_orientation_error`` are the worst EE's, the
+    ``*_linear_velocity`` vectors the first EE's (``robot.ee_frame``); with one EE both are
+    that EE's, as they always were.
     """
 
     t: float
     constraint_error: float  # max over equality constraints of |e|
     constraint_velocity_residual: float  # max |C v_c - (-K e + ff)| over equalities
     barrier_penetration: float  # max depth behind a barrier (0 on the allowed side)
-    ee_position_error: float
-    ee_orientation_error: float
+    ee_position_errors: np.ndarray  # (EEs,) |p_e - p*| of each EE against its filtered target
+    ee_orientation_errors: np.ndarray  # (EEs,) |log3(R_e^T R*)| of each EE
     joint_limit_violation: float  # max over joints of the distance past a limit (rad)
     failed: bool
     step_time_us: float
     tick_time_us: float
     constraint_velocity_floor: float  # float64 round-off of C v_c (m/s, _constraint_velocity)
-    twist_saturated: bool  # the speed caps scaled the commanded twist down
+    twist_saturated: bool  # the speed caps scaled some EE's commanded twist down
     constraint_velocity: np.ndarray = field(repr=False)  # C v_c - C v_geom, every equality row
     constraint_velocity_labels: tuple[str, ...] = field(repr=False)  # one per row (row_labels)
     drift_velocity: np.ndarray = field(repr=False)  # -K e per row at the true configuration
-    operator_linear_velocity: np.ndarray = field(repr=False)  # the filtered target's, world
-    commanded_linear_velocity: np.ndarray = field(repr=False)  # of the commanded twist, world
-    actual_linear_velocity: np.ndarray = field(repr=False)  # world frame
+    operator_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) the filtered targets'
+    commanded_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) of the commanded twists
+    actual_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) world frame
+    constraint_errors: np.ndarray = field(repr=False)  # each constraint's violation (m)
+    constraint_names: tuple[str, ...] = field(repr=False)  # one per constraint (constraint_names)
     status: str = "ok"  # the controller's step status (controllers.StepStatus value)
     message: str = ""
+
+    @property
+    def ee_position_error(self) -> float:
+        """The worst EE's position error (m)."""
+        return float(np.max(self.ee_position_errors))
+
+    @property
+    def ee_orientation_error(self) -> float:
+        """The worst EE's orientation error (rad)."""
+        return float(np.max(self.ee_orientation_errors))
+
+    @property
+    def operator_linear_velocity(self) -> np.ndarray:
+        """The first EE's filtered target velocity (world, m/s)."""
+        return self.operator_linear_velocities[0]
+
+    @property
+    def commanded_linear_velocity(self) -> np.ndarray:
+        """The first EE's commanded linear velocity (world, m/s)."""
+        return self.commanded_linear_velocities[0]
+
+    @property
+    def actual_linear_velocity(self) -> np.ndarray:
+        """The first EE's achieved linear velocity (world, m/s)."""
+        return self.actual_linear_velocities[0]
 
 
 @dataclass
 class PendingStep:
     """What :meth:`TeleopLoop.advance` computed, waiting for the end-of-period measures."""
 
-    target: pin.SE3
+    targets: list[pin.SE3]  # the filtered target of each EE
     tick_start: int  # perf_counter_ns
     step_time_us: float
     status: str
@@ -155,9 +201,9 @@ class PendingStep:
     constraint_velocity: np.ndarray
     drift_velocity: np.ndarray
     labels: tuple[str, ...]
-    operator_linear_velocity: np.ndarray
-    commanded_linear_velocity: np.ndarray
-    actual_linear_velocity: np.ndarray
+    operator_linear_velocities: np.ndarray
+    commanded_linear_velocities: np.ndarray
+    actual_linear_velocities: np.ndarray
 
 
 def saturate_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
@@ -178,6 +224,9 @@ class TeleopLoop:
     config : :class:`LoopConfig`.
     plant : what stands between the loop and the true joints (:class:`Plant`,
         docs/design.md section 15.1); None: the loop reads and drives them exactly.
+
+    Targets (:data:`Targets`) are one ``pin.SE3`` per entry of ``robot.ee_frames``, in
+    that order; a single-EE robot also takes the pose alone.
     """
 
     def __init__(self, robot, controller, q0: np.ndarray | None = None,
@@ -188,14 +237,18 @@ class TeleopLoop:
         self.controller = controller
         self.config = config or LoopConfig()
         self.plant = plant
-        self.ee_frame_id = self.model.getFrameId(robot.ee_frame)
+        self.ee_frame_ids: tuple[int, ...] = tuple(self.model.getFrameId(name)
+                                                   for name in robot.ee_frames)
+        self.ee_frame_id = self.ee_frame_ids[0]
         self.q = np.array(robot.q_home if q0 is None else q0, dtype=float)
         self.t = 0.0
-        self._filtered_target: pin.SE3 | None = None
-        self._previous_target: pin.SE3 | None = None
+        self._filtered_targets: list[pin.SE3] | None = None
+        #: the filtered targets of the last period (their feed-forward), None at the start
+        self.previous_targets: list[pin.SE3] | None = None
         self.last_qd = np.zeros(self.model.nv)
         self._labels_key: tuple[int, ...] = ()
         self._labels: tuple[str, ...] = ()
+        self._names: tuple[str, ...] = ()
 
     # -- state -------------------------------------------------------------------------
 
@@ -207,52 +260,81 @@ class TeleopLoop:
         self.controller.set_constraints(list(constraints))
 
     def ee_placement(self, q: np.ndarray | None = None) -> pin.SE3:
-        """World placement of the EE at ``q`` (default: the current state)."""
+        """World placement of the first EE at ``q`` (default: the current state)."""
         return frame_placement(self.model, self.q if q is None else q, self.ee_frame_id, self.data)
+
+    def ee_placements(self, q: np.ndarray | None = None) -> list[pin.SE3]:
+        """World placement of every EE at ``q`` (default: the current state), in
+        ``robot.ee_frames`` order."""
+        pin.framesForwardKinematics(self.model, self.data, self.q if q is None else q)
+        return [self.data.oMf[frame].copy() for frame in self.ee_frame_ids]
 
     def reset(self, q0: np.ndarray | None = None) -> None:
         """Back to ``q0`` (default home), forgetting the target history (and the plant's
         commands in flight)."""
         self.q = np.array(self.robot.q_home if q0 is None else q0, dtype=float)
         self.t = 0.0
-        self._filtered_target = None
-        self._previous_target = None
+        self._filtered_targets = None
+        self.previous_targets = None
         self.last_qd = np.zeros(self.model.nv)
         if self.plant is not None:
             self.plant.reset()
 
     # -- one tick ----------------------------------------------------------------------
 
-    def filter_target(self, target: pin.SE3) -> pin.SE3:
-        """First-order smoothing on SE(3) (identity when ``target_time_constant == 0``)."""
+    def targets(self, target: Targets) -> list[pin.SE3]:
+        """``target`` as one pose per EE; ``ValueError`` unless it has one per
+        ``robot.ee_frames`` entry (a lone ``pin.SE3`` counts as one)."""
+        poses = [target] if isinstance(target, pin.SE3) else list(target)
+        if len(poses) != len(self.ee_frame_ids):
+            raise ValueError(f"expected {len(self.ee_frame_ids)} target poses, one per EE frame "
+                             f"{list(self.robot.ee_frames)}, got {len(poses)}")
+        for pose in poses:
+            if not isinstance(pose, pin.SE3):
+                raise ValueError(f"a target must be a pin.SE3, got {type(pose).__name__}")
+        return poses
+
+    def filter_targets(self, target: Targets) -> list[pin.SE3]:
+        """First-order smoothing on SE(3) of each EE's target (identity when
+        ``target_time_constant == 0``)."""
+        poses = self.targets(target)
         tau = self.config.target_time_constant
-        if self._filtered_target is None or tau == 0.0:
-            self._filtered_target = target.copy()
+        if self._filtered_targets is None or tau == 0.0:
+            self._filtered_targets = [pose.copy() for pose in poses]
         else:
             alpha = 1.0 - math.exp(-self.config.dt / tau)
-            step = pin.log6(self._filtered_target.actInv(target)).vector * alpha
-            self._filtered_target = self._filtered_target * pin.exp6(step)
-        return self._filtered_target
+            self._filtered_targets = [
+                filtered * pin.exp6(pin.log6(filtered.actInv(pose)).vector * alpha)
+                for filtered, pose in zip(self._filtered_targets, poses)]
+        return self._filtered_targets
 
-    def command(self, ee: pin.SE3, target: pin.SE3) -> np.ndarray:
-        """EE body twist ``K_p log6(T_e^-1 T*) + Ad_(T_e^-1 T*) V_ff``, saturated."""
-        return self._saturate(self._pose_twist(ee, target))
+    def command(self, placements: Sequence[pin.SE3], targets: Sequence[pin.SE3]) -> np.ndarray:
+        """The stacked EE body twists ``K_p log6(T_e,i^-1 T*_i) + Ad_(T_e,i^-1 T*_i) V_ff,i``,
+        each saturated on its own (:func:`saturate_twist`), fed forward from
+        :attr:`previous_targets` (which the caller then sets to ``targets``)."""
+        return np.concatenate([self._saturate(twist)
+                               for twist in self._pose_twists(placements, targets)])
 
-    def _pose_twist(self, ee: pin.SE3, target: pin.SE3) -> np.ndarray:
-        """:meth:`command` before the speed caps."""
-        error = ee.actInv(target)
-        twist = self.config.kp * pin.log6(error).vector
-        if self.config.feed_forward and self._previous_target is not None:
-            target_twist = pin.log6(self._previous_target.actInv(target)).vector / self.config.dt
-            twist += error.action @ target_twist
-        return twist
+    def _pose_twists(self, placements: Sequence[pin.SE3],
+                     targets: Sequence[pin.SE3]) -> list[np.ndarray]:
+        """Each EE's twist of :meth:`command` before the speed caps."""
+        previous = self.previous_targets
+        twists = []
+        for i, (ee, target) in enumerate(zip(placements, targets)):
+            error = ee.actInv(target)
+            twist = self.config.kp * pin.log6(error).vector
+            if self.config.feed_forward and previous is not None:
+                target_twist = pin.log6(previous[i].actInv(target)).vector / self.config.dt
+                twist += error.action @ target_twist
+            twists.append(twist)
+        return twists
 
     def _saturate(self, twist: np.ndarray) -> np.ndarray:
         return saturate_twist(twist, self.config.max_linear_speed, self.config.max_angular_speed)
 
-    def tick(self, target: pin.SE3,
+    def tick(self, target: Targets,
              advance_geometry: Callable[[float], None] | None = None) -> StepRecord:
-        """Advance one control period towards ``target`` and measure it.
+        """Advance one control period towards ``target`` (one pose per EE) and measure it.
 
         The measures are taken at the end of the period, against the geometry of that
         instant: ``advance_geometry(t)`` (when moving geometry is given) is called with the
@@ -263,24 +345,27 @@ class TeleopLoop:
             advance_geometry(self.t)
         return self.measure(step)
 
-    def advance(self, target: pin.SE3) -> "PendingStep":
+    def advance(self, target: Targets) -> "PendingStep":
         """The first half of :meth:`tick`: command, solve, integrate (no end measures)."""
         tick_start = time.perf_counter_ns()
         dt = self.config.dt
         model, data = self.model, self.data
-        target = self.filter_target(target)
+        targets = self.filter_targets(target)
         sensed = self.q if self.plant is None else self.plant.sense(self.q)
         pin.computeJointJacobians(model, data, sensed)
         pin.updateFramePlacements(model, data)
-        ee = data.oMf[self.ee_frame_id].copy()
-        requested = self._pose_twist(ee, target)
-        twist = self._saturate(requested)
-        saturated = not np.array_equal(twist, requested)
-        previous = self._previous_target
-        operator = (np.zeros(3) if previous is None
-                    else (target.translation - previous.translation) / dt)
-        self._previous_target = target.copy()
-        commanded = ee.rotation @ twist[:3]
+        placements = [data.oMf[frame].copy() for frame in self.ee_frame_ids]
+        requested = self._pose_twists(placements, targets)
+        twists = [self._saturate(twist) for twist in requested]
+        saturated = any(not np.array_equal(capped, twist)
+                        for capped, twist in zip(twists, requested))
+        previous = self.previous_targets
+        operator = np.array([np.zeros(3) if previous is None
+                             else (now.translation - before.translation) / dt
+                             for now, before in zip(targets, previous or targets)])
+        self.previous_targets = [pose.copy() for pose in targets]
+        commanded = np.array([ee.rotation @ twist[:3] for ee, twist in zip(placements, twists)])
+        twist = np.concatenate(twists)
 
         solve_start = time.perf_counter_ns()
         try:
@@ -302,42 +387,47 @@ class TeleopLoop:
             pin.computeJointJacobians(model, data, self.q)
             pin.updateFramePlacements(model, data)
             _, velocity, drift, floor = self._constraint_velocity(moved)
-        ee_jacobian = pin.getFrameJacobian(model, data, self.ee_frame_id, pin.LOCAL)
-        actual = data.oMf[self.ee_frame_id].rotation @ (ee_jacobian[:3] @ moved)
+        actual = np.array([
+            data.oMf[frame].rotation
+            @ (pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:3] @ moved)
+            for frame in self.ee_frame_ids])
 
         self.q = pin.integrate(model, self.q, moved * dt)
         self.last_qd = qd
         self.t += dt
-        return PendingStep(target=target, tick_start=tick_start, step_time_us=step_time,
+        return PendingStep(targets=targets, tick_start=tick_start, step_time_us=step_time,
                            status=status, message=message, residual=residual,
                            twist_saturated=saturated, floor=floor,
                            constraint_velocity=velocity, drift_velocity=drift,
-                           labels=self._row_labels(), operator_linear_velocity=operator,
-                           commanded_linear_velocity=commanded, actual_linear_velocity=actual)
+                           labels=self._row_labels(), operator_linear_velocities=operator,
+                           commanded_linear_velocities=commanded,
+                           actual_linear_velocities=actual)
 
     def measure(self, step: "PendingStep") -> StepRecord:
         """The second half of :meth:`tick`: the measures at the end of the period."""
         model, data = self.model, self.data
-        error, penetration = self._constraint_errors()
-        ee_now = data.oMf[self.ee_frame_id]
-        target = step.target
-        position_error = float(np.linalg.norm(ee_now.translation - target.translation))
-        orientation_error = float(np.linalg.norm(pin.log3(ee_now.rotation.T @ target.rotation)))
+        errors, error, penetration = self._constraint_errors()
+        placements = [data.oMf[frame] for frame in self.ee_frame_ids]
+        position_errors = np.array([np.linalg.norm(ee.translation - target.translation)
+                                    for ee, target in zip(placements, step.targets)])
+        orientation_errors = np.array([np.linalg.norm(pin.log3(ee.rotation.T @ target.rotation))
+                                       for ee, target in zip(placements, step.targets)])
         violation = float(max(0.0, np.max(self.q - model.upperPositionLimit),
                               np.max(model.lowerPositionLimit - self.q)))
         return StepRecord(
             t=self.t, constraint_error=error, constraint_velocity_residual=step.residual,
-            barrier_penetration=penetration, ee_position_error=position_error,
-            ee_orientation_error=orientation_error, joint_limit_violation=violation,
+            barrier_penetration=penetration, ee_position_errors=position_errors,
+            ee_orientation_errors=orientation_errors, joint_limit_violation=violation,
             failed=step.status == "failed", step_time_us=step.step_time_us,
             tick_time_us=(time.perf_counter_ns() - step.tick_start) * 1e-3,
             constraint_velocity_floor=step.floor, twist_saturated=step.twist_saturated,
             constraint_velocity=step.constraint_velocity,
             constraint_velocity_labels=step.labels, drift_velocity=step.drift_velocity,
-            operator_linear_velocity=step.operator_linear_velocity,
-            commanded_linear_velocity=step.commanded_linear_velocity,
-            actual_linear_velocity=step.actual_linear_velocity, status=step.status,
-            message=step.message,
+            operator_linear_velocities=step.operator_linear_velocities,
+            commanded_linear_velocities=step.commanded_linear_velocities,
+            actual_linear_velocities=step.actual_linear_velocities,
+            constraint_errors=errors, constraint_names=self._names,
+            status=step.status, message=step.message,
         )
 
     def _row_labels(self) -> tuple[str, ...]:
@@ -345,6 +435,7 @@ class TeleopLoop:
         key = tuple(map(id, self.constraints))
         if key != self._labels_key:
             self._labels_key, self._labels = key, row_labels(self.constraints)
+            self._names = constraint_names(self.constraints)
         return self._labels
 
     def _constraint_velocity(self, qd: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, float]:
@@ -372,15 +463,17 @@ class TeleopLoop:
         return (residual, np.concatenate(velocity), np.concatenate(drift),
                 floor * np.finfo(float).eps)
 
-    def _constraint_errors(self) -> tuple[float, float]:
-        """After integration: max |e| over equalities, max inequality (barrier)
-        penetration, each the constraint's own ``violation``."""
+    def _constraint_errors(self) -> tuple[np.ndarray, float, float]:
+        """After integration: each constraint's own ``violation``, then the max |e| over
+        equalities and the max inequality (barrier) penetration."""
         pin.framesForwardKinematics(self.model, self.data, self.q)  # every frame at once
         error, penetration = 0.0, 0.0
+        violations = []
         for constraint, frame in zip(self.constraints, self.controller.constraint_frames):
             violation = constraint.violation(self.data.oMf[frame])
+            violations.append(violation)
             if constraint.is_equality:
                 error = max(error, violation)
             else:
                 penetration = max(penetration, violation)
-        return error, penetration
+        return np.array(violations), error, penetration
