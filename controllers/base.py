@@ -146,6 +146,19 @@ def as_constraint_list(constraints: Iterable[Constraint]) -> list[Constraint]:
     return constraints
 
 
+def as_twist_weight(twist_weight, task_size: int) -> np.ndarray:
+    """The diagonal weight ``W`` (task_size,) of the twist error: identity for None; 6
+    values apply to every EE, ``task_size`` values to each entry. ``ValueError`` for
+    negative or non-finite weights, or another size."""
+    if twist_weight is None:
+        return np.ones(task_size)
+    size = 6 if np.shape(twist_weight) == (6,) else task_size
+    weight = np.tile(as_vector(twist_weight, size, "twist_weight"), task_size // size)
+    if np.any(weight < 0):
+        raise ValueError(f"twist_weight must be non-negative, got {weight.tolist()}")
+    return weight
+
+
 class Controller(ABC):
     """Turns a desired end-effector body twist into joint velocities under constraints.
 
@@ -281,9 +294,14 @@ class Controller(ABC):
                 self.info.equality_residual = float(np.max(np.abs(A @ clipped - b)))
         return clipped
 
-    def _report_twist_error(self, jacobian: np.ndarray, qd: np.ndarray, twist: np.ndarray) -> None:
-        """``least_squares`` when ``J_e qd`` misses the twist (optimisers trade it off)."""
-        error = float(np.max(np.abs(jacobian @ qd - twist)))
+    def _report_twist_error(self, jacobian: np.ndarray, qd: np.ndarray, twist: np.ndarray,
+                            weight_root: np.ndarray | None = None) -> None:
+        """``least_squares`` when ``J_e qd`` misses the twist (optimisers trade it off),
+        each entry's miss scaled by ``W^1/2`` (``weight_root``) when the task is weighted."""
+        miss = jacobian @ qd - twist
+        if weight_root is not None:
+            miss *= weight_root
+        error = float(np.max(np.abs(miss)))
         if error > TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(twist)))):
             self.info.report(StepStatus.LEAST_SQUARES,
                              f"twist not met exactly (error {error:.2e}): limits, barriers, "

@@ -29,7 +29,7 @@ from scipy.linalg import lapack
 from constraints import Constraint
 from constraints.validation import as_number, as_vector
 
-from .base import EQUALITY_TOLERANCE, Controller, Kinematics, SolverError
+from .base import EQUALITY_TOLERANCE, Controller, Kinematics, SolverError, as_twist_weight
 from .joint_limits import DEFAULT_LIMIT_GAIN
 from .linalg import nullspace
 
@@ -419,13 +419,7 @@ class QPController(Controller):
                         else as_vector(posture, self.model.nq, "posture"))
         user_settings = dict(solver_settings or {})
         self.settings = {**SOLVER_SETTINGS.get(solver, {}), **user_settings}
-        weight = np.ones(self.task_size)
-        if twist_weight is not None:  # one weight per EE twist entry, or 6 for every EE
-            twist_weight = np.asarray(twist_weight, dtype=float)
-            size = 6 if twist_weight.shape == (6,) else self.task_size
-            weight = np.tile(as_vector(twist_weight, size, "twist_weight"), self.task_size // size)
-        if np.any(weight < 0):
-            raise ValueError(f"twist_weight must be non-negative, got {weight}")
+        weight = as_twist_weight(twist_weight, self.task_size)
         self.twist_weight = weight
         self._twist_scale = np.sqrt(weight)
         self._twist_rows = self._twist_scale[:, None]  # W^1/2, to scale the rows of J_e
@@ -513,7 +507,8 @@ class QPController(Controller):
         if barrier_rows is not None:
             held = np.flatnonzero(barrier_rows @ qd - barrier_bound > -1e-9)
             self.info.active_barriers = tuple(self._barriers[i] for i in held)
-        self._report_twist_error(jacobian, qd, twist)
+        self._report_twist_error(jacobian, qd, twist,
+                                 None if self._unit_weight else self._twist_scale)
         return qd
 
     def _box(self, q: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:

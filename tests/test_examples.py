@@ -83,9 +83,18 @@ def check_06(out: str, tmp: Path) -> None:
     assert len(errors) == 2 and max(errors) <= 1e-5, errors  # main and ghost
 
 
+def check_07(out: str, tmp: Path) -> None:
+    holes = numbers(r"max hole error = NUMBER m", out)
+    tips = numbers(r"max tip error = NUMBER m", out)
+    assert len(holes) == len(tips) == 2  # CJM and QP
+    assert max(holes) <= 1e-6 and max(tips) <= 1e-3, (holes, tips)
+    (difference,) = numbers(r"max \|q_cjm - q_qp\| after 2 s = NUMBER rad", out)
+    assert difference <= 5e-3
+
+
 CHECKS = {"01_cjm_vs_qp.py": check_01, "02_closed_loop.py": check_02, "03_barrier.py": check_03,
           "04_any_urdf.py": check_04, "05_mink_peer.py": check_05,
-          "06_embed_teleop_app.py": check_06}
+          "06_embed_teleop_app.py": check_06, "07_two_trocars.py": check_07}
 
 
 def test_the_examples_folder_has_the_documented_scripts():

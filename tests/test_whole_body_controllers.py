@@ -270,3 +270,33 @@ def test_commands_stay_inside_the_joint_box(dual, mobile, seed, magnitude, robot
         if controller.info.status.value != "constraint_degraded":
             rows, rhs = hole_rows(robot, q, holes)
             assert np.max(np.abs(rows @ qd - rhs)) <= 1e-9, type(controller).__name__
+
+
+@PROPERTY
+@given(seed=SEEDS, positions_only=st.booleans())
+def test_weighted_twists_cjm_equals_qp(dual, seed, positions_only):
+    """``twist_weight``: the CJM's weighted general form is the QP's weighted task. With
+    the tips' linear velocities only (orientation weight 0), both tips are met exactly
+    (6 entries for 11 free joint directions) and the rest goes to the posture in both."""
+    rng = np.random.default_rng(seed)
+    q = near_home(dual, rng)
+    holes = holes_on_both_arms(dual, q)
+    twist = rng.normal(scale=0.01, size=12)
+    weight = [1.0, 1.0, 1.0, 0.0, 0.0, 0.0] if positions_only else rng.uniform(0.1, 2.0, 12)
+    cjm = CJMController(dual, holes, twist_weight=weight)
+    qd_cjm = cjm.solve(q, twist)
+    assume(cjm.info.method == "general" and cjm.info.damping == 0.0)
+    qp = QPController(dual, holes, solver="daqp", twist_weight=weight)
+    qd_qp = qp.solve(q, twist)
+    np.testing.assert_allclose(qd_qp, qd_cjm, atol=1e-6)
+    if positions_only:
+        linear = stacked_ee_jacobian(dual, q)[[0, 1, 2, 6, 7, 8]]
+        np.testing.assert_allclose(linear @ qd_cjm, twist[[0, 1, 2, 6, 7, 8]], atol=1e-9)
+        assert cjm.info.status.value == "ok", cjm.info.message
+
+
+def test_twist_weight_is_checked(dual):
+    holes = holes_on_both_arms(dual, dual.q_home)
+    for bad in ([1.0] * 5, [-1.0] * 6, [np.nan] * 12):
+        with pytest.raises(ValueError, match="twist_weight"):
+            CJMController(dual, holes, twist_weight=bad)

@@ -10,7 +10,7 @@ import pinocchio as pin
 from constraints import Constraint, Parametrisation, RobotLike
 from constraints.validation import as_number, as_vector
 
-from ..base import Controller, Kinematics, StepStatus
+from ..base import Controller, Kinematics, StepStatus, as_twist_weight
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from .analytical import (
@@ -61,6 +61,11 @@ class CJMController(Controller):
     posture_gain : gain (1/s) of the null-space posture task; 0 gives minimum norm.
     form : ``"auto"`` (analytical where it applies) or ``"general"`` (always the
         null-space form: the cross-check).
+    twist_weight : diagonal weight ``W`` of the twist error, 6 values for every EE or one
+        per entry of the stacked twist (default identity): the task becomes
+        ``W^1/2 J_e qd = W^1/2 V_e`` in the general form, as the QP's
+        ``|J_e qd - V_e|_W^2``; a zero weight leaves that entry to the posture
+        (docs/design.md section 11.2). Anything but the identity takes the general form.
     limit_gain, position_limits, velocity_limits, strict : see
         :class:`controllers.base.Controller`.
     """
@@ -77,6 +82,7 @@ class CJMController(Controller):
         posture: np.ndarray | None = None,
         posture_gain: float = 1.0,
         form: Form = "auto",
+        twist_weight=None,
         limit_gain: float = DEFAULT_LIMIT_GAIN,
         position_limits: bool = True,
         velocity_limits: bool = True,
@@ -94,6 +100,14 @@ class CJMController(Controller):
         self.parametrisation: Parametrisation = parametrisation
         self.posture_gain = as_number(posture_gain, "posture_gain", 0.0)
         self.form: Form = form
+        self.twist_weight = as_twist_weight(twist_weight, self.task_size)
+        #: the task entries asked for (weight > 0: a zero-weight row would read as a
+        #: singular direction and bring the damping in), or None for the identity
+        self._task_rows = (None if np.all(self.twist_weight == 1.0)
+                           else np.flatnonzero(self.twist_weight > 0.0))
+        #: W^1/2 of those entries, a column to scale the rows of J_e
+        self._task_row_scale = np.sqrt(self.twist_weight if self._task_rows is None
+                                       else self.twist_weight[self._task_rows])[:, None]
         if posture is None:
             posture = getattr(robot, "q_home", None)
         self.posture = (pin.neutral(self.model) if posture is None
@@ -143,7 +157,23 @@ class CJMController(Controller):
 
     # -- the step ----------------------------------------------------------------------
 
+    def _kinematics(self, q: np.ndarray) -> Kinematics:
+        """The base's kinematics, with the task Jacobian ``W^1/2 J_e`` (the rows of
+        non-zero weight) when weighted."""
+        kinematics = super()._kinematics(q)
+        if self._task_rows is not None:
+            kinematics.ee_jacobian = (self._task_row_scale
+                                      * kinematics.ee_jacobian[self._task_rows])
+        return kinematics
+
+    def _task(self, twist: np.ndarray) -> np.ndarray:
+        """``W^1/2 V_e``: the twist the weighted task Jacobian must meet."""
+        if self._task_rows is None:
+            return twist
+        return self._task_row_scale[:, 0] * twist[self._task_rows]
+
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
+        twist = self._task(twist)
         self._active = list(self._equalities)
         qd = self._solve_rows(kinematics, twist, self._active)
         if self._barriers:
@@ -169,7 +199,8 @@ class CJMController(Controller):
 
     def _solve_rows(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
         """The analytical form where it applies, else the general form, for these rows."""
-        if len(active) == 1 and self.form == "auto" and self.task_size == 6:
+        if (len(active) == 1 and self.form == "auto" and self.task_size == 6
+                and self._task_rows is None):
             qd = self._solve_analytical(kinematics, twist, active[0])
             if qd is not None:
                 return qd
@@ -214,6 +245,7 @@ class CJMController(Controller):
     def _saturate(self, kinematics: Kinematics, twist: np.ndarray, qd: np.ndarray,
                   lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
         """Saturation in the null space (module :mod:`controllers.cjm.saturation`)."""
+        twist = self._task(twist)
         info = self.info
         for _ in range(len(self._barriers) + 1):
             rows, rows_rhs = self.constraint_rows(self._active)
