@@ -380,13 +380,13 @@ def test_a_joint_at_its_limit_is_named():
     info = SolveInfo(status=StepStatus.LEAST_SQUARES, saturated_joints=(4,),
                      message="joint 4 at a limit")
     names = ["j0", "j1", "j2", "j3", "arm_joint_4_u"]
-    stalled = SimpleNamespace(commanded_linear_velocity=np.array([0.05, 0.0, 0.0]),
-                              actual_linear_velocity=np.array([0.004, 0.003, 0.0]))
+    stalled = SimpleNamespace(commanded_linear_velocities=np.array([[0.05, 0.0, 0.0]]),
+                              actual_linear_velocities=np.array([[0.004, 0.003, 0.0]]))
     words = describe_limitation(info, stalled, 0.02, names)
     assert words.status == "least_squares"
     assert words.words == "target out of reach; joint arm_joint_4_u at its limit"
-    following = SimpleNamespace(commanded_linear_velocity=np.array([0.05, 0.0, 0.0]),
-                                actual_linear_velocity=np.array([0.045, 0.01, 0.0]))
+    following = SimpleNamespace(commanded_linear_velocities=np.array([[0.05, 0.0, 0.0]]),
+                                actual_linear_velocities=np.array([[0.045, 0.01, 0.0]]))
     assert describe_limitation(info, following, 0.02, names).words == \
         "joint arm_joint_4_u at its limit"
     degraded = describe_limitation(SolveInfo(status=StepStatus.CONSTRAINT_DEGRADED,

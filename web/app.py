@@ -13,6 +13,11 @@ surgical or industrial console, a **clutch** (:meth:`TeleopApp.set_clutch`) deco
 from the target, and **motion scaling** (:meth:`TeleopApp.set_motion_scale`) maps a gizmo
 displacement ``d`` since the last clutch release to a target displacement ``scale d``
 (orientation follows the gizmo's rotation since then, unscaled).
+
+A robot with several end effectors (``robot.ee_frames``, docs/design.md section 11) has a
+target and a gizmo per EE (:class:`EEInput`); the actions on them take the EE's index
+``ee`` (0: ``robot.ee_frame``). The clutch and the motion scale are the console's, shared
+by every gizmo; each gizmo keeps its own anchors.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import math
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -66,6 +72,8 @@ HISTORY_SECONDS = 10.0
 HISTORY_RATE = 50.0
 #: the motion scale is a number in (0, MAX_MOTION_SCALE]
 MAX_MOTION_SCALE = 10.0
+#: a plane's point on a link without an instrument axis is at most this far from its origin (m)
+MAX_LINK_POINT = 2.0
 #: the ghost's offset from the main robot is at most this long (m)
 MAX_GHOST_OFFSET = 5.0
 #: the EE is "on target" within this distance (m); it does not follow its target when it
@@ -98,6 +106,36 @@ class ConstraintEntry:
     def position(self) -> np.ndarray:
         """Where the geometry is now (world reference point, a copy)."""
         return self.constraint.position
+
+
+@dataclass
+class EEInput:
+    """The operator's input for one end effector: its target, its gizmo, and the poses of
+    both at the last re-anchoring (clutch release, motion-scale change, nudge)."""
+
+    frame: str  # the EE frame (an entry of robot.ee_frames)
+    target: pin.SE3
+    gizmo: pin.SE3
+    gizmo_anchor: pin.SE3
+    target_anchor: pin.SE3
+
+    @classmethod
+    def at(cls, frame: str, pose: pin.SE3) -> "EEInput":
+        """Target and gizmo both at ``pose``."""
+        return cls(frame, pose.copy(), pose.copy(), pose.copy(), pose.copy())
+
+    def reanchor(self) -> None:
+        """From now on the target moves by the gizmo's motion since this instant."""
+        self.gizmo_anchor = self.gizmo.copy()
+        self.target_anchor = self.target.copy()
+
+    def followed(self, scale: float) -> pin.SE3:
+        """The target the gizmo asks for: the target anchor moved by ``scale`` times the
+        gizmo's displacement since its anchor, turned by the gizmo's rotation since then."""
+        anchor, start = self.gizmo_anchor, self.target_anchor
+        position = start.translation + scale * (self.gizmo.translation - anchor.translation)
+        rotation = self.gizmo.rotation @ anchor.rotation.T @ start.rotation
+        return pin.SE3(rotation, position)
 
 
 def _deque() -> collections.deque:
@@ -136,14 +174,15 @@ class AppLoop(TeleopLoop):
 
     refused: str = ""  # why the controller refused the last light step's input, if it did
 
-    def control_step(self, target: pin.SE3) -> float:
-        """One period without the measures; the controller's solve time (us)."""
+    def control_step(self, targets: Sequence[pin.SE3]) -> float:
+        """One period without the measures, towards one target per EE; the controller's
+        solve time (us)."""
         model, data = self.model, self.data
-        target = self.filter_target(target)
+        filtered = self.filter_targets(targets)
         pin.forwardKinematics(model, data, self.q)
-        ee = pin.updateFramePlacement(model, data, self.ee_frame_id)
-        twist = self.command(ee, target)
-        self._previous_target = target.copy()
+        placements = [pin.updateFramePlacement(model, data, frame) for frame in self.ee_frame_ids]
+        twist = self.command(placements, filtered)
+        self.previous_targets = [pose.copy() for pose in filtered]
         start = time.perf_counter_ns()
         try:
             qd = self.controller.solve(self.q, twist)
@@ -169,6 +208,13 @@ class Limitation:
     distance: float  # EE to target (m)
 
 
+def _pose_to_dict(pose: pin.SE3) -> dict:
+    """``{"position": [x, y, z], "wxyz": [w, x, y, z]}`` (a scene's target)."""
+    quaternion = pin.Quaternion(pose.rotation)
+    return {"position": [float(x) for x in pose.translation],
+            "wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]}
+
+
 def velocity_joint_names(robot: Robot) -> list[str]:
     """The joint name of each velocity index."""
     model = robot.model
@@ -180,21 +226,22 @@ def velocity_joint_names(robot: Robot) -> list[str]:
     return names
 
 
-def _not_following(record: StepRecord) -> bool:
-    """Whether the EE moves towards its target at less than :data:`FOLLOWING` of the
+def _not_following(record: StepRecord, ee: int = 0) -> bool:
+    """Whether EE ``ee`` moves towards its target at less than :data:`FOLLOWING` of the
     commanded speed (or hardly at all): something keeps it from the target."""
-    desired = np.asarray(record.commanded_linear_velocity)
+    desired = np.asarray(record.commanded_linear_velocities[ee])
+    actual = np.asarray(record.actual_linear_velocities[ee])
     speed = float(np.linalg.norm(desired))
     if speed < STALLED_SPEED:
-        return float(np.linalg.norm(record.actual_linear_velocity)) < STALLED_SPEED
-    return float(np.asarray(record.actual_linear_velocity) @ desired) / speed < FOLLOWING * speed
+        return float(np.linalg.norm(actual)) < STALLED_SPEED
+    return float(actual @ desired) / speed < FOLLOWING * speed
 
 
 def describe_limitation(info, record: StepRecord | None, distance: float,
-                        joint_names: list[str], refused: str = "") -> Limitation:
-    """In words, what keeps the EE from its target (``info`` the controller's last
-    :class:`controllers.SolveInfo`, ``record`` the last measured tick, ``distance`` the
-    EE-target distance in m)."""
+                        joint_names: list[str], refused: str = "", ee: int = 0) -> Limitation:
+    """In words, what keeps EE ``ee`` (an index of ``robot.ee_frames``) from its target
+    (``info`` the controller's last :class:`controllers.SolveInfo`, ``record`` the last
+    measured tick, ``distance`` the EE-target distance in m)."""
     status = info.status.value if isinstance(info.status, StepStatus) else str(info.status)
     if refused:
         return Limitation("failed", f"command refused: {refused}", distance)
@@ -204,7 +251,7 @@ def describe_limitation(info, record: StepRecord | None, distance: float,
     if status == "constraint_degraded":
         return Limitation(status, f"constraint degraded: {info.message}", distance)
     parts = []
-    if distance > ON_TARGET and record is not None and _not_following(record):
+    if distance > ON_TARGET and record is not None and _not_following(record, ee):
         parts.append("target out of reach")
     if info.saturated_joints:
         names = [joint_names[i] for i in info.saturated_joints]
@@ -220,13 +267,14 @@ def describe_limitation(info, record: StepRecord | None, distance: float,
 
 
 def default_ghost_offset(robot: Robot) -> np.ndarray:
-    """Where the ghost goes beside the main robot: sideways from the direction the arm
-    reaches at home, by the robot's width in that direction plus a margin."""
+    """Where the ghost goes beside the main robot: sideways from the direction the arms
+    reach at home (their EEs' mean), by the robot's width in that direction plus a margin."""
     model = robot.model
     data = model.createData()
     pin.framesForwardKinematics(model, data, robot.q_home)
     points = np.array([frame.translation for frame in data.oMf])
-    reach = data.oMf[robot.ee_frame_id].translation - data.oMf[0].translation
+    reach = (np.mean([data.oMf[frame].translation for frame in robot.ee_frame_ids], axis=0)
+             - data.oMf[0].translation)
     reach[2] = 0.0
     if np.linalg.norm(reach) < 1e-6:
         reach = np.array([1.0, 0.0, 0.0])
@@ -236,7 +284,8 @@ def default_ghost_offset(robot: Robot) -> np.ndarray:
 
 
 class TeleopApp:
-    """One robot (plus an optional ghost) teleoperated from one shared target.
+    """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
+    per end effector.
 
     Parameters
     ----------
@@ -272,13 +321,11 @@ class TeleopApp:
         self.ghost_offset = default_ghost_offset(robot)
         if ghost:
             self.set_ghost(ghost)
-        self.target = self.loops["main"].ee_placement()
-        # the input mapping: gizmo -> target (clutch, motion scale)
-        self.gizmo = self.target.copy()
+        # the input mapping, per EE: gizmo -> target (clutch, motion scale)
+        self.inputs = [EEInput.at(frame, pose) for frame, pose in
+                       zip(robot.ee_frames, self.loops["main"].ee_placements())]
         self.motion_scale = 1.0
         self.clutch = False
-        self._gizmo_anchor = self.gizmo.copy()
-        self._target_anchor = self.target.copy()
         self.recorder: SessionRecorder | None = None
         self._record_start = 0.0
         self._next_history = 0.0
@@ -315,16 +362,49 @@ class TeleopApp:
 
     # -- the operator's input: target, gizmo, clutch, motion scale --------------------------
 
-    def _set_target(self, target: pin.SE3) -> None:
-        """The target pose (caller holds the lock); recorded when recording."""
-        self.target = target
+    @property
+    def target(self) -> pin.SE3:
+        """The first EE's target (``robot.ee_frame``)."""
+        return self.inputs[0].target
+
+    @property
+    def gizmo(self) -> pin.SE3:
+        """The first EE's gizmo pose."""
+        return self.inputs[0].gizmo
+
+    @property
+    def targets(self) -> list[pin.SE3]:
+        """Every EE's target, in ``robot.ee_frames`` order (copies)."""
+        with self._lock:
+            return [hand.target.copy() for hand in self.inputs]
+
+    def ee_index(self, ee) -> int:
+        """``ee`` (an index or a name of ``robot.ee_frames``) as an index; else ``ValueError``."""
+        frames = self.robot.ee_frames
+        if isinstance(ee, str) and ee in frames:
+            return frames.index(ee)
+        if isinstance(ee, (int, np.integer)) and not isinstance(ee, bool) and 0 <= ee < len(frames):
+            return int(ee)
+        raise ValueError(f"no end effector {ee!r}: this robot's are {list(frames)} "
+                         f"(or their indices 0-{len(frames) - 1})")
+
+    def _set_target(self, target: pin.SE3, ee: int = 0) -> None:
+        """EE ``ee``'s target pose (caller holds the lock); recorded when recording."""
+        self.inputs[ee].target = target
         if self.recorder is not None:
-            self.recorder.target(self.now - self._record_start, self.target)
+            self._record_target(self.now - self._record_start, ee)
+
+    def _record_target(self, t: float, ee: int) -> None:
+        """Write EE ``ee``'s target to the session (a single-EE robot's events name no frame)."""
+        if len(self.inputs) == 1:
+            self.recorder.target(t, self.inputs[0].target)
+        else:
+            self.recorder.target(t, self.inputs[ee].target, frame=self.inputs[ee].frame)
 
     def _reanchor(self) -> None:
-        """From now on the target moves by the gizmo's motion since this instant."""
-        self._gizmo_anchor = self.gizmo.copy()
-        self._target_anchor = self.target.copy()
+        """From now on every target moves by its gizmo's motion since this instant."""
+        for hand in self.inputs:
+            hand.reanchor()
 
     @staticmethod
     def _pose(position, wxyz, what: str) -> pin.SE3:
@@ -335,33 +415,30 @@ class TeleopApp:
         rotation = pin.Quaternion(wxyz[0], wxyz[1], wxyz[2], wxyz[3]).normalized().matrix()
         return pin.SE3(rotation, position)
 
-    def set_target(self, position, wxyz) -> None:
-        """The operator's target pose directly (world position, quaternion w, x, y, z).
-
-        The gizmo's later motion continues from this target.
-        """
+    def set_target(self, position, wxyz, ee=0) -> None:
+        """The operator's target pose of EE ``ee`` directly (world position, quaternion
+        w, x, y, z). Its gizmo's later motion continues from this target."""
+        ee = self.ee_index(ee)
         target = self._pose(position, wxyz, "target")
         with self._lock:
-            self._set_target(target)
-            self._reanchor()
+            self._set_target(target, ee)
+            self.inputs[ee].reanchor()
 
-    def move_gizmo(self, position, wxyz) -> None:
-        """The input gizmo's pose. Unless the clutch is engaged, the target moves by
+    def move_gizmo(self, position, wxyz, ee=0) -> None:
+        """EE ``ee``'s input gizmo pose. Unless the clutch is engaged, its target moves by
         ``motion_scale`` times the gizmo's displacement since the last clutch release
-        (and turns with the gizmo's rotation since then)."""
+        (and turns with the gizmo's rotation since then); the other targets stay."""
+        ee = self.ee_index(ee)
         gizmo = self._pose(position, wxyz, "gizmo")
         with self._lock:
-            self.gizmo = gizmo
-            if self.clutch:
-                return
-            anchor, start = self._gizmo_anchor, self._target_anchor
-            position = start.translation + self.motion_scale * (gizmo.translation - anchor.translation)
-            rotation = gizmo.rotation @ anchor.rotation.T @ start.rotation
-            self._set_target(pin.SE3(rotation, position))
+            hand = self.inputs[ee]
+            hand.gizmo = gizmo
+            if not self.clutch:
+                self._set_target(hand.followed(self.motion_scale), ee)
 
     def set_clutch(self, engaged: bool) -> None:
-        """Engage (the gizmo moves alone) or release the clutch; on release the target
-        continues from where it is, so it does not jump."""
+        """Engage (the gizmos move alone) or release the clutch; on release every target
+        continues from where it is, so none jumps."""
         if not isinstance(engaged, (bool, np.bool_)):
             raise ValueError(f"the clutch is engaged (True) or released (False), got {engaged!r}")
         with self._lock:
@@ -370,7 +447,8 @@ class TeleopApp:
                 self._reanchor()
 
     def set_motion_scale(self, scale: float) -> None:
-        """Target displacement per gizmo displacement, in (0, 10]; the target does not jump."""
+        """Target displacement per gizmo displacement, in (0, 10], for every gizmo; no
+        target jumps."""
         scale = as_number(scale, "motion scale")
         if not 0.0 < scale <= MAX_MOTION_SCALE:
             raise ValueError(f"motion scale must be in (0, {MAX_MOTION_SCALE:g}], got {scale:g}")
@@ -378,23 +456,28 @@ class TeleopApp:
             self.motion_scale = scale
             self._reanchor()
 
-    def nudge_target(self, displacement) -> None:
-        """Move the target by ``displacement`` (world, m), the gizmo staying where it is."""
+    def nudge_target(self, displacement, ee=0) -> None:
+        """Move EE ``ee``'s target by ``displacement`` (world, m), its gizmo staying where
+        it is."""
+        ee = self.ee_index(ee)
         displacement = as_vector(displacement, 3, "nudge")
         if np.linalg.norm(displacement) > 0.1:
             raise ValueError("a nudge moves the target by at most 0.1 m")
         with self._lock:
-            target = self.target.copy()
+            target = self.inputs[ee].target.copy()
             target.translation = target.translation + displacement
-            self._set_target(target)
-            self._reanchor()
+            self._set_target(target, ee)
+            self.inputs[ee].reanchor()
 
-    def gizmo_to_target(self) -> pin.SE3:
-        """Put the gizmo on the target (the UI moves its handle there); returns the pose."""
+    def gizmo_to_target(self, ee=0) -> pin.SE3:
+        """Put EE ``ee``'s gizmo on its target (the UI moves its handle there); returns
+        the pose."""
+        ee = self.ee_index(ee)
         with self._lock:
-            self.gizmo = self.target.copy()
-            self._reanchor()
-            return self.gizmo.copy()
+            hand = self.inputs[ee]
+            hand.gizmo = hand.target.copy()
+            hand.reanchor()
+            return hand.gizmo.copy()
 
     # -- constraints ---------------------------------------------------------------------
 
@@ -429,44 +512,100 @@ class TeleopApp:
                 self.recorder.add(self.now - self._record_start, entry_id, constraint)
             return entry_id
 
-    def _link_distance(self, distance: float, what: str) -> float:
-        """``distance`` (m along the constrained link's axis) if it lies on the arm: between
-        the link's joint (0) and the EE's distance from it; else ``ValueError``."""
-        distance = as_number(distance, what)
-        if self.robot.constrained_link is None:
+    @property
+    def plane_links(self) -> tuple[str, ...]:
+        """The links a plane or barrier may hold: the constrained links (one per arm)
+        first, then every other link that moves (a mobile base's ``mobile_base``...)."""
+        model = self.robot.model
+        moving = [frame.name for frame in model.frames
+                  if frame.type == pin.FrameType.BODY and frame.parentJoint != 0]
+        return tuple(dict.fromkeys((*self.robot.constrained_links, *moving)))
+
+    def _arm_ee(self, link: str) -> str:
+        """The EE frame on ``link``'s arm: the first whose chain carries the link (a link
+        before every arm, such as the torso or a mobile base, gives the first EE)."""
+        model = self.robot.model
+        joint = model.frames[model.getFrameId(link)].parentJoint
+        return next((frame for frame in self.robot.ee_frames
+                     if joint in model.supports[model.frames[model.getFrameId(frame)].parentJoint]),
+                    self.robot.ee_frame)
+
+    def _constrained_link(self, link: str | None, what: str) -> str:
+        """``link`` (default: the first constrained link) if it carries an instrument
+        axis (``robot.link_axes``); else ``ValueError`` naming the ones that do."""
+        links = self.robot.constrained_links
+        if not links:
             raise ValueError(f"this robot has no constrained link: start `teleop web` with "
-                             f"--constrained-link LINK (and --link-axis X Y Z) to place a {what.split()[0]}")
+                             f"--constrained-link LINK (and --link-axis X Y Z) to place a {what}")
+        link = links[0] if link is None else link
+        if link not in links:
+            raise ValueError(f"a {what} goes on a constrained link: one of {list(links)}, "
+                             f"got {link!r}")
+        return link
+
+    def _link_distance(self, distance: float, what: str, link: str) -> float:
+        """``distance`` (m along ``link``'s axis) if it lies on the arm: between the link's
+        joint (0) and the distance of that arm's EE from it; else ``ValueError``."""
+        distance = as_number(distance, what)
         with self._lock:
-            link = self._link_placement(self.robot.constrained_link)
-            reach = float(np.linalg.norm(link.actInv(
-                self._link_placement(self.robot.ee_frame).translation)))
+            placement = self._link_placement(link)
+            reach = float(np.linalg.norm(placement.actInv(
+                self._link_placement(self._arm_ee(link)).translation)))
         if not 0.0 <= distance <= reach:
             raise ValueError(f"{what} must be between 0 and {reach:.3f} m (from the joint of "
-                             f"{self.robot.constrained_link} to the tool tip), got {distance:g} m")
+                             f"{link} to the tool tip), got {distance:g} m")
         return distance
 
-    def add_hole(self, distance: float) -> str:
-        """A hole on the constrained link, ``distance`` m along its axis, where it is now."""
-        distance = self._link_distance(distance, "hole distance")
+    def add_hole(self, distance: float, link: str | None = None) -> str:
+        """A hole on ``link`` (default: the first constrained link), ``distance`` m along
+        its axis (``robot.link_axes[link]``), where it is now."""
+        link = self._constrained_link(link, "hole")
+        distance = self._link_distance(distance, "hole distance", link)
         with self._lock:
-            return self.add_constraint(Hole.on_link(self.robot, self.loops["main"].q, distance=distance))
+            return self.add_constraint(Hole.on_link(self.robot, self.loops["main"].q,
+                                                    distance=distance, link=link))
 
-    def add_point_lock(self, distance: float) -> str:
-        """Lock the constrained link's point ``distance`` m along its axis where it is now."""
-        distance = self._link_distance(distance, "point lock distance")
+    def add_point_lock(self, distance: float, link: str | None = None) -> str:
+        """Lock the point ``distance`` m along ``link``'s axis (default: the first
+        constrained link) where it is now."""
+        link = self._constrained_link(link, "point lock")
+        distance = self._link_distance(distance, "point lock distance", link)
         with self._lock:
-            return self.add_constraint(
-                PointLock.on_link(self.robot, self.loops["main"].q, distance=distance))
+            return self.add_constraint(PointLock.on_link(self.robot, self.loops["main"].q,
+                                                         distance=distance, link=link))
 
-    def add_plane(self, distance: float, normal, barrier: bool = False, offset: float = 0.0) -> str:
-        """A plane (or barrier) through the link point ``distance`` m along the link axis.
+    def add_plane(self, distance: float | None, normal, barrier: bool = False,
+                  offset: float = 0.0, link: str | None = None, link_point=None) -> str:
+        """A plane (or barrier) through a point of ``link`` (default: the first
+        constrained link) as it is now: ``distance`` m along the link's axis on a
+        constrained link, else ``link_point`` (link coordinates, m; e.g. a corner of a
+        mobile base, kept off a wall by a barrier).
 
         ``normal`` is a direction in **world** coordinates (normalised here; zero is
         refused); a barrier's allowed side is the one it points to. A barrier may sit
         ``offset`` m below the point along the normal (the point must be on its positive
         side).
         """
-        distance = self._link_distance(distance, "plane distance")
+        what = "barrier" if barrier else "plane"
+        if link is None:
+            link = self._constrained_link(None, what)
+        if link not in self.plane_links:
+            raise ValueError(f"no link {link!r} to put a {what} on: one of {list(self.plane_links)}")
+        if link in self.robot.link_axes:
+            if link_point is not None:
+                raise ValueError(f"a {what} on {link} goes through a point on its axis: give "
+                                 "its distance, not a link point")
+            distance = self._link_distance(distance, "plane distance", link)
+            at = {"distance": distance}
+        else:
+            if link_point is None:
+                raise ValueError(f"{link} has no instrument axis: give the {what}'s point on "
+                                 "it in link coordinates (m)")
+            link_point = as_vector(link_point, 3, f"{what} link point")
+            if np.linalg.norm(link_point) > MAX_LINK_POINT:
+                raise ValueError(f"the {what}'s link point must be within {MAX_LINK_POINT:g} m "
+                                 f"of {link}'s origin")
+            at = {"link_point": link_point}
         offset = as_number(offset, "barrier offset")
         normal = as_vector(normal, 3, "plane normal")
         if np.linalg.norm(normal) < 1e-9:
@@ -474,12 +613,12 @@ class TeleopApp:
         normal = normal / np.linalg.norm(normal)
         with self._lock:
             q = self.loops["main"].q
-            point = self._link_placement(self.robot.constrained_link).act(
-                distance * np.asarray(self.robot.link_axis))
+            point = self._link_placement(link).act(
+                at["link_point"] if "link_point" in at
+                else at["distance"] * np.asarray(self.robot.link_axes[link]))
             cls = Barrier if barrier else Plane
-            constraint = cls.through_link_point(
-                self.robot, q, normal=normal, distance=distance,
-                plane_point=point - offset * normal)
+            constraint = cls.through_link_point(self.robot, q, normal=normal, link=link,
+                                                plane_point=point - offset * normal, **at)
             return self.add_constraint(constraint)
 
     def move_constraint(self, entry_id: str, position) -> None:
@@ -600,29 +739,33 @@ class TeleopApp:
                 raise
             self.loops.update(loops)
 
-    def home(self) -> None:
-        """Target and gizmo on the home EE pose. The constraints stay
-        (:meth:`clear_constraints` removes them), so the robots drive there through their
-        controllers, the constraints held; with no constraint placed they are also put
-        back at ``q_home`` at once (a reset)."""
+    def home(self, ee=None) -> None:
+        """Every target and gizmo (or only EE ``ee``'s) on its home EE pose. The
+        constraints stay (:meth:`clear_constraints` removes them), so the robots drive
+        there through their controllers, the constraints held; homing every EE with no
+        constraint placed also puts the robots back at ``q_home`` at once (a reset)."""
+        indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
         with self._lock:
-            if not self.entries:
+            if ee is None and not self.entries:
                 for loop in self.loops.values():
                     t = loop.t
                     loop.reset()
                     loop.t = t
-            home = frame_placement(self.robot.model, self.robot.q_home, self.robot.ee_frame_id,
-                                   self._view_data)
-            self._set_target(home)
-            self.gizmo = self.target.copy()
-            self._reanchor()
+            pin.framesForwardKinematics(self.robot.model, self._view_data, self.robot.q_home)
+            for index in indices:
+                hand = self.inputs[index]
+                self._set_target(self._view_data.oMf[self.robot.ee_frame_ids[index]].copy(), index)
+                hand.gizmo = hand.target.copy()
+                hand.reanchor()
 
     # -- scenes ----------------------------------------------------------------------------
 
     def scene(self) -> dict:
         """The scene as a JSON-ready dict (format in :mod:`web.scene`)."""
         with self._lock:
-            quaternion = pin.Quaternion(self.target.rotation)
+            targets = [_pose_to_dict(hand.target) for hand in self.inputs]
+            several = {} if len(targets) == 1 else {"targets": [
+                {"frame": hand.frame, **pose} for hand, pose in zip(self.inputs, targets)]}
             return {
                 "format": SCENE_FORMAT, "version": SCENE_VERSION,
                 "created": datetime.now().isoformat(timespec="seconds"),
@@ -632,8 +775,7 @@ class TeleopApp:
                 "motion_scale": self.motion_scale,
                 "ghost_offset": [float(x) for x in self.ghost_offset],
                 "q": {which: [float(x) for x in loop.q] for which, loop in self.loops.items()},
-                "target": {"position": [float(x) for x in self.target.translation],
-                           "wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]},
+                "target": targets[0], **several,
                 "constraints": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                  "constraint": e.constraint.to_dict()}
                                 for e in self.entries.values()],
@@ -654,7 +796,7 @@ class TeleopApp:
         target, controllers, gain, damping, rate, motion scale, ghost offset. All or
         nothing: a scene that cannot be applied raises ``ValueError`` and changes nothing.
         The scene must be for this robot (another robot needs ``teleop web --scene``)."""
-        scene = parse_scene(data, self.robot.model.nq)
+        scene = parse_scene(data, self.robot.model.nq, self.robot.ee_frames)
         if not same_robot(self.robot, scene.robot):
             raise ValueError(f"this scene is for robot {scene.robot.get('source')!r}, this UI "
                              f"runs {robot_source(self.robot)!r}: start "
@@ -701,8 +843,9 @@ class TeleopApp:
             self.ghost_offset = scene.ghost_offset.copy()
             self.motion_scale = scene.motion_scale
             self.clutch = False
-            self._set_target(self._pose(scene.target_position, scene.target_wxyz, "target"))
-            self.gizmo = self.target.copy()
+            for index, (position, wxyz) in enumerate(scene.targets):
+                self._set_target(self._pose(position, wxyz, "target"), index)
+                self.inputs[index].gizmo = self.inputs[index].target.copy()
             self._reanchor()
             self._next_history = t
 
@@ -720,7 +863,8 @@ class TeleopApp:
             self._record_start = self.now
             for entry in self.entries.values():
                 self.recorder.add(0.0, entry.id, entry.constraint)
-            self.recorder.target(0.0, self.target)
+            for index in range(len(self.inputs)):
+                self._record_target(0.0, index)
             return self.recorder.path
 
     def stop_recording(self) -> Path:
@@ -746,14 +890,14 @@ class TeleopApp:
             moving = [entry for entry in self.entries.values() if not entry.settled]
             if moving:
                 self._steer(moving, dt)
-            target, start = self.target, self.now
+            targets, start = [hand.target for hand in self.inputs], self.now
             if start >= self._next_history - 0.5 * dt:
-                solve_us = self._measured_step(target, moving, dt)
+                solve_us = self._measured_step(targets, moving, dt)
                 self._next_history = start + 1.0 / HISTORY_RATE
             else:
                 solve_us = 0.0
                 for loop in self.loops.values():
-                    solve_us += loop.control_step(target)
+                    solve_us += loop.control_step(targets)
                 for entry in moving:  # where the period took the geometry
                     advance(entry.constraint, dt)
             self.ticks += 1
@@ -774,9 +918,10 @@ class TeleopApp:
                 self.recorder.move(self.now - self._record_start, entry.id,
                                    constraint.position, constraint.velocity)
 
-    def _measured_step(self, target: pin.SE3, moving: list[ConstraintEntry], dt: float) -> float:
+    def _measured_step(self, targets: list[pin.SE3], moving: list[ConstraintEntry],
+                       dt: float) -> float:
         """A full tick with the measures, appended to the history."""
-        pending = {which: loop.advance(target) for which, loop in self.loops.items()}
+        pending = {which: loop.advance(targets) for which, loop in self.loops.items()}
         for entry in moving:
             advance(entry.constraint, dt)
         main_qd = self.loops["main"].last_qd
@@ -789,18 +934,22 @@ class TeleopApp:
 
     # -- what the view draws -----------------------------------------------------------
 
-    def limitation(self, which: str = "main") -> Limitation:
-        """What limits robot ``which`` now, in words (:func:`describe_limitation`)."""
+    def limitation(self, which: str = "main", ee=0) -> Limitation:
+        """What keeps EE ``ee`` of robot ``which`` from its target now, in words
+        (:func:`describe_limitation`)."""
+        ee = self.ee_index(ee)
         with self._lock:
             loop = self.loops[which]
-            ee = frame_placement(self.robot.model, loop.q, self.robot.ee_frame_id, self._view_data)
-            return self._limitation(which, ee)
+            placement = frame_placement(self.robot.model, loop.q, self.robot.ee_frame_ids[ee],
+                                        self._view_data)
+            return self._limitation(which, placement, ee)
 
-    def _limitation(self, which: str, ee: pin.SE3) -> Limitation:
+    def _limitation(self, which: str, placement: pin.SE3, ee: int) -> Limitation:
         loop = self.loops[which]
-        distance = float(np.linalg.norm(ee.translation - self.target.translation))
+        distance = float(np.linalg.norm(placement.translation
+                                        - self.inputs[ee].target.translation))
         return describe_limitation(loop.controller.info, self.last_records.get(which),
-                                   distance, self.joint_names, loop.refused)
+                                   distance, self.joint_names, loop.refused, ee)
 
     def active_barriers(self, which: str = "main") -> list[str]:
         """Ids of the barriers robot ``which``'s controller holds as equalities now."""
@@ -817,7 +966,7 @@ class TeleopApp:
         with self._lock:
             model = self.robot.model
             robots = {}
-            axis = np.asarray(self.robot.link_axis, dtype=float)
+            axes = self.robot.link_axes
             for which, loop in self.loops.items():
                 q = loop.q.copy()
                 pin.framesForwardKinematics(model, self._view_data, q)
@@ -826,24 +975,29 @@ class TeleopApp:
                 for entry in self.entries.values():
                     link = model.getFrameId(entry.constraint.link)
                     placement = placements[link]
+                    axis = axes.get(entry.constraint.link)
                     constraints[entry.id] = {
                         "geometry": entry.constraint.geometry(placement),
-                        "link_axis": (placement.rotation @ axis
-                                      if entry.constraint.link == self.robot.constrained_link
-                                      else None)}
-                ee = placements[self.robot.ee_frame_id].copy()
+                        "link": entry.constraint.link,
+                        "link_axis": None if axis is None else placement.rotation @ axis}
+                ees = [placements[frame].copy() for frame in self.robot.ee_frame_ids]
+                limitations = [self._limitation(which, ee, index) for index, ee in enumerate(ees)]
                 robots[which] = {
-                    "spec": self.specs[which], "q": q, "t": loop.t, "ee": ee,
+                    "spec": self.specs[which], "q": q, "t": loop.t,
+                    "ees": ees, "ee": ees[0],  # every EE, the first
                     "record": self.last_records.get(which),
                     "trace": self.traces[which].arrays() if history else None,
                     "info": loop.controller.info, "constraints": constraints,
-                    "limitation": self._limitation(which, ee),
+                    "limitations": limitations, "limitation": limitations[0],
                     "active_barriers": self.active_barriers(which),
                 }
             entries = [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),
                         **robots["main"]["constraints"][entry.id]}  # geometry, link_axis
                        for entry in self.entries.values()]
             return {"robots": robots, "constraints": entries,
+                    "ee_frames": self.robot.ee_frames,
+                    "targets": [hand.target.copy() for hand in self.inputs],
+                    "gizmos": [hand.gizmo.copy() for hand in self.inputs],
                     "target": self.target.copy(), "gizmo": self.gizmo.copy(),
                     "clutch": self.clutch, "motion_scale": self.motion_scale,
                     "ghost_offset": self.ghost_offset.copy(),

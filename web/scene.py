@@ -15,6 +15,13 @@ the control rate, the motion scale and the ghost's offset::
      "target": {"position": [x, y, z], "wxyz": [w, x, y, z]},
      "constraints": [{"id": "hole-1", "goal": [x, y, z], "constraint": {"kind": "hole", ...}}]}
 
+A robot with several end effectors (docs/design.md section 11) adds ``"targets"``, one
+``{"frame", "position", "wxyz"}`` per entry of ``robot.ee_frames`` in that order
+(``"target"`` is the first), and its robot entry names them all: ``"ee_frames"``,
+``"constrained_links"`` (each link with its axis), and, when they are not the defaults,
+``"root_joint"`` (``"planar"``: a mobile base) and ``"locked_joints"`` (each with the
+coordinates it is held at). A single-EE scene has none of these keys.
+
 :func:`parse_scene` checks a scene and turns it into a :class:`Scene`; anything wrong raises
 ``ValueError`` naming the field (the UI shows it as a notification, the CLI as one line).
 Applying a scene to a running app is :meth:`web.app.TeleopApp.apply_scene`.
@@ -49,11 +56,39 @@ def robot_to_dict(robot: Robot) -> dict:
     """Everything :func:`load_robot` needs to load ``robot`` again."""
     source = robot_source(robot)
     builtin = source in BUILTIN_ROBOTS
-    return {"source": source, "ee_frame": robot.ee_frame,
-            "constrained_link": robot.constrained_link,
-            "link_axis": [float(x) for x in robot.link_axis],
-            "package_dirs": None if builtin else list(robot.package_dirs),
-            "q_home": [float(x) for x in robot.q_home]}
+    description = {"source": source, "ee_frame": robot.ee_frame,
+                   "constrained_link": robot.constrained_link,
+                   "link_axis": [float(x) for x in robot.link_axis],
+                   "package_dirs": None if builtin else list(robot.package_dirs),
+                   "q_home": [float(x) for x in robot.q_home]}
+    if len(robot.ee_frames) > 1 or len(robot.constrained_links) > 1:
+        description["ee_frames"] = list(robot.ee_frames)
+        description["constrained_links"] = {link: [float(x) for x in axis]
+                                            for link, axis in robot.link_axes.items()}
+    if robot.root_joint != "fixed":
+        description["root_joint"] = robot.root_joint
+    if robot.locked_joints:
+        description["locked_joints"] = {name: list(values)
+                                        for name, values in robot.locked_joints.items()}
+    return description
+
+
+def _full_configuration(source: str, data: Mapping, locked: Mapping) -> list[float]:
+    """The URDF's configuration (locked joints included) of a scene's robot whose
+    ``q_home`` has the kept joints only: what ``load_robot(q_home=...)`` takes."""
+    model = load_robot(source, root_joint=data.get("root_joint"),
+                       package_dirs=data.get("package_dirs")).model
+    kept = iter(as_vector(data.get("q_home"), model.nq - sum(
+        model.nqs[model.getJointId(name)] for name in locked), "scene robot.q_home"))
+    q = []
+    for joint in range(1, model.njoints):
+        name = model.names[joint]
+        if name in locked:
+            values = as_vector(locked[name], model.nqs[joint], f"scene robot.locked_joints.{name}")
+            q += [float(x) for x in values]
+        else:
+            q += [float(next(kept)) for _ in range(model.nqs[joint])]
+    return q
 
 
 def robot_from_dict(data: Any) -> Robot:
@@ -61,22 +96,47 @@ def robot_from_dict(data: Any) -> Robot:
     if not isinstance(data, Mapping) or not isinstance(data.get("source"), str):
         raise ValueError("scene 'robot' must be an object with a 'source' (a built-in robot "
                          "name or a URDF path)")
-    return load_robot(data["source"], ee_frame=data.get("ee_frame"),
-                      constrained_link=data.get("constrained_link"),
-                      link_axis=data.get("link_axis"), package_dirs=data.get("package_dirs"),
-                      q_home=data.get("q_home"))
+    source = data["source"]
+    links = data.get("constrained_links")
+    if links is not None and not isinstance(links, Mapping):
+        raise ValueError("scene robot.constrained_links must map each link to its axis")
+    several_links = links is not None and len(links) > 1  # only a built-in robot's own
+    frames = {"ee_frames": data["ee_frames"]} if data.get("ee_frames") else \
+        {"ee_frame": data.get("ee_frame")}
+    locked = data.get("locked_joints") or {}
+    if not isinstance(locked, Mapping):
+        raise ValueError("scene robot.locked_joints must map each locked joint to its coordinates")
+    q_home = _full_configuration(source, data, locked) if locked else data.get("q_home")
+    robot = load_robot(source, **frames,
+                       constrained_link=None if several_links else data.get("constrained_link"),
+                       link_axis=None if several_links else data.get("link_axis"),
+                       package_dirs=data.get("package_dirs"), q_home=q_home,
+                       locked_joints=list(locked) or None, root_joint=data.get("root_joint"))
+    if not same_robot(robot, data):
+        raise ValueError(f"scene robot: {source!r} does not have the constrained links "
+                         f"{dict(links or {})}; it has {dict(robot_to_dict(robot).get('constrained_links', {}))}")
+    return robot
 
 
 def same_robot(robot: Robot, data: Mapping) -> bool:
-    """Whether the scene's robot description is ``robot`` (same source, frames and axis)."""
+    """Whether the scene's robot description is ``robot`` (same source, frames, links,
+    axes, root joint and locked joints)."""
     mine = robot_to_dict(robot)
     if data.get("source") != mine["source"]:
         return False
-    for key in ("ee_frame", "constrained_link"):
-        if data.get(key, mine[key]) != mine[key]:
+    for key in ("ee_frame", "constrained_link", "ee_frames", "root_joint"):
+        if data.get(key, mine.get(key)) != mine.get(key):
             return False
+    if set(data.get("locked_joints") or {}) != set(mine.get("locked_joints", {})):
+        return False
     axis = data.get("link_axis")
-    return axis is None or np.allclose(np.asarray(axis, dtype=float), robot.link_axis)
+    if axis is not None and not np.allclose(np.asarray(axis, dtype=float), robot.link_axis):
+        return False
+    links = data.get("constrained_links")
+    if links is None:
+        return True
+    return list(links) == list(robot.link_axes) and all(
+        np.allclose(np.asarray(links[link], dtype=float), robot.link_axes[link]) for link in links)
 
 
 @dataclass(frozen=True)
@@ -104,6 +164,8 @@ class Scene:
     target_position: np.ndarray
     target_wxyz: np.ndarray
     constraints: tuple[PlacedConstraint, ...]
+    #: every EE's target (position, unit wxyz), in ``robot.ee_frames`` order
+    targets: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
 
 
 def _spec(value: Any, name: str, optional: bool = False) -> str | None:
@@ -115,8 +177,38 @@ def _spec(value: Any, name: str, optional: bool = False) -> str | None:
     return value
 
 
-def parse_scene(data: Any, nq: int | None = None) -> Scene:
-    """Check a scene (a dict from JSON); ``nq`` checks the configurations' size."""
+def _target(data: Any, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """A scene target's position and unit quaternion (w, x, y, z)."""
+    if not isinstance(data, Mapping):
+        raise ValueError(f"scene {where} must be an object with 'position' and 'wxyz'")
+    wxyz = as_vector(data.get("wxyz"), 4, f"scene {where}.wxyz")
+    if np.linalg.norm(wxyz) < 1e-9:
+        raise ValueError(f"scene {where}.wxyz must be a non-zero quaternion")
+    return as_vector(data.get("position"), 3, f"scene {where}.position"), wxyz / np.linalg.norm(wxyz)
+
+
+def _targets(data: Mapping, ee_frames: tuple[str, ...] | None) -> tuple:
+    """Every EE's target: ``"targets"`` (one per frame of ``ee_frames``, in order), else
+    ``"target"`` alone (a single-EE robot)."""
+    entries = data.get("targets")
+    if entries is None:
+        if ee_frames is not None and len(ee_frames) > 1:
+            raise ValueError(f"scene 'targets' must give one target per end effector "
+                             f"{list(ee_frames)}")
+        return (_target(data.get("target"), "target"),)
+    if not isinstance(entries, list):
+        raise ValueError("scene 'targets' must be a list, one target per end effector")
+    frames = [entry.get("frame") if isinstance(entry, Mapping) else None for entry in entries]
+    if ee_frames is not None and frames != list(ee_frames):
+        raise ValueError(f"scene 'targets' must name the end effectors {list(ee_frames)} in "
+                         f"order, got {frames}")
+    return tuple(_target(entry, f"targets[{index}]") for index, entry in enumerate(entries))
+
+
+def parse_scene(data: Any, nq: int | None = None, ee_frames: tuple[str, ...] | None = None
+                ) -> Scene:
+    """Check a scene (a dict from JSON); ``nq`` checks the configurations' size,
+    ``ee_frames`` its targets (one per end effector)."""
     if not isinstance(data, Mapping):
         raise ValueError("a scene must be a JSON object")
     if data.get("format") != FORMAT:
@@ -140,12 +232,8 @@ def parse_scene(data: Any, nq: int | None = None) -> Scene:
     q = {"main": as_vector(q_data["main"], size, "scene q.main")}
     if ghost is not None:
         q["ghost"] = as_vector(q_data.get("ghost", q_data["main"]), size, "scene q.ghost")
-    target = data.get("target")
-    if not isinstance(target, Mapping):
-        raise ValueError("scene 'target' must be an object with 'position' and 'wxyz'")
-    wxyz = as_vector(target.get("wxyz"), 4, "scene target.wxyz")
-    if np.linalg.norm(wxyz) < 1e-9:
-        raise ValueError("scene target.wxyz must be a non-zero quaternion")
+    position, wxyz = _target(data.get("target"), "target")
+    targets = _targets(data, ee_frames)
     placed = []
     entries = data.get("constraints", [])
     if not isinstance(entries, list):
@@ -170,8 +258,8 @@ def parse_scene(data: Any, nq: int | None = None) -> Scene:
         rate=as_number(data.get("rate"), "scene rate", positive=True),
         motion_scale=as_number(data.get("motion_scale", 1.0), "scene motion_scale", positive=True),
         ghost_offset=as_vector(data.get("ghost_offset", [0.0, 0.0, 0.0]), 3, "scene ghost_offset"),
-        q=q, target_position=as_vector(target.get("position"), 3, "scene target.position"),
-        target_wxyz=wxyz / np.linalg.norm(wxyz), constraints=tuple(placed))
+        q=q, target_position=position, target_wxyz=wxyz, constraints=tuple(placed),
+        targets=targets)
 
 
 def read_scene_file(path: str | Path) -> dict:

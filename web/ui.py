@@ -1,24 +1,31 @@
 """The viser front end: a thin layer over :class:`web.app.TeleopApp`.
 
-* scene: the robot (:class:`web.robot_view.RobotView`: any URDF, meshes or fallbacks), an
-  optional ghost robot drawn beside it (``ghost_offset``; zero overlays them), the grid
-  at the robot's base; the input gizmo and, where it differs, the target itself; per robot
-  a line from the EE to its target coloured by the step status, and each constraint as its
+* scene: the robot (:class:`web.robot_view.RobotView`: any URDF, meshes or fallbacks; a
+  mobile base moves with its planar root joint), an optional ghost robot drawn beside it
+  (``ghost_offset``; zero overlays them), the grid at the robot's base; per end effector an
+  input gizmo and, where it differs, the target itself; per robot and EE a line from the
+  EE to its target coloured by the step status, and each constraint as its
   ``geometry()`` says (holes as rings on the link axis, planes as translucent squares,
-  barriers in red with an arrow to their allowed side, point locks as spheres at their
-  target), the constraint point as a collar around the link, the constraint error as a
-  short vector (drawn x100) when it is not zero;
-* panels: a status (rate, lateness, what limits each robot in words, active barriers),
-  then tabs: Teleop (controllers, side by side, clutch, motion scale, nudges, home),
-  Constraints, Settings (gain, damping, rate, scenes, recording), Plots (uPlot).
+  barriers in red with an arrow to their allowed side, walls on a mobile base as large as
+  the base, point locks as spheres at their target), the constraint point as a collar
+  around its link, the constraint error as a short vector (drawn x100) when it is not zero;
+* panels: a status (rate, lateness, what limits each robot's EEs in words, active
+  barriers), then tabs: Teleop (controllers, side by side, clutch, motion scale, the
+  active arm's nudges, home), Constraints (each on the arm or link chosen), Settings
+  (gain, damping, rate, scenes, recording), Plots (uPlot).
 
-Several browsers may connect: they share one target and one scene (the last drag wins).
+A robot with several end effectors (docs/design.md section 11) gets a gizmo on each: each
+drives its own EE's target; the clutch and the motion scale act on all of them; the nudge
+buttons and "Gizmo to target" act on the arm chosen as "active arm"; "Home" homes every EE.
+
+Several browsers may connect: they share the targets and one scene (the last drag wins).
 A browser that disconnects mid-drag leaves the target where it last was, so the robot
 converges there and holds still.
 """
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from dataclasses import dataclass
@@ -100,10 +107,58 @@ def _link_radius(robot: Robot, link: str | None) -> float:
     return max(radii, default=0.0)
 
 
-def _ring_radius(robot: Robot, minimum: float = 0.015) -> float:
-    """Radius of the hole rings: just outside the constrained link's cylinders (drawn inside them,
-    a ring would be hidden by the link it surrounds)."""
-    return max(minimum, 1.25 * _link_radius(robot, robot.constrained_link) + 0.005)
+def _ring_radius(robot: Robot, link: str | None = None, minimum: float = 0.015) -> float:
+    """Radius of the hole rings on ``link`` (default: the first constrained link): just
+    outside its cylinders (drawn inside them, a ring would be hidden by the link it
+    surrounds)."""
+    return max(minimum, 1.25 * _link_radius(robot, link or robot.constrained_link) + 0.005)
+
+
+def _collar_radius(robot: Robot, link: str | None) -> float:
+    """Radius of the collar drawn around ``link`` at a constrained point."""
+    return 1.15 * _link_radius(robot, link) + 0.004
+
+
+def _link_extent(robot: Robot, link: str) -> float:
+    """Half the largest horizontal size of ``link``'s visual geometry (0 when it has none)."""
+    if not robot.model.existFrame(link):
+        return 0.0
+    frame_id = robot.model.getFrameId(link)
+    extents = []
+    for geometry_object in robot.visual_model.geometryObjects:
+        if geometry_object.parentFrame != frame_id:
+            continue
+        try:
+            geometry_object.geometry.computeLocalAABB()
+            size = np.asarray(geometry_object.geometry.aabb_local.max_) \
+                - np.asarray(geometry_object.geometry.aabb_local.min_)
+        except (AttributeError, RuntimeError):
+            continue
+        extents.append(0.5 * float(np.max(size[:2])))
+    return max(extents, default=0.0)
+
+
+#: the square a plane is drawn as: this wide (m), or twice its link's size (a wall beside a
+#: mobile base spans the base)
+PLANE_SIZE = 0.3
+
+
+def _plane_size(robot: Robot, link: str) -> float:
+    return max(PLANE_SIZE, 4.0 * _link_extent(robot, link))
+
+
+def _short_names(frames: tuple[str, ...]) -> dict[str, str]:
+    """Each EE frame's name for the operator: without the prefix and suffix they share
+    (``arm_left_link_tool0``, ``arm_right_link_tool0`` -> ``left``, ``right``)."""
+    if len(frames) < 2:
+        return {frame: frame for frame in frames}
+    words = [frame.split("_") for frame in frames]
+    prefix = len(os.path.commonprefix(words))
+    suffix = len(os.path.commonprefix([w[::-1] for w in words]))
+    names = {frame: "_".join(w[prefix:len(w) - suffix]) for frame, w in zip(frames, words)}
+    if len(set(names.values())) < len(frames) or not all(names.values()):
+        return {frame: frame for frame in frames}
+    return names
 
 
 # -- plots ---------------------------------------------------------------------------------
@@ -188,12 +243,17 @@ class TeleopUI:
         self._syncing = False  # widgets being set from the app: their callbacks do nothing
         self._plots: dict[str, object] = {}
         self._plot_keys: dict[str, tuple] = {}
-        self._line_colors: dict[str, tuple] = {}  # the EE-target lines' current colours
+        self._line_colors: dict[tuple[str, int], tuple] = {}  # (robot, EE) -> its line colour
         self._plotted: set[str] = set()  # the robots the plots show
         self._ghost_seen: float | None = None  # when the view first saw the ghost
         self._saved_offset = app.ghost_offset.copy()
-        self.ring_radius = _ring_radius(app.robot)
-        self.collar_radius = 1.15 * _link_radius(app.robot, app.robot.constrained_link) + 0.004
+        robot = app.robot
+        self.ring_radius = _ring_radius(robot)  # the first constrained link's
+        self.ring_radii = {link: _ring_radius(robot, link) for link in robot.constrained_links}
+        self.collar_radius = _collar_radius(robot, robot.constrained_link)
+        self.collar_radii = {link: _collar_radius(robot, link) for link in app.plane_links}
+        self.plane_sizes = {link: _plane_size(robot, link) for link in app.plane_links}
+        self.ee_names = _short_names(robot.ee_frames)  # what the operator reads per EE
         self.floor = floor_height(app.robot)
         self.notes = list(notes)
         self._build_scene()
@@ -214,26 +274,30 @@ class TeleopUI:
         self.grid = scene.add_grid("/grid", width=4.0, height=4.0, cell_size=0.1,
                                    section_size=0.5, position=(0.0, 0.0, self.floor))
         self._views["main"] = RobotView(self.app.robot, self.server, "/main")
-        target = self.app.target
-        self.target_gizmo = scene.add_transform_controls(
-            "/gizmo", scale=0.12, position=target.translation, wxyz=_wxyz(target.rotation))
-
-        @self.target_gizmo.on_update
-        def _(event) -> None:
-            self._guarded(event, lambda: self.app.move_gizmo(self.target_gizmo.position,
-                                                             self.target_gizmo.wxyz))
-
-        self.target_marker = scene.add_frame("/target", axes_length=0.05, axes_radius=0.004,
-                                             origin_radius=0.008, visible=False)
-        self.reach_line = scene.add_line_segments("/reach", np.zeros((1, 2, 3)),
-                                                  STATUS_COLORS["ok"], thickness=4.0,
-                                                  thickness_units="screen")
-        # every new browser looks at the tool from the front (where the arm reaches), the
+        # per EE: its gizmo, its target (drawn where it is apart from the gizmo), the line
+        # from the EE to the target; the first EE's keep the single-EE names
+        self.target_gizmos, self.target_markers, self.reach_lines = [], [], []
+        for index, target in enumerate(self.app.targets):
+            suffix = "" if index == 0 else f"_{index}"
+            gizmo = scene.add_transform_controls(
+                f"/gizmo{suffix}", scale=0.12, position=target.translation,
+                wxyz=_wxyz(target.rotation))
+            gizmo.on_update(self._gizmo_moved(gizmo, index))
+            self.target_gizmos.append(gizmo)
+            self.target_markers.append(scene.add_frame(
+                f"/target{suffix}", axes_length=0.05, axes_radius=0.004, origin_radius=0.008,
+                visible=False))
+            self.reach_lines.append(scene.add_line_segments(
+                f"/reach{suffix}", np.zeros((1, 2, 3)), STATUS_COLORS["ok"], thickness=4.0,
+                thickness_units="screen"))
+        self.target_gizmo, self.target_marker = self.target_gizmos[0], self.target_markers[0]
+        self.reach_line = self.reach_lines[0]
+        # every new browser looks at the tools from the front (where the arms reach), the
         # ghost to the right of the main robot
         side = default_ghost_offset(self.app.robot)
         side /= np.linalg.norm(side)
         front = np.cross(side, [0.0, 0.0, 1.0])
-        look_at = self.app.target.translation.copy()
+        look_at = np.mean([target.translation for target in self.app.targets], axis=0)
         distance = 1.0
         if "ghost" in self.app.loops:
             look_at += 0.5 * self.app.ghost_offset
@@ -241,6 +305,12 @@ class TeleopUI:
         direction = 0.8 * front - 0.3 * side + np.array([0.0, 0.0, 0.5])
         self.server.initial_camera.position = look_at + distance * direction / np.linalg.norm(direction)
         self.server.initial_camera.look_at = look_at
+
+    def _gizmo_moved(self, gizmo, index: int):
+        """The callback of EE ``index``'s gizmo: the app moves that EE's target."""
+        def moved(event) -> None:
+            self._guarded(event, lambda: self.app.move_gizmo(gizmo.position, gizmo.wxyz, index))
+        return moved
 
     def _ghost_rgba(self) -> tuple[float, float, float, float]:
         overlay = float(np.linalg.norm(self.app.ghost_offset)) < 1e-9
@@ -252,14 +322,20 @@ class TeleopUI:
         rgba = self._ghost_rgba()
         self._views["ghost"] = RobotView(self.app.robot, self.server, "/ghost/robot", color=rgba)
         self._ghost_style = rgba
-        self.ghost_target = scene.add_frame("/ghost/target", axes_length=0.05,
-                                            axes_radius=0.004, origin_radius=0.008)
-        self.ghost_reach = scene.add_line_segments("/ghost/reach", np.zeros((1, 2, 3)),
-                                                   STATUS_COLORS["ok"], thickness=4.0,
-                                                   thickness_units="screen")
+        self.ghost_targets, self.ghost_reaches = [], []
+        for index in range(len(self.app.robot.ee_frames)):
+            suffix = "" if index == 0 else f"_{index}"
+            self.ghost_targets.append(scene.add_frame(
+                f"/ghost/target{suffix}", axes_length=0.05, axes_radius=0.004,
+                origin_radius=0.008))
+            self.ghost_reaches.append(scene.add_line_segments(
+                f"/ghost/reach{suffix}", np.zeros((1, 2, 3)), STATUS_COLORS["ok"],
+                thickness=4.0, thickness_units="screen"))
+        self.ghost_target, self.ghost_reach = self.ghost_targets[0], self.ghost_reaches[0]
 
     def _remove_ghost(self) -> None:
-        self._line_colors.pop("ghost", None)
+        for key in [key for key in self._line_colors if key[0] == "ghost"]:
+            self._line_colors.pop(key)
         if self._ghost_root is not None:
             self._ghost_root.remove()  # and every node under /ghost
         self._ghost_root = None
@@ -329,11 +405,16 @@ class TeleopUI:
         self.motion_scale = gui.add_number("motion scale", app.motion_scale, min=0.01,
                                            max=10.0, step=0.05,
                                            hint="target displacement per gizmo displacement")
+        names = tuple(self.ee_names.values())
+        self.active_arm = gui.add_dropdown(
+            "active arm", names, initial_value=names[0], visible=len(names) > 1,
+            hint="the end effector the nudges and 'Gizmo to target' act on (each gizmo "
+                 "drives its own)")
         self.nudge_step = gui.add_number("nudge step (m)", 0.005, min=0.0005, max=0.1,
                                          step=0.0005)
         self.nudge_buttons = gui.add_button_group("nudge target", tuple(NUDGES))
         self.gizmo_button = gui.add_button("Gizmo to target")
-        self.home_button = gui.add_button("Home", hint="the target to the home pose; the "
+        self.home_button = gui.add_button("Home", hint="every target to its home pose; the "
                                           "constraints stay")
 
         self.controller_menu.on_update(lambda event: self._guarded(
@@ -349,16 +430,31 @@ class TeleopUI:
         self.motion_scale.on_update(lambda event: self._guarded(
             event, lambda: app.set_motion_scale(self.motion_scale.value)))
         self.nudge_buttons.on_click(lambda event: self._guarded(event, lambda: app.nudge_target(
-            self.nudge_step.value * np.asarray(NUDGES[self.nudge_buttons.value], dtype=float))))
+            self.nudge_step.value * np.asarray(NUDGES[self.nudge_buttons.value], dtype=float),
+            self._active_ee())))
         self.gizmo_button.on_click(lambda event: self._guarded(event, self._gizmo_to_target))
         self.home_button.on_click(lambda event: self._guarded(event, self._home))
 
     def _build_constraint_panel(self) -> None:
         gui, app = self.server.gui, self.app
+        arms = app.robot.constrained_links or ("(none)",)
+        self.constraint_arm = gui.add_dropdown(
+            "arm", arms, initial_value=arms[0], visible=len(arms) > 1,
+            hint="the constrained link (one per arm) a hole or point lock goes on")
         self.hole_distance = gui.add_number("hole at (m)", 0.08, step=0.005,
                                             hint="distance along the constrained link")
         self.add_hole_button = gui.add_button("Add hole")
-        self.plane_distance = gui.add_number("plane point at (m)", 0.08, step=0.005)
+        links = app.plane_links or ("(none)",)
+        self.plane_link = gui.add_dropdown(
+            "plane on link", links, initial_value=links[0],
+            visible=len(app.robot.ee_frames) > 1 or app.robot.root_joint != "fixed",
+            hint="the link a plane or barrier holds: an arm's constrained link, or any "
+                 "other (a mobile base: a wall)")
+        self.plane_distance = gui.add_number("plane point at (m)", 0.08, step=0.005,
+                                             hint="distance along the constrained link")
+        self.plane_point = gui.add_vector3(
+            "plane point on link (m)", (0.0, 0.0, 0.0), step=0.05, visible=False,
+            hint="in the link's own coordinates (a link without an instrument axis)")
         self.plane_normal = gui.add_vector3("plane normal (world)", (0.0, 1.0, 0.0), step=0.1,
                                             hint="in world coordinates; a barrier keeps the "
                                                  "point on the side the normal points to")
@@ -373,17 +469,38 @@ class TeleopUI:
         self.clear_button = gui.add_button("Clear constraints")
 
         self.add_hole_button.on_click(lambda event: self._guarded(
-            event, lambda: app.add_hole(self.hole_distance.value)))
+            event, lambda: app.add_hole(self.hole_distance.value, self._arm_link())))
+        self.plane_link.on_update(lambda event: self._plane_link_changed())
         self.add_plane_button.on_click(lambda event: self._guarded(
-            event, lambda: app.add_plane(self.plane_distance.value, self.plane_normal.value)))
+            event, lambda: self._add_plane(barrier=False)))
         self.add_barrier_button.on_click(lambda event: self._guarded(
-            event, lambda: app.add_plane(self.plane_distance.value, self.plane_normal.value,
-                                         barrier=True, offset=self.barrier_offset.value)))
+            event, lambda: self._add_plane(barrier=True)))
         self.add_lock_button.on_click(lambda event: self._guarded(
-            event, lambda: app.add_point_lock(self.lock_distance.value)))
+            event, lambda: app.add_point_lock(self.lock_distance.value, self._arm_link())))
         self.remove_button.on_click(lambda event: self._guarded(
             event, lambda: app.remove_constraint(self.constraint_menu.value)))
         self.clear_button.on_click(lambda event: self._guarded(event, app.clear_constraints))
+
+    def _arm_link(self) -> str | None:
+        """The constrained link chosen for a hole or point lock (None: the robot has none)."""
+        links = self.app.robot.constrained_links
+        return self.constraint_arm.value if self.constraint_arm.value in links else None
+
+    def _plane_link_changed(self) -> None:
+        """A link with an instrument axis takes a distance along it, any other a point."""
+        on_axis = self.plane_link.value in self.app.robot.link_axes
+        self.plane_distance.visible = on_axis
+        self.plane_point.visible = not on_axis
+
+    def _add_plane(self, barrier: bool) -> str:
+        link = self.plane_link.value if self.plane_link.value in self.app.plane_links else None
+        if link is None or link in self.app.robot.link_axes:
+            return self.app.add_plane(self.plane_distance.value, self.plane_normal.value,
+                                      barrier=barrier, offset=self.barrier_offset.value,
+                                      link=link)
+        return self.app.add_plane(None, self.plane_normal.value, barrier=barrier,
+                                  offset=self.barrier_offset.value, link=link,
+                                  link_point=self.plane_point.value)
 
     def _build_settings_panel(self) -> None:
         gui, app = self.server.gui, self.app
@@ -409,16 +526,26 @@ class TeleopUI:
 
     # -- actions that also update widgets ---------------------------------------------------
 
-    def _move_gizmo_handle(self, pose: pin.SE3) -> None:
-        self.target_gizmo.position = pose.translation
-        self.target_gizmo.wxyz = _wxyz(pose.rotation)
+    def _active_ee(self) -> int:
+        """The index (in ``robot.ee_frames``) of the arm chosen as active."""
+        return list(self.ee_names.values()).index(self.active_arm.value)
+
+    def _move_gizmo_handle(self, pose: pin.SE3, ee: int = 0) -> None:
+        self.target_gizmos[ee].position = pose.translation
+        self.target_gizmos[ee].wxyz = _wxyz(pose.rotation)
+
+    def _move_gizmo_handles(self) -> None:
+        """Every gizmo handle where the app's gizmo is."""
+        for index, hand in enumerate(self.app.inputs):
+            self._move_gizmo_handle(hand.gizmo, index)
 
     def _home(self) -> None:
         self.app.home()
-        self._move_gizmo_handle(self.app.gizmo)
+        self._move_gizmo_handles()
 
     def _gizmo_to_target(self) -> None:
-        self._move_gizmo_handle(self.app.gizmo_to_target())
+        ee = self._active_ee()
+        self._move_gizmo_handle(self.app.gizmo_to_target(ee), ee)
 
     def _offset_changed(self) -> None:
         self.app.set_ghost_offset(np.asarray(self.ghost_offset.value, dtype=float))
@@ -439,7 +566,7 @@ class TeleopUI:
     def _load_scene(self) -> None:
         self.app.load_scene(self.scene_path.value)
         self._sync(self._widgets_from_app)
-        self._move_gizmo_handle(self.app.gizmo)
+        self._move_gizmo_handles()
         self.scene_status.content = f"loaded `{self.scene_path.value}`"
 
     def _sync(self, action) -> None:
@@ -541,26 +668,30 @@ class TeleopUI:
         return ("ghost" in self._plotted or now - self._ghost_seen > GHOST_PLOTS_FIRST)
 
     def _draw_target(self, snapshot: dict) -> None:
-        target, gizmo = snapshot["target"], snapshot["gizmo"]
-        apart = (np.linalg.norm(target.translation - gizmo.translation) > 1e-3
-                 or np.linalg.norm(pin.log3(gizmo.rotation.T @ target.rotation)) > 1e-2)
-        self.target_marker.visible = bool(apart or snapshot["clutch"])
-        self.target_marker.position = target.translation
-        self.target_marker.wxyz = _wxyz(target.rotation)
-        lines = {"main": self.reach_line}
-        if "ghost" in self._views:
-            self.ghost_target.position = target.translation
-            self.ghost_target.wxyz = _wxyz(target.rotation)
-            lines["ghost"] = self.ghost_reach
-        for which, line in lines.items():
-            robot = snapshot["robots"][which]
-            limitation = robot["limitation"]
-            line.points = np.array([[robot["ee"].translation, target.translation]])
-            color = STATUS_COLORS.get(limitation.status, STATUS_COLORS["failed"])
-            if self._line_colors.get(which) != color:
-                line.colors = np.tile(np.array(color, dtype=np.uint8), (1, 2, 1))
-                self._line_colors[which] = color
-            line.visible = limitation.distance > 2e-4
+        """Per EE: its target (where apart from its gizmo, or clutched) and, per robot, the
+        line from the EE to it in the step status's colour."""
+        ghost = "ghost" in self._views
+        for index, (target, gizmo) in enumerate(zip(snapshot["targets"], snapshot["gizmos"])):
+            apart = (np.linalg.norm(target.translation - gizmo.translation) > 1e-3
+                     or np.linalg.norm(pin.log3(gizmo.rotation.T @ target.rotation)) > 1e-2)
+            marker = self.target_markers[index]
+            marker.visible = bool(apart or snapshot["clutch"])
+            marker.position = target.translation
+            marker.wxyz = _wxyz(target.rotation)
+            lines = {"main": self.reach_lines[index]}
+            if ghost:
+                self.ghost_targets[index].position = target.translation
+                self.ghost_targets[index].wxyz = _wxyz(target.rotation)
+                lines["ghost"] = self.ghost_reaches[index]
+            for which, line in lines.items():
+                robot = snapshot["robots"][which]
+                limitation = robot["limitations"][index]
+                line.points = np.array([[robot["ees"][index].translation, target.translation]])
+                color = STATUS_COLORS.get(limitation.status, STATUS_COLORS["failed"])
+                if self._line_colors.get((which, index)) != color:
+                    line.colors = np.tile(np.array(color, dtype=np.uint8), (1, 2, 1))
+                    self._line_colors[(which, index)] = color
+                line.visible = limitation.distance > 2e-4
 
     def _draw_constraints(self, entries: list[dict], ghost: dict | None = None) -> None:
         """The main robot's constraint markers (``snapshot["constraints"]``) and, given the
@@ -586,37 +717,42 @@ class TeleopUI:
         if tuple(self.constraint_menu.options) != options:
             self.constraint_menu.options = options
 
-    def _add_shape(self, name: str, geometry: ConstraintGeometry):
-        """The scene node of a constraint's geometry, drawn as its ``shape`` says."""
+    def _add_shape(self, name: str, geometry: ConstraintGeometry, link: str):
+        """The scene node of a constraint's geometry, drawn as its ``shape`` says (a ring
+        around ``link``, a plane as wide as it)."""
         scene = self.server.scene
         if geometry.shape == "ring":
-            ring = _ring(geometry.anchor, geometry.axis, self.ring_radius)
+            ring = _ring(geometry.anchor, geometry.axis, self._ring_radius_of(link))
             return scene.add_line_segments(f"{name}/ring", ring, geometry.color, thickness=0.004)
         if geometry.shape == "plane":
-            return scene.add_box(f"{name}/plane", geometry.color, (0.3, 0.3, 0.001),
+            size = self.plane_sizes.get(link, PLANE_SIZE)
+            return scene.add_box(f"{name}/plane", geometry.color, (size, size, 0.001),
                                  opacity=0.3, side="double", wxyz=_wxyz_from_z(geometry.axis),
                                  position=geometry.anchor)
         return scene.add_icosphere(f"{name}/anchor", 0.012, geometry.color, opacity=0.5,
                                    position=geometry.anchor)
 
-    def _update_shape(self, handle, geometry: ConstraintGeometry) -> None:
+    def _ring_radius_of(self, link: str) -> float:
+        return self.ring_radii.get(link, self.ring_radius)
+
+    def _update_shape(self, handle, geometry: ConstraintGeometry, link: str) -> None:
         if geometry.shape == "ring":  # around the link axis, which turns with the link
-            handle.points = _ring(geometry.anchor, geometry.axis, self.ring_radius)
+            handle.points = _ring(geometry.anchor, geometry.axis, self._ring_radius_of(link))
         else:
             handle.position = geometry.anchor
 
     def _point_marker(self, drawing: dict) -> np.ndarray | None:
         """The collar around the link at the constrained point (None: draw a sphere)."""
-        axis = drawing["link_axis"]
-        if axis is None or self.collar_radius <= 0.004:
+        axis, radius = drawing["link_axis"], self.collar_radii.get(drawing["link"], 0.0)
+        if axis is None or radius <= 0.004:
             return None
-        return _ring(drawing["geometry"].point, axis, self.collar_radius, n=24)
+        return _ring(drawing["geometry"].point, axis, radius, n=24)
 
     def _create_markers(self, name: str, entry_id: str, drawing: dict, goal: np.ndarray,
                         gizmo: bool) -> dict:
         scene = self.server.scene
         geometry: ConstraintGeometry = drawing["geometry"]
-        markers = {"shape": self._add_shape(name, geometry)}
+        markers = {"shape": self._add_shape(name, geometry, drawing["link"])}
         collar = self._point_marker(drawing)
         if collar is not None:  # outside the link cylinder: visible, unlike a point inside
             markers["point"] = scene.add_line_segments(f"{name}/point", collar, (20, 20, 20),
@@ -643,7 +779,7 @@ class TeleopUI:
 
     def _update_markers(self, markers: dict, drawing: dict) -> None:
         geometry: ConstraintGeometry = drawing["geometry"]
-        self._update_shape(markers["shape"], geometry)
+        self._update_shape(markers["shape"], geometry, drawing["link"])
         collar = self._point_marker(drawing)
         if collar is not None:
             markers["point"].points = collar
@@ -666,19 +802,29 @@ class TeleopUI:
         lines = [control]
         if self.control.error:
             lines.append(f"**control error** {self.control.error}")
+        names = [self.ee_names[frame] for frame in snapshot["ee_frames"]]
         for which, robot in snapshot["robots"].items():
             record, limitation = robot["record"], robot["limitation"]
-            words = (f"**{which}** `{robot['spec']}` **{limitation.status}**: {limitation.words}")
-            if record is not None:
-                words += (f" (constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
-                          f"EE {1e3 * limitation.distance:.2f} mm from the target, "
-                          f"step {record.step_time_us:.0f} us)")
+            if len(names) == 1:
+                words = f"**{which}** `{robot['spec']}` **{limitation.status}**: {limitation.words}"
+                if record is not None:
+                    words += (f" (constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
+                              f"EE {1e3 * limitation.distance:.2f} mm from the target, "
+                              f"step {record.step_time_us:.0f} us)")
+            else:  # one status per robot, what keeps each EE from its target
+                words = f"**{which}** `{robot['spec']}` **{limitation.status}**: " + "; ".join(
+                    f"*{name}* {each.words} ({1e3 * each.distance:.2f} mm from its target)"
+                    for name, each in zip(names, robot["limitations"]))
+                if record is not None:
+                    words += (f" (constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
+                              f"step {record.step_time_us:.0f} us)")
             if robot["active_barriers"]:
                 words += f"; active barriers: {', '.join(robot['active_barriers'])}"
             lines.append(words)
         console = [f"motion scale {snapshot['motion_scale']:g}"]
         if snapshot["clutch"]:
-            console.insert(0, "**clutch engaged**: the gizmo moves alone")
+            console.insert(0, "**clutch engaged**: the gizmo moves alone" if len(names) == 1
+                           else "**clutch engaged**: the gizmos move alone")
         lines.append(", ".join(console))
         self.status.content = "  \n".join(lines)
         label = "Release clutch" if snapshot["clutch"] else "Clutch"
