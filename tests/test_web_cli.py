@@ -69,8 +69,26 @@ def test_a_scene_opens_with_its_robot(sda10f, tmp_path):
     assert "sda10f on http://" in out and "(controller cjm, ghost qp:daqp)" in out
 
 
+@pytest.mark.parametrize("robot", ["sda10f_dual", "sda10f_dual_mobile"])
+def test_the_two_arm_robots_start(robot):
+    out, err, code = serve("--robot", robot)
+    assert code == 0, err
+    assert f"{robot} on http://" in out and err == "", err
+
+
+def test_locked_joints_are_frozen_out_of_the_robot(tmp_path):
+    args = web_cli.build_parser().parse_args(["--robot", "sda10f_dual",
+                                              "--locked-joints", "torso_joint_b1"])
+    robot, scene = web_cli._load(args)
+    assert robot.nv == 14 and dict(robot.locked_joints) == {"torso_joint_b1": (0.0,)}
+    app = TeleopApp(robot, record_dir=tmp_path)  # and a scene of it names the locked joint
+    assert app.scene()["robot"]["locked_joints"] == {"torso_joint_b1": [0.0]}
+
+
 @pytest.mark.parametrize("args, message", [
     (["--robot", "/nonexistent.urdf"], "no URDF file at '/nonexistent.urdf'"),
+    (["--robot", "sda10f_dual", "--locked-joints", "elbow"],
+     "locked_joints: unknown joint 'elbow'"),
     (["--scene", "/nonexistent.json"], "no scene file at '/nonexistent.json'"),
     (["--scene", "x.json", "--robot", "ur5_instrument", "--q-home=0"],
      "--scene sets the robot: drop --robot, --q-home"),

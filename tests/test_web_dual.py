@@ -280,3 +280,99 @@ def test_the_mobile_base_drives_and_a_wall_on_it_holds(mobile, tmp_path):
           f"worst penetration {penetration:.2e} m")
     assert q[0] > 0.01, "the base did not drive"
     assert penetration <= 1e-6 and edge <= 0.45 + 1e-6
+
+
+# -- the viser view (a real viser server, no browser: tests/test_browser_dual.py has one) ----
+
+
+@pytest.fixture()
+def server():
+    import viser
+    from browser_helpers import free_port
+
+    server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    yield server
+    server.stop()
+
+
+def make_ui(server, app):
+    from web.app import ControlThread
+    from web.ui import TeleopUI
+
+    return TeleopUI(server, app, ControlThread(app))
+
+
+def test_a_gizmo_line_and_target_per_ee(server, app):
+    from web.ui import STATUS_COLORS
+
+    ui = make_ui(server, app)
+    assert len(ui.target_gizmos) == 2 and ui.ee_names == {"arm_left_link_tool0": "left",
+                                                          "arm_right_link_tool0": "right"}
+    assert ui.active_arm.visible and ui.active_arm.options == ("left", "right")
+    for gizmo, target in zip(ui.target_gizmos, app.targets):
+        np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
+    right = ui.target_gizmos[1]  # what the right gizmo's drag does: the right target only
+    right.position = np.asarray(right.position) + [0.0, -0.01, 0.0]
+    ui._gizmo_moved(right, 1)(None)
+    np.testing.assert_allclose(app.inputs[1].target.translation, right.position, atol=1e-12)
+    assert app.inputs[0].target.isApprox(app.inputs[0].gizmo, 1e-15)
+    for _ in range(20):
+        app.step()
+    snapshot = app.snapshot()
+    ui._draw(snapshot)
+    assert not ui.reach_lines[0].visible and ui.reach_lines[1].visible
+    np.testing.assert_allclose(ui.reach_lines[1].points[0],
+                               [ee_positions(app)[1], app.inputs[1].target.translation], atol=1e-9)
+    np.testing.assert_allclose(ui.reach_lines[1].colors[0, 0], STATUS_COLORS["ok"])
+    assert "*left* on target" in ui.status.content and "*right* moving to the target" in ui.status.content
+    ui.active_arm.value = "right"  # the nudges act on the active arm
+    ui.nudge_buttons.value = "+z"
+    before = app.targets
+    app.nudge_target(0.005 * np.array([0.0, 0.0, 1.0]), ui._active_ee())
+    np.testing.assert_allclose(app.inputs[1].target.translation - before[1].translation,
+                               [0, 0, 0.005], atol=1e-15)
+    ui._home()
+    for gizmo, target in zip(ui.target_gizmos, app.targets):
+        np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
+
+
+def test_each_arms_hole_is_drawn_around_its_own_link(server, app, dual):
+    ui = make_ui(server, app)
+    ids = [app.add_hole(0.08, link) for link in dual.constrained_links]
+    snapshot = app.snapshot()
+    ui._draw(snapshot)
+    for hole_id, link in zip(ids, dual.constrained_links):
+        ring = ui._markers[hole_id]["shape"].points
+        centre = app.entries[hole_id].position
+        radii = np.linalg.norm(ring.reshape(-1, 3) - centre, axis=1)
+        np.testing.assert_allclose(radii, ui.ring_radii[link], atol=1e-6)  # float32
+        collar = ui._markers[hole_id]["point"].points.reshape(-1, 3)
+        assert np.linalg.norm(collar.mean(axis=0) - centre) < 1e-3  # around the link at the hole
+
+
+def test_the_mobile_base_is_drawn_where_the_planar_joint_puts_it_and_a_wall_spans_it(
+        server, mobile, tmp_path):
+    app = TeleopApp(mobile, record_dir=tmp_path)
+    ui = make_ui(server, app)
+    assert ui.floor == pytest.approx(0.0)  # the base's box stands on the floor
+    q = app.loops["main"].q.copy()
+    q[:4] = [0.3, -0.2, np.cos(0.5), np.sin(0.5)]  # x, y, heading 0.5 rad
+    app.loops["main"].q = q
+    ui._draw(app.snapshot())
+    view = ui._views["main"]
+    geometry = pin.GeometryData(mobile.visual_model)
+    pin.updateGeometryPlacements(mobile.model, mobile.model.createData(), mobile.visual_model,
+                                 geometry, q)
+    for index, geometry_object in enumerate(mobile.visual_model.geometryObjects):
+        if geometry_object.parentFrame != mobile.model.getFrameId("mobile_base"):
+            continue
+        handle = view.frames[f"/main/visual/{geometry_object.name}"]
+        np.testing.assert_allclose(handle.position, geometry.oMg[index].translation, atol=1e-6)
+        np.testing.assert_allclose(np.abs(pin.Quaternion(geometry.oMg[index].rotation).coeffs()
+                                          [[3, 0, 1, 2]] @ handle.wxyz), 1.0, atol=1e-6)
+    wall_id = app.add_plane(None, [-1.0, 0.0, 0.0], barrier=True, offset=0.05,
+                            link="mobile_base", link_point=[0.4, 0.0, 0.15])
+    ui._draw(app.snapshot())
+    plane = ui._markers[wall_id]["shape"]
+    assert plane.dimensions[0] == pytest.approx(1.6)  # twice the base's 0.8 m length
+    np.testing.assert_allclose(plane.position, app.entries[wall_id].position, atol=1e-9)

@@ -49,6 +49,9 @@ def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
     robot.add_argument("--link-axis", nargs=3, type=float, metavar=("X", "Y", "Z"),
                        help="long direction of the constrained link in its own coordinates "
                             "(default: the built-in robot's, else 0 0 1)")
+    robot.add_argument("--locked-joints", type=csv_list, metavar="JOINT[,JOINT...]",
+                       help="URDF joints to freeze at their --q-home values (grippers, a "
+                            "torso): no controller sees or moves them (default: none)")
     robot.add_argument("--package-dirs", action="append", type=csv_list, metavar="DIR[,DIR...]",
                        help="where package:// meshes are looked up; repeatable (default: the "
                             "URDF's folder and its ancestors)")
@@ -76,7 +79,8 @@ def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
     return parser
 
 
-ROBOT_OPTIONS = ("robot", "ee_frame", "constrained_link", "link_axis", "package_dirs", "q_home")
+ROBOT_OPTIONS = ("robot", "ee_frame", "constrained_link", "link_axis", "package_dirs", "q_home",
+                 "locked_joints")
 
 
 def _load_robot(args: argparse.Namespace):
@@ -87,7 +91,8 @@ def _load_robot(args: argparse.Namespace):
         package_dirs = [directory for group in args.package_dirs for directory in group]
     return load_robot(args.robot or "sda10f", ee_frame=args.ee_frame,
                       constrained_link=args.constrained_link, link_axis=args.link_axis,
-                      package_dirs=package_dirs, q_home=args.q_home)
+                      package_dirs=package_dirs, q_home=args.q_home,
+                      locked_joints=args.locked_joints)
 
 
 def _load(args: argparse.Namespace):
