@@ -97,13 +97,69 @@ SITE_PREFIX = "pin:"
 
 
 @dataclass(frozen=True)
+class PlanarBase:
+    """Pinocchio's planar root joint as MuJoCo's slide x, slide y and hinge z on the root body.
+
+    Pinocchio's configuration is ``(x, y, cos th, sin th)`` and its velocity
+    ``(v_x, v_y, w)`` is in the *base* frame (``LOCAL``); MuJoCo's slides move along the
+    world's axes, so its configuration is ``(x, y, th)`` and its velocity
+    ``(x', y', th') = P(th) (v_x, v_y, w)`` with ``P(th) = diag(R(th), 1)``, ``R(th)`` the
+    2D rotation (docs/design.md section 11). ``P`` is orthogonal: a matrix ``M`` acting on
+    Pinocchio's base velocity acts on MuJoCo's as ``M P(th)^T``.
+
+    Attributes: the first configuration and velocity index of the base in each model.
+    """
+
+    pin_q: int
+    pin_v: int
+    mj_q: int
+    mj_v: int
+
+    def heading(self, q_mj: np.ndarray) -> float:
+        """The base's heading ``th`` (rad) in a MuJoCo ``qpos``."""
+        return float(q_mj[self.mj_q + 2])
+
+    def rotation(self, q_mj: np.ndarray) -> np.ndarray:
+        """``P(th)`` (3 x 3): Pinocchio's base velocity to MuJoCo's."""
+        heading = self.heading(q_mj)
+        cos, sin = math.cos(heading), math.sin(heading)
+        return np.array([[cos, -sin, 0.0], [sin, cos, 0.0], [0.0, 0.0, 1.0]])
+
+    def q_to_mujoco(self, q_pin: np.ndarray, out: np.ndarray) -> None:
+        """``(x, y, cos, sin)`` into ``(x, y, atan2(sin, cos))``."""
+        x, y, cos, sin = q_pin[self.pin_q:self.pin_q + 4]
+        out[self.mj_q:self.mj_q + 3] = x, y, math.atan2(sin, cos)
+
+    def q_to_pinocchio(self, q_mj: np.ndarray, out: np.ndarray) -> None:
+        """``(x, y, th)`` into ``(x, y, cos th, sin th)``."""
+        x, y, heading = q_mj[self.mj_q:self.mj_q + 3]
+        out[self.pin_q:self.pin_q + 4] = x, y, math.cos(heading), math.sin(heading)
+
+    def v_to_pinocchio(self, v_mj: np.ndarray, q_mj: np.ndarray, out: np.ndarray) -> None:
+        """Base-frame ``(v_x, v_y, w) = P^T (x', y', th')``."""
+        out[self.pin_v:self.pin_v + 3] = self.rotation(q_mj).T @ v_mj[self.mj_v:self.mj_v + 3]
+
+    def v_to_mujoco(self, v_pin: np.ndarray, q_mj: np.ndarray, out: np.ndarray) -> None:
+        """World-frame ``(x', y', th') = P (v_x, v_y, w)``."""
+        out[self.mj_v:self.mj_v + 3] = self.rotation(q_mj) @ v_pin[self.pin_v:self.pin_v + 3]
+
+    def columns_to_mujoco(self, matrix_pin: np.ndarray, q_mj: np.ndarray,
+                          out: np.ndarray) -> None:
+        """The base's columns of ``matrix_pin`` times ``P^T``, into MuJoCo's base columns."""
+        out[:, self.mj_v:self.mj_v + 3] = (
+            matrix_pin[:, self.pin_v:self.pin_v + 3] @ self.rotation(q_mj).T)
+
+
+@dataclass(frozen=True)
 class JointMap:
-    """Index maps between Pinocchio and MuJoCo coordinates, matched by joint name.
+    """Maps between Pinocchio and MuJoCo coordinates, joints matched by name.
 
     For every 1-dof joint ``k`` (revolute or prismatic): ``q_mj[mj_q[k]] = q_pin[pin_q[k]]``
-    and ``v_mj[mj_v[k]] = v_pin[pin_v[k]]``. Built-in robots have 8 revolute joints in
-    the same order in both models (``identity``, the maps then only copy), but nothing
-    here assumes it.
+    and ``v_mj[mj_v[k]] = v_pin[pin_v[k]]``. A planar root joint, if any, is ``base``
+    (:class:`PlanarBase`): its velocity map turns with the heading, so the velocity and
+    column maps take the MuJoCo configuration ``q_mj`` they apply at. Built-in fixed-base
+    robots have 8 revolute joints in the same order in both models (``identity``, the
+    maps then only copy), but nothing here assumes it.
     """
 
     names: tuple[str, ...]
@@ -112,38 +168,59 @@ class JointMap:
     mj_q: np.ndarray
     mj_v: np.ndarray
     identity: bool
+    base: PlanarBase | None = None
 
     def q_to_mujoco(self, q_pin: np.ndarray, out: np.ndarray) -> np.ndarray:
         """MuJoCo ``qpos`` from a Pinocchio configuration, written into ``out``."""
         if self.identity:
             out[:] = q_pin
-        else:
-            out[self.mj_q] = q_pin[self.pin_q]
+            return out
+        out[self.mj_q] = q_pin[self.pin_q]
+        if self.base is not None:
+            self.base.q_to_mujoco(q_pin, out)
         return out
 
     def q_to_pinocchio(self, q_mj: np.ndarray, out: np.ndarray) -> np.ndarray:
         """Pinocchio configuration from a MuJoCo ``qpos``, written into ``out``."""
         if self.identity:
             out[:] = q_mj
-        else:
-            out[self.pin_q] = q_mj[self.mj_q]
+            return out
+        out[self.pin_q] = q_mj[self.mj_q]
+        if self.base is not None:
+            self.base.q_to_pinocchio(q_mj, out)
         return out
 
-    def v_to_pinocchio(self, v_mj: np.ndarray) -> np.ndarray:
-        """Pinocchio velocity from a MuJoCo one (``v_mj`` itself when ``identity``)."""
+    def v_to_pinocchio(self, v_mj: np.ndarray, q_mj: np.ndarray) -> np.ndarray:
+        """Pinocchio velocity from a MuJoCo one at ``q_mj`` (``v_mj`` itself when
+        ``identity``)."""
         if self.identity:
             return v_mj
-        out = np.empty(len(self.pin_v))
+        out = np.empty(len(v_mj))  # nv is the same in both models
         out[self.pin_v] = v_mj[self.mj_v]
+        if self.base is not None:
+            self.base.v_to_pinocchio(v_mj, q_mj, out)
         return out
 
-    def columns_to_mujoco(self, matrix_pin: np.ndarray) -> np.ndarray:
-        """A matrix acting on Pinocchio velocities, re-ordered to act on MuJoCo ones
-        (``matrix_pin`` itself when ``identity``)."""
+    def v_to_mujoco(self, v_pin: np.ndarray, q_mj: np.ndarray) -> np.ndarray:
+        """MuJoCo velocity from a Pinocchio one at ``q_mj`` (``v_pin`` itself when
+        ``identity``)."""
+        if self.identity:
+            return v_pin
+        out = np.empty(len(v_pin))
+        out[self.mj_v] = v_pin[self.pin_v]
+        if self.base is not None:
+            self.base.v_to_mujoco(v_pin, q_mj, out)
+        return out
+
+    def columns_to_mujoco(self, matrix_pin: np.ndarray, q_mj: np.ndarray) -> np.ndarray:
+        """A matrix acting on Pinocchio velocities, made to act on MuJoCo ones at ``q_mj``:
+        ``M_mj v_mj = M_pin v_pin`` (``matrix_pin`` itself when ``identity``)."""
         if self.identity:
             return matrix_pin
         out = np.empty_like(matrix_pin)
         out[:, self.mj_v] = matrix_pin[:, self.pin_v]
+        if self.base is not None:
+            self.base.columns_to_mujoco(matrix_pin, q_mj, out)
         return out
 
 
@@ -217,6 +294,14 @@ def _fix_joint(joint: ET.Element, position: Sequence[float]) -> None:
         joint.remove(child)
 
 
+#: Pinocchio's planar joint (``JointModelPlanar``): the one multi-dof joint supported, as
+#: the root joint of a mobile base.
+_PLANAR = "JointModelPlanar"
+
+#: Names given to the MuJoCo joints of a planar root joint: suffixes to its Pinocchio name.
+PLANAR_SUFFIXES = (":x", ":y", ":heading")
+
+
 def build_mujoco_model(
     model: pin.Model, urdf_text: str, frames: Iterable[str],
     locked_joints: Mapping[str, Sequence[float]] | None = None,
@@ -224,17 +309,24 @@ def build_mujoco_model(
     """Compile a MuJoCo model of the URDF with a site at each Pinocchio frame in ``frames``.
 
     MuJoCo merges the bodies joined by fixed joints (``fusestatic``) and drops frames
-    that carry no body, so the end effector and the constraint links are added back as
+    that carry no body, so the end effectors and the constraint links are added back as
     sites *before* compiling. A Pinocchio frame's ``placement`` is relative to its parent
     joint frame, which is the frame of that joint's child link: MuJoCo's body holding
     the joint of the same name (or the world body for frames fixed to the base). The
     site's pose in that body is that placement.
 
+    A planar root joint (``load_robot(..., root_joint="planar")``) becomes three joints
+    of the URDF's root body, in this order: a slide along world x, a slide along world y
+    and a hinge about the body's z axis through its origin, named after the Pinocchio
+    joint (:data:`PLANAR_SUFFIXES`). The root body then sits at
+    ``Trans(x, y) Rz(th)``, Pinocchio's planar placement; :class:`PlanarBase` maps the
+    coordinates.
+
     ``locked_joints`` (the robot's, joint name to its Pinocchio coordinates) are made
     fixed at those positions, as ``model`` has them.
 
     Raises ``ValueError`` when the two models' joints differ (names, or a joint that is
-    not a 1-dof revolute/prismatic joint in both).
+    neither a 1-dof revolute/prismatic joint in both nor a planar root joint).
     """
     spec = mujoco.MjSpec.from_string(_kinematic_urdf(urdf_text, locked_joints or {}))
     # massless links are fine for kinematics: bound mass/inertia so that they compile
@@ -243,6 +335,9 @@ def build_mujoco_model(
     bodies = {}
     for j in range(1, model.njoints):
         name = model.names[j]
+        if _is_planar_root(model, j):
+            bodies[j] = _add_planar_base(spec, model, name)
+            continue
         joint = spec.joint(name)
         if joint is None:
             raise ValueError(f"joint {name!r} of the Pinocchio model is not in the MuJoCo model")
@@ -261,35 +356,76 @@ def build_mujoco_model(
     return mj_model, _joint_map(model, mj_model)
 
 
+def _add_planar_base(spec: mujoco.MjSpec, model: pin.Model, name: str) -> mujoco.MjsBody:
+    """Give the URDF's root body the slide x, slide y, hinge z of the planar joint ``name``."""
+    root = spec.worldbody.first_body()
+    if root is None or spec.worldbody.next_body(root) is not None:
+        raise ValueError("a planar root joint needs a URDF with exactly one root link")
+    if not (model.existFrame(root.name) and model.frames[model.getFrameId(root.name)]
+            .placement.isIdentity()):
+        raise ValueError(f"the URDF's root link {root.name!r} is not the frame of Pinocchio's "
+                         f"planar joint {name!r}")
+    kinds = (mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_HINGE)
+    axes = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0])
+    for joint_name, kind, axis in zip(_mujoco_names(model, model.getJointId(name)), kinds, axes):
+        if spec.joint(joint_name) is not None:
+            raise ValueError(f"the URDF already has a joint named {joint_name!r}")
+        root.add_joint(name=joint_name, type=kind, axis=axis,
+                       limited=mujoco.mjtLimited.mjLIMITED_FALSE)
+    return root
+
+
+def _is_planar_root(model: pin.Model, joint: int) -> bool:
+    return model.joints[joint].shortname() == _PLANAR and model.parents[joint] == 0
+
+
+def _mujoco_names(model: pin.Model, joint: int) -> list[str]:
+    """Names of the MuJoCo joints that stand for Pinocchio's joint ``joint``."""
+    name = model.names[joint]
+    return [name + suffix for suffix in PLANAR_SUFFIXES] if _is_planar_root(model, joint) else [name]
+
+
 def _joint_map(model: pin.Model, mj_model: mujoco.MjModel) -> JointMap:
     scalar = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
     mj_names = [mj_model.joint(i).name for i in range(mj_model.njnt)]
-    pin_names = [model.names[j] for j in range(1, model.njoints)]
+    pin_names = [n for j in range(1, model.njoints) for n in _mujoco_names(model, j)]
     if sorted(mj_names) != sorted(pin_names):
         raise ValueError(
             f"joints differ between Pinocchio {pin_names} and MuJoCo {mj_names}")
     names, pin_q, pin_v, mj_q, mj_v = [], [], [], [], []
+    base = None
     for j in range(1, model.njoints):
         name = model.names[j]
+        if _is_planar_root(model, j):
+            x, y, heading = (mj_model.joint(n).id for n in _mujoco_names(model, j))
+            if not (mj_model.jnt_dofadr[y] == mj_model.jnt_dofadr[x] + 1
+                    and mj_model.jnt_dofadr[heading] == mj_model.jnt_dofadr[x] + 2):
+                raise ValueError(f"the MuJoCo joints of the planar joint {name!r} are not "
+                                 "consecutive")
+            base = PlanarBase(pin_q=int(model.idx_qs[j]), pin_v=int(model.idx_vs[j]),
+                              mj_q=int(mj_model.jnt_qposadr[x]), mj_v=int(mj_model.jnt_dofadr[x]))
+            continue
         jid = mj_model.joint(name).id
         if model.nqs[j] != 1 or model.nvs[j] != 1 or int(mj_model.jnt_type[jid]) not in scalar:
             raise ValueError(
-                f"joint {name!r}: only 1-dof revolute/prismatic joints are supported "
-                f"(Pinocchio nq={model.nqs[j]}, nv={model.nvs[j]}, MuJoCo type "
-                f"{mujoco.mjtJoint(int(mj_model.jnt_type[jid])).name})")
+                f"joint {name!r}: only 1-dof revolute/prismatic joints and a planar root "
+                f"joint are supported (Pinocchio nq={model.nqs[j]}, nv={model.nvs[j]}, "
+                f"MuJoCo type {mujoco.mjtJoint(int(mj_model.jnt_type[jid])).name})")
         names.append(name)
         pin_q.append(model.idx_qs[j])
         pin_v.append(model.idx_vs[j])
         mj_q.append(mj_model.jnt_qposadr[jid])
         mj_v.append(mj_model.jnt_dofadr[jid])
-    if mj_model.nq != model.nq or mj_model.nv != model.nv:
+    heading_coordinates = 0 if base is None else 1  # (cos, sin) in Pinocchio, th in MuJoCo
+    if mj_model.nq != model.nq - heading_coordinates or mj_model.nv != model.nv:
         raise ValueError(f"MuJoCo nq/nv = {mj_model.nq}/{mj_model.nv}, "
                          f"Pinocchio {model.nq}/{model.nv}")
     pin_q, pin_v, mj_q, mj_v = (np.array(i, dtype=int) for i in (pin_q, pin_v, mj_q, mj_v))
-    identity = bool(np.array_equal(pin_q, mj_q) and np.array_equal(pin_v, mj_v)
+    identity = bool(base is None
+                    and np.array_equal(pin_q, mj_q) and np.array_equal(pin_v, mj_v)
                     and np.array_equal(pin_q, np.arange(model.nq))
                     and np.array_equal(pin_v, np.arange(model.nv)))
-    return JointMap(tuple(names), pin_q, pin_v, mj_q, mj_v, identity)
+    return JointMap(tuple(names), pin_q, pin_v, mj_q, mj_v, identity, base)
 
 
 # ----------------------------------------------------------------------------- rows
@@ -304,11 +440,12 @@ class PinocchioRows:
     configuration changes.
     """
 
-    def __init__(self, model: pin.Model, data: pin.Data, joints: JointMap) -> None:
+    def __init__(self, model: pin.Model, data: pin.Data, joints: JointMap,
+                 mujoco_nq: int) -> None:
         self.model = model
         self.data = data
         self.joints = joints
-        self._q_mj = np.full(model.nq, np.nan)
+        self._q_mj = np.full(mujoco_nq, np.nan)
         self._q_pin = np.empty(model.nq)
         self.version = 0
 
@@ -343,7 +480,7 @@ class _RowsCache:
         rows.ensure(configuration)
         if self._version != rows.version:
             self.A_pin, self.b = self.constraint.rows(rows.model, rows.data, self.frame_id)
-            self.A_mj = rows.joints.columns_to_mujoco(self.A_pin)
+            self.A_mj = rows.joints.columns_to_mujoco(self.A_pin, configuration.q)
             self._version = rows.version
         return self
 
@@ -401,6 +538,69 @@ class BarrierLimit(mink.Limit):
         """``G dq <= h`` with ``G = -A`` (MuJoCo columns) and ``h = -b dt``."""
         rows = self.cache.at(configuration)
         return LimitRows(G=-rows.A_mj, h=-dt * rows.b)
+
+
+class PostureTask(mink.Task):
+    """mink's posture task with the CJM's posture velocity, in MuJoCo coordinates.
+
+    ``mink.PostureTask`` has ``e = q (-) q_posture`` (``mj_differentiatePos``) and
+    ``J = I``, so ``J dq = -gain e`` asks for ``dq = gain (q_posture (-) q)``. This one
+    takes the difference with Pinocchio, ``e = -map(pin.difference(q, q_posture))``
+    (``JointMap.v_to_mujoco``), as the CJM's ``qd_posture`` does. For 1-dof joints the
+    two are the same numbers; on a planar base MuJoCo's difference is the world-frame
+    ``(dx, dy, dth)`` while Pinocchio's is the SE(2) logarithm in the base frame, and
+    only the latter makes mink's posture the CJM's (docs/design.md section 11).
+    """
+
+    def __init__(self, model: pin.Model, joints: JointMap, posture: np.ndarray,
+                 cost: float, gain: float) -> None:
+        super().__init__(cost=np.full(model.nv, cost), gain=gain, lm_damping=0.0)
+        self.model = model
+        self.joints = joints
+        self.posture = posture
+        self._q_pin = np.empty(model.nq)
+        self._identity = np.eye(model.nv)
+
+    def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
+        """``e = -(q_posture (-) q)`` (nv,), MuJoCo velocity coordinates."""
+        q_mj = configuration.q
+        q_pin = self.joints.q_to_pinocchio(q_mj, out=self._q_pin)
+        return -self.joints.v_to_mujoco(pin.difference(self.model, q_pin, self.posture), q_mj)
+
+    def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
+        """``J = I`` (nv x nv)."""
+        return self._identity
+
+
+class PlanarBaseVelocityLimit(mink.Limit):
+    """``|v_base| <= v_max`` on Pinocchio's base-frame velocity ``(v_x, v_y, w)``.
+
+    MuJoCo's base dofs are world-frame rates (:class:`PlanarBase`), on which
+    ``mink.VelocityLimit`` would bound ``x'`` and ``y'``: a different box from the one
+    every controller's command must lie in (``JointBounds`` on Pinocchio's velocity).
+    With ``(v_x, v_y, w) = P^T v_mj``, the rows are ``+-P^T dq <= v_max dt`` on the
+    base's columns, the box itself (a diagonal base velocity reaches ``sqrt 2`` of each
+    limit in the world, as it does in Pinocchio).
+    """
+
+    def __init__(self, base: PlanarBase, velocity_limit: np.ndarray, nv: int) -> None:
+        self.base = base
+        self._bounded = np.flatnonzero(np.isfinite(velocity_limit) & (velocity_limit > 0.0))
+        self._limit = np.asarray(velocity_limit, dtype=float)[self._bounded]
+        self._rows = np.zeros((2 * len(self._bounded), nv))
+
+    def compute_qp_inequalities(
+        self, configuration: mink.Configuration, dt: float
+    ) -> LimitRows:
+        """``G dq <= h``: ``G = [P^T; -P^T]`` (bounded rows, base columns), ``h = v_max dt``."""
+        if not len(self._bounded):
+            return LimitRows()
+        rows = self.base.rotation(configuration.q).T[self._bounded]
+        columns = slice(self.base.mj_v, self.base.mj_v + 3)
+        count = len(self._bounded)
+        self._rows[:count, columns] = rows
+        self._rows[count:, columns] = -rows
+        return LimitRows(G=self._rows.copy(), h=np.tile(self._limit * dt, 2))
 
 
 # ----------------------------------------------------------------------------- controller
@@ -523,26 +723,27 @@ class MinkController(Controller):
 
         # The MuJoCo side, built once, before the constraints that use it.
         model: pin.Model = robot.model
+        ee_frames = [model.frames[frame_id].name for frame_id in self.ee_frame_ids]
         frames = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
-        frames.append(robot.ee_frame)
+        frames.extend(ee_frames)
         self.mj_model, self.joints = build_mujoco_model(
             model, robot.urdf_path.read_text(), frames, getattr(robot, "locked_joints", None))
         self.site_names = {name: site_name(name) for name in frames}
-        self.ee_site = site_name(robot.ee_frame)
+        self.ee_site = site_name(ee_frames[0])
         self.configuration = mink.Configuration(self.mj_model)
-        self.ee_task = mink.FrameTask(self.ee_site, "site", position_cost=1.0,
-                                      orientation_cost=1.0, gain=1.0, lm_damping=0.0)
-        self._ee_site_id = self.mj_model.site(self.ee_site).id
+        #: one frame task per end effector, in ``robot.ee_frames`` order
+        self.ee_tasks = [mink.FrameTask(site_name(name), "site", position_cost=1.0,
+                                        orientation_cost=1.0, gain=1.0, lm_damping=0.0)
+                         for name in ee_frames]
+        self._ee_site_ids = [self.mj_model.site(site_name(name)).id for name in ee_frames]
         self._q_mj = np.empty(self.mj_model.nq)
         self._base_limits = self._make_limits(robot, limits, limit_gain)
         if posture is None:
             posture = robot.q_home
         self.posture = as_vector(posture, model.nq, "posture")
-        self.posture_task = mink.PostureTask(self.mj_model, cost=self.posture_cost,
-                                             gain=self.posture_gain * self.dt, lm_damping=0.0)
-        self.posture_task.set_target(
-            self.joints.q_to_mujoco(self.posture, np.empty(self.mj_model.nq)))
-        self._tasks = [self.ee_task, self.posture_task] if self.posture_cost else [self.ee_task]
+        self.posture_task = PostureTask(model, self.joints, self.posture, cost=self.posture_cost,
+                                        gain=self.posture_gain * self.dt)
+        self._tasks = [*self.ee_tasks, self.posture_task] if self.posture_cost else self.ee_tasks
         self._equality_caches: list[_RowsCache] = []
         self.constraint_tasks: list[ConstraintTask] = []
         self.barrier_limits: list[BarrierLimit] = []
@@ -557,8 +758,13 @@ class MinkController(Controller):
                        for name in self.joints.names}
             bounded = {name: value for name, value in bounded.items()
                        if np.isfinite(value) and value > 0}
-            return [mink.ConfigurationLimit(self.mj_model, gain=limit_gain),
+            made = [mink.ConfigurationLimit(self.mj_model, gain=limit_gain),
                     mink.VelocityLimit(self.mj_model, bounded)]
+            base = self.joints.base
+            if base is not None:
+                made.append(PlanarBaseVelocityLimit(
+                    base, velocity[base.pin_v:base.pin_v + 3], self.mj_model.nv))
+            return made
         made = []
         for limit in limits:
             made.append(limit if isinstance(limit, mink.Limit) else limit(self.mj_model))
@@ -566,8 +772,13 @@ class MinkController(Controller):
                 raise TypeError(f"limits: expected mink.Limit or a factory of one, got {limit!r}")
         return made
 
+    @property
+    def ee_task(self) -> mink.FrameTask:
+        """The first end effector's frame task (the only one of a single-EE robot)."""
+        return self.ee_tasks[0]
+
     def _prepare(self) -> None:
-        rows = PinocchioRows(self.model, self.data, self.joints)
+        rows = PinocchioRows(self.model, self.data, self.joints, self.mj_model.nq)
         self._rows = rows
         caches = [_RowsCache(c, f, rows) for c, f in zip(self.constraints, self.constraint_frames)]
         self._equality_caches = [c for c in caches if c.constraint.is_equality]
@@ -583,15 +794,16 @@ class MinkController(Controller):
         configuration.update(q_mj)
         self._rows.mark_current(q_mj)  # the base class ran Pinocchio at this q already
         data = configuration.data
-        ee = pin.SE3(data.site_xmat[self._ee_site_id].reshape(3, 3),
-                     data.site_xpos[self._ee_site_id])
-        xyz_quat = pin.SE3ToXYZQUAT(ee * pin.exp6(twist * self.dt))  # x y z qx qy qz qw
-        # (the attribute set_target would set, without its defensive copy)
-        self.ee_task.transform_target_to_world = mink.SE3(wxyz_xyz=xyz_quat[_WXYZ_XYZ])
+        dt = self.dt
+        for index, (task, site_id) in enumerate(zip(self.ee_tasks, self._ee_site_ids)):
+            ee = pin.SE3(data.site_xmat[site_id].reshape(3, 3), data.site_xpos[site_id])
+            xyz_quat = pin.SE3ToXYZQUAT(ee * pin.exp6(twist[6 * index:6 * index + 6] * dt))
+            # (the attribute set_target would set, without its defensive copy)
+            task.transform_target_to_world = mink.SE3(wxyz_xyz=xyz_quat[_WXYZ_XYZ])
         self.info.method = f"mink:{self.solver}"
         if self.posture_cost > 0.0:  # c = posture_cost * sqrt(s), s the task's scale
             cost = self.posture_cost * math.sqrt(
-                float(np.vdot(kinematics.ee_jacobian, kinematics.ee_jacobian)) / 6.0)
+                float(np.vdot(kinematics.ee_jacobian, kinematics.ee_jacobian)) / self.task_size)
             self.posture_task.cost[:] = cost  # (set_cost, without its checks)
             if self._proxqp_rho_tuned:
                 self.settings["rho"] = PROXQP_RHO * cost**2
@@ -604,7 +816,7 @@ class MinkController(Controller):
         if v_mj is None or not np.all(np.isfinite(v_mj)):
             raise SolverError(f"mink.solve_ik with solver {self.solver!r} returned a "
                               "non-finite velocity")
-        qd = self.joints.v_to_pinocchio(v_mj)
+        qd = self.joints.v_to_pinocchio(v_mj, q_mj)
         if self._equality_caches:
             residual = max(float(np.max(np.abs(c.A_pin @ qd - c.b)))
                            for c in self._equality_caches)

@@ -109,9 +109,9 @@ def test_joint_map_permutes_both_ways():
     q_mj = joints.q_to_mujoco(q_pin, out=np.empty(3))
     assert q_mj.tolist() == [20.0, 30.0, 10.0]
     assert joints.q_to_pinocchio(q_mj, out=np.empty(3)).tolist() == q_pin.tolist()
-    assert joints.v_to_pinocchio(q_mj).tolist() == q_pin.tolist()
+    assert joints.v_to_pinocchio(q_mj, q_mj).tolist() == q_pin.tolist()
     A_pin = np.array([[1.0, 2.0, 3.0]])
-    A_mj = joints.columns_to_mujoco(A_pin)
+    A_mj = joints.columns_to_mujoco(A_pin, q_mj)
     assert (A_mj @ q_mj).tolist() == (A_pin @ q_pin).tolist()
     assert A_mj.tolist() == [[2.0, 3.0, 1.0]]
 
