@@ -10,6 +10,7 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.kinematics import frame_placement
+from teleop.loop import Targets
 from teleop.robots import Robot
 
 
@@ -24,7 +25,8 @@ class Plan:
     q0 : start configuration.
     duration : seconds.
     make_constraints : returns fresh constraint objects for one run.
-    target : operator target pose at time ``t`` (world frame).
+    target : operator target at time ``t`` (world frame): one pose per entry of
+        ``robot.ee_frames`` (a single-EE plan may give the pose alone, ``teleop.loop.Targets``).
     update : called every tick with ``(t, constraints, q)``, ``q`` the robot's
         configuration at ``t``; moves geometry in place and returns a new list when the
         constraint set itself changes (else None).
@@ -36,7 +38,7 @@ class Plan:
     q0: np.ndarray
     duration: float
     make_constraints: Callable[[], list[Constraint]]
-    target: Callable[[float], pin.SE3]
+    target: Callable[[float], Targets]
     update: Callable[[float, list[Constraint], np.ndarray], list[Constraint] | None] = field(
         default=lambda t, constraints, q: None)
     description: str = ""
@@ -49,8 +51,13 @@ def smoothstep(x: float) -> float:
 
 
 def home_pose(robot: Robot, q: np.ndarray) -> pin.SE3:
-    """World placement of the EE at ``q``."""
+    """World placement of the (first) EE at ``q``."""
     return frame_placement(robot.model, q, robot.ee_frame)
+
+
+def home_poses(robot: Robot, q: np.ndarray) -> list[pin.SE3]:
+    """World placement of every EE at ``q``, in ``robot.ee_frames`` order."""
+    return [frame_placement(robot.model, q, frame) for frame in robot.ee_frames]
 
 
 def link_placement(robot: Robot, q: np.ndarray, link: str) -> pin.SE3:

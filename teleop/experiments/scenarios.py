@@ -2,7 +2,7 @@
 
 A scenario builds a :class:`Plan`: the robot, the start configuration, fresh constraint
 objects (each controller run gets its own, since a moving hole is mutated), the operator
-target ``T*(t)`` and, for moving geometry, what moves at time ``t``. Every trajectory
+target ``T*(t)`` (one per EE of a several-EE robot) and, for moving geometry, what moves at time ``t``. Every trajectory
 starts at the EE's home pose with zero velocity (smooth ramps), so no controller is
 handed a step.
 """
@@ -18,7 +18,7 @@ import pinocchio as pin
 from constraints import Barrier, Constraint, Hole, Plane
 from teleop.robots import Robot, load_robot
 
-from .plan import Plan, home_pose, link_placement, smoothstep
+from .plan import Plan, home_pose, home_poses, link_placement, smoothstep
 
 
 def operator_motion(start: pin.SE3, amplitude: Sequence[float], frequencies: Sequence[float],
@@ -193,6 +193,128 @@ def _multi(robot: Robot) -> Plan:
         description="sda10f, a hole on link 6 and a plane on link 3 at once (5 DoF left)")
 
 
+def lissajous(start: np.ndarray, amplitude: Sequence[float], frequencies: Sequence[float],
+              phases: Sequence[float], ramp: float = 2.5) -> Callable[[float], np.ndarray]:
+    """A smooth closed path about ``start`` (world, m): ``A_i sin(2 pi f_i t + phi_i)`` per
+    axis, faded in over ``ramp`` s (zero velocity at ``t = 0``, when it is at ``start``)."""
+    amplitude, frequencies, phases = (np.asarray(x, dtype=float)
+                                      for x in (amplitude, frequencies, phases))
+
+    def point(t: float) -> np.ndarray:
+        return start + smoothstep(t / ramp) * amplitude * (
+            np.sin(2.0 * np.pi * frequencies * t + phases) - np.sin(phases))
+
+    return point
+
+
+#: Gains of the reference run of :func:`tips_through_constraints` (1/s): tip tracking, and
+#: the pull towards the start posture in the null space of the constraints and tips.
+REFERENCE_GAIN, REFERENCE_POSTURE_GAIN = 20.0, 5.0
+
+
+def tips_through_constraints(robot: Robot, q0: np.ndarray, constraints: Sequence[Constraint],
+                             tips: Sequence[Callable[[float], np.ndarray]], duration: float,
+                             dt: float = 1e-3) -> Callable[[float], list[pin.SE3]]:
+    """EE targets the robot can meet exactly: the EE poses of a kinematic reference run in
+    which each EE's tip follows its path ``tips[i](t)`` and the constraints hold, each EE's
+    orientation being what its constraints leave it (docs/design.md section 11.2).
+
+    The run integrates (``pin.integrate``, every ``dt``) the least-norm solution of
+    ``[A; J_p] qd = [b; p*' + K (p* - p)]`` (the equality rows ``A qd = b`` of every
+    constraint, each EE's world-aligned linear Jacobian ``J_p``) plus ``-K_q (q - q0)``
+    projected on its null space. It runs once, at the first call; targets between its
+    samples are interpolated on SE(3).
+    """
+    model = robot.model
+    samples: list[list[pin.SE3]] = []
+
+    def run() -> None:
+        data = model.createData()
+        frames = [model.getFrameId(c.link) for c in constraints]
+        q = np.array(q0, dtype=float)
+        for k in range(int(math.ceil(duration / dt)) + 2):
+            t = k * dt
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+            samples.append([data.oMf[frame].copy() for frame in robot.ee_frame_ids])
+            rows, rhs = [], []
+            for constraint, frame in zip(constraints, frames):
+                A, b = constraint.rows(model, data, frame)
+                rows.append(A)
+                rhs.append(b)
+            for tip, frame in zip(tips, robot.ee_frame_ids):
+                rows.append(pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)[:3])
+                rhs.append((tip(t + dt) - tip(t)) / dt
+                           + REFERENCE_GAIN * (tip(t) - data.oMf[frame].translation))
+            stacked = np.vstack(rows)
+            inverse = np.linalg.pinv(stacked)
+            posture = -REFERENCE_POSTURE_GAIN * pin.difference(model, q0, q)
+            qd = inverse @ np.concatenate(rhs) + posture - inverse @ (stacked @ posture)
+            q = pin.integrate(model, q, qd * dt)
+
+    def target(t: float) -> list[pin.SE3]:
+        if not samples:
+            run()
+        k = min(int(t / dt), len(samples) - 2)
+        fraction = min(max(t / dt - k, 0.0), 1.0)
+        return [before * pin.exp6(fraction * pin.log6(before.actInv(after)).vector)
+                for before, after in zip(samples[k], samples[k + 1])]
+
+    return target
+
+
+def _bimanual_trocars(robot: Robot) -> Plan:
+    q0 = robot.q_home.copy()
+
+    def make() -> list[Constraint]:
+        return [Hole.on_link(robot, q0, distance=0.08, link=link)
+                for link in robot.constrained_links]
+
+    starts = [pose.translation for pose in home_poses(robot, q0)]
+    # two Lissajous curves, 4 cm across, in each tip's vertical plane facing forward (x, z):
+    # measured along the reference run, the stacked rows [A; J_e1; J_e2] keep their 15th
+    # singular value above 0.01 and the joint speeds under 6 % of their limits. Sideways
+    # (y) motion of 1.5 cm or more takes the arms' r joints near 0, where they lose rank.
+    tips = [lissajous(starts[0], (0.02, 0.0, 0.02), (0.10, 0.0, 0.15), (0.0, 0.0, 0.5)),
+            lissajous(starts[1], (0.02, 0.0, 0.02), (0.13, 0.0, 0.08), (0.0, 0.0, 1.0))]
+    duration = 10.0
+    return Plan(
+        "bimanual-trocars", robot, q0, duration, make,
+        tips_through_constraints(robot, q0, make(), tips, duration),
+        description="sda10f_dual, a trocar 8 cm along each arm's link 6, both tips trace "
+                    "their own 4 cm Lissajous curve, orientations as the trocars allow")
+
+
+#: The wall ahead of the mobile base: its distance from the base's front (m), and how far
+#: the EE targets move forward (m), beyond what the arms reach from the base at the wall.
+WALL_CLEARANCE, REACH_FORWARD = 0.25, 0.6
+
+
+def _mobile_wall(robot: Robot) -> Plan:
+    q0 = robot.q_home.copy()
+    base = link_placement(robot, q0, "mobile_base")
+    front = 0.4  # half the 0.8 m base: its corners at x = +-0.4, y = +-0.3 (base frame)
+    wall_point = base.act(np.array([front + WALL_CLEARANCE, 0.0, 0.0]))
+    facing = base.rotation @ np.array([-1.0, 0.0, 0.0])  # the allowed side: behind the wall
+
+    def make() -> list[Constraint]:
+        return [Barrier("mobile_base", [front, side, 0.0], wall_point, facing)
+                for side in (0.3, -0.3)]
+
+    starts = home_poses(robot, q0)
+    forward = base.rotation @ np.array([REACH_FORWARD, 0.0, 0.0])
+
+    def target(t: float) -> list[pin.SE3]:
+        advance = smoothstep(t / 6.0) * forward
+        return [pin.SE3(start.rotation, start.translation + advance) for start in starts]
+
+    return Plan(
+        "mobile-wall", robot, q0, 10.0, make, target,
+        description=f"sda10f_dual_mobile, both EE targets move {REACH_FORWARD:g} m forward, "
+                    f"beyond the arms' reach; a wall {WALL_CLEARANCE:g} m ahead of the base's "
+                    "front corners (barriers) stops the base")
+
+
 #: scenario name -> (robot name, builder)
 SCENARIOS: dict[str, tuple[str, Callable[[Robot], Plan]]] = {
     "paper-hole": ("sda10f", _paper_hole),
@@ -204,6 +326,8 @@ SCENARIOS: dict[str, tuple[str, Callable[[Robot], Plan]]] = {
     "joint-limits": ("ur5_instrument", _joint_limits),
     "barrier": ("ur5_instrument", _barrier),
     "multi": ("sda10f", _multi),
+    "bimanual-trocars": ("sda10f_dual", _bimanual_trocars),
+    "mobile-wall": ("sda10f_dual_mobile", _mobile_wall),
 }
 
 
