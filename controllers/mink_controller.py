@@ -23,6 +23,10 @@ Conventions of mink 1.3.0 (read from ``mink/solve_ik.py``, ``mink/tasks/task.py`
   ``limit_gain = gain``).
 * The global ``damping`` adds ``damping * I`` to the Hessian in ``dq``: since the whole
   objective scales as ``dt^2`` it acts like the QP controller's ``mu`` on ``v``.
+* A planar root joint is MuJoCo's slide x, slide y, hinge z (:class:`PlanarBase`), which
+  ``configuration.integrate`` moves by ``(x, y, th) + v dt`` where Pinocchio integrates
+  the SE(2) exponential: the two agree to first order in ``dt``, and mink only uses the
+  velocity, never the integrated configuration.
 """
 
 from __future__ import annotations
@@ -600,7 +604,7 @@ class PlanarBaseVelocityLimit(mink.Limit):
         count = len(self._bounded)
         self._rows[:count, columns] = rows
         self._rows[count:, columns] = -rows
-        return LimitRows(G=self._rows.copy(), h=np.tile(self._limit * dt, 2))
+        return LimitRows(G=self._rows, h=np.tile(self._limit * dt, 2))  # (solve_ik stacks a copy)
 
 
 # ----------------------------------------------------------------------------- controller
@@ -611,7 +615,9 @@ LimitSpec = mink.Limit | Callable[[mujoco.MjModel], mink.Limit]
 class MinkController(Controller):
     """The constrained teleoperation step solved by mink's ``solve_ik``.
 
-    Per step, with ``T_e`` the EE pose and ``V`` the desired EE body twist::
+    Per step, with ``T_e`` the EE pose and ``V`` the desired EE body twist (several EEs:
+    one FrameTask each, ``V_i`` the ``i``-th 6 entries of the stacked twist, and the
+    first term summed over them; docs/design.md section 11)::
 
         target  = T_e exp6(V dt)                    FrameTask on the EE site (cost 1, 1)
         min_dq  |Jlog(T_t^-1 T_e) (J_e dq - V dt)|^2 + c^2 |dq - qd_posture dt|^2 + damping |dq|^2
@@ -636,13 +642,13 @@ class MinkController(Controller):
     ``Jlog`` wrong by ~1e-7, so ``J_e qd`` misses ``V`` by ~1e-9 m/s and ``qd`` differs
     from the CJM's by up to a few 1e-8 rad/s (on the built-in robots, every backend).
 
-    **Posture.** A ``mink.PostureTask`` towards ``posture`` with gain
+    **Posture.** A :class:`PostureTask` towards ``posture`` with gain
     ``posture_gain * dt`` (mink's gain is per step) asks for the CJM's and the QP
-    controller's posture velocity ``qd_posture = posture_gain * (posture (-) q)``. mink
-    sums its tasks, so the posture's cost ``c`` trades the twist for the posture by about
-    ``c^2 / sigma^2`` (``sigma`` the task's singular values): the QP controller's
-    weighted formulation with ``mu s = c^2``, never its lexicographic one. The default
-    cost is about as small as mink's solve still resolves the posture with:
+    controller's posture velocity ``qd_posture = posture_gain * pin.difference(q,
+    posture)``. mink sums its tasks, so the posture's cost ``c`` trades the twist for the
+    posture by about ``c^2 / sigma^2`` (``sigma`` the task's singular values): the QP
+    controller's weighted formulation with ``mu s = c^2``, never its lexicographic one.
+    The default cost is about as small as mink's solve still resolves the posture with:
     docs/design.md section 10 gives the deviation from the CJM that remains.
 
     **Equalities.** Every equality (``Hole``, ``Plane``, ``PointLock``) is a
@@ -655,10 +661,11 @@ class MinkController(Controller):
 
     Parameters
     ----------
-    robot : a ``teleop.Robot`` (``urdf_path``, ``model``, ``ee_frame``, ...). The MuJoCo
+    robot : a ``teleop.Robot`` (``urdf_path``, ``model``, ``ee_frames``, ...). The MuJoCo
         model is compiled from the same URDF (geometry dropped), with a site at every
         Pinocchio link frame (``site_name(link)``, the constraint links among them) and
-        at the EE frame. Joints must be 1-dof revolute/prismatic, matched by name.
+        at every EE frame. Joints must be 1-dof revolute/prismatic, matched by name, on
+        a fixed base or on a planar root joint (:func:`build_mujoco_model`).
     constraints, strict : see :class:`controllers.base.Controller`.
     solver : any qpsolvers backend mink accepts: ``"daqp"`` (default), ``"proxqp"``,
         ``"osqp"``, ...
@@ -670,12 +677,15 @@ class MinkController(Controller):
     posture_gain : gain (1/s) of the posture velocity, as the CJM's (at most ``1 / dt``:
         mink's per-step gain is ``posture_gain * dt`` and must not exceed 1).
     posture_cost : the posture task's cost relative to the task's scale: mink's cost is
-        ``c = posture_cost * sqrt(s)``, ``s = |J_e|_F^2 / 6`` (as the QP controller's ``s``),
+        ``c = posture_cost * sqrt(s)``, ``s = |J_e|_F^2 / m`` (``J_e`` stacked, ``m = 6`` rows
+        per EE: the mean squared singular value, as the QP controller's ``s``),
         set every step (0: no posture task). With proxqp, its ``rho`` follows as
         ``PROXQP_RHO c^2`` (``controllers.qp``): proxqp's own 1e-6 against the curvature
         ``c^2`` failed every step of the 64-DoF chains with binding limits.
     limits : ``None`` for the defaults (``mink.ConfigurationLimit`` with gain
-        ``limit_gain``, and a ``mink.VelocityLimit`` from the Pinocchio velocity limits),
+        ``limit_gain``, a ``mink.VelocityLimit`` from the Pinocchio velocity limits of the
+        1-dof joints and, on a planar base, a :class:`PlanarBaseVelocityLimit` on its
+        base-frame velocity),
         else a sequence of ``mink.Limit`` instances or factories ``f(mj_model) -> Limit``
         (``mink.ConfigurationLimit`` itself is one); ``()`` for none. Barrier limits
         are always added.

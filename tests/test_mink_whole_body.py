@@ -210,7 +210,8 @@ def test_joint_map_round_trips_a_planar_base(mobile, mobile_controller, seed, x,
 
 
 def mujoco_site_pose(controller: MinkController, q: np.ndarray, frame: str) -> pin.SE3:
-    controller.configuration.update(controller.joints.q_to_mujoco(q, out=controller._q_mj.copy()))
+    controller.configuration.update(
+        controller.joints.q_to_mujoco(q, out=np.empty(controller.mj_model.nq)))
     return controller.site_pose(frame)
 
 
