@@ -403,12 +403,13 @@ def look_at_target(web, distance: float = 0.3) -> None:
     set_camera(web.client, target + distance * direction / np.linalg.norm(direction), target)
 
 
-def plan_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
-    """Where to grab the target gizmo and how to move the mouse for ``distance`` m.
+def plan_drag(web, distance: float, steps: int, prefer_sign: float = 1.0, ee: int = 0):
+    """Where to grab EE ``ee``'s target gizmo and how to move the mouse for ``distance`` m.
 
     Grabs a translation arrow near its tip (88 % of its length: past the rotation arcs at
     65 %), keeps the path on the free part of the canvas (not under the control panel, not
-    over the hole's own gizmo) and prefers the arrow that looks longest on screen.
+    over the constraints' own gizmos nor the other EEs') and prefers the arrow that looks
+    longest on screen.
     """
     page, camera = web.page, web.client.camera
     box = scene_canvas(page)
@@ -416,11 +417,13 @@ def plan_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
     panel_left = panel["x"] - 40.0 if panel else box.x + 0.7 * box.width
     right = pin.Quaternion(*camera.wxyz).normalized().matrix()[:, 0]  # camera x, in the world
     avoid = []  # the constraints' own gizmos: circles on screen
-    for markers in list(web.ui._markers.values()):
-        position, scale = np.asarray(markers["gizmo"].position), markers["gizmo"].scale
+    others = [markers["gizmo"] for markers in list(web.ui._markers.values())]
+    others += [handle for k, handle in enumerate(web.ui.target_gizmos) if k != ee]
+    for handle in others:
+        position, scale = np.asarray(handle.position), handle.scale
         centre, edge = project(camera, box, [position, position + scale * right])
         avoid.append((centre, 1.2 * np.linalg.norm(edge - centre) + 10.0))
-    gizmo = web.ui.target_gizmo
+    gizmo = web.ui.target_gizmos[ee]
     origin = np.asarray(gizmo.position, dtype=float)
     w, x, y, z = gizmo.wxyz
     rotation = pin.Quaternion(w, x, y, z).normalized().matrix()
