@@ -20,7 +20,7 @@ from .plan import Plan
 from .results import METRIC_KEYS, RunResult
 from .solver_output import SolverOutputCapture
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 
 def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
@@ -57,7 +57,7 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
     controller = make_controller(spec, plan.robot, constraints, dt=config.dt)
     records, failures = _drive(plan, controller, constraints, config, steps, imperfections,
                                on_step)
-    return _collect(spec, records, failures)
+    return _collect(spec, records, failures, plan.robot.ee_frames)
 
 
 def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopConfig,
@@ -94,8 +94,10 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
     return records, failures
 
 
-def _collect(spec: str, records: Sequence[StepRecord], failures: list[str]) -> RunResult:
-    """The records as columns; constraint rows by label, NaN where a row did not exist."""
+def _collect(spec: str, records: Sequence[StepRecord], failures: list[str],
+             ee_frames: Sequence[str]) -> RunResult:
+    """The records as columns; constraint rows by label and constraints by name, NaN where
+    one did not exist; the EE errors one column per EE."""
     columns = {name: np.array([getattr(r, name) for r in records], dtype=float)
                for name in RECORD_FIELDS}
     labels = list(dict.fromkeys(label for r in records for label in r.constraint_velocity_labels))
@@ -110,6 +112,13 @@ def _collect(spec: str, records: Sequence[StepRecord], failures: list[str]) -> R
     def vectors(name: str) -> np.ndarray:
         return np.array([getattr(r, name) for r in records]).reshape(-1, 3)
 
+    names = list(dict.fromkeys(name for r in records for name in r.constraint_names))
+    constraint_errors = {name: np.full(len(records), np.nan) for name in names}
+    for i, r in enumerate(records):
+        for name, error in zip(r.constraint_names, r.constraint_errors):
+            constraint_errors[name][i] = error
+    count = len(ee_frames)
+
     return RunResult(
         controller=spec, columns=columns, constraint_velocity=velocity,
         constraint_velocity_labels=labels, drift_velocity=drift,
@@ -117,6 +126,11 @@ def _collect(spec: str, records: Sequence[StepRecord], failures: list[str]) -> R
         commanded_linear_velocity=vectors("commanded_linear_velocity"),
         actual_linear_velocity=vectors("actual_linear_velocity"),
         statuses=np.array([r.status for r in records], dtype=str),
+        ee_frames=tuple(ee_frames),
+        ee_position_errors=np.array([r.ee_position_errors for r in records]).reshape(-1, count),
+        ee_orientation_errors=np.array([r.ee_orientation_errors
+                                        for r in records]).reshape(-1, count),
+        constraint_errors=constraint_errors,
         failure_messages=failures,
         status_counts=dict(collections.Counter(r.status for r in records)))
 
@@ -245,6 +259,7 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
         "scenario": plan.name,
         "description": plan.description,
         "robot": plan.robot.name,
+        "ee_frames": list(plan.robot.ee_frames),
         "rate_hz": config.rate,
         "duration_s": duration,
         "steps": int(round(duration * config.rate)),
@@ -315,6 +330,15 @@ def format_table(document: dict) -> str:
     for spec, m in document["controllers"].items():
         lines.append(f"| {spec} | " + " | ".join(table_cells(m))
                      + f" | {format_status_counts(m['status_counts'])} |")
+    if len(document["ee_frames"]) > 1 or any(len(m["constraints"]) > 1
+                                             for m in document["controllers"].values()):
+        lines += ["", "each EE: position RMS / max (mm); each constraint: error max (m)"]
+        for spec, m in document["controllers"].items():
+            parts = [f"{frame} {1e3 * e['position_error_rms_m']:.3f} / "
+                     f"{1e3 * e['position_error_max_m']:.3f}"
+                     for frame, e in m["end_effectors"].items()]
+            parts += [f"{name} {c['error_max_m']:.1e}" for name, c in m["constraints"].items()]
+            lines.append(f"  {spec}: " + "; ".join(parts))
     return "\n".join(lines)
 
 

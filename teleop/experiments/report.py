@@ -88,6 +88,7 @@ def render_report(document: dict, figures: Sequence[Figure]) -> str:
         "marked; a column where every controller shows the same value has no mark)."
         + (f" qd dev: the largest |qd - qd_{e(reference)}| at the same q and twist along "
            f"{e(reference)}'s run (design 15.3)." if reference else "") + "</p>",
+        "<h2>Each end effector and each constraint</h2>", _parts_table(document),
         "<h2>Steps by status</h2>", _status_table(document),
         "<h2>What the solvers said</h2>", _solver_messages(document),
         "<h2>Plots</h2>",
@@ -123,6 +124,28 @@ def _metrics_table(document: dict) -> str:
         cells = [f'<td class="best">{e(text)}</td>' if spec in best[key] else f"<td>{e(text)}</td>"
                  for (_, key, _), text in zip(TABLE_COLUMNS, table_cells(metrics))]
         rows.append(f"<tr><td>{e(spec)}</td>" + "".join(cells) + "</tr>")
+    rows.append("</table>")
+    return "\n".join(rows)
+
+
+def _parts_table(document: dict) -> str:
+    """Per controller: each EE's position / orientation error, each constraint's error."""
+    e = html.escape
+    first = next(iter(document["controllers"].values()))
+    frames, names = list(first["end_effectors"]), list(first["constraints"])
+    headers = ([f"{frame} pos RMS / max (mm)" for frame in frames]
+               + [f"{frame} ori RMS (mrad)" for frame in frames]
+               + [f"{name} max (m)" for name in names])
+    rows = ["<table>", "<tr><th>controller</th>"
+            + "".join(f"<th>{e(header)}</th>" for header in headers) + "</tr>"]
+    for spec, m in document["controllers"].items():
+        ees, constraints = m["end_effectors"], m["constraints"]
+        cells = ([f"{1e3 * ees[f]['position_error_rms_m']:.3f} / "
+                  f"{1e3 * ees[f]['position_error_max_m']:.3f}" for f in frames]
+                 + [f"{1e3 * ees[f]['orientation_error_rms_rad']:.3f}" for f in frames]
+                 + [f"{constraints[n]['error_max_m']:.1e}" if n in constraints else "-"
+                    for n in names])
+        rows.append(f"<tr><td>{e(spec)}</td>" + "".join(f"<td>{e(c)}</td>" for c in cells) + "</tr>")
     rows.append("</table>")
     return "\n".join(rows)
 

@@ -36,6 +36,12 @@ class RunResult:
         (steps, 3) world-frame EE linear velocities: the filtered target's, the commanded
         twist's, the one achieved.
     statuses : (steps,) the controller's step status each step.
+    ee_frames : the robot's EE frames, in order.
+    ee_position_errors, ee_orientation_errors : (steps, EEs) each EE's error against its
+        target (m, rad); the ``ee_*`` columns are the worst EE's.
+    constraint_errors : per constraint name (``teleop.loop.constraint_names``), its
+        violation each step (m: a hole's axis offset, a barrier's penetration), NaN while
+        it does not exist.
     joint_velocity_deviation : (steps,) ``max_j |qd_j - qd_ref,j|`` of this controller's
         solve at the reference run's ``q`` and twist (rad/s, docs/design.md section 15.3),
         zeros for the reference itself; None when not computed.
@@ -54,6 +60,10 @@ class RunResult:
     commanded_linear_velocity: np.ndarray
     actual_linear_velocity: np.ndarray
     statuses: np.ndarray
+    ee_frames: tuple[str, ...] = ()
+    ee_position_errors: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    ee_orientation_errors: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    constraint_errors: dict[str, np.ndarray] = field(default_factory=dict)
     joint_velocity_deviation: np.ndarray | None = None
     failure_messages: list[str] = field(default_factory=list)
     status_counts: dict[str, int] = field(default_factory=dict)
@@ -64,7 +74,9 @@ class RunResult:
         return len(self.columns["t"])
 
     def metrics(self) -> dict[str, float | int | str | dict | None]:
-        """The summary of docs/design.md sections 7 and 15 (units in the key names)."""
+        """The summary of docs/design.md sections 7 and 15 (units in the key names): the
+        ``ee_*`` keys are over the per-step worst EE; ``end_effectors`` has each EE's,
+        ``constraints`` each constraint's error."""
         c = self.columns
 
         def rms(x: np.ndarray) -> float:
@@ -98,4 +110,12 @@ class RunResult:
             "first_failure": self.failure_messages[0] if self.failure_messages else None,
             "status_counts": dict(self.status_counts),
             "solver_messages": dict(self.solver_messages),
+            "end_effectors": {frame: {
+                "position_error_max_m": top(self.ee_position_errors[:, i]),
+                "position_error_rms_m": rms(self.ee_position_errors[:, i]),
+                "orientation_error_max_rad": top(self.ee_orientation_errors[:, i]),
+                "orientation_error_rms_rad": rms(self.ee_orientation_errors[:, i]),
+            } for i, frame in enumerate(self.ee_frames)},
+            "constraints": {name: {"error_max_m": top(errors), "error_rms_m": rms(errors)}
+                            for name, errors in self.constraint_errors.items()},
         }

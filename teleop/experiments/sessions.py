@@ -2,12 +2,18 @@
 
 Format (one JSON object per line, times ``t`` in seconds from the start, world frame, m):
 
-* ``{"type": "header", "format": "cjm-teleop-session", "version": 1, "robot": "sda10f",
-  "q0": [...], "rate_hz": 1000, "kp": 20, "target_time_constant_s": 0.05}`` - first line;
-  ``robot`` is a built-in name or a URDF path (then also ``ee_frame``,
-  ``constrained_link``, ``link_axis``).
-* ``{"type": "target", "t": 0.05, "position": [x, y, z], "quaternion_wxyz": [w, x, y, z]}``
-  - the operator's target; it holds until the next one (the loop smooths it).
+* ``{"type": "header", "format": "cjm-teleop-session", "version": 2, "robot": "sda10f",
+  "ee_frames": ["tool0"], "root_joint": "fixed", "locked_joints": {}, "q0": [...],
+  "rate_hz": 1000, "kp": 20, "target_time_constant_s": 0.05}`` - first line; ``robot`` is
+  a built-in name or a URDF path (then also ``ee_frame``, ``constrained_link``,
+  ``link_axis``); ``locked_joints`` maps each joint frozen out of the model to the
+  coordinates it is held at (``q0`` is of the model without them). Version 1 files (no
+  ``ee_frames``, ``root_joint``, ``locked_joints``: the robot's defaults, nothing locked)
+  are read too.
+* ``{"type": "target", "t": 0.05, "frame": "tool0", "position": [x, y, z],
+  "quaternion_wxyz": [w, x, y, z]}`` - the operator's target for the EE ``frame`` (one of
+  the header's ``ee_frames``; absent: the first); it holds until the next one for that
+  frame (the loop smooths it).
 * ``{"type": "add", "t": 0.0, "id": "hole-1", "constraint": {"kind": "hole", ...}}`` - the
   constraint's ``to_dict()``: kinds and fields ``hole`` (link, center, link_axis, gain),
   ``plane`` and ``barrier`` (link, link_point, plane_point, normal, gain), ``point_lock``
@@ -25,7 +31,7 @@ import math
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import IO
+from typing import IO, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -33,13 +39,16 @@ import pinocchio as pin
 from constraints import Constraint
 from constraints.kinematics import frame_placement
 from constraints.validation import as_vector
+from teleop.loop import target_poses
 from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED, advance, steer
 from teleop.robots import Robot, load_robot
 
-from .plan import Plan, home_pose
+from .plan import Plan, home_poses
 
 FORMAT = "cjm-teleop-session"
-VERSION = 1
+VERSION = 2
+#: the versions :func:`load_session` reads (1: a single EE, no root joint or locked joints)
+READABLE_VERSIONS = (1, 2)
 EVENT_TYPES = ("target", "add", "move", "remove", "end")
 #: events within this of a tick's time belong to that tick (float time stamps)
 TIME_EPSILON = 1e-9
@@ -80,6 +89,10 @@ class SessionRecorder:
             header.update(robot=str(robot.urdf_path), ee_frame=robot.ee_frame,
                           constrained_link=robot.constrained_link,
                           link_axis=[float(x) for x in robot.link_axis])
+        header.update(ee_frames=list(robot.ee_frames), root_joint=robot.root_joint,
+                      locked_joints={name: list(coordinates)
+                                     for name, coordinates in robot.locked_joints.items()})
+        self.ee_frames = tuple(robot.ee_frames)
         self._write(header)
         self.last_t = 0.0
 
@@ -96,11 +109,25 @@ class SessionRecorder:
         self.last_t = max(self.last_t, t)
         return t
 
-    def target(self, t: float, pose: pin.SE3) -> None:
+    def target(self, t: float, pose: pin.SE3, frame: str | None = None) -> None:
+        """The operator's target for the EE ``frame`` (default: the first, written
+        without a ``frame`` field)."""
+        if frame is not None and frame not in self.ee_frames:
+            raise ValueError(f"unknown EE frame {frame!r}; this robot's: {list(self.ee_frames)}")
         quaternion = pin.Quaternion(pose.rotation)
-        self._write({"type": "target", "t": self._stamp(t),
-                     "position": [float(x) for x in pose.translation],
+        event = {"type": "target", "t": self._stamp(t)}
+        if frame is not None and frame != self.ee_frames[0]:
+            event["frame"] = frame
+        self._write({**event, "position": [float(x) for x in pose.translation],
                      "quaternion_wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]})
+
+    def targets(self, t: float, poses: Sequence[pin.SE3]) -> None:
+        """One target per EE, in ``robot.ee_frames`` order."""
+        if len(poses) != len(self.ee_frames):
+            raise ValueError(f"expected {len(self.ee_frames)} target poses, one per EE frame "
+                             f"{list(self.ee_frames)}, got {len(poses)}")
+        for frame, pose in zip(self.ee_frames, poses):
+            self.target(t, pose, frame)
 
     def add(self, t: float, constraint_id: str, constraint: Constraint) -> None:
         self._write({"type": "add", "t": self._stamp(t), "id": str(constraint_id),
@@ -155,7 +182,7 @@ def record_plan(plan: Plan, path: str | Path, rate_hz: float = 1000.0,
                     recorder.move(t, cid, now, constraint.velocity)
                     before[k] = now
             if i < steps:
-                recorder.target(t + dt, plan.target(t + dt))
+                recorder.targets(t + dt, target_poses(plan.target(t + dt)))
         recorder.close(duration)
     return Path(path)
 
@@ -197,7 +224,7 @@ def load_session(path: str | Path) -> Session:
         if header is None:
             if event["type"] != "header" or event.get("format") != FORMAT:
                 raise SessionError(f"{where}: the first line must be a {FORMAT} header")
-            if event.get("version") != VERSION:
+            if event.get("version") not in READABLE_VERSIONS:
                 raise SessionError(f"{where}: unsupported version {event.get('version')!r}")
             if "robot" not in event or "q0" not in event:
                 raise SessionError(f"{where}: the header needs 'robot' and 'q0'")
@@ -223,6 +250,8 @@ def load_session(path: str | Path) -> Session:
 def _check_event(event: dict) -> None:
     kind = event["type"]
     if kind == "target":
+        if "frame" in event and not isinstance(event["frame"], str):
+            raise ValueError(f"target 'frame' must be an EE frame name, got {event['frame']!r}")
         as_vector(event.get("position"), 3, "target 'position'")
         quaternion = as_vector(event.get("quaternion_wxyz"), 4, "target 'quaternion_wxyz'")
         if abs(np.linalg.norm(quaternion) - 1.0) > 1e-6:
@@ -242,10 +271,34 @@ def _check_event(event: dict) -> None:
 
 
 def session_robot(session: Session) -> Robot:
+    """The robot of the session's header: its EE frames, root joint and locked joints
+    (held at the recorded coordinates) as recorded; a version-1 header: the defaults."""
     header = session.header
-    return load_robot(header["robot"], ee_frame=header.get("ee_frame"),
-                      constrained_link=header.get("constrained_link"),
-                      link_axis=header.get("link_axis"))
+    where = f"{session.path}:1"
+    locked = header.get("locked_joints") or {}
+    if not isinstance(locked, dict):
+        raise SessionError(f"{where}: 'locked_joints' must map joint names to coordinates")
+    ee_frames = header.get("ee_frames")
+    try:
+        options = dict(root_joint=header.get("root_joint"), constrained_link=header.get("constrained_link"),
+                       link_axis=header.get("link_axis"))
+        if ee_frames is None:
+            options["ee_frame"] = header.get("ee_frame")
+        else:
+            options["ee_frames"] = ee_frames
+        if locked:
+            full = load_robot(header["robot"], **options)
+            configuration = full.q_home.copy()
+            for name, coordinates in locked.items():
+                if name not in full.model.names:
+                    raise ValueError(f"locked joint {name!r} is not a joint of {header['robot']}")
+                joint = full.model.joints[full.model.getJointId(name)]
+                configuration[joint.idx_q:joint.idx_q + joint.nq] = as_vector(
+                    coordinates, joint.nq, f"locked joint {name!r}")
+            options.update(locked_joints=list(locked), locked_configuration=configuration)
+        return load_robot(header["robot"], **options)
+    except ValueError as error:
+        raise SessionError(f"{where}: {error}") from error
 
 
 #: How far (m) the geometry of a session's ``add`` event may be off its link when added.
@@ -272,11 +325,18 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
     q0 = np.asarray(session.header["q0"], dtype=float)
     if q0.shape != (robot.model.nq,):
         raise SessionError(f"{session.path}: q0 has {q0.size} values, the robot has nq = {robot.model.nq}")
-    start = home_pose(robot, q0)
-    targets = [e for e in session.events if e["type"] == "target"]
-    target_times = np.array([e["t"] for e in targets])
-    poses = [pin.SE3(pin.Quaternion(*e["quaternion_wxyz"]).normalized().matrix(),
-                     np.asarray(e["position"], dtype=float)) for e in targets]
+    starts = home_poses(robot, q0)
+    held: dict[str, tuple[np.ndarray, list[pin.SE3]]] = {}  # per EE frame: times, poses
+    for frame in robot.ee_frames:
+        events = [e for e in session.events
+                  if e["type"] == "target" and e.get("frame", robot.ee_frame) == frame]
+        held[frame] = (np.array([e["t"] for e in events]),
+                       [pin.SE3(pin.Quaternion(*e["quaternion_wxyz"]).normalized().matrix(),
+                                np.asarray(e["position"], dtype=float)) for e in events])
+    for event in session.events:
+        if event["type"] == "target" and event.get("frame", robot.ee_frame) not in held:
+            raise SessionError(f"{session.path}:{event['_line']}: unknown EE frame "
+                               f"{event['frame']!r}; the robot's: {list(robot.ee_frames)}")
     edits = [e for e in session.events if e["type"] in ("add", "move", "remove")]
     state: dict = {}
 
@@ -284,9 +344,12 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
         state.update(cursor=0, by_id={}, goals={}, t=None, dt=1.0 / float(session.header.get("rate_hz", 1000.0)))
         return []
 
-    def target(t: float) -> pin.SE3:
-        index = int(np.searchsorted(target_times, t + TIME_EPSILON, side="right")) - 1
-        return start if index < 0 else poses[index]
+    def target(t: float) -> list[pin.SE3]:
+        poses = []
+        for start, (times, recorded) in zip(starts, held.values()):
+            index = int(np.searchsorted(times, t + TIME_EPSILON, side="right")) - 1
+            poses.append(start if index < 0 else recorded[index])
+        return poses
 
     def update(t: float, constraints: list[Constraint], q: np.ndarray) -> list[Constraint] | None:
         changed = False

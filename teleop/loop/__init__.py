@@ -10,7 +10,8 @@ from .closed_loop import (
     constraint_names,
     row_labels,
     saturate_twist,
+    target_poses,
 )
 
 __all__ = ["RECORD_FIELDS", "LoopConfig", "Plant", "StepRecord", "Targets", "TeleopLoop",
-           "constraint_names", "row_labels", "saturate_twist"]
+           "constraint_names", "row_labels", "saturate_twist", "target_poses"]

@@ -110,6 +110,15 @@ def row_labels(constraints: Sequence[Constraint]) -> tuple[str, ...]:
     return tuple(labels)
 
 
+def target_poses(target: Targets) -> list[pin.SE3]:
+    """``target`` as a list of poses (a lone ``pin.SE3`` becomes a list of one)."""
+    poses = [target] if isinstance(target, pin.SE3) else list(target)
+    for pose in poses:
+        if not isinstance(pose, pin.SE3):
+            raise ValueError(f"a target must be a pin.SE3, got {type(pose).__name__}")
+    return poses
+
+
 def constraint_names(constraints: Sequence[Constraint]) -> tuple[str, ...]:
     """One name per constraint, in order: ``"hole 2 (arm_right_link_5_r)"``, numbered by
     kind in list order (equalities and barriers alike) and naming the link it holds."""
@@ -285,13 +294,10 @@ class TeleopLoop:
     def targets(self, target: Targets) -> list[pin.SE3]:
         """``target`` as one pose per EE; ``ValueError`` unless it has one per
         ``robot.ee_frames`` entry (a lone ``pin.SE3`` counts as one)."""
-        poses = [target] if isinstance(target, pin.SE3) else list(target)
+        poses = target_poses(target)
         if len(poses) != len(self.ee_frame_ids):
             raise ValueError(f"expected {len(self.ee_frame_ids)} target poses, one per EE frame "
                              f"{list(self.robot.ee_frames)}, got {len(poses)}")
-        for pose in poses:
-            if not isinstance(pose, pin.SE3):
-                raise ValueError(f"a target must be a pin.SE3, got {type(pose).__name__}")
         return poses
 
     def filter_targets(self, target: Targets) -> list[pin.SE3]:
