@@ -376,3 +376,24 @@ def test_the_mobile_base_is_drawn_where_the_planar_joint_puts_it_and_a_wall_span
     plane = ui._markers[wall_id]["shape"]
     assert plane.dimensions[0] == pytest.approx(1.6)  # twice the base's 0.8 m length
     np.testing.assert_allclose(plane.position, app.entries[wall_id].position, atol=1e-9)
+
+
+def test_a_recorded_session_holds_both_targets_and_replays(app, dual, tmp_path):
+    from teleop.experiments.compare import run_plan
+    from teleop.experiments.sessions import load_session, session_plan
+
+    for link in dual.constrained_links:
+        app.add_hole(0.08, link)
+    path = app.start_recording(tmp_path / "two.jsonl")
+    app.nudge_target([0.0, 0.004, 0.0], ee=0)
+    run(app, 0.2)
+    app.nudge_target([0.0, 0.0, -0.004], ee=1)
+    run(app, 0.2)
+    app.stop_recording()
+    session = load_session(path)
+    frames = [event.get("frame", dual.ee_frames[0]) for event in session.events
+              if event["type"] == "target"]
+    assert frames.count(dual.ee_frames[1]) == 2 and frames.count(dual.ee_frames[0]) == 2
+    metrics = run_plan(session_plan(session), "cjm").metrics()
+    # 4 mm target jumps: the same bound as the single-arm session test
+    assert metrics["failed_steps"] == 0 and metrics["constraint_error_max_m"] < 1e-5
