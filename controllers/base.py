@@ -199,6 +199,9 @@ class Controller(ABC):
         self._box_test = BoxTest(self.joint_bounds, self.model.nq, self.model.nv)
         self.constraints: list[Constraint] = []
         self.constraint_frames: list[int] = []
+        #: a mobile base's velocity indices: no posture there (docs/design.md section 11.3)
+        self._base_velocity = (slice(0, self.model.nvs[1])
+                               if getattr(robot, "root_joint", "fixed") == "planar" else None)
 
     @property
     def dt(self) -> float:
@@ -220,6 +223,15 @@ class Controller(ABC):
     def bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The joint box ``lower <= qd <= upper`` at ``q`` (:class:`JointBounds`)."""
         return self.joint_bounds.box(q)
+
+    def posture_difference(self, q: np.ndarray, posture: np.ndarray) -> np.ndarray:
+        """``posture (-) q`` (nv,, ``pin.difference``) with a mobile base's entries zero:
+        the posture shapes the joints; the base stands where it is unless the task or a
+        constraint moves it (docs/design.md section 11.3)."""
+        difference = pin.difference(self.model, q, posture)
+        if self._base_velocity is not None:
+            difference[self._base_velocity] = 0.0
+        return difference
 
     # -- constraints -------------------------------------------------------------------
 

@@ -549,19 +549,21 @@ class PostureTask(mink.Task):
 
     ``mink.PostureTask`` has ``e = q (-) q_posture`` (``mj_differentiatePos``) and
     ``J = I``, so ``J dq = -gain e`` asks for ``dq = gain (q_posture (-) q)``. This one
-    takes the difference with Pinocchio, ``e = -map(pin.difference(q, q_posture))``
-    (``JointMap.v_to_mujoco``), as the CJM's ``qd_posture`` does. For 1-dof joints the
+    takes the difference with Pinocchio, ``e = -map(posture_difference(q, q_posture))``
+    (``JointMap.v_to_mujoco``, ``Controller.posture_difference``: ``pin.difference``
+    without a mobile base's entries), as the CJM's ``qd_posture`` does. For 1-dof joints the
     two are the same numbers; on a planar base MuJoCo's difference is the world-frame
     ``(dx, dy, dth)`` while Pinocchio's is the SE(2) logarithm in the base frame, and
     only the latter makes mink's posture the CJM's (docs/design.md section 11).
     """
 
     def __init__(self, model: pin.Model, joints: JointMap, posture: np.ndarray,
-                 cost: float, gain: float) -> None:
+                 cost: float, gain: float,
+                 difference: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
         super().__init__(cost=np.full(model.nv, cost), gain=gain, lm_damping=0.0)
-        self.model = model
         self.joints = joints
         self.posture = posture
+        self.difference = difference  # the controller's posture_difference
         self._q_pin = np.empty(model.nq)
         self._identity = np.eye(model.nv)
 
@@ -569,7 +571,7 @@ class PostureTask(mink.Task):
         """``e = -(q_posture (-) q)`` (nv,), MuJoCo velocity coordinates."""
         q_mj = configuration.q
         q_pin = self.joints.q_to_pinocchio(q_mj, out=self._q_pin)
-        return -self.joints.v_to_mujoco(pin.difference(self.model, q_pin, self.posture), q_mj)
+        return -self.joints.v_to_mujoco(self.difference(q_pin, self.posture), q_mj)
 
     def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
         """``J = I`` (nv x nv)."""
@@ -752,7 +754,8 @@ class MinkController(Controller):
             posture = robot.q_home
         self.posture = as_vector(posture, model.nq, "posture")
         self.posture_task = PostureTask(model, self.joints, self.posture, cost=self.posture_cost,
-                                        gain=self.posture_gain * self.dt)
+                                        gain=self.posture_gain * self.dt,
+                                        difference=self.posture_difference)
         self._tasks = [*self.ee_tasks, self.posture_task] if self.posture_cost else self.ee_tasks
         self._equality_caches: list[_RowsCache] = []
         self.constraint_tasks: list[ConstraintTask] = []

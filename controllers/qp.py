@@ -452,7 +452,7 @@ class QPController(Controller):
         """``posture_gain * (posture (-) q)`` (nv,): the CJM's posture velocity."""
         if self.posture_gain == 0.0:
             return np.zeros(self.model.nv)
-        return self.posture_gain * pin.difference(self.model, q, self.posture)
+        return self.posture_gain * self.posture_difference(q, self.posture)
 
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
         nv = self.model.nv

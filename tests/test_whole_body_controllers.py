@@ -214,35 +214,41 @@ def test_mobile_jacobians_and_rows_match_finite_differences(mobile, seed, headin
 
 
 def test_a_barrier_on_the_base_is_never_crossed(mobile):
-    """Both EEs asked to drive into a wall for 3 s: the base's corner stops at the wall
-    (the issue's bound: penetration <= 1 um)."""
+    """Both EEs asked to drive through a wall for 3 s: the base's corner stops at the wall
+    and slides along it while the base turns. The barrier row holds at every step; the
+    only penetration is the first-order rows' discretisation (docs/design.md section
+    11.3): each step the corner's true rate (finite differences through ``pin.integrate``)
+    differs from the row's ``A qd`` by ``|a| dt / 2``, which the barrier's feedback
+    ``-K d`` balances at a depth of at most that difference over ``K``."""
     q = mobile.q_home.copy()
-    data = data_at(mobile, q)
-    base = data.oMf[mobile.model.getFrameId("mobile_base")]
+    base_frame = mobile.model.getFrameId("mobile_base")
     corner = np.array([0.4, 0.3, 0.0])  # link coordinates of a corner of the base
-    wall_x = float(base.act(corner)[0]) + 0.10  # a wall 10 cm ahead, normal -x
+    wall_x = float(data_at(mobile, q).oMf[base_frame].act(corner)[0]) + 0.10
     wall = Barrier("mobile_base", corner, [wall_x, 0.0, 0.0], [-1.0, 0.0, 0.0])
-    for spec in ("cjm", "qp"):
-        controller = (CJMController(mobile, [wall]) if spec == "cjm"
-                      else QPController(mobile, [wall], solver="daqp"))
+    for controller in (CJMController(mobile, [wall]), QPController(mobile, [wall], solver="daqp")):
         q = mobile.q_home.copy()
-        closest = np.inf
+        depth, worst_rate_miss = 0.0, 0.0
+        distance = wall_x - float(data_at(mobile, q).oMf[base_frame].act(corner)[0])
         for _ in range(3000):
             data = data_at(mobile, q)
-            # both EEs pushed along world +x, expressed in each EE's frame
+            # both EEs pushed along world +x at 0.3 m/s, expressed in each EE's frame
             twist = np.concatenate([
                 np.concatenate([data.oMf[f].rotation.T @ [0.3, 0.0, 0.0], np.zeros(3)])
                 for f in mobile.ee_frame_ids])
             qd = controller.solve(q, twist)
             assert controller.info.success
+            rows, bound = wall.rows(mobile.model, data)
+            assert rows[0] @ qd >= bound[0] - 1e-9  # the barrier row held
             q = pin.integrate(mobile.model, q, qd * controller.dt)
-            placement = data_at(mobile, q).oMf[mobile.model.getFrameId("mobile_base")]
-            closest = min(closest, wall_x - float(placement.act(corner)[0]))
-        # the rows are first order: a corner that turns with the base curves past the
-        # linear prediction by about |a| dt^2 / 2 a step, which the barrier's feedback
-        # bounds to |a| dt / (2 K) (9e-7 m here, docs/design.md section 11.3)
-        assert closest >= -1e-6, spec
-        assert closest < 0.02, f"{spec}: the base never came near the wall ({closest:.3f} m)"
+            new_distance = wall_x - float(data_at(mobile, q).oMf[base_frame].act(corner)[0])
+            rate_miss = rows[0] @ qd - (new_distance - distance) / controller.dt
+            worst_rate_miss = max(worst_rate_miss, rate_miss)
+            distance = new_distance
+            depth = max(depth, -distance)
+        name = type(controller).__name__
+        assert distance < 1e-3, f"{name}: the base never reached the wall ({distance:.3f} m)"
+        assert worst_rate_miss < 2e-4, name  # |a| dt / 2 with |a| ~ 0.2 m/s^2
+        assert depth <= 1.01 * worst_rate_miss / wall.gain + 1e-12, (name, depth)
 
 
 @PROPERTY

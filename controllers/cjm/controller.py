@@ -238,7 +238,7 @@ class CJMController(Controller):
     def _posture_velocity(self, q: np.ndarray) -> np.ndarray | None:
         if self.posture_gain == 0.0:
             return None
-        return self.posture_gain * pin.difference(self.model, q, self.posture)
+        return self.posture_gain * self.posture_difference(q, self.posture)
 
     # -- joint limits ------------------------------------------------------------------
 
