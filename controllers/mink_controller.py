@@ -46,7 +46,7 @@ from mink.limits.limit import Constraint as LimitRows
 from constraints import Constraint
 from constraints.validation import as_number, as_vector
 
-from .base import Controller, Kinematics, SolverError
+from .base import Controller, Kinematics, SolverError, as_twist_weight
 from .joint_limits import DEFAULT_LIMIT_GAIN
 from .qp import PROXQP_RHO
 
@@ -679,7 +679,7 @@ class MinkController(Controller):
     posture_gain : gain (1/s) of the posture velocity, as the CJM's (at most ``1 / dt``:
         mink's per-step gain is ``posture_gain * dt`` and must not exceed 1).
     posture_cost : the posture task's cost relative to the task's scale: mink's cost is
-        ``c = posture_cost * sqrt(s)``, ``s = |J_e|_F^2 / m`` (``J_e`` stacked, ``m = 6`` rows
+        ``c = posture_cost * sqrt(s)``, ``s = |W^1/2 J_e|_F^2 / m`` (``J_e`` stacked, ``m = 6`` rows
         per EE: the mean squared singular value, as the QP controller's ``s``),
         set every step (0: no posture task). With proxqp, its ``rho`` follows as
         ``PROXQP_RHO c^2`` (``controllers.qp``): proxqp's own 1e-6 against the curvature
@@ -695,6 +695,8 @@ class MinkController(Controller):
     equality_tolerance : largest ``|A qd - b|`` (m/s) accepted from the backend.
     solver_settings : backend keyword arguments, passed as they are (they override the
         defaults built from ``VELOCITY_TOLERANCES`` and ``FIXED_SETTINGS``).
+    twist_weight : the diagonal ``W`` of the CJM's and the QP's weighted task: each frame
+        task's position and orientation costs are ``W^1/2`` of its EE's entries.
     """
 
     def __init__(
@@ -711,9 +713,13 @@ class MinkController(Controller):
         limit_gain: float = DEFAULT_LIMIT_GAIN,
         equality_tolerance: float = 1e-6,
         solver_settings: dict | None = None,
+        twist_weight=None,
         strict: bool = False,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, strict=strict)
+        self.twist_weight = as_twist_weight(twist_weight, self.task_size)
+        self._twist_scale = np.sqrt(self.twist_weight)  # W^1/2: each frame task's costs
+        self._unit_weight = bool(np.all(self.twist_weight == 1.0))
         if solver not in qpsolvers.available_solvers:
             raise ValueError(
                 f"QP solver {solver!r} is not available to mink; installed: "
@@ -744,9 +750,11 @@ class MinkController(Controller):
         self.ee_site = site_name(ee_frames[0])
         self.configuration = mink.Configuration(self.mj_model)
         #: one frame task per end effector, in ``robot.ee_frames`` order
-        self.ee_tasks = [mink.FrameTask(site_name(name), "site", position_cost=1.0,
-                                        orientation_cost=1.0, gain=1.0, lm_damping=0.0)
-                         for name in ee_frames]
+        self.ee_tasks = [mink.FrameTask(site_name(name), "site",
+                                        position_cost=self._twist_scale[6 * i:6 * i + 3],
+                                        orientation_cost=self._twist_scale[6 * i + 3:6 * i + 6],
+                                        gain=1.0, lm_damping=0.0)
+                         for i, name in enumerate(ee_frames)]
         self._ee_site_ids = [self.mj_model.site(site_name(name)).id for name in ee_frames]
         self._q_mj = np.empty(self.mj_model.nq)
         self._base_limits = self._make_limits(robot, limits, limit_gain)
@@ -816,7 +824,8 @@ class MinkController(Controller):
         self.info.method = f"mink:{self.solver}"
         if self.posture_cost > 0.0:  # c = posture_cost * sqrt(s), s the task's scale
             cost = self.posture_cost * math.sqrt(
-                float(np.vdot(kinematics.ee_jacobian, kinematics.ee_jacobian)) / self.task_size)
+                float(np.vdot(self.twist_weight, np.square(kinematics.ee_jacobian).sum(axis=1)))
+                / self.task_size)
             self.posture_task.cost[:] = cost  # (set_cost, without its checks)
             if self._proxqp_rho_tuned:
                 self.settings["rho"] = PROXQP_RHO * cost**2
@@ -849,7 +858,8 @@ class MinkController(Controller):
                 if np.any(rows.A_pin @ qd - rows.b < 1e-9):
                     active.append(index)
             self.info.active_barriers = tuple(active)
-        self._report_twist_error(kinematics.ee_jacobian, qd, twist)
+        self._report_twist_error(kinematics.ee_jacobian, qd, twist,
+                                 None if self._unit_weight else self._twist_scale)
         return qd
 
     def _solve_ik(self) -> np.ndarray:

@@ -105,23 +105,28 @@ def _solver(family: str, option: str) -> str:
 
 
 def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
-                    dt: float = 1e-3) -> Controller:
-    """Build a controller from its spec string; unknown specs raise ``ValueError``."""
+                    dt: float = 1e-3, twist_weight=None) -> Controller:
+    """Build a controller from its spec string; unknown specs raise ``ValueError``.
+    ``twist_weight`` (the task's diagonal weight, 6 per EE or one per entry) goes to every
+    family alike."""
     family, _, option = str(spec).strip().partition(":")
     if family == "cjm":
         if option not in CJM_VARIANTS:
             raise ValueError(f"unknown CJM variant {option!r}: analytical, general or paper")
         from controllers import CJMController
 
-        return CJMController(robot, constraints, dt=dt, **CJM_VARIANTS[option])
+        return CJMController(robot, constraints, dt=dt, twist_weight=twist_weight,
+                             **CJM_VARIANTS[option])
     if family == "qp":
         from controllers import QPController
 
-        return QPController(robot, constraints, solver=_solver(family, option), dt=dt)
+        return QPController(robot, constraints, solver=_solver(family, option), dt=dt,
+                            twist_weight=twist_weight)
     if family == "mink":
         solver = _solver(family, option)  # checked before MuJoCo (heavy) is imported
         from controllers import MinkController
 
-        return MinkController(robot, constraints, solver=solver, dt=dt)
+        return MinkController(robot, constraints, solver=solver, dt=dt,
+                              twist_weight=twist_weight)
     raise ValueError(f"unknown controller {spec!r}: known {', '.join(spec_names())}; in general "
                      f"{CONTROLLER_HELP} ({', '.join(available_solvers())})")

@@ -367,3 +367,23 @@ def test_sites_follow_pinocchio_on_the_planar_base(mobile, mobile_controller, se
         np.testing.assert_allclose(mobile_controller.site_pose(frame).homogeneous,
                                    data.oMf[mobile.model.getFrameId(frame)].homogeneous,
                                    atol=1e-12, err_msg=frame)
+
+
+def test_weighted_task_matches_the_cjm_and_the_qp():
+    """``twist_weight`` on the two-trocar robot, tips' linear velocities only: mink's frame
+    tasks with those costs give the CJM's and the QP's command (the rest to the posture,
+    which mink weights where the others put it last: the bound of the mobile test)."""
+    robot = load_robot("sda10f_dual")
+    weight = [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q = pin.integrate(robot.model, robot.q_home, rng.uniform(-0.1, 0.1, robot.model.nv))
+        holes = [Hole.on_link(robot, q, distance=0.08, link=link) for link in robot.constrained_links]
+        twist = rng.normal(scale=0.01, size=12)
+        qd_cjm = CJMController(robot, holes, twist_weight=weight).solve(q, twist)
+        qd_qp = QPController(robot, holes, solver="daqp", twist_weight=weight).solve(q, twist)
+        mink_controller = MinkController(robot, holes, twist_weight=weight)
+        qd_mink = mink_controller.solve(q, twist)
+        assert mink_controller.info.status.value == "ok", mink_controller.info.message
+        np.testing.assert_allclose(qd_cjm, qd_qp, atol=1e-6)
+        np.testing.assert_allclose(qd_mink, qd_cjm, atol=1e-4)

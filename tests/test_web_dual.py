@@ -397,3 +397,47 @@ def test_a_recorded_session_holds_both_targets_and_replays(app, dual, tmp_path):
     metrics = run_plan(session_plan(session), "cjm").metrics()
     # 4 mm target jumps: the same bound as the single-arm session test
     assert metrics["failed_steps"] == 0 and metrics["constraint_error_max_m"] < 1e-5
+
+
+@pytest.mark.parametrize("spec", ["cjm", "qp:daqp"])
+def test_a_lower_orientation_weight_lets_the_dragged_tip_reach_its_target(dual, tmp_path, spec):
+    """Two trocars leave 11 joint directions for two full poses (12): at orientation weight
+    1 the dragged tip stops short (least squares); at 0 only the tips' positions are asked
+    for, so the dragged tip reaches its target and the other stays, holes held."""
+    reached = {}
+    for weight in (1.0, 0.0):
+        app = TeleopApp(dual, controller=spec, record_dir=tmp_path / "sessions",
+                        scene_dir=tmp_path / "scenes")
+        ids = [app.add_hole(0.08, link) for link in dual.constrained_links]
+        app.set_orientation_weight(weight)
+        assert app.orientation_weight == weight
+        start = ee_positions(app)
+        displacement = np.array([0.0, 0.01, 0.01])
+        drag(app, 0, displacement, steps=20, ticks_per_step=40)
+        run(app, 1.5)  # 15 time constants of the gain kp = 20 1/s with the target filter
+        end = ee_positions(app)
+        reached[weight] = float(np.linalg.norm(end[0] - (start[0] + displacement)))
+        model, data = dual.model, dual.model.createData()
+        pin.framesForwardKinematics(model, data, app.loops["main"].q)
+        for hole_id in ids:
+            hole = app.entries[hole_id].constraint
+            assert hole.violation(data.oMf[model.getFrameId(hole.link)]) <= HOLE_TOLERANCE
+        if weight == 0.0:
+            assert np.linalg.norm(end[1] - start[1]) < 1e-4, "the other tip moved"
+    assert reached[0.0] < 1e-4, reached  # the dragged tip where it was dragged
+    assert reached[1.0] > 10 * reached[0.0], reached
+
+
+def test_orientation_weight_is_checked_and_kept_in_scenes(app, tmp_path):
+    for bad in (-0.1, 1.5, float("nan"), "x"):
+        with pytest.raises(ValueError, match="orientation weight"):
+            app.set_orientation_weight(bad)
+    assert app.orientation_weight == 1.0
+    app.set_orientation_weight(0.25)
+    path = tmp_path / "scene.json"
+    app.save_scene(path)
+    assert json.loads(path.read_text())["orientation_weight"] == 0.25
+    app.set_orientation_weight(1.0)
+    app.load_scene(path)
+    assert app.orientation_weight == 0.25
+    assert np.allclose(app.loops["main"].controller.twist_weight, [1, 1, 1, 0.25, 0.25, 0.25] * 2)

@@ -310,6 +310,9 @@ class TeleopApp:
                                  max_angular_speed=MAX_ANGULAR_SPEED)
         self.gain = 100.0
         self.damping = 0.0
+        #: weight of the EE twists' angular entries (1: full poses; lower lets each
+        #: instrument's orientation give way to its tip position, docs/design.md 11.2)
+        self.orientation_weight = 1.0
         self.record_dir = Path(record_dir)
         self.scene_dir = Path(scene_dir)
         self.entries: dict[str, ConstraintEntry] = {}
@@ -335,11 +338,15 @@ class TeleopApp:
 
     def _make_loop(self, spec: str, q: np.ndarray | None = None,
                    constraints: list[Constraint] | None = None,
-                   config: LoopConfig | None = None) -> AppLoop:
+                   config: LoopConfig | None = None,
+                   orientation_weight: float | None = None) -> AppLoop:
         if constraints is None:
             constraints = [e.constraint for e in getattr(self, "entries", {}).values()]
         config = config or self.config
-        controller = make_controller(spec, self.robot, constraints, dt=config.dt)
+        weight = self.orientation_weight if orientation_weight is None else orientation_weight
+        controller = make_controller(spec, self.robot, constraints, dt=config.dt,
+                                     twist_weight=None if weight == 1.0 else
+                                     [1.0, 1.0, 1.0, weight, weight, weight])
         self._apply_damping(controller)
         return AppLoop(self.robot, controller, q0=q, config=config)
 
@@ -724,6 +731,23 @@ class TeleopApp:
             for loop in self.loops.values():
                 self._apply_damping(loop.controller)
 
+    def set_orientation_weight(self, weight: float) -> None:
+        """Weight in [0, 1] of every EE twist's angular entries against the linear ones
+        (every controller's ``twist_weight``): 1 asks for full poses; with two trocars on
+        one torso, which leave 11 joint directions for 12 entries, a lower weight lets the
+        orientations give way so the tips go where they are dragged. Rebuilds the loops,
+        keeps the state."""
+        weight = as_number(weight, "orientation weight", 0.0, maximum=1.0)
+        with self._lock:
+            loops = {which: self._make_loop(self.specs[which], q=loop.q.copy(),
+                                            orientation_weight=weight)
+                     for which, loop in self.loops.items()}
+            for which, loop in loops.items():
+                self._apply_damping(loop.controller)
+                loop.t = self.loops[which].t
+            self.orientation_weight = weight
+            self.loops.update(loops)
+
     def set_rate(self, rate: float) -> None:
         """Control rate (Hz); rebuilds the loops (QP limits depend on dt), keeps the state."""
         rate = as_number(rate, "the control rate")
@@ -772,6 +796,7 @@ class TeleopApp:
                 "robot": robot_to_dict(self.robot),
                 "controllers": {"main": self.specs["main"], "ghost": self.specs.get("ghost")},
                 "gain": self.gain, "damping": self.damping, "rate": self.config.rate,
+                "orientation_weight": self.orientation_weight,
                 "motion_scale": self.motion_scale,
                 "ghost_offset": [float(x) for x in self.ghost_offset],
                 "q": {which: [float(x) for x in loop.q] for which, loop in self.loops.items()},
@@ -824,11 +849,13 @@ class TeleopApp:
             loops = {}
             for which, spec in specs.items():  # raises ValueError: nothing changed yet
                 loop = self._make_loop(spec, q=scene.q[which], constraints=constraints,
-                                       config=config)
+                                       config=config,
+                                       orientation_weight=scene.orientation_weight)
                 self._apply_damping(loop.controller, scene.damping)
                 loop.t = t
                 loops[which] = loop
             self.config, self.gain, self.damping = config, scene.gain, scene.damping
+            self.orientation_weight = scene.orientation_weight
             self.specs, self.loops = specs, loops
             self.traces = {which: Trace() for which in loops}
             self.last_records = {which: None for which in loops}

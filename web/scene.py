@@ -10,6 +10,7 @@ the control rate, the motion scale and the ghost's offset::
                "link_axis": [0, 0, -1], "package_dirs": null, "q_home": [...]},
      "controllers": {"main": "cjm", "ghost": "qp:daqp"},
      "gain": 100.0, "damping": 0.0, "rate": 1000.0, "motion_scale": 1.0,
+     "orientation_weight": 1.0,
      "ghost_offset": [0.0, 0.9, 0.0],
      "q": {"main": [...], "ghost": [...]},
      "target": {"position": [x, y, z], "wxyz": [w, x, y, z]},
@@ -166,6 +167,8 @@ class Scene:
     constraints: tuple[PlacedConstraint, ...]
     #: every EE's target (position, unit wxyz), in ``robot.ee_frames`` order
     targets: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
+    #: weight of the EE twists' angular entries (``TeleopApp.set_orientation_weight``)
+    orientation_weight: float = 1.0
 
 
 def _spec(value: Any, name: str, optional: bool = False) -> str | None:
@@ -259,7 +262,9 @@ def parse_scene(data: Any, nq: int | None = None, ee_frames: tuple[str, ...] | N
         motion_scale=as_number(data.get("motion_scale", 1.0), "scene motion_scale", positive=True),
         ghost_offset=as_vector(data.get("ghost_offset", [0.0, 0.0, 0.0]), 3, "scene ghost_offset"),
         q=q, target_position=position, target_wxyz=wxyz, constraints=tuple(placed),
-        targets=targets)
+        targets=targets,
+        orientation_weight=as_number(data.get("orientation_weight", 1.0),
+                                     "scene orientation_weight", 0.0, maximum=1.0))
 
 
 def read_scene_file(path: str | Path) -> dict:

@@ -506,6 +506,10 @@ class TeleopUI:
         gui, app = self.server.gui, self.app
         self.gain_slider = gui.add_slider("drift gain K (1/s)", 0.0, 500.0, 5.0, app.gain)
         self.damping_slider = gui.add_slider("damping lambda", 0.0, 0.2, 0.001, app.damping)
+        self.orientation_slider = gui.add_slider(
+            "orientation weight", 0.0, 1.0, 0.05, app.orientation_weight,
+            hint="weight of the tools' orientations against their tip positions: lower it "
+                 "when two trocars on one torso leave too few joints for both full poses")
         self.rate_number = gui.add_number("rate (Hz)", app.config.rate, min=50, max=5000, step=50)
         self.scene_path = gui.add_text("scene file", str(app.scene_dir / "scene.json"))
         self.save_scene_button = gui.add_button("Save scene")
@@ -518,6 +522,8 @@ class TeleopUI:
             event, lambda: app.set_gain(self.gain_slider.value)))
         self.damping_slider.on_update(lambda event: self._guarded(
             event, lambda: app.set_damping(self.damping_slider.value)))
+        self.orientation_slider.on_update(lambda event: self._guarded(
+            event, lambda: app.set_orientation_weight(self.orientation_slider.value)))
         self.rate_number.on_update(lambda event: self._guarded(
             event, lambda: app.set_rate(self.rate_number.value)))
         self.save_scene_button.on_click(lambda event: self._guarded(event, self._save_scene))
@@ -596,6 +602,7 @@ class TeleopUI:
         self.motion_scale.value = app.motion_scale
         self.gain_slider.value = app.gain
         self.damping_slider.value = app.damping
+        self.orientation_slider.value = app.orientation_weight
         self.rate_number.value = app.config.rate
 
     def _toggle_recording(self) -> None:
