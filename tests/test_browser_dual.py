@@ -5,7 +5,7 @@ Two arms, two gizmos. A real mouse drags each gizmo in turn (tests/browser_helpe
 dragged EE follows its target and the other stays where it was. Then a hole goes on each
 arm through the page ("arm" menu, "Add hole"), each gizmo is dragged again with both
 instruments through their trocars (the holes held to 1 um), and the README's screenshot of
-the two-arm robot through two trocars is taken: docs/images/sda10f_dual_trocars.png.
+the two-arm robot through two trocars is taken (tests/artifacts; the README shows a copy).
 Its own module: one browser at a time.
 """
 
@@ -34,7 +34,8 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
 from teleop import load_robot
 
 HOLE_TOLERANCE = 1e-6  # m
-SCREENSHOT = Path(__file__).resolve().parents[1] / "docs" / "images" / "sda10f_dual_trocars.png"
+#: written under tests/artifacts (ignored); docs/images/sda10f_dual_trocars.png is a copy of one
+SCREENSHOT = Path(__file__).resolve().parent / "artifacts" / "sda10f_dual_trocars.png"
 
 
 @pytest.fixture(scope="module")
