@@ -20,12 +20,22 @@ from .analytical import (
     solve_redundant_pre_chain,
 )
 from .general import solve_general
-from .saturation import saturate_in_null_space
+from .saturation import rows_scaled_note, saturate_in_null_space
 
 #: A barrier row is violated when the solution undercuts it by more than this (m/s).
 BARRIER_TOLERANCE = 1e-12
 
 Form = Literal["auto", "general"]
+Backend = Literal["auto", "compiled", "python"]
+
+
+def compiled_step_available() -> bool:
+    """Whether the C++ extension of the compiled step (section 16) is built here."""
+    try:
+        from . import _step  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 class CJMController(Controller):
@@ -61,6 +71,10 @@ class CJMController(Controller):
         null-space form: the cross-check).
     limit_gain, position_limits, velocity_limits, strict : see
         :class:`controllers.base.Controller`.
+    backend : ``"compiled"`` (the step's algebra in C++, :mod:`controllers.cjm.compiled`,
+        docs/design.md section 16), ``"python"`` (this module and its siblings: the
+        readable reference) or ``"auto"`` (compiled when the extension is built, else
+        Python). ``"compiled"`` without the extension raises ``ImportError``.
     """
 
     def __init__(
@@ -79,6 +93,7 @@ class CJMController(Controller):
         position_limits: bool = True,
         velocity_limits: bool = True,
         strict: bool = False,
+        backend: Backend = "auto",
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
                          velocity_limits=velocity_limits, strict=strict)
@@ -86,6 +101,15 @@ class CJMController(Controller):
             raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
         if form not in ("auto", "general"):
             raise ValueError(f"unknown form {form!r}: 'auto' or 'general'")
+        if backend not in ("auto", "compiled", "python"):
+            raise ValueError(f"unknown backend {backend!r}: 'auto', 'compiled' or 'python'")
+        if backend == "compiled" and not compiled_step_available():
+            raise ImportError("the compiled CJM step (controllers.cjm._step) is not built: "
+                              "reinstall with pip install -e . (it needs a C++17 compiler)")
+        if backend == "auto":
+            backend = "compiled" if compiled_step_available() else "python"
+        self.backend: Backend = backend
+        self._compiled = None
         self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
                                     as_number(singular_threshold, "singular_threshold", 0.0),
                                     as_number(max_damping, "max_damping", 0.0))
@@ -115,6 +139,16 @@ class CJMController(Controller):
         self._equalities = [i for i, c in enumerate(self.constraints) if c.is_equality]
         self._barriers = [i for i, c in enumerate(self.constraints) if not c.is_equality]
         self._square_plans = {}
+        if self.backend == "compiled":
+            from .compiled import CompiledStep
+
+            self._compiled = CompiledStep(self)
+
+    def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """:meth:`Controller.solve`, in C++ with the compiled backend (section 16)."""
+        if self._compiled is None:
+            return super().solve(q, twist)
+        return self._compiled.solve(*self._checked_inputs(q, twist))
 
     # -- chain structure ---------------------------------------------------------------
 
@@ -228,16 +262,19 @@ class CJMController(Controller):
         info.equality_residual = (float(np.max(np.abs(rows @ result.qd - rows_rhs)))
                                   if rows.shape[0] else 0.0)
         if result.rows_scale < 1.0:
-            info.report(StepStatus.CONSTRAINT_DEGRADED,
-                        f"the constraint's correction exceeds the joint limits: scaled to "
-                        f"{result.rows_scale:.0%}, the constraint converges as fast as they allow")
+            info.report(StepStatus.CONSTRAINT_DEGRADED, rows_scaled_note(result.rows_scale))
         elif result.task_missed:
-            info.report(StepStatus.LEAST_SQUARES,
-                        f"{self._joint_list(result.saturated)} at a limit: task not fully achievable")
+            info.report(StepStatus.LEAST_SQUARES, self._task_missed_note(result.saturated))
         elif result.task_scale < 1.0:
-            info.report(StepStatus.SCALED, f"{self._joint_list([result.limiting_joint])} at a limit: "
-                                           f"task scaled to {result.task_scale:.0%}")
+            info.report(StepStatus.SCALED,
+                        self._task_scaled_note(result.limiting_joint, result.task_scale))
         return result.qd
+
+    def _task_missed_note(self, saturated: Iterable[int]) -> str:
+        return f"{self._joint_list(saturated)} at a limit: task not fully achievable"
+
+    def _task_scaled_note(self, joint: int, scale: float) -> str:
+        return f"{self._joint_list([joint])} at a limit: task scaled to {scale:.0%}"
 
     def _joint_list(self, velocity_indices: Iterable[int]) -> str:
         """``joint arm_joint_4`` / ``joints a, b`` for velocity indices of 1-dof joints."""
