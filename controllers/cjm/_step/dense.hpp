@@ -81,6 +81,9 @@ inline void jacobi_columns(MatrixRef x, MatrixRef v) {
   const Index q = x.cols();
   v.setIdentity();
   const double eps = std::numeric_limits<double>::epsilon();
+  // a column below the rounding of the whole matrix is left alone: its singular value is
+  // noise (far under the rank cut), and rotating it need not converge
+  const double negligible = 64.0 * eps * eps * x.squaredNorm();
   for (int sweep = 0; sweep < 100; ++sweep) {
     bool rotated = false;
     for (Index i = 0; i + 1 < q; ++i) {
@@ -88,7 +91,9 @@ inline void jacobi_columns(MatrixRef x, MatrixRef v) {
         const double alpha = x.col(i).squaredNorm();
         const double beta = x.col(j).squaredNorm();
         const double gamma = x.col(i).dot(x.col(j));
-        if (!(std::abs(gamma) > eps * std::sqrt(alpha * beta))) continue;
+        if (!(std::abs(gamma) > eps * std::sqrt(alpha * beta)) || alpha <= negligible ||
+            beta <= negligible)
+          continue;
         rotated = true;
         const double zeta = (beta - alpha) / (2.0 * gamma);
         const double t = std::copysign(1.0, zeta) / (std::abs(zeta) + std::hypot(1.0, zeta));

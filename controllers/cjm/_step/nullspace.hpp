@@ -4,8 +4,9 @@
 // ``A^T = Q [R1; 0]`` (QR of the n x m transpose). A certified bound decides the common
 // full-rank case without an SVD: ``sigma_min(A) >= 1 / ||R1^-1||_F``. Otherwise
 // ``R1 = U_R S V_R^T`` gives A's singular values, so the rank is decided on the same
-// numbers as the Python's SVD of A. The basis ``N = Q [U_R,dropped 0; 0 I]`` is never
-// formed: products with it cost one pass of the reflectors.
+// numbers as the Python's SVD of A. The basis ``N = Q [U_c 0; 0 I]`` (``U_c`` completing
+// the kept columns of ``U_R``) is never formed: products with it cost one pass of the
+// reflectors.
 #pragma once
 
 #include "dense.hpp"
@@ -20,7 +21,10 @@ class NullSpace {
         tau_(std::max<Index>(1, std::min(max_rows, max_cols))),
         inverse_(std::max<Index>(1, max_rows), std::max<Index>(1, max_rows)),
         svd_(std::max<Index>(1, std::min(max_rows, max_cols)), std::max<Index>(1, max_rows)),
-        kept_(std::max<Index>(1, max_rows)), dropped_(std::max<Index>(1, max_rows)),
+        kept_(std::max<Index>(1, max_rows)),
+        kept_vectors_(std::max<Index>(1, max_rows), std::max<Index>(1, max_rows)),
+        complement_(std::max<Index>(1, max_rows), std::max<Index>(1, max_rows)),
+        complement_tau_(std::max<Index>(1, max_rows)),
         weights_(std::max<Index>(1, max_rows)) {}
 
   //! Factor ``rows`` (m x n).
@@ -42,10 +46,18 @@ class NullSpace {
     r1 = a_t.topRows(t_).triangularView<Eigen::Upper>();
     svd_.compute(r1);
     const double tolerance = kRankTolerance * std::max(1.0, svd_.max_value());
-    for (Index j = 0; j < t_; ++j) {
+    for (Index j = 0; j < t_; ++j)
       if (svd_.s()(j) > tolerance) kept_(n_kept_++) = j;
-      else dropped_(n_dropped_++) = j;
-    }
+    n_dropped_ = t_ - n_kept_;
+    // the dropped directions: an orthonormal complement of the kept left vectors in R^t
+    // (the left vectors of zero singular values are not defined by the SVD)
+    auto kept = kept_vectors_.topLeftCorner(t_, n_kept_);
+    for (Index i = 0; i < n_kept_; ++i) kept.col(i) = svd_.u().col(kept_(i));
+    householder_qr(kept, complement_tau_.head(n_kept_));
+    auto complement = complement_.topLeftCorner(t_, n_dropped_);
+    complement.setZero();
+    complement.bottomRows(n_dropped_).setIdentity();
+    apply_q(kept, complement_tau_.head(n_kept_), complement);
   }
 
   Index rank() const { return n_kept_; }
@@ -78,7 +90,7 @@ class NullSpace {
     }
     apply_qt(factored_.topLeftCorner(n_, m_), tau_.head(t_), x);
     for (Index i = 0; i < n_dropped_; ++i)
-      y.row(i).noalias() = svd_.u().col(dropped_(i)).transpose() * x.topRows(t_);
+      y.row(i).noalias() = complement_.col(i).head(t_).transpose() * x.topRows(t_);
     y.bottomRows(n_ - t_) = x.bottomRows(n_ - t_);
   }
 
@@ -89,7 +101,7 @@ class NullSpace {
       return;
     }
     x.head(t_).setZero();
-    for (Index i = 0; i < n_dropped_; ++i) x.head(t_) += y(i) * svd_.u().col(dropped_(i));
+    for (Index i = 0; i < n_dropped_; ++i) x.head(t_) += y(i) * complement_.col(i).head(t_);
     x.tail(n_ - t_) = y.tail(n_ - t_);
     apply_q(factored_.topLeftCorner(n_, m_), tau_.head(t_), x);
   }
@@ -113,7 +125,9 @@ class NullSpace {
   Vector tau_;
   Matrix inverse_;   // R1^-1 for the certificate, else R1 for its SVD
   ThinSvd svd_;
-  Eigen::Matrix<Index, Eigen::Dynamic, 1> kept_, dropped_;
+  Eigen::Matrix<Index, Eigen::Dynamic, 1> kept_;
+  Matrix kept_vectors_, complement_;  // U_R's kept columns (QR-factored); their complement
+  Vector complement_tau_;
   Vector weights_;
   Index m_ = 0, n_ = 0, t_ = 0, n_kept_ = 0, n_dropped_ = 0;
   bool full_rank_ = false;
