@@ -27,6 +27,19 @@ EQUALITY_TOLERANCE = 1e-9
 TWIST_TOLERANCE = 1e-6
 
 
+def residual_note(residual: float) -> str:
+    return f"constraint residual {residual:.2e} m/s"
+
+
+def clipped_note(joints: list[int], change: float) -> str:
+    return (f"clipped to the joint limits (joints {joints}, by up to {change:.2e} rad/s): "
+            "constraints not held exactly")
+
+
+#: The message of a step whose command came out non-finite (the command is zero).
+NON_FINITE_NOTE = "non-finite joint velocity computed"
+
+
 class SolverError(RuntimeError):
     """A controller could not compute a command (raised only with ``strict=True``)."""
 
@@ -259,13 +272,7 @@ class Controller(ABC):
         when the controller is ``strict``): never a non-finite command, never one
         outside the joint box.
         """
-        q = np.asarray(q, dtype=float)
-        twist = np.asarray(twist, dtype=float)
-        # one cheap test for the common case; as_vector says what is wrong otherwise
-        if (q.shape != (self.model.nq,) or twist.shape != (self.task_size,)
-                or not math.isfinite(sum(q.tolist()) + sum(twist.tolist()))):
-            q = as_vector(q, self.model.nq, "q")
-            twist = as_vector(twist, self.task_size, "twist")
+        q, twist = self._checked_inputs(q, twist)
         self.info = SolveInfo()
         kinematics = self._kinematics(q)
         try:
@@ -273,7 +280,7 @@ class Controller(ABC):
         except (np.linalg.LinAlgError, SolverError) as error:
             return self._fail(f"{type(error).__name__}: {error}")
         if not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
-            return self._fail("non-finite joint velocity computed")
+            return self._fail(NON_FINITE_NOTE)
         if not self._box_test.contains(q, qd):
             lower, upper = self.joint_bounds.box(q)
             try:
@@ -283,8 +290,19 @@ class Controller(ABC):
             qd = self._clip(qd, lower, upper)
         if self.info.equality_residual > EQUALITY_TOLERANCE:
             self.info.report(StepStatus.CONSTRAINT_DEGRADED,
-                             f"constraint residual {self.info.equality_residual:.2e} m/s")
+                             residual_note(self.info.equality_residual))
         return qd
+
+    def _checked_inputs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``q`` and ``twist`` as float arrays of the right sizes, else ``ValueError``."""
+        q = np.asarray(q, dtype=float)
+        twist = np.asarray(twist, dtype=float)
+        # one cheap test for the common case; as_vector says what is wrong otherwise
+        if (q.shape != (self.model.nq,) or twist.shape != (self.task_size,)
+                or not math.isfinite(sum(q.tolist()) + sum(twist.tolist()))):
+            q = as_vector(q, self.model.nq, "q")
+            twist = as_vector(twist, self.task_size, "twist")
+        return q, twist
 
     def _saturate(self, kinematics: Kinematics, twist: np.ndarray, qd: np.ndarray,
                   lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -297,9 +315,7 @@ class Controller(ABC):
         change = float(np.max(np.abs(clipped - qd), initial=0.0))
         if change > EQUALITY_TOLERANCE * (1.0 + float(np.max(np.abs(qd), initial=0.0))):
             joints = np.flatnonzero(clipped != qd).tolist()
-            self.info.report(StepStatus.CONSTRAINT_DEGRADED,
-                             f"clipped to the joint limits (joints {joints}, by up to "
-                             f"{change:.2e} rad/s): constraints not held exactly")
+            self.info.report(StepStatus.CONSTRAINT_DEGRADED, clipped_note(joints, change))
             self.info.saturated_joints = tuple(joints)
             A, b = self.constraint_rows([i for i, c in enumerate(self.constraints) if c.is_equality])
             if A.shape[0]:
@@ -330,12 +346,15 @@ class Controller(ABC):
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
+        return Kinematics(q, self._ee_jacobian(), data, self.ee_frame_id)
+
+    def _ee_jacobian(self) -> np.ndarray:
+        """The EE frames' ``LOCAL`` Jacobians, stacked (6 n, nv), from the joint
+        Jacobians in ``self.data``."""
         if len(self.ee_frame_ids) == 1:
-            ee_jacobian = pin.getFrameJacobian(model, data, self.ee_frame_id, pin.LOCAL)
-        else:
-            ee_jacobian = np.vstack([pin.getFrameJacobian(model, data, frame, pin.LOCAL)
-                                     for frame in self.ee_frame_ids])
-        return Kinematics(q, ee_jacobian, data, self.ee_frame_id)
+            return pin.getFrameJacobian(self.model, self.data, self.ee_frame_id, pin.LOCAL)
+        return np.vstack([pin.getFrameJacobian(self.model, self.data, frame, pin.LOCAL)
+                          for frame in self.ee_frame_ids])
 
     @abstractmethod
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:

@@ -2,7 +2,8 @@
 
 A spec is ``family[:option]``:
 
-* ``cjm``, ``cjm:general``, ``cjm:paper`` - the Constrained Jacobian Matrix variants;
+* ``cjm``, ``cjm:general``, ``cjm:paper``, ``cjm:python`` - the Constrained Jacobian Matrix
+  variants (``cjm:python``: the Python reference of the compiled step);
 * ``qp:<solver>`` - the QP baseline with any installed qpsolvers backend;
 * ``mink:<solver>`` - mink (MuJoCo model) with any installed qpsolvers backend.
 
@@ -33,10 +34,10 @@ CONTEXTS = ("compare", "bench", "scaling", "ui")
 
 #: The CJM variants (``cjm:<variant>``) and the CJMController keywords of each.
 CJM_VARIANTS = {"": {}, "analytical": {}, "general": {"form": "general"},
-                "paper": {"parametrisation": "paper"}}
+                "paper": {"parametrisation": "paper"}, "python": {"backend": "python"}}
 
 #: The spec forms in one line, for help texts (no import: ``teleop --help`` stays fast).
-CONTROLLER_HELP = ("cjm[:general|:paper], qp:<solver>, mink:<solver> with <solver> any "
+CONTROLLER_HELP = ("cjm[:general|:paper|:python], qp:<solver>, mink:<solver> with <solver> any "
                    "installed qpsolvers backend")
 
 #: Default solver of ``qp`` and ``mink`` given without one.
@@ -64,6 +65,8 @@ _ALL = frozenset(CONTEXTS)
 CONTROLLER_SPECS: tuple[ControllerSpec, ...] = (
     ControllerSpec("cjm", "CJM: analytical form for one hole/plane, general null-space form "
                    "otherwise", _ALL),
+    ControllerSpec("cjm:python", "CJM, the Python reference step (the others run the compiled "
+                   "step, docs/design.md section 16)", {"bench", "scaling"}),
     ControllerSpec("cjm:general", "CJM, always the general null-space form (the cross-check)",
                    {"bench", "ui"}),
     ControllerSpec("cjm:paper", "CJM, the paper's parametrisation (singular with the "
@@ -112,7 +115,7 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
     family, _, option = str(spec).strip().partition(":")
     if family == "cjm":
         if option not in CJM_VARIANTS:
-            raise ValueError(f"unknown CJM variant {option!r}: analytical, general or paper")
+            raise ValueError(f"unknown CJM variant {option!r}: analytical, general, paper or python")
         from controllers import CJMController
 
         return CJMController(robot, constraints, dt=dt, twist_weight=twist_weight,

@@ -129,6 +129,28 @@ class AffineTerms:
             terms += self.of_f @ f
 
 
+class TermsWriter:
+    """Writes one constraint's flat terms buffer at its link's placement: through its
+    affine form (:class:`AffineTerms`, rebuilt when the gain changes) where it has one and
+    the parametrisation is the null-space one, else by evaluating the constraint."""
+
+    def __init__(self, constraint: Constraint, parametrisation: Parametrisation) -> None:
+        self.constraint = constraint
+        self.parametrisation = parametrisation
+        self._affine: tuple[float, AffineTerms] | None = None  # (gain it was built for, map)
+
+    def write(self, placement: pin.SE3, terms: np.ndarray) -> None:
+        constraint = self.constraint
+        inputs = constraint.affine_inputs(placement) if self.parametrisation == "nullspace" else None
+        if inputs is None:
+            state = constraint.evaluate(placement)
+            write_terms(state, structure_of(state, self.parametrisation), terms)
+            return
+        if self._affine is None or self._affine[0] != constraint.gain:
+            self._affine = (constraint.gain, AffineTerms(constraint))
+        self._affine[1].write(*inputs, terms)
+
+
 class SquarePreChain:
     """The paper's case: one constraint, exactly 6 joints before it, buffers allocated once.
 
@@ -144,9 +166,8 @@ class SquarePreChain:
 
     def __init__(self, constraint: Constraint, frame_id: int, nv: int, split: ChainSplit,
                  parametrisation: Parametrisation) -> None:
-        self.constraint = constraint
         self.frame_id = frame_id
-        self.parametrisation = parametrisation
+        self.terms_writer = TermsWriter(constraint, parametrisation)
         k = constraint.dim
         self.n_free = 6 - k
         n_columns = self.n_free + split.post.size  # columns of Jbar
@@ -166,18 +187,6 @@ class SquarePreChain:
         # factorisation of LAPACK's dgesv, reused objects, less call overhead.
         self.lu_pre = eigenpy.PartialPivLU(6)
         self.lu_cjm = eigenpy.PartialPivLU(6)
-        self._affine: tuple[float, AffineTerms] | None = None  # (gain it was built for, map)
-
-    def write_terms(self, placement: pin.SE3) -> None:
-        constraint = self.constraint
-        inputs = constraint.affine_inputs(placement) if self.parametrisation == "nullspace" else None
-        if inputs is None:
-            state = constraint.evaluate(placement)
-            write_terms(state, structure_of(state, self.parametrisation), self.terms)
-            return
-        if self._affine is None or self._affine[0] != constraint.gain:
-            self._affine = (constraint.gain, AffineTerms(constraint))
-        self._affine[1].write(*inputs, self.terms)
 
     def solve(self, model: pin.Model, data: pin.Data, ee_jacobian: np.ndarray,
               twist: np.ndarray, policy: DampingPolicy, info: SolveInfo,
@@ -191,7 +200,7 @@ class SquarePreChain:
         Written flat, with the buffers of the plan: from Python every NumPy or LAPACK call
         costs about a microsecond whatever the size, so the step is counted in calls.
         """
-        self.write_terms(pin.updateFramePlacement(model, data, self.frame_id))
+        self.terms_writer.write(pin.updateFramePlacement(model, data, self.frame_id), self.terms)
         jacobian_a = pin.getFrameJacobian(model, data, self.frame_id, pin.LOCAL)
         lu_pre = self.lu_pre
         lu_pre.compute(jacobian_a[:, self.pre])
@@ -253,9 +262,14 @@ def report_task_solution(solution: DampedSolution, matrix: np.ndarray, rhs: np.n
         return
     residual = float(np.max(np.abs(matrix @ solution.x - rhs), initial=0.0))
     if residual > TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(rhs), initial=0.0))):
-        note = (f"near a singularity: damped (lambda {solution.damping:.2g})" if solution.damping > 0
-                else "task not fully achievable: least squares")
-        info.report(StepStatus.LEAST_SQUARES, f"{note}, twist residual {residual:.2e}")
+        info.report(StepStatus.LEAST_SQUARES, task_residual_note(solution.damping, residual))
+
+
+def task_residual_note(damping: float, residual: float) -> str:
+    """Why a DLS solution misses the task: damping near a singularity, or least squares."""
+    note = (f"near a singularity: damped (lambda {damping:.2g})" if damping > 0
+            else "task not fully achievable: least squares")
+    return f"{note}, twist residual {residual:.2e}"
 
 
 def solve_redundant_pre_chain(model: pin.Model, data: pin.Data, ee_jacobian: np.ndarray,

@@ -20,12 +20,22 @@ from .analytical import (
     solve_redundant_pre_chain,
 )
 from .general import solve_general
-from .saturation import saturate_in_null_space
+from .saturation import rows_scaled_note, saturate_in_null_space
 
 #: A barrier row is violated when the solution undercuts it by more than this (m/s).
 BARRIER_TOLERANCE = 1e-12
 
 Form = Literal["auto", "general"]
+Backend = Literal["auto", "compiled", "python"]
+
+
+def compiled_step_available() -> bool:
+    """Whether the C++ extension of the compiled step (section 16) is built here."""
+    try:
+        from . import _step  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 class CJMController(Controller):
@@ -68,6 +78,10 @@ class CJMController(Controller):
         (docs/design.md section 11.2). Anything but the identity takes the general form.
     limit_gain, position_limits, velocity_limits, strict : see
         :class:`controllers.base.Controller`.
+    backend : ``"compiled"`` (the step's algebra in C++, :mod:`controllers.cjm.compiled`,
+        docs/design.md section 16), ``"python"`` (this module and its siblings: the
+        readable reference) or ``"auto"`` (compiled when the extension is built, else
+        Python). ``"compiled"`` without the extension raises ``ImportError``.
     """
 
     def __init__(
@@ -87,6 +101,7 @@ class CJMController(Controller):
         position_limits: bool = True,
         velocity_limits: bool = True,
         strict: bool = False,
+        backend: Backend = "auto",
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
                          velocity_limits=velocity_limits, strict=strict)
@@ -94,6 +109,15 @@ class CJMController(Controller):
             raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
         if form not in ("auto", "general"):
             raise ValueError(f"unknown form {form!r}: 'auto' or 'general'")
+        if backend not in ("auto", "compiled", "python"):
+            raise ValueError(f"unknown backend {backend!r}: 'auto', 'compiled' or 'python'")
+        if backend == "compiled" and not compiled_step_available():
+            raise ImportError("the compiled CJM step (controllers.cjm._step) is not built: "
+                              "reinstall with pip install -e . (it needs a C++17 compiler)")
+        if backend == "auto":
+            backend = "compiled" if compiled_step_available() else "python"
+        self.backend: Backend = backend
+        self._compiled = None
         self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
                                     as_number(singular_threshold, "singular_threshold", 0.0),
                                     as_number(max_damping, "max_damping", 0.0))
@@ -131,6 +155,16 @@ class CJMController(Controller):
         self._equalities = [i for i, c in enumerate(self.constraints) if c.is_equality]
         self._barriers = [i for i, c in enumerate(self.constraints) if not c.is_equality]
         self._square_plans = {}
+        if self.backend == "compiled":
+            from .compiled import CompiledStep
+
+            self._compiled = CompiledStep(self)
+
+    def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """:meth:`Controller.solve`, in C++ with the compiled backend (section 16)."""
+        if self._compiled is None:
+            return super().solve(q, twist)
+        return self._compiled.solve(*self._checked_inputs(q, twist))
 
     # -- chain structure ---------------------------------------------------------------
 
@@ -161,10 +195,24 @@ class CJMController(Controller):
         """The base's kinematics, with the task Jacobian ``W^1/2 J_e`` (the rows of
         non-zero weight) when weighted."""
         kinematics = super()._kinematics(q)
-        if self._task_rows is not None:
-            kinematics.ee_jacobian = (self._task_row_scale
-                                      * kinematics.ee_jacobian[self._task_rows])
+        kinematics.ee_jacobian = self._task_jacobian(kinematics.ee_jacobian)
         return kinematics
+
+    @property
+    def task_rows(self) -> int:
+        """Rows of the task the forms solve: 6 per EE, or those of non-zero weight."""
+        return self.task_size if self._task_rows is None else self._task_rows.size
+
+    @property
+    def paper_task(self) -> bool:
+        """One EE and its full, unweighted twist: the task of the analytical form."""
+        return self.task_size == 6 and self._task_rows is None
+
+    def _task_jacobian(self, ee_jacobian: np.ndarray) -> np.ndarray:
+        """``W^1/2 J_e`` (the rows of non-zero weight) from the stacked EE Jacobians."""
+        if self._task_rows is None:
+            return ee_jacobian
+        return self._task_row_scale * ee_jacobian[self._task_rows]
 
     def _task(self, twist: np.ndarray) -> np.ndarray:
         """``W^1/2 V_e``: the twist the weighted task Jacobian must meet."""
@@ -199,8 +247,7 @@ class CJMController(Controller):
 
     def _solve_rows(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
         """The analytical form where it applies, else the general form, for these rows."""
-        if (len(active) == 1 and self.form == "auto" and self.task_size == 6
-                and self._task_rows is None):
+        if len(active) == 1 and self.form == "auto" and self.paper_task:
             qd = self._solve_analytical(kinematics, twist, active[0])
             if qd is not None:
                 return qd
@@ -263,16 +310,19 @@ class CJMController(Controller):
         info.equality_residual = (float(np.max(np.abs(rows @ result.qd - rows_rhs)))
                                   if rows.shape[0] else 0.0)
         if result.rows_scale < 1.0:
-            info.report(StepStatus.CONSTRAINT_DEGRADED,
-                        f"the constraint's correction exceeds the joint limits: scaled to "
-                        f"{result.rows_scale:.0%}, the constraint converges as fast as they allow")
+            info.report(StepStatus.CONSTRAINT_DEGRADED, rows_scaled_note(result.rows_scale))
         elif result.task_missed:
-            info.report(StepStatus.LEAST_SQUARES,
-                        f"{self._joint_list(result.saturated)} at a limit: task not fully achievable")
+            info.report(StepStatus.LEAST_SQUARES, self._task_missed_note(result.saturated))
         elif result.task_scale < 1.0:
-            info.report(StepStatus.SCALED, f"{self._joint_list([result.limiting_joint])} at a limit: "
-                                           f"task scaled to {result.task_scale:.0%}")
+            info.report(StepStatus.SCALED,
+                        self._task_scaled_note(result.limiting_joint, result.task_scale))
         return result.qd
+
+    def _task_missed_note(self, saturated: Iterable[int]) -> str:
+        return f"{self._joint_list(saturated)} at a limit: task not fully achievable"
+
+    def _task_scaled_note(self, joint: int, scale: float) -> str:
+        return f"{self._joint_list([joint])} at a limit: task scaled to {scale:.0%}"
 
     def _joint_list(self, velocity_indices: Iterable[int]) -> str:
         """``joint arm_joint_4`` / ``joints a, b`` for velocity indices of 1-dof joints."""

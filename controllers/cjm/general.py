@@ -21,6 +21,13 @@ from .analytical import report_task_solution
 #: constraints conflict.
 CONFLICT_RESIDUAL = 1e-9
 
+NO_FREE_JOINT_NOTE = "the constraints leave no joint free for the task"
+
+
+def conflict_note(rank: int, rows: int, residual: float) -> str:
+    return (f"constraints conflict (rank {rank} < {rows} rows, "
+            f"least-squares residual {residual:.2e} m/s)")
+
 
 def solve_general(rows: np.ndarray, rows_rhs: np.ndarray, ee_jacobian: np.ndarray,
                   twist: np.ndarray, policy: DampingPolicy,
@@ -31,9 +38,7 @@ def solve_general(rows: np.ndarray, rows_rhs: np.ndarray, ee_jacobian: np.ndarra
     if rank < rows.shape[0]:
         residual = float(np.max(np.abs(rows @ qd - rows_rhs)))
         if residual > CONFLICT_RESIDUAL:
-            info.report(StepStatus.CONSTRAINT_DEGRADED,
-                        f"constraints conflict (rank {rank} < {rows.shape[0]} rows, "
-                        f"least-squares residual {residual:.2e} m/s)")
+            info.report(StepStatus.CONSTRAINT_DEGRADED, conflict_note(rank, rows.shape[0], residual))
     if null_basis.shape[1] > 0:
         cjm = ee_jacobian @ null_basis
         cjm_rhs = twist - ee_jacobian @ qd
@@ -45,7 +50,7 @@ def solve_general(rows: np.ndarray, rows_rhs: np.ndarray, ee_jacobian: np.ndarra
             posture -= solution.row_space.T @ (solution.row_space @ posture)
             qd += null_basis @ posture
     elif np.any(twist):
-        info.report(StepStatus.LEAST_SQUARES, "the constraints leave no joint free for the task")
+        info.report(StepStatus.LEAST_SQUARES, NO_FREE_JOINT_NOTE)
     info.equality_residual = (max(map(abs, (rows @ qd - rows_rhs).tolist())) if rows.size else 0.0)
     info.method = "general"
     return qd

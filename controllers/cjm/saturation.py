@@ -32,6 +32,12 @@ from ..linalg import DampingPolicy, damped_least_squares, nullspace
 ROWS_TOLERANCE = 1e-9
 
 
+def rows_scaled_note(scale: float) -> str:
+    """The note of a step whose rows' correction was scaled to fit the box."""
+    return (f"the constraint's correction exceeds the joint limits: scaled to {scale:.0%}, "
+            "the constraint converges as fast as they allow")
+
+
 @dataclass
 class Saturation:
     """The result of :func:`saturate_in_null_space`.

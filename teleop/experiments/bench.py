@@ -200,9 +200,16 @@ def run_scaling(iterations: int = 300, controllers: Sequence[str] = SCALING_CONT
 
 def mink_ratios(results: Sequence[StepTiming]) -> dict[tuple[str, str], float]:
     """``mink median / controller median`` per (problem, controller), same run."""
+    return speedups(results, "mink")
+
+
+def speedups(results: Sequence[StepTiming], reference_prefix: str) -> dict[tuple[str, str], float]:
+    """``reference median / controller median`` per (problem, controller), same run; the
+    reference is the problem's first controller whose spec starts with ``reference_prefix``
+    (``"mink"``, ``"qp:daqp"``)."""
     reference = {}
     for r in results:
-        if r.controller.startswith("mink") and (r.robot, r.constraint_rows) not in reference:
+        if r.controller.startswith(reference_prefix) and (r.robot, r.constraint_rows) not in reference:
             reference[(r.robot, r.constraint_rows)] = r.median_us
     return {(r.robot, r.controller): reference[(r.robot, r.constraint_rows)] / r.median_us
             for r in results if (r.robot, r.constraint_rows) in reference}
@@ -211,15 +218,16 @@ def mink_ratios(results: Sequence[StepTiming]) -> dict[tuple[str, str], float]:
 def format_table(results: Sequence[StepTiming]) -> str:
     """One line per timing; ``qd dev``: the joint-velocity deviation from the problem's
     first controller (rad/s)."""
-    ratios = mink_ratios(results)
+    ratios, daqp = mink_ratios(results), speedups(results, "qp:daqp")
     lines = [(f"{'problem':<20}{'dof':>4}{'rows':>5}  {'controller':<13}{'median us':>10}"
-              f"{'p99 us':>9}{'max us':>10}{'x mink':>8}{'residual':>10}{'qd dev':>10}  "
+              f"{'p99 us':>9}{'max us':>10}{'x mink':>8}{'x daqp':>8}{'residual':>10}{'qd dev':>10}  "
               f"{'method':<12}statuses")]
     for r in results:
-        ratio = ratios.get((r.robot, r.controller))
+        ratio, daqp_ratio = ratios.get((r.robot, r.controller)), daqp.get((r.robot, r.controller))
         lines.append(
             f"{r.robot:<20}{r.dof:>4}{r.constraint_rows:>5}  {r.controller:<13}{r.median_us:>10.1f}"
             f"{r.p99_us:>9.1f}{r.max_us:>10.1f}{'' if ratio is None else f'{ratio:.1f}':>8}"
+            f"{'' if daqp_ratio is None else f'{daqp_ratio:.1f}':>8}"
             f"{r.max_constraint_residual:>10.1e}{r.joint_velocity_deviation_max:>10.1e}  "
             f"{r.method:<12}{format_status_counts(r.status_counts)}")
     return "\n".join(lines)
@@ -227,6 +235,8 @@ def format_table(results: Sequence[StepTiming]) -> str:
 
 def write_json(results: Sequence[StepTiming], path: str) -> None:
     ratios = mink_ratios(results)
-    rows = [{**asdict(r), "speedup_vs_mink": ratios.get((r.robot, r.controller))} for r in results]
+    daqp = speedups(results, "qp:daqp")
+    rows = [{**asdict(r), "speedup_vs_mink": ratios.get((r.robot, r.controller)),
+             "speedup_vs_qp_daqp": daqp.get((r.robot, r.controller))} for r in results]
     with open(path, "w", encoding="utf-8") as handle:
         json.dump(rows, handle, indent=2)

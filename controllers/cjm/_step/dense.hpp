@@ -1,0 +1,175 @@
+// Small dense kernels on preallocated storage, for the compiled CJM step
+// (docs/design.md section 16): Householder QR, one-sided Jacobi SVD, a thin SVD built
+// from the two. Every routine works in blocks of matrices allocated once, so a step
+// never touches the heap.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace cjm {
+
+using Index = Eigen::Index;
+using Matrix = Eigen::MatrixXd;
+using Vector = Eigen::VectorXd;
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using MatrixRef = Eigen::Ref<Matrix>;
+using ConstMatrixRef = Eigen::Ref<const Matrix>;
+using VectorRef = Eigen::Ref<Vector>;
+using ConstVectorRef = Eigen::Ref<const Vector>;
+
+//! Thrown when an SVD does not converge: the step then fails, as LAPACK's LinAlgError
+//! makes the Python step fail.
+struct NoConvergence {};
+
+//! Householder QR in place (LAPACK dgeqr2's layout): ``a`` (p x q) becomes R on and above
+//! the diagonal and each reflector's vector below it (its first entry, 1, implicit);
+//! ``tau`` (min(p, q)) holds the reflectors' factors, ``H_j = I - tau_j v_j v_j^T``.
+inline void householder_qr(MatrixRef a, VectorRef tau) {
+  const Index p = a.rows(), q = a.cols(), t = std::min(p, q);
+  for (Index j = 0; j < t; ++j) {
+    auto column = a.col(j).tail(p - j);
+    const double alpha = column(0);
+    const double tail_norm2 = column.tail(p - j - 1).squaredNorm();
+    if (tail_norm2 == 0.0) {  // already triangular in this column: H_j = I
+      tau(j) = 0.0;
+      continue;
+    }
+    const double beta = -std::copysign(std::sqrt(alpha * alpha + tail_norm2), alpha);
+    tau(j) = (beta - alpha) / beta;
+    column.tail(p - j - 1) /= (alpha - beta);
+    column(0) = beta;
+    for (Index k = j + 1; k < q; ++k) {
+      auto target = a.col(k).tail(p - j);
+      const double w = tau(j) * (target(0) + column.tail(p - j - 1).dot(target.tail(p - j - 1)));
+      target(0) -= w;
+      target.tail(p - j - 1) -= w * column.tail(p - j - 1);
+    }
+  }
+}
+
+//! One reflector ``H_j`` of a factored ``qr`` applied to every column of ``b``.
+inline void apply_reflector(const ConstMatrixRef& qr, double tau, Index j, MatrixRef b) {
+  if (tau == 0.0) return;
+  const Index p = qr.rows();
+  const auto vector_tail = qr.col(j).tail(p - j - 1);
+  for (Index k = 0; k < b.cols(); ++k) {
+    auto target = b.col(k).tail(p - j);
+    const double w = tau * (target(0) + vector_tail.dot(target.tail(p - j - 1)));
+    target(0) -= w;
+    target.tail(p - j - 1) -= w * vector_tail;
+  }
+}
+
+//! ``b <- Q^T b`` for the ``Q`` of :func:`householder_qr` (``b`` has p rows).
+inline void apply_qt(const ConstMatrixRef& qr, const ConstVectorRef& tau, MatrixRef b) {
+  for (Index j = 0; j < tau.size(); ++j) apply_reflector(qr, tau(j), j, b);
+}
+
+//! ``b <- Q b`` for the ``Q`` of :func:`householder_qr` (``b`` has p rows).
+inline void apply_q(const ConstMatrixRef& qr, const ConstVectorRef& tau, MatrixRef b) {
+  for (Index j = tau.size() - 1; j >= 0; --j) apply_reflector(qr, tau(j), j, b);
+}
+
+//! One-sided Jacobi (Hestenes): rotates the columns of ``x`` (p x q) until they are
+//! orthogonal, so ``x_in = x_out v^T`` with ``v`` (q x q) orthogonal; the column norms
+//! of ``x_out`` are the singular values. Accurate to the last digits of the small ones.
+inline void jacobi_columns(MatrixRef x, MatrixRef v) {
+  const Index q = x.cols();
+  v.setIdentity();
+  const double eps = std::numeric_limits<double>::epsilon();
+  // a column below the rounding of the whole matrix is left alone: its singular value is
+  // noise (far under the rank cut), and rotating it need not converge
+  const double negligible = 64.0 * eps * eps * x.squaredNorm();
+  for (int sweep = 0; sweep < 100; ++sweep) {
+    bool rotated = false;
+    for (Index i = 0; i + 1 < q; ++i) {
+      for (Index j = i + 1; j < q; ++j) {
+        const double alpha = x.col(i).squaredNorm();
+        const double beta = x.col(j).squaredNorm();
+        const double gamma = x.col(i).dot(x.col(j));
+        if (!(std::abs(gamma) > eps * std::sqrt(alpha * beta)) || alpha <= negligible ||
+            beta <= negligible)
+          continue;
+        rotated = true;
+        const double zeta = (beta - alpha) / (2.0 * gamma);
+        const double t = std::copysign(1.0, zeta) / (std::abs(zeta) + std::hypot(1.0, zeta));
+        const double c = 1.0 / std::sqrt(1.0 + t * t), s = c * t;
+        for (Index r = 0; r < x.rows(); ++r) {
+          const double xi = x(r, i), xj = x(r, j);
+          x(r, i) = c * xi - s * xj;
+          x(r, j) = s * xi + c * xj;
+        }
+        for (Index r = 0; r < q; ++r) {
+          const double vi = v(r, i), vj = v(r, j);
+          v(r, i) = c * vi - s * vj;
+          v(r, j) = s * vi + c * vj;
+        }
+      }
+    }
+    if (!rotated) return;
+  }
+  throw NoConvergence{};
+}
+
+//! Storage for :class:`ThinSvd` of matrices up to ``max_rows x max_cols`` (either way).
+class ThinSvd {
+ public:
+  ThinSvd(Index max_rows, Index max_cols) {
+    const Index large = std::max<Index>(1, std::max(max_rows, max_cols));
+    const Index small = std::max<Index>(1, std::min(max_rows, max_cols));
+    work_.resize(large, small);
+    tau_.resize(small);
+    square_.resize(small, small);
+    rotations_.resize(small, small);
+    u_.resize(max_rows > 0 ? max_rows : 1, small);
+    v_.resize(max_cols > 0 ? max_cols : 1, small);
+    s_.resize(small);
+  }
+
+  //! ``m = U diag(s) V^T`` with ``t = min(p, q)`` singular values (unsorted), ``U``
+  //! (p x t) and ``V`` (q x t): QR of the tall orientation, then Jacobi on its R.
+  void compute(const ConstMatrixRef& m) {
+    rows_ = m.rows();
+    cols_ = m.cols();
+    const bool tall = rows_ >= cols_;
+    const Index p = tall ? rows_ : cols_, t = tall ? cols_ : rows_;
+    auto tall_copy = work_.topLeftCorner(p, t);
+    if (tall) tall_copy = m;
+    else tall_copy = m.transpose();
+    auto tau = tau_.head(t);
+    householder_qr(tall_copy, tau);
+    auto r = square_.topLeftCorner(t, t);
+    r = tall_copy.topRows(t).triangularView<Eigen::Upper>();
+    auto rotations = rotations_.topLeftCorner(t, t);
+    jacobi_columns(r, rotations);  // R = (R rotations) rotations^T, R rotations = U_R S
+    // the tall orientation's left vectors: Q [U_R; 0]; its right vectors: the rotations
+    auto left = (tall ? u_ : v_).topLeftCorner(p, t);
+    auto right = (tall ? v_ : u_).topLeftCorner(t, t);
+    left.setZero();
+    for (Index j = 0; j < t; ++j) {
+      const double norm = r.col(j).norm();
+      s_(j) = norm;
+      if (norm > 0.0) left.col(j).head(t) = r.col(j) / norm;
+    }
+    apply_q(tall_copy, tau, left);
+    right = rotations;
+  }
+
+  Index size() const { return std::min(rows_, cols_); }
+  auto u() const { return u_.topLeftCorner(rows_, size()); }
+  auto v() const { return v_.topLeftCorner(cols_, size()); }
+  auto s() const { return s_.head(size()); }
+  double max_value() const { return size() ? s().maxCoeff() : 0.0; }
+  double min_value() const { return size() ? s().minCoeff() : 0.0; }
+
+ private:
+  Matrix work_, square_, rotations_, u_, v_;
+  Vector tau_, s_;
+  Index rows_ = 0, cols_ = 0;
+};
+
+}  // namespace cjm

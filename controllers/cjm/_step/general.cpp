@@ -1,0 +1,132 @@
+// The general CJM over stacked rows (controllers/cjm/general.py, docs/design.md 4.5) and
+// its restriction to the free joints that saturation solves again and again
+// (controllers/cjm/saturation.py's _solve_over_free, section 9).
+#include "step.hpp"
+
+namespace cjm {
+
+namespace {
+//! controllers.cjm.general.CONFLICT_RESIDUAL
+constexpr double kConflictResidual = 1e-9;
+
+//! ``max |rows x - rhs|`` (0 without rows), with ``scratch`` for the product.
+double residual_of(const ConstMatrixRef& rows, const ConstVectorRef& x, const ConstVectorRef& rhs,
+                   VectorRef scratch) {
+  if (rows.rows() == 0) return 0.0;
+  scratch.noalias() = rows * x;
+  scratch -= rhs;
+  return scratch.cwiseAbs().maxCoeff();
+}
+}  // namespace
+
+void Step::general(const Inputs& in, VectorRef qd) {
+  ensure_rows(in);
+  gather_active_rows();
+  const Index m = row_count_;
+  const auto rows = rows_.topRows(m);
+  const auto rhs = rhs_.head(m);
+  null_.factor(rows);
+  null_.pseudo_solve(rhs, qd);  // qd_0 = A^+ b
+  if (null_.rank() < m) {
+    const double residual = residual_of(rows, qd, rhs, scratch_rows_.head(m));
+    if (residual > kConflictResidual) {
+      report(Status::constraint_degraded);
+      event(Event::conflict, static_cast<double>(null_.rank()), static_cast<double>(m), residual);
+    }
+  }
+  const Index d = null_.dimension();
+  if (d > 0) {
+    // Jbar = J_e N, from (N^T J_e^T)
+    auto task_t = task_t_.topLeftCorner(nv_, task_rows_);
+    task_t = in.ee_jacobian.transpose();
+    auto task_null_t = task_null_t_.topLeftCorner(d, task_rows_);
+    null_.to_null(task_t, task_null_t);
+    auto task_null = task_null_.topLeftCorner(task_rows_, d);
+    task_null = task_null_t.transpose();
+    auto task_rhs = task_rhs_.col(0).head(task_rows_);
+    task_rhs = in.twist;
+    task_rhs.noalias() -= in.ee_jacobian * qd;
+    dls_.factor(task_null, policy_);
+    auto y = task_x_.col(0).head(d);
+    dls_.solve(task_rhs, y);
+    null_.from_null(y, delta_);
+    qd += delta_;
+    report_task_solution(task_null, task_rhs, y);
+    if (in.use_posture && dls_.rank() < d) {  // the posture in what null(A) leaves
+      auto posture = task_t_.col(0);
+      posture = in.posture;
+      auto posture_null = posture_null_.head(d);
+      null_.to_null(posture, posture_null);
+      auto weights = rank_weights_.head(dls_.rank());
+      weights.noalias() = dls_.row_space().transpose() * posture_null;
+      posture_null.noalias() -= dls_.row_space() * weights;
+      null_.from_null(posture_null, delta_);
+      qd += delta_;
+    }
+  } else if ((in.twist.array() != 0.0).any()) {
+    report(Status::least_squares);
+    event(Event::no_free_joint);
+  }
+  equality_residual_ = residual_of(rows, qd, rhs, scratch_rows_.head(m));
+  method_ = Method::general;
+}
+
+Step::Split Step::solve_over_free(const Inputs& in) {
+  // rows exactly over the free joints, held ones moved to the right-hand side
+  const Index m = row_count_;
+  Index n_free = 0;
+  for (Index j = 0; j < nv_; ++j) {
+    if (!free_(j)) continue;
+    columns_.col(n_free).head(m) = rows_.col(j).head(m);
+    task_columns_.col(n_free) = in.ee_jacobian.col(j);
+    ++n_free;
+  }
+  auto rhs = scratch_rows_.head(m);
+  rhs = rhs_.head(m);
+  rhs.noalias() -= rows_.topRows(m) * held_;
+  const auto rows_free = columns_.topLeftCorner(m, n_free);
+  null_.factor(rows_free);
+  auto x0 = free_x_.head(n_free);
+  null_.pseudo_solve(rhs, x0);
+  Split split;
+  if (m > 0) {
+    auto check = rows_scratch_.head(m);
+    check.noalias() = rows_free * x0;
+    check -= rhs;
+    split.rows_residual = check.cwiseAbs().maxCoeff();
+  }
+  base_ = held_;
+  direction_.setZero();
+  const Index d = null_.dimension();
+  if (d > 0) {
+    for (Index j = 0, f = 0; j < nv_; ++j)
+      if (free_(j)) base_(j) = x0(f++);
+    auto task_t = task_t_.topLeftCorner(n_free, task_rows_);
+    task_t = task_columns_.leftCols(n_free).transpose();
+    auto task_null_t = task_null_t_.topLeftCorner(d, task_rows_);
+    null_.to_null(task_t, task_null_t);
+    auto task_null = task_null_.topLeftCorner(task_rows_, d);
+    task_null = task_null_t.transpose();
+    auto task_rhs = task_rhs_.topRows(task_rows_);
+    task_rhs.col(0) = in.twist;
+    task_rhs.col(1).noalias() = in.ee_jacobian * base_;
+    task_rhs.col(1) = -task_rhs.col(1);
+    dls_.factor(task_null, policy_);
+    auto x = task_x_.topLeftCorner(d, 2);
+    dls_.solve(task_rhs, x);
+    auto delta = delta_.head(n_free);
+    null_.from_null(x.col(1), delta);
+    for (Index j = 0, f = 0; j < nv_; ++j)
+      if (free_(j)) base_(j) += delta(f++);
+    null_.from_null(x.col(0), delta);
+    for (Index j = 0, f = 0; j < nv_; ++j)
+      if (free_(j)) direction_(j) = delta(f++);
+    split.task_rank = dls_.rank();
+  } else {
+    for (Index j = 0, f = 0; j < nv_; ++j)
+      if (free_(j)) base_(j) = x0(f++);
+  }
+  return split;
+}
+
+}  // namespace cjm

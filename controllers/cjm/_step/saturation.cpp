@@ -1,0 +1,180 @@
+// Joint limits by saturation in the null space (controllers/cjm/saturation.py and the
+// CJM's _saturate, docs/design.md section 9): Flacco, De Luca, Khatib, IEEE T-RO 2015,
+// Algorithm 1, with the constraint rows as a hard first priority.
+#include "step.hpp"
+
+namespace cjm {
+
+namespace {
+//! controllers.cjm.saturation.ROWS_TOLERANCE
+constexpr double kRowsTolerance = 1e-9;
+constexpr double kTwistTolerance = 1e-6;
+constexpr double kBarrierTolerance = 1e-12;
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+}  // namespace
+
+void Step::saturate(const Inputs& in, VectorRef qd) {
+  ensure_rows(in);
+  for (size_t pass = 0; pass <= barriers_.size(); ++pass) {
+    gather_active_rows();
+    saturate_in_null_space(in);
+    waiting_.clear();
+    for (Index i : barriers_)
+      if (std::find(active_.begin(), active_.end(), i) == active_.end()) waiting_.push_back(i);
+    Index worst = -1;
+    double worst_violation = kBarrierTolerance;
+    for (Index i : waiting_) {
+      const double violation = barrier_violation(i, sns_qd_);
+      if (violation > worst_violation) {
+        worst_violation = violation;
+        worst = i;
+      }
+    }
+    if (worst < 0) break;
+    active_.push_back(worst);
+  }
+  qd = sns_qd_;
+  method_ = Method::saturated;
+  scale_ = sns_task_scale_;
+  saturated_count_ = 0;
+  for (Index j = 0; j < nv_; ++j)
+    if (!free_(j)) saturated_(saturated_count_++) = j;
+  const Index m = row_count_;
+  if (m > 0) {
+    auto residual = rows_scratch_.head(m);
+    residual.noalias() = rows_.topRows(m) * qd;
+    residual -= rhs_.head(m);
+    equality_residual_ = residual.cwiseAbs().maxCoeff();
+  } else {
+    equality_residual_ = 0.0;
+  }
+  if (sns_rows_scale_ < 1.0) {
+    report(Status::constraint_degraded);
+    event(Event::rows_scaled, sns_rows_scale_);
+  } else if (sns_missed_) {
+    report(Status::least_squares);
+    saturation_joint_count_ = saturated_count_;
+    saturation_joints_.head(saturated_count_) = saturated_.head(saturated_count_);
+    event(Event::task_missed);
+  } else if (sns_task_scale_ < 1.0) {
+    report(Status::scaled);
+    event(Event::task_scaled, static_cast<double>(sns_limiting_), sns_task_scale_);
+  }
+}
+
+void Step::saturate_in_null_space(const Inputs& in) {
+  free_.setConstant(true);
+  held_.setZero();
+  for (Index j = 0; j < nv_; ++j) {
+    box_lower_(j) = lower_(j) - 1e-12 * (1.0 + std::abs(lower_(j)));
+    box_upper_(j) = upper_(j) + 1e-12 * (1.0 + std::abs(upper_(j)));
+  }
+  bool have_scaled = false, have_reference = false;
+  double best_scale = 0.0;
+  Index best_critical = -1, reference_rank = 0;
+  for (Index iteration = 0; iteration <= nv_; ++iteration) {
+    const Split split = solve_over_free(in);
+    if (!have_reference) {
+      reference_rank = split.task_rank;
+      have_reference = true;
+    }
+    if (split.rows_residual > kRowsTolerance) break;  // too few free joints for the rows
+    if (split.task_rank < reference_rank && have_scaled) break;  // keep the best full-rank scale
+    sns_qd_ = base_ + direction_;
+    if ((sns_qd_.array() >= box_lower_.array()).all() && (sns_qd_.array() <= box_upper_.array()).all()) {
+      saturation_result(in, 1.0, 1.0, -1);
+      return;
+    }
+    Index critical = -1;
+    const double scale = task_scale_limit(base_, direction_, critical);
+    if (critical < 0) break;
+    const double bound = sns_qd_(critical) > upper_(critical) ? upper_(critical) : lower_(critical);
+    held_(critical) = bound;
+    free_(critical) = false;
+    if (std::abs(bound) < box_.velocity_limit(critical) * (1.0 - 1e-12)) {  // a position bound
+      have_reference = have_scaled = false;
+    } else if (scale >= 0.0 && (!have_scaled || scale > best_scale)) {
+      have_scaled = true;
+      best_scale = scale;
+      best_critical = critical;
+      best_free_ = free_;
+      best_held_ = held_;
+      best_free_(critical) = true;  // it is free there
+      best_held_(critical) = 0.0;
+    }
+    if (!free_.any()) break;
+  }
+  if (have_scaled) {
+    free_ = best_free_;
+    held_ = best_held_;
+    solve_over_free(in);
+    sns_qd_ = base_ + best_scale * direction_;
+    saturation_result(in, best_scale, 1.0, best_critical);
+    return;
+  }
+  scale_rows(in);
+}
+
+double Step::task_scale_limit(const ConstVectorRef& base, const ConstVectorRef& direction,
+                              Index& critical) const {
+  double smallest_max = kInfinity, largest_min = -kInfinity;
+  Index needs_more = -1;
+  critical = -1;
+  for (Index i = 0; i < nv_; ++i) {
+    if (!free_(i)) continue;
+    const double a = direction(i), b = base(i);
+    double low, high;
+    if (std::abs(a) > 1e-12) {
+      low = (lower_(i) - b) / a;
+      high = (upper_(i) - b) / a;
+      if (a < 0.0) std::swap(low, high);
+    } else if (lower_(i) <= b && b <= upper_(i)) {
+      continue;
+    } else {
+      low = kInfinity;  // outside whatever the scale
+      high = -kInfinity;
+    }
+    if (high < smallest_max) {
+      smallest_max = high;
+      critical = i;
+    }
+    if (low > largest_min) {
+      largest_min = low;
+      needs_more = i;
+    }
+  }
+  const double largest = std::min(1.0, smallest_max);
+  if (largest_min > largest) {
+    critical = needs_more;
+    return -kInfinity;
+  }
+  if (largest < 0.0) return -kInfinity;
+  return largest;
+}
+
+void Step::saturation_result(const Inputs& in, double task_scale, double rows_scale,
+                             Index limiting_joint) {
+  auto achieved = scratch_rows_.head(task_rows_);
+  achieved.noalias() = in.ee_jacobian * sns_qd_;
+  achieved -= task_scale * in.twist;
+  const double tolerance = kTwistTolerance * (1.0 + in.twist.cwiseAbs().maxCoeff());
+  sns_missed_ = achieved.cwiseAbs().maxCoeff() > tolerance;
+  sns_task_scale_ = task_scale;
+  sns_rows_scale_ = rows_scale;
+  sns_limiting_ = limiting_joint;
+}
+
+void Step::scale_rows(const Inputs& in) {
+  // no task, the rows' minimum-norm correction scaled by the largest factor in the box
+  const Index m = row_count_;
+  null_.factor(rows_.topRows(m));
+  null_.pseudo_solve(rhs_.head(m), direction_);
+  free_.setConstant(true);
+  base_.setZero();
+  Index critical = -1;
+  const double scale = std::max(task_scale_limit(base_, direction_, critical), 0.0);
+  sns_qd_ = scale * direction_;
+  saturation_result(in, 0.0, scale, -1);
+}
+
+}  // namespace cjm

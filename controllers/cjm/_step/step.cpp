@@ -1,0 +1,313 @@
+// The driver of the compiled step: controllers.base.Controller.solve and the CJM's
+// barriers' active set (controllers/cjm/controller.py), the joint box and the clip guard
+// (controllers/joint_limits.py), the status (docs/design.md sections 8, 12 and 16).
+#include "step.hpp"
+
+#include <stdexcept>
+#include <string>
+
+namespace cjm {
+
+namespace {
+//! An equality row is held up to this (m/s): controllers.base.EQUALITY_TOLERANCE.
+constexpr double kEqualityTolerance = 1e-9;
+//! ``J_e qd`` meets the twist up to this relative error: controllers.base.TWIST_TOLERANCE.
+constexpr double kTwistTolerance = 1e-6;
+//! A barrier is violated beyond this (m/s): controllers.cjm.controller.BARRIER_TOLERANCE.
+constexpr double kBarrierTolerance = 1e-12;
+constexpr Index kEventsPerConstraint = 8;
+
+Index terms_size_of(Index k) { return 6 * (7 - k) + 7 * k; }
+}  // namespace
+
+Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool general_only,
+           std::vector<ConstraintPlan> constraints, JointBox box, double posture_gain,
+           Vector posture_target)
+    : nq_(nq), nv_(nv), task_rows_(task_rows), policy_(policy), general_only_(general_only),
+      constraints_(std::move(constraints)), box_(std::move(box)), posture_gain_(posture_gain),
+      posture_target_(std::move(posture_target)),
+      null_(0, 0), dls_(0, 0), pre_svd_(6, std::max<Index>(nv, 6)), closest_svd_(nv, nv + 7) {
+  if (nq < 1 || nv < 1 || task_rows < 1)
+    throw std::invalid_argument("nq, nv and the task rows must be positive");
+  for (Index i = 0; i < static_cast<Index>(constraints_.size()); ++i) {
+    const ConstraintPlan& plan = constraints_[i];
+    if (plan.rows < 1 || plan.rows > 3)
+      throw std::invalid_argument("a constraint has 1 to 3 rows");
+    row_offset_.push_back(total_rows_);
+    terms_offset_.push_back(terms_size_);
+    total_rows_ += plan.rows;
+    terms_size_ += terms_size_of(plan.rows);
+    (plan.equality ? equalities_ : barriers_).push_back(i);
+    for (Index j : plan.pre) if (j < 0 || j >= nv) throw std::invalid_argument("pre index out of range");
+    for (Index j : plan.post) if (j < 0 || j >= nv) throw std::invalid_argument("post index out of range");
+  }
+  const Index n_constraints = static_cast<Index>(constraints_.size());
+  const Index m = std::max<Index>(1, total_rows_);
+  if (box_.velocity_lower.size() != nv || box_.velocity_upper.size() != nv ||
+      box_.velocity_limit.size() != nv || box_.q_min.size() != static_cast<Index>(box_.limited_q.size()) ||
+      box_.q_max.size() != box_.q_min.size() || box_.limited_v.size() != box_.limited_q.size() ||
+      (box_.box_test.rows() > 0 && box_.box_test.cols() != nv + nq + 1))
+    throw std::invalid_argument("joint box of the wrong size");
+  if (posture_target_.size() != 0 && (posture_target_.size() != nq || nq != nv))
+    throw std::invalid_argument("a posture target needs nq == nv and one entry per joint");
+  posture_velocity_.resize(nv);
+  active_.reserve(n_constraints);
+  waiting_.reserve(n_constraints);
+  report_ = Vector::Zero(kReportSize);
+  events_ = RowMatrix::Zero(kEventsPerConstraint * (n_constraints + 2), 4);
+  saturated_.resize(nv);
+  clip_joints_.resize(nv);
+  saturation_joints_.resize(nv);
+  active_barriers_.resize(std::max<Index>(1, n_constraints));
+  all_rows_.resize(m, nv);
+  rows_.resize(m, nv);
+  all_rhs_.resize(m);
+  rhs_.resize(m);
+  null_ = NullSpace(m, nv);
+  dls_ = DampedLeastSquares(task_rows, std::max<Index>(nv + 7, 8));
+  task_t_.resize(nv, task_rows);
+  task_null_t_.resize(nv, task_rows);
+  task_null_.resize(task_rows, nv);
+  task_rhs_.resize(task_rows, 2);
+  task_x_.resize(nv + 7, 2);
+  for (Vector* v : {&qd0_, &delta_, &lower_, &upper_, &box_lower_, &box_upper_, &free_x_,
+                    &posture_null_, &held_, &best_held_, &base_, &direction_, &sns_qd_})
+    v->resize(nv);
+  stacked_.resize(std::max<Index>(box_.box_test.rows(), 1));
+  scratch_rows_.resize(std::max(m, task_rows));
+  rows_scratch_.resize(m);
+  rank_weights_.resize(nv);
+  columns_.resize(m, nv);
+  task_columns_.resize(task_rows, nv);
+  free_.resize(nv);
+  best_free_.resize(nv);
+  pre_jacobian_.resize(6, nv);
+  joint_map_.resize(nv, nv + 7);
+  task_map_.resize(6, nv + 7);
+  cjm_.resize(6, nv + 7);
+  ad_cjm_.resize(6, 6);
+  basis_qr_.resize(nv + 7, 6);
+  basis_.resize(nv + 7, nv + 7);
+  closest_.resize(nv, nv + 7);
+  free_with_one_.resize(nv + 8);
+  twist_a_.resize(6);
+  twist_a_with_one_.resize(7);
+  basis_tau_.resize(6);
+  goal_.resize(nv);
+  step_.resize(nv + 7);
+}
+
+void Step::check_sizes(const Inputs& in, const VectorRef& qd) const {
+  const Index n = static_cast<Index>(constraints_.size());
+  if (in.q.size() != nq_ || in.twist.size() != task_rows_ || in.ee_jacobian.rows() != task_rows_ ||
+      in.ee_jacobian.cols() != nv_ || qd.size() != nv_ || in.terms.size() != terms_size_ ||
+      (n > 0 && (in.frame_jacobians.rows() != 6 * n || in.frame_jacobians.cols() != nv_)) ||
+      (in.use_posture && in.posture.size() != nv_))
+    throw std::invalid_argument("compiled CJM step: an input has the wrong size");
+}
+
+void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
+                 const Eigen::Ref<const RowMatrix>& ee_jacobian,
+                 const Eigen::Ref<const RowMatrix>& frame_jacobians, const ConstVectorRef& terms,
+                 const ConstVectorRef& posture, bool use_posture, bool analytical_allowed,
+                 VectorRef qd) {
+  if (q.size() != nq_) throw std::invalid_argument("compiled CJM step: q has the wrong size");
+  const bool posture_from_q = use_posture && posture_target_.size() != 0;
+  if (posture_from_q) posture_velocity_ = posture_gain_ * (posture_target_ - q);
+  const ConstVectorRef posture_used(posture_from_q ? ConstVectorRef(posture_velocity_) : posture);
+  const Inputs in{q, twist, ee_jacobian, frame_jacobians, terms, posture_used, use_posture,
+                  analytical_allowed};
+  check_sizes(in, qd);
+  status_ = Status::ok;
+  method_ = Method::none;
+  sigma_min_ = std::numeric_limits<double>::quiet_NaN();
+  damping_ = 0.0;
+  scale_ = 1.0;
+  equality_residual_ = 0.0;
+  saturated_count_ = event_count_ = saturation_joint_count_ = 0;
+  rows_ready_ = false;
+  active_.assign(equalities_.begin(), equalities_.end());
+  try {
+    solve_rows(in, qd);
+    if (!barriers_.empty()) activate_barriers(in, qd);
+    if (!qd.allFinite()) {
+      status_ = Status::failed;
+      event(Event::non_finite);
+      qd.setZero();
+    } else if (!box_contains(q, qd)) {
+      compute_box(q);
+      saturate(in, qd);
+      clip(qd);
+    }
+  } catch (const NoConvergence&) {
+    status_ = Status::failed;
+    event(Event::no_convergence);
+    qd.setZero();
+  }
+  if (status_ != Status::failed && equality_residual_ > kEqualityTolerance) {
+    report(Status::constraint_degraded);
+    event(Event::residual, equality_residual_);
+  }
+  write_report();
+}
+
+// -- rows and forms ---------------------------------------------------------------------
+
+void Step::solve_rows(const Inputs& in, VectorRef qd) {
+  if (active_.size() == 1 && !general_only_ && in.analytical_allowed &&
+      analytical(in, active_[0], qd))
+    return;
+  general(in, qd);
+}
+
+void Step::activate_barriers(const Inputs& in, VectorRef qd) {
+  ensure_rows(in);
+  waiting_.clear();
+  for (Index i : barriers_)
+    if (std::find(active_.begin(), active_.end(), i) == active_.end()) waiting_.push_back(i);
+  while (!waiting_.empty()) {
+    Index worst = 0;
+    double worst_violation = -std::numeric_limits<double>::infinity();
+    for (Index w = 0; w < static_cast<Index>(waiting_.size()); ++w) {
+      const double violation = barrier_violation(waiting_[w], qd);
+      if (violation > worst_violation) {
+        worst_violation = violation;
+        worst = w;
+      }
+    }
+    if (!(worst_violation > kBarrierTolerance)) break;
+    active_.push_back(waiting_[worst]);
+    waiting_.erase(waiting_.begin() + worst);
+    solve_rows(in, qd);
+  }
+}
+
+void Step::ensure_rows(const Inputs& in) {
+  if (rows_ready_) return;
+  for (Index i = 0; i < static_cast<Index>(constraints_.size()); ++i) {
+    const Index k = constraints_[i].rows;
+    // residual_rows = [-b, C [I, -hat(p)]] (k x 7, row-major) after the 6 x (7 - k) pre_rhs
+    const Eigen::Map<const RowMatrix> residual_rows(
+        in.terms.data() + terms_offset_[i] + 6 * (7 - k), k, 7);
+    all_rows_.middleRows(row_offset_[i], k).noalias() =
+        residual_rows.rightCols(6) * in.frame_jacobians.middleRows(6 * i, 6);
+    all_rhs_.segment(row_offset_[i], k) = -residual_rows.col(0);
+  }
+  rows_ready_ = true;
+}
+
+void Step::gather_active_rows() {
+  Index m = 0;
+  for (Index i : active_) {
+    const Index k = constraints_[i].rows;
+    rows_.middleRows(m, k) = all_rows_.middleRows(row_offset_[i], k);
+    rhs_.segment(m, k) = all_rhs_.segment(row_offset_[i], k);
+    m += k;
+  }
+  row_count_ = m;
+}
+
+double Step::barrier_violation(Index index, const ConstVectorRef& qd) const {
+  const Index row = row_offset_[index];
+  return all_rhs_(row) - all_rows_.row(row).dot(qd);
+}
+
+// -- the joint box ----------------------------------------------------------------------
+
+bool Step::box_contains(const ConstVectorRef& q, const ConstVectorRef& qd) {
+  const Index rows = box_.box_test.rows();
+  if (rows == 0) return true;
+  auto stacked = stacked_.head(rows);
+  stacked.noalias() = box_.box_test.leftCols(nv_) * qd;
+  stacked.noalias() += box_.box_test.middleCols(nv_, nq_) * q;
+  stacked += box_.box_test.col(nv_ + nq_);
+  return stacked.maxCoeff() <= 0.0;
+}
+
+void Step::compute_box(const ConstVectorRef& q) {
+  lower_ = box_.velocity_lower;
+  upper_ = box_.velocity_upper;
+  if (box_.position_limits) {
+    for (size_t i = 0; i < box_.limited_q.size(); ++i) {
+      const Index v = box_.limited_v[i];
+      const double q_i = q(box_.limited_q[i]);
+      lower_(v) = std::max(lower_(v), (box_.q_min(i) - q_i) * box_.position_gain);
+      upper_(v) = std::min(upper_(v), (box_.q_max(i) - q_i) * box_.position_gain);
+    }
+  }
+  // past a limit the position bound points back; never faster than the velocity limit
+  lower_ = lower_.cwiseMin(box_.velocity_upper);
+  upper_ = upper_.cwiseMax(box_.velocity_lower);
+  upper_ = upper_.cwiseMax(lower_);
+}
+
+void Step::clip(VectorRef qd) {
+  const double largest = qd.cwiseAbs().maxCoeff();
+  double change = 0.0;
+  Index clipped = 0;
+  for (Index i = 0; i < nv_; ++i) {
+    const double value = std::min(std::max(qd(i), lower_(i)), upper_(i));
+    change = std::max(change, std::abs(value - qd(i)));
+    if (value != qd(i)) clip_joints_(clipped++) = i;
+    qd(i) = value;
+  }
+  if (change > kEqualityTolerance * (1.0 + largest)) {
+    report(Status::constraint_degraded);
+    event(Event::clipped, change);
+    saturated_.head(clipped) = clip_joints_.head(clipped);
+    saturated_count_ = clipped;
+    Index m = 0;
+    for (Index i : equalities_) {
+      const Index k = constraints_[i].rows;
+      scratch_rows_.segment(m, k).noalias() = all_rows_.middleRows(row_offset_[i], k) * qd;
+      scratch_rows_.segment(m, k) -= all_rhs_.segment(row_offset_[i], k);
+      m += k;
+    }
+    if (m > 0) equality_residual_ = scratch_rows_.head(m).cwiseAbs().maxCoeff();
+  }
+}
+
+// -- the report -------------------------------------------------------------------------
+
+void Step::report(Status status) {
+  if (static_cast<int>(status) > static_cast<int>(status_)) status_ = status;
+}
+
+void Step::event(Event event, double a, double b, double c) {
+  if (event_count_ >= events_.rows()) return;
+  events_.row(event_count_++) << static_cast<double>(event), a, b, c;
+}
+
+void Step::report_task_solution(const ConstMatrixRef& matrix, const ConstVectorRef& rhs,
+                                const ConstVectorRef& x) {
+  sigma_min_ = dls_.sigma_min();
+  damping_ = dls_.damping();
+  if (dls_.exact()) return;
+  auto achieved = scratch_rows_.head(matrix.rows());
+  achieved.noalias() = matrix * x;
+  achieved -= rhs;
+  const double residual = matrix.rows() ? achieved.cwiseAbs().maxCoeff() : 0.0;
+  const double scale = rhs.size() ? rhs.cwiseAbs().maxCoeff() : 0.0;
+  if (residual > kTwistTolerance * (1.0 + scale)) {
+    report(Status::least_squares);
+    event(Event::task_residual, damping_, residual);
+  }
+}
+
+void Step::write_report() {
+  report_(kStatus) = static_cast<double>(status_);
+  report_(kMethod) = static_cast<double>(method_);
+  report_(kSigmaMin) = sigma_min_;
+  report_(kDamping) = damping_;
+  report_(kScale) = scale_;
+  report_(kEqualityResidual) = equality_residual_;
+  report_(kSaturatedCount) = static_cast<double>(saturated_count_);
+  Index barrier_count = 0;
+  for (Index i : active_)
+    if (!constraints_[i].equality) active_barriers_(barrier_count++) = i;
+  report_(kActiveBarrierCount) = static_cast<double>(barrier_count);
+  report_(kEventCount) = static_cast<double>(event_count_);
+  report_(kSaturationJointCount) = static_cast<double>(saturation_joint_count_);
+}
+
+}  // namespace cjm

@@ -1,0 +1,192 @@
+// The compiled CJM step: the dense algebra of one step of controllers/cjm/ (the
+// analytical form, the general form, the barriers' active set, saturation in the null
+// space, the clip guard and the step status), in one call (docs/design.md section 16).
+//
+// Python computes the kinematics (Pinocchio) and each constraint's terms; this class
+// takes them as arrays and does the rest with the same algorithms, the same damping, the
+// same rank decisions and the same order of saturation as the Python reference.
+#pragma once
+
+#include <Eigen/LU>
+
+#include <vector>
+
+#include "damped.hpp"
+#include "dense.hpp"
+#include "nullspace.hpp"
+
+namespace cjm {
+
+//! controllers.base.StepStatus, best to worst.
+enum class Status : int { ok = 0, scaled, least_squares, constraint_degraded, failed };
+
+//! SolveInfo.method.
+enum class Method : int { none = 0, analytical, general, saturated };
+
+//! What happened in a step, in order; Python words them into SolveInfo.message.
+enum class Event : int {
+  pre_chain_singular = 1,  // the note replaces the message, as in the Python
+  task_residual,           // a: damping, b: twist residual
+  conflict,                // a: rank, b: rows, c: least-squares residual
+  no_free_joint,
+  rows_scaled,             // a: the rows' scale
+  task_missed,             // the joints: saturation_joints()
+  task_scaled,             // a: limiting joint, b: task scale
+  clipped,                 // a: largest change; the joints: saturated_joints()
+  residual,                // a: equality residual
+  no_convergence,          // failed
+  non_finite,              // failed
+};
+
+//! One constraint: its rows and, when the analytical form may take it, its chain split.
+struct ConstraintPlan {
+  Index rows = 0;          // k
+  bool equality = true;
+  bool analytical = false;  // the EE downstream of its link, >= 6 joints before it, one EE
+  std::vector<Index> pre, post;
+};
+
+//! The joint box of controllers/joint_limits.py (JointBounds.box and BoxTest).
+struct JointBox {
+  Vector velocity_lower, velocity_upper;  // the velocity box (+-inf where none or off)
+  Vector velocity_limit;                  // inf where none (a bound below it is a position bound)
+  std::vector<Index> limited_q, limited_v;
+  Vector q_min, q_max;
+  double position_gain = 0.0;  // limit_gain / dt
+  bool position_limits = true;
+  RowMatrix box_test;          // M with M [qd; q; 1] <= 0 inside the box
+};
+
+//! Positions in report(): SolveInfo's numbers.
+enum ReportField : int {
+  kStatus = 0, kMethod, kSigmaMin, kDamping, kScale, kEqualityResidual,
+  kSaturatedCount, kActiveBarrierCount, kEventCount, kSaturationJointCount, kReportSize
+};
+
+class Step {
+ public:
+  //! ``posture_target`` (nq) non-empty: every joint has one coordinate, so the posture
+  //! velocity is ``posture_gain (posture_target - q)`` (pin.difference) and is computed
+  //! here; empty: Python passes it to solve().
+  Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool general_only,
+       std::vector<ConstraintPlan> constraints, JointBox box, double posture_gain,
+       Vector posture_target);
+
+  void set_policy(DampingPolicy policy) { policy_ = policy; }
+
+  //! One step: ``qd`` for ``twist``. ``frame_jacobians`` stacks each constraint's
+  //! 6 x nv LOCAL Jacobian; ``terms`` each constraint's flat terms buffer
+  //! (controllers.cjm.analytical.terms_views); ``posture`` is read when ``use_posture``.
+  void solve(const ConstVectorRef& q, const ConstVectorRef& twist,
+             const Eigen::Ref<const RowMatrix>& ee_jacobian,
+             const Eigen::Ref<const RowMatrix>& frame_jacobians, const ConstVectorRef& terms,
+             const ConstVectorRef& posture, bool use_posture, bool analytical_allowed,
+             VectorRef qd);
+
+  Vector& report() { return report_; }
+  RowMatrix& events() { return events_; }
+  Eigen::Matrix<Index, Eigen::Dynamic, 1>& saturated_joints() { return saturated_; }
+  Eigen::Matrix<Index, Eigen::Dynamic, 1>& active_barriers() { return active_barriers_; }
+  Eigen::Matrix<Index, Eigen::Dynamic, 1>& saturation_joints() { return saturation_joints_; }
+  Index terms_size() const { return terms_size_; }
+
+ private:
+  struct Inputs {
+    const ConstVectorRef& q;
+    const ConstVectorRef& twist;
+    const Eigen::Ref<const RowMatrix>& ee_jacobian;
+    const Eigen::Ref<const RowMatrix>& frame_jacobians;
+    const ConstVectorRef& terms;
+    const ConstVectorRef& posture;
+    bool use_posture;
+    bool analytical_allowed;
+  };
+  //! ``qd(s) = base + s direction`` over one saturated set (controllers/cjm/saturation.py).
+  struct Split {
+    double rows_residual = 0.0;
+    Index task_rank = 0;
+  };
+
+  // step.cpp: the driver, the barriers' active set, the box and the clip
+  void check_sizes(const Inputs& in, const VectorRef& qd) const;
+  void solve_rows(const Inputs& in, VectorRef qd);
+  void activate_barriers(const Inputs& in, VectorRef qd);
+  void ensure_rows(const Inputs& in);
+  void gather_active_rows();
+  double barrier_violation(Index index, const ConstVectorRef& qd) const;
+  bool box_contains(const ConstVectorRef& q, const ConstVectorRef& qd);
+  void compute_box(const ConstVectorRef& q);
+  void clip(VectorRef qd);
+  void report(Status status);
+  void event(Event event, double a = 0.0, double b = 0.0, double c = 0.0);
+  void report_task_solution(const ConstMatrixRef& matrix, const ConstVectorRef& rhs,
+                            const ConstVectorRef& x);
+  void write_report();
+
+  // analytical.cpp
+  bool analytical(const Inputs& in, Index index, VectorRef qd);
+  bool square_pre_chain(const Inputs& in, Index index, VectorRef qd);
+  bool redundant_pre_chain(const Inputs& in, Index index, VectorRef qd);
+  void closest_to_posture(const Inputs& in, Index n_columns, bool use_posture);
+
+  // general.cpp
+  void general(const Inputs& in, VectorRef qd);
+  Split solve_over_free(const Inputs& in);
+
+  // saturation.cpp
+  void saturate(const Inputs& in, VectorRef qd);
+  void saturate_in_null_space(const Inputs& in);
+  double task_scale_limit(const ConstVectorRef& base, const ConstVectorRef& direction,
+                          Index& critical) const;
+  void saturation_result(const Inputs& in, double task_scale, double rows_scale,
+                         Index limiting_joint);
+  void scale_rows(const Inputs& in);
+
+  // problem
+  Index nq_, nv_, task_rows_;
+  DampingPolicy policy_;
+  bool general_only_;
+  std::vector<ConstraintPlan> constraints_;
+  std::vector<Index> row_offset_, terms_offset_, equalities_, barriers_;
+  Index total_rows_ = 0, terms_size_ = 0;
+  JointBox box_;
+  double posture_gain_;
+  Vector posture_target_, posture_velocity_;
+
+  // the step's state, mirroring SolveInfo
+  Status status_ = Status::ok;
+  Method method_ = Method::none;
+  double sigma_min_ = 0.0, damping_ = 0.0, scale_ = 1.0, equality_residual_ = 0.0;
+  Index saturated_count_ = 0, event_count_ = 0, saturation_joint_count_ = 0;
+  std::vector<Index> active_, waiting_;
+  Vector report_;
+  RowMatrix events_;
+  Eigen::Matrix<Index, Eigen::Dynamic, 1> saturated_, active_barriers_, saturation_joints_, clip_joints_;
+
+  // workspace, allocated once
+  Matrix all_rows_, rows_;     // every constraint's rows; the active ones
+  Vector all_rhs_, rhs_;
+  Index row_count_ = 0;  // rows of the active set in rows_
+  bool rows_ready_ = false;
+  NullSpace null_;
+  DampedLeastSquares dls_;
+  Matrix task_t_, task_null_t_, task_null_, task_rhs_, task_x_;  // (J N)^T and its solves
+  Vector qd0_, delta_, lower_, upper_, box_lower_, box_upper_, stacked_, scratch_rows_, rows_scratch_;
+  Vector free_x_, posture_null_, rank_weights_;
+  Matrix columns_, task_columns_;  // rows and J over the free joints (SNS)
+  // SNS
+  Eigen::Array<bool, Eigen::Dynamic, 1> free_, best_free_;
+  Vector held_, best_held_, base_, direction_, sns_qd_;
+  double sns_task_scale_ = 1.0, sns_rows_scale_ = 1.0;
+  Index sns_limiting_ = -1;
+  bool sns_missed_ = false;
+  // analytical
+  Eigen::PartialPivLU<Eigen::Matrix<double, 6, 6>> lu_pre_, lu_cjm_;
+  Eigen::Matrix<double, 6, 6> square_;
+  Matrix pre_jacobian_, joint_map_, task_map_, cjm_, ad_cjm_, basis_qr_, basis_, closest_;
+  Eigen::Matrix<double, 6, 1> cjm_rhs_;
+  Vector free_with_one_, twist_a_, twist_a_with_one_, basis_tau_, goal_, step_;
+  ThinSvd pre_svd_, closest_svd_;
+};
+
+}  // namespace cjm

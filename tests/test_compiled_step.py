@@ -1,0 +1,214 @@
+"""The compiled CJM step (C++, docs/design.md section 16) gives what the Python step gives.
+
+Hypothesis draws configurations (near home, or with joints near their position limits),
+twists (teleoperation-sized, or large enough for the velocity limits to bind), constraint
+sets (holes, planes, point locks, barriers, several at once, none) and the options (form,
+posture gain, parametrisation) on the built-in robots and generated chains (a square, a
+redundant and a short pre-chain). Both backends must give the same ``qd`` to 1e-12
+relative, the same status, method, scale, saturated joints, active barriers, sigma_min
+and message. The extension is built by ``pip install -e .``: these tests never skip.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from constraints import Barrier, Hole, Plane, PointLock
+from controllers import CJMController, StepStatus
+from controllers.cjm import _step  # noqa: F401  (an ImportError here fails the suite)
+from teleop.robots import load_robot
+from teleop.robots.chains import load_chain
+
+ROBOTS = {"sda10f": load_robot("sda10f"), "ur5_instrument": load_robot("ur5_instrument"),
+          "chain10": load_chain(10), "chain16": load_chain(16)}
+#: the constrained links tried per robot: 6 joints before them (the paper's case), more
+#: than 6 (the redundant pre-chain), fewer (the general form)
+LINKS = {"sda10f": ["arm_link_5_r", "arm_link_3_e"],
+         "ur5_instrument": ["instrument_shaft", "wrist_3_link"],
+         "chain10": ["link_6", "link_8", "link_4"],
+         "chain16": ["link_6", "link_11", "link_3"]}
+KINDS = ("hole", "plane", "lock", "barrier")
+
+
+def build_constraint(kind: str, robot, q0: np.ndarray, link: str, rng: np.random.Generator):
+    """One constraint of ``kind`` on ``link`` as it is at ``q0``."""
+    normal = rng.normal(size=3)
+    normal /= np.linalg.norm(normal)
+    axis = robot.link_axis if link == robot.constrained_link else np.array([0.0, 0.0, 1.0])
+    if kind == "hole":
+        return Hole.on_link(robot, q0, distance=0.1, link=link, link_axis=axis)
+    if kind == "plane":
+        return Plane.through_link_point(robot, q0, normal, distance=0.05, link=link)
+    if kind == "lock":
+        return PointLock.on_link(robot, q0, distance=0.05, link=link)
+    return Barrier.through_link_point(robot, q0, normal, distance=0.05, link=link)
+
+
+@st.composite
+def problems(draw):
+    """A controller's options, a constraint set, a configuration and a twist."""
+    name = draw(st.sampled_from(sorted(ROBOTS)))
+    robot = ROBOTS[name]
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    model = robot.model
+    q0 = np.clip(robot.q_home + rng.uniform(-0.2, 0.2, model.nq),
+                 model.lowerPositionLimit + 0.01, model.upperPositionLimit - 0.01)
+    kinds = draw(st.lists(st.sampled_from(KINDS), min_size=0, max_size=3))
+    links = LINKS[name]
+    constraints = [build_constraint(kind, robot, q0, links[draw(st.integers(0, len(links) - 1))], rng)
+                   for kind in kinds]
+    # drift off the constraints, and some joints pushed against their position limits
+    q = q0 + rng.uniform(-1e-3, 1e-3, model.nq) * draw(st.sampled_from([0.0, 1.0, 30.0]))
+    if draw(st.booleans()):
+        pushed = rng.random(model.nq) < 0.3
+        side = np.where(rng.random(model.nq) < 0.5, model.lowerPositionLimit, model.upperPositionLimit)
+        q[pushed] = side[pushed] - np.sign(side[pushed]) * rng.uniform(0.0, 2e-3, pushed.sum())
+    twist = rng.normal(size=6) * draw(st.sampled_from([1e-3, 0.05, 1.0, 20.0]))
+    options = {
+        "form": draw(st.sampled_from(["auto", "general"])),
+        "posture_gain": draw(st.sampled_from([0.0, 1.0])),
+        "damping": draw(st.sampled_from([0.0, 0.0, 0.01])),
+    }
+    if kinds == ["hole"] and draw(st.booleans()):
+        options["parametrisation"] = "paper"
+    return robot, constraints, q, twist, options
+
+
+def assert_same_step(python: CJMController, compiled: CJMController, q: np.ndarray,
+                     twist: np.ndarray) -> None:
+    expected = python.solve(q, twist)
+    actual = compiled.solve(q, twist)
+    assert np.all(np.isfinite(actual))
+    scale = 1.0 + float(np.max(np.abs(expected)))
+    assert float(np.max(np.abs(actual - expected))) <= 1e-12 * scale, (python.info, compiled.info)
+    a, b = python.info, compiled.info
+    assert (b.status, b.method, b.saturated_joints, b.active_barriers) == \
+        (a.status, a.method, a.saturated_joints, a.active_barriers)
+    assert b.message == a.message
+    assert math.isclose(b.scale, a.scale, rel_tol=1e-9, abs_tol=1e-12)
+    assert math.isclose(b.damping, a.damping, rel_tol=1e-9, abs_tol=1e-12)
+    assert (math.isnan(a.sigma_min) and math.isnan(b.sigma_min)) or \
+        math.isclose(b.sigma_min, a.sigma_min, rel_tol=1e-9, abs_tol=1e-13)
+    assert math.isclose(b.equality_residual, a.equality_residual, rel_tol=1e-6, abs_tol=1e-12)
+    lower, upper = compiled.bounds(q)
+    assert np.all(actual >= lower - 1e-9 * (1 + np.abs(lower)))
+    assert np.all(actual <= upper + 1e-9 * (1 + np.abs(upper)))
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(problem=problems())
+def test_the_compiled_step_equals_the_python_step(problem):
+    robot, constraints, q, twist, options = problem
+    python = CJMController(robot, constraints, backend="python", **options)
+    compiled = CJMController(robot, constraints, backend="compiled", **options)
+    assert_same_step(python, compiled, q, twist)
+
+
+WHOLE_BODY = {"sda10f_dual": load_robot("sda10f_dual"),
+              "sda10f_dual_mobile": load_robot("sda10f_dual_mobile")}
+
+
+@st.composite
+def whole_body_problems(draw):
+    """Two EEs (stacked twists), a hole on each arm, maybe a wall on the mobile base, a
+    twist weight, configurations near home or pushed against the limits."""
+    name = draw(st.sampled_from(sorted(WHOLE_BODY)))
+    robot = WHOLE_BODY[name]
+    model = robot.model
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    q = pin.integrate(model, robot.q_home, rng.uniform(-0.2, 0.2, model.nv))
+    bounded = np.abs(model.lowerPositionLimit) < 1e10
+    if draw(st.booleans()):
+        pushed = bounded & (rng.random(model.nq) < 0.3)
+        side = np.where(rng.random(model.nq) < 0.5, model.lowerPositionLimit, model.upperPositionLimit)
+        q[pushed] = side[pushed] - np.sign(side[pushed]) * rng.uniform(0.0, 2e-3, pushed.sum())
+    constraints = [Hole.on_link(robot, q, distance=0.08, link=link)
+                   for link in draw(st.sets(st.sampled_from(robot.constrained_links)))]
+    if robot.root_joint == "planar" and draw(st.booleans()):
+        wall = Barrier.through_link_point(robot, q, [-1.0, 0.0, 0.0], link="mobile_base",
+                                          link_point=[0.4, 0.3, 0.0])  # touching the corner
+        wall.move_to(wall.position + [rng.uniform(0.0, 0.05), 0.0, 0.0])  # or a little ahead
+        constraints.append(wall)
+    twist = rng.normal(size=robot.task_size) * draw(st.sampled_from([1e-3, 0.05, 1.0, 20.0]))
+    options = {
+        "twist_weight": draw(st.sampled_from(
+            [None, [1.0, 1.0, 1.0, 0.0, 0.0, 0.0], list(rng.uniform(0.1, 2.0, 12))])),
+        "posture_gain": draw(st.sampled_from([0.0, 1.0])),
+    }
+    return robot, constraints, q, twist, options
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(problem=whole_body_problems())
+def test_the_compiled_step_equals_the_python_step_with_two_end_effectors(problem):
+    """Stacked twists, weighted tasks and a planar base (nq != nv): the same step."""
+    robot, constraints, q, twist, options = problem
+    python = CJMController(robot, constraints, backend="python", **options)
+    compiled = CJMController(robot, constraints, backend="compiled", **options)
+    assert_same_step(python, compiled, q, twist)
+
+
+def test_every_path_of_the_step_is_drawn():
+    """The strategy reaches each method and the statuses the limits give, so the
+    property test above is not vacuous."""
+    seen_methods, seen_statuses = set(), set()
+
+    @settings(max_examples=300, deadline=None, database=None,
+              suppress_health_check=[HealthCheck.too_slow])
+    @given(problem=problems())
+    def run(problem):
+        robot, constraints, q, twist, options = problem
+        controller = CJMController(robot, constraints, backend="compiled", **options)
+        controller.solve(q, twist)
+        seen_methods.add(controller.info.method)
+        seen_statuses.add(controller.info.status)
+        if controller.info.active_barriers:
+            seen_methods.add("barrier")
+
+    run()
+    assert {"analytical", "general", "saturated", "barrier"} <= seen_methods
+    assert {StepStatus.OK, StepStatus.SCALED, StepStatus.LEAST_SQUARES} <= seen_statuses
+
+
+def test_the_paper_robot_steps_agree_along_a_path(sda10f):
+    """A hole on the paper's robot, a thousand configurations near home: the fast path."""
+    hole = Hole.on_link(sda10f, sda10f.q_home, distance=0.08)
+    python = CJMController(sda10f, [hole], backend="python")
+    compiled = CJMController(sda10f, [hole], backend="compiled")
+    rng = np.random.default_rng(3)
+    methods = set()
+    for _ in range(1000):
+        q = sda10f.q_home + rng.uniform(-1e-3, 1e-3, sda10f.model.nq)
+        assert_same_step(python, compiled, q, rng.normal(size=6) * 0.01)
+        methods.add(compiled.info.method)
+    assert "analytical" in methods  # the fast path, compared on most of the steps
+
+
+def test_the_compiled_backend_is_the_default_and_keeps_the_input_checks(sda10f):
+    controller = CJMController(sda10f, [])
+    assert controller.backend == "compiled"
+    with pytest.raises(ValueError, match="twist"):
+        controller.solve(sda10f.q_home, [0.0, 0.0, float("nan"), 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="q"):
+        controller.solve(sda10f.q_home[:3], np.zeros(6))
+    with pytest.raises(ValueError, match="backend"):
+        CJMController(sda10f, [], backend="fortran")
+
+
+def test_a_new_damping_policy_reaches_the_compiled_step(sda10f):
+    """The UI replaces ``controller.policy``; the compiled step must use the new one."""
+    from controllers import DampingPolicy
+
+    hole = Hole.on_link(sda10f, sda10f.q_home, distance=0.08)
+    python = CJMController(sda10f, [hole], backend="python")
+    compiled = CJMController(sda10f, [hole], backend="compiled")
+    for controller in (python, compiled):
+        controller.policy = DampingPolicy(0.05, 0.01, 0.05)
+    assert_same_step(python, compiled, sda10f.q_home, np.full(6, 0.01))
+    assert compiled.info.damping == pytest.approx(0.05)
