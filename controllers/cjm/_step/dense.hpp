@@ -84,6 +84,10 @@ inline void jacobi_columns(MatrixRef x, MatrixRef v) {
   // a column below the rounding of the whole matrix is left alone: its singular value is
   // noise (far under the rank cut), and rotating it need not converge
   const double negligible = 64.0 * eps * eps * x.squaredNorm();
+  // two columns count as orthogonal when their cosine is below sqrt(p) eps, LAPACK's
+  // dgesvj tolerance: eps alone is below the rounding of a p-term dot product, and near a
+  // rank loss the sweeps then never end (seen on sda10f_dual: 100 sweeps not enough)
+  const double tolerance = std::sqrt(static_cast<double>(x.rows())) * eps;
   for (int sweep = 0; sweep < 100; ++sweep) {
     bool rotated = false;
     for (Index i = 0; i + 1 < q; ++i) {
@@ -91,7 +95,7 @@ inline void jacobi_columns(MatrixRef x, MatrixRef v) {
         const double alpha = x.col(i).squaredNorm();
         const double beta = x.col(j).squaredNorm();
         const double gamma = x.col(i).dot(x.col(j));
-        if (!(std::abs(gamma) > eps * std::sqrt(alpha * beta)) || alpha <= negligible ||
+        if (!(std::abs(gamma) > tolerance * std::sqrt(alpha * beta)) || alpha <= negligible ||
             beta <= negligible)
           continue;
         rotated = true;
