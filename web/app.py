@@ -167,37 +167,6 @@ class Trace:
                 for name in ("t", *TRACE_COLUMNS, "qd_deviation")}
 
 
-class AppLoop(TeleopLoop):
-    """The closed loop with a light tick: :meth:`control_step` computes only what the
-    controller needs (target filter, EE pose, command, solve, integrate); the full
-    :meth:`advance` + :meth:`measure` run on the history ticks only."""
-
-    refused: str = ""  # why the controller refused the last light step's input, if it did
-
-    def control_step(self, targets: Sequence[pin.SE3]) -> float:
-        """One period without the measures, towards one target per EE; the controller's
-        solve time (us)."""
-        model, data = self.model, self.data
-        filtered = self.filter_targets(targets)
-        pin.forwardKinematics(model, data, self.q)
-        placements = [pin.updateFramePlacement(model, data, frame) for frame in self.ee_frame_ids]
-        twist = self.command(placements, filtered)
-        self.previous_targets = [pose.copy() for pose in filtered]
-        start = time.perf_counter_ns()
-        try:
-            qd = self.controller.solve(self.q, twist)
-            self.refused = ""
-        except ValueError as error:  # refused input: hold still, say why
-            qd, self.refused = np.zeros(model.nv), str(error)
-        solve_us = (time.perf_counter_ns() - start) * 1e-3
-        if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
-            qd = np.zeros(model.nv)
-        self.q = pin.integrate(model, self.q, qd * self.config.dt)
-        self.last_qd = qd
-        self.t += self.config.dt
-        return solve_us
-
-
 @dataclass(frozen=True)
 class Limitation:
     """What limits a robot now: the step status (it colours the EE-target line) and why,
@@ -318,7 +287,7 @@ class TeleopApp:
         self.entries: dict[str, ConstraintEntry] = {}
         self._ids = itertools.count(1)
         self.specs = {"main": controller}
-        self.loops: dict[str, AppLoop] = {"main": self._make_loop(controller)}
+        self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(controller)}
         self.traces: dict[str, Trace] = {"main": Trace()}
         self.last_records: dict[str, StepRecord | None] = {"main": None}
         self.ghost_offset = default_ghost_offset(robot)
@@ -339,7 +308,7 @@ class TeleopApp:
     def _make_loop(self, spec: str, q: np.ndarray | None = None,
                    constraints: list[Constraint] | None = None,
                    config: LoopConfig | None = None,
-                   orientation_weight: float | None = None) -> AppLoop:
+                   orientation_weight: float | None = None) -> TeleopLoop:
         if constraints is None:
             constraints = [e.constraint for e in getattr(self, "entries", {}).values()]
         config = config or self.config
@@ -348,7 +317,7 @@ class TeleopApp:
                                      twist_weight=None if weight == 1.0 else
                                      [1.0, 1.0, 1.0, weight, weight, weight])
         self._apply_damping(controller)
-        return AppLoop(self.robot, controller, q0=q, config=config)
+        return TeleopLoop(self.robot, controller, q0=q, config=config)
 
     def _apply_damping(self, controller, damping: float | None = None) -> None:
         if hasattr(controller, "policy"):  # the CJM's damped least squares
@@ -696,7 +665,7 @@ class TeleopApp:
         self.loops[which] = self._rebuilt(which, spec)  # raises ValueError on a bad spec
         self.specs[which] = spec
 
-    def _rebuilt(self, which: str, spec: str) -> AppLoop:
+    def _rebuilt(self, which: str, spec: str) -> TeleopLoop:
         """A new loop for robot ``which`` with ``spec`` and the current config, same state."""
         old = self.loops[which]
         loop = self._make_loop(spec, q=old.q.copy())
@@ -923,8 +892,8 @@ class TeleopApp:
                 self._next_history = start + 1.0 / HISTORY_RATE
             else:
                 solve_us = 0.0
-                for loop in self.loops.values():
-                    solve_us += loop.control_step(targets)
+                for loop in self.loops.values():  # the hot path only (no measures)
+                    solve_us += loop.advance(targets).step_time_us
                 for entry in moving:  # where the period took the geometry
                     advance(entry.constraint, dt)
             self.ticks += 1
@@ -949,6 +918,8 @@ class TeleopApp:
                        dt: float) -> float:
         """A full tick with the measures, appended to the history."""
         pending = {which: loop.advance(targets) for which, loop in self.loops.items()}
+        for which, loop in self.loops.items():  # before the geometry moves on
+            loop.measure_command(pending[which])
         for entry in moving:
             advance(entry.constraint, dt)
         main_qd = self.loops["main"].last_qd

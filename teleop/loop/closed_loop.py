@@ -154,8 +154,8 @@ class StepRecord:
     ee_orientation_errors: np.ndarray  # (EEs,) |log3(R_e^T R*)| of each EE
     joint_limit_violation: float  # max over joints of the distance past a limit (rad)
     failed: bool
-    step_time_us: float
-    tick_time_us: float
+    step_time_us: float  # the controller's solve
+    tick_time_us: float  # the period's hot path, the solve included (the measures are not)
     constraint_velocity_floor: float  # float64 round-off of C v_c (m/s, _constraint_velocity)
     twist_saturated: bool  # the speed caps scaled some EE's commanded twist down
     constraint_velocity: np.ndarray = field(repr=False)  # C v_c - C v_geom, every equality row
@@ -197,22 +197,30 @@ class StepRecord:
 
 @dataclass
 class PendingStep:
-    """What :meth:`TeleopLoop.advance` computed, waiting for the end-of-period measures."""
+    """One period as :meth:`TeleopLoop.advance` ran it (the hot path), then its command's
+    measures (:meth:`TeleopLoop.measure_command`), waiting for the end-of-period ones."""
 
     targets: list[pin.SE3]  # the filtered target of each EE
-    tick_start: int  # perf_counter_ns
+    previous_targets: list[pin.SE3] | None  # the period before's (the operator's velocity)
+    placements: list[pin.SE3]  # each EE's pose the command was computed from
+    twists: list[np.ndarray]  # each EE's commanded body twist, after the speed caps
+    sensed: np.ndarray  # the configuration the controller saw
+    q_before: np.ndarray  # the true configuration before the integration
+    qd: np.ndarray  # the command
+    moved: np.ndarray  # the joint velocities the robot moved with (the plant's)
+    tick_time_us: float  # the hot path: filter, kinematics, command, solve, integration
     step_time_us: float
     status: str
     message: str
-    residual: float
     twist_saturated: bool
-    floor: float
-    constraint_velocity: np.ndarray
-    drift_velocity: np.ndarray
-    labels: tuple[str, ...]
-    operator_linear_velocities: np.ndarray
-    commanded_linear_velocities: np.ndarray
-    actual_linear_velocities: np.ndarray
+    residual: float = 0.0
+    floor: float = 0.0
+    constraint_velocity: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drift_velocity: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    labels: tuple[str, ...] = ()
+    operator_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    commanded_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    actual_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 def saturate_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
@@ -255,6 +263,7 @@ class TeleopLoop:
         #: the filtered targets of the last period (their feed-forward), None at the start
         self.previous_targets: list[pin.SE3] | None = None
         self.last_qd = np.zeros(self.model.nv)
+        self.refused = ""  # why the controller refused the last input (ValueError), if it did
         self._labels_key: tuple[int, ...] = ()
         self._labels: tuple[str, ...] = ()
         self._names: tuple[str, ...] = ()
@@ -342,75 +351,87 @@ class TeleopLoop:
              advance_geometry: Callable[[float], None] | None = None) -> StepRecord:
         """Advance one control period towards ``target`` (one pose per EE) and measure it.
 
-        The measures are taken at the end of the period, against the geometry of that
-        instant: ``advance_geometry(t)`` (when moving geometry is given) is called with the
-        new time after the integration, to move the constraints there first.
+        The hot path (:meth:`advance`) is what a robot's control loop runs; the measures
+        come after it, off that path (docs/design.md section 5.1): the command's at the
+        state it was computed for (:meth:`measure_command`), then, once
+        ``advance_geometry(t)`` (when moving geometry is given) has moved the constraints
+        to the new time, the end-of-period ones against the geometry of that instant
+        (:meth:`measure`).
         """
         step = self.advance(target)
+        self.measure_command(step)
         if advance_geometry is not None:
             advance_geometry(self.t)
         return self.measure(step)
 
-    def advance(self, target: Targets) -> "PendingStep":
-        """The first half of :meth:`tick`: command, solve, integrate (no end measures)."""
+    def advance(self, target: Targets) -> PendingStep:
+        """The hot path of a period: filter the targets, the EE poses, the command, the
+        controller's step, the integration. No measures (:meth:`measure_command`)."""
         tick_start = time.perf_counter_ns()
-        dt = self.config.dt
         model, data = self.model, self.data
         targets = self.filter_targets(target)
         sensed = self.q if self.plant is None else self.plant.sense(self.q)
-        pin.computeJointJacobians(model, data, sensed)
-        pin.updateFramePlacements(model, data)
-        placements = [data.oMf[frame].copy() for frame in self.ee_frame_ids]
+        pin.forwardKinematics(model, data, sensed)
+        placements = [pin.updateFramePlacement(model, data, frame).copy()
+                      for frame in self.ee_frame_ids]
         requested = self._pose_twists(placements, targets)
         twists = [self._saturate(twist) for twist in requested]
-        saturated = any(not np.array_equal(capped, twist)
-                        for capped, twist in zip(twists, requested))
-        previous = self.previous_targets
-        operator = np.array([np.zeros(3) if previous is None
-                             else (now.translation - before.translation) / dt
-                             for now, before in zip(targets, previous or targets)])
-        self.previous_targets = [pose.copy() for pose in targets]
-        commanded = np.array([ee.rotation @ twist[:3] for ee, twist in zip(placements, twists)])
-        twist = np.concatenate(twists)
-
+        previous, self.previous_targets = self.previous_targets, [pose.copy() for pose in targets]
         solve_start = time.perf_counter_ns()
         try:
-            qd = self.controller.solve(sensed, twist)
-            status = self.controller.info.status.value
-            message = self.controller.info.message
+            qd = self.controller.solve(sensed, np.concatenate(twists))
+            status, message = self.controller.info.status.value, self.controller.info.message
+            self.refused = ""
         except ValueError as error:  # refused input: hold still, say why
             qd, status, message = np.zeros(model.nv), "failed", str(error)
+            self.refused = message
         step_time = (time.perf_counter_ns() - solve_start) * 1e-3
-        if not np.isfinite(qd).all():  # never integrate a non-finite command
+        if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
             qd, status, message = np.zeros(model.nv), "failed", "non-finite command replaced by zero"
-
-        # the command's residual at the configuration it was computed for; the velocities
-        # the joints move with, at the true configuration
-        residual, velocity, drift, floor = self._constraint_velocity(qd)
-        moved = qd
-        if self.plant is not None:
-            moved = self.plant.actuate(qd)
-            pin.computeJointJacobians(model, data, self.q)
-            pin.updateFramePlacements(model, data)
-            _, velocity, drift, floor = self._constraint_velocity(moved)
-        actual = np.array([
-            data.oMf[frame].rotation
-            @ (pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:3] @ moved)
-            for frame in self.ee_frame_ids])
-
-        self.q = pin.integrate(model, self.q, moved * dt)
+        moved = qd if self.plant is None else self.plant.actuate(qd)
+        q_before = self.q
+        self.q = pin.integrate(model, q_before, moved * self.config.dt)
         self.last_qd = qd
-        self.t += dt
-        return PendingStep(targets=targets, tick_start=tick_start, step_time_us=step_time,
-                           status=status, message=message, residual=residual,
-                           twist_saturated=saturated, floor=floor,
-                           constraint_velocity=velocity, drift_velocity=drift,
-                           labels=self._row_labels(), operator_linear_velocities=operator,
-                           commanded_linear_velocities=commanded,
-                           actual_linear_velocities=actual)
+        self.t += self.config.dt
+        saturated = any(not np.array_equal(capped, twist)
+                        for capped, twist in zip(twists, requested))
+        return PendingStep(
+            targets=targets, previous_targets=previous, placements=placements, twists=twists,
+            sensed=sensed, q_before=q_before, qd=qd, moved=moved,
+            tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3, step_time_us=step_time,
+            status=status, message=message, twist_saturated=saturated)
 
-    def measure(self, step: "PendingStep") -> StepRecord:
-        """The second half of :meth:`tick`: the measures at the end of the period."""
+    def measure_command(self, step: PendingStep) -> None:
+        """The command's measures, into ``step``, at the state and geometry it was computed
+        for: its residual ``max |A qd - b|`` at the sensed configuration; the velocities
+        the joints moved with at the true one (each equality row's ``C v_c`` relative to
+        its geometry, the drift ``-K e``, the EE velocities); the operator's and the
+        commanded EE velocities (world)."""
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, step.sensed)
+        pin.updateFramePlacements(model, data)
+        step.residual, step.constraint_velocity, step.drift_velocity, step.floor = \
+            self._constraint_velocity(step.qd)
+        if self.plant is not None:
+            pin.computeJointJacobians(model, data, step.q_before)
+            pin.updateFramePlacements(model, data)
+            _, step.constraint_velocity, step.drift_velocity, step.floor = \
+                self._constraint_velocity(step.moved)
+        step.actual_linear_velocities = np.array([
+            data.oMf[frame].rotation
+            @ (pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:3] @ step.moved)
+            for frame in self.ee_frame_ids])
+        step.commanded_linear_velocities = np.array(
+            [ee.rotation @ twist[:3] for ee, twist in zip(step.placements, step.twists)])
+        dt = self.config.dt
+        step.operator_linear_velocities = np.array([
+            np.zeros(3) if step.previous_targets is None
+            else (now.translation - before.translation) / dt
+            for now, before in zip(step.targets, step.previous_targets or step.targets)])
+        step.labels = self._row_labels()
+
+    def measure(self, step: PendingStep) -> StepRecord:
+        """The end of the period's measures (after :meth:`measure_command`)."""
         model, data = self.model, self.data
         errors, error, penetration = self._constraint_errors()
         placements = [data.oMf[frame] for frame in self.ee_frame_ids]
@@ -425,7 +446,7 @@ class TeleopLoop:
             barrier_penetration=penetration, ee_position_errors=position_errors,
             ee_orientation_errors=orientation_errors, joint_limit_violation=violation,
             failed=step.status == "failed", step_time_us=step.step_time_us,
-            tick_time_us=(time.perf_counter_ns() - step.tick_start) * 1e-3,
+            tick_time_us=step.tick_time_us,
             constraint_velocity_floor=step.floor, twist_saturated=step.twist_saturated,
             constraint_velocity=step.constraint_velocity,
             constraint_velocity_labels=step.labels, drift_velocity=step.drift_velocity,
