@@ -224,10 +224,13 @@ class PendingStep:
 
 
 def saturate_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
-    """Scale ``[v; w]`` uniformly so that ``|v| <= max_linear`` and ``|w| <= max_angular``."""
-    scale = min(1.0, max_linear / max(np.linalg.norm(twist[:3]), 1e-300),
-                max_angular / max(np.linalg.norm(twist[3:]), 1e-300))
-    return twist * scale
+    """Scale ``[v; w]`` uniformly so that ``|v| <= max_linear`` and ``|w| <= max_angular``;
+    ``twist`` itself when it is within both (the common case)."""
+    # the norms as np.linalg.norm computes them, without its overhead (~4 us a tick, bench)
+    linear = math.sqrt(float(np.dot(twist[:3], twist[:3])))
+    angular = math.sqrt(float(np.dot(twist[3:], twist[3:])))
+    scale = min(1.0, max_linear / max(linear, 1e-300), max_angular / max(angular, 1e-300))
+    return twist if scale == 1.0 else twist * scale
 
 
 class TeleopLoop:
@@ -376,7 +379,8 @@ class TeleopLoop:
                       for frame in self.ee_frame_ids]
         requested = self._pose_twists(placements, targets)
         twists = [self._saturate(twist) for twist in requested]
-        previous, self.previous_targets = self.previous_targets, [pose.copy() for pose in targets]
+        # filter_targets makes a new list of new poses every period: no copy needed
+        previous, self.previous_targets = self.previous_targets, targets
         solve_start = time.perf_counter_ns()
         try:
             qd = self.controller.solve(sensed, np.concatenate(twists))
@@ -393,8 +397,7 @@ class TeleopLoop:
         self.q = pin.integrate(model, q_before, moved * self.config.dt)
         self.last_qd = qd
         self.t += self.config.dt
-        saturated = any(not np.array_equal(capped, twist)
-                        for capped, twist in zip(twists, requested))
+        saturated = any(capped is not twist for capped, twist in zip(twists, requested))
         return PendingStep(
             targets=targets, previous_targets=previous, placements=placements, twists=twists,
             sensed=sensed, q_before=q_before, qd=qd, moved=moved,
