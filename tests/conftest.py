@@ -27,10 +27,27 @@ def ur5_instrument():
     return load_robot("ur5_instrument")
 
 
+@pytest.fixture(scope="session")
+def dual():
+    """The two-arm SDA10F (docs/design.md section 11)."""
+    return load_robot("sda10f_dual")
+
+
+@pytest.fixture(scope="session")
+def mobile():
+    """The two-arm SDA10F on a planar mobile base."""
+    return load_robot("sda10f_dual_mobile")
+
+
 def near_home(robot, rng: np.random.Generator, spread: float = 0.15) -> np.ndarray:
-    """A configuration a little away from home (well inside limits, non-singular)."""
-    q = robot.q_home + rng.uniform(-spread, spread, robot.model.nq)
-    return np.clip(q, robot.model.lowerPositionLimit + 0.05, robot.model.upperPositionLimit - 0.05)
+    """A configuration a little away from home (well inside limits, non-singular):
+    ``q_home`` moved by a random velocity for 1 s, valid for any joint (a planar base's
+    too; for 1-dof joints it is ``q_home + v``)."""
+    q = pin.integrate(robot.model, robot.q_home, rng.uniform(-spread, spread, robot.model.nv))
+    bounded = np.abs(robot.model.lowerPositionLimit) < 1e10  # not a planar base's
+    q[bounded] = np.clip(q[bounded], robot.model.lowerPositionLimit[bounded] + 0.05,
+                         robot.model.upperPositionLimit[bounded] - 0.05)
+    return q
 
 
 def kinematics(robot, q: np.ndarray) -> pin.Data:

@@ -17,6 +17,8 @@ import scipy.linalg
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from conftest import kinematics
+
 from constraints import Hole
 from controllers import CJMController, MinkController, QPController
 from controllers.base import StepStatus
@@ -55,16 +57,6 @@ BASE_AGREEMENT = 1e-7
 
 
 @pytest.fixture(scope="module")
-def dual():
-    return load_robot("sda10f_dual")
-
-
-@pytest.fixture(scope="module")
-def mobile():
-    return load_robot("sda10f_dual_mobile")
-
-
-@pytest.fixture(scope="module")
 def mobile_controller(mobile):
     """A mink controller of the mobile robot (its model and joint map), no constraint."""
     return MinkController(mobile)
@@ -94,13 +86,6 @@ def with_base(robot, q: np.ndarray, x: float, y: float, heading: float) -> np.nd
     return q
 
 
-def data_at(robot, q: np.ndarray) -> pin.Data:
-    data = robot.model.createData()
-    pin.computeJointJacobians(robot.model, data, q)
-    pin.updateFramePlacements(robot.model, data)
-    return data
-
-
 def stacked_ee_jacobian(robot, data: pin.Data) -> np.ndarray:
     return np.vstack([pin.getFrameJacobian(robot.model, data, frame, pin.LOCAL)
                       for frame in robot.ee_frame_ids])
@@ -115,7 +100,7 @@ def consistent_twist(robot, q: np.ndarray, holes: list[Hole], rng: np.random.Gen
                      speed: float) -> tuple[np.ndarray, float]:
     """A stacked twist both EEs can meet with the holes held (``J_e qd0``, ``A qd0 = 0``,
     ``max |qd0| = speed``), and the smallest singular value of ``J_e`` on ``null(A)``."""
-    data = data_at(robot, q)
+    data = kinematics(robot, q)
     A, _ = hole_rows(robot, data, holes)
     null = scipy.linalg.null_space(A)
     qd0 = null @ rng.normal(size=null.shape[1])
@@ -135,7 +120,7 @@ def check_agreement(robot, q: np.ndarray, holes: list[Hole], twist: np.ndarray,
         assert controller.info.status is StepStatus.OK, controller.info.message
     np.testing.assert_allclose(qd, qd_cjm, rtol=0.0, atol=agreement)
     np.testing.assert_allclose(qd, qd_qp, rtol=0.0, atol=agreement)
-    data = data_at(robot, q)
+    data = kinematics(robot, q)
     A, b = hole_rows(robot, data, holes)
     assert np.abs(A @ qd - b).max() <= 1e-9
     assert mink.info.equality_residual <= 1e-9
@@ -163,7 +148,7 @@ def test_each_frame_task_gets_its_own_slice_of_the_twist(dual):
     controller = MinkController(dual, dt=2e-3)
     twist = np.arange(1.0, 13.0) / 100.0
     controller.solve(q, twist)
-    data = data_at(dual, q)
+    data = kinematics(dual, q)
     assert [task.frame_name for task in controller.ee_tasks] == [
         site_name(frame) for frame in dual.ee_frames]
     assert controller.ee_task is controller.ee_tasks[0]
@@ -178,7 +163,7 @@ def test_posture_scale_is_the_mean_squared_singular_value_of_the_stacked_task(du
     q = dual.q_home.copy()
     controller = MinkController(dual)
     controller.solve(q, np.zeros(12))
-    sigma = np.linalg.svd(stacked_ee_jacobian(dual, data_at(dual, q)), compute_uv=False)
+    sigma = np.linalg.svd(stacked_ee_jacobian(dual, kinematics(dual, q)), compute_uv=False)
     scale = float(np.sum(sigma**2)) / 12
     np.testing.assert_allclose(controller.posture_task.cost,
                                controller.posture_cost * math.sqrt(scale), rtol=1e-12)
@@ -225,7 +210,7 @@ def test_mujoco_jacobian_columns_are_pinocchios_local_jacobian(mobile, mobile_co
     rng = np.random.default_rng(seed)
     controller = mobile_controller
     q = with_base(mobile, around_home(mobile, rng), *rng.uniform(-2.0, 2.0, 2), heading)
-    data = data_at(mobile, q)
+    data = kinematics(mobile, q)
     eps = 1e-6
     for frame, frame_id in zip(mobile.ee_frames, mobile.ee_frame_ids):
         differences = np.empty((6, mobile.nv))
@@ -352,7 +337,7 @@ def test_base_velocity_limit_binds_pinocchios_base_frame_velocity(mobile_base_ta
 
 
 def ee_residual(robot, q: np.ndarray, qd: np.ndarray, twist: np.ndarray) -> np.ndarray:
-    return stacked_ee_jacobian(robot, data_at(robot, q)) @ qd - twist
+    return stacked_ee_jacobian(robot, kinematics(robot, q)) @ qd - twist
 
 
 @PROPERTY
@@ -362,7 +347,7 @@ def test_sites_follow_pinocchio_on_the_planar_base(mobile, mobile_controller, se
     rng = np.random.default_rng(seed)
     q = with_base(mobile, around_home(mobile, rng), *rng.uniform(-3.0, 3.0, 2), heading)
     mobile_controller.solve(q, np.zeros(12))
-    data = data_at(mobile, q)
+    data = kinematics(mobile, q)
     for frame in ("mobile_base", *mobile.ee_frames, *mobile.constrained_links):
         np.testing.assert_allclose(mobile_controller.site_pose(frame).homogeneous,
                                    data.oMf[mobile.model.getFrameId(frame)].homogeneous,

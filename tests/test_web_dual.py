@@ -20,16 +20,6 @@ from web.scene import parse_scene, robot_from_dict, robot_to_dict, same_robot
 HOLE_TOLERANCE = 1e-6  # m
 
 
-@pytest.fixture(scope="module")
-def dual():
-    return load_robot("sda10f_dual")
-
-
-@pytest.fixture(scope="module")
-def mobile():
-    return load_robot("sda10f_dual_mobile")
-
-
 @pytest.fixture()
 def app(dual, tmp_path):
     return TeleopApp(dual, controller="cjm", record_dir=tmp_path / "sessions",

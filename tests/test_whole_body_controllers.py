@@ -15,6 +15,8 @@ import scipy.linalg
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from conftest import kinematics, near_home
+
 from constraints import Barrier, Hole
 from controllers import CJMController, QPController
 from teleop import load_robot
@@ -25,46 +27,19 @@ PROPERTY = settings(max_examples=25, deadline=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 
-@pytest.fixture(scope="module")
-def dual():
-    return load_robot("sda10f_dual")
-
-
-@pytest.fixture(scope="module")
-def mobile():
-    return load_robot("sda10f_dual_mobile")
-
-
-def near_home(robot, rng: np.random.Generator, spread: float = 0.15) -> np.ndarray:
-    """``q_home`` moved by a random velocity for 1 s (valid for any joint, planar included)."""
-    q = pin.integrate(robot.model, robot.q_home, rng.uniform(-spread, spread, robot.model.nv))
-    lower = robot.model.lowerPositionLimit + 0.05
-    upper = robot.model.upperPositionLimit - 0.05
-    bounded = np.abs(robot.model.lowerPositionLimit) < 1e10  # the 1-dof joints
-    q[bounded] = np.clip(q[bounded], lower[bounded], upper[bounded])
-    return q
-
-
 def holes_on_both_arms(robot, q: np.ndarray) -> list[Hole]:
     return [Hole.on_link(robot, q, distance=HOLE_DISTANCE, link=link)
             for link in robot.constrained_links]
 
 
-def data_at(robot, q: np.ndarray) -> pin.Data:
-    data = robot.model.createData()
-    pin.computeJointJacobians(robot.model, data, q)
-    pin.updateFramePlacements(robot.model, data)
-    return data
-
-
 def stacked_ee_jacobian(robot, q: np.ndarray) -> np.ndarray:
-    data = data_at(robot, q)
+    data = kinematics(robot, q)
     return np.vstack([pin.getFrameJacobian(robot.model, data, frame, pin.LOCAL)
                       for frame in robot.ee_frame_ids])
 
 
 def hole_rows(robot, q: np.ndarray, holes: list[Hole]) -> tuple[np.ndarray, np.ndarray]:
-    data = data_at(robot, q)
+    data = kinematics(robot, q)
     blocks = [hole.rows(robot.model, data) for hole in holes]
     return np.vstack([A for A, _ in blocks]), np.concatenate([b for _, b in blocks])
 
@@ -88,7 +63,7 @@ def test_dual_robot_declares_both_arms(dual):
     assert dual.model.nq == dual.model.nv == 15
     assert len(dual.ee_frames) == 2 and dual.task_size == 12
     assert len(dual.constrained_links) == 2
-    data = data_at(dual, dual.q_home)
+    data = kinematics(dual, dual.q_home)
     for link in dual.constrained_links:  # each axis points from joint R towards the tool
         placement = data.oMf[dual.model.getFrameId(link)]
         tool = [data.oMf[f].translation for f in dual.ee_frame_ids
@@ -177,7 +152,7 @@ def test_mobile_robot_is_the_dual_robot_on_a_planar_base(mobile, dual):
     assert mobile.root_joint == "planar"
     np.testing.assert_array_equal(mobile.model.velocityLimit[:3] > 0, True)
     assert np.all(np.isfinite(mobile.model.velocityLimit))
-    data, dual_data = data_at(mobile, mobile.q_home), data_at(dual, dual.q_home)
+    data, dual_data = kinematics(mobile, mobile.q_home), kinematics(dual, dual.q_home)
     base = data.oMf[mobile.model.getFrameId("mobile_base")]
     for frame in dual.ee_frames:  # the arm rides the base rigidly
         relative = base.actInv(data.oMf[mobile.model.getFrameId(frame)])
@@ -198,9 +173,9 @@ def test_mobile_jacobians_and_rows_match_finite_differences(mobile, seed, headin
     step = 1e-6
     q_plus = pin.integrate(mobile.model, q, step * qd)
     q_minus = pin.integrate(mobile.model, q, -step * qd)
-    data_plus, data_minus = data_at(mobile, q_plus), data_at(mobile, q_minus)
+    data_plus, data_minus = kinematics(mobile, q_plus), kinematics(mobile, q_minus)
     jacobian = stacked_ee_jacobian(mobile, q)
-    data = data_at(mobile, q)
+    data = kinematics(mobile, q)
     for i, frame in enumerate(mobile.ee_frame_ids):
         twist = pin.log6(data_minus.oMf[frame].actInv(data_plus.oMf[frame])).vector / (2 * step)
         # log6 of the relative motion over 2 steps is the body twist at the midpoint, q
@@ -223,14 +198,14 @@ def test_a_barrier_on_the_base_is_never_crossed(mobile):
     q = mobile.q_home.copy()
     base_frame = mobile.model.getFrameId("mobile_base")
     corner = np.array([0.4, 0.3, 0.0])  # link coordinates of a corner of the base
-    wall_x = float(data_at(mobile, q).oMf[base_frame].act(corner)[0]) + 0.10
+    wall_x = float(kinematics(mobile, q).oMf[base_frame].act(corner)[0]) + 0.10
     wall = Barrier("mobile_base", corner, [wall_x, 0.0, 0.0], [-1.0, 0.0, 0.0])
     for controller in (CJMController(mobile, [wall]), QPController(mobile, [wall], solver="daqp")):
         q = mobile.q_home.copy()
         depth, worst_rate_miss = 0.0, 0.0
-        distance = wall_x - float(data_at(mobile, q).oMf[base_frame].act(corner)[0])
+        distance = wall_x - float(kinematics(mobile, q).oMf[base_frame].act(corner)[0])
         for _ in range(3000):
-            data = data_at(mobile, q)
+            data = kinematics(mobile, q)
             # both EEs pushed along world +x at 0.3 m/s, expressed in each EE's frame
             twist = np.concatenate([
                 np.concatenate([data.oMf[f].rotation.T @ [0.3, 0.0, 0.0], np.zeros(3)])
@@ -240,7 +215,7 @@ def test_a_barrier_on_the_base_is_never_crossed(mobile):
             rows, bound = wall.rows(mobile.model, data)
             assert rows[0] @ qd >= bound[0] - 1e-9  # the barrier row held
             q = pin.integrate(mobile.model, q, qd * controller.dt)
-            new_distance = wall_x - float(data_at(mobile, q).oMf[base_frame].act(corner)[0])
+            new_distance = wall_x - float(kinematics(mobile, q).oMf[base_frame].act(corner)[0])
             rate_miss = rows[0] @ qd - (new_distance - distance) / controller.dt
             worst_rate_miss = max(worst_rate_miss, rate_miss)
             distance = new_distance

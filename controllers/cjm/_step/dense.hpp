@@ -84,11 +84,13 @@ inline void jacobi_columns(MatrixRef x, MatrixRef v) {
   // a column below the rounding of the whole matrix is left alone: its singular value is
   // noise (far under the rank cut), and rotating it need not converge
   const double negligible = 64.0 * eps * eps * x.squaredNorm();
-  // two columns count as orthogonal when their cosine is below sqrt(p) eps, LAPACK's
-  // dgesvj tolerance: eps alone is below the rounding of a p-term dot product, and near a
-  // rank loss the sweeps then never end (seen on sda10f_dual: 100 sweeps not enough)
-  const double tolerance = std::sqrt(static_cast<double>(x.rows())) * eps;
-  for (int sweep = 0; sweep < 100; ++sweep) {
+  // two columns count as orthogonal when their cosine is below eps (the closest match to
+  // LAPACK's results); near a rank loss that can be below the rounding of a p-term dot
+  // product and the sweeps never end (seen on sda10f_dual), so after 100 sweeps the
+  // cosine need only be below sqrt(p) eps, LAPACK dgesvj's tolerance
+  const double strict = eps, loose = std::sqrt(static_cast<double>(x.rows())) * eps;
+  for (int sweep = 0; sweep < 130; ++sweep) {
+    const double tolerance = sweep < 100 ? strict : loose;
     bool rotated = false;
     for (Index i = 0; i + 1 < q; ++i) {
       for (Index j = i + 1; j < q; ++j) {
