@@ -111,11 +111,12 @@ class CJMController(Controller):
             raise ValueError(f"unknown form {form!r}: 'auto' or 'general'")
         if backend not in ("auto", "compiled", "python"):
             raise ValueError(f"unknown backend {backend!r}: 'auto', 'compiled' or 'python'")
-        if backend == "compiled" and not compiled_step_available():
+        available = compiled_step_available()
+        if backend == "compiled" and not available:
             raise ImportError("the compiled CJM step (controllers.cjm._step) is not built: "
                               "reinstall with pip install -e . (it needs a C++17 compiler)")
         if backend == "auto":
-            backend = "compiled" if compiled_step_available() else "python"
+            backend = "compiled" if available else "python"
         self.backend: Backend = backend
         self._compiled = None
         self.policy = DampingPolicy(as_number(damping, "damping", 0.0),

@@ -326,16 +326,10 @@ class TeleopLoop:
                 for filtered, pose in zip(self._filtered_targets, poses)]
         return self._filtered_targets
 
-    def command(self, placements: Sequence[pin.SE3], targets: Sequence[pin.SE3]) -> np.ndarray:
-        """The stacked EE body twists ``K_p log6(T_e,i^-1 T*_i) + Ad_(T_e,i^-1 T*_i) V_ff,i``,
-        each saturated on its own (:func:`saturate_twist`), fed forward from
-        :attr:`previous_targets` (which the caller then sets to ``targets``)."""
-        return np.concatenate([self._saturate(twist)
-                               for twist in self._pose_twists(placements, targets)])
-
     def _pose_twists(self, placements: Sequence[pin.SE3],
                      targets: Sequence[pin.SE3]) -> list[np.ndarray]:
-        """Each EE's twist of :meth:`command` before the speed caps."""
+        """Each EE's body twist ``K_p log6(T_e,i^-1 T*_i) + Ad_(T_e,i^-1 T*_i) V_ff,i``
+        before the speed caps, fed forward from :attr:`previous_targets`."""
         previous = self.previous_targets
         twists = []
         for i, (ee, target) in enumerate(zip(placements, targets)):

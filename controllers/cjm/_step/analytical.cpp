@@ -66,16 +66,19 @@ bool Step::square_pre_chain(const Inputs& in, Index index, VectorRef qd) {
     if (dls_.rank() < n_columns) closest_to_posture(in, n_columns, n_columns != 6 && in.use_posture);
   }
   qd.noalias() = joint_map * free_with_one;
-  // residual of C v_c = b for the twist the pre-chain really produces
+  twist_a_with_one_.tail(6).noalias() = jacobian_a * qd;  // what the pre-chain produces
+  record_pre_chain_residual(in, index, k);
+  return true;
+}
+
+void Step::record_pre_chain_residual(const Inputs& in, Index index, Index k) {
   twist_a_with_one_(0) = 1.0;
-  twist_a_with_one_.tail(6).noalias() = jacobian_a * qd;
   const Eigen::Map<const RowMatrix> residual_rows(
       in.terms.data() + terms_offset_[index] + 6 * (7 - k), k, 7);
   auto residual = scratch_rows_.head(k);
   residual.noalias() = residual_rows * twist_a_with_one_;
   equality_residual_ = residual.cwiseAbs().maxCoeff();
   method_ = Method::analytical;
-  return true;
 }
 
 void Step::closest_to_posture(const Inputs& in, Index n_columns, bool use_posture) {
@@ -152,14 +155,8 @@ bool Step::redundant_pre_chain(const Inputs& in, Index index, VectorRef qd) {
   qd.setZero();
   for (Index j = 0; j < n_pre; ++j) qd(plan.pre[j]) = qd_pre(j);
   for (Index j = 0; j < n_post; ++j) qd(plan.post[j]) = free(n_free + j);
-  twist_a_with_one_(0) = 1.0;
   twist_a_with_one_.tail(6).noalias() = pre_jacobian * qd_pre;  // what the pre-chain produces
-  const Eigen::Map<const RowMatrix> residual_rows(
-      in.terms.data() + terms_offset_[index] + 6 * (7 - k), k, 7);
-  auto residual = scratch_rows_.head(k);
-  residual.noalias() = residual_rows * twist_a_with_one_;
-  equality_residual_ = residual.cwiseAbs().maxCoeff();
-  method_ = Method::analytical;
+  record_pre_chain_residual(in, index, k);
   report_task_solution(cjm, cjm_rhs_, free);
   return true;
 }

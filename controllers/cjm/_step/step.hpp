@@ -128,6 +128,9 @@ class Step {
   bool square_pre_chain(const Inputs& in, Index index, VectorRef qd);
   bool redundant_pre_chain(const Inputs& in, Index index, VectorRef qd);
   void closest_to_posture(const Inputs& in, Index n_columns, bool use_posture);
+  //! ``max |C v_c - b|`` of constraint ``index`` (k rows) for the pre-chain's twist,
+  //! already in ``twist_a_with_one_.tail(6)``; the analytical form's residual and method.
+  void record_pre_chain_residual(const Inputs& in, Index index, Index k);
 
   // general.cpp
   void general(const Inputs& in, VectorRef qd);
