@@ -435,15 +435,26 @@ class Constraint(ABC):
 
     # -- an affine form, for the analytical CJM's precomputed terms ----------------------
 
-    def affine_inputs(self, placement: pin.SE3) -> tuple[np.ndarray, np.ndarray | None] | None:
-        """``(x, f)`` in ``F_a`` coordinates when :meth:`evaluate` is affine in them, else None.
+    def affine_anchor(self) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """``(x_w, f_w)``: a world point and its world velocity (None: at rest) when
+        :meth:`evaluate` is affine in ``x = T_a^-1 x_w`` and ``f = R_a^T f_w``, else None.
 
-        A constraint returns inputs here when, for fixed gain, its ``p``, ``error`` and
-        ``rhs`` are affine functions of ``(x, f)`` (``f`` may be None: zero) and ``C``,
-        ``C_perp`` are constant; :meth:`evaluate_affine` then gives the evaluation.
-        The analytical CJM precomputes its per-step terms as one matrix product of it.
+        A constraint returns an anchor here when, for fixed gain, its ``p``, ``error`` and
+        ``rhs`` are affine functions of ``(x, f)`` and ``C``, ``C_perp`` are constant;
+        :meth:`evaluate_affine` then gives the evaluation. The analytical CJM
+        precomputes its per-step terms as one matrix product of ``(x, f)``.
         """
         return None
+
+    def affine_inputs(self, placement: pin.SE3) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """``(x, f)`` of :meth:`affine_anchor` in ``F_a`` coordinates (``f`` None at
+        rest), or None without an affine form."""
+        anchor = self.affine_anchor()
+        if anchor is None:
+            return None
+        point, velocity = anchor
+        return (placement.actInv(point),
+                None if velocity is None else placement.rotation.T @ velocity)
 
     def evaluate_affine(self, x: np.ndarray, f: np.ndarray | None) -> ConstraintPoint:
         """:meth:`evaluate` as a function of the inputs of :meth:`affine_inputs`."""

@@ -144,10 +144,9 @@ class Hole(Constraint):
     def error(self, placement: pin.SE3) -> np.ndarray:
         return -self._C @ self._center_local(placement)
 
-    def affine_inputs(self, placement: pin.SE3) -> tuple[np.ndarray, np.ndarray | None]:
-        """The hole centre and (when it moves) its velocity, in ``F_a`` coordinates."""
-        velocity = placement.rotation.T @ self.velocity if self._moving else None
-        return placement.actInv(self.center), velocity
+    def affine_anchor(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The hole centre and (when it moves) its velocity."""
+        return self.center, (self.velocity if self._moving else None)
 
     def evaluate_affine(self, x: np.ndarray, f: np.ndarray | None) -> ConstraintPoint:
         """``p = (e . x) e``, ``error = -C x``, ``rhs = K C x + C f``: affine in ``(x, f)``."""

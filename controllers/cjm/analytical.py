@@ -139,6 +139,18 @@ class TermsWriter:
         self.parametrisation = parametrisation
         self._affine: tuple[float, AffineTerms] | None = None  # (gain it was built for, map)
 
+    @property
+    def affine(self) -> bool:
+        """Whether the terms come from the affine form."""
+        return self.parametrisation == "nullspace" and self.constraint.affine_anchor() is not None
+
+    def affine_terms(self) -> AffineTerms:
+        """The affine map at the constraint's current gain (built again when it changes)."""
+        gain = self.constraint.gain
+        if self._affine is None or self._affine[0] != gain:
+            self._affine = (gain, AffineTerms(self.constraint))
+        return self._affine[1]
+
     def write(self, placement: pin.SE3, terms: np.ndarray) -> None:
         constraint = self.constraint
         inputs = constraint.affine_inputs(placement) if self.parametrisation == "nullspace" else None
@@ -146,9 +158,7 @@ class TermsWriter:
             state = constraint.evaluate(placement)
             write_terms(state, structure_of(state, self.parametrisation), terms)
             return
-        if self._affine is None or self._affine[0] != constraint.gain:
-            self._affine = (constraint.gain, AffineTerms(constraint))
-        self._affine[1].write(*inputs, terms)
+        self.affine_terms().write(*inputs, terms)
 
 
 class SquarePreChain:

@@ -1,13 +1,15 @@
 """The compiled CJM step (docs/design.md section 16).
 
-Pinocchio's kinematics and each constraint's terms stay in Python (a few calls per
-constraint); the dense algebra of the whole step (the analytical form, the general form,
-the barriers' active set, saturation in the null space, the clip guard and the status)
-is one call into the C++ extension ``controllers.cjm._step`` (Eigen only), which
-releases the GIL and allocates nothing. It runs the algorithms of :mod:`.analytical`,
-:mod:`.general`, :mod:`.saturation` and :class:`.controller.CJMController`, which stay
-the readable reference (``backend="python"``); tests/test_compiled_step.py holds the two
-equal.
+The whole step is C++ (the extension ``controllers.cjm._step``): Pinocchio's kinematics
+(its templates compiled in, the model copied from ``controller.model``), the terms of
+the constraints with an affine form (a hole), the analytical form, the general form, the
+barriers' active set, saturation in the null space, the clip guard and the status. It
+releases the GIL and allocates nothing but the returned ``qd``. When every constraint has
+an affine form a step is one call; otherwise Python writes the other constraints' terms
+from the link placements the C++ kinematics gives, between two calls. It runs the
+algorithms of :mod:`.analytical`, :mod:`.general`, :mod:`.saturation` and
+:class:`.controller.CJMController`, which stay the readable reference
+(``backend="python"``); tests/test_compiled_step.py holds the two equal.
 """
 
 from __future__ import annotations
@@ -31,35 +33,41 @@ if TYPE_CHECKING:
 METHODS = ("", "analytical", "general", "saturated")
 #: StepStatus by the C++ code (the enum's order, best to worst)
 STATUSES = tuple(StepStatus)
-FIELD = _step.REPORT_FIELDS
 EVENT = _step.EVENTS
+#: the C++ report's entries, in the order CompiledStep._info unpacks them
+REPORT_FIELDS = ("status", "method", "sigma_min", "damping", "scale", "equality_residual",
+                 "saturated_count", "active_barrier_count", "event_count",
+                 "saturation_joint_count")
+if tuple(sorted(_step.REPORT_FIELDS, key=_step.REPORT_FIELDS.get)) != REPORT_FIELDS:
+    raise ImportError("controllers.cjm._step reports other fields: rebuild it (pip install -e .)")
 #: the message of a step whose SVD did not converge (the command is zero)
 NO_CONVERGENCE_NOTE = "LinAlgError: SVD did not converge (Jacobi sweeps)"
 #: the paper's 1/a form undefined: the note of CJMController._solve_analytical
 PAPER_FORM_NOTE = "a = 0, where the paper's 1/a form is singular: null-space form used"
 
 
+def joint_specs(model: pin.Model) -> list[tuple[str, int, np.ndarray, np.ndarray]]:
+    """``(kind, parent, placement, axis)`` of each joint after the universe, for the C++
+    copy of the model (``axis``: an unaligned joint's, else unused)."""
+    return [(joint.shortname(), model.parents[j], model.jointPlacements[j].homogeneous,
+             np.asarray(getattr(joint.extract(), "axis", np.zeros(3)), dtype=float))
+            for j, joint in enumerate(model.joints) if j > 0]
+
+
 class CompiledStep:
     """One :class:`CJMController`'s compiled step: buffers allocated once, one C++ call a
-    step. Built by the controller's ``_prepare`` (so again for new constraints)."""
+    step when every constraint has an affine form. Built by the controller's
+    ``_prepare`` (so again for new constraints)."""
 
     def __init__(self, controller: CJMController) -> None:
         model = controller.model
         self._controller = controller
         constraints = controller.constraints
-        self._single = len(constraints) == 1
         # the paper's S only where the analytical form can use it (one hole, form auto)
-        self._paper = (controller.parametrisation == "paper" and self._single
+        self._paper = (controller.parametrisation == "paper" and len(constraints) == 1
                        and controller.form == "auto")
-        self._writers = [TermsWriter(c, "paper" if self._paper else "nullspace")
-                         for c in constraints]
+        writers = [TermsWriter(c, "paper" if self._paper else "nullspace") for c in constraints]
         self._fallback_writer = TermsWriter(constraints[0], "nullspace") if self._paper else None
-        sizes = [terms_size(c.dim) for c in constraints]
-        self._terms = np.empty(sum(sizes))
-        offsets = np.cumsum([0] + sizes)
-        self._terms_views = [self._terms[offsets[i]:offsets[i + 1]] for i in range(len(sizes))]
-        self._frame_jacobians = np.zeros((6 * len(constraints), model.nv))
-        self._posture = np.zeros(model.nv)
         self._use_posture = controller.posture_gain > 0.0
         one_coordinate = all(model.nqs[j] == 1 and model.nvs[j] == 1 for j in range(1, model.njoints))
         self._posture_in_python = self._use_posture and not one_coordinate
@@ -79,77 +87,118 @@ class CompiledStep:
             limited_v=bounds._limited_v.tolist(), q_min=bounds._q_limits[0],
             q_max=bounds._q_limits[1], position_gain=bounds.limit_gain / bounds.dt,
             position_limits=bounds.position_limits, box_test=controller._box_test._matrix)
-        policy = controller.policy
-        self._policy = policy
-        self._step = _step.Step(
+        policy = self._policy = controller.policy
+        step = _step.Step(
             nq=model.nq, nv=model.nv, task_rows=controller.task_rows, damping=policy.damping,
             threshold=policy.threshold, max_damping=policy.max_damping,
             general_only=controller.form == "general", constraints=plans, box=box,
             posture_gain=controller.posture_gain,
             posture_target=(controller.posture if one_coordinate and self._use_posture
                             else np.zeros(0)))
-        self._report = self._step.report
-        self._events = self._step.events
-        self._saturated = self._step.saturated_joints
-        self._active_barriers = self._step.active_barriers
-        self._saturation_joints = self._step.saturation_joints
-        self._frames = list(zip(controller.constraint_frames, self._writers, self._terms_views,
-                                range(len(constraints))))
-
-    def _set_policy(self, policy: DampingPolicy) -> None:
-        self._step.set_policy(policy.damping, policy.threshold, policy.max_damping)
-        self._policy = policy
+        frames = [*controller.ee_frame_ids, *controller.constraint_frames]
+        task_entries = (np.arange(controller.task_size) if controller._task_rows is None
+                        else controller._task_rows)
+        self._pipeline = _step.Pipeline(
+            joints=joint_specs(model),
+            frames=[(model.frames[f].parentJoint, model.frames[f].placement.homogeneous)
+                    for f in frames],
+            step=step, ee_count=len(controller.ee_frame_ids), task_entries=task_entries.tolist(),
+            task_scale=np.broadcast_to(controller._task_row_scale[:, 0], task_entries.shape),
+            constraint_rows=[c.dim for c in constraints])
+        pipeline = self._pipeline
+        step = pipeline.step
+        self._report = step.report
+        self._events = step.events
+        self._saturated = step.saturated_joints
+        self._active_barriers = step.active_barriers
+        self._saturation_joints = step.saturation_joints
+        anchors, terms, placements = pipeline.anchors, pipeline.terms, pipeline.placements
+        offsets = np.cumsum([0] + [terms_size(c.dim) for c in constraints])
+        #: [index, writer, anchor point and velocity buffers, gain of the map sent] of
+        #: each affine constraint
+        self._affine = []
+        #: (writer, terms view, link rotation and translation views) of the others
+        self._in_python = []
+        for i, writer in enumerate(writers):
+            row = placements[len(controller.ee_frame_ids) + i]
+            if writer.affine:
+                self._affine.append([i, writer, anchors[i, :3], anchors[i, 3:], None])
+            else:
+                self._in_python.append((writer, terms[offsets[i]:offsets[i + 1]],
+                                        row[:9].reshape(3, 3), row[9:]))
+        self._one_call = not self._in_python and not self._posture_in_python
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
-        """``qd`` for checked inputs; sets ``controller.info`` (section 8.3)."""
+        """``qd`` (section 8.3): bad input raises ValueError as :meth:`Controller.solve`
+        does; sets ``controller.info``."""
         controller = self._controller
-        model, data = controller.model, controller.data
+        pipeline = self._pipeline
         if controller.policy is not self._policy:  # e.g. the UI's damping slider
-            self._set_policy(controller.policy)
-        pin.computeJointJacobians(model, data, q)
-        ee_jacobian = controller._task_jacobian(controller._ee_jacobian())
-        frame_jacobians = self._frame_jacobians
-        analytical_allowed, note = True, ""
-        for frame, writer, terms, i in self._frames:
-            placement = pin.updateFramePlacement(model, data, frame)
-            jacobian = pin.getFrameJacobian(model, data, frame, pin.LOCAL)
-            if self._single:
-                frame_jacobians = jacobian
-            else:
-                frame_jacobians[6 * i:6 * i + 6] = jacobian
-            if self._paper and not controller._paper_form_defined(0):
-                analytical_allowed, note = False, PAPER_FORM_NOTE
-                writer = self._fallback_writer
-            writer.write(placement, terms)
-        if self._posture_in_python:
-            np.multiply(controller.posture_gain,
-                        controller.posture_difference(q, controller.posture), out=self._posture)
-        qd = np.empty(model.nv)
-        self._step.solve(q, controller._task(twist), ee_jacobian, frame_jacobians, self._terms,
-                         self._posture, self._use_posture, analytical_allowed, qd)
+            policy = self._policy = controller.policy
+            pipeline.set_policy(policy.damping, policy.threshold, policy.max_damping)
+        for entry in self._affine:
+            self._update_anchor(entry)
+        if self._one_call:
+            qd = pipeline.solve(q, twist, self._use_posture, True)
+            if qd is None:  # not finite float vectors of the right sizes: say what is wrong
+                qd = pipeline.solve(*controller._checked_inputs(q, twist), self._use_posture, True)
+            note = ""
+        else:
+            if not pipeline.load(q, twist):
+                pipeline.load(*controller._checked_inputs(q, twist))
+            pipeline.prepare()
+            analytical_allowed, note = self._write_in_python()
+            qd = pipeline.finish(self._use_posture, analytical_allowed)
         info = controller.info = self._info(note)
         if info.status is StepStatus.FAILED and controller.strict:
             raise SolverError(info.message)
         return qd
 
+    def _update_anchor(self, entry: list) -> None:
+        """An affine constraint's anchor into the C++ buffer; its map when the gain changed."""
+        index, writer, point_buffer, velocity_buffer, gain = entry
+        constraint = writer.constraint
+        point, velocity = constraint.affine_anchor()
+        point_buffer[...] = point
+        velocity_buffer[...] = 0.0 if velocity is None else velocity
+        if constraint.gain != gain:
+            terms = writer.affine_terms()
+            self._pipeline.set_affine(index, terms.of_x, terms.of_f, terms.offset)
+            entry[4] = constraint.gain
+
+    def _write_in_python(self) -> tuple[bool, str]:
+        """The terms of the constraints without an affine form, and a posture velocity
+        Python computes; returns whether the analytical form may run, and a note."""
+        controller = self._controller
+        analytical_allowed, note = True, ""
+        for writer, terms, rotation, translation in self._in_python:
+            placement = pin.SE3(rotation, translation)
+            if self._paper and not controller._paper_form_defined(0, placement):
+                analytical_allowed, note = False, PAPER_FORM_NOTE
+                writer = self._fallback_writer
+            writer.write(placement, terms)
+        if self._posture_in_python:
+            np.multiply(controller.posture_gain,
+                        controller.posture_difference(self._pipeline.q, controller.posture),
+                        out=self._pipeline.posture)
+        return analytical_allowed, note
+
     def _info(self, note: str) -> SolveInfo:
         """SolveInfo from the C++ report; the events, in order, give the message."""
-        report = self._report.tolist()
-        saturated = int(report[FIELD["saturated_count"]])
-        barriers = int(report[FIELD["active_barrier_count"]])
+        (status, method, sigma_min, damping, scale, equality_residual, saturated, barriers,
+         events, saturation_joints) = self._report.tolist()
         info = SolveInfo(
-            method=METHODS[int(report[FIELD["method"]])], sigma_min=report[FIELD["sigma_min"]],
-            damping=report[FIELD["damping"]], scale=report[FIELD["scale"]],
-            saturated_joints=tuple(self._saturated[:saturated].tolist()) if saturated else (),
-            active_barriers=tuple(self._active_barriers[:barriers].tolist()) if barriers else (),
-            equality_residual=report[FIELD["equality_residual"]])
+            method=METHODS[int(method)], sigma_min=sigma_min, damping=damping, scale=scale,
+            saturated_joints=tuple(self._saturated[:int(saturated)].tolist()) if saturated else (),
+            active_barriers=(tuple(self._active_barriers[:int(barriers)].tolist())
+                             if barriers else ()),
+            equality_residual=equality_residual)
         if note:
             info.report(StepStatus.OK, note)
-        events = int(report[FIELD["event_count"]])
         if events:
-            self._replay(info, self._events[:events].tolist(),
-                         self._saturation_joints[:int(report[FIELD["saturation_joint_count"]])].tolist())
-        info.status = STATUSES[int(report[FIELD["status"]])]
+            self._replay(info, self._events[:int(events)].tolist(),
+                         self._saturation_joints[:int(saturation_joints)].tolist())
+        info.status = STATUSES[int(status)]
         return info
 
     def _replay(self, info: SolveInfo, events: list[list[float]], saturation_joints: list[int]) -> None:

@@ -38,6 +38,13 @@ def compiled_step_available() -> bool:
     return True
 
 
+def unsupported_joint_kinds(model: pin.Model) -> list[str]:
+    """The kinds of ``model``'s joints the compiled step's kinematics does not cover."""
+    from ._step import JOINT_KINDS
+
+    return sorted({joint.shortname() for joint in model.joints[1:]} - set(JOINT_KINDS))
+
+
 class CJMController(Controller):
     """Joint velocities from an EE twist through the Constrained Jacobian Matrix.
 
@@ -115,8 +122,12 @@ class CJMController(Controller):
         if backend == "compiled" and not available:
             raise ImportError("the compiled CJM step (controllers.cjm._step) is not built: "
                               "reinstall with pip install -e . (it needs a C++17 compiler)")
+        unsupported = unsupported_joint_kinds(self.model) if available else []
+        if backend == "compiled" and unsupported:
+            raise ValueError(f"the compiled CJM step does not cover joints of kind "
+                             f"{', '.join(unsupported)}: use backend='python'")
         if backend == "auto":
-            backend = "compiled" if available else "python"
+            backend = "compiled" if available and not unsupported else "python"
         self.backend: Backend = backend
         self._compiled = None
         self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
@@ -165,7 +176,7 @@ class CJMController(Controller):
         """:meth:`Controller.solve`, in C++ with the compiled backend (section 16)."""
         if self._compiled is None:
             return super().solve(q, twist)
-        return self._compiled.solve(*self._checked_inputs(q, twist))
+        return self._compiled.solve(q, twist)
 
     # -- chain structure ---------------------------------------------------------------
 
@@ -259,7 +270,8 @@ class CJMController(Controller):
     def _solve_analytical(self, kinematics: Kinematics, twist: np.ndarray, index: int) -> np.ndarray | None:
         """The analytical form of constraint ``index``, or None where it does not apply."""
         frame_id = self.constraint_frames[index]
-        if self.parametrisation == "paper" and not self._paper_form_defined(index):
+        if (self.parametrisation == "paper"
+                and not self._paper_form_defined(index, self.data.oMf[frame_id])):
             self.info.report(StepStatus.OK, "a = 0, where the paper's 1/a form is singular: "
                                             "null-space form used")
             return None
@@ -278,10 +290,10 @@ class CJMController(Controller):
         return plan.solve(self.model, self.data, kinematics.ee_jacobian, twist, self.policy, self.info,
                           None if plan.square else self._posture_velocity(kinematics.q))
 
-    def _paper_form_defined(self, index: int) -> bool:
-        """Whether the paper's ``1/a`` structure matrix exists here (``a = |p|`` not ~0)."""
-        point = self.constraints[index].point(self.data.oMf[self.constraint_frames[index]])
-        return float(np.linalg.norm(point)) >= 1e-6
+    def _paper_form_defined(self, index: int, placement: pin.SE3) -> bool:
+        """Whether the paper's ``1/a`` structure matrix exists at this placement of
+        constraint ``index``'s link (``a = |p|`` not ~0)."""
+        return float(np.linalg.norm(self.constraints[index].point(placement))) >= 1e-6
 
     def _posture_velocity(self, q: np.ndarray) -> np.ndarray | None:
         if self.posture_gain == 0.0:

@@ -60,8 +60,9 @@ class StepTiming:
 
 
 def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
-               warmup: int) -> np.ndarray:
-    """Per-call wall time (us) of ``step(q)`` over ``configurations`` after a warm-up."""
+               warmup: int, record: Callable[[int], None] | None = None) -> np.ndarray:
+    """Per-call wall time (us) of ``step(q)`` over ``configurations`` after a warm-up;
+    ``record(i)``, called after the clock stops, reads what step ``i`` did."""
     for q in configurations[:warmup]:
         step(q)
     times = np.empty(len(configurations))
@@ -70,6 +71,8 @@ def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
         start = clock()
         step(q)
         times[i] = (clock() - start) * 1e-3
+        if record is not None:
+            record(i)
     return times
 
 
@@ -92,18 +95,19 @@ def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: in
     residual = 0.0
     statuses: collections.Counter[str] = collections.Counter()
     commands = np.empty((iterations, robot.model.nv))
-    index = 0
+    command = np.empty(0)
 
-    def step(q: np.ndarray) -> None:
-        nonlocal residual, index
-        commands[index] = controller.solve(q, twist)
-        index += 1
+    def step(q: np.ndarray) -> None:  # the timed call: the controller's step only
+        nonlocal command
+        command = controller.solve(q, twist)
+
+    def record(i: int) -> None:
+        nonlocal residual
+        commands[i] = command
         residual = max(residual, controller.info.equality_residual)
         statuses[controller.info.status.value] += 1
 
-    for q in configurations[:warmup]:
-        controller.solve(q, twist)
-    times = time_steps(step, configurations, warmup=0)
+    times = time_steps(step, configurations, warmup, record)
     timing = StepTiming(robot=label or robot.name, controller=spec, dof=robot.model.nv,
                         constraint_rows=sum(h.dim for h in holes),
                         median_us=float(np.median(times)),

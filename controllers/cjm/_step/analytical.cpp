@@ -42,7 +42,7 @@ bool Step::square_pre_chain(const Inputs& in, Index index, VectorRef qd) {
   for (Index j = 0; j < 6; ++j) joint_map.row(plan.pre[j]).head(n_free + 1) = pre_solution.row(j);
   for (Index j = 0; j < n_post; ++j) joint_map(plan.post[j], n_free + 1 + j) = 1.0;
   auto task_map = task_map_.topLeftCorner(6, n_columns + 1);  // [J_e qd_0, Jbar]
-  task_map.noalias() = in.ee_jacobian * joint_map;
+  task_map.noalias() = in.ee_jacobian.lazyProduct(joint_map);  // small: no GEMM blocking (0.3 us)
   cjm_rhs_ = in.twist - task_map.col(0);  // V_e - Ad_ea V_a0 (eq 22)
   const auto cjm = task_map.rightCols(n_columns);
   auto free_with_one = free_with_one_.head(n_columns + 1);

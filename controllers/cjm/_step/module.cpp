@@ -5,7 +5,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include "step.hpp"
+#include "pipeline.hpp"
 
 namespace py = pybind11;
 using cjm::Index;
@@ -18,6 +18,33 @@ py::array_t<Scalar> view(Scalar* data, std::vector<py::ssize_t> shape, py::handl
   std::vector<py::ssize_t> strides(shape.size(), sizeof(Scalar));
   for (size_t i = shape.size(); i-- > 1;) strides[i - 1] = strides[i] * shape[i];
   return py::array_t<Scalar>(shape, strides, data, owner);
+}
+
+//! A read-only NumPy view of ``matrix``, owned by ``owner``.
+py::array_t<double> read_only(const cjm::RowMatrix& matrix, py::handle owner) {
+  auto array = view(const_cast<double*>(matrix.data()), {matrix.rows(), matrix.cols()}, owner);
+  array.attr("flags").attr("writeable") = false;
+  return array;
+}
+
+//! Copies a 1-D float64 array of ``size`` finite entries into ``target``; false for
+//! anything else (Python then says what is wrong, as Controller.solve does).
+bool load_vector(py::handle source, cjm::Vector& target) {
+  if (!py::isinstance<py::array_t<double>>(source)) return false;
+  const auto array = py::reinterpret_borrow<py::array_t<double>>(source);
+  if (array.ndim() != 1 || array.shape(0) != target.size()) return false;
+  const auto entries = array.unchecked<1>();
+  for (py::ssize_t i = 0; i < entries.shape(0); ++i) target(i) = entries(i);
+  return target.allFinite();
+}
+
+//! The step into a new array (the GIL released while it runs).
+py::array_t<double> finish(cjm::Pipeline& pipeline, bool use_posture, bool analytical_allowed) {
+  py::array_t<double> qd(pipeline.posture().size());
+  Eigen::Map<cjm::Vector> qd_map(qd.mutable_data(), qd.size());
+  py::gil_scoped_release release;
+  pipeline.finish(use_posture, analytical_allowed, qd_map);
+  return qd;
 }
 
 }  // namespace
@@ -60,15 +87,6 @@ PYBIND11_MODULE(_step, module) {
            py::arg("threshold"), py::arg("max_damping"), py::arg("general_only"),
            py::arg("constraints"), py::arg("box"), py::arg("posture_gain"),
            py::arg("posture_target"))
-      .def("set_policy", [](cjm::Step& step, double damping, double threshold, double max_damping) {
-             step.set_policy(cjm::DampingPolicy{damping, threshold, max_damping});
-           }, py::arg("damping"), py::arg("threshold"), py::arg("max_damping"))
-      .def("solve", &cjm::Step::solve, py::arg("q"), py::arg("twist"), py::arg("ee_jacobian"),
-           py::arg("frame_jacobians"), py::arg("terms"), py::arg("posture"),
-           py::arg("use_posture"), py::arg("analytical_allowed"), py::arg("qd").noconvert(),
-           py::call_guard<py::gil_scoped_release>(),
-           "One step into ``qd``; read report, events and the joint lists afterwards.")
-      .def_property_readonly("terms_size", &cjm::Step::terms_size)
       .def_property_readonly("report", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.report().data(), {step.report().size()}, self);
@@ -88,6 +106,78 @@ PYBIND11_MODULE(_step, module) {
       .def_property_readonly("saturation_joints", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.saturation_joints().data(), {step.saturation_joints().size()}, self);
+      });
+
+  py::class_<cjm::Pipeline>(module, "Pipeline")
+      .def(py::init([](std::vector<std::tuple<std::string, Index, Eigen::Matrix4d, Eigen::Vector3d>> joints,
+                       std::vector<std::tuple<Index, Eigen::Matrix4d>> frames, const cjm::Step& step,
+                       Index ee_count, std::vector<Index> task_entries, cjm::Vector task_scale,
+                       std::vector<Index> constraint_rows) {
+             std::vector<cjm::JointSpec> joint_specs;
+             for (auto& [kind, parent, placement, axis] : joints)
+               joint_specs.push_back(cjm::JointSpec{kind, parent, placement, axis});
+             std::vector<cjm::FrameSpec> frame_specs;
+             for (auto& [parent, placement] : frames)
+               frame_specs.push_back(cjm::FrameSpec{parent, placement});
+             return new cjm::Pipeline(cjm::Kinematics(joint_specs, frame_specs), step, ee_count,
+                                      std::move(task_entries), std::move(task_scale),
+                                      std::move(constraint_rows));
+           }),
+           py::arg("joints"), py::arg("frames"), py::arg("step"), py::arg("ee_count"),
+           py::arg("task_entries"), py::arg("task_scale"), py::arg("constraint_rows"),
+           "``joints``: (kind, parent, placement 4x4, axis) per joint of pin.Model after the "
+           "universe; ``frames``: (parent joint, placement 4x4), the EE frames then one per "
+           "constraint; ``step`` is copied.")
+      .def("set_affine", [](cjm::Pipeline& pipeline, Index index, cjm::RowMatrix of_x,
+                            cjm::RowMatrix of_f, cjm::Vector offset) {
+             pipeline.set_affine(index, cjm::AffineTerms{std::move(of_x), std::move(of_f), std::move(offset)});
+           }, py::arg("index"), py::arg("of_x"), py::arg("of_f"), py::arg("offset"))
+      .def("set_policy", [](cjm::Pipeline& pipeline, double damping, double threshold, double max_damping) {
+             pipeline.set_policy(cjm::DampingPolicy{damping, threshold, max_damping});
+           }, py::arg("damping"), py::arg("threshold"), py::arg("max_damping"))
+      .def("load", [](cjm::Pipeline& pipeline, py::handle q, py::handle twist) {
+             return load_vector(q, pipeline.q()) && load_vector(twist, pipeline.twist());
+           }, py::arg("q"), py::arg("twist"),
+           "Copies q and the stacked twist in: false unless both are finite float64 vectors "
+           "of the right sizes.")
+      .def("prepare", &cjm::Pipeline::prepare, py::call_guard<py::gil_scoped_release>(),
+           "The kinematics, the task rows and the affine terms at the loaded q.")
+      .def("finish", &finish, py::arg("use_posture"), py::arg("analytical_allowed"),
+           "The step, after prepare() and the terms Python writes: a new qd.")
+      .def("solve", [](cjm::Pipeline& pipeline, py::handle q, py::handle twist, bool use_posture,
+                       bool analytical_allowed) -> py::object {
+             if (!load_vector(q, pipeline.q()) || !load_vector(twist, pipeline.twist()))
+               return py::none();
+             {
+               py::gil_scoped_release release;
+               pipeline.prepare();
+             }
+             return finish(pipeline, use_posture, analytical_allowed);
+           }, py::arg("q"), py::arg("twist"), py::arg("use_posture"), py::arg("analytical_allowed"),
+           "load, prepare and finish in one call; None when load() would be false.")
+      .def_property_readonly("step", [](cjm::Pipeline& pipeline) -> cjm::Step& { return pipeline.step(); },
+                             py::return_value_policy::reference_internal)
+      .def_property_readonly("q", [](py::object self) {
+        auto& vector = self.cast<cjm::Pipeline&>().q();
+        return view(vector.data(), {vector.size()}, self);
+      })
+      .def_property_readonly("terms", [](py::object self) {
+        auto& vector = self.cast<cjm::Pipeline&>().terms();
+        return view(vector.data(), {vector.size()}, self);
+      })
+      .def_property_readonly("posture", [](py::object self) {
+        auto& vector = self.cast<cjm::Pipeline&>().posture();
+        return view(vector.data(), {vector.size()}, self);
+      })
+      .def_property_readonly("anchors", [](py::object self) {
+        auto& matrix = self.cast<cjm::Pipeline&>().anchors();
+        return view(matrix.data(), {matrix.rows(), matrix.cols()}, self);
+      })
+      .def_property_readonly("placements", [](py::object self) {
+        return read_only(self.cast<cjm::Pipeline&>().placements(), self);
+      })
+      .def_property_readonly("jacobians", [](py::object self) {
+        return read_only(self.cast<cjm::Pipeline&>().jacobians(), self);
       });
 
   py::dict fields;
@@ -116,4 +206,5 @@ PYBIND11_MODULE(_step, module) {
   events["no_convergence"] = static_cast<int>(cjm::Event::no_convergence);
   events["non_finite"] = static_cast<int>(cjm::Event::non_finite);
   module.attr("EVENTS") = events;
+  module.attr("JOINT_KINDS") = cjm::joint_kinds();
 }

@@ -1,0 +1,147 @@
+"""The compiled step's own kinematics (Pinocchio's templates in the C++ extension, a copy
+of the model, docs/design.md section 16) equal Pinocchio's Python kinematics, and what
+the compiled step reads each step (hole anchors, gains, inputs) reaches it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from constraints import Hole
+from controllers import CJMController
+from controllers.cjm import _step
+from controllers.cjm.compiled import joint_specs
+from controllers.cjm.controller import unsupported_joint_kinds
+from teleop.robots import load_robot
+from teleop.robots.chains import load_chain
+
+ROBOTS = {name: load_robot(name)
+          for name in ("sda10f", "ur5_instrument", "sda10f_dual", "sda10f_dual_mobile")}
+ROBOTS["chain16"] = load_chain(16)
+
+
+def holes_on(robot) -> list[Hole]:
+    """A hole on each constrained link, where the link is at home."""
+    links = robot.constrained_links or [robot.constrained_link]
+    return [Hole.on_link(robot, robot.q_home, distance=0.08, link=link) for link in links]
+
+
+def random_configuration(robot, seed: int) -> np.ndarray:
+    """Uniform inside the joint limits; the planar base anywhere within 2 m, any heading."""
+    model = robot.model
+    rng = np.random.default_rng(seed)
+    lower = np.clip(model.lowerPositionLimit, -2.0, 2.0)  # the base's are +-inf or huge
+    upper = np.clip(model.upperPositionLimit, -2.0, 2.0)
+    q = rng.uniform(lower, upper)
+    if robot.root_joint == "planar":  # (x, y, cos, sin) of a random heading
+        heading = rng.uniform(-np.pi, np.pi)
+        q[2:4] = np.cos(heading), np.sin(heading)
+    return q
+
+
+@settings(max_examples=60, deadline=None)
+@given(name=st.sampled_from(sorted(ROBOTS)), seed=st.integers(0, 2**32 - 1))
+def test_placements_and_jacobians_equal_pinocchio(name, seed):
+    """Every frame the step reads (the EEs, then each constraint's link): placement and
+    LOCAL Jacobian equal ``pin.updateFramePlacement`` / ``pin.getFrameJacobian`` to 1e-12."""
+    robot = ROBOTS[name]
+    controller = CJMController(robot, holes_on(robot), backend="compiled")
+    q = random_configuration(robot, seed)
+    pipeline = controller._compiled._pipeline
+    assert pipeline.load(q, np.zeros(robot.task_size))
+    pipeline.prepare()
+    model, data = robot.model, robot.model.createData()
+    pin.computeJointJacobians(model, data, q)
+    frames = [*controller.ee_frame_ids, *controller.constraint_frames]
+    for i, frame in enumerate(frames):
+        placement = pin.updateFramePlacement(model, data, frame)
+        np.testing.assert_allclose(pipeline.placements[i, :9].reshape(3, 3), placement.rotation,
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(pipeline.placements[i, 9:], placement.translation,
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(pipeline.jacobians[6 * i:6 * i + 6],
+                                   pin.getFrameJacobian(model, data, frame, pin.LOCAL),
+                                   rtol=0, atol=1e-12)
+
+
+def test_a_joint_kind_not_covered_is_named():
+    """A spherical ZYX joint: named by the check, refused by the C++ copy of the model."""
+    model = pin.Model()
+    base = model.addJoint(0, pin.JointModelSphericalZYX(), pin.SE3.Identity(), "wrist")
+    model.addJoint(base, pin.JointModelRZ(), pin.SE3.Identity(), "roll")
+    assert unsupported_joint_kinds(model) == ["JointModelSphericalZYX"]
+    step = _step.Step(nq=model.nq, nv=model.nv, task_rows=6, damping=0.0, threshold=0.01,
+                      max_damping=0.05, general_only=True, constraints=[],
+                      box=_step.JointBox(
+                          velocity_lower=np.full(model.nv, -1.0), velocity_upper=np.ones(model.nv),
+                          velocity_limit=np.ones(model.nv), limited_q=[], limited_v=[],
+                          q_min=np.zeros(0), q_max=np.zeros(0), position_gain=0.0,
+                          position_limits=False, box_test=np.zeros((0, 2 * model.nv + 1))),
+                      posture_gain=0.0, posture_target=np.zeros(0))
+    with pytest.raises(ValueError, match="JointModelSphericalZYX"):
+        _step.Pipeline(joints=joint_specs(model), frames=[(2, np.eye(4))], step=step, ee_count=1,
+                       task_entries=list(range(6)), task_scale=np.ones(6), constraint_rows=[])
+
+
+def test_a_robot_with_such_a_joint_runs_the_python_step():
+    """``backend="auto"`` falls back to the Python step; ``"compiled"`` says why not."""
+    ur5 = ROBOTS["ur5_instrument"]
+    model = pin.Model()
+    model.addJoint(0, pin.JointModelSphericalZYX(), pin.SE3.Identity(), "wrist")
+    model.addFrame(pin.Frame(ur5.ee_frame, 1, pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1])),
+                             pin.OP_FRAME))
+    robot = dataclasses.replace(ur5, model=model, q_home=np.zeros(3), constrained_link=None,
+                                constrained_links=[], link_axes=[], ee_frames=[ur5.ee_frame])
+    controller = CJMController(robot, [])
+    assert controller.backend == "python"
+    q = np.array([0.3, -0.2, 0.1])
+    data = model.createData()
+    pin.computeJointJacobians(model, data, q)
+    ee_jacobian = pin.getFrameJacobian(model, data, model.getFrameId(ur5.ee_frame), pin.LOCAL)
+    twist = ee_jacobian @ np.array([0.1, -0.2, 0.3])  # a twist the wrist can make
+    qd = controller.solve(q, twist)
+    np.testing.assert_allclose(ee_jacobian @ qd, twist, atol=1e-9)
+    with pytest.raises(ValueError, match="JointModelSphericalZYX"):
+        CJMController(robot, [], backend="compiled")
+
+
+def test_moved_holes_and_new_gains_reach_the_compiled_step():
+    """Along a path the hole moves (with a velocity fed forward, then at rest) and its gain
+    changes: the compiled step follows what the Python step reads from the hole."""
+    robot = ROBOTS["sda10f"]
+    holes = {backend: Hole.on_link(robot, robot.q_home, distance=0.08) for backend in ("python", "compiled")}
+    controllers = {backend: CJMController(robot, [holes[backend]], backend=backend)
+                   for backend in holes}
+    rng = np.random.default_rng(5)
+    twist = np.array([0.01, -0.02, 0.0, 0.05, 0.0, -0.03])
+    start = holes["python"].center.copy()
+    for step in range(60):
+        velocity = np.array([0.02, 0.0, -0.01]) if step < 30 else np.zeros(3)
+        for hole in holes.values():
+            hole.move_to(start + 1e-3 * step * np.array([1.0, 0.0, -0.5]), velocity)
+            hole.gain = 50.0 if step % 20 < 10 else 100.0
+        q = robot.q_home + rng.uniform(-1e-3, 1e-3, robot.model.nq)
+        qd = {backend: controllers[backend].solve(q, twist) for backend in holes}
+        np.testing.assert_allclose(qd["compiled"], qd["python"], rtol=0,
+                                   atol=1e-12 * max(1.0, np.abs(qd["python"]).max()))
+        assert controllers["compiled"].info.status == controllers["python"].info.status
+
+
+def test_inputs_that_are_not_float_arrays_are_converted():
+    """Lists and integer arrays take the checked path and give the same command."""
+    robot = ROBOTS["sda10f"]
+    controller = CJMController(robot, holes_on(robot), backend="compiled")
+    q = robot.q_home.copy()
+    twist = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+    expected = controller.solve(q, twist)
+    np.testing.assert_array_equal(controller.solve(q.tolist(), [0, 0, 0, 1, 0, 0]), expected)
+    np.testing.assert_array_equal(controller.solve(q, twist.astype(int)), expected)
+    np.testing.assert_array_equal(controller.solve(q[::-1].copy()[::-1], twist), expected)
+    with pytest.raises(ValueError, match="q"):
+        controller.solve(np.append(q, 0.0), twist)
