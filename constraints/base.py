@@ -435,14 +435,16 @@ class Constraint(ABC):
 
     # -- an affine form, for the analytical CJM's precomputed terms ----------------------
 
-    def affine_anchor(self) -> tuple[np.ndarray, np.ndarray | None] | None:
-        """``(x_w, f_w)``: a world point and its world velocity (None: at rest) when
-        :meth:`evaluate` is affine in ``x = T_a^-1 x_w`` and ``f = R_a^T f_w``, else None.
+    def affine_anchor(self) -> np.ndarray | None:
+        """``[x_w; f_w]`` (6,): a world point and its world velocity, when :meth:`evaluate`
+        is affine in ``x = T_a^-1 x_w`` and ``f = R_a^T f_w``; else None.
 
         A constraint returns an anchor here when, for fixed gain, its ``p``, ``error`` and
         ``rhs`` are affine functions of ``(x, f)`` and ``C``, ``C_perp`` are constant;
         :meth:`evaluate_affine` then gives the evaluation. The analytical CJM
-        precomputes its per-step terms as one matrix product of ``(x, f)``.
+        precomputes its per-step terms as one matrix product of ``(x, f)``. The array is
+        read-only and replaced whenever the geometry changes (the compiled step copies
+        it only then).
         """
         return None
 
@@ -452,9 +454,9 @@ class Constraint(ABC):
         anchor = self.affine_anchor()
         if anchor is None:
             return None
-        point, velocity = anchor
-        return (placement.actInv(point),
-                None if velocity is None else placement.rotation.T @ velocity)
+        velocity = anchor[3:]
+        return (placement.actInv(anchor[:3]),
+                placement.rotation.T @ velocity if velocity.any() else None)
 
     def evaluate_affine(self, x: np.ndarray, f: np.ndarray | None) -> ConstraintPoint:
         """:meth:`evaluate` as a function of the inputs of :meth:`affine_inputs`."""

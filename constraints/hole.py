@@ -60,9 +60,7 @@ class Hole(Constraint):
         velocity=(0.0, 0.0, 0.0),
     ) -> None:
         super().__init__(link, gain)
-        self.center = as_vector(center, 3, "hole center")
-        self.velocity = as_vector(velocity, 3, "hole velocity")
-        self._moving = bool(self.velocity.any())
+        self._set_anchor(as_vector(center, 3, "hole center"), as_vector(velocity, 3, "hole velocity"))
         self.link_axis = as_unit_vector(link_axis, "link_axis")
         self._C = perpendicular_basis(self.link_axis)
         self._C_perp = self.link_axis[None, :]
@@ -122,8 +120,29 @@ class Hole(Constraint):
     # ``hole.move_to(center, velocity)`` (inherited) moves the centre (world, m) and sets
     # its velocity (m/s) for feed-forward.
 
-    def _moved(self) -> None:
-        self._moving = bool(self.velocity.any())
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) hole centre, world frame (m); read-only: assign a new one, or ``move_to``."""
+        return self._anchor[:3]
+
+    @center.setter
+    def center(self, value) -> None:
+        self._set_anchor(as_vector(value, 3, "hole center"), self._anchor[3:])
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """(3,) world velocity of the centre (m/s), fed forward; read-only like ``center``."""
+        return self._anchor[3:]
+
+    @velocity.setter
+    def velocity(self, value) -> None:
+        self._set_anchor(self._anchor[:3], as_vector(value, 3, "hole velocity"))
+
+    def _set_anchor(self, center: np.ndarray, velocity: np.ndarray) -> None:
+        anchor = np.concatenate([center, velocity])
+        anchor.flags.writeable = False  # changed only through the setters: a new array
+        self._anchor = anchor
+        self._moving = bool(velocity.any())
 
     def axis_world(self, placement: pin.SE3) -> np.ndarray:
         """The link axis in the world frame (the hole's ring is drawn around it)."""
@@ -144,9 +163,9 @@ class Hole(Constraint):
     def error(self, placement: pin.SE3) -> np.ndarray:
         return -self._C @ self._center_local(placement)
 
-    def affine_anchor(self) -> tuple[np.ndarray, np.ndarray | None]:
-        """The hole centre and (when it moves) its velocity."""
-        return self.center, (self.velocity if self._moving else None)
+    def affine_anchor(self) -> np.ndarray:
+        """The hole centre and its velocity."""
+        return self._anchor
 
     def evaluate_affine(self, x: np.ndarray, f: np.ndarray | None) -> ConstraintPoint:
         """``p = (e . x) e``, ``error = -C x``, ``rhs = K C x + C f``: affine in ``(x, f)``."""

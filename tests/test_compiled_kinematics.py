@@ -123,8 +123,12 @@ def test_moved_holes_and_new_gains_reach_the_compiled_step():
     start = holes["python"].center.copy()
     for step in range(60):
         velocity = np.array([0.02, 0.0, -0.01]) if step < 30 else np.zeros(3)
+        center = start + 1e-3 * step * np.array([1.0, 0.0, -0.5])
         for hole in holes.values():
-            hole.move_to(start + 1e-3 * step * np.array([1.0, 0.0, -0.5]), velocity)
+            if step % 3:
+                hole.move_to(center, velocity)
+            else:  # the attributes assigned directly
+                hole.center, hole.velocity = center, velocity
             hole.gain = 50.0 if step % 20 < 10 else 100.0
         q = robot.q_home + rng.uniform(-1e-3, 1e-3, robot.model.nq)
         qd = {backend: controllers[backend].solve(q, twist) for backend in holes}
@@ -145,3 +149,19 @@ def test_inputs_that_are_not_float_arrays_are_converted():
     np.testing.assert_array_equal(controller.solve(q[::-1].copy()[::-1], twist), expected)
     with pytest.raises(ValueError, match="q"):
         controller.solve(np.append(q, 0.0), twist)
+
+
+def test_a_hole_moves_only_through_its_setters():
+    """The compiled step copies a hole's anchor when the array changes: in-place edits of
+    the centre or velocity are refused, assignments give a new anchor."""
+    hole = Hole("link", [0.1, 0.2, 0.3])
+    anchor = hole.affine_anchor()
+    with pytest.raises(ValueError, match="read-only"):
+        hole.center[0] += 1.0
+    with pytest.raises(ValueError, match="read-only"):
+        hole.velocity[:] = 1.0
+    hole.center = [0.1, 0.2, 0.4]
+    assert hole.affine_anchor() is not anchor
+    np.testing.assert_array_equal(hole.affine_anchor(), [0.1, 0.2, 0.4, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="hole velocity"):
+        hole.velocity = [0.0, float("nan"), 0.0]

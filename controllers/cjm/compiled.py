@@ -112,17 +112,16 @@ class CompiledStep:
         self._saturated = step.saturated_joints
         self._active_barriers = step.active_barriers
         self._saturation_joints = step.saturation_joints
-        anchors, terms, placements = pipeline.anchors, pipeline.terms, pipeline.placements
+        terms, placements = pipeline.terms, pipeline.placements
         offsets = np.cumsum([0] + [terms_size(c.dim) for c in constraints])
-        #: [index, writer, anchor point and velocity buffers, gain of the map sent] of
-        #: each affine constraint
+        #: [index, constraint, writer, anchor and gain last sent] of each affine one
         self._affine = []
         #: (writer, terms view, link rotation and translation views) of the others
         self._in_python = []
         for i, writer in enumerate(writers):
             row = placements[len(controller.ee_frame_ids) + i]
             if writer.affine:
-                self._affine.append([i, writer, anchors[i, :3], anchors[i, 3:], None])
+                self._affine.append([i, writer.constraint, writer, None, None])
             else:
                 self._in_python.append((writer, terms[offsets[i]:offsets[i + 1]],
                                         row[:9].reshape(3, 3), row[9:]))
@@ -136,8 +135,11 @@ class CompiledStep:
         if controller.policy is not self._policy:  # e.g. the UI's damping slider
             policy = self._policy = controller.policy
             pipeline.set_policy(policy.damping, policy.threshold, policy.max_damping)
-        for entry in self._affine:
-            self._update_anchor(entry)
+        for entry in self._affine:  # [index, constraint, writer, anchor sent, gain sent]
+            constraint = entry[1]
+            anchor = constraint.affine_anchor()
+            if anchor is not entry[3] or constraint.gain != entry[4]:
+                self._send_anchor(entry, anchor)
         if self._one_call:
             qd = pipeline.solve(q, twist, self._use_posture, True)
             if qd is None:  # not finite float vectors of the right sizes: say what is wrong
@@ -154,17 +156,15 @@ class CompiledStep:
             raise SolverError(info.message)
         return qd
 
-    def _update_anchor(self, entry: list) -> None:
-        """An affine constraint's anchor into the C++ buffer; its map when the gain changed."""
-        index, writer, point_buffer, velocity_buffer, gain = entry
-        constraint = writer.constraint
-        point, velocity = constraint.affine_anchor()
-        point_buffer[...] = point
-        velocity_buffer[...] = 0.0 if velocity is None else velocity
+    def _send_anchor(self, entry: list, anchor: np.ndarray) -> None:
+        """A new anchor of an affine constraint into the C++ buffer, and its affine map
+        when its gain changed (a new anchor array is a moved constraint)."""
+        index, constraint, writer, _, gain = entry
+        self._pipeline.anchors[index] = anchor
         if constraint.gain != gain:
             terms = writer.affine_terms()
             self._pipeline.set_affine(index, terms.of_x, terms.of_f, terms.offset)
-            entry[4] = constraint.gain
+        entry[3:] = [anchor, constraint.gain]
 
     def _write_in_python(self) -> tuple[bool, str]:
         """The terms of the constraints without an affine form, and a posture velocity
