@@ -32,7 +32,7 @@ Backend = Literal["auto", "compiled", "python"]
 def compiled_step_available() -> bool:
     """Whether the C++ extension of the compiled step (section 16) is built here."""
     try:
-        from . import _step  # noqa: F401
+        from ._step import JOINT_KINDS, Pipeline  # noqa: F401  (an older build lacks them)
     except ImportError:
         return False
     return True

@@ -23,6 +23,8 @@ Pipeline::Pipeline(Kinematics kinematics, Step step, Index ee_count,
     terms_size_.push_back(6 * (7 - rows) + 7 * rows);
     total += terms_size_.back();
   }
+  if (total != step_.terms_size())
+    throw std::invalid_argument("the step was built for other constraints");
   has_affine_.assign(n_constraints, false);
   affine_.resize(n_constraints);
   const Index nv = kinematics_.nv();

@@ -2,9 +2,10 @@
 // analytical form, the general form, the barriers' active set, saturation in the null
 // space, the clip guard and the step status), in one call (docs/design.md section 16).
 //
-// Python computes the kinematics (Pinocchio) and each constraint's terms; this class
-// takes them as arrays and does the rest with the same algorithms, the same damping, the
-// same rank decisions and the same order of saturation as the Python reference.
+// The kinematics (kinematics.hpp) and each constraint's terms come in as arrays
+// (pipeline.hpp fills them); this class does the rest with the same algorithms, the same
+// damping, the same rank decisions and the same order of saturation as the Python
+// reference.
 #pragma once
 
 #include <Eigen/LU>
