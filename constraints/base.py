@@ -350,10 +350,6 @@ class Constraint(ABC):
         velocity = as_vector(velocity, 3, f"{self.kind} velocity")
         setattr(self, self.position_attribute, position)
         self.velocity = velocity
-        self._moved()
-
-    def _moved(self) -> None:
-        """Hook run after :meth:`move_to` (a subclass refreshes what it caches)."""
 
     # -- what a view draws -----------------------------------------------------------------
 

@@ -126,7 +126,7 @@ class Hole(Constraint):
         return self._anchor[:3]
 
     @center.setter
-    def center(self, value) -> None:
+    def center(self, value: np.typing.ArrayLike) -> None:
         self._set_anchor(as_vector(value, 3, "hole center"), self._anchor[3:])
 
     @property
@@ -135,14 +135,18 @@ class Hole(Constraint):
         return self._anchor[3:]
 
     @velocity.setter
-    def velocity(self, value) -> None:
+    def velocity(self, value: np.typing.ArrayLike) -> None:
         self._set_anchor(self._anchor[:3], as_vector(value, 3, "hole velocity"))
 
     def _set_anchor(self, center: np.ndarray, velocity: np.ndarray) -> None:
         anchor = np.concatenate([center, velocity])
         anchor.flags.writeable = False  # changed only through the setters: a new array
         self._anchor = anchor
-        self._moving = bool(velocity.any())
+
+    def __setstate__(self, state: dict) -> None:
+        """A copy (``copy.deepcopy``, ``pickle``) keeps the anchor read-only."""
+        self.__dict__.update(state)
+        self._anchor.flags.writeable = False
 
     def axis_world(self, placement: pin.SE3) -> np.ndarray:
         """The link axis in the world frame (the hole's ring is drawn around it)."""

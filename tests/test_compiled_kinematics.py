@@ -70,20 +70,86 @@ def test_placements_and_jacobians_equal_pinocchio(name, seed):
                                    rtol=0, atol=1e-12)
 
 
+def fixed_step(model: pin.Model) -> _step.Step:
+    """A compiled step with no constraint and no joint limit, for ``model``."""
+    return _step.Step(nq=model.nq, nv=model.nv, task_rows=6, damping=0.0, threshold=0.01,
+                      max_damping=0.05, general_only=True, constraints=[],
+                      box=_step.JointBox(
+                          velocity_lower=np.full(model.nv, -1.0), velocity_upper=np.ones(model.nv),
+                          velocity_limit=np.ones(model.nv), limited_q=[], limited_v=[],
+                          q_min=np.zeros(0), q_max=np.zeros(0), position_gain=0.0,
+                          position_limits=False, box_test=np.zeros((0, model.nv + model.nq + 1))),
+                      posture_gain=0.0, posture_target=np.zeros(0))
+
+
+#: one URDF joint of each kind it can give (tilted axes give the unaligned kinds)
+EVERY_KIND_URDF = """<robot name="every_kind">
+  <link name="base"/>
+  {links}
+</robot>"""
+URDF_JOINTS = [("revolute", "1 0 0"), ("revolute", "0 1 0"), ("revolute", "0 0 1"),
+               ("revolute", "0.6 0.8 0"), ("continuous", "1 0 0"), ("continuous", "0 1 0"),
+               ("continuous", "0 0 1"), ("continuous", "0 0.28 0.96"), ("prismatic", "1 0 0"),
+               ("prismatic", "0 1 0"), ("prismatic", "0 0 1"), ("prismatic", "0.48 0.6 0.64"),
+               ("planar", "0 0 1"), ("floating", "0 0 1")]
+
+
+def every_kind_model() -> pin.Model:
+    """A chain with a joint of every kind the compiled kinematics covers, tilted
+    placements between them, and a frame on each joint."""
+    parts, parent = [], "base"
+    for i, (kind, axis) in enumerate(URDF_JOINTS):
+        limits = '<limit lower="-2" upper="2" effort="1" velocity="1"/>' if kind in ("revolute", "prismatic") else ""
+        parts.append(f'<link name="l{i}"/><joint name="j{i}" type="{kind}"><parent link="{parent}"/>'
+                     f'<child link="l{i}"/><origin xyz="0.1 -0.05 0.2" rpy="0.3 -0.2 0.5"/>'
+                     f'<axis xyz="{axis}"/>{limits}</joint>')
+        parent = f"l{i}"
+    model = pin.buildModelFromXML(EVERY_KIND_URDF.format(links="".join(parts)))
+    tilt = pin.SE3(pin.rpy.rpyToMatrix(0.1, 0.4, -0.3), np.array([0.05, 0.1, -0.02]))
+    spherical = model.addJoint(model.njoints - 1, pin.JointModelSpherical(), tilt, "ball")
+    model.addJoint(spherical, pin.JointModelTranslation(), tilt, "slide3")
+    for joint in range(1, model.njoints):
+        model.addFrame(pin.Frame(f"on_{joint}", joint, tilt, pin.OP_FRAME))
+    return model
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_every_joint_kind_covered_equals_pinocchio(seed):
+    """Every kind in ``JOINT_KINDS`` (the unaligned ones' axes read back from Pinocchio):
+    the C++ copy's placements and LOCAL Jacobians equal Pinocchio's to 1e-12."""
+    model = every_kind_model()
+    assert {joint.shortname() for joint in model.joints[1:]} == set(_step.JOINT_KINDS)
+    frames = [f for f in range(model.nframes) if model.frames[f].name.startswith("on_")]
+    pipeline = _step.Pipeline(
+        joints=joint_specs(model),
+        frames=[(model.frames[f].parentJoint, model.frames[f].placement.homogeneous) for f in frames],
+        step=fixed_step(model), ee_count=len(frames), task_entries=list(range(6)),
+        task_scale=np.ones(6), constraint_rows=[])
+    rng = np.random.default_rng(seed)
+    q = pin.integrate(model, pin.neutral(model), rng.uniform(-2.0, 2.0, model.nv))
+    assert pipeline.load(q, np.zeros(6 * len(frames)))
+    pipeline.prepare()
+    data = model.createData()
+    pin.computeJointJacobians(model, data, q)
+    for i, frame in enumerate(frames):
+        placement = pin.updateFramePlacement(model, data, frame)
+        np.testing.assert_allclose(pipeline.placements[i, :9].reshape(3, 3), placement.rotation,
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(pipeline.placements[i, 9:], placement.translation,
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(pipeline.jacobians[6 * i:6 * i + 6],
+                                   pin.getFrameJacobian(model, data, frame, pin.LOCAL),
+                                   rtol=0, atol=1e-12)
+
+
 def test_a_joint_kind_not_covered_is_named():
     """A spherical ZYX joint: named by the check, refused by the C++ copy of the model."""
     model = pin.Model()
     base = model.addJoint(0, pin.JointModelSphericalZYX(), pin.SE3.Identity(), "wrist")
     model.addJoint(base, pin.JointModelRZ(), pin.SE3.Identity(), "roll")
     assert unsupported_joint_kinds(model) == ["JointModelSphericalZYX"]
-    step = _step.Step(nq=model.nq, nv=model.nv, task_rows=6, damping=0.0, threshold=0.01,
-                      max_damping=0.05, general_only=True, constraints=[],
-                      box=_step.JointBox(
-                          velocity_lower=np.full(model.nv, -1.0), velocity_upper=np.ones(model.nv),
-                          velocity_limit=np.ones(model.nv), limited_q=[], limited_v=[],
-                          q_min=np.zeros(0), q_max=np.zeros(0), position_gain=0.0,
-                          position_limits=False, box_test=np.zeros((0, 2 * model.nv + 1))),
-                      posture_gain=0.0, posture_target=np.zeros(0))
+    step = fixed_step(model)
     with pytest.raises(ValueError, match="JointModelSphericalZYX"):
         _step.Pipeline(joints=joint_specs(model), frames=[(2, np.eye(4))], step=step, ee_count=1,
                        task_entries=list(range(6)), task_scale=np.ones(6), constraint_rows=[])
@@ -165,3 +231,26 @@ def test_a_hole_moves_only_through_its_setters():
     np.testing.assert_array_equal(hole.affine_anchor(), [0.1, 0.2, 0.4, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="hole velocity"):
         hole.velocity = [0.0, float("nan"), 0.0]
+
+
+def test_a_copy_of_the_model_that_is_off_is_caught(monkeypatch):
+    """A joint placement copied 1 mm off (as a change in pin's Python API could do): the
+    one check at build time catches it; ``auto`` runs the Python step, ``compiled`` says
+    which frame is off."""
+    from controllers.cjm import compiled
+
+    copy_the_model = compiled.joint_specs
+
+    def one_millimetre_off(model):
+        specs = copy_the_model(model)
+        kind, parent, placement, axis = specs[2]
+        placement = placement.copy()
+        placement[0, 3] += 1e-3
+        specs[2] = (kind, parent, placement, axis)
+        return specs
+
+    monkeypatch.setattr(compiled, "joint_specs", one_millimetre_off)
+    robot = ROBOTS["sda10f"]
+    assert CJMController(robot, holes_on(robot)).backend == "python"
+    with pytest.raises(compiled.KinematicsMismatch, match="differ from Pinocchio's by 0.001"):
+        CJMController(robot, holes_on(robot), backend="compiled")

@@ -294,15 +294,22 @@ def test_one_constraint_near_a_limit_with_posture_off_and_on(case, posture_gain)
                   twist_exponents=(-3.0, -1.0)),
        posture_gain=st.sampled_from([0.0, 1.0]))
 def test_where_no_limit_binds_the_cjm_is_the_plain_null_space_solution(case, posture_gain):
+    """The Python step (the reference implementation) against SciPy's null-space solution
+    on the same Pinocchio kinematics, to 1e-12. The compiled step computes its kinematics
+    in its own build of Pinocchio, a few 1e-15 apart, which two nearly parallel rows
+    amplify by their condition number (225 for two planes 0.2 degree apart: 3.5e-12
+    rad/s); tests/test_compiled_step.py holds it to this step."""
     robot, q, constraints, twist = unpack(case)
     (A, _), _, data = rows_of(robot, q, constraints)
     sigma = np.linalg.svd(A, compute_uv=False)
     assume(sigma[-1] > 1e-6 * sigma[0])  # independent rows: the solution is well posed
     redundant = scipy.linalg.null_space(np.vstack([A, ee_jacobian(robot, data)])).shape[1] > 0
     for form in FORMS:
-        unlimited = CJMController(robot, constraints, form=form, posture_gain=posture_gain, **UNLIMITED)
+        unlimited = CJMController(robot, constraints, form=form, posture_gain=posture_gain,
+                                  backend="python", **UNLIMITED)
         free = unlimited.solve(q, twist)
-        controller = CJMController(robot, constraints, form=form, posture_gain=posture_gain)
+        controller = CJMController(robot, constraints, form=form, posture_gain=posture_gain,
+                                   backend="python")
         lower, upper = controller.bounds(q)
         margin = 0.1 * controller.velocity_limit  # well inside the box
         assume(np.all(free < upper - margin) and np.all(free > lower + margin))

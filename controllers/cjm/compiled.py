@@ -14,13 +14,15 @@ algorithms of :mod:`.analytical`, :mod:`.general`, :mod:`.saturation` and
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
+from constraints import Constraint
+
 from ..base import NON_FINITE_NOTE, SolveInfo, SolverError, StepStatus, clipped_note, residual_note
-from ..linalg import DampingPolicy
 from . import _step
 from .analytical import PRE_CHAIN_SINGULAR_NOTE, TermsWriter, terms_size, task_residual_note
 from .general import NO_FREE_JOINT_NOTE, conflict_note
@@ -46,12 +48,41 @@ NO_CONVERGENCE_NOTE = "LinAlgError: SVD did not converge (Jacobi sweeps)"
 PAPER_FORM_NOTE = "a = 0, where the paper's 1/a form is singular: null-space form used"
 
 
+#: largest difference (m, or 1 for rotations and Jacobians) the copy of the model may
+#: show against Pinocchio's Python kinematics when it is built
+KINEMATICS_TOLERANCE = 1e-9
+
+
+class KinematicsMismatch(ValueError):
+    """The C++ copy of the model does not reproduce Pinocchio's kinematics."""
+
+
 def joint_specs(model: pin.Model) -> list[tuple[str, int, np.ndarray, np.ndarray]]:
     """``(kind, parent, placement, axis)`` of each joint after the universe, for the C++
-    copy of the model (``axis``: an unaligned joint's, else unused)."""
-    return [(joint.shortname(), model.parents[j], model.jointPlacements[j].homogeneous,
-             np.asarray(getattr(joint.extract(), "axis", np.zeros(3)), dtype=float))
-            for j, joint in enumerate(model.joints) if j > 0]
+    copy of the model. ``axis`` is an unaligned joint's (zero for the others), read from
+    its column of the LOCAL joint Jacobian (Python does not expose every kind's axis)."""
+    data = model.createData()
+    pin.computeJointJacobians(model, data, pin.neutral(model))
+    specs = []
+    for j in range(1, model.njoints):
+        kind = model.joints[j].shortname()
+        axis = np.zeros(3)
+        if kind.endswith("Unaligned"):
+            column = pin.getJointJacobian(model, data, j, pin.LOCAL)[:, model.idx_vs[j]]
+            axis = column[:3] if "Prismatic" in kind else column[3:]
+        specs.append((kind, model.parents[j], model.jointPlacements[j].homogeneous, axis))
+    return specs
+
+
+@dataclass
+class AffineEntry:
+    """A constraint whose terms the C++ side computes, and what it was last sent."""
+
+    index: int
+    constraint: Constraint
+    writer: TermsWriter
+    sent_anchor: np.ndarray | None = None
+    sent_gain: float | None = None
 
 
 class CompiledStep:
@@ -65,7 +96,7 @@ class CompiledStep:
         constraints = controller.constraints
         # the paper's S only where the analytical form can use it (one hole, form auto)
         self._paper = (controller.parametrisation == "paper" and len(constraints) == 1
-                       and controller.form == "auto")
+                       and controller.form == "auto" and controller.paper_task)
         writers = [TermsWriter(c, "paper" if self._paper else "nullspace") for c in constraints]
         self._fallback_writer = TermsWriter(constraints[0], "nullspace") if self._paper else None
         self._use_posture = controller.posture_gain > 0.0
@@ -103,7 +134,7 @@ class CompiledStep:
             frames=[(model.frames[f].parentJoint, model.frames[f].placement.homogeneous)
                     for f in frames],
             step=step, ee_count=len(controller.ee_frame_ids), task_entries=task_entries.tolist(),
-            task_scale=np.broadcast_to(controller._task_row_scale[:, 0], task_entries.shape),
+            task_scale=controller._task_row_scale[:, 0],
             constraint_rows=[c.dim for c in constraints])
         pipeline = self._pipeline
         step = pipeline.step
@@ -114,18 +145,38 @@ class CompiledStep:
         self._saturation_joints = step.saturation_joints
         terms, placements = pipeline.terms, pipeline.placements
         offsets = np.cumsum([0] + [terms_size(c.dim) for c in constraints])
-        #: [index, constraint, writer, anchor and gain last sent] of each affine one
-        self._affine = []
+        self._affine: list[AffineEntry] = []
         #: (writer, terms view, link rotation and translation views) of the others
-        self._in_python = []
+        self._in_python: list[tuple[TermsWriter, np.ndarray, np.ndarray, np.ndarray]] = []
         for i, writer in enumerate(writers):
             row = placements[len(controller.ee_frame_ids) + i]
             if writer.affine:
-                self._affine.append([i, writer.constraint, writer, None, None])
+                self._affine.append(AffineEntry(i, writer.constraint, writer))
             else:
                 self._in_python.append((writer, terms[offsets[i]:offsets[i + 1]],
                                         row[:9].reshape(3, 3), row[9:]))
         self._one_call = not self._in_python and not self._posture_in_python
+        self._check_kinematics(frames)
+
+    def _check_kinematics(self, frames: list[int]) -> None:
+        """The copy of the model against Pinocchio, once, at the posture: a joint it
+        reproduces wrongly raises :class:`KinematicsMismatch` (a safety net under the
+        tests of tests/test_compiled_kinematics.py)."""
+        controller, pipeline = self._controller, self._pipeline
+        model, data = controller.model, controller.model.createData()
+        pipeline.load(controller.posture, np.zeros(controller.task_size))
+        pipeline.prepare()
+        pin.computeJointJacobians(model, data, controller.posture)
+        for i, frame in enumerate(frames):
+            placement = pin.updateFramePlacement(model, data, frame)
+            expected = np.concatenate([placement.rotation.ravel(), placement.translation])
+            jacobian = pin.getFrameJacobian(model, data, frame, pin.LOCAL)
+            difference = max(np.abs(pipeline.placements[i] - expected).max(),
+                             np.abs(pipeline.jacobians[6 * i:6 * i + 6] - jacobian).max())
+            if not difference <= KINEMATICS_TOLERANCE:
+                raise KinematicsMismatch(
+                    f"the compiled step's kinematics differ from Pinocchio's by {difference:.3g} "
+                    f"at frame {model.frames[frame].name!r}: use backend='python'")
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """``qd`` (section 8.3): bad input raises ValueError as :meth:`Controller.solve`
@@ -135,10 +186,10 @@ class CompiledStep:
         if controller.policy is not self._policy:  # e.g. the UI's damping slider
             policy = self._policy = controller.policy
             pipeline.set_policy(policy.damping, policy.threshold, policy.max_damping)
-        for entry in self._affine:  # [index, constraint, writer, anchor sent, gain sent]
-            constraint = entry[1]
+        for entry in self._affine:
+            constraint = entry.constraint
             anchor = constraint.affine_anchor()
-            if anchor is not entry[3] or constraint.gain != entry[4]:
+            if anchor is not entry.sent_anchor or constraint.gain != entry.sent_gain:
                 self._send_anchor(entry, anchor)
         if self._one_call:
             qd = pipeline.solve(q, twist, self._use_posture, True)
@@ -156,15 +207,15 @@ class CompiledStep:
             raise SolverError(info.message)
         return qd
 
-    def _send_anchor(self, entry: list, anchor: np.ndarray) -> None:
+    def _send_anchor(self, entry: AffineEntry, anchor: np.ndarray) -> None:
         """A new anchor of an affine constraint into the C++ buffer, and its affine map
         when its gain changed (a new anchor array is a moved constraint)."""
-        index, constraint, writer, _, gain = entry
-        self._pipeline.anchors[index] = anchor
-        if constraint.gain != gain:
-            terms = writer.affine_terms()
-            self._pipeline.set_affine(index, terms.of_x, terms.of_f, terms.offset)
-        entry[3:] = [anchor, constraint.gain]
+        constraint = entry.constraint
+        self._pipeline.anchors[entry.index] = anchor
+        if constraint.gain != entry.sent_gain:
+            terms = entry.writer.affine_terms()
+            self._pipeline.set_affine(entry.index, terms.of_x, terms.of_f, terms.offset)
+        entry.sent_anchor, entry.sent_gain = anchor, constraint.gain
 
     def _write_in_python(self) -> tuple[bool, str]:
         """The terms of the constraints without an affine form, and a posture velocity

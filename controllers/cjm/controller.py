@@ -85,10 +85,13 @@ class CJMController(Controller):
         (docs/design.md section 11.2). Anything but the identity takes the general form.
     limit_gain, position_limits, velocity_limits, strict : see
         :class:`controllers.base.Controller`.
-    backend : ``"compiled"`` (the step's algebra in C++, :mod:`controllers.cjm.compiled`,
-        docs/design.md section 16), ``"python"`` (this module and its siblings: the
-        readable reference) or ``"auto"`` (compiled when the extension is built, else
-        Python). ``"compiled"`` without the extension raises ``ImportError``.
+    backend : ``"compiled"`` (the whole step in C++, Pinocchio's kinematics included,
+        :mod:`controllers.cjm.compiled`, docs/design.md section 16), ``"python"`` (this
+        module and its siblings: the readable reference) or ``"auto"`` (compiled when the
+        extension is built and covers the robot's joints, else Python). ``"compiled"``
+        raises ``ImportError`` without the extension and ``ValueError`` for a robot it
+        does not cover. The compiled step computes its kinematics on its own copy of the
+        model: it leaves ``self.data`` as it was.
     """
 
     def __init__(
@@ -126,6 +129,8 @@ class CJMController(Controller):
         if backend == "compiled" and unsupported:
             raise ValueError(f"the compiled CJM step does not cover joints of kind "
                              f"{', '.join(unsupported)}: use backend='python'")
+        #: whether the Python step may stand in when the compiled one cannot take the robot
+        self._python_if_needed = backend == "auto"
         if backend == "auto":
             backend = "compiled" if available and not unsupported else "python"
         self.backend: Backend = backend
@@ -168,9 +173,14 @@ class CJMController(Controller):
         self._barriers = [i for i, c in enumerate(self.constraints) if not c.is_equality]
         self._square_plans = {}
         if self.backend == "compiled":
-            from .compiled import CompiledStep
+            from .compiled import CompiledStep, KinematicsMismatch
 
-            self._compiled = CompiledStep(self)
+            try:
+                self._compiled = CompiledStep(self)
+            except KinematicsMismatch:
+                if not self._python_if_needed:
+                    raise
+                self.backend, self._compiled = "python", None
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """:meth:`Controller.solve`, in C++ with the compiled backend (section 16)."""

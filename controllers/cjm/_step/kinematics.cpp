@@ -5,6 +5,7 @@
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/multibody.hpp>
 
+#include <cmath>
 #include <stdexcept>
 
 namespace cjm {
@@ -53,6 +54,9 @@ const std::vector<std::pair<std::string, JointFactory>>& joint_factories() {
 }
 
 pin::JointModel joint_model(const JointSpec& joint) {
+  const bool unaligned = joint.kind.size() > 9 && joint.kind.substr(joint.kind.size() - 9) == "Unaligned";
+  if (unaligned && !(std::abs(joint.axis.norm() - 1.0) <= 1e-9))
+    throw std::invalid_argument("the axis of a joint of kind " + joint.kind + " must be a unit vector");
   for (const auto& [kind, factory] : joint_factories())
     if (kind == joint.kind) return factory(joint.axis);
   throw std::invalid_argument("the compiled CJM step does not cover joints of kind " + joint.kind);

@@ -4,7 +4,7 @@
 // Pinocchio's templates are compiled into the extension from its headers; no Pinocchio
 // library is linked, so the extension does not depend on the binary interface of the
 // installed ``pin`` wheel. The model is copied from Python's pin.Model (its joints and
-// the frames used), and tests/test_compiled_step.py holds the two equal.
+// the frames used); tests/test_compiled_kinematics.py holds the two equal.
 #pragma once
 
 #include <memory>

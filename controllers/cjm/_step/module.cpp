@@ -1,4 +1,5 @@
-// Python bindings of the compiled CJM step (pybind11): controllers.cjm._step.Step.
+// Python bindings of the compiled CJM step (pybind11): controllers.cjm._step's Pipeline
+// (kinematics, terms and step in one call) and the Step it runs.
 // controllers/cjm/compiled.py is its only user (docs/design.md section 16).
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
@@ -40,7 +41,7 @@ bool load_vector(py::handle source, cjm::Vector& target) {
 
 //! The step into a new array (the GIL released while it runs).
 py::array_t<double> finish(cjm::Pipeline& pipeline, bool use_posture, bool analytical_allowed) {
-  py::array_t<double> qd(pipeline.posture().size());
+  py::array_t<double> qd(pipeline.nv());
   Eigen::Map<cjm::Vector> qd_map(qd.mutable_data(), qd.size());
   py::gil_scoped_release release;
   pipeline.finish(use_posture, analytical_allowed, qd_map);

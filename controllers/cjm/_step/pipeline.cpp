@@ -15,6 +15,9 @@ Pipeline::Pipeline(Kinematics kinematics, Step step, Index ee_count,
     throw std::invalid_argument("the kinematics needs one frame per EE and per constraint");
   if (static_cast<Index>(task_entries_.size()) != task_scale_.size() || task_entries_.empty())
     throw std::invalid_argument("one scale per task entry, at least one entry");
+  if (step_.nq() != kinematics_.nq() || step_.nv() != kinematics_.nv() ||
+      step_.task_rows() != static_cast<Index>(task_entries_.size()))
+    throw std::invalid_argument("the step was built for another model or task");
   for (Index entry : task_entries_)
     if (entry < 0 || entry >= 6 * ee_count_) throw std::invalid_argument("task entry out of range");
   Index total = 0;

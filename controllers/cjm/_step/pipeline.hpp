@@ -39,6 +39,7 @@ class Pipeline {
   //! The step into ``qd``, after prepare() (and Python's terms).
   void finish(bool use_posture, bool analytical_allowed, VectorRef qd);
 
+  Index nv() const { return kinematics_.nv(); }
   Vector& q() { return q_; }
   Vector& twist() { return twist_; }
   Vector& terms() { return terms_; }

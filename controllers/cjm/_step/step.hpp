@@ -74,6 +74,9 @@ class Step {
        Vector posture_target);
 
   void set_policy(DampingPolicy policy) { policy_ = policy; }
+  Index nq() const { return nq_; }
+  Index nv() const { return nv_; }
+  Index task_rows() const { return task_rows_; }
 
   //! One step: ``qd`` for ``twist``. ``frame_jacobians`` stacks each constraint's
   //! 6 x nv LOCAL Jacobian; ``terms`` each constraint's flat terms buffer
