@@ -59,19 +59,26 @@ class KinematicsMismatch(ValueError):
 
 def joint_specs(model: pin.Model) -> list[tuple[str, int, np.ndarray, np.ndarray]]:
     """``(kind, parent, placement, axis)`` of each joint after the universe, for the C++
-    copy of the model. ``axis`` is an unaligned joint's (zero for the others), read from
-    its column of the LOCAL joint Jacobian (Python does not expose every kind's axis)."""
-    data = model.createData()
-    pin.computeJointJacobians(model, data, pin.neutral(model))
+    copy of the model (``axis``: an unaligned joint's, else zero)."""
     specs = []
     for j in range(1, model.njoints):
-        kind = model.joints[j].shortname()
-        axis = np.zeros(3)
-        if kind.endswith("Unaligned"):
-            column = pin.getJointJacobian(model, data, j, pin.LOCAL)[:, model.idx_vs[j]]
-            axis = column[:3] if "Prismatic" in kind else column[3:]
+        joint = model.joints[j]
+        kind = joint.shortname()
+        axis = unaligned_axis(joint) if kind.endswith("Unaligned") else np.zeros(3)
         specs.append((kind, model.parents[j], model.jointPlacements[j].homogeneous, axis))
     return specs
+
+
+def unaligned_axis(joint: pin.JointModel) -> np.ndarray:
+    """A one-degree-of-freedom joint's axis, exactly: its motion subspace, the Jacobian of
+    a model of that joint alone at its neutral configuration (Python does not expose the
+    axis of every kind)."""
+    alone = pin.Model()
+    alone.addJoint(0, joint, pin.SE3.Identity(), "alone")
+    data = alone.createData()
+    pin.computeJointJacobians(alone, data, pin.neutral(alone))
+    column = np.asarray(data.J).reshape(6, -1)[:, 0]
+    return column[:3].copy() if "Prismatic" in joint.shortname() else column[3:].copy()
 
 
 @dataclass
