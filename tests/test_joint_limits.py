@@ -294,11 +294,11 @@ def test_one_constraint_near_a_limit_with_posture_off_and_on(case, posture_gain)
                   twist_exponents=(-3.0, -1.0)),
        posture_gain=st.sampled_from([0.0, 1.0]))
 def test_where_no_limit_binds_the_cjm_is_the_plain_null_space_solution(case, posture_gain):
-    """The Python step (the reference implementation) against SciPy's null-space solution
-    on the same Pinocchio kinematics, to 1e-12. The compiled step computes its kinematics
-    in its own build of Pinocchio, a few 1e-15 apart, which two nearly parallel rows
-    amplify by their condition number (225 for two planes 0.2 degree apart: 3.5e-12
-    rad/s); tests/test_compiled_step.py holds it to this step."""
+    """The Python step (the reference implementation, LAPACK's SVDs) against SciPy's
+    null-space solution, to 1e-12. The compiled step's algebra (QR and Jacobi SVDs) rounds
+    otherwise, which two nearly parallel rows amplify by their condition number: 3.5e-12
+    rad/s from SciPy's, 1.5e-12 from the Python step's, for two planes 0.2 degree apart on
+    one link (condition number 225); tests/test_compiled_step.py holds it to this step."""
     robot, q, constraints, twist = unpack(case)
     (A, _), _, data = rows_of(robot, q, constraints)
     sigma = np.linalg.svd(A, compute_uv=False)
