@@ -52,13 +52,19 @@ def test_placements_and_jacobians_equal_pinocchio(name, seed):
     LOCAL Jacobian equal ``pin.updateFramePlacement`` / ``pin.getFrameJacobian`` to 1e-12."""
     robot = ROBOTS[name]
     controller = CJMController(robot, holes_on(robot), backend="compiled")
-    q = random_configuration(robot, seed)
-    pipeline = controller._compiled._pipeline
-    assert pipeline.load(q, np.zeros(robot.task_size))
+    assert_kinematics_equal(controller._compiled._pipeline, robot.model,
+                            [*controller.ee_frame_ids, *controller.constraint_frames],
+                            random_configuration(robot, seed), robot.task_size)
+
+
+def assert_kinematics_equal(pipeline: _step.Pipeline, model: pin.Model, frames: list[int],
+                            q: np.ndarray, twist_size: int) -> None:
+    """The pipeline's placements and LOCAL Jacobians of ``frames`` (in its order) at ``q``
+    equal Pinocchio's to 1e-12."""
+    assert pipeline.load(q, np.zeros(twist_size))
     pipeline.prepare()
-    model, data = robot.model, robot.model.createData()
+    data = model.createData()
     pin.computeJointJacobians(model, data, q)
-    frames = [*controller.ee_frame_ids, *controller.constraint_frames]
     for i, frame in enumerate(frames):
         placement = pin.updateFramePlacement(model, data, frame)
         np.testing.assert_allclose(pipeline.placements[i, :9].reshape(3, 3), placement.rotation,
@@ -128,19 +134,7 @@ def test_every_joint_kind_covered_equals_pinocchio(seed):
         task_scale=np.ones(6), constraint_rows=[])
     rng = np.random.default_rng(seed)
     q = pin.integrate(model, pin.neutral(model), rng.uniform(-2.0, 2.0, model.nv))
-    assert pipeline.load(q, np.zeros(6 * len(frames)))
-    pipeline.prepare()
-    data = model.createData()
-    pin.computeJointJacobians(model, data, q)
-    for i, frame in enumerate(frames):
-        placement = pin.updateFramePlacement(model, data, frame)
-        np.testing.assert_allclose(pipeline.placements[i, :9].reshape(3, 3), placement.rotation,
-                                   rtol=0, atol=1e-12)
-        np.testing.assert_allclose(pipeline.placements[i, 9:], placement.translation,
-                                   rtol=0, atol=1e-12)
-        np.testing.assert_allclose(pipeline.jacobians[6 * i:6 * i + 6],
-                                   pin.getFrameJacobian(model, data, frame, pin.LOCAL),
-                                   rtol=0, atol=1e-12)
+    assert_kinematics_equal(pipeline, model, frames, q, 6 * len(frames))
 
 
 def test_a_joint_kind_not_covered_is_named():
