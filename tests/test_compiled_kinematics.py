@@ -131,7 +131,7 @@ def test_every_joint_kind_covered_equals_pinocchio(seed):
         joints=joint_specs(model),
         frames=[(model.frames[f].parentJoint, model.frames[f].placement.homogeneous) for f in frames],
         step=fixed_step(model), ee_count=len(frames), task_entries=list(range(6)),
-        task_scale=np.ones(6), constraint_rows=[])
+        task_scale=np.ones(6))
     rng = np.random.default_rng(seed)
     q = pin.integrate(model, pin.neutral(model), rng.uniform(-2.0, 2.0, model.nv))
     assert_kinematics_equal(pipeline, model, frames, q, 6 * len(frames))
@@ -146,7 +146,7 @@ def test_a_joint_kind_not_covered_is_named():
     step = fixed_step(model)
     with pytest.raises(ValueError, match="JointModelSphericalZYX"):
         _step.Pipeline(joints=joint_specs(model), frames=[(2, np.eye(4))], step=step, ee_count=1,
-                       task_entries=list(range(6)), task_scale=np.ones(6), constraint_rows=[])
+                       task_entries=list(range(6)), task_scale=np.ones(6))
 
 
 def test_a_robot_with_such_a_joint_runs_the_python_step():

@@ -141,8 +141,7 @@ class CompiledStep:
             frames=[(model.frames[f].parentJoint, model.frames[f].placement.homogeneous)
                     for f in frames],
             step=step, ee_count=len(controller.ee_frame_ids), task_entries=task_entries.tolist(),
-            task_scale=controller._task_row_scale[:, 0],
-            constraint_rows=[c.dim for c in constraints])
+            task_scale=controller._task_row_scale[:, 0])
         pipeline = self._pipeline
         step = pipeline.step
         self._report = step.report

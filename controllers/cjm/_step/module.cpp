@@ -112,8 +112,7 @@ PYBIND11_MODULE(_step, module) {
   py::class_<cjm::Pipeline>(module, "Pipeline")
       .def(py::init([](std::vector<std::tuple<std::string, Index, Eigen::Matrix4d, Eigen::Vector3d>> joints,
                        std::vector<std::tuple<Index, Eigen::Matrix4d>> frames, const cjm::Step& step,
-                       Index ee_count, std::vector<Index> task_entries, cjm::Vector task_scale,
-                       std::vector<Index> constraint_rows) {
+                       Index ee_count, std::vector<Index> task_entries, cjm::Vector task_scale) {
              std::vector<cjm::JointSpec> joint_specs;
              for (auto& [kind, parent, placement, axis] : joints)
                joint_specs.push_back(cjm::JointSpec{kind, parent, placement, axis});
@@ -121,11 +120,10 @@ PYBIND11_MODULE(_step, module) {
              for (auto& [parent, placement] : frames)
                frame_specs.push_back(cjm::FrameSpec{parent, placement});
              return new cjm::Pipeline(cjm::Kinematics(joint_specs, frame_specs), step, ee_count,
-                                      std::move(task_entries), std::move(task_scale),
-                                      std::move(constraint_rows));
+                                      std::move(task_entries), std::move(task_scale));
            }),
            py::arg("joints"), py::arg("frames"), py::arg("step"), py::arg("ee_count"),
-           py::arg("task_entries"), py::arg("task_scale"), py::arg("constraint_rows"),
+           py::arg("task_entries"), py::arg("task_scale"),
            "``joints``: (kind, parent, placement 4x4, axis) per joint of pin.Model after the "
            "universe; ``frames``: (parent joint, placement 4x4), the EE frames then one per "
            "constraint; ``step`` is copied.")

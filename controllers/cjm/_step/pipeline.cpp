@@ -6,11 +6,10 @@
 namespace cjm {
 
 Pipeline::Pipeline(Kinematics kinematics, Step step, Index ee_count,
-                   std::vector<Index> task_entries, Vector task_scale,
-                   std::vector<Index> constraint_rows)
+                   std::vector<Index> task_entries, Vector task_scale)
     : kinematics_(std::move(kinematics)), step_(std::move(step)), ee_count_(ee_count),
       task_entries_(std::move(task_entries)), task_scale_(std::move(task_scale)) {
-  const Index n_constraints = static_cast<Index>(constraint_rows.size());
+  const Index n_constraints = step_.constraint_count();
   if (kinematics_.jacobians().rows() != 6 * (ee_count_ + n_constraints))
     throw std::invalid_argument("the kinematics needs one frame per EE and per constraint");
   if (static_cast<Index>(task_entries_.size()) != task_scale_.size() || task_entries_.empty())
@@ -20,21 +19,16 @@ Pipeline::Pipeline(Kinematics kinematics, Step step, Index ee_count,
     throw std::invalid_argument("the step was built for another model or task");
   for (Index entry : task_entries_)
     if (entry < 0 || entry >= 6 * ee_count_) throw std::invalid_argument("task entry out of range");
-  Index total = 0;
-  for (Index rows : constraint_rows) {
-    terms_offset_.push_back(total);
-    terms_size_.push_back(6 * (7 - rows) + 7 * rows);
-    total += terms_size_.back();
-  }
-  if (total != step_.terms_size())
-    throw std::invalid_argument("the step was built for other constraints");
+  for (Index i = 0; i < n_constraints; ++i)
+    terms_size_.push_back((i + 1 < n_constraints ? step_.terms_offset(i + 1) : step_.terms_size()) -
+                          step_.terms_offset(i));
   has_affine_.assign(n_constraints, false);
   affine_.resize(n_constraints);
   const Index nv = kinematics_.nv();
   q_ = Vector::Zero(kinematics_.nq());
   twist_ = Vector::Zero(6 * ee_count_);
   task_twist_ = Vector::Zero(static_cast<Index>(task_entries_.size()));
-  terms_ = Vector::Zero(total);
+  terms_ = Vector::Zero(step_.terms_size());
   posture_ = Vector::Zero(nv);
   ee_jacobian_ = RowMatrix::Zero(task_twist_.size(), nv);
   anchors_ = RowMatrix::Zero(n_constraints, 6);
@@ -65,7 +59,7 @@ void Pipeline::prepare() {
     const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> rotation(placement.data());
     x_.noalias() = rotation.transpose() * (anchors_.row(i).head<3>().transpose() -
                                            placement.tail<3>().transpose());
-    auto terms = terms_.segment(terms_offset_[i], terms_size_[i]);
+    auto terms = terms_.segment(step_.terms_offset(i), terms_size_[i]);
     terms.noalias() = affine_[i].of_x * x_;
     terms += affine_[i].offset;
     const auto velocity = anchors_.row(i).tail<3>();

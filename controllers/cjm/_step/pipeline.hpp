@@ -27,7 +27,7 @@ class Pipeline {
   //! ``task_entries``/``task_scale``: the entries of the stacked twist the task keeps and
   //! their ``W^1/2`` (all entries with scale 1 when unweighted).
   Pipeline(Kinematics kinematics, Step step, Index ee_count, std::vector<Index> task_entries,
-           Vector task_scale, std::vector<Index> constraint_rows);
+           Vector task_scale);
 
   //! Constraint ``index``'s affine map (replaced when its gain changes); without one,
   //! Python writes its terms.
@@ -56,7 +56,7 @@ class Pipeline {
   Index ee_count_;
   std::vector<Index> task_entries_;
   Vector task_scale_;
-  std::vector<Index> terms_offset_, terms_size_;
+  std::vector<Index> terms_size_;  // per constraint (its buffer starts at step_.terms_offset)
   std::vector<bool> has_affine_;
   std::vector<AffineTerms> affine_;
   Vector q_, twist_, task_twist_, terms_, posture_;

@@ -93,6 +93,9 @@ class Step {
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& active_barriers() { return active_barriers_; }
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& saturation_joints() { return saturation_joints_; }
   Index terms_size() const { return terms_size_; }
+  Index constraint_count() const { return static_cast<Index>(constraints_.size()); }
+  //! Where constraint ``index``'s flat terms buffer starts in ``terms``.
+  Index terms_offset(Index index) const { return terms_offset_[index]; }
 
  private:
   struct Inputs {
