@@ -117,8 +117,11 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
     hole_id = app.add_hole(0.08)
     lock_id = app.add_point_lock(0.05)
     draw(ui)
-    link_radius = _link_radius(app.robot, app.robot.constrained_link)
+    frame = app.robot.model.getFrameId(app.robot.constrained_link)
+    link_radius = max(g.geometry.radius for g in app.robot.visual_model.geometryObjects
+                      if g.parentFrame == frame and type(g.geometry).__name__ == "Cylinder")
     assert link_radius == pytest.approx(0.04)  # arm_link_5_r's cylinder
+    assert _link_radius(app.robot, app.robot.constrained_link) >= link_radius
     for entry_id in (hole_id, lock_id):
         markers = ui._markers[entry_id]
         collar = np.asarray(markers["point"].points).reshape(-1, 3)
@@ -184,9 +187,10 @@ def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app.set_gain(60.0)
     app.set_motion_scale(0.5)
     app.set_ghost("qp:daqp")
-    ui.scene_path.value = str(tmp_path / "s.json")
+    ui.scene_path.value = "s"
     ui._save_scene()
-    assert "saved" in ui.scene_status.content
+    assert ui.scene_status.content == "saved `s.json`"
+    assert (tmp_path / "scenes" / "s.json").is_file()
     app.set_gain(100.0)
     app.set_motion_scale(1.0)
     app.set_ghost(None)
