@@ -458,7 +458,7 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(app, tmp_pat
     app.set_motion_scale(1.0)
     app.home()
     run(app, 0.1)
-    app.load_scene("a")  # the suffix is optional
+    app.load_scene("a.json")
     assert list(app.entries) == [hole_id, barrier_id]
     assert [e.kind for e in app.entries.values()] == ["hole", "barrier"]
     for entry_id, goal in goals.items():

@@ -187,7 +187,7 @@ def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app.set_gain(60.0)
     app.set_motion_scale(0.5)
     app.set_ghost("qp:daqp")
-    ui.scene_path.value = "s"
+    ui.scene_path.value = "s.json"
     ui._save_scene()
     assert ui.scene_status.content == "saved `s.json`"
     assert (tmp_path / "scenes" / "s.json").is_file()

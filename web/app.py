@@ -853,7 +853,7 @@ class TeleopApp:
         """Write the scene as file ``name`` of the scene folder (default: a new name);
         its path. A name that is not a plain file name of that folder is refused
         (:class:`web.folders.Folder`)."""
-        if name is None or name.strip() == "":
+        if name is None or isinstance(name, str) and not name.strip():
             name = f"scene-{datetime.now():%Y%m%d-%H%M%S}.json"
         return write_scene_file(self.scenes.writable(name), self.scene())
 

@@ -24,8 +24,8 @@ MAX_NAME = 200
 class Folder:
     """The folder ``root`` (created on the first write), holding files of one kind.
 
-    ``what`` names the kind in messages ("scene", "recording"); ``suffix`` is appended to
-    a name that has no suffix (".json" makes "my scene" ``my scene.json``).
+    ``what`` names the kind in messages ("scene", "recording"); every name must end in
+    ``suffix`` (".json"), so nothing else (a script, a dotfile) can be written there.
     """
 
     def __init__(self, root: str | Path, what: str, suffix: str) -> None:
@@ -41,7 +41,7 @@ class Folder:
                           f"the {self.what} folder (no folders, no '..')")
 
     def name_of(self, name: object) -> str:
-        """``name`` checked as a plain file name (its suffix added when it has none)."""
+        """``name`` checked as a plain file name ending in the folder's suffix."""
         if not isinstance(name, str):
             raise self._refused(name, "not a text")
         name = name.strip()
@@ -55,8 +55,9 @@ class Folder:
             raise self._refused(name, "it leads out of the folder")
         if len(name.encode("utf-8")) > MAX_NAME:
             raise self._refused(name[:40] + "...", f"longer than {MAX_NAME} bytes")
-        if not Path(name).suffix:
-            name += self.suffix
+        if not name.endswith(self.suffix) or name == self.suffix or name.startswith("."):
+            raise self._refused(name, f"a {self.what} name ends in {self.suffix} and does not "
+                                      "start with '.'")
         return name
 
     def path(self, name: object) -> Path:
