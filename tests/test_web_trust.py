@@ -54,7 +54,8 @@ def outside_names(tmp_path) -> list[str]:
     (scenes / "leak.json").symlink_to(outside / "secret.json")
     (scenes / "dangling.json").symlink_to(outside / "new.json")
     return ["../x.json", "../outside/secret.json", str(outside / "x.json"), "/etc/passwd",
-            "linked/x.json", "linked", "linked.json", "leak.json", "x.sh", ".json", ".x.json", "dangling.json", "..", ".", "a\\b.json",
+            "linked/x.json", "linked", "linked.json", "leak.json", "x.sh", ".json", ".x.json",
+            "dangling.json", "..", ".", "a\\b.json",
             "C:x.json", "x\0.json", "~/x.json", "", "   ", "a" * 300]
 
 
@@ -282,8 +283,8 @@ def test_a_target_held_where_the_robot_is_lets_it_settle(app):
 def test_behind_is_said_below_95_percent_of_the_rate():
     assert behind_words(1000.0, 1000.0) == "" and behind_words(950.0, 1000.0) == ""
     words = behind_words(949.0, 1000.0)
-    assert "949 Hz achieved of 1000 Hz" in words and "(95 %)" in words
-    assert "84 Hz achieved of 1000 Hz (8 %)" in behind_words(84.0, 1000.0)
+    assert "only 949 of the 1000 Hz asked for" in words and "(95 %)" in words
+    assert "only 84 of the 1000 Hz asked for (8 %)" in behind_words(84.0, 1000.0)
     assert BEHIND_FRACTION == 0.95
 
 
@@ -303,7 +304,7 @@ def test_a_control_thread_that_cannot_keep_its_rate_says_so(app, monkeypatch):
     finally:
         control.stop()
     assert control.achieved_rate < 0.95 * 1000.0
-    assert words.startswith("control loop behind:") and "of 1000 Hz" in words
+    assert words.startswith("control loop behind:") and "of the 1000 Hz" in words
 
 
 def wait_for(predicate, timeout: float):

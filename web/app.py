@@ -1108,7 +1108,7 @@ def behind_words(achieved_rate: float, rate: float) -> str:
     slower than commanded and the measures stretch in time (docs/design.md section 5.3)."""
     if achieved_rate >= BEHIND_FRACTION * rate:
         return ""
-    return (f"control loop behind: {achieved_rate:.0f} Hz achieved of {rate:.0f} Hz "
+    return (f"control loop behind: only {achieved_rate:.0f} of the {rate:.0f} Hz asked for "
             f"({100.0 * achieved_rate / rate:.0f} %); this machine is too busy for this rate")
 
 
