@@ -22,7 +22,7 @@ def as_number(value, name: str, minimum: float | None = None, *, positive: bool 
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (Real, np.number)) \
             or isinstance(value, np.complexfloating):
-        raise ValueError(f"{name} must be a real number, got {_short(value)}")
+        raise ValueError(f"{name} must be a real number, got {short_repr(value)}")
     try:
         number = float(value)
     except OverflowError:  # an int beyond float's range, such as JSON's 10**400
@@ -54,12 +54,12 @@ def as_vector(value, size: int, name: str) -> np.ndarray:
     except (TypeError, ValueError, OverflowError, RecursionError):  # ragged, odd objects
         array = None
     if array is None or array.dtype.kind not in REAL_KINDS:
-        raise ValueError(f"{name} must be an array of {size} real numbers, got {_short(value)}")
+        raise ValueError(f"{name} must be an array of {size} real numbers, got {short_repr(value)}")
     array = np.array(array, dtype=float)
     if array.shape != (size,):
         raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
     if not np.isfinite(array).all():
-        raise ValueError(f"{name} must be finite, got {_short(array.tolist())}")
+        raise ValueError(f"{name} must be finite, got {short_repr(array.tolist())}")
     return array
 
 
@@ -78,7 +78,10 @@ def as_unit_vector(value, name: str, tolerance: float = 1e-6) -> np.ndarray:
     return vector / norm
 
 
-def _short(value, limit: int = 80) -> str:
+def short_repr(value, limit: int = 80) -> str:
     """``repr(value)`` cut to ``limit`` characters, so an error message stays one line."""
-    text = " ".join(repr(value).split())
+    try:
+        text = " ".join(repr(value).split())
+    except (RecursionError, ValueError):  # nested too deeply; an int too long to print
+        return f"a {type(value).__name__} too large to show"
     return text if len(text) <= limit else text[:limit - 3] + "..."
