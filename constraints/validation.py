@@ -7,6 +7,7 @@ validate through these few functions instead of their own copies.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from numbers import Real
 
 import numpy as np
@@ -22,7 +23,7 @@ def as_number(value, name: str, minimum: float | None = None, *, positive: bool 
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (Real, np.number)) \
             or isinstance(value, np.complexfloating):
-        raise ValueError(f"{name} must be a real number, got {short_repr(value)}")
+        raise ValueError(f"{name} must be a number, got {short_repr(value)}")
     try:
         number = float(value)
     except OverflowError:  # an int beyond float's range, such as JSON's 10**400
@@ -54,13 +55,29 @@ def as_vector(value, size: int, name: str) -> np.ndarray:
     except (TypeError, ValueError, OverflowError, RecursionError):  # ragged, odd objects
         array = None
     if array is None or array.dtype.kind not in REAL_KINDS:
-        raise ValueError(f"{name} must be an array of {size} real numbers, got {short_repr(value)}")
+        raise ValueError(f"{name} must be an array of {size} numbers, got {short_repr(value)}")
     array = np.array(array, dtype=float)
     if array.shape != (size,):
         raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
     if not np.isfinite(array).all():
         raise ValueError(f"{name} must be finite, got {short_repr(array.tolist())}")
     return array
+
+
+def as_settings(value, name: str) -> dict:
+    """``value`` as a dict of keyword settings (string keys; values numbers, booleans or
+    strings, numbers finite), else ``ValueError`` naming ``name``. None is no settings."""
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{name} must be a mapping of setting names to values, got "
+                         f"{short_repr(value)}")
+    for key, item in value.items():
+        if not isinstance(key, str) or not key.isidentifier():
+            raise ValueError(f"{name} keys must be setting names, got {short_repr(key)}")
+        if not isinstance(item, (str, bool, np.bool_)):
+            as_number(item, f"{name}[{key!r}]")
+    return dict(value)
 
 
 def as_unit_vector(value, name: str, tolerance: float = 1e-6) -> np.ndarray:

@@ -416,7 +416,8 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
     robot = robot or session_robot(session)
     q0 = np.asarray(session.header["q0"], dtype=float)
     if q0.shape != (robot.model.nq,):
-        raise SessionError(f"{session.path}: q0 has {q0.size} values, the robot has nq = {robot.model.nq}")
+        raise SessionError(f"{session.path}:1: header 'q0' has {q0.size} values, the robot "
+                           f"has nq = {robot.model.nq}")
     starts = home_poses(robot, q0)
     held: dict[str, tuple[np.ndarray, list[pin.SE3]]] = {}  # per EE frame: times, poses
     for frame in robot.ee_frames:
