@@ -28,7 +28,7 @@ from teleop.experiments.compare import compare, run_plan
 from teleop.experiments.imperfect import Imperfections
 from teleop.experiments.scenarios import load_scenario
 from teleop.experiments.sessions import SessionError, load_session, record_plan, session_plan
-from teleop.loop import LoopConfig
+from teleop.loop import LoopConfig, TeleopLoop
 from web.scene import parse_scene, read_scene_file, robot_from_dict
 
 ROBOT = "ur5_instrument"
@@ -119,6 +119,12 @@ API = [
     ("LoopConfig kp None", lambda tmp: LoopConfig(kp=None), r"^kp must be a number, got None"),
     ("LoopConfig smoothing 1e300", lambda tmp: LoopConfig(target_time_constant=1e300),
      r"^target_time_constant must be <= 1"),
+    ("TeleopLoop q0 complex", lambda tmp: TeleopLoop(robot(), CJMController(robot(), []),
+                                                     q0=robot().q_home + 1j),
+     r"^q0 must be an array of 8 numbers"),
+    ("TeleopLoop config 'fast'", lambda tmp: TeleopLoop(robot(), CJMController(robot(), []),
+                                                        config="fast"),
+     r"^config must be a LoopConfig, got str$"),
     ("encoder noise 1e6", lambda tmp: Imperfections(encoder_noise=1e6),
      r"^encoder_noise must be <= 0.1, got 1e\+06"),
     ("latency 1e9 periods", lambda tmp: Imperfections(latency=10**9),

@@ -29,7 +29,7 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.kinematics import frame_placement
-from constraints.validation import as_number
+from constraints.validation import as_number, as_vector
 from teleop.limits import MAX_RATE_HZ, MAX_TIME_CONSTANT_S
 
 #: Columns of the per-step record, in order (see :class:`StepRecord`).
@@ -273,12 +273,14 @@ class TeleopLoop:
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
         self.controller = controller
+        if config is not None and not isinstance(config, LoopConfig):
+            raise ValueError(f"config must be a LoopConfig, got {type(config).__name__}")
         self.config = config or LoopConfig()
         self.plant = plant
         self.ee_frame_ids: tuple[int, ...] = tuple(self.model.getFrameId(name)
                                                    for name in robot.ee_frames)
         self.ee_frame_id = self.ee_frame_ids[0]
-        self.q = np.array(robot.q_home if q0 is None else q0, dtype=float)
+        self.q = as_vector(robot.q_home if q0 is None else q0, self.model.nq, "q0")
         self.t = 0.0
         self._filtered_targets: list[pin.SE3] | None = None
         #: the filtered targets of the last period (their feed-forward), None at the start
