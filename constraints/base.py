@@ -279,20 +279,55 @@ class Constraint(ABC):
         if not isinstance(link, str) or not link:
             raise ValueError(f"link must be a non-empty link name, got {link!r}")
         self.link = link
-        self.gain = as_number(gain, "gain", 0.0)
+        #: the control period (s) a controller last accepted this constraint at
+        #: (:meth:`check_gain`), or None before any did
+        self._checked_period: float | None = None
+        self.gain = gain
 
     #: the largest stable ``K dt`` (exclusive): drift feedback ``e+ = (1 - K dt) e``
     #: converges for ``0 <= K dt < 2`` (docs/design.md section 3)
     max_gain_period: float = 2.0
 
-    def check_gain(self, dt: float) -> None:
-        """Refuse a gain that is unstable at control period ``dt`` (``ValueError``)."""
-        product = self.gain * dt
-        if not product < self.max_gain_period:
-            raise ValueError(
-                f"{type(self).__name__} gain {self.gain:g} 1/s is unstable at {1.0 / dt:g} Hz "
+    @property
+    def gain(self) -> float:
+        """Drift-feedback gain ``K`` (1/s), a finite number >= 0 (0: no drift feedback).
+
+        Setting it goes through the checks of construction: a non-number, a negative or
+        non-finite gain raises ``ValueError`` at once. A gain unstable at the period a
+        controller accepted this constraint at (:meth:`check_gain`) is held, and every
+        read raises that ``ValueError`` until the gain is stable again or a controller at
+        another period accepts it: the next step refuses it instead of diverging
+        (docs/design.md section 3).
+        """
+        if self._unstable_gain is not None:
+            raise ValueError(self._unstable_gain)
+        return self._gain
+
+    @gain.setter
+    def gain(self, value: float) -> None:
+        gain = as_number(value, "gain", 0.0)
+        self._gain = gain
+        period = self._checked_period
+        self._unstable_gain = None if period is None else self._instability(gain, period)
+
+    def _instability(self, gain: float, dt: float) -> str | None:
+        """Why ``gain`` is unstable at control period ``dt``, or None when it is stable."""
+        product = gain * dt
+        if product < self.max_gain_period:
+            return None
+        return (f"{type(self).__name__} gain {gain:g} 1/s is unstable at {1.0 / dt:g} Hz "
                 f"(K dt = {product:g}, needs < {self.max_gain_period:g}): lower the gain "
                 f"below {self.max_gain_period / dt:g} 1/s or raise the rate")
+
+    def check_gain(self, dt: float) -> None:
+        """Refuse a gain that is unstable at control period ``dt`` (``ValueError``);
+        a controller calls it when it takes the constraint, and the gain setter checks
+        against the last ``dt`` accepted here."""
+        problem = self._instability(self._gain, dt)
+        if problem is not None:
+            raise ValueError(problem)
+        self._checked_period = dt
+        self._unstable_gain = None
 
     # -- geometry, in F_a coordinates, given the link's world placement --------------
 
@@ -484,4 +519,4 @@ class Constraint(ABC):
         return state.C @ point_jacobian, state.rhs
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}(link={self.link!r}, gain={self.gain})"
+        return f"{type(self).__name__}(link={self.link!r}, gain={self._gain})"

@@ -302,6 +302,10 @@ def _build_geometry(model: pin.Model, urdf: pathlib.Path, package_dirs: tuple[st
     return models[0], models[1]
 
 
+class RobotNotFound(FileNotFoundError, ValueError):
+    """Neither a built-in robot's name nor the path of a URDF file."""
+
+
 def load_robot(
     name_or_urdf_path: str | os.PathLike,
     ee_frame: str | None = None,
@@ -345,13 +349,27 @@ def load_robot(
 
     Raises
     ------
-    FileNotFoundError : the path does not exist (and is not a built-in name).
+    RobotNotFound : the path does not exist (and is not a built-in name); both a
+        ``FileNotFoundError`` and a ``ValueError``.
     ValueError : unparsable URDF, unknown frame, bad ``link_axis``, ``q_home``,
         ``locked_joints`` or ``locked_configuration``.
 
     If the geometry cannot be loaded (e.g. missing meshes) a warning is emitted and the
     robot gets empty geometry models: the kinematics are all the controllers need.
     """
+    if not isinstance(name_or_urdf_path, (str, os.PathLike)) or not os.fspath(name_or_urdf_path):
+        raise ValueError(f"robot must be a built-in robot name or a URDF path, got "
+                         f"{name_or_urdf_path!r} (built-in robots: {sorted(BUILTIN_ROBOTS)})")
+    for option, value in (("ee_frame", ee_frame), ("constrained_link", constrained_link),
+                          ("root_joint", root_joint)):
+        if value is not None and not isinstance(value, str):
+            raise ValueError(f"{option} must be a name, got {value!r}")
+    for option, value, kinds in (("ee_frames", ee_frames, str),
+                                 ("package_dirs", package_dirs, (str, os.PathLike))):
+        listed = value if isinstance(value, (list, tuple)) else ()
+        if not isinstance(value, (type(None), str, os.PathLike, Iterable)) or not all(
+                isinstance(item, kinds) for item in listed):
+            raise ValueError(f"{option} must be a list of names, got {value!r}")
     key = os.fspath(name_or_urdf_path)
     builtin = isinstance(key, str) and key in BUILTIN_ROBOTS
     if builtin:
@@ -360,7 +378,7 @@ def load_robot(
     else:
         urdf = pathlib.Path(key).expanduser()
         if not urdf.is_file():
-            raise FileNotFoundError(
+            raise RobotNotFound(
                 f"no URDF file at {str(urdf)!r} and not a built-in robot name "
                 f"(built-in robots: {sorted(BUILTIN_ROBOTS)})"
             )
