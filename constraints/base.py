@@ -292,23 +292,22 @@ class Constraint(ABC):
     def gain(self) -> float:
         """Drift-feedback gain ``K`` (1/s), a finite number >= 0 (0: no drift feedback).
 
-        Setting it goes through the checks of construction: a non-number, a negative or
-        non-finite gain raises ``ValueError`` at once. A gain unstable at the period a
-        controller accepted this constraint at (:meth:`check_gain`) is held, and every
-        read raises that ``ValueError`` until the gain is stable again or a controller at
-        another period accepts it: the next step refuses it instead of diverging
-        (docs/design.md section 3).
+        Setting it goes through the checks of construction (a non-number, a negative or
+        non-finite gain) and, once a controller has taken this constraint
+        (:meth:`check_gain`), through that controller's stability test at its period:
+        each raises ``ValueError`` and leaves the gain as it was (docs/design.md
+        section 3.4).
         """
-        if self._unstable_gain is not None:
-            raise ValueError(self._unstable_gain)
         return self._gain
 
     @gain.setter
     def gain(self, value: float) -> None:
         gain = as_number(value, "gain", 0.0)
+        if self._checked_period is not None:
+            problem = self._instability(gain, self._checked_period)
+            if problem is not None:
+                raise ValueError(problem)
         self._gain = gain
-        period = self._checked_period
-        self._unstable_gain = None if period is None else self._instability(gain, period)
 
     def _instability(self, gain: float, dt: float) -> str | None:
         """Why ``gain`` is unstable at control period ``dt``, or None when it is stable."""
@@ -327,7 +326,6 @@ class Constraint(ABC):
         if problem is not None:
             raise ValueError(problem)
         self._checked_period = dt
-        self._unstable_gain = None
 
     # -- geometry, in F_a coordinates, given the link's world placement --------------
 

@@ -768,11 +768,12 @@ class TeleopApp:
             if not 0.0 <= gain * self.config.dt < 2.0:
                 raise ValueError(f"gain must be in [0, {2.0 / self.config.dt:g}) 1/s at this "
                                  f"rate, got {gain:g}")
-            previous, self.gain = self.gain, gain
-            for entry in self.entries.values():
-                entry.constraint.gain = gain
-            try:
-                self._sync_constraints()  # the controllers check the gains and refresh
+            previous = self.gain
+            try:  # each constraint checks the gain at its controllers' period
+                for entry in self.entries.values():
+                    entry.constraint.gain = gain
+                self.gain = gain
+                self._sync_constraints()
             except ValueError:
                 self.gain = previous
                 for entry in self.entries.values():
