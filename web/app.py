@@ -385,7 +385,7 @@ class TeleopApp:
         """``ValueError`` when ``target`` is farther than :data:`MAX_TARGET_DISTANCE` from
         where EE ``ee`` of the main robot is now (caller holds the lock)."""
         ee_now = self.loops["main"].ee_placements()[ee].translation
-        distance = float(np.linalg.norm(target.translation - ee_now))
+        distance = math.hypot(*(target.translation - ee_now))  # no overflow at 1e300
         if not distance <= MAX_TARGET_DISTANCE:
             raise ValueError(f"{what} refused: {distance:.3g} m from the end effector "
                              f"{self.inputs[ee].frame}, more than {MAX_TARGET_DISTANCE:g} m")
@@ -653,7 +653,7 @@ class TeleopApp:
             if entry_id not in self.entries:
                 raise ValueError(f"no constraint {entry_id!r}")
             entry = self.entries[entry_id]
-            distance = float(np.linalg.norm(position - entry.position))
+            distance = math.hypot(*(position - entry.position))
             if distance > MAX_TARGET_DISTANCE:
                 raise ValueError(f"constraint position refused: {distance:.3g} m from where "
                                  f"{entry_id} is, more than {MAX_TARGET_DISTANCE:g} m")
@@ -886,7 +886,7 @@ class TeleopApp:
         data = model.createData()
         for index, (position, _) in enumerate(scene.targets):
             ee = frame_placement(model, scene.q["main"], self.robot.ee_frame_ids[index], data)
-            if not np.linalg.norm(position - ee.translation) <= MAX_TARGET_DISTANCE:
+            if not math.hypot(*(position - ee.translation)) <= MAX_TARGET_DISTANCE:
                 raise ValueError(f"scene target of {self.robot.ee_frames[index]} is more than "
                                  f"{MAX_TARGET_DISTANCE:g} m from its end effector")
         if not 0.0 < scene.motion_scale <= MAX_MOTION_SCALE:
