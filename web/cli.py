@@ -17,7 +17,7 @@ import time
 import warnings
 from typing import Sequence
 
-from teleop.cli.main import HelpFormatter, csv_list, positive
+from teleop.cli.main import ArgumentParser, HelpFormatter, csv_list, positive
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.robots import BUILTIN_ROBOTS
 
@@ -43,8 +43,7 @@ def numbers(text: str) -> list[float]:
 
 
 def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION,
-                                     formatter_class=HelpFormatter)
+    parser = ArgumentParser(prog=prog, description=DESCRIPTION, formatter_class=HelpFormatter)
     robot = parser.add_argument_group("robot")
     robot.add_argument("--robot",
                        help=f"built-in robot ({', '.join(BUILTIN_ROBOTS)}) or the path of a URDF "
