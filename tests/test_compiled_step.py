@@ -268,3 +268,49 @@ def test_known_mismatch_on_conflicting_rows_scaled_to_zero(case):
     constraints = [Constraint.from_dict(entry) for entry in case["constraints"]]
     assert_same_step_of_both_backends(robot, constraints, np.array(case["q"]),
                                       np.array(case["twist"]), case["options"])
+
+
+def test_joints_off_the_path_take_the_posture_in_both_backends_as_in_the_qp():
+    """Issue 18 item 11b: the Panda's fingers (example-robot-data, not locked) move neither
+    the hand nor a constraint on the arm. The QP drives them to the posture; the CJM's
+    analytical form left them still. Both backends now give them
+    ``posture_gain (posture - q)`` (their columns of ``J_e`` and ``A`` are zero, so the
+    null-space posture is exactly that), and the whole command is the QP's (qp:daqp, to
+    its 1e-6 rad/s agreement with the CJM of tests/test_qp_priorities.py), except with a
+    hole on panda_link4: the task over ``N`` is 6 x 7 of rank 5 (the fingers' columns are
+    zero), its sixth singular value 0 brings the CJM's damping in (eq 35) and the arm's
+    command differs from the undamped QP's by about 1e-3 rad/s (with the fingers locked
+    ``J_e N`` is 6 x 5 and undamped): the fingers agree there too."""
+    import importlib.metadata
+    import warnings
+
+    from controllers import QPController
+
+    share = importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # meshes: not needed here
+        panda = load_robot(share / "example-robot-data/robots/panda_description/urdf/panda.urdf",
+                           ee_frame="panda_hand", constrained_link="panda_link7",
+                           package_dirs=[str(share)],
+                           q_home=[0.2, -0.3, 0.1, -2.0, 0.2, 1.8, 0.7, 0.02, 0.02])
+    model = panda.model
+    fingers = [model.idx_vs[model.getJointId(name)]
+               for name in ("panda_finger_joint1", "panda_finger_joint2")]
+    rng = np.random.default_rng(11)
+    q = panda.q_home + np.r_[rng.uniform(-0.1, 0.1, 7), 0.015, -0.01]
+    twist = np.array([0.01, -0.02, 0.015, 0.03, -0.02, 0.01])
+    posture_velocity = panda.q_home - q  # posture_gain 1
+    for links in ([], ["panda_link7"], ["panda_link4"]):  # none, analytical, general form
+        holes = [Hole.on_link(panda, q, distance=0.05, link=link) for link in links]
+        python = CJMController(panda, holes, backend="python")
+        compiled = CJMController(panda, holes, backend="compiled")
+        assert_same_step(python, compiled, q, twist)
+        qd = python.solve(q, twist)
+        # a hole on panda_link7 leaves the hand 4 DoF: least squares, the rows held
+        assert python.info.status in (StepStatus.OK, StepStatus.LEAST_SQUARES), python.info
+        assert python.info.equality_residual <= 1e-9
+        np.testing.assert_allclose(qd[fingers], posture_velocity[fingers], rtol=0, atol=1e-15)
+        qd_qp = QPController(panda, holes, solver="daqp").solve(q, twist)
+        np.testing.assert_allclose(qd_qp[fingers], qd[fingers], rtol=0, atol=1e-6)
+        if links != ["panda_link4"]:  # there the CJM damps J_e N, 6 x 7 of rank 5 (see below)
+            np.testing.assert_allclose(qd_qp, qd, rtol=0, atol=1e-6, err_msg=str(links))
