@@ -125,7 +125,7 @@ def problem(name: str, seed: int, kinds: list[str], placement: str, twist_expone
 
 def compare_backends(robot, constraints, q, twist, options) -> tuple[float, float, list[str]]:
     """The difference of the two commands relative to ``1 + max |qd_python|``, the step's
-    :func:`condition_number`, and what else differs (empty when the steps agree), each
+    :func:`rounding_bound`, and what else differs (empty when the steps agree), each
     command checked finite and in the box."""
     python = CJMController(robot, constraints, backend="python", **options)
     compiled = CJMController(robot, constraints, backend="compiled", **options)
@@ -144,7 +144,7 @@ def compare_backends(robot, constraints, q, twist, options) -> tuple[float, floa
         elif np.any(qd < lower - slack) or np.any(qd > upper + slack):
             differences.append(f"{label} outside the box")
     relative = float(np.max(np.abs(actual - expected))) / (1.0 + float(np.max(np.abs(expected))))
-    return relative, condition_number(python, q), differences
+    return relative, rounding_bound(python, q), differences
 
 
 @st.composite
@@ -161,12 +161,23 @@ def problems(draw):
         form=draw(st.sampled_from(["auto", "auto", "general"])))
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(drawn=problems())
 def test_both_backends_give_the_same_step_at_and_past_the_limits(drawn):
-    relative, kappa, differences = compare_backends(*drawn)
+    relative, bound, differences = compare_backends(*drawn)
     assert not differences, differences
-    assert relative <= AGREEMENT, kappa
+    assert relative <= AGREEMENT
+    assert relative <= bound
+
+
+def rounding_bound(controller: CJMController, q: np.ndarray) -> float:
+    """How far apart, relative to ``1 + max |qd|``, two backward-stable computations of
+    the step ``controller`` just took at ``q`` may be: ``2 m n eps kappa``, the
+    :func:`condition_number` ``kappa`` times a backward-error constant of order ``m n``
+    (``m`` task and constraint rows, ``n`` joints; measured over 10,000 fuzz draws: the
+    two backends at most 82 ``eps kappa`` apart, the smallest ``2 m n`` is 72)."""
+    rows = controller.task_rows + sum(c.dim for c in controller.constraints)
+    return 2.0 * rows * controller.model.nv * np.finfo(float).eps * condition_number(controller, q)
 
 
 def condition_number(controller: CJMController, q: np.ndarray) -> float:
