@@ -372,7 +372,8 @@ class CJMController(Controller):
         return f"{'; '.join(causes)}: task not fully achievable"
 
     def _task_scaled_note(self, joint: int, scale: float) -> str:
-        return f"{self._joint_list([joint])} at a limit: task scaled to {scale:.0%}"
+        limit = f"{self._joint_list([joint])} at a limit" if joint >= 0 else "the joint limits"
+        return f"{limit}: task scaled to {scale:.0%}"
 
     def _joint_list(self, velocity_indices: Iterable[int]) -> str:
         """``joint arm_joint_4`` / ``joints a, b`` for velocity indices (a multi-dof
