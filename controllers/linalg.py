@@ -9,6 +9,10 @@ import numpy as np
 from scipy.linalg import lapack
 
 
+#: Singular values at or below this times ``max(1, sigma_max)`` count as zero.
+RANK_TOLERANCE = 1e-10
+
+
 @dataclass(frozen=True)
 class DampingPolicy:
     """Damped least squares with damping that rises near singularity (paper eq 35).
@@ -51,7 +55,8 @@ class DampedSolution(NamedTuple):
 
 
 def damped_least_squares(
-    matrix: np.ndarray, rhs: np.ndarray, policy: DampingPolicy, rank_tolerance: float = 1e-10
+    matrix: np.ndarray, rhs: np.ndarray, policy: DampingPolicy,
+    rank_tolerance: float = RANK_TOLERANCE
 ) -> DampedSolution:
     """``x = J^T (J J^T + lambda^2 I)^-1 r`` computed through one SVD (paper eq 35).
 
@@ -78,7 +83,8 @@ def damped_least_squares(
                           exact=exact)
 
 
-def nullspace(matrix: np.ndarray, rank_tolerance: float = 1e-10) -> tuple[np.ndarray, np.ndarray, int]:
+def nullspace(matrix: np.ndarray,
+              rank_tolerance: float = RANK_TOLERANCE) -> tuple[np.ndarray, np.ndarray, int]:
     """An orthonormal basis ``N`` of ``null(A)``, the pseudo-inverse ``A^+`` and the rank.
 
     ``N`` has shape ``(n, n - rank)``; ``A^+`` has shape ``(n, m)``.

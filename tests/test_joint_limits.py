@@ -564,3 +564,70 @@ def test_daqp_solves_a_feasible_hole_and_barrier_step():
     qp = QPController(robot, [barrier, hole], solver="daqp")
     qp.solve(q, twist)
     assert qp.info.success, qp.info.message
+
+
+# --------------------------------------------------- what the message says (issue 18, 11)
+
+
+def least_squares_scene_step():
+    """The state of issue 18 item 11 (tests/data/least_squares_scene.json, recorded in the
+    UI): the hole on ``arm_link_5_r``, every joint well inside its limits, a twist the
+    arm cannot give near a singularity of ``J_e N``."""
+    import json
+    from pathlib import Path
+
+    from constraints import Constraint
+
+    scene = json.loads((Path(__file__).parent / "data" / "least_squares_scene.json").read_text())
+    robot = load_robot("sda10f", q_home=scene["robot"]["q_home"])
+    hole = Constraint.from_dict(scene["constraints"][0]["constraint"])
+    q = np.array([-0.764, -0.812, -0.040, 1.486, -1.700, 0.083, -1.000, 0.598])
+    twist = np.array([0.0426, -0.0249, 0.0815, -0.0073, -0.011, 0.0])
+    return robot, hole, q, twist
+
+
+@pytest.mark.parametrize("backend", ["python", "compiled"])
+def test_a_damped_step_says_it_is_near_a_singularity_not_at_a_joint_limit(backend):
+    """The message named a joint limit ("joint - at a limit") with no joint saturated.
+    It must name what limits the step: the damping near a singularity of ``J_e N``, with
+    the sigma_min and lambda computed here from the SVD of ``J_e N`` and eq 35."""
+    robot, hole, q, twist = least_squares_scene_step()
+    controller = CJMController(robot, [hole], backend=backend)
+    qd = controller.solve(q, twist)
+    info = controller.info
+    lower, upper = controller.bounds(q)
+    assert np.all(lower < -1.0) and np.all(upper > 1.0)  # every joint far from its limits
+    data = kinematics(robot, q)
+    rows, _ = hole.rows(robot.model, data)
+    jacobian = pin.getFrameJacobian(robot.model, data, robot.model.getFrameId(robot.ee_frame),
+                                    pin.LOCAL)
+    sigma_min = np.linalg.svd(jacobian @ scipy.linalg.null_space(rows), compute_uv=False)[-1]
+    damping = np.sqrt(controller.policy.lambda_squared(sigma_min))
+    assert sigma_min < controller.policy.threshold  # the premise: damping acts
+    assert info.status is StepStatus.LEAST_SQUARES and info.saturated_joints == ()
+    assert info.sigma_min == pytest.approx(sigma_min, rel=1e-9)
+    assert info.damping == pytest.approx(damping, rel=1e-9)
+    assert info.message == (f"near a singularity (sigma_min {sigma_min:.2g}, damping "
+                            f"{damping:.2g}): task not fully achievable"), info.message
+    assert np.all(np.isfinite(qd)) and np.all(qd >= lower) and np.all(qd <= upper)
+
+
+@pytest.mark.parametrize("backend", ["python", "compiled"])
+def test_a_step_held_by_a_joint_limit_names_the_joint(backend):
+    """A joint at its position limit that the task pushes on: the message names it."""
+    robot = robot_named("sda10f")
+    q = robot.q_home.copy()
+    joint = 1  # arm_joint_1_s
+    q[joint] = robot.model.upperPositionLimit[joint]
+    _, constraints = hole_square_case(q)
+    twist = np.array([0.01, -0.02, 0.015, 0.05, -0.03, 0.02])
+    free = CJMController(robot, constraints, **UNLIMITED).solve(q, twist)
+    controller = CJMController(robot, constraints, backend=backend)
+    controller.solve(q, twist * np.sign(free[joint]))  # towards the limit
+    info = controller.info
+    assert joint in info.saturated_joints
+    names = [robot.model.names[robot.model.joints[j].id] for j in range(1, robot.model.njoints)]
+    saturated = [names[i] for i in info.saturated_joints]
+    assert "arm_joint_1_s" in saturated
+    assert info.message.startswith(f"joint{'s' if len(saturated) > 1 else ''} "
+                                   f"{', '.join(saturated)} at a limit"), info.message

@@ -317,12 +317,13 @@ def qp_sequence(robot, controller_or_none, steps=50, seed=9):
 
 
 def fresh_qpsolvers_solution(robot, controller, q, twist, constraints, solver, **settings):
-    """The same QP, built from scratch with public calls and solved by a fresh qpsolvers call.
+    """The same QP, built from scratch with public calls and solved by a fresh qpsolvers
+    call, and the condition number of its Hessian.
 
     With 8 joints and at least 8 rows (a hole and the task) the lexicographic QP is its
     task stage alone, ``min |J qd - V|^2 / s + |A qd - b|^2`` under the rows and the
     limits (``s = |J|_F^2 / 6``; the second term is constant on the feasible set), whose
-    Hessian is positive definite.
+    Hessian ``H`` is positive definite.
     """
     model = robot.model
     data = kinematics(robot, q)
@@ -336,14 +337,22 @@ def fresh_qpsolvers_solution(robot, controller, q, twist, constraints, solver, *
     assert controller.priorities == "lexicographic"
     assert np.linalg.matrix_rank(np.vstack([A, J])) == model.nv  # no posture stage
     scale = np.sum(J * J) / 6.0
-    return qpsolvers.solve_qp(J.T @ J / scale + A.T @ A, -J.T @ twist / scale - A.T @ b, G, h,
-                              A, b, lb, ub, solver=solver, **settings)
+    hessian = J.T @ J / scale + A.T @ A
+    solution = qpsolvers.solve_qp(hessian, -J.T @ twist / scale - A.T @ b, G, h, A, b, lb, ub,
+                                  solver=solver, **settings)
+    return solution, float(np.linalg.cond(hessian))
+
+
+#: two exact (active-set) solves of one QP differ by about ``eps cond(H) |qd|``: this
+#: factor of it (measured: at most 0.13 on these runs, where ``cond(H)`` is about 1.5e4)
+ROUNDING_OF_THE_QP = 1.0
 
 
 @pytest.mark.parametrize("solver, settings, tolerance", [
     # the fresh reference as tight as the controller, whose eps_abs follows the curvature
     ("proxqp", {"eps_abs": 1e-12, "eps_rel": 0.0}, 1e-8),
-    ("daqp", {"primal_tol": 1e-10}, 1e-12),
+    # daqp is exact up to rounding: the bound comes from the Hessian's conditioning
+    ("daqp", {"primal_tol": 1e-10}, None),
 ])
 def test_persistent_qp_agrees_with_fresh_solves_while_constraints_come_and_go(
         robot, solver, settings, tolerance):
@@ -358,9 +367,12 @@ def test_persistent_qp_agrees_with_fresh_solves_while_constraints_come_and_go(
             qd = controller.solve(q, twist)
             assert controller.info.success, controller.info.message
             assert controller.info.equality_residual <= 1e-9
-            reference = fresh_qpsolvers_solution(robot, controller, q, twist, constraints,
-                                                 solver, **settings)
-            np.testing.assert_allclose(qd, reference, rtol=0.0, atol=tolerance)
+            reference, condition = fresh_qpsolvers_solution(robot, controller, q, twist,
+                                                            constraints, solver, **settings)
+            rounding = (ROUNDING_OF_THE_QP * np.finfo(float).eps * condition
+                        * (1.0 + np.abs(reference).max()))
+            np.testing.assert_allclose(qd, reference, rtol=0.0,
+                                       atol=rounding if tolerance is None else tolerance)
             barrier_held += bool(controller.info.active_barriers)
             q, twist, constraints = run.send(qd)
     except StopIteration:

@@ -45,10 +45,12 @@ PRE_CHAIN_SINGULAR_NOTE = "pre-constraint chain singular: general form used"
 
 @dataclass(frozen=True)
 class ChainSplit:
-    """Velocity indices of the joints before (moving ``F_a``) and after the constraint."""
+    """Velocity indices of the joints before (moving ``F_a``) and after the constraint on
+    the path to the EE, and of the others (``off``: they move neither, e.g. fingers)."""
 
     pre: np.ndarray
     post: np.ndarray
+    off: np.ndarray
 
 
 def chain_split(model: pin.Model, frame_id: int, ee_frame_id: int) -> ChainSplit | None:
@@ -64,7 +66,9 @@ def chain_split(model: pin.Model, frame_id: int, ee_frame_id: int) -> ChainSplit
         return np.array([i for j in joints for i in range(model.idx_vs[j], model.idx_vs[j] + model.nvs[j])],
                         dtype=int)
 
-    return ChainSplit(pre=velocity_indices(pre_joints), post=velocity_indices(post_joints))
+    off_joints = [j for j in range(1, model.njoints) if j not in ee_path]
+    return ChainSplit(pre=velocity_indices(pre_joints), post=velocity_indices(post_joints),
+                      off=velocity_indices(off_joints))
 
 
 # -- the per-step terms, as one flat buffer ------------------------------------------------

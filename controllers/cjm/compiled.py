@@ -274,7 +274,8 @@ class CompiledStep:
             elif event == EVENT["rows_scaled"]:
                 info.report(StepStatus.CONSTRAINT_DEGRADED, rows_scaled_note(a))
             elif event == EVENT["task_missed"]:
-                info.report(StepStatus.LEAST_SQUARES, controller._task_missed_note(saturation_joints))
+                info.report(StepStatus.LEAST_SQUARES,
+                            controller._task_missed_note(saturation_joints, a, b))
             elif event == EVENT["task_scaled"]:
                 info.report(StepStatus.SCALED, controller._task_scaled_note(int(a), b))
             elif event == EVENT["clipped"]:

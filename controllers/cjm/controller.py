@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Iterable, Literal
 
 import numpy as np
@@ -12,7 +13,7 @@ from constraints.validation import as_number, as_vector
 
 from ..base import Controller, Kinematics, StepStatus, as_twist_weight
 from ..joint_limits import DEFAULT_LIMIT_GAIN
-from ..linalg import DampingPolicy
+from ..linalg import RANK_TOLERANCE, DampingPolicy
 from .analytical import (
     ChainSplit,
     SquarePreChain,
@@ -278,7 +279,20 @@ class CJMController(Controller):
                              self._posture_velocity(kinematics.q), self.info)
 
     def _solve_analytical(self, kinematics: Kinematics, twist: np.ndarray, index: int) -> np.ndarray | None:
-        """The analytical form of constraint ``index``, or None where it does not apply."""
+        """The analytical form of constraint ``index``, or None where it does not apply;
+        the joints off the path to the EE (they move neither the task nor the constraint:
+        columns of zeros in ``J_e`` and ``A``) take the posture velocity, as in the
+        general form, where they lie in ``null(A)`` and ``null(J_e N)``."""
+        qd = self._solve_analytical_path(kinematics, twist, index)
+        if qd is not None and self.posture_gain > 0.0:
+            off = self.split(self.constraint_frames[index]).off
+            if off.size:
+                qd[off] = self._posture_velocity(kinematics.q)[off]
+        return qd
+
+    def _solve_analytical_path(self, kinematics: Kinematics, twist: np.ndarray,
+                               index: int) -> np.ndarray | None:
+        """The analytical form over the joints on the path to the EE (zero elsewhere)."""
         frame_id = self.constraint_frames[index]
         if (self.parametrisation == "paper"
                 and not self._paper_form_defined(index, self.data.oMf[frame_id])):
@@ -330,27 +344,42 @@ class CJMController(Controller):
         info.method = "saturated"
         info.scale = result.task_scale
         info.saturated_joints = result.saturated
+        if not math.isnan(result.sigma_min):  # the task's DLS that gave this command
+            info.sigma_min, info.damping = result.sigma_min, result.damping
         info.equality_residual = (float(np.max(np.abs(rows @ result.qd - rows_rhs)))
                                   if rows.shape[0] else 0.0)
         if result.rows_scale < 1.0:
             info.report(StepStatus.CONSTRAINT_DEGRADED, rows_scaled_note(result.rows_scale))
         elif result.task_missed:
-            info.report(StepStatus.LEAST_SQUARES, self._task_missed_note(result.saturated))
+            info.report(StepStatus.LEAST_SQUARES,
+                        self._task_missed_note(result.saturated, result.sigma_min, result.damping))
         elif result.task_scale < 1.0:
             info.report(StepStatus.SCALED,
                         self._task_scaled_note(result.limiting_joint, result.task_scale))
         return result.qd
 
-    def _task_missed_note(self, saturated: Iterable[int]) -> str:
-        return f"{self._joint_list(saturated)} at a limit: task not fully achievable"
+    def _task_missed_note(self, saturated: Iterable[int], sigma_min: float, damping: float) -> str:
+        """What keeps a saturated step from the task: the joints held at a limit, the
+        damping near a singularity (eq 35), else a least-squares task (rank lost)."""
+        saturated = list(saturated)
+        causes = [f"{self._joint_list(saturated)} at a limit"] if saturated else []
+        # below the rank cut sigma_min is rounding: 0 (the two backends round differently)
+        sigma = f"sigma_min {sigma_min if sigma_min > RANK_TOLERANCE else 0.0:.2g}"
+        if damping > 0.0:
+            causes.append(f"near a singularity ({sigma}, damping {damping:.2g})")
+        if not causes:
+            causes.append(f"least squares ({sigma})")
+        return f"{'; '.join(causes)}: task not fully achievable"
 
     def _task_scaled_note(self, joint: int, scale: float) -> str:
-        return f"{self._joint_list([joint])} at a limit: task scaled to {scale:.0%}"
+        limit = f"{self._joint_list([joint])} at a limit" if joint >= 0 else "the joint limits"
+        return f"{limit}: task scaled to {scale:.0%}"
 
     def _joint_list(self, velocity_indices: Iterable[int]) -> str:
-        """``joint arm_joint_4`` / ``joints a, b`` for velocity indices of 1-dof joints."""
-        names = [self._joint_names[i] for i in velocity_indices if 0 <= i < len(self._joint_names)]
-        return f"joint{'s' if len(names) > 1 else ''} {', '.join(names) or '-'}"
+        """``joint arm_joint_4`` / ``joints a, b`` for velocity indices (a multi-dof
+        joint named once)."""
+        names = list(dict.fromkeys(self._joint_names[i] for i in velocity_indices))
+        return f"joint{'s' if len(names) > 1 else ''} {', '.join(names)}"
 
     def _barrier_violation(self, index: int, qd: np.ndarray) -> float:
         rows, rhs = self.constraints[index].rows(self.model, self.data, self.constraint_frames[index])

@@ -50,6 +50,8 @@ class Saturation:
     saturated : velocity indices of the joints held at a bound.
     limiting_joint : the joint whose limit sets ``task_scale`` (-1: none).
     task_missed : ``J_e qd`` differs from ``task_scale V_e`` (a least-squares task).
+    sigma_min, damping : of the DLS of the task over the free joints that gave ``qd``
+        (NaN and 0 when no task was solved: no free direction, or the rows scaled).
     """
 
     qd: np.ndarray
@@ -58,6 +60,8 @@ class Saturation:
     saturated: tuple[int, ...]
     limiting_joint: int
     task_missed: bool
+    sigma_min: float = float("nan")
+    damping: float = 0.0
 
 
 @dataclass
@@ -68,6 +72,8 @@ class _Split:
     direction: np.ndarray
     rows_residual: float
     task_rank: int
+    sigma_min: float = float("nan")
+    damping: float = 0.0
 
 
 def _solve_over_free(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
@@ -83,15 +89,15 @@ def _solve_over_free(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarra
     base = held.copy()
     base[free] = x_0
     direction = np.zeros_like(held)
-    task_rank = 0
+    task_rank, sigma_min, damping = 0, float("nan"), 0.0
     if null_basis.shape[1]:
         cjm = jacobian[:, free] @ null_basis
         task_rhs = np.column_stack([twist, -(jacobian @ base)])
         solution = damped_least_squares(cjm, task_rhs, policy)
         base[free] += null_basis @ solution.x[:, 1]
         direction[free] = null_basis @ solution.x[:, 0]
-        task_rank = solution.rank
-    return _Split(base, direction, rows_residual, task_rank)
+        task_rank, sigma_min, damping = solution.rank, solution.sigma_min, solution.damping
+    return _Split(base, direction, rows_residual, task_rank, sigma_min, damping)
 
 
 def task_scale_limit(base: np.ndarray, direction: np.ndarray, lower: np.ndarray,
@@ -100,16 +106,25 @@ def task_scale_limit(base: np.ndarray, direction: np.ndarray, lower: np.ndarray,
     joints (-inf when no ``s >= 0`` fits), and the joint that limits it (-1 if none).
 
     Flacco et al.'s *getTaskScalingFactor*: per joint the interval of ``s`` that keeps it
-    inside, intersected over the free joints.
+    inside, intersected over the free joints. A joint whose ``base`` is at a bound up to
+    its rounding (:func:`gap_to_bound`) bounds ``s`` at exactly 0, so that among joints
+    at their limits (several at once, at a configuration on the limits) the lowest index
+    is the critical one whatever the last bits of ``base``; a ``direction`` entry within
+    the rounding of the direction (a joint the task does not move) counts as 0. The
+    choice, and so the joints saturated, the barriers that follow and the status, must
+    not depend on rounding (docs/design.md section 9).
     """
     smallest_max, critical, largest_min, needs_more = np.inf, -1, -np.inf, -1
+    noise = float(np.max(np.abs(base), initial=0.0))
+    still = max(1e-12, AT_BOUND * float(np.max(np.abs(direction), initial=0.0)))
     for i in np.flatnonzero(free).tolist():
         a, b = direction[i], base[i]
-        if abs(a) > 1e-12:
-            low, high = (lower[i] - b) / a, (upper[i] - b) / a
+        to_lower, to_upper = gap_to_bound(lower[i], b, noise), gap_to_bound(upper[i], b, noise)
+        if abs(a) > still:
+            low, high = to_lower / a, to_upper / a
             if a < 0.0:
                 low, high = high, low
-        elif lower[i] <= b <= upper[i]:
+        elif to_lower <= 0.0 <= to_upper:
             continue
         else:
             low, high = np.inf, -np.inf  # outside whatever the scale
@@ -117,12 +132,26 @@ def task_scale_limit(base: np.ndarray, direction: np.ndarray, lower: np.ndarray,
             smallest_max, critical = high, i
         if low > largest_min:
             largest_min, needs_more = low, i
-    largest = min(1.0, smallest_max)
+    largest = min(1.0, smallest_max) + 0.0  # + 0.0: no -0 (a joint at its bound: s = 0)
     if largest_min > largest:  # joint needs_more is outside for every s in [0, 1]
         return -np.inf, needs_more
     if largest < 0.0:
         return -np.inf, critical
     return largest, critical
+
+
+#: ``bound - base`` within this of 0, relative to ``1 + |bound| + max |base|``, counts as
+#: 0: the base at the bound up to rounding (a solve's error is about ``eps cond`` of its
+#: largest entry; 1e-10 is the rank cut's ``cond`` of 1e10 times eps, as in
+#: :func:`controllers.linalg.nullspace`); so does an entry of the direction below this
+#: times its largest
+AT_BOUND = 1e-10
+
+
+def gap_to_bound(bound: float, base: float, noise: float) -> float:
+    """``bound - base``, exactly 0 when within the rounding of the base (:data:`AT_BOUND`)."""
+    gap = bound - base
+    return 0.0 if abs(gap) <= AT_BOUND * (1.0 + abs(bound) + noise) else gap
 
 
 def _inside(qd: np.ndarray, box: tuple[np.ndarray, np.ndarray]) -> bool:
@@ -155,7 +184,7 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
             break  # Flacco et al.: keep the best scale found with every task direction
         qd = split.base + split.direction
         if _inside(qd, box):
-            return _result(qd, 1.0, 1.0, free, -1, jacobian, twist)
+            return _result(qd, 1.0, 1.0, free, -1, jacobian, twist, split)
         scale, critical = task_scale_limit(split.base, split.direction, lower, upper, free)
         if critical < 0:
             break
@@ -174,17 +203,19 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
         scale, free, held, critical = scaled
         split = _solve_over_free(rows, rows_rhs, jacobian, twist, free, held, policy)
         return _result(split.base + scale * split.direction, scale, 1.0, free, critical,
-                       jacobian, twist)
+                       jacobian, twist, split)
     return _scale_rows(rows, rows_rhs, lower, upper, jacobian, twist)
 
 
 def _result(qd: np.ndarray, task_scale: float, rows_scale: float, free: np.ndarray,
-            limiting_joint: int, jacobian: np.ndarray, twist: np.ndarray) -> Saturation:
+            limiting_joint: int, jacobian: np.ndarray, twist: np.ndarray,
+            split: _Split | None = None) -> Saturation:
     achieved = jacobian @ qd
     tolerance = TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(twist))))
     missed = float(np.max(np.abs(achieved - task_scale * twist))) > tolerance
     return Saturation(qd, task_scale, rows_scale, tuple(np.flatnonzero(~free).tolist()),
-                      limiting_joint, missed)
+                      limiting_joint, missed,
+                      *((split.sigma_min, split.damping) if split else (float("nan"), 0.0)))
 
 
 def _scale_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray, upper: np.ndarray,

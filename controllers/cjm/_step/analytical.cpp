@@ -18,8 +18,13 @@ constexpr double kLeastSquaresRcond = 1e-10;
 bool Step::analytical(const Inputs& in, Index index, VectorRef qd) {
   const ConstraintPlan& plan = constraints_[index];
   if (!plan.analytical || task_rows_ != 6) return false;
-  return plan.pre.size() == 6 ? square_pre_chain(in, index, qd)
-                              : redundant_pre_chain(in, index, qd);
+  const bool solved = plan.pre.size() == 6 ? square_pre_chain(in, index, qd)
+                                           : redundant_pre_chain(in, index, qd);
+  // the joints off the path to the EE move neither task nor constraint: the posture
+  // (CJMController._solve_analytical)
+  if (solved && in.use_posture)
+    for (Index j : plan.off) qd(j) = in.posture(j);
+  return solved;
 }
 
 bool Step::square_pre_chain(const Inputs& in, Index index, VectorRef qd) {

@@ -11,6 +11,14 @@ constexpr double kRowsTolerance = 1e-9;
 constexpr double kTwistTolerance = 1e-6;
 constexpr double kBarrierTolerance = 1e-12;
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
+//! controllers.cjm.saturation.AT_BOUND
+constexpr double kAtBound = 1e-10;
+
+//! controllers.cjm.saturation.gap_to_bound: ``bound - base``, 0 within its rounding.
+double gap_to_bound(double bound, double base, double noise) {
+  const double gap = bound - base;
+  return std::abs(gap) <= kAtBound * (1.0 + std::abs(bound) + noise) ? 0.0 : gap;
+}
 }  // namespace
 
 void Step::saturate(const Inputs& in, VectorRef qd) {
@@ -36,6 +44,10 @@ void Step::saturate(const Inputs& in, VectorRef qd) {
   qd = sns_qd_;
   method_ = Method::saturated;
   scale_ = sns_task_scale_;
+  if (!std::isnan(sns_sigma_min_)) {  // the task's DLS that gave this command
+    sigma_min_ = sns_sigma_min_;
+    damping_ = sns_damping_;
+  }
   saturated_count_ = 0;
   for (Index j = 0; j < nv_; ++j)
     if (!free_(j)) saturated_(saturated_count_++) = j;
@@ -55,7 +67,7 @@ void Step::saturate(const Inputs& in, VectorRef qd) {
     report(Status::least_squares);
     saturation_joint_count_ = saturated_count_;
     saturation_joints_.head(saturated_count_) = saturated_.head(saturated_count_);
-    event(Event::task_missed);
+    event(Event::task_missed, sns_sigma_min_, sns_damping_);
   } else if (sns_task_scale_ < 1.0) {
     report(Status::scaled);
     event(Event::task_scaled, static_cast<double>(sns_limiting_), sns_task_scale_);
@@ -82,7 +94,7 @@ void Step::saturate_in_null_space(const Inputs& in) {
     if (split.task_rank < reference_rank && have_scaled) break;  // keep the best full-rank scale
     sns_qd_ = base_ + direction_;
     if ((sns_qd_.array() >= box_lower_.array()).all() && (sns_qd_.array() <= box_upper_.array()).all()) {
-      saturation_result(in, 1.0, 1.0, -1);
+      saturation_result(in, 1.0, 1.0, -1, split);
       return;
     }
     Index critical = -1;
@@ -107,9 +119,9 @@ void Step::saturate_in_null_space(const Inputs& in) {
   if (have_scaled) {
     free_ = best_free_;
     held_ = best_held_;
-    solve_over_free(in);
+    const Split best = solve_over_free(in);
     sns_qd_ = base_ + best_scale * direction_;
-    saturation_result(in, best_scale, 1.0, best_critical);
+    saturation_result(in, best_scale, 1.0, best_critical, best);
     return;
   }
   scale_rows(in);
@@ -120,15 +132,23 @@ double Step::task_scale_limit(const ConstVectorRef& base, const ConstVectorRef& 
   double smallest_max = kInfinity, largest_min = -kInfinity;
   Index needs_more = -1;
   critical = -1;
+  double noise = 0.0, largest = 0.0;  // max |base| and max |direction| over the joints
+  for (Index i = 0; i < nv_; ++i) {
+    noise = std::max(noise, std::abs(base(i)));
+    largest = std::max(largest, std::abs(direction(i)));
+  }
+  const double still = std::max(1e-12, kAtBound * largest);  // a direction entry of 0
   for (Index i = 0; i < nv_; ++i) {
     if (!free_(i)) continue;
     const double a = direction(i), b = base(i);
+    const double to_lower = gap_to_bound(lower_(i), b, noise);
+    const double to_upper = gap_to_bound(upper_(i), b, noise);
     double low, high;
-    if (std::abs(a) > 1e-12) {
-      low = (lower_(i) - b) / a;
-      high = (upper_(i) - b) / a;
+    if (std::abs(a) > still) {
+      low = to_lower / a;
+      high = to_upper / a;
       if (a < 0.0) std::swap(low, high);
-    } else if (lower_(i) <= b && b <= upper_(i)) {
+    } else if (to_lower <= 0.0 && 0.0 <= to_upper) {
       continue;
     } else {
       low = kInfinity;  // outside whatever the scale
@@ -143,17 +163,19 @@ double Step::task_scale_limit(const ConstVectorRef& base, const ConstVectorRef& 
       needs_more = i;
     }
   }
-  const double largest = std::min(1.0, smallest_max);
-  if (largest_min > largest) {
+  const double scale = std::min(1.0, smallest_max) + 0.0;  // no -0 (a joint at its bound)
+  if (largest_min > scale) {
     critical = needs_more;
     return -kInfinity;
   }
-  if (largest < 0.0) return -kInfinity;
-  return largest;
+  if (scale < 0.0) return -kInfinity;
+  return scale;
 }
 
 void Step::saturation_result(const Inputs& in, double task_scale, double rows_scale,
-                             Index limiting_joint) {
+                             Index limiting_joint, const Split& split) {
+  sns_sigma_min_ = split.sigma_min;
+  sns_damping_ = split.damping;
   auto achieved = scratch_rows_.head(task_rows_);
   achieved.noalias() = in.ee_jacobian * sns_qd_;
   achieved -= task_scale * in.twist;
@@ -174,7 +196,7 @@ void Step::scale_rows(const Inputs& in) {
   Index critical = -1;
   const double scale = std::max(task_scale_limit(base_, direction_, critical), 0.0);
   sns_qd_ = scale * direction_;
-  saturation_result(in, 0.0, scale, -1);
+  saturation_result(in, 0.0, scale, -1, Split());  // no task solved
 }
 
 }  // namespace cjm

@@ -41,6 +41,14 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
     for (Index j : plan.pre) if (j < 0 || j >= nv) throw std::invalid_argument("pre index out of range");
     for (Index j : plan.post) if (j < 0 || j >= nv) throw std::invalid_argument("post index out of range");
   }
+  for (ConstraintPlan& plan : constraints_) {
+    plan.off.clear();
+    if (!plan.analytical) continue;
+    for (Index j = 0; j < nv; ++j)
+      if (std::find(plan.pre.begin(), plan.pre.end(), j) == plan.pre.end() &&
+          std::find(plan.post.begin(), plan.post.end(), j) == plan.post.end())
+        plan.off.push_back(j);
+  }
   const Index n_constraints = static_cast<Index>(constraints_.size());
   const Index m = std::max<Index>(1, total_rows_);
   if (box_.velocity_lower.size() != nv || box_.velocity_upper.size() != nv ||

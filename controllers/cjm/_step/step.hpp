@@ -31,7 +31,7 @@ enum class Event : int {
   conflict,                // a: rank, b: rows, c: least-squares residual
   no_free_joint,
   rows_scaled,             // a: the rows' scale
-  task_missed,             // the joints: saturation_joints()
+  task_missed,             // a: sigma_min, b: damping; the joints: saturation_joints()
   task_scaled,             // a: limiting joint, b: task scale
   clipped,                 // a: largest change; the joints: saturated_joints()
   residual,                // a: equality residual
@@ -45,6 +45,8 @@ struct ConstraintPlan {
   bool equality = true;
   bool analytical = false;  // the EE downstream of its link, >= 6 joints before it, one EE
   std::vector<Index> pre, post;
+  //! the joints on neither (off the path to the EE): set by Step from pre and post
+  std::vector<Index> off;
 };
 
 //! The joint box of controllers/joint_limits.py (JointBounds.box and BoxTest).
@@ -112,6 +114,7 @@ class Step {
   struct Split {
     double rows_residual = 0.0;
     Index task_rank = 0;
+    double sigma_min = std::numeric_limits<double>::quiet_NaN(), damping = 0.0;  // the task's DLS
   };
 
   // step.cpp: the driver, the barriers' active set, the box and the clip
@@ -149,7 +152,7 @@ class Step {
   double task_scale_limit(const ConstVectorRef& base, const ConstVectorRef& direction,
                           Index& critical) const;
   void saturation_result(const Inputs& in, double task_scale, double rows_scale,
-                         Index limiting_joint);
+                         Index limiting_joint, const Split& split);
   void scale_rows(const Inputs& in);
 
   // problem
@@ -188,6 +191,7 @@ class Step {
   Eigen::Array<bool, Eigen::Dynamic, 1> free_, best_free_;
   Vector held_, best_held_, base_, direction_, sns_qd_;
   double sns_task_scale_ = 1.0, sns_rows_scale_ = 1.0;
+  double sns_sigma_min_ = 0.0, sns_damping_ = 0.0;  // of the task's DLS that gave sns_qd_
   Index sns_limiting_ = -1;
   bool sns_missed_ = false;
   // analytical
