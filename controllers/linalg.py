@@ -20,7 +20,10 @@ class DampingPolicy:
     ``lambda^2 = damping^2 + max_damping^2 (1 - (sigma_min / threshold)^2)`` while the
     smallest singular value ``sigma_min`` is below ``threshold``, else ``damping^2``
     (Nakamura and Hanafusa's variable damping). ``damping = 0`` and a well-conditioned
-    matrix give the exact inverse (paper eq 22).
+    matrix give the exact inverse (paper eq 22). ``sigma_min`` is the smallest value the
+    rank keeps: a direction the matrix does not see at all (joints off the EE's path, a
+    pre-chain's self-motion under a hole) is dropped, not a singularity to damp
+    (docs/design.md section 4.2).
     """
 
     damping: float = 0.0
@@ -68,12 +71,16 @@ def damped_least_squares(
     if info != 0:
         raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK dgesdd info {info})")
     sigma_max, sigma_min = float(s[0]), float(s[-1])
-    lam2 = policy.lambda_squared(sigma_min)
-    if sigma_min > rank_tolerance * max(1.0, sigma_max):
+    tolerance = rank_tolerance * max(1.0, sigma_max)
+    if sigma_min > tolerance:
+        lam2 = policy.lambda_squared(sigma_min)
         gains = s / (s * s + lam2)
         row_space = vt
     else:  # rank deficient: drop the null directions instead of dividing by ~0
-        keep = s > rank_tolerance * max(1.0, sigma_max)
+        keep = s > tolerance
+        rank = int(np.count_nonzero(keep))
+        sigma_min = float(s[rank - 1]) if rank else 0.0  # the smallest value kept
+        lam2 = policy.lambda_squared(sigma_min)
         gains = np.where(keep, s / (s * s + lam2 + ~keep), 0.0)
         row_space = vt[keep]
     projected = u.T @ rhs

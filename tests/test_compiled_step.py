@@ -281,11 +281,10 @@ def test_joints_off_the_path_take_the_posture_in_both_backends_as_in_the_qp():
     analytical form left them still. Both backends now give them
     ``posture_gain (posture - q)`` (their columns of ``J_e`` and ``A`` are zero, so the
     null-space posture is exactly that), and the whole command is the QP's (qp:daqp, to
-    its 1e-6 rad/s agreement with the CJM of tests/test_qp_priorities.py), except with a
-    hole on panda_link4: the task over ``N`` is 6 x 7 of rank 5 (the fingers' columns are
-    zero), its sixth singular value 0 brings the CJM's damping in (eq 35) and the arm's
-    command differs from the undamped QP's by about 1e-3 rad/s (with the fingers locked
-    ``J_e N`` is 6 x 5 and undamped): the fingers agree there too."""
+    its 1e-6 rad/s agreement with the CJM of tests/test_qp_priorities.py). With a hole on
+    panda_link4 the task over ``N`` is 6 x 7 of rank 5 (the fingers' columns are zero): its
+    structural zero is dropped, not damped as a singularity (docs/design.md section 4.2),
+    so the CJM's command is the QP's there too."""
     import importlib.metadata
     import warnings
 
@@ -317,5 +316,5 @@ def test_joints_off_the_path_take_the_posture_in_both_backends_as_in_the_qp():
         np.testing.assert_allclose(qd[fingers], posture_velocity[fingers], rtol=0, atol=1e-15)
         qd_qp = QPController(panda, holes, solver="daqp").solve(q, twist)
         np.testing.assert_allclose(qd_qp[fingers], qd[fingers], rtol=0, atol=1e-6)
-        if links != ["panda_link4"]:  # there the CJM damps J_e N, 6 x 7 of rank 5 (see below)
-            np.testing.assert_allclose(qd_qp, qd, rtol=0, atol=1e-6, err_msg=str(links))
+        assert python.info.damping == 0.0, python.info
+        np.testing.assert_allclose(qd_qp, qd, rtol=0, atol=1e-6, err_msg=str(links))

@@ -145,10 +145,14 @@ def test_plane_on_sda10f_leaves_seven_dof_and_the_wide_cjm_tracks_exactly(sda10f
 
 def damped_least_squares(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """``matrix x`` for the CJM's default damping (paper eq 35: lambda rises to 0.05 as the
-    smallest of the singular values falls below 0.01), written out with an SVD."""
+    smallest singular value falls below 0.01), written out with an SVD. Values at or below
+    1e-10 relative (a structural zero: the Panda's fingers, off the hand's path) are
+    dropped, and the smallest value kept decides the damping (docs/design.md section 4.2)."""
     u, s, vt = np.linalg.svd(matrix, full_matrices=False)
-    lam2 = 0.05**2 * max(0.0, 1.0 - (s[-1] / 0.01) ** 2)
-    return matrix @ (vt.T @ (s / (s * s + lam2) * (u.T @ rhs)))
+    kept = s > 1e-10 * max(1.0, s[0])
+    lam2 = 0.05**2 * max(0.0, 1.0 - (s[kept][-1] / 0.01) ** 2)
+    gains = np.where(kept, s / (s * s + lam2), 0.0)
+    return matrix @ (vt.T @ (gains * (u.T @ rhs)))
 
 
 @pytest.mark.parametrize("name", sorted(EXAMPLE_ARMS))

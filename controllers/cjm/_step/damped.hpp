@@ -43,10 +43,14 @@ class DampedLeastSquares {
     svd_.compute(matrix);
     rows_ = matrix.rows();
     const auto s = svd_.s();
-    sigma_min_ = svd_.min_value();
+    const double tolerance = kRankTolerance * std::max(1.0, svd_.max_value());
+    // sigma_min: the smallest value kept (a direction not seen at all is not damped)
+    sigma_min_ = 0.0;
+    for (Index j = 0; j < s.size(); ++j) {
+      if (s(j) > tolerance) sigma_min_ = sigma_min_ == 0.0 ? s(j) : std::min(sigma_min_, s(j));
+    }
     const double lam2 = policy.lambda_squared(sigma_min_);
     damping_ = std::sqrt(lam2);
-    const double tolerance = kRankTolerance * std::max(1.0, svd_.max_value());
     rank_ = 0;
     for (Index j = 0; j < s.size(); ++j) {
       const bool keep = s(j) > tolerance;
