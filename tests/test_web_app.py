@@ -379,17 +379,22 @@ def test_a_joint_at_its_limit_is_named():
     from web.app import describe_limitation
 
     info = SolveInfo(status=StepStatus.LEAST_SQUARES, saturated_joints=(4,),
-                     message="joint 4 at a limit")
+                     message="joint arm_joint_4_u at a limit; near a singularity (sigma_min "
+                             "0.00074, damping 0.05): task not fully achievable")
     names = ["j0", "j1", "j2", "j3", "arm_joint_4_u"]
     stalled = SimpleNamespace(commanded_linear_velocities=np.array([[0.05, 0.0, 0.0]]),
                               actual_linear_velocities=np.array([[0.004, 0.003, 0.0]]))
     words = describe_limitation(info, stalled, 0.02, names)
     assert words.status == "least_squares"
-    assert words.words == "target out of reach; joint arm_joint_4_u at its limit"
+    # the CJM's message names the joint and the damping: both reach the operator
+    assert words.words == ("target out of reach; closest motion: joint arm_joint_4_u at a "
+                           "limit; near a singularity (sigma_min 0.00074, damping 0.05): task "
+                           "not fully achievable")
+    scaled = SolveInfo(status=StepStatus.SCALED, saturated_joints=(4,), scale=0.5)
     following = SimpleNamespace(commanded_linear_velocities=np.array([[0.05, 0.0, 0.0]]),
                                 actual_linear_velocities=np.array([[0.045, 0.01, 0.0]]))
-    assert describe_limitation(info, following, 0.02, names).words == \
-        "joint arm_joint_4_u at its limit"
+    assert describe_limitation(scaled, following, 0.02, names).words == \
+        "joint arm_joint_4_u at its limit; slowed to 50 % by the joint limits"
     degraded = describe_limitation(SolveInfo(status=StepStatus.CONSTRAINT_DEGRADED,
                                              message="residual 1e-6 m/s"), None, 0.0, names)
     assert degraded.words == "constraint degraded: residual 1e-6 m/s"

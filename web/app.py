@@ -232,13 +232,15 @@ def describe_limitation(info, record: StepRecord | None, distance: float,
     parts = []
     if distance > ON_TARGET and record is not None and _not_following(record, ee):
         parts.append("target out of reach")
-    if info.saturated_joints:
+    if status == "least_squares" and info.message:
+        parts.append(f"closest motion: {info.message}")  # it names the joints and the damping
+    elif info.saturated_joints:
         names = [joint_names[i] for i in info.saturated_joints]
         parts.append(f"joint {', '.join(names)} at {'its limit' if len(names) == 1 else 'their limits'}")
+    elif status == "least_squares":
+        parts.append("closest motion")
     if status == "scaled":
         parts.append(f"slowed to {100 * info.scale:.0f} % by the joint limits")
-    elif status == "least_squares" and not info.saturated_joints:
-        parts.append(f"closest motion: {info.message}" if info.message else "closest motion")
     if not parts:
         parts.append(f"moving to the target ({1e3 * distance:.1f} mm away)"
                      if distance > ON_TARGET else "on target")
