@@ -500,12 +500,13 @@ class QPController(Controller):
         try:
             qd = self._prioritised(kinematics.q, weighted_jacobian, twist, damping.rows,
                                    A, b, barrier_rows, barrier_bound, lower, upper)
-        except BudgetExceeded:
-            raise
-        except SolverError as error:
+        except SolverError as error:  # infeasible, or out of iterations (proxqp's sign of it)
             if A is None and barrier_rows is None:
                 raise
-            held = self._least_residual(A, b, barrier_rows, barrier_bound, lower, upper)
+            try:
+                held = self._least_residual(A, b, barrier_rows, barrier_bound, lower, upper)
+            except SolverError as second:
+                raise error from second
             if held.residual <= EQUALITY_TOLERANCE:
                 raise  # the rows fit the limits: the failure was something else
             self.info.report(StepStatus.CONSTRAINT_DEGRADED, held_note(held.residual))
