@@ -51,8 +51,8 @@ from .joint_limits import DEFAULT_LIMIT_GAIN
 from .least_residual import HeldRows, held_rows, least_residual_problem
 from .linalg import DampingPolicy
 from .qp import (DAQP_PROXIMAL_FLOOR, DAQP_PROXIMAL_WEIGHT, INFINITE_BOUND, PROXQP_RHO,
-                 SOLVER_SETTINGS, TASK_ACCURACY, held_note)
-from .qp_budget import DEFAULT_TIME_BUDGET, ITERATION_CAPS, BudgetExceeded, StepBudget
+                 SOLVER_SETTINGS, TASK_ACCURACY, QuadraticProgram, _ProxQP, held_note)
+from .qp_budget import ITERATION_CAPS, BudgetExceeded, StepBudget, TimeBudget
 from .task_damping import task_damping
 
 #: Solver settings in the units of *velocity* (rad/s, m/s); they are multiplied by ``dt``
@@ -81,11 +81,15 @@ FIXED_SETTINGS: dict[str, dict] = {
     "osqp": {"eps_rel": 0.0, "polishing": True, "max_iter": 20000, "raise_error": False},
 }
 
-#: Iteration caps of mink's solves. proxqp through ``qpsolvers`` takes ``max_iter`` (its
-#: outer iterations) but not ``max_iter_in`` (up to 1500 inner ones each): 10 stopped the
-#: solve under the held rows after a 5.5 cm hole jump, 100 solved it (2.9 ms). daqp and
-#: OSQP also get the step's time left as ``time_limit``.
-MINK_ITERATION_CAPS: dict[str, dict[str, int]] = {**ITERATION_CAPS, "proxqp": {"max_iter": 100}}
+#: Iteration caps of mink's solves: the QP controller's, but proxqp's inner cap. mink's
+#: QP (``mink.build_ik``, in ``dq`` units, the posture's curvature ``c^2`` ~ 1e-10) is
+#: solved by the QP controller's proxsuite objects (``_ProxQP``), which take both
+#: ``max_iter`` and ``max_iter_in`` (``qpsolvers``' proxqp path takes no inner cap). After
+#: the 5.5 cm hole jump on sda10f (tests/test_qp_recovery.py) an inner cap of 50 stopped
+#: 362 of 500 steps, 200 none (at most 133 inner iterations a solve). daqp and OSQP also
+#: get the step's time left as ``time_limit``.
+MINK_ITERATION_CAPS: dict[str, dict[str, int]] = {
+    **ITERATION_CAPS, "proxqp": {"max_iter": 100, "max_iter_in": 200}}
 
 #: Backends whose ``time_limit`` setting takes the step's time left.
 TIME_LIMITED_SOLVERS = frozenset({"daqp", "osqp"})
@@ -738,6 +742,8 @@ class MinkController(Controller):
         defaults built from ``VELOCITY_TOLERANCES`` and ``FIXED_SETTINGS``).
     twist_weight : the diagonal ``W`` of the CJM's and the QP's weighted task: each frame
         task's position and orientation costs are ``W^1/2`` of its EE's entries.
+    time_budget, singular_threshold, max_damping : the step's deadline and the CJM's
+        damping policy, as :class:`controllers.QPController`'s (docs/design.md 10.6, 10.7).
     """
 
     def __init__(
@@ -755,13 +761,13 @@ class MinkController(Controller):
         equality_tolerance: float = 1e-6,
         solver_settings: dict | None = None,
         twist_weight=None,
-        time_budget: float = DEFAULT_TIME_BUDGET,
+        time_budget: TimeBudget = "periods",
         singular_threshold: float = 0.01,
         max_damping: float = 0.05,
         strict: bool = False,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, strict=strict)
-        self.budget = StepBudget(time_budget)
+        self.budget = StepBudget(time_budget, self.dt)
         self.policy = DampingPolicy(0.0, as_number(singular_threshold, "singular_threshold", 0.0),
                                     as_number(max_damping, "max_damping", 0.0))
         self.twist_weight = as_twist_weight(twist_weight, self.task_size)
@@ -787,6 +793,16 @@ class MinkController(Controller):
         #: proxqp's rho follows the posture cost, unless the user set it
         self._proxqp_rho_tuned = (solver == "proxqp" and self.posture_cost > 0.0
                                   and "rho" not in (solver_settings or {}))
+        #: proxqp runs on the QP controller's proxsuite objects, which cap its inner
+        #: iterations too (unless a setting is one they cannot apply: then qpsolvers)
+        self._proxqp = self._least_residual_proxqp = None
+        if solver == "proxqp" and _ProxQP.accepts(self.settings):
+            self._proxqp = _ProxQP(self.settings, frozenset(
+                {"rho"} if self._proxqp_rho_tuned else ()))
+            self._least_residual_proxqp = _ProxQP(
+                {**SOLVER_SETTINGS["proxqp"], **ITERATION_CAPS["proxqp"]},
+                frozenset({"eps_abs", "rho"}))
+        self._posture_curvature = 1.0  # c^2, the curvature the posture task gives mink's QP
 
         # The MuJoCo side, built once, before the constraints that use it.
         model: pin.Model = robot.model
@@ -879,7 +895,8 @@ class MinkController(Controller):
                 float(np.vdot(self.twist_weight, np.square(kinematics.ee_jacobian).sum(axis=1)))
                 / self.task_size)
             self.posture_task.cost[:] = cost  # (set_cost, without its checks)
-            if self._proxqp_rho_tuned:
+            self._posture_curvature = cost**2
+            if self._proxqp_rho_tuned and self._proxqp is None:
                 self.settings["rho"] = PROXQP_RHO * cost**2
         self.budget.start()
         A, b = self._equality_rows()
@@ -950,16 +967,21 @@ class MinkController(Controller):
 
     def _solve_ik(self, tasks: list[mink.Task]) -> np.ndarray:
         """``mink.build_ik`` solved within the step's budget (``solve_ik``'s two lines, so
-        that a budget spent is told from an infeasible problem)."""
+        that a budget spent is told from an infeasible problem). proxqp: by
+        :meth:`_solve_proxqp`."""
         settings = self.settings
+        time_limit = self.budget.time_limit(self.solver)
         if self.solver in TIME_LIMITED_SOLVERS:
-            settings = {**settings, "time_limit": self.budget.remaining(self.solver) * 1.0}
-        else:
-            self.budget.remaining(self.solver)
+            settings = {**settings, **time_limit}
         try:
             problem = mink.build_ik(self.configuration, tasks, self.dt, self.damping,
                                     self._limits, self.constraint_tasks)
+            if self._proxqp is not None:
+                return self._solve_proxqp(problem) / self.dt
             solution = qpsolvers.solve_problem(problem, solver=self.solver, **settings)
+        except SolverError:
+            raise
+
         except Exception as error:  # backend errors
             raise SolverError(f"mink with solver {self.solver!r} raised "
                               f"{type(error).__name__}: {error}") from error
@@ -972,6 +994,17 @@ class MinkController(Controller):
             raise SolverError(f"mink with solver {self.solver!r} found no solution "
                               f"({status or 'infeasible, or out of iterations'})")
         return solution.x / self.dt
+
+    def _solve_proxqp(self, problem: qpsolvers.Problem) -> np.ndarray:
+        """mink's QP ``min 1/2 dq'P dq + q'dq  s.t.  G dq <= h,  A dq = b`` by a fresh
+        capped proxsuite solve (as ``qpsolvers``' proxqp path: no state carried between
+        steps), ``rho`` from the posture's curvature ``c^2`` as before."""
+        P, q, G, h, A, b, lb, ub = problem.unpack()
+        self._proxqp.reset()
+        return self._proxqp.solve(QuadraticProgram(
+            np.asarray(P, dtype=float), q, A, b, G,
+            None if G is None else np.full(G.shape[0], -INFINITE_BOUND), h, lb, ub,
+            curvature=self._posture_curvature), self.budget).x
 
     def _equality_rows(self) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The equality rows ``A qd = b`` at the current configuration (Pinocchio order)."""
@@ -993,11 +1026,18 @@ class MinkController(Controller):
             G = -np.vstack([c.A_pin for c in caches])
             h = -np.concatenate([c.b for c in caches])
         problem = least_residual_problem(A, b, G, h, lower, upper, INFINITE_BOUND)
+        if self._least_residual_proxqp is not None:
+            self._least_residual_proxqp.reset()
+            solution = self._least_residual_proxqp.solve(QuadraticProgram(
+                problem.hessian, problem.gradient, rows=problem.rows,
+                rows_lower=problem.rows_lower, rows_upper=problem.rows_upper,
+                lower=problem.lower, upper=problem.upper, curvature=problem.curvature,
+                semidefinite=problem.semidefinite), self.budget)
+            return held_rows(solution.x, A, b, G, h, lower, upper)
         settings = {**SOLVER_SETTINGS.get(self.solver, {}), **ITERATION_CAPS.get(self.solver, {})}
-        if self.solver == "proxqp":
-            settings.pop("max_iter_in", None)
+        time_limit = self.budget.time_limit(self.solver)
         if self.solver in TIME_LIMITED_SOLVERS:
-            settings["time_limit"] = self.budget.remaining(self.solver)
+            settings.update(time_limit)
         if self.solver == "daqp" and problem.semidefinite:  # as the QP controller's
             settings.update(eps_prox=DAQP_PROXIMAL_WEIGHT, eta_prox=max(
                 TASK_ACCURACY * problem.curvature, DAQP_PROXIMAL_FLOOR))

@@ -34,8 +34,8 @@ from .base import (EQUALITY_TOLERANCE, Controller, Kinematics, SolverError, Step
 from .joint_limits import DEFAULT_LIMIT_GAIN
 from .least_residual import HeldRows, held_rows, least_residual_problem
 from .linalg import DampingPolicy, nullspace
-from .qp_budget import (DAQP_OUT_OF_BUDGET, DEFAULT_TIME_BUDGET, ITERATION_CAPS,
-                        BudgetExceeded, StepBudget)
+from .qp_budget import (DAQP_OUT_OF_BUDGET, ITERATION_CAPS, BudgetExceeded, StepBudget,
+                        TimeBudget)
 from .task_damping import task_damping
 
 Priorities = Literal["lexicographic", "weighted"]
@@ -400,7 +400,12 @@ class QPController(Controller):
     twist_weight : (6,) diagonal weight ``W`` of each EE's twist error, or one weight per
         entry of the stacked twist (default identity).
     solver_settings : extra keyword arguments for the backend (override the defaults,
-        the tolerances set from the curvature included).
+        the tolerances set from the curvature included, and the iteration caps).
+    time_budget : the step's wall-clock deadline (s): ``"periods"`` (default, 10 control
+        periods), a number, or None for the iteration caps alone (simulated time);
+        docs/design.md section 10.6.
+    damping, singular_threshold, max_damping : the CJM's damping policy (paper eq 35),
+        applied to the task stage as rows (docs/design.md section 10.7).
     """
 
     def __init__(
@@ -418,7 +423,7 @@ class QPController(Controller):
         position_limits: bool = True,
         velocity_limits: bool = True,
         solver_settings: dict | None = None,
-        time_budget: float = DEFAULT_TIME_BUDGET,
+        time_budget: TimeBudget = "periods",
         damping: float = 0.0,
         singular_threshold: float = 0.01,
         max_damping: float = 0.05,
@@ -426,7 +431,7 @@ class QPController(Controller):
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
                          velocity_limits=velocity_limits, strict=strict)
-        self.budget = StepBudget(time_budget)
+        self.budget = StepBudget(time_budget, self.dt)
         self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
                                     as_number(singular_threshold, "singular_threshold", 0.0),
                                     as_number(max_damping, "max_damping", 0.0))
@@ -768,7 +773,7 @@ class QPController(Controller):
             else np.vstack([problem.rows, problem.equality_matrix]))
         if rows is None:
             rows = np.zeros((0, variables))
-        settings = {**self.settings, "time_limit": self.budget.remaining("daqp")}
+        settings = {**self.settings, **self.budget.time_limit("daqp")}
         if problem.semidefinite and self._daqp_proximal_keys:
             proximal = {"eps_prox": DAQP_PROXIMAL_WEIGHT,
                         "eta_prox": min(max(TASK_ACCURACY * problem.curvature, DAQP_PROXIMAL_FLOOR),
@@ -807,10 +812,9 @@ class QPController(Controller):
         qp = qpsolvers.Problem(P, problem.gradient, G, h, A, problem.equality_rhs,
                                lb=problem.lower, ub=problem.upper)
         settings = self.settings
+        time_limit = self.budget.time_limit(self.solver)
         if self.solver in TIME_LIMITED_SOLVERS:
-            settings = {**settings, "time_limit": self.budget.remaining(self.solver)}
-        else:
-            self.budget.remaining(self.solver)
+            settings = {**settings, **time_limit}
         try:
             solution = qpsolvers.solve_problem(qp, solver=self.solver, **settings)
         except Exception as error:  # backends raise their own types

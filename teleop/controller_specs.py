@@ -108,10 +108,12 @@ def _solver(family: str, option: str) -> str:
 
 
 def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
-                    dt: float = 1e-3, twist_weight=None) -> Controller:
+                    dt: float = 1e-3, twist_weight=None,
+                    time_budget: float | None | str = "periods") -> Controller:
     """Build a controller from its spec string; unknown specs raise ``ValueError``.
     ``twist_weight`` (the task's diagonal weight, 6 per EE or one per entry) goes to every
-    family alike."""
+    family alike; ``time_budget`` (a step's wall-clock deadline, docs/design.md 10.6) to
+    the optimisers (the CJM has no iterative solve)."""
     family, _, option = str(spec).strip().partition(":")
     if family == "cjm":
         if option not in CJM_VARIANTS:
@@ -124,12 +126,12 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
         from controllers import QPController
 
         return QPController(robot, constraints, solver=_solver(family, option), dt=dt,
-                            twist_weight=twist_weight)
+                            twist_weight=twist_weight, time_budget=time_budget)
     if family == "mink":
         solver = _solver(family, option)  # checked before MuJoCo (heavy) is imported
         from controllers import MinkController
 
         return MinkController(robot, constraints, solver=solver, dt=dt,
-                              twist_weight=twist_weight)
+                              twist_weight=twist_weight, time_budget=time_budget)
     raise ValueError(f"unknown controller {spec!r}: known {', '.join(spec_names())}; in general "
                      f"{CONTROLLER_HELP} ({', '.join(available_solvers())})")
