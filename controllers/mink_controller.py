@@ -81,18 +81,15 @@ FIXED_SETTINGS: dict[str, dict] = {
     "osqp": {"eps_rel": 0.0, "polishing": True, "max_iter": 20000, "raise_error": False},
 }
 
-#: Iteration caps of mink's solves: the QP controller's, but proxqp's inner cap. mink's
-#: QP (``mink.build_ik``, in ``dq`` units, the posture's curvature ``c^2`` ~ 1e-10) is
-#: solved by the QP controller's proxsuite objects (``_ProxQP``), which take both
-#: ``max_iter`` and ``max_iter_in`` (``qpsolvers``' proxqp path takes no inner cap). After
-#: the 5.5 cm hole jump on sda10f (tests/test_qp_recovery.py) an inner cap of 50 stopped
-#: 362 of 500 steps, 200 none (at most 133 inner iterations a solve). daqp and OSQP also
-#: get the step's time left as ``time_limit``.
+#: Iteration caps of mink's solves: the QP controller's, but proxqp's. mink's QP
+#: (``mink.build_ik``, in ``dq`` units, the posture's curvature ``c^2`` ~ 1e-10) is solved
+#: by the QP controller's proxsuite objects (``_ProxQP``), which take both ``max_iter`` and
+#: ``max_iter_in`` (``qpsolvers``' proxqp path takes no inner cap). After the 5.5 cm hole
+#: jump on sda10f (tests/test_qp_recovery.py) 100 x 50 stopped 362 of 500 steps; 25 x 100
+#: none (at most 22 outer, 423 inner iterations a solve), at most 2500 inner iterations
+#: (about 60 ms on the 19-DoF sda10f_dual_mobile, docs/design.md 10.6).
 MINK_ITERATION_CAPS: dict[str, dict[str, int]] = {
-    **ITERATION_CAPS, "proxqp": {"max_iter": 100, "max_iter_in": 200}}
-
-#: Backends whose ``time_limit`` setting takes the step's time left.
-TIME_LIMITED_SOLVERS = frozenset({"daqp", "osqp"})
+    **ITERATION_CAPS, "proxqp": {"max_iter": 25, "max_iter_in": 100}}
 
 #: Cost of the posture task relative to the task's scale (``MinkController.posture_cost``:
 #: mink's cost is ``c = posture_cost * sqrt(s)``). The posture bends the twist by about
@@ -790,6 +787,9 @@ class MinkController(Controller):
         self.settings.update(FIXED_SETTINGS.get(solver, {}))
         self.settings.update(MINK_ITERATION_CAPS.get(solver, {}))
         self.settings.update(solver_settings or {})
+        #: iteration caps the user set: the least-residual solve takes them too
+        self._user_caps = {k: v for k, v in (solver_settings or {}).items()
+                           if k in ITERATION_CAPS.get(solver, {})}
         #: proxqp's rho follows the posture cost, unless the user set it
         self._proxqp_rho_tuned = (solver == "proxqp" and self.posture_cost > 0.0
                                   and "rho" not in (solver_settings or {}))
@@ -800,7 +800,7 @@ class MinkController(Controller):
             self._proxqp = _ProxQP(self.settings, frozenset(
                 {"rho"} if self._proxqp_rho_tuned else ()))
             self._least_residual_proxqp = _ProxQP(
-                {**SOLVER_SETTINGS["proxqp"], **ITERATION_CAPS["proxqp"]},
+                {**SOLVER_SETTINGS["proxqp"], **ITERATION_CAPS["proxqp"], **self._user_caps},
                 frozenset({"eps_abs", "rho"}))
         self._posture_curvature = 1.0  # c^2, the curvature the posture task gives mink's QP
 
@@ -970,9 +970,7 @@ class MinkController(Controller):
         that a budget spent is told from an infeasible problem). proxqp: by
         :meth:`_solve_proxqp`."""
         settings = self.settings
-        time_limit = self.budget.time_limit(self.solver)
-        if self.solver in TIME_LIMITED_SOLVERS:
-            settings = {**settings, **time_limit}
+        self.budget.remaining(self.solver)
         try:
             problem = mink.build_ik(self.configuration, tasks, self.dt, self.damping,
                                     self._limits, self.constraint_tasks)
@@ -990,7 +988,6 @@ class MinkController(Controller):
             if ("time limit" in status or "maximum iterations" in status
                     or "MAX_ITER" in status):
                 raise self.budget.exceeded(f"mink:{self.solver}", status)
-            self.budget.remaining(f"mink:{self.solver}")  # a daqp stopped by its time limit
             raise SolverError(f"mink with solver {self.solver!r} found no solution "
                               f"({status or 'infeasible, or out of iterations'})")
         return solution.x / self.dt
@@ -1001,10 +998,13 @@ class MinkController(Controller):
         steps), ``rho`` from the posture's curvature ``c^2`` as before."""
         P, q, G, h, A, b, lb, ub = problem.unpack()
         self._proxqp.reset()
-        return self._proxqp.solve(QuadraticProgram(
-            np.asarray(P, dtype=float), q, A, b, G,
-            None if G is None else np.full(G.shape[0], -INFINITE_BOUND), h, lb, ub,
-            curvature=self._posture_curvature), self.budget).x
+        try:
+            return self._proxqp.solve(QuadraticProgram(
+                np.asarray(P, dtype=float), q, A, b, G,
+                None if G is None else np.full(G.shape[0], -INFINITE_BOUND), h, lb, ub,
+                curvature=self._posture_curvature), self.budget).x
+        except SolverError as error:  # the same type, naming mink
+            raise type(error)(f"mink:{error}") from error
 
     def _equality_rows(self) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The equality rows ``A qd = b`` at the current configuration (Pinocchio order)."""
@@ -1034,10 +1034,9 @@ class MinkController(Controller):
                 lower=problem.lower, upper=problem.upper, curvature=problem.curvature,
                 semidefinite=problem.semidefinite), self.budget)
             return held_rows(solution.x, A, b, G, h, lower, upper)
-        settings = {**SOLVER_SETTINGS.get(self.solver, {}), **ITERATION_CAPS.get(self.solver, {})}
-        time_limit = self.budget.time_limit(self.solver)
-        if self.solver in TIME_LIMITED_SOLVERS:
-            settings.update(time_limit)
+        settings = {**SOLVER_SETTINGS.get(self.solver, {}), **ITERATION_CAPS.get(self.solver, {}),
+                    **self._user_caps}
+        self.budget.remaining(self.solver)
         if self.solver == "daqp" and problem.semidefinite:  # as the QP controller's
             settings.update(eps_prox=DAQP_PROXIMAL_WEIGHT, eta_prox=max(
                 TASK_ACCURACY * problem.curvature, DAQP_PROXIMAL_FLOOR))

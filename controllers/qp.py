@@ -122,9 +122,6 @@ GRAM_CERTIFICATE = 1e-12
 #: implicit equality: unbounded multipliers, on which proxqp stopped at a wrong point).
 ACTIVE_MULTIPLIER = 1e-9
 
-#: Backends (through qpsolvers) whose ``time_limit`` setting takes the step's time left.
-TIME_LIMITED_SOLVERS = frozenset({"osqp"})
-
 #: What stands for an infinite bound in the backends' constraints.
 INFINITE_BOUND = 1e20
 
@@ -401,7 +398,7 @@ class QPController(Controller):
         entry of the stacked twist (default identity).
     solver_settings : extra keyword arguments for the backend (override the defaults,
         the tolerances set from the curvature included, and the iteration caps).
-    time_budget : the step's wall-clock deadline (s): ``"periods"`` (default, 10 control
+    time_budget : the step's deadline in CPU seconds: ``"periods"`` (default, 10 control
         periods), a number, or None for the iteration caps alone (simulated time);
         docs/design.md section 10.6.
     damping, singular_threshold, max_damping : the CJM's damping policy (paper eq 35),
@@ -773,7 +770,8 @@ class QPController(Controller):
             else np.vstack([problem.rows, problem.equality_matrix]))
         if rows is None:
             rows = np.zeros((0, variables))
-        settings = {**self.settings, **self.budget.time_limit("daqp")}
+        self.budget.remaining("daqp")
+        settings = self.settings
         if problem.semidefinite and self._daqp_proximal_keys:
             proximal = {"eps_prox": DAQP_PROXIMAL_WEIGHT,
                         "eta_prox": min(max(TASK_ACCURACY * problem.curvature, DAQP_PROXIMAL_FLOOR),
@@ -812,9 +810,7 @@ class QPController(Controller):
         qp = qpsolvers.Problem(P, problem.gradient, G, h, A, problem.equality_rhs,
                                lb=problem.lower, ub=problem.upper)
         settings = self.settings
-        time_limit = self.budget.time_limit(self.solver)
-        if self.solver in TIME_LIMITED_SOLVERS:
-            settings = {**settings, **time_limit}
+        self.budget.remaining(self.solver)
         try:
             solution = qpsolvers.solve_problem(qp, solver=self.solver, **settings)
         except Exception as error:  # backends raise their own types

@@ -2,14 +2,13 @@
 (docs/design.md section 10.6).
 
 Every solver call of a step is capped in iterations (:data:`ITERATION_CAPS`, always on:
-deterministic, so a step's result never depends on the machine's load). A controller on a
-robot also gets a wall-clock deadline, by default :data:`DEADLINE_PERIODS` control periods
-after the step starts: daqp and OSQP take the time left as their ``time_limit``; proxqp
-has none, so the deadline is checked before each of its calls. ``time_budget=None`` keeps
-the iteration caps only (the simulated-time experiments: a loaded machine must not turn
-their steps into failures). A solve that runs out raises :class:`BudgetExceeded`, a
-:class:`SolverError`: the step is ``failed`` with the reason and the command is zero (the
-loop holds).
+deterministic, so a step's result never depends on the machine's load). A controller also
+gets a deadline, by default :data:`DEADLINE_PERIODS` control periods of the step's own CPU
+time (the calling thread's: what the step computes, not how long the machine made it
+wait), checked before each solve; within a solve the caps bound it. ``time_budget=None``
+keeps the caps only (the simulated-time experiments). A solve that runs out raises
+:class:`BudgetExceeded`, a :class:`SolverError`: the step is ``failed`` with the reason and
+the command is zero (the loop holds).
 """
 
 from __future__ import annotations
@@ -21,7 +20,8 @@ from constraints.validation import as_number
 
 from .base import SolverError
 
-#: The default deadline (``time_budget="periods"``), in control periods: 10 ms at 1 kHz.
+#: The default deadline (``time_budget="periods"``), in control periods of CPU time: 10 ms
+#: at 1 kHz.
 DEADLINE_PERIODS = 10
 
 #: Iteration caps per backend, each solve. proxqp's inner iterations are at most
@@ -33,8 +33,8 @@ ITERATION_CAPS: dict[str, dict[str, int]] = {
     "osqp": {"max_iter": 100000},
 }
 
-#: daqp exit flags that mean the budget ran out (iterations, time).
-DAQP_OUT_OF_BUDGET = {-4: "iteration limit", -7: "time limit"}
+#: daqp exit flags that mean the budget ran out.
+DAQP_OUT_OF_BUDGET = {-4: "iteration limit"}
 
 TimeBudget = float | None | Literal["periods"]
 
@@ -44,8 +44,8 @@ class BudgetExceeded(SolverError):
 
 
 class StepBudget:
-    """The deadline of one step: :meth:`start` it, then ask :meth:`remaining` (or
-    :meth:`time_limit`) before each solve.
+    """The deadline of one step: :meth:`start` it, then ask :meth:`remaining` before each
+    solve.
 
     ``time_budget``: seconds, ``"periods"`` (:data:`DEADLINE_PERIODS` times ``dt``) or
     None (no deadline: the iteration caps alone bound the step).
@@ -60,26 +60,20 @@ class StepBudget:
 
     def start(self) -> None:
         self._deadline = (float("inf") if self.time_budget is None
-                          else time.perf_counter() + self.time_budget)
+                          else time.thread_time() + self.time_budget)
 
     def remaining(self, solver: str) -> float:
-        """Seconds left (> 0; infinite without a deadline), else :class:`BudgetExceeded`
-        naming ``solver``."""
-        left = self._deadline - time.perf_counter()
+        """CPU seconds left (> 0; infinite without a deadline), else
+        :class:`BudgetExceeded` naming ``solver``."""
+        left = self._deadline - time.thread_time()
         if left <= 0.0:
             raise BudgetExceeded(f"{solver}: the step's time budget "
-                                 f"({self.time_budget * 1e3:.3g} ms) is spent")
+                                 f"({self.time_budget * 1e3:.3g} ms of CPU) is spent")
         return left
-
-    def time_limit(self, solver: str) -> dict[str, float]:
-        """``{"time_limit": seconds left}`` for a backend that takes one (empty without a
-        deadline); :class:`BudgetExceeded` if none is left."""
-        left = self.remaining(solver)
-        return {} if self.time_budget is None else {"time_limit": left}
 
     def exceeded(self, solver: str, what: str) -> BudgetExceeded:
         """The error of a solve of ``solver`` stopped by ``what`` (a limit's name)."""
         budget = ("iteration caps only" if self.time_budget is None
-                  else f"step budget {self.time_budget * 1e3:.3g} ms")
+                  else f"step budget {self.time_budget * 1e3:.3g} ms of CPU")
         return BudgetExceeded(f"{solver} stopped at its {what} ({budget}): no solution "
                               "within it")
