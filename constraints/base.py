@@ -279,20 +279,53 @@ class Constraint(ABC):
         if not isinstance(link, str) or not link:
             raise ValueError(f"link must be a non-empty link name, got {link!r}")
         self.link = link
-        self.gain = as_number(gain, "gain", 0.0)
+        #: the control period (s) a controller last accepted this constraint at
+        #: (:meth:`check_gain`), or None before any did
+        self._checked_period: float | None = None
+        self.gain = gain
 
     #: the largest stable ``K dt`` (exclusive): drift feedback ``e+ = (1 - K dt) e``
     #: converges for ``0 <= K dt < 2`` (docs/design.md section 3)
     max_gain_period: float = 2.0
 
-    def check_gain(self, dt: float) -> None:
-        """Refuse a gain that is unstable at control period ``dt`` (``ValueError``)."""
-        product = self.gain * dt
-        if not product < self.max_gain_period:
-            raise ValueError(
-                f"{type(self).__name__} gain {self.gain:g} 1/s is unstable at {1.0 / dt:g} Hz "
+    @property
+    def gain(self) -> float:
+        """Drift-feedback gain ``K`` (1/s), a finite number >= 0 (0: no drift feedback).
+
+        Setting it goes through the checks of construction (a non-number, a negative or
+        non-finite gain) and, once a controller has taken this constraint
+        (:meth:`check_gain`), through that controller's stability test at its period:
+        each raises ``ValueError`` and leaves the gain as it was (docs/design.md
+        section 3.4).
+        """
+        return self._gain
+
+    @gain.setter
+    def gain(self, value: float) -> None:
+        gain = as_number(value, "gain", 0.0)
+        if self._checked_period is not None:
+            problem = self._instability(gain, self._checked_period)
+            if problem is not None:
+                raise ValueError(problem)
+        self._gain = gain
+
+    def _instability(self, gain: float, dt: float) -> str | None:
+        """Why ``gain`` is unstable at control period ``dt``, or None when it is stable."""
+        product = gain * dt
+        if product < self.max_gain_period:
+            return None
+        return (f"{type(self).__name__} gain {gain:g} 1/s is unstable at {1.0 / dt:g} Hz "
                 f"(K dt = {product:g}, needs < {self.max_gain_period:g}): lower the gain "
                 f"below {self.max_gain_period / dt:g} 1/s or raise the rate")
+
+    def check_gain(self, dt: float) -> None:
+        """Refuse a gain that is unstable at control period ``dt`` (``ValueError``);
+        a controller calls it when it takes the constraint, and the gain setter checks
+        against the last ``dt`` accepted here."""
+        problem = self._instability(self._gain, dt)
+        if problem is not None:
+            raise ValueError(problem)
+        self._checked_period = dt
 
     # -- geometry, in F_a coordinates, given the link's world placement --------------
 
@@ -484,4 +517,4 @@ class Constraint(ABC):
         return state.C @ point_jacobian, state.rhs
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}(link={self.link!r}, gain={self.gain})"
+        return f"{type(self).__name__}(link={self.link!r}, gain={self._gain})"

@@ -36,6 +36,10 @@ def clipped_note(joints: list[int], change: float) -> str:
             "constraints not held exactly")
 
 
+#: numpy's float64 dtype (one object: the inputs' fast path tests it by identity; a
+#: float64 of the other byte order takes the slow path, which converts it)
+FLOAT64 = np.dtype(np.float64)
+
 #: The message of a step whose command came out non-finite (the command is zero).
 NON_FINITE_NOTE = "non-finite joint velocity computed"
 
@@ -294,11 +298,15 @@ class Controller(ABC):
         return qd
 
     def _checked_inputs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``q`` and ``twist`` as float arrays of the right sizes, else ``ValueError``."""
-        q = np.asarray(q, dtype=float)
-        twist = np.asarray(twist, dtype=float)
-        # one cheap test for the common case; as_vector says what is wrong otherwise
-        if (q.shape != (self.model.nq,) or twist.shape != (self.task_size,)
+        """``q`` and ``twist`` as finite real float arrays of the right sizes, else
+        ``ValueError`` (a complex twist is refused, not cast: its imaginary part would be
+        dropped)."""
+        q = np.asarray(q)
+        twist = np.asarray(twist)
+        # one cheap test for the common case (float64 arrays of the right sizes, finite);
+        # as_vector converts integers and says what is wrong otherwise
+        if (q.dtype is not FLOAT64 or twist.dtype is not FLOAT64
+                or q.shape != (self.model.nq,) or twist.shape != (self.task_size,)
                 or not math.isfinite(sum(q.tolist()) + sum(twist.tolist()))):
             q = as_vector(q, self.model.nq, "q")
             twist = as_vector(twist, self.task_size, "twist")

@@ -51,7 +51,7 @@ from .joint_limits import DEFAULT_LIMIT_GAIN
 from .least_residual import HeldRows, held_rows, least_residual_problem
 from .linalg import DampingPolicy
 from .qp import (DAQP_PROXIMAL_FLOOR, DAQP_PROXIMAL_WEIGHT, INFINITE_BOUND, PROXQP_RHO,
-                 SOLVER_SETTINGS, TASK_ACCURACY, QuadraticProgram, _ProxQP, held_note)
+                 SOLVER_SETTINGS, TASK_ACCURACY, ProxQPSolver, QuadraticProgram, held_note)
 from .qp_budget import ITERATION_CAPS, BudgetExceeded, StepBudget, TimeBudget
 from .task_damping import task_damping
 
@@ -83,11 +83,11 @@ FIXED_SETTINGS: dict[str, dict] = {
 
 #: Iteration caps of mink's solves: the QP controller's, but proxqp's. mink's QP
 #: (``mink.build_ik``, in ``dq`` units, the posture's curvature ``c^2`` ~ 1e-10) is solved
-#: by the QP controller's proxsuite objects (``_ProxQP``), which take both ``max_iter`` and
-#: ``max_iter_in`` (``qpsolvers``' proxqp path takes no inner cap). After the 5.5 cm hole
-#: jump on sda10f (tests/test_qp_recovery.py) 100 x 50 stopped 362 of 500 steps; 25 x 100
-#: none (at most 22 outer, 423 inner iterations a solve), at most 2500 inner iterations
-#: (about 60 ms on the 19-DoF sda10f_dual_mobile, docs/design.md 10.6).
+#: by the QP controller's proxsuite objects (``ProxQPSolver``), which take both
+#: ``max_iter`` and ``max_iter_in`` (``qpsolvers``' proxqp path takes no inner cap). After
+#: the 5.5 cm hole jump on sda10f (tests/test_qp_recovery.py) 100 x 50 stopped 362 of 500
+#: steps; 25 x 100 none (at most 22 outer, 423 inner iterations a solve). The worst step
+#: it allows is measured in docs/design.md section 10.6.
 MINK_ITERATION_CAPS: dict[str, dict[str, int]] = {
     **ITERATION_CAPS, "proxqp": {"max_iter": 25, "max_iter_in": 100}}
 
@@ -796,10 +796,10 @@ class MinkController(Controller):
         #: proxqp runs on the QP controller's proxsuite objects, which cap its inner
         #: iterations too (unless a setting is one they cannot apply: then qpsolvers)
         self._proxqp = self._least_residual_proxqp = None
-        if solver == "proxqp" and _ProxQP.accepts(self.settings):
-            self._proxqp = _ProxQP(self.settings, frozenset(
+        if solver == "proxqp" and ProxQPSolver.accepts(self.settings):
+            self._proxqp = ProxQPSolver(self.settings, frozenset(
                 {"rho"} if self._proxqp_rho_tuned else ()))
-            self._least_residual_proxqp = _ProxQP(
+            self._least_residual_proxqp = ProxQPSolver(
                 {**SOLVER_SETTINGS["proxqp"], **ITERATION_CAPS["proxqp"], **self._user_caps},
                 frozenset({"eps_abs", "rho"}))
         self._posture_curvature = 1.0  # c^2, the curvature the posture task gives mink's QP

@@ -241,7 +241,7 @@ def _daqp_accepts(settings: dict) -> bool:
     return all(k in daqp.Model().settings for k in settings)
 
 
-class _ProxQP:
+class ProxQPSolver:
     """Persistent ``proxsuite.proxqp.dense.QP`` objects: ``init`` once per problem shape,
     ``update`` + ``solve`` after.
 
@@ -384,8 +384,8 @@ class QPController(Controller):
         :class:`controllers.base.Controller`.
     solver : a ``qpsolvers`` backend: ``"proxqp"`` (default), ``"daqp"``, ``"osqp"``, ...
         proxqp runs as persistent ``proxsuite`` dense QPs (``init`` once per stage, then
-        ``update`` + ``solve``; see ``_ProxQP``), daqp through ``daqp.solve`` directly, the
-        others through ``qpsolvers``. ``solver_settings`` the direct calls cannot apply
+        ``update`` + ``solve``; see :class:`ProxQPSolver`), daqp through ``daqp.solve``
+        directly, the others through ``qpsolvers``. ``solver_settings`` the direct calls cannot apply
         (a key that is no proxqp/daqp setting) send proxqp/daqp through ``qpsolvers`` too.
     priorities : ``"lexicographic"`` (default) or ``"weighted"``.
     posture : configuration the redundancy is spent on (default ``robot.q_home``), as
@@ -461,8 +461,9 @@ class QPController(Controller):
         # proxqp and daqp are called directly (persistent proxqp objects; daqp.solve),
         # the other backends through qpsolvers. Settings a direct call cannot apply
         # send proxqp and daqp back through qpsolvers as well.
-        self._proxqp = (_ProxQP(self.settings, frozenset({"eps_abs", "rho"} - set(user_settings)))
-                        if solver == "proxqp" and _ProxQP.accepts(self.settings) else None)
+        self._proxqp = (ProxQPSolver(self.settings,
+                                     frozenset({"eps_abs", "rho"} - set(user_settings)))
+                        if solver == "proxqp" and ProxQPSolver.accepts(self.settings) else None)
         self._direct_daqp = solver == "daqp" and _daqp_accepts(self.settings)
         if self._direct_daqp:
             import daqp  # noqa: PLC0415 - only when daqp is the backend

@@ -1,7 +1,10 @@
 """Any URDF: a trocar on the Panda's forearm, from example-robot-data.
 
 ``load_robot`` takes a URDF path plus what the controllers need: the EE frame, the
-constrained link and that link's long axis (link coordinates). Here the hole sits 15 cm
+constrained link and that link's long axis (link coordinates). Without a ``q_home`` it
+picks a home inside the joint limits (every joint at least 10 % of its range from each
+bound) and away from singularities for a hole on that link (docs/design.md section 6.1).
+Here the hole sits 15 cm
 along the Panda's forearm (``panda_link4``, from joint 4 towards joint 5). Only 4 joints
 lie before that link, so the CJM uses its general null-space form. The hole leaves the
 hand 5 DoF, so a 6D twist is met in the least-squares sense: the default CJM treats the
@@ -29,10 +32,12 @@ share = importlib.metadata.distribution("example-robot-data").locate_file("cmeel
 urdf = share / "example-robot-data/robots/panda_description/urdf/panda.urdf"
 forearm = np.array([-0.0825, 0.384, 0.0])  # joint 4 -> joint 5, in panda_link4 coordinates
 robot = load_robot(urdf, ee_frame="panda_hand", constrained_link="panda_link4",
-                   link_axis=forearm / np.linalg.norm(forearm), package_dirs=[str(share)],
-                   q_home=[0.2, -0.3, 0.1, -2.0, 0.2, 1.8, 0.7, 0.02, 0.02])
+                   link_axis=forearm / np.linalg.norm(forearm), package_dirs=[str(share)])
 print(f"loaded {urdf.name}: {robot.name}, nq={robot.model.nq}, nv={robot.model.nv}, "
       f"EE {robot.ee_frame}, constrained link {robot.constrained_link}")
+lower, upper = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+margin = np.min(np.minimum(robot.q_home - lower, upper - robot.q_home) / (upper - lower))
+print(f"home {robot.q_home}: every joint {100 * margin:.0f} % of its range or more from a bound")
 
 q = robot.q_home.copy()
 hole = Hole.on_link(robot, q, distance=0.15)

@@ -18,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    WAIT,
     VIEWPORT,
     distinct_colours,
     drag,
@@ -72,7 +73,7 @@ def drag_gizmo(web, ee: int, distance: float, steps: int):
     targets0, ees0, t0 = app.targets, ee_positions(app), app.now
     drag(web, plan)
     wait_until(lambda: np.linalg.norm(app.targets[ee].translation
-                                      - targets0[ee].translation) > 0.5 * distance, 10.0,
+                                      - targets0[ee].translation) > 0.5 * distance, WAIT,
                f"EE {ee}'s target to follow the drag (did the mouse grab its gizmo?)")
     time.sleep(1.5)  # the robot converges (or settles where the holes let it)
     moved = app.targets[ee].translation - targets0[ee].translation
@@ -89,7 +90,7 @@ def test_dragging_each_gizmo_moves_its_own_ee(web):
         targets0, ees0, ees1, moved, _ = drag_gizmo(web, ee, distance=0.02, steps=20)
         assert app.targets[other].isApprox(targets0[other], 1e-12), "the other target moved"
         wait_until(lambda: np.linalg.norm(ee_positions(app)[ee] - app.targets[ee].translation)
-                   < 1e-4, 5.0, f"EE {ee} to reach its dragged target")
+                   < 1e-4, WAIT, f"EE {ee} to reach its dragged target")
         ees1 = ee_positions(app)
         print(f"\n[browser dual] gizmo {ee} dragged {1e3 * np.linalg.norm(moved):.1f} mm: EE {ee} "
               f"moved {1e3 * np.linalg.norm(ees1[ee] - ees0[ee]):.1f} mm, the other "
@@ -107,10 +108,10 @@ def add_hole_on(web, link: str) -> str:
     open_tab(web, "Constraints")
     page.get_by_label("arm", exact=True).click()
     page.get_by_role("option", name=link, exact=True).click()
-    wait_until(lambda: web.ui.constraint_arm.value == link, 10.0, f"the arm menu to read {link}")
+    wait_until(lambda: web.ui.constraint_arm.value == link, WAIT, f"the arm menu to read {link}")
     before = set(holes(web.app))
     page.get_by_role("button", name="Add hole").click()
-    (hole_id,) = wait_until(lambda: set(holes(web.app)) - before, 10.0, "a new hole")
+    (hole_id,) = wait_until(lambda: set(holes(web.app)) - before, WAIT, "a new hole")
     return hole_id
 
 
@@ -124,7 +125,7 @@ def test_two_trocars_hold_while_each_gizmo_is_dragged_and_the_readme_screenshot(
     # the settings' only slider that ends at 1 (gain: 500, damping: 0.2)
     web.page.locator('[role="slider"][aria-valuemax="1"]').focus()
     web.page.keyboard.press("Home")  # the keyboard's way to a slider's minimum
-    wait_until(lambda: app.orientation_weight == 0.0, 10.0, "the orientation weight to be 0")
+    wait_until(lambda: app.orientation_weight == 0.0, WAIT, "the orientation weight to be 0")
     open_tab(web, "Teleop")
     for ee in (0, 1):
         _, ees0, ees1, moved, worst = drag_gizmo(web, ee, distance=0.01, steps=10)
@@ -144,7 +145,7 @@ def test_two_trocars_hold_while_each_gizmo_is_dragged_and_the_readme_screenshot(
     for close in web.page.locator(".mantine-Notification-closeButton").all():
         close.click()
     time.sleep(1.5)
-    png = web.page.screenshot(timeout=30_000)
+    png = web.page.screenshot(timeout=1e3 * WAIT)
     SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
     SCREENSHOT.write_bytes(png)
     pixels = png_pixels(png)

@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    WAIT,
     PANDA,
     changed_fraction,
     click_add_hole,
@@ -36,10 +37,10 @@ def test_the_panda_opens_with_its_meshes(tmp_path):
             assert type(view.frames[f"/main/visual/{name}"]).__name__ == "GlbHandle"
         target = web.app.target.translation
         set_camera(web.client, target + np.array([0.9, -0.9, 0.3]), target - [0.0, 0.0, 0.3])
-        shown = wait_for_pixels(web, lambda p: distinct_colours(p) > 100, 30.0, "the Panda")
+        shown = wait_for_pixels(web, lambda p: distinct_colours(p) > 100, WAIT, "the Panda")
         view.displayVisuals(False)
         try:
-            hidden = wait_for_pixels(web, lambda p: changed_fraction(p, shown) > 0.01, 30.0,
+            hidden = wait_for_pixels(web, lambda p: changed_fraction(p, shown) > 0.01, WAIT,
                                      "the canvas to change when the Panda is hidden")
         finally:
             view.displayVisuals(True)

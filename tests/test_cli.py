@@ -187,3 +187,42 @@ def test_every_registry_spec_builds_and_solves(spec, with_hole, sda10f):
 def test_unknown_spec_raises_value_error(spec, message, sda10f):
     with pytest.raises(ValueError, match=message):
         make_controller(spec, sda10f)
+
+
+def test_compare_says_each_run_it_finishes_when_stderr_is_no_terminal(tmp_path):
+    """Issue 18, item 14: output redirected, standard error still shows the runs going by,
+    one line each, the agreement run last."""
+    result = run("compare", "--scenario", "paper-hole", "--duration", "0.02",
+                 "--controllers", "cjm,qp:daqp", "--out", str(tmp_path), "--no-plots")
+    assert result.returncode == 0, result.stderr
+    lines = result.stderr.splitlines()
+    runs = ["cjm", "qp:daqp", "joint velocities against cjm"]
+    assert len(lines) == len(runs), result.stderr
+    for index, (line, name) in enumerate(zip(lines, runs), start=1):
+        assert re.fullmatch(rf"paper-hole: {re.escape(name)} done \({index}/3, 20 steps in "
+                            r"[0-9.]+ s\)", line), line
+
+
+def test_compare_shows_a_bar_with_an_estimate_on_a_terminal():
+    """On a terminal: tqdm's bar over every run's steps, with the time left (``<``)."""
+    import io
+
+    from teleop.experiments.compare import RunProgress
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    console = Terminal()
+    progress = RunProgress("paper-hole", ["cjm", "qp:daqp"], steps=50, console=console)
+    progress.start("cjm")
+    for step in range(50):
+        progress.step(step)
+    progress.start("qp:daqp")
+    progress.step(0)
+    progress.finish()
+    progress.close()
+    shown = console.getvalue()
+    assert "paper-hole" in shown and "/100" in shown and "qp:daqp" in shown
+    assert re.search(r"\d\d:\d\d<\d\d:\d\d", shown), shown  # elapsed<remaining
+    assert "done (" not in shown  # the lines are for consoles that are not terminals

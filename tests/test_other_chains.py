@@ -7,12 +7,15 @@ import importlib.metadata
 import warnings
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from conftest import ee_jacobian, kinematics
+from example_robots import EXAMPLE_ARMS, bounded_margins, singular_values
 
 from constraints import Hole
 from controllers import CJMController, QPController
 from teleop import load_robot
+from teleop.loop.closed_loop import LoopConfig, TeleopLoop, saturate_twist
 
 EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)
 
@@ -138,3 +141,53 @@ def test_plane_on_sda10f_leaves_seven_dof_and_the_wide_cjm_tracks_exactly(sda10f
     assert CJMController(sda10f, [plane]).constrained_jacobian(q).shape == (6, 7)
     qd_qp = QPController(sda10f, [plane], solver="proxqp").solve(q, twist)
     np.testing.assert_allclose(J @ qd_qp, twist, atol=1e-6)
+
+
+def damped_least_squares(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``matrix x`` for the CJM's default damping (paper eq 35: lambda rises to 0.05 as the
+    smallest of the singular values falls below 0.01), written out with an SVD."""
+    u, s, vt = np.linalg.svd(matrix, full_matrices=False)
+    lam2 = 0.05**2 * max(0.0, 1.0 - (s[-1] / 0.01) ** 2)
+    return matrix @ (vt.T @ (s / (s * s + lam2) * (u.T @ rhs)))
+
+
+@pytest.mark.parametrize("name", sorted(EXAMPLE_ARMS))
+def test_a_40_mm_drag_from_the_default_home_moves_the_ee_and_no_joint_reaches_a_limit(name):
+    """Issue 18 item 12: from the neutral pose clipped to the limits the Panda's joint 4
+    sat at its bound and a drag did not move the hand. From the default home (docs/design.md
+    section 6.1), with a hole 8 cm along the link: a 40 mm target step along each world
+    axis, followed for 1 s by the closed loop at 1 kHz with the default CJM, at 5 cm/s
+    (under the Kinova's 0.63 rad/s joint speeds). The first step's EE twist (its speed
+    capped) is the (damped) least-squares one over the joint velocities the hole admits,
+    computed here with NumPy: no joint limit in it; on no step is a joint held at a limit;
+    the joints stay 5 % of their range inside; the constrained Jacobian stays above 0.05
+    (five times the CJM's damping threshold); the hole holds; the EE moves."""
+    arm = EXAMPLE_ARMS[name]
+    robot = arm.load()
+    link = robot.model.getFrameId(robot.constrained_link)
+    for direction in np.vstack([np.eye(3), -np.eye(3)]):
+        hole = Hole.on_link(robot, robot.q_home, distance=0.08)
+        cjm = CJMController(robot, [hole])
+        loop = TeleopLoop(robot, cjm, config=LoopConfig(max_linear_speed=0.05,
+                                                        max_angular_speed=0.3))
+        start = loop.ee_placement()
+        target = pin.SE3(start.rotation, start.translation + 0.04 * direction)
+        twist = saturate_twist(loop.config.kp * pin.log6(start.actInv(target)).vector,
+                               loop.config.max_linear_speed, loop.config.max_angular_speed)
+        A, _ = hole.rows(robot.model, kinematics(robot, robot.q_home))
+        admissible = ee_jacobian(robot, robot.q_home) @ np.linalg.svd(A)[2][2:].T
+        expected = damped_least_squares(admissible, twist)
+        for tick in range(1000):
+            q = loop.q.copy()
+            record = loop.tick(target)
+            if tick == 0:
+                np.testing.assert_allclose(ee_jacobian(robot, q) @ loop.last_qd, expected,
+                                           atol=1e-9 * np.linalg.norm(twist))
+            assert cjm.info.saturated_joints == (), (name, direction, tick, record.message)
+            assert record.constraint_error < 1e-6
+        assert min(bounded_margins(robot.model, loop.q).values()) > 0.05
+        data = kinematics(robot, loop.q)
+        contact = robot.link_axis @ data.oMf[link].actInv(hole.center)  # slid along the link
+        constrained = singular_values(robot, loop.q, contact)[1]
+        assert constrained[arm.free_dof - 1] > 0.05
+        assert np.linalg.norm(loop.ee_placement().translation - start.translation) > 2e-3

@@ -1,12 +1,19 @@
-"""Robot-model layer: shipped URDFs against docs/design.md section 6, load_robot behaviour."""
+"""Robot-model layer: shipped URDFs against docs/design.md section 6, load_robot behaviour,
+the home pose of any URDF (section 6.1)."""
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from example_robots import EXAMPLE_ARMS, bounded_margins, singular_values
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
 
 from teleop import BUILTIN_ROBOTS, Robot, load_robot
+from teleop.robots.home import HomeWarning, check_home
 
 # docs/design.md section 6, typed in: joint, origin xyz, origin rpy, axis, limit, velocity.
 SDA10F_TABLE = [
@@ -192,7 +199,9 @@ def test_random_configuration_inside_margin(robot: Robot) -> None:
 
 
 def test_builtin_overrides() -> None:
-    robot = load_robot("ur5_instrument", ee_frame="flange", link_axis=(0, 0, 5), q_home=np.zeros(8))
+    with pytest.warns(HomeWarning, match="singular"):  # the arm stretched out
+        robot = load_robot("ur5_instrument", ee_frame="flange", link_axis=(0, 0, 5),
+                           q_home=np.zeros(8))
     assert robot.ee_frame == "flange" and robot.ee_frame_id == robot.model.getFrameId("flange")
     np.testing.assert_allclose(robot.link_axis, (0, 0, 1))
     np.testing.assert_array_equal(robot.q_home, np.zeros(8))
@@ -285,7 +294,11 @@ def test_custom_urdf_defaults(tmp_path) -> None:
     assert robot.constrained_link is None and robot.constrained_frame_id is None
     np.testing.assert_allclose(robot.link_axis, (0, 0, 1))
     assert (robot.nq, robot.nv) == (4, 3)  # the continuous joint has nq = 2
-    np.testing.assert_allclose(robot.q_home, [0.2, 0.0, 1.0, 0.0])  # neutral, clipped to j1's limits
+    # j1 (0.2 to 1.0) 10 % of its range inside, j2 likewise, j3 a unit (cos, sin)
+    assert 0.28 <= robot.q_home[0] <= 0.92 and -0.8 <= robot.q_home[1] <= 0.8
+    assert np.hypot(robot.q_home[2], robot.q_home[3]) == pytest.approx(1.0, abs=1e-12)
+    # the 3 joints move l3 in 3 independent directions, well conditioned
+    assert np.linalg.svd(local_jacobian(robot, robot.q_home, "l3"), compute_uv=False)[2] > 0.1
     q = robot.random_configuration(np.random.default_rng(1))
     assert q.shape == (4,) and np.hypot(q[2], q[3]) == pytest.approx(1.0)
     robot = load_robot(path, ee_frame="l2", constrained_link="l1", link_axis=(1, 0, 0))
@@ -303,3 +316,89 @@ def test_custom_urdf_package_meshes(tmp_path) -> None:
     with pytest.warns(UserWarning, match="mypkg/meshes/t.stl"):
         robot = load_robot(path)  # meshes not found: kinematics still load
     assert robot.visual_model.ngeoms == 0 and robot.model.nq == 4
+
+
+# ---------------------------------------------------------------- home poses (section 6.1)
+
+#: every bounded joint this share of its range from each bound (docs/design.md section 6.1)
+HOME_MARGIN = 0.1
+#: smallest singular value of J_e and of J_e N (over the rank the hole leaves) a home
+#: must exceed: ten times the CJM's singular_threshold, where its damping starts
+WELL_CONDITIONED = 0.1
+
+
+@pytest.mark.parametrize("name", sorted(BUILTIN_ROBOTS))
+def test_builtin_homes_are_the_hand_chosen_ones_inside_the_margin(name: str) -> None:
+    robot = load_robot(name)
+    np.testing.assert_array_equal(robot.q_home, BUILTIN_ROBOTS[name]["q_home"])
+    assert min(bounded_margins(robot.model, robot.q_home).values()) >= HOME_MARGIN
+
+
+@pytest.fixture(scope="module")
+def example_arms() -> dict[str, Robot]:
+    return {name: arm.load() for name, arm in EXAMPLE_ARMS.items()}
+
+
+@pytest.mark.parametrize("name", sorted(EXAMPLE_ARMS))
+def test_default_home_of_a_urdf_is_inside_the_margin_and_well_conditioned(example_arms, name):
+    """The neutral pose clipped to the limits (the old default) is at a bound or singular
+    for each; the default home is neither: its smallest singular values, measured here
+    with Pinocchio and SciPy for a hole 8 cm along the link, are above 0.1."""
+    robot, arm = example_arms[name], EXAMPLE_ARMS[name]
+    q = robot.q_home
+    assert min(bounded_margins(robot.model, q).values()) >= HOME_MARGIN - 1e-12  # rounding
+    ee, constrained = singular_values(robot, q, 0.08)
+    assert ee[5] > WELL_CONDITIONED and constrained[arm.free_dof - 1] > WELL_CONDITIONED
+    assert constrained.size == arm.free_dof or constrained[arm.free_dof] < 1e-9  # the rank
+    clipped = np.clip(pin.neutral(robot.model), robot.model.lowerPositionLimit,
+                      robot.model.upperPositionLimit)
+    ee, constrained = singular_values(robot, clipped, 0.08)
+    assert (min(bounded_margins(robot.model, clipped).values()) == 0.0
+            or min(ee[5], constrained[arm.free_dof - 1]) < 0.07)
+
+
+def test_the_default_home_is_the_same_every_time(example_arms) -> None:
+    np.testing.assert_array_equal(EXAMPLE_ARMS["ur5"].load().q_home, example_arms["ur5"].q_home)
+
+
+def test_a_given_home_at_bounds_warns_once_naming_the_joints(example_arms) -> None:
+    panda = example_arms["panda"]
+    clipped = np.clip(pin.neutral(panda.model), panda.model.lowerPositionLimit,
+                      panda.model.upperPositionLimit)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        robot = EXAMPLE_ARMS["panda"].load(q_home=clipped)
+    homes = [w for w in caught if issubclass(w.category, HomeWarning)]
+    assert len(homes) == 1
+    message = str(homes[0].message)
+    for joint in ("panda_joint4", "panda_joint6", "panda_finger_joint1"):
+        assert joint in message
+    assert "panda_joint1 " not in message
+    assert homes[0].filename.endswith("example_robots.py")  # where load_robot was called
+    np.testing.assert_array_equal(robot.q_home, clipped)  # taken all the same
+
+
+def test_a_given_singular_home_warns_and_a_good_one_does_not(example_arms) -> None:
+    with pytest.warns(HomeWarning, match="singular for a hole 0.08 m along forearm_link"):
+        EXAMPLE_ARMS["ur5"].load(q_home=np.zeros(6))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the default home, given back (a scene does)
+        EXAMPLE_ARMS["ur5"].load(q_home=example_arms["ur5"].q_home)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(shares=st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7))
+def test_check_home_warns_exactly_when_near_a_bound_or_singular(example_arms, shares) -> None:
+    """Against the measure of this module: a joint within 10 % of its range of a bound, or
+    a smallest singular value (EE, or EE with the hole) below the CJM's 0.01."""
+    robot = example_arms["xarm7"]
+    lower, upper = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+    q = lower + np.array(shares) * (upper - lower)
+    margin = min(bounded_margins(robot.model, q).values())
+    ee, constrained = singular_values(robot, q, 0.08)
+    sigma = min(ee[5], constrained[EXAMPLE_ARMS["xarm7"].free_dof - 1])
+    assume(abs(margin - HOME_MARGIN) > 1e-6 and abs(sigma - 0.01) > 1e-6)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_home(robot, q)
+    assert len(caught) == (1 if margin < HOME_MARGIN or sigma < 0.01 else 0)

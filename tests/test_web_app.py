@@ -17,7 +17,8 @@ from web.app import ControlThread, TeleopApp
 
 @pytest.fixture()
 def app(sda10f, tmp_path):
-    return TeleopApp(sda10f, controller="cjm", record_dir=tmp_path)
+    return TeleopApp(sda10f, controller="cjm", record_dir=tmp_path,
+                     scene_dir=tmp_path / "scenes")
 
 
 def ee_position(app, which="main"):
@@ -440,7 +441,8 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(app, tmp_pat
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.3)
     app.move_constraint(hole_id, app.entries[hole_id].goal + [0.0, 0.0, 0.002])
-    saved = app.save_scene(tmp_path / "scenes" / "a.json")
+    saved = app.save_scene("a.json")
+    assert saved == tmp_path / "scenes" / "a.json"
     scene = json.loads(saved.read_text())
     assert scene["format"] == "cjm-teleop-scene" and scene["robot"]["source"] == "sda10f"
     assert [c["id"] for c in scene["constraints"]] == [hole_id, barrier_id]
@@ -456,7 +458,7 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(app, tmp_pat
     app.set_motion_scale(1.0)
     app.home()
     run(app, 0.1)
-    app.load_scene(saved)
+    app.load_scene("a.json")
     assert list(app.entries) == [hole_id, barrier_id]
     assert [e.kind for e in app.entries.values()] == ["hole", "barrier"]
     for entry_id, goal in goals.items():
@@ -496,14 +498,16 @@ def test_a_bad_scene_is_refused_and_changes_nothing(app, change, message):
 
 
 def test_scene_files_that_cannot_be_read(app, tmp_path):
-    with pytest.raises(ValueError, match="no scene file at"):
-        app.load_scene(tmp_path / "none.json")
-    (tmp_path / "bad.json").write_text("{nope")
+    with pytest.raises(ValueError, match="no scene 'none.json' in the scene folder"):
+        app.load_scene("none.json")
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    (scenes / "bad.json").write_text("{nope")
     with pytest.raises(ValueError, match="is not JSON"):
-        app.load_scene(tmp_path / "bad.json")
-    (tmp_path / "dir").mkdir()
-    with pytest.raises(ValueError, match="cannot write scene file"):
-        app.save_scene(tmp_path / "dir")
+        app.load_scene("bad.json")
+    (scenes / "dir.json").mkdir()
+    with pytest.raises(ValueError, match="'dir.json' in the scene folder is not a file"):
+        app.save_scene("dir.json")
 
 
 # -- the light tick ---------------------------------------------------------------------------

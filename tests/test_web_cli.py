@@ -57,10 +57,10 @@ def test_a_urdf_whose_meshes_are_missing_opens_with_a_warning_line_each(tmp_path
 
 
 def test_a_scene_opens_with_its_robot(sda10f, tmp_path):
-    app = TeleopApp(sda10f, record_dir=tmp_path)
+    app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path)
     app.add_hole(0.08)
     app.set_ghost("qp:daqp")
-    path = app.save_scene(tmp_path / "scene.json")
+    path = app.save_scene("scene.json")
     args = web_cli.build_parser().parse_args(["--scene", str(path)])
     robot, scene = web_cli._load(args)
     assert robot.name == "sda10f" and scene["constraints"][0]["id"] == "hole-1"
@@ -105,3 +105,45 @@ def test_a_scene_file_that_is_not_a_scene_is_one_line(tmp_path, capsys):
     assert web_cli.main(["--scene", str(path), "--port", str(free_port())]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "not a scene file" in err, err
+
+
+# -- the address: checked, loopback by default, a token beyond it -------------------------------
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--port", "99999"], "port must be from 1 to 65535, got 99999"),
+    (["--port", "0"], "port must be from 1 to 65535, got 0"),
+    (["--port", "abc"], "port must be a whole number from 1 to 65535"),
+    (["--host", "not a host"], "host 'not a host' is not an IP address or a host name"),
+    (["--host", "8.8.8.8"], "cannot listen on 8.8.8.8 port"),
+    (["--host", "0.0.0.0"], "--host 0.0.0.0 serves the UI beyond this machine: give --token"),
+    (["--host", "127.0.0.1", "--token", "short"], "token must be at least 16 characters"),
+    (["--rate", "1e12"], "rate must be between 50 and 5000 Hz"),
+])
+def test_an_address_or_rate_that_cannot_be_served_is_one_line_and_exit_2(args, message):
+    """Run as a user would (a subprocess, bounded): one line, exit code 2, no hang."""
+    result = subprocess.run([sys.executable, "-m", "web", *args], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 2, result
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], result.stderr
+    assert "Traceback" not in result.stderr and result.stdout == ""
+
+
+def test_a_host_beyond_loopback_warns_and_prints_the_address_with_the_token():
+    out, err, code = serve("--host", "0.0.0.0", "--token", "auto")
+    assert code == 0, err
+    warning = [line for line in err.splitlines() if "warning:" in line]
+    assert len(warning) == 1 and "anyone who can reach this port and has the token can move " \
+        "the robot" in warning[0] and "SSH tunnel" in warning[0], err
+    assert "on http://0.0.0.0:" in out and "/?websocket=ws://0.0.0.0:" in out
+    assert "/?token=" in out
+
+
+def test_the_help_says_what_the_server_exposes(capsys):
+    with pytest.raises(SystemExit):
+        web_cli.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for words in ("--scene-dir", "--record-dir", "--token", "SSH tunnel",
+                  "can move the robot, and read and write scene files"):
+        assert words in text, words

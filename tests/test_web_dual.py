@@ -8,6 +8,7 @@ configuration, never from the app's report of it.
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -193,15 +194,15 @@ def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path)
         app.add_hole(0.08, link)
     app.nudge_target([0.0, 0.005, 0.0], ee=1)
     run(app, 0.2)
-    path = app.save_scene(tmp_path / "two.json")
+    path = app.save_scene("two.json")
     data = json.loads(path.read_text())
     assert [t["frame"] for t in data["targets"]] == list(dual.ee_frames)
     assert data["robot"]["ee_frames"] == list(dual.ee_frames)
     assert list(data["robot"]["constrained_links"]) == list(dual.constrained_links)
     again = robot_from_dict(data["robot"])
     assert again.ee_frames == dual.ee_frames and again.constrained_links == dual.constrained_links
-    other = TeleopApp(again, record_dir=tmp_path, scene_dir=tmp_path)
-    other.load_scene(path)
+    other = TeleopApp(again, record_dir=tmp_path, scene_dir=path.parent)
+    other.load_scene(path.name)
     for k in (0, 1):
         assert other.inputs[k].target.isApprox(app.inputs[k].target, 1e-12)
         assert other.inputs[k].gizmo.isApprox(app.inputs[k].target, 1e-12)
@@ -303,7 +304,12 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
         np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
     right = ui.target_gizmos[1]  # what the right gizmo's drag does: the right target only
     right.position = np.asarray(right.position) + [0.0, -0.01, 0.0]
-    ui._gizmo_moved(right, 1)(None)
+    ui._gizmo_moved(right, 1)(SimpleNamespace(client=None, client_id=None, phase="update"))
+    ui.inbox.start()  # the action went to the inbox: applied there
+    try:
+        assert ui.inbox.drain(10.0)
+    finally:
+        ui.inbox.stop()
     np.testing.assert_allclose(app.inputs[1].target.translation, right.position, atol=1e-12)
     assert app.inputs[0].target.isApprox(app.inputs[0].gizmo, 1e-15)
     for _ in range(20):
@@ -335,7 +341,11 @@ def test_each_arms_hole_is_drawn_around_its_own_link(server, app, dual):
         ring = ui._markers[hole_id]["shape"].points
         centre = app.entries[hole_id].position
         radii = np.linalg.norm(ring.reshape(-1, 3) - centre, axis=1)
-        np.testing.assert_allclose(radii, ui.ring_radii[link], atol=1e-6)  # float32
+        radius = ui.ring_radius_at(snapshot["robots"]["main"]["constraints"][hole_id])
+        np.testing.assert_allclose(radii, radius, atol=1e-6)  # float32
+        frame = dual.model.getFrameId(link)
+        assert radius > max(g.geometry.radius for g in dual.visual_model.geometryObjects
+                            if g.parentFrame == frame and type(g.geometry).__name__ == "Cylinder")
         collar = ui._markers[hole_id]["point"].points.reshape(-1, 3)
         assert np.linalg.norm(collar.mean(axis=0) - centre) < 1e-3  # around the link at the hole
 
@@ -374,7 +384,7 @@ def test_a_recorded_session_holds_both_targets_and_replays(app, dual, tmp_path):
 
     for link in dual.constrained_links:
         app.add_hole(0.08, link)
-    path = app.start_recording(tmp_path / "two.jsonl")
+    path = app.start_recording("two.jsonl")
     app.nudge_target([0.0, 0.004, 0.0], ee=0)
     run(app, 0.2)
     app.nudge_target([0.0, 0.0, -0.004], ee=1)
@@ -424,10 +434,9 @@ def test_orientation_weight_is_checked_and_kept_in_scenes(app, tmp_path):
             app.set_orientation_weight(bad)
     assert app.orientation_weight == 1.0
     app.set_orientation_weight(0.25)
-    path = tmp_path / "scene.json"
-    app.save_scene(path)
+    path = app.save_scene("scene.json")
     assert json.loads(path.read_text())["orientation_weight"] == 0.25
     app.set_orientation_weight(1.0)
-    app.load_scene(path)
+    app.load_scene("scene.json")
     assert app.orientation_weight == 0.25
     assert np.allclose(app.loops["main"].controller.twist_weight, [1, 1, 1, 0.25, 0.25, 0.25] * 2)

@@ -117,8 +117,11 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
     hole_id = app.add_hole(0.08)
     lock_id = app.add_point_lock(0.05)
     draw(ui)
-    link_radius = _link_radius(app.robot, app.robot.constrained_link)
+    frame = app.robot.model.getFrameId(app.robot.constrained_link)
+    link_radius = max(g.geometry.radius for g in app.robot.visual_model.geometryObjects
+                      if g.parentFrame == frame and type(g.geometry).__name__ == "Cylinder")
     assert link_radius == pytest.approx(0.04)  # arm_link_5_r's cylinder
+    assert _link_radius(app.robot, app.robot.constrained_link) >= link_radius
     for entry_id in (hole_id, lock_id):
         markers = ui._markers[entry_id]
         collar = np.asarray(markers["point"].points).reshape(-1, 3)
@@ -184,9 +187,10 @@ def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app.set_gain(60.0)
     app.set_motion_scale(0.5)
     app.set_ghost("qp:daqp")
-    ui.scene_path.value = str(tmp_path / "s.json")
+    ui.scene_path.value = "s.json"
     ui._save_scene()
-    assert "saved" in ui.scene_status.content
+    assert ui.scene_status.content == "saved `s.json`"
+    assert (tmp_path / "scenes" / "s.json").is_file()
     app.set_gain(100.0)
     app.set_motion_scale(1.0)
     app.set_ghost(None)
@@ -240,3 +244,64 @@ def test_a_robot_without_geometry_is_a_skeleton(server, tmp_path):
     spheres = [name for name in view.frames if "skeleton_joint_" in name]
     assert len(spheres) == panda.model.njoints - 1
     view.display(panda.q_home)
+
+
+def test_a_drag_ended_by_a_lost_browser_holds_the_target_where_the_ee_is(ui):
+    """viser ends the drag of a browser that went away (its client no longer listed):
+    its pending moves are dropped and the target held where the EE is."""
+    from types import SimpleNamespace
+
+    app = ui.app
+    gizmo = ui.target_gizmos[0]
+    moved = ui._gizmo_moved(gizmo, 0)
+    gone = 12345  # a client id the server does not list
+    assert gone not in ui.server.get_clients()
+    start = app.target.translation.copy()
+    ui.inbox.post(lambda: app.set_target(start + [0.0, 0.0, 0.02], [1, 0, 0, 0]))
+    gizmo.position = np.asarray(gizmo.position) + [0.0, 0.0, 0.05]
+    moved(SimpleNamespace(client=None, client_id=gone, phase="update"))  # ignored: gone
+    moved(SimpleNamespace(client=None, client_id=gone, phase="end"))
+    ui.inbox.start()
+    try:
+        assert ui.inbox.drain(10.0)
+    finally:
+        ui.inbox.stop()
+    ee = app.loops["main"].ee_placement()
+    np.testing.assert_allclose(app.target.translation, ee.translation, atol=1e-12)
+    np.testing.assert_allclose(gizmo.position, ee.translation, atol=1e-6)  # float32
+
+
+def test_the_pandas_hole_ring_is_outside_its_link_mesh(server, tmp_path):
+    """The ring goes around panda_link4 outside its mesh where it is: wider than every
+    vertex of the link's visual and collision meshes within 1 cm of the ring's plane
+    (world frame, from Pinocchio's geometry placements)."""
+    panda = load_robot(PANDA, ee_frame="panda_hand", constrained_link="panda_link4",
+                       link_axis=(-0.0825, 0.384, 0.0))
+    app = TeleopApp(panda, record_dir=tmp_path)
+    ui = TeleopUI(server, app, ControlThread(app))
+    hole_id = app.add_hole(0.08)
+    snapshot = draw(ui)
+    ring = np.asarray(ui._markers[hole_id]["shape"].points).reshape(-1, 3)
+    geometry = snapshot["robots"]["main"]["constraints"][hole_id]["geometry"]
+    centre, axis = geometry.anchor, geometry.axis / np.linalg.norm(geometry.axis)
+    ring_radius = np.linalg.norm(ring - centre, axis=1).min()
+    frame = panda.model.getFrameId("panda_link4")
+    q = app.loops["main"].q
+    nearest = 0.0
+    for model in (panda.visual_model, panda.collision_model):
+        data = pin.GeometryData(model)
+        pin.updateGeometryPlacements(panda.model, panda.model.createData(), model, data, q)
+        for index, geometry_object in enumerate(model.geometryObjects):
+            if geometry_object.parentFrame != frame:
+                continue
+            vertices = np.asarray(geometry_object.geometry.vertices())
+            world = vertices @ data.oMg[index].rotation.T + data.oMg[index].translation
+            offset = world - centre
+            along = offset @ axis
+            radial = np.linalg.norm(offset - np.outer(along, axis), axis=1)
+            near = np.abs(along) < 0.01
+            assert near.any()
+            nearest = max(nearest, radial[near].max())
+    print(f"\n[panda] ring radius {1e3 * ring_radius:.1f} mm around a mesh reaching "
+          f"{1e3 * nearest:.1f} mm from the axis at the ring")
+    assert ring_radius > nearest > 0.03

@@ -47,6 +47,7 @@ from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.moving_geometry import advance, steer
 from teleop.robots import Robot
 
+from .folders import Folder
 from .scene import FORMAT as SCENE_FORMAT
 from .scene import VERSION as SCENE_VERSION
 from .scene import (
@@ -76,6 +77,15 @@ MAX_MOTION_SCALE = 10.0
 MAX_LINK_POINT = 2.0
 #: the ghost's offset from the main robot is at most this long (m)
 MAX_GHOST_OFFSET = 5.0
+#: an EE target (or a constraint's goal) is refused farther than this from where the EE
+#: (or the constraint) is now (m): no arm reaches farther, and a number such as 1e300
+#: would otherwise reach the controllers as a twist of that size
+MAX_TARGET_DISTANCE = 2.0
+#: the CJM's constant damping lambda is at most this (the slider offers 0-0.2; at 1 the
+#: damped inverse barely moves the robot)
+MAX_DAMPING = 1.0
+#: the control rate (Hz) is between these
+MIN_RATE, MAX_RATE = 50.0, 5000.0
 #: the EE is "on target" within this distance (m); it does not follow its target when it
 #: approaches it at less than FOLLOWING of the commanded speed, or moves at less than
 #: STALLED_SPEED (m/s) when the command is that slow
@@ -263,15 +273,21 @@ class TeleopApp:
     ghost : spec of a second robot driven from the same target, drawn beside the main
         one (``ghost_offset``), or None.
     rate : control rate (Hz).
-    record_dir : where session recordings go.
-    scene_dir : where scenes are saved by default.
+    record_dir : the folder session recordings go to; :meth:`start_recording` writes
+        there and nowhere else (:class:`web.folders.Folder`).
+    scene_dir : the folder scenes are saved to and loaded from, and no other.
     """
 
     def __init__(self, robot: Robot, controller: str = "cjm", ghost: str | None = None,
                  rate: float = 1000.0, kp: float = 20.0, record_dir: str | Path = "sessions",
                  scene_dir: str | Path = "scenes") -> None:
+        rate = as_number(rate, "rate")
+        if not MIN_RATE <= rate <= MAX_RATE:
+            raise ValueError(f"rate must be between {MIN_RATE:g} and {MAX_RATE:g} Hz, "
+                             f"got {rate:g}")
         self.robot = robot
         self._lock = threading.RLock()
+        self._build_lock = threading.Lock()  # one loop build at a time (outside _lock)
         self._view_data = robot.model.createData()  # for geometry queries, under the lock
         self.joint_names = velocity_joint_names(robot)
         self.config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING,
@@ -282,8 +298,9 @@ class TeleopApp:
         #: weight of the EE twists' angular entries (1: full poses; lower lets each
         #: instrument's orientation give way to its tip position, docs/design.md 11.2)
         self.orientation_weight = 1.0
-        self.record_dir = Path(record_dir)
-        self.scene_dir = Path(scene_dir)
+        self.recordings = Folder(record_dir, "recording", ".jsonl")
+        self.scenes = Folder(scene_dir, "scene", ".json")
+        self.record_dir, self.scene_dir = self.recordings.root, self.scenes.root
         self.entries: dict[str, ConstraintEntry] = {}
         self._ids = itertools.count(1)
         self.specs = {"main": controller}
@@ -364,6 +381,15 @@ class TeleopApp:
         raise ValueError(f"no end effector {ee!r}: this robot's are {list(frames)} "
                          f"(or their indices 0-{len(frames) - 1})")
 
+    def _check_target(self, target: pin.SE3, ee: int, what: str = "target") -> None:
+        """``ValueError`` when ``target`` is farther than :data:`MAX_TARGET_DISTANCE` from
+        where EE ``ee`` of the main robot is now (caller holds the lock)."""
+        ee_now = self.loops["main"].ee_placements()[ee].translation
+        distance = math.hypot(*(target.translation - ee_now))  # no overflow at 1e300
+        if not distance <= MAX_TARGET_DISTANCE:
+            raise ValueError(f"{what} refused: {distance:.3g} m from the end effector "
+                             f"{self.inputs[ee].frame}, more than {MAX_TARGET_DISTANCE:g} m")
+
     def _set_target(self, target: pin.SE3, ee: int = 0) -> None:
         """EE ``ee``'s target pose (caller holds the lock); recorded when recording."""
         self.inputs[ee].target = target
@@ -397,6 +423,7 @@ class TeleopApp:
         ee = self.ee_index(ee)
         target = self._pose(position, wxyz, "target")
         with self._lock:
+            self._check_target(target, ee)
             self._set_target(target, ee)
             self.inputs[ee].reanchor()
 
@@ -408,9 +435,15 @@ class TeleopApp:
         gizmo = self._pose(position, wxyz, "gizmo")
         with self._lock:
             hand = self.inputs[ee]
-            hand.gizmo = gizmo
+            previous, hand.gizmo = hand.gizmo, gizmo
             if not self.clutch:
-                self._set_target(hand.followed(self.motion_scale), ee)
+                target = hand.followed(self.motion_scale)
+                try:
+                    self._check_target(target, ee, "the gizmo's target")
+                except ValueError:
+                    hand.gizmo = previous
+                    raise
+                self._set_target(target, ee)
 
     def set_clutch(self, engaged: bool) -> None:
         """Engage (the gizmos move alone) or release the clutch; on release every target
@@ -442,8 +475,23 @@ class TeleopApp:
         with self._lock:
             target = self.inputs[ee].target.copy()
             target.translation = target.translation + displacement
+            self._check_target(target, ee, "nudged target")
             self._set_target(target, ee)
             self.inputs[ee].reanchor()
+
+    def hold_where_the_robot_is(self, ee=None) -> None:
+        """Every target and gizmo (or EE ``ee``'s) on the main robot's EE pose now: what a
+        browser lost mid-drag leaves behind (docs/design.md section 5.3). The robot then
+        settles where it is instead of going on towards the last point of the drag,
+        which may lie past a joint limit."""
+        indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
+        with self._lock:
+            placements = self.loops["main"].ee_placements()
+            for index in indices:
+                hand = self.inputs[index]
+                self._set_target(placements[index].copy(), index)
+                hand.gizmo = hand.target.copy()
+                hand.reanchor()
 
     def gizmo_to_target(self, ee=0) -> pin.SE3:
         """Put EE ``ee``'s gizmo on its target (the UI moves its handle there); returns
@@ -605,6 +653,10 @@ class TeleopApp:
             if entry_id not in self.entries:
                 raise ValueError(f"no constraint {entry_id!r}")
             entry = self.entries[entry_id]
+            distance = math.hypot(*(position - entry.position))
+            if distance > MAX_TARGET_DISTANCE:
+                raise ValueError(f"constraint position refused: {distance:.3g} m from where "
+                                 f"{entry_id} is, more than {MAX_TARGET_DISTANCE:g} m")
             entry.goal = position.copy()
             entry.settled = False
 
@@ -625,32 +677,77 @@ class TeleopApp:
             return len(ids)
 
     # -- controllers and settings ----------------------------------------------------------
+    #
+    # A new controller, rate or orientation weight needs new loops: they are built outside
+    # the lock (milliseconds of work) and swapped in under it, so the control thread does
+    # not wait for a build (docs/design.md section 5.3).
+
+    def _build_inputs(self) -> tuple:
+        """What a loop build reads besides its own arguments: if any of it changed while
+        a build ran outside the lock, the build is redone under the lock."""
+        return (tuple(id(e.constraint) for e in self.entries.values()), self.gain,
+                self.damping, self.config, self.orientation_weight, tuple(self.specs.items()))
+
+    def _rebuild(self, specs: dict[str, str], config: LoopConfig | None = None,
+                 orientation_weight: float | None = None) -> None:
+        """Robots ``specs`` (``{"main": spec, "ghost": spec}``) with new loops at ``config``
+        and ``orientation_weight`` (default: the current ones), each starting from the
+        state of the loop it replaces (a new ghost from the main robot's); the others keep
+        theirs. All or nothing: a spec or gain that cannot be built raises ``ValueError``
+        and changes nothing."""
+        with self._build_lock:
+            with self._lock:
+                inputs = self._build_inputs()
+                config = config or self.config
+                weight = self.orientation_weight if orientation_weight is None \
+                    else orientation_weight
+                constraints = [e.constraint for e in self.entries.values()]
+                starts = {which: self.loops.get(which, self.loops["main"]).q.copy()
+                          for which in specs}
+            loops = {which: self._make_loop(spec, q=starts[which], constraints=constraints,
+                                            config=config, orientation_weight=weight)
+                     for which, spec in specs.items()}  # raises ValueError: nothing changed
+            with self._lock:
+                if self._build_inputs() != inputs:  # changed meanwhile: build it again here
+                    constraints = [e.constraint for e in self.entries.values()]
+                    loops = {which: self._make_loop(spec, constraints=constraints,
+                                                    config=config, orientation_weight=weight)
+                             for which, spec in specs.items()}
+                for which, loop in loops.items():  # the state they replace, as of now
+                    old = self.loops.get(which, self.loops["main"])
+                    loop.q = old.q.copy()
+                    loop.t = old.t
+                if config is not self.config:  # every other loop follows the new period
+                    others = {which: self._make_loop(self.specs[which], q=loop.q.copy(),
+                                                     constraints=constraints, config=config,
+                                                     orientation_weight=weight)
+                              for which, loop in self.loops.items() if which not in loops}
+                    for which, loop in others.items():
+                        loop.t = self.loops[which].t
+                    loops.update(others)
+                for which in loops:
+                    if which not in self.traces:
+                        self.traces[which] = Trace()
+                        self.last_records[which] = None
+                self.config, self.orientation_weight = config, weight
+                self.specs.update(specs)
+                self.loops.update(loops)
 
     def set_controller(self, spec: str) -> None:
         """Switch the main robot's controller, keeping its state."""
-        with self._lock:
-            self._switch("main", spec)
+        self._rebuild({"main": spec})
 
     def set_ghost(self, spec: str | None) -> None:
         """Show a second robot driven by ``spec`` from the same target (None removes it).
 
         It starts where the main robot is, at the same time, so the two histories line up.
         """
-        with self._lock:
-            if not spec:
+        if not spec:
+            with self._lock:
                 for store in (self.loops, self.specs, self.traces, self.last_records):
                     store.pop("ghost", None)
-                return
-            if "ghost" in self.loops:
-                self._switch("ghost", spec)
-                return
-            main = self.loops["main"]
-            ghost = self._make_loop(spec, q=main.q.copy())
-            ghost.t = main.t
-            self.loops["ghost"] = ghost
-            self.specs["ghost"] = spec
-            self.traces["ghost"] = Trace()
-            self.last_records["ghost"] = None
+            return
+        self._rebuild({"ghost": spec})
 
     def set_ghost_offset(self, offset) -> None:
         """Where the ghost is drawn, from the main robot (world, m); zero overlays them."""
@@ -661,30 +758,22 @@ class TeleopApp:
         with self._lock:
             self.ghost_offset = offset
 
-    def _switch(self, which: str, spec: str) -> None:
-        self.loops[which] = self._rebuilt(which, spec)  # raises ValueError on a bad spec
-        self.specs[which] = spec
-
-    def _rebuilt(self, which: str, spec: str) -> TeleopLoop:
-        """A new loop for robot ``which`` with ``spec`` and the current config, same state."""
-        old = self.loops[which]
-        loop = self._make_loop(spec, q=old.q.copy())
-        loop.t = old.t
-        return loop
-
     def set_gain(self, gain: float) -> None:
         """Gain K (1/s) of every constraint: the drift feedback of the equalities, the
-        approach rate of the barriers. A gain some placed constraint cannot take at this
-        rate (``K dt`` too large) raises ``ValueError`` and changes nothing."""
+        approach rate of the barriers, in [0, 2 / dt) (``K dt`` at most 2). A gain some
+        placed constraint cannot take at this rate raises ``ValueError`` naming the gain
+        and changes nothing."""
         gain = as_number(gain, "gain")
-        if not 0.0 <= gain * self.config.dt < 2.0:
-            raise ValueError(f"gain must be in [0, {2.0 / self.config.dt:g}) 1/s at this rate")
         with self._lock:
-            previous, self.gain = self.gain, gain
-            for entry in self.entries.values():
-                entry.constraint.gain = gain
-            try:
-                self._sync_constraints()  # the controllers check the gains and refresh
+            if not 0.0 <= gain * self.config.dt < 2.0:
+                raise ValueError(f"gain must be in [0, {2.0 / self.config.dt:g}) 1/s at this "
+                                 f"rate, got {gain:g}")
+            previous = self.gain
+            try:  # each constraint checks the gain at its controllers' period
+                for entry in self.entries.values():
+                    entry.constraint.gain = gain
+                self.gain = gain
+                self._sync_constraints()
             except ValueError:
                 self.gain = previous
                 for entry in self.entries.values():
@@ -693,8 +782,8 @@ class TeleopApp:
                 raise
 
     def set_damping(self, damping: float) -> None:
-        """Constant DLS damping lambda of the CJM (paper eq 35)."""
-        damping = as_number(damping, "damping", 0.0)
+        """Constant DLS damping lambda of the CJM (paper eq 35), in [0, MAX_DAMPING]."""
+        damping = as_number(damping, "damping", 0.0, maximum=MAX_DAMPING)
         with self._lock:
             self.damping = damping
             for loop in self.loops.values():
@@ -707,30 +796,16 @@ class TeleopApp:
         orientations give way so the tips go where they are dragged. Rebuilds the loops,
         keeps the state."""
         weight = as_number(weight, "orientation weight", 0.0, maximum=1.0)
-        with self._lock:
-            loops = {which: self._make_loop(self.specs[which], q=loop.q.copy(),
-                                            orientation_weight=weight)
-                     for which, loop in self.loops.items()}
-            for which, loop in loops.items():
-                self._apply_damping(loop.controller)
-                loop.t = self.loops[which].t
-            self.orientation_weight = weight
-            self.loops.update(loops)
+        self._rebuild(dict(self.specs), orientation_weight=weight)
 
     def set_rate(self, rate: float) -> None:
-        """Control rate (Hz); rebuilds the loops (QP limits depend on dt), keeps the state."""
-        rate = as_number(rate, "the control rate")
-        if not 50.0 <= rate <= 5000.0:
-            raise ValueError("the control rate must be between 50 and 5000 Hz")
-        with self._lock:
-            previous = self.config
-            self.config = dataclasses.replace(self.config, rate=rate)
-            try:  # every loop rebuilt at the new dt (gains checked), or none
-                loops = {which: self._rebuilt(which, self.specs[which]) for which in self.loops}
-            except ValueError:
-                self.config = previous
-                raise
-            self.loops.update(loops)
+        """Control rate (Hz), in [MIN_RATE, MAX_RATE]; rebuilds the loops (QP limits depend
+        on dt), keeps the state."""
+        rate = as_number(rate, "rate")
+        if not MIN_RATE <= rate <= MAX_RATE:
+            raise ValueError(f"rate must be between {MIN_RATE:g} and {MAX_RATE:g} Hz, "
+                             f"got {rate:g}")
+        self._rebuild(dict(self.specs), config=dataclasses.replace(self.config, rate=rate))
 
     def home(self, ee=None) -> None:
         """Every target and gizmo (or only EE ``ee``'s) on its home EE pose. The
@@ -775,15 +850,17 @@ class TeleopApp:
                                 for e in self.entries.values()],
             }
 
-    def save_scene(self, path: str | Path | None = None) -> Path:
-        """Write the scene to ``path`` (default: a new file in ``scene_dir``)."""
-        if path is None or str(path).strip() == "":
-            path = self.scene_dir / f"scene-{datetime.now():%Y%m%d-%H%M%S}.json"
-        return write_scene_file(path, self.scene())
+    def save_scene(self, name: str | None = None) -> Path:
+        """Write the scene as file ``name`` of the scene folder (default: a new name);
+        its path. A name that is not a plain file name of that folder is refused
+        (:class:`web.folders.Folder`)."""
+        if name is None or isinstance(name, str) and not name.strip():
+            name = f"scene-{datetime.now():%Y%m%d-%H%M%S}.json"
+        return write_scene_file(self.scenes.writable(name), self.scene())
 
-    def load_scene(self, path: str | Path) -> None:
-        """Read a scene file and apply it (:meth:`apply_scene`)."""
-        self.apply_scene(read_scene_file(path))
+    def load_scene(self, name: str) -> None:
+        """Read file ``name`` of the scene folder and apply it (:meth:`apply_scene`)."""
+        self.apply_scene(read_scene_file(self.scenes.existing(name)))
 
     def apply_scene(self, data: dict) -> None:
         """Put the app in the state a scene describes: robots' configurations, constraints,
@@ -802,8 +879,16 @@ class TeleopApp:
             if outside.size:
                 raise ValueError(f"scene q.{which} is outside the joint limits of "
                                  f"{[self.joint_names[i] for i in outside]}")
-        if not 50.0 <= scene.rate <= 5000.0:
-            raise ValueError("scene rate must be between 50 and 5000 Hz")
+        if not MIN_RATE <= scene.rate <= MAX_RATE:
+            raise ValueError(f"scene rate must be between {MIN_RATE:g} and {MAX_RATE:g} Hz")
+        if scene.damping > MAX_DAMPING:
+            raise ValueError(f"scene damping must be at most {MAX_DAMPING:g}")
+        data = model.createData()
+        for index, (position, _) in enumerate(scene.targets):
+            ee = frame_placement(model, scene.q["main"], self.robot.ee_frame_ids[index], data)
+            if not math.hypot(*(position - ee.translation)) <= MAX_TARGET_DISTANCE:
+                raise ValueError(f"scene target of {self.robot.ee_frames[index]} is more than "
+                                 f"{MAX_TARGET_DISTANCE:g} m from its end effector")
         if not 0.0 < scene.motion_scale <= MAX_MOTION_SCALE:
             raise ValueError(f"scene motion_scale must be in (0, {MAX_MOTION_SCALE:g}]")
         if np.linalg.norm(scene.ghost_offset) > MAX_GHOST_OFFSET:
@@ -847,12 +932,15 @@ class TeleopApp:
 
     # -- recording ---------------------------------------------------------------------
 
-    def start_recording(self, path: str | Path | None = None) -> Path:
+    def start_recording(self, name: str | None = None) -> Path:
+        """Record the session to file ``name`` of the recording folder (default: a new
+        name, by date); its path."""
         with self._lock:
             if self.recorder is not None:
-                raise ValueError(f"already recording to {self.recorder.path}")
-            if path is None:
-                path = self.record_dir / f"session-{datetime.now():%Y%m%d-%H%M%S}.jsonl"
+                raise ValueError(f"already recording to {self.recorder.path.name}")
+            if name is None:
+                name = f"session-{datetime.now():%Y%m%d-%H%M%S}.jsonl"
+            path = self.recordings.writable(name)
             self.recorder = SessionRecorder(path, self.robot, self.loops["main"].q,
                                             rate_hz=self.config.rate, kp=self.config.kp,
                                             target_time_constant_s=self.config.target_time_constant)
@@ -976,7 +1064,7 @@ class TeleopApp:
                     axis = axes.get(entry.constraint.link)
                     constraints[entry.id] = {
                         "geometry": entry.constraint.geometry(placement),
-                        "link": entry.constraint.link,
+                        "link": entry.constraint.link, "link_placement": placement.copy(),
                         "link_axis": None if axis is None else placement.rotation @ axis}
                 ees = [placements[frame].copy() for frame in self.robot.ee_frame_ids]
                 limitations = [self._limitation(which, ee, index) for index, ee in enumerate(ees)]
@@ -1011,6 +1099,20 @@ TIMING_WINDOW = 4096
 SWITCH_INTERVAL = 2e-4
 
 
+#: the control loop is behind when it achieves less than this fraction of its rate
+BEHIND_FRACTION = 0.95
+
+
+def behind_words(achieved_rate: float, rate: float) -> str:
+    """The operator's warning when a loop asked for ``rate`` (Hz) achieves less than
+    :data:`BEHIND_FRACTION` of it over the last second, else ``""``: the robot then moves
+    slower than commanded and the measures stretch in time (docs/design.md section 5.3)."""
+    if achieved_rate >= BEHIND_FRACTION * rate:
+        return ""
+    return (f"control loop behind: only {achieved_rate:.0f} of the {rate:.0f} Hz asked for "
+            f"({100.0 * achieved_rate / rate:.0f} %); this machine is too busy for this rate")
+
+
 @dataclass(frozen=True)
 class Timing:
     """The control thread's timing over its last :data:`TIMING_WINDOW` ticks."""
@@ -1040,6 +1142,7 @@ class ControlThread:
         self._thread = threading.Thread(target=self._run, name="control", daemon=True)
         self.deadline_misses = 0
         self.achieved_rate = 0.0
+        self._measured_rate: float | None = None  # the rate the last full second ran at
         self.error: str | None = None
         self._lateness = np.zeros(TIMING_WINDOW)
         self._tick = np.zeros(TIMING_WINDOW)
@@ -1063,6 +1166,14 @@ class ControlThread:
     def alive(self) -> bool:
         return self._thread.is_alive()
 
+    def behind(self) -> str:
+        """:func:`behind_words` for the last full second at the current rate (``""``
+        before one has been measured)."""
+        rate = 1.0 / self.app.config.dt
+        if self._measured_rate is None or self._measured_rate != rate:
+            return ""
+        return behind_words(self.achieved_rate, rate)
+
     def timing(self) -> Timing:
         """Percentiles of the recent ticks (computed here, off the control thread)."""
         n = min(self._count, TIMING_WINDOW)
@@ -1083,8 +1194,11 @@ class ControlThread:
         clock = time.perf_counter
         next_tick = clock()
         window_start, window_ticks = clock(), 0
+        period = self.app.config.dt
         while not self._stop.is_set():
-            period = self.app.config.dt
+            if self.app.config.dt != period:  # a new rate: a new measuring window
+                period = self.app.config.dt
+                window_start, window_ticks = clock(), 0
             start = clock()
             solve_us = 0.0
             try:
@@ -1101,6 +1215,7 @@ class ControlThread:
             window_ticks += 1
             if end - window_start >= 1.0:
                 self.achieved_rate = window_ticks / (end - window_start)
+                self._measured_rate = 1.0 / period
                 window_start, window_ticks = end, 0
             next_tick += period
             delay = next_tick - clock()

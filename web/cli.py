@@ -1,9 +1,12 @@
 """``teleop web`` / ``python -m web``: the command line of the browser teleoperation UI.
 
 All of ``teleop web``'s options live here (``teleop`` hands every argument after ``web``
-to :func:`main`). A robot or scene that cannot be loaded, or any other bad value, is one
-line on stderr and exit code 2. Geometry that cannot be drawn as the URDF says (a mesh
-that cannot be read) is a warning line, and the UI draws a fallback and says so.
+to :func:`main`). A robot or scene that cannot be loaded, an address that cannot be served
+(a port outside 1-65535, a host that is not one), or any other bad value, is one line on
+stderr and exit code 2. Geometry that cannot be drawn as the URDF says (a mesh that cannot
+be read) is a warning line, and the UI draws a fallback and says so. Serving anything but
+the loopback interface needs ``--token`` and prints a warning saying what it exposes
+(docs/design.md section 5.3).
 """
 
 from __future__ import annotations
@@ -14,11 +17,21 @@ import time
 import warnings
 from typing import Sequence
 
-from teleop.cli.main import HelpFormatter, csv_list, positive
+from teleop.cli.main import ArgumentParser, HelpFormatter, csv_list, positive
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.robots import BUILTIN_ROBOTS
 
-DESCRIPTION = "Browser teleoperation UI (viser) of a built-in robot or any URDF."
+from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
+    resolve_host
+
+DESCRIPTION = """Browser teleoperation UI (viser) of a built-in robot or any URDF.
+
+Whoever opens the page can move the robot, and read and write scene files in --scene-dir
+and recordings in --record-dir (file names only, nothing outside those folders). The
+server listens on this machine only (127.0.0.1) unless --host says otherwise; another
+address needs --token, and the page must then be opened at the address printed at start.
+From another machine, prefer an SSH tunnel to the loopback server:
+  ssh -L 8080:127.0.0.1:8080 robot-pc   then open http://127.0.0.1:8080/"""
 
 
 def numbers(text: str) -> list[float]:
@@ -30,8 +43,7 @@ def numbers(text: str) -> list[float]:
 
 
 def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION,
-                                     formatter_class=HelpFormatter)
+    parser = ArgumentParser(prog=prog, description=DESCRIPTION, formatter_class=HelpFormatter)
     robot = parser.add_argument_group("robot")
     robot.add_argument("--robot",
                        help=f"built-in robot ({', '.join(BUILTIN_ROBOTS)}) or the path of a URDF "
@@ -68,14 +80,27 @@ def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
                               "target, drawn beside the main one; a scene's own wins "
                               "(default: no second robot)")
     control.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
-    control.add_argument("--record-dir", default="sessions",
-                         help="folder the recorded sessions are written to")
+
+    files = parser.add_argument_group("files (the page reads and writes only these folders)")
+    files.add_argument("--scene-dir", default="scenes", metavar="DIR",
+                       help="folder the page saves scenes to and loads them from, by file "
+                            "name (created on the first save)")
+    files.add_argument("--record-dir", default="sessions", metavar="DIR",
+                       help="folder the page writes recorded sessions to (created on the "
+                            "first recording)")
 
     server = parser.add_argument_group("server")
     server.add_argument("--host", default="127.0.0.1",
                         help="address to bind; the UI commands a robot, so only this machine "
-                             "by default: open it wider only on purpose")
-    server.add_argument("--port", type=int, default=8080, help="port to serve the UI on")
+                             "by default. Any other address (0.0.0.0: every interface) "
+                             "needs --token and prints a warning")
+    server.add_argument("--port", default="8080", help="port to serve the UI on (1-65535)")
+    server.add_argument("--token", metavar="TOKEN",
+                        help=f"secret every page must present (at least {MIN_TOKEN} characters "
+                             "of A-Z a-z 0-9 _ - . ~, or 'auto' for a random one); required "
+                             "when --host is not a loopback address; open the address printed "
+                             "at start. It travels unencrypted: across an untrusted network use "
+                             "an SSH tunnel (default: none on loopback)")
     return parser
 
 
@@ -115,10 +140,31 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
+    """The port and token to serve with; ``ValueError`` for a port or host that cannot be
+    served, or a host beyond loopback without a token (then a warning line is printed)."""
+    port = check_port(args.port)
+    addresses = resolve_host(args.host)
+    check_bind(addresses, port)
+    token = None if args.token is None else make_token(args.token)
+    if not is_loopback(addresses):
+        if token is None:
+            raise ValueError(f"--host {args.host} serves the UI beyond this machine: give "
+                             "--token TOKEN (or --token auto), or use an SSH tunnel to "
+                             "127.0.0.1")
+        print(f"{prog}: warning: listening on {args.host} ({', '.join(addresses)}): anyone "
+              "who can reach this port and has the token can move the robot and read and "
+              f"write files in {args.scene_dir} and {args.record_dir}; the token and the "
+              "page travel unencrypted (an SSH tunnel to 127.0.0.1 avoids both)",
+              file=sys.stderr)
+    return port, token
+
+
 def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
     """Serve the UI until Ctrl-C; 2 (and one line on stderr) when it cannot start."""
     args = build_parser(prog).parse_args(argv)
     try:
+        port, token = _address(args, prog)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             robot, scene = _load(args)
@@ -127,10 +173,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
             print(f"{prog}: warning: {note}", file=sys.stderr)
         from web.ui import run_server
 
-        server, app, control, ui = run_server(robot, host=args.host, port=args.port,
+        server, app, control, ui = run_server(robot, host=args.host, port=port,
                                               controller=args.controller, ghost=args.ghost,
                                               rate=args.rate, record_dir=args.record_dir,
-                                              scene=scene, notes=notes)
+                                              scene_dir=args.scene_dir, scene=scene,
+                                              notes=notes, token=token)
     except (OSError, ValueError) as error:  # no such URDF/scene, bad frame / q_home / spec, port
         print(f"{prog}: {_one_line(error)}", file=sys.stderr)
         return 2
@@ -138,7 +185,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
         return 130
     try:
         ghost = app.specs.get("ghost")
-        print(f"{prog}: {robot.name} on http://{args.host}:{server.get_port()} "
+        print(f"{prog}: {robot.name} on {page_url(args.host, server.get_port(), token)} "
               f"(controller {app.specs['main']}{', ghost ' + ghost if ghost else ''}); "
               "Ctrl-C stops", flush=True)
         while True:

@@ -39,7 +39,8 @@ from typing import Any
 import numpy as np
 
 from constraints import Constraint
-from constraints.validation import as_number, as_vector
+from constraints.validation import as_number, as_vector, short_repr
+from teleop.limits import MAX_DAMPING, MAX_RATE_HZ
 from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
 
 FORMAT = "cjm-teleop-scene"
@@ -92,11 +93,48 @@ def _full_configuration(source: str, data: Mapping, locked: Mapping) -> list[flo
     return q
 
 
-def robot_from_dict(data: Any) -> Robot:
-    """Load the robot a scene names (``FileNotFoundError`` or ``ValueError`` if it cannot be)."""
-    if not isinstance(data, Mapping) or not isinstance(data.get("source"), str):
+#: The scene robot's fields that hold a name (null: the robot's default).
+ROBOT_NAME_FIELDS = ("ee_frame", "constrained_link", "root_joint")
+
+
+def check_robot_fields(data: Any) -> Mapping:
+    """A scene's ``robot`` object, its fields of the right kinds (``ValueError`` naming
+    the field); whether the robot has those frames and links is :func:`load_robot`'s to say."""
+    if not isinstance(data, Mapping) or not isinstance(data.get("source"), str) \
+            or not data["source"]:
         raise ValueError("scene 'robot' must be an object with a 'source' (a built-in robot "
                          "name or a URDF path)")
+    for name in ROBOT_NAME_FIELDS:
+        if data.get(name) is not None and not isinstance(data[name], str):
+            raise ValueError(f"scene robot.{name} must be a name, got {short_repr(data[name])}")
+    for name in ("ee_frames", "package_dirs"):
+        value = data.get(name)
+        if value is not None and (not isinstance(value, list)
+                                  or not all(isinstance(item, str) for item in value)):
+            raise ValueError(f"scene robot.{name} must be a list of names, got {short_repr(value)}")
+    if data.get("link_axis") is not None:
+        as_vector(data["link_axis"], 3, "scene robot.link_axis")
+    q_home = data.get("q_home")
+    if q_home is not None:
+        if not isinstance(q_home, list):
+            raise ValueError(f"scene robot.q_home must be a list of numbers, got {short_repr(q_home)}")
+        as_vector(q_home, len(q_home), "scene robot.q_home")
+    links = data.get("constrained_links")
+    if links is not None:
+        if not isinstance(links, Mapping):
+            raise ValueError("scene robot.constrained_links must map each link to its axis")
+        for link, axis in links.items():
+            as_vector(axis, 3, f"scene robot.constrained_links.{link}")
+    locked = data.get("locked_joints")
+    if locked is not None and not isinstance(locked, Mapping):
+        raise ValueError("scene robot.locked_joints must map each locked joint to its coordinates")
+    return data
+
+
+def robot_from_dict(data: Any) -> Robot:
+    """Load the robot a scene names (``ValueError`` if it cannot be; a missing URDF is
+    also a ``FileNotFoundError``)."""
+    data = check_robot_fields(data)
     source = data["source"]
     links = data.get("constrained_links")
     if links is not None and not isinstance(links, Mapping):
@@ -216,13 +254,11 @@ def parse_scene(data: Any, nq: int | None = None, ee_frames: tuple[str, ...] | N
         raise ValueError("a scene must be a JSON object")
     if data.get("format") != FORMAT:
         raise ValueError(f"not a scene file: 'format' must be {FORMAT!r}, "
-                         f"got {data.get('format')!r}")
-    if data.get("version") != VERSION:
-        raise ValueError(f"scene version {data.get('version')!r} is not supported "
+                         f"got {short_repr(data.get('format'))}")
+    if type(data.get("version")) is not int or data["version"] != VERSION:  # True is not 1
+        raise ValueError(f"scene version {short_repr(data.get('version'))} is not supported "
                          f"(this program reads version {VERSION})")
-    robot = data.get("robot")
-    if not isinstance(robot, Mapping) or not isinstance(robot.get("source"), str):
-        raise ValueError("scene 'robot' must be an object with a 'source'")
+    robot = check_robot_fields(data.get("robot"))
     controllers = data.get("controllers")
     if not isinstance(controllers, Mapping):
         raise ValueError("scene 'controllers' must be an object {'main': ..., 'ghost': ...}")
@@ -257,8 +293,8 @@ def parse_scene(data: Any, nq: int | None = None, ee_frames: tuple[str, ...] | N
     return Scene(
         robot=dict(robot), main=main, ghost=ghost,
         gain=as_number(data.get("gain"), "scene gain", 0.0),
-        damping=as_number(data.get("damping", 0.0), "scene damping", 0.0),
-        rate=as_number(data.get("rate"), "scene rate", positive=True),
+        damping=as_number(data.get("damping", 0.0), "scene damping", 0.0, maximum=MAX_DAMPING),
+        rate=as_number(data.get("rate"), "scene rate", positive=True, maximum=MAX_RATE_HZ),
         motion_scale=as_number(data.get("motion_scale", 1.0), "scene motion_scale", positive=True),
         ghost_offset=as_vector(data.get("ghost_offset", [0.0, 0.0, 0.0]), 3, "scene ghost_offset"),
         q=q, target_position=position, target_wxyz=wxyz, constraints=tuple(placed),
@@ -280,6 +316,10 @@ def read_scene_file(path: str | Path) -> dict:
         return json.loads(text)
     except json.JSONDecodeError as error:
         raise ValueError(f"scene file {str(path)!r} is not JSON: {error}") from None
+    except RecursionError:
+        raise ValueError(f"scene file {str(path)!r}: JSON nested too deeply") from None
+    except ValueError as error:  # e.g. an integer of more than 4300 digits
+        raise ValueError(f"scene file {str(path)!r} is not readable JSON: {error}") from None
 
 
 def write_scene_file(path: str | Path, scene: dict) -> Path:

@@ -19,8 +19,12 @@ drives its own EE's target; the clutch and the motion scale act on all of them; 
 buttons and "Gizmo to target" act on the arm chosen as "active arm"; "Home" homes every EE.
 
 Several browsers may connect: they share the targets and one scene (the last drag wins).
-A browser that disconnects mid-drag leaves the target where it last was, so the robot
-converges there and holds still.
+A browser that disconnects mid-drag leaves its target where the robot's EE is at that
+moment, not where the drag was, so the robot settles where it is. Every action goes
+through one coalescing inbox (web/inbox.py), so a flood of events cannot starve the
+control loop; the status turns red (a banner and a notification) when the loop achieves
+less than 95 % of its rate. Scenes and recordings are plain file names in the folders the
+server was started with (web/folders.py).
 """
 
 from __future__ import annotations
@@ -40,7 +44,9 @@ from constraints import ConstraintGeometry
 from teleop.controller_specs import default_specs
 from teleop.robots import Robot
 
+from .access import require_token
 from .app import HISTORY_SECONDS, ControlThread, TeleopApp, default_ghost_offset
+from .inbox import Inbox
 from .robot_view import RobotView, floor_height
 
 CONTROLLER_CHOICES = default_specs("ui")  # the dropdowns (plus a spec given on the command line)
@@ -60,6 +66,7 @@ STATUS_COLORS = {"ok": (30, 160, 70), "scaled": (230, 170, 0), "least_squares": 
 NUDGES = {"-x": (-1, 0, 0), "+x": (1, 0, 0), "-y": (0, -1, 0), "+y": (0, 1, 0),
           "-z": (0, 0, -1), "+z": (0, 0, 1)}
 BARRIER_ARROW = 0.08  # m
+BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
 
 
 def _wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
@@ -97,26 +104,108 @@ def _arrow(start: np.ndarray, direction: np.ndarray, length: float) -> np.ndarra
     return np.array([[start, tip], *[[tip, barb] for barb in barbs]])
 
 
+def _geometry_points(geometry) -> np.ndarray:
+    """Points (n, 3) on one geometry in its own frame: a mesh's vertices; circles on a
+    cylinder or capsule (axis z), points on a sphere; else a 5x5x5 grid filling its
+    bounding box (a box...)."""
+    kind = type(geometry).__name__
+    angles = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)
+    circle = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
+    if kind in ("Cylinder", "Capsule"):
+        half = geometry.halfLength + (geometry.radius if kind == "Capsule" else 0.0)
+        return np.concatenate([geometry.radius * circle + [0.0, 0.0, z]
+                               for z in np.linspace(-half, half, 9)])
+    if kind == "Sphere":
+        return np.concatenate([geometry.radius * np.sin(polar) * circle
+                               + [0.0, 0.0, geometry.radius * np.cos(polar)]
+                               for polar in np.linspace(0.0, np.pi, 9)])
+    if hasattr(geometry, "vertices"):
+        try:
+            vertices = np.asarray(geometry.vertices(), dtype=float)
+            if vertices.ndim == 2 and vertices.shape[1] == 3 and len(vertices):
+                return vertices
+        except (AttributeError, RuntimeError, TypeError):
+            pass
+    try:
+        geometry.computeLocalAABB()
+        low = np.asarray(geometry.aabb_local.min_, dtype=float)
+        high = np.asarray(geometry.aabb_local.max_, dtype=float)
+    except (AttributeError, RuntimeError):
+        return np.zeros((0, 3))
+    if not (np.isfinite(low).all() and np.isfinite(high).all()):
+        return np.zeros((0, 3))
+    grid = np.linspace(0.0, 1.0, 5)
+    weights = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), axis=-1).reshape(-1, 3)
+    return low + weights * (high - low)
+
+
+@dataclass(frozen=True)
+class LinkProfile:
+    """Where a link's geometry (visual and collision) is around an axis through the link
+    frame's origin: per point, its coordinate along the axis and its distance from it
+    (link frame, m). A ring drawn around the axis at ``s`` must be wider than
+    :meth:`radius_at` ``s`` to be seen outside the link's mesh."""
+
+    along: np.ndarray
+    radial: np.ndarray
+
+    #: half the slab of the link (m, along the axis) a ring at ``s`` must clear
+    SLAB = 0.03
+
+    @classmethod
+    def of(cls, robot: Robot, link: str | None, axis=None) -> "LinkProfile":
+        """The profile of ``link`` around ``axis`` (default: its instrument axis
+        ``robot.link_axes[link]``, else the link frame's z); empty without geometry."""
+        empty = cls(np.zeros(0), np.zeros(0))
+        model = robot.model
+        if link is None or not model.existFrame(link):
+            return empty
+        frame_id = model.getFrameId(link)
+        frame = model.frames[frame_id]
+        axis = np.asarray(robot.link_axes.get(link, (0.0, 0.0, 1.0)) if axis is None else axis,
+                          dtype=float)
+        axis = axis / np.linalg.norm(axis)
+        points = []
+        for geometry_model in (robot.visual_model, robot.collision_model):
+            for geometry_object in getattr(geometry_model, "geometryObjects", ()):
+                if geometry_object.parentFrame != frame_id:
+                    continue
+                in_link = frame.placement.actInv(geometry_object.placement)
+                local = _geometry_points(geometry_object.geometry)
+                if len(local):
+                    points.append(local @ in_link.rotation.T + in_link.translation)
+        if not points:
+            return empty
+        points = np.concatenate(points)
+        along = points @ axis
+        radial = np.linalg.norm(points - np.outer(along, axis), axis=1)
+        return cls(along, radial)
+
+    def radius_at(self, s: float | None = None) -> float:
+        """How far the geometry reaches from the axis within :attr:`SLAB` of ``s`` (the
+        whole link when ``s`` is None or no geometry is there); 0 without geometry."""
+        if not self.radial.size:
+            return 0.0
+        if s is not None:
+            near = np.abs(self.along - s) <= self.SLAB
+            if np.any(near):
+                return float(self.radial[near].max())
+        return float(self.radial.max())
+
+
 def _link_radius(robot: Robot, link: str | None) -> float:
-    """Radius of the cylinders drawn for ``link`` (0 when it has none)."""
-    if link is None or not robot.model.existFrame(link):
-        return 0.0
-    frame_id = robot.model.getFrameId(link)
-    radii = [g.geometry.radius for g in robot.visual_model.geometryObjects
-             if g.parentFrame == frame_id and type(g.geometry).__name__ in ("Cylinder", "Capsule")]
-    return max(radii, default=0.0)
+    """How far ``link``'s geometry reaches from its instrument axis (0 without one)."""
+    return LinkProfile.of(robot, link).radius_at()
 
 
-def _ring_radius(robot: Robot, link: str | None = None, minimum: float = 0.015) -> float:
-    """Radius of the hole rings on ``link`` (default: the first constrained link): just
-    outside its cylinders (drawn inside them, a ring would be hidden by the link it
-    surrounds)."""
-    return max(minimum, 1.25 * _link_radius(robot, link or robot.constrained_link) + 0.005)
+#: a ring is this much wider than the geometry it goes around (ratio, and m)
+RING_MARGIN = (1.1, 0.005)
+MIN_RING_RADIUS = 0.015  # m
 
 
-def _collar_radius(robot: Robot, link: str | None) -> float:
-    """Radius of the collar drawn around ``link`` at a constrained point."""
-    return 1.15 * _link_radius(robot, link) + 0.004
+def _ring_around(radius: float, minimum: float = MIN_RING_RADIUS) -> float:
+    """A ring's radius around geometry reaching ``radius`` from the axis: outside it."""
+    return max(minimum, RING_MARGIN[0] * radius + RING_MARGIN[1])
 
 
 def _link_extent(robot: Robot, link: str) -> float:
@@ -235,6 +324,10 @@ class TeleopUI:
         self.app = app
         self.control = control
         self._stop = threading.Event()
+        #: every operator action goes through it (web/inbox.py), never straight to the app
+        self.inbox = Inbox(self._failed)
+        self._gone: set[int] = set()  # browsers that disconnected mid-drag
+        self._behind = ""  # the warning shown while the control loop falls behind
         self._markers: dict[str, dict] = {}  # main robot: entry id -> handles
         self._ghost_markers: dict[str, dict] = {}
         self._views: dict[str, RobotView] = {}
@@ -248,10 +341,8 @@ class TeleopUI:
         self._ghost_seen: float | None = None  # when the view first saw the ghost
         self._saved_offset = app.ghost_offset.copy()
         robot = app.robot
-        self.ring_radius = _ring_radius(robot)  # the first constrained link's
-        self.ring_radii = {link: _ring_radius(robot, link) for link in robot.constrained_links}
-        self.collar_radius = _collar_radius(robot, robot.constrained_link)
-        self.collar_radii = {link: _collar_radius(robot, link) for link in app.plane_links}
+        #: where each link's geometry is around its axis: rings and collars go outside it
+        self.profiles = {link: LinkProfile.of(robot, link) for link in app.plane_links}
         self.plane_sizes = {link: _plane_size(robot, link) for link in app.plane_links}
         self.ee_names = _short_names(robot.ee_frames)  # what the operator reads per EE
         self.floor = floor_height(app.robot)
@@ -307,10 +398,31 @@ class TeleopUI:
         self.server.initial_camera.look_at = look_at
 
     def _gizmo_moved(self, gizmo, index: int):
-        """The callback of EE ``index``'s gizmo: the app moves that EE's target."""
+        """The callback of EE ``index``'s gizmo: the app moves that EE's target, the
+        latest pose winning. A drag that viser ends because its browser went away holds
+        the target where the robot is (:meth:`TeleopApp.hold_where_the_robot_is`)."""
         def moved(event) -> None:
-            self._guarded(event, lambda: self.app.move_gizmo(gizmo.position, gizmo.wxyz, index))
+            client = event.client_id
+            if client is not None and client not in self.server.get_clients():
+                if event.phase == "end":
+                    self._lost_mid_drag(client, index)
+                return
+            position, wxyz = np.array(gizmo.position), np.array(gizmo.wxyz)
+            self._guarded(event, lambda: None if client in self._gone else
+                          self.app.move_gizmo(position, wxyz, index), key=("gizmo", index))
         return moved
+
+    def _lost_mid_drag(self, client: int, index: int) -> None:
+        """Browser ``client`` disconnected while dragging EE ``index``'s gizmo: its moves
+        still pending are dropped, the target held where the EE is, the handle put there
+        for the other browsers."""
+        self._gone.add(client)
+
+        def hold() -> None:
+            self.app.hold_where_the_robot_is(index)
+            self._move_gizmo_handle(self.app.inputs[index].gizmo, index)
+
+        self.inbox.post(hold, key=("hold", index))
 
     def _ghost_rgba(self) -> tuple[float, float, float, float]:
         overlay = float(np.linalg.norm(self.app.ghost_offset)) < 1e-9
@@ -344,14 +456,20 @@ class TeleopUI:
 
     # -- panels --------------------------------------------------------------------------
 
-    def _guarded(self, event, action) -> None:
-        """Run an operator action; an impossible one becomes a notification, not a traceback."""
+    def _guarded(self, event, action, key: object = None, throttled: bool = False) -> None:
+        """Post an operator action to the inbox (:mod:`web.inbox`: applied in order on its
+        own thread; with a ``key``, the latest wins; ``throttled``, at most 10 a second);
+        an impossible one becomes a notification, not a traceback."""
         if self._syncing:
             return
-        try:
-            action()
-        except ValueError as error:
+        self.inbox.post(action, key=key, context=event, throttled=throttled)
+
+    def _failed(self, event, error: Exception) -> None:
+        """An action from ``event`` could not be done: tell its browser why."""
+        if isinstance(error, ValueError):
             self.notify(event, "Not possible", str(error))
+        else:
+            self.notify(event, "Error", f"{type(error).__name__}: {error}")
 
     def notify(self, event, title: str, body: str, color: str = "red") -> None:
         clients = [event.client] if event is not None and event.client is not None else \
@@ -368,6 +486,7 @@ class TeleopUI:
     def _build_panels(self) -> None:
         gui = self.server.gui
         with gui.add_folder("Status"):
+            self.banner = gui.add_html("", visible=False)  # the control loop falling behind
             self.status = gui.add_markdown("starting...")
         self.tabs = gui.add_tab_group()
         with self.tabs.add_tab("Teleop"):
@@ -418,17 +537,22 @@ class TeleopUI:
                                           "constraints stay")
 
         self.controller_menu.on_update(lambda event: self._guarded(
-            event, lambda: app.set_controller(self.controller_menu.value)))
+            event, lambda: app.set_controller(self.controller_menu.value), key="controller",
+            throttled=True))
         self.side_by_side.on_update(lambda event: self._guarded(event, lambda: app.set_ghost(
-            self.ghost_menu.value if self.side_by_side.value else None)))
+            self.ghost_menu.value if self.side_by_side.value else None), key="ghost",
+            throttled=True))
         self.ghost_menu.on_update(lambda event: self._guarded(event, lambda: (
-            app.set_ghost(self.ghost_menu.value) if self.side_by_side.value else None)))
-        self.ghost_offset.on_update(lambda event: self._guarded(event, self._offset_changed))
-        self.overlay.on_update(lambda event: self._guarded(event, self._overlay_changed))
+            app.set_ghost(self.ghost_menu.value) if self.side_by_side.value else None),
+            key="ghost", throttled=True))
+        self.ghost_offset.on_update(lambda event: self._guarded(event, self._offset_changed,
+                                                                key="ghost offset"))
+        self.overlay.on_update(lambda event: self._guarded(event, self._overlay_changed,
+                                                           key="ghost offset"))
         self.clutch_button.on_click(lambda event: self._guarded(
             event, lambda: app.set_clutch(not app.clutch)))
         self.motion_scale.on_update(lambda event: self._guarded(
-            event, lambda: app.set_motion_scale(self.motion_scale.value)))
+            event, lambda: app.set_motion_scale(self.motion_scale.value), key="motion scale"))
         self.nudge_buttons.on_click(lambda event: self._guarded(event, lambda: app.nudge_target(
             self.nudge_step.value * np.asarray(NUDGES[self.nudge_buttons.value], dtype=float),
             self._active_ee())))
@@ -511,7 +635,10 @@ class TeleopUI:
             hint="weight of the tools' orientations against their tip positions: lower it "
                  "when two trocars on one torso leave too few joints for both full poses")
         self.rate_number = gui.add_number("rate (Hz)", app.config.rate, min=50, max=5000, step=50)
-        self.scene_path = gui.add_text("scene file", str(app.scene_dir / "scene.json"))
+        self.scene_path = gui.add_text(
+            "scene name", "scene.json",
+            hint=f"a file name in the scene folder ({app.scenes.root.name}/, set by `teleop "
+                 "web --scene-dir`): no folders, nothing outside it")
         self.save_scene_button = gui.add_button("Save scene")
         self.load_scene_button = gui.add_button("Load scene")
         self.scene_status = gui.add_markdown("")
@@ -519,15 +646,18 @@ class TeleopUI:
         self.record_status = gui.add_markdown("not recording")
 
         self.gain_slider.on_update(lambda event: self._guarded(
-            event, lambda: app.set_gain(self.gain_slider.value)))
+            event, lambda: app.set_gain(self.gain_slider.value), key="gain", throttled=True))
         self.damping_slider.on_update(lambda event: self._guarded(
-            event, lambda: app.set_damping(self.damping_slider.value)))
+            event, lambda: app.set_damping(self.damping_slider.value), key="damping"))
         self.orientation_slider.on_update(lambda event: self._guarded(
-            event, lambda: app.set_orientation_weight(self.orientation_slider.value)))
+            event, lambda: app.set_orientation_weight(self.orientation_slider.value),
+            key="orientation weight", throttled=True))
         self.rate_number.on_update(lambda event: self._guarded(
-            event, lambda: app.set_rate(self.rate_number.value)))
-        self.save_scene_button.on_click(lambda event: self._guarded(event, self._save_scene))
-        self.load_scene_button.on_click(lambda event: self._guarded(event, self._load_scene))
+            event, lambda: app.set_rate(self.rate_number.value), key="rate", throttled=True))
+        self.save_scene_button.on_click(lambda event: self._guarded(
+            event, self._save_scene, throttled=True))
+        self.load_scene_button.on_click(lambda event: self._guarded(
+            event, self._load_scene, throttled=True))
         self.record_button.on_click(lambda event: self._guarded(event, self._toggle_recording))
 
     # -- actions that also update widgets ---------------------------------------------------
@@ -567,13 +697,14 @@ class TeleopUI:
 
     def _save_scene(self) -> None:
         path = self.app.save_scene(self.scene_path.value)
-        self.scene_status.content = f"saved `{path}`"
+        self.scene_status.content = f"saved `{path.name}`"
 
     def _load_scene(self) -> None:
-        self.app.load_scene(self.scene_path.value)
+        name = self.scene_path.value
+        self.app.load_scene(name)
         self._sync(self._widgets_from_app)
         self._move_gizmo_handles()
-        self.scene_status.content = f"loaded `{self.scene_path.value}`"
+        self.scene_status.content = f"loaded `{self.app.scenes.name_of(name)}`"
 
     def _sync(self, action) -> None:
         """Set widgets from the app without their callbacks acting."""
@@ -609,7 +740,7 @@ class TeleopUI:
         if self.app.recorder is None:
             path = self.app.start_recording()
             self.record_button.label = "Stop recording"
-            self.record_status.content = f"recording to `{path}`"
+            self.record_status.content = f"recording to `{path.name}`"
         else:
             path = self.app.stop_recording()
             self.record_button.label = "Start recording"
@@ -618,10 +749,12 @@ class TeleopUI:
     # -- the view thread -------------------------------------------------------------------
 
     def start(self) -> None:
+        self.inbox.start()
         self._thread.start()
 
     def stop(self) -> None:
         self._stop.set()
+        self.inbox.stop()
         self._thread.join(2.0)
 
     def _view_loop(self) -> None:
@@ -724,12 +857,13 @@ class TeleopUI:
         if tuple(self.constraint_menu.options) != options:
             self.constraint_menu.options = options
 
-    def _add_shape(self, name: str, geometry: ConstraintGeometry, link: str):
+    def _add_shape(self, name: str, drawing: dict):
         """The scene node of a constraint's geometry, drawn as its ``shape`` says (a ring
-        around ``link``, a plane as wide as it)."""
+        around its link, a plane as wide as it)."""
         scene = self.server.scene
+        geometry, link = drawing["geometry"], drawing["link"]
         if geometry.shape == "ring":
-            ring = _ring(geometry.anchor, geometry.axis, self._ring_radius_of(link))
+            ring = _ring(geometry.anchor, geometry.axis, self.ring_radius_at(drawing))
             return scene.add_line_segments(f"{name}/ring", ring, geometry.color, thickness=0.004)
         if geometry.shape == "plane":
             size = self.plane_sizes.get(link, PLANE_SIZE)
@@ -739,18 +873,34 @@ class TeleopUI:
         return scene.add_icosphere(f"{name}/anchor", 0.012, geometry.color, opacity=0.5,
                                    position=geometry.anchor)
 
-    def _ring_radius_of(self, link: str) -> float:
-        return self.ring_radii.get(link, self.ring_radius)
+    def _along(self, link: str, placement: pin.SE3, point: np.ndarray) -> float:
+        """Where the world ``point`` is along ``link``'s axis (link frame, m)."""
+        axis = np.asarray(self.app.robot.link_axes.get(link, (0.0, 0.0, 1.0)), dtype=float)
+        return float(placement.actInv(np.asarray(point, dtype=float)) @ axis
+                     / np.linalg.norm(axis))
 
-    def _update_shape(self, handle, geometry: ConstraintGeometry, link: str) -> None:
-        if geometry.shape == "ring":  # around the link axis, which turns with the link
-            handle.points = _ring(geometry.anchor, geometry.axis, self._ring_radius_of(link))
-        else:
-            handle.position = geometry.anchor
+    def ring_radius_at(self, drawing: dict) -> float:
+        """Radius of the ring of a hole drawn as ``drawing`` (a snapshot's constraint):
+        outside the geometry of its link where the ring is (:class:`LinkProfile`)."""
+        link, geometry = drawing["link"], drawing["geometry"]
+        profile = self.profiles.get(link)
+        if profile is None:
+            return MIN_RING_RADIUS
+        return _ring_around(profile.radius_at(
+            self._along(link, drawing["link_placement"], geometry.anchor)))
+
+    def collar_radius_at(self, drawing: dict) -> float:
+        """Radius of the collar around the link at the constrained point (0: none)."""
+        link, geometry = drawing["link"], drawing["geometry"]
+        profile = self.profiles.get(link)
+        if profile is None or not profile.radial.size:
+            return 0.0
+        radius = profile.radius_at(self._along(link, drawing["link_placement"], geometry.point))
+        return _ring_around(radius, minimum=0.0) - 0.001
 
     def _point_marker(self, drawing: dict) -> np.ndarray | None:
         """The collar around the link at the constrained point (None: draw a sphere)."""
-        axis, radius = drawing["link_axis"], self.collar_radii.get(drawing["link"], 0.0)
+        axis, radius = drawing["link_axis"], self.collar_radius_at(drawing)
         if axis is None or radius <= 0.004:
             return None
         return _ring(drawing["geometry"].point, axis, radius, n=24)
@@ -759,7 +909,7 @@ class TeleopUI:
                         gizmo: bool) -> dict:
         scene = self.server.scene
         geometry: ConstraintGeometry = drawing["geometry"]
-        markers = {"shape": self._add_shape(name, geometry, drawing["link"])}
+        markers = {"shape": self._add_shape(name, drawing)}
         collar = self._point_marker(drawing)
         if collar is not None:  # outside the link cylinder: visible, unlike a point inside
             markers["point"] = scene.add_line_segments(f"{name}/point", collar, (20, 20, 20),
@@ -779,14 +929,20 @@ class TeleopUI:
 
             @handle.on_update
             def _(event) -> None:
-                self._guarded(event, lambda: self.app.move_constraint(entry_id, handle.position))
+                position = np.array(handle.position)
+                self._guarded(event, lambda: self.app.move_constraint(entry_id, position),
+                              key=("constraint", entry_id))
 
             markers["gizmo"] = handle
         return markers
 
     def _update_markers(self, markers: dict, drawing: dict) -> None:
         geometry: ConstraintGeometry = drawing["geometry"]
-        self._update_shape(markers["shape"], geometry, drawing["link"])
+        if geometry.shape == "ring":  # around the link axis, which turns with the link
+            markers["shape"].points = _ring(geometry.anchor, geometry.axis,
+                                            self.ring_radius_at(drawing))
+        else:
+            markers["shape"].position = geometry.anchor
         collar = self._point_marker(drawing)
         if collar is not None:
             markers["point"].points = collar
@@ -799,9 +955,25 @@ class TeleopUI:
         if "arrow" in markers:
             markers["arrow"].points = _arrow(geometry.anchor, geometry.axis, BARRIER_ARROW)
 
+    def _warn_behind(self) -> None:
+        """A red banner above the status (and a notification when it starts) while the
+        control loop achieves less than 95 % of its rate (``ControlThread.behind``)."""
+        behind = self.control.behind()
+        if bool(behind) != bool(self._behind):
+            if behind:
+                self.notify(None, "Control loop behind", behind, color="red")
+            self.banner.visible = bool(behind)
+        if behind and behind != self._behind:
+            self.banner.content = (f'<div style="background:{BEHIND_COLOR};color:white;'
+                                   f'padding:6px 8px;border-radius:4px;font-weight:600">'
+                                   f'{behind}</div>')
+        self._behind = behind
+
     def _draw_status(self, snapshot: dict) -> None:
+        self._warn_behind()
         timing = self.control.timing()
-        control = (f"**control** {timing.achieved_rate:.0f} Hz achieved (target "
+        control = (f"**control{' BEHIND' if self._behind else ''}** "
+                   f"{timing.achieved_rate:.0f} Hz achieved (target "
                    f"{snapshot['config'].rate:.0f} Hz), lateness p99 "
                    f"{timing.lateness_p99_ms:.2f} ms, tick {timing.tick_p50_us:.0f} us "
                    f"({timing.overhead_p50_us:.0f} us beyond the controllers), "
@@ -886,14 +1058,23 @@ class TeleopUI:
 def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                controller: str = "cjm", ghost: str | None = None, rate: float = 1000.0,
                record_dir: str | Path = "sessions", scene: dict | None = None,
-               notes: list[str] | tuple[str, ...] = ()
+               notes: list[str] | tuple[str, ...] = (), scene_dir: str | Path = "scenes",
+               token: str | None = None
                ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
-    threads. ``scene`` (a scene dict for this robot) is applied before anything runs."""
-    app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir)
+    threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
+    The page reads and writes files in ``scene_dir`` and ``record_dir`` only; with a
+    ``token``, a page that does not present it gets nothing (:mod:`web.access`)."""
+    app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
+                    scene_dir=scene_dir)
     if scene is not None:
         app.apply_scene(scene)
     server = viser.ViserServer(host=host, port=port, verbose=False)
+    if token is not None:
+        require_token(server, token)
+        # a page that connected before the check was in place (nothing is served yet)
+        # reconnects, and is checked
+        server._websock_server.disconnect_all_clients()
     control = ControlThread(app)
     ui = TeleopUI(server, app, control, notes=notes)
     control.start()

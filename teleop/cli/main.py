@@ -9,9 +9,18 @@ from __future__ import annotations
 import argparse
 import sys
 from importlib import metadata
-from typing import Sequence
+from typing import Callable, NoReturn, Sequence
 
 from teleop.controller_specs import CONTROLLER_HELP, CONTROLLER_SPECS, default_specs
+from teleop.limits import (
+    MAX_BENCH_ITERATIONS,
+    MAX_DURATION_S,
+    MAX_ENCODER_NOISE_RAD,
+    MAX_LATENCY_PERIODS,
+    MAX_LATENCY_S,
+    MAX_RATE_HZ,
+    MAX_TIME_CONSTANT_S,
+)
 from teleop.robots import BUILTIN_ROBOTS
 
 PACKAGE = "cjm-teleop"
@@ -49,36 +58,68 @@ def csv_list(text: str) -> list[str]:
 
 
 def positive(text: str) -> float:
-    """A number > 0 (argparse type)."""
+    """A finite number > 0 (argparse type)."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
     return value
 
 
-def nonnegative(text: str) -> float:
-    """A finite number >= 0 (argparse type)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return value
+def number_in(minimum: float, maximum: float, *, inclusive_minimum: bool = True,
+              unit: str = "") -> Callable[[str], float]:
+    """An argparse type: a number in ``[minimum, maximum]`` (``(minimum, maximum]`` unless
+    ``inclusive_minimum``), named in the message with its ``unit``."""
+    low = "[" if inclusive_minimum else "("
+    bounds = f"{low}{minimum:g}, {maximum:g}]{' ' + unit if unit else ''}"
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        inside = (minimum <= value if inclusive_minimum else minimum < value) and value <= maximum
+        if not inside:  # NaN is outside too
+            raise argparse.ArgumentTypeError(f"must be in {bounds}, got {text}")
+        return value
+
+    return parse
 
 
-def count(text: str) -> int:
-    """An integer >= 0 (argparse type)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
-    return value
+def integer_in(minimum: int, maximum: int | None = None) -> Callable[[str], int]:
+    """An argparse type: an integer in ``[minimum, maximum]`` (no maximum when None)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < minimum or (maximum is not None and value > maximum):
+            bounds = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
+            raise argparse.ArgumentTypeError(f"must be {bounds}, got {text}")
+        return value
+
+    return parse
+
+
+#: The option types, bounded by the maxima of :mod:`teleop.limits`.
+rate = number_in(0.0, MAX_RATE_HZ, inclusive_minimum=False, unit="Hz")
+duration = number_in(0.0, MAX_DURATION_S, inclusive_minimum=False, unit="s")
+encoder_noise = number_in(0.0, MAX_ENCODER_NOISE_RAD, unit="rad")
+time_constant = number_in(0.0, MAX_TIME_CONSTANT_S, unit="s")
+latency = integer_in(0, MAX_LATENCY_PERIODS)
+count = integer_in(0)
+iterations = integer_in(1, MAX_BENCH_ITERATIONS)
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser, its errors one line on standard error (exit code 2): the
+    program, the problem and where the help is, without the usage block."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
 def _controllers_epilog(context: str) -> str:
@@ -101,12 +142,14 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     parser.add_argument("--controllers", type=csv_list, default=DEFAULT_CONTROLLERS,
                         help="comma-separated controllers, see the list below")
     if source == "session":
-        parser.add_argument("--rate", type=positive,
-                            help="control rate in Hz (default: the session's rate, else 1000)")
+        parser.add_argument("--rate", type=rate, help="control rate in Hz, at most "
+                            f"{MAX_RATE_HZ:g} (default: the session's rate, else 1000)")
     else:
-        parser.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
-    parser.add_argument("--duration", type=positive,
-                        help=f"seconds to run (default: the whole {source})")
+        parser.add_argument("--rate", type=rate, default=1000.0,
+                            help=f"control rate in Hz, at most {MAX_RATE_HZ:g}")
+    parser.add_argument("--duration", type=duration,
+                        help=f"seconds to run, at most {MAX_DURATION_S:g} (default: the whole "
+                        f"{source})")
     parser.add_argument("--out", default="out", help="output directory")
     parser.add_argument("--no-plots", action="store_true",
                         help="write the metrics only, no plots and no report.html")
@@ -114,22 +157,26 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     robot = parser.add_argument_group(
         "a robot that is not perfect", "the same for every controller; off by default "
         "(docs/design.md section 15.1)")
-    robot.add_argument("--encoder-noise", type=nonnegative, default=0.0, metavar="RAD",
-                       help="std of the Gaussian noise on each measured joint, every period")
-    robot.add_argument("--latency", type=count, default=0, metavar="PERIODS",
-                       help="control periods between a command and the joints")
-    robot.add_argument("--joint-time-constant", type=nonnegative, default=0.0, metavar="S",
-                       help="first-order response of the joint velocities to their command")
+    robot.add_argument("--encoder-noise", type=encoder_noise, default=0.0, metavar="RAD",
+                       help="std of the Gaussian noise on each measured joint, every period, "
+                       f"at most {MAX_ENCODER_NOISE_RAD:g}")
+    robot.add_argument("--latency", type=latency, default=0, metavar="PERIODS",
+                       help="control periods between a command and the joints, at most "
+                       f"{MAX_LATENCY_S:g} s")
+    robot.add_argument("--joint-time-constant", type=time_constant, default=0.0, metavar="S",
+                       help="first-order response of the joint velocities to their command, "
+                       f"at most {MAX_TIME_CONSTANT_S:g}")
     robot.add_argument("--seed", type=count, default=0, help="seed of the encoder noise")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="teleop", formatter_class=HelpFormatter,
         description="Operational-space teleoperation under kinematic constraints (CJM, QP, mink).")
     parser.add_argument("--version", action="version", version=package_version(),
                         help="print the installed version and exit")
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                     parser_class=ArgumentParser)
 
     compare = _add_command(commands, "compare", "run controllers on a scripted scenario and "
                            "write metrics and plots", epilog=_controllers_epilog("compare"))
@@ -143,10 +190,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     record = _add_command(commands, "record", "write a scenario's operator input as a session file")
     record.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
-    record.add_argument("--rate", type=positive, default=1000.0,
-                        help="control rate in Hz (one recorded target per tick)")
-    record.add_argument("--duration", type=positive,
-                        help="seconds to record (default: the whole scenario)")
+    record.add_argument("--rate", type=rate, default=1000.0,
+                        help=f"control rate in Hz, at most {MAX_RATE_HZ:g} (one recorded "
+                        "target per tick)")
+    record.add_argument("--duration", type=duration,
+                        help=f"seconds to record, at most {MAX_DURATION_S:g} (default: the whole "
+                        "scenario)")
     record.add_argument("file", help="session file to write")
 
     _add_command(commands, "scenarios", "list the scripted scenarios")
@@ -157,7 +206,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="comma-separated built-in robots")
     bench.add_argument("--controllers", type=csv_list, default=DEFAULT_BENCH_CONTROLLERS,
                        help="comma-separated controllers, see the list below")
-    bench.add_argument("--iterations", type=int, default=2000, help="timed steps per controller")
+    bench.add_argument("--iterations", type=iterations, default=2000,
+                       help=f"timed steps per controller, at most {MAX_BENCH_ITERATIONS}")
     bench.add_argument("--quick", action="store_true",
                        help="20 iterations and small scaling runs (CI smoke run)")
     bench.add_argument("--no-scaling", action="store_true",
@@ -175,10 +225,12 @@ def _run(plan, args, config) -> int:
         compare,
         format_table,
         metrics_document,
+        output_directory,
         write_outputs,
     )
     from teleop.experiments.imperfect import Imperfections
 
+    output_directory(args.out)  # before minutes of simulation
     imperfections = Imperfections(args.encoder_noise, args.latency, args.joint_time_constant,
                                   args.seed)
     duration = args.duration or plan.duration
@@ -218,8 +270,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _dispatch(args)
     except ValueError as error:  # bad scenario, controller, file: one clear line
-        print(f"teleop {args.command}: {error}", file=sys.stderr)
+        print(f"teleop {args.command}: {one_line(error)}", file=sys.stderr)
         return 2
+
+
+def one_line(error: Exception) -> str:
+    """The error's message on one line (a message never spreads over several)."""
+    return " ".join(str(error).split())
 
 
 def _dispatch(args) -> int:
@@ -261,8 +318,6 @@ def _dispatch(args) -> int:
         )
 
         iterations = 20 if args.quick else args.iterations
-        if iterations < 1:
-            raise ValueError("--iterations must be >= 1")
         results = run_bench(args.robots, args.controllers, iterations=iterations)
         if not args.no_scaling:
             results += run_scaling(iterations=max(5, iterations // 5),

@@ -20,7 +20,8 @@ import pinocchio as pin
 
 from constraints import Hole
 from teleop.controller_specs import default_specs, make_controller
-from teleop.robots import Robot, load_robot
+from teleop.limits import MAX_BENCH_ITERATIONS
+from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
 from teleop.robots.chains import hole_links, load_chain
 
 from .compare import format_status_counts
@@ -133,11 +134,28 @@ def bench_controllers(robot: Robot, holes: Sequence[Hole], specs: Sequence[str],
     return timings
 
 
+def check_iterations(iterations: int) -> int:
+    """``iterations`` as a count of timed steps in [1, :data:`MAX_BENCH_ITERATIONS`]."""
+    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) \
+            or not 1 <= iterations <= MAX_BENCH_ITERATIONS:
+        raise ValueError(f"iterations must be an integer in [1, {MAX_BENCH_ITERATIONS}], "
+                         f"got {iterations!r}")
+    return int(iterations)
+
+
 def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
               controllers: Sequence[str] = default_specs("bench"),
               iterations: int = 2000) -> list[StepTiming]:
     """The built-in robots, one hole on each constrained link (the paper's 6-before/2-after
-    case, on each arm of the dual robots)."""
+    case, on each arm of the dual robots). An unknown robot or an iteration count outside
+    [1, :data:`~teleop.limits.MAX_BENCH_ITERATIONS`] raises ``ValueError`` before any run."""
+    check_iterations(iterations)
+    if isinstance(robots, str):
+        raise ValueError(f"robots must be a list of built-in robot names, got {robots!r}")
+    for name in robots:
+        if name not in BUILTIN_ROBOTS:
+            raise ValueError(f"unknown robot {name!r}: the bench runs the built-in robots "
+                             f"{', '.join(BUILTIN_ROBOTS)}")
     results = []
     for name in robots:
         robot = load_robot(name)

@@ -6,13 +6,16 @@ import collections
 import csv
 import json
 import math
+import time
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
 from constraints import Constraint
+from constraints.validation import as_number
 from teleop.controller_specs import make_controller
+from teleop.limits import MAX_DURATION_S, MAX_STEPS
 from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
 
 from .imperfect import Imperfections
@@ -24,11 +27,26 @@ SCHEMA_VERSION = 3
 
 
 def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
-    """Control periods in ``duration`` s (default: the plan's); ValueError unless > 0 s."""
-    duration = plan.duration if duration is None else float(duration)
-    if not math.isfinite(duration) or duration <= 0:
-        raise ValueError(f"duration must be > 0 s, got {duration}")
-    return int(round(duration * config.rate))
+    """Control periods in ``duration`` s (default: the plan's): ``ValueError`` unless the
+    duration is in (0, :data:`MAX_DURATION_S`] and the periods at most :data:`MAX_STEPS`."""
+    duration = as_number(plan.duration if duration is None else duration, "duration",
+                         positive=True, maximum=MAX_DURATION_S)
+    steps = int(round(duration * config.rate))
+    if steps > MAX_STEPS:
+        raise ValueError(f"duration {duration:g} s at {config.rate:g} Hz is {steps} control "
+                         f"periods, more than {MAX_STEPS}: lower the duration or the rate")
+    return steps
+
+
+def output_directory(out_dir: str | Path) -> Path:
+    """``out_dir`` as a path where outputs can be written: an existing directory or none
+    yet (a file, a device such as ``/dev/null``, raises ``ValueError``)."""
+    if not isinstance(out_dir, (str, Path)) or not str(out_dir):
+        raise ValueError(f"output directory must be a path, got {out_dir!r}")
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"output directory {str(out)!r} exists and is not a directory")
+    return out
 
 
 def _check_specs(specs: Sequence[str]) -> list[str]:
@@ -54,7 +72,7 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
     constraints = plan.make_constraints()
-    # simulated time: iteration caps only, no wall-clock deadline (docs/design.md 10.6)
+    # simulated time: iteration caps only, no deadline (docs/design.md 10.6)
     controller = make_controller(spec, plan.robot, constraints, dt=config.dt, time_budget=None)
     records, failures = _drive(plan, controller, constraints, config, steps, imperfections,
                                on_step)
@@ -213,42 +231,84 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
     With ``agreement`` and two or more specs, one more run of the first spec evaluates the
     others beside it (:func:`joint_velocity_agreement`). The solvers' console output and
     warnings are kept off the console, in each result's ``solver_messages`` (those of the
-    agreement run repeat the runs' and are dropped).
+    agreement run repeat the runs' and are dropped). With ``progress``, standard error
+    shows a progress bar with an estimate of the time left when it is a terminal, else one
+    line per finished run.
     """
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
     specs = _check_specs(specs)
+    (imperfections or Imperfections()).check_period(config.dt)
     for spec in specs:  # fail fast on a bad spec, before minutes of simulation
         make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt)
     agreement = agreement and len(specs) > 1
+    runs = [*specs, *([f"joint velocities against {specs[0]}"] if agreement else [])]
     results = {}
     with SolverOutputCapture() as capture:
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=steps * (len(specs) + agreement), unit="step", desc=plan.name,
-                       leave=False, file=capture.console,
-                       disable=None)  # None: no bar when the console is not a terminal
-        tick = (lambda i: bar.update(1)) if bar is not None else None
+        report = RunProgress(plan.name, runs, steps, capture.console) if progress else None
+        tick = report.step if report is not None else None
         try:
             for spec in specs:
-                if bar is not None:
-                    bar.set_postfix_str(spec)
+                if report is not None:
+                    report.start(spec)
                 results[spec] = run_plan(plan, spec, config, duration, tick, imperfections)
                 results[spec].solver_messages = capture.collect()
             if agreement:
-                if bar is not None:
-                    bar.set_postfix_str(f"joint velocities against {specs[0]}")
+                if report is not None:
+                    report.start(runs[-1])
                 deviations = joint_velocity_agreement(plan, specs, config, duration,
                                                       imperfections, tick)
                 capture.collect()
                 for spec, deviation in deviations.items():
                     results[spec].joint_velocity_deviation = deviation
+            if report is not None:
+                report.finish()
         finally:
-            if bar is not None:
-                bar.close()
+            if report is not None:
+                report.close()
     return results
+
+
+class RunProgress:
+    """What :func:`compare` shows while it runs: on a terminal a tqdm bar over every run's
+    steps (with its estimate of the time left), else one line per finished run (a log
+    redirected to a file still shows the runs going by)."""
+
+    def __init__(self, name: str, runs: Sequence[str], steps: int, console) -> None:
+        self.name, self.runs, self.steps, self.console = name, list(runs), steps, console
+        self._run: str | None = None
+        self._started = 0.0
+        self._bar = None
+        if console.isatty():
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=steps * len(self.runs), unit="step", desc=name,
+                             leave=False, file=console)
+
+    def start(self, run: str) -> None:
+        """``run`` begins (the one before it has finished)."""
+        self.finish()
+        self._run, self._started = run, time.perf_counter()
+        if self._bar is not None:
+            self._bar.set_postfix_str(run)
+
+    def step(self, index: int) -> None:
+        if self._bar is not None:
+            self._bar.update(1)
+
+    def finish(self) -> None:
+        """The current run has finished: its line (not on a terminal)."""
+        if self._run is None or self._bar is not None:
+            return
+        done = self.runs.index(self._run) + 1
+        print(f"{self.name}: {self._run} done ({done}/{len(self.runs)}, {self.steps} steps in "
+              f"{time.perf_counter() - self._started:.1f} s)", file=self.console, flush=True)
+        self._run = None
+
+    def close(self) -> None:
+        """Remove the bar (the runs are over, or stopped on an error)."""
+        if self._bar is not None:
+            self._bar.close()
 
 
 def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
@@ -277,8 +337,11 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
                   imperfections: Imperfections | None = None) -> list[Path]:
     """metrics.json, metrics.csv and, with ``plots``, the PNG plots and report.html into
     ``out_dir``; returns the paths."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_directory(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ValueError(f"cannot create output directory {str(out)!r}: {error.strerror}") from None
     document = metrics_document(plan, results, config, duration, imperfections)
     paths = [out / "metrics.json", out / "metrics.csv"]
     paths[0].write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")

@@ -16,6 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from constraints.validation import as_number
+from teleop.limits import (
+    MAX_ENCODER_NOISE_RAD,
+    MAX_LATENCY_PERIODS,
+    MAX_LATENCY_S,
+    MAX_TIME_CONSTANT_S,
+)
+
 
 @dataclass(frozen=True)
 class Imperfections:
@@ -39,15 +47,24 @@ class Imperfections:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("encoder_noise", "joint_time_constant"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not math.isfinite(value) or value < 0:
-                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
-        for name in ("latency", "seed"):
+        """Each field a number in its range, at most the maxima of :mod:`teleop.limits`
+        (``ValueError`` naming it)."""
+        as_number(self.encoder_noise, "encoder_noise", 0.0, maximum=MAX_ENCODER_NOISE_RAD)
+        as_number(self.joint_time_constant, "joint_time_constant", 0.0,
+                  maximum=MAX_TIME_CONSTANT_S)
+        for name, maximum in (("latency", MAX_LATENCY_PERIODS), ("seed", None)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+            if maximum is not None and value > maximum:
+                raise ValueError(f"{name} must be <= {maximum} periods, got {value}")
+
+    def check_period(self, dt: float) -> None:
+        """Refuse a latency longer than :data:`~teleop.limits.MAX_LATENCY_S` at control
+        period ``dt`` (``ValueError``)."""
+        if self.latency * dt > MAX_LATENCY_S:
+            raise ValueError(f"latency must be <= {MAX_LATENCY_S:g} s, got {self.latency} "
+                             f"periods of {dt:g} s = {self.latency * dt:g} s")
 
     @property
     def perfect(self) -> bool:
@@ -76,6 +93,7 @@ class Imperfections:
 
     def plant(self, model: pin.Model, dt: float) -> "ImperfectPlant | None":
         """A fresh plant for one run, or None for the perfect robot."""
+        self.check_period(dt)
         return None if self.perfect else ImperfectPlant(self, model, dt)
 
 

@@ -38,7 +38,8 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.kinematics import frame_placement
-from constraints.validation import as_vector
+from constraints.validation import as_number, as_vector, short_repr
+from teleop.limits import MAX_DURATION_S, MAX_RATE_HZ, MAX_STEPS, MAX_TIME_CONSTANT_S
 from teleop.loop import target_poses
 from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED, advance, steer
 from teleop.robots import Robot, load_robot
@@ -75,8 +76,14 @@ class SessionRecorder:
     def __init__(self, path: str | Path, robot: Robot, q0: np.ndarray, rate_hz: float = 1000.0,
                  kp: float = 20.0, target_time_constant_s: float = 0.0) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file: IO[str] | None = self.path.open("w", encoding="utf-8")
+        if self.path.is_dir():
+            raise ValueError(f"session file {str(self.path)!r} is a directory")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file: IO[str] | None = self.path.open("w", encoding="utf-8")
+        except OSError as error:
+            raise ValueError(f"cannot write session file {str(self.path)!r}: "
+                             f"{error.strerror}") from None
         header = {"type": "header", "format": FORMAT, "version": VERSION,
                   "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                   "q0": [float(x) for x in q0], "rate_hz": rate_hz, "kp": kp,
@@ -163,7 +170,12 @@ def record_plan(plan: Plan, path: str | Path, rate_hz: float = 1000.0,
     Moving geometry is recorded as ``move`` events every tick. Replaying the file at the
     same rate reproduces the scenario step for step.
     """
-    duration = plan.duration if duration is None else duration
+    rate_hz = as_number(rate_hz, "rate_hz", positive=True, maximum=MAX_RATE_HZ)
+    duration = as_number(plan.duration if duration is None else duration, "duration",
+                         positive=True, maximum=MAX_DURATION_S)
+    if duration * rate_hz > MAX_STEPS:
+        raise ValueError(f"duration {duration:g} s at {rate_hz:g} Hz is more than {MAX_STEPS} "
+                         "control periods: lower the duration or the rate")
     dt = 1.0 / rate_hz
     constraints = plan.make_constraints()
     ids = [f"{c.kind}-{i + 1}" for i, c in enumerate(constraints)]
@@ -205,36 +217,35 @@ class Session:
 
 
 def load_session(path: str | Path) -> Session:
-    """Parse and check a session file; errors name the file and line."""
+    """Parse and check a session file; errors (``SessionError``) name the file and line.
+
+    Times are at most :data:`~teleop.limits.MAX_DURATION_S`; an ``add`` takes an id no
+    constraint holds at that time, a ``move`` or ``remove`` one that does.
+    """
     path = Path(path)
     if not path.is_file():
         raise SessionError(f"no session file at {path}")
-    lines = path.read_text(encoding="utf-8").splitlines()
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as error:
+        raise SessionError(f"cannot read session file {path}: {error}") from None
     header, events = None, []
     for number, line in enumerate(lines, start=1):
         if not line.strip():
             continue
         where = f"{path}:{number}"
-        try:
-            event = json.loads(line)
-        except json.JSONDecodeError as error:
-            raise SessionError(f"{where}: not JSON ({error.msg})") from error
-        if not isinstance(event, dict) or "type" not in event:
-            raise SessionError(f"{where}: each line must be an object with a 'type'")
+        event = _parse_line(line, where)
         if header is None:
-            if event["type"] != "header" or event.get("format") != FORMAT:
-                raise SessionError(f"{where}: the first line must be a {FORMAT} header")
-            if event.get("version") not in READABLE_VERSIONS:
-                raise SessionError(f"{where}: unsupported version {event.get('version')!r}")
-            if "robot" not in event or "q0" not in event:
-                raise SessionError(f"{where}: the header needs 'robot' and 'q0'")
+            _check_header(event, where)
             header = event
             continue
         if event["type"] not in EVENT_TYPES:
-            raise SessionError(f"{where}: unknown event type {event['type']!r}")
+            raise SessionError(f"{where}: unknown event type {short_repr(event['type'])}")
         t = event.get("t")
-        if not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
-            raise SessionError(f"{where}: 't' must be a time >= 0 s, got {t!r}")
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) \
+                or not 0 <= t <= MAX_DURATION_S:
+            raise SessionError(f"{where}: 't' must be a time in [0, {MAX_DURATION_S:g}] s, "
+                               f"got {short_repr(t)}")
         try:
             _check_event(event)
         except (ValueError, TypeError, KeyError) as error:
@@ -244,7 +255,88 @@ def load_session(path: str | Path) -> Session:
     if header is None:
         raise SessionError(f"{path}: empty session file")
     events.sort(key=lambda e: e["t"])  # stable: equal times keep file order
+    _check_ids(path, events)
     return Session(path, header, events)
+
+
+def _parse_line(line: str, where: str) -> dict:
+    """One line's JSON object with a ``type``, else ``SessionError``."""
+    try:
+        event = json.loads(line)
+    except json.JSONDecodeError as error:
+        raise SessionError(f"{where}: not JSON ({error.msg})") from None
+    except RecursionError:
+        raise SessionError(f"{where}: JSON nested too deeply") from None
+    except ValueError as error:  # e.g. an integer of more than 4300 digits
+        raise SessionError(f"{where}: not readable JSON ({error})") from None
+    if not isinstance(event, dict) or "type" not in event:
+        raise SessionError(f"{where}: each line must be an object with a 'type'")
+    return event
+
+
+#: The header's optional fields that name a frame, a link or a joint type (null: the
+#: robot's default).
+HEADER_TEXT_FIELDS = ("ee_frame", "constrained_link", "root_joint")
+
+
+def _check_header(event: dict, where: str) -> None:
+    """The first line: format, version, robot, q0 and the loop settings, each checked
+    (``SessionError`` naming the field)."""
+    if event["type"] != "header" or event.get("format") != FORMAT:
+        raise SessionError(f"{where}: the first line must be a {FORMAT} header")
+    version = event.get("version")
+    if type(version) is not int or version not in READABLE_VERSIONS:  # True is not 1
+        raise SessionError(f"{where}: unsupported version {short_repr(version)} "
+                           f"(this program reads {list(READABLE_VERSIONS)})")
+    if "robot" not in event or "q0" not in event:
+        raise SessionError(f"{where}: the header needs 'robot' and 'q0'")
+    try:
+        if not isinstance(event["robot"], str) or not event["robot"]:
+            raise ValueError(f"header 'robot' must be a built-in robot name or a URDF path, "
+                             f"got {short_repr(event['robot'])}")
+        q0 = event["q0"]
+        if not isinstance(q0, list):
+            raise ValueError(f"header 'q0' must be a list of joint coordinates, got {short_repr(q0)}")
+        as_vector(q0, len(q0), "header 'q0'")
+        if "rate_hz" in event:
+            as_number(event["rate_hz"], "header 'rate_hz'", positive=True, maximum=MAX_RATE_HZ)
+        if "kp" in event:
+            as_number(event["kp"], "header 'kp'", positive=True)
+        if "target_time_constant_s" in event:
+            as_number(event["target_time_constant_s"], "header 'target_time_constant_s'", 0.0,
+                      maximum=MAX_TIME_CONSTANT_S)
+        for name in HEADER_TEXT_FIELDS:
+            if event.get(name) is not None and not isinstance(event[name], str):
+                raise ValueError(f"header {name!r} must be a name, got {short_repr(event[name])}")
+        frames = event.get("ee_frames")
+        if frames is not None and (not isinstance(frames, list) or not frames
+                                   or not all(isinstance(f, str) for f in frames)):
+            raise ValueError(f"header 'ee_frames' must be a list of frame names, got {short_repr(frames)}")
+        if event.get("link_axis") is not None:
+            as_vector(event["link_axis"], 3, "header 'link_axis'")
+        locked = event.get("locked_joints")
+        if locked is not None and not isinstance(locked, dict):
+            raise ValueError("header 'locked_joints' must map joint names to coordinates")
+    except ValueError as error:
+        raise SessionError(f"{where}: {error}") from None
+
+
+def _check_ids(path: Path, events: list[dict]) -> None:
+    """In time order, an ``add`` names an id no constraint holds, a ``move`` or ``remove``
+    one that does (``SessionError`` at the line)."""
+    live: dict[str, int] = {}
+    for event in events:
+        kind, where = event["type"], f"{path}:{event['_line']}"
+        if kind == "add":
+            if event["id"] in live:
+                raise SessionError(f"{where}: duplicate id {event['id']!r}: the constraint "
+                                   f"added at line {live[event['id']]} still holds it")
+            live[event["id"]] = event["_line"]
+        elif kind in ("move", "remove"):
+            if event["id"] not in live:
+                raise SessionError(f"{where}: no constraint with id {event['id']!r} to {kind}")
+            if kind == "remove":
+                del live[event["id"]]
 
 
 def _check_event(event: dict) -> None:
@@ -324,7 +416,8 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
     robot = robot or session_robot(session)
     q0 = np.asarray(session.header["q0"], dtype=float)
     if q0.shape != (robot.model.nq,):
-        raise SessionError(f"{session.path}: q0 has {q0.size} values, the robot has nq = {robot.model.nq}")
+        raise SessionError(f"{session.path}:1: header 'q0' has {q0.size} values, the robot "
+                           f"has nq = {robot.model.nq}")
     starts = home_poses(robot, q0)
     held: dict[str, tuple[np.ndarray, list[pin.SE3]]] = {}  # per EE frame: times, poses
     for frame in robot.ee_frames:

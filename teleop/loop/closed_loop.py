@@ -29,6 +29,8 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.kinematics import frame_placement
+from constraints.validation import as_number, as_vector
+from teleop.limits import MAX_RATE_HZ, MAX_TIME_CONSTANT_S
 
 #: Columns of the per-step record, in order (see :class:`StepRecord`).
 RECORD_FIELDS = (
@@ -70,12 +72,23 @@ class LoopConfig:
     feed_forward: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("rate", "kp", "max_linear_speed", "max_angular_speed"):
-            value = getattr(self, name)
-            if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be finite and > 0, got {value}")
-        if not math.isfinite(self.target_time_constant) or self.target_time_constant < 0:
-            raise ValueError(f"target_time_constant must be >= 0, got {self.target_time_constant}")
+        """Every field a real number in its range (``ValueError`` naming it); the rate
+        and the smoothing at most :data:`~teleop.limits.MAX_RATE_HZ` and
+        :data:`~teleop.limits.MAX_TIME_CONSTANT_S`."""
+        checked = {
+            "rate": as_number(self.rate, "rate", positive=True, maximum=MAX_RATE_HZ),
+            "kp": as_number(self.kp, "kp", positive=True),
+            "max_linear_speed": as_number(self.max_linear_speed, "max_linear_speed",
+                                          positive=True),
+            "max_angular_speed": as_number(self.max_angular_speed, "max_angular_speed",
+                                           positive=True),
+            "target_time_constant": as_number(self.target_time_constant, "target_time_constant",
+                                              0.0, maximum=MAX_TIME_CONSTANT_S),
+        }
+        if not isinstance(self.feed_forward, (bool, np.bool_)):
+            raise ValueError(f"feed_forward must be True or False, got {self.feed_forward!r}")
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
 
     @property
     def dt(self) -> float:
@@ -260,12 +273,14 @@ class TeleopLoop:
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
         self.controller = controller
+        if config is not None and not isinstance(config, LoopConfig):
+            raise ValueError(f"config must be a LoopConfig, got {type(config).__name__}")
         self.config = config or LoopConfig()
         self.plant = plant
         self.ee_frame_ids: tuple[int, ...] = tuple(self.model.getFrameId(name)
                                                    for name in robot.ee_frames)
         self.ee_frame_id = self.ee_frame_ids[0]
-        self.q = np.array(robot.q_home if q0 is None else q0, dtype=float)
+        self.q = as_vector(robot.q_home if q0 is None else q0, self.model.nq, "q0")
         self.t = 0.0
         self._filtered_targets: list[pin.SE3] | None = None
         #: the filtered targets of the last period (their feed-forward), None at the start

@@ -10,6 +10,7 @@ path.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pathlib
 import types
@@ -24,12 +25,11 @@ import pinocchio as pin
 
 from constraints.validation import as_vector
 
+from .home import check_home, default_home, joint_box, sampling_bounds
+
 __all__ = ["Robot", "load_robot", "BUILTIN_ROBOTS"]
 
 ROBOTS_DIR = pathlib.Path(__file__).resolve().parent
-
-#: Limits at or beyond this magnitude count as unbounded (Pinocchio uses +-DBL_MAX).
-_UNBOUNDED = 1e10
 
 #: Defaults of the shipped robots: urdf file (in ``teleop/robots``), EE frame(s), constrained
 #: link(s) with the link axis (in constrained-link coordinates), root joint, home configuration.
@@ -80,15 +80,6 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
-
-
-def _bounds(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
-    """Position limits with unbounded entries replaced by -pi / +pi."""
-    lo = np.array(model.lowerPositionLimit, dtype=float)
-    hi = np.array(model.upperPositionLimit, dtype=float)
-    free = ~np.isfinite(lo) | ~np.isfinite(hi) | (np.abs(lo) >= _UNBOUNDED) | (np.abs(hi) >= _UNBOUNDED)
-    lo[free], hi[free] = -np.pi, np.pi
-    return lo, hi
 
 
 @dataclass(frozen=True, eq=False)
@@ -185,7 +176,7 @@ class Robot:
         """
         if not 0.0 <= margin < 0.5:
             raise ValueError(f"margin must be in [0, 0.5), got {margin}")
-        lo, hi = _bounds(self.model)
+        lo, hi = sampling_bounds(self.model)
         span = hi - lo
         q = rng.uniform(lo + margin * span, hi - margin * span)
         return pin.normalize(self.model, q)
@@ -311,6 +302,10 @@ def _build_geometry(model: pin.Model, urdf: pathlib.Path, package_dirs: tuple[st
     return models[0], models[1]
 
 
+class RobotNotFound(FileNotFoundError, ValueError):
+    """Neither a built-in robot's name nor the path of a URDF file."""
+
+
 def load_robot(
     name_or_urdf_path: str | os.PathLike,
     ee_frame: str | None = None,
@@ -337,8 +332,10 @@ def load_robot(
     package_dirs : directories where ``package://`` meshes are looked up. Default: the
         directories containing the URDF (its folder and all its ancestors).
     q_home : (nq,) home configuration inside the limits, of the URDF's joints (the
-        locked ones included). Default: the built-in's, else ``pin.neutral(model)``
-        clipped to the limits.
+        locked ones included). Default: the built-in's, else one inside the limits by a
+        margin and away from singularities (``teleop.robots.home.default_home``,
+        docs/design.md section 6.1). A given one near a bound or singular is taken with
+        a ``HomeWarning``.
     locked_joints : names of URDF joints to freeze (grippers, fingers): the robot's model
         is Pinocchio's ``buildReducedModel`` of the URDF's without them, so no controller
         sees or moves them. The frames they carry stay, rigidly attached to the parent.
@@ -352,13 +349,27 @@ def load_robot(
 
     Raises
     ------
-    FileNotFoundError : the path does not exist (and is not a built-in name).
+    RobotNotFound : the path does not exist (and is not a built-in name); both a
+        ``FileNotFoundError`` and a ``ValueError``.
     ValueError : unparsable URDF, unknown frame, bad ``link_axis``, ``q_home``,
         ``locked_joints`` or ``locked_configuration``.
 
     If the geometry cannot be loaded (e.g. missing meshes) a warning is emitted and the
     robot gets empty geometry models: the kinematics are all the controllers need.
     """
+    if not isinstance(name_or_urdf_path, (str, os.PathLike)) or not os.fspath(name_or_urdf_path):
+        raise ValueError(f"robot must be a built-in robot name or a URDF path, got "
+                         f"{name_or_urdf_path!r} (built-in robots: {sorted(BUILTIN_ROBOTS)})")
+    for option, value in (("ee_frame", ee_frame), ("constrained_link", constrained_link),
+                          ("root_joint", root_joint)):
+        if value is not None and not isinstance(value, str):
+            raise ValueError(f"{option} must be a name, got {value!r}")
+    for option, value, kinds in (("ee_frames", ee_frames, str),
+                                 ("package_dirs", package_dirs, (str, os.PathLike))):
+        listed = value if isinstance(value, (list, tuple)) else ()
+        if not isinstance(value, (type(None), str, os.PathLike, Iterable)) or not all(
+                isinstance(item, kinds) for item in listed):
+            raise ValueError(f"{option} must be a list of names, got {value!r}")
     key = os.fspath(name_or_urdf_path)
     builtin = isinstance(key, str) and key in BUILTIN_ROBOTS
     if builtin:
@@ -367,7 +378,7 @@ def load_robot(
     else:
         urdf = pathlib.Path(key).expanduser()
         if not urdf.is_file():
-            raise FileNotFoundError(
+            raise RobotNotFound(
                 f"no URDF file at {str(urdf)!r} and not a built-in robot name "
                 f"(built-in robots: {sorted(BUILTIN_ROBOTS)})"
             )
@@ -393,10 +404,13 @@ def load_robot(
     package_dirs = tuple(os.fspath(p) for p in package_dirs)
     visual_model, collision_model = _build_geometry(model, urdf, package_dirs)
 
+    given = q_home is not None
     if q_home is None:
         q_home = defaults["q_home"]
-    if q_home is None:
-        q = np.clip(pin.neutral(model), model.lowerPositionLimit, model.upperPositionLimit)
+    if q_home is None:  # a start for default_home, below; the locked joints stay there
+        box = joint_box(model)
+        q = pin.neutral(model)
+        q[box.q_index] = np.clip(q[box.q_index], *box.inner())
     else:
         q = _check_q_home(model, q_home)
     locked: dict[str, tuple[float, ...]] = {}
@@ -416,7 +430,7 @@ def load_robot(
         axis = _readonly(_check_axis(link_axis if link_axis is not None
                                      else defaults.get("link_axis", (0.0, 0.0, 1.0))))
 
-    return Robot(
+    robot = Robot(
         name=key if builtin else model.name,
         model=model,
         visual_model=visual_model,
@@ -433,6 +447,11 @@ def load_robot(
         link_axes=types.MappingProxyType(links),
         root_joint=root_joint,
     )
+    if given:
+        check_home(robot, robot.q_home)
+    elif q_home is None:
+        robot = dataclasses.replace(robot, q_home=_readonly(default_home(robot, robot.q_home)))
+    return robot
 
 
 #: Default velocity limits of a planar root joint: (m/s, m/s, rad/s).

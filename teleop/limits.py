@@ -1,0 +1,44 @@
+"""The largest rates, durations, sizes, latencies and noise the teleop layer accepts.
+
+Every entry point (the Python API, the CLI, session and scene files) checks its input
+against these, so that no input makes a run allocate without end or never finish
+(docs/design.md section 15.6). Each bound is far beyond any real use; the line above it
+says why.
+"""
+
+from __future__ import annotations
+
+#: Control rate (Hz). Robot joint interfaces run at 1-8 kHz; at 1e12 Hz a simulated second
+#: would never finish.
+MAX_RATE_HZ = 10_000.0
+
+#: Simulated time (s) of a run, a recording or a session: an hour, longer than any
+#: teleoperated procedure recorded to replay.
+MAX_DURATION_S = 3_600.0
+
+#: Control periods of one run: each tick keeps a record (1.5 kB with one hole, measured),
+#: so a run holds at most about 1.5 GB; 1000 s at 1 kHz.
+MAX_STEPS = 1_000_000
+
+#: Command latency (s): a command a second old is no longer teleoperation.
+MAX_LATENCY_S = 1.0
+
+#: Command latency in control periods: :data:`MAX_LATENCY_S` at :data:`MAX_RATE_HZ` (each
+#: period in flight holds one queued command).
+MAX_LATENCY_PERIODS = int(MAX_LATENCY_S * MAX_RATE_HZ)
+
+#: Standard deviation of the simulated encoder noise (rad): 0.1 rad (5.7 degrees) is
+#: thousands of counts of any joint encoder.
+MAX_ENCODER_NOISE_RAD = 0.1
+
+#: Time constant (s) of the simulated joint velocity response, and of the target
+#: smoothing: a joint or a filter slower than a second is not following its command.
+MAX_TIME_CONSTANT_S = 1.0
+
+#: The CJM's damped-least-squares damping (paper eq 35), in units of the constrained
+#: Jacobian's singular values (order 1 for an arm, m and rad): 1 already damps every
+#: direction of such an arm by half or more; the UI's slider stops at 0.2.
+MAX_DAMPING = 1.0
+
+#: Timed steps per controller in ``teleop bench``: 1e6 steps of 50 us is under a minute.
+MAX_BENCH_ITERATIONS = 1_000_000
