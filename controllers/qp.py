@@ -465,6 +465,9 @@ class QPController(Controller):
                                      frozenset({"eps_abs", "rho"} - set(user_settings)))
                         if solver == "proxqp" and ProxQPSolver.accepts(self.settings) else None)
         self._direct_daqp = solver == "daqp" and _daqp_accepts(self.settings)
+        #: what goes through qpsolvers: its proxqp path takes no inner cap (``max_iter_in``)
+        self._qpsolvers_settings = {k: v for k, v in self.settings.items()
+                                    if not (solver == "proxqp" and k == "max_iter_in")}
         if self._direct_daqp:
             import daqp  # noqa: PLC0415 - only when daqp is the backend
 
@@ -810,10 +813,9 @@ class QPController(Controller):
             G = None if G is None else scipy.sparse.csc_matrix(G)
         qp = qpsolvers.Problem(P, problem.gradient, G, h, A, problem.equality_rhs,
                                lb=problem.lower, ub=problem.upper)
-        settings = self.settings
         self.budget.remaining(self.solver)
         try:
-            solution = qpsolvers.solve_problem(qp, solver=self.solver, **settings)
+            solution = qpsolvers.solve_problem(qp, solver=self.solver, **self._qpsolvers_settings)
         except Exception as error:  # backends raise their own types
             raise SolverError(f"{self.solver} raised {type(error).__name__}: {error}") from error
         if not solution.found or solution.x is None:
