@@ -46,9 +46,14 @@ from mink.limits.limit import Constraint as LimitRows
 from constraints import Constraint
 from constraints.validation import as_number, as_vector
 
-from .base import Controller, Kinematics, SolverError, as_twist_weight
+from .base import EQUALITY_TOLERANCE, Controller, Kinematics, SolverError, StepStatus, as_twist_weight
 from .joint_limits import DEFAULT_LIMIT_GAIN
-from .qp import PROXQP_RHO
+from .least_residual import HeldRows, held_rows, least_residual_problem
+from .linalg import DampingPolicy
+from .qp import (DAQP_PROXIMAL_FLOOR, DAQP_PROXIMAL_WEIGHT, INFINITE_BOUND, PROXQP_RHO,
+                 SOLVER_SETTINGS, TASK_ACCURACY, ProxQPSolver, QuadraticProgram, held_note)
+from .qp_budget import ITERATION_CAPS, BudgetExceeded, StepBudget, TimeBudget
+from .task_damping import task_damping
 
 #: Solver settings in the units of *velocity* (rad/s, m/s); they are multiplied by ``dt``
 #: before they reach the backend, because mink's QP variable is ``dq = v dt``: a
@@ -75,6 +80,17 @@ FIXED_SETTINGS: dict[str, dict] = {
     "daqp": {"eq_reduction": 1},
     "osqp": {"eps_rel": 0.0, "polishing": True, "max_iter": 20000, "raise_error": False},
 }
+
+#: Iteration caps of mink's solves: the QP controller's, but proxqp's. mink's QP
+#: (``mink.build_ik``, in ``dq`` units, the posture's curvature ``c^2`` ~ 1e-10) is solved
+#: by the QP controller's proxsuite objects (``ProxQPSolver``), which take both
+#: ``max_iter`` and ``max_iter_in`` (``qpsolvers``' proxqp path takes no inner cap). After
+#: the 5.5 cm hole jump on sda10f (tests/test_qp_recovery.py) 100 x 50 stopped 362 of 500
+#: steps; 25 x 100 none (at most 22 outer, 423 inner iterations a solve), but with no margin
+#: (a rounding difference put one step over it): 50 x 100. The worst step
+#: it allows is measured in docs/design.md section 10.6.
+MINK_ITERATION_CAPS: dict[str, dict[str, int]] = {
+    **ITERATION_CAPS, "proxqp": {"max_iter": 50, "max_iter_in": 100}}
 
 #: Cost of the posture task relative to the task's scale (``MinkController.posture_cost``:
 #: mink's cost is ``c = posture_cost * sqrt(s)``). The posture bends the twist by about
@@ -507,14 +523,18 @@ class ConstraintTask(mink.Task):
         super().__init__(cost=np.ones(cache.constraint.dim), gain=1.0, lm_damping=0.0)
         self.cache = cache
         self.dt = float(dt)
+        #: the right-hand side held instead of ``b`` (the least-residual stage), or None
+        self.held_rhs: np.ndarray | None = None
 
     @property
     def constraint(self) -> Constraint:
         return self.cache.constraint
 
     def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
-        """``e = -b dt`` (k,), so that ``J dq = -e`` reads ``A v = b``."""
-        return -self.dt * self.cache.at(configuration).b
+        """``e = -b dt`` (k,), so that ``J dq = -e`` reads ``A v = b`` (``held_rhs``
+        instead of ``b`` when set)."""
+        rows = self.cache.at(configuration)
+        return -self.dt * (rows.b if self.held_rhs is None else self.held_rhs)
 
     def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
         """``J = A`` (k x nv), columns in MuJoCo dof order."""
@@ -531,6 +551,8 @@ class BarrierLimit(mink.Limit):
 
     def __init__(self, cache: _RowsCache) -> None:
         self.cache = cache
+        #: the bound held instead of ``b`` (the least-residual stage), or None
+        self.held_rhs: np.ndarray | None = None
 
     @property
     def constraint(self) -> Constraint:
@@ -541,7 +563,8 @@ class BarrierLimit(mink.Limit):
     ) -> LimitRows:
         """``G dq <= h`` with ``G = -A`` (MuJoCo columns) and ``h = -b dt``."""
         rows = self.cache.at(configuration)
-        return LimitRows(G=-rows.A_mj, h=-dt * rows.b)
+        return LimitRows(G=-rows.A_mj, h=-dt * (rows.b if self.held_rhs is None
+                                                else self.held_rhs))
 
 
 class PostureTask(mink.Task):
@@ -576,6 +599,26 @@ class PostureTask(mink.Task):
     def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
         """``J = I`` (nv x nv)."""
         return self._identity
+
+
+class DampingTask(mink.Task):
+    """The CJM's damping as a mink task: ``|D dq|^2`` (:mod:`controllers.task_damping`),
+    ``D`` in MuJoCo columns, padded with zero rows to the task's size; error 0."""
+
+    def __init__(self, size: int, nv: int) -> None:
+        super().__init__(cost=np.ones(size), gain=1.0, lm_damping=0.0)
+        self.rows = np.zeros((size, nv))
+        self._error = np.zeros(size)
+
+    def set_rows(self, rows: np.ndarray) -> None:
+        self.rows[:] = 0.0
+        self.rows[:rows.shape[0]] = rows
+
+    def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
+        return self._error
+
+    def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
+        return self.rows
 
 
 class PlanarBaseVelocityLimit(mink.Limit):
@@ -697,6 +740,8 @@ class MinkController(Controller):
         defaults built from ``VELOCITY_TOLERANCES`` and ``FIXED_SETTINGS``).
     twist_weight : the diagonal ``W`` of the CJM's and the QP's weighted task: each frame
         task's position and orientation costs are ``W^1/2`` of its EE's entries.
+    time_budget, singular_threshold, max_damping : the step's deadline and the CJM's
+        damping policy, as :class:`controllers.QPController`'s (docs/design.md 10.6, 10.7).
     """
 
     def __init__(
@@ -714,11 +759,18 @@ class MinkController(Controller):
         equality_tolerance: float = 1e-6,
         solver_settings: dict | None = None,
         twist_weight=None,
+        time_budget: TimeBudget = "periods",
+        singular_threshold: float = 0.01,
+        max_damping: float = 0.05,
         strict: bool = False,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, strict=strict)
+        self.budget = StepBudget(time_budget, self.dt)
+        self.policy = DampingPolicy(0.0, as_number(singular_threshold, "singular_threshold", 0.0),
+                                    as_number(max_damping, "max_damping", 0.0))
         self.twist_weight = as_twist_weight(twist_weight, self.task_size)
         self._twist_scale = np.sqrt(self.twist_weight)  # W^1/2: each frame task's costs
+        self._twist_rows = self._twist_scale[:, None]  # W^1/2, to scale the rows of J_e
         self._unit_weight = bool(np.all(self.twist_weight == 1.0))
         if solver not in qpsolvers.available_solvers:
             raise ValueError(
@@ -734,10 +786,24 @@ class MinkController(Controller):
         self.settings = {key: value * self.dt
                          for key, value in VELOCITY_TOLERANCES.get(solver, {}).items()}
         self.settings.update(FIXED_SETTINGS.get(solver, {}))
+        self.settings.update(MINK_ITERATION_CAPS.get(solver, {}))
         self.settings.update(solver_settings or {})
+        #: iteration caps the user set: the least-residual solve takes them too
+        self._user_caps = {k: v for k, v in (solver_settings or {}).items()
+                           if k in ITERATION_CAPS.get(solver, {})}
         #: proxqp's rho follows the posture cost, unless the user set it
         self._proxqp_rho_tuned = (solver == "proxqp" and self.posture_cost > 0.0
                                   and "rho" not in (solver_settings or {}))
+        #: proxqp runs on the QP controller's proxsuite objects, which cap its inner
+        #: iterations too (unless a setting is one they cannot apply: then qpsolvers)
+        self._proxqp = self._least_residual_proxqp = None
+        if solver == "proxqp" and ProxQPSolver.accepts(self.settings):
+            self._proxqp = ProxQPSolver(self.settings, frozenset(
+                {"rho"} if self._proxqp_rho_tuned else ()))
+            self._least_residual_proxqp = ProxQPSolver(
+                {**SOLVER_SETTINGS["proxqp"], **ITERATION_CAPS["proxqp"], **self._user_caps},
+                frozenset({"eps_abs", "rho"}))
+        self._posture_curvature = 1.0  # c^2, the curvature the posture task gives mink's QP
 
         # The MuJoCo side, built once, before the constraints that use it.
         model: pin.Model = robot.model
@@ -765,6 +831,9 @@ class MinkController(Controller):
                                         gain=self.posture_gain * self.dt,
                                         difference=self.posture_difference)
         self._tasks = [*self.ee_tasks, self.posture_task] if self.posture_cost else self.ee_tasks
+        self.damping_task = DampingTask(self.task_size, self.mj_model.nv)
+        #: the task rows the damping sees: those of non-zero weight, as the CJM's
+        self._weighted_rows = np.flatnonzero(self.twist_weight > 0.0)
         self._equality_caches: list[_RowsCache] = []
         self.constraint_tasks: list[ConstraintTask] = []
         self.barrier_limits: list[BarrierLimit] = []
@@ -827,28 +896,43 @@ class MinkController(Controller):
                 float(np.vdot(self.twist_weight, np.square(kinematics.ee_jacobian).sum(axis=1)))
                 / self.task_size)
             self.posture_task.cost[:] = cost  # (set_cost, without its checks)
-            if self._proxqp_rho_tuned:
+            self._posture_curvature = cost**2
+            if self._proxqp_rho_tuned and self._proxqp is None:
                 self.settings["rho"] = PROXQP_RHO * cost**2
+        self.budget.start()
+        A, b = self._equality_rows()
+        damping = task_damping(A, (self._twist_rows * kinematics.ee_jacobian)[self._weighted_rows],
+                               self.policy)
+        self.info.sigma_min, self.info.damping = damping.sigma_min, damping.damping
+        tasks = self._tasks
+        if damping.rows.shape[0]:
+            self.damping_task.set_rows(self.joints.columns_to_mujoco(damping.rows, q_mj))
+            tasks = [*tasks, self.damping_task]
         try:
-            v_mj = self._solve_ik()
-        except Exception as error:  # mink.NoSolutionFound, backend errors
-            raise SolverError(
-                f"mink.solve_ik with solver {self.solver!r} raised "
-                f"{type(error).__name__}: {error}") from error
-        if v_mj is None or not np.all(np.isfinite(v_mj)):
-            raise SolverError(f"mink.solve_ik with solver {self.solver!r} returned a "
-                              "non-finite velocity")
-        qd = self.joints.v_to_pinocchio(v_mj, q_mj)
-        if self._equality_caches:
-            residual = max(float(np.max(np.abs(c.A_pin @ qd - c.b)))
-                           for c in self._equality_caches)
-            self.info.equality_residual = residual
-            if not residual <= self.equality_tolerance:  # daqp's eq_reduction: least squares
-                raise SolverError(
-                    f"mink.solve_ik with solver {self.solver!r} returned a velocity that "
-                    f"breaks the equality rows by {residual:.3g} m/s (tolerance "
-                    f"{self.equality_tolerance:g}): infeasible constraints or an "
-                    "inaccurate solve")
+            qd = self._solve_rows(tasks, q_mj)
+        except SolverError as error:  # infeasible rows, or a budget spent
+            if not (self._equality_caches or self.barrier_limits):
+                raise
+            try:
+                held = self._least_residual(A, b, kinematics.q)
+            except SolverError as second:
+                raise error from second
+            if held.residual <= EQUALITY_TOLERANCE:
+                raise  # the rows fit the limits: the failure was something else
+            self.info.report(StepStatus.CONSTRAINT_DEGRADED, held_note(held.residual))
+            self._hold(held)
+            try:
+                qd = self._solve_rows(tasks, q_mj)
+            except BudgetExceeded:
+                raise
+            except SolverError as task_error:  # (proxqp: a false infeasibility, in dq units)
+                qd = held.qd
+                self.info.report(StepStatus.LEAST_SQUARES, f"mink under the held rows failed "
+                                 f"({task_error}): the least-residual command")
+            finally:
+                self._hold(None)
+        if A is not None:
+            self.info.equality_residual = float(np.max(np.abs(A @ qd - b)))
         if self.barrier_limits:
             active = []
             for index, limit in zip(
@@ -862,11 +946,121 @@ class MinkController(Controller):
                                  None if self._unit_weight else self._twist_scale)
         return qd
 
-    def _solve_ik(self) -> np.ndarray:
-        return mink.solve_ik(
-            self.configuration, self._tasks, self.dt, self.solver, damping=self.damping,
-            safety_break=False, limits=self._limits, constraints=self.constraint_tasks,
-            **self.settings)
+    def _solve_rows(self, tasks: list[mink.Task], q_mj: np.ndarray) -> np.ndarray:
+        """mink's ``qd`` (Pinocchio order) under the rows as the constraint tasks hold them
+        (``b``, or the least residual's), which it must meet to ``equality_tolerance``."""
+        v_mj = self._solve_ik(tasks)
+        if not np.all(np.isfinite(v_mj)):
+            raise SolverError(f"mink.solve_ik with solver {self.solver!r} returned a "
+                              "non-finite velocity")
+        qd = self.joints.v_to_pinocchio(v_mj, q_mj)
+        if self._equality_caches:
+            residual = max(float(np.max(np.abs(
+                task.cache.A_pin @ qd - (task.cache.b if task.held_rhs is None else task.held_rhs))))
+                for task in self.constraint_tasks)
+            if not residual <= self.equality_tolerance:  # daqp's eq_reduction: least squares
+                raise SolverError(
+                    f"mink.solve_ik with solver {self.solver!r} returned a velocity that "
+                    f"breaks the equality rows by {residual:.3g} m/s (tolerance "
+                    f"{self.equality_tolerance:g}): infeasible constraints or an "
+                    "inaccurate solve")
+        return qd
+
+    def _solve_ik(self, tasks: list[mink.Task]) -> np.ndarray:
+        """``mink.build_ik`` solved within the step's budget (``solve_ik``'s two lines, so
+        that a budget spent is told from an infeasible problem). proxqp: by
+        :meth:`_solve_proxqp`."""
+        settings = self.settings
+        self.budget.remaining(self.solver)
+        try:
+            problem = mink.build_ik(self.configuration, tasks, self.dt, self.damping,
+                                    self._limits, self.constraint_tasks)
+            if self._proxqp is not None:
+                return self._solve_proxqp(problem) / self.dt
+            solution = qpsolvers.solve_problem(problem, solver=self.solver, **settings)
+        except SolverError:
+            raise
+
+        except Exception as error:  # backend errors
+            raise SolverError(f"mink with solver {self.solver!r} raised "
+                              f"{type(error).__name__}: {error}") from error
+        if not solution.found or solution.x is None:
+            status = str(getattr(solution.extras.get("info"), "status", ""))
+            if ("time limit" in status or "maximum iterations" in status
+                    or "MAX_ITER" in status):
+                raise self.budget.exceeded(f"mink:{self.solver}", status)
+            raise SolverError(f"mink with solver {self.solver!r} found no solution "
+                              f"({status or 'infeasible, or out of iterations'})")
+        return solution.x / self.dt
+
+    def _solve_proxqp(self, problem: qpsolvers.Problem) -> np.ndarray:
+        """mink's QP ``min 1/2 dq'P dq + q'dq  s.t.  G dq <= h,  A dq = b`` by a fresh
+        capped proxsuite solve (as ``qpsolvers``' proxqp path: no state carried between
+        steps), ``rho`` from the posture's curvature ``c^2`` as before."""
+        P, q, G, h, A, b, lb, ub = problem.unpack()
+        self._proxqp.reset()
+        try:
+            return self._proxqp.solve(QuadraticProgram(
+                np.asarray(P, dtype=float), q, A, b, G,
+                None if G is None else np.full(G.shape[0], -INFINITE_BOUND), h, lb, ub,
+                curvature=self._posture_curvature), self.budget).x
+        except SolverError as error:  # the same type, naming mink
+            raise type(error)(f"mink:{error}") from error
+
+    def _equality_rows(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The equality rows ``A qd = b`` at the current configuration (Pinocchio order)."""
+        if not self._equality_caches:
+            return None, None
+        caches = [cache.at(self.configuration) for cache in self._equality_caches]
+        return np.vstack([c.A_pin for c in caches]), np.concatenate([c.b for c in caches])
+
+    def _least_residual(self, A: np.ndarray | None, b: np.ndarray | None,
+                        q: np.ndarray) -> HeldRows:
+        """The rows as close to ``b`` as the box and the barriers allow
+        (:mod:`controllers.least_residual`), solved with this controller's backend."""
+        lower, upper = self.joint_bounds.box(q)
+        lower = np.where(np.isfinite(lower), lower, -INFINITE_BOUND)
+        upper = np.where(np.isfinite(upper), upper, INFINITE_BOUND)
+        G = h = None
+        if self.barrier_limits:
+            caches = [limit.cache.at(self.configuration) for limit in self.barrier_limits]
+            G = -np.vstack([c.A_pin for c in caches])
+            h = -np.concatenate([c.b for c in caches])
+        problem = least_residual_problem(A, b, G, h, lower, upper, INFINITE_BOUND)
+        if self._least_residual_proxqp is not None:
+            self._least_residual_proxqp.reset()
+            solution = self._least_residual_proxqp.solve(QuadraticProgram(
+                problem.hessian, problem.gradient, rows=problem.rows,
+                rows_lower=problem.rows_lower, rows_upper=problem.rows_upper,
+                lower=problem.lower, upper=problem.upper, curvature=problem.curvature,
+                semidefinite=problem.semidefinite), self.budget)
+            return held_rows(solution.x, A, b, G, h, lower, upper)
+        settings = {**SOLVER_SETTINGS.get(self.solver, {}), **ITERATION_CAPS.get(self.solver, {}),
+                    **self._user_caps}
+        self.budget.remaining(self.solver)
+        if self.solver == "daqp" and problem.semidefinite:  # as the QP controller's
+            settings.update(eps_prox=DAQP_PROXIMAL_WEIGHT, eta_prox=max(
+                TASK_ACCURACY * problem.curvature, DAQP_PROXIMAL_FLOOR))
+        qp = qpsolvers.Problem(problem.hessian, problem.gradient, problem.rows,
+                               problem.rows_upper, lb=problem.lower, ub=problem.upper)
+        try:
+            solution = qpsolvers.solve_problem(qp, solver=self.solver, **settings)
+        except Exception as error:  # backends raise their own types
+            raise SolverError(f"{self.solver} raised {type(error).__name__}: {error}") from error
+        if not solution.found or solution.x is None:
+            raise SolverError(f"{self.solver} found no least-residual solution")
+        return held_rows(solution.x, A, b, G, h, lower, upper)
+
+    def _hold(self, held: HeldRows | None) -> None:
+        """Make the constraint tasks and barrier limits hold ``held``'s rows (None: ``b``)."""
+        if held is None:
+            for item in (*self.constraint_tasks, *self.barrier_limits):
+                item.held_rhs = None
+            return
+        for task in self.constraint_tasks:
+            task.held_rhs = task.cache.A_pin @ held.qd
+        for limit in self.barrier_limits:
+            limit.held_rhs = np.minimum(limit.cache.b, limit.cache.A_pin @ held.qd)
 
     def site_pose(self, frame: str) -> pin.SE3:
         """World pose of the MuJoCo site at Pinocchio frame ``frame`` (last ``solve``'s q)."""

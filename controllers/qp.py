@@ -29,9 +29,14 @@ from scipy.linalg import lapack
 from constraints import Constraint
 from constraints.validation import as_number, as_vector
 
-from .base import EQUALITY_TOLERANCE, Controller, Kinematics, SolverError, as_twist_weight
+from .base import (EQUALITY_TOLERANCE, Controller, Kinematics, SolverError, StepStatus,
+                   as_twist_weight)
 from .joint_limits import DEFAULT_LIMIT_GAIN
-from .linalg import nullspace
+from .least_residual import HeldRows, held_rows, least_residual_problem
+from .linalg import DampingPolicy, nullspace
+from .qp_budget import (DAQP_OUT_OF_BUDGET, ITERATION_CAPS, BudgetExceeded, StepBudget,
+                        TimeBudget)
+from .task_damping import task_damping
 
 Priorities = Literal["lexicographic", "weighted"]
 
@@ -46,13 +51,15 @@ SPARSE_SOLVERS = frozenset({"osqp", "scs", "clarabel", "highs", "piqp", "qpalm"}
 #: refinement steps of its polishing (default 3) make the polished answer exact to about
 #: 1e-11 rad/s on the generated chains, where 3 left up to 1e-4; its iteration cap is
 #: 10^5 (2*10^4 stopped 3 of 20 semidefinite task stages on the 32-DoF chain with 8 holes
-#: and binding limits). ``raise_error=False`` keeps OSQP's failures a "not found" status
-#: (as mink's settings do). Residuals are reported, not hidden.
+#: and binding limits; :data:`controllers.qp_budget.ITERATION_CAPS`). ``raise_error=False``
+#: keeps OSQP's failures a "not found" status (as mink's settings do). Residuals are
+#: reported, not hidden. Iteration caps and the time limit are the step budget's
+#: (:mod:`controllers.qp_budget`).
 SOLVER_SETTINGS: dict[str, dict] = {
-    "proxqp": {"eps_abs": 1e-10, "eps_rel": 0.0, "max_iter": 1000},  # fails fast, not in 10^4 iterations
+    "proxqp": {"eps_abs": 1e-10, "eps_rel": 0.0},
     "daqp": {"primal_tol": 1e-10},
     "osqp": {"eps_abs": 1e-7, "eps_rel": 0.0, "polishing": True, "polish_refine_iter": 20,
-             "max_iter": 100000, "raise_error": False},
+             "raise_error": False},
 }
 
 #: Accuracy (rad/s) asked of the task stage along its weakest direction. A stationarity
@@ -129,6 +136,11 @@ PROXQP_PRIMAL_INFEASIBILITY = 1e-8
 #: proxqp settings that are arguments of ``init`` rather than fields of ``settings``.
 _PROXQP_INIT_ARGUMENTS = frozenset({"rho", "mu_eq", "mu_in", "compute_preconditioner",
                                     "manual_minimal_H_eigenvalue"})
+
+
+def held_note(residual: float) -> str:
+    return (f"constraint rows conflict with the joint limits or barriers: held at their "
+            f"least residual, {residual:.2e} m/s")
 
 
 class QuadraticProgram(NamedTuple):
@@ -229,7 +241,7 @@ def _daqp_accepts(settings: dict) -> bool:
     return all(k in daqp.Model().settings for k in settings)
 
 
-class _ProxQP:
+class ProxQPSolver:
     """Persistent ``proxsuite.proxqp.dense.QP`` objects: ``init`` once per problem shape,
     ``update`` + ``solve`` after.
 
@@ -286,7 +298,8 @@ class _ProxQP:
     def reset(self) -> None:
         self.solvers.clear()
 
-    def solve(self, problem: QuadraticProgram) -> QPSolution:
+    def solve(self, problem: QuadraticProgram, budget: StepBudget) -> QPSolution:
+        budget.remaining("proxqp")
         shape = problem.shape
         _, _, n_rows, boxed = shape
         arguments = (problem.hessian, problem.gradient, problem.equality_matrix,
@@ -319,6 +332,9 @@ class _ProxQP:
             status = qp.results.info.status
         if status != self.solved:
             self.reset()
+            if status == self._proxqp.QPSolverOutput.PROXQP_MAX_ITER_REACHED:
+                raise budget.exceeded("proxqp", f"iteration limit ({qp.settings.max_iter} "
+                                      f"x {qp.settings.max_iter_in} iterations)")
             raise SolverError(f"proxqp found no solution ({status.name})")
         multipliers = qp.results.z  # the rows C, then the box
         return QPSolution(qp.results.x.copy(), multipliers[n_rows:].copy() if boxed else None,
@@ -368,8 +384,8 @@ class QPController(Controller):
         :class:`controllers.base.Controller`.
     solver : a ``qpsolvers`` backend: ``"proxqp"`` (default), ``"daqp"``, ``"osqp"``, ...
         proxqp runs as persistent ``proxsuite`` dense QPs (``init`` once per stage, then
-        ``update`` + ``solve``; see ``_ProxQP``), daqp through ``daqp.solve`` directly, the
-        others through ``qpsolvers``. ``solver_settings`` the direct calls cannot apply
+        ``update`` + ``solve``; see :class:`ProxQPSolver`), daqp through ``daqp.solve``
+        directly, the others through ``qpsolvers``. ``solver_settings`` the direct calls cannot apply
         (a key that is no proxqp/daqp setting) send proxqp/daqp through ``qpsolvers`` too.
     priorities : ``"lexicographic"`` (default) or ``"weighted"``.
     posture : configuration the redundancy is spent on (default ``robot.q_home``), as
@@ -381,7 +397,12 @@ class QPController(Controller):
     twist_weight : (6,) diagonal weight ``W`` of each EE's twist error, or one weight per
         entry of the stacked twist (default identity).
     solver_settings : extra keyword arguments for the backend (override the defaults,
-        the tolerances set from the curvature included).
+        the tolerances set from the curvature included, and the iteration caps).
+    time_budget : the step's deadline in CPU seconds: ``"periods"`` (default, 10 control
+        periods), a number, or None for the iteration caps alone (simulated time);
+        docs/design.md section 10.6.
+    damping, singular_threshold, max_damping : the CJM's damping policy (paper eq 35),
+        applied to the task stage as rows (docs/design.md section 10.7).
     """
 
     def __init__(
@@ -399,10 +420,18 @@ class QPController(Controller):
         position_limits: bool = True,
         velocity_limits: bool = True,
         solver_settings: dict | None = None,
+        time_budget: TimeBudget = "periods",
+        damping: float = 0.0,
+        singular_threshold: float = 0.01,
+        max_damping: float = 0.05,
         strict: bool = False,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
                          velocity_limits=velocity_limits, strict=strict)
+        self.budget = StepBudget(time_budget, self.dt)
+        self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
+                                    as_number(singular_threshold, "singular_threshold", 0.0),
+                                    as_number(max_damping, "max_damping", 0.0))
         if solver not in qpsolvers.available_solvers:
             raise ValueError(
                 f"QP solver {solver!r} is not available; installed: {qpsolvers.available_solvers}"
@@ -418,20 +447,27 @@ class QPController(Controller):
         self.posture = (pin.neutral(self.model) if posture is None
                         else as_vector(posture, self.model.nq, "posture"))
         user_settings = dict(solver_settings or {})
-        self.settings = {**SOLVER_SETTINGS.get(solver, {}), **user_settings}
+        self.settings = {**SOLVER_SETTINGS.get(solver, {}), **ITERATION_CAPS.get(solver, {}),
+                         **user_settings}
         weight = as_twist_weight(twist_weight, self.task_size)
         self.twist_weight = weight
         self._twist_scale = np.sqrt(weight)
         self._twist_rows = self._twist_scale[:, None]  # W^1/2, to scale the rows of J_e
         self._unit_weight = bool(np.all(weight == 1.0))
+        #: the task rows the damping sees: those of non-zero weight, as the CJM's
+        self._weighted_rows = np.flatnonzero(weight > 0.0)
         self._stacked, self._stacked_target = np.empty((0, self.model.nv)), np.empty(0)
         self._daqp_buffers: dict[tuple[int, int, int], tuple[np.ndarray, ...]] = {}
         # proxqp and daqp are called directly (persistent proxqp objects; daqp.solve),
         # the other backends through qpsolvers. Settings a direct call cannot apply
         # send proxqp and daqp back through qpsolvers as well.
-        self._proxqp = (_ProxQP(self.settings, frozenset({"eps_abs", "rho"} - set(user_settings)))
-                        if solver == "proxqp" and _ProxQP.accepts(self.settings) else None)
+        self._proxqp = (ProxQPSolver(self.settings,
+                                     frozenset({"eps_abs", "rho"} - set(user_settings)))
+                        if solver == "proxqp" and ProxQPSolver.accepts(self.settings) else None)
         self._direct_daqp = solver == "daqp" and _daqp_accepts(self.settings)
+        #: what goes through qpsolvers: its proxqp path takes no inner cap (``max_iter_in``)
+        self._qpsolvers_settings = {k: v for k, v in self.settings.items()
+                                    if not (solver == "proxqp" and k == "max_iter_in")}
         if self._direct_daqp:
             import daqp  # noqa: PLC0415 - only when daqp is the backend
 
@@ -455,61 +491,115 @@ class QPController(Controller):
         return self.posture_gain * self.posture_difference(q, self.posture)
 
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
-        nv = self.model.nv
+        self.budget.start()
+        self.info.method = f"qp:{self.solver}"
         jacobian = kinematics.ee_jacobian
-        equalities = self._equalities
-        A, b = self.constraint_rows(equalities) if equalities else (None, None)
-        k = 0 if A is None else A.shape[0]
-        # M = [A; W^1/2 J / sqrt(s)]: the task Hessian is M^T M, and the objective
-        # 1/2 |J qd - V|_W^2 / s + 1/2 |A qd - b|^2 has gradient -M^T [b; W^1/2 V / sqrt(s)]
-        m = self.task_size
-        if self._stacked.shape[0] != k + m:
-            self._stacked, self._stacked_target = np.empty((k + m, nv)), np.empty(k + m)
-        stacked, stacked_target = self._stacked, self._stacked_target
-        weighted_jacobian = jacobian if self._unit_weight else self._twist_rows * jacobian
-        square_sum = float(np.vdot(weighted_jacobian, weighted_jacobian))
-        inverse_root_scale = math.sqrt(m / square_sum) if square_sum > 0.0 else 1.0
-        np.multiply(weighted_jacobian, inverse_root_scale, out=stacked[k:])
-        np.multiply(twist if self._unit_weight else self._twist_scale * twist,
-                    inverse_root_scale, out=stacked_target[k:])
-        if k:
-            stacked[:k] = A
-            stacked_target[:k] = b
-        hessian = np.dot(stacked.T, stacked)
-        gradient = np.dot(stacked_target, stacked)
-        np.negative(gradient, out=gradient)
-        barrier_rows = barrier_bound = barrier_lower = None
+        A, b = self.constraint_rows(self._equalities) if self._equalities else (None, None)
+        barrier_rows = barrier_bound = None
         if self._barriers:
             rows, rhs = self.constraint_rows(self._barriers)
             barrier_rows, barrier_bound = -rows, -rhs  # A qd >= b as -A qd <= -b
-            barrier_lower = np.full(rhs.size, -INFINITE_BOUND)
         lower, upper = self._box(kinematics.q)
-        self.info.method = f"qp:{self.solver}"
-        if self.priorities == "weighted":
-            hessian.flat[::nv + 1] += self.mu  # + mu I
-            gradient -= self.mu * self.posture_velocity(kinematics.q)
-            qd = self._solve_qp(QuadraticProgram(
-                hessian, gradient, A, b, barrier_rows, barrier_lower, barrier_bound,
-                lower, upper, curvature=self.mu)).x
-        else:
-            geometry = task_geometry(stacked, hessian)
-            spare = geometry.null_basis.shape[1] > 0
-            task = QuadraticProgram(hessian, gradient, A, b, barrier_rows, barrier_lower,
-                                    barrier_bound, lower, upper, geometry.curvature, spare)
-            stage_1 = self._solve_qp(task)
-            qd = stage_1.x
-            if spare:
-                qd = self._posture_stage(stage_1, geometry.null_basis,
-                                         self.posture_velocity(kinematics.q), task,
-                                         stacked, stacked_target)
-        if k:
+        weighted_jacobian = jacobian if self._unit_weight else self._twist_rows * jacobian
+        damping = task_damping(A, weighted_jacobian[self._weighted_rows], self.policy)
+        self.info.sigma_min, self.info.damping = damping.sigma_min, damping.damping
+        try:
+            qd = self._prioritised(kinematics.q, weighted_jacobian, twist, damping.rows,
+                                   A, b, barrier_rows, barrier_bound, lower, upper)
+        except SolverError as error:  # infeasible, or out of iterations (proxqp's sign of it)
+            if A is None and barrier_rows is None:
+                raise
+            try:
+                held = self._least_residual(A, b, barrier_rows, barrier_bound, lower, upper)
+            except SolverError as second:
+                raise error from second
+            if held.residual <= EQUALITY_TOLERANCE:
+                raise  # the rows fit the limits: the failure was something else
+            self.info.report(StepStatus.CONSTRAINT_DEGRADED, held_note(held.residual))
+            try:
+                qd = self._prioritised(kinematics.q, weighted_jacobian, twist, damping.rows,
+                                       held.rows, held.rhs, barrier_rows, held.barrier_bound,
+                                       lower, upper)
+            except BudgetExceeded:
+                raise
+            except SolverError as task_error:
+                qd = held.qd
+                self.info.report(StepStatus.LEAST_SQUARES, f"task stage under the held rows "
+                                 f"failed ({task_error}): the least-residual command")
+            barrier_bound = held.barrier_bound
+        if A is not None:
             self.info.equality_residual = max(map(abs, (np.dot(A, qd) - b).tolist()))
         if barrier_rows is not None:
-            held = np.flatnonzero(barrier_rows @ qd - barrier_bound > -1e-9)
-            self.info.active_barriers = tuple(self._barriers[i] for i in held)
+            held_barriers = np.flatnonzero(barrier_rows @ qd - barrier_bound > -1e-9)
+            self.info.active_barriers = tuple(self._barriers[i] for i in held_barriers)
         self._report_twist_error(jacobian, qd, twist,
                                  None if self._unit_weight else self._twist_scale)
         return qd
+
+    def _prioritised(self, q: np.ndarray, weighted_jacobian: np.ndarray, twist: np.ndarray,
+                     damping_rows: np.ndarray, A: np.ndarray | None, b: np.ndarray | None,
+                     barrier_rows: np.ndarray | None, barrier_bound: np.ndarray | None,
+                     lower: np.ndarray | None, upper: np.ndarray | None) -> np.ndarray:
+        """The lexicographic (or weighted) solve under the rows ``A qd = b``, the barriers
+        ``barrier_rows qd <= barrier_bound`` and the box (docs/design.md section 10)."""
+        nv = self.model.nv
+        k = 0 if A is None else A.shape[0]
+        d = damping_rows.shape[0]
+        # M = [A; W^1/2 J / sqrt(s); D / sqrt(s)]: the task Hessian is M^T M, and the
+        # objective 1/2 (|J qd - V|_W^2 + |D qd|^2) / s + 1/2 |A qd - b|^2 has gradient
+        # -M^T [b; W^1/2 V / sqrt(s); 0]
+        m = self.task_size
+        if self._stacked.shape[0] != k + m + d:
+            self._stacked, self._stacked_target = np.empty((k + m + d, nv)), np.empty(k + m + d)
+        stacked, stacked_target = self._stacked, self._stacked_target
+        square_sum = float(np.vdot(weighted_jacobian, weighted_jacobian))
+        inverse_root_scale = math.sqrt(m / square_sum) if square_sum > 0.0 else 1.0
+        np.multiply(weighted_jacobian, inverse_root_scale, out=stacked[k:k + m])
+        np.multiply(twist if self._unit_weight else self._twist_scale * twist,
+                    inverse_root_scale, out=stacked_target[k:k + m])
+        if k:
+            stacked[:k] = A
+            stacked_target[:k] = b
+        if d:
+            np.multiply(damping_rows, inverse_root_scale, out=stacked[k + m:])
+            stacked_target[k + m:] = 0.0
+        hessian = np.dot(stacked.T, stacked)
+        gradient = np.dot(stacked_target, stacked)
+        np.negative(gradient, out=gradient)
+        barrier_lower = None if barrier_rows is None else np.full(barrier_rows.shape[0],
+                                                                   -INFINITE_BOUND)
+        if self.priorities == "weighted":
+            hessian.flat[::nv + 1] += self.mu  # + mu I
+            gradient -= self.mu * self.posture_velocity(q)
+            return self._solve_qp(QuadraticProgram(
+                hessian, gradient, A, b, barrier_rows, barrier_lower, barrier_bound,
+                lower, upper, curvature=self.mu)).x
+        geometry = task_geometry(stacked, hessian)
+        spare = geometry.null_basis.shape[1] > 0
+        task = QuadraticProgram(hessian, gradient, A, b, barrier_rows, barrier_lower,
+                                barrier_bound, lower, upper, geometry.curvature, spare)
+        stage_1 = self._solve_qp(task)
+        if not spare:
+            return stage_1.x
+        return self._posture_stage(stage_1, geometry.null_basis, self.posture_velocity(q),
+                                   task, stacked, stacked_target)
+
+    def _least_residual(self, A: np.ndarray | None, b: np.ndarray | None,
+                        barrier_rows: np.ndarray | None, barrier_bound: np.ndarray | None,
+                        lower: np.ndarray | None, upper: np.ndarray | None) -> HeldRows:
+        """The rows as close to ``b`` as the box and the barriers allow
+        (:mod:`controllers.least_residual`)."""
+        nv = self.model.nv
+        if lower is None:
+            lower, upper = np.full(nv, -INFINITE_BOUND), np.full(nv, INFINITE_BOUND)
+        problem = least_residual_problem(A, b, barrier_rows, barrier_bound, lower, upper,
+                                         INFINITE_BOUND)
+        solution = self._solve_qp(QuadraticProgram(
+            problem.hessian, problem.gradient, rows=problem.rows,
+            rows_lower=problem.rows_lower, rows_upper=problem.rows_upper,
+            lower=problem.lower, upper=problem.upper, curvature=problem.curvature,
+            semidefinite=problem.semidefinite))
+        return held_rows(solution.x, A, b, barrier_rows, barrier_bound, lower, upper)
 
     def _box(self, q: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The joint box at ``q`` with ``+-INFINITE_BOUND`` for no bound; None if none."""
@@ -647,7 +737,7 @@ class QPController(Controller):
 
     def _solve_qp(self, problem: QuadraticProgram) -> QPSolution:
         if self._proxqp is not None:
-            return self._proxqp.solve(problem)
+            return self._proxqp.solve(problem, self.budget)
         if self._direct_daqp:
             return self._solve_daqp(problem)
         return self._solve_qpsolvers(problem)
@@ -684,6 +774,7 @@ class QPController(Controller):
             else np.vstack([problem.rows, problem.equality_matrix]))
         if rows is None:
             rows = np.zeros((0, variables))
+        self.budget.remaining("daqp")
         settings = self.settings
         if problem.semidefinite and self._daqp_proximal_keys:
             proximal = {"eps_prox": DAQP_PROXIMAL_WEIGHT,
@@ -695,6 +786,8 @@ class QPController(Controller):
                                                     lower, sense, **settings)
         except Exception as error:  # the backend raises its own types
             raise SolverError(f"daqp raised {type(error).__name__}: {error}") from error
+        if exitflag in DAQP_OUT_OF_BUDGET:
+            raise self.budget.exceeded("daqp", DAQP_OUT_OF_BUDGET[exitflag])
         if exitflag <= 0:
             raise SolverError(f"daqp found no solution (exit flag {exitflag})")
         multipliers = info["lam"]
@@ -720,12 +813,17 @@ class QPController(Controller):
             G = None if G is None else scipy.sparse.csc_matrix(G)
         qp = qpsolvers.Problem(P, problem.gradient, G, h, A, problem.equality_rhs,
                                lb=problem.lower, ub=problem.upper)
+        self.budget.remaining(self.solver)
         try:
-            solution = qpsolvers.solve_problem(qp, solver=self.solver, **self.settings)
+            solution = qpsolvers.solve_problem(qp, solver=self.solver, **self._qpsolvers_settings)
         except Exception as error:  # backends raise their own types
             raise SolverError(f"{self.solver} raised {type(error).__name__}: {error}") from error
         if not solution.found or solution.x is None:
-            raise SolverError(f"{self.solver} found no solution (infeasible or not converged)")
+            status = str(getattr(solution.extras.get("info"), "status", ""))
+            if "time limit" in status or "maximum iterations" in status:
+                raise self.budget.exceeded(self.solver, status)
+            raise SolverError(f"{self.solver} found no solution "
+                              f"({status or 'infeasible or not converged'})")
         row_multipliers = None
         if problem.rows is not None:
             row_multipliers = np.zeros(problem.rows.shape[0])

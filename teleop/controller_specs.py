@@ -110,11 +110,13 @@ def _solver(family: str, option: str) -> str:
 
 def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
                     dt: float = 1e-3, twist_weight=None,
-                    solver_settings: Mapping | None = None) -> Controller:
+                    solver_settings: Mapping | None = None,
+                    time_budget: float | None | str = "periods") -> Controller:
     """Build a controller from its spec string; unknown specs raise ``ValueError``.
     ``twist_weight`` (the task's diagonal weight, 6 per EE or one per entry) goes to every
-    family alike; ``solver_settings`` (a mapping of the QP backend's keyword settings) to
-    the ``qp`` and ``mink`` families, which have a backend."""
+    family alike; ``solver_settings`` (a mapping of the QP backend's keyword settings) and
+    ``time_budget`` (a step's CPU deadline, docs/design.md 10.6) to the ``qp`` and ``mink``
+    families, which have a backend."""
     if not isinstance(spec, str):
         raise ValueError(f"a controller spec must be a string such as 'cjm' or 'qp:daqp', "
                          f"got {spec!r}")
@@ -135,12 +137,14 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
         from controllers import QPController
 
         return QPController(robot, constraints, solver=_solver(family, option), dt=dt,
-                            twist_weight=twist_weight, solver_settings=settings)
+                            twist_weight=twist_weight, solver_settings=settings,
+                            time_budget=time_budget)
     if family == "mink":
         solver = _solver(family, option)  # checked before MuJoCo (heavy) is imported
         from controllers import MinkController
 
         return MinkController(robot, constraints, solver=solver, dt=dt,
-                              twist_weight=twist_weight, solver_settings=settings)
+                              twist_weight=twist_weight, solver_settings=settings,
+                              time_budget=time_budget)
     raise ValueError(f"unknown controller {spec!r}: known {', '.join(spec_names())}; in general "
                      f"{CONTROLLER_HELP} ({', '.join(available_solvers())})")

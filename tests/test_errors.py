@@ -7,7 +7,7 @@ import pytest
 from conftest import kinematics
 
 from constraints import Barrier, Hole, Plane, PointLock
-from controllers import CJMController, QPController, SolverError
+from controllers import CJMController, QPController, SolverError, StepStatus
 
 
 @pytest.fixture()
@@ -108,15 +108,36 @@ def conflicting_locks(robot, q):
     return [lock, other]
 
 
+#: Iteration caps of one: no backend finishes a point lock's step in them.
+ONE_ITERATION = {"daqp": {"iter_limit": 1}, "proxqp": {"max_iter": 1}, "osqp": {"max_iter": 1}}
+
+
 @pytest.mark.parametrize("solver", ["proxqp", "daqp", "osqp"])
-def test_infeasible_qp_returns_a_flagged_zero_command(setup, solver):
+def test_conflicting_locks_in_the_qp_are_held_at_their_least_residual(setup, solver):
+    """No qd holds both locks: the least residual (docs/design.md 10.7) splits the 1 m/s
+    conflict (1 cm, K = 100 1/s), 0.5 m/s each, and says so."""
     robot, q, _ = setup
-    controller = QPController(robot, conflicting_locks(robot, q), solver=solver)
+    controller = QPController(robot, conflicting_locks(robot, q), solver=solver,
+                              time_budget=None)
+    qd = controller.solve(q, np.full(6, 0.01))
+    assert controller.info.status is StepStatus.CONSTRAINT_DEGRADED
+    assert "least residual, 5.00e-01 m/s" in controller.info.message
+    A, b = controller.constraint_rows([0, 1])
+    assert np.max(np.abs(A @ qd - b)) == pytest.approx(0.5, abs=1e-6)
+
+
+@pytest.mark.parametrize("solver", ["proxqp", "daqp", "osqp"])
+def test_a_qp_that_cannot_finish_returns_a_flagged_zero_command(setup, solver):
+    """The same locks with every solve capped at one iteration: nothing is found."""
+    robot, q, _ = setup
+    controller = QPController(robot, conflicting_locks(robot, q), solver=solver,
+                              solver_settings=ONE_ITERATION[solver])
     qd = controller.solve(q, np.full(6, 0.01))
     assert not controller.info.success
     assert solver in controller.info.message
     np.testing.assert_array_equal(qd, np.zeros(robot.model.nv))
-    strict = QPController(robot, conflicting_locks(robot, q), solver=solver, strict=True)
+    strict = QPController(robot, conflicting_locks(robot, q), solver=solver, strict=True,
+                          solver_settings=ONE_ITERATION[solver])
     with pytest.raises(SolverError, match=solver):
         strict.solve(q, np.full(6, 0.01))
 

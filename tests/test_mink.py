@@ -18,7 +18,7 @@ import pytest
 from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
 
 from constraints import Barrier, Hole, PointLock
-from controllers import CJMController, MinkController, QPController, SolverError
+from controllers import CJMController, MinkController, QPController, SolverError, StepStatus
 from controllers.mink_controller import JointMap, site_name
 from teleop import load_robot
 
@@ -217,19 +217,44 @@ def test_osqp_is_reported(robot):
 # ----------------------------------------------------------------------------- failures
 
 
+#: Iteration caps of one: no backend finishes a point lock's step in them.
+ONE_ITERATION = {"daqp": {"iter_limit": 1}, "proxqp": {"max_iter": 1}, "osqp": {"max_iter": 1}}
+
+
 @pytest.mark.filterwarnings("ignore")  # OSQP/qpsolvers warn about the infeasible problem
 @pytest.mark.parametrize("solver", ["daqp", "proxqp", "osqp"])
-def test_infeasible_point_locks_give_the_flagged_zero_command(robot, solver):
-    """One link point locked at two targets 1 cm apart: no velocity satisfies both."""
+def test_infeasible_point_locks_are_held_at_their_least_residual(robot, solver):
+    """One link point locked at two targets 1 cm apart: no velocity satisfies both; the
+    least residual (docs/design.md 10.7) splits the 1 m/s conflict (K = 100 1/s), 0.5 m/s
+    each, and says so."""
     q = robot.q_home.copy()
     lock = PointLock.on_link(robot, q, distance=0.05)
     other = PointLock(lock.link, lock.link_point, lock.target + [0.01, 0.0, 0.0])
-    controller = MinkController(robot, [lock, other], solver=solver)
+    controller = MinkController(robot, [lock, other], solver=solver, time_budget=None)
+    qd = controller.solve(q, np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    assert controller.info.status is StepStatus.CONSTRAINT_DEGRADED
+    assert "least residual, 5.00e-01 m/s" in controller.info.message
+    A, b = controller.constraint_rows([0, 1])
+    assert np.max(np.abs(A @ qd - b)) == pytest.approx(0.5, abs=1e-6)
+    lower, upper = controller.bounds(q)
+    assert np.all(qd >= lower - 1e-9) and np.all(qd <= upper + 1e-9)
+
+
+@pytest.mark.filterwarnings("ignore")
+@pytest.mark.parametrize("solver", ["daqp", "proxqp", "osqp"])
+def test_a_solve_that_cannot_finish_gives_the_flagged_zero_command(robot, solver):
+    """The same locks with every solve capped at one iteration: nothing is found."""
+    q = robot.q_home.copy()
+    lock = PointLock.on_link(robot, q, distance=0.05)
+    other = PointLock(lock.link, lock.link_point, lock.target + [0.01, 0.0, 0.0])
+    controller = MinkController(robot, [lock, other], solver=solver,
+                                solver_settings=ONE_ITERATION[solver])
     qd = controller.solve(q, np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0]))
     assert controller.info.success is False
     assert np.array_equal(qd, np.zeros(robot.model.nv))
     assert "mink" in controller.info.message and solver in controller.info.message
-    strict = MinkController(robot, [lock, other], solver=solver, strict=True)
+    strict = MinkController(robot, [lock, other], solver=solver, strict=True,
+                            solver_settings=ONE_ITERATION[solver])
     with pytest.raises(SolverError, match="mink"):
         strict.solve(q, np.zeros(6))
 

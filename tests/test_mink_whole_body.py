@@ -113,8 +113,9 @@ def check_agreement(robot, q: np.ndarray, holes: list[Hole], twist: np.ndarray,
                     agreement: float, posture: np.ndarray) -> None:
     """mink's ``qd`` is the CJM's and the QP's, holds the holes and meets both twists."""
     cjm = CJMController(robot, holes, posture=posture, **EXACT_CJM)
-    qp = QPController(robot, holes, solver="daqp", posture=posture)
-    mink = MinkController(robot, holes, posture=posture)
+    # the QP and mink carry the CJM's damping (docs/design.md 10.7): undamped as it is here
+    qp = QPController(robot, holes, solver="daqp", posture=posture, **EXACT_CJM)
+    mink = MinkController(robot, holes, posture=posture, **EXACT_CJM)
     qd_cjm, qd_qp, qd = cjm.solve(q, twist), qp.solve(q, twist), mink.solve(q, twist)
     for controller in (cjm, qp, mink):
         assert controller.info.status is StepStatus.OK, controller.info.message

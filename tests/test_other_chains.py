@@ -18,6 +18,8 @@ from teleop import load_robot
 from teleop.loop.closed_loop import LoopConfig, TeleopLoop, saturate_twist
 
 EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)
+#: the QP carries the CJM's damping (docs/design.md 10.7): undamped where compared with EXACT
+UNDAMPED = dict(singular_threshold=0.0)
 
 
 def example_robot_data_share():
@@ -69,8 +71,8 @@ def test_ur5_forearm_hole_three_joints_before_least_squares_in_both(ur5):
     N = np.linalg.svd(A)[2][2:].T
     np.testing.assert_allclose((J @ N).T @ (J @ qd - twist), 0.0, atol=1e-12)
     for solver in ("proxqp", "daqp"):
-        np.testing.assert_allclose(QPController(ur5, [hole], solver=solver).solve(q, twist),
-                                   qd, atol=1e-6)
+        np.testing.assert_allclose(
+            QPController(ur5, [hole], solver=solver, **UNDAMPED).solve(q, twist), qd, atol=1e-6)
 
 
 def test_sda10f_hole_on_link_7_uses_the_pseudo_inverse_of_a_7_joint_pre_chain(sda10f):
@@ -88,8 +90,8 @@ def test_sda10f_hole_on_link_7_uses_the_pseudo_inverse_of_a_7_joint_pre_chain(sd
     reached_general = J @ CJMController(sda10f, [hole], form="general", **EXACT).solve(q, twist)
     np.testing.assert_allclose(J @ qd, reached_general, atol=1e-9)
     for solver in ("proxqp", "daqp"):
-        np.testing.assert_allclose(J @ QPController(sda10f, [hole], solver=solver).solve(q, twist),
-                                   J @ qd, atol=1e-6)
+        qp = QPController(sda10f, [hole], solver=solver, **UNDAMPED)
+        np.testing.assert_allclose(J @ qp.solve(q, twist), J @ qd, atol=1e-6)
     # the posture task moves only the null space of J_a: same twist at F_a and EE
     no_posture = CJMController(sda10f, [hole], posture_gain=0.0, **EXACT).solve(q, twist)
     q_off = q.copy()
@@ -118,7 +120,7 @@ def test_panda_forearm_hole_leaves_five_dof_and_both_controllers_reach_the_same_
     np.testing.assert_allclose((J @ N).T @ (J @ qd - twist), 0.0, atol=1e-12)  # least squares
     np.testing.assert_allclose(qd[7:], 0.0, atol=1e-12)  # fingers: posture at home, idle
     for solver in ("proxqp", "daqp"):
-        qp = QPController(panda, [hole], solver=solver)
+        qp = QPController(panda, [hole], solver=solver, **UNDAMPED)
         qd_qp = qp.solve(q, twist)
         assert qp.info.equality_residual <= 1e-9
         np.testing.assert_allclose(J @ qd_qp, J @ qd, atol=1e-6)

@@ -222,7 +222,9 @@ def test_every_backend_is_the_cjm_on_generated_chains(dof, count, data):
     assert cjm.info.method != "saturated" and cjm.info.damping == 0.0  # exact, unlimited
     for solver, tolerance in (("proxqp", AGREEMENT), ("daqp", AGREEMENT),
                               ("osqp", osqp_bound(robot, q, holes))):
-        qp = QPController(robot, holes, solver=solver)
+        # numerics, not timing: no deadline (a 64-DoF step may take over 10 ms of CPU)
+        qp = QPController(robot, holes, solver=solver, time_budget=None,
+                          singular_threshold=0.0)  # undamped, as the CJM here (10.7)
         qd = qp.solve(q, twist)
         assert qp.info.success, qp.info.message
         assert qp.info.equality_residual <= 1e-9
@@ -242,7 +244,8 @@ def bench_problem(dof: int, count: int):
     home, so the holes' drift correction asks for more than the velocity limits."""
     robot = chain(dof)
     holes = [Hole.on_link(robot, robot.q_home, 0.05, link=link) for link in hole_links(dof, count)]
-    return robot, holes, {solver: QPController(robot, holes, solver=solver)
+    # numerics, not timing: no deadline (a 64-DoF step may take over 10 ms of CPU)
+    return robot, holes, {solver: QPController(robot, holes, solver=solver, time_budget=None)
                           for solver in ("proxqp", "daqp", "osqp")}
 
 
@@ -340,7 +343,9 @@ def test_priorities_and_posture_are_checked():
 def minks(name: str):
     """mink with its posture task and without, built once (the MuJoCo model is)."""
     robot = panda() if name == "panda" else chain(32)
-    return robot, MinkController(robot), MinkController(robot, posture_cost=0.0)
+    # numerics, not timing: no deadline (a 64-DoF step may take over 10 ms of CPU)
+    return robot, MinkController(robot, time_budget=None), MinkController(
+        robot, posture_cost=0.0, time_budget=None)
 
 
 @pytest.mark.parametrize("name, tolerance", [("panda", 1e-6), ("chain32", 2e-5)])

@@ -72,7 +72,8 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
     constraints = plan.make_constraints()
-    controller = make_controller(spec, plan.robot, constraints, dt=config.dt)
+    # simulated time: iteration caps only, no deadline (docs/design.md 10.6)
+    controller = make_controller(spec, plan.robot, constraints, dt=config.dt, time_budget=None)
     records, failures = _drive(plan, controller, constraints, config, steps, imperfections,
                                on_step)
     return _collect(spec, records, failures, plan.robot.ee_frames)
@@ -210,8 +211,10 @@ def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfi
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
     constraints = plan.make_constraints()
-    reference = make_controller(specs[0], plan.robot, constraints, dt=config.dt)
-    shadows = {spec: make_controller(spec, plan.robot, constraints, dt=config.dt)
+    reference = make_controller(specs[0], plan.robot, constraints, dt=config.dt,
+                                time_budget=None)  # simulated time (docs/design.md 10.6)
+    shadows = {spec: make_controller(spec, plan.robot, constraints, dt=config.dt,
+                                     time_budget=None)
                for spec in specs[1:]}
     shadowed = ShadowedController(reference, shadows)
     _drive(plan, shadowed, constraints, config, steps, imperfections, on_step)
