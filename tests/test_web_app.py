@@ -508,7 +508,7 @@ def test_scene_files_that_cannot_be_read(app, tmp_path):
     scenes = tmp_path / "scenes"
     scenes.mkdir()
     (scenes / "bad.json").write_text("{nope")
-    with pytest.raises(ValueError, match="is not JSON"):
+    with pytest.raises(ValueError, match="not JSON"):
         app.load_scene("bad.json")
     (scenes / "dir.json").mkdir()
     with pytest.raises(ValueError, match="'dir.json' in the scene folder is not a file"):

@@ -40,6 +40,7 @@ import numpy as np
 
 from constraints import Constraint
 from constraints.validation import as_number, as_vector, short_repr
+from teleop.json_text import parse_json
 from teleop.limits import MAX_DAMPING, MAX_RATE_HZ
 from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
 
@@ -312,14 +313,7 @@ def read_scene_file(path: str | Path) -> dict:
         raise ValueError(f"no scene file at {str(path)!r}") from None
     except OSError as error:
         raise ValueError(f"cannot read scene file {str(path)!r}: {error.strerror}") from None
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as error:
-        raise ValueError(f"scene file {str(path)!r} is not JSON: {error}") from None
-    except RecursionError:
-        raise ValueError(f"scene file {str(path)!r}: JSON nested too deeply") from None
-    except ValueError as error:  # e.g. an integer of more than 4300 digits
-        raise ValueError(f"scene file {str(path)!r} is not readable JSON: {error}") from None
+    return parse_json(text, f"scene file {str(path)!r}")
 
 
 def write_scene_file(path: str | Path, scene: dict) -> Path:

@@ -39,6 +39,7 @@ import pinocchio as pin
 from constraints import Constraint
 from constraints.kinematics import frame_placement
 from constraints.validation import as_number, as_vector, short_repr
+from teleop.json_text import parse_json
 from teleop.limits import MAX_DURATION_S, MAX_RATE_HZ, MAX_STEPS, MAX_TIME_CONSTANT_S
 from teleop.loop import target_poses
 from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED, advance, steer
@@ -261,14 +262,7 @@ def load_session(path: str | Path) -> Session:
 
 def _parse_line(line: str, where: str) -> dict:
     """One line's JSON object with a ``type``, else ``SessionError``."""
-    try:
-        event = json.loads(line)
-    except json.JSONDecodeError as error:
-        raise SessionError(f"{where}: not JSON ({error.msg})") from None
-    except RecursionError:
-        raise SessionError(f"{where}: JSON nested too deeply") from None
-    except ValueError as error:  # e.g. an integer of more than 4300 digits
-        raise SessionError(f"{where}: not readable JSON ({error})") from None
+    event = parse_json(line, where, SessionError)
     if not isinstance(event, dict) or "type" not in event:
         raise SessionError(f"{where}: each line must be an object with a 'type'")
     return event
