@@ -794,6 +794,9 @@ class MinkController(Controller):
                          for i, name in enumerate(ee_frames)]
         self._ee_site_ids = [self.mj_model.site(site_name(name)).id for name in ee_frames]
         self._q_mj = np.empty(self.mj_model.nq)
+        #: the default limit, the controller's joint box (None with ``limits`` given)
+        self._joint_box = (JointBoxLimit(self.joint_bounds, self.joints, model.nq)
+                           if limits is None else None)
         self._base_limits = self._make_limits(limits)
         if posture is None:
             posture = robot.q_home
@@ -813,7 +816,7 @@ class MinkController(Controller):
 
     def _make_limits(self, limits: Sequence[LimitSpec] | None) -> list[mink.Limit]:
         if limits is None:
-            return [JointBoxLimit(self.joint_bounds, self.joints, self.model.nq)]
+            return [self._joint_box]
         made = []
         for limit in limits:
             made.append(limit if isinstance(limit, mink.Limit) else limit(self.mj_model))
@@ -934,6 +937,10 @@ class MinkController(Controller):
         try:
             problem = mink.build_ik(self.configuration, tasks, self.dt, self.damping,
                                     self._limits, self.constraint_tasks)
+            if self._joint_box is not None:  # its 1-dof joints bound the variable
+                lb, ub = self._joint_box.displacement_bounds(self.configuration, self.dt)
+                problem.lb = np.maximum(lb, -INFINITE_BOUND)
+                problem.ub = np.minimum(ub, INFINITE_BOUND)
             if self._proxqp is not None:
                 return self._solve_proxqp(problem) / self.dt
             solution = qpsolvers.solve_problem(problem, solver=self.solver, **settings)
