@@ -17,10 +17,11 @@ Conventions of mink 1.3.0 (read from ``mink/solve_ik.py``, ``mink/tasks/task.py`
 * ``FrameTask``: ``e = log(T_b^-1 T_t)`` (a body twist, ``LOCAL``, linear first: the
   right-minus ``T_t (-) T_b``) and ``J = -Jlog(T_t^-1 T_b) J_b`` with ``J_b`` the body
   Jacobian of the frame (see :class:`MinkController` for why this tracks ``V`` exactly).
-* A limit returns ``G dq <= h`` at step ``dt``; ``VelocityLimit`` is
-  ``|dq| <= v_max dt``, ``ConfigurationLimit`` is
-  ``gain (q_min - q) <= dq <= gain (q_max - q)`` (the QP controller's box with
-  ``limit_gain = gain``).
+* A limit returns ``G dq <= h`` at step ``dt``. mink's own ``VelocityLimit``
+  (``|dq| <= v_max dt``) and ``ConfigurationLimit`` (``gain (q_min - q) <= dq <=
+  gain (q_max - q)``) have no common point once a joint is past a position limit by more
+  than ``v_max dt / gain``; the controller uses the project's joint box instead
+  (:class:`controllers.mink_joint_box.JointBoxLimit`).
 * The global ``damping`` adds ``damping * I`` to the Hessian in ``dq``: since the whole
   objective scales as ``dt^2`` it acts like the QP controller's ``mu`` on ``v``.
 * A planar root joint is MuJoCo's slide x, slide y, hinge z (:class:`PlanarBase`), which
@@ -50,6 +51,7 @@ from .base import EQUALITY_TOLERANCE, Controller, Kinematics, SolverError, StepS
 from .joint_limits import DEFAULT_LIMIT_GAIN
 from .least_residual import HeldRows, held_rows, least_residual_problem
 from .linalg import DampingPolicy
+from .mink_joint_box import JointBoxLimit
 from .qp import (DAQP_PROXIMAL_FLOOR, DAQP_PROXIMAL_WEIGHT, INFINITE_BOUND, PROXQP_RHO,
                  SOLVER_SETTINGS, TASK_ACCURACY, ProxQPSolver, QuadraticProgram, held_note)
 from .qp_budget import ITERATION_CAPS, BudgetExceeded, StepBudget, TimeBudget
@@ -621,37 +623,6 @@ class DampingTask(mink.Task):
         return self.rows
 
 
-class PlanarBaseVelocityLimit(mink.Limit):
-    """``|v_base| <= v_max`` on Pinocchio's base-frame velocity ``(v_x, v_y, w)``.
-
-    MuJoCo's base dofs are world-frame rates (:class:`PlanarBase`), on which
-    ``mink.VelocityLimit`` would bound ``x'`` and ``y'``: a different box from the one
-    every controller's command must lie in (``JointBounds`` on Pinocchio's velocity).
-    With ``(v_x, v_y, w) = P^T v_mj``, the rows are ``+-P^T dq <= v_max dt`` on the
-    base's columns, the box itself (a diagonal base velocity reaches ``sqrt 2`` of each
-    limit in the world, as it does in Pinocchio).
-    """
-
-    def __init__(self, base: PlanarBase, velocity_limit: np.ndarray, nv: int) -> None:
-        self.base = base
-        self._bounded = np.flatnonzero(np.isfinite(velocity_limit) & (velocity_limit > 0.0))
-        self._limit = np.asarray(velocity_limit, dtype=float)[self._bounded]
-        self._rows = np.zeros((2 * len(self._bounded), nv))
-
-    def compute_qp_inequalities(
-        self, configuration: mink.Configuration, dt: float
-    ) -> LimitRows:
-        """``G dq <= h``: ``G = [P^T; -P^T]`` (bounded rows, base columns), ``h = v_max dt``."""
-        if not len(self._bounded):
-            return LimitRows()
-        rows = self.base.rotation(configuration.q).T[self._bounded]
-        columns = slice(self.base.mj_v, self.base.mj_v + 3)
-        count = len(self._bounded)
-        self._rows[:count, columns] = rows
-        self._rows[count:, columns] = -rows
-        return LimitRows(G=self._rows, h=np.tile(self._limit * dt, 2))  # (solve_ik stacks a copy)
-
-
 # ----------------------------------------------------------------------------- controller
 
 LimitSpec = mink.Limit | Callable[[mujoco.MjModel], mink.Limit]
@@ -668,7 +639,7 @@ class MinkController(Controller):
         min_dq  |Jlog(T_t^-1 T_e) (J_e dq - V dt)|^2 + c^2 |dq - qd_posture dt|^2 + damping |dq|^2
         s.t.    A dq = b dt                         ConstraintTask per equality (hard)
                 -A_b dq <= -b_b dt                  BarrierLimit per barrier
-                |dq| <= qd_max dt,  g (q_min - q) <= dq <= g (q_max - q)
+                lower dt <= dq <= upper dt          JointBoxLimit (JointBounds.box(q))
         qd = dq / dt                                (solve_ik's return value)
 
     **Why this tracks V exactly.** mink's frame error is ``e = log(T_e^-1 T_t) = V dt``
@@ -727,14 +698,14 @@ class MinkController(Controller):
         set every step (0: no posture task). With proxqp, its ``rho`` follows as
         ``PROXQP_RHO c^2`` (``controllers.qp``): proxqp's own 1e-6 against the curvature
         ``c^2`` failed every step of the 64-DoF chains with binding limits.
-    limits : ``None`` for the defaults (``mink.ConfigurationLimit`` with gain
-        ``limit_gain``, a ``mink.VelocityLimit`` from the Pinocchio velocity limits of the
-        1-dof joints and, on a planar base, a :class:`PlanarBaseVelocityLimit` on its
-        base-frame velocity),
+    limits : ``None`` for the default, the controller's joint box
+        (:class:`controllers.mink_joint_box.JointBoxLimit`: velocity limits, and position
+        limits through ``dt`` with ``limit_gain``, on Pinocchio's velocity, a planar base's
+        in its own frame; docs/design.md 10.7),
         else a sequence of ``mink.Limit`` instances or factories ``f(mj_model) -> Limit``
         (``mink.ConfigurationLimit`` itself is one); ``()`` for none. Barrier limits
         are always added.
-    limit_gain : gain of the default configuration limit.
+    limit_gain : ``g`` of the joint box (:class:`controllers.joint_limits.JointBounds`).
     equality_tolerance : largest ``|A qd - b|`` (m/s) accepted from the backend.
     solver_settings : backend keyword arguments, passed as they are (they override the
         defaults built from ``VELOCITY_TOLERANCES`` and ``FIXED_SETTINGS``).
@@ -823,7 +794,10 @@ class MinkController(Controller):
                          for i, name in enumerate(ee_frames)]
         self._ee_site_ids = [self.mj_model.site(site_name(name)).id for name in ee_frames]
         self._q_mj = np.empty(self.mj_model.nq)
-        self._base_limits = self._make_limits(robot, limits, limit_gain)
+        #: the default limit, the controller's joint box (None with ``limits`` given)
+        self._joint_box = (JointBoxLimit(self.joint_bounds, self.joints, model.nq)
+                           if limits is None else None)
+        self._base_limits = self._make_limits(limits)
         if posture is None:
             posture = robot.q_home
         self.posture = as_vector(posture, model.nq, "posture")
@@ -840,21 +814,9 @@ class MinkController(Controller):
         self._limits: list[mink.Limit] = list(self._base_limits)
         self.set_constraints(constraints)
 
-    def _make_limits(self, robot, limits: Sequence[LimitSpec] | None,
-                     limit_gain: float) -> list[mink.Limit]:
+    def _make_limits(self, limits: Sequence[LimitSpec] | None) -> list[mink.Limit]:
         if limits is None:
-            velocity = np.asarray(robot.model.velocityLimit, dtype=float)
-            bounded = {name: velocity[robot.model.idx_vs[robot.model.getJointId(name)]]
-                       for name in self.joints.names}
-            bounded = {name: value for name, value in bounded.items()
-                       if np.isfinite(value) and value > 0}
-            made = [mink.ConfigurationLimit(self.mj_model, gain=limit_gain),
-                    mink.VelocityLimit(self.mj_model, bounded)]
-            base = self.joints.base
-            if base is not None:
-                made.append(PlanarBaseVelocityLimit(
-                    base, velocity[base.pin_v:base.pin_v + 3], self.mj_model.nv))
-            return made
+            return [self._joint_box]
         made = []
         for limit in limits:
             made.append(limit if isinstance(limit, mink.Limit) else limit(self.mj_model))
@@ -975,6 +937,10 @@ class MinkController(Controller):
         try:
             problem = mink.build_ik(self.configuration, tasks, self.dt, self.damping,
                                     self._limits, self.constraint_tasks)
+            if self._joint_box is not None:  # its 1-dof joints bound the variable
+                lb, ub = self._joint_box.displacement_bounds(self.configuration, self.dt)
+                problem.lb = np.maximum(lb, -INFINITE_BOUND)
+                problem.ub = np.minimum(ub, INFINITE_BOUND)
             if self._proxqp is not None:
                 return self._solve_proxqp(problem) / self.dt
             solution = qpsolvers.solve_problem(problem, solver=self.solver, **settings)

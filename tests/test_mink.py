@@ -243,20 +243,22 @@ def test_infeasible_point_locks_are_held_at_their_least_residual(robot, solver):
 @pytest.mark.filterwarnings("ignore")
 @pytest.mark.parametrize("solver", ["daqp", "proxqp", "osqp"])
 def test_a_solve_that_cannot_finish_gives_the_flagged_zero_command(robot, solver):
-    """The same locks with every solve capped at one iteration: nothing is found."""
+    """The same locks and a twist beyond every velocity limit (the box binds, so no solve
+    ends at its first iterate) with every solve capped at one iteration: nothing is found."""
     q = robot.q_home.copy()
     lock = PointLock.on_link(robot, q, distance=0.05)
     other = PointLock(lock.link, lock.link_point, lock.target + [0.01, 0.0, 0.0])
+    beyond_limits = np.array([0.0, 0.0, 0.0, 50.0, 0.0, 0.0])
     controller = MinkController(robot, [lock, other], solver=solver,
                                 solver_settings=ONE_ITERATION[solver])
-    qd = controller.solve(q, np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    qd = controller.solve(q, beyond_limits)
     assert controller.info.success is False
     assert np.array_equal(qd, np.zeros(robot.model.nv))
     assert "mink" in controller.info.message and solver in controller.info.message
     strict = MinkController(robot, [lock, other], solver=solver, strict=True,
                             solver_settings=ONE_ITERATION[solver])
     with pytest.raises(SolverError, match="mink"):
-        strict.solve(q, np.zeros(6))
+        strict.solve(q, beyond_limits)
 
 
 def test_barrier_is_held_against_a_push_like_the_qp(ur5_instrument):
