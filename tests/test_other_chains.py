@@ -153,7 +153,7 @@ def damped_least_squares(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     u, s, vt = np.linalg.svd(matrix, full_matrices=False)
     kept = s > 1e-10 * max(1.0, s[0])
     lam2 = 0.05**2 * max(0.0, 1.0 - (s[kept][-1] / 0.01) ** 2)
-    gains = np.where(kept, s / (s * s + lam2), 0.0)
+    gains = np.where(kept, s / (s * s + lam2 + ~kept), 0.0)  # no 0/0 where dropped
     return matrix @ (vt.T @ (gains * (u.T @ rhs)))
 
 

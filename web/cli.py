@@ -24,8 +24,9 @@ from teleop.robots import BUILTIN_ROBOTS
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
     resolve_host
 
-DESCRIPTION = """Browser teleoperation UI (viser) of a built-in robot or any URDF.
+DESCRIPTION = "Browser teleoperation UI (viser) of a built-in robot or any URDF."
 
+SECURITY = """what the server exposes:
 Whoever opens the page can move the robot, and read and write scene files in --scene-dir
 and recordings in --record-dir (file names only, nothing outside those folders). The
 server listens on this machine only (127.0.0.1) unless --host says otherwise; another
@@ -43,7 +44,8 @@ def numbers(text: str) -> list[float]:
 
 
 def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
-    parser = ArgumentParser(prog=prog, description=DESCRIPTION, formatter_class=HelpFormatter)
+    parser = ArgumentParser(prog=prog, description=DESCRIPTION, epilog=SECURITY,
+                            formatter_class=HelpFormatter)
     robot = parser.add_argument_group("robot")
     robot.add_argument("--robot",
                        help=f"built-in robot ({', '.join(BUILTIN_ROBOTS)}) or the path of a URDF "
