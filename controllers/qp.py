@@ -813,9 +813,12 @@ class QPController(Controller):
             G = None if G is None else scipy.sparse.csc_matrix(G)
         qp = qpsolvers.Problem(P, problem.gradient, G, h, A, problem.equality_rhs,
                                lb=problem.lower, ub=problem.upper)
-        self.budget.remaining(self.solver)
+        left = self.budget.remaining(self.solver)
+        settings = self._qpsolvers_settings
+        if self.solver == "osqp" and math.isfinite(left):  # one solve bounded by what is left
+            settings = {**settings, "time_limit": left}
         try:
-            solution = qpsolvers.solve_problem(qp, solver=self.solver, **self._qpsolvers_settings)
+            solution = qpsolvers.solve_problem(qp, solver=self.solver, **settings)
         except Exception as error:  # backends raise their own types
             raise SolverError(f"{self.solver} raised {type(error).__name__}: {error}") from error
         if not solution.found or solution.x is None:
