@@ -101,6 +101,32 @@ def test_recordings_go_only_to_the_recording_folder(app, tmp_path):
     assert path.is_file() and json.loads(path.read_text().splitlines()[0])
 
 
+def test_a_recording_never_replaces_another(app, tmp_path):
+    """Two recordings started within one second get two files (the default name is by the
+    second); a name already in the folder is refused and the file stays as it was."""
+    first = app.start_recording()
+    run(app, 0.01)
+    app.stop_recording()
+    kept = first.read_bytes()
+    second = app.start_recording()
+    app.stop_recording()
+    assert second != first and second.parent == first.parent
+    assert first.read_bytes() == kept
+    with pytest.raises(ValueError, match=f"{first.name!r} is already in the recording folder"):
+        app.start_recording(first.name)
+    assert app.recorder is None and first.read_bytes() == kept
+
+
+def test_a_symlink_loop_is_refused_like_any_name_leading_out(app, tmp_path):
+    folder = tmp_path / "scenes"
+    folder.mkdir(exist_ok=True)
+    (folder / "loop.json").symlink_to(folder / "loop.json")
+    for action in (app.load_scene, app.save_scene):
+        with pytest.raises(ValueError, match=r"scene name 'loop.json' refused") as refused:
+            action("loop.json")
+        assert str(tmp_path) not in str(refused.value)
+
+
 # -- nonsense: bounded targets and settings ---------------------------------------------------
 
 

@@ -857,7 +857,7 @@ class TeleopApp:
         its path. A name that is not a plain file name of that folder is refused
         (:class:`web.folders.Folder`)."""
         if name is None or isinstance(name, str) and not name.strip():
-            name = f"scene-{datetime.now():%Y%m%d-%H%M%S}.json"
+            name = self.scenes.unused_name(f"scene-{datetime.now():%Y%m%d-%H%M%S}")
         return write_scene_file(self.scenes.writable(name), self.scene())
 
     def load_scene(self, name: str) -> None:
@@ -936,13 +936,14 @@ class TeleopApp:
 
     def start_recording(self, name: str | None = None) -> Path:
         """Record the session to file ``name`` of the recording folder (default: a new
-        name, by date); its path."""
+        name, by date); its path. A name already in the folder is refused: a recording
+        never replaces another."""
         with self._lock:
             if self.recorder is not None:
                 raise ValueError(f"already recording to {self.recorder.path.name}")
             if name is None:
-                name = f"session-{datetime.now():%Y%m%d-%H%M%S}.jsonl"
-            path = self.recordings.writable(name)
+                name = self.recordings.unused_name(f"session-{datetime.now():%Y%m%d-%H%M%S}")
+            path = self.recordings.new(name)
             self.recorder = SessionRecorder(path, self.robot, self.loops["main"].q,
                                             rate_hz=self.config.rate, kp=self.config.kp,
                                             target_time_constant_s=self.config.target_time_constant)

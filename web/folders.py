@@ -65,8 +65,11 @@ class Folder:
         plain file name or resolves outside the folder (a symlink leading out)."""
         name = self.name_of(name)
         path = self.root / name
-        root = self.root.resolve()
-        if path.resolve().parent != root:
+        try:
+            inside = path.resolve().parent == self.root.resolve()
+        except (RuntimeError, OSError):  # a symlink loop: said as any other refusal
+            inside = False
+        if not inside:
             raise self._refused(name, "it leads out of the folder")
         return path
 
@@ -88,6 +91,24 @@ class Folder:
         if path.exists() and not path.is_file():
             raise ValueError(f"{path.name!r} in the {self.what} folder is not a file")
         return path
+
+    def new(self, name: object) -> Path:
+        """:meth:`writable` for a file that is not there yet: a recording never replaces
+        another."""
+        path = self.writable(name)
+        if path.exists():
+            raise ValueError(f"{path.name!r} is already in the {self.what} folder: "
+                             "choose another name")
+        return path
+
+    def unused_name(self, stem: str) -> str:
+        """``stem`` + suffix, or ``stem-2`` + suffix, ``stem-3`` ..., the first not in the
+        folder."""
+        name, count = f"{stem}{self.suffix}", 1
+        while (self.root / name).exists() or (self.root / name).is_symlink():
+            count += 1
+            name = f"{stem}-{count}{self.suffix}"
+        return name
 
     def names(self) -> list[str]:
         """The files in the folder with the suffix, sorted (none when it does not exist)."""
