@@ -414,6 +414,25 @@ def wait_for_pixels(web, predicate, timeout: float, what: str) -> np.ndarray:
         time.sleep(0.2)
 
 
+#: two screenshots 0.5 s apart that differ on less than this fraction of the canvas: still
+STILL = 1e-3
+
+
+def wait_for_still_canvas(web, timeout: float) -> np.ndarray:
+    """The canvas once two screenshots 0.5 s apart agree (camera and scene settled): a
+    reference image taken while the camera still moves would never be seen again."""
+    deadline = time.perf_counter() + timeout
+    previous = canvas_pixels(web)
+    while True:
+        time.sleep(0.5)
+        pixels = canvas_pixels(web)
+        if changed_fraction(pixels, previous) < STILL:
+            return pixels
+        if time.perf_counter() > deadline:
+            raise AssertionError(f"the canvas did not hold still within {timeout:g} s")
+        previous = pixels
+
+
 def look_at_target(web, distance: float = 0.3) -> None:
     """Camera in front of the target gizmo, from the front-right and above."""
     target = web.app.target.translation.copy()

@@ -50,6 +50,7 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
     trace_since,
     uplot_line_pixels,
     wait_for_pixels,
+    wait_for_still_canvas,
     wait_until,
     watchdog,
 )
@@ -109,8 +110,10 @@ def test_robot_is_in_the_scene(web):
 
     # what the browser draws: not blank, and the robot is a good part of it
     look_at_target(web, distance=1.0)
-    shown = wait_for_pixels(web, lambda p: distinct_colours(p) > 100 and p.std() > 10.0, WAIT,
-                            "a canvas that is not blank")
+    wait_for_pixels(web, lambda p: distinct_colours(p) > 100 and p.std() > 10.0, WAIT,
+                    "a canvas that is not blank")
+    shown = wait_for_still_canvas(web, WAIT)
+    assert distinct_colours(shown) > 100 and shown.std() > 10.0
     visualiser.displayVisuals(False)
     try:
         hidden = wait_for_pixels(web, lambda p: changed_fraction(p, shown) > 0.01, WAIT,
