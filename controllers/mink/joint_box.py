@@ -23,8 +23,9 @@ class JointBoxLimit(mink.Limit):
     pins the joint (``lower = upper``), which a backend takes as a fixed variable, whereas
     the two opposite rows ``dq <= u dt``, ``-dq <= -u dt`` of an inequality make an active
     set that is linearly dependent (daqp at mink's tolerance then finds no solution). A
-    planar base's velocity is ``P(th)^T`` times MuJoCo's (:class:`controllers.mujoco_model.PlanarBase`);
-    it has no position limit, so its part is the rows of :meth:`compute_qp_inequalities`.
+    planar base's velocity is ``P(th)^T`` times MuJoCo's
+    (:class:`controllers.mujoco_model.PlanarBase`); it has no position limit, so its part is
+    the rows of :meth:`compute_qp_inequalities`.
 
     Parameters
     ----------

@@ -34,12 +34,13 @@ class ProxQPSolver:
     iterates, and directions the objective does not see feel no force.
 
     ``initial_guess`` (a ``proxsuite.proxqp.InitialGuess`` name, in ``solver_settings``)
-    defaults to ``EQUALITY_CONSTRAINED_INITIAL_GUESS``, which is what a fresh proxqp
-    solve uses: on the built-in robots it needs no more iterations than
-    ``WARM_START_WITH_PREVIOUS_RESULT`` on a smooth closed loop, and warm starting from the previous result now and then stopped at a spurious
-    ``PROXQP_PRIMAL_INFEASIBLE`` on independent configurations. With a warm start
-    chosen, a step that does not reach ``PROXQP_SOLVED`` is solved again from the
-    equality-constrained guess before it is reported as a failure.
+    defaults to ``EQUALITY_CONSTRAINED_INITIAL_GUESS``, which is what a fresh proxqp solve
+    uses: on the built-in robots it needs no more iterations than
+    ``WARM_START_WITH_PREVIOUS_RESULT`` on a smooth closed loop, and warm starting from the
+    previous result now and then stopped at a spurious ``PROXQP_PRIMAL_INFEASIBLE`` on
+    independent configurations. With a warm start chosen, a step that does not reach
+    ``PROXQP_SOLVED`` is solved again from the equality-constrained guess before it is
+    reported as a failure.
     """
 
     def __init__(self, settings: dict, tuned: frozenset[str]) -> None:

@@ -82,7 +82,8 @@ class QPController(Controller):
     and definite wherever the rows or the task see a direction. One SVD of ``M`` (or,
     with no spare DoF, a Cholesky factorisation of ``M^T M``: :func:`task_geometry`)
     gives the null space of stage 2 and the smallest curvature ``lambda_min``, from
-    which proxqp's and daqp's tolerances are set (:data:`TASK_ACCURACY`).
+    which proxqp's and daqp's tolerances are set
+    (:data:`controllers.numerics.TASK_ACCURACY`).
 
     Parameters
     ----------
@@ -90,9 +91,11 @@ class QPController(Controller):
         :class:`controllers.base.Controller`.
     solver : a ``qpsolvers`` backend: ``"proxqp"`` (default), ``"daqp"``, ``"osqp"``, ...
         proxqp runs as persistent ``proxsuite`` dense QPs (``init`` once per stage, then
-        ``update`` + ``solve``; see :class:`ProxQPSolver`), daqp through ``daqp.solve``
-        directly, the others through ``qpsolvers``. ``solver_settings`` the direct calls cannot apply
-        (a key that is no proxqp/daqp setting) send proxqp/daqp through ``qpsolvers`` too.
+        ``update`` + ``solve``; see
+        :class:`controllers.optimization.proxqp.ProxQPSolver`), daqp through ``daqp.solve``
+        directly, the others through ``qpsolvers``. ``solver_settings`` the direct calls
+        cannot apply (a key that is no proxqp/daqp setting) send proxqp/daqp through
+        ``qpsolvers`` too.
     priorities : ``"lexicographic"`` (default) or ``"weighted"``.
     posture : configuration the redundancy is spent on (default ``robot.q_home``), as
         the CJM's.
@@ -169,7 +172,7 @@ class QPController(Controller):
         self._proxqp = (ProxQPSolver(self.settings,
                                      frozenset({"eps_abs", "rho"} - set(user_settings)))
                         if solver == "proxqp" and ProxQPSolver.accepts(self.settings) else None)
-        self._daqp = (DirectDAQP(self.settings, user_settings)
+        self._direct_daqp = (DirectDAQP(self.settings, user_settings)
                       if solver == "daqp" and DirectDAQP.accepts(self.settings) else None)
         #: what goes through qpsolvers: its proxqp path takes no inner cap (``max_iter_in``)
         self._qpsolvers_settings = {k: v for k, v in self.settings.items()
@@ -289,6 +292,6 @@ class QPController(Controller):
         or qpsolvers for the others (and for settings the direct calls cannot apply)."""
         if self._proxqp is not None:
             return self._proxqp.solve(problem, self.budget)
-        if self._daqp is not None:
-            return self._daqp.solve(problem, self.budget)
+        if self._direct_daqp is not None:
+            return self._direct_daqp.solve(problem, self.budget)
         return solve_with_qpsolvers(problem, self.solver, self._qpsolvers_settings, self.budget)

@@ -93,11 +93,11 @@ def polish_on_face(stage_1: QPSolution, held_joints: np.ndarray, held_rows: np.n
     of the rows, the held rows and any other inequality ``qd_1`` sits on (to
     :data:`EQUALITY_TOLERANCE`), the task stage is a least-squares problem, solved
     here exactly from ``qd_1``: ``qd_F = qd_f + Z (M Z)^+ (m - M qd_f)``, ``qd_f`` the
-    nearest point of ``F`` to ``qd_1``, ``Z = null(F)``, ``m`` the stacked target.
-    That removes the task solve's tolerance, which a nearly degenerate posture
-    polytope amplifies (docs/design.md 10.3). ``qd_F`` moves ``qd_1`` only across ``N``, and is kept when it
-    meets the other inequalities to ``EQUALITY_TOLERANCE`` and misses the task by no
-    more than ``qd_1`` (+ ``POLISH_SLACK``); else ``qd_1`` stays.
+    nearest point of ``F`` to ``qd_1``, ``Z = null(F)``, ``m`` the stacked target. That
+    removes the task solve's tolerance, which a nearly degenerate posture polytope amplifies
+    (docs/design.md 10.3). ``qd_F`` moves ``qd_1`` only across ``N``, and is kept when it
+    meets the other inequalities to ``EQUALITY_TOLERANCE`` and misses the task by no more
+    than ``qd_1`` (+ ``POLISH_SLACK``); else ``qd_1`` stays.
     """
     qd_1 = stage_1.x
     held = ([np.eye(qd_1.size)[held_joints]] if held_joints.any() else []) + (
