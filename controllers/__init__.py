@@ -29,7 +29,7 @@ __all__ = [
 
 def __getattr__(name: str):
     if name == "MinkController":
-        from .mink_controller import MinkController
+        from .mink import MinkController
 
         return MinkController
     raise AttributeError(f"module 'controllers' has no attribute {name!r}")

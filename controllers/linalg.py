@@ -1,4 +1,8 @@
-"""Small dense linear algebra shared by the controllers."""
+"""The CJM's dense linear algebra: damped least squares and null spaces (paper eq 35).
+
+Rank is decided by the rule of :mod:`controllers.numerics` (``RANK_TOLERANCE`` is that
+module's, re-exported here).
+"""
 
 from __future__ import annotations
 
@@ -6,11 +10,11 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg import lapack
 
+from .numerics import RANK_TOLERANCE, numerical_rank, rank_cutoff, svd
 
-#: Singular values at or below this times ``max(1, sigma_max)`` count as zero.
-RANK_TOLERANCE = 1e-10
+__all__ = ["RANK_TOLERANCE", "DampedSolution", "DampingPolicy", "damped_least_squares",
+           "nullspace"]
 
 
 @dataclass(frozen=True)
@@ -67,22 +71,19 @@ def damped_least_squares(
     values below ``rank_tolerance`` are dropped, so a rank-deficient ``J`` never yields a
     non-finite ``x``. ``rhs`` may be (m,) or (m, k) (k right-hand sides, one SVD).
     """
-    u, s, vt, info = lapack.dgesdd(matrix, full_matrices=0)  # 3x cheaper than numpy's on 6 x 6
-    if info != 0:
-        raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK dgesdd info {info})")
-    sigma_max, sigma_min = float(s[0]), float(s[-1])
-    tolerance = rank_tolerance * max(1.0, sigma_max)
-    if sigma_min > tolerance:
+    u, s, vt = svd(matrix)
+    sigma_min = float(s[-1])
+    if sigma_min > rank_cutoff(float(s[0]), rank_tolerance):
         lam2 = policy.lambda_squared(sigma_min)
         gains = s / (s * s + lam2)
         row_space = vt
     else:  # rank deficient: drop the null directions instead of dividing by ~0
-        keep = s > tolerance
-        rank = int(np.count_nonzero(keep))
+        rank = numerical_rank(s, rank_tolerance)
         sigma_min = float(s[rank - 1]) if rank else 0.0  # the smallest value kept
         lam2 = policy.lambda_squared(sigma_min)
-        gains = np.where(keep, s / (s * s + lam2 + ~keep), 0.0)
-        row_space = vt[keep]
+        gains = np.zeros_like(s)
+        gains[:rank] = s[:rank] / (s[:rank] * s[:rank] + lam2)
+        row_space = vt[:rank]
     projected = u.T @ rhs
     x = vt.T @ ((gains[:, None] if projected.ndim == 2 else gains) * projected)
     exact = lam2 == 0.0 and row_space.shape[0] == matrix.shape[0]
@@ -99,12 +100,7 @@ def nullspace(matrix: np.ndarray,
     m, n = matrix.shape
     if m == 0:
         return np.eye(n), np.zeros((n, 0)), 0
-    # LAPACK's divide-and-conquer SVD, as numpy.linalg.svd, without its Python layer
-    u, s, vt, info = lapack.dgesdd(matrix, full_matrices=1)
-    if info != 0:
-        raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK dgesdd info {info})")
-    values = s.tolist()
-    tolerance = rank_tolerance * max(1.0, values[0]) if values else 0.0
-    rank = sum(1 for value in values if value > tolerance)
+    u, s, vt = svd(matrix, full_matrices=True)
+    rank = numerical_rank(s, rank_tolerance)
     pinv = vt[:rank].T @ (u[:, :rank].T / s[:rank, None])
     return vt[rank:].T.copy(), pinv, rank

@@ -19,7 +19,7 @@ from conftest import HOLE_DISTANCE, ee_jacobian, kinematics, near_home
 
 from constraints import Barrier, Hole, PointLock
 from controllers import CJMController, MinkController, QPController, SolverError, StepStatus
-from controllers.mink_controller import JointMap, site_name
+from controllers.mujoco_model import JointMap, site_name
 from teleop import load_robot
 
 EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)  # undamped, unscaled CJM

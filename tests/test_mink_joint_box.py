@@ -1,4 +1,4 @@
-"""mink under the project's joint box (controllers/mink_joint_box.py, docs/design.md 10.7).
+"""mink under the project's joint box (controllers/mink/joint_box.py, docs/design.md 10.7).
 
 A joint 0.1 rad past a position limit: mink's stock ConfigurationLimit and VelocityLimit
 have no common point there; the joint box pins that joint at its velocity limit back
@@ -27,8 +27,8 @@ PROPERTY = settings(max_examples=30, deadline=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 #: How far a command may sit from the box's bound (rad/s): the solvers' primal tolerances on
-#: ``v`` (mink_controller.VELOCITY_TOLERANCES, at most 1e-10) with a margin; the base class
-#: clips anything beyond rounding (and then degrades the step).
+#: ``v`` (controllers.mink.settings.VELOCITY_TOLERANCES, at most 1e-10) with a margin; the
+#: base class clips anything beyond rounding (and then degrades the step).
 BOUND_TOLERANCE = 1e-8
 
 

@@ -22,7 +22,7 @@ from conftest import kinematics
 from constraints import Hole
 from controllers import CJMController, MinkController, QPController
 from controllers.base import StepStatus
-from controllers.mink_controller import site_name
+from controllers.mujoco_model import site_name
 from teleop import load_robot
 
 HOLE_DISTANCE = 0.08

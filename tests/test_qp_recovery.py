@@ -118,7 +118,7 @@ REPRO_Q = np.array([-0.764, -0.812, -0.040, 1.486, -1.700, 0.083, -1.000, 0.598]
 REPRO_TWIST = np.array([0.0426, -0.0249, 0.0815, -0.0073, -0.011, 0.0])
 
 #: Stationarity tolerance of each backend's task stage (normalised units:
-#: ``controllers.qp.TOLERANCE_RANGE`` for proxqp and daqp, OSQP's ``eps_abs``).
+#: ``controllers.numerics.TOLERANCE_RANGE`` for proxqp and daqp, OSQP's ``eps_abs``).
 STATIONARITY = {"proxqp": 1e-10, "daqp": 1e-10, "osqp": 1e-7}
 
 

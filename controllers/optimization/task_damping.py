@@ -5,10 +5,11 @@ The general CJM damps the task coordinates ``y`` of ``qd = qd_0 + N y`` (``N = n
 orthonormal, ``qd_0 = A^+ b``): ``y = argmin |J N y - r|^2 + lambda^2 |y|^2`` over the
 row space of ``J N`` (paper eq 35), with ``lambda`` from ``sigma_min(J N)``
 (:class:`~controllers.linalg.DampingPolicy`), the smallest singular value above the rank
-tolerance: a structural rank deficiency (the Panda's pre-chain self-motion, which does
-not move a hole on its last link, leaves ``J N`` with an exact zero) is no singularity and
-does not damp; a kept value that falls below the threshold does. On the rows' solution
-set ``qd - qd_0 = N y`` and ``N^T qd_0 = 0``, so that term is ``|D qd|^2`` with::
+cut-off (:mod:`controllers.numerics`): a structural rank deficiency (the Panda's pre-chain
+self-motion, which does not move a hole on its last link, leaves ``J N`` with an exact
+zero) is no singularity and does not damp; a kept value that falls below the threshold
+does. On the rows' solution set ``qd - qd_0 = N y`` and ``N^T qd_0 = 0``, so that term is
+``|D qd|^2`` with::
 
     D = lambda V_r^T N^T        V_r: right singular vectors of J N with non-zero value
 
@@ -22,13 +23,9 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg import lapack
 
-from .linalg import DampingPolicy, nullspace
-
-#: Singular values below this (relative to the largest, at least 1) count as zero, as in
-#: :func:`controllers.linalg.damped_least_squares`.
-RANK_TOLERANCE = 1e-10
+from ..linalg import DampingPolicy, nullspace
+from ..numerics import numerical_rank, svd
 
 
 class TaskDamping(NamedTuple):
@@ -47,18 +44,16 @@ def task_damping(constraint_rows: np.ndarray | None, task_jacobian: np.ndarray,
     weight, ``W^1/2`` applied) under the equality rows ``constraint_rows`` (None: none)."""
     nv = task_jacobian.shape[1]
     null_basis = (np.eye(nv) if constraint_rows is None
-                  else nullspace(constraint_rows, RANK_TOLERANCE)[0])
+                  else nullspace(constraint_rows)[0])
     if not null_basis.shape[1] or not task_jacobian.shape[0]:
         return TaskDamping(np.zeros((0, nv)), float("nan"), 0.0)
-    _, values, right_vectors, info = lapack.dgesdd(task_jacobian @ null_basis, full_matrices=0)
-    if info != 0:
-        raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK dgesdd info {info})")
-    kept = values > RANK_TOLERANCE * max(1.0, float(values[0]))
-    if not kept.any():
+    _, values, right_vectors = svd(task_jacobian @ null_basis)
+    rank = numerical_rank(values)
+    if not rank:
         return TaskDamping(np.zeros((0, nv)), 0.0, 0.0)
-    sigma_min = float(values[kept][-1])
+    sigma_min = float(values[rank - 1])
     damping_squared = policy.lambda_squared(sigma_min)
     if damping_squared == 0.0:
         return TaskDamping(np.zeros((0, nv)), sigma_min, 0.0)
     damping = damping_squared ** 0.5
-    return TaskDamping(damping * (right_vectors[kept] @ null_basis.T), sigma_min, damping)
+    return TaskDamping(damping * (right_vectors[:rank] @ null_basis.T), sigma_min, damping)

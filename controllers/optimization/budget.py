@@ -18,15 +18,15 @@ from typing import Literal
 
 from constraints.validation import as_number
 
-from .base import SolverError
+from ..base import SolverError
 
 #: The default deadline (``time_budget="periods"``), in control periods of CPU time: 10 ms
 #: at 1 kHz.
 DEADLINE_PERIODS = 10
 
 #: Iteration caps per backend, each solve. proxqp's inner iterations are at most
-#: ``max_iter * max_iter_in``: the 8.2 s step of issue 18 ran 1000 x 1500 of them on 19 DoF
-#: and never converged. docs/design.md section 10.6 gives the worst step times they allow.
+#: ``max_iter * max_iter_in``, which uncapped let one step run for seconds without
+#: converging. docs/design.md section 10.6 gives the worst step times they allow.
 ITERATION_CAPS: dict[str, dict[str, int]] = {
     "proxqp": {"max_iter": 100, "max_iter_in": 50},
     "daqp": {"iter_limit": 10000},

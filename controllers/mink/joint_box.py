@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import mink
 import numpy as np
 from mink.limits.limit import Constraint as LimitRows
 
-from .joint_limits import JointBounds
-
-if TYPE_CHECKING:
-    from .mink_controller import JointMap
+from ..joint_limits import JointBounds
+from ..mujoco_model import JointMap
 
 
 class JointBoxLimit(mink.Limit):
@@ -27,8 +23,9 @@ class JointBoxLimit(mink.Limit):
     pins the joint (``lower = upper``), which a backend takes as a fixed variable, whereas
     the two opposite rows ``dq <= u dt``, ``-dq <= -u dt`` of an inequality make an active
     set that is linearly dependent (daqp at mink's tolerance then finds no solution). A
-    planar base's velocity is ``P(th)^T`` times MuJoCo's (``mink_controller.PlanarBase``);
-    it has no position limit, so its part is the rows of :meth:`compute_qp_inequalities`.
+    planar base's velocity is ``P(th)^T`` times MuJoCo's
+    (:class:`controllers.mujoco_model.PlanarBase`); it has no position limit, so its part is
+    the rows of :meth:`compute_qp_inequalities`.
 
     Parameters
     ----------

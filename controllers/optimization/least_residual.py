@@ -28,10 +28,14 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg import lapack
 
-#: Singular values of ``A`` below this (relative to the largest, at least 1) count as zero.
-RANK_TOLERANCE = 1e-10
+from ..numerics import numerical_rank, svd
+
+
+def held_note(residual: float) -> str:
+    """The step's message when the rows are held at their least residual (m/s)."""
+    return (f"constraint rows conflict with the joint limits or barriers: held at their "
+            f"least residual, {residual:.2e} m/s")
 
 
 class LeastResidualProblem(NamedTuple):
@@ -73,9 +77,9 @@ def least_residual_problem(A: np.ndarray | None, b: np.ndarray | None, G: np.nda
     gradient = np.zeros(nv + slacks)
     scale, curvature, rank = 1.0, 1.0, 0
     if A is not None:
-        values = np.linalg.svd(A, compute_uv=False)
+        values = svd(A)[1]
         scale = max(float(np.vdot(A, A)) / A.shape[0], 1e-300)
-        rank = int(np.sum(values > RANK_TOLERANCE * max(1.0, float(values[0]))))
+        rank = numerical_rank(values)
         curvature = float(values[rank - 1]) ** 2 / scale if rank else 1.0
         hessian[:nv, :nv] = A.T @ A / scale
         gradient[:nv] = -(b @ A) / scale
@@ -99,10 +103,8 @@ def held_rows(x: np.ndarray, A: np.ndarray | None, b: np.ndarray | None,
     residual, rows, rhs, bound = 0.0, None, None, None
     if A is not None:
         residual = float(np.max(np.abs(A @ qd - b)))
-        left, values, _, info = lapack.dgesdd(A, full_matrices=0)
-        if info != 0:
-            raise np.linalg.LinAlgError(f"SVD did not converge (LAPACK dgesdd info {info})")
-        rank = int(np.sum(values > RANK_TOLERANCE * max(1.0, float(values[0]))))
+        left, values, _ = svd(A)
+        rank = numerical_rank(values)
         rows = left[:, :rank].T @ A
         rhs = rows @ qd
     if G is not None:

@@ -1,0 +1,357 @@
+"""The constrained teleoperation step solved by mink's ``solve_ik`` (docs/design.md 4.8)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+
+import mink
+import mujoco
+import numpy as np
+import pinocchio as pin
+import qpsolvers
+
+from constraints import Constraint
+from constraints.validation import as_number, as_vector
+
+from ..base import EQUALITY_TOLERANCE, Controller, Kinematics, SolverError, StepStatus, as_twist_weight
+from ..joint_limits import DEFAULT_LIMIT_GAIN
+from ..linalg import DampingPolicy
+from ..mujoco_model import build_mujoco_model, site_name
+from ..numerics import INFINITE_BOUND
+from ..optimization.budget import BudgetExceeded, StepBudget, TimeBudget
+from ..optimization.least_residual import HeldRows, held_note, held_rows, least_residual_problem
+from ..optimization.task_damping import task_damping
+from .adapters import BarrierLimit, ConstraintTask, DampingTask, PostureTask
+from .joint_box import JointBoxLimit
+from .rows import PinocchioRows, RowsCache
+from .backend import MinkBackend
+from .settings import DEFAULT_DAMPING, DEFAULT_POSTURE_COST
+
+#: Pinocchio's ``[x y z qx qy qz qw]`` re-ordered into mink's ``wxyz_xyz``.
+_WXYZ_XYZ = np.array([6, 3, 4, 5, 0, 1, 2])
+
+LimitSpec = mink.Limit | Callable[[mujoco.MjModel], mink.Limit]
+
+
+class MinkController(Controller):
+    """The constrained teleoperation step solved by mink's ``solve_ik``.
+
+    Per step, with ``T_e`` the EE pose and ``V`` the desired EE body twist (several EEs:
+    one FrameTask each, ``V_i`` the ``i``-th 6 entries of the stacked twist, and the
+    first term summed over them; docs/design.md section 11)::
+
+        target  = T_e exp6(V dt)                    FrameTask on the EE site (cost 1, 1)
+        min_dq  |Jlog(T_t^-1 T_e) (J_e dq - V dt)|^2 + c^2 |dq - qd_posture dt|^2 + damping |dq|^2
+        s.t.    A dq = b dt                         ConstraintTask per equality (hard)
+                -A_b dq <= -b_b dt                  BarrierLimit per barrier
+                lower dt <= dq <= upper dt          JointBoxLimit (JointBounds.box(q))
+        qd = dq / dt                                (solve_ik's return value)
+
+    **Why this tracks V exactly.** mink's frame error is ``e = log(T_e^-1 T_t) = V dt``
+    (for ``|V dt|`` below pi) and its Jacobian ``J = -Jlog(exp(-V dt)) J_e``, so the
+    task row ``J dq = -e`` reads ``Jr^-1(-V dt) J_e dq = V dt``. Since
+    ``Jr^-1(-x) x = x`` on SE(3) (``ad_x x = 0``), its solution is ``J_e dq = V dt``,
+    i.e. ``J_e qd = V``: whenever the constrained task is feasible (6 + k = n, the
+    built-in robots with a hole), mink's ``qd`` is the CJM's. When it is not (e.g. a
+    barrier is active) mink minimises ``|J_e qd - V|`` in the metric
+    ``W = Jr^-1(-V dt) = I + O(|V dt|)`` instead of the QP controller's identity:
+    the two least-squares answers then differ by ``O(|V dt|)`` relative.
+
+    **Accuracy floor.** mink 1.3.0 evaluates ``Jlog`` (``mink/lie/se3.py::_getQ``) with
+    ``(1 - t^2/2 - cos t) / t^4`` and a similar quintic term in closed form once ``t^2``
+    exceeds machine epsilon; at ``t = |w| dt`` of a teleoperation step the cancellation
+    leaves ``Jlog`` wrong well above rounding, which sets how closely ``J_e qd`` meets
+    ``V`` and ``qd`` the CJM's, for every backend (docs/design.md 10.3, tests/test_mink.py).
+
+    **Posture.** A :class:`PostureTask` towards ``posture`` with gain
+    ``posture_gain * dt`` (mink's gain is per step) asks for the CJM's and the QP
+    controller's posture velocity ``qd_posture = posture_gain * pin.difference(q,
+    posture)``. mink sums its tasks, so the posture's cost ``c`` trades the twist for the
+    posture by about ``c^2 / sigma^2`` (``sigma`` the task's singular values): the QP
+    controller's weighted formulation with ``mu s = c^2``, never its lexicographic one.
+    The default cost is about as small as mink's solve still resolves the posture with:
+    docs/design.md section 10 gives the deviation from the CJM that remains.
+
+    **Equalities.** Every equality (``Hole``, ``Plane``, ``PointLock``) is a
+    :class:`ConstraintTask` in ``solve_ik(..., constraints=...)`` and barriers are
+    :class:`BarrierLimit` rows; both evaluate the constraints' own ``rows`` with
+    Pinocchio at mink's configuration (joints mapped by name). After the solve the rows
+    are checked: ``info.equality_residual = max |A qd - b|``, and a residual above
+    ``equality_tolerance`` (infeasible equalities that a backend answered in the least
+    squares sense) is a failure like a ``NoSolutionFound``: a flagged zero command.
+
+    Parameters
+    ----------
+    robot : a ``teleop.Robot`` (``urdf_path``, ``model``, ``ee_frames``, ...). The MuJoCo
+        model is compiled from the same URDF (geometry dropped), with a site at every
+        Pinocchio link frame (``site_name(link)``, the constraint links among them) and
+        at every EE frame. Joints must be 1-dof revolute/prismatic, matched by name, on
+        a fixed base or on a planar root joint (:func:`build_mujoco_model`).
+    constraints, strict : see :class:`controllers.base.Controller`.
+    solver : any qpsolvers backend mink accepts: ``"daqp"`` (default), ``"proxqp"``,
+        ``"osqp"``, ...
+    dt : control period (s): mink's integration step.
+    damping : mink's Levenberg-Marquardt damping (on ``dq``; acts as ``mu`` on ``qd``).
+        Default: 0 with a posture task, :data:`DEFAULT_DAMPING` without.
+    posture : configuration the redundancy is spent on (default ``robot.q_home``), as the
+        CJM's.
+    posture_gain : gain (1/s) of the posture velocity, as the CJM's (at most ``1 / dt``:
+        mink's per-step gain is ``posture_gain * dt`` and must not exceed 1).
+    posture_cost : the posture task's cost relative to the task's scale: mink's cost is
+        ``c = posture_cost * sqrt(s)``, ``s = |W^1/2 J_e|_F^2 / m`` (``J_e`` stacked,
+        ``m = 6`` rows per EE: the mean squared singular value, as the QP controller's
+        ``s``), set every step (0: no posture task). With proxqp, its ``rho`` follows as
+        ``PROXQP_RHO c^2`` (:mod:`controllers.numerics`): proxqp's own 1e-6 is far too
+        large against that curvature (docs/design.md 10.2).
+    limits : ``None`` for the default, the controller's joint box
+        (:class:`controllers.mink.joint_box.JointBoxLimit`: velocity limits, and position
+        limits through ``dt`` with ``limit_gain``, on Pinocchio's velocity, a planar base's
+        in its own frame; docs/design.md 10.7),
+        else a sequence of ``mink.Limit`` instances or factories ``f(mj_model) -> Limit``
+        (``mink.ConfigurationLimit`` itself is one); ``()`` for none. Barrier limits
+        are always added.
+    limit_gain : ``g`` of the joint box (:class:`controllers.joint_limits.JointBounds`).
+    equality_tolerance : largest ``|A qd - b|`` (m/s) accepted from the backend.
+    solver_settings : backend keyword arguments, passed as they are (they override the
+        defaults built from ``VELOCITY_TOLERANCES`` and ``FIXED_SETTINGS``).
+    twist_weight : the diagonal ``W`` of the CJM's and the QP's weighted task: each frame
+        task's position and orientation costs are ``W^1/2`` of its EE's entries.
+    time_budget, singular_threshold, max_damping : the step's deadline and the CJM's
+        damping policy, as :class:`controllers.QPController`'s (docs/design.md 10.6, 10.7).
+    """
+
+    def __init__(
+        self,
+        robot,
+        constraints: Iterable[Constraint] = (),
+        solver: str = "daqp",
+        dt: float = 1e-3,
+        damping: float | None = None,
+        posture: np.ndarray | None = None,
+        posture_gain: float = 1.0,
+        posture_cost: float = DEFAULT_POSTURE_COST,
+        limits: Sequence[LimitSpec] | None = None,
+        limit_gain: float = DEFAULT_LIMIT_GAIN,
+        equality_tolerance: float = 1e-6,
+        solver_settings: dict | None = None,
+        twist_weight=None,
+        time_budget: TimeBudget = "periods",
+        singular_threshold: float = 0.01,
+        max_damping: float = 0.05,
+        strict: bool = False,
+    ) -> None:
+        super().__init__(robot, dt=dt, limit_gain=limit_gain, strict=strict)
+        self.budget = StepBudget(time_budget, self.dt)
+        self.policy = DampingPolicy(0.0, as_number(singular_threshold, "singular_threshold", 0.0),
+                                    as_number(max_damping, "max_damping", 0.0))
+        self.twist_weight = as_twist_weight(twist_weight, self.task_size)
+        self._twist_scale = np.sqrt(self.twist_weight)  # W^1/2: each frame task's costs
+        self._twist_rows = self._twist_scale[:, None]  # W^1/2, to scale the rows of J_e
+        self._unit_weight = bool(np.all(self.twist_weight == 1.0))
+        if solver not in qpsolvers.available_solvers:
+            raise ValueError(
+                f"QP solver {solver!r} is not available to mink; installed: "
+                f"{qpsolvers.available_solvers}")
+        self.posture_gain = as_number(posture_gain, "posture_gain", 0.0, maximum=1.0 / self.dt)
+        self.posture_cost = as_number(posture_cost, "posture_cost", 0.0)
+        if damping is None:
+            damping = 0.0 if self.posture_cost > 0.0 else DEFAULT_DAMPING
+        self.damping = as_number(damping, "damping", 0.0)
+        self.equality_tolerance = as_number(equality_tolerance, "equality_tolerance", positive=True)
+        self.solver = solver
+        self.backend = MinkBackend(solver, self.dt, self.posture_cost, solver_settings,
+                                   self.budget)
+        #: the backend's settings (one dict: changing it changes the next solve)
+        self.settings = self.backend.settings
+
+        # The MuJoCo side, built once, before the constraints that use it.
+        model: pin.Model = robot.model
+        ee_frames = [model.frames[frame_id].name for frame_id in self.ee_frame_ids]
+        frames = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+        frames.extend(ee_frames)
+        self.mj_model, self.joints = build_mujoco_model(
+            model, robot.urdf_path.read_text(), frames, getattr(robot, "locked_joints", None))
+        self.site_names = {name: site_name(name) for name in frames}
+        self.ee_site = site_name(ee_frames[0])
+        self.configuration = mink.Configuration(self.mj_model)
+        #: one frame task per end effector, in ``robot.ee_frames`` order
+        self.ee_tasks = [mink.FrameTask(site_name(name), "site",
+                                        position_cost=self._twist_scale[6 * i:6 * i + 3],
+                                        orientation_cost=self._twist_scale[6 * i + 3:6 * i + 6],
+                                        gain=1.0, lm_damping=0.0)
+                         for i, name in enumerate(ee_frames)]
+        self._ee_site_ids = [self.mj_model.site(site_name(name)).id for name in ee_frames]
+        self._q_mj = np.empty(self.mj_model.nq)
+        #: the default limit, the controller's joint box (None with ``limits`` given)
+        self._joint_box = (JointBoxLimit(self.joint_bounds, self.joints, model.nq)
+                           if limits is None else None)
+        self._base_limits = self._make_limits(limits)
+        if posture is None:
+            posture = robot.q_home
+        self.posture = as_vector(posture, model.nq, "posture")
+        self.posture_task = PostureTask(model, self.joints, self.posture, cost=self.posture_cost,
+                                        gain=self.posture_gain * self.dt,
+                                        difference=self.posture_difference)
+        self._tasks = [*self.ee_tasks, self.posture_task] if self.posture_cost else self.ee_tasks
+        self.damping_task = DampingTask(self.task_size, self.mj_model.nv)
+        #: the task rows the damping sees: those of non-zero weight, as the CJM's
+        self._weighted_rows = np.flatnonzero(self.twist_weight > 0.0)
+        self._equality_caches: list[RowsCache] = []
+        self.constraint_tasks: list[ConstraintTask] = []
+        self.barrier_limits: list[BarrierLimit] = []
+        self._limits: list[mink.Limit] = list(self._base_limits)
+        self.set_constraints(constraints)
+
+    def _make_limits(self, limits: Sequence[LimitSpec] | None) -> list[mink.Limit]:
+        if limits is None:
+            return [self._joint_box]
+        made = []
+        for limit in limits:
+            made.append(limit if isinstance(limit, mink.Limit) else limit(self.mj_model))
+            if not isinstance(made[-1], mink.Limit):
+                raise TypeError(f"limits: expected mink.Limit or a factory of one, got {limit!r}")
+        return made
+
+    @property
+    def ee_task(self) -> mink.FrameTask:
+        """The first end effector's frame task (the only one of a single-EE robot)."""
+        return self.ee_tasks[0]
+
+    def _prepare(self) -> None:
+        rows = PinocchioRows(self.model, self.data, self.joints, self.mj_model.nq)
+        self._rows = rows
+        caches = [RowsCache(c, f, rows) for c, f in zip(self.constraints, self.constraint_frames)]
+        self._equality_caches = [c for c in caches if c.constraint.is_equality]
+        self.constraint_tasks = [ConstraintTask(c, self.dt) for c in self._equality_caches]
+        self.barrier_limits = [BarrierLimit(c) for c in caches if not c.constraint.is_equality]
+        self._limits = [*self._base_limits, *self.barrier_limits]
+
+    # -- the step ----------------------------------------------------------------------
+
+    def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
+        configuration = self.configuration
+        q_mj = self.joints.q_to_mujoco(kinematics.q, out=self._q_mj)
+        configuration.update(q_mj)
+        self._rows.mark_current(q_mj)  # the base class ran Pinocchio at this q already
+        data = configuration.data
+        dt = self.dt
+        for index, (task, site_id) in enumerate(zip(self.ee_tasks, self._ee_site_ids)):
+            ee = pin.SE3(data.site_xmat[site_id].reshape(3, 3), data.site_xpos[site_id])
+            xyz_quat = pin.SE3ToXYZQUAT(ee * pin.exp6(twist[6 * index:6 * index + 6] * dt))
+            # (the attribute set_target would set, without its defensive copy)
+            task.transform_target_to_world = mink.SE3(wxyz_xyz=xyz_quat[_WXYZ_XYZ])
+        self.info.method = f"mink:{self.solver}"
+        if self.posture_cost > 0.0:  # c = posture_cost * sqrt(s), s the task's scale
+            cost = self.posture_cost * math.sqrt(
+                float(np.vdot(self.twist_weight, np.square(kinematics.ee_jacobian).sum(axis=1)))
+                / self.task_size)
+            self.posture_task.cost[:] = cost  # (set_cost, without its checks)
+            self.backend.set_posture_cost(cost)
+        self.budget.start()
+        A, b = self._equality_rows()
+        damping = task_damping(A, (self._twist_rows * kinematics.ee_jacobian)[self._weighted_rows],
+                               self.policy)
+        self.info.sigma_min, self.info.damping = damping.sigma_min, damping.damping
+        tasks = self._tasks
+        if damping.rows.shape[0]:
+            self.damping_task.set_rows(self.joints.columns_to_mujoco(damping.rows, q_mj))
+            tasks = [*tasks, self.damping_task]
+        try:
+            qd = self._solve_rows(tasks, q_mj)
+        except SolverError as error:  # infeasible rows, or a budget spent
+            if not (self._equality_caches or self.barrier_limits):
+                raise
+            try:
+                held = self._least_residual(A, b, kinematics.q)
+            except SolverError as second:
+                raise error from second
+            if held.residual <= EQUALITY_TOLERANCE:
+                raise  # the rows fit the limits: the failure was something else
+            self.info.report(StepStatus.CONSTRAINT_DEGRADED, held_note(held.residual))
+            self._hold(held)
+            try:
+                qd = self._solve_rows(tasks, q_mj)
+            except BudgetExceeded:
+                raise
+            except SolverError as task_error:  # (proxqp: a false infeasibility, in dq units)
+                qd = held.qd
+                self.info.report(StepStatus.LEAST_SQUARES, f"mink under the held rows failed "
+                                 f"({task_error}): the least-residual command")
+            finally:
+                self._hold(None)
+        if A is not None:
+            self.info.equality_residual = float(np.max(np.abs(A @ qd - b)))
+        if self.barrier_limits:
+            active = []
+            for index, limit in zip(
+                    (i for i, c in enumerate(self.constraints) if not c.is_equality),
+                    self.barrier_limits):
+                rows = limit.cache.at(configuration)
+                if np.any(rows.A_pin @ qd - rows.b < 1e-9):
+                    active.append(index)
+            self.info.active_barriers = tuple(active)
+        self._report_twist_error(kinematics.ee_jacobian, qd, twist,
+                                 None if self._unit_weight else self._twist_scale)
+        return qd
+
+    def _solve_rows(self, tasks: list[mink.Task], q_mj: np.ndarray) -> np.ndarray:
+        """mink's ``qd`` (Pinocchio order) under the rows as the constraint tasks hold them
+        (``b``, or the least residual's), which it must meet to ``equality_tolerance``."""
+        v_mj = self.backend.solve_ik(self.configuration, tasks, self.damping, self._limits,
+                                     self.constraint_tasks, self._joint_box)
+        if not np.all(np.isfinite(v_mj)):
+            raise SolverError(f"mink.solve_ik with solver {self.solver!r} returned a "
+                              "non-finite velocity")
+        qd = self.joints.v_to_pinocchio(v_mj, q_mj)
+        if self._equality_caches:
+            residual = max(float(np.max(np.abs(
+                task.cache.A_pin @ qd - (task.cache.b if task.held_rhs is None else task.held_rhs))))
+                for task in self.constraint_tasks)
+            if not residual <= self.equality_tolerance:  # daqp's eq_reduction: least squares
+                raise SolverError(
+                    f"mink.solve_ik with solver {self.solver!r} returned a velocity that "
+                    f"breaks the equality rows by {residual:.3g} m/s (tolerance "
+                    f"{self.equality_tolerance:g}): infeasible constraints or an "
+                    "inaccurate solve")
+        return qd
+
+    def _equality_rows(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The equality rows ``A qd = b`` at the current configuration (Pinocchio order)."""
+        if not self._equality_caches:
+            return None, None
+        caches = [cache.at(self.configuration) for cache in self._equality_caches]
+        return np.vstack([c.A_pin for c in caches]), np.concatenate([c.b for c in caches])
+
+    def _least_residual(self, A: np.ndarray | None, b: np.ndarray | None,
+                        q: np.ndarray) -> HeldRows:
+        """The rows as close to ``b`` as the box and the barriers allow
+        (:mod:`controllers.optimization.least_residual`), solved with this controller's
+        backend."""
+        lower, upper = self.joint_bounds.box(q)
+        lower = np.where(np.isfinite(lower), lower, -INFINITE_BOUND)
+        upper = np.where(np.isfinite(upper), upper, INFINITE_BOUND)
+        G = h = None
+        if self.barrier_limits:
+            caches = [limit.cache.at(self.configuration) for limit in self.barrier_limits]
+            G = -np.vstack([c.A_pin for c in caches])
+            h = -np.concatenate([c.b for c in caches])
+        problem = least_residual_problem(A, b, G, h, lower, upper, INFINITE_BOUND)
+        return held_rows(self.backend.least_residual(problem), A, b, G, h, lower, upper)
+
+    def _hold(self, held: HeldRows | None) -> None:
+        """Make the constraint tasks and barrier limits hold ``held``'s rows (None: ``b``)."""
+        if held is None:
+            for item in (*self.constraint_tasks, *self.barrier_limits):
+                item.held_rhs = None
+            return
+        for task in self.constraint_tasks:
+            task.held_rhs = task.cache.A_pin @ held.qd
+        for limit in self.barrier_limits:
+            limit.held_rhs = np.minimum(limit.cache.b, limit.cache.A_pin @ held.qd)
+
+    def site_pose(self, frame: str) -> pin.SE3:
+        """World pose of the MuJoCo site at Pinocchio frame ``frame`` (last ``solve``'s q)."""
+        sid = self.mj_model.site(site_name(frame)).id
+        data = self.configuration.data
+        return pin.SE3(data.site_xmat[sid].reshape(3, 3).copy(), data.site_xpos[sid].copy())

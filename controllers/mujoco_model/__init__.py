@@ -1,0 +1,16 @@
+"""A MuJoCo model of a robot's URDF and the map between its coordinates and Pinocchio's.
+
+Below every user in the layers: the mink peer (:mod:`controllers.mink`) imports it, and
+so may a MuJoCo physics plant in ``teleop``; it imports neither mink nor any controller.
+
+* :func:`build_mujoco_model` - ``(mujoco.MjModel, JointMap)`` from a Pinocchio model and
+  its URDF, with a site (:func:`site_name`) at each frame asked for;
+* :class:`JointMap`, :class:`PlanarBase` - configurations, velocities and Jacobian columns
+  from one model's coordinates to the other's.
+"""
+
+from .builder import PLANAR_SUFFIXES, SITE_PREFIX, build_mujoco_model, site_name
+from .joint_map import JointMap, PlanarBase
+
+__all__ = ["PLANAR_SUFFIXES", "SITE_PREFIX", "JointMap", "PlanarBase", "build_mujoco_model",
+           "site_name"]

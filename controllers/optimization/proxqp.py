@@ -1,0 +1,117 @@
+"""proxqp as persistent ``proxsuite`` dense QPs (docs/design.md section 10.2)."""
+
+from __future__ import annotations
+
+from ..base import SolverError
+from ..numerics import PROXQP_PRIMAL_INFEASIBILITY, PROXQP_RHO
+from .budget import StepBudget
+from .problem import QPSolution, QuadraticProgram
+
+#: proxqp settings that are arguments of ``init`` rather than fields of ``settings``.
+INIT_ARGUMENTS = frozenset({"rho", "mu_eq", "mu_in", "compute_preconditioner",
+                            "manual_minimal_H_eigenvalue"})
+
+
+class ProxQPSolver:
+    """Persistent ``proxsuite.proxqp.dense.QP`` objects: ``init`` once per problem shape,
+    ``update`` + ``solve`` after. Used by the QP controller and, for its proxqp solves, by
+    the mink peer.
+
+    ``tuned`` names the settings set from each problem's curvature: ``"eps_abs"``
+    (:meth:`QuadraticProgram.tolerance`) and ``"rho"`` (``PROXQP_RHO`` times it).
+
+    The task stage and the posture stage have different shapes, so each gets its own
+    object (keyed by :attr:`QuadraticProgram.shape`). The joint bounds go in proxsuite's
+    box constraints, the other inequality rows in ``C``. All objects are dropped after a
+    failed solve, so that a bad state never carries over. ``update`` keeps the
+    preconditioner of ``init``: recomputing it every step cost more than it saved, and
+    the stopping test is on the unscaled residuals, so the tolerances hold either way.
+    It restarts the penalty parameters ``mu_eq``, ``mu_in`` from their initial values,
+    as ``init`` does: carried over from the previous step, they made proxqp stop at a
+    wrong point reported as solved, at a spurious infeasibility or at the iteration cap
+    on the generated chains with binding limits (docs/design.md 10.2).
+    proxqp takes a semidefinite Hessian as it is: its proximal term acts only while it
+    iterates, and directions the objective does not see feel no force.
+
+    ``initial_guess`` (a ``proxsuite.proxqp.InitialGuess`` name, in ``solver_settings``)
+    defaults to ``EQUALITY_CONSTRAINED_INITIAL_GUESS``, which is what a fresh proxqp solve
+    uses: on the built-in robots it needs no more iterations than
+    ``WARM_START_WITH_PREVIOUS_RESULT`` on a smooth closed loop, and warm starting from the
+    previous result now and then stopped at a spurious ``PROXQP_PRIMAL_INFEASIBLE`` on
+    independent configurations. With a warm start chosen, a step that does not reach
+    ``PROXQP_SOLVED`` is solved again from the equality-constrained guess before it is
+    reported as a failure.
+    """
+
+    def __init__(self, settings: dict, tuned: frozenset[str]) -> None:
+        import proxsuite  # noqa: PLC0415 - only when proxqp is the backend
+
+        self._proxqp = proxsuite.proxqp
+        self.init_arguments = {k: v for k, v in settings.items() if k in INIT_ARGUMENTS}
+        self.settings = {"eps_primal_inf": PROXQP_PRIMAL_INFEASIBILITY,
+                         **{k: v for k, v in settings.items() if k not in INIT_ARGUMENTS}}
+        guess = self.settings.pop("initial_guess", "EQUALITY_CONSTRAINED_INITIAL_GUESS")
+        if isinstance(guess, str):
+            if guess not in proxsuite.proxqp.InitialGuess.__members__:
+                raise ValueError(f"unknown proxqp initial_guess {guess!r}; one of "
+                                 f"{list(proxsuite.proxqp.InitialGuess.__members__)}")
+            guess = proxsuite.proxqp.InitialGuess.__members__[guess]
+        self.initial_guess = guess
+        self.fallback_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
+        self.solved = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
+        self.tuned = tuned  # of "eps_abs", "rho": set from the curvature, per solve
+        self.solvers: dict[tuple[int, int, int, bool], object] = {}
+
+    @staticmethod
+    def accepts(settings: dict) -> bool:
+        """Whether every key is a proxqp setting this class can apply (else: qpsolvers)."""
+        import proxsuite  # noqa: PLC0415
+
+        fields = set(dir(proxsuite.proxqp.dense.QP(1, 0, 0).settings))
+        return all(k in fields or k in INIT_ARGUMENTS for k in settings)
+
+    def reset(self) -> None:
+        self.solvers.clear()
+
+    def solve(self, problem: QuadraticProgram, budget: StepBudget) -> QPSolution:
+        budget.remaining("proxqp")
+        shape = problem.shape
+        _, _, n_rows, boxed = shape
+        arguments = (problem.hessian, problem.gradient, problem.equality_matrix,
+                     problem.equality_rhs, problem.rows, problem.rows_lower, problem.rows_upper,
+                     *((problem.lower, problem.upper) if boxed else ()))
+        proximal = ({"rho": min(1e-6, PROXQP_RHO * problem.curvature)}
+                    if "rho" in self.tuned else {})
+        qp = self.solvers.get(shape)
+        if qp is None:
+            qp = self._proxqp.dense.QP(*shape[:3], box_constraints=boxed)
+            for key, value in self.settings.items():
+                setattr(qp.settings, key, value)
+            qp.settings.initial_guess = self.initial_guess
+            if "eps_abs" in self.tuned:
+                qp.settings.eps_abs = problem.tolerance()
+            qp.init(*arguments, **self.init_arguments, **proximal)
+            self.solvers[shape] = qp
+        else:
+            if "eps_abs" in self.tuned:
+                qp.settings.eps_abs = problem.tolerance()
+            penalties = {"mu_eq": self.init_arguments.get("mu_eq", qp.settings.default_mu_eq),
+                         "mu_in": self.init_arguments.get("mu_in", qp.settings.default_mu_in)}
+            qp.update(*arguments, **proximal, **penalties)
+        qp.solve()
+        status = qp.results.info.status
+        if status != self.solved and self.initial_guess != self.fallback_guess:
+            qp.settings.initial_guess = self.fallback_guess
+            qp.solve()
+            qp.settings.initial_guess = self.initial_guess
+            status = qp.results.info.status
+        if status != self.solved:
+            self.reset()
+            if status == self._proxqp.QPSolverOutput.PROXQP_MAX_ITER_REACHED:
+                raise budget.exceeded("proxqp", f"iteration limit ({qp.settings.max_iter} "
+                                      f"x {qp.settings.max_iter_in} iterations)")
+            raise SolverError(f"proxqp found no solution ({status.name})")
+        multipliers = qp.results.z  # the rows C, then the box
+        return QPSolution(qp.results.x.copy(), multipliers[n_rows:].copy() if boxed else None,
+                          multipliers[:n_rows].copy() if n_rows else None)
+
