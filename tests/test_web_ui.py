@@ -64,7 +64,7 @@ def test_the_grid_is_at_the_robots_base(ui, ur5_instrument):
 
 def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
     app = ui.app
-    hole_id = app.add_hole(0.08)
+    hole_id = app.add_constraint("hole", distance=0.08)
     app.set_ghost("qp:daqp")
     nudge(app, [0.0, 0.01, 0.0])
     run(app, 0.1)
@@ -99,7 +99,7 @@ def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
 
 def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_side(ui):
     app = ui.app
-    barrier_id = app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
+    barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     run(app, 0.05)
     draw(ui)
     markers = ui._markers[barrier_id]
@@ -114,8 +114,8 @@ def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_sid
 
 def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
     app = ui.app
-    hole_id = app.add_hole(0.08)
-    lock_id = app.add_point_lock(0.05)
+    hole_id = app.add_constraint("hole", distance=0.08)
+    lock_id = app.add_constraint("point_lock", distance=0.05)
     draw(ui)
     frame = app.robot.model.getFrameId(app.robot.constrained_link)
     link_radius = max(g.geometry.radius for g in app.robot.visual_model.geometryObjects
@@ -133,7 +133,7 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
 
 def test_the_ee_target_line_takes_the_step_status_colour(ui):
     app = ui.app
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     draw(ui)
     assert ui.reach_line.visible is False  # on target: nothing to show
     assert ui.target_marker.visible is False  # the target is at the gizmo
@@ -151,7 +151,7 @@ def test_the_ee_target_line_takes_the_step_status_colour(ui):
 
 def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
     app = ui.app
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     nudge(app, [0.004, 0.0, 0.0])
     run(app, 0.3)
     draw(ui, plot=True)
@@ -183,7 +183,7 @@ def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
 
 def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app = ui.app
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     app.set_gain(60.0)
     app.set_motion_scale(0.5)
     app.set_ghost("qp:daqp")
@@ -279,7 +279,7 @@ def test_the_pandas_hole_ring_is_outside_its_link_mesh(server, tmp_path):
                        link_axis=(-0.0825, 0.384, 0.0))
     app = TeleopApp(panda, record_dir=tmp_path)
     ui = TeleopUI(server, app, ControlThread(app))
-    hole_id = app.add_hole(0.08)
+    hole_id = app.add_constraint("hole", distance=0.08)
     snapshot = draw(ui)
     ring = np.asarray(ui._markers[hole_id]["shape"].points).reshape(-1, 3)
     geometry = snapshot["robots"]["main"]["constraints"][hole_id]["geometry"]
