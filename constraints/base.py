@@ -36,6 +36,10 @@ DEFAULT_GAIN = 100.0
 
 Parametrisation = Literal["nullspace", "paper"]
 
+#: how a view draws a constraint's geometry (:attr:`ConstraintGeometry.shape`): a ring
+#: around an axis, a flat square through a point with a normal, a point
+SHAPES = ("ring", "plane", "point")
+
 
 class RobotLike(Protocol):
     """What a constraint needs from a robot (``teleop.Robot`` satisfies it)."""

@@ -3,7 +3,7 @@
 Each constraint type declares its ``placement``: a tuple of :class:`PlacementField`, one
 per keyword of its :meth:`~constraints.base.Constraint.place`. A user interface builds its
 inputs from these declarations and checks the values by field type (the few types below),
-so it never names a constraint kind (docs/design.md section 5.4).
+so it never names a constraint kind (docs/design.md section 5.5).
 
 Field types:
 

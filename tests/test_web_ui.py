@@ -18,7 +18,7 @@ from browser_helpers import PANDA, free_port
 from teleop import load_robot
 from web.app import ControlThread, TeleopApp
 from web.robot_view import RobotView, floor_height
-from web.ui import PLOTS, STATUS_COLORS, TeleopUI, _link_radius
+from web.ui import PLOTS, STATUS_COLORS, TeleopUI, reach_from_axis
 
 
 @pytest.fixture()
@@ -108,8 +108,8 @@ def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_sid
     anchor = app.entries[barrier_id].position
     np.testing.assert_allclose(arrow[0, 0], anchor, atol=1e-6)  # viser keeps float32
     np.testing.assert_allclose(arrow[0, 1] - anchor, [0.0, 0.0, 0.08], atol=1e-6)  # +n, 8 cm
-    assert ui.plane_normal.label == "plane normal (world)"
-    assert "world coordinates" in ui.plane_normal.hint
+    assert ui.constraint_inputs["plane"]["normal"].label == "plane normal (world)"
+    assert "world coordinates" in ui.constraint_inputs["plane"]["normal"].hint
 
 
 def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
@@ -121,7 +121,7 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
     link_radius = max(g.geometry.radius for g in app.robot.visual_model.geometryObjects
                       if g.parentFrame == frame and type(g.geometry).__name__ == "Cylinder")
     assert link_radius == pytest.approx(0.04)  # arm_link_5_r's cylinder
-    assert _link_radius(app.robot, app.robot.constrained_link) >= link_radius
+    assert reach_from_axis(app.robot, app.robot.constrained_link) >= link_radius
     for entry_id in (hole_id, lock_id):
         markers = ui._markers[entry_id]
         collar = np.asarray(markers["point"].points).reshape(-1, 3)
