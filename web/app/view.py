@@ -52,7 +52,7 @@ class View:
 
     def active_inequalities(self, which: str = "main") -> list[str]:
         """Ids of the one-sided constraints robot ``which``'s controller holds as
-        equalities now (its ``info.active_barriers``)."""
+        equalities now (from its step's :class:`controllers.SolveInfo`)."""
         with self._lock:
             controller = self.loops[which].controller
             ids = {id(e.constraint): e.id for e in self.entries.values()}
