@@ -31,7 +31,13 @@ from ..scene import (
 )
 from .console import EEInput, pose_from
 from .editing import ConstraintEntry
-from .limits import MAX_DAMPING, MAX_GHOST_OFFSET, MAX_MOTION_SCALE, MAX_TARGET_DISTANCE, checked_rate
+from .limits import (
+    MAX_DAMPING,
+    MAX_GHOST_OFFSET,
+    MAX_MOTION_SCALE,
+    MAX_TARGET_DISTANCE,
+    checked_rate,
+)
 from .trace import Trace
 
 
