@@ -15,6 +15,7 @@ import pytest
 import viser
 from browser_helpers import PANDA, free_port
 
+from constraints import CONSTRAINT_TYPES
 from teleop import load_robot
 from web.app import ControlThread, TeleopApp
 from web.robot_view import RobotView, floor_height
@@ -305,3 +306,20 @@ def test_the_pandas_hole_ring_is_outside_its_link_mesh(server, tmp_path):
     print(f"\n[panda] ring radius {1e3 * ring_radius:.1f} mm around a mesh reaching "
           f"{1e3 * nearest:.1f} mm from the axis at the ring")
     assert ring_radius > nearest > 0.03
+
+
+def test_every_kind_is_added_from_its_inputs_as_they_start(ui):
+    """Each type's "Add" button with its inputs untouched places it where the link point is
+    (before the declarations, "Add plane" took the barrier's offset and was refused)."""
+    app = ui.app
+    added = {kind: ui._add_constraint(kind) for kind in ui.constraint_inputs}
+    assert set(added) == set(CONSTRAINT_TYPES) and len(app.entries) == len(CONSTRAINT_TYPES)
+    data = app.robot.model.createData()
+    pin.framesForwardKinematics(app.robot.model, data, app.loops["main"].q)
+    link = data.oMf[app.robot.model.getFrameId(app.robot.constrained_link)]
+    for kind, entry_id in added.items():
+        constraint = app.entries[entry_id].constraint
+        inputs = ui.constraint_inputs[kind]
+        point = link.act(inputs["distance"].value * np.asarray(app.robot.link_axis))
+        np.testing.assert_allclose(constraint.point_world(link), point, atol=1e-12)
+        assert constraint.violation(link) <= 1e-12
