@@ -4,7 +4,7 @@ Each constraint computes, at a configuration, its structure matrix ``S`` (the pa
 reparametrisation of the twist of ``F_a``), its joint-space rows ``A qd = b`` with drift
 feedback, and its position error. See ``base.Constraint``. Each also describes itself
 (``kind``, ``to_dict`` / ``Constraint.from_dict``, ``position`` / ``move_to``,
-``geometry``); ``registry.CONSTRAINT_TYPES`` lists the kinds.
+``geometry``, ``placement`` / ``place``); ``registry.CONSTRAINT_TYPES`` lists the kinds.
 """
 
 from .barrier import DEFAULT_BARRIER_GAIN, Barrier
@@ -14,6 +14,7 @@ from .base import (
     ConstraintGeometry,
     ConstraintPoint,
     Parametrisation,
+    SHAPES,
     RobotLike,
     structure_nullspace,
     structure_of,
@@ -21,22 +22,33 @@ from .base import (
 )
 from .hole import Hole
 from .plane import Plane
+from .placement import PlacementField
 from .point_lock import PointLock
-from .registry import CONSTRAINT_TYPES
+from .registry import CONSTRAINT_TYPES, register
+
+#: the built-in kinds, in the order error messages and the UI list them
+BUILTIN_TYPES = (Hole, Plane, Barrier, PointLock)
+for _type in BUILTIN_TYPES:
+    register(_type)
+del _type
 
 __all__ = [
+    "BUILTIN_TYPES",
     "Barrier",
     "CONSTRAINT_TYPES",
     "Constraint",
     "ConstraintGeometry",
     "ConstraintPoint",
     "Parametrisation",
+    "PlacementField",
     "DEFAULT_BARRIER_GAIN",
     "DEFAULT_GAIN",
     "Hole",
     "Plane",
     "PointLock",
     "RobotLike",
+    "SHAPES",
+    "register",
     "structure_nullspace",
     "structure_of",
     "structure_paper",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from .placement import PlacementField
 from .plane import Plane
 
 #: Default barrier gain (1/s): the point may approach the plane at most at ``K d`` m/s.
@@ -31,6 +32,11 @@ class Barrier(Plane):
     kind = "barrier"
     color = (230, 40, 40)
     label = "barrier"
+    placement: tuple[PlacementField, ...] = (
+        *Plane.placement,
+        PlacementField("offset", "number", "offset (m)", default=0.01, step=0.005,
+                       hint="how far the barrier lies behind the point, along the normal "
+                            "(the point starts on its allowed side)"))
     #: ``K dt < 1`` (exclusive, like every gain bound here): the point never crosses
     #: the plane in discrete time
     max_gain_period = 1.0

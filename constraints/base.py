@@ -26,6 +26,8 @@ import numpy as np
 import pinocchio as pin
 
 from .kinematics import frame_placement, resolve_frame
+from .placement import PlacementField
+from .registry import constraint_type
 from .validation import as_number, as_unit_vector, as_vector
 
 #: Default drift-feedback gain (1/s). Stable at a control period dt when 0 < K dt < 2;
@@ -33,6 +35,10 @@ from .validation import as_number, as_unit_vector, as_vector
 DEFAULT_GAIN = 100.0
 
 Parametrisation = Literal["nullspace", "paper"]
+
+#: how a view draws a constraint's geometry (:attr:`ConstraintGeometry.shape`): a ring
+#: around an axis, a flat square through a point with a normal, a point
+SHAPES = ("ring", "plane", "point")
 
 
 class RobotLike(Protocol):
@@ -90,6 +96,8 @@ class ConstraintGeometry:
         allowed side.
     color : display colour, RGB 0-255.
     label : human-readable name of the kind.
+    allowed_side : (3,) unit world direction a one-sided constraint lets the point go
+        (a barrier's normal), or None for an equality.
     """
 
     kind: str
@@ -100,6 +108,7 @@ class ConstraintGeometry:
     error: np.ndarray
     color: tuple[int, int, int]
     label: str
+    allowed_side: np.ndarray | None = None
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -112,10 +121,6 @@ def constructor_fields(constraint_type: type) -> dict[str, inspect.Parameter]:
     return {name: parameter
             for name, parameter in inspect.signature(constraint_type).parameters.items()
             if parameter.kind in (parameter.POSITIONAL_OR_KEYWORD, parameter.KEYWORD_ONLY)}
-
-
-
-
 
 
 def orthonormal_complement(rows: np.ndarray) -> np.ndarray:
@@ -138,12 +143,10 @@ def perpendicular_basis(axis: np.ndarray) -> np.ndarray:
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a x b`` of two 3-vectors: ``np.cross``'s arithmetic, bit for bit, without its
-    overhead (two calls a step for a plane: 30 us less, measured with cProfile)."""
+    per-call overhead (a plane calls it twice a step)."""
     a0, a1, a2 = a.tolist()
     b0, b1, b2 = b.tolist()
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-
-
 
 
 def default_link(robot: RobotLike, link: str | None) -> str:
@@ -170,8 +173,6 @@ def link_point_at(robot: RobotLike, q: np.ndarray, link: str | None, link_point=
         link_point = as_number(distance, "distance") * link_axis_of(robot, link)
     link_point = as_vector(link_point, 3, "link_point")
     return link, link_point, frame_placement(robot.model, q, link)
-
-
 
 
 def structure_nullspace(p: np.ndarray, C: np.ndarray, C_perp: np.ndarray | None = None) -> np.ndarray:
@@ -223,8 +224,6 @@ def structure_paper(p: np.ndarray, C: np.ndarray) -> np.ndarray:
     return S
 
 
-
-
 def structure_of(state: ConstraintPoint, parametrisation: Parametrisation = "nullspace") -> np.ndarray:
     """Structure matrix ``S`` of an evaluated constraint in the chosen parametrisation."""
     if parametrisation == "nullspace":
@@ -248,8 +247,9 @@ class Constraint(ABC):
     ``kind`` name, :meth:`to_dict` / :meth:`from_dict` (the constructor's arguments; the
     kinds are listed in :mod:`constraints.registry`), the world reference point of its
     geometry (:attr:`position`, moved by :meth:`move_to`) and what a view draws
-    (:meth:`geometry`). A new type sets the class attributes below and is one line in
-    the registry.
+    (:meth:`geometry`), and what placing it on a robot as the robot is now takes
+    (:attr:`placement`, :meth:`place`). A new type sets the class attributes below and
+    is registered (:func:`constraints.registry.register`).
 
     Parameters
     ----------
@@ -272,6 +272,9 @@ class Constraint(ABC):
     shape: ClassVar[str] = "point"
     color: ClassVar[tuple[int, int, int]] = (128, 128, 128)
     label: ClassVar[str] = "constraint"
+    #: what :meth:`place` takes, one field per keyword (:mod:`constraints.placement`);
+    #: empty: the type is not placed from a user interface
+    placement: ClassVar[tuple[PlacementField, ...]] = ()
     #: world velocity (m/s) of the reference point, fed forward (set by :meth:`move_to`)
     velocity: np.ndarray
 
@@ -309,14 +312,25 @@ class Constraint(ABC):
                 raise ValueError(problem)
         self._gain = gain
 
+    @classmethod
+    def gain_is_stable(cls, gain: float, dt: float) -> bool:
+        """The gain rule, the one place it is written: drift feedback at gain ``K`` (1/s)
+        and control period ``dt`` (s) is stable when ``0 <= K dt <`` :attr:`max_gain_period`
+        (docs/design.md section 3.4)."""
+        return 0.0 <= gain * dt < cls.max_gain_period
+
+    @classmethod
+    def stable_gain_bound(cls, dt: float) -> float:
+        """The exclusive upper bound of a stable gain (1/s) at period ``dt``."""
+        return cls.max_gain_period / dt
+
     def _instability(self, gain: float, dt: float) -> str | None:
         """Why ``gain`` is unstable at control period ``dt``, or None when it is stable."""
-        product = gain * dt
-        if product < self.max_gain_period:
+        if self.gain_is_stable(gain, dt):
             return None
         return (f"{type(self).__name__} gain {gain:g} 1/s is unstable at {1.0 / dt:g} Hz "
-                f"(K dt = {product:g}, needs < {self.max_gain_period:g}): lower the gain "
-                f"below {self.max_gain_period / dt:g} 1/s or raise the rate")
+                f"(K dt = {gain * dt:g}, needs < {self.max_gain_period:g}): lower the gain "
+                f"below {self.stable_gain_bound(dt):g} 1/s or raise the rate")
 
     def check_gain(self, dt: float) -> None:
         """Refuse a gain that is unstable at control period ``dt`` (``ValueError``);
@@ -408,11 +422,23 @@ class Constraint(ABC):
         return None
 
     def geometry(self, placement: pin.SE3) -> ConstraintGeometry:
-        """Everything a view draws, in the world frame, at the link's ``placement``."""
+        """Everything a view draws, in the world frame, at the link's ``placement``; a
+        one-sided constraint allows the side its axis points to."""
+        axis = self.axis_world(placement)
         return ConstraintGeometry(
             kind=self.kind, shape=self.shape, anchor=self.position,
-            point=self.point_world(placement), axis=self.axis_world(placement),
-            error=self.error_world(placement), color=self.color, label=self.label)
+            point=self.point_world(placement), axis=axis,
+            error=self.error_world(placement), color=self.color, label=self.label,
+            allowed_side=None if self.is_equality else axis)
+
+    # -- placing it on a robot as the robot is now -------------------------------------------
+
+    @classmethod
+    def place(cls, robot: RobotLike, q: np.ndarray, **fields) -> "Constraint":
+        """A constraint of this type where the robot is at ``q``, from the values of its
+        :attr:`placement` fields (checked by field type by the caller: a link, a distance
+        along it or a link point, a unit world direction, numbers)."""
+        raise NotImplementedError(f"{cls.__name__} declares no placement")
 
     # -- description: to and from a JSON-ready dict ----------------------------------------
 
@@ -438,8 +464,6 @@ class Constraint(ABC):
         Bad input raises ``ValueError`` naming the field: an unknown or missing ``kind``,
         an unknown or missing field, or a bad value.
         """
-        from .registry import constraint_type  # the registry imports every subclass
-
         if not isinstance(data, Mapping):
             raise ValueError(f"a constraint must be an object with a 'kind', got {data!r}")
         kind_type = constraint_type(data.get("kind"))

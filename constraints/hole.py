@@ -17,6 +17,7 @@ from .base import (
     link_axis_of,
     perpendicular_basis,
 )
+from .placement import ALONG_LINK, ON_ARM, PlacementField
 from .validation import as_number
 
 #: How far (m) a hole centre may lie off the link axis when a hole is built.
@@ -50,6 +51,7 @@ class Hole(Constraint):
     shape = "ring"
     color = (255, 170, 0)
     label = "hole"
+    placement: tuple[PlacementField, ...] = (ON_ARM, ALONG_LINK)
 
     def __init__(
         self,
@@ -87,6 +89,11 @@ class Hole(Constraint):
         placement = frame_placement(robot.model, q, link)
         center = placement.act(distance * axis)
         return cls(link, center, link_axis=axis, gain=gain)
+
+    @classmethod
+    def place(cls, robot: RobotLike, q: np.ndarray, link: str, distance: float) -> "Hole":
+        """:meth:`on_link`: a hole ``distance`` m along ``link``'s axis, where it is at ``q``."""
+        return cls.on_link(robot, q, distance, link=link)
 
     @classmethod
     def at(

@@ -14,6 +14,7 @@ from .base import (
     link_point_at,
     perpendicular_basis,
 )
+from .placement import ALONG_LINK, ON_ANY_LINK, ON_LINK_POINT, PlacementField
 from .validation import as_number
 
 #: How far (m) the link point may be from the plane when a plane is built.
@@ -44,6 +45,11 @@ class Plane(Constraint):
     shape = "plane"
     color = (60, 140, 255)
     label = "plane"
+    placement: tuple[PlacementField, ...] = (
+        ON_ANY_LINK, ALONG_LINK, ON_LINK_POINT,
+        PlacementField("normal", "direction", "normal (world)", default=(0.0, 1.0, 0.0),
+                       step=0.1, hint="in world coordinates; a barrier keeps the point on "
+                                      "the side the normal points to"))
 
     def __init__(
         self,
@@ -87,6 +93,19 @@ class Plane(Constraint):
         plane = cls(link, link_point, plane_point, normal, gain=gain)
         plane._check_start(plane.signed_distance(placement), as_number(tolerance, "tolerance", 0.0))
         return plane
+
+    @classmethod
+    def place(cls, robot: RobotLike, q: np.ndarray, link: str, normal, distance=None,
+              link_point=None, offset: float = 0.0) -> "Plane":
+        """Through a point of ``link`` as it is at ``q`` (``distance`` m along its axis, or
+        ``link_point`` in its coordinates), moved ``offset`` m against the unit world
+        ``normal`` (:meth:`through_link_point`: the point must then satisfy the type's
+        start check, on the plane or on a barrier's allowed side)."""
+        link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
+        normal = as_unit_vector(normal, f"{cls.label} normal")
+        plane_point = placement.act(link_point) - as_number(offset, f"{cls.label} offset") * normal
+        return cls.through_link_point(robot, q, normal, link_point=link_point, link=link,
+                                      plane_point=plane_point)
 
     def _check_start(self, signed_distance: float, tolerance: float) -> None:
         if abs(signed_distance) > tolerance:

@@ -12,6 +12,7 @@ from .base import (
     as_vector,
     link_point_at,
 )
+from .placement import ALONG_LINK, ON_ARM, PlacementField
 
 
 class PointLock(Constraint):
@@ -35,6 +36,7 @@ class PointLock(Constraint):
     shape = "point"
     color = (40, 170, 90)
     label = "point lock"
+    placement: tuple[PlacementField, ...] = (ON_ARM, ALONG_LINK)
 
     def __init__(self, link: str, link_point, target, gain: float = DEFAULT_GAIN,
                  velocity=(0.0, 0.0, 0.0)) -> None:
@@ -50,6 +52,11 @@ class PointLock(Constraint):
         """Lock a link point where it is at ``q`` (``link_point`` or ``distance`` on the axis)."""
         link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
         return cls(link, link_point, placement.act(link_point), gain=gain)
+
+    @classmethod
+    def place(cls, robot: RobotLike, q: np.ndarray, link: str, distance: float) -> "PointLock":
+        """:meth:`on_link`: the point ``distance`` m along ``link``'s axis, where it is at ``q``."""
+        return cls.on_link(robot, q, distance=distance, link=link)
 
     # ``lock.move_to(target, velocity)`` (inherited) moves the lock point (world, m) and
     # sets its velocity (m/s).

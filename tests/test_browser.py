@@ -255,7 +255,8 @@ def test_impossible_action_shows_a_notification(web):
     inputs = row.locator("input")
     expect(inputs).to_have_count(3)
     inputs.nth(1).fill("0")  # (0, 1, 0) -> (0, 0, 0)
-    wait_until(lambda: tuple(ui.plane_normal.value) == (0.0, 0.0, 0.0), WAIT,
+    normal = ui.constraint_inputs["plane"]["normal"]
+    wait_until(lambda: tuple(normal.value) == (0.0, 0.0, 0.0), WAIT,
                "the plane normal (0, 0, 0) to reach the server")
     page.get_by_role("button", name="Add plane").click()
     expect(page.get_by_text("the plane normal must be a non-zero 3-vector").first).to_be_visible()
@@ -264,7 +265,7 @@ def test_impossible_action_shows_a_notification(web):
     assert [e for e in app.entries.values() if e.kind != "hole"] == planes_before
     assert web.control.error is None and web.control.alive
     inputs.nth(1).fill("1")
-    wait_until(lambda: tuple(ui.plane_normal.value) == (0.0, 1.0, 0.0), WAIT,
+    wait_until(lambda: tuple(normal.value) == (0.0, 1.0, 0.0), WAIT,
                "the plane normal to be restored")
 
 

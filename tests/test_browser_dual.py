@@ -106,9 +106,10 @@ def add_hole_on(web, link: str) -> str:
     """Choose ``link`` in the page's "arm" menu and press "Add hole"; the new hole's id."""
     page = web.page
     open_tab(web, "Constraints")
-    page.get_by_label("arm", exact=True).click()
+    page.get_by_label("hole arm", exact=True).click()
     page.get_by_role("option", name=link, exact=True).click()
-    wait_until(lambda: web.ui.constraint_arm.value == link, WAIT, f"the arm menu to read {link}")
+    menu = web.ui.constraint_inputs["hole"]["link"]
+    wait_until(lambda: menu.value == link, WAIT, f"the arm menu to read {link}")
     before = set(holes(web.app))
     page.get_by_role("button", name="Add hole").click()
     (hole_id,) = wait_until(lambda: set(holes(web.app)) - before, WAIT, "a new hole")

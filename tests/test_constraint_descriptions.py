@@ -305,7 +305,7 @@ def test_a_point_lock_is_added_moved_and_recorded_through_the_app(app):
     from teleop.experiments.sessions import load_session, session_plan
 
     path = app.start_recording()
-    lock_id = app.add_point_lock(0.08)
+    lock_id = app.add_constraint("point_lock", distance=0.08)
     entry = app.entries[lock_id]
     assert lock_id.startswith("point_lock-") and entry.kind == "point_lock"
     start = entry.position
@@ -332,11 +332,11 @@ def test_a_point_lock_is_added_moved_and_recorded_through_the_app(app):
 
 def test_a_gain_a_barrier_cannot_take_is_refused_and_changes_nothing(app):
     app.set_gain(150.0)
-    barrier_id = app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
+    barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     assert app.entries[barrier_id].constraint.gain == 150.0  # no special case for barriers
     app.set_gain(100.0)
     assert app.entries[barrier_id].constraint.gain == 100.0
-    hole_id = app.add_hole(0.08)
+    hole_id = app.add_constraint("hole", distance=0.08)
     with pytest.raises(ValueError, match="Barrier gain 1500"):
         app.set_gain(1500.0)  # K dt = 1.5: stable drift feedback, a barrier could be crossed
     assert app.gain == 100.0
@@ -362,9 +362,11 @@ def test_the_ui_draws_every_kind_from_its_geometry(app):
     from web.app import ControlThread
     from web.ui import TeleopUI
 
-    ids = {"hole": app.add_hole(0.08), "plane": app.add_plane(0.08, [0.0, 1.0, 0.0]),
-           "barrier": app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.01),
-           "point_lock": app.add_point_lock(0.04)}
+    ids = {"hole": app.add_constraint("hole", distance=0.08),
+           "plane": app.add_constraint("plane", distance=0.08, normal=[0.0, 1.0, 0.0]),
+           "barrier": app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0],
+                                         offset=0.01),
+           "point_lock": app.add_constraint("point_lock", distance=0.04)}
     app.move_constraint(ids["point_lock"], app.entries[ids["point_lock"]].position + 0.01)
     run(app, 0.01)  # the lock lags its goal: a visible error vector
     server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)

@@ -38,7 +38,7 @@ def nudge(app, offset):
 
 
 def test_target_moves_the_robot_and_the_hole_holds(app):
-    hole_id = app.add_hole(0.08)
+    hole_id = app.add_constraint("hole", distance=0.08)
     assert app.entries[hole_id].kind == "hole"
     start = ee_position(app)
     nudge(app, [0.01, 0.0, -0.005])
@@ -49,7 +49,7 @@ def test_target_moves_the_robot_and_the_hole_holds(app):
 
 
 def test_side_by_side_robots_follow_the_same_target(app):
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     app.set_ghost("qp:daqp")
     nudge(app, [0.0, 0.01, 0.0])
     run(app, 0.3)
@@ -62,7 +62,7 @@ def test_side_by_side_robots_follow_the_same_target(app):
 
 
 def test_switching_controller_keeps_the_state(app):
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.1)
     q = app.loops["main"].q.copy()
@@ -77,7 +77,7 @@ def test_switching_controller_keeps_the_state(app):
 
 
 def test_a_moving_hole_is_followed(app):
-    hole_id = app.add_hole(0.08)
+    hole_id = app.add_constraint("hole", distance=0.08)
     center = app.entries[hole_id].position.copy()
     app.move_constraint(hole_id, center + [0.0, 0.0, 0.003])
     run(app, 0.5)
@@ -95,7 +95,7 @@ def test_a_hole_moved_far_glides_inside_the_joint_limits(robot_name, move, tmp_p
 
     robot = load_robot(robot_name)
     app = TeleopApp(robot, controller="cjm", record_dir=tmp_path)
-    hole_id = app.add_hole(0.08 if robot_name == "sda10f" else 0.2)
+    hole_id = app.add_constraint("hole", distance=0.08 if robot_name == "sda10f" else 0.2)
     goal = app.entries[hole_id].position + [0.0, move, 0.0]
     app.move_constraint(hole_id, goal)
     controller = app.loops["main"].controller
@@ -120,7 +120,7 @@ def test_a_hole_moved_far_glides_inside_the_joint_limits(robot_name, move, tmp_p
 
 
 def test_a_rate_too_low_for_the_gain_is_refused_and_nothing_changes(app):
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     app.set_gain(500.0)
     with pytest.raises(ValueError, match=r"unstable at 50 Hz \(K dt = 10"):
         app.set_rate(50.0)
@@ -134,8 +134,9 @@ def test_a_rate_too_low_for_the_gain_is_refused_and_nothing_changes(app):
 
 
 def test_planes_and_barriers_and_removal(app):
-    plane_id = app.add_plane(0.08, [0.0, 2.0, 0.0])  # any non-zero normal, normalised
-    barrier_id = app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
+    # any non-zero normal, normalised
+    plane_id = app.add_constraint("plane", distance=0.08, normal=[0.0, 2.0, 0.0])
+    barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     assert app.entries[plane_id].constraint.normal.tolist() == [0.0, 1.0, 0.0]
     assert app.entries[barrier_id].kind == "barrier"
     run(app, 0.05)
@@ -148,14 +149,15 @@ def test_planes_and_barriers_and_removal(app):
 
 
 @pytest.mark.parametrize("action, message", [
-    (lambda app: app.add_plane(0.08, [0.0, 0.0, 0.0]), "non-zero"),
-    (lambda app: app.add_plane(0.08, [0.0, 0.0, 1.0], barrier=True, offset=-0.05), "wrong side"),
+    (lambda app: app.add_constraint("plane", distance=0.08, normal=[0.0, 0.0, 0.0]), "non-zero"),
+    (lambda app: app.add_constraint("barrier", distance=0.08, normal=[0.0, 0.0, 1.0],
+                                    offset=-0.05), "wrong side"),
     (lambda app: app.set_target([np.nan, 0, 0], [1, 0, 0, 0]), "finite"),
     (lambda app: app.set_rate(10.0), "between 50 and 5000"),
     (lambda app: app.set_gain(5000.0), "gain must be in"),
-    (lambda app: app.add_hole(1e6), "hole distance must be between 0 and"),
-    (lambda app: app.add_hole(-19.0), "hole distance must be between 0 and"),
-    (lambda app: app.add_hole(None), "hole distance must be a number"),
+    (lambda app: app.add_constraint("hole", distance=1e6), "hole distance must be between 0 and"),
+    (lambda app: app.add_constraint("hole", distance=-19.0), "hole distance must be between 0 and"),
+    (lambda app: app.add_constraint("hole", distance=None), "hole distance must be a number"),
     (lambda app: app.set_damping(-1.0), "damping must be"),
     (lambda app: app.move_constraint("hole-9", [0, 0, 0]), "no constraint"),
     (lambda app: app.stop_recording(), "not recording"),
@@ -168,7 +170,7 @@ def test_impossible_actions_raise_a_message_for_the_operator(app, action, messag
 
 
 def test_home_keeps_the_constraints_and_clear_removes_them(app):
-    hole_id = app.add_hole(0.08)
+    hole_id = app.add_constraint("hole", distance=0.08)
     nudge(app, [0.01, 0.0, 0.0])
     run(app, 0.2)
     app.home()  # with a constraint: the target goes home, the robot drives there
@@ -188,12 +190,12 @@ def test_home_keeps_the_constraints_and_clear_removes_them(app):
 
 
 def test_recording_writes_a_session_that_replay_accepts(app, tmp_path):
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     path = app.start_recording()
     assert path.parent == tmp_path
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.2)
-    plane_id = app.add_plane(0.04, [1.0, 0.0, 0.0])
+    plane_id = app.add_constraint("plane", distance=0.04, normal=[1.0, 0.0, 0.0])
     run(app, 0.1)
     app.remove_constraint(plane_id)
     run(app, 0.1)
@@ -227,7 +229,7 @@ def test_control_thread_runs_and_reports_its_rate(app):
 def test_plot_history_is_finite_and_the_ghost_turned_on_later_fills_its_own(app):
     from web.ui import PLOTS, plot_series
 
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.5)
     snapshot = app.snapshot()
@@ -358,7 +360,7 @@ def test_nudges_and_gizmo_to_target(app):
 
 
 def test_an_unreachable_target_is_said_in_words(app):
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     assert app.limitation().words == "on target" and app.limitation().status == "ok"
     nudge(app, [0.5, 0.0, 0.0])  # half a metre ahead, through a hole: not reachable
     run(app, 0.2)
@@ -403,18 +405,18 @@ def test_a_joint_at_its_limit_is_named():
 
 
 def test_active_barriers_are_listed(app):
-    barrier_id = app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.002)
-    assert app.active_barriers() == []
+    barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.002)
+    assert app.active_inequalities() == []
     nudge(app, [0.0, 0.0, -0.05])  # down, into the barrier
     run(app, 1.0)
-    assert app.active_barriers() == [barrier_id]
+    assert app.active_inequalities() == [barrier_id]
     assert app.last_records["main"].barrier_penetration < 1e-6
     geometry = app.snapshot()["constraints"][0]["geometry"]
     assert np.linalg.norm(geometry.error) < 1e-9  # held on the plane: no error to draw
 
 
 def test_a_satisfied_barrier_has_no_error_to_draw(app):
-    app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
+    app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     run(app, 0.05)
     (entry,) = app.snapshot()["constraints"]
     assert entry["kind"] == "barrier" and np.linalg.norm(entry["geometry"].error) == 0.0
@@ -428,15 +430,15 @@ def test_a_robot_without_a_constrained_link_says_how_to_get_one(tmp_path):
     app = TeleopApp(robot, record_dir=tmp_path)
     with pytest.raises(ValueError, match="no constrained link: start `teleop web` with "
                                          "--constrained-link"):
-        app.add_hole(0.08)
+        app.add_constraint("hole", distance=0.08)
 
 
 # -- scenes ---------------------------------------------------------------------------------
 
 
 def test_a_scene_saved_and_loaded_restores_constraints_and_settings(app, tmp_path):
-    hole_id = app.add_hole(0.08)
-    barrier_id = app.add_plane(0.04, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
+    hole_id = app.add_constraint("hole", distance=0.08)
+    barrier_id = app.add_constraint("barrier", distance=0.04, normal=[0.0, 0.0, 1.0], offset=0.01)
     app.set_ghost("qp:daqp")
     app.set_ghost_offset([0.0, -0.7, 0.0])
     app.set_gain(80.0)
@@ -474,7 +476,7 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(app, tmp_pat
     np.testing.assert_allclose(app.loops["main"].q, q_saved, atol=1e-12)
     assert app.target.isApprox(target, 1e-9)
     assert all(e.constraint.gain == 80.0 for e in app.entries.values())
-    assert app.add_hole(0.1) == "hole-3"  # new ids after the loaded ones
+    assert app.add_constraint("hole", distance=0.1) == "hole-3"  # new ids after the loaded ones
     run(app, 0.3)
     assert app.last_records["main"].constraint_error < 1e-6
 
@@ -491,7 +493,7 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(app, tmp_pat
     (lambda s: s.update(gain=5000.0), "unstable at 1000 Hz"),
 ])
 def test_a_bad_scene_is_refused_and_changes_nothing(app, change, message):
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     scene = app.scene()
     change(scene)
     app.clear_constraints()
@@ -519,7 +521,7 @@ def test_scene_files_that_cannot_be_read(app, tmp_path):
 
 
 def test_measures_are_taken_at_the_history_rate_only(app, monkeypatch):
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     app.set_ghost("qp:daqp")
     measured = []
     for loop in app.loops.values():

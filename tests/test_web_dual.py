@@ -83,7 +83,7 @@ def test_holes_on_both_arms_hold_while_both_gizmos_move(app, dual):
     q = app.loops["main"].q.copy()
     data = dual.model.createData()
     pin.framesForwardKinematics(dual.model, data, q)
-    ids = [app.add_hole(0.08, link) for link in dual.constrained_links]
+    ids = [app.add_constraint("hole", distance=0.08, link=link) for link in dual.constrained_links]
     for hole_id, link in zip(ids, dual.constrained_links):
         hole = app.entries[hole_id].constraint
         assert hole.link == link
@@ -128,14 +128,14 @@ def test_a_hole_or_lock_goes_on_the_chosen_arm_and_is_checked_against_that_arm(a
     reach = np.linalg.norm(link.actInv(data.oMf[dual.model.getFrameId(dual.ee_frames[1])].translation))
     with pytest.raises(ValueError, match=f"hole distance must be between 0 and {reach:.3f} m "
                                          f"\\(from the joint of {right} to the tool tip\\)"):
-        app.add_hole(reach + 0.01, right)
+        app.add_constraint("hole", distance=reach + 0.01, link=right)
     with pytest.raises(ValueError, match="a hole goes on a constrained link: one of"):
-        app.add_hole(0.05, "torso_link_b1")
-    lock_id = app.add_point_lock(0.05, right)
+        app.add_constraint("hole", distance=0.05, link="torso_link_b1")
+    lock_id = app.add_constraint("point_lock", distance=0.05, link=right)
     lock = app.entries[lock_id].constraint
     assert lock.link == right
     np.testing.assert_allclose(lock.position, link.act(0.05 * dual.link_axes[right]), atol=1e-12)
-    hole_id = app.add_hole(0.08)  # default: the first arm
+    hole_id = app.add_constraint("hole", distance=0.08)  # default: the first arm
     assert app.entries[hole_id].constraint.link == dual.constrained_links[0]
     snapshot = app.snapshot()
     drawn = {entry["id"]: entry for entry in snapshot["constraints"]}
@@ -159,7 +159,7 @@ def test_nudges_home_and_gizmo_to_target_act_on_one_ee(app, dual):
         with pytest.raises(ValueError, match="no end effector"):
             app.nudge_target([0.0, 0.0, 0.01], ee=bad)
     app.nudge_target([0.01, 0.0, 0.0], ee=0)
-    app.add_hole(0.08, dual.constrained_links[1])
+    app.add_constraint("hole", distance=0.08, link=dual.constrained_links[1])
     run(app, 0.3)
     app.home(ee=0)  # one EE's target home; the other keeps its own
     data = dual.model.createData()
@@ -191,7 +191,7 @@ def test_clutch_and_motion_scale_act_on_every_gizmo(app):
 
 def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path):
     for link in dual.constrained_links:
-        app.add_hole(0.08, link)
+        app.add_constraint("hole", distance=0.08, link=link)
     app.nudge_target([0.0, 0.005, 0.0], ee=1)
     run(app, 0.2)
     path = app.save_scene("two.json")
@@ -243,14 +243,15 @@ def test_the_mobile_base_drives_and_a_wall_on_it_holds(mobile, tmp_path):
     forward, beyond where the arms alone would take them: the base drives up to the wall
     and never through it."""
     app = TeleopApp(mobile, controller="cjm", record_dir=tmp_path)
-    assert app.plane_links[:2] == mobile.constrained_links and "mobile_base" in app.plane_links
+    assert app.moving_links[:2] == mobile.constrained_links and "mobile_base" in app.moving_links
     front = [0.4, 0.0, 0.15]  # the middle of the base's front face, base coordinates
     with pytest.raises(ValueError, match="mobile_base has no instrument axis"):
-        app.add_plane(0.1, [-1.0, 0.0, 0.0], barrier=True, link="mobile_base")
+        app.add_constraint("barrier", distance=0.1, normal=[-1.0, 0.0, 0.0], link="mobile_base")
     with pytest.raises(ValueError, match="link point must be within 2 m"):
-        app.add_plane(None, [-1.0, 0.0, 0.0], link="mobile_base", link_point=[5.0, 0.0, 0.0])
-    wall_id = app.add_plane(None, [-1.0, 0.0, 0.0], barrier=True, offset=0.05,
-                            link="mobile_base", link_point=front)
+        app.add_constraint("plane", link_point=[5.0, 0.0, 0.0], normal=[-1.0, 0.0, 0.0],
+                           link="mobile_base")
+    wall_id = app.add_constraint("barrier", link_point=front, normal=[-1.0, 0.0, 0.0],
+                                 offset=0.05, link="mobile_base")
     wall = app.entries[wall_id].constraint
     np.testing.assert_allclose(wall.position, [0.45, 0.0, 0.15], atol=1e-12)
     base = mobile.model.getFrameId("mobile_base")
@@ -334,7 +335,7 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
 
 def test_each_arms_hole_is_drawn_around_its_own_link(server, app, dual):
     ui = make_ui(server, app)
-    ids = [app.add_hole(0.08, link) for link in dual.constrained_links]
+    ids = [app.add_constraint("hole", distance=0.08, link=link) for link in dual.constrained_links]
     snapshot = app.snapshot()
     ui._draw(snapshot)
     for hole_id, link in zip(ids, dual.constrained_links):
@@ -370,8 +371,8 @@ def test_the_mobile_base_is_drawn_where_the_planar_joint_puts_it_and_a_wall_span
         np.testing.assert_allclose(handle.position, geometry.oMg[index].translation, atol=1e-6)
         np.testing.assert_allclose(np.abs(pin.Quaternion(geometry.oMg[index].rotation).coeffs()
                                           [[3, 0, 1, 2]] @ handle.wxyz), 1.0, atol=1e-6)
-    wall_id = app.add_plane(None, [-1.0, 0.0, 0.0], barrier=True, offset=0.05,
-                            link="mobile_base", link_point=[0.4, 0.0, 0.15])
+    wall_id = app.add_constraint("barrier", link_point=[0.4, 0.0, 0.15],
+                                 normal=[-1.0, 0.0, 0.0], offset=0.05, link="mobile_base")
     ui._draw(app.snapshot())
     plane = ui._markers[wall_id]["shape"]
     assert plane.dimensions[0] == pytest.approx(1.6)  # twice the base's 0.8 m length
@@ -383,7 +384,7 @@ def test_a_recorded_session_holds_both_targets_and_replays(app, dual, tmp_path):
     from teleop.experiments.sessions import load_session, session_plan
 
     for link in dual.constrained_links:
-        app.add_hole(0.08, link)
+        app.add_constraint("hole", distance=0.08, link=link)
     path = app.start_recording("two.jsonl")
     app.nudge_target([0.0, 0.004, 0.0], ee=0)
     run(app, 0.2)
@@ -408,7 +409,8 @@ def test_a_lower_orientation_weight_lets_the_dragged_tip_reach_its_target(dual, 
     for weight in (1.0, 0.0):
         app = TeleopApp(dual, controller=spec, record_dir=tmp_path / "sessions",
                         scene_dir=tmp_path / "scenes")
-        ids = [app.add_hole(0.08, link) for link in dual.constrained_links]
+        ids = [app.add_constraint("hole", distance=0.08, link=link)
+               for link in dual.constrained_links]
         app.set_orientation_weight(weight)
         assert app.orientation_weight == weight
         start = ee_positions(app)

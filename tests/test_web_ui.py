@@ -15,10 +15,11 @@ import pytest
 import viser
 from browser_helpers import PANDA, free_port
 
+from constraints import CONSTRAINT_TYPES
 from teleop import load_robot
 from web.app import ControlThread, TeleopApp
 from web.robot_view import RobotView, floor_height
-from web.ui import PLOTS, STATUS_COLORS, TeleopUI, _link_radius
+from web.ui import PLOTS, STATUS_COLORS, TeleopUI, reach_from_axis
 
 
 @pytest.fixture()
@@ -64,7 +65,7 @@ def test_the_grid_is_at_the_robots_base(ui, ur5_instrument):
 
 def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
     app = ui.app
-    hole_id = app.add_hole(0.08)
+    hole_id = app.add_constraint("hole", distance=0.08)
     app.set_ghost("qp:daqp")
     nudge(app, [0.0, 0.01, 0.0])
     run(app, 0.1)
@@ -99,7 +100,7 @@ def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
 
 def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_side(ui):
     app = ui.app
-    barrier_id = app.add_plane(0.05, [0.0, 0.0, 1.0], barrier=True, offset=0.01)
+    barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     run(app, 0.05)
     draw(ui)
     markers = ui._markers[barrier_id]
@@ -108,20 +109,20 @@ def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_sid
     anchor = app.entries[barrier_id].position
     np.testing.assert_allclose(arrow[0, 0], anchor, atol=1e-6)  # viser keeps float32
     np.testing.assert_allclose(arrow[0, 1] - anchor, [0.0, 0.0, 0.08], atol=1e-6)  # +n, 8 cm
-    assert ui.plane_normal.label == "plane normal (world)"
-    assert "world coordinates" in ui.plane_normal.hint
+    assert ui.constraint_inputs["plane"]["normal"].label == "plane normal (world)"
+    assert "world coordinates" in ui.constraint_inputs["plane"]["normal"].hint
 
 
 def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
     app = ui.app
-    hole_id = app.add_hole(0.08)
-    lock_id = app.add_point_lock(0.05)
+    hole_id = app.add_constraint("hole", distance=0.08)
+    lock_id = app.add_constraint("point_lock", distance=0.05)
     draw(ui)
     frame = app.robot.model.getFrameId(app.robot.constrained_link)
     link_radius = max(g.geometry.radius for g in app.robot.visual_model.geometryObjects
                       if g.parentFrame == frame and type(g.geometry).__name__ == "Cylinder")
     assert link_radius == pytest.approx(0.04)  # arm_link_5_r's cylinder
-    assert _link_radius(app.robot, app.robot.constrained_link) >= link_radius
+    assert reach_from_axis(app.robot, app.robot.constrained_link) >= link_radius
     for entry_id in (hole_id, lock_id):
         markers = ui._markers[entry_id]
         collar = np.asarray(markers["point"].points).reshape(-1, 3)
@@ -133,7 +134,7 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
 
 def test_the_ee_target_line_takes_the_step_status_colour(ui):
     app = ui.app
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     draw(ui)
     assert ui.reach_line.visible is False  # on target: nothing to show
     assert ui.target_marker.visible is False  # the target is at the gizmo
@@ -151,7 +152,7 @@ def test_the_ee_target_line_takes_the_step_status_colour(ui):
 
 def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
     app = ui.app
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     nudge(app, [0.004, 0.0, 0.0])
     run(app, 0.3)
     draw(ui, plot=True)
@@ -183,7 +184,7 @@ def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
 
 def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app = ui.app
-    app.add_hole(0.08)
+    app.add_constraint("hole", distance=0.08)
     app.set_gain(60.0)
     app.set_motion_scale(0.5)
     app.set_ghost("qp:daqp")
@@ -279,7 +280,7 @@ def test_the_pandas_hole_ring_is_outside_its_link_mesh(server, tmp_path):
                        link_axis=(-0.0825, 0.384, 0.0))
     app = TeleopApp(panda, record_dir=tmp_path)
     ui = TeleopUI(server, app, ControlThread(app))
-    hole_id = app.add_hole(0.08)
+    hole_id = app.add_constraint("hole", distance=0.08)
     snapshot = draw(ui)
     ring = np.asarray(ui._markers[hole_id]["shape"].points).reshape(-1, 3)
     geometry = snapshot["robots"]["main"]["constraints"][hole_id]["geometry"]
@@ -305,3 +306,20 @@ def test_the_pandas_hole_ring_is_outside_its_link_mesh(server, tmp_path):
     print(f"\n[panda] ring radius {1e3 * ring_radius:.1f} mm around a mesh reaching "
           f"{1e3 * nearest:.1f} mm from the axis at the ring")
     assert ring_radius > nearest > 0.03
+
+
+def test_every_kind_is_added_from_its_inputs_as_they_start(ui):
+    """Each type's "Add" button with its inputs untouched places it where the link point is
+    (before the declarations, "Add plane" took the barrier's offset and was refused)."""
+    app = ui.app
+    added = {kind: ui._add_constraint(kind) for kind in ui.constraint_inputs}
+    assert set(added) == set(CONSTRAINT_TYPES) and len(app.entries) == len(CONSTRAINT_TYPES)
+    data = app.robot.model.createData()
+    pin.framesForwardKinematics(app.robot.model, data, app.loops["main"].q)
+    link = data.oMf[app.robot.model.getFrameId(app.robot.constrained_link)]
+    for kind, entry_id in added.items():
+        constraint = app.entries[entry_id].constraint
+        inputs = ui.constraint_inputs[kind]
+        point = link.act(inputs["distance"].value * np.asarray(app.robot.link_axis))
+        np.testing.assert_allclose(constraint.point_world(link), point, atol=1e-12)
+        assert constraint.violation(link) <= 1e-12

@@ -50,8 +50,8 @@ def skeleton_geometry(model: pin.Model, radius: float = 0.02) -> pin.GeometryMod
 
 def floor_height(robot: Robot) -> float:
     """Height (m) of the floor under the robot: the bottom of its base at home (the
-    geometry fixed to the world, or carried by a planar root joint, which moves in the
-    floor's plane), else the base frame's origin."""
+    geometry fixed to the world, or carried by a planar root joint, which moves on the
+    floor), else the base frame's origin."""
     base_joints = (0, 1) if robot.root_joint == "planar" else (0,)
     bottoms = []
     for geometry_object in robot.visual_model.geometryObjects:

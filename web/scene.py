@@ -14,7 +14,7 @@ the control rate, the motion scale and the ghost's offset::
      "ghost_offset": [0.0, 0.9, 0.0],
      "q": {"main": [...], "ghost": [...]},
      "target": {"position": [x, y, z], "wxyz": [w, x, y, z]},
-     "constraints": [{"id": "hole-1", "goal": [x, y, z], "constraint": {"kind": "hole", ...}}]}
+     "constraints": [{"id": "<kind>-1", "goal": [x, y, z], "constraint": {"kind": "<kind>", ...}}]}
 
 A robot with several end effectors (docs/design.md section 11) adds ``"targets"``, one
 ``{"frame", "position", "wxyz"}`` per entry of ``robot.ee_frames`` in that order

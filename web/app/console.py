@@ -1,0 +1,237 @@
+"""The operator's console: per end effector a target and an input gizmo, the clutch, the
+motion scale, nudges and home (docs/design.md section 5.3).
+
+As on a surgical or industrial console, a **clutch** decouples the gizmos from the
+targets, and **motion scaling** maps a gizmo displacement ``d`` since the last clutch
+release to a target displacement ``scale d`` (orientation follows the gizmo's rotation
+since then, unscaled). A robot with several end effectors (docs/design.md section 11) has
+a target and a gizmo per EE (:class:`EEInput`); the actions take the EE's index ``ee``
+(0: ``robot.ee_frame``). The clutch and the motion scale are shared by every gizmo; each
+gizmo keeps its own anchors.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from constraints.validation import as_number, as_vector
+from teleop.loop import TeleopLoop
+from teleop.robots import Robot
+
+from .limits import MAX_MOTION_SCALE, MAX_TARGET_DISTANCE
+
+#: a nudge moves a target by at most this much (m)
+MAX_NUDGE = 0.1
+
+
+@dataclass
+class EEInput:
+    """The operator's input for one end effector: its target, its gizmo, and the poses of
+    both at the last re-anchoring (clutch release, motion-scale change, nudge)."""
+
+    frame: str  # the EE frame (an entry of robot.ee_frames)
+    target: pin.SE3
+    gizmo: pin.SE3
+    gizmo_anchor: pin.SE3
+    target_anchor: pin.SE3
+
+    @classmethod
+    def at(cls, frame: str, pose: pin.SE3) -> "EEInput":
+        """Target and gizmo both at ``pose``."""
+        return cls(frame, pose.copy(), pose.copy(), pose.copy(), pose.copy())
+
+    def reanchor(self) -> None:
+        """From now on the target moves by the gizmo's motion since this instant."""
+        self.gizmo_anchor = self.gizmo.copy()
+        self.target_anchor = self.target.copy()
+
+    def followed(self, scale: float) -> pin.SE3:
+        """The target the gizmo asks for: the target anchor moved by ``scale`` times the
+        gizmo's displacement since its anchor, turned by the gizmo's rotation since then."""
+        anchor, start = self.gizmo_anchor, self.target_anchor
+        position = start.translation + scale * (self.gizmo.translation - anchor.translation)
+        rotation = self.gizmo.rotation @ anchor.rotation.T @ start.rotation
+        return pin.SE3(rotation, position)
+
+
+def pose_from(position, wxyz, what: str) -> pin.SE3:
+    """A pose from a world position and a quaternion (w, x, y, z), normalised; a bad or
+    zero one raises ``ValueError`` naming ``what``."""
+    position = as_vector(position, 3, f"{what} position")
+    wxyz = as_vector(wxyz, 4, f"{what} quaternion")
+    if np.linalg.norm(wxyz) < 1e-9:
+        raise ValueError(f"the {what} quaternion must be non-zero")
+    rotation = pin.Quaternion(wxyz[0], wxyz[1], wxyz[2], wxyz[3]).normalized().matrix()
+    return pin.SE3(rotation, position)
+
+
+class Console:
+    """The operator's console of :class:`web.app.TeleopApp` (its state: ``inputs``,
+    ``clutch``, ``motion_scale``; it reads the main robot's loop)."""
+
+    robot: Robot
+    loops: dict[str, TeleopLoop]
+    inputs: list[EEInput]
+    clutch: bool
+    motion_scale: float
+    entries: dict
+    _lock: threading.RLock
+    _view_data: pin.Data
+
+    @property
+    def target(self) -> pin.SE3:
+        """The first EE's target (``robot.ee_frame``)."""
+        return self.inputs[0].target
+
+    @property
+    def gizmo(self) -> pin.SE3:
+        """The first EE's gizmo pose."""
+        return self.inputs[0].gizmo
+
+    @property
+    def targets(self) -> list[pin.SE3]:
+        """Every EE's target, in ``robot.ee_frames`` order (copies)."""
+        with self._lock:
+            return [hand.target.copy() for hand in self.inputs]
+
+    def ee_index(self, ee) -> int:
+        """``ee`` (an index or a name of ``robot.ee_frames``) as an index; else ``ValueError``."""
+        frames = self.robot.ee_frames
+        if isinstance(ee, str) and ee in frames:
+            return frames.index(ee)
+        if isinstance(ee, (int, np.integer)) and not isinstance(ee, bool) and 0 <= ee < len(frames):
+            return int(ee)
+        raise ValueError(f"no end effector {ee!r}: this robot's are {list(frames)} "
+                         f"(or their indices 0-{len(frames) - 1})")
+
+    def _check_target(self, target: pin.SE3, ee: int, what: str = "target") -> None:
+        """``ValueError`` when ``target`` is farther than :data:`MAX_TARGET_DISTANCE` from
+        where EE ``ee`` of the main robot is now (caller holds the lock)."""
+        ee_now = self.loops["main"].ee_placements()[ee].translation
+        distance = math.hypot(*(target.translation - ee_now))  # no overflow at 1e300
+        if not distance <= MAX_TARGET_DISTANCE:
+            raise ValueError(f"{what} refused: {distance:.3g} m from the end effector "
+                             f"{self.inputs[ee].frame}, more than {MAX_TARGET_DISTANCE:g} m")
+
+    def _set_target(self, target: pin.SE3, ee: int = 0) -> None:
+        """EE ``ee``'s target pose (caller holds the lock); recorded when recording."""
+        self.inputs[ee].target = target
+        self._record_target(ee)
+
+    def _reanchor(self) -> None:
+        """From now on every target moves by its gizmo's motion since this instant."""
+        for hand in self.inputs:
+            hand.reanchor()
+
+    def set_target(self, position, wxyz, ee=0) -> None:
+        """The operator's target pose of EE ``ee`` directly (world position, quaternion
+        w, x, y, z). Its gizmo's later motion continues from this target."""
+        ee = self.ee_index(ee)
+        target = pose_from(position, wxyz, "target")
+        with self._lock:
+            self._check_target(target, ee)
+            self._set_target(target, ee)
+            self.inputs[ee].reanchor()
+
+    def move_gizmo(self, position, wxyz, ee=0) -> None:
+        """EE ``ee``'s input gizmo pose. Unless the clutch is engaged, its target moves by
+        ``motion_scale`` times the gizmo's displacement since the last clutch release
+        (and turns with the gizmo's rotation since then); the other targets stay."""
+        ee = self.ee_index(ee)
+        gizmo = pose_from(position, wxyz, "gizmo")
+        with self._lock:
+            hand = self.inputs[ee]
+            previous, hand.gizmo = hand.gizmo, gizmo
+            if not self.clutch:
+                target = hand.followed(self.motion_scale)
+                try:
+                    self._check_target(target, ee, "the gizmo's target")
+                except ValueError:
+                    hand.gizmo = previous
+                    raise
+                self._set_target(target, ee)
+
+    def set_clutch(self, engaged: bool) -> None:
+        """Engage (the gizmos move alone) or release the clutch; on release every target
+        continues from where it is, so none jumps."""
+        if not isinstance(engaged, (bool, np.bool_)):
+            raise ValueError(f"the clutch is engaged (True) or released (False), got {engaged!r}")
+        with self._lock:
+            self.clutch = bool(engaged)
+            if not self.clutch:
+                self._reanchor()
+
+    def set_motion_scale(self, scale: float) -> None:
+        """Target displacement per gizmo displacement, in (0, 10], for every gizmo; no
+        target jumps."""
+        scale = as_number(scale, "motion scale")
+        if not 0.0 < scale <= MAX_MOTION_SCALE:
+            raise ValueError(f"motion scale must be in (0, {MAX_MOTION_SCALE:g}], got {scale:g}")
+        with self._lock:
+            self.motion_scale = scale
+            self._reanchor()
+
+    def nudge_target(self, displacement, ee=0) -> None:
+        """Move EE ``ee``'s target by ``displacement`` (world, m), its gizmo staying where
+        it is."""
+        ee = self.ee_index(ee)
+        displacement = as_vector(displacement, 3, "nudge")
+        if np.linalg.norm(displacement) > MAX_NUDGE:
+            raise ValueError(f"a nudge moves the target by at most {MAX_NUDGE:g} m")
+        with self._lock:
+            target = self.inputs[ee].target.copy()
+            target.translation = target.translation + displacement
+            self._check_target(target, ee, "nudged target")
+            self._set_target(target, ee)
+            self.inputs[ee].reanchor()
+
+    def hold_where_the_robot_is(self, ee=None) -> None:
+        """Every target and gizmo (or EE ``ee``'s) on the main robot's EE pose now: what a
+        browser lost mid-drag leaves behind (docs/design.md section 5.3). The robot then
+        settles where it is instead of going on towards the last point of the drag,
+        which may lie past a joint limit."""
+        indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
+        with self._lock:
+            placements = self.loops["main"].ee_placements()
+            for index in indices:
+                self._put_hand(index, placements[index].copy())
+
+    def gizmo_to_target(self, ee=0) -> pin.SE3:
+        """Put EE ``ee``'s gizmo on its target (the UI moves its handle there); returns
+        the pose."""
+        ee = self.ee_index(ee)
+        with self._lock:
+            hand = self.inputs[ee]
+            hand.gizmo = hand.target.copy()
+            hand.reanchor()
+            return hand.gizmo.copy()
+
+    def home(self, ee=None) -> None:
+        """Every target and gizmo (or only EE ``ee``'s) on its home EE pose. The
+        constraints stay (:meth:`clear_constraints` removes them), so the robots drive
+        there through their controllers, the constraints held; homing every EE with no
+        constraint placed also puts the robots back at ``q_home`` at once (a reset)."""
+        indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
+        with self._lock:
+            if ee is None and not self.entries:
+                for loop in self.loops.values():
+                    t = loop.t
+                    loop.reset()
+                    loop.t = t
+            pin.framesForwardKinematics(self.robot.model, self._view_data, self.robot.q_home)
+            for index in indices:
+                self._put_hand(index,
+                               self._view_data.oMf[self.robot.ee_frame_ids[index]].copy())
+
+    def _put_hand(self, ee: int, pose: pin.SE3) -> None:
+        """EE ``ee``'s target and gizmo both at ``pose``, anchored there (caller holds the
+        lock)."""
+        hand = self.inputs[ee]
+        self._set_target(pose, ee)
+        hand.gizmo = hand.target.copy()
+        hand.reanchor()

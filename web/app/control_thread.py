@@ -1,0 +1,135 @@
+"""The control thread: :meth:`web.app.TeleopApp.step` at the control rate, its timing
+measured (docs/design.md section 5.3). It never touches viser."""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .core import TeleopApp
+from .status import behind_words
+
+#: ticks of timing kept by the control thread (a few seconds at 1 kHz)
+TIMING_WINDOW = 4096
+#: the control thread asks the interpreter to switch threads this often (s): a thread
+#: waking for its deadline waits at most about this long for the others (Python's default
+#: 5 ms would make the 1 kHz loop late by up to 5 periods whenever the view thread works)
+SWITCH_INTERVAL = 2e-4
+
+
+@dataclass(frozen=True)
+class Timing:
+    """The control thread's timing over its last :data:`TIMING_WINDOW` ticks."""
+
+    achieved_rate: float  # Hz, over the last second
+    lateness_p50_ms: float  # how late a tick starts after its deadline
+    lateness_p99_ms: float
+    tick_p50_us: float  # the whole tick (TeleopApp.step)
+    tick_p99_us: float
+    overhead_p50_us: float  # the tick minus the controllers' own solve time
+    deadline_misses: int
+    ticks: int
+
+
+class ControlThread:
+    """Runs :meth:`TeleopApp.step` at the app's control rate on its own thread.
+
+    Tracks the achieved rate, each tick's lateness (start minus deadline) and cost, and
+    deadline misses (a tick that started later than one period after it was due). Sleeps
+    between ticks; when it falls behind it does not try to catch up by bursting (the robot
+    would see a jump), it resynchronises.
+    """
+
+    def __init__(self, app: TeleopApp) -> None:
+        self.app = app
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="control", daemon=True)
+        self.deadline_misses = 0
+        self.achieved_rate = 0.0
+        self._measured_rate: float | None = None  # the rate the last full second ran at
+        self.error: str | None = None
+        self._lateness = np.zeros(TIMING_WINDOW)
+        self._tick = np.zeros(TIMING_WINDOW)
+        self._solve = np.zeros(TIMING_WINDOW)
+        self._count = 0
+        self._switch_interval: float | None = None
+
+    def start(self) -> None:
+        self._switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(min(self._switch_interval, SWITCH_INTERVAL))
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        self._thread.join(timeout)
+        if self._switch_interval is not None:
+            sys.setswitchinterval(self._switch_interval)
+            self._switch_interval = None
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def behind(self) -> str:
+        """:func:`behind_words` for the last full second at the current rate (``""``
+        before one has been measured)."""
+        rate = 1.0 / self.app.config.dt
+        if self._measured_rate is None or self._measured_rate != rate:
+            return ""
+        return behind_words(self.achieved_rate, rate)
+
+    def timing(self) -> Timing:
+        """Percentiles of the recent ticks (computed here, off the control thread)."""
+        n = min(self._count, TIMING_WINDOW)
+        if n == 0:
+            return Timing(self.achieved_rate, math.nan, math.nan, math.nan, math.nan,
+                          math.nan, self.deadline_misses, 0)
+        lateness, tick, solve = self._lateness[:n].copy(), self._tick[:n].copy(), self._solve[:n].copy()
+        return Timing(
+            achieved_rate=self.achieved_rate,
+            lateness_p50_ms=1e3 * float(np.percentile(lateness, 50)),
+            lateness_p99_ms=1e3 * float(np.percentile(lateness, 99)),
+            tick_p50_us=1e6 * float(np.percentile(tick, 50)),
+            tick_p99_us=1e6 * float(np.percentile(tick, 99)),
+            overhead_p50_us=float(np.percentile(1e6 * tick - solve, 50)),
+            deadline_misses=self.deadline_misses, ticks=self._count)
+
+    def _run(self) -> None:
+        clock = time.perf_counter
+        next_tick = clock()
+        window_start, window_ticks = clock(), 0
+        period = self.app.config.dt
+        while not self._stop.is_set():
+            if self.app.config.dt != period:  # a new rate: a new measuring window
+                period = self.app.config.dt
+                window_start, window_ticks = clock(), 0
+            start = clock()
+            solve_us = 0.0
+            try:
+                solve_us = self.app.step()
+            except Exception as error:  # keep the robot still and say why
+                self.error = f"{type(error).__name__}: {error}"
+                time.sleep(0.01)
+            end = clock()
+            slot = self._count % TIMING_WINDOW
+            self._lateness[slot] = max(0.0, start - next_tick)
+            self._tick[slot] = end - start
+            self._solve[slot] = solve_us
+            self._count += 1
+            window_ticks += 1
+            if end - window_start >= 1.0:
+                self.achieved_rate = window_ticks / (end - window_start)
+                self._measured_rate = 1.0 / period
+                window_start, window_ticks = end, 0
+            next_tick += period
+            delay = next_tick - clock()
+            if delay > 0:
+                time.sleep(delay)
+            elif delay < -period:
+                self.deadline_misses += 1
+                next_tick = clock()

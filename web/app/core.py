@@ -1,0 +1,93 @@
+"""The browser session's core, without any browser: :class:`TeleopApp`.
+
+Everything the UI does goes through :class:`TeleopApp`, so it can be tested without
+viser. All public methods are thread-safe (one lock); actions that cannot be done raise
+``ValueError`` with a message meant for the operator (the UI shows it as a notification).
+Its parts, one module each: the operator's console (:mod:`.console`), constraint editing
+(:mod:`.editing`, from the registry's declarations, :mod:`.placing`), the robots and their
+controllers (:mod:`.robots`), settings (:mod:`.settings`), scenes (:mod:`.scenes`),
+recording (:mod:`.recording`), the control tick (:mod:`.tick`) and what the view reads
+(:mod:`.view`).
+
+Threading (docs/design.md section 5.3): :class:`web.app.ControlThread` calls
+:meth:`TeleopApp.step` at the control rate and never touches viser; the view thread reads
+:meth:`TeleopApp.snapshot`.
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+from pathlib import Path
+
+from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.robots import Robot
+
+from ..folders import Folder
+from .console import Console, EEInput
+from .editing import ConstraintEntry, Editing
+from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
+from .recording import Recording
+from .robots import Robots, default_ghost_offset
+from .scenes import Scenes
+from .settings import Settings
+from .status import velocity_joint_names
+from .tick import Tick
+from .trace import Trace
+from .view import View
+
+
+class TeleopApp(Console, Editing, Robots, Settings, Scenes, Recording, Tick, View):
+    """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
+    per end effector.
+
+    Parameters
+    ----------
+    robot : the robot.
+    controller : controller spec of the main robot (``cjm``, ``qp:daqp``, ``mink:daqp``...).
+    ghost : spec of a second robot driven from the same target, drawn beside the main
+        one (``ghost_offset``), or None.
+    rate : control rate (Hz).
+    record_dir : the folder session recordings go to; :meth:`start_recording` writes
+        there and nowhere else (:class:`web.folders.Folder`).
+    scene_dir : the folder scenes are saved to and loaded from, and no other.
+    """
+
+    def __init__(self, robot: Robot, controller: str = "cjm", ghost: str | None = None,
+                 rate: float = 1000.0, kp: float = 20.0, record_dir: str | Path = "sessions",
+                 scene_dir: str | Path = "scenes") -> None:
+        rate = checked_rate(rate)
+        self.robot = robot
+        self._lock = threading.RLock()
+        self._build_lock = threading.Lock()  # one loop build at a time (outside _lock)
+        self._view_data = robot.model.createData()  # for geometry queries, under the lock
+        self.joint_names = velocity_joint_names(robot)
+        self.config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING,
+                                 max_linear_speed=MAX_LINEAR_SPEED,
+                                 max_angular_speed=MAX_ANGULAR_SPEED)
+        self.gain = 100.0
+        self.damping = 0.0
+        #: weight of the EE twists' angular entries (1: full poses; lower lets each
+        #: instrument's orientation give way to its tip position, docs/design.md 11.2)
+        self.orientation_weight = 1.0
+        self.recordings = Folder(record_dir, "recording", ".jsonl")
+        self.scenes = Folder(scene_dir, "scene", ".json")
+        self.record_dir, self.scene_dir = self.recordings.root, self.scenes.root
+        self.entries: dict[str, ConstraintEntry] = {}
+        self._ids = itertools.count(1)
+        self.specs = {"main": controller}
+        self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(controller)}
+        self.traces: dict[str, Trace] = {"main": Trace()}
+        self.last_records: dict[str, StepRecord | None] = {"main": None}
+        self.ghost_offset = default_ghost_offset(robot)
+        if ghost:
+            self.set_ghost(ghost)
+        # the input mapping, per EE: gizmo -> target (clutch, motion scale)
+        self.inputs = [EEInput.at(frame, pose) for frame, pose in
+                       zip(robot.ee_frames, self.loops["main"].ee_placements())]
+        self.motion_scale = 1.0
+        self.clutch = False
+        self.recorder = None
+        self._record_start = 0.0
+        self._next_history = 0.0
+        self.ticks = 0

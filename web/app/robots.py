@@ -1,0 +1,174 @@
+"""The robots of the session: the main one and an optional ghost, each a closed loop with
+its controller; switching controllers, the ghost, and rebuilding the loops (docs/design.md
+section 5.3).
+
+A new controller, rate or orientation weight needs new loops: they are built outside the
+lock (milliseconds of work) and swapped in under it, so the control thread does not wait
+for a build.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+import pinocchio as pin
+
+from constraints import Constraint
+from constraints.validation import as_vector
+from controllers.linalg import DampingPolicy
+from teleop.controller_specs import make_controller
+from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.robots import Robot
+
+from .limits import MAX_GHOST_OFFSET
+from .trace import Trace
+
+
+@runtime_checkable
+class Damped(Protocol):
+    """A controller whose damped least squares the operator sets (the CJM): it declares
+    its :class:`controllers.linalg.DampingPolicy` as ``policy`` (paper eq 35)."""
+
+    policy: DampingPolicy
+
+
+def default_ghost_offset(robot: Robot) -> np.ndarray:
+    """Where the ghost goes beside the main robot: sideways from the direction the arms
+    reach at home (their EEs' mean), by the robot's width in that direction plus a margin."""
+    model = robot.model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, robot.q_home)
+    points = np.array([frame.translation for frame in data.oMf])
+    reach = (np.mean([data.oMf[frame].translation for frame in robot.ee_frame_ids], axis=0)
+             - data.oMf[0].translation)
+    reach[2] = 0.0
+    if np.linalg.norm(reach) < 1e-6:
+        reach = np.array([1.0, 0.0, 0.0])
+    side = np.cross([0.0, 0.0, 1.0], reach / np.linalg.norm(reach))
+    width = float(np.ptp(points @ side))
+    return (width + 0.4) * side
+
+
+class Robots:
+    """The loops of :class:`web.app.TeleopApp` by robot (``"main"``, ``"ghost"``): their
+    specs, loops, traces and last measured records."""
+
+    robot: Robot
+    config: LoopConfig
+    damping: float
+    gain: float
+    orientation_weight: float
+    entries: dict
+    specs: dict[str, str]
+    loops: dict[str, TeleopLoop]
+    traces: dict[str, Trace]
+    last_records: dict[str, StepRecord | None]
+    ghost_offset: np.ndarray
+    _lock: threading.RLock
+    _build_lock: threading.Lock
+
+    def _make_loop(self, spec: str, q: np.ndarray | None = None,
+                   constraints: list[Constraint] | None = None,
+                   config: LoopConfig | None = None,
+                   orientation_weight: float | None = None,
+                   damping: float | None = None) -> TeleopLoop:
+        if constraints is None:
+            constraints = [e.constraint for e in self.entries.values()]
+        config = config or self.config
+        weight = self.orientation_weight if orientation_weight is None else orientation_weight
+        controller = make_controller(spec, self.robot, constraints, dt=config.dt,
+                                     twist_weight=None if weight == 1.0 else
+                                     [1.0, 1.0, 1.0, weight, weight, weight])
+        self._apply_damping(controller, damping)
+        return TeleopLoop(self.robot, controller, q0=q, config=config)
+
+    def _apply_damping(self, controller, damping: float | None = None) -> None:
+        """The operator's constant damping on a controller that takes one (:class:`Damped`),
+        its rising damping near singularity kept."""
+        if isinstance(controller, Damped):
+            old = controller.policy
+            controller.policy = DampingPolicy(self.damping if damping is None else damping,
+                                              old.threshold, old.max_damping)
+
+    def _sync_constraints(self) -> None:
+        constraints = [e.constraint for e in self.entries.values()]
+        for loop in self.loops.values():
+            loop.set_constraints(constraints)
+
+    def _build_inputs(self) -> tuple:
+        """What a loop build reads besides its own arguments: if any of it changed while
+        a build ran outside the lock, the build is redone under the lock."""
+        return (tuple(id(e.constraint) for e in self.entries.values()), self.gain,
+                self.damping, self.config, self.orientation_weight, tuple(self.specs.items()))
+
+    def _rebuild(self, specs: dict[str, str], config: LoopConfig | None = None,
+                 orientation_weight: float | None = None) -> None:
+        """Robots ``specs`` (``{"main": spec, "ghost": spec}``) with new loops at ``config``
+        and ``orientation_weight`` (default: the current ones), each starting from the
+        state of the loop it replaces (a new ghost from the main robot's); the others keep
+        theirs. All or nothing: a spec or gain that cannot be built raises ``ValueError``
+        and changes nothing."""
+        with self._build_lock:
+            with self._lock:
+                inputs = self._build_inputs()
+                config = config or self.config
+                weight = self.orientation_weight if orientation_weight is None \
+                    else orientation_weight
+                constraints = [e.constraint for e in self.entries.values()]
+                starts = {which: self.loops.get(which, self.loops["main"]).q.copy()
+                          for which in specs}
+            loops = {which: self._make_loop(spec, q=starts[which], constraints=constraints,
+                                            config=config, orientation_weight=weight)
+                     for which, spec in specs.items()}  # raises ValueError: nothing changed
+            with self._lock:
+                if self._build_inputs() != inputs:  # changed meanwhile: build it again here
+                    constraints = [e.constraint for e in self.entries.values()]
+                    loops = {which: self._make_loop(spec, constraints=constraints,
+                                                    config=config, orientation_weight=weight)
+                             for which, spec in specs.items()}
+                for which, loop in loops.items():  # the state they replace, as of now
+                    old = self.loops.get(which, self.loops["main"])
+                    loop.q = old.q.copy()
+                    loop.t = old.t
+                if config is not self.config:  # every other loop follows the new period
+                    others = {which: self._make_loop(self.specs[which], q=loop.q.copy(),
+                                                     constraints=constraints, config=config,
+                                                     orientation_weight=weight)
+                              for which, loop in self.loops.items() if which not in loops}
+                    for which, loop in others.items():
+                        loop.t = self.loops[which].t
+                    loops.update(others)
+                for which in loops:
+                    if which not in self.traces:
+                        self.traces[which] = Trace()
+                        self.last_records[which] = None
+                self.config, self.orientation_weight = config, weight
+                self.specs.update(specs)
+                self.loops.update(loops)
+
+    def set_controller(self, spec: str) -> None:
+        """Switch the main robot's controller, keeping its state."""
+        self._rebuild({"main": spec})
+
+    def set_ghost(self, spec: str | None) -> None:
+        """Show a second robot driven by ``spec`` from the same target (None removes it).
+
+        It starts where the main robot is, at the same time, so the two histories line up.
+        """
+        if not spec:
+            with self._lock:
+                for store in (self.loops, self.specs, self.traces, self.last_records):
+                    store.pop("ghost", None)
+            return
+        self._rebuild({"ghost": spec})
+
+    def set_ghost_offset(self, offset) -> None:
+        """Where the ghost is drawn, from the main robot (world, m); zero overlays them."""
+        offset = as_vector(offset, 3, "ghost offset")
+        if np.linalg.norm(offset) > MAX_GHOST_OFFSET:
+            raise ValueError(f"the ghost offset must be at most {MAX_GHOST_OFFSET:g} m long, "
+                             f"got {np.linalg.norm(offset):.3g} m")
+        with self._lock:
+            self.ghost_offset = offset

@@ -1,0 +1,177 @@
+"""Scenes: the whole state of a session (robots' configurations, constraints, targets,
+controllers, settings) saved to and loaded from the scene folder (format in
+:mod:`web.scene`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import threading
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from constraints.kinematics import frame_placement
+from teleop.loop import LoopConfig, TeleopLoop
+from teleop.robots import Robot
+
+from ..folders import Folder
+from ..scene import FORMAT as SCENE_FORMAT
+from ..scene import VERSION as SCENE_VERSION
+from ..scene import (
+    parse_scene,
+    read_scene_file,
+    robot_source,
+    robot_to_dict,
+    same_robot,
+    write_scene_file,
+)
+from .console import EEInput, pose_from
+from .editing import ConstraintEntry
+from .limits import (
+    MAX_DAMPING,
+    MAX_GHOST_OFFSET,
+    MAX_MOTION_SCALE,
+    MAX_TARGET_DISTANCE,
+    checked_rate,
+)
+from .trace import Trace
+
+
+def pose_to_dict(pose: pin.SE3) -> dict:
+    """``{"position": [x, y, z], "wxyz": [w, x, y, z]}`` (a scene's target)."""
+    quaternion = pin.Quaternion(pose.rotation)
+    return {"position": [float(x) for x in pose.translation],
+            "wxyz": [quaternion.w, quaternion.x, quaternion.y, quaternion.z]}
+
+
+class Scenes:
+    """Saving and loading the scene of :class:`web.app.TeleopApp`."""
+
+    robot: Robot
+    config: LoopConfig
+    gain: float
+    damping: float
+    orientation_weight: float
+    motion_scale: float
+    clutch: bool
+    ghost_offset: np.ndarray
+    specs: dict[str, str]
+    loops: dict[str, TeleopLoop]
+    traces: dict[str, Trace]
+    entries: dict[str, ConstraintEntry]
+    inputs: list[EEInput]
+    joint_names: list[str]
+    scenes: Folder
+    _ids: itertools.count
+    _next_history: float
+    _lock: threading.RLock
+
+    def scene(self) -> dict:
+        """The scene as a JSON-ready dict (format in :mod:`web.scene`)."""
+        with self._lock:
+            targets = [pose_to_dict(hand.target) for hand in self.inputs]
+            several = {} if len(targets) == 1 else {"targets": [
+                {"frame": hand.frame, **pose} for hand, pose in zip(self.inputs, targets)]}
+            return {
+                "format": SCENE_FORMAT, "version": SCENE_VERSION,
+                "created": datetime.now().isoformat(timespec="seconds"),
+                "robot": robot_to_dict(self.robot),
+                "controllers": {"main": self.specs["main"], "ghost": self.specs.get("ghost")},
+                "gain": self.gain, "damping": self.damping, "rate": self.config.rate,
+                "orientation_weight": self.orientation_weight,
+                "motion_scale": self.motion_scale,
+                "ghost_offset": [float(x) for x in self.ghost_offset],
+                "q": {which: [float(x) for x in loop.q] for which, loop in self.loops.items()},
+                "target": targets[0], **several,
+                "constraints": [{"id": e.id, "goal": [float(x) for x in e.goal],
+                                 "constraint": e.constraint.to_dict()}
+                                for e in self.entries.values()],
+            }
+
+    def save_scene(self, name: str | None = None) -> Path:
+        """Write the scene as file ``name`` of the scene folder (default: a new name);
+        its path. A name that is not a plain file name of that folder is refused
+        (:class:`web.folders.Folder`)."""
+        if name is None or isinstance(name, str) and not name.strip():
+            name = self.scenes.unused_name(f"scene-{datetime.now():%Y%m%d-%H%M%S}")
+        return write_scene_file(self.scenes.writable(name), self.scene())
+
+    def load_scene(self, name: str) -> None:
+        """Read file ``name`` of the scene folder and apply it (:meth:`apply_scene`)."""
+        self.apply_scene(read_scene_file(self.scenes.existing(name)))
+
+    def apply_scene(self, data: dict) -> None:
+        """Put the app in the state a scene describes: robots' configurations, constraints,
+        target, controllers, gain, damping, rate, motion scale, ghost offset. All or
+        nothing: a scene that cannot be applied raises ``ValueError`` and changes nothing.
+        The scene must be for this robot (another robot needs ``teleop web --scene``)."""
+        scene = parse_scene(data, self.robot.model.nq, self.robot.ee_frames)
+        if not same_robot(self.robot, scene.robot):
+            raise ValueError(f"this scene is for robot {scene.robot.get('source')!r}, this UI "
+                             f"runs {robot_source(self.robot)!r}: start "
+                             "`teleop web --scene FILE` to open it with its robot")
+        self._check_scene(scene)
+        constraints = [placed.constraint for placed in scene.constraints]
+        for constraint in constraints:
+            constraint.gain = scene.gain
+        config = dataclasses.replace(self.config, rate=scene.rate)
+        with self._lock:
+            t = self.now
+            specs = {"main": scene.main, **({"ghost": scene.ghost} if scene.ghost else {})}
+            loops = {}
+            for which, spec in specs.items():  # raises ValueError: nothing changed yet
+                loop = self._make_loop(spec, q=scene.q[which], constraints=constraints,
+                                       config=config,
+                                       orientation_weight=scene.orientation_weight,
+                                       damping=scene.damping)
+                loop.t = t
+                loops[which] = loop
+            self.config, self.gain, self.damping = config, scene.gain, scene.damping
+            self.orientation_weight = scene.orientation_weight
+            self.specs, self.loops = specs, loops
+            self.traces = {which: Trace() for which in loops}
+            self.last_records = {which: None for which in loops}
+            self.entries = {}
+            for placed in scene.constraints:
+                self.entries[placed.id] = ConstraintEntry(
+                    placed.id, placed.constraint, placed.goal.copy(),
+                    settled=bool(np.array_equal(placed.goal, placed.constraint.position)))
+            numbers = [int(p.id.rsplit("-", 1)[1]) for p in scene.constraints
+                       if p.id.rsplit("-", 1)[-1].isdigit()]
+            self._ids = itertools.count(max(numbers, default=0) + 1)
+            self.ghost_offset = scene.ghost_offset.copy()
+            self.motion_scale = scene.motion_scale
+            self.clutch = False
+            for index, (position, wxyz) in enumerate(scene.targets):
+                self._set_target(pose_from(position, wxyz, "target"), index)
+                self.inputs[index].gizmo = self.inputs[index].target.copy()
+            self._reanchor()
+            self._next_history = t
+
+    def _check_scene(self, scene) -> None:
+        """``ValueError`` for a parsed scene this app cannot take: a configuration outside
+        the joint limits, a setting out of its bounds, a target out of reach."""
+        model = self.robot.model
+        for which, q in scene.q.items():
+            outside = np.flatnonzero((q < model.lowerPositionLimit - 1e-9)
+                                     | (q > model.upperPositionLimit + 1e-9))
+            if outside.size:
+                raise ValueError(f"scene q.{which} is outside the joint limits of "
+                                 f"{[self.joint_names[i] for i in outside]}")
+        checked_rate(scene.rate, "scene rate")
+        if scene.damping > MAX_DAMPING:
+            raise ValueError(f"scene damping must be at most {MAX_DAMPING:g}")
+        data = model.createData()
+        for index, (position, _) in enumerate(scene.targets):
+            ee = frame_placement(model, scene.q["main"], self.robot.ee_frame_ids[index], data)
+            if not math.hypot(*(position - ee.translation)) <= MAX_TARGET_DISTANCE:
+                raise ValueError(f"scene target of {self.robot.ee_frames[index]} is more than "
+                                 f"{MAX_TARGET_DISTANCE:g} m from its end effector")
+        if not 0.0 < scene.motion_scale <= MAX_MOTION_SCALE:
+            raise ValueError(f"scene motion_scale must be in (0, {MAX_MOTION_SCALE:g}]")
+        if np.linalg.norm(scene.ghost_offset) > MAX_GHOST_OFFSET:
+            raise ValueError(f"scene ghost_offset must be at most {MAX_GHOST_OFFSET:g} m long")

@@ -1,0 +1,90 @@
+"""The status in words: what keeps each end effector from its target, and a control loop
+falling behind (docs/design.md section 5.3)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers import StepStatus
+from teleop.loop import StepRecord
+from teleop.robots import Robot
+
+from .limits import FOLLOWING, ON_TARGET, STALLED_SPEED
+
+#: the control loop is behind when it achieves less than this fraction of its rate
+BEHIND_FRACTION = 0.95
+
+
+@dataclass(frozen=True)
+class Limitation:
+    """What limits a robot now: the step status (it colours the EE-target line) and why,
+    in words."""
+
+    status: str  # a StepStatus value
+    words: str
+    distance: float  # EE to target (m)
+
+
+def velocity_joint_names(robot: Robot) -> list[str]:
+    """The joint name of each velocity index."""
+    model = robot.model
+    names = [""] * model.nv
+    for joint_id in range(1, model.njoints):
+        joint = model.joints[joint_id]
+        for k in range(joint.nv):
+            names[joint.idx_v + k] = model.names[joint_id]
+    return names
+
+
+def _not_following(record: StepRecord, ee: int = 0) -> bool:
+    """Whether EE ``ee`` moves towards its target at less than :data:`FOLLOWING` of the
+    commanded speed (or hardly at all): something keeps it from the target."""
+    desired = np.asarray(record.commanded_linear_velocities[ee])
+    actual = np.asarray(record.actual_linear_velocities[ee])
+    speed = float(np.linalg.norm(desired))
+    if speed < STALLED_SPEED:
+        return float(np.linalg.norm(actual)) < STALLED_SPEED
+    return float(actual @ desired) / speed < FOLLOWING * speed
+
+
+def describe_limitation(info, record: StepRecord | None, distance: float,
+                        joint_names: list[str], refused: str = "", ee: int = 0) -> Limitation:
+    """In words, what keeps EE ``ee`` (an index of ``robot.ee_frames``) from its target
+    (``info`` the controller's last :class:`controllers.SolveInfo`, ``record`` the last
+    measured tick, ``distance`` the EE-target distance in m)."""
+    status = info.status.value if isinstance(info.status, StepStatus) else str(info.status)
+    if refused:
+        return Limitation("failed", f"command refused: {refused}", distance)
+    if status == "failed":
+        return Limitation(status, f"no command: {info.message or 'the controller failed'}",
+                          distance)
+    if status == "constraint_degraded":
+        return Limitation(status, f"constraint degraded: {info.message}", distance)
+    parts = []
+    if distance > ON_TARGET and record is not None and _not_following(record, ee):
+        parts.append("target out of reach")
+    if status == "least_squares" and info.message:
+        parts.append(f"closest motion: {info.message}")  # it names the joints and the damping
+    elif info.saturated_joints:
+        names = [joint_names[i] for i in info.saturated_joints]
+        parts.append(f"joint {', '.join(names)} at {'its limit' if len(names) == 1 else 'their limits'}")
+    elif status == "least_squares":
+        parts.append("closest motion")
+    if status == "scaled":
+        parts.append(f"slowed to {100 * info.scale:.0f} % by the joint limits")
+    if not parts:
+        parts.append(f"moving to the target ({1e3 * distance:.1f} mm away)"
+                     if distance > ON_TARGET else "on target")
+    return Limitation(status, "; ".join(parts), distance)
+
+
+def behind_words(achieved_rate: float, rate: float) -> str:
+    """The operator's warning when a loop asked for ``rate`` (Hz) achieves less than
+    :data:`BEHIND_FRACTION` of it over the last second, else ``""``: the robot then moves
+    slower than commanded and the measures stretch in time (docs/design.md section 5.3)."""
+    if achieved_rate >= BEHIND_FRACTION * rate:
+        return ""
+    return (f"control loop behind: only {achieved_rate:.0f} of the {rate:.0f} Hz asked for "
+            f"({100.0 * achieved_rate / rate:.0f} %); this machine is too busy for this rate")

@@ -1,0 +1,45 @@
+"""The rolling history of one robot's measures, for the live plots."""
+
+from __future__ import annotations
+
+import collections
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from teleop.loop import StepRecord
+
+from .limits import HISTORY_RATE, HISTORY_SECONDS
+
+_HISTORY_LENGTH = int(HISTORY_SECONDS * HISTORY_RATE)
+#: the plotted measures of each robot, in the order of the plots
+TRACE_COLUMNS = ("constraint_error", "constraint_velocity", "ee_error", "step_time")
+
+
+def _deque() -> collections.deque:
+    return collections.deque(maxlen=_HISTORY_LENGTH)
+
+
+@dataclass
+class Trace:
+    """Rolling history of one robot's measures for the live plots (app time ``t``)."""
+
+    t: collections.deque = field(default_factory=_deque)
+    constraint_error: collections.deque = field(default_factory=_deque)
+    constraint_velocity: collections.deque = field(default_factory=_deque)
+    ee_error: collections.deque = field(default_factory=_deque)
+    step_time: collections.deque = field(default_factory=_deque)
+    #: |qd - qd_main| (rad/s): the ghost's deviation from the main robot's command
+    qd_deviation: collections.deque = field(default_factory=_deque)
+
+    def add(self, record: StepRecord, qd_deviation: float = 0.0) -> None:
+        self.t.append(record.t)
+        self.constraint_error.append(max(record.constraint_error, record.barrier_penetration))
+        self.constraint_velocity.append(float(np.linalg.norm(record.constraint_velocity)))
+        self.ee_error.append(record.ee_position_error)
+        self.step_time.append(record.step_time_us)
+        self.qd_deviation.append(qd_deviation)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {name: np.array(getattr(self, name), dtype=float)
+                for name in ("t", *TRACE_COLUMNS, "qd_deviation")}

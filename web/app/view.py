@@ -1,0 +1,106 @@
+"""What the view draws: a consistent copy of the session under the lock, and the status
+of each robot in words (:mod:`web.app.status`)."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pinocchio as pin
+
+from constraints.kinematics import frame_placement
+from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.robots import Robot
+
+from .console import EEInput
+from .editing import ConstraintEntry
+from .status import Limitation, describe_limitation
+from .trace import Trace
+
+
+class View:
+    """The view's reading of :class:`web.app.TeleopApp`."""
+
+    robot: Robot
+    config: LoopConfig
+    specs: dict[str, str]
+    loops: dict[str, TeleopLoop]
+    traces: dict[str, Trace]
+    last_records: dict[str, StepRecord | None]
+    entries: dict[str, ConstraintEntry]
+    inputs: list[EEInput]
+    joint_names: list[str]
+    _lock: threading.RLock
+    _view_data: pin.Data
+
+    def limitation(self, which: str = "main", ee=0) -> Limitation:
+        """What keeps EE ``ee`` of robot ``which`` from its target now, in words
+        (:func:`web.app.status.describe_limitation`)."""
+        ee = self.ee_index(ee)
+        with self._lock:
+            loop = self.loops[which]
+            placement = frame_placement(self.robot.model, loop.q, self.robot.ee_frame_ids[ee],
+                                        self._view_data)
+            return self._limitation(which, placement, ee)
+
+    def _limitation(self, which: str, placement: pin.SE3, ee: int) -> Limitation:
+        loop = self.loops[which]
+        distance = float(np.linalg.norm(placement.translation
+                                        - self.inputs[ee].target.translation))
+        return describe_limitation(loop.controller.info, self.last_records.get(which),
+                                   distance, self.joint_names, loop.refused, ee)
+
+    def active_inequalities(self, which: str = "main") -> list[str]:
+        """Ids of the one-sided constraints robot ``which``'s controller holds as
+        equalities now (from its step's :class:`controllers.SolveInfo`)."""
+        with self._lock:
+            controller = self.loops[which].controller
+            ids = {id(e.constraint): e.id for e in self.entries.values()}
+            constraints = controller.constraints
+            return [ids.get(id(constraints[i]), f"#{i}") for i in controller.info.active_barriers
+                    if i < len(constraints)]
+
+    def snapshot(self, history: bool = True) -> dict:
+        """A consistent copy of everything the view shows (``history``: with the plots'
+        data)."""
+        with self._lock:
+            robots = {which: self._robot_snapshot(which, loop, history)
+                      for which, loop in self.loops.items()}
+            entries = [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),
+                        **robots["main"]["constraints"][entry.id]}  # geometry, link_axis
+                       for entry in self.entries.values()]
+            return {"robots": robots, "constraints": entries,
+                    "ee_frames": self.robot.ee_frames,
+                    "targets": [hand.target.copy() for hand in self.inputs],
+                    "gizmos": [hand.gizmo.copy() for hand in self.inputs],
+                    "target": self.target.copy(), "gizmo": self.gizmo.copy(),
+                    "clutch": self.clutch, "motion_scale": self.motion_scale,
+                    "ghost_offset": self.ghost_offset.copy(),
+                    "recording": self.recorder is not None,
+                    "config": self.config, "gain": self.gain, "damping": self.damping}
+
+    def _robot_snapshot(self, which: str, loop: TeleopLoop, history: bool) -> dict:
+        """One robot's part of :meth:`snapshot` (caller holds the lock): its state, each
+        constraint's drawing at its configuration, what limits each EE."""
+        model = self.robot.model
+        q = loop.q.copy()
+        pin.framesForwardKinematics(model, self._view_data, q)
+        placements = self._view_data.oMf
+        constraints = {}
+        for entry in self.entries.values():
+            link = entry.constraint.link
+            placement = placements[model.getFrameId(link)]
+            axis = self.robot.link_axes.get(link)
+            constraints[entry.id] = {
+                "geometry": entry.constraint.geometry(placement),
+                "link": link, "link_placement": placement.copy(),
+                "link_axis": None if axis is None else placement.rotation @ axis}
+        ees = [placements[frame].copy() for frame in self.robot.ee_frame_ids]
+        limitations = [self._limitation(which, ee, index) for index, ee in enumerate(ees)]
+        return {"spec": self.specs[which], "q": q, "t": loop.t,
+                "ees": ees, "ee": ees[0],  # every EE, the first
+                "record": self.last_records.get(which),
+                "trace": self.traces[which].arrays() if history else None,
+                "info": loop.controller.info, "constraints": constraints,
+                "limitations": limitations, "limitation": limitations[0],
+                "active_inequalities": self.active_inequalities(which)}

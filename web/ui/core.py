@@ -1,0 +1,221 @@
+"""The viser front end: a thin layer over :class:`web.app.TeleopApp`, one module per part.
+
+* scene (:mod:`.scene_view`): the robot (:class:`web.robot_view.RobotView`: any URDF,
+  meshes or fallbacks; a mobile base moves with its planar root joint), an optional ghost
+  robot drawn beside it (``ghost_offset``; zero overlays them), the grid at the robot's
+  base; per end effector an input gizmo and, where it differs, the target itself; per
+  robot and EE a line from the EE to its target coloured by the step status;
+* constraints (:mod:`.markers`), each drawn from its own ``geometry()``;
+* panels: a status (:mod:`.status_view`: rate, lateness, what limits each robot's EEs in
+  words, the one-sided constraints held), then tabs: Teleop (controllers, side by side,
+  clutch, motion scale, the active arm's nudges, home) and Settings (gain, damping, rate,
+  scenes, recording) (:mod:`.panels`), Constraints, built from the registry's
+  declarations (:mod:`.constraint_panel`), Plots (:mod:`.plots`, uPlot).
+
+A robot with several end effectors (docs/design.md section 11) gets a gizmo on each: each
+drives its own EE's target; the clutch and the motion scale act on all of them; the nudge
+buttons and "Gizmo to target" act on the arm chosen as "active arm"; "Home" homes every EE.
+
+Several browsers may connect: they share the targets and one scene (the last drag wins).
+A browser that disconnects mid-drag leaves its target where the robot's EE is at that
+moment, not where the drag was, so the robot settles where it is. Every action goes
+through one coalescing inbox (web/inbox.py), so a flood of events cannot starve the
+control loop; the status turns red (a banner and a notification) when the loop achieves
+less than 95 % of its rate. Scenes and recordings are plain file names in the folders the
+server was started with (web/folders.py).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import viser
+
+from ..app import ControlThread, TeleopApp
+from ..inbox import Inbox
+from ..robot_view import RobotView, floor_height
+from .constraint_panel import ConstraintPanel
+from .markers import Markers
+from .panels import Panels
+from .plots import Plots
+from .scene_view import SceneView
+from .shapes import LinkProfile, square_size
+from .status_view import StatusView
+
+VIEW_RATE = 30.0  # Hz: robot poses, markers, status
+PLOT_RATE = 10.0  # Hz: live plots
+STATUS_RATE = 5.0  # Hz: the status text (readable, and light on the browser)
+
+
+def short_names(frames: tuple[str, ...]) -> dict[str, str]:
+    """Each EE frame's name for the operator: without the prefix and suffix they share
+    (``arm_left_link_tool0``, ``arm_right_link_tool0`` -> ``left``, ``right``)."""
+    if len(frames) < 2:
+        return {frame: frame for frame in frames}
+    words = [frame.split("_") for frame in frames]
+    prefix = len(os.path.commonprefix(words))
+    suffix = len(os.path.commonprefix([w[::-1] for w in words]))
+    names = {frame: "_".join(w[prefix:len(w) - suffix]) for frame, w in zip(frames, words)}
+    if len(set(names.values())) < len(frames) or not all(names.values()):
+        return {frame: frame for frame in frames}
+    return names
+
+
+class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, StatusView, Plots):
+    """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
+
+    ``notes`` are what the caller wants the operator told on connecting (e.g. the
+    warnings of loading the robot), with the meshes' own fallbacks.
+    """
+
+    def __init__(self, server: viser.ViserServer, app: TeleopApp, control: ControlThread,
+                 notes: list[str] | tuple[str, ...] = ()) -> None:
+        self.server = server
+        self.app = app
+        self.control = control
+        self._stop = threading.Event()
+        #: every operator action goes through it (web/inbox.py), never straight to the app
+        self.inbox = Inbox(self._failed)
+        self._gone: set[int] = set()  # browsers that disconnected mid-drag
+        self._behind = ""  # the warning shown while the control loop falls behind
+        self._markers: dict[str, dict] = {}  # main robot: entry id -> handles
+        self._ghost_markers: dict[str, dict] = {}
+        self._views: dict[str, RobotView] = {}
+        self._ghost_root = None
+        self._ghost_style: tuple | None = None
+        self._syncing = False  # widgets being set from the app: their callbacks do nothing
+        self._plots: dict[str, object] = {}
+        self._plot_keys: dict[str, tuple] = {}
+        self._line_colors: dict[tuple[str, int], tuple] = {}  # (robot, EE) -> its line colour
+        self._plotted: set[str] = set()  # the robots the plots show
+        self._ghost_seen: float | None = None  # when the view first saw the ghost
+        self._saved_offset = app.ghost_offset.copy()
+        robot = app.robot
+        #: where each link's geometry is around its axis: rings and collars go outside it
+        self.profiles = {link: LinkProfile.of(robot, link) for link in app.moving_links}
+        self.square_sizes = {link: square_size(robot, link) for link in app.moving_links}
+        self.ee_names = short_names(robot.ee_frames)  # what the operator reads per EE
+        self.floor = floor_height(app.robot)
+        self.notes = list(notes)
+        self._build_scene()
+        self.notes += self._views["main"].problems
+        self._build_panels()
+        server.on_client_connect(self._greet)
+        self._thread = threading.Thread(target=self._view_loop, name="view", daemon=True)
+
+    @property
+    def _visualisers(self) -> dict[str, RobotView]:
+        """The robots' views by name ("main", "ghost")."""
+        return self._views
+
+    # -- panels --------------------------------------------------------------------------
+
+    def _guarded(self, event, action, key: object = None, throttled: bool = False) -> None:
+        """Post an operator action to the inbox (:mod:`web.inbox`: applied in order on its
+        own thread; with a ``key``, the latest wins; ``throttled``, at most 10 a second);
+        an impossible one becomes a notification, not a traceback."""
+        if self._syncing:
+            return
+        self.inbox.post(action, key=key, context=event, throttled=throttled)
+
+    def _failed(self, event, error: Exception) -> None:
+        """An action from ``event`` could not be done: tell its browser why."""
+        if isinstance(error, ValueError):
+            self.notify(event, "Not possible", str(error))
+        else:
+            self.notify(event, "Error", f"{type(error).__name__}: {error}")
+
+    def notify(self, event, title: str, body: str, color: str = "red") -> None:
+        clients = [event.client] if event is not None and event.client is not None else \
+            list(self.server.get_clients().values())
+        for client in clients:
+            client.add_notification(title, body, auto_close_seconds=8.0, color=color)
+
+    def _greet(self, client: viser.ClientHandle) -> None:
+        """Tell a new browser what could not be loaded as asked."""
+        if self.notes:
+            client.add_notification("Robot loaded with fallbacks", "\n".join(self.notes),
+                                    auto_close_seconds=20.0, color="yellow")
+
+    def _build_panels(self) -> None:
+        gui = self.server.gui
+        with gui.add_folder("Status"):
+            self.banner = gui.add_html("", visible=False)  # the control loop falling behind
+            self.status = gui.add_markdown("starting...")
+        self.tabs = gui.add_tab_group()
+        with self.tabs.add_tab("Teleop"):
+            self._build_teleop_panel()
+        with self.tabs.add_tab("Constraints"):
+            self._build_constraint_panel()
+        with self.tabs.add_tab("Settings"):
+            self._build_settings_panel()
+        self._plot_tab = self.tabs.add_tab("Plots")
+        with self._plot_tab:
+            self.plot_note = gui.add_markdown("the last 10 s, measured at 50 Hz; with a ghost, "
+                                              "since it joined")
+        if self.notes:
+            with self.tabs.add_tab("Robot"):
+                gui.add_markdown("**Loaded with fallbacks:**\n\n" +
+                                 "\n".join(f"* {note}" for note in self.notes))
+
+    def _sync(self, action) -> None:
+        """Set widgets from the app without their callbacks acting."""
+        self._syncing = True
+        try:
+            action()
+        finally:
+            self._syncing = False
+
+    # -- the view thread -------------------------------------------------------------------
+
+    def start(self) -> None:
+        self.inbox.start()
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.inbox.stop()
+        self._thread.join(2.0)
+
+    def _view_loop(self) -> None:
+        next_plot = next_status = 0.0
+        while not self._stop.is_set():
+            start = time.perf_counter()
+            try:
+                plot = start >= next_plot
+                status = start >= next_status
+                snapshot = self.app.snapshot(history=plot)
+                with self.server.atomic():
+                    self._draw(snapshot, status=status)
+                if status:
+                    next_status = start + 1.0 / STATUS_RATE
+                if plot:
+                    self._plot(snapshot)
+                    next_plot = start + 1.0 / PLOT_RATE
+            except Exception as error:  # the view must never take the control loop down
+                self.status.content = f"view error: {type(error).__name__}: {error}"
+            time.sleep(max(0.0, 1.0 / VIEW_RATE - (time.perf_counter() - start)))
+
+    def _draw(self, snapshot: dict, status: bool = True) -> None:
+        robots = snapshot["robots"]
+        if "ghost" in robots:
+            if "ghost" in self._views and self._ghost_style != self._ghost_rgba():
+                self._remove_ghost()  # overlay <-> beside: see-through or not
+            if "ghost" not in self._views and self._ghost_due():
+                self._add_ghost(snapshot["ghost_offset"])
+            if self._ghost_root is not None:
+                self._ghost_root.position = snapshot["ghost_offset"]
+        else:
+            self._ghost_seen = None
+            if "ghost" in self._views:
+                self._remove_ghost()
+        for which, view in self._views.items():
+            view.display(robots[which]["q"])
+        self._draw_target(snapshot)
+        ghost = snapshot["robots"].get("ghost") if "ghost" in self._views else None
+        self._draw_constraints(snapshot["constraints"],
+                               None if ghost is None else ghost["constraints"])
+        if status:
+            self._draw_status(snapshot)

@@ -1,0 +1,175 @@
+"""Each constraint drawn from its own geometry (:meth:`constraints.Constraint.geometry`):
+its shape (a ring around its link, a translucent square, a sphere), the constrained point
+as a collar around its link, the error as a short vector (drawn x100) when it is not zero,
+an arrow to a one-sided constraint's allowed side, and a gizmo that moves it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import viser
+
+from constraints import ConstraintGeometry
+from ..app import TeleopApp
+from .shapes import (
+    MIN_RING_RADIUS,
+    SQUARE_SIZE,
+    LinkProfile,
+    arrow_segments,
+    ring_around,
+    ring_segments,
+    wxyz_from_z,
+)
+
+ERROR_VECTOR_SCALE = 100.0
+ALLOWED_SIDE_ARROW = 0.08  # m
+POINT_COLOR = (20, 20, 20)
+ERROR_COLOR = (255, 0, 255)
+
+
+class Markers:
+    """The constraint markers of :class:`web.ui.TeleopUI`, per robot: entry id -> its
+    scene handles (``"shape"``, ``"point"``, ``"error"``, and ``"arrow"``, ``"gizmo"``
+    where they apply)."""
+
+    server: viser.ViserServer
+    app: TeleopApp
+    profiles: dict[str, LinkProfile]
+    square_sizes: dict[str, float]
+    _markers: dict[str, dict]
+    _ghost_markers: dict[str, dict]
+
+    def _draw_constraints(self, entries: list[dict], ghost: dict | None = None) -> None:
+        """The main robot's constraint markers (``snapshot["constraints"]``) and, given the
+        ghost's drawings (``snapshot["robots"]["ghost"]["constraints"]``), the ghost's."""
+        goals = {e["id"]: e["goal"] for e in entries}
+        main = {e["id"]: e for e in entries}
+        for drawn, markers_of, prefix in ((main, self._markers, "/constraints"),
+                                          (ghost, self._ghost_markers, "/ghost/constraints")):
+            if drawn is None:
+                continue
+            for entry_id in list(markers_of):
+                if entry_id not in drawn:
+                    for handle in markers_of.pop(entry_id).values():
+                        handle.remove()
+            for entry_id, drawing in drawn.items():
+                markers = markers_of.get(entry_id)
+                if markers is None:
+                    markers = markers_of[entry_id] = self._create_markers(
+                        f"{prefix}/{entry_id}", entry_id, drawing, goals[entry_id],
+                        gizmo=markers_of is self._markers)
+                self._update_markers(markers, drawing)
+        self._list_placed(tuple(main))
+
+    def _add_shape(self, name: str, drawing: dict):
+        """The scene node of a constraint's geometry, drawn as its ``shape`` says
+        (:data:`constraints.SHAPES`; an unknown shape as a sphere at its anchor)."""
+        shape = drawing["geometry"].shape
+        add = {"ring": self._add_ring, "plane": self._add_square}.get(shape, self._add_sphere)
+        return add(name, drawing)
+
+    def _add_ring(self, name: str, drawing: dict):
+        """A ring around the link's axis at the anchor, outside the link's meshes."""
+        geometry: ConstraintGeometry = drawing["geometry"]
+        ring = ring_segments(geometry.anchor, geometry.axis, self.ring_radius_at(drawing))
+        return self.server.scene.add_line_segments(f"{name}/{geometry.shape}", ring,
+                                                   geometry.color, thickness=0.004)
+
+    def _add_square(self, name: str, drawing: dict):
+        """A translucent square through the anchor, across the axis, as wide as its link."""
+        geometry: ConstraintGeometry = drawing["geometry"]
+        size = self.square_sizes.get(drawing["link"], SQUARE_SIZE)
+        return self.server.scene.add_box(f"{name}/{geometry.shape}", geometry.color,
+                                         (size, size, 0.001), opacity=0.3, side="double",
+                                         wxyz=wxyz_from_z(geometry.axis),
+                                         position=geometry.anchor)
+
+    def _add_sphere(self, name: str, drawing: dict):
+        """A translucent sphere at the anchor."""
+        geometry: ConstraintGeometry = drawing["geometry"]
+        return self.server.scene.add_icosphere(f"{name}/anchor", 0.012, geometry.color,
+                                               opacity=0.5, position=geometry.anchor)
+
+    def _along(self, link: str, placement: pin.SE3, point: np.ndarray) -> float:
+        """Where the world ``point`` is along ``link``'s axis (link frame, m)."""
+        axis = np.asarray(self.app.robot.link_axes.get(link, (0.0, 0.0, 1.0)), dtype=float)
+        return float(placement.actInv(np.asarray(point, dtype=float)) @ axis
+                     / np.linalg.norm(axis))
+
+    def ring_radius_at(self, drawing: dict) -> float:
+        """Radius of the ring drawn as ``drawing`` (a snapshot's constraint): outside the
+        geometry of its link where the ring is (:class:`web.ui.shapes.LinkProfile`)."""
+        link, geometry = drawing["link"], drawing["geometry"]
+        profile = self.profiles.get(link)
+        if profile is None:
+            return MIN_RING_RADIUS
+        return ring_around(profile.radius_at(
+            self._along(link, drawing["link_placement"], geometry.anchor)))
+
+    def collar_radius_at(self, drawing: dict) -> float:
+        """Radius of the collar around the link at the constrained point (0: none)."""
+        link, geometry = drawing["link"], drawing["geometry"]
+        profile = self.profiles.get(link)
+        if profile is None or not profile.radial.size:
+            return 0.0
+        radius = profile.radius_at(self._along(link, drawing["link_placement"], geometry.point))
+        return ring_around(radius, minimum=0.0) - 0.001
+
+    def _point_marker(self, drawing: dict) -> np.ndarray | None:
+        """The collar around the link at the constrained point (None: draw a sphere)."""
+        axis, radius = drawing["link_axis"], self.collar_radius_at(drawing)
+        if axis is None or radius <= 0.004:
+            return None
+        return ring_segments(drawing["geometry"].point, axis, radius, n=24)
+
+    def _create_markers(self, name: str, entry_id: str, drawing: dict, goal: np.ndarray,
+                        gizmo: bool) -> dict:
+        scene = self.server.scene
+        geometry: ConstraintGeometry = drawing["geometry"]
+        markers = {"shape": self._add_shape(name, drawing)}
+        collar = self._point_marker(drawing)
+        if collar is not None:  # outside the link cylinder: visible, unlike a point inside
+            markers["point"] = scene.add_line_segments(f"{name}/point", collar, POINT_COLOR,
+                                                       thickness=0.004)
+        else:
+            markers["point"] = scene.add_icosphere(f"{name}/point", 0.008, POINT_COLOR,
+                                                   position=geometry.point)
+        markers["error"] = scene.add_line_segments(f"{name}/error", np.zeros((1, 2, 3)),
+                                                   ERROR_COLOR, thickness=0.003)
+        if geometry.allowed_side is not None:
+            markers["arrow"] = scene.add_line_segments(
+                f"{name}/arrow", arrow_segments(geometry.anchor, geometry.allowed_side,
+                                                ALLOWED_SIDE_ARROW),
+                geometry.color, thickness=0.004)
+        if gizmo:  # drawn over the links (depth_test off): never hidden inside one
+            handle = scene.add_transform_controls(f"{name}/gizmo", scale=0.07, position=goal,
+                                                  disable_rotations=True, depth_test=False)
+
+            @handle.on_update
+            def _(event) -> None:
+                position = np.array(handle.position)
+                self._guarded(event, lambda: self.app.move_constraint(entry_id, position),
+                              key=("constraint", entry_id))
+
+            markers["gizmo"] = handle
+        return markers
+
+    def _update_markers(self, markers: dict, drawing: dict) -> None:
+        geometry: ConstraintGeometry = drawing["geometry"]
+        if geometry.shape == "ring":  # around the link axis, which turns with the link
+            markers["shape"].points = ring_segments(geometry.anchor, geometry.axis,
+                                                    self.ring_radius_at(drawing))
+        else:
+            markers["shape"].position = geometry.anchor
+        collar = self._point_marker(drawing)
+        if collar is not None:
+            markers["point"].points = collar
+        else:
+            markers["point"].position = geometry.point
+        # from the point towards where it should be (the error points the other way)
+        vector = -ERROR_VECTOR_SCALE * geometry.error
+        markers["error"].points = np.array([[geometry.point, geometry.point + vector]])
+        markers["error"].visible = float(np.linalg.norm(geometry.error)) > 1e-6
+        if "arrow" in markers:
+            markers["arrow"].points = arrow_segments(geometry.anchor, geometry.allowed_side,
+                                                     ALLOWED_SIDE_ARROW)

@@ -1,0 +1,41 @@
+"""Starting the browser UI: the server, the app, the control and view threads."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import viser
+
+from teleop.robots import Robot
+
+from ..access import require_token
+from ..app import ControlThread, TeleopApp
+from .core import TeleopUI
+
+
+def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
+               controller: str = "cjm", ghost: str | None = None, rate: float = 1000.0,
+               record_dir: str | Path = "sessions", scene: dict | None = None,
+               notes: list[str] | tuple[str, ...] = (), scene_dir: str | Path = "scenes",
+               token: str | None = None
+               ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
+    """Start the app: server bound to ``host`` (loopback by default), control and view
+    threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
+    The page reads and writes files in ``scene_dir`` and ``record_dir`` only; with a
+    ``token``, a page that does not present it gets nothing (:mod:`web.access`)."""
+    app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
+                    scene_dir=scene_dir)
+    if scene is not None:
+        app.apply_scene(scene)
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    if token is not None:
+        require_token(server, token)
+        # a page that connected before the check was in place (nothing is served yet)
+        # reconnects, and is checked
+        server._websock_server.disconnect_all_clients()
+    control = ControlThread(app)
+    ui = TeleopUI(server, app, control, notes=notes)
+    control.start()
+    ui.start()
+    return server, app, control, ui
+

@@ -1,0 +1,77 @@
+"""The status panel: the control loop's rate and timing, what limits each robot's end
+effectors in words, the one-sided constraints held, the console's state; a red banner
+while the control loop falls behind (docs/design.md section 5.3)."""
+
+from __future__ import annotations
+
+import viser
+
+from ..app import ControlThread
+
+BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
+
+
+class StatusView:
+    """The status panel of :class:`web.ui.TeleopUI`."""
+
+    control: ControlThread
+    ee_names: dict[str, str]
+    _behind: str
+    banner: viser.GuiHtmlHandle
+    status: viser.GuiMarkdownHandle
+
+    def _warn_behind(self) -> None:
+        """A red banner above the status (and a notification when it starts) while the
+        control loop achieves less than 95 % of its rate (``ControlThread.behind``)."""
+        behind = self.control.behind()
+        if bool(behind) != bool(self._behind):
+            if behind:
+                self.notify(None, "Control loop behind", behind, color="red")
+            self.banner.visible = bool(behind)
+        if behind and behind != self._behind:
+            self.banner.content = (f'<div style="background:{BEHIND_COLOR};color:white;'
+                                   f'padding:6px 8px;border-radius:4px;font-weight:600">'
+                                   f'{behind}</div>')
+        self._behind = behind
+
+    def _draw_status(self, snapshot: dict) -> None:
+        self._warn_behind()
+        timing = self.control.timing()
+        control = (f"**control{' BEHIND' if self._behind else ''}** "
+                   f"{timing.achieved_rate:.0f} Hz achieved (target "
+                   f"{snapshot['config'].rate:.0f} Hz), lateness p99 "
+                   f"{timing.lateness_p99_ms:.2f} ms, tick {timing.tick_p50_us:.0f} us "
+                   f"({timing.overhead_p50_us:.0f} us beyond the controllers), "
+                   f"{timing.deadline_misses} deadline misses")
+        lines = [control]
+        if self.control.error:
+            lines.append(f"**control error** {self.control.error}")
+        names = [self.ee_names[frame] for frame in snapshot["ee_frames"]]
+        for which, robot in snapshot["robots"].items():
+            record, limitation = robot["record"], robot["limitation"]
+            if len(names) == 1:
+                words = f"**{which}** `{robot['spec']}` **{limitation.status}**: {limitation.words}"
+                if record is not None:
+                    words += (f" (constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
+                              f"EE {1e3 * limitation.distance:.2f} mm from the target, "
+                              f"step {record.step_time_us:.0f} us)")
+            else:  # one status per robot, what keeps each EE from its target
+                words = f"**{which}** `{robot['spec']}` **{limitation.status}**: " + "; ".join(
+                    f"*{name}* {each.words} ({1e3 * each.distance:.2f} mm from its target)"
+                    for name, each in zip(names, robot["limitations"]))
+                if record is not None:
+                    words += (f" (constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
+                              f"step {record.step_time_us:.0f} us)")
+            if robot["active_inequalities"]:
+                words += (f"; one-sided constraints held: "
+                          f"{', '.join(robot['active_inequalities'])}")
+            lines.append(words)
+        console = [f"motion scale {snapshot['motion_scale']:g}"]
+        if snapshot["clutch"]:
+            console.insert(0, "**clutch engaged**: the gizmo moves alone" if len(names) == 1
+                           else "**clutch engaged**: the gizmos move alone")
+        lines.append(", ".join(console))
+        self.status.content = "  \n".join(lines)
+        label = "Release clutch" if snapshot["clutch"] else "Clutch"
+        if self.clutch_button.label != label:
+            self.clutch_button.label = label
