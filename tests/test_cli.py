@@ -194,10 +194,11 @@ def test_a_registered_command_runs_with_its_options_and_help(plugin_env):
     shown = run("greet", "--help", env=plugin_env)
     assert shown.stdout.startswith("usage: teleop greet") and "Greet someone." in shown.stdout
     assert "(default: world)" in shown.stdout and "a command from a test" in shown.stdout
-    refused = run("greet", "--times", "9", env=plugin_env)
-    assert refused.returncode == 2 and refused.stderr.strip().splitlines() == [
-        "teleop greet: error: argument --times: must be in [1, 3], got 9 "
-        "(see 'teleop greet --help')"]
+    for bad, message in ((["--times", "9"], "argument --times: must be in [1, 3], got 9"),
+                         (["--nope", "x"], "unrecognized arguments: --nope x")):
+        refused = run("greet", *bad, env=plugin_env)
+        assert refused.returncode == 2 and refused.stderr.splitlines() == [
+            f"teleop greet: error: {message} (see 'teleop greet --help')"], refused.stderr
 
 
 @pytest.mark.parametrize("name, reason", [
@@ -264,8 +265,8 @@ def test_unknown_spec_raises_value_error(spec, message, sda10f):
 
 
 def test_compare_says_each_run_it_finishes_when_stderr_is_no_terminal(tmp_path):
-    """Issue 18, item 14: output redirected, standard error still shows the runs going by,
-    one line each, the agreement run last."""
+    """Output redirected: standard error still shows the runs going by, one line each, the
+    agreement run last."""
     result = run("compare", "--scenario", "paper-hole", "--duration", "0.02",
                  "--controllers", "cjm,qp:daqp", "--out", str(tmp_path), "--no-plots")
     assert result.returncode == 0, result.stderr

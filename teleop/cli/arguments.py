@@ -24,17 +24,24 @@ class ArgumentParser(argparse.ArgumentParser):
     """argparse's parser, its errors one line on standard error (exit code 2): the
     program, the problem and where the help is, without the usage block.
 
-    ``unavailable``: why this (sub)command cannot run; parsing it then prints that one line
-    and exits 2, whatever the arguments (a registered command that failed to load)."""
+    ``strict``: arguments it does not know are its own error (a subcommand's parser: the
+    message names the subcommand, not ``teleop``). ``unavailable``: why this subcommand
+    cannot run; parsing it then prints that one line and exits 2, whatever the arguments
+    (a registered command that could not be loaded)."""
 
-    def __init__(self, *args, unavailable: str | None = None, **kwargs) -> None:
+    def __init__(self, *args, strict: bool = False, unavailable: str | None = None,
+                 **kwargs) -> None:
         super().__init__(*args, **kwargs)
+        self.strict = strict
         self.unavailable = unavailable
 
     def parse_known_args(self, args=None, namespace=None):
         if self.unavailable is not None:
             self.exit(2, f"{self.prog}: {self.unavailable}\n")
-        return super().parse_known_args(args, namespace)
+        namespace, extras = super().parse_known_args(args, namespace)
+        if self.strict and extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace, extras
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")

@@ -63,8 +63,8 @@ def _add_command(commands, name: str, summary: str, run: Callable[[argparse.Name
     """A subcommand whose one-line summary is both its help (in ``teleop -h``) and
     description, run by ``run(args)``."""
     parser = commands.add_parser(name, help=summary, description=sentence(summary),
-                                 formatter_class=HelpFormatter, **kwargs)
-    parser.set_defaults(run=run)
+                                 formatter_class=HelpFormatter, strict=True, **kwargs)
+    parser.set_defaults(run_command=run)
     return parser
 
 
@@ -172,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return args.run(args)
+        return args.run_command(args)
     except ValueError as error:  # bad scenario, controller, file: one clear line
         print(f"teleop {args.command}: {one_line(error)}", file=sys.stderr)
         return 2
