@@ -17,7 +17,7 @@ import pytest
 
 from constraints import Hole
 from teleop.cli.commands import COMMAND_GROUP
-from teleop.cli.main import build_parser
+from teleop.cli.main import BUILT_IN, build_parser
 from teleop.controller_specs import (
     CONTEXTS,
     CONTROLLER_SPECS,
@@ -65,6 +65,20 @@ def test_version_is_the_installed_version():
 
 def test_the_subcommands_are_the_documented_ones():
     assert set(subcommand_parsers()) == {"compare", "replay", "record", "scenarios", "bench", "web"}
+    (built_in,) = [a for a in build_parser(registered=False)._actions
+                   if isinstance(a, argparse._SubParsersAction)]
+    assert set(built_in.choices) == set(BUILT_IN)
+
+
+def test_a_built_in_command_loads_no_registered_one():
+    """``teleop scenarios`` neither imports web nor viser (the registered commands are
+    loaded for themselves and for ``teleop --help`` only)."""
+    code = ("import sys; from teleop.cli.main import main; code = main(['scenarios']); "
+            "print(code, sorted(m for m in ('web', 'web.cli', 'viser') if m in sys.modules))")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[-1] == "0 []"
 
 
 @pytest.mark.parametrize("command", sorted(subcommand_parsers()))

@@ -4,7 +4,8 @@ A distribution registers a subcommand under the entry-point group :data:`COMMAND
 the entry point's name is the subcommand's, its object a :class:`Command`. This package
 ships ``web = "web.cli:COMMAND"`` (pyproject.toml), so ``teleop web`` runs the browser UI
 while ``teleop`` never imports ``web`` (the layers, docs/design.md). Entry points are read
-from the installed metadata (``pip install -e .`` writes it). A registered command that
+from the installed metadata (``pip install -e .`` writes it), and loaded only to run one of
+them or to list them (``teleop --help``). A registered command that
 cannot be loaded (its module or a dependency missing) leaves the other commands working:
 ``teleop --help`` says it cannot be loaded and running it prints why, one line, exit code 2.
 """

@@ -116,7 +116,9 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     robot.add_argument("--seed", type=count, default=0, help="seed of the encoder noise")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(registered: bool = True) -> argparse.ArgumentParser:
+    """``teleop``'s parser: the built-in commands and, with ``registered``, those of the
+    entry-point group (loading them imports their layers: ``web`` imports viser)."""
     parser = ArgumentParser(
         prog="teleop", formatter_class=HelpFormatter,
         description="Operational-space teleoperation under kinematic constraints (CJM, QP, mink).")
@@ -165,12 +167,18 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", metavar="FILE",
                        help="also write the results as JSON to FILE (default: no JSON)")
 
-    _add_registered(commands)
+    if registered:
+        _add_registered(commands)
     return parser
 
 
+#: The subcommands defined here: running one loads no registered command.
+BUILT_IN = ("compare", "replay", "record", "scenarios", "bench")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(registered=not argv or argv[0] not in BUILT_IN).parse_args(argv)
     try:
         return args.run_command(args)
     except ValueError as error:  # bad scenario, controller, file: one clear line
