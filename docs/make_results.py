@@ -76,18 +76,59 @@ COMPARISONS = (
 )
 
 
-def machine() -> dict[str, str | int]:
-    """What the measurements ran on."""
+#: What a comparison's numbers mean, where the table alone does not say it (no figures:
+#: those come from the runs).
+NOTES = {
+    "moving-trocar": "The trocar itself moves: the errors are measured at the instant the "
+                     "robot is at, so one period of the trocar's own motion is not counted "
+                     "as the controllers' error.",
+    "near-singular": "The CJM damps near the singularity (eq 35, `least_squares` steps) and "
+                     "the QPs and mink carry the same damping; what is left of the "
+                     "joint-velocity deviation is where the damping acts: the analytical CJM "
+                     "damps its own variables `v_m`, the QP the general form's.",
+    "joint-limits": "The target asks the wrist past its bound: every controller holds the "
+                    "joint at it (`least_squares`); a distance past the limit of one ulp is "
+                    "the integrator's rounding as the joint converges on its bound.",
+    "multi": "A hole and a plane leave 5 free DoF for a 6-D task: `least_squares` by design.",
+    "paper-hole-noise-1e-4": "The controllers see the noisy `q`; the errors are measured on "
+                             "the true one.",
+    "bimanual-trocars": "Two holes leave 11 of the 15 joint directions for 12 task entries; the "
+                        "targets' orientations come from a kinematic reference run that holds "
+                        "both holes, so both full poses are reachable.",
+    "mobile-wall": "The EE errors are by design: the base stops at the wall (the barriers on "
+                   "its front corners) and the targets go on out of reach. At the wall the QPs "
+                   "and mink pick another least-squares command than the CJM's saturation in "
+                   "the null space; all hold the barriers.",
+    "mobile-wall-osqp": "OSQP at the wall: it runs each step to its iteration cap and fails "
+                        "(the loop holds the robot still) where proxqp and daqp solve the same "
+                        "problems. `compare` runs in simulated time, without a step deadline; "
+                        "in a live loop the step's deadline is also OSQP's own time limit "
+                        "(docs/design.md section 10.6).",
+}
+
+
+def processor() -> str:
+    """The CPU's model name (Linux's /proc/cpuinfo), else what ``platform`` says."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
+            if line.startswith("model name"):
+                return line.partition(":")[2].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def machine() -> dict:
+    """What the measurements run on, and how busy it is (the 1-minute load average)."""
     versions = {}
     for name in PACKAGES:
         try:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             versions[name] = "not installed"
-    return {"platform": platform.platform(), "processor": platform.processor() or "unknown",
+    return {"platform": platform.platform(), "processor": processor(),
             "cpus": os.cpu_count() or 0, "python": platform.python_version(),
-            "openblas_num_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
-            "packages": versions}
+            "load_average": round(os.getloadavg()[0], 2), "packages": versions}
 
 
 def teleop(*arguments: str, env: dict[str, str]) -> None:
@@ -105,6 +146,7 @@ def run_all(raw: Path = RAW, docs: Path = DOCS, iterations: int = BENCH_ITERATIO
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1")  # one thread: no oversubscription
     runs = {"date": datetime.date.today().isoformat(), "machine": machine(),
             "bench": "", "comparisons": {}}
+    loads = [runs["machine"]["load_average"]]
     bench = ["bench", "--iterations", str(iterations), "--json"]
     teleop(*bench, str(raw / "bench.json"), env=env)
     runs["bench"] = " ".join(["OPENBLAS_NUM_THREADS=1 teleop", *bench, "bench.json"])
@@ -118,6 +160,8 @@ def run_all(raw: Path = RAW, docs: Path = DOCS, iterations: int = BENCH_ITERATIO
             runs["comparisons"][comparison.name] = " ".join(
                 ["OPENBLAS_NUM_THREADS=1 teleop", *comparison.arguments_with("DIR")])
             print(f"{comparison.name}: done", file=sys.stderr, flush=True)
+            loads.append(round(os.getloadavg()[0], 2))
+    runs["machine"]["load_average"] = f"{min(loads):g} to {max(loads):g}"
     (raw / "runs.json").write_text(json.dumps(runs, indent=2) + "\n", encoding="utf-8")
     return runs
 
@@ -236,6 +280,8 @@ def comparison_section(name: str, command: str, document: dict) -> list[str]:
                 for spec, m in document["controllers"].items()]
         lines += ["", *markdown_table(["controller", *(f"{f} position RMS / max (mm)" for f in frames),
                                        *(f"{part} max (m)" for part in parts)], rows)]
+    if name in NOTES:
+        lines += ["", NOTES[name]]
     first_failures = [f"`{spec}`: {m['first_failure']}" for spec, m in document["controllers"].items()
                       if m["first_failure"]]
     if first_failures:
@@ -313,8 +359,9 @@ def render(raw: Path = RAW) -> str:
         "after the other). Step times are CPU time on a shared machine: compare them within "
         "one run, not across runs.", "",
         f"* **Date:** {runs['date']}.",
-        f"* **Machine:** {box['platform']}, processor {box['processor']}, {box['cpus']} CPUs "
-        f"(shared), Python {box['python']}, `OPENBLAS_NUM_THREADS={box['openblas_num_threads']}`.",
+        f"* **Machine:** {box['platform']}, {box['processor']}, {box['cpus']} CPUs, "
+        f"1-minute load average {box['load_average']} between the runs (other work shared "
+        f"the machine), Python {box['python']}.",
         f"* **Packages:** {versions}.",
         "* **Commands** (`DIR`: a temporary folder; its `metrics.json` is kept as "
         "`docs/results/compare/NAME.json`):", "",
