@@ -278,12 +278,13 @@ def comparison_section(name: str, command: str, document: dict) -> list[str]:
                  *(sci(m["constraints"][part]["error_max_m"]) if part in m["constraints"] else "-"
                    for part in parts)]
                 for spec, m in document["controllers"].items()]
-        lines += ["", *markdown_table(["controller", *(f"{f} position RMS / max (mm)" for f in frames),
-                                       *(f"{part} max (m)" for part in parts)], rows)]
+        headers = ["controller", *(f"{f} position RMS / max (mm)" for f in frames),
+                   *(f"{part} max (m)" for part in parts)]
+        lines += ["", *markdown_table(headers, rows)]
     if name in NOTES:
         lines += ["", NOTES[name]]
-    first_failures = [f"`{spec}`: {m['first_failure']}" for spec, m in document["controllers"].items()
-                      if m["first_failure"]]
+    first_failures = [f"`{spec}`: {m['first_failure']}"
+                      for spec, m in document["controllers"].items() if m["first_failure"]]
     if first_failures:
         lines += ["", "First failure: " + "; ".join(first_failures) + "."]
     return lines + [""]
@@ -323,7 +324,8 @@ def bench_tables(bench: Sequence[dict]) -> list[str]:
                          "on 8..64 DoF, then 1..8 holes on 32 DoF:", chains)):
         if rows:
             lines += [title, "", *markdown_table(headers, [
-                [row["robot"], str(row["dof"]), str(row["constraint_rows"]), f"`{row['controller']}`",
+                [row["robot"], str(row["dof"]), str(row["constraint_rows"]),
+                 f"`{row['controller']}`",
                  fixed(row["median_us"]), fixed(row["p99_us"]), fixed(row["speedup_vs_mink"]),
                  fixed(row["speedup_vs_qp_daqp"]), sci(row["max_constraint_residual"]),
                  format_status_counts(row["status_counts"])] for row in rows]), ""]

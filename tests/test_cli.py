@@ -10,7 +10,6 @@ import subprocess
 import sys
 import textwrap
 from importlib import metadata
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -191,7 +190,8 @@ def plugin_env(tmp_path_factory) -> dict[str, str]:
     (folder / "teleop_test_greet.py").write_text(textwrap.dedent(PLUGIN))
     info = folder / "teleop_test_plugin-0.1.dist-info"
     info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: teleop-test-plugin\nVersion: 0.1\n")
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: teleop-test-plugin\n"
+                                   "Version: 0.1\n")
     (info / "entry_points.txt").write_text(f"[{COMMAND_GROUP}]\n"
                                            "greet = teleop_test_greet:COMMAND\n"
                                            "broken = teleop_test_missing_module:COMMAND\n"
@@ -218,8 +218,8 @@ def test_a_registered_command_runs_with_its_options_and_help(plugin_env):
 @pytest.mark.parametrize("name, reason", [
     ("broken", "cannot be loaded from teleop_test_missing_module:COMMAND (ModuleNotFoundError: "
                "No module named 'teleop_test_missing_module')"),
-    ("printer", "cannot be loaded from teleop_test_greet:NOT_A_COMMAND (a builtin_function_or_method, "
-                "not a Command of teleop.cli.commands)"),
+    ("printer", "cannot be loaded from teleop_test_greet:NOT_A_COMMAND (a "
+                "builtin_function_or_method, not a Command of teleop.cli.commands)"),
 ])
 def test_a_command_that_cannot_be_loaded_says_why_in_one_line(plugin_env, name, reason):
     for args in ([name], [name, "--any", "option"], [name, "--help"]):

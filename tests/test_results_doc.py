@@ -86,7 +86,8 @@ def test_the_tables_carry_the_numbers_of_the_run(small_run):
     timings = table(lines, "problem")
     assert len(timings) == len(bench) == 6
     for row, timing in zip(timings, bench):
-        assert row["problem"] == timing["robot"] and row["controller"] == f"`{timing['controller']}`"
+        assert row["problem"] == timing["robot"]
+        assert row["controller"] == f"`{timing['controller']}`"
         assert int(row["DoF"]) == timing["dof"] and int(row["rows"]) == timing["constraint_rows"]
         assert abs(float(row["median us"]) - timing["median_us"]) <= 0.5
     (scenario,) = table(lines, "scenario")[:1]

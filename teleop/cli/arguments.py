@@ -70,7 +70,8 @@ def numbers(text: str) -> list[float]:
     try:
         return [float(item) for item in csv_list(text)]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated numbers, got {text!r}") from None
 
 
 def _shown(bound: float) -> str:

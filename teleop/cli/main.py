@@ -188,7 +188,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run(plan, args: argparse.Namespace, config) -> int:
     """Compare the controllers on ``plan``, write the outputs, print the table."""
-    from teleop.experiments.compare import compare, metrics_document, output_directory, write_outputs
+    from teleop.experiments.compare import (
+        compare,
+        metrics_document,
+        output_directory,
+        write_outputs,
+    )
     from teleop.experiments.imperfect import Imperfections
     from teleop.experiments.metrics_table import format_table
 
