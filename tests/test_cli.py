@@ -1,18 +1,22 @@
-"""The command lines (``teleop``, ``teleop web``, ``python -m web``) and the controller registry."""
+"""The command lines (``teleop``, ``teleop web``, ``python -m web``), the commands registered
+from the layers above, and the controller registry."""
 
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import subprocess
 import sys
+import textwrap
 from importlib import metadata
 
 import numpy as np
 import pytest
 
 from constraints import Hole
-from teleop.cli.main import build_parser
+from teleop.cli.commands import COMMAND_GROUP
+from teleop.cli.main import BUILT_IN, build_parser
 from teleop.controller_specs import (
     CONTEXTS,
     CONTROLLER_SPECS,
@@ -25,17 +29,16 @@ from teleop.robots import load_robot
 from web import cli as web_cli
 
 
-def run(*args: str, module: str = "teleop.cli") -> subprocess.CompletedProcess:
+def run(*args: str, module: str = "teleop.cli",
+        env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True,
-                          timeout=120)
+                          timeout=120, env=env)
 
 
 def subcommand_parsers() -> dict[str, argparse.ArgumentParser]:
-    """The parser behind ``teleop NAME --help`` for every subcommand (web: web's own)."""
+    """The parser behind ``teleop NAME --help`` for every subcommand (web: registered)."""
     (commands,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
-    parsers = dict(commands.choices)
-    parsers["web"] = web_cli.build_parser()
-    return parsers
+    return dict(commands.choices)
 
 
 def option_blocks(help_text: str) -> list[str]:
@@ -61,6 +64,20 @@ def test_version_is_the_installed_version():
 
 def test_the_subcommands_are_the_documented_ones():
     assert set(subcommand_parsers()) == {"compare", "replay", "record", "scenarios", "bench", "web"}
+    (built_in,) = [a for a in build_parser(registered=False)._actions
+                   if isinstance(a, argparse._SubParsersAction)]
+    assert set(built_in.choices) == set(BUILT_IN)
+
+
+def test_a_built_in_command_loads_no_registered_one():
+    """``teleop scenarios`` neither imports web nor viser (the registered commands are
+    loaded for themselves and for ``teleop --help`` only)."""
+    code = ("import sys; from teleop.cli.main import main; code = main(['scenarios']); "
+            "print(code, sorted(m for m in ('web', 'web.cli', 'viser') if m in sys.modules))")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[-1] == "0 []"
 
 
 @pytest.mark.parametrize("command", sorted(subcommand_parsers()))
@@ -135,13 +152,85 @@ def test_web_passes_the_urdf_options_to_load_robot(tmp_path):
     assert loaded.package_dirs == (str(tmp_path), f"{tmp_path}/a", f"{tmp_path}/b")
 
 
-def test_teleop_reaches_web_in_one_place_only():
-    import importlib
-    import inspect
+def test_web_is_registered_in_the_command_group_not_imported():
+    """``teleop web`` comes from the installed metadata (pyproject.toml's entry point), and
+    its parser is web's own options; tests/test_layers.py checks teleop never imports web."""
+    (entry,) = [e for e in metadata.entry_points(group=COMMAND_GROUP) if e.name == "web"]
+    assert entry.value == "web.cli:COMMAND" and entry.load() is web_cli.COMMAND
+    registered = {a.dest for a in subcommand_parsers()["web"]._actions}
+    assert registered == {a.dest for a in web_cli.build_parser()._actions}
 
-    # (``import teleop.cli.main as m`` would give the function: teleop.cli exports main)
-    source = inspect.getsource(importlib.import_module("teleop.cli.main"))
-    assert len(re.findall(r"^\s*(from web\b|import web\b)", source, re.MULTILINE)) == 1
+
+PLUGIN = """
+from teleop.cli.arguments import bounded
+from teleop.cli.commands import Command
+
+
+def add_arguments(parser):
+    parser.add_argument("--name", default="world", help="whom to greet")
+    parser.add_argument("--times", type=bounded(int, 1, 3), default=1, help="how many times")
+
+
+def run(args, prog):
+    for _ in range(args.times):
+        print(f"{prog}: hello {args.name}")
+    return 0
+
+
+COMMAND = Command("greet someone", add_arguments, run, epilog="a command from a test")
+NOT_A_COMMAND = print
+"""
+
+
+@pytest.fixture(scope="module")
+def plugin_env(tmp_path_factory) -> dict[str, str]:
+    """An environment whose ``sys.path`` holds a distribution registering three commands
+    in the group: one that works, one whose module is missing, one that is not a Command."""
+    folder = tmp_path_factory.mktemp("plugin")
+    (folder / "teleop_test_greet.py").write_text(textwrap.dedent(PLUGIN))
+    info = folder / "teleop_test_plugin-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: teleop-test-plugin\n"
+                                   "Version: 0.1\n")
+    (info / "entry_points.txt").write_text(f"[{COMMAND_GROUP}]\n"
+                                           "greet = teleop_test_greet:COMMAND\n"
+                                           "broken = teleop_test_missing_module:COMMAND\n"
+                                           "printer = teleop_test_greet:NOT_A_COMMAND\n"
+                                           "scenarios = teleop_test_greet:COMMAND\n")
+    path = [str(folder), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(path))
+
+
+def test_a_registered_command_runs_with_its_options_and_help(plugin_env):
+    result = run("greet", "--name", "Ada", "--times", "2", env=plugin_env)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == ["teleop greet: hello Ada"] * 2
+    shown = run("greet", "--help", env=plugin_env)
+    assert shown.stdout.startswith("usage: teleop greet") and "Greet someone." in shown.stdout
+    assert "(default: world)" in shown.stdout and "a command from a test" in shown.stdout
+    for bad, message in ((["--times", "9"], "argument --times: must be in [1, 3], got 9"),
+                         (["--nope", "x"], "unrecognized arguments: --nope x")):
+        refused = run("greet", *bad, env=plugin_env)
+        assert refused.returncode == 2 and refused.stderr.splitlines() == [
+            f"teleop greet: error: {message} (see 'teleop greet --help')"], refused.stderr
+
+
+@pytest.mark.parametrize("name, reason", [
+    ("broken", "cannot be loaded from teleop_test_missing_module:COMMAND (ModuleNotFoundError: "
+               "No module named 'teleop_test_missing_module')"),
+    ("printer", "cannot be loaded from teleop_test_greet:NOT_A_COMMAND (a "
+                "builtin_function_or_method, not a Command of teleop.cli.commands)"),
+])
+def test_a_command_that_cannot_be_loaded_says_why_in_one_line(plugin_env, name, reason):
+    for args in ([name], [name, "--any", "option"], [name, "--help"]):
+        result = run(*args, env=plugin_env)
+        assert result.returncode == 2 and result.stdout == "", result
+        assert result.stderr.splitlines() == [f"teleop {name}: {reason}"], result.stderr
+    listed = run("--help", env=plugin_env)
+    assert listed.returncode == 0 and name in listed.stdout
+    others = run("scenarios", env=plugin_env)  # the built-in commands still work...
+    assert others.returncode == 0 and others.stdout.startswith("paper-hole"), others.stderr
+    assert "hello" not in others.stdout  # ...and keep their names
 
 
 # -- the controller registry ------------------------------------------------------------
@@ -190,8 +279,8 @@ def test_unknown_spec_raises_value_error(spec, message, sda10f):
 
 
 def test_compare_says_each_run_it_finishes_when_stderr_is_no_terminal(tmp_path):
-    """Issue 18, item 14: output redirected, standard error still shows the runs going by,
-    one line each, the agreement run last."""
+    """Output redirected: standard error still shows the runs going by, one line each, the
+    agreement run last."""
     result = run("compare", "--scenario", "paper-hole", "--duration", "0.02",
                  "--controllers", "cjm,qp:daqp", "--out", str(tmp_path), "--no-plots")
     assert result.returncode == 0, result.stderr

@@ -1,12 +1,15 @@
-"""The layers: dependencies flow one way, ``constraints <- controllers <- teleop <- web``.
+"""The layers: dependencies flow one way, ``constraints <- controllers <- teleop <- web``,
+with no circle between modules and no module too large to read.
 
 The import graph of the four top-level packages is read with ``ast`` (no import is
 executed). A module may import its own package or a lower one. An upward import is an
 error wherever it is: at module level, in a class body, under ``if TYPE_CHECKING`` or
-inside a function (a lazy import is still a dependency), with exactly one exception: the
-``teleop`` CLI reaches the UI (``web``) lazily, from one function in ``teleop/cli/``.
+inside a function (a lazy import is still a dependency); there is no exception (``teleop
+web`` is registered by ``web`` through an entry point, teleop/cli/commands.py).
 ``importlib.import_module("...")`` and ``__import__("...")`` with a literal name count as
-imports too.
+imports too. The same graph, every import counted wherever it sits, has no circle: a
+module that imports a module that imports it back, directly or through others (a package's
+``__init__`` is a module like any other).
 
 The last test checks that design citations name ``docs/design.md``.
 """
@@ -15,6 +18,7 @@ from __future__ import annotations
 
 import ast
 import subprocess
+from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,10 +27,10 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 #: rank of each layer: a module may import packages of its own rank or lower
 LAYERS = {"constraints": 0, "controllers": 1, "teleop": 2, "web": 3}
-#: where the one allowed lazy upward import may live, and what it may reach
-LAZY_EXCEPTION_DIR = ("teleop", "cli")
-LAZY_EXCEPTION_TARGET = "web"
-MAX_LAZY_EXCEPTIONS = 1
+#: the largest source file of the four packages, in lines (one concept per file)
+MAX_MODULE_LINES = 600
+#: what counts as a source file of theirs: Python, and the compiled step's C++
+SOURCE_SUFFIXES = (".py", ".cpp", ".hpp")
 
 
 @dataclass(frozen=True)
@@ -36,6 +40,7 @@ class Import:
     line: int
     target: str  # dotted name imported (resolved when relative), e.g. "web.cli"
     in_function: bool  # inside a def / async def / lambda (a lazy import)
+    names: tuple[str, ...] = ()  # what ``from target import ...`` takes (may be submodules)
 
     @property
     def source_package(self) -> str:
@@ -88,7 +93,8 @@ def imports_of(source: str, module: str, is_package: bool, path: str) -> list[Im
                     found.append(Import(module, path, node.lineno, f"{target}.{alias.name}",
                                         in_function))
             else:
-                found.append(Import(module, path, node.lineno, target, in_function))
+                found.append(Import(module, path, node.lineno, target, in_function,
+                                    tuple(alias.name for alias in node.names)))
         elif (isinstance(node, ast.Call) and node.args
               and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)
               and ((isinstance(node.func, ast.Attribute) and node.func.attr == "import_module")
@@ -116,10 +122,68 @@ def all_imports() -> list[Import]:
     return found
 
 
-def is_lazy_exception(item: Import) -> bool:
-    return (item.in_function and item.source_package == "teleop"
-            and Path(item.path).parts[:2] == LAZY_EXCEPTION_DIR
-            and item.target_package == LAZY_EXCEPTION_TARGET)
+def imported_modules(item: Import, modules: set[str]) -> set[str]:
+    """The Python modules of the four packages that ``item`` loads: each ``from X import
+    name`` that is a submodule, and ``X`` itself unless every name is one. A name outside
+    ``modules`` (another package, the compiled step) leads nowhere in this graph."""
+    found = {f"{item.target}.{name}" for name in item.names} & modules
+    if len(found) < len(item.names) or not item.names:  # a name defined in the module X
+        found |= {item.target} & modules
+    return found
+
+
+def import_graph(imports: list[Import]) -> dict[str, dict[str, list[Import]]]:
+    """``graph[a][b]``: the imports by which module ``a`` loads module ``b`` (no self-loops)."""
+    modules = {module_name(path) for path in package_modules()}
+    graph: dict[str, dict[str, list[Import]]] = {module: defaultdict(list) for module in modules}
+    for item in imports:
+        for target in imported_modules(item, modules) - {item.source}:
+            graph[item.source][target].append(item)
+    return graph
+
+
+def strongly_connected(graph: dict[str, dict[str, list[Import]]]) -> list[list[str]]:
+    """Tarjan's strongly connected components of more than one module, each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    components: list[list[str]] = []
+
+    def visit(module: str) -> None:
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        on_stack.add(module)
+        for target in graph[module]:
+            if target not in index:
+                visit(target)
+                low[module] = min(low[module], low[target])
+            elif target in on_stack:
+                low[module] = min(low[module], index[target])
+        if low[module] == index[module]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == module:
+                    break
+            if len(component) > 1:
+                components.append(sorted(component))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return sorted(components)
+
+
+def describe_circle(component: list[str], graph: dict[str, dict[str, list[Import]]]) -> str:
+    """The circle's modules and every import between them, ``file:line`` each."""
+    members = set(component)
+    lines = [f"circle of {len(component)} modules: {', '.join(component)}"]
+    lines += [f"  {item}" for source in component for target in sorted(graph[source])
+              if target in members for item in graph[source][target]]
+    return "\n".join(lines)
 
 
 # -- the walker itself -------------------------------------------------------------------
@@ -168,14 +232,64 @@ def test_no_module_imports_a_higher_layer_at_module_level():
     assert not violations, "upward imports at module level:\n" + "\n".join(violations)
 
 
-def test_lazy_upward_imports_are_only_the_one_cli_entry_to_web():
-    lazy = [i for i in all_imports() if i.upward and i.in_function]
-    violations = [str(i) for i in lazy if not is_lazy_exception(i)]
+def test_no_module_imports_a_higher_layer_lazily_either():
+    violations = [str(i) for i in all_imports() if i.upward and i.in_function]
     assert not violations, "upward imports inside functions:\n" + "\n".join(violations)
-    allowed = [str(i) for i in lazy if is_lazy_exception(i)]
-    assert len(allowed) <= MAX_LAZY_EXCEPTIONS, (
-        f"the teleop CLI may reach web from one place only, found {len(allowed)}:\n"
-        + "\n".join(allowed))
+
+
+# -- circles -------------------------------------------------------------------------------
+
+def test_the_circle_finder_finds_circles_and_only_them():
+    """A graph written here: a -> b -> c -> a (one lazily), d -> a, e alone."""
+    def edge(source: str, target: str, lazy: bool = False) -> Import:
+        return Import(source, source.replace(".", "/") + ".py", 1, target, lazy)
+
+    graph = {"a": {"b": [edge("a", "b")]}, "b": {"c": [edge("b", "c")]},
+             "c": {"a": [edge("c", "a", lazy=True)]}, "d": {"a": [edge("d", "a")]}, "e": {}}
+    assert strongly_connected(graph) == [["a", "b", "c"]]
+    text = describe_circle(["a", "b", "c"], graph)
+    assert text.startswith("circle of 3 modules: a, b, c")
+    assert "c.py:1: c imports a (in a function)" in text and "d imports" not in text
+
+
+def test_the_graph_resolves_submodules_names_and_packages():
+    modules = {"teleop", "teleop.experiments", "teleop.experiments.plots",
+               "teleop.experiments.compare", "controllers.cjm"}
+    def item(target: str, *names: str) -> Import:
+        return Import("teleop.experiments.report", "x.py", 1, target, False, names)
+
+    assert imported_modules(item("teleop.experiments", "plots"), modules) == {
+        "teleop.experiments.plots"}
+    assert imported_modules(item("teleop.experiments", "plots", "Plan"), modules) == {
+        "teleop.experiments.plots", "teleop.experiments"}
+    assert imported_modules(item("teleop.experiments.compare", "compare"), modules) == {
+        "teleop.experiments.compare"}
+    assert imported_modules(item("teleop.experiments.compare"), modules) == {
+        "teleop.experiments.compare"}
+    assert imported_modules(item("controllers.cjm._step"), modules) == set()  # compiled
+    assert imported_modules(item("numpy", "linalg"), modules) == set()
+
+
+def test_no_import_circle_between_modules():
+    graph = import_graph(all_imports())
+    circles = strongly_connected(graph)
+    assert not circles, "import circles:\n" + "\n".join(describe_circle(c, graph)
+                                                         for c in circles)
+
+
+# -- size -----------------------------------------------------------------------------------
+
+def test_no_source_file_is_over_the_line_limit():
+    sources = sorted(path for package in LAYERS for path in (ROOT / package).rglob("*")
+                     if path.suffix in SOURCE_SUFFIXES and "__pycache__" not in path.parts)
+    sizes = {str(path.relative_to(ROOT)): len(path.read_text(encoding="utf-8").splitlines())
+             for path in sources}
+    assert len(sizes) >= 20
+    too_large = [f"{path}: {lines} lines" for path, lines in sorted(sizes.items(),
+                                                                      key=lambda kv: -kv[1])
+                 if lines > MAX_MODULE_LINES]
+    assert not too_large, (f"files over {MAX_MODULE_LINES} lines (split by concern):\n"
+                           + "\n".join(too_large))
 
 
 # -- citations -----------------------------------------------------------------------------

@@ -1,12 +1,14 @@
 """``teleop web`` / ``python -m web``: the command line of the browser teleoperation UI.
 
-All of ``teleop web``'s options live here (``teleop`` hands every argument after ``web``
-to :func:`main`). A robot or scene that cannot be loaded, an address that cannot be served
-(a port outside 1-65535, a host that is not one), or any other bad value, is one line on
-stderr and exit code 2. Geometry that cannot be drawn as the URDF says (a mesh that cannot
-be read) is a warning line, and the UI draws a fallback and says so. Serving anything but
-the loopback interface needs ``--token`` and prints a warning saying what it exposes
-(docs/design.md section 5.3).
+All of ``teleop web``'s options live here, in :data:`COMMAND`, registered as a ``teleop``
+subcommand by the entry point ``web = "web.cli:COMMAND"`` of the group ``teleop.commands``
+(pyproject.toml): ``teleop`` loads it without importing this layer
+(:mod:`teleop.cli.commands`). A robot or scene that cannot be loaded, an address that
+cannot be served (a port outside 1-65535, a host that is not one), or any other bad value,
+is one line on stderr and exit code 2. Geometry that cannot be drawn as the URDF says (a
+mesh that cannot be read) is a warning line, and the UI draws a fallback and says so.
+Serving anything but the loopback interface needs ``--token`` and prints a warning saying
+what it exposes (docs/design.md section 5.3).
 """
 
 from __future__ import annotations
@@ -17,14 +19,15 @@ import time
 import warnings
 from typing import Sequence
 
-from teleop.cli.main import ArgumentParser, HelpFormatter, csv_list, positive
+from teleop.cli.arguments import csv_list, numbers, one_line, positive
+from teleop.cli.commands import Command
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.robots import BUILTIN_ROBOTS
 
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
     resolve_host
 
-DESCRIPTION = "Browser teleoperation UI (viser) of a built-in robot or any URDF."
+SUMMARY = "browser teleoperation UI (viser) of a built-in robot or any URDF"
 
 SECURITY = """what the server exposes:
 Whoever opens the page can move the robot, and read and write scene files in --scene-dir
@@ -35,17 +38,8 @@ From another machine, prefer an SSH tunnel to the loopback server:
   ssh -L 8080:127.0.0.1:8080 robot-pc   then open http://127.0.0.1:8080/"""
 
 
-def numbers(text: str) -> list[float]:
-    """``"0, -1.2,0.5"`` -> ``[0.0, -1.2, 0.5]`` (argparse type)."""
-    try:
-        return [float(item) for item in csv_list(text)]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
-
-
-def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
-    parser = ArgumentParser(prog=prog, description=DESCRIPTION, epilog=SECURITY,
-                            formatter_class=HelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``teleop web``'s options, added to ``parser``."""
     robot = parser.add_argument_group("robot")
     robot.add_argument("--robot",
                        help=f"built-in robot ({', '.join(BUILTIN_ROBOTS)}) or the path of a URDF "
@@ -103,7 +97,6 @@ def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
                              "when --host is not a loopback address; open the address printed "
                              "at start. It travels unencrypted: across an untrusted network use "
                              "an SSH tunnel (default: none on loopback)")
-    return parser
 
 
 ROBOT_OPTIONS = ("robot", "ee_frame", "constrained_link", "link_axis", "package_dirs", "q_home",
@@ -138,10 +131,6 @@ def _load(args: argparse.Namespace):
     return robot_from_dict(scene.get("robot")), scene
 
 
-def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
-
-
 def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
     """The port and token to serve with; ``ValueError`` for a port or host that cannot be
     served, or a host beyond loopback without a token (then a warning line is printed)."""
@@ -162,15 +151,15 @@ def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
     return port, token
 
 
-def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
-    """Serve the UI until Ctrl-C; 2 (and one line on stderr) when it cannot start."""
-    args = build_parser(prog).parse_args(argv)
+def run(args: argparse.Namespace, prog: str) -> int:
+    """Serve the UI the options ``args`` ask for until Ctrl-C; 2 (and one line on stderr,
+    naming ``prog``) when it cannot start."""
     try:
         port, token = _address(args, prog)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             robot, scene = _load(args)
-        notes = [_one_line(w.message) for w in caught]
+        notes = [one_line(w.message) for w in caught]
         for note in notes:  # e.g. meshes not found: the UI draws a fallback and says so
             print(f"{prog}: warning: {note}", file=sys.stderr)
         from web.ui import run_server
@@ -181,7 +170,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
                                               scene_dir=args.scene_dir, scene=scene,
                                               notes=notes, token=token)
     except (OSError, ValueError) as error:  # no such URDF/scene, bad frame / q_home / spec, port
-        print(f"{prog}: {_one_line(error)}", file=sys.stderr)
+        print(f"{prog}: {one_line(error)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # Ctrl-C while loading
         return 130
@@ -199,6 +188,19 @@ def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
         control.stop()
         server.stop()
     return 0
+
+
+COMMAND = Command(SUMMARY, add_arguments, run, epilog=SECURITY)
+
+
+def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
+    """``teleop web``'s parser, standing alone (``python -m web``)."""
+    return COMMAND.parser(prog)
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
+    """``prog ARGV``: parse the options and :func:`run`."""
+    return run(build_parser(prog).parse_args(argv), prog)
 
 
 if __name__ == "__main__":

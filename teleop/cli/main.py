@@ -1,7 +1,5 @@
-"""Command line: ``teleop compare | replay | record | scenarios | bench | web``.
-
-``teleop web`` belongs to the ``web`` layer above this one: its options live in
-:mod:`web.cli`, reached lazily in :func:`_web` only.
+"""Command line: ``teleop compare | replay | record | scenarios | bench`` and the commands
+registered from the layers above (``teleop web``, :mod:`teleop.cli.commands`); docs/cli.md.
 """
 
 from __future__ import annotations
@@ -9,7 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 from importlib import metadata
-from typing import Callable, NoReturn, Sequence
+from typing import Callable, Sequence
 
 from teleop.controller_specs import CONTROLLER_HELP, CONTROLLER_SPECS, default_specs
 from teleop.limits import (
@@ -23,22 +21,13 @@ from teleop.limits import (
 )
 from teleop.robots import BUILTIN_ROBOTS
 
+from .arguments import ArgumentParser, HelpFormatter, bounded, csv_list, one_line, sentence
+from .commands import Command, registered_commands
+
 PACKAGE = "cjm-teleop"
 DEFAULT_CONTROLLERS = ", ".join(default_specs("compare"))
 DEFAULT_BENCH_CONTROLLERS = ", ".join(default_specs("bench"))
 DEFAULT_BENCH_ROBOTS = ", ".join(BUILTIN_ROBOTS)
-WEB_HELP = "browser teleoperation UI (viser); 'teleop web --help' lists its options"
-
-
-class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-    """Every option's help shows its default ("(default: ...)" appended unless the help
-    already says it; nothing for required options); descriptions and epilogs keep their lines."""
-
-    def _get_help_string(self, action: argparse.Action) -> str:
-        text = action.help or ""
-        if "(default" in text or action.required:
-            return text
-        return super()._get_help_string(action)
 
 
 def package_version() -> str:
@@ -49,77 +38,14 @@ def package_version() -> str:
         return "unknown (not installed)"
 
 
-def csv_list(text: str) -> list[str]:
-    """``"a, b,c"`` -> ``["a", "b", "c"]`` (argparse type)."""
-    items = [item.strip() for item in text.split(",") if item.strip()]
-    if not items:
-        raise argparse.ArgumentTypeError("expected a comma-separated list")
-    return items
-
-
-def positive(text: str) -> float:
-    """A finite number > 0 (argparse type)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
-    return value
-
-
-def number_in(minimum: float, maximum: float, *, inclusive_minimum: bool = True,
-              unit: str = "") -> Callable[[str], float]:
-    """An argparse type: a number in ``[minimum, maximum]`` (``(minimum, maximum]`` unless
-    ``inclusive_minimum``), named in the message with its ``unit``."""
-    low = "[" if inclusive_minimum else "("
-    bounds = f"{low}{minimum:g}, {maximum:g}]{' ' + unit if unit else ''}"
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        inside = (minimum <= value if inclusive_minimum else minimum < value) and value <= maximum
-        if not inside:  # NaN is outside too
-            raise argparse.ArgumentTypeError(f"must be in {bounds}, got {text}")
-        return value
-
-    return parse
-
-
-def integer_in(minimum: int, maximum: int | None = None) -> Callable[[str], int]:
-    """An argparse type: an integer in ``[minimum, maximum]`` (no maximum when None)."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if value < minimum or (maximum is not None and value > maximum):
-            bounds = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
-            raise argparse.ArgumentTypeError(f"must be {bounds}, got {text}")
-        return value
-
-    return parse
-
-
 #: The option types, bounded by the maxima of :mod:`teleop.limits`.
-rate = number_in(0.0, MAX_RATE_HZ, inclusive_minimum=False, unit="Hz")
-duration = number_in(0.0, MAX_DURATION_S, inclusive_minimum=False, unit="s")
-encoder_noise = number_in(0.0, MAX_ENCODER_NOISE_RAD, unit="rad")
-time_constant = number_in(0.0, MAX_TIME_CONSTANT_S, unit="s")
-latency = integer_in(0, MAX_LATENCY_PERIODS)
-count = integer_in(0)
-iterations = integer_in(1, MAX_BENCH_ITERATIONS)
-
-
-class ArgumentParser(argparse.ArgumentParser):
-    """argparse's parser, its errors one line on standard error (exit code 2): the
-    program, the problem and where the help is, without the usage block."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+rate = bounded(float, 0.0, MAX_RATE_HZ, inclusive_minimum=False, unit="Hz")
+duration = bounded(float, 0.0, MAX_DURATION_S, inclusive_minimum=False, unit="s")
+encoder_noise = bounded(float, 0.0, MAX_ENCODER_NOISE_RAD, unit="rad")
+time_constant = bounded(float, 0.0, MAX_TIME_CONSTANT_S, unit="s")
+latency = bounded(int, 0, MAX_LATENCY_PERIODS)
+count = bounded(int, 0)
+iterations = bounded(int, 1, MAX_BENCH_ITERATIONS)
 
 
 def _controllers_epilog(context: str) -> str:
@@ -132,10 +58,31 @@ def _controllers_epilog(context: str) -> str:
     return "\n".join(lines)
 
 
-def _add_command(commands, name: str, summary: str, **kwargs) -> argparse.ArgumentParser:
-    """A subcommand whose one-line summary is both its help (in ``teleop -h``) and description."""
-    return commands.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".",
-                               formatter_class=HelpFormatter, **kwargs)
+def _add_command(commands, name: str, summary: str, run: Callable[[argparse.Namespace], int],
+                 **kwargs) -> argparse.ArgumentParser:
+    """A subcommand whose one-line summary is both its help (in ``teleop -h``) and
+    description, run by ``run(args)``."""
+    parser = commands.add_parser(name, help=summary, description=sentence(summary),
+                                 formatter_class=HelpFormatter, strict=True, **kwargs)
+    parser.set_defaults(run_command=run)
+    return parser
+
+
+def _add_registered(commands) -> None:
+    """The commands of the entry-point group (:mod:`teleop.cli.commands`), after the
+    built-in ones; one that cannot be loaded says why when it is run."""
+    for entry in registered_commands(taken=set(commands.choices)):
+        if entry.command is None:
+            commands.add_parser(entry.name, help=entry.unavailable, unavailable=entry.unavailable)
+            continue
+        parser = _add_command(commands, entry.name, entry.command.summary,
+                              _registered_run(entry.command, f"teleop {entry.name}"),
+                              epilog=entry.command.epilog or None)
+        entry.command.add_arguments(parser)
+
+
+def _registered_run(command: Command, prog: str) -> Callable[[argparse.Namespace], int]:
+    return lambda args: command.run(args, prog)
 
 
 def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
@@ -169,7 +116,9 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     robot.add_argument("--seed", type=count, default=0, help="seed of the encoder noise")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(registered: bool = True) -> argparse.ArgumentParser:
+    """``teleop``'s parser: the built-in commands and, with ``registered``, those of the
+    entry-point group (loading them imports their layers: ``web`` imports viser)."""
     parser = ArgumentParser(
         prog="teleop", formatter_class=HelpFormatter,
         description="Operational-space teleoperation under kinematic constraints (CJM, QP, mink).")
@@ -179,16 +128,19 @@ def build_parser() -> argparse.ArgumentParser:
                                      parser_class=ArgumentParser)
 
     compare = _add_command(commands, "compare", "run controllers on a scripted scenario and "
-                           "write metrics and plots", epilog=_controllers_epilog("compare"))
+                           "write metrics and plots", _compare,
+                           epilog=_controllers_epilog("compare"))
     compare.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
     _add_run_options(compare, "scenario")
 
     replay = _add_command(commands, "replay", "replay a recorded session through controllers "
-                          "and write metrics and plots", epilog=_controllers_epilog("compare"))
-    replay.add_argument("file", help="session file (JSON lines, see README)")
+                          "and write metrics and plots", _replay,
+                          epilog=_controllers_epilog("compare"))
+    replay.add_argument("file", help="session file (JSON lines, see docs/sessions.md)")
     _add_run_options(replay, "session")
 
-    record = _add_command(commands, "record", "write a scenario's operator input as a session file")
+    record = _add_command(commands, "record", "write a scenario's operator input as a session "
+                          "file", _record)
     record.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
     record.add_argument("--rate", type=rate, default=1000.0,
                         help=f"control rate in Hz, at most {MAX_RATE_HZ:g} (one recorded "
@@ -198,10 +150,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "scenario)")
     record.add_argument("file", help="session file to write")
 
-    _add_command(commands, "scenarios", "list the scripted scenarios")
+    _add_command(commands, "scenarios", "list the scripted scenarios", _scenarios)
 
     bench = _add_command(commands, "bench", "time one control step of each controller on each "
-                         "robot", epilog=_controllers_epilog("bench"))
+                         "robot", _bench, epilog=_controllers_epilog("bench"))
     bench.add_argument("--robots", type=csv_list, default=DEFAULT_BENCH_ROBOTS,
                        help="comma-separated built-in robots")
     bench.add_argument("--controllers", type=csv_list, default=DEFAULT_BENCH_CONTROLLERS,
@@ -215,20 +167,35 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", metavar="FILE",
                        help="also write the results as JSON to FILE (default: no JSON)")
 
-    # web's options are web's own (web.cli); everything after 'web' is handed over to it
-    commands.add_parser("web", help=WEB_HELP, description=WEB_HELP, add_help=False)
+    if registered:
+        _add_registered(commands)
     return parser
 
 
-def _run(plan, args, config) -> int:
+#: The subcommands defined here: running one loads no registered command.
+BUILT_IN = ("compare", "replay", "record", "scenarios", "bench")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(registered=not argv or argv[0] not in BUILT_IN).parse_args(argv)
+    try:
+        return args.run_command(args)
+    except ValueError as error:  # bad scenario, controller, file: one clear line
+        print(f"teleop {args.command}: {one_line(error)}", file=sys.stderr)
+        return 2
+
+
+def _run(plan, args: argparse.Namespace, config) -> int:
+    """Compare the controllers on ``plan``, write the outputs, print the table."""
     from teleop.experiments.compare import (
         compare,
-        format_table,
         metrics_document,
         output_directory,
         write_outputs,
     )
     from teleop.experiments.imperfect import Imperfections
+    from teleop.experiments.metrics_table import format_table
 
     output_directory(args.out)  # before minutes of simulation
     imperfections = Imperfections(args.encoder_noise, args.latency, args.joint_time_constant,
@@ -252,87 +219,60 @@ def _run(plan, args, config) -> int:
     return 0
 
 
-def _web(argv: list[str]) -> int:
-    """``teleop web ...``: the one place this layer reaches ``web`` (the layer above),
-    lazily, handing it every argument after ``web`` (so ``teleop web --help`` is web's)."""
-    from web.cli import main as web_main
-
-    return web_main(argv, prog="teleop web")
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args, rest = parser.parse_known_args(argv)
-    if args.command == "web":
-        return _web(rest)
-    if rest:
-        parser.error(f"unrecognized arguments: {' '.join(rest)}")
-    try:
-        return _dispatch(args)
-    except ValueError as error:  # bad scenario, controller, file: one clear line
-        print(f"teleop {args.command}: {one_line(error)}", file=sys.stderr)
-        return 2
-
-
-def one_line(error: Exception) -> str:
-    """The error's message on one line (a message never spreads over several)."""
-    return " ".join(str(error).split())
-
-
-def _dispatch(args) -> int:
+def _compare(args: argparse.Namespace) -> int:
+    from teleop.experiments.scenarios import load_scenario
     from teleop.loop import LoopConfig
 
-    if args.command == "scenarios":
-        from teleop.experiments.scenarios import SCENARIOS, load_scenario
+    return _run(load_scenario(args.scenario), args, LoopConfig(rate=args.rate or 1000.0))
 
-        for name in SCENARIOS:
-            print(f"{name:<15} {load_scenario(name).description}")
-        return 0
-    if args.command == "compare":
-        from teleop.experiments.scenarios import load_scenario
 
-        plan = load_scenario(args.scenario)
-        return _run(plan, args, LoopConfig(rate=args.rate or 1000.0))
-    if args.command == "replay":
-        from teleop.experiments.sessions import load_session, session_plan
+def _replay(args: argparse.Namespace) -> int:
+    from teleop.experiments.sessions import load_session, session_plan
+    from teleop.loop import LoopConfig
 
-        session = load_session(args.file)
-        header = session.header
-        config = LoopConfig(rate=args.rate or header.get("rate_hz", 1000.0),
-                            kp=header.get("kp", 20.0),
-                            target_time_constant=header.get("target_time_constant_s", 0.0))
-        return _run(session_plan(session), args, config)
-    if args.command == "record":
-        from teleop.experiments.scenarios import load_scenario
-        from teleop.experiments.sessions import record_plan
+    session = load_session(args.file)
+    header = session.header
+    config = LoopConfig(rate=args.rate or header.get("rate_hz", 1000.0),
+                        kp=header.get("kp", 20.0),
+                        target_time_constant=header.get("target_time_constant_s", 0.0))
+    return _run(session_plan(session), args, config)
 
-        path = record_plan(load_scenario(args.scenario), args.file, args.rate, args.duration)
-        print(f"wrote {path}")
-        return 0
-    if args.command == "bench":
-        from teleop.experiments.bench import (
-            format_table,
-            run_bench,
-            run_scaling,
-            write_json,
-        )
 
-        iterations = 20 if args.quick else args.iterations
-        results = run_bench(args.robots, args.controllers, iterations=iterations)
-        if not args.no_scaling:
-            results += run_scaling(iterations=max(5, iterations // 5),
-                                   dofs=(8, 16) if args.quick else (8, 16, 32, 64),
-                                   holes=(1, 2) if args.quick else (1, 2, 4, 8))
-        print(format_table(results))
-        for r in results:
-            if r.solver_messages:
-                print(f"  {r.robot} {r.controller}: the solver wrote "
-                      f"{sum(r.solver_messages.values())} lines, kept in solver_messages"
-                      + (" of the JSON" if args.json else " (--json FILE writes them)"))
-        if args.json:
-            write_json(results, args.json)
-        return 0
-    return 2
+def _record(args: argparse.Namespace) -> int:
+    from teleop.experiments.scenarios import load_scenario
+    from teleop.experiments.sessions import record_plan
+
+    path = record_plan(load_scenario(args.scenario), args.file, args.rate, args.duration)
+    print(f"wrote {path}")
+    return 0
+
+
+def _scenarios(args: argparse.Namespace) -> int:
+    from teleop.experiments.scenarios import SCENARIOS, load_scenario
+
+    for name in SCENARIOS:
+        print(f"{name:<15} {load_scenario(name).description}")
+    return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from teleop.experiments.bench import format_table, run_bench, run_scaling, write_json
+
+    iterations = 20 if args.quick else args.iterations
+    results = run_bench(args.robots, args.controllers, iterations=iterations)
+    if not args.no_scaling:
+        results += run_scaling(iterations=max(5, iterations // 5),
+                               dofs=(8, 16) if args.quick else (8, 16, 32, 64),
+                               holes=(1, 2) if args.quick else (1, 2, 4, 8))
+    print(format_table(results))
+    for r in results:
+        if r.solver_messages:
+            print(f"  {r.robot} {r.controller}: the solver wrote "
+                  f"{sum(r.solver_messages.values())} lines, kept in solver_messages"
+                  + (" of the JSON" if args.json else " (--json FILE writes them)"))
+    if args.json:
+        write_json(results, args.json)
+    return 0
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ from teleop.limits import MAX_BENCH_ITERATIONS
 from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
 from teleop.robots.chains import hole_links, load_chain
 
-from .compare import format_status_counts
+from .metrics_table import format_status_counts
 from .solver_output import SolverOutputCapture
 
 #: hole distance along the constrained link of each built-in robot (m)

@@ -15,7 +15,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Sequence
 
-from .compare import TABLE_COLUMNS, format_status_counts, table_cells, table_headers
+from .metrics_table import TABLE_COLUMNS, format_status_counts, table_cells, table_headers
 from .plots import Figure
 
 #: The distributions whose versions the report lists (importlib.metadata names).

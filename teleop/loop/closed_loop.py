@@ -240,11 +240,11 @@ def saturate_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> 
     """Scale ``[v; w]`` uniformly so that ``|v| <= max_linear`` and ``|w| <= max_angular``;
     ``twist`` itself when it is within both (the common case)."""
     vx, vy, vz, wx, wy, wz = twist.tolist()
-    # inside both caps by a margin that covers rounding: the common case, 2 us less a tick
+    # inside both caps by a margin that covers rounding: the common case, no norm computed
     if (vx * vx + vy * vy + vz * vz < 0.999 * max_linear * max_linear
             and wx * wx + wy * wy + wz * wz < 0.999 * max_angular * max_angular):
         return twist
-    # the norms as np.linalg.norm computes them, without its overhead (~4 us a tick, bench)
+    # the norms as np.linalg.norm computes them, without its call overhead
     linear = math.sqrt(float(np.dot(twist[:3], twist[:3])))
     angular = math.sqrt(float(np.dot(twist[3:], twist[3:])))
     scale = min(1.0, max_linear / max(linear, 1e-300), max_angular / max(angular, 1e-300))

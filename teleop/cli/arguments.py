@@ -1,0 +1,108 @@
+"""What every ``teleop`` command line shares (the built-in commands and those registered
+from the layers above, :mod:`teleop.cli.commands`): a parser whose errors are one line, a
+help formatter that shows each default, and the option types (docs/cli.md)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Callable, NoReturn
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """Every option's help shows its default ("(default: ...)" appended unless the help
+    already says it; nothing for required options); descriptions and epilogs keep their lines."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "(default" in text or action.required:
+            return text
+        return super()._get_help_string(action)
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser, its errors one line on standard error (exit code 2): the
+    program, the problem and where the help is, without the usage block.
+
+    ``strict``: arguments it does not know are its own error (a subcommand's parser: the
+    message names the subcommand, not ``teleop``). ``unavailable``: why this subcommand
+    cannot run; parsing it then prints that one line and exits 2, whatever the arguments
+    (a registered command that could not be loaded)."""
+
+    def __init__(self, *args, strict: bool = False, unavailable: str | None = None,
+                 **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.strict = strict
+        self.unavailable = unavailable
+
+    def parse_known_args(self, args=None, namespace=None):
+        if self.unavailable is not None:
+            self.exit(2, f"{self.prog}: {self.unavailable}\n")
+        namespace, extras = super().parse_known_args(args, namespace)
+        if self.strict and extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace, extras
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def one_line(error: Exception | str) -> str:
+    """An error's message on one line (a message never spreads over several)."""
+    return " ".join(str(error).split())
+
+
+def sentence(summary: str) -> str:
+    """A command's one-line summary as its description: capitalised, a full stop."""
+    return summary[0].upper() + summary[1:] + "."
+
+
+def csv_list(text: str) -> list[str]:
+    """``"a, b,c"`` -> ``["a", "b", "c"]`` (argparse type)."""
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError("expected a comma-separated list")
+    return items
+
+
+def numbers(text: str) -> list[float]:
+    """``"0, -1.2,0.5"`` -> ``[0.0, -1.2, 0.5]`` (argparse type)."""
+    try:
+        return [float(item) for item in csv_list(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated numbers, got {text!r}") from None
+
+
+def _shown(bound: float) -> str:
+    return f"{bound:g}" if isinstance(bound, float) else str(bound)
+
+
+def bounded(kind: type[float] | type[int], minimum: float, maximum: float | None = None, *,
+            inclusive_minimum: bool = True, unit: str = "") -> Callable[[str], float]:
+    """An argparse type: a finite ``kind`` (``float`` or ``int``) in ``[minimum, maximum]``
+    (``(minimum, ...`` unless ``inclusive_minimum``; no maximum when None), its range named
+    in the message with its ``unit``."""
+    noun = "an integer" if kind is int else "a number"
+    if maximum is None:
+        bounds = (f"{'' if kind is int else 'a finite number '}"
+                  f"{'>=' if inclusive_minimum else '>'} {_shown(minimum)}")
+    else:
+        bounds = f"in {'[' if inclusive_minimum else '('}{_shown(minimum)}, {_shown(maximum)}]"
+    bounds += f" {unit}" if unit else ""
+
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
+        above = minimum <= value if inclusive_minimum else minimum < value
+        if not (math.isfinite(value) and above and (maximum is None or value <= maximum)):
+            raise argparse.ArgumentTypeError(f"must be {bounds}, got {text}")  # NaN included
+        return value
+
+    return parse
+
+
+#: A finite number > 0.
+positive = bounded(float, 0.0, inclusive_minimum=False)

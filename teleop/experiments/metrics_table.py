@@ -1,0 +1,59 @@
+"""The comparison's table: the numeric columns of a metrics document (the terminal's
+table after ``teleop compare``, report.html's, docs/results.md's), and the steps by status."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+#: The table's numeric columns: header, metrics key, format (a callable on the value).
+TABLE_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (
+    ("constraint err max (m)", "constraint_error_max_m", lambda v: f"{v:.1e}"),
+    ("RMS (m)", "constraint_error_rms_m", lambda v: f"{v:.1e}"),
+    ("residual max (m/s)", "constraint_velocity_residual_max_mps", lambda v: f"{v:.1e}"),
+    ("C v_c max (m/s)", "constraint_velocity_max_mps", lambda v: f"{v:.1e}"),
+    ("EE pos RMS (mm)", "ee_position_error_rms_m", lambda v: f"{1e3 * v:.3f}"),
+    ("EE ori RMS (mrad)", "ee_orientation_error_rms_rad", lambda v: f"{1e3 * v:.3f}"),
+    ("limit viol (rad)", "joint_limit_violation_max_rad", lambda v: f"{v:.3f}"),
+    ("failed", "failed_steps", lambda v: f"{v}"),
+    ("step median (us)", "step_time_median_us", lambda v: f"{v:.0f}"),
+    ("step p99 (us)", "step_time_p99_us", lambda v: f"{v:.0f}"),
+    ("qd dev max (rad/s)", "joint_velocity_deviation_max_radps", lambda v: f"{v:.1e}"),
+)
+
+
+def table_cells(metrics: dict) -> list[str]:
+    """One controller's row of :data:`TABLE_COLUMNS` (``-`` for a value not computed)."""
+    return ["-" if metrics[key] is None else fmt(metrics[key]) for _, key, fmt in TABLE_COLUMNS]
+
+
+def table_headers(document: dict) -> list[str]:
+    """The headers of :data:`TABLE_COLUMNS`, the deviation's naming its reference."""
+    reference = document.get("joint_velocity_reference")
+    return [header if key != "joint_velocity_deviation_max_radps" or reference is None
+            else f"qd dev max vs {reference} (rad/s)" for header, key, _ in TABLE_COLUMNS]
+
+
+def format_table(document: dict) -> str:
+    """A short table of the headline numbers (Markdown): the terminal, docs/results.md."""
+    headers = table_headers(document)
+    lines = ["| controller | " + " | ".join(headers) + " | steps by status |",
+             "|" + "---|" * (len(headers) + 2)]
+    for spec, m in document["controllers"].items():
+        lines.append(f"| {spec} | " + " | ".join(table_cells(m))
+                     + f" | {format_status_counts(m['status_counts'])} |")
+    if len(document["ee_frames"]) > 1 or any(len(m["constraints"]) > 1
+                                             for m in document["controllers"].values()):
+        lines += ["", "each EE: position RMS / max (mm); each constraint: error max (m)"]
+        for spec, m in document["controllers"].items():
+            parts = [f"{frame} {1e3 * e['position_error_rms_m']:.3f} / "
+                     f"{1e3 * e['position_error_max_m']:.3f}"
+                     for frame, e in m["end_effectors"].items()]
+            parts += [f"{name} {c['error_max_m']:.1e}" for name, c in m["constraints"].items()]
+            lines.append(f"  {spec}: " + "; ".join(parts))
+    return "\n".join(lines)
+
+
+def format_status_counts(counts: dict[str, int]) -> str:
+    """``ok 9990, scaled 10``: the statuses in order of severity, zeros left out."""
+    order = ("ok", "scaled", "least_squares", "constraint_degraded", "failed")
+    return ", ".join(f"{status} {counts[status]}" for status in order if counts.get(status))
