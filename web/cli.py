@@ -53,7 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             "last link)")
     robot.add_argument("--constrained-link", metavar="LINK",
                        help="link the constraints act on (default: the built-in robot's, else "
-                            "none: no hole or plane can be added)")
+                            "none: no constraint can be placed on an arm)")
     robot.add_argument("--link-axis", nargs=3, type=float, metavar=("X", "Y", "Z"),
                        help="long direction of the constrained link in its own coordinates "
                             "(default: the built-in robot's, else 0 0 1)")
