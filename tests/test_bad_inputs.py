@@ -1,6 +1,6 @@
 """Every bad input is one line naming the field: a ``ValueError`` from the Python API, the
 file and line for a session file, one line on standard error and exit code 2 at the CLI;
-never a traceback, a NaN or a run without end (issue 18, findings 5, 6, 7 and 9).
+never a traceback, a NaN or a run without end.
 
 Each table row is one input through its public entry point; the rows stand for the
 classes of input around them (wrong type, null, out of range, beyond the documented maxima

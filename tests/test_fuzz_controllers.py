@@ -1,4 +1,4 @@
-"""Every controller on adversarial input (issue 18): robots built in and from
+"""Every controller on adversarial input: robots built in and from
 example-robot-data, configurations at and past their limits, twists up to 1e6, mixes of
 every constraint type. The command is finite and in every limit, a step that does not hold
 its rows never says ``ok``, and a step's CPU time is bounded (a generous guard)."""

@@ -159,7 +159,7 @@ def damped_least_squares(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("name", sorted(EXAMPLE_ARMS))
 def test_a_40_mm_drag_from_the_default_home_moves_the_ee_and_no_joint_reaches_a_limit(name):
-    """Issue 18 item 12: from the neutral pose clipped to the limits the Panda's joint 4
+    """Found in review: from the neutral pose clipped to the limits the Panda's joint 4
     sat at its bound and a drag did not move the hand. From the default home (docs/design.md
     section 6.1), with a hole 8 cm along the link: a 40 mm target step along each world
     axis, followed for 1 s by the closed loop at 1 kHz with the default CJM, at 5 cm/s

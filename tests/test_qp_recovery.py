@@ -1,4 +1,4 @@
-"""The baselines recover and stay bounded (issue 18): a hole that jumps 5.5 cm, the
+"""The baselines recover and stay bounded: a hole that jumps 5.5 cm, the
 8.2 s proxqp step, and the CJM's damping near a singularity (docs/design.md 10.6, 10.7)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""What the UI core refuses and how it holds up (issue 18): files only in their folders,
+"""What the UI core refuses and how it holds up: files only in their folders,
 targets and settings bounded, a flood of events that does not starve the control loop, a
 browser lost mid-drag that leaves the robot settling, the loop falling behind said."""
 
