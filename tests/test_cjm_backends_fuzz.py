@@ -179,7 +179,7 @@ def rounding_bound(controller: CJMController, q: np.ndarray) -> float:
     :func:`condition_number` ``kappa`` times a backward-error constant of order ``m n``
     (``m`` task and constraint rows, ``n`` joints; measured over 10,000 fuzz draws: the
     two backends at most 82 ``eps kappa`` apart, the smallest ``2 m n`` is 72)."""
-    rows = controller.task_rows + sum(c.dim for c in controller.constraints)
+    rows = controller.setup.task_rows + sum(c.dim for c in controller.constraints)
     return 2.0 * rows * controller.model.nv * np.finfo(float).eps * condition_number(controller, q)
 
 
@@ -201,8 +201,10 @@ def condition_number(controller: CJMController, q: np.ndarray) -> float:
     free = np.setdiff1d(np.arange(model.nv), info.saturated_joints)
     if free.size == 0:  # every joint held: nothing solved
         return 1.0
-    jacobian = controller._task_jacobian(np.vstack(
-        [pin.getFrameJacobian(model, data, f, pin.LOCAL) for f in controller.ee_frame_ids]))[:, free]
+    setup = controller.setup
+    stacked = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL) for f in controller.ee_frame_ids])
+    jacobian = (stacked if setup.task_entries is None
+                else setup.task_scale[:, None] * stacked[setup.task_entries])[:, free]
     if held:
         rows = np.vstack([controller.constraints[i].rows(model, data, controller.constraint_frames[i])[0]
                           for i in held])[:, free]

@@ -75,19 +75,38 @@ PYBIND11_MODULE(_step, module) {
            py::arg("limited_q"), py::arg("limited_v"), py::arg("q_min"), py::arg("q_max"),
            py::arg("position_gain"), py::arg("position_limits"), py::arg("box_test"));
 
+  py::class_<cjm::Tolerances>(module, "Tolerances")
+      .def(py::init([](double equality, double twist, double barrier, double rank,
+                       double pre_chain_pivot_ratio, double pre_chain_min_singular_value,
+                       double fast_path_min_sigma, double least_squares_rcond,
+                       double conflict_residual, double rows, double at_bound, double box_margin,
+                       double still_direction) {
+             return cjm::Tolerances{equality, twist, barrier, rank, pre_chain_pivot_ratio,
+                                    pre_chain_min_singular_value, fast_path_min_sigma,
+                                    least_squares_rcond, conflict_residual, rows, at_bound,
+                                    box_margin, still_direction};
+           }),
+           py::arg("equality"), py::arg("twist"), py::arg("barrier"), py::arg("rank"),
+           py::arg("pre_chain_pivot_ratio"), py::arg("pre_chain_min_singular_value"),
+           py::arg("fast_path_min_sigma"), py::arg("least_squares_rcond"),
+           py::arg("conflict_residual"), py::arg("rows"), py::arg("at_bound"),
+           py::arg("box_margin"), py::arg("still_direction"),
+           "controllers.cjm.tolerances.StepTolerances, field by field.");
+
   py::class_<cjm::Step>(module, "Step")
       .def(py::init([](Index nq, Index nv, Index task_rows, double damping, double threshold,
                        double max_damping, bool general_only,
                        std::vector<cjm::ConstraintPlan> constraints, cjm::JointBox box,
-                       double posture_gain, cjm::Vector posture_target) {
+                       double posture_gain, cjm::Vector posture_target,
+                       cjm::Tolerances tolerances) {
              return new cjm::Step(nq, nv, task_rows, cjm::DampingPolicy{damping, threshold, max_damping},
                                   general_only, std::move(constraints), std::move(box),
-                                  posture_gain, std::move(posture_target));
+                                  posture_gain, std::move(posture_target), tolerances);
            }),
            py::arg("nq"), py::arg("nv"), py::arg("task_rows"), py::arg("damping"),
            py::arg("threshold"), py::arg("max_damping"), py::arg("general_only"),
            py::arg("constraints"), py::arg("box"), py::arg("posture_gain"),
-           py::arg("posture_target"))
+           py::arg("posture_target"), py::arg("tolerances"))
       .def_property_readonly("report", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.report().data(), {step.report().size()}, self);
@@ -128,12 +147,13 @@ PYBIND11_MODULE(_step, module) {
            "universe; ``frames``: (parent joint, placement 4x4), the EE frames then one per "
            "constraint; ``step`` is copied.")
       .def("set_affine", [](cjm::Pipeline& pipeline, Index index, cjm::RowMatrix of_x,
-                            cjm::RowMatrix of_f, cjm::Vector offset) {
-             pipeline.set_affine(index, cjm::AffineTerms{std::move(of_x), std::move(of_f), std::move(offset)});
-           }, py::arg("index"), py::arg("of_x"), py::arg("of_f"), py::arg("offset"))
-      .def("set_policy", [](cjm::Pipeline& pipeline, double damping, double threshold, double max_damping) {
-             pipeline.set_policy(cjm::DampingPolicy{damping, threshold, max_damping});
-           }, py::arg("damping"), py::arg("threshold"), py::arg("max_damping"))
+                            cjm::RowMatrix of_f, cjm::Vector offset, cjm::RowMatrix of_x_per_gain,
+                            cjm::Vector offset_per_gain) {
+             pipeline.set_affine(index, cjm::AffineTerms{std::move(of_x), std::move(of_f),
+                                                         std::move(of_x_per_gain), std::move(offset),
+                                                         std::move(offset_per_gain)});
+           }, py::arg("index"), py::arg("of_x"), py::arg("of_f"), py::arg("offset"),
+           py::arg("of_x_per_gain"), py::arg("offset_per_gain"))
       .def("load", [](cjm::Pipeline& pipeline, py::handle q, py::handle twist) {
              return load_vector(q, pipeline.q()) && load_vector(twist, pipeline.twist());
            }, py::arg("q"), py::arg("twist"),
@@ -166,6 +186,10 @@ PYBIND11_MODULE(_step, module) {
       })
       .def_property_readonly("posture", [](py::object self) {
         auto& vector = self.cast<cjm::Pipeline&>().posture();
+        return view(vector.data(), {vector.size()}, self);
+      })
+      .def_property_readonly("gains", [](py::object self) {
+        auto& vector = self.cast<cjm::Pipeline&>().gains();
         return view(vector.data(), {vector.size()}, self);
       })
       .def_property_readonly("anchors", [](py::object self) {
