@@ -84,8 +84,8 @@ class BoxTest:
     Every bound of :meth:`JointBounds.box` is affine in ``(qd, q)`` while ``q`` is inside
     its position limits, so the whole test is one product ``M [qd; q; 1] <= 0`` with a
     constant ``M``: one matrix product instead of the eight NumPy calls of
-    :meth:`JointBounds.box` (docs/design.md section 16). It answers False, never wrongly True, when ``q`` is past a limit;
-    the caller then computes the exact box.
+    :meth:`JointBounds.box` (docs/design.md section 8.2). It answers False, never wrongly
+    True, when ``q`` is past a limit; the caller then computes the exact box.
     """
 
     def __init__(self, bounds: JointBounds, nq: int, nv: int, tolerance: float = 1e-9) -> None:

@@ -123,13 +123,15 @@ class AffineTerms:
         self.offset_per_gain = terms_at(zero, zero, 1.0) - self.offset
         self.of_x_per_gain = np.column_stack(
             [terms_at(e, zero, 1.0) - self.offset_per_gain - self.offset for e in np.eye(3)]) - self.of_x
+        #: ``[t_0, T_x, T_K, t_K]``: the terms are this times ``[1; x; K x; K]``
+        self._stacked = np.column_stack([self.offset, self.of_x, self.of_x_per_gain,
+                                         self.offset_per_gain])
 
     def write(self, x: np.ndarray, f: np.ndarray | None, terms: np.ndarray) -> None:
         """The terms at ``(x, f)`` and the constraint's gain now."""
         gain = self.constraint.gain
-        np.dot(self.of_x + gain * self.of_x_per_gain, x, out=terms)
-        terms += self.offset
-        terms += gain * self.offset_per_gain
+        x0, x1, x2 = x.tolist()
+        np.dot(self._stacked, [1.0, x0, x1, x2, gain * x0, gain * x1, gain * x2, gain], out=terms)
         if f is not None:
             terms += self.of_f @ f
 

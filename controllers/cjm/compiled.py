@@ -4,8 +4,8 @@
 to ``controllers.cjm._step`` once (the tolerances included), and then runs
 ``solve(q, twist) -> (qd, report)`` as the Python reference
 (:class:`~controllers.cjm.python_step.PythonStep`) does: one C++ call a step when every
-constraint has an affine form (a hole's centre, velocity and gain are sent as data at
-every step), else Python writes the other constraints' terms between two calls.
+constraint has an affine form (the C++ side reads a hole's centre, velocity and gain
+before every step, as data), else Python writes the other constraints' terms between two calls.
 tests/test_compiled_step.py and tests/test_cjm_backends_fuzz.py hold the two equal.
 """
 
@@ -17,7 +17,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..base import StepStatus, checked_inputs
-from . import _step
+from ._step import EVENTS, REPORT_FIELDS as CPP_REPORT_FIELDS, JointBox, Pipeline, Step, Tolerances
+from ._step import ConstraintPlan as CompiledPlan
 from .analytical import TermsWriter, terms_size
 from .python_step import paper_form_defined
 from .report import METHODS, Event, StepReport
@@ -29,8 +30,8 @@ STATUSES = tuple(StepStatus)
 REPORT_FIELDS = ("status", "method", "sigma_min", "damping", "scale", "equality_residual",
                  "saturated_count", "active_barrier_count", "event_count",
                  "saturation_joint_count")
-if (tuple(sorted(_step.REPORT_FIELDS, key=_step.REPORT_FIELDS.get)) != REPORT_FIELDS
-        or any(Event[name.upper()] != code for name, code in _step.EVENTS.items())):
+if (tuple(sorted(CPP_REPORT_FIELDS, key=CPP_REPORT_FIELDS.get)) != REPORT_FIELDS
+        or any(Event[name.upper()] != code for name, code in EVENTS.items())):
     raise ImportError("controllers.cjm._step reports other fields: rebuild it (pip install -e .)")
 
 #: largest difference (m, or 1 for rotations and Jacobians) the copy of the model may
@@ -66,10 +67,10 @@ def unaligned_axis(joint: pin.JointModel) -> np.ndarray:
     return column[:3].copy() if "Prismatic" in joint.shortname() else column[3:].copy()
 
 
-def joint_box(setup: StepSetup) -> _step.JointBox:
+def joint_box(setup: StepSetup) -> JointBox:
     """The joint box of ``setup.bounds`` (and its fast test) for the C++ step."""
     bounds = setup.bounds
-    return _step.JointBox(
+    return JointBox(
         velocity_lower=bounds.velocity_box[0], velocity_upper=bounds.velocity_box[1],
         velocity_limit=bounds.velocity_limit, limited_q=bounds.limited_q.tolist(),
         limited_v=bounds.limited_v.tolist(), q_min=bounds.q_limits[0], q_max=bounds.q_limits[1],
@@ -96,22 +97,22 @@ class CompiledStep:
         one_coordinate = all(model.nqs[j] == 1 and model.nvs[j] == 1 for j in range(1, model.njoints))
         self._posture_in_python = self._use_posture and not one_coordinate
         policy = setup.policy
-        step = _step.Step(
+        step = Step(
             nq=model.nq, nv=model.nv, task_rows=setup.task_rows, damping=policy.damping,
             threshold=policy.threshold, max_damping=policy.max_damping,
             general_only=setup.form == "general",
-            constraints=[_step.ConstraintPlan(
+            constraints=[CompiledPlan(
                 rows=plan.constraint.dim, equality=plan.constraint.is_equality,
                 analytical=plan.analytical, pre=plan.split.pre.tolist() if plan.analytical else [],
                 post=plan.split.post.tolist() if plan.analytical else []) for plan in plans],
             box=joint_box(setup), posture_gain=setup.posture_gain,
             posture_target=setup.posture if one_coordinate and self._use_posture else np.zeros(0),
-            tolerances=_step.Tolerances(**dataclasses.asdict(setup.tolerances)))
+            tolerances=Tolerances(**dataclasses.asdict(setup.tolerances)))
         frames = [*setup.ee_frame_ids, *(plan.frame_id for plan in plans)]
         task_entries = (np.arange(setup.task_size) if setup.task_entries is None
                         else setup.task_entries)
         #: the C++ pipeline (kinematics, terms and step)
-        self.pipeline = pipeline = _step.Pipeline(
+        self.pipeline = pipeline = Pipeline(
             joints=joint_specs(model),
             frames=[(model.frames[f].parentJoint, model.frames[f].placement.homogeneous)
                     for f in frames],
@@ -125,16 +126,14 @@ class CompiledStep:
         self._saturation_joints = step.saturation_joints
         terms, placements = pipeline.terms, pipeline.placements
         offsets = np.cumsum([0] + [terms_size(plan.constraint.dim) for plan in plans])
-        #: (index, constraint) of those whose terms C++ computes from their anchor and gain
-        self._affine = []
         #: (writer, terms view, link rotation and translation views) of the others
         self._in_python: list[tuple[TermsWriter, np.ndarray, np.ndarray, np.ndarray]] = []
         for i, writer in enumerate(writers):
             if writer.affine_terms is not None:
                 affine = writer.affine_terms
+                # the C++ side reads the constraint's anchor and gain before every step
                 pipeline.set_affine(i, affine.of_x, affine.of_f, affine.offset,
-                                    affine.of_x_per_gain, affine.offset_per_gain)
-                self._affine.append((i, writer.constraint))
+                                    affine.of_x_per_gain, affine.offset_per_gain, writer.constraint)
             else:
                 row = placements[len(setup.ee_frame_ids) + i]
                 self._in_python.append((writer, terms[offsets[i]:offsets[i + 1]],
@@ -167,10 +166,6 @@ class CompiledStep:
         """``qd`` for the stacked EE twist at ``q`` and the step's report (section 8.3);
         bad input raises ``ValueError`` as the Python step does."""
         pipeline = self.pipeline
-        anchors, gains = pipeline.anchors, pipeline.gains
-        for index, constraint in self._affine:  # the constraints' data, every step
-            anchors[index] = constraint.affine_anchor()
-            gains[index] = constraint.gain
         paper_form = True
         if self._one_call:
             qd = pipeline.solve(q, twist, self._use_posture, True)
@@ -210,6 +205,9 @@ class CompiledStep:
         event first, as the Python step records it)."""
         (status, method, sigma_min, damping, scale, equality_residual, saturated, barriers,
          events, saturation_joints) = self._report.tolist()
+        if paper_form and not (saturated or barriers or events):  # the common step
+            return StepReport(STATUSES[int(status)], METHODS[int(method)], sigma_min, damping,
+                              scale, equality_residual)
         recorded = () if paper_form else ((Event.PAPER_FORM_UNDEFINED, 0.0, 0.0, 0.0),)
         if events:
             recorded += tuple((Event(int(code)), a, b, c)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Iterable, Literal
+from typing import Iterable, Literal
 
 import numpy as np
 import pinocchio as pin
@@ -18,9 +18,6 @@ from .python_step import PythonStep
 from .report import solve_info
 from .step_setup import ConstraintPlan, Form, StepSetup
 from .tolerances import StepTolerances
-
-if TYPE_CHECKING:
-    from .compiled import CompiledStep
 
 Backend = Literal["auto", "compiled", "python"]
 
@@ -207,17 +204,18 @@ class CJMController(Controller):
                         "at every configuration, as a hole's are): use 'nullspace'")
         #: everything the step needs (:class:`controllers.cjm.step_setup.StepSetup`)
         self.setup = self._step_setup()
-        #: the backend's step: ``step.solve(q, twist) -> (qd, report)``
-        self.step: PythonStep | CompiledStep = PythonStep(self.setup, self.data)
+        step = PythonStep(self.setup, self.data)
         if self.backend == "compiled":
             from .compiled import CompiledStep, KinematicsMismatch
 
             try:
-                self.step = CompiledStep(self.setup)
+                step = CompiledStep(self.setup)
             except KinematicsMismatch:
                 if not self._python_if_needed:
                     raise
                 self.backend = "python"
+        #: the backend's step (PythonStep or CompiledStep): ``step.solve(q, twist) -> (qd, report)``
+        self.step = step
 
     def _step_setup(self) -> StepSetup:
         """The :class:`StepSetup` of the controller's current options and constraints."""

@@ -36,6 +36,11 @@ class PythonStep:
         self.data = data
         self._square_plans: dict[int, SquarePreChain] = {}
         self._active: list[int] = []
+        self._equalities, self._barriers = setup.equalities, setup.barriers
+        #: one task the analytical form may take (form auto, one EE, its full twist)
+        self._analytical_task = setup.form == "auto" and setup.paper_task
+        self._nq, self._task_size = setup.model.nq, setup.task_size
+        self._posture_free = list(setup.posture_free) if setup.posture_free else None
 
     # -- the step template (controllers.base.Controller.solve) ---------------------------
 
@@ -43,7 +48,7 @@ class PythonStep:
         """``qd`` for the stacked EE twist at ``q`` and the step's report. Bad input
         raises ``ValueError``; a failed step gives zeros."""
         setup = self.setup
-        q, twist = checked_inputs(q, twist, setup.model.nq, setup.task_size)
+        q, twist = checked_inputs(q, twist, self._nq, self._task_size)
         report = ReportBuilder()
         ee_jacobian = self._kinematics(q)
         task = self._task(twist)
@@ -98,7 +103,7 @@ class PythonStep:
         if change > EQUALITY_TOLERANCE * (1.0 + float(np.max(np.abs(qd), initial=0.0))):
             report.saturated_joints = tuple(np.flatnonzero(clipped != qd).tolist())
             report.event(Event.CLIPPED, StepStatus.CONSTRAINT_DEGRADED, change)
-            rows, rhs = self.rows(self.setup.equalities)
+            rows, rhs = self.rows(self._equalities)
             if rows.shape[0]:
                 report.equality_residual = float(np.max(np.abs(rows @ clipped - rhs)))
         return clipped
@@ -117,17 +122,16 @@ class PythonStep:
 
     def _solve(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
                report: ReportBuilder) -> np.ndarray:
-        setup = self.setup
-        self._active = list(setup.equalities)
+        self._active = list(self._equalities)
         qd = self._solve_rows(q, ee_jacobian, twist, self._active, report)
-        if setup.barriers:
+        if self._barriers:
             qd = self._activate_barriers(q, ee_jacobian, twist, qd, report)
         return qd
 
     def _activate_barriers(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
                            qd: np.ndarray, report: ReportBuilder) -> np.ndarray:
         """Active set over the barriers: hold the most violated one as an equality, again."""
-        barriers = self.setup.barriers
+        barriers = self._barriers
         waiting = [i for i in barriers if i not in self._active]
         while waiting:
             violations = [self._barrier_violation(i, qd) for i in waiting]
@@ -147,7 +151,7 @@ class PythonStep:
                     active: list[int], report: ReportBuilder) -> np.ndarray:
         """The analytical form where it applies, else the general form, for these rows."""
         setup = self.setup
-        if len(active) == 1 and setup.form == "auto" and setup.paper_task:
+        if len(active) == 1 and self._analytical_task:
             qd = self._solve_analytical(q, ee_jacobian, twist, active[0], report)
             if qd is not None:
                 return qd
@@ -196,7 +200,8 @@ class PythonStep:
         if setup.posture_gain == 0.0:
             return None
         difference = pin.difference(setup.model, q, setup.posture)
-        difference[list(setup.posture_free)] = 0.0
+        if self._posture_free is not None:
+            difference[self._posture_free] = 0.0
         return setup.posture_gain * difference
 
     # -- joint limits (docs/design.md section 9) -----------------------------------------
@@ -206,7 +211,7 @@ class PythonStep:
         """Saturation in the null space (module :mod:`controllers.cjm.saturation`), the
         barriers activated again against the saturated command."""
         setup = self.setup
-        barriers = setup.barriers
+        barriers = self._barriers
         for _ in range(len(barriers) + 1):
             rows, rows_rhs = self.rows(self._active)
             result = saturate_in_null_space(rows, rows_rhs, ee_jacobian, twist, lower, upper,

@@ -9,7 +9,6 @@ written there and nowhere else.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import NamedTuple, Sequence
 
@@ -67,9 +66,9 @@ class StepReport(NamedTuple):
     error: str = ""
 
 
-@dataclass
 class ReportBuilder:
-    """The Python step's report while it runs (frozen into a :class:`StepReport`)."""
+    """The Python step's report while it runs (frozen into a :class:`StepReport`); the
+    class attributes are the defaults (an empty report costs no assignment)."""
 
     status: StepStatus = StepStatus.OK
     method: str = ""
@@ -79,7 +78,7 @@ class ReportBuilder:
     equality_residual: float = 0.0
     saturated_joints: tuple[int, ...] = ()
     active_barriers: tuple[int, ...] = ()
-    events: list[tuple[Event, float, float, float]] = field(default_factory=list)
+    events: tuple[tuple[Event, float, float, float], ...] = ()
     saturation_joints: tuple[int, ...] = ()
     error: str = ""
 
@@ -88,27 +87,29 @@ class ReportBuilder:
         """Record ``event`` and lower the status to ``status`` if it is worse."""
         if status.severity > self.status.severity:
             self.status = status
-        self.events.append((event, a, b, c))
+        self.events += ((event, a, b, c),)
 
     def fail(self, event: Event, error: str = "") -> None:
         """The step failed (its command is zero)."""
         self.status, self.error = StepStatus.FAILED, error
-        self.events.append((event, 0.0, 0.0, 0.0))
+        self.events += ((event, 0.0, 0.0, 0.0),)
 
     def freeze(self) -> StepReport:
         return StepReport(self.status, self.method, self.sigma_min, self.damping, self.scale,
                           self.equality_residual, self.saturated_joints, self.active_barriers,
-                          tuple(self.events), self.saturation_joints, self.error)
+                          self.events, self.saturation_joints, self.error)
 
 
 def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
     """The :class:`SolveInfo` of a step: its figures, and its events worded in order
     (``joint_names``: the joint's name per velocity index)."""
-    info = SolveInfo(method=report.method, sigma_min=report.sigma_min, damping=report.damping,
-                     scale=report.scale, saturated_joints=report.saturated_joints,
-                     active_barriers=report.active_barriers,
-                     equality_residual=report.equality_residual)
-    for event, a, b, c in report.events:
+    (status, method, sigma_min, damping, scale, equality_residual, saturated_joints,
+     active_barriers, events, saturation_joints, error) = report
+    info = SolveInfo(status, method, "", sigma_min, damping, scale, saturated_joints,
+                     active_barriers, equality_residual)  # the notes below leave the status
+    if not events:
+        return info
+    for event, a, b, c in events:
         if event is Event.PRE_CHAIN_SINGULAR:
             info.message = PRE_CHAIN_SINGULAR_NOTE  # the note replaces the message
         elif event is Event.PAPER_FORM_UNDEFINED:
@@ -123,11 +124,11 @@ def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
             info.report(StepStatus.OK, rows_scaled_note(a))
         elif event is Event.TASK_MISSED:
             info.report(StepStatus.OK,
-                        task_missed_note(joint_names, report.saturation_joints, a, b))
+                        task_missed_note(joint_names, saturation_joints, a, b))
         elif event is Event.TASK_SCALED:
             info.report(StepStatus.OK, task_scaled_note(joint_names, int(a), b))
         elif event is Event.CLIPPED:
-            info.report(StepStatus.OK, clipped_note(list(report.saturated_joints), a))
+            info.report(StepStatus.OK, clipped_note(list(saturated_joints), a))
         elif event is Event.RESIDUAL:
             info.report(StepStatus.OK, residual_note(a))
         elif event is Event.NO_CONVERGENCE:
@@ -135,8 +136,7 @@ def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
         elif event is Event.NON_FINITE:
             info.message = NON_FINITE_NOTE
         elif event is Event.LINEAR_ALGEBRA_ERROR:
-            info.message = report.error
-    info.status = report.status
+            info.message = error
     return info
 
 

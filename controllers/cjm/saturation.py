@@ -133,7 +133,8 @@ def task_scale_limit(base: np.ndarray, direction: np.ndarray, lower: np.ndarray,
 
 
 def gap_to_bound(bound: float, base: float, noise: float) -> float:
-    """``bound - base``, exactly 0 when within the rounding of the base (:data:`controllers.cjm.tolerances.AT_BOUND`)."""
+    """``bound - base``, exactly 0 when within the rounding of the base
+    (:data:`controllers.cjm.tolerances.AT_BOUND`)."""
     gap = bound - base
     return 0.0 if abs(gap) <= AT_BOUND * (1.0 + abs(bound) + noise) else gap
 

@@ -39,8 +39,27 @@ bool load_vector(py::handle source, cjm::Vector& target) {
   return target.allFinite();
 }
 
+//! A Pipeline that also holds the constraints with an affine form, whose anchor
+//! (``affine_anchor()``, 6 entries) and ``gain`` it copies in before every step: the
+//! constraints' data read each step, with no Python loop (docs/design.md section 16).
+struct BoundPipeline : cjm::Pipeline {
+  using cjm::Pipeline::Pipeline;
+  std::vector<std::pair<Index, py::object>> sources;
+
+  void read_sources() {
+    for (auto& [index, source] : sources) {
+      const auto anchor = source.attr("affine_anchor")().cast<py::array_t<double, py::array::c_style | py::array::forcecast>>();
+      if (anchor.ndim() != 1 || anchor.shape(0) != 6)
+        throw std::invalid_argument("affine_anchor() must give 6 entries");
+      const auto entries = anchor.unchecked<1>();
+      for (py::ssize_t i = 0; i < 6; ++i) anchors()(index, i) = entries(i);
+      gains()(index) = source.attr("gain").cast<double>();
+    }
+  }
+};
+
 //! The step into a new array (the GIL released while it runs).
-py::array_t<double> finish(cjm::Pipeline& pipeline, bool use_posture, bool analytical_allowed) {
+py::array_t<double> finish(BoundPipeline& pipeline, bool use_posture, bool analytical_allowed) {
   py::array_t<double> qd(pipeline.nv());
   Eigen::Map<cjm::Vector> qd_map(qd.mutable_data(), qd.size());
   py::gil_scoped_release release;
@@ -128,7 +147,7 @@ PYBIND11_MODULE(_step, module) {
         return view(step.saturation_joints().data(), {step.saturation_joints().size()}, self);
       });
 
-  py::class_<cjm::Pipeline>(module, "Pipeline")
+  py::class_<BoundPipeline>(module, "Pipeline")
       .def(py::init([](std::vector<std::tuple<std::string, Index, Eigen::Matrix4d, Eigen::Vector3d>> joints,
                        std::vector<std::tuple<Index, Eigen::Matrix4d>> frames, const cjm::Step& step,
                        Index ee_count, std::vector<Index> task_entries, cjm::Vector task_scale) {
@@ -138,7 +157,7 @@ PYBIND11_MODULE(_step, module) {
              std::vector<cjm::FrameSpec> frame_specs;
              for (auto& [parent, placement] : frames)
                frame_specs.push_back(cjm::FrameSpec{parent, placement});
-             return new cjm::Pipeline(cjm::Kinematics(joint_specs, frame_specs), step, ee_count,
+             return new BoundPipeline(cjm::Kinematics(joint_specs, frame_specs), step, ee_count,
                                       std::move(task_entries), std::move(task_scale));
            }),
            py::arg("joints"), py::arg("frames"), py::arg("step"), py::arg("ee_count"),
@@ -146,27 +165,36 @@ PYBIND11_MODULE(_step, module) {
            "``joints``: (kind, parent, placement 4x4, axis) per joint of pin.Model after the "
            "universe; ``frames``: (parent joint, placement 4x4), the EE frames then one per "
            "constraint; ``step`` is copied.")
-      .def("set_affine", [](cjm::Pipeline& pipeline, Index index, cjm::RowMatrix of_x,
+      .def("set_affine", [](BoundPipeline& pipeline, Index index, cjm::RowMatrix of_x,
                             cjm::RowMatrix of_f, cjm::Vector offset, cjm::RowMatrix of_x_per_gain,
-                            cjm::Vector offset_per_gain) {
+                            cjm::Vector offset_per_gain, py::object source) {
              pipeline.set_affine(index, cjm::AffineTerms{std::move(of_x), std::move(of_f),
                                                          std::move(of_x_per_gain), std::move(offset),
                                                          std::move(offset_per_gain)});
+             pipeline.sources.emplace_back(index, std::move(source));
            }, py::arg("index"), py::arg("of_x"), py::arg("of_f"), py::arg("offset"),
-           py::arg("of_x_per_gain"), py::arg("offset_per_gain"))
-      .def("load", [](cjm::Pipeline& pipeline, py::handle q, py::handle twist) {
+           py::arg("of_x_per_gain"), py::arg("offset_per_gain"), py::arg("source"),
+           "Constraint ``index``'s affine map; ``source`` (the constraint) gives its anchor "
+           "and gain, read before every step.")
+      .def("load", [](BoundPipeline& pipeline, py::handle q, py::handle twist) {
              return load_vector(q, pipeline.q()) && load_vector(twist, pipeline.twist());
            }, py::arg("q"), py::arg("twist"),
            "Copies q and the stacked twist in: false unless both are finite float64 vectors "
            "of the right sizes.")
-      .def("prepare", &cjm::Pipeline::prepare, py::call_guard<py::gil_scoped_release>(),
-           "The kinematics, the task rows and the affine terms at the loaded q.")
+      .def("prepare", [](BoundPipeline& pipeline) {
+             pipeline.read_sources();
+             py::gil_scoped_release release;
+             pipeline.prepare();
+           },
+           "The constraints' anchors and gains read, then the kinematics, the task rows and "
+           "the affine terms at the loaded q.")
       .def("finish", &finish, py::arg("use_posture"), py::arg("analytical_allowed"),
            "The step, after prepare() and the terms Python writes: a new qd.")
-      .def("solve", [](cjm::Pipeline& pipeline, py::handle q, py::handle twist, bool use_posture,
+      .def("solve", [](BoundPipeline& pipeline, py::handle q, py::handle twist, bool use_posture,
                        bool analytical_allowed) -> py::object {
              if (!load_vector(q, pipeline.q()) || !load_vector(twist, pipeline.twist()))
                return py::none();
+             pipeline.read_sources();
              {
                py::gil_scoped_release release;
                pipeline.prepare();
@@ -174,33 +202,29 @@ PYBIND11_MODULE(_step, module) {
              return finish(pipeline, use_posture, analytical_allowed);
            }, py::arg("q"), py::arg("twist"), py::arg("use_posture"), py::arg("analytical_allowed"),
            "load, prepare and finish in one call; None when load() would be false.")
-      .def_property_readonly("step", [](cjm::Pipeline& pipeline) -> cjm::Step& { return pipeline.step(); },
+      .def_property_readonly("step", [](BoundPipeline& pipeline) -> cjm::Step& { return pipeline.step(); },
                              py::return_value_policy::reference_internal)
       .def_property_readonly("q", [](py::object self) {
-        auto& vector = self.cast<cjm::Pipeline&>().q();
+        auto& vector = self.cast<BoundPipeline&>().q();
         return view(vector.data(), {vector.size()}, self);
       })
       .def_property_readonly("terms", [](py::object self) {
-        auto& vector = self.cast<cjm::Pipeline&>().terms();
+        auto& vector = self.cast<BoundPipeline&>().terms();
         return view(vector.data(), {vector.size()}, self);
       })
       .def_property_readonly("posture", [](py::object self) {
-        auto& vector = self.cast<cjm::Pipeline&>().posture();
-        return view(vector.data(), {vector.size()}, self);
-      })
-      .def_property_readonly("gains", [](py::object self) {
-        auto& vector = self.cast<cjm::Pipeline&>().gains();
+        auto& vector = self.cast<BoundPipeline&>().posture();
         return view(vector.data(), {vector.size()}, self);
       })
       .def_property_readonly("anchors", [](py::object self) {
-        auto& matrix = self.cast<cjm::Pipeline&>().anchors();
+        auto& matrix = self.cast<BoundPipeline&>().anchors();
         return view(matrix.data(), {matrix.rows(), matrix.cols()}, self);
       })
       .def_property_readonly("placements", [](py::object self) {
-        return read_only(self.cast<cjm::Pipeline&>().placements(), self);
+        return read_only(self.cast<BoundPipeline&>().placements(), self);
       })
       .def_property_readonly("jacobians", [](py::object self) {
-        return read_only(self.cast<cjm::Pipeline&>().jacobians(), self);
+        return read_only(self.cast<BoundPipeline&>().jacobians(), self);
       });
 
   py::dict fields;

@@ -45,7 +45,8 @@ class Pipeline {
   Vector& posture() { return posture_; }
   //! Per constraint: its world anchor point, then its world velocity (affine ones only).
   RowMatrix& anchors() { return anchors_; }
-  //! Per constraint: its drift-feedback gain (affine ones only).
+  //! Per constraint: its drift-feedback gain (affine ones only; with the anchors, read
+  //! from the constraint before every step by the bindings).
   Vector& gains() { return gains_; }
   const RowMatrix& placements() const { return kinematics_.placements(); }
   const RowMatrix& jacobians() const { return kinematics_.jacobians(); }
