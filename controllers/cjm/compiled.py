@@ -21,7 +21,7 @@ from ._step import EVENTS, REPORT_FIELDS as CPP_REPORT_FIELDS, JointBox, Pipelin
 from ._step import ConstraintPlan as CompiledPlan
 from .analytical import TermsWriter, terms_size
 from .python_step import paper_form_defined
-from .report import METHODS, Event, StepReport
+from .report import EVENT_BY_CODE, METHODS, Event, StepReport
 from .step_setup import StepSetup
 
 #: StepStatus by the C++ code (the enum's order, best to worst)
@@ -208,16 +208,15 @@ class CompiledStep:
         if paper_form and not (saturated or barriers or events):  # the common step
             return StepReport(STATUSES[int(status)], METHODS[int(method)], sigma_min, damping,
                               scale, equality_residual)
-        recorded = () if paper_form else ((Event.PAPER_FORM_UNDEFINED, 0.0, 0.0, 0.0),)
+        recorded = [] if paper_form else [(Event.PAPER_FORM_UNDEFINED, 0.0, 0.0, 0.0)]
         if events:
-            recorded += tuple((Event(int(code)), a, b, c)
-                              for code, a, b, c in self._events[:int(events)].tolist())
+            recorded += [(EVENT_BY_CODE[int(code)], a, b, c)
+                         for code, a, b, c in self._events[:int(events)].tolist()]
         return StepReport(
-            status=STATUSES[int(status)], method=METHODS[int(method)], sigma_min=sigma_min,
-            damping=damping, scale=scale, equality_residual=equality_residual,
-            saturated_joints=tuple(self._saturated[:int(saturated)].tolist()) if saturated else (),
-            active_barriers=(tuple(self._active_barriers[:int(barriers)].tolist())
-                             if barriers else ()),
-            events=recorded,
-            saturation_joints=(tuple(self._saturation_joints[:int(saturation_joints)].tolist())
-                               if saturation_joints else ()))
+            STATUSES[int(status)], METHODS[int(method)], sigma_min, damping, scale,
+            equality_residual,
+            tuple(self._saturated[:int(saturated)].tolist()) if saturated else (),
+            tuple(self._active_barriers[:int(barriers)].tolist()) if barriers else (),
+            tuple(recorded),
+            (tuple(self._saturation_joints[:int(saturation_joints)].tolist())
+             if saturation_joints else ()))

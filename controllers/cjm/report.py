@@ -35,6 +35,8 @@ class Event(IntEnum):
     LINEAR_ALGEBRA_ERROR = 13  # failed: a LAPACK error (StepReport.error says which)
 
 
+#: Event by its code (the C++ report's event log holds codes)
+EVENT_BY_CODE = {event.value: event for event in Event}
 #: SolveInfo.method by its code in the C++ report (0: none yet)
 METHODS = ("", "analytical", "general", "saturated")
 
@@ -109,28 +111,27 @@ def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
                      active_barriers, equality_residual)  # the notes below leave the status
     if not events:
         return info
-    for event, a, b, c in events:
-        if event is Event.PRE_CHAIN_SINGULAR:
-            info.message = PRE_CHAIN_SINGULAR_NOTE  # the note replaces the message
-        elif event is Event.PAPER_FORM_UNDEFINED:
-            info.report(StepStatus.OK, PAPER_FORM_NOTE)
-        elif event is Event.TASK_RESIDUAL:
+    for event, a, b, c in events:  # the frequent events first
+        if event is Event.TASK_RESIDUAL:
             info.report(StepStatus.OK, task_residual_note(a, b))
-        elif event is Event.CONFLICT:
-            info.report(StepStatus.OK, conflict_note(int(a), int(b), c))
-        elif event is Event.NO_FREE_JOINT:
-            info.report(StepStatus.OK, NO_FREE_JOINT_NOTE)
-        elif event is Event.ROWS_SCALED:
-            info.report(StepStatus.OK, rows_scaled_note(a))
         elif event is Event.TASK_MISSED:
-            info.report(StepStatus.OK,
-                        task_missed_note(joint_names, saturation_joints, a, b))
+            info.report(StepStatus.OK, task_missed_note(joint_names, saturation_joints, a, b))
         elif event is Event.TASK_SCALED:
             info.report(StepStatus.OK, task_scaled_note(joint_names, int(a), b))
         elif event is Event.CLIPPED:
             info.report(StepStatus.OK, clipped_note(list(saturated_joints), a))
         elif event is Event.RESIDUAL:
             info.report(StepStatus.OK, residual_note(a))
+        elif event is Event.CONFLICT:
+            info.report(StepStatus.OK, conflict_note(int(a), int(b), c))
+        elif event is Event.ROWS_SCALED:
+            info.report(StepStatus.OK, rows_scaled_note(a))
+        elif event is Event.NO_FREE_JOINT:
+            info.report(StepStatus.OK, NO_FREE_JOINT_NOTE)
+        elif event is Event.PRE_CHAIN_SINGULAR:
+            info.message = PRE_CHAIN_SINGULAR_NOTE  # the note replaces the message
+        elif event is Event.PAPER_FORM_UNDEFINED:
+            info.report(StepStatus.OK, PAPER_FORM_NOTE)
         elif event is Event.NO_CONVERGENCE:
             info.message = NO_CONVERGENCE_NOTE
         elif event is Event.NON_FINITE:
