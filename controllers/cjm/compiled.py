@@ -26,7 +26,7 @@ from .step_setup import StepSetup
 
 #: StepStatus by the C++ code (the enum's order, best to worst)
 STATUSES = tuple(StepStatus)
-#: the C++ report's entries, in the order CompiledStep._report unpacks them
+#: the C++ report's entries, in the order CompiledStep unpacks them
 REPORT_FIELDS = ("status", "method", "sigma_min", "damping", "scale", "equality_residual",
                  "saturated_count", "active_barrier_count", "event_count",
                  "saturation_joint_count")
@@ -96,6 +96,7 @@ class CompiledStep:
         self._use_posture = setup.posture_gain > 0.0
         one_coordinate = all(model.nqs[j] == 1 and model.nvs[j] == 1 for j in range(1, model.njoints))
         self._posture_in_python = self._use_posture and not one_coordinate
+        self._posture_free = list(setup.posture_free) if setup.posture_free else None
         policy = setup.policy
         step = Step(
             nq=model.nq, nv=model.nv, task_rows=setup.task_rows, damping=policy.damping,
@@ -177,7 +178,10 @@ class CompiledStep:
             pipeline.prepare()
             paper_form = self._write_in_python()
             qd = pipeline.finish(self._use_posture, paper_form)
-        return qd, self._step_report(paper_form)
+        report = self._report.tolist()
+        if paper_form and not (report[6] or report[7] or report[8]):  # no list, no event
+            return qd, StepReport(STATUSES[int(report[0])], METHODS[int(report[1])], *report[2:6])
+        return qd, self._step_report(report, paper_form)
 
     def _checked(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return checked_inputs(q, twist, self.setup.model.nq, self.setup.task_size)
@@ -196,18 +200,17 @@ class CompiledStep:
         if self._posture_in_python:
             pipeline = self.pipeline
             difference = pin.difference(setup.model, pipeline.q, setup.posture)
-            difference[list(setup.posture_free)] = 0.0
+            if self._posture_free is not None:
+                difference[self._posture_free] = 0.0
             np.multiply(setup.posture_gain, difference, out=pipeline.posture)
         return paper_form
 
-    def _step_report(self, paper_form: bool) -> StepReport:
-        """The C++ report as a :class:`StepReport` (the paper's form undefined: its
-        event first, as the Python step records it)."""
+    def _step_report(self, report: list[float], paper_form: bool) -> StepReport:
+        """The C++ report (its entries, :data:`REPORT_FIELDS`) as a :class:`StepReport`
+        with its lists and events (the paper's form undefined: its event first, as the
+        Python step records it)."""
         (status, method, sigma_min, damping, scale, equality_residual, saturated, barriers,
-         events, saturation_joints) = self._report.tolist()
-        if paper_form and not (saturated or barriers or events):  # the common step
-            return StepReport(STATUSES[int(status)], METHODS[int(method)], sigma_min, damping,
-                              scale, equality_residual)
+         events, saturation_joints) = report
         recorded = [] if paper_form else [(Event.PAPER_FORM_UNDEFINED, 0.0, 0.0, 0.0)]
         if events:
             recorded += [(EVENT_BY_CODE[int(code)], a, b, c)

@@ -246,7 +246,7 @@ class CJMController(Controller):
         its report worded into :attr:`info`."""
         qd, report = self.step.solve(q, twist)
         info = self.info = solve_info(report, self.joint_names)
-        if info.status is StepStatus.FAILED and self.strict:
+        if self.strict and info.status is StepStatus.FAILED:
             raise SolverError(info.message)
         return qd
 

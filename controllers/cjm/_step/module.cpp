@@ -44,16 +44,28 @@ bool load_vector(py::handle source, cjm::Vector& target) {
 //! constraints' data read each step, with no Python loop (docs/design.md section 16).
 struct BoundPipeline : cjm::Pipeline {
   using cjm::Pipeline::Pipeline;
-  std::vector<std::pair<Index, py::object>> sources;
+
+  struct Source {
+    Index index;
+    py::object constraint, affine_anchor;  // the constraint and its bound affine_anchor
+  };
+  std::vector<Source> sources;
+  py::str gain_name{"gain"};
+
+  void add_source(Index index, py::object constraint) {
+    py::object method = constraint.attr("affine_anchor");
+    sources.push_back(Source{index, std::move(constraint), std::move(method)});
+  }
 
   void read_sources() {
-    for (auto& [index, source] : sources) {
-      const auto anchor = source.attr("affine_anchor")().cast<py::array_t<double, py::array::c_style | py::array::forcecast>>();
-      if (anchor.ndim() != 1 || anchor.shape(0) != 6)
-        throw std::invalid_argument("affine_anchor() must give 6 entries");
-      const auto entries = anchor.unchecked<1>();
-      for (py::ssize_t i = 0; i < 6; ++i) anchors()(index, i) = entries(i);
-      gains()(index) = source.attr("gain").cast<double>();
+    for (const Source& source : sources) {
+      const py::object anchor = source.affine_anchor();
+      if (!py::isinstance<py::array_t<double>>(anchor))
+        throw std::invalid_argument("affine_anchor() must give a float64 array");
+      const auto entries = py::reinterpret_borrow<py::array_t<double>>(anchor).unchecked<1>();
+      if (entries.shape(0) != 6) throw std::invalid_argument("affine_anchor() must give 6 entries");
+      for (py::ssize_t i = 0; i < 6; ++i) anchors()(source.index, i) = entries(i);
+      gains()(source.index) = source.constraint.attr(gain_name).cast<double>();
     }
   }
 };
@@ -171,7 +183,7 @@ PYBIND11_MODULE(_step, module) {
              pipeline.set_affine(index, cjm::AffineTerms{std::move(of_x), std::move(of_f),
                                                          std::move(of_x_per_gain), std::move(offset),
                                                          std::move(offset_per_gain)});
-             pipeline.sources.emplace_back(index, std::move(source));
+             pipeline.add_source(index, std::move(source));
            }, py::arg("index"), py::arg("of_x"), py::arg("of_f"), py::arg("offset"),
            py::arg("of_x_per_gain"), py::arg("offset_per_gain"), py::arg("source"),
            "Constraint ``index``'s affine map; ``source`` (the constraint) gives its anchor "
