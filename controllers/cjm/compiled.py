@@ -96,7 +96,6 @@ class CompiledStep:
         self._use_posture = setup.posture_gain > 0.0
         one_coordinate = all(model.nqs[j] == 1 and model.nvs[j] == 1 for j in range(1, model.njoints))
         self._posture_in_python = self._use_posture and not one_coordinate
-        self._posture_free = list(setup.posture_free) if setup.posture_free else None
         policy = setup.policy
         step = Step(
             nq=model.nq, nv=model.nv, task_rows=setup.task_rows, damping=policy.damping,
@@ -200,8 +199,8 @@ class CompiledStep:
         if self._posture_in_python:
             pipeline = self.pipeline
             difference = pin.difference(setup.model, pipeline.q, setup.posture)
-            if self._posture_free is not None:
-                difference[self._posture_free] = 0.0
+            if setup.posture_free is not None:
+                difference[setup.posture_free] = 0.0
             np.multiply(setup.posture_gain, difference, out=pipeline.posture)
         return paper_form
 

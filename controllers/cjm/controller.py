@@ -15,7 +15,7 @@ from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from .analytical import ChainSplit, chain_split
 from .python_step import PythonStep
-from .report import solve_info
+from .report import StepReport, solve_info
 from .step_setup import ConstraintPlan, Form, StepSetup
 from .tolerances import StepTolerances
 
@@ -144,6 +144,8 @@ class CJMController(Controller):
         self._posture = (pin.neutral(self.model) if posture is None
                          else as_vector(posture, self.model.nq, "posture"))
         self._splits: dict[int, ChainSplit | None] = {}
+        #: the last step's :class:`StepReport` (``info`` is its wording)
+        self.report = StepReport()
         #: joint name per velocity index (a multi-dof joint repeats its name)
         self.joint_names = tuple(self.model.names[j] for j in range(1, self.model.njoints)
                                  for _ in range(self.model.nvs[j]))
@@ -230,21 +232,21 @@ class CJMController(Controller):
             split = self.split(frame)
             analytical = paper_task and split is not None and split.pre.size >= 6
             plans.append(ConstraintPlan(constraint, frame, split, analytical))
-        base = self._base_velocity
         return StepSetup(
             model=self.model, ee_frame_ids=tuple(self.ee_frame_ids), plans=tuple(plans),
             bounds=self.joint_bounds, box_test=self._box_test, policy=self._policy,
             tolerances=StepTolerances(), task_entries=task_entries, task_scale=task_scale,
             posture=self._posture.copy(), posture_gain=self._posture_gain,
-            posture_free=() if base is None else tuple(range(base.start, base.stop)),
+            posture_free=self._base_velocity,
             parametrisation=self.parametrisation, form=self.form, joint_names=self.joint_names)
 
     # -- the step ----------------------------------------------------------------------
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """:meth:`Controller.solve`, by the backend's step (docs/design.md section 16):
-        its report worded into :attr:`info`."""
+        its report kept in :attr:`report` and worded into :attr:`info`."""
         qd, report = self.step.solve(q, twist)
+        self.report = report
         info = self.info = solve_info(report, self.joint_names)
         if self.strict and info.status is StepStatus.FAILED:
             raise SolverError(info.message)

@@ -40,7 +40,6 @@ class PythonStep:
         #: one task the analytical form may take (form auto, one EE, its full twist)
         self._analytical_task = setup.form == "auto" and setup.paper_task
         self._nq, self._task_size = setup.model.nq, setup.task_size
-        self._posture_free = list(setup.posture_free) if setup.posture_free else None
 
     # -- the step template (controllers.base.Controller.solve) ---------------------------
 
@@ -200,8 +199,8 @@ class PythonStep:
         if setup.posture_gain == 0.0:
             return None
         difference = pin.difference(setup.model, q, setup.posture)
-        if self._posture_free is not None:
-            difference[self._posture_free] = 0.0
+        if setup.posture_free is not None:
+            difference[setup.posture_free] = 0.0
         return setup.posture_gain * difference
 
     # -- joint limits (docs/design.md section 9) -----------------------------------------

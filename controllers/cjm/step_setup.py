@@ -55,7 +55,7 @@ class StepSetup:
     task_entries : the entries of the stacked twist the task keeps (weight > 0), or None
         for all of them unweighted; ``task_scale`` their ``W^1/2``.
     posture, posture_gain : the null-space posture task (gain 0: minimum norm).
-    posture_free : velocity indices the posture leaves alone (a mobile base).
+    posture_free : the velocity indices the posture leaves alone (a mobile base's), or None.
     parametrisation, form : see :class:`CJMController`.
     joint_names : the joint's name per velocity index (for the messages).
     """
@@ -71,7 +71,7 @@ class StepSetup:
     task_scale: np.ndarray
     posture: np.ndarray
     posture_gain: float
-    posture_free: tuple[int, ...]
+    posture_free: slice | None
     parametrisation: Parametrisation
     form: Form
     joint_names: tuple[str, ...]
