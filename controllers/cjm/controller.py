@@ -79,8 +79,8 @@ class CJMController(Controller):
     limit_gain, position_limits, velocity_limits, strict : see
         :class:`controllers.base.Controller`.
     backend : ``"compiled"`` (the whole step in C++, Pinocchio's kinematics included,
-        :mod:`controllers.cjm.compiled`, docs/design.md section 16), ``"python"`` (this
-        module and its siblings: the readable reference) or ``"auto"`` (compiled when the
+        :mod:`controllers.cjm.compiled`, docs/design.md section 16), ``"python"``
+        (:mod:`controllers.cjm.python_step` and the forms: the readable reference) or ``"auto"`` (compiled when the
         extension is built and covers the robot's joints, else Python). ``"compiled"``
         raises ``ImportError`` without the extension and ``ValueError`` for a robot it
         does not cover. The compiled step computes its kinematics on its own copy of the

@@ -17,8 +17,9 @@ from ..linalg import RANK_TOLERANCE
 
 
 class Event(IntEnum):
-    """What happened in a step (the C++ ``cjm::Event`` has the same codes) and the
-    figures it carries as ``(a, b, c)``."""
+    """What happened in a step and the figures it carries as ``(a, b, c)``; the C++
+    ``cjm::Event`` has the same codes up to ``NON_FINITE`` (the last two are recorded by
+    Python alone)."""
 
     PRE_CHAIN_SINGULAR = 1  # the analytical form handed over to the general form
     TASK_RESIDUAL = 2       # a: damping, b: twist residual
