@@ -44,6 +44,23 @@ FLOAT64 = np.dtype(np.float64)
 NON_FINITE_NOTE = "non-finite joint velocity computed"
 
 
+def checked_inputs(q: np.ndarray, twist: np.ndarray, nq: int,
+                   task_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``q`` (nq,) and ``twist`` (task_size,) as finite real float arrays, else
+    ``ValueError`` naming the field (a complex twist is refused, not cast: its imaginary
+    part would be dropped)."""
+    q = np.asarray(q)
+    twist = np.asarray(twist)
+    # one cheap test for the common case (float64 arrays of the right sizes, finite);
+    # as_vector converts integers and says what is wrong otherwise
+    if (q.dtype is not FLOAT64 or twist.dtype is not FLOAT64
+            or q.shape != (nq,) or twist.shape != (task_size,)
+            or not math.isfinite(sum(q.tolist()) + sum(twist.tolist()))):
+        q = as_vector(q, nq, "q")
+        twist = as_vector(twist, task_size, "twist")
+    return q, twist
+
+
 class SolverError(RuntimeError):
     """A controller could not compute a command (raised only with ``strict=True``)."""
 
@@ -298,19 +315,8 @@ class Controller(ABC):
         return qd
 
     def _checked_inputs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``q`` and ``twist`` as finite real float arrays of the right sizes, else
-        ``ValueError`` (a complex twist is refused, not cast: its imaginary part would be
-        dropped)."""
-        q = np.asarray(q)
-        twist = np.asarray(twist)
-        # one cheap test for the common case (float64 arrays of the right sizes, finite);
-        # as_vector converts integers and says what is wrong otherwise
-        if (q.dtype is not FLOAT64 or twist.dtype is not FLOAT64
-                or q.shape != (self.model.nq,) or twist.shape != (self.task_size,)
-                or not math.isfinite(sum(q.tolist()) + sum(twist.tolist()))):
-            q = as_vector(q, self.model.nq, "q")
-            twist = as_vector(twist, self.task_size, "twist")
-        return q, twist
+        """:func:`checked_inputs` for this controller's model and task."""
+        return checked_inputs(q, twist, self.model.nq, self.task_size)
 
     def _saturate(self, kinematics: Kinematics, twist: np.ndarray, qd: np.ndarray,
                   lower: np.ndarray, upper: np.ndarray) -> np.ndarray:

@@ -45,7 +45,8 @@ class JointBounds:
         velocity[~np.isfinite(velocity) | (velocity <= 0.0)] = np.inf
         #: velocity limit per joint (inf where the model gives none)
         self.velocity_limit = velocity
-        self._velocity_box = (np.vstack([-velocity, velocity]) if self.velocity_limits
+        #: (2, nv): the velocity box alone, ``-qd_max`` and ``qd_max`` (+-inf where none or off)
+        self.velocity_box = (np.vstack([-velocity, velocity]) if self.velocity_limits
                               else np.vstack([np.full(nv, -np.inf), np.full(nv, np.inf)]))
         q_index, v_index = [], []
         for joint in range(1, model.njoints):
@@ -56,21 +57,23 @@ class JointBounds:
         q_min = model.lowerPositionLimit[q_index]
         q_max = model.upperPositionLimit[q_index]
         finite = np.isfinite(q_min) & np.isfinite(q_max) & (q_max > q_min)
-        self._limited_q, self._limited_v = q_index[finite], v_index[finite]
-        self._q_limits = np.vstack([q_min[finite], q_max[finite]])  # (2, n)
+        #: configuration and velocity indices of the joints with finite position limits
+        self.limited_q, self.limited_v = q_index[finite], v_index[finite]
+        #: (2, n): ``q_min`` and ``q_max`` of those joints
+        self.q_limits = np.vstack([q_min[finite], q_max[finite]])
 
     def box(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(lower, upper)``, each (nv,), at configuration ``q`` (new arrays)."""
-        box = self._velocity_box.copy()
-        if self.position_limits and self._limited_v.size:
-            position = (self._q_limits - q[self._limited_q]) * (self.limit_gain / self.dt)
-            v = self._limited_v
+        box = self.velocity_box.copy()
+        if self.position_limits and self.limited_v.size:
+            position = (self.q_limits - q[self.limited_q]) * (self.limit_gain / self.dt)
+            v = self.limited_v
             box[0, v] = np.maximum(box[0, v], position[0])
             box[1, v] = np.minimum(box[1, v], position[1])
         lower, upper = box[0], box[1]
         # past a limit: the position bound points back; never faster than the velocity limit
-        np.minimum(lower, self._velocity_box[1], out=lower)
-        np.maximum(upper, self._velocity_box[0], out=upper)
+        np.minimum(lower, self.velocity_box[1], out=lower)
+        np.maximum(upper, self.velocity_box[0], out=upper)
         np.maximum(upper, lower, out=upper)
         return lower, upper
 
@@ -80,10 +83,9 @@ class BoxTest:
 
     Every bound of :meth:`JointBounds.box` is affine in ``(qd, q)`` while ``q`` is inside
     its position limits, so the whole test is one product ``M [qd; q; 1] <= 0`` with a
-    constant ``M``. (One matrix product instead of the eight NumPy calls of
-    :meth:`JointBounds.box` saves about 3 us per step on the fast path, measured with
-    ``teleop bench``.) It answers False, never wrongly True, when ``q`` is past a limit;
-    the caller then computes the exact box.
+    constant ``M``: one matrix product instead of the eight NumPy calls of
+    :meth:`JointBounds.box` (docs/design.md section 8.2). It answers False, never wrongly
+    True, when ``q`` is past a limit; the caller then computes the exact box.
     """
 
     def __init__(self, bounds: JointBounds, nq: int, nv: int, tolerance: float = 1e-9) -> None:
@@ -101,23 +103,24 @@ class BoxTest:
                     row[v], row[-1] = sign, -limit - slack[v]
                     rows.append(row)
         if bounds.position_limits:
-            for c, v, q_min, q_max in zip(bounds._limited_q.tolist(), bounds._limited_v.tolist(),
-                                          bounds._q_limits[0].tolist(), bounds._q_limits[1].tolist()):
+            for c, v, q_min, q_max in zip(bounds.limited_q.tolist(), bounds.limited_v.tolist(),
+                                          bounds.q_limits[0].tolist(), bounds.q_limits[1].tolist()):
                 # qd <= g (q_max - q) / dt  and  -qd <= -g (q_min - q) / dt
                 for sign, q_limit in ((1.0, q_max), (-1.0, q_min)):
                     row = np.zeros(nv + nq + 1)
                     row[v], row[nv + c] = sign, sign * gain
                     row[-1] = -sign * gain * q_limit - slack[v]
                     rows.append(row)
-        self._matrix = np.array(rows).reshape(len(rows), nv + nq + 1)
+        #: ``M`` (rows, nv + nq + 1): inside the box when ``M [qd; q; 1] <= 0``
+        self.matrix = np.array(rows).reshape(len(rows), nv + nq + 1)
         self._stacked = np.ones(nv + nq + 1)  # [qd; q; 1]
         self._nv = nv
 
     def contains(self, q: np.ndarray, qd: np.ndarray) -> bool:
         """Whether ``qd`` (finite) is inside the box at ``q``, to the tolerance."""
-        if not self._matrix.shape[0]:
+        if not self.matrix.shape[0]:
             return True
         stacked = self._stacked
         stacked[:self._nv] = qd
         stacked[self._nv:-1] = q
-        return max(np.dot(self._matrix, stacked).tolist()) <= 0.0
+        return max(np.dot(self.matrix, stacked).tolist()) <= 0.0

@@ -10,7 +10,8 @@ twist from 1e-9 to 1e6. The compiled command must equal the Python one within
 
 and within :func:`rounding_bound` (``2 m n eps kappa``, the step's condition number
 computed here), and the statuses, methods, saturated joints, active barriers and
-messages must be equal; both commands finite and inside the joint box (to the
+messages must be equal, as must the events of their reports, in order
+(docs/design.md section 16); both commands finite and inside the joint box (to the
 controllers' ``1e-9`` of each velocity limit). The bound is relative to the command's
 scale because both backends solve the same linear systems (rank decisions on the same
 singular values, docs/design.md section 16) with backward-stable factorisations (QR +
@@ -138,6 +139,13 @@ def compare_backends(robot, constraints, q, twist, options) -> tuple[float, floa
     for field in ("status", "method", "saturated_joints", "active_barriers", "message"):
         if getattr(a, field) != getattr(b, field):
             differences.append(f"{field}: {getattr(a, field)!r} != {getattr(b, field)!r}")
+    # the reports behind the infos (docs/design.md section 16): the same events, in order
+    events = [[event for event, *_ in c.report.events] for c in (python, compiled)]
+    if events[0] != events[1]:
+        differences.append(f"events: {events[0]!r} != {events[1]!r}")
+    if python.report.saturation_joints != compiled.report.saturation_joints:
+        differences.append(f"saturation_joints: {python.report.saturation_joints!r} != "
+                           f"{compiled.report.saturation_joints!r}")
     lower, upper = python.bounds(q)
     # the controllers' box test: 1e-9 of each joint's velocity limit (BoxTest)
     slack = 1e-9 * np.where(np.isfinite(python.velocity_limit), python.velocity_limit, 1.0)
@@ -179,7 +187,7 @@ def rounding_bound(controller: CJMController, q: np.ndarray) -> float:
     :func:`condition_number` ``kappa`` times a backward-error constant of order ``m n``
     (``m`` task and constraint rows, ``n`` joints; measured over 10,000 fuzz draws: the
     two backends at most 82 ``eps kappa`` apart, the smallest ``2 m n`` is 72)."""
-    rows = controller.task_rows + sum(c.dim for c in controller.constraints)
+    rows = controller.setup.task_rows + sum(c.dim for c in controller.constraints)
     return 2.0 * rows * controller.model.nv * np.finfo(float).eps * condition_number(controller, q)
 
 
@@ -201,8 +209,10 @@ def condition_number(controller: CJMController, q: np.ndarray) -> float:
     free = np.setdiff1d(np.arange(model.nv), info.saturated_joints)
     if free.size == 0:  # every joint held: nothing solved
         return 1.0
-    jacobian = controller._task_jacobian(np.vstack(
-        [pin.getFrameJacobian(model, data, f, pin.LOCAL) for f in controller.ee_frame_ids]))[:, free]
+    setup = controller.setup
+    stacked = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL) for f in controller.ee_frame_ids])
+    jacobian = (stacked if setup.task_entries is None
+                else setup.task_scale[:, None] * stacked[setup.task_entries])[:, free]
     if held:
         rows = np.vstack([controller.constraints[i].rows(model, data, controller.constraint_frames[i])[0]
                           for i in held])[:, free]

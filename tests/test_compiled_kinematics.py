@@ -18,6 +18,7 @@ from controllers import CJMController
 from controllers.cjm import _step
 from controllers.cjm.compiled import joint_specs
 from controllers.cjm.controller import unsupported_joint_kinds
+from controllers.cjm.tolerances import StepTolerances
 from teleop.robots import load_robot
 from teleop.robots.chains import load_chain
 
@@ -52,7 +53,7 @@ def test_placements_and_jacobians_equal_pinocchio(name, seed):
     LOCAL Jacobian equal ``pin.updateFramePlacement`` / ``pin.getFrameJacobian`` to 1e-12."""
     robot = ROBOTS[name]
     controller = CJMController(robot, holes_on(robot), backend="compiled")
-    assert_kinematics_equal(controller._compiled._pipeline, robot.model,
+    assert_kinematics_equal(controller.step.pipeline, robot.model,
                             [*controller.ee_frame_ids, *controller.constraint_frames],
                             random_configuration(robot, seed), robot.task_size)
 
@@ -85,7 +86,8 @@ def fixed_step(model: pin.Model) -> _step.Step:
                           velocity_limit=np.ones(model.nv), limited_q=[], limited_v=[],
                           q_min=np.zeros(0), q_max=np.zeros(0), position_gain=0.0,
                           position_limits=False, box_test=np.zeros((0, model.nv + model.nq + 1))),
-                      posture_gain=0.0, posture_target=np.zeros(0))
+                      posture_gain=0.0, posture_target=np.zeros(0),
+                      tolerances=_step.Tolerances(**dataclasses.asdict(StepTolerances())))
 
 
 #: one URDF joint of each kind it can give (tilted axes give the unaligned kinds)

@@ -13,6 +13,7 @@ The constraint holds by construction for any solution of the small system.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -22,26 +23,15 @@ import pinocchio as pin
 
 from constraints import Constraint, ConstraintPoint, Parametrisation, structure_of
 
-from ..base import TWIST_TOLERANCE, SolveInfo, StepStatus
+from ..base import TWIST_TOLERANCE, StepStatus
 from ..linalg import DampedSolution, DampingPolicy, damped_least_squares, nullspace
-
-#: Below this ratio of the smallest to the largest LU pivot of a square ``J_a``, ``F_a``
-#: can no longer take every twist at a sane joint speed (``J_a^-1`` would amplify by more
-#: than about its inverse), and the analytical form hands over to the general null-space
-#: form, which holds the rows exactly and damps instead.
-PRE_CHAIN_PIVOT_RATIO = 1e-2
-
-#: The same hand-over for a redundant pre-chain, on the smallest singular value of
-#: ``J_a`` (m/s or rad/s per rad/s).
-PRE_CHAIN_MIN_SINGULAR_VALUE = 1e-2
-
-#: The LU fast path for a square ``Jbar`` needs the certified lower bound on its smallest
-#: singular value to be at least this as well as the damping threshold, so the SVD path
-#: keeps every nearly rank-deficient case (it drops singular values below 1e-10).
-FAST_PATH_MIN_SIGMA = 1e-6
-
-PRE_CHAIN_SINGULAR_NOTE = "pre-constraint chain singular: general form used"
-
+from .report import Event, ReportBuilder
+from .tolerances import (
+    FAST_PATH_MIN_SIGMA,
+    LEAST_SQUARES_RCOND,
+    PRE_CHAIN_MIN_SINGULAR_VALUE,
+    PRE_CHAIN_PIVOT_RATIO,
+)
 
 @dataclass(frozen=True)
 class ChainSplit:
@@ -102,67 +92,68 @@ def write_terms(state: ConstraintPoint, structure: np.ndarray, terms: np.ndarray
 
 
 class AffineTerms:
-    """The terms of a constraint with an affine form, as ``T_x x + T_f f + t_0``.
+    """The terms of a constraint with an affine form, as
+    ``t_0 + T_x x + T_f f + K (t_K + T_K x)`` at its gain ``K``.
 
     When :meth:`Constraint.affine_inputs` gives ``(x, f)`` and the evaluation is affine
     in them with constant ``C`` (a hole: ``x`` its centre, ``f`` its velocity in ``F_a``),
     the null-space structure matrix ``[[C_perp^T, C^T C hat(p)], [0, I]]`` is affine
-    too (``hat`` is linear), so the whole buffer is. The maps are found by evaluating
-    at ``x, f = 0`` and at the unit vectors; a step is then one matrix product (about
-    2 us less than evaluating and writing the terms, measured with ``teleop bench``).
+    too (``hat`` is linear), so the whole buffer is; ``rhs = C v - K e`` (with ``e``
+    affine in ``x``) is affine in the gain as well. The maps are found by evaluating at
+    ``x, f = 0`` and at the unit vectors, the right-hand side taken at gain 0 and 1; a
+    step is then a few matrix products with the gain it reads (docs/design.md section 16).
     """
 
     def __init__(self, constraint: Constraint) -> None:
+        self.constraint = constraint
         k = constraint.dim
         zero = np.zeros(3)
 
-        def terms_at(x: np.ndarray, f: np.ndarray) -> np.ndarray:
+        def terms_at(x: np.ndarray, f: np.ndarray, gain: float) -> np.ndarray:
             state = constraint.evaluate_affine(x, f)
+            # rhs = C v - K e at the constraint's gain K: the same point at ``gain``
+            state = dataclasses.replace(state, rhs=state.rhs + (constraint.gain - gain) * state.error)
             terms = np.empty(terms_size(k))
             write_terms(state, structure_of(state, "nullspace"), terms)
             return terms
 
-        self.offset = terms_at(zero, zero)
-        self.of_x = np.column_stack([terms_at(e, zero) - self.offset for e in np.eye(3)])
-        self.of_f = np.column_stack([terms_at(zero, e) - self.offset for e in np.eye(3)])
+        self.offset = terms_at(zero, zero, 0.0)
+        self.of_x = np.column_stack([terms_at(e, zero, 0.0) - self.offset for e in np.eye(3)])
+        self.of_f = np.column_stack([terms_at(zero, e, 0.0) - self.offset for e in np.eye(3)])
+        self.offset_per_gain = terms_at(zero, zero, 1.0) - self.offset
+        self.of_x_per_gain = np.column_stack(
+            [terms_at(e, zero, 1.0) - self.offset_per_gain - self.offset for e in np.eye(3)]) - self.of_x
+        #: ``[t_0, T_x, T_K, t_K]``: the terms are this times ``[1; x; K x; K]``
+        self._stacked = np.column_stack([self.offset, self.of_x, self.of_x_per_gain,
+                                         self.offset_per_gain])
 
     def write(self, x: np.ndarray, f: np.ndarray | None, terms: np.ndarray) -> None:
-        np.dot(self.of_x, x, out=terms)
-        terms += self.offset
+        """The terms at ``(x, f)`` and the constraint's gain now."""
+        gain = self.constraint.gain
+        x0, x1, x2 = x.tolist()
+        np.dot(self._stacked, [1.0, x0, x1, x2, gain * x0, gain * x1, gain * x2, gain], out=terms)
         if f is not None:
             terms += self.of_f @ f
 
 
 class TermsWriter:
     """Writes one constraint's flat terms buffer at its link's placement: through its
-    affine form (:class:`AffineTerms`, rebuilt when the gain changes) where it has one and
-    the parametrisation is the null-space one, else by evaluating the constraint."""
+    affine form (:class:`AffineTerms`) where it has one and the parametrisation is the
+    null-space one, else by evaluating the constraint."""
 
     def __init__(self, constraint: Constraint, parametrisation: Parametrisation) -> None:
         self.constraint = constraint
         self.parametrisation = parametrisation
-        self._affine: tuple[float, AffineTerms] | None = None  # (gain it was built for, map)
-
-    @property
-    def affine(self) -> bool:
-        """Whether the terms come from the affine form."""
-        return self.parametrisation == "nullspace" and self.constraint.affine_anchor() is not None
-
-    def affine_terms(self) -> AffineTerms:
-        """The affine map at the constraint's current gain (built again when it changes)."""
-        gain = self.constraint.gain
-        if self._affine is None or self._affine[0] != gain:
-            self._affine = (gain, AffineTerms(self.constraint))
-        return self._affine[1]
+        #: the affine form, or None: the terms come from evaluating the constraint
+        self.affine_terms = (AffineTerms(constraint) if parametrisation == "nullspace"
+                             and constraint.affine_anchor() is not None else None)
 
     def write(self, placement: pin.SE3, terms: np.ndarray) -> None:
-        constraint = self.constraint
-        inputs = constraint.affine_inputs(placement) if self.parametrisation == "nullspace" else None
-        if inputs is None:
-            state = constraint.evaluate(placement)
+        if self.affine_terms is None:
+            state = self.constraint.evaluate(placement)
             write_terms(state, structure_of(state, self.parametrisation), terms)
             return
-        self.affine_terms().write(*inputs, terms)
+        self.affine_terms.write(*self.constraint.affine_inputs(placement), terms)
 
 
 class SquarePreChain:
@@ -203,7 +194,7 @@ class SquarePreChain:
         self.lu_cjm = eigenpy.PartialPivLU(6)
 
     def solve(self, model: pin.Model, data: pin.Data, ee_jacobian: np.ndarray,
-              twist: np.ndarray, policy: DampingPolicy, info: SolveInfo,
+              twist: np.ndarray, policy: DampingPolicy, report: ReportBuilder,
               posture_velocity: np.ndarray | None = None) -> np.ndarray | None:
         """``qd`` for ``twist``, or None when ``J_a`` is near singular (general form then).
 
@@ -212,7 +203,7 @@ class SquarePreChain:
         minimum-norm ``qd``) among those that meet the rows and the task.
 
         Written flat, with the buffers of the plan: from Python every NumPy or LAPACK call
-        costs about a microsecond whatever the size, so the step is counted in calls.
+        costs about the same whatever the size, so the step is counted in calls.
         """
         self.terms_writer.write(pin.updateFramePlacement(model, data, self.frame_id), self.terms)
         jacobian_a = pin.getFrameJacobian(model, data, self.frame_id, pin.LOCAL)
@@ -220,23 +211,23 @@ class SquarePreChain:
         lu_pre.compute(jacobian_a[:, self.pre])
         pivots = list(map(abs, lu_pre.matrixLU().diagonal().tolist()))
         if not min(pivots) >= PRE_CHAIN_PIVOT_RATIO * max(pivots):  # NaN included
-            info.message = PRE_CHAIN_SINGULAR_NOTE
+            report.event(Event.PRE_CHAIN_SINGULAR)
             return None
         joint_map = self.joint_map
         joint_map[self.pre, :self.n_free + 1] = lu_pre.solve(self.pre_rhs)
         task_map = np.dot(ee_jacobian, joint_map, out=self.task_map)
         np.subtract(twist, task_map[:, 0], out=self.cjm_rhs)  # V_e - Ad_ea V_a0 (eq 22)
-        if not self._solve_by_lu(task_map[:, 1:], policy, info):  # the SVD DLS (eq 35)
+        if not self._solve_by_lu(task_map[:, 1:], policy, report):  # the SVD DLS (eq 35)
             solution = damped_least_squares(task_map[:, 1:], self.cjm_rhs, policy)
             self.free_with_one[1:] = solution.x
-            report_task_solution(solution, task_map[:, 1:], self.cjm_rhs, info)
+            report_task_solution(solution, task_map[:, 1:], self.cjm_rhs, report)
             if solution.rank < solution.x.size:
                 self._closest_to_posture(task_map[:, 1:], posture_velocity)
         qd = np.dot(joint_map, self.free_with_one)  # a new array: the caller keeps it
         # residual of C v_c = b for the twist the pre-chain really produces
         np.dot(jacobian_a, qd, out=self.twist_a_with_one[1:])
-        info.equality_residual = max(map(abs, np.dot(self.residual_rows, self.twist_a_with_one).tolist()))
-        info.method = "analytical"
+        report.equality_residual = max(map(abs, np.dot(self.residual_rows, self.twist_a_with_one).tolist()))
+        report.method = "analytical"
         return qd
 
     def _closest_to_posture(self, cjm: np.ndarray, posture_velocity: np.ndarray | None) -> None:
@@ -244,10 +235,10 @@ class SquarePreChain:
         null_basis, _, _ = nullspace(cjm)
         qd = self.joint_map @ self.free_with_one
         goal = -qd if posture_velocity is None else posture_velocity - qd
-        step, *_ = np.linalg.lstsq(self.joint_map[:, 1:] @ null_basis, goal, rcond=1e-10)
+        step, *_ = np.linalg.lstsq(self.joint_map[:, 1:] @ null_basis, goal, rcond=LEAST_SQUARES_RCOND)
         self.free_with_one[1:] += null_basis @ step
 
-    def _solve_by_lu(self, cjm: np.ndarray, policy: DampingPolicy, info: SolveInfo) -> bool:
+    def _solve_by_lu(self, cjm: np.ndarray, policy: DampingPolicy, report: ReportBuilder) -> bool:
         """Solve a square, well-conditioned ``Jbar`` by its LU, where damping cannot act.
 
         ``||Jbar^-1||_2 <= ||Jbar^-1||_F``, so ``1 / ||Jbar^-1||_F`` is a lower bound on
@@ -263,34 +254,27 @@ class SquarePreChain:
         if not (bound >= policy.threshold and bound >= FAST_PATH_MIN_SIGMA):
             return False
         self.free_with_one[1:] = lu_cjm.solve(self.cjm_rhs)
-        info.sigma_min = bound
+        report.sigma_min = bound
         return True
 
 
 def report_task_solution(solution: DampedSolution, matrix: np.ndarray, rhs: np.ndarray,
-                         info: SolveInfo) -> None:
-    """Record a DLS solution of the task in ``info``; a task not met is ``least_squares``."""
-    info.sigma_min = solution.sigma_min
-    info.damping = solution.damping
+                         report: ReportBuilder) -> None:
+    """Record a DLS solution of the task in ``report``; a task not met is ``least_squares``."""
+    report.sigma_min = solution.sigma_min
+    report.damping = solution.damping
     if solution.exact:
         return
     residual = float(np.max(np.abs(matrix @ solution.x - rhs), initial=0.0))
     if residual > TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(rhs), initial=0.0))):
-        info.report(StepStatus.LEAST_SQUARES, task_residual_note(solution.damping, residual))
-
-
-def task_residual_note(damping: float, residual: float) -> str:
-    """Why a DLS solution misses the task: damping near a singularity, or least squares."""
-    note = (f"near a singularity: damped (lambda {damping:.2g})" if damping > 0
-            else "task not fully achievable: least squares")
-    return f"{note}, twist residual {residual:.2e}"
+        report.event(Event.TASK_RESIDUAL, StepStatus.LEAST_SQUARES, solution.damping, residual)
 
 
 def solve_redundant_pre_chain(model: pin.Model, data: pin.Data, ee_jacobian: np.ndarray,
                               ee_placement: pin.SE3, constraint: Constraint, frame_id: int,
                               split: ChainSplit, twist: np.ndarray, policy: DampingPolicy,
                               parametrisation: Parametrisation, posture_velocity: np.ndarray | None,
-                              info: SolveInfo) -> np.ndarray | None:
+                              report: ReportBuilder) -> np.ndarray | None:
     """More than 6 joints move ``F_a``: SVD of ``J_a``, posture in its null space."""
     placement = data.oMf[frame_id]
     pre_jacobian = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL)[:, split.pre]
@@ -311,7 +295,7 @@ def solve_redundant_pre_chain(model: pin.Model, data: pin.Data, ee_jacobian: np.
 
     u, s, vt = np.linalg.svd(pre_jacobian, full_matrices=True)
     if s[-1] < PRE_CHAIN_MIN_SINGULAR_VALUE:
-        info.message = PRE_CHAIN_SINGULAR_NOTE
+        report.event(Event.PRE_CHAIN_SINGULAR)
         return None
     qd_pre = vt[:6].T @ ((u.T @ twist_a) / s)
     if posture_velocity is not None:
@@ -323,7 +307,7 @@ def solve_redundant_pre_chain(model: pin.Model, data: pin.Data, ee_jacobian: np.
     qd[split.post] = solution.x[n_free:]
     achieved = pre_jacobian @ qd_pre  # the twist the pre-chain really produces
     point_velocity = achieved[:3] - pin.skew(state.p) @ achieved[3:]
-    info.equality_residual = float(np.max(np.abs(state.C @ point_velocity - state.rhs)))
-    info.method = "analytical"
-    report_task_solution(solution, cjm, cjm_rhs, info)
+    report.equality_residual = float(np.max(np.abs(state.C @ point_velocity - state.rhs)))
+    report.method = "analytical"
+    report_task_solution(solution, cjm, cjm_rhs, report)
     return qd

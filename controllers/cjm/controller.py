@@ -1,8 +1,7 @@
-"""The Constrained Jacobian Matrix controller: which form solves a step, barriers, limits."""
+"""The Constrained Jacobian Matrix controller: its options, its step setup, its backend."""
 
 from __future__ import annotations
 
-import math
 from typing import Iterable, Literal
 
 import numpy as np
@@ -11,29 +10,22 @@ import pinocchio as pin
 from constraints import Constraint, Parametrisation, RobotLike
 from constraints.validation import as_number, as_vector
 
-from ..base import Controller, Kinematics, StepStatus, as_twist_weight
+from ..base import Controller, Kinematics, SolverError, StepStatus, as_twist_weight
 from ..joint_limits import DEFAULT_LIMIT_GAIN
-from ..linalg import RANK_TOLERANCE, DampingPolicy
-from .analytical import (
-    ChainSplit,
-    SquarePreChain,
-    chain_split,
-    solve_redundant_pre_chain,
-)
-from .general import solve_general
-from .saturation import rows_scaled_note, saturate_in_null_space
+from ..linalg import DampingPolicy
+from .analytical import ChainSplit, chain_split
+from .python_step import PythonStep
+from .report import StepReport, solve_info
+from .step_setup import ConstraintPlan, Form, StepSetup
+from .tolerances import StepTolerances
 
-#: A barrier row is violated when the solution undercuts it by more than this (m/s).
-BARRIER_TOLERANCE = 1e-12
-
-Form = Literal["auto", "general"]
 Backend = Literal["auto", "compiled", "python"]
 
 
 def compiled_step_available() -> bool:
     """Whether the C++ extension of the compiled step (section 16) is built here."""
     try:
-        from ._step import JOINT_KINDS, Pipeline  # noqa: F401  (an older build lacks them)
+        from ._step import JOINT_KINDS, Pipeline, Tolerances  # noqa: F401  (an older build lacks them)
     except ImportError:
         return False
     return True
@@ -87,12 +79,17 @@ class CJMController(Controller):
     limit_gain, position_limits, velocity_limits, strict : see
         :class:`controllers.base.Controller`.
     backend : ``"compiled"`` (the whole step in C++, Pinocchio's kinematics included,
-        :mod:`controllers.cjm.compiled`, docs/design.md section 16), ``"python"`` (this
-        module and its siblings: the readable reference) or ``"auto"`` (compiled when the
+        :mod:`controllers.cjm.compiled`, docs/design.md section 16), ``"python"``
+        (:mod:`controllers.cjm.python_step` and the forms: the readable reference) or ``"auto"`` (compiled when the
         extension is built and covers the robot's joints, else Python). ``"compiled"``
         raises ``ImportError`` without the extension and ``ValueError`` for a robot it
         does not cover. The compiled step computes its kinematics on its own copy of the
         model: it leaves ``self.data`` as it was.
+
+    The step itself lives in :attr:`step` (built with :attr:`setup`, again whenever
+    ``policy``, ``posture``, ``posture_gain``, ``twist_weight`` or the constraints are
+    set): ``step.solve(q, twist)`` gives ``qd`` and a
+    :class:`~controllers.cjm.report.StepReport`, which :meth:`solve` words into ``info``.
     """
 
     def __init__(
@@ -135,34 +132,71 @@ class CJMController(Controller):
         if backend == "auto":
             backend = "compiled" if available and not unsupported else "python"
         self.backend: Backend = backend
-        self._compiled = None
-        self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
-                                    as_number(singular_threshold, "singular_threshold", 0.0),
-                                    as_number(max_damping, "max_damping", 0.0))
         self.parametrisation: Parametrisation = parametrisation
-        self.posture_gain = as_number(posture_gain, "posture_gain", 0.0)
         self.form: Form = form
-        self.twist_weight = as_twist_weight(twist_weight, self.task_size)
-        #: the task entries asked for (weight > 0: a zero-weight row would read as a
-        #: singular direction and bring the damping in), or None for the identity
-        self._task_rows = (None if np.all(self.twist_weight == 1.0)
-                           else np.flatnonzero(self.twist_weight > 0.0))
-        #: W^1/2 of those entries, a column to scale the rows of J_e
-        self._task_row_scale = np.sqrt(self.twist_weight if self._task_rows is None
-                                       else self.twist_weight[self._task_rows])[:, None]
+        self._policy = DampingPolicy(as_number(damping, "damping", 0.0),
+                                     as_number(singular_threshold, "singular_threshold", 0.0),
+                                     as_number(max_damping, "max_damping", 0.0))
+        self._posture_gain = as_number(posture_gain, "posture_gain", 0.0)
+        self._twist_weight = as_twist_weight(twist_weight, self.task_size)
         if posture is None:
             posture = getattr(robot, "q_home", None)
-        self.posture = (pin.neutral(self.model) if posture is None
-                        else as_vector(posture, self.model.nq, "posture"))
+        self._posture = (pin.neutral(self.model) if posture is None
+                         else as_vector(posture, self.model.nq, "posture"))
         self._splits: dict[int, ChainSplit | None] = {}
-        self._square_plans: dict[int, SquarePreChain] = {}
-        self._active: list[int] = []
+        #: the last step's :class:`StepReport` (``info`` is its wording)
+        self.report = StepReport()
         #: joint name per velocity index (a multi-dof joint repeats its name)
-        self._joint_names = [self.model.names[j] for j in range(1, self.model.njoints)
-                             for _ in range(self.model.nvs[j])]
+        self.joint_names = tuple(self.model.names[j] for j in range(1, self.model.njoints)
+                                 for _ in range(self.model.nvs[j]))
         self.set_constraints(constraints)
 
+    # -- what the step is built from: setting any of it builds the step again ----------
+
+    @property
+    def policy(self) -> DampingPolicy:
+        """The DLS damping (eq 35; :class:`controllers.linalg.DampingPolicy`)."""
+        return self._policy
+
+    @policy.setter
+    def policy(self, policy: DampingPolicy) -> None:
+        if not isinstance(policy, DampingPolicy):
+            raise ValueError(f"policy must be a DampingPolicy, got {policy!r}")
+        self._policy = policy
+        self._prepare()
+
+    @property
+    def posture(self) -> np.ndarray:
+        """Configuration the redundancy is spent on (nq,; read-only: assign a new one)."""
+        return self._posture
+
+    @posture.setter
+    def posture(self, posture: np.ndarray) -> None:
+        self._posture = as_vector(posture, self.model.nq, "posture")
+        self._prepare()
+
+    @property
+    def posture_gain(self) -> float:
+        """Gain (1/s) of the null-space posture task; 0 gives minimum norm."""
+        return self._posture_gain
+
+    @posture_gain.setter
+    def posture_gain(self, gain: float) -> None:
+        self._posture_gain = as_number(gain, "posture_gain", 0.0)
+        self._prepare()
+
+    @property
+    def twist_weight(self) -> np.ndarray:
+        """Diagonal weight ``W`` of the twist error (task_size,; read-only: assign a new one)."""
+        return self._twist_weight
+
+    @twist_weight.setter
+    def twist_weight(self, twist_weight) -> None:
+        self._twist_weight = as_twist_weight(twist_weight, self.task_size)
+        self._prepare()
+
     def _prepare(self) -> None:
+        """Build the step setup and the backend's step from it (after any change)."""
         if self.parametrisation == "paper":
             for constraint in self.constraints:
                 if not constraint.has_paper_form:
@@ -170,24 +204,58 @@ class CJMController(Controller):
                         f"parametrisation='paper' does not cover {type(constraint).__name__} "
                         "(its 1/a form needs the constrained directions perpendicular to p "
                         "at every configuration, as a hole's are): use 'nullspace'")
-        self._equalities = [i for i, c in enumerate(self.constraints) if c.is_equality]
-        self._barriers = [i for i, c in enumerate(self.constraints) if not c.is_equality]
-        self._square_plans = {}
+        #: everything the step needs (:class:`controllers.cjm.step_setup.StepSetup`)
+        self.setup = self._step_setup()
+        step = PythonStep(self.setup, self.data)
         if self.backend == "compiled":
             from .compiled import CompiledStep, KinematicsMismatch
 
             try:
-                self._compiled = CompiledStep(self)
+                step = CompiledStep(self.setup)
             except KinematicsMismatch:
                 if not self._python_if_needed:
                     raise
-                self.backend, self._compiled = "python", None
+                self.backend = "python"
+        #: the backend's step (PythonStep or CompiledStep): ``step.solve(q, twist) -> (qd, report)``
+        self.step = step
+
+    def _step_setup(self) -> StepSetup:
+        """The :class:`StepSetup` of the controller's current options and constraints."""
+        weight = self._twist_weight
+        # the task entries asked for (weight > 0: a zero-weight row would read as a
+        # singular direction and bring the damping in), or None for the identity
+        task_entries = None if np.all(weight == 1.0) else np.flatnonzero(weight > 0.0)
+        task_scale = np.sqrt(weight if task_entries is None else weight[task_entries])
+        paper_task = self.task_size == 6 and task_entries is None
+        plans = []
+        for constraint, frame in zip(self.constraints, self.constraint_frames):
+            split = self.split(frame)
+            analytical = paper_task and split is not None and split.pre.size >= 6
+            plans.append(ConstraintPlan(constraint, frame, split, analytical))
+        return StepSetup(
+            model=self.model, ee_frame_ids=tuple(self.ee_frame_ids), plans=tuple(plans),
+            bounds=self.joint_bounds, box_test=self._box_test, policy=self._policy,
+            tolerances=StepTolerances(), task_entries=task_entries, task_scale=task_scale,
+            posture=self._posture.copy(), posture_gain=self._posture_gain,
+            posture_free=self._base_velocity,
+            parametrisation=self.parametrisation, form=self.form, joint_names=self.joint_names)
+
+    # -- the step ----------------------------------------------------------------------
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
-        """:meth:`Controller.solve`, in C++ with the compiled backend (section 16)."""
-        if self._compiled is None:
-            return super().solve(q, twist)
-        return self._compiled.solve(q, twist)
+        """:meth:`Controller.solve`, by the backend's step (docs/design.md section 16):
+        its report kept in :attr:`report` and worded into :attr:`info`."""
+        qd, report = self.step.solve(q, twist)
+        self.report = report
+        info = self.info = solve_info(report, self.joint_names)
+        if self.strict and info.status is StepStatus.FAILED:
+            raise SolverError(info.message)
+        return qd
+
+    def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
+        """Not reached: :meth:`solve` hands the whole step, the template of
+        :meth:`Controller.solve` included, to :attr:`step`."""
+        raise NotImplementedError("CJMController.solve runs its step backend")
 
     # -- chain structure ---------------------------------------------------------------
 
@@ -201,7 +269,7 @@ class CJMController(Controller):
         """The CJM ``Jbar = [Ad_ea S, J_post]`` of constraint ``index`` at ``q`` (eq 24), for
         the first end effector."""
         q = as_vector(q, self.model.nq, "q")
-        self._kinematics(q)
+        super()._kinematics(q)
         frame_id = self.constraint_frames[index]
         split = self.split(frame_id)
         if split is None:
@@ -211,176 +279,3 @@ class CJMController(Controller):
         ad_ea = self.data.oMf[self.ee_frame_id].actInv(placement).action
         ee_jacobian = pin.getFrameJacobian(self.model, self.data, self.ee_frame_id, pin.LOCAL)
         return np.hstack([ad_ea @ structure, ee_jacobian[:, split.post]])
-
-    # -- the step ----------------------------------------------------------------------
-
-    def _kinematics(self, q: np.ndarray) -> Kinematics:
-        """The base's kinematics, with the task Jacobian ``W^1/2 J_e`` (the rows of
-        non-zero weight) when weighted."""
-        kinematics = super()._kinematics(q)
-        kinematics.ee_jacobian = self._task_jacobian(kinematics.ee_jacobian)
-        return kinematics
-
-    @property
-    def task_rows(self) -> int:
-        """Rows of the task the forms solve: 6 per EE, or those of non-zero weight."""
-        return self.task_size if self._task_rows is None else self._task_rows.size
-
-    @property
-    def paper_task(self) -> bool:
-        """One EE and its full, unweighted twist: the task of the analytical form."""
-        return self.task_size == 6 and self._task_rows is None
-
-    def _task_jacobian(self, ee_jacobian: np.ndarray) -> np.ndarray:
-        """``W^1/2 J_e`` (the rows of non-zero weight) from the stacked EE Jacobians."""
-        if self._task_rows is None:
-            return ee_jacobian
-        return self._task_row_scale * ee_jacobian[self._task_rows]
-
-    def _task(self, twist: np.ndarray) -> np.ndarray:
-        """``W^1/2 V_e``: the twist the weighted task Jacobian must meet."""
-        if self._task_rows is None:
-            return twist
-        return self._task_row_scale[:, 0] * twist[self._task_rows]
-
-    def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
-        twist = self._task(twist)
-        self._active = list(self._equalities)
-        qd = self._solve_rows(kinematics, twist, self._active)
-        if self._barriers:
-            qd = self._activate_barriers(kinematics, twist, qd)
-        return qd
-
-    def _activate_barriers(self, kinematics: Kinematics, twist: np.ndarray,
-                           qd: np.ndarray) -> np.ndarray:
-        """Active set over the barriers: hold the most violated one as an equality, again."""
-        waiting = [i for i in self._barriers if i not in self._active]
-        while waiting:
-            violations = []
-            for i in waiting:
-                rows, rhs = self.constraints[i].rows(self.model, self.data, self.constraint_frames[i])
-                violations.append(float(rhs[0] - rows[0] @ qd))
-            worst = int(np.argmax(violations))
-            if violations[worst] <= BARRIER_TOLERANCE:
-                break
-            self._active.append(waiting.pop(worst))
-            qd = self._solve_rows(kinematics, twist, self._active)
-        self.info.active_barriers = tuple(i for i in self._active if i in self._barriers)
-        return qd
-
-    def _solve_rows(self, kinematics: Kinematics, twist: np.ndarray, active: list[int]) -> np.ndarray:
-        """The analytical form where it applies, else the general form, for these rows."""
-        if len(active) == 1 and self.form == "auto" and self.paper_task:
-            qd = self._solve_analytical(kinematics, twist, active[0])
-            if qd is not None:
-                return qd
-        rows, rows_rhs = self.constraint_rows(active)
-        return solve_general(rows, rows_rhs, kinematics.ee_jacobian, twist, self.policy,
-                             self._posture_velocity(kinematics.q), self.info)
-
-    def _solve_analytical(self, kinematics: Kinematics, twist: np.ndarray, index: int) -> np.ndarray | None:
-        """The analytical form of constraint ``index``, or None where it does not apply;
-        the joints off the path to the EE (they move neither the task nor the constraint:
-        columns of zeros in ``J_e`` and ``A``) take the posture velocity, as in the
-        general form, where they lie in ``null(A)`` and ``null(J_e N)``."""
-        qd = self._solve_analytical_path(kinematics, twist, index)
-        if qd is not None and self.posture_gain > 0.0:
-            off = self.split(self.constraint_frames[index]).off
-            if off.size:
-                qd[off] = self._posture_velocity(kinematics.q)[off]
-        return qd
-
-    def _solve_analytical_path(self, kinematics: Kinematics, twist: np.ndarray,
-                               index: int) -> np.ndarray | None:
-        """The analytical form over the joints on the path to the EE (zero elsewhere)."""
-        frame_id = self.constraint_frames[index]
-        if (self.parametrisation == "paper"
-                and not self._paper_form_defined(index, self.data.oMf[frame_id])):
-            self.info.report(StepStatus.OK, "a = 0, where the paper's 1/a form is singular: "
-                                            "null-space form used")
-            return None
-        plan = self._square_plans.get(index)  # the paper's case, seen before
-        if plan is None:
-            split = self.split(frame_id)
-            if split is None or split.pre.size < 6:
-                return None
-            if split.pre.size > 6:
-                return solve_redundant_pre_chain(
-                    self.model, self.data, kinematics.ee_jacobian, kinematics.ee_placement,
-                    self.constraints[index], frame_id, split, twist, self.policy,
-                    self.parametrisation, self._posture_velocity(kinematics.q), self.info)
-            plan = self._square_plans[index] = SquarePreChain(
-                self.constraints[index], frame_id, self.model.nv, split, self.parametrisation)
-        return plan.solve(self.model, self.data, kinematics.ee_jacobian, twist, self.policy, self.info,
-                          None if plan.square else self._posture_velocity(kinematics.q))
-
-    def _paper_form_defined(self, index: int, placement: pin.SE3) -> bool:
-        """Whether the paper's ``1/a`` structure matrix exists at this placement of
-        constraint ``index``'s link (``a = |p|`` not ~0)."""
-        return float(np.linalg.norm(self.constraints[index].point(placement))) >= 1e-6
-
-    def _posture_velocity(self, q: np.ndarray) -> np.ndarray | None:
-        if self.posture_gain == 0.0:
-            return None
-        return self.posture_gain * self.posture_difference(q, self.posture)
-
-    # -- joint limits ------------------------------------------------------------------
-
-    def _saturate(self, kinematics: Kinematics, twist: np.ndarray, qd: np.ndarray,
-                  lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-        """Saturation in the null space (module :mod:`controllers.cjm.saturation`)."""
-        twist = self._task(twist)
-        info = self.info
-        for _ in range(len(self._barriers) + 1):
-            rows, rows_rhs = self.constraint_rows(self._active)
-            result = saturate_in_null_space(rows, rows_rhs, kinematics.ee_jacobian, twist,
-                                            lower, upper, self.velocity_limit, self.policy)
-            waiting = [i for i in self._barriers if i not in self._active]
-            violated = [i for i in waiting if self._barrier_violation(i, result.qd) > BARRIER_TOLERANCE]
-            if not violated:
-                break
-            self._active.append(max(violated, key=lambda i: self._barrier_violation(i, result.qd)))
-        info.active_barriers = tuple(i for i in self._active if i in self._barriers)
-        info.method = "saturated"
-        info.scale = result.task_scale
-        info.saturated_joints = result.saturated
-        if not math.isnan(result.sigma_min):  # the task's DLS that gave this command
-            info.sigma_min, info.damping = result.sigma_min, result.damping
-        info.equality_residual = (float(np.max(np.abs(rows @ result.qd - rows_rhs)))
-                                  if rows.shape[0] else 0.0)
-        if result.rows_scale < 1.0:
-            info.report(StepStatus.CONSTRAINT_DEGRADED, rows_scaled_note(result.rows_scale))
-        elif result.task_missed:
-            info.report(StepStatus.LEAST_SQUARES,
-                        self._task_missed_note(result.saturated, result.sigma_min, result.damping))
-        elif result.task_scale < 1.0:
-            info.report(StepStatus.SCALED,
-                        self._task_scaled_note(result.limiting_joint, result.task_scale))
-        return result.qd
-
-    def _task_missed_note(self, saturated: Iterable[int], sigma_min: float, damping: float) -> str:
-        """What keeps a saturated step from the task: the joints held at a limit, the
-        damping near a singularity (eq 35), else a least-squares task (rank lost)."""
-        saturated = list(saturated)
-        causes = [f"{self._joint_list(saturated)} at a limit"] if saturated else []
-        # below the rank cut sigma_min is rounding: 0 (the two backends round differently)
-        sigma = f"sigma_min {sigma_min if sigma_min > RANK_TOLERANCE else 0.0:.2g}"
-        if damping > 0.0:
-            causes.append(f"near a singularity ({sigma}, damping {damping:.2g})")
-        if not causes:
-            causes.append(f"least squares ({sigma})")
-        return f"{'; '.join(causes)}: task not fully achievable"
-
-    def _task_scaled_note(self, joint: int, scale: float) -> str:
-        limit = f"{self._joint_list([joint])} at a limit" if joint >= 0 else "the joint limits"
-        return f"{limit}: task scaled to {scale:.0%}"
-
-    def _joint_list(self, velocity_indices: Iterable[int]) -> str:
-        """``joint arm_joint_4`` / ``joints a, b`` for velocity indices (a multi-dof
-        joint named once)."""
-        names = list(dict.fromkeys(self._joint_names[i] for i in velocity_indices))
-        return f"joint{'s' if len(names) > 1 else ''} {', '.join(names)}"
-
-    def _barrier_violation(self, index: int, qd: np.ndarray) -> float:
-        rows, rhs = self.constraints[index].rows(self.model, self.data, self.constraint_frames[index])
-        return float(rhs[0] - rows[0] @ qd)

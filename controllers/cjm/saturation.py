@@ -27,15 +27,7 @@ import numpy as np
 
 from ..base import TWIST_TOLERANCE
 from ..linalg import DampingPolicy, damped_least_squares, nullspace
-
-#: The rows count as held over the free joints up to this residual (m/s).
-ROWS_TOLERANCE = 1e-9
-
-
-def rows_scaled_note(scale: float) -> str:
-    """The note of a step whose rows' correction was scaled to fit the box."""
-    return (f"the constraint's correction exceeds the joint limits: scaled to {scale:.0%}, "
-            "the constraint converges as fast as they allow")
+from .tolerances import AT_BOUND, BOX_MARGIN, ROWS_TOLERANCE, STILL_DIRECTION
 
 
 @dataclass
@@ -116,7 +108,7 @@ def task_scale_limit(base: np.ndarray, direction: np.ndarray, lower: np.ndarray,
     """
     smallest_max, critical, largest_min, needs_more = np.inf, -1, -np.inf, -1
     noise = float(np.max(np.abs(base), initial=0.0))
-    still = max(1e-12, AT_BOUND * float(np.max(np.abs(direction), initial=0.0)))
+    still = max(STILL_DIRECTION, AT_BOUND * float(np.max(np.abs(direction), initial=0.0)))
     for i in np.flatnonzero(free).tolist():
         a, b = direction[i], base[i]
         to_lower, to_upper = gap_to_bound(lower[i], b, noise), gap_to_bound(upper[i], b, noise)
@@ -140,16 +132,9 @@ def task_scale_limit(base: np.ndarray, direction: np.ndarray, lower: np.ndarray,
     return largest, critical
 
 
-#: ``bound - base`` within this of 0, relative to ``1 + |bound| + max |base|``, counts as
-#: 0: the base at the bound up to rounding (a solve's error is about ``eps cond`` of its
-#: largest entry; 1e-10 is the rank cut's ``cond`` of 1e10 times eps, as in
-#: :func:`controllers.linalg.nullspace`); so does an entry of the direction below this
-#: times its largest
-AT_BOUND = 1e-10
-
-
 def gap_to_bound(bound: float, base: float, noise: float) -> float:
-    """``bound - base``, exactly 0 when within the rounding of the base (:data:`AT_BOUND`)."""
+    """``bound - base``, exactly 0 when within the rounding of the base
+    (:data:`controllers.cjm.tolerances.AT_BOUND`)."""
     gap = bound - base
     return 0.0 if abs(gap) <= AT_BOUND * (1.0 + abs(bound) + noise) else gap
 
@@ -172,7 +157,7 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
     nv = jacobian.shape[1]
     free = np.ones(nv, dtype=bool)
     held = np.zeros(nv)
-    box = (lower - 1e-12 * (1.0 + np.abs(lower)), upper + 1e-12 * (1.0 + np.abs(upper)))
+    box = (lower - BOX_MARGIN * (1.0 + np.abs(lower)), upper + BOX_MARGIN * (1.0 + np.abs(upper)))
     scaled: tuple[float, np.ndarray, np.ndarray, int] | None = None  # scale, free, held, joint
     reference_rank = None  # the task rank before any velocity saturation
     for _ in range(nv + 1):
@@ -191,7 +176,7 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
         bound = upper[critical] if qd[critical] > upper[critical] else lower[critical]
         held[critical] = bound
         free[critical] = False
-        if abs(bound) < velocity_limit[critical] * (1.0 - 1e-12):  # a position bound
+        if abs(bound) < velocity_limit[critical] * (1.0 - BOX_MARGIN):  # a position bound
             reference_rank, scaled = None, None
         elif scale >= 0.0 and (scaled is None or scale > scaled[0]):
             candidate_free, candidate_held = free.copy(), held.copy()

@@ -4,17 +4,6 @@
 
 namespace cjm {
 
-namespace {
-//! controllers.cjm.analytical.PRE_CHAIN_PIVOT_RATIO
-constexpr double kPreChainPivotRatio = 1e-2;
-//! controllers.cjm.analytical.PRE_CHAIN_MIN_SINGULAR_VALUE
-constexpr double kPreChainMinSingularValue = 1e-2;
-//! controllers.cjm.analytical.FAST_PATH_MIN_SIGMA
-constexpr double kFastPathMinSigma = 1e-6;
-//! numpy.linalg.lstsq's rcond in SquarePreChain._closest_to_posture
-constexpr double kLeastSquaresRcond = 1e-10;
-}  // namespace
-
 bool Step::analytical(const Inputs& in, Index index, VectorRef qd) {
   const ConstraintPlan& plan = constraints_[index];
   if (!plan.analytical || task_rows_ != 6) return false;
@@ -35,7 +24,7 @@ bool Step::square_pre_chain(const Inputs& in, Index index, VectorRef qd) {
   for (Index j = 0; j < 6; ++j) square_.col(j) = jacobian_a.col(plan.pre[j]);
   lu_pre_.compute(square_);
   const auto pivots = lu_pre_.matrixLU().diagonal().cwiseAbs();
-  if (!(pivots.minCoeff() >= kPreChainPivotRatio * pivots.maxCoeff())) {
+  if (!(pivots.minCoeff() >= tol_.pre_chain_pivot_ratio * pivots.maxCoeff())) {
     event(Event::pre_chain_singular);
     return false;
   }
@@ -58,7 +47,7 @@ bool Step::square_pre_chain(const Inputs& in, Index index, VectorRef qd) {
     square_ = cjm;
     lu_cjm_.compute(square_);
     const double bound = 1.0 / lu_cjm_.inverse().norm();  // <= sigma_min
-    if (bound >= policy_.threshold && bound >= kFastPathMinSigma) {
+    if (bound >= policy_.threshold && bound >= tol_.fast_path_min_sigma) {
       free = lu_cjm_.solve(cjm_rhs_);
       sigma_min_ = bound;
       solved = true;
@@ -106,7 +95,7 @@ void Step::closest_to_posture(const Inputs& in, Index n_columns, bool use_postur
   auto mapped = closest_.topLeftCorner(nv_, d);
   mapped.noalias() = joint_map.rightCols(n_columns) * basis;
   closest_svd_.compute(mapped);
-  const double cutoff = kLeastSquaresRcond * closest_svd_.max_value();
+  const double cutoff = tol_.least_squares_rcond * closest_svd_.max_value();
   auto step = step_.head(d);
   step.setZero();
   for (Index j = 0; j < closest_svd_.size(); ++j) {
@@ -124,7 +113,7 @@ bool Step::redundant_pre_chain(const Inputs& in, Index index, VectorRef qd) {
   auto pre_jacobian = pre_jacobian_.topLeftCorner(6, n_pre);
   for (Index j = 0; j < n_pre; ++j) pre_jacobian.col(j) = jacobian_a.col(plan.pre[j]);
   pre_svd_.compute(pre_jacobian);  // J_a = U S V^T, 6 singular values
-  if (pre_svd_.min_value() < kPreChainMinSingularValue) {
+  if (pre_svd_.min_value() < tol_.pre_chain_min_singular_value) {
     event(Event::pre_chain_singular);
     return false;
   }

@@ -24,17 +24,15 @@ struct DampingPolicy {
   }
 };
 
-//! Singular values at or below this times ``max(1, sigma_max)`` count as zero
-//! (controllers.linalg's rank_tolerance).
-constexpr double kRankTolerance = 1e-10;
-
 //! ``x = J^T (J J^T + lambda^2 I)^-1 r`` for one or more right-hand sides, with what
 //! controllers.linalg.DampedSolution reports: sigma_min, lambda, the rank (singular
 //! values kept), the row space and whether the solution is exact.
 class DampedLeastSquares {
  public:
-  DampedLeastSquares(Index max_rows, Index max_cols)
-      : svd_(max_rows, max_cols), gains_(std::max<Index>(1, std::min(max_rows, max_cols))),
+  //! Singular values at or below ``rank_tolerance`` times ``max(1, sigma_max)`` count
+  //! as zero (controllers.linalg's rank_tolerance).
+  DampedLeastSquares(Index max_rows, Index max_cols, double rank_tolerance)
+      : rank_tolerance_(rank_tolerance), svd_(max_rows, max_cols), gains_(std::max<Index>(1, std::min(max_rows, max_cols))),
         projected_(std::max<Index>(1, std::min(max_rows, max_cols)), 2),
         row_space_(std::max<Index>(1, max_cols), std::max<Index>(1, std::min(max_rows, max_cols))) {}
 
@@ -43,7 +41,7 @@ class DampedLeastSquares {
     svd_.compute(matrix);
     rows_ = matrix.rows();
     const auto s = svd_.s();
-    const double tolerance = kRankTolerance * std::max(1.0, svd_.max_value());
+    const double tolerance = rank_tolerance_ * std::max(1.0, svd_.max_value());
     // sigma_min: the smallest value kept (a direction not seen at all is not damped)
     sigma_min_ = 0.0;
     for (Index j = 0; j < s.size(); ++j) {
@@ -77,6 +75,7 @@ class DampedLeastSquares {
   auto row_space() const { return row_space_.topLeftCorner(svd_.v().rows(), rank_); }
 
  private:
+  double rank_tolerance_;
   ThinSvd svd_;
   Vector gains_;
   Matrix projected_, row_space_;

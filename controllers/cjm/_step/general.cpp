@@ -6,9 +6,6 @@
 namespace cjm {
 
 namespace {
-//! controllers.cjm.general.CONFLICT_RESIDUAL
-constexpr double kConflictResidual = 1e-9;
-
 //! ``max |rows x - rhs|`` (0 without rows), with ``scratch`` for the product.
 double residual_of(const ConstMatrixRef& rows, const ConstVectorRef& x, const ConstVectorRef& rhs,
                    VectorRef scratch) {
@@ -29,7 +26,7 @@ void Step::general(const Inputs& in, VectorRef qd) {
   null_.pseudo_solve(rhs, qd);  // qd_0 = A^+ b
   if (null_.rank() < m) {
     const double residual = residual_of(rows, qd, rhs, scratch_rows_.head(m));
-    if (residual > kConflictResidual) {
+    if (residual > tol_.conflict_residual) {
       report(Status::constraint_degraded);
       event(Event::conflict, static_cast<double>(null_.rank()), static_cast<double>(m), residual);
     }

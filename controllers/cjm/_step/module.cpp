@@ -39,8 +39,39 @@ bool load_vector(py::handle source, cjm::Vector& target) {
   return target.allFinite();
 }
 
+//! A Pipeline that also holds the constraints with an affine form, whose anchor
+//! (``affine_anchor()``, 6 entries) and ``gain`` it copies in before every step: the
+//! constraints' data read each step, with no Python loop (docs/design.md section 16).
+struct BoundPipeline : cjm::Pipeline {
+  using cjm::Pipeline::Pipeline;
+
+  struct Source {
+    Index index;
+    py::object constraint, affine_anchor;  // the constraint and its bound affine_anchor
+  };
+  std::vector<Source> sources;
+  py::str gain_name{"gain"};
+
+  void add_source(Index index, py::object constraint) {
+    py::object method = constraint.attr("affine_anchor");
+    sources.push_back(Source{index, std::move(constraint), std::move(method)});
+  }
+
+  void read_sources() {
+    for (const Source& source : sources) {
+      const py::object anchor = source.affine_anchor();
+      if (!py::isinstance<py::array_t<double>>(anchor))
+        throw std::invalid_argument("affine_anchor() must give a float64 array");
+      const auto entries = py::reinterpret_borrow<py::array_t<double>>(anchor).unchecked<1>();
+      if (entries.shape(0) != 6) throw std::invalid_argument("affine_anchor() must give 6 entries");
+      for (py::ssize_t i = 0; i < 6; ++i) anchors()(source.index, i) = entries(i);
+      gains()(source.index) = source.constraint.attr(gain_name).cast<double>();
+    }
+  }
+};
+
 //! The step into a new array (the GIL released while it runs).
-py::array_t<double> finish(cjm::Pipeline& pipeline, bool use_posture, bool analytical_allowed) {
+py::array_t<double> finish(BoundPipeline& pipeline, bool use_posture, bool analytical_allowed) {
   py::array_t<double> qd(pipeline.nv());
   Eigen::Map<cjm::Vector> qd_map(qd.mutable_data(), qd.size());
   py::gil_scoped_release release;
@@ -75,19 +106,38 @@ PYBIND11_MODULE(_step, module) {
            py::arg("limited_q"), py::arg("limited_v"), py::arg("q_min"), py::arg("q_max"),
            py::arg("position_gain"), py::arg("position_limits"), py::arg("box_test"));
 
+  py::class_<cjm::Tolerances>(module, "Tolerances")
+      .def(py::init([](double equality, double twist, double barrier, double rank,
+                       double pre_chain_pivot_ratio, double pre_chain_min_singular_value,
+                       double fast_path_min_sigma, double least_squares_rcond,
+                       double conflict_residual, double rows, double at_bound, double box_margin,
+                       double still_direction) {
+             return cjm::Tolerances{equality, twist, barrier, rank, pre_chain_pivot_ratio,
+                                    pre_chain_min_singular_value, fast_path_min_sigma,
+                                    least_squares_rcond, conflict_residual, rows, at_bound,
+                                    box_margin, still_direction};
+           }),
+           py::arg("equality"), py::arg("twist"), py::arg("barrier"), py::arg("rank"),
+           py::arg("pre_chain_pivot_ratio"), py::arg("pre_chain_min_singular_value"),
+           py::arg("fast_path_min_sigma"), py::arg("least_squares_rcond"),
+           py::arg("conflict_residual"), py::arg("rows"), py::arg("at_bound"),
+           py::arg("box_margin"), py::arg("still_direction"),
+           "controllers.cjm.tolerances.StepTolerances, field by field.");
+
   py::class_<cjm::Step>(module, "Step")
       .def(py::init([](Index nq, Index nv, Index task_rows, double damping, double threshold,
                        double max_damping, bool general_only,
                        std::vector<cjm::ConstraintPlan> constraints, cjm::JointBox box,
-                       double posture_gain, cjm::Vector posture_target) {
+                       double posture_gain, cjm::Vector posture_target,
+                       cjm::Tolerances tolerances) {
              return new cjm::Step(nq, nv, task_rows, cjm::DampingPolicy{damping, threshold, max_damping},
                                   general_only, std::move(constraints), std::move(box),
-                                  posture_gain, std::move(posture_target));
+                                  posture_gain, std::move(posture_target), tolerances);
            }),
            py::arg("nq"), py::arg("nv"), py::arg("task_rows"), py::arg("damping"),
            py::arg("threshold"), py::arg("max_damping"), py::arg("general_only"),
            py::arg("constraints"), py::arg("box"), py::arg("posture_gain"),
-           py::arg("posture_target"))
+           py::arg("posture_target"), py::arg("tolerances"))
       .def_property_readonly("report", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.report().data(), {step.report().size()}, self);
@@ -109,7 +159,7 @@ PYBIND11_MODULE(_step, module) {
         return view(step.saturation_joints().data(), {step.saturation_joints().size()}, self);
       });
 
-  py::class_<cjm::Pipeline>(module, "Pipeline")
+  py::class_<BoundPipeline>(module, "Pipeline")
       .def(py::init([](std::vector<std::tuple<std::string, Index, Eigen::Matrix4d, Eigen::Vector3d>> joints,
                        std::vector<std::tuple<Index, Eigen::Matrix4d>> frames, const cjm::Step& step,
                        Index ee_count, std::vector<Index> task_entries, cjm::Vector task_scale) {
@@ -119,7 +169,7 @@ PYBIND11_MODULE(_step, module) {
              std::vector<cjm::FrameSpec> frame_specs;
              for (auto& [parent, placement] : frames)
                frame_specs.push_back(cjm::FrameSpec{parent, placement});
-             return new cjm::Pipeline(cjm::Kinematics(joint_specs, frame_specs), step, ee_count,
+             return new BoundPipeline(cjm::Kinematics(joint_specs, frame_specs), step, ee_count,
                                       std::move(task_entries), std::move(task_scale));
            }),
            py::arg("joints"), py::arg("frames"), py::arg("step"), py::arg("ee_count"),
@@ -127,26 +177,36 @@ PYBIND11_MODULE(_step, module) {
            "``joints``: (kind, parent, placement 4x4, axis) per joint of pin.Model after the "
            "universe; ``frames``: (parent joint, placement 4x4), the EE frames then one per "
            "constraint; ``step`` is copied.")
-      .def("set_affine", [](cjm::Pipeline& pipeline, Index index, cjm::RowMatrix of_x,
-                            cjm::RowMatrix of_f, cjm::Vector offset) {
-             pipeline.set_affine(index, cjm::AffineTerms{std::move(of_x), std::move(of_f), std::move(offset)});
-           }, py::arg("index"), py::arg("of_x"), py::arg("of_f"), py::arg("offset"))
-      .def("set_policy", [](cjm::Pipeline& pipeline, double damping, double threshold, double max_damping) {
-             pipeline.set_policy(cjm::DampingPolicy{damping, threshold, max_damping});
-           }, py::arg("damping"), py::arg("threshold"), py::arg("max_damping"))
-      .def("load", [](cjm::Pipeline& pipeline, py::handle q, py::handle twist) {
+      .def("set_affine", [](BoundPipeline& pipeline, Index index, cjm::RowMatrix of_x,
+                            cjm::RowMatrix of_f, cjm::Vector offset, cjm::RowMatrix of_x_per_gain,
+                            cjm::Vector offset_per_gain, py::object source) {
+             pipeline.set_affine(index, cjm::AffineTerms{std::move(of_x), std::move(of_f),
+                                                         std::move(of_x_per_gain), std::move(offset),
+                                                         std::move(offset_per_gain)});
+             pipeline.add_source(index, std::move(source));
+           }, py::arg("index"), py::arg("of_x"), py::arg("of_f"), py::arg("offset"),
+           py::arg("of_x_per_gain"), py::arg("offset_per_gain"), py::arg("source"),
+           "Constraint ``index``'s affine map; ``source`` (the constraint) gives its anchor "
+           "and gain, read before every step.")
+      .def("load", [](BoundPipeline& pipeline, py::handle q, py::handle twist) {
              return load_vector(q, pipeline.q()) && load_vector(twist, pipeline.twist());
            }, py::arg("q"), py::arg("twist"),
            "Copies q and the stacked twist in: false unless both are finite float64 vectors "
            "of the right sizes.")
-      .def("prepare", &cjm::Pipeline::prepare, py::call_guard<py::gil_scoped_release>(),
-           "The kinematics, the task rows and the affine terms at the loaded q.")
+      .def("prepare", [](BoundPipeline& pipeline) {
+             pipeline.read_sources();
+             py::gil_scoped_release release;
+             pipeline.prepare();
+           },
+           "The constraints' anchors and gains read, then the kinematics, the task rows and "
+           "the affine terms at the loaded q.")
       .def("finish", &finish, py::arg("use_posture"), py::arg("analytical_allowed"),
            "The step, after prepare() and the terms Python writes: a new qd.")
-      .def("solve", [](cjm::Pipeline& pipeline, py::handle q, py::handle twist, bool use_posture,
+      .def("solve", [](BoundPipeline& pipeline, py::handle q, py::handle twist, bool use_posture,
                        bool analytical_allowed) -> py::object {
              if (!load_vector(q, pipeline.q()) || !load_vector(twist, pipeline.twist()))
                return py::none();
+             pipeline.read_sources();
              {
                py::gil_scoped_release release;
                pipeline.prepare();
@@ -154,29 +214,29 @@ PYBIND11_MODULE(_step, module) {
              return finish(pipeline, use_posture, analytical_allowed);
            }, py::arg("q"), py::arg("twist"), py::arg("use_posture"), py::arg("analytical_allowed"),
            "load, prepare and finish in one call; None when load() would be false.")
-      .def_property_readonly("step", [](cjm::Pipeline& pipeline) -> cjm::Step& { return pipeline.step(); },
+      .def_property_readonly("step", [](BoundPipeline& pipeline) -> cjm::Step& { return pipeline.step(); },
                              py::return_value_policy::reference_internal)
       .def_property_readonly("q", [](py::object self) {
-        auto& vector = self.cast<cjm::Pipeline&>().q();
+        auto& vector = self.cast<BoundPipeline&>().q();
         return view(vector.data(), {vector.size()}, self);
       })
       .def_property_readonly("terms", [](py::object self) {
-        auto& vector = self.cast<cjm::Pipeline&>().terms();
+        auto& vector = self.cast<BoundPipeline&>().terms();
         return view(vector.data(), {vector.size()}, self);
       })
       .def_property_readonly("posture", [](py::object self) {
-        auto& vector = self.cast<cjm::Pipeline&>().posture();
+        auto& vector = self.cast<BoundPipeline&>().posture();
         return view(vector.data(), {vector.size()}, self);
       })
       .def_property_readonly("anchors", [](py::object self) {
-        auto& matrix = self.cast<cjm::Pipeline&>().anchors();
+        auto& matrix = self.cast<BoundPipeline&>().anchors();
         return view(matrix.data(), {matrix.rows(), matrix.cols()}, self);
       })
       .def_property_readonly("placements", [](py::object self) {
-        return read_only(self.cast<cjm::Pipeline&>().placements(), self);
+        return read_only(self.cast<BoundPipeline&>().placements(), self);
       })
       .def_property_readonly("jacobians", [](py::object self) {
-        return read_only(self.cast<cjm::Pipeline&>().jacobians(), self);
+        return read_only(self.cast<BoundPipeline&>().jacobians(), self);
       });
 
   py::dict fields;

@@ -16,8 +16,10 @@ namespace cjm {
 
 class NullSpace {
  public:
-  NullSpace(Index max_rows, Index max_cols)
-      : factored_(std::max<Index>(1, max_cols), std::max<Index>(1, max_rows)),
+  //! ``rank_tolerance``: singular values at or below it times ``max(1, sigma_max)``
+  //! count as zero (controllers.linalg's rank_tolerance).
+  NullSpace(Index max_rows, Index max_cols, double rank_tolerance)
+      : rank_tolerance_(rank_tolerance), factored_(std::max<Index>(1, max_cols), std::max<Index>(1, max_rows)),
         tau_(std::max<Index>(1, std::min(max_rows, max_cols))),
         inverse_(std::max<Index>(1, max_rows), std::max<Index>(1, max_rows)),
         svd_(std::max<Index>(1, std::min(max_rows, max_cols)), std::max<Index>(1, max_rows)),
@@ -45,7 +47,7 @@ class NullSpace {
     auto r1 = inverse_.topLeftCorner(t_, m_);  // reused as R1's storage
     r1 = a_t.topRows(t_).triangularView<Eigen::Upper>();
     svd_.compute(r1);
-    const double tolerance = kRankTolerance * std::max(1.0, svd_.max_value());
+    const double tolerance = rank_tolerance_ * std::max(1.0, svd_.max_value());
     for (Index j = 0; j < t_; ++j)
       if (svd_.s()(j) > tolerance) kept_(n_kept_++) = j;
     n_dropped_ = t_ - n_kept_;
@@ -118,9 +120,10 @@ class NullSpace {
     double largest2 = 0.0;  // ||R1||_F^2
     for (Index j = 0; j < m_; ++j) largest2 += factored_.col(j).head(j + 1).squaredNorm();
     const double largest = std::sqrt(largest2);
-    return std::isfinite(bound) && bound > kRankTolerance * std::max(1.0, largest);
+    return std::isfinite(bound) && bound > rank_tolerance_ * std::max(1.0, largest);
   }
 
+  double rank_tolerance_;
   Matrix factored_;  // A^T's QR (n x m)
   Vector tau_;
   Matrix inverse_;   // R1^-1 for the certificate, else R1 for its SVD

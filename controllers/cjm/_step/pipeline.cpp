@@ -32,6 +32,7 @@ Pipeline::Pipeline(Kinematics kinematics, Step step, Index ee_count,
   posture_ = Vector::Zero(nv);
   ee_jacobian_ = RowMatrix::Zero(task_twist_.size(), nv);
   anchors_ = RowMatrix::Zero(n_constraints, 6);
+  gains_ = Vector::Zero(n_constraints);
 }
 
 void Pipeline::set_affine(Index index, AffineTerms terms) {
@@ -39,7 +40,9 @@ void Pipeline::set_affine(Index index, AffineTerms terms) {
     throw std::invalid_argument("constraint index out of range");
   const Index size = terms_size_[index];
   if (terms.of_x.rows() != size || terms.of_x.cols() != 3 || terms.of_f.rows() != size ||
-      terms.of_f.cols() != 3 || terms.offset.size() != size)
+      terms.of_f.cols() != 3 || terms.offset.size() != size ||
+      terms.of_x_per_gain.rows() != size || terms.of_x_per_gain.cols() != 3 ||
+      terms.offset_per_gain.size() != size)
     throw std::invalid_argument("affine terms of the wrong size");
   affine_[index] = std::move(terms);
   has_affine_[index] = true;
@@ -60,12 +63,18 @@ void Pipeline::prepare() {
     x_.noalias() = rotation.transpose() * (anchors_.row(i).head<3>().transpose() -
                                            placement.tail<3>().transpose());
     auto terms = terms_.segment(step_.terms_offset(i), terms_size_[i]);
-    terms.noalias() = affine_[i].of_x * x_;
-    terms += affine_[i].offset;
+    const AffineTerms& affine = affine_[i];
+    terms.noalias() = affine.of_x * x_;
+    terms += affine.offset;
+    const double gain = gains_(i);
+    if (gain != 0.0) {
+      terms.noalias() += gain * (affine.of_x_per_gain * x_);
+      terms += gain * affine.offset_per_gain;
+    }
     const auto velocity = anchors_.row(i).tail<3>();
     if ((velocity.array() != 0.0).any()) {  // a moving anchor (AffineTerms.write's f)
       f_.noalias() = rotation.transpose() * velocity.transpose();
-      terms.noalias() += affine_[i].of_f * f_;
+      terms.noalias() += affine.of_f * f_;
     }
   }
 }

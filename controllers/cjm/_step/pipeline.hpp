@@ -14,11 +14,12 @@
 
 namespace cjm {
 
-//! A constraint's terms as ``offset + of_x x + of_f f`` with ``x = R^T (point - t)`` and
-//! ``f = R^T velocity`` in its link's frame (controllers.cjm.analytical.AffineTerms).
+//! A constraint's terms as ``offset + of_x x + of_f f + K (offset_per_gain +
+//! of_x_per_gain x)`` with ``x = R^T (point - t)`` and ``f = R^T velocity`` in its link's
+//! frame and ``K`` its gain (controllers.cjm.analytical.AffineTerms).
 struct AffineTerms {
-  RowMatrix of_x, of_f;  // terms_size x 3
-  Vector offset;
+  RowMatrix of_x, of_f, of_x_per_gain;  // terms_size x 3
+  Vector offset, offset_per_gain;
 };
 
 class Pipeline {
@@ -29,10 +30,8 @@ class Pipeline {
   Pipeline(Kinematics kinematics, Step step, Index ee_count, std::vector<Index> task_entries,
            Vector task_scale);
 
-  //! Constraint ``index``'s affine map (replaced when its gain changes); without one,
-  //! Python writes its terms.
+  //! Constraint ``index``'s affine map; without one, Python writes its terms.
   void set_affine(Index index, AffineTerms terms);
-  void set_policy(DampingPolicy policy) { step_.set_policy(policy); }
 
   //! The kinematics at q(), the task rows and the affine terms.
   void prepare();
@@ -46,6 +45,9 @@ class Pipeline {
   Vector& posture() { return posture_; }
   //! Per constraint: its world anchor point, then its world velocity (affine ones only).
   RowMatrix& anchors() { return anchors_; }
+  //! Per constraint: its drift-feedback gain (affine ones only; with the anchors, read
+  //! from the constraint before every step by the bindings).
+  Vector& gains() { return gains_; }
   const RowMatrix& placements() const { return kinematics_.placements(); }
   const RowMatrix& jacobians() const { return kinematics_.jacobians(); }
   Step& step() { return step_; }
@@ -59,7 +61,7 @@ class Pipeline {
   std::vector<Index> terms_size_;  // per constraint (its buffer starts at step_.terms_offset)
   std::vector<bool> has_affine_;
   std::vector<AffineTerms> affine_;
-  Vector q_, twist_, task_twist_, terms_, posture_;
+  Vector q_, twist_, task_twist_, terms_, posture_, gains_;
   RowMatrix ee_jacobian_, anchors_;
   Eigen::Vector3d x_, f_;
 };

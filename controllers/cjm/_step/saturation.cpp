@@ -6,20 +6,14 @@
 namespace cjm {
 
 namespace {
-//! controllers.cjm.saturation.ROWS_TOLERANCE
-constexpr double kRowsTolerance = 1e-9;
-constexpr double kTwistTolerance = 1e-6;
-constexpr double kBarrierTolerance = 1e-12;
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
-//! controllers.cjm.saturation.AT_BOUND
-constexpr double kAtBound = 1e-10;
+}  // namespace
 
 //! controllers.cjm.saturation.gap_to_bound: ``bound - base``, 0 within its rounding.
-double gap_to_bound(double bound, double base, double noise) {
+double Step::gap_to_bound(double bound, double base, double noise) const {
   const double gap = bound - base;
-  return std::abs(gap) <= kAtBound * (1.0 + std::abs(bound) + noise) ? 0.0 : gap;
+  return std::abs(gap) <= tol_.at_bound * (1.0 + std::abs(bound) + noise) ? 0.0 : gap;
 }
-}  // namespace
 
 void Step::saturate(const Inputs& in, VectorRef qd) {
   ensure_rows(in);
@@ -30,7 +24,7 @@ void Step::saturate(const Inputs& in, VectorRef qd) {
     for (Index i : barriers_)
       if (std::find(active_.begin(), active_.end(), i) == active_.end()) waiting_.push_back(i);
     Index worst = -1;
-    double worst_violation = kBarrierTolerance;
+    double worst_violation = tol_.barrier;
     for (Index i : waiting_) {
       const double violation = barrier_violation(i, sns_qd_);
       if (violation > worst_violation) {
@@ -78,8 +72,8 @@ void Step::saturate_in_null_space(const Inputs& in) {
   free_.setConstant(true);
   held_.setZero();
   for (Index j = 0; j < nv_; ++j) {
-    box_lower_(j) = lower_(j) - 1e-12 * (1.0 + std::abs(lower_(j)));
-    box_upper_(j) = upper_(j) + 1e-12 * (1.0 + std::abs(upper_(j)));
+    box_lower_(j) = lower_(j) - tol_.box_margin * (1.0 + std::abs(lower_(j)));
+    box_upper_(j) = upper_(j) + tol_.box_margin * (1.0 + std::abs(upper_(j)));
   }
   bool have_scaled = false, have_reference = false;
   double best_scale = 0.0;
@@ -90,7 +84,7 @@ void Step::saturate_in_null_space(const Inputs& in) {
       reference_rank = split.task_rank;
       have_reference = true;
     }
-    if (split.rows_residual > kRowsTolerance) break;  // too few free joints for the rows
+    if (split.rows_residual > tol_.rows) break;  // too few free joints for the rows
     if (split.task_rank < reference_rank && have_scaled) break;  // keep the best full-rank scale
     sns_qd_ = base_ + direction_;
     if ((sns_qd_.array() >= box_lower_.array()).all() && (sns_qd_.array() <= box_upper_.array()).all()) {
@@ -103,7 +97,7 @@ void Step::saturate_in_null_space(const Inputs& in) {
     const double bound = sns_qd_(critical) > upper_(critical) ? upper_(critical) : lower_(critical);
     held_(critical) = bound;
     free_(critical) = false;
-    if (std::abs(bound) < box_.velocity_limit(critical) * (1.0 - 1e-12)) {  // a position bound
+    if (std::abs(bound) < box_.velocity_limit(critical) * (1.0 - tol_.box_margin)) {  // a position bound
       have_reference = have_scaled = false;
     } else if (scale >= 0.0 && (!have_scaled || scale > best_scale)) {
       have_scaled = true;
@@ -137,7 +131,7 @@ double Step::task_scale_limit(const ConstVectorRef& base, const ConstVectorRef& 
     noise = std::max(noise, std::abs(base(i)));
     largest = std::max(largest, std::abs(direction(i)));
   }
-  const double still = std::max(1e-12, kAtBound * largest);  // a direction entry of 0
+  const double still = std::max(tol_.still_direction, tol_.at_bound * largest);  // a direction entry of 0
   for (Index i = 0; i < nv_; ++i) {
     if (!free_(i)) continue;
     const double a = direction(i), b = base(i);
@@ -179,7 +173,7 @@ void Step::saturation_result(const Inputs& in, double task_scale, double rows_sc
   auto achieved = scratch_rows_.head(task_rows_);
   achieved.noalias() = in.ee_jacobian * sns_qd_;
   achieved -= task_scale * in.twist;
-  const double tolerance = kTwistTolerance * (1.0 + in.twist.cwiseAbs().maxCoeff());
+  const double tolerance = tol_.twist * (1.0 + in.twist.cwiseAbs().maxCoeff());
   sns_missed_ = achieved.cwiseAbs().maxCoeff() > tolerance;
   sns_task_scale_ = task_scale;
   sns_rows_scale_ = rows_scale;

@@ -9,12 +9,6 @@
 namespace cjm {
 
 namespace {
-//! An equality row is held up to this (m/s): controllers.base.EQUALITY_TOLERANCE.
-constexpr double kEqualityTolerance = 1e-9;
-//! ``J_e qd`` meets the twist up to this relative error: controllers.base.TWIST_TOLERANCE.
-constexpr double kTwistTolerance = 1e-6;
-//! A barrier is violated beyond this (m/s): controllers.cjm.controller.BARRIER_TOLERANCE.
-constexpr double kBarrierTolerance = 1e-12;
 constexpr Index kEventsPerConstraint = 8;
 
 Index terms_size_of(Index k) { return 6 * (7 - k) + 7 * k; }
@@ -22,11 +16,12 @@ Index terms_size_of(Index k) { return 6 * (7 - k) + 7 * k; }
 
 Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool general_only,
            std::vector<ConstraintPlan> constraints, JointBox box, double posture_gain,
-           Vector posture_target)
-    : nq_(nq), nv_(nv), task_rows_(task_rows), policy_(policy), general_only_(general_only),
+           Vector posture_target, Tolerances tolerances)
+    : nq_(nq), nv_(nv), task_rows_(task_rows), policy_(policy), tol_(tolerances),
+      general_only_(general_only),
       constraints_(std::move(constraints)), box_(std::move(box)), posture_gain_(posture_gain),
       posture_target_(std::move(posture_target)),
-      null_(0, 0), dls_(0, 0), pre_svd_(6, std::max<Index>(nv, 6)), closest_svd_(nv, nv + 7) {
+      null_(0, 0, tolerances.rank), dls_(0, 0, tolerances.rank), pre_svd_(6, std::max<Index>(nv, 6)), closest_svd_(nv, nv + 7) {
   if (nq < 1 || nv < 1 || task_rows < 1)
     throw std::invalid_argument("nq, nv and the task rows must be positive");
   for (Index i = 0; i < static_cast<Index>(constraints_.size()); ++i) {
@@ -71,8 +66,8 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   rows_.resize(m, nv);
   all_rhs_.resize(m);
   rhs_.resize(m);
-  null_ = NullSpace(m, nv);
-  dls_ = DampedLeastSquares(task_rows, std::max<Index>(nv + 7, 8));
+  null_ = NullSpace(m, nv, tol_.rank);
+  dls_ = DampedLeastSquares(task_rows, std::max<Index>(nv + 7, 8), tol_.rank);
   task_t_.resize(nv, task_rows);
   task_null_t_.resize(nv, task_rows);
   task_null_.resize(task_rows, nv);
@@ -152,7 +147,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
     event(Event::no_convergence);
     qd.setZero();
   }
-  if (status_ != Status::failed && equality_residual_ > kEqualityTolerance) {
+  if (status_ != Status::failed && equality_residual_ > tol_.equality) {
     report(Status::constraint_degraded);
     event(Event::residual, equality_residual_);
   }
@@ -183,7 +178,7 @@ void Step::activate_barriers(const Inputs& in, VectorRef qd) {
         worst = w;
       }
     }
-    if (!(worst_violation > kBarrierTolerance)) break;
+    if (!(worst_violation > tol_.barrier)) break;
     active_.push_back(waiting_[worst]);
     waiting_.erase(waiting_.begin() + worst);
     solve_rows(in, qd);
@@ -259,7 +254,7 @@ void Step::clip(VectorRef qd) {
     if (value != qd(i)) clip_joints_(clipped++) = i;
     qd(i) = value;
   }
-  if (change > kEqualityTolerance * (1.0 + largest)) {
+  if (change > tol_.equality * (1.0 + largest)) {
     report(Status::constraint_degraded);
     event(Event::clipped, change);
     saturated_.head(clipped) = clip_joints_.head(clipped);
@@ -296,7 +291,7 @@ void Step::report_task_solution(const ConstMatrixRef& matrix, const ConstVectorR
   achieved -= rhs;
   const double residual = matrix.rows() ? achieved.cwiseAbs().maxCoeff() : 0.0;
   const double scale = rhs.size() ? rhs.cwiseAbs().maxCoeff() : 0.0;
-  if (residual > kTwistTolerance * (1.0 + scale)) {
+  if (residual > tol_.twist * (1.0 + scale)) {
     report(Status::least_squares);
     event(Event::task_residual, damping_, residual);
   }

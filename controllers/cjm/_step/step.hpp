@@ -39,6 +39,14 @@ enum class Event : int {
   non_finite,              // failed
 };
 
+//! Every tolerance the step decides with: controllers.cjm.tolerances.StepTolerances,
+//! given by Python when the step is built (no copy of the numbers here).
+struct Tolerances {
+  double equality, twist, barrier, rank, pre_chain_pivot_ratio, pre_chain_min_singular_value,
+      fast_path_min_sigma, least_squares_rcond, conflict_residual, rows, at_bound, box_margin,
+      still_direction;
+};
+
 //! One constraint: its rows and, when the analytical form may take it, its chain split.
 struct ConstraintPlan {
   Index rows = 0;          // k
@@ -73,9 +81,8 @@ class Step {
   //! here; empty: Python passes it to solve().
   Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool general_only,
        std::vector<ConstraintPlan> constraints, JointBox box, double posture_gain,
-       Vector posture_target);
+       Vector posture_target, Tolerances tolerances);
 
-  void set_policy(DampingPolicy policy) { policy_ = policy; }
   Index nq() const { return nq_; }
   Index nv() const { return nv_; }
   Index task_rows() const { return task_rows_; }
@@ -151,6 +158,7 @@ class Step {
   void saturate_in_null_space(const Inputs& in);
   double task_scale_limit(const ConstVectorRef& base, const ConstVectorRef& direction,
                           Index& critical) const;
+  double gap_to_bound(double bound, double base, double noise) const;
   void saturation_result(const Inputs& in, double task_scale, double rows_scale,
                          Index limiting_joint, const Split& split);
   void scale_rows(const Inputs& in);
@@ -158,6 +166,7 @@ class Step {
   // problem
   Index nq_, nv_, task_rows_;
   DampingPolicy policy_;
+  Tolerances tol_;
   bool general_only_;
   std::vector<ConstraintPlan> constraints_;
   std::vector<Index> row_offset_, terms_offset_, equalities_, barriers_;

@@ -1,0 +1,246 @@
+"""The CJM step in Python: the readable reference of docs/design.md sections 4-9.
+
+:class:`PythonStep` runs one step of :class:`controllers.cjm.controller.CJMController`
+from its :class:`~controllers.cjm.step_setup.StepSetup`: the kinematics, the equality
+rows, the barriers' active set, the analytical or general form, saturation in the null
+space when the command leaves the joint box, the clip guard, and a
+:class:`~controllers.cjm.report.StepReport` of what happened. The compiled step
+(:mod:`controllers.cjm.compiled`) does the same in C++.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+from ..base import StepStatus, checked_inputs
+from .analytical import SquarePreChain, solve_redundant_pre_chain
+from .general import solve_general
+from .report import Event, ReportBuilder, StepReport
+from .saturation import saturate_in_null_space
+from .step_setup import StepSetup
+from .tolerances import BARRIER_TOLERANCE, EQUALITY_TOLERANCE, PAPER_FORM_MIN_A
+
+
+class PythonStep:
+    """One controller's Python step: ``solve(q, twist) -> (qd, report)``.
+
+    ``data`` is the controller's ``pin.Data``: after a step it holds the kinematics at
+    ``q`` (as :meth:`controllers.base.Controller.solve` leaves it).
+    """
+
+    def __init__(self, setup: StepSetup, data: pin.Data) -> None:
+        self.setup = setup
+        self.data = data
+        self._square_plans: dict[int, SquarePreChain] = {}
+        self._active: list[int] = []
+        self._equalities, self._barriers = setup.equalities, setup.barriers
+        #: one task the analytical form may take (form auto, one EE, its full twist)
+        self._analytical_task = setup.form == "auto" and setup.paper_task
+        self._nq, self._task_size = setup.model.nq, setup.task_size
+
+    # -- the step template (controllers.base.Controller.solve) ---------------------------
+
+    def solve(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
+        """``qd`` for the stacked EE twist at ``q`` and the step's report. Bad input
+        raises ``ValueError``; a failed step gives zeros."""
+        setup = self.setup
+        q, twist = checked_inputs(q, twist, self._nq, self._task_size)
+        report = ReportBuilder()
+        ee_jacobian = self._kinematics(q)
+        task = self._task(twist)
+        try:
+            qd = self._solve(q, ee_jacobian, task, report)
+        except np.linalg.LinAlgError as error:
+            return self._fail(report, f"{type(error).__name__}: {error}")
+        if not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
+            return self._fail(report, "", Event.NON_FINITE)
+        if not setup.box_test.contains(q, qd):
+            lower, upper = setup.bounds.box(q)
+            try:
+                qd = self._saturate(q, ee_jacobian, task, lower, upper, report)
+            except np.linalg.LinAlgError as error:
+                return self._fail(report, f"{type(error).__name__} while saturating: {error}")
+            qd = self._clip(qd, lower, upper, report)
+        if report.equality_residual > EQUALITY_TOLERANCE:
+            report.event(Event.RESIDUAL, StepStatus.CONSTRAINT_DEGRADED, report.equality_residual)
+        return qd, report.freeze()
+
+    def _fail(self, report: ReportBuilder, error: str,
+              event: Event = Event.LINEAR_ALGEBRA_ERROR) -> tuple[np.ndarray, StepReport]:
+        report.fail(event, error)
+        return np.zeros(self.setup.model.nv), report.freeze()
+
+    def _kinematics(self, q: np.ndarray) -> np.ndarray:
+        """The kinematics at ``q`` into ``data``; the task Jacobian ``W^1/2 J_e`` (the
+        rows of non-zero weight of the stacked EE Jacobians)."""
+        setup, data = self.setup, self.data
+        model = setup.model
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        if len(setup.ee_frame_ids) == 1:
+            jacobian = pin.getFrameJacobian(model, data, setup.ee_frame_ids[0], pin.LOCAL)
+        else:
+            jacobian = np.vstack([pin.getFrameJacobian(model, data, frame, pin.LOCAL)
+                                  for frame in setup.ee_frame_ids])
+        if setup.task_entries is None:
+            return jacobian
+        return setup.task_scale[:, None] * jacobian[setup.task_entries]
+
+    def _task(self, twist: np.ndarray) -> np.ndarray:
+        """``W^1/2 V_e``: the twist the weighted task Jacobian must meet."""
+        setup = self.setup
+        return twist if setup.task_entries is None else setup.task_scale * twist[setup.task_entries]
+
+    def _clip(self, qd: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+              report: ReportBuilder) -> np.ndarray:
+        """The last guard: clip to the box; a change beyond rounding degrades the step."""
+        clipped = np.clip(qd, lower, upper)
+        change = float(np.max(np.abs(clipped - qd), initial=0.0))
+        if change > EQUALITY_TOLERANCE * (1.0 + float(np.max(np.abs(qd), initial=0.0))):
+            report.saturated_joints = tuple(np.flatnonzero(clipped != qd).tolist())
+            report.event(Event.CLIPPED, StepStatus.CONSTRAINT_DEGRADED, change)
+            rows, rhs = self.rows(self._equalities)
+            if rows.shape[0]:
+                report.equality_residual = float(np.max(np.abs(rows @ clipped - rhs)))
+        return clipped
+
+    def rows(self, indices: list[int] | tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """Stacked rows ``(A, b)`` of the chosen constraints at the kinematics in ``data``."""
+        plans, model, data = self.setup.plans, self.setup.model, self.data
+        blocks = [plans[i].constraint.rows(model, data, plans[i].frame_id) for i in indices]
+        if len(blocks) == 1:
+            return blocks[0]
+        if not blocks:
+            return np.zeros((0, model.nv)), np.zeros(0)
+        return np.vstack([A for A, _ in blocks]), np.concatenate([b for _, b in blocks])
+
+    # -- the forms and the barriers (docs/design.md sections 4-7) ------------------------
+
+    def _solve(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
+               report: ReportBuilder) -> np.ndarray:
+        self._active = list(self._equalities)
+        qd = self._solve_rows(q, ee_jacobian, twist, self._active, report)
+        if self._barriers:
+            qd = self._activate_barriers(q, ee_jacobian, twist, qd, report)
+        return qd
+
+    def _activate_barriers(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
+                           qd: np.ndarray, report: ReportBuilder) -> np.ndarray:
+        """Active set over the barriers: hold the most violated one as an equality, again."""
+        barriers = self._barriers
+        waiting = [i for i in barriers if i not in self._active]
+        while waiting:
+            violations = [self._barrier_violation(i, qd) for i in waiting]
+            worst = int(np.argmax(violations))
+            if violations[worst] <= BARRIER_TOLERANCE:
+                break
+            self._active.append(waiting.pop(worst))
+            qd = self._solve_rows(q, ee_jacobian, twist, self._active, report)
+        report.active_barriers = tuple(i for i in self._active if i in barriers)
+        return qd
+
+    def _barrier_violation(self, index: int, qd: np.ndarray) -> float:
+        rows, rhs = self.rows([index])
+        return float(rhs[0] - rows[0] @ qd)
+
+    def _solve_rows(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
+                    active: list[int], report: ReportBuilder) -> np.ndarray:
+        """The analytical form where it applies, else the general form, for these rows."""
+        setup = self.setup
+        if len(active) == 1 and self._analytical_task:
+            qd = self._solve_analytical(q, ee_jacobian, twist, active[0], report)
+            if qd is not None:
+                return qd
+        rows, rows_rhs = self.rows(active)
+        return solve_general(rows, rows_rhs, ee_jacobian, twist, setup.policy,
+                             self._posture_velocity(q), report)
+
+    def _solve_analytical(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
+                          index: int, report: ReportBuilder) -> np.ndarray | None:
+        """The analytical form of constraint ``index``, or None where it does not apply;
+        the joints off the path to the EE take the posture velocity, as they do in the
+        general form, where they lie in ``null(A)`` and ``null(J_e N)``."""
+        qd = self._solve_analytical_path(q, ee_jacobian, twist, index, report)
+        split = self.setup.plans[index].split
+        if qd is not None and self.setup.posture_gain > 0.0 and split.off.size:
+            qd[split.off] = self._posture_velocity(q)[split.off]
+        return qd
+
+    def _solve_analytical_path(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
+                               index: int, report: ReportBuilder) -> np.ndarray | None:
+        """The analytical form over the joints on the path to the EE (zero elsewhere)."""
+        setup, data = self.setup, self.data
+        plan = setup.plans[index]
+        if setup.parametrisation == "paper" and not paper_form_defined(
+                plan.constraint, data.oMf[plan.frame_id]):
+            report.event(Event.PAPER_FORM_UNDEFINED)
+            return None
+        square = self._square_plans.get(index)  # the paper's case, seen before
+        if square is None:
+            if not plan.analytical:
+                return None
+            if plan.split.pre.size > 6:
+                return solve_redundant_pre_chain(
+                    setup.model, data, ee_jacobian, data.oMf[setup.ee_frame_ids[0]],
+                    plan.constraint, plan.frame_id, plan.split, twist, setup.policy,
+                    setup.parametrisation, self._posture_velocity(q), report)
+            square = self._square_plans[index] = SquarePreChain(
+                plan.constraint, plan.frame_id, setup.model.nv, plan.split, setup.parametrisation)
+        return square.solve(setup.model, data, ee_jacobian, twist, setup.policy, report,
+                            None if square.square else self._posture_velocity(q))
+
+    def _posture_velocity(self, q: np.ndarray) -> np.ndarray | None:
+        """``posture_gain (posture (-) q)``, zero on the joints the posture leaves alone
+        (a mobile base: docs/design.md section 11.3); None at gain 0."""
+        setup = self.setup
+        if setup.posture_gain == 0.0:
+            return None
+        difference = pin.difference(setup.model, q, setup.posture)
+        if setup.posture_free is not None:
+            difference[setup.posture_free] = 0.0
+        return setup.posture_gain * difference
+
+    # -- joint limits (docs/design.md section 9) -----------------------------------------
+
+    def _saturate(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
+                  lower: np.ndarray, upper: np.ndarray, report: ReportBuilder) -> np.ndarray:
+        """Saturation in the null space (module :mod:`controllers.cjm.saturation`), the
+        barriers activated again against the saturated command."""
+        setup = self.setup
+        barriers = self._barriers
+        for _ in range(len(barriers) + 1):
+            rows, rows_rhs = self.rows(self._active)
+            result = saturate_in_null_space(rows, rows_rhs, ee_jacobian, twist, lower, upper,
+                                            setup.bounds.velocity_limit, setup.policy)
+            waiting = [i for i in barriers if i not in self._active]
+            violated = [i for i in waiting if self._barrier_violation(i, result.qd) > BARRIER_TOLERANCE]
+            if not violated:
+                break
+            self._active.append(max(violated, key=lambda i: self._barrier_violation(i, result.qd)))
+        report.active_barriers = tuple(i for i in self._active if i in barriers)
+        report.method = "saturated"
+        report.scale = result.task_scale
+        report.saturated_joints = result.saturated
+        if not math.isnan(result.sigma_min):  # the task's DLS that gave this command
+            report.sigma_min, report.damping = result.sigma_min, result.damping
+        report.equality_residual = (float(np.max(np.abs(rows @ result.qd - rows_rhs)))
+                                    if rows.shape[0] else 0.0)
+        if result.rows_scale < 1.0:
+            report.event(Event.ROWS_SCALED, StepStatus.CONSTRAINT_DEGRADED, result.rows_scale)
+        elif result.task_missed:
+            report.saturation_joints = result.saturated
+            report.event(Event.TASK_MISSED, StepStatus.LEAST_SQUARES, result.sigma_min,
+                         result.damping)
+        elif result.task_scale < 1.0:
+            report.event(Event.TASK_SCALED, StepStatus.SCALED, result.limiting_joint,
+                         result.task_scale)
+        return result.qd
+
+
+def paper_form_defined(constraint, placement: pin.SE3) -> bool:
+    """Whether the paper's ``1/a`` structure matrix exists at this placement of the
+    constraint's link (``a = |p|`` not ~0)."""
+    return float(np.linalg.norm(constraint.point(placement))) >= PAPER_FORM_MIN_A

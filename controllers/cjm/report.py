@@ -1,0 +1,186 @@
+"""What a CJM step reports, and the one function that words it (docs/design.md section 16).
+
+Both backends end a step with a :class:`StepReport`: the status, the figures
+(``sigma_min``, damping, scale, residual, the joints and barriers involved) and the
+events that explain it, in the order they happened. :func:`solve_info` turns it into
+the :class:`controllers.base.SolveInfo` every controller exposes; the messages are
+written there and nowhere else.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import NamedTuple, Sequence
+
+from ..base import NON_FINITE_NOTE, SolveInfo, StepStatus, clipped_note, residual_note
+from ..linalg import RANK_TOLERANCE
+
+
+class Event(IntEnum):
+    """What happened in a step and the figures it carries as ``(a, b, c)``; the C++
+    ``cjm::Event`` has the same codes up to ``NON_FINITE`` (the last two are recorded by
+    Python alone)."""
+
+    PRE_CHAIN_SINGULAR = 1  # the analytical form handed over to the general form
+    TASK_RESIDUAL = 2       # a: damping, b: twist residual
+    CONFLICT = 3            # a: rank, b: rows, c: least-squares residual
+    NO_FREE_JOINT = 4
+    ROWS_SCALED = 5         # a: the rows' scale
+    TASK_MISSED = 6         # a: sigma_min, b: damping; the joints: saturation_joints
+    TASK_SCALED = 7         # a: limiting joint, b: task scale
+    CLIPPED = 8             # a: largest change; the joints: saturated_joints
+    RESIDUAL = 9            # a: equality residual
+    NO_CONVERGENCE = 10     # failed: the SVD did not converge
+    NON_FINITE = 11         # failed: the command came out non-finite
+    PAPER_FORM_UNDEFINED = 12  # a = 0: the paper's 1/a form gave way to the null-space form
+    LINEAR_ALGEBRA_ERROR = 13  # failed: a LAPACK error (StepReport.error says which)
+
+
+#: Event by its code (the C++ report's event log holds codes)
+EVENT_BY_CODE = {event.value: event for event in Event}
+#: SolveInfo.method by its code in the C++ report (0: none yet)
+METHODS = ("", "analytical", "general", "saturated")
+
+PRE_CHAIN_SINGULAR_NOTE = "pre-constraint chain singular: general form used"
+NO_FREE_JOINT_NOTE = "the constraints leave no joint free for the task"
+PAPER_FORM_NOTE = "a = 0, where the paper's 1/a form is singular: null-space form used"
+#: the message of a step whose SVD did not converge (the command is zero)
+NO_CONVERGENCE_NOTE = "LinAlgError: SVD did not converge (Jacobi sweeps)"
+
+
+class StepReport(NamedTuple):
+    """One step of either backend: its status, figures and events (in order).
+
+    ``saturation_joints``: the joints a saturated step held at a limit when it missed
+    the task (the ``TASK_MISSED`` event names them); ``error``: the text of a
+    ``LINEAR_ALGEBRA_ERROR``. (A named tuple: immutable and built in one call, every step.)
+    """
+
+    status: StepStatus = StepStatus.OK
+    method: str = ""
+    sigma_min: float = float("nan")
+    damping: float = 0.0
+    scale: float = 1.0
+    equality_residual: float = 0.0
+    saturated_joints: tuple[int, ...] = ()
+    active_barriers: tuple[int, ...] = ()
+    events: tuple[tuple[Event, float, float, float], ...] = ()
+    saturation_joints: tuple[int, ...] = ()
+    error: str = ""
+
+
+class ReportBuilder:
+    """The Python step's report while it runs (frozen into a :class:`StepReport`); the
+    class attributes are the defaults (an empty report costs no assignment)."""
+
+    status: StepStatus = StepStatus.OK
+    method: str = ""
+    sigma_min: float = float("nan")
+    damping: float = 0.0
+    scale: float = 1.0
+    equality_residual: float = 0.0
+    saturated_joints: tuple[int, ...] = ()
+    active_barriers: tuple[int, ...] = ()
+    events: tuple[tuple[Event, float, float, float], ...] = ()
+    saturation_joints: tuple[int, ...] = ()
+    error: str = ""
+
+    def event(self, event: Event, status: StepStatus = StepStatus.OK, a: float = 0.0,
+              b: float = 0.0, c: float = 0.0) -> None:
+        """Record ``event`` and lower the status to ``status`` if it is worse."""
+        if status.severity > self.status.severity:
+            self.status = status
+        self.events += ((event, a, b, c),)
+
+    def fail(self, event: Event, error: str = "") -> None:
+        """The step failed (its command is zero)."""
+        self.status, self.error = StepStatus.FAILED, error
+        self.events += ((event, 0.0, 0.0, 0.0),)
+
+    def freeze(self) -> StepReport:
+        return StepReport(self.status, self.method, self.sigma_min, self.damping, self.scale,
+                          self.equality_residual, self.saturated_joints, self.active_barriers,
+                          self.events, self.saturation_joints, self.error)
+
+
+def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
+    """The :class:`SolveInfo` of a step: its figures, and its events worded in order
+    (``joint_names``: the joint's name per velocity index)."""
+    (status, method, sigma_min, damping, scale, equality_residual, saturated_joints,
+     active_barriers, events, saturation_joints, error) = report
+    info = SolveInfo(status, method, "", sigma_min, damping, scale, saturated_joints,
+                     active_barriers, equality_residual)  # the notes below leave the status
+    if not events:
+        return info
+    for event, a, b, c in events:  # the frequent events first
+        if event is Event.TASK_RESIDUAL:
+            info.report(StepStatus.OK, task_residual_note(a, b))
+        elif event is Event.TASK_MISSED:
+            info.report(StepStatus.OK, task_missed_note(joint_names, saturation_joints, a, b))
+        elif event is Event.TASK_SCALED:
+            info.report(StepStatus.OK, task_scaled_note(joint_names, int(a), b))
+        elif event is Event.CLIPPED:
+            info.report(StepStatus.OK, clipped_note(list(saturated_joints), a))
+        elif event is Event.RESIDUAL:
+            info.report(StepStatus.OK, residual_note(a))
+        elif event is Event.CONFLICT:
+            info.report(StepStatus.OK, conflict_note(int(a), int(b), c))
+        elif event is Event.ROWS_SCALED:
+            info.report(StepStatus.OK, rows_scaled_note(a))
+        elif event is Event.NO_FREE_JOINT:
+            info.report(StepStatus.OK, NO_FREE_JOINT_NOTE)
+        elif event is Event.PRE_CHAIN_SINGULAR:
+            info.message = PRE_CHAIN_SINGULAR_NOTE  # the note replaces the message
+        elif event is Event.PAPER_FORM_UNDEFINED:
+            info.report(StepStatus.OK, PAPER_FORM_NOTE)
+        elif event is Event.NO_CONVERGENCE:
+            info.message = NO_CONVERGENCE_NOTE
+        elif event is Event.NON_FINITE:
+            info.message = NON_FINITE_NOTE
+        elif event is Event.LINEAR_ALGEBRA_ERROR:
+            info.message = error
+    return info
+
+
+def task_residual_note(damping: float, residual: float) -> str:
+    """Why a DLS solution misses the task: damping near a singularity, or least squares."""
+    note = (f"near a singularity: damped (lambda {damping:.2g})" if damping > 0
+            else "task not fully achievable: least squares")
+    return f"{note}, twist residual {residual:.2e}"
+
+
+def conflict_note(rank: int, rows: int, residual: float) -> str:
+    return (f"constraints conflict (rank {rank} < {rows} rows, "
+            f"least-squares residual {residual:.2e} m/s)")
+
+
+def rows_scaled_note(scale: float) -> str:
+    """The note of a step whose rows' correction was scaled to fit the box."""
+    return (f"the constraint's correction exceeds the joint limits: scaled to {scale:.0%}, "
+            "the constraint converges as fast as they allow")
+
+
+def task_missed_note(joint_names: Sequence[str], saturated: Sequence[int], sigma_min: float,
+                     damping: float) -> str:
+    """What keeps a saturated step from the task: the joints held at a limit, the
+    damping near a singularity (eq 35), else a least-squares task (rank lost)."""
+    causes = [f"{joint_list(joint_names, saturated)} at a limit"] if saturated else []
+    # below the rank cut sigma_min is rounding: 0 (the two backends round differently)
+    sigma = f"sigma_min {sigma_min if sigma_min > RANK_TOLERANCE else 0.0:.2g}"
+    if damping > 0.0:
+        causes.append(f"near a singularity ({sigma}, damping {damping:.2g})")
+    if not causes:
+        causes.append(f"least squares ({sigma})")
+    return f"{'; '.join(causes)}: task not fully achievable"
+
+
+def task_scaled_note(joint_names: Sequence[str], joint: int, scale: float) -> str:
+    limit = f"{joint_list(joint_names, [joint])} at a limit" if joint >= 0 else "the joint limits"
+    return f"{limit}: task scaled to {scale:.0%}"
+
+
+def joint_list(joint_names: Sequence[str], velocity_indices: Sequence[int]) -> str:
+    """``joint arm_joint_4`` / ``joints a, b`` for velocity indices (a multi-dof joint
+    named once)."""
+    names = list(dict.fromkeys(joint_names[i] for i in velocity_indices))
+    return f"joint{'s' if len(names) > 1 else ''} {', '.join(names)}"
