@@ -197,9 +197,9 @@ class Controller(ABC):
     """Turns a desired end-effector body twist into joint velocities under constraints.
 
     Every command is finite and inside the joint box of :class:`JointBounds` (velocity
-    limits, and position limits through ``dt``): a controller whose own solution leaves
-    the box is corrected by :meth:`_saturate` (the CJM: saturation in the null space;
-    the others: clipping, reported as ``constraint_degraded``).
+    limits, and position limits through ``dt``): a solution that leaves the box is
+    corrected (the CJM: saturation in the null space, section 9; the others, through
+    :class:`GuardedController`: clipping, reported as ``constraint_degraded``).
 
     Subclasses set their own attributes first and call :meth:`set_constraints` last in
     their ``__init__``; :meth:`_prepare` then sees a fully built object.
@@ -284,6 +284,7 @@ class Controller(ABC):
 
     # -- the step ----------------------------------------------------------------------
 
+    @abstractmethod
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """Joint velocities (nv,) for the desired EE body twist ``[v; w]`` (``LOCAL``),
         6 entries per end effector in ``robot.ee_frames`` order (docs/design.md section 11).
@@ -293,6 +294,63 @@ class Controller(ABC):
         when the controller is ``strict``): never a non-finite command, never one
         outside the joint box.
         """
+
+    def _checked_inputs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`checked_inputs` for this controller's model and task."""
+        return checked_inputs(q, twist, self.model.nq, self.task_size)
+
+    def _fail(self, message: str) -> np.ndarray:
+        self.info.status = StepStatus.FAILED
+        self.info.message = message
+        if self.strict:
+            raise SolverError(message)
+        return np.zeros(self.model.nv)
+
+    def _kinematics(self, q: np.ndarray) -> Kinematics:
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        return Kinematics(q, self._ee_jacobian(), data, self.ee_frame_id)
+
+    def _ee_jacobian(self) -> np.ndarray:
+        """The EE frames' ``LOCAL`` Jacobians, stacked (6 n, nv), from the joint
+        Jacobians in ``self.data``."""
+        if len(self.ee_frame_ids) == 1:
+            return pin.getFrameJacobian(self.model, self.data, self.ee_frame_id, pin.LOCAL)
+        return np.vstack([pin.getFrameJacobian(self.model, self.data, frame, pin.LOCAL)
+                          for frame in self.ee_frame_ids])
+
+    # -- shared pieces -----------------------------------------------------------------
+
+    def constraint_rows(
+        self, indices: Sequence[int] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Stacked rows ``(A, b)`` of the chosen constraints at the current kinematics."""
+        if indices is None:
+            indices = range(len(self.constraints))
+        blocks = [self.constraints[i].rows(self.model, self.data, self.constraint_frames[i])
+                  for i in indices]
+        if len(blocks) == 1:
+            return blocks[0]
+        if not blocks:
+            return np.zeros((0, self.model.nv)), np.zeros(0)
+        return np.vstack([A for A, _ in blocks]), np.concatenate([b for _, b in blocks])
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(robot={getattr(self.robot, 'name', '?')!r}, "
+                f"constraints={self.constraints!r})")
+
+
+class GuardedController(Controller):
+    """A controller whose step is one template: its own :meth:`_solve` at the current
+    kinematics, then the guards every command passes (the QP baseline and mink; the CJM
+    runs the same guards inside its step backends, docs/design.md section 16)."""
+
+    def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """:meth:`Controller.solve`: the kinematics at ``q``, :meth:`_solve`, then the
+        guards (a non-finite command fails; one outside the box goes through
+        :meth:`_saturate` and :meth:`_clip`; an equality residual above
+        ``EQUALITY_TOLERANCE`` degrades the step)."""
         q, twist = self._checked_inputs(q, twist)
         self.info = SolveInfo()
         kinematics = self._kinematics(q)
@@ -313,10 +371,6 @@ class Controller(ABC):
             self.info.report(StepStatus.CONSTRAINT_DEGRADED,
                              residual_note(self.info.equality_residual))
         return qd
-
-    def _checked_inputs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`checked_inputs` for this controller's model and task."""
-        return checked_inputs(q, twist, self.model.nq, self.task_size)
 
     def _saturate(self, kinematics: Kinematics, twist: np.ndarray, qd: np.ndarray,
                   lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -349,47 +403,6 @@ class Controller(ABC):
                              f"twist not met exactly (error {error:.2e}): limits, barriers, "
                              "constraints or a singularity")
 
-    def _fail(self, message: str) -> np.ndarray:
-        self.info.status = StepStatus.FAILED
-        self.info.message = message
-        if self.strict:
-            raise SolverError(message)
-        return np.zeros(self.model.nv)
-
-    def _kinematics(self, q: np.ndarray) -> Kinematics:
-        model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, q)
-        pin.updateFramePlacements(model, data)
-        return Kinematics(q, self._ee_jacobian(), data, self.ee_frame_id)
-
-    def _ee_jacobian(self) -> np.ndarray:
-        """The EE frames' ``LOCAL`` Jacobians, stacked (6 n, nv), from the joint
-        Jacobians in ``self.data``."""
-        if len(self.ee_frame_ids) == 1:
-            return pin.getFrameJacobian(self.model, self.data, self.ee_frame_id, pin.LOCAL)
-        return np.vstack([pin.getFrameJacobian(self.model, self.data, frame, pin.LOCAL)
-                          for frame in self.ee_frame_ids])
-
     @abstractmethod
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
         """Compute ``qd``; the kinematics in ``self.data`` are up to date."""
-
-    # -- shared pieces -----------------------------------------------------------------
-
-    def constraint_rows(
-        self, indices: Sequence[int] | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Stacked rows ``(A, b)`` of the chosen constraints at the current kinematics."""
-        if indices is None:
-            indices = range(len(self.constraints))
-        blocks = [self.constraints[i].rows(self.model, self.data, self.constraint_frames[i])
-                  for i in indices]
-        if len(blocks) == 1:
-            return blocks[0]
-        if not blocks:
-            return np.zeros((0, self.model.nv)), np.zeros(0)
-        return np.vstack([A for A, _ in blocks]), np.concatenate([b for _, b in blocks])
-
-    def __repr__(self) -> str:
-        return (f"{type(self).__name__}(robot={getattr(self.robot, 'name', '?')!r}, "
-                f"constraints={self.constraints!r})")

@@ -10,7 +10,7 @@ import pinocchio as pin
 from constraints import Constraint, Parametrisation, RobotLike
 from constraints.validation import as_number, as_vector
 
-from ..base import Controller, Kinematics, SolverError, StepStatus, as_twist_weight
+from ..base import Controller, SolverError, StepStatus, as_twist_weight
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from .analytical import ChainSplit, chain_split
@@ -251,11 +251,6 @@ class CJMController(Controller):
         if self.strict and info.status is StepStatus.FAILED:
             raise SolverError(info.message)
         return qd
-
-    def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
-        """Not reached: :meth:`solve` hands the whole step, the template of
-        :meth:`Controller.solve` included, to :attr:`step`."""
-        raise NotImplementedError("CJMController.solve runs its step backend")
 
     # -- chain structure ---------------------------------------------------------------
 

@@ -28,7 +28,7 @@ class PythonStep:
     """One controller's Python step: ``solve(q, twist) -> (qd, report)``.
 
     ``data`` is the controller's ``pin.Data``: after a step it holds the kinematics at
-    ``q`` (as :meth:`controllers.base.Controller.solve` leaves it).
+    ``q`` (as :meth:`controllers.base.GuardedController.solve` leaves it).
     """
 
     def __init__(self, setup: StepSetup, data: pin.Data) -> None:
@@ -41,7 +41,7 @@ class PythonStep:
         self._analytical_task = setup.form == "auto" and setup.paper_task
         self._nq, self._task_size = setup.model.nq, setup.task_size
 
-    # -- the step template (controllers.base.Controller.solve) ---------------------------
+    # -- the step template (controllers.base.GuardedController.solve) ------------------
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         """``qd`` for the stacked EE twist at ``q`` and the step's report. Bad input

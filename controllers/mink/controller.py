@@ -14,7 +14,7 @@ import qpsolvers
 from constraints import Constraint
 from constraints.validation import as_number, as_vector
 
-from ..base import EQUALITY_TOLERANCE, Controller, Kinematics, SolverError, StepStatus, as_twist_weight
+from ..base import EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus, as_twist_weight
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from ..mujoco_model import build_mujoco_model, site_name
@@ -34,7 +34,7 @@ _WXYZ_XYZ = np.array([6, 3, 4, 5, 0, 1, 2])
 LimitSpec = mink.Limit | Callable[[mujoco.MjModel], mink.Limit]
 
 
-class MinkController(Controller):
+class MinkController(GuardedController):
     """The constrained teleoperation step solved by mink's ``solve_ik``.
 
     Per step, with ``T_e`` the EE pose and ``V`` the desired EE body twist (several EEs:

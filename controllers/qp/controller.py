@@ -25,7 +25,7 @@ import qpsolvers
 from constraints import Constraint
 from constraints.validation import as_number, as_vector
 
-from ..base import EQUALITY_TOLERANCE, Controller, Kinematics, SolverError, StepStatus, as_twist_weight
+from ..base import EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus, as_twist_weight
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from ..numerics import INFINITE_BOUND, SOLVER_SETTINGS
@@ -47,7 +47,7 @@ Priorities = Literal["lexicographic", "weighted"]
 DEFAULT_POSTURE_WEIGHT = 1e-6
 
 
-class QPController(Controller):
+class QPController(GuardedController):
     """Joint velocities from a QP with the CJM's priorities: rows, then twist, then posture.
 
     ::

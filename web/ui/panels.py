@@ -161,14 +161,6 @@ class Panels:
         self._move_gizmo_handles()
         self.scene_status.content = f"loaded `{self.app.scenes.name_of(name)}`"
 
-    def _sync(self, action) -> None:
-        """Set widgets from the app without their callbacks acting."""
-        self._syncing = True
-        try:
-            action()
-        finally:
-            self._syncing = False
-
     def _widgets_from_app(self) -> None:
         app = self.app
         choices = tuple(self.controller_menu.options)
