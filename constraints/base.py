@@ -504,8 +504,8 @@ class Constraint(ABC):
         ``rhs`` are affine functions of ``(x, f)`` and ``C``, ``C_perp`` are constant;
         :meth:`evaluate_affine` then gives the evaluation. The analytical CJM
         precomputes its per-step terms as one matrix product of ``(x, f)``. The array is
-        read-only and replaced whenever the geometry changes (the compiled step copies
-        it only then).
+        read-only and replaced whenever the geometry changes; the compiled CJM step reads
+        it at every step.
         """
         return None
 

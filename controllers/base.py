@@ -16,6 +16,7 @@ from constraints.kinematics import resolve_frame
 from constraints.validation import as_vector
 
 from .joint_limits import DEFAULT_LIMIT_GAIN, BoxTest, JointBounds
+from .linalg import DampingPolicy
 
 #: An equality row is held when ``|A qd - b|`` is at most this (m/s); above it the step
 #: reports ``constraint_degraded``.
@@ -165,6 +166,23 @@ class Kinematics:
         return self._ee_placement
 
 
+def velocity_joint_names(model: pin.Model) -> tuple[str, ...]:
+    """The joint name of each velocity index (a joint of several repeats its name)."""
+    return tuple(model.names[joint_id] for joint_id in range(1, model.njoints)
+                 for _ in range(model.nvs[joint_id]))
+
+
+def posture_difference(model: pin.Model, q: np.ndarray, posture: np.ndarray,
+                       free: slice | None) -> np.ndarray:
+    """``posture (-) q`` (nv,, ``pin.difference``) with the entries ``free`` (a mobile
+    base's) zero: the posture shapes the joints; the base stands where it is unless the
+    task or a constraint moves it (docs/design.md section 11.3)."""
+    difference = pin.difference(model, q, posture)
+    if free is not None:
+        difference[free] = 0.0
+    return difference
+
+
 def as_constraint_list(constraints: Iterable[Constraint]) -> list[Constraint]:
     """``constraints`` as a list of ``Constraint`` objects, else ``ValueError``."""
     if constraints is None or isinstance(constraints, (str, bytes, Constraint)):
@@ -215,6 +233,10 @@ class Controller(ABC):
     strict : raise ``SolverError`` instead of returning the zero-velocity fallback.
     """
 
+    #: the damped least squares' policy (paper eq 35) of a controller that damps its task
+    #: near singularities (all three here), else None; assign a new one to change it
+    policy: DampingPolicy | None = None
+
     def __init__(self, robot: RobotLike, dt: float = 1e-3,
                  limit_gain: float = DEFAULT_LIMIT_GAIN, position_limits: bool = True,
                  velocity_limits: bool = True, strict: bool = False) -> None:
@@ -262,22 +284,26 @@ class Controller(ABC):
         """``posture (-) q`` (nv,, ``pin.difference``) with a mobile base's entries zero:
         the posture shapes the joints; the base stands where it is unless the task or a
         constraint moves it (docs/design.md section 11.3)."""
-        difference = pin.difference(self.model, q, posture)
-        if self._base_velocity is not None:
-            difference[self._base_velocity] = 0.0
-        return difference
+        return posture_difference(self.model, q, posture, self._base_velocity)
 
     # -- constraints -------------------------------------------------------------------
 
     def set_constraints(self, constraints: Iterable[Constraint]) -> None:
-        """Replace the constraint set; unknown links and gains unstable at ``dt`` raise
-        ``ValueError`` here. Call it again after changing a constraint's gain."""
+        """Replace the constraint set; unknown links, gains unstable at ``dt`` and sets the
+        controller cannot take raise ``ValueError`` here, leaving the set it had. A
+        constraint's gain may change afterwards (its setter checks it): every controller
+        reads it at each step."""
         constraints = as_constraint_list(constraints)
         for constraint in constraints:
             constraint.check_gain(self.dt)
-        self.constraint_frames = [resolve_frame(self.model, c.link) for c in constraints]
-        self.constraints = constraints
-        self._prepare()
+        frames = [resolve_frame(self.model, c.link) for c in constraints]
+        previous = self.constraints, self.constraint_frames
+        self.constraints, self.constraint_frames = constraints, frames
+        try:
+            self._prepare()
+        except Exception:  # refused: the controller keeps, and says, the set it holds
+            self.constraints, self.constraint_frames = previous
+            raise
 
     def _prepare(self) -> None:
         """Precompute per-constraint data after :meth:`set_constraints` (override)."""
@@ -367,6 +393,8 @@ class GuardedController(Controller):
             except np.linalg.LinAlgError as error:
                 return self._fail(f"{type(error).__name__} while saturating: {error}")
             qd = self._clip(qd, lower, upper)
+            if not math.isfinite(sum(qd.tolist())):  # clipping passes a NaN through
+                return self._fail(NON_FINITE_NOTE)
         if self.info.equality_residual > EQUALITY_TOLERANCE:
             self.info.report(StepStatus.CONSTRAINT_DEGRADED,
                              residual_note(self.info.equality_residual))

@@ -10,6 +10,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from constraints import Hole, Plane
@@ -114,3 +115,51 @@ def test_the_compiled_step_does_not_reach_into_the_controller():
                            for alias in node.names), ast.dump(node)
         if isinstance(node, ast.Name):
             assert node.id != "controller"
+
+
+@pytest.mark.parametrize("backend", ["python", "compiled"])
+def test_a_refused_change_leaves_the_controller_as_it_was(sda10f, backend):
+    """A change the controller cannot take (a plane under the paper's parametrisation, a
+    negative posture gain) raises and keeps the constraints, options and step it had:
+    what it says it holds is what its step holds (A qd = b of the hole it kept)."""
+    q = sda10f.q_home + 0.02
+    hole = Hole.on_link(sda10f, q, distance=0.08)
+    plane = Plane.through_link_point(sda10f, q, [0.0, 0.0, 1.0], distance=0.05,
+                                     link="arm_link_5_r")
+    controller = CJMController(sda10f, [hole], parametrisation="paper", backend=backend)
+    setup, step, gain = controller.setup, controller.step, controller.posture_gain
+    with pytest.raises(ValueError, match="paper"):
+        controller.set_constraints([plane])
+    with pytest.raises(ValueError, match="posture_gain"):
+        controller.posture_gain = -1.0
+    assert controller.constraints == [hole]
+    assert (controller.setup, controller.step, controller.posture_gain) == (setup, step, gain)
+    twist = np.array([0.01, -0.02, 0.0, 0.05, 0.0, -0.03])
+    qd = controller.solve(q, twist)
+    model = controller.model
+    data = model.createData()  # Pinocchio at q (the compiled step keeps its own kinematics)
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    A, b = hole.rows(model, data, controller.constraint_frames[0])
+    assert np.abs(A @ qd - b).max() < 1e-9
+    assert controller.info.status is StepStatus.OK, controller.info.message
+
+
+def test_posture_and_twist_weight_are_read_only(sda10f):
+    """Changed by assigning a new array (which builds the step again), never in place:
+    a change in place would not reach the built step."""
+    controller = CJMController(sda10f, [], twist_weight=[1, 1, 1, 0.5, 0.5, 0.5])
+    with pytest.raises(ValueError):
+        controller.posture[0] = 1.0
+    with pytest.raises(ValueError):
+        controller.twist_weight[3] = 1.0
+
+
+def test_the_python_step_refuses_tolerances_it_does_not_decide_with(sda10f):
+    """The Python reference decides with the module's constants: a setup carrying other
+    tolerances is refused rather than run with different decisions from the compiled step."""
+    controller = CJMController(sda10f, [Hole.on_link(sda10f, sda10f.q_home, distance=0.08)])
+    custom = dataclasses.replace(controller.setup,
+                                 tolerances=StepTolerances(pre_chain_pivot_ratio=1.0))
+    with pytest.raises(ValueError, match="tolerances"):
+        PythonStep(custom, controller.model.createData())

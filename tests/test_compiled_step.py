@@ -302,7 +302,7 @@ def test_conflicting_rows_scaled_to_zero_agree_to_their_conditioning(case):
 
 
 def test_joints_off_the_path_take_the_posture_in_both_backends_as_in_the_qp():
-    """Issue 18 item 11b: the Panda's fingers (example-robot-data, not locked) move neither
+    """Found in review: the Panda's fingers (example-robot-data, not locked) move neither
     the hand nor a constraint on the arm. The QP drives them to the posture; the CJM's
     analytical form left them still. Both backends now give them
     ``posture_gain (posture - q)`` (their columns of ``J_e`` and ``A`` are zero, so the

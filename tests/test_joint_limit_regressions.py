@@ -1,7 +1,7 @@
 """Regressions found by tests/test_joint_limits.py: the QP backends' false
 infeasibilities at the joint limits (the lexicographic QP, docs/design.md section 10,
-solves them) and what a step held by a limit or near a singularity says (issue 18,
-item 11), with both CJM backends.
+solves them) and what a step held by a limit or near a singularity says, with both CJM
+backends.
 """
 
 from __future__ import annotations
@@ -119,11 +119,11 @@ def test_daqp_solves_a_feasible_hole_and_barrier_step():
     assert qp.info.success, qp.info.message
 
 
-# --------------------------------------------------- what the message says (issue 18, 11)
+# ------------------------------------------------------------------ what the message says
 
 
 def least_squares_scene_step():
-    """The state of issue 18 item 11 (tests/data/least_squares_scene.json, recorded in the
+    """A state recorded in the UI (tests/data/least_squares_scene.json, recorded in the
     UI): the hole on ``arm_link_5_r``, every joint well inside its limits, a twist the
     arm cannot give near a singularity of ``J_e N``."""
     import json

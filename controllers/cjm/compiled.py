@@ -197,11 +197,7 @@ class CompiledStep:
                 paper_form, writer = False, self._fallback_writer
             writer.write(placement, terms)
         if self._posture_in_python:
-            pipeline = self.pipeline
-            difference = pin.difference(setup.model, pipeline.q, setup.posture)
-            if setup.posture_free is not None:
-                difference[setup.posture_free] = 0.0
-            np.multiply(setup.posture_gain, difference, out=pipeline.posture)
+            self.pipeline.posture[:] = setup.posture_velocity(self.pipeline.q)
         return paper_form
 
     def _step_report(self, report: list[float], paper_form: bool) -> StepReport:

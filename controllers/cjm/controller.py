@@ -10,7 +10,7 @@ import pinocchio as pin
 from constraints import Constraint, Parametrisation, RobotLike
 from constraints.validation import as_number, as_vector
 
-from ..base import Controller, SolverError, StepStatus, as_twist_weight
+from ..base import Controller, SolverError, StepStatus, as_twist_weight, velocity_joint_names
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from .analytical import ChainSplit, chain_split
@@ -29,6 +29,14 @@ def compiled_step_available() -> bool:
     except ImportError:
         return False
     return True
+
+
+def read_only(array: np.ndarray) -> np.ndarray:
+    """A read-only copy of ``array``: a property's value that is changed by assigning a
+    new one, never in place (a change in place would not reach the built step)."""
+    copy = np.array(array, dtype=float)
+    copy.flags.writeable = False
+    return copy
 
 
 def unsupported_joint_kinds(model: pin.Model) -> list[str]:
@@ -138,17 +146,16 @@ class CJMController(Controller):
                                      as_number(singular_threshold, "singular_threshold", 0.0),
                                      as_number(max_damping, "max_damping", 0.0))
         self._posture_gain = as_number(posture_gain, "posture_gain", 0.0)
-        self._twist_weight = as_twist_weight(twist_weight, self.task_size)
+        self._twist_weight = read_only(as_twist_weight(twist_weight, self.task_size))
         if posture is None:
             posture = getattr(robot, "q_home", None)
-        self._posture = (pin.neutral(self.model) if posture is None
-                         else as_vector(posture, self.model.nq, "posture"))
+        self._posture = read_only(pin.neutral(self.model) if posture is None
+                                  else as_vector(posture, self.model.nq, "posture"))
         self._splits: dict[int, ChainSplit | None] = {}
         #: the last step's :class:`StepReport` (``info`` is its wording)
         self.report = StepReport()
         #: joint name per velocity index (a multi-dof joint repeats its name)
-        self.joint_names = tuple(self.model.names[j] for j in range(1, self.model.njoints)
-                                 for _ in range(self.model.nvs[j]))
+        self.joint_names = velocity_joint_names(self.model)
         self.set_constraints(constraints)
 
     # -- what the step is built from: setting any of it builds the step again ----------
@@ -162,8 +169,7 @@ class CJMController(Controller):
     def policy(self, policy: DampingPolicy) -> None:
         if not isinstance(policy, DampingPolicy):
             raise ValueError(f"policy must be a DampingPolicy, got {policy!r}")
-        self._policy = policy
-        self._prepare()
+        self._change(_policy=policy)
 
     @property
     def posture(self) -> np.ndarray:
@@ -172,8 +178,7 @@ class CJMController(Controller):
 
     @posture.setter
     def posture(self, posture: np.ndarray) -> None:
-        self._posture = as_vector(posture, self.model.nq, "posture")
-        self._prepare()
+        self._change(_posture=read_only(as_vector(posture, self.model.nq, "posture")))
 
     @property
     def posture_gain(self) -> float:
@@ -182,8 +187,7 @@ class CJMController(Controller):
 
     @posture_gain.setter
     def posture_gain(self, gain: float) -> None:
-        self._posture_gain = as_number(gain, "posture_gain", 0.0)
-        self._prepare()
+        self._change(_posture_gain=as_number(gain, "posture_gain", 0.0))
 
     @property
     def twist_weight(self) -> np.ndarray:
@@ -192,8 +196,20 @@ class CJMController(Controller):
 
     @twist_weight.setter
     def twist_weight(self, twist_weight) -> None:
-        self._twist_weight = as_twist_weight(twist_weight, self.task_size)
-        self._prepare()
+        self._change(_twist_weight=read_only(as_twist_weight(twist_weight, self.task_size)))
+
+    def _change(self, **values) -> None:
+        """Set the attributes ``values`` and build the step again; a build that is refused
+        restores them, so the controller keeps the step it had and says what it holds."""
+        previous = {name: getattr(self, name) for name in values}
+        for name, value in values.items():
+            setattr(self, name, value)
+        try:
+            self._prepare()
+        except Exception:
+            for name, value in previous.items():
+                setattr(self, name, value)
+            raise
 
     def _prepare(self) -> None:
         """Build the step setup and the backend's step from it (after any change)."""
@@ -204,18 +220,19 @@ class CJMController(Controller):
                         f"parametrisation='paper' does not cover {type(constraint).__name__} "
                         "(its 1/a form needs the constrained directions perpendicular to p "
                         "at every configuration, as a hole's are): use 'nullspace'")
-        #: everything the step needs (:class:`controllers.cjm.step_setup.StepSetup`)
-        self.setup = self._step_setup()
-        step = PythonStep(self.setup, self.data)
+        setup = self._step_setup()
+        step = PythonStep(setup, self.data)
         if self.backend == "compiled":
             from .compiled import CompiledStep, KinematicsMismatch
 
             try:
-                step = CompiledStep(self.setup)
+                step = CompiledStep(setup)
             except KinematicsMismatch:
                 if not self._python_if_needed:
                     raise
                 self.backend = "python"
+        #: everything the step needs (:class:`controllers.cjm.step_setup.StepSetup`)
+        self.setup = setup
         #: the backend's step (PythonStep or CompiledStep): ``step.solve(q, twist) -> (qd, report)``
         self.step = step
 

@@ -21,7 +21,7 @@ from .general import solve_general
 from .report import Event, ReportBuilder, StepReport
 from .saturation import saturate_in_null_space
 from .step_setup import StepSetup
-from .tolerances import BARRIER_TOLERANCE, EQUALITY_TOLERANCE, PAPER_FORM_MIN_A
+from .tolerances import BARRIER_TOLERANCE, EQUALITY_TOLERANCE, PAPER_FORM_MIN_A, StepTolerances
 
 
 class PythonStep:
@@ -32,6 +32,10 @@ class PythonStep:
     """
 
     def __init__(self, setup: StepSetup, data: pin.Data) -> None:
+        if setup.tolerances != StepTolerances():
+            raise ValueError("the Python step decides with the tolerances of "
+                             "controllers/cjm/tolerances.py; a setup with others can only be "
+                             "run by the compiled step")
         self.setup = setup
         self.data = data
         self._square_plans: dict[int, SquarePreChain] = {}
@@ -64,6 +68,8 @@ class PythonStep:
             except np.linalg.LinAlgError as error:
                 return self._fail(report, f"{type(error).__name__} while saturating: {error}")
             qd = self._clip(qd, lower, upper, report)
+            if not math.isfinite(sum(qd.tolist())):  # clipping passes a NaN through
+                return self._fail(report, "", Event.NON_FINITE)
         if report.equality_residual > EQUALITY_TOLERANCE:
             report.event(Event.RESIDUAL, StepStatus.CONSTRAINT_DEGRADED, report.equality_residual)
         return qd, report.freeze()
@@ -195,13 +201,7 @@ class PythonStep:
     def _posture_velocity(self, q: np.ndarray) -> np.ndarray | None:
         """``posture_gain (posture (-) q)``, zero on the joints the posture leaves alone
         (a mobile base: docs/design.md section 11.3); None at gain 0."""
-        setup = self.setup
-        if setup.posture_gain == 0.0:
-            return None
-        difference = pin.difference(setup.model, q, setup.posture)
-        if setup.posture_free is not None:
-            difference[setup.posture_free] = 0.0
-        return setup.posture_gain * difference
+        return None if self.setup.posture_gain == 0.0 else self.setup.posture_velocity(q)
 
     # -- joint limits (docs/design.md section 9) -----------------------------------------
 

@@ -17,6 +17,7 @@ import pinocchio as pin
 
 from constraints import Constraint, Parametrisation
 
+from ..base import posture_difference
 from ..joint_limits import BoxTest, JointBounds
 from ..linalg import DampingPolicy
 from .analytical import ChainSplit
@@ -95,6 +96,12 @@ class StepSetup:
     def paper_task(self) -> bool:
         """One EE and its full, unweighted twist: the task of the analytical form."""
         return self.task_size == 6 and self.task_entries is None
+
+    def posture_velocity(self, q: np.ndarray) -> np.ndarray:
+        """``posture_gain (posture (-) q)`` (nv,), zero on ``posture_free``
+        (:func:`controllers.base.posture_difference`)."""
+        return self.posture_gain * posture_difference(self.model, q, self.posture,
+                                                      self.posture_free)
 
     @property
     def constraints(self) -> tuple[Constraint, ...]:

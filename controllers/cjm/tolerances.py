@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..base import EQUALITY_TOLERANCE, TWIST_TOLERANCE
-from ..linalg import RANK_TOLERANCE
+from ..numerics import RANK_TOLERANCE
 
 #: A barrier row is violated when the solution undercuts it by more than this (m/s).
 BARRIER_TOLERANCE = 1e-12

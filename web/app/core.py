@@ -20,6 +20,7 @@ import itertools
 import threading
 from pathlib import Path
 
+from controllers.base import velocity_joint_names
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.robots import Robot
 
@@ -31,7 +32,6 @@ from .recording import Recording
 from .robots import Robots, default_ghost_offset
 from .scenes import Scenes
 from .settings import Settings
-from .status import velocity_joint_names
 from .tick import Tick
 from .trace import Trace
 from .view import View
@@ -61,7 +61,7 @@ class TeleopApp(Console, Editing, Robots, Settings, Scenes, Recording, Tick, Vie
         self._lock = threading.RLock()
         self._build_lock = threading.Lock()  # one loop build at a time (outside _lock)
         self._view_data = robot.model.createData()  # for geometry queries, under the lock
-        self.joint_names = velocity_joint_names(robot)
+        self.joint_names = list(velocity_joint_names(robot.model))
         self.config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING,
                                  max_linear_speed=MAX_LINEAR_SPEED,
                                  max_angular_speed=MAX_ANGULAR_SPEED)

@@ -10,13 +10,13 @@ for a build.
 from __future__ import annotations
 
 import threading
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
 from constraints.validation import as_vector
+from controllers import Controller
 from controllers.linalg import DampingPolicy
 from teleop.controller_specs import make_controller
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
@@ -24,14 +24,6 @@ from teleop.robots import Robot
 
 from .limits import MAX_GHOST_OFFSET
 from .trace import Trace
-
-
-@runtime_checkable
-class Damped(Protocol):
-    """A controller whose damped least squares the operator sets (the CJM): it declares
-    its :class:`controllers.linalg.DampingPolicy` as ``policy`` (paper eq 35)."""
-
-    policy: DampingPolicy
 
 
 def default_ghost_offset(robot: Robot) -> np.ndarray:
@@ -84,10 +76,10 @@ class Robots:
         self._apply_damping(controller, damping)
         return TeleopLoop(self.robot, controller, q0=q, config=config)
 
-    def _apply_damping(self, controller, damping: float | None = None) -> None:
-        """The operator's constant damping on a controller that takes one (:class:`Damped`),
-        its rising damping near singularity kept."""
-        if isinstance(controller, Damped):
+    def _apply_damping(self, controller: Controller, damping: float | None = None) -> None:
+        """The operator's constant damping on a controller that damps its task
+        (:attr:`controllers.Controller.policy`), its rising damping near singularity kept."""
+        if controller.policy is not None:
             old = controller.policy
             controller.policy = DampingPolicy(self.damping if damping is None else damping,
                                               old.threshold, old.max_damping)

@@ -9,7 +9,6 @@ import numpy as np
 
 from controllers import StepStatus
 from teleop.loop import StepRecord
-from teleop.robots import Robot
 
 from .limits import FOLLOWING, ON_TARGET, STALLED_SPEED
 
@@ -25,17 +24,6 @@ class Limitation:
     status: str  # a StepStatus value
     words: str
     distance: float  # EE to target (m)
-
-
-def velocity_joint_names(robot: Robot) -> list[str]:
-    """The joint name of each velocity index."""
-    model = robot.model
-    names = [""] * model.nv
-    for joint_id in range(1, model.njoints):
-        joint = model.joints[joint_id]
-        for k in range(joint.nv):
-            names[joint.idx_v + k] = model.names[joint_id]
-    return names
 
 
 def _not_following(record: StepRecord, ee: int = 0) -> bool:

@@ -141,6 +141,11 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
       compute_box(q);
       saturate(in, qd);
       clip(qd);
+      if (!qd.allFinite()) {  // clipping passes a NaN through
+        status_ = Status::failed;
+        event(Event::non_finite);
+        qd.setZero();
+      }
     }
   } catch (const NoConvergence&) {
     status_ = Status::failed;
