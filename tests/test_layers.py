@@ -309,10 +309,9 @@ def repository_files() -> list[Path]:
         return sorted(p for p in ROOT.rglob("*") if p.is_file() and ".git" not in p.parts)
 
 
-def test_CITATIONS_design_doc_is_cited_as_docs_design_md():
-    """EXPECTED TO FAIL until the lead renames the citations: no .py, .md or .toml file of
-    the repository may mention the old top-level design file; cite ``docs/design.md``.
-    (Deliberately neither skipped nor xfailed.)"""
+def test_the_design_doc_is_cited_as_docs_design_md():
+    """No .py, .md or .toml file of the repository mentions a top-level design file
+    outside it: the design is cited as ``docs/design.md``."""
     offenders = []
     for path in repository_files():
         relative = path.relative_to(ROOT).as_posix()
