@@ -34,6 +34,7 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
     set_camera,
     uplot_line_pixels,
     wait_for_pixels,
+    wait_for_still_canvas,
     wait_until,
     watchdog,
 )
@@ -99,11 +100,15 @@ def test_the_ghost_is_drawn_beside_the_robot_at_its_offset(web):
     # the main robot along the screen direction from one to the other
     apart = (ghost_px - main_px) / np.linalg.norm(ghost_px - main_px)
     assert (ghost_points @ apart).min() > (main_points @ apart).max()
-    shown = wait_for_pixels(web, lambda p: distinct_colours(p) > 100, WAIT, "the robots")
+    wait_for_pixels(web, lambda p: distinct_colours(p) > 100, WAIT, "the robots")
+    # both images settled: a frame caught while the camera or the main robot still moves
+    # changes pixels everywhere, and their centre says nothing about the ghost
+    shown = wait_for_still_canvas(web, WAIT)
     ui._views["ghost"].displayVisuals(False)
     try:
-        hidden = wait_for_pixels(web, lambda p: changed_fraction(p, shown) > 0.005, WAIT,
-                                 "the canvas to change when the ghost is hidden")
+        wait_for_pixels(web, lambda p: changed_fraction(p, shown) > 0.005, WAIT,
+                        "the canvas to change when the ghost is hidden")
+        hidden = wait_for_still_canvas(web, WAIT)
     finally:
         ui._views["ghost"].displayVisuals(True)
     rows, cols = np.nonzero(np.abs(hidden - shown).max(axis=2) > 24)
