@@ -37,7 +37,17 @@ def build_mujoco_model(
     model: pin.Model, urdf_text: str, frames: Iterable[str],
     locked_joints: Mapping[str, Sequence[float]] | None = None,
 ) -> tuple[mujoco.MjModel, JointMap]:
-    """Compile a MuJoCo model of the URDF with a site at each Pinocchio frame in ``frames``.
+    """Compile :func:`mujoco_spec` and map its joints to ``model``'s (:func:`joint_map`)."""
+    mj_model = mujoco_spec(model, urdf_text, frames, locked_joints).compile()
+    return mj_model, joint_map(model, mj_model)
+
+
+def mujoco_spec(
+    model: pin.Model, urdf_text: str, frames: Iterable[str],
+    locked_joints: Mapping[str, Sequence[float]] | None = None,
+) -> mujoco.MjSpec:
+    """A MuJoCo spec of the URDF with a site at each Pinocchio frame in ``frames``, not yet
+    compiled (a physics plant adds its actuators and payload before compiling).
 
     MuJoCo merges the bodies joined by fixed joints (``fusestatic``) and drops frames
     that carry no body, so the end effectors and the constraint links are added back as
@@ -56,8 +66,9 @@ def build_mujoco_model(
     ``locked_joints`` (the robot's, joint name to its Pinocchio coordinates) are made
     fixed at those positions, as ``model`` has them.
 
-    Raises ``ValueError`` when the two models' joints differ (names, or a joint that is
-    neither a 1-dof revolute/prismatic joint in both nor a planar root joint).
+    Raises ``ValueError`` when a joint of ``model`` is not in the URDF (:func:`joint_map`
+    checks the rest: names, and joints that are neither 1-dof revolute/prismatic in both
+    nor a planar root joint).
     """
     spec = mujoco.MjSpec.from_string(kinematic_urdf(urdf_text, locked_joints or {}))
     # massless links are fine for kinematics: bound mass/inertia so that they compile
@@ -83,8 +94,7 @@ def build_mujoco_model(
             pos=placement.translation.copy(),
             quat=[quaternion.w, quaternion.x, quaternion.y, quaternion.z],
         )
-    mj_model = spec.compile()
-    return mj_model, _joint_map(model, mj_model)
+    return spec
 
 
 def _add_planar_base(spec: mujoco.MjSpec, model: pin.Model, name: str) -> mujoco.MjsBody:
@@ -116,7 +126,9 @@ def _mujoco_names(model: pin.Model, joint: int) -> list[str]:
     return [name + suffix for suffix in PLANAR_SUFFIXES] if _is_planar_root(model, joint) else [name]
 
 
-def _joint_map(model: pin.Model, mj_model: mujoco.MjModel) -> JointMap:
+def joint_map(model: pin.Model, mj_model: mujoco.MjModel) -> JointMap:
+    """The :class:`JointMap` between ``model`` and a MuJoCo model compiled from
+    :func:`mujoco_spec` of it (``ValueError`` when their joints differ)."""
     scalar = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
     mj_names = [mj_model.joint(i).name for i in range(mj_model.njnt)]
     pin_names = [n for j in range(1, model.njoints) for n in _mujoco_names(model, j)]
