@@ -190,3 +190,30 @@ def test_the_physics_runs_at_least_twice_the_control_rate():
     assert PlantSettings().substeps(0.25e-3) == 2  # a 4 kHz loop still gets two steps
     with pytest.raises(ValueError, match="physics_rate"):
         PlantSettings(physics_rate=1000.0)
+
+
+def test_the_slow_paper_scenario_on_the_plant_follows_the_ideal_integrator(sda10f):
+    """The paper's slow operator motion (+-1.5 cm) with the CJM: on the stiff plant the EE
+    stays within 20 um of its path on the ideal integrator (the servos' lag, `a / w^2`,
+    times the arm's reach, is a few microns) and the hole error within 1 um."""
+    from teleop.controller_specs import make_controller
+    from teleop.experiments.scenarios import load_scenario
+    from teleop.loop import LoopConfig, TeleopLoop
+
+    plan, config = load_scenario("paper-hole", sda10f), LoopConfig()
+    paths, hole_errors = {}, {}
+    for name in ("kinematic", "mujoco"):
+        constraints = plan.make_constraints()
+        controller = make_controller("cjm", sda10f, constraints, dt=config.dt)
+        plant = MujocoPlant(sda10f, config.dt) if name == "mujoco" else None
+        loop = TeleopLoop(sda10f, controller, q0=plan.q0, config=config, plant=plant)
+        path, worst = [], 0.0
+        for i in range(1500):
+            record = loop.tick(plan.target((i + 1) * config.dt))
+            path.append(loop.ee_placement().translation.copy())
+            worst = max(worst, record.constraint_error)
+            assert not record.failed, record.message
+        paths[name], hole_errors[name] = np.array(path), worst
+    apart = np.max(np.linalg.norm(paths["mujoco"] - paths["kinematic"], axis=1))
+    assert 1e-8 < apart < 20e-6, apart
+    assert hole_errors["mujoco"] < 1e-6, hole_errors
