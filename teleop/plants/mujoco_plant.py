@@ -79,7 +79,9 @@ class MujocoPlant:
         self.model: pin.Model = robot.model
         self.dt = float(dt)
         self.substeps = self.settings.substeps(self.dt)
-        self.shaping = ImperfectPlant(imperfections or Imperfections(), robot.model, dt)
+        #: the imperfect robot's noise, latency and lag (None: a perfect interface)
+        self.shaping: ImperfectPlant | None = (imperfections or Imperfections()).plant(
+            robot.model, dt)
         self.mj_model = self._compile(robot)
         self.mj_data = mujoco.MjData(self.mj_model)
         self.joints = joint_map(self.model, self.mj_model)
@@ -194,12 +196,13 @@ class MujocoPlant:
         data.qvel[:] = 0.0
         data.act[self._activation] = data.qpos[self._qpos_of_dof[
             self._actuator_dofs[self._reference_actuators]]]
-        self.shaping.reset()
+        if self.shaping is not None:
+            self.shaping.reset()
         self.last = PlantMeasures(np.zeros((0, 3)), np.zeros(0), 0.0, False)
 
     def sense(self, q: np.ndarray) -> np.ndarray:
         """The simulated configuration ``q`` with the encoder noise on top."""
-        return self.shaping.sense(q)
+        return q if self.shaping is None else self.shaping.sense(q)
 
     def actuate(self, qd: np.ndarray, q: np.ndarray,
                 constraints: Sequence[Constraint] = ()) -> np.ndarray:
@@ -207,7 +210,8 @@ class MujocoPlant:
         filtered by the imperfections); the mean velocity that takes the loop's true
         configuration ``q`` to the simulated one."""
         model, data = self.mj_model, self.mj_data
-        command = self.joints.v_to_mujoco(self.shaping.actuate(qd), data.qpos)
+        shaped = qd if self.shaping is None else self.shaping.actuate(qd)
+        command = self.joints.v_to_mujoco(shaped, data.qpos)
         data.ctrl[:] = command[self._actuator_dofs]
         holes = [c for c in constraints if c.has_wall]
         forces, displacements = np.zeros((len(holes), 3)), np.zeros(len(holes))
