@@ -99,8 +99,8 @@ class MujocoPlant:
 
     @staticmethod
     def _site_frames(robot) -> list[str]:
-        frames = [frame.name for frame in robot.model.frames if frame.type == pin.FrameType.BODY]
-        return list(dict.fromkeys(frames + list(robot.ee_frames)))
+        """Every frame a constraint or an EE can sit on (all but the universe)."""
+        return list(dict.fromkeys(frame.name for frame in robot.model.frames[1:]))
 
     def _compile(self, robot) -> mujoco.MjModel:
         """The URDF's bodies, the drives' rotor inertia, damping and friction, two
@@ -216,14 +216,15 @@ class MujocoPlant:
         holes = [c for c in constraints if c.has_wall]
         forces, displacements = np.zeros((len(holes), 3)), np.zeros(len(holes))
         data.qfrc_applied[:] = 0.0
-        if not holes:  # one call: the physics steps without Python between them
+        if holes:  # each physics step split to apply the wall's force at its kinematics
+            for _ in range(self.substeps):
+                mujoco.mj_step1(model, data)
+                data.qfrc_applied[:] = 0.0
+                for i, hole in enumerate(holes):
+                    forces[i], displacements[i] = self._push(hole)
+                mujoco.mj_step2(model, data)
+        else:  # one call: the physics steps without Python between them
             mujoco.mj_step(model, data, self.substeps)
-        for _ in range(self.substeps if holes else 0):
-            mujoco.mj_step1(model, data)
-            data.qfrc_applied[:] = 0.0
-            for i, hole in enumerate(holes):
-                forces[i], displacements[i] = self._push(hole)
-            mujoco.mj_step2(model, data)
         torque = np.abs(data.qfrc_actuator) / self.effort_limit
         ratio = float(np.max(torque))
         saturated = ratio >= 1.0 - 1e-12
