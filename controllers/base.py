@@ -352,7 +352,8 @@ class Controller(ABC):
         6 entries per end effector in ``robot.ee_frames`` order (docs/design.md section 11).
 
         Bad input (wrong size, NaN or inf) raises ``ValueError``. A numerical failure
-        returns zeros with ``self.info.status == "failed"`` (or raises ``SolverError``
+        returns :meth:`stop_command` (zeros without acceleration limits) with
+        ``self.info.status == "failed"`` (or raises ``SolverError``
         when the controller is ``strict``): never a non-finite command, never one
         outside the joint box.
         """
