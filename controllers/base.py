@@ -230,7 +230,12 @@ class Controller(ABC):
     limit_gain : fraction of the distance to a position limit allowed per step.
     position_limits, velocity_limits : enforce these limits (False: a bare solver, for
         cross-checks only; never on a robot).
-    strict : raise ``SolverError`` instead of returning the zero-velocity fallback.
+    strict : raise ``SolverError`` instead of returning the fallback (a controlled stop).
+    acceleration_limit : (nv,) per joint (rad/s^2, m/s^2 for prismatic and base
+        translations; ``inf`` for none), or None for no acceleration limit. The reference
+        is the previous command (:attr:`reference`, zero after :meth:`reset`); the box of a
+        step is then the intersection of the velocity, braking-aware position and
+        acceleration bounds (docs/design.md section 8.4).
     """
 
     #: the damped least squares' policy (paper eq 35) of a controller that damps its task
@@ -239,7 +244,8 @@ class Controller(ABC):
 
     def __init__(self, robot: RobotLike, dt: float = 1e-3,
                  limit_gain: float = DEFAULT_LIMIT_GAIN, position_limits: bool = True,
-                 velocity_limits: bool = True, strict: bool = False) -> None:
+                 velocity_limits: bool = True, strict: bool = False,
+                 acceleration_limit=None) -> None:
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
@@ -250,7 +256,10 @@ class Controller(ABC):
         self.task_size = 6 * len(self.ee_frame_ids)
         self.strict = bool(strict)
         self.info = SolveInfo()
-        self.joint_bounds = JointBounds(self.model, dt, limit_gain, position_limits, velocity_limits)
+        self.joint_bounds = JointBounds(self.model, dt, limit_gain, position_limits,
+                                        velocity_limits, acceleration_limit)
+        #: the previous command, the acceleration limits' reference (zero at rest)
+        self._reference = np.zeros(self.model.nv)
         self.velocity_limit = self.joint_bounds.velocity_limit
         self._box_test = BoxTest(self.joint_bounds, self.model.nq, self.model.nv)
         self.constraints: list[Constraint] = []
@@ -276,9 +285,36 @@ class Controller(ABC):
     def velocity_limits(self) -> bool:
         return self.joint_bounds.velocity_limits
 
+    @property
+    def acceleration_limit(self) -> np.ndarray | None:
+        """(nv,) acceleration limits (inf where none), or None."""
+        return self.joint_bounds.acceleration_limit
+
+    @property
+    def reference(self) -> np.ndarray:
+        """The command the acceleration limits count from: the previous one (a copy)."""
+        return self._previous_command().copy()
+
+    def _previous_command(self) -> np.ndarray:
+        """The array holding the previous command (the CJM's lives in its step)."""
+        return self._reference
+
+    def reset(self) -> None:
+        """Forget the previous command: the next step starts from rest."""
+        self._previous_command()[:] = 0.0
+
     def bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The joint box ``lower <= qd <= upper`` at ``q`` (:class:`JointBounds`)."""
-        return self.joint_bounds.box(q)
+        """The joint box ``lower <= qd <= upper`` at ``q`` (:class:`JointBounds`), for the
+        next step (around the previous command when there are acceleration limits)."""
+        return self.joint_bounds.box(q, self._previous_command())
+
+    def stop_command(self, q: np.ndarray) -> np.ndarray:
+        """The fallback of a failed step: zero without acceleration limits, else a
+        controlled stop, the command nearest zero inside the box (docs/design.md 8.4)."""
+        if self.joint_bounds.acceleration_step is None:
+            return np.zeros(self.model.nv)
+        lower, upper = self.bounds(q)
+        return np.clip(0.0, lower, upper)
 
     def posture_difference(self, q: np.ndarray, posture: np.ndarray) -> np.ndarray:
         """``posture (-) q`` (nv,, ``pin.difference``) with a mobile base's entries zero:
@@ -316,7 +352,8 @@ class Controller(ABC):
         6 entries per end effector in ``robot.ee_frames`` order (docs/design.md section 11).
 
         Bad input (wrong size, NaN or inf) raises ``ValueError``. A numerical failure
-        returns zeros with ``self.info.status == "failed"`` (or raises ``SolverError``
+        returns :meth:`stop_command` (zeros without acceleration limits) with
+        ``self.info.status == "failed"`` (or raises ``SolverError``
         when the controller is ``strict``): never a non-finite command, never one
         outside the joint box.
         """
@@ -325,12 +362,12 @@ class Controller(ABC):
         """:func:`checked_inputs` for this controller's model and task."""
         return checked_inputs(q, twist, self.model.nq, self.task_size)
 
-    def _fail(self, message: str) -> np.ndarray:
+    def _fail(self, message: str, q: np.ndarray) -> np.ndarray:
         self.info.status = StepStatus.FAILED
         self.info.message = message
         if self.strict:
             raise SolverError(message)
-        return np.zeros(self.model.nv)
+        return self.stop_command(q)
 
     def _kinematics(self, q: np.ndarray) -> Kinematics:
         model, data = self.model, self.data
@@ -379,22 +416,28 @@ class GuardedController(Controller):
         ``EQUALITY_TOLERANCE`` degrades the step)."""
         q, twist = self._checked_inputs(q, twist)
         self.info = SolveInfo()
+        qd = self._guarded_step(q, twist)
+        self._reference[:] = qd
+        return qd
+
+    def _guarded_step(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         kinematics = self._kinematics(q)
         try:
             qd = self._solve(kinematics, twist)
         except (np.linalg.LinAlgError, SolverError) as error:
-            return self._fail(f"{type(error).__name__}: {error}")
+            return self._fail(f"{type(error).__name__}: {error}", q)
         if not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
-            return self._fail(NON_FINITE_NOTE)
-        if not self._box_test.contains(q, qd):
-            lower, upper = self.joint_bounds.box(q)
+            return self._fail(NON_FINITE_NOTE, q)
+        previous = self._reference if self.joint_bounds.acceleration_step is not None else None
+        if not self._box_test.contains(q, qd, previous):
+            lower, upper = self.joint_bounds.box(q, previous)
             try:
                 qd = self._saturate(kinematics, twist, qd, lower, upper)
             except np.linalg.LinAlgError as error:
-                return self._fail(f"{type(error).__name__} while saturating: {error}")
+                return self._fail(f"{type(error).__name__} while saturating: {error}", q)
             qd = self._clip(qd, lower, upper)
             if not math.isfinite(sum(qd.tolist())):  # clipping passes a NaN through
-                return self._fail(NON_FINITE_NOTE)
+                return self._fail(NON_FINITE_NOTE, q)
         if self.info.equality_residual > EQUALITY_TOLERANCE:
             self.info.report(StepStatus.CONSTRAINT_DEGRADED,
                              residual_note(self.info.equality_residual))

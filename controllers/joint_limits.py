@@ -7,6 +7,8 @@ import pinocchio as pin
 
 from constraints.validation import as_number
 
+from .joint_acceleration import acceleration_box, as_acceleration_limit, braking_speed
+
 #: Fraction ``g`` of the distance to a position limit a joint may cover in one period.
 DEFAULT_LIMIT_GAIN = 0.95
 
@@ -19,7 +21,11 @@ class JointBounds:
         lower_i = max(-qd_max_i, g (q_min_i - q_i) / dt)
         upper_i = min( qd_max_i, g (q_max_i - q_i) / dt)
 
-    so ``q + qd dt`` stays inside the position limits (``g < 1`` keeps a margin). A joint
+    so ``q + qd dt`` stays inside the position limits (``g < 1`` keeps a margin). With
+    acceleration limits ``a`` the position bound is the braking-aware one of
+    :func:`controllers.joint_acceleration.braking_speed` (at most the one above), and
+    :meth:`box` given the previous command ``qd_prev`` also intersects the acceleration box
+    ``[qd_prev - a dt, qd_prev + a dt]`` (docs/design.md section 8.4). A joint
     already past a position limit may only come back, at most at its velocity limit.
     Unlimited joints (no finite limit in the model) get ``+-inf``; position limits apply
     to one-dimensional joints only (revolute, prismatic), where ``q`` and ``qd`` share
@@ -31,11 +37,13 @@ class JointBounds:
     dt : control period (s).
     limit_gain : ``g`` in (0, 1].
     position_limits, velocity_limits : which limits apply.
+    acceleration_limit : (nv,) rad/s^2 (m/s^2 for prismatic and base translations), ``inf``
+        for none on a joint; None: no acceleration limit.
     """
 
     def __init__(self, model: pin.Model, dt: float = 1e-3,
                  limit_gain: float = DEFAULT_LIMIT_GAIN, position_limits: bool = True,
-                 velocity_limits: bool = True) -> None:
+                 velocity_limits: bool = True, acceleration_limit=None) -> None:
         self.dt = as_number(dt, "dt", positive=True)
         self.limit_gain = as_number(limit_gain, "limit_gain", positive=True, maximum=1.0)
         self.position_limits = bool(position_limits)
@@ -61,12 +69,29 @@ class JointBounds:
         self.limited_q, self.limited_v = q_index[finite], v_index[finite]
         #: (2, n): ``q_min`` and ``q_max`` of those joints
         self.q_limits = np.vstack([q_min[finite], q_max[finite]])
+        #: (nv,) acceleration limits (inf where none), or None
+        self.acceleration_limit = as_acceleration_limit(acceleration_limit, nv)
+        #: (nv,) the largest change of command per period, ``a dt``, or None
+        self.acceleration_step = (None if self.acceleration_limit is None
+                                  else self.acceleration_limit * self.dt)
+        braked = (np.zeros(0, dtype=int) if self.acceleration_step is None
+                  else np.flatnonzero(np.isfinite(self.acceleration_step[self.limited_v])))
+        #: indices (into ``limited_v``) of the joints whose position bound brakes
+        self._braked = braked
+        self._braked_step = (self.acceleration_step[self.limited_v[braked]]
+                             if braked.size else np.zeros(0))
 
-    def box(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(lower, upper)``, each (nv,), at configuration ``q`` (new arrays)."""
+    def box(self, q: np.ndarray,
+            previous: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)``, each (nv,), at configuration ``q`` (new arrays); with
+        ``previous`` (the last command) and acceleration limits, intersected with
+        :func:`controllers.joint_acceleration.acceleration_box`."""
         box = self.velocity_box.copy()
         if self.position_limits and self.limited_v.size:
-            position = (self.q_limits - q[self.limited_q]) * (self.limit_gain / self.dt)
+            distance = self.q_limits - q[self.limited_q]
+            position = distance * (self.limit_gain / self.dt)
+            if self._braked.size:
+                self._brake(distance, position)
             v = self.limited_v
             box[0, v] = np.maximum(box[0, v], position[0])
             box[1, v] = np.minimum(box[1, v], position[1])
@@ -75,7 +100,22 @@ class JointBounds:
         np.minimum(lower, self.velocity_box[1], out=lower)
         np.maximum(upper, self.velocity_box[0], out=upper)
         np.maximum(upper, lower, out=upper)
-        return lower, upper
+        if previous is None or self.acceleration_step is None:
+            return lower, upper
+        accel_lower, accel_upper = acceleration_box(lower, upper, previous, self.acceleration_step)
+        return np.maximum(lower, accel_lower), np.minimum(upper, accel_upper)
+
+    def _brake(self, distance: np.ndarray, position: np.ndarray) -> None:
+        """The braking-aware position bounds of the joints with an acceleration limit,
+        inside their limits, into ``position`` (2, n)."""
+        braked, step = self._braked, self._braked_step
+        below, above = distance[0, braked], distance[1, braked]
+        lower = np.where(below <= 0.0, -braking_speed(np.maximum(-below, 0.0), step, self.dt,
+                                                      self.limit_gain), position[0, braked])
+        upper = np.where(above >= 0.0, braking_speed(np.maximum(above, 0.0), step, self.dt,
+                                                     self.limit_gain), position[1, braked])
+        position[0, braked] = lower
+        position[1, braked] = upper
 
 
 class BoxTest:
@@ -111,13 +151,22 @@ class BoxTest:
                     row[v], row[nv + c] = sign, sign * gain
                     row[-1] = -sign * gain * q_limit - slack[v]
                     rows.append(row)
+        #: per joint slack of the test (rad/s)
+        self.slack = np.array(slack).reshape(nv)
+        self._bounds = bounds
         #: ``M`` (rows, nv + nq + 1): inside the box when ``M [qd; q; 1] <= 0``
         self.matrix = np.array(rows).reshape(len(rows), nv + nq + 1)
         self._stacked = np.ones(nv + nq + 1)  # [qd; q; 1]
         self._nv = nv
 
-    def contains(self, q: np.ndarray, qd: np.ndarray) -> bool:
-        """Whether ``qd`` (finite) is inside the box at ``q``, to the tolerance."""
+    def contains(self, q: np.ndarray, qd: np.ndarray,
+                 previous: np.ndarray | None = None) -> bool:
+        """Whether ``qd`` (finite) is inside the box at ``q``, to the tolerance. With
+        acceleration limits and ``previous`` the box is not affine in ``q`` (the braking
+        bound): the exact box is computed and compared."""
+        if previous is not None and self._bounds.acceleration_step is not None:
+            lower, upper = self._bounds.box(q, previous)
+            return bool(((qd >= lower - self.slack) & (qd <= upper + self.slack)).all())
         if not self.matrix.shape[0]:
             return True
         stacked = self._stacked

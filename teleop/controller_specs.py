@@ -41,6 +41,9 @@ CJM_VARIANTS = {"": {}, "analytical": {}, "general": {"form": "general"},
 CONTROLLER_HELP = ("cjm[:general|:paper|:python], qp:<solver>, mink:<solver> with <solver> any "
                    "installed qpsolvers backend")
 
+#: ``make_controller``'s default ``acceleration_limit``: the robot's own.
+ROBOT = "robot"
+
 #: Default solver of ``qp`` and ``mink`` given without one.
 DEFAULT_SOLVERS = {"qp": "proxqp", "mink": "daqp"}
 
@@ -111,10 +114,13 @@ def _solver(family: str, option: str) -> str:
 def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
                     dt: float = 1e-3, twist_weight=None,
                     solver_settings: Mapping | None = None,
-                    time_budget: float | None | str = "periods") -> Controller:
+                    time_budget: float | None | str = "periods",
+                    acceleration_limit=ROBOT) -> Controller:
     """Build a controller from its spec string; unknown specs raise ``ValueError``.
     ``twist_weight`` (the task's diagonal weight, 6 per EE or one per entry) goes to every
-    family alike; ``solver_settings`` (a mapping of the QP backend's keyword settings) and
+    family alike, as does ``acceleration_limit`` (``"robot"``, the default: the robot's own,
+    ``robot.acceleration_limit``; None: none; else nv values, docs/design.md 8.4);
+    ``solver_settings`` (a mapping of the QP backend's keyword settings) and
     ``time_budget`` (a step's CPU deadline, docs/design.md 10.6) to the ``qp`` and ``mink``
     families, which have a backend."""
     if not isinstance(spec, str):
@@ -122,6 +128,8 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
                          f"got {spec!r}")
     from constraints.validation import as_settings
 
+    if isinstance(acceleration_limit, str) and acceleration_limit == ROBOT:
+        acceleration_limit = getattr(robot, "acceleration_limit", None)
     family, _, option = spec.strip().partition(":")
     settings = as_settings(solver_settings, "solver_settings")
     if settings and family not in ("qp", "mink"):
@@ -132,19 +140,19 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
         from controllers import CJMController
 
         return CJMController(robot, constraints, dt=dt, twist_weight=twist_weight,
-                             **CJM_VARIANTS[option])
+                             acceleration_limit=acceleration_limit, **CJM_VARIANTS[option])
     if family == "qp":
         from controllers import QPController
 
         return QPController(robot, constraints, solver=_solver(family, option), dt=dt,
                             twist_weight=twist_weight, solver_settings=settings,
-                            time_budget=time_budget)
+                            time_budget=time_budget, acceleration_limit=acceleration_limit)
     if family == "mink":
         solver = _solver(family, option)  # checked before MuJoCo (heavy) is imported
         from controllers import MinkController
 
         return MinkController(robot, constraints, solver=solver, dt=dt,
                               twist_weight=twist_weight, solver_settings=settings,
-                              time_budget=time_budget)
+                              time_budget=time_budget, acceleration_limit=acceleration_limit)
     raise ValueError(f"unknown controller {spec!r}: known {', '.join(spec_names())}; in general "
                      f"{CONTROLLER_HELP} ({', '.join(available_solvers())})")

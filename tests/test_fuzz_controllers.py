@@ -10,6 +10,7 @@ import time
 import warnings
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -112,3 +113,48 @@ def test_every_controller_is_finite_in_its_limits_honest_and_bounded(robots, pro
         if equalities:
             A, b = controller.constraint_rows(equalities)
             assert np.max(np.abs(A @ qd - b)) <= 1e3 * EQUALITY_TOLERANCE, (spec, info)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(problem=problems(), steps=st.integers(2, 12))
+def test_every_controller_keeps_its_acceleration_box_over_a_sequence(robots, problem, steps):
+    """The same draws as above, run for several steps from the drawn configuration (joints
+    at and past their limits) on the ideal integrator: every command is inside the box
+    of its step (velocity, braking-aware position and acceleration limits, the acceleration
+    giving way only where it misses the others, docs/design.md 8.4), a failed step's
+    command included (the controlled stop); no ``ok`` step breaks a hole's rows."""
+    name, kinds, past, scale, direction, offset, at_limits, spec = problem
+    robot = robots[name]
+    model = robot.model
+    q = robot.q_home.copy()
+    bounded = np.isfinite(model.lowerPositionLimit) & np.isfinite(model.upperPositionLimit) & (
+        np.abs(model.upperPositionLimit) < 1e10)
+    for i in np.flatnonzero(bounded):
+        side = at_limits[i % len(at_limits)]
+        if side:
+            q[i] = (model.upperPositionLimit[i] if side > 0 else model.lowerPositionLimit[i]) + side * past
+    links = list(robot.constrained_links)
+    constraints = [constraint_of(robot, robot.q_home, kind, links[i % len(links)], offset)
+                   for i, kind in enumerate(kinds)]
+    if spec == "cjm:paper":
+        constraints = [c for c in constraints if c.has_paper_form]
+    controller = make_controller(spec, robot, constraints, time_budget=None)
+    twist = scale * direction[:controller.task_size]
+    velocity_limit = controller.joint_bounds.velocity_limit
+    slack = 1e-9 * np.where(np.isfinite(velocity_limit), velocity_limit, 1.0)
+    step = controller.joint_bounds.acceleration_step  # None: the Panda has no limits
+    step = np.full(model.nv, np.inf) if step is None else step
+    for _ in range(steps):
+        lower, upper = controller.bounds(q)  # this step's box, around the previous command
+        previous = controller.reference
+        qd = controller.solve(q, twist)
+        assert np.all(np.isfinite(qd)), spec
+        assert np.all(qd >= lower - slack) and np.all(qd <= upper + slack), (spec, controller.info.message)
+        reachable = (lower <= previous + step) & (upper >= previous - step)
+        assert np.all(np.abs(qd - previous)[reachable] <= step[reachable] + slack[reachable]), spec
+        if controller.info.status.value == "ok":
+            equalities = [i for i, c in enumerate(constraints) if c.is_equality]
+            if equalities:
+                A, b = controller.constraint_rows(equalities)
+                assert np.max(np.abs(A @ qd - b)) <= 1e3 * EQUALITY_TOLERANCE, spec
+        q = pin.integrate(model, q, qd * controller.dt)

@@ -75,7 +75,10 @@ def joint_box(setup: StepSetup) -> JointBox:
         velocity_limit=bounds.velocity_limit, limited_q=bounds.limited_q.tolist(),
         limited_v=bounds.limited_v.tolist(), q_min=bounds.q_limits[0], q_max=bounds.q_limits[1],
         position_gain=bounds.limit_gain / bounds.dt, position_limits=bounds.position_limits,
-        box_test=setup.box_test.matrix)
+        box_test=setup.box_test.matrix,
+        acceleration_step=(np.zeros(0) if bounds.acceleration_step is None
+                           else bounds.acceleration_step),
+        dt=bounds.dt, limit_gain=bounds.limit_gain, slack=setup.box_test.slack)
 
 
 class CompiledStep:
@@ -139,6 +142,8 @@ class CompiledStep:
                 self._in_python.append((writer, terms[offsets[i]:offsets[i + 1]],
                                         row[:9].reshape(3, 3), row[9:]))
         self._one_call = not self._in_python and not self._posture_in_python
+        #: the previous command, the acceleration limits' reference (a view of the C++ step's)
+        self.previous = step.previous
         self._check_kinematics(frames)
 
     def _check_kinematics(self, frames: list[int]) -> None:

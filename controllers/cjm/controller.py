@@ -84,7 +84,7 @@ class CJMController(Controller):
         ``W^1/2 J_e qd = W^1/2 V_e`` in the general form, as the QP's
         ``|J_e qd - V_e|_W^2``; a zero weight leaves that entry to the posture
         (docs/design.md section 11.2). Anything but the identity takes the general form.
-    limit_gain, position_limits, velocity_limits, strict : see
+    limit_gain, position_limits, velocity_limits, strict, acceleration_limit : see
         :class:`controllers.base.Controller`.
     backend : ``"compiled"`` (the whole step in C++, Pinocchio's kinematics included,
         :mod:`controllers.cjm.compiled`, docs/design.md section 16), ``"python"``
@@ -118,9 +118,11 @@ class CJMController(Controller):
         velocity_limits: bool = True,
         strict: bool = False,
         backend: Backend = "auto",
+        acceleration_limit=None,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
-                         velocity_limits=velocity_limits, strict=strict)
+                         velocity_limits=velocity_limits, strict=strict,
+                         acceleration_limit=acceleration_limit)
         if parametrisation not in ("nullspace", "paper"):
             raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
         if form not in ("auto", "general"):
@@ -231,6 +233,9 @@ class CJMController(Controller):
                 if not self._python_if_needed:
                     raise
                 self.backend = "python"
+        previous = getattr(self, "step", None)
+        if previous is not None:  # a rebuilt step goes on from the command last sent
+            step.previous[:] = previous.previous
         #: everything the step needs (:class:`controllers.cjm.step_setup.StepSetup`)
         self.setup = setup
         #: the backend's step (PythonStep or CompiledStep): ``step.solve(q, twist) -> (qd, report)``
@@ -258,6 +263,10 @@ class CJMController(Controller):
             parametrisation=self.parametrisation, form=self.form, joint_names=self.joint_names)
 
     # -- the step ----------------------------------------------------------------------
+
+    def _previous_command(self) -> np.ndarray:
+        """The step's own array of the previous command (:attr:`Controller.reference`)."""
+        return self.step.previous
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """:meth:`Controller.solve`, by the backend's step (docs/design.md section 16):

@@ -44,40 +44,57 @@ class PythonStep:
         #: one task the analytical form may take (form auto, one EE, its full twist)
         self._analytical_task = setup.form == "auto" and setup.paper_task
         self._nq, self._task_size = setup.model.nq, setup.task_size
+        #: the previous command, the acceleration limits' reference (zero at rest)
+        self.previous = np.zeros(setup.model.nv)
+        #: the box's reference when there are acceleration limits, else None
+        self._reference = None if setup.bounds.acceleration_step is None else self.previous
 
     # -- the step template (controllers.base.GuardedController.solve) ------------------
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         """``qd`` for the stacked EE twist at ``q`` and the step's report. Bad input
-        raises ``ValueError``; a failed step gives zeros."""
-        setup = self.setup
+        raises ``ValueError``; a failed step gives the stop command (zero without
+        acceleration limits, else the command nearest zero in the box)."""
         q, twist = checked_inputs(q, twist, self._nq, self._task_size)
+        qd, report = self._step(q, twist)
+        self.previous[:] = qd
+        return qd, report
+
+    def _step(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
+        setup = self.setup
         report = ReportBuilder()
         ee_jacobian = self._kinematics(q)
         task = self._task(twist)
         try:
             qd = self._solve(q, ee_jacobian, task, report)
         except np.linalg.LinAlgError as error:
-            return self._fail(report, f"{type(error).__name__}: {error}")
+            return self._fail(q, report, f"{type(error).__name__}: {error}")
         if not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
-            return self._fail(report, "", Event.NON_FINITE)
-        if not setup.box_test.contains(q, qd):
-            lower, upper = setup.bounds.box(q)
+            return self._fail(q, report, "", Event.NON_FINITE)
+        if not setup.box_test.contains(q, qd, self._reference):
+            lower, upper = setup.bounds.box(q, self._reference)
             try:
                 qd = self._saturate(q, ee_jacobian, task, lower, upper, report)
             except np.linalg.LinAlgError as error:
-                return self._fail(report, f"{type(error).__name__} while saturating: {error}")
+                return self._fail(q, report, f"{type(error).__name__} while saturating: {error}")
             qd = self._clip(qd, lower, upper, report)
             if not math.isfinite(sum(qd.tolist())):  # clipping passes a NaN through
-                return self._fail(report, "", Event.NON_FINITE)
+                return self._fail(q, report, "", Event.NON_FINITE)
         if report.equality_residual > EQUALITY_TOLERANCE:
             report.event(Event.RESIDUAL, StepStatus.CONSTRAINT_DEGRADED, report.equality_residual)
         return qd, report.freeze()
 
-    def _fail(self, report: ReportBuilder, error: str,
+    def _fail(self, q: np.ndarray, report: ReportBuilder, error: str,
               event: Event = Event.LINEAR_ALGEBRA_ERROR) -> tuple[np.ndarray, StepReport]:
         report.fail(event, error)
-        return np.zeros(self.setup.model.nv), report.freeze()
+        return self.stop_command(q), report.freeze()
+
+    def stop_command(self, q: np.ndarray) -> np.ndarray:
+        """Zero without acceleration limits, else the command nearest zero in the box."""
+        if self._reference is None:
+            return np.zeros(self.setup.model.nv)
+        lower, upper = self.setup.bounds.box(q, self._reference)
+        return np.clip(0.0, lower, upper)
 
     def _kinematics(self, q: np.ndarray) -> np.ndarray:
         """The kinematics at ``q`` into ``data``; the task Jacobian ``W^1/2 J_e`` (the
@@ -211,10 +228,14 @@ class PythonStep:
         barriers activated again against the saturated command."""
         setup = self.setup
         barriers = self._barriers
+        step = setup.bounds.acceleration_step
+        acceleration = (None if self._reference is None
+                        else (self._reference - step, self._reference + step))
         for _ in range(len(barriers) + 1):
             rows, rows_rhs = self.rows(self._active)
             result = saturate_in_null_space(rows, rows_rhs, ee_jacobian, twist, lower, upper,
-                                            setup.bounds.velocity_limit, setup.policy)
+                                            setup.bounds.velocity_limit, setup.policy,
+                                            acceleration)
             waiting = [i for i in barriers if i not in self._active]
             violated = [i for i in waiting if self._barrier_violation(i, result.qd) > BARRIER_TOLERANCE]
             if not violated:

@@ -145,11 +145,15 @@ def _inside(qd: np.ndarray, box: tuple[np.ndarray, np.ndarray]) -> bool:
 
 def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
                            twist: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                           velocity_limit: np.ndarray, policy: DampingPolicy) -> Saturation:
+                           velocity_limit: np.ndarray, policy: DampingPolicy,
+                           acceleration: tuple[np.ndarray, np.ndarray] | None = None
+                           ) -> Saturation:
     """``qd`` inside ``[lower, upper]`` holding the rows first, the twist second.
 
     A joint whose *velocity* limit binds slows the task: Flacco et al.'s scaling, the
-    direction of the twist kept. A joint whose *position* bound binds (it is at, or a
+    direction of the twist kept; so does one whose *acceleration* bound binds (a bound
+    equal to its side of ``acceleration``, the box ``qd_prev -+ a dt``: docs/design.md
+    8.4), which the next steps widen again. A joint whose *position* bound binds (it is at, or a
     period away from, a position limit) is held there like a locked joint and the task
     is solved over the others, in the least-squares sense if they cannot give all of it
     (as the QP does); scaling for it would freeze the arm as the bound shrinks to zero.
@@ -176,7 +180,8 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
         bound = upper[critical] if qd[critical] > upper[critical] else lower[critical]
         held[critical] = bound
         free[critical] = False
-        if abs(bound) < velocity_limit[critical] * (1.0 - BOX_MARGIN):  # a position bound
+        if (abs(bound) < velocity_limit[critical] * (1.0 - BOX_MARGIN)
+                and not _acceleration_bound(bound, critical, acceleration)):  # a position bound
             reference_rank, scaled = None, None
         elif scale >= 0.0 and (scaled is None or scale > scaled[0]):
             candidate_free, candidate_held = free.copy(), held.copy()
@@ -190,6 +195,12 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
         return _result(split.base + scale * split.direction, scale, 1.0, free, critical,
                        jacobian, twist, split)
     return _scale_rows(rows, rows_rhs, lower, upper, jacobian, twist)
+
+
+def _acceleration_bound(bound: float, joint: int,
+                        acceleration: tuple[np.ndarray, np.ndarray] | None) -> bool:
+    """Whether ``bound`` is the joint's acceleration bound (the box takes it exactly)."""
+    return acceleration is not None and bound in (acceleration[0][joint], acceleration[1][joint])
 
 
 def _result(qd: np.ndarray, task_scale: float, rows_scale: float, free: np.ndarray,

@@ -37,6 +37,7 @@ The MuJoCo model and the joint map are :mod:`controllers.mujoco_model`'s.
 """
 
 from .controller import LimitSpec, MinkController
+from .acceleration_limit import AccelerationLimit
 from .joint_box import JointBoxLimit
 
-__all__ = ["JointBoxLimit", "LimitSpec", "MinkController"]
+__all__ = ["AccelerationLimit", "JointBoxLimit", "LimitSpec", "MinkController"]

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import mink
 import numpy as np
 import qpsolvers
@@ -14,6 +16,7 @@ from ..optimization.budget import ITERATION_CAPS, StepBudget
 from ..optimization.least_residual import LeastResidualProblem
 from ..optimization.problem import QuadraticProgram
 from ..optimization.proxqp import ProxQPSolver
+from .acceleration_limit import AccelerationLimit
 from .joint_box import JointBoxLimit
 from .settings import FIXED_SETTINGS, MINK_ITERATION_CAPS, VELOCITY_TOLERANCES
 
@@ -63,17 +66,22 @@ class MinkBackend:
 
     def solve_ik(self, configuration: mink.Configuration, tasks: list[mink.Task],
                  damping: float, limits: list[mink.Limit], constraints: list[mink.Task],
-                 joint_box: JointBoxLimit | None) -> np.ndarray:
+                 variable_bounds: Sequence[JointBoxLimit | AccelerationLimit]) -> np.ndarray:
         """``mink.build_ik`` solved within the step's budget (``solve_ik``'s two lines, so
         that a budget spent is told from an infeasible problem): MuJoCo's velocity ``v``.
-        ``joint_box`` bounds the variable of its 1-dof joints."""
+        ``variable_bounds`` (the joint box, the acceleration box) bound the variable of
+        their 1-dof joints, intersected."""
         self.budget.remaining(self.solver)
         try:
             problem = mink.build_ik(configuration, tasks, self.dt, damping, limits, constraints)
-            if joint_box is not None:
-                lb, ub = joint_box.displacement_bounds(configuration, self.dt)
-                problem.lb = np.maximum(lb, -INFINITE_BOUND)
-                problem.ub = np.minimum(ub, INFINITE_BOUND)
+            if variable_bounds:
+                lb = np.full(configuration.nv, -INFINITE_BOUND)
+                ub = np.full(configuration.nv, INFINITE_BOUND)
+                for limit in variable_bounds:
+                    lower, upper = limit.displacement_bounds(configuration, self.dt)
+                    np.maximum(lb, lower, out=lb)
+                    np.minimum(ub, upper, out=ub)
+                problem.lb, problem.ub = lb, ub
             if self._proxqp is not None:
                 return self._solve_proxqp(problem) / self.dt
             solution = qpsolvers.solve_problem(problem, solver=self.solver, **self.settings)

@@ -23,6 +23,7 @@ from ..optimization.budget import BudgetExceeded, StepBudget, TimeBudget
 from ..optimization.least_residual import HeldRows, held_note, held_rows, least_residual_problem
 from ..optimization.task_damping import task_damping
 from .adapters import BarrierLimit, ConstraintTask, DampingTask, PostureTask
+from .acceleration_limit import AccelerationLimit
 from .joint_box import JointBoxLimit
 from .rows import PinocchioRows, RowsCache
 from .backend import MinkBackend
@@ -88,7 +89,8 @@ class MinkController(GuardedController):
         Pinocchio link frame (``site_name(link)``, the constraint links among them) and
         at every EE frame. Joints must be 1-dof revolute/prismatic, matched by name, on
         a fixed base or on a planar root joint (:func:`build_mujoco_model`).
-    constraints, strict : see :class:`controllers.base.Controller`.
+    constraints, strict, acceleration_limit : see :class:`controllers.base.Controller`
+        (the acceleration box is :class:`controllers.mink.acceleration_limit.AccelerationLimit`).
     solver : any qpsolvers backend mink accepts: ``"daqp"`` (default), ``"proxqp"``,
         ``"osqp"``, ...
     dt : control period (s): mink's integration step.
@@ -140,8 +142,10 @@ class MinkController(GuardedController):
         singular_threshold: float = 0.01,
         max_damping: float = 0.05,
         strict: bool = False,
+        acceleration_limit=None,
     ) -> None:
-        super().__init__(robot, dt=dt, limit_gain=limit_gain, strict=strict)
+        super().__init__(robot, dt=dt, limit_gain=limit_gain, strict=strict,
+                         acceleration_limit=acceleration_limit)
         self.budget = StepBudget(time_budget, self.dt)
         self.policy = DampingPolicy(0.0, as_number(singular_threshold, "singular_threshold", 0.0),
                                     as_number(max_damping, "max_damping", 0.0))
@@ -186,7 +190,16 @@ class MinkController(GuardedController):
         #: the default limit, the controller's joint box (None with ``limits`` given)
         self._joint_box = (JointBoxLimit(self.joint_bounds, self.joints, model.nq)
                            if limits is None else None)
+        #: the acceleration box (None without acceleration limits), whatever ``limits``
+        self.acceleration_box = (AccelerationLimit(self.joint_bounds, self.joints, model.nq,
+                                                   self._reference)
+                                 if self.joint_bounds.acceleration_step is not None else None)
+        #: the limits that bound mink's variable directly (their 1-dof joints' part)
+        self._variable_bounds = tuple(limit for limit in (self._joint_box, self.acceleration_box)
+                                      if limit is not None)
         self._base_limits = self._make_limits(limits)
+        if self.acceleration_box is not None:
+            self._base_limits.append(self.acceleration_box)
         if posture is None:
             posture = robot.q_home
         self.posture = as_vector(posture, model.nq, "posture")
@@ -299,7 +312,7 @@ class MinkController(GuardedController):
         """mink's ``qd`` (Pinocchio order) under the rows as the constraint tasks hold them
         (``b``, or the least residual's), which it must meet to ``equality_tolerance``."""
         v_mj = self.backend.solve_ik(self.configuration, tasks, self.damping, self._limits,
-                                     self.constraint_tasks, self._joint_box)
+                                     self.constraint_tasks, self._variable_bounds)
         if not np.all(np.isfinite(v_mj)):
             raise SolverError(f"mink.solve_ik with solver {self.solver!r} returned a "
                               "non-finite velocity")
@@ -328,7 +341,7 @@ class MinkController(GuardedController):
         """The rows as close to ``b`` as the box and the barriers allow
         (:mod:`controllers.optimization.least_residual`), solved with this controller's
         backend."""
-        lower, upper = self.joint_bounds.box(q)
+        lower, upper = self.bounds(q)
         lower = np.where(np.isfinite(lower), lower, -INFINITE_BOUND)
         upper = np.where(np.isfinite(upper), upper, INFINITE_BOUND)
         G = h = None

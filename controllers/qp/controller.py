@@ -87,7 +87,8 @@ class QPController(GuardedController):
 
     Parameters
     ----------
-    robot, constraints, dt, limit_gain, position_limits, velocity_limits, strict : see
+    robot, constraints, dt, limit_gain, position_limits, velocity_limits, strict,
+    acceleration_limit : see
         :class:`controllers.base.Controller`.
     solver : a ``qpsolvers`` backend: ``"proxqp"`` (default), ``"daqp"``, ``"osqp"``, ...
         proxqp runs as persistent ``proxsuite`` dense QPs (``init`` once per stage, then
@@ -134,9 +135,11 @@ class QPController(GuardedController):
         singular_threshold: float = 0.01,
         max_damping: float = 0.05,
         strict: bool = False,
+        acceleration_limit=None,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
-                         velocity_limits=velocity_limits, strict=strict)
+                         velocity_limits=velocity_limits, strict=strict,
+                         acceleration_limit=acceleration_limit)
         self.budget = StepBudget(time_budget, self.dt)
         self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
                                     as_number(singular_threshold, "singular_threshold", 0.0),
@@ -202,7 +205,7 @@ class QPController(GuardedController):
         if self._barriers:
             rows, rhs = self.constraint_rows(self._barriers)
             barrier_rows, barrier_bound = -rows, -rhs  # A qd >= b as -A qd <= -b
-        lower, upper = bounded_box(*self.joint_bounds.box(kinematics.q))
+        lower, upper = bounded_box(*self.bounds(kinematics.q))
         weighted_jacobian = jacobian if self._unit_weight else self._twist_rows * jacobian
         damping = task_damping(A, weighted_jacobian[self._weighted_rows], self.policy)
         self.info.sigma_min, self.info.damping = damping.sigma_min, damping.damping

@@ -320,7 +320,9 @@ class TeleopLoop:
 
     def reset(self, q0: np.ndarray | None = None) -> None:
         """Back to ``q0`` (default home), forgetting the target history (and the plant's
-        commands in flight)."""
+        commands in flight, and the controller's previous command: its acceleration limits
+        start again from rest)."""
+        self.controller.reset()
         self.q = np.array(self.robot.q_home if q0 is None else q0, dtype=float)
         self.t = 0.0
         self._filtered_targets = None

@@ -35,7 +35,8 @@ def chain_urdf(dof: int, link_length: float = 0.12) -> str:
             f'    <parent link="{parent}"/><child link="link_{i}"/>',
             f'    <origin xyz="{0.0 if i == 1 else 0.02} 0 {origin_z}" rpy="0 0 0"/>'
             f'<axis xyz="{axes[i - 1]}"/>',
-            '    <limit lower="-3.1" upper="3.1" velocity="3.0" effort="10"/>',
+            # acceleration: 0.2 s to full speed (teleop.robots.robot.ACCELERATION_RAMP_TIME)
+            '    <limit lower="-3.1" upper="3.1" velocity="3.0" effort="10" acceleration="15.0"/>',
             '  </joint>',
             f'  <link name="link_{i}">',
             f'    <visual><origin xyz="0 0 {link_length / 2}"/><geometry>'

@@ -104,6 +104,9 @@ class Robot:
         per arm), ``constrained_link`` first; empty when there is none.
     link_axes : the long axis of each of ``constrained_links``, read-only.
     root_joint : ``"fixed"``, or ``"planar"`` for a mobile base (x, y, heading).
+    acceleration_limit : (nv,) read-only per-joint acceleration limits (rad/s^2, m/s^2 for
+        prismatic joints and a base's translations; ``inf`` for none), or None when the
+        robot has none (:func:`acceleration_limits`, docs/design.md section 8.4).
     package_dirs : directories searched for ``package://`` meshes.
     locked_joints : the URDF joints frozen out of ``model`` by ``load_robot(...,
         locked_joints=...)``, each with the configuration coordinates it is held at
@@ -127,6 +130,7 @@ class Robot:
     link_axes: Mapping[str, np.ndarray] = field(
         default_factory=lambda: types.MappingProxyType({}))
     root_joint: str = "fixed"
+    acceleration_limit: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         # a Robot built field by field (single EE) gets the tuples from the single names
@@ -318,6 +322,7 @@ def load_robot(
     ee_frames: Iterable[str] | None = None,
     root_joint: str | None = None,
     root_velocity_limit: Any = None,
+    acceleration_limit: Any = None,
 ) -> Robot:
     """Load a built-in robot by name, or any URDF by path.
 
@@ -446,12 +451,74 @@ def load_robot(
         constrained_links=tuple(links),
         link_axes=types.MappingProxyType(links),
         root_joint=root_joint,
+        acceleration_limit=acceleration_limits(model, urdf, acceleration_limit,
+                                               root_joint == "planar"),
     )
     if given:
         check_home(robot, robot.q_home)
     elif q_home is None:
         robot = dataclasses.replace(robot, q_home=_readonly(default_home(robot, robot.q_home)))
     return robot
+
+
+#: Seconds a built-in robot's joint takes from rest to its velocity limit at its default
+#: acceleration limit. The makers publish joint speeds (Yaskawa's SDA10F datasheet: 130-400
+#: deg/s, the URDFs' velocity limits) but no joint accelerations; 0.2 s to full speed is an
+#: engineering choice typical of arms of this class (docs/design.md section 8.4).
+ACCELERATION_RAMP_TIME = 0.2
+
+#: Default acceleration limits of a built-in planar base (m/s^2, m/s^2, rad/s^2): 0.5 s to
+#: its default speed (0.5 m/s, 1 rad/s), about 0.1 g, an engineering choice for a wheeled
+#: base carrying a dual-arm torso.
+ROOT_ACCELERATION_LIMIT = (1.0, 1.0, 2.0)
+
+
+def urdf_acceleration_limits(urdf: pathlib.Path) -> dict[str, float]:
+    """``{joint name: limit}`` of the URDF's joints whose ``<limit>`` carries an
+    ``acceleration`` attribute (rad/s^2 or m/s^2; not part of the URDF standard, read when
+    present). A value that is not a positive number raises ``ValueError`` (file:joint)."""
+    limits = {}
+    for joint in ET.parse(urdf).getroot().iter("joint"):
+        limit = joint.find("limit")
+        text = None if limit is None else limit.get("acceleration")
+        if text is None:
+            continue
+        try:
+            value = float(text)
+        except ValueError:
+            value = float("nan")
+        if not value > 0.0:
+            raise ValueError(f"{urdf}: joint {joint.get('name')!r}: limit acceleration must be "
+                             f"a positive number, got {text!r}")
+        limits[joint.get("name")] = value
+    return limits
+
+
+def acceleration_limits(model: pin.Model, urdf: pathlib.Path, given: Any,
+                        planar_base: bool) -> np.ndarray | None:
+    """The robot's (nv,) acceleration limits, read-only: ``given`` (nv values, or one for
+    every joint) when given; else the URDF's ``<limit acceleration>`` (``inf`` where a
+    joint has none); else, for a built-in robot, the velocity limit over
+    :data:`ACCELERATION_RAMP_TIME` and a planar base's :data:`ROOT_ACCELERATION_LIMIT`;
+    else None."""
+    from controllers.joint_acceleration import as_acceleration_limit
+
+    if given is not None:
+        return _readonly(as_acceleration_limit(given, model.nv))
+    from_urdf = urdf_acceleration_limits(urdf)
+    limits = np.full(model.nv, np.inf)
+    for joint in range(1, model.njoints):
+        if model.names[joint] in from_urdf:
+            start = model.idx_vs[joint]
+            limits[start:start + model.nvs[joint]] = from_urdf[model.names[joint]]
+    if from_urdf:
+        return _readonly(limits)
+    if urdf.parent != ROBOTS_DIR:
+        return None
+    limits = np.asarray(model.velocityLimit, dtype=float) / ACCELERATION_RAMP_TIME
+    if planar_base:
+        limits[:3] = ROOT_ACCELERATION_LIMIT
+    return _readonly(limits)
 
 
 #: Default velocity limits of a planar root joint: (m/s, m/s, rad/s).

@@ -96,15 +96,20 @@ PYBIND11_MODULE(_step, module) {
       .def(py::init([](cjm::Vector velocity_lower, cjm::Vector velocity_upper,
                        cjm::Vector velocity_limit, std::vector<Index> limited_q,
                        std::vector<Index> limited_v, cjm::Vector q_min, cjm::Vector q_max,
-                       double position_gain, bool position_limits, cjm::RowMatrix box_test) {
+                       double position_gain, bool position_limits, cjm::RowMatrix box_test,
+                       cjm::Vector acceleration_step, double dt, double limit_gain,
+                       cjm::Vector slack) {
              return cjm::JointBox{std::move(velocity_lower), std::move(velocity_upper),
                                   std::move(velocity_limit), std::move(limited_q),
                                   std::move(limited_v), std::move(q_min), std::move(q_max),
-                                  position_gain, position_limits, std::move(box_test)};
+                                  position_gain, position_limits, std::move(box_test),
+                                  std::move(acceleration_step), dt, limit_gain, std::move(slack)};
            }),
            py::arg("velocity_lower"), py::arg("velocity_upper"), py::arg("velocity_limit"),
            py::arg("limited_q"), py::arg("limited_v"), py::arg("q_min"), py::arg("q_max"),
-           py::arg("position_gain"), py::arg("position_limits"), py::arg("box_test"));
+           py::arg("position_gain"), py::arg("position_limits"), py::arg("box_test"),
+           py::arg("acceleration_step"), py::arg("dt"), py::arg("limit_gain"), py::arg("slack"),
+           "``acceleration_step`` (a dt per joint) empty: no acceleration limit.");
 
   py::class_<cjm::Tolerances>(module, "Tolerances")
       .def(py::init([](double equality, double twist, double barrier, double rank,
@@ -157,7 +162,11 @@ PYBIND11_MODULE(_step, module) {
       .def_property_readonly("saturation_joints", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.saturation_joints().data(), {step.saturation_joints().size()}, self);
-      });
+      })
+      .def_property_readonly("previous", [](py::object self) {
+        auto& step = self.cast<cjm::Step&>();
+        return view(step.previous().data(), {step.previous().size()}, self);
+      }, "The previous command (writable): the acceleration limits' reference.");
 
   py::class_<BoundPipeline>(module, "Pipeline")
       .def(py::init([](std::vector<std::tuple<std::string, Index, Eigen::Matrix4d, Eigen::Vector3d>> joints,

@@ -97,7 +97,10 @@ void Step::saturate_in_null_space(const Inputs& in) {
     const double bound = sns_qd_(critical) > upper_(critical) ? upper_(critical) : lower_(critical);
     held_(critical) = bound;
     free_(critical) = false;
-    if (std::abs(bound) < box_.velocity_limit(critical) * (1.0 - tol_.box_margin)) {  // a position bound
+    const bool acceleration_bound =  // the box takes it exactly (section 8.4)
+        accelerating_ && (bound == accel_lower_(critical) || bound == accel_upper_(critical));
+    if (std::abs(bound) < box_.velocity_limit(critical) * (1.0 - tol_.box_margin) &&
+        !acceleration_bound) {  // a position bound
       have_reference = have_scaled = false;
     } else if (scale >= 0.0 && (!have_scaled || scale > best_scale)) {
       have_scaled = true;

@@ -49,11 +49,18 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   if (box_.velocity_lower.size() != nv || box_.velocity_upper.size() != nv ||
       box_.velocity_limit.size() != nv || box_.q_min.size() != static_cast<Index>(box_.limited_q.size()) ||
       box_.q_max.size() != box_.q_min.size() || box_.limited_v.size() != box_.limited_q.size() ||
-      (box_.box_test.rows() > 0 && box_.box_test.cols() != nv + nq + 1))
+      (box_.box_test.rows() > 0 && box_.box_test.cols() != nv + nq + 1) ||
+      (box_.acceleration_step.size() != 0 &&
+       (box_.acceleration_step.size() != nv || box_.slack.size() != nv || !(box_.dt > 0.0) ||
+        !(box_.limit_gain > 0.0))))
     throw std::invalid_argument("joint box of the wrong size");
   if (posture_target_.size() != 0 && (posture_target_.size() != nq || nq != nv))
     throw std::invalid_argument("a posture target needs nq == nv and one entry per joint");
   posture_velocity_.resize(nv);
+  accelerating_ = box_.acceleration_step.size() != 0;
+  previous_ = Vector::Zero(nv);
+  accel_lower_.resize(nv);
+  accel_upper_.resize(nv);
   active_.reserve(n_constraints);
   waiting_.reserve(n_constraints);
   report_ = Vector::Zero(kReportSize);
@@ -136,7 +143,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
     if (!qd.allFinite()) {
       status_ = Status::failed;
       event(Event::non_finite);
-      qd.setZero();
+      stop(q, qd);
     } else if (!box_contains(q, qd)) {
       compute_box(q);
       saturate(in, qd);
@@ -144,14 +151,15 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
       if (!qd.allFinite()) {  // clipping passes a NaN through
         status_ = Status::failed;
         event(Event::non_finite);
-        qd.setZero();
+        stop(q, qd);
       }
     }
   } catch (const NoConvergence&) {
     status_ = Status::failed;
     event(Event::no_convergence);
-    qd.setZero();
+    stop(q, qd);
   }
+  previous_ = qd;
   if (status_ != Status::failed && equality_residual_ > tol_.equality) {
     report(Status::constraint_degraded);
     event(Event::residual, equality_residual_);
@@ -223,6 +231,12 @@ double Step::barrier_violation(Index index, const ConstVectorRef& qd) const {
 // -- the joint box ----------------------------------------------------------------------
 
 bool Step::box_contains(const ConstVectorRef& q, const ConstVectorRef& qd) {
+  if (accelerating_) {  // the braking bound is not affine in q: the exact box
+    compute_box(q);
+    for (Index i = 0; i < nv_; ++i)
+      if (!(qd(i) >= lower_(i) - box_.slack(i) && qd(i) <= upper_(i) + box_.slack(i))) return false;
+    return true;
+  }
   const Index rows = box_.box_test.rows();
   if (rows == 0) return true;
   auto stacked = stacked_.head(rows);
@@ -239,14 +253,51 @@ void Step::compute_box(const ConstVectorRef& q) {
     for (size_t i = 0; i < box_.limited_q.size(); ++i) {
       const Index v = box_.limited_v[i];
       const double q_i = q(box_.limited_q[i]);
-      lower_(v) = std::max(lower_(v), (box_.q_min(i) - q_i) * box_.position_gain);
-      upper_(v) = std::min(upper_(v), (box_.q_max(i) - q_i) * box_.position_gain);
+      const double below = box_.q_min(i) - q_i, above = box_.q_max(i) - q_i;
+      double low = below * box_.position_gain, high = above * box_.position_gain;
+      if (accelerating_ && std::isfinite(box_.acceleration_step(v))) {  // braking-aware
+        if (below <= 0.0) low = -braking_speed(-below, box_.acceleration_step(v));
+        if (above >= 0.0) high = braking_speed(above, box_.acceleration_step(v));
+      }
+      lower_(v) = std::max(lower_(v), low);
+      upper_(v) = std::min(upper_(v), high);
     }
   }
   // past a limit the position bound points back; never faster than the velocity limit
   lower_ = lower_.cwiseMin(box_.velocity_upper);
   upper_ = upper_.cwiseMax(box_.velocity_lower);
   upper_ = upper_.cwiseMax(lower_);
+  if (!accelerating_) return;
+  // controllers.joint_acceleration.acceleration_box: where it misses, it gives way
+  for (Index i = 0; i < nv_; ++i) {
+    const double step = box_.acceleration_step(i);
+    double low = previous_(i) - step, high = previous_(i) + step;
+    accel_lower_(i) = low;
+    accel_upper_(i) = high;
+    if (low > upper_(i) || high < lower_(i)) {
+      low = high = std::min(std::max(std::min(std::max(lower_(i), low), high), lower_(i)), upper_(i));
+    }
+    lower_(i) = std::max(lower_(i), low);
+    upper_(i) = std::min(upper_(i), high);
+  }
+}
+
+double Step::braking_speed(double distance, double step) const {
+  const double c = 1.0 / box_.limit_gain;
+  const double scaled = distance / (step * box_.dt);
+  double k = std::floor(std::max(std::sqrt(std::max(2.0 * scaled + c - c * c, 0.0)) - c, 0.0));
+  const double x_0 = scaled / c;
+  const double x_k = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c);
+  k = k + 1.0;
+  const double x_next = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c);
+  return step * std::min(std::min(x_0, x_k), x_next);
+}
+
+void Step::stop(const ConstVectorRef& q, VectorRef qd) {
+  qd.setZero();
+  if (!accelerating_) return;
+  compute_box(q);
+  for (Index i = 0; i < nv_; ++i) qd(i) = std::min(std::max(0.0, lower_(i)), upper_(i));
 }
 
 void Step::clip(VectorRef qd) {

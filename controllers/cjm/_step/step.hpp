@@ -66,6 +66,10 @@ struct JointBox {
   double position_gain = 0.0;  // limit_gain / dt
   bool position_limits = true;
   RowMatrix box_test;          // M with M [qd; q; 1] <= 0 inside the box
+  //! a dt per joint (inf where none); empty: no acceleration limit (section 8.4)
+  Vector acceleration_step;
+  double dt = 0.0, limit_gain = 1.0;
+  Vector slack;                // BoxTest.slack: the test's tolerance per joint
 };
 
 //! Positions in report(): SolveInfo's numbers.
@@ -101,6 +105,8 @@ class Step {
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& saturated_joints() { return saturated_; }
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& active_barriers() { return active_barriers_; }
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& saturation_joints() { return saturation_joints_; }
+  //! The previous command, the acceleration limits' reference (zero at rest).
+  Vector& previous() { return previous_; }
   Index terms_size() const { return terms_size_; }
   Index constraint_count() const { return static_cast<Index>(constraints_.size()); }
   //! Where constraint ``index``'s flat terms buffer starts in ``terms``.
@@ -133,6 +139,11 @@ class Step {
   double barrier_violation(Index index, const ConstVectorRef& qd) const;
   bool box_contains(const ConstVectorRef& q, const ConstVectorRef& qd);
   void compute_box(const ConstVectorRef& q);
+  //! controllers.joint_acceleration.braking_speed for one joint.
+  double braking_speed(double distance, double step) const;
+  //! The fallback of a failed step: zero, or with acceleration limits the command
+  //! nearest zero inside the box.
+  void stop(const ConstVectorRef& q, VectorRef qd);
   void clip(VectorRef qd);
   void report(Status status);
   void event(Event event, double a = 0.0, double b = 0.0, double c = 0.0);
@@ -193,6 +204,8 @@ class Step {
   NullSpace null_;
   DampedLeastSquares dls_;
   Matrix task_t_, task_null_t_, task_null_, task_rhs_, task_x_;  // (J N)^T and its solves
+  bool accelerating_ = false;  // acceleration limits on
+  Vector previous_, accel_lower_, accel_upper_;  // the reference and its raw box
   Vector qd0_, delta_, lower_, upper_, box_lower_, box_upper_, stacked_, scratch_rows_, rows_scratch_;
   Vector free_x_, posture_null_, rank_weights_;
   Matrix columns_, task_columns_;  // rows and J over the free joints (SNS)

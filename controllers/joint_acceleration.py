@@ -1,0 +1,66 @@
+"""Joint acceleration limits: the braking-aware position bound and the acceleration box
+(docs/design.md section 8.4)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from constraints.validation import REAL_KINDS, short_repr
+
+
+def as_acceleration_limit(value, size: int, name: str = "acceleration_limit") -> np.ndarray | None:
+    """``value`` as a new float array (size,) of positive limits (``inf``: none for that
+    joint), or None for None (no acceleration limit); else ``ValueError`` naming ``name``."""
+    if value is None:
+        return None
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError, OverflowError, RecursionError):
+        array = None
+    if array is None or array.dtype.kind not in REAL_KINDS:
+        raise ValueError(f"{name} must be an array of {size} numbers, got {short_repr(value)}")
+    array = np.array(array, dtype=float)
+    if array.ndim == 0:
+        array = np.full(size, float(array))
+    if array.shape != (size,):
+        raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
+    if np.isnan(array).any() or (array <= 0.0).any():
+        raise ValueError(f"{name} must be positive (inf: no limit), got {short_repr(array.tolist())}")
+    return array
+
+
+def braking_speed(distance: np.ndarray, step: np.ndarray, dt: float, gain: float) -> np.ndarray:
+    """The largest speed (>= 0) towards a position limit ``distance >= 0`` away from which
+    the joint can still stop, slowing by ``step = a dt`` per period, with every period
+    covering at most the fraction ``gain`` of the distance left (docs/design.md 8.4).
+
+    In units ``x = v / (a dt)``, ``D = d / (a dt^2)``, ``c = 1 / gain``, braking at once from
+    ``x`` needs ``T(x) = max_k [sum_{j<k} (x - j) + (x - k) c] <= D``, i.e. ``x <= x_k(D) =
+    (D + k (k - 1) / 2 + k c) / (k + c)`` for every integer ``k >= 0``. ``x_k`` is convex in
+    ``k``, least at ``k* = sqrt(2 D + c - c^2) - c``: the bound is the least of ``x_0 = g D``
+    and ``x_k`` at the two integers around ``k*``. The set is invariant: from ``x`` inside
+    at ``D``, ``x - 1`` is inside at ``D - x``, so braking is always possible.
+    """
+    c = 1.0 / gain
+    scaled = distance / (step * dt)
+    k = np.floor(np.maximum(np.sqrt(np.maximum(2.0 * scaled + c - c * c, 0.0)) - c, 0.0))
+    x_0 = scaled / c
+    x_k = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c)
+    k = k + 1.0
+    x_next = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c)
+    return step * np.minimum(np.minimum(x_0, x_k), x_next)
+
+
+def acceleration_box(lower: np.ndarray, upper: np.ndarray, previous: np.ndarray,
+                     step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``[previous - a dt, previous + a dt]`` (new arrays); where it misses the box
+    ``[lower, upper]`` of the position and velocity limits, the point of that box nearest
+    to it: the acceleration limit gives way, never the position or velocity limits."""
+    accel_lower, accel_upper = previous - step, previous + step
+    miss = (accel_lower > upper) | (accel_upper < lower)
+    if miss.any():
+        point = np.minimum(np.maximum(np.minimum(np.maximum(lower, accel_lower), accel_upper),
+                                      lower), upper)
+        accel_lower[miss] = point[miss]
+        accel_upper[miss] = point[miss]
+    return accel_lower, accel_upper
