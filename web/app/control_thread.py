@@ -34,6 +34,7 @@ class Timing:
     overhead_p50_us: float  # the tick minus the controllers' own solve time
     deadline_misses: int
     ticks: int
+    on_time: float = math.nan  # fraction of the ticks started less than a period late
 
 
 class ControlThread:
@@ -97,7 +98,8 @@ class ControlThread:
             tick_p50_us=1e6 * float(np.percentile(tick, 50)),
             tick_p99_us=1e6 * float(np.percentile(tick, 99)),
             overhead_p50_us=float(np.percentile(1e6 * tick - solve, 50)),
-            deadline_misses=self.deadline_misses, ticks=self._count)
+            deadline_misses=self.deadline_misses, ticks=self._count,
+            on_time=float(np.mean(lateness < self.app.config.dt)))
 
     def _run(self) -> None:
         clock = time.perf_counter

@@ -1,0 +1,59 @@
+"""The abdominal wall's force on each instrument, drawn at its port as an arrow scaled in
+newtons (docs/design.md sections 5.3 and 17.2), for every robot on a physics plant."""
+
+from __future__ import annotations
+
+import numpy as np
+import viser
+
+from ..app.plant import PortReading
+from ..robot_view import RobotView
+from .shapes import arrow_segments
+
+#: an arrow's length per newton of wall force (m/N): 2 cm per 0.1 N
+FORCE_ARROW_SCALE = 0.2
+#: a force below this (N) is drawn as no arrow (its arrow would be under 0.2 mm)
+MIN_DRAWN_FORCE = 1e-3
+FORCE_COLOR = (220, 38, 38)
+#: the arrows' width on screen (pixels): seen whatever the zoom
+FORCE_ARROW_WIDTH = 5.0
+
+
+def force_arrow(reading: PortReading) -> np.ndarray:
+    """Line segments (5, 2, 3) of the arrow of ``reading``: from the port along the force,
+    :data:`FORCE_ARROW_SCALE` x ``|F|`` long (world, m)."""
+    magnitude = reading.magnitude
+    direction = reading.force / magnitude if magnitude > 0 else np.array([0.0, 0.0, 1.0])
+    return arrow_segments(reading.point, direction, FORCE_ARROW_SCALE * magnitude)
+
+
+class PortForces:
+    """The port-force arrows of :class:`web.ui.TeleopUI`: robot -> port id -> its line
+    segments (the ghost's under its own root, moved with it)."""
+
+    server: viser.ViserServer
+    _views: dict[str, RobotView]
+    _port_arrows: dict[str, dict[str, viser.LineSegmentsHandle]]
+
+    def _draw_ports(self, robots: dict) -> None:
+        """Each drawn robot's arrows from ``snapshot["robots"]``: one per port its plant
+        measured, hidden below :data:`MIN_DRAWN_FORCE`; none without a physics plant."""
+        for which in list(self._port_arrows):
+            if which not in self._views:  # the ghost went, and its root with its arrows
+                self._port_arrows.pop(which)
+        for which in self._views:
+            arrows = self._port_arrows.setdefault(which, {})
+            readings = {reading.id: reading for reading in robots[which]["ports"]}
+            for port in [port for port in arrows if port not in readings]:
+                arrows.pop(port).remove()
+            prefix = "/ports" if which == "main" else "/ghost/ports"
+            for port, reading in readings.items():
+                segments = force_arrow(reading)
+                handle = arrows.get(port)
+                if handle is None:
+                    handle = arrows[port] = self.server.scene.add_line_segments(
+                        f"{prefix}/{port}", segments, FORCE_COLOR,
+                        thickness=FORCE_ARROW_WIDTH, thickness_units="screen")
+                else:
+                    handle.points = segments
+                handle.visible = reading.magnitude >= MIN_DRAWN_FORCE
