@@ -82,11 +82,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     plant = parser.add_argument_group("plant (docs/design.md section 17)")
     plant.add_argument("--plant", choices=PLANTS, default="kinematic",
                        help="what the loops run on: the ideal integrator (q += qd dt) or the "
-                            "robot simulated in MuJoCo, the abdominal wall at each hole's port "
+                            "robot simulated in MuJoCo, the abdominal wall at each port "
                             "(default: kinematic)")
     plant.add_argument("--wall-stiffness", type=positive, metavar="N_PER_MM",
                        help="lateral stiffness of the abdominal wall at every port, N/mm, at "
-                            f"most {MAX_WALL_STIFFNESS / 1e3:g} (default: each hole's own, "
+                            f"most {MAX_WALL_STIFFNESS / 1e3:g} (default: each port's own, "
                             "1 N/mm); needs --plant mujoco")
     plant.add_argument("--payload", type=float, metavar="KG",
                        help="mass carried at each end effector, unknown to the gravity "

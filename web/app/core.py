@@ -57,7 +57,7 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Recording, T
         ``"mujoco"`` (a :class:`teleop.plants.MujocoPlant` per loop, docs/design.md
         section 17); ``plant_settings`` its body and servos (payload...).
     wall_stiffness : the abdominal wall's stiffness (N/m) at every port of the session;
-        None: each hole's own.
+        None: each port's own.
     """
 
     def __init__(self, robot: Robot, controller: str = "cjm", ghost: str | None = None,

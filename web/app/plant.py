@@ -31,7 +31,7 @@ class PlantChoice:
     kind : ``"kinematic"`` (``q += qd dt``, no plant) or ``"mujoco"`` (:class:`MujocoPlant`).
     settings : the physics plant's body and servos (payload, friction...).
     wall_stiffness : the abdominal wall's lateral stiffness (N/m) at every port of the
-        session, placed or loaded; None: each hole's own (1 N/mm when placed here).
+        session, placed or loaded; None: each port's own (its constraint's default, 1 N/mm).
     """
 
     kind: str = "kinematic"
@@ -63,7 +63,7 @@ class PlantChoice:
         """One line for the operator."""
         if not self.physical:
             return "kinematic plant (q += qd dt)"
-        wall = ("each hole's own wall" if self.wall_stiffness is None
+        wall = ("each port's own wall" if self.wall_stiffness is None
                 else f"wall {self.wall_stiffness / 1e3:g} N/mm")
         return f"{self.settings.describe()}, {wall}"
 
@@ -74,8 +74,8 @@ class PortReading:
 
     Attributes
     ----------
-    id : the hole's entry id.
-    point : where the instrument crosses the wall (:meth:`constraints.Hole.port`, m).
+    id : the entry id of the constraint that puts the wall there.
+    point : where the instrument crosses the wall (the constraint's ``port``, m).
     force : the wall's force on the instrument there (N).
     displacement : the tissue's lateral displacement (m).
     """
@@ -130,10 +130,10 @@ class Plants:
         if len(walls) != len(measures.port_forces):  # constraints changed since the step
             return []
         readings = []
-        for hole, force, displacement in zip(walls, measures.port_forces,
+        for wall, force, displacement in zip(walls, measures.port_forces,
                                              measures.port_displacements):
-            link = placements[self.robot.model.getFrameId(hole.link)]
-            point, _ = hole.port(link.rotation, link.translation)
-            readings.append(PortReading(ids.get(id(hole), hole.link), point,
+            link = placements[self.robot.model.getFrameId(wall.link)]
+            point, _ = wall.port(link.rotation, link.translation)
+            readings.append(PortReading(ids.get(id(wall), wall.link), point,
                                         np.array(force, dtype=float), float(displacement)))
         return readings

@@ -80,7 +80,7 @@ def behind_words(achieved_rate: float, rate: float) -> str:
 
 
 def port_words(ports: list[PortReading]) -> str:
-    """The wall's force at each port in words, ``"port force hole-1 0.012 N (tissue
+    """The wall's force at each port in words, ``"port force <id> 0.012 N (tissue
     0.012 mm)"``; ``""`` without a port (docs/design.md section 17.2)."""
     if not ports:
         return ""

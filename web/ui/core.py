@@ -87,6 +87,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, PortForces, StatusVi
         self._ghost_markers: dict[str, dict] = {}
         self._views: dict[str, RobotView] = {}
         self._port_arrows: dict[str, dict] = {}  # robot -> port id -> its force arrow
+        self._drawn: dict[tuple[str, str], object] = {}  # markers' last drawing (.markers)
         self._ghost_root = None
         self._ghost_style: tuple | None = None
         self._syncing = False  # widgets being set from the app: their callbacks do nothing

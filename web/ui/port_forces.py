@@ -1,6 +1,6 @@
 """The abdominal wall's force on each instrument, drawn at its port as an arrow scaled in
 newtons (docs/design.md sections 5.3 and 17.2), for every robot on a physics plant: it
-points the way the wall pushes the instrument, its tip on the hole's ring (outside the
+points the way the wall pushes the instrument, its tip on the port's ring (outside the
 instrument's meshes, which would hide it), :data:`FORCE_ARROW_SCALE` x ``|F|`` long."""
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ class PortForces:
 
     def _draw_ports(self, robots: dict) -> None:
         """Each drawn robot's arrows from ``snapshot["robots"]``: one per port its plant
-        measured, its tip on the hole's ring, hidden below :data:`MIN_DRAWN_FORCE`; none
+        measured, its tip on the port's ring, hidden below :data:`MIN_DRAWN_FORCE`; none
         without a physics plant."""
         for which in list(self._port_arrows):
             if which not in self._views:  # the ghost went, and its root with its arrows
@@ -58,12 +58,17 @@ class PortForces:
             prefix = "/ports" if which == "main" else "/ghost/ports"
             drawings = robots[which]["constraints"]
             for port, reading in readings.items():
-                segments = force_arrow(reading, self.ring_radius_at(drawings[port]))
                 handle = arrows.get(port)
+                shown = reading.magnitude >= MIN_DRAWN_FORCE
+                if not shown:  # nothing to compute for an arrow not drawn
+                    if handle is not None and handle.visible:
+                        handle.visible = False
+                    continue
+                segments = force_arrow(reading, self.ring_radius_at(drawings[port]))
                 if handle is None:
-                    handle = arrows[port] = self.server.scene.add_line_segments(
+                    arrows[port] = self.server.scene.add_line_segments(
                         f"{prefix}/{port}", segments, FORCE_COLOR,
                         thickness=FORCE_ARROW_WIDTH, thickness_units="screen")
                 else:
                     handle.points = segments
-                handle.visible = reading.magnitude >= MIN_DRAWN_FORCE
+                    handle.visible = True
