@@ -6,12 +6,16 @@ the instrument's offset from the port centre, computed here from Pinocchio's kin
 from __future__ import annotations
 
 import math
+import signal
+import subprocess
+import sys
 import time
 
 import numpy as np
 import pinocchio as pin
 import pytest
 from hypothesis import HealthCheck, given, settings
+from browser_helpers import free_port
 from hypothesis import strategies as st
 
 from constraints import Hole
@@ -215,7 +219,6 @@ def test_plant_choice_describes_itself():
 
 def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
     import viser
-    from browser_helpers import free_port
 
     from web.ui import TeleopUI
 
@@ -262,3 +265,58 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         assert ui._port_arrows["main"] == {}
     finally:
         server.stop()
+
+
+# -- the command line ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--plant", "bullet"], "argument --plant: invalid choice: 'bullet'"),
+    (["--wall-stiffness", "2"], "--wall-stiffness needs --plant mujoco"),
+    (["--payload", "1", "--wall-stiffness", "2"],
+     "--wall-stiffness and --payload need --plant mujoco"),
+    (["--plant", "mujoco", "--wall-stiffness", "0"], "--wall-stiffness: must be a finite number > 0"),
+    (["--plant", "mujoco", "--wall-stiffness", "1000"], "--wall-stiffness must be at most 100 N/mm"),
+    (["--plant", "mujoco", "--payload", "-1"], "--payload must be >= 0, got -1"),
+    (["--plant", "mujoco", "--payload", "nan"], "--payload must be finite"),
+    (["--plant", "mujoco", "--payload", "1e9"], "--payload must be <= 100"),
+])
+def test_bad_plant_options_are_one_line_and_exit_2(args, message, capsys):
+    from web import cli as web_cli
+
+    try:
+        code = web_cli.main([*args, "--port", str(free_port())])
+    except SystemExit as exit_:  # argparse's own refusals exit from the parser
+        code = exit_.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+
+
+def test_teleop_web_plant_mujoco_starts_and_says_what_it_runs_on():
+    """``python -m web --plant mujoco ...`` as a user starts it (bounded): its start line
+    names the plant; Ctrl-C stops it with exit code 0."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "web", "--port", str(free_port()), "--plant", "mujoco",
+         "--wall-stiffness", "2", "--payload", "0.5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines, deadline = [], time.monotonic() + 90.0
+    try:
+        while time.monotonic() < deadline:
+            line = process.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            if "Ctrl-C stops" in line:
+                break
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    out = "".join(lines) + out
+    assert process.returncode == 0, err
+    assert "(controller cjm), on the MuJoCo plant at 2000 Hz, 20 Hz servos, payload 0.5 kg, " \
+        "wall 2 N/mm; Ctrl-C stops" in out, out
+    assert "Traceback" not in err, err
