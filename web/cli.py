@@ -24,6 +24,8 @@ from teleop.cli.commands import Command
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.robots import BUILTIN_ROBOTS
 
+from .app.limits import MAX_WALL_STIFFNESS
+from .app.plant import PLANTS
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
     resolve_host
 
@@ -76,6 +78,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "target, drawn beside the main one; a scene's own wins "
                               "(default: no second robot)")
     control.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
+
+    plant = parser.add_argument_group("plant (docs/design.md section 17)")
+    plant.add_argument("--plant", choices=PLANTS, default="kinematic",
+                       help="what the loops run on: the ideal integrator (q += qd dt) or the "
+                            "robot simulated in MuJoCo, the abdominal wall at each port "
+                            "(default: kinematic)")
+    plant.add_argument("--wall-stiffness", type=positive, metavar="N_PER_MM",
+                       help="lateral stiffness of the abdominal wall at every port, N/mm, at "
+                            f"most {MAX_WALL_STIFFNESS / 1e3:g} (default: each port's own, "
+                            "1 N/mm); needs --plant mujoco")
+    plant.add_argument("--payload", type=float, metavar="KG",
+                       help="mass carried at each end effector, unknown to the gravity "
+                            "compensation and the controllers (default: 0); needs --plant "
+                            "mujoco")
 
     files = parser.add_argument_group("files (the page reads and writes only these folders)")
     files.add_argument("--scene-dir", default="scenes", metavar="DIR",
@@ -151,10 +167,36 @@ def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
     return port, token
 
 
+def _plant(args: argparse.Namespace) -> dict:
+    """The plant keywords of :func:`web.ui.run_server` the options ask for; ``ValueError``
+    naming the option for a value out of range or a physics option without the plant."""
+    given = [f"--{name.replace('_', '-')}" for name in ("wall_stiffness", "payload")
+             if getattr(args, name) is not None]
+    if args.plant == "kinematic":
+        if given:
+            raise ValueError(f"{' and '.join(given)} need{'s' * (len(given) == 1)} "
+                             "--plant mujoco")
+        return {}
+    from teleop.plants import PlantSettings
+
+    stiffness = None
+    if args.wall_stiffness is not None:
+        stiffness = 1e3 * args.wall_stiffness  # N/mm -> N/m
+        if stiffness > MAX_WALL_STIFFNESS:
+            raise ValueError(f"--wall-stiffness must be at most {MAX_WALL_STIFFNESS / 1e3:g} "
+                             f"N/mm, got {args.wall_stiffness:g}")
+    try:
+        settings = PlantSettings(payload=0.0 if args.payload is None else args.payload)
+    except ValueError as error:
+        raise ValueError(f"--{error}") from None
+    return {"plant": args.plant, "plant_settings": settings, "wall_stiffness": stiffness}
+
+
 def run(args: argparse.Namespace, prog: str) -> int:
     """Serve the UI the options ``args`` ask for until Ctrl-C; 2 (and one line on stderr,
     naming ``prog``) when it cannot start."""
     try:
+        plant = _plant(args)
         port, token = _address(args, prog)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -168,7 +210,7 @@ def run(args: argparse.Namespace, prog: str) -> int:
                                               controller=args.controller, ghost=args.ghost,
                                               rate=args.rate, record_dir=args.record_dir,
                                               scene_dir=args.scene_dir, scene=scene,
-                                              notes=notes, token=token)
+                                              notes=notes, token=token, **plant)
     except (OSError, ValueError) as error:  # no such URDF/scene, bad frame / q_home / spec, port
         print(f"{prog}: {one_line(error)}", file=sys.stderr)
         return 2
@@ -177,7 +219,8 @@ def run(args: argparse.Namespace, prog: str) -> int:
     try:
         ghost = app.specs.get("ghost")
         print(f"{prog}: {robot.name} on {page_url(args.host, server.get_port(), token)} "
-              f"(controller {app.specs['main']}{', ghost ' + ghost if ghost else ''}); "
+              f"(controller {app.specs['main']}{', ghost ' + ghost if ghost else ''})"
+              f"{', on the ' + app.plant.describe() if app.plant.physical else ''}; "
               "Ctrl-C stops", flush=True)
         while True:
             time.sleep(1.0)

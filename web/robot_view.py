@@ -23,6 +23,11 @@ from pinocchio.visualize import ViserVisualizer
 from teleop.robots import Robot
 
 SKELETON_COLOR = np.array([0.55, 0.58, 0.62, 1.0])
+#: a configuration (rad, m) or mesh pose (m, quaternion) that moved less than this since it
+#: was last sent is not sent again: invisible, and a physics plant's robot is never
+#: bit-for-bit still (each mesh pose sent costs the view thread, which shares the
+#: interpreter with the 1 kHz control loop, about 0.1 ms)
+DISPLAY_RESOLUTION = 1e-7
 
 
 def skeleton_geometry(model: pin.Model, radius: float = 0.02) -> pin.GeometryModel:
@@ -98,6 +103,7 @@ class RobotView(ViserVisualizer):
         self.problems: list[str] = []
         self.color = color
         self._shown: np.ndarray | None = None  # the configuration last displayed
+        self._sent: dict[str, np.ndarray] = {}  # each mesh's pose last sent (xyz, wxyz)
         visual = robot.visual_model
         if len(visual.geometryObjects) == 0:
             if len(robot.collision_model.geometryObjects) > 0:
@@ -114,10 +120,12 @@ class RobotView(ViserVisualizer):
         self.displayFrames(False)
 
     def display(self, q=None):
-        """Place the robot at ``q``; nothing to do (nor send) when it has not moved."""
+        """Place the robot at ``q``; nothing to do (nor send) when it has not moved by
+        :data:`DISPLAY_RESOLUTION` since it was last shown."""
         if q is not None:
             q = np.asarray(q, dtype=float)
-            if self._shown is not None and np.array_equal(q, self._shown):
+            if self._shown is not None and q.shape == self._shown.shape and \
+                    float(np.max(np.abs(q - self._shown), initial=0.0)) < DISPLAY_RESOLUTION:
                 return
             self._shown = q.copy()
         super().display(q)
@@ -134,9 +142,24 @@ class RobotView(ViserVisualizer):
             self.collision_data = collision.createData()
 
     def updatePlacements(self, geometry_type):
+        """Send the pose of each visual mesh that moved by :data:`DISPLAY_RESOLUTION` (a
+        dragged arm's links, not the torso's nor the other arm's)."""
         if geometry_type == pin.GeometryType.COLLISION:
             return  # not drawn (see loadViewerModel)
-        super().updatePlacements(geometry_type)
+        pin.updateGeometryPlacements(self.model, self.data, self.visual_model, self.visual_data)
+        prefix = self.viewerRootNodeName + "/visual"
+        for placement, geometry_object in zip(self.visual_data.oMg,
+                                              self.visual_model.geometryObjects):
+            name = f"{prefix}/{geometry_object.name}"
+            x, y, z, w = pin.Quaternion(placement.rotation).coeffs()
+            pose = np.array([*placement.translation, w, x, y, z])
+            sent = self._sent.get(name)
+            if sent is not None and float(np.max(np.abs(pose - sent))) < DISPLAY_RESOLUTION:
+                continue
+            self._sent[name] = pose
+            frame = self.frames[name]
+            frame.position = pose[:3]
+            frame.wxyz = pose[3:]
 
     def loadViewerGeometryObject(self, geometry_object, prefix="", color=None):
         try:

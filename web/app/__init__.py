@@ -14,8 +14,9 @@ from .limits import (
     MAX_TARGET_DISTANCE,
     MIN_RATE,
 )
+from .plant import PLANTS, PlantChoice, PortReading
 from .robots import default_ghost_offset
-from .status import BEHIND_FRACTION, Limitation, behind_words, describe_limitation
+from .status import BEHIND_FRACTION, Limitation, behind_words, describe_limitation, port_words
 
 __all__ = [
     "BEHIND_FRACTION",
@@ -30,6 +31,9 @@ __all__ = [
     "MAX_RATE",
     "MAX_TARGET_DISTANCE",
     "MIN_RATE",
+    "PLANTS",
+    "PlantChoice",
+    "PortReading",
     "SWITCH_INTERVAL",
     "TIMING_WINDOW",
     "TeleopApp",
@@ -37,4 +41,5 @@ __all__ = [
     "behind_words",
     "default_ghost_offset",
     "describe_limitation",
+    "port_words",
 ]

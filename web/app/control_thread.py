@@ -34,6 +34,9 @@ class Timing:
     overhead_p50_us: float  # the tick minus the controllers' own solve time
     deadline_misses: int
     ticks: int
+    #: ticks started less than a period after their deadline, over the ticks due in the
+    #: window (those skipped by a resynchronisation count as late)
+    on_time: float = math.nan
 
 
 class ControlThread:
@@ -56,6 +59,7 @@ class ControlThread:
         self._lateness = np.zeros(TIMING_WINDOW)
         self._tick = np.zeros(TIMING_WINDOW)
         self._solve = np.zeros(TIMING_WINDOW)
+        self._start = np.zeros(TIMING_WINDOW)
         self._count = 0
         self._switch_interval: float | None = None
 
@@ -90,6 +94,9 @@ class ControlThread:
             return Timing(self.achieved_rate, math.nan, math.nan, math.nan, math.nan,
                           math.nan, self.deadline_misses, 0)
         lateness, tick, solve = self._lateness[:n].copy(), self._tick[:n].copy(), self._solve[:n].copy()
+        period = self.app.config.dt
+        starts = self._start[:n].copy()
+        due = max(n, round((float(starts.max() - starts.min()) + period) / period))
         return Timing(
             achieved_rate=self.achieved_rate,
             lateness_p50_ms=1e3 * float(np.percentile(lateness, 50)),
@@ -97,7 +104,8 @@ class ControlThread:
             tick_p50_us=1e6 * float(np.percentile(tick, 50)),
             tick_p99_us=1e6 * float(np.percentile(tick, 99)),
             overhead_p50_us=float(np.percentile(1e6 * tick - solve, 50)),
-            deadline_misses=self.deadline_misses, ticks=self._count)
+            deadline_misses=self.deadline_misses, ticks=self._count,
+            on_time=float(np.sum(lateness < period)) / due)
 
     def _run(self) -> None:
         clock = time.perf_counter
@@ -120,6 +128,7 @@ class ControlThread:
             self._lateness[slot] = max(0.0, start - next_tick)
             self._tick[slot] = end - start
             self._solve[slot] = solve_us
+            self._start[slot] = start
             self._count += 1
             window_ticks += 1
             if end - window_start >= 1.0:

@@ -22,12 +22,14 @@ from pathlib import Path
 
 from controllers.base import velocity_joint_names
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.plants import PlantSettings
 from teleop.robots import Robot
 
 from ..folders import Folder
 from .console import Console, EEInput
 from .editing import ConstraintEntry, Editing
 from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
+from .plant import PlantChoice, Plants
 from .recording import Recording
 from .robots import Robots, default_ghost_offset
 from .scenes import Scenes
@@ -37,7 +39,7 @@ from .trace import Trace
 from .view import View
 
 
-class TeleopApp(Console, Editing, Robots, Settings, Scenes, Recording, Tick, View):
+class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Recording, Tick, View):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
 
@@ -51,12 +53,20 @@ class TeleopApp(Console, Editing, Robots, Settings, Scenes, Recording, Tick, Vie
     record_dir : the folder session recordings go to; :meth:`start_recording` writes
         there and nowhere else (:class:`web.folders.Folder`).
     scene_dir : the folder scenes are saved to and loaded from, and no other.
+    plant : what every loop runs on, ``"kinematic"`` (the ideal integrator) or
+        ``"mujoco"`` (a :class:`teleop.plants.MujocoPlant` per loop, docs/design.md
+        section 17); ``plant_settings`` its body and servos (payload...).
+    wall_stiffness : the abdominal wall's stiffness (N/m) at every port of the session;
+        None: each port's own.
     """
 
     def __init__(self, robot: Robot, controller: str = "cjm", ghost: str | None = None,
                  rate: float = 1000.0, kp: float = 20.0, record_dir: str | Path = "sessions",
-                 scene_dir: str | Path = "scenes") -> None:
+                 scene_dir: str | Path = "scenes", plant: str = "kinematic",
+                 plant_settings: PlantSettings | None = None,
+                 wall_stiffness: float | None = None) -> None:
         rate = checked_rate(rate)
+        self.plant = PlantChoice(plant, plant_settings or PlantSettings(), wall_stiffness)
         self.robot = robot
         self._lock = threading.RLock()
         self._build_lock = threading.Lock()  # one loop build at a time (outside _lock)

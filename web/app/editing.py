@@ -92,6 +92,7 @@ class Editing:
         """Add ``constraint`` at its position with the app's gain; its new id."""
         with self._lock:
             constraint.gain = self.gain
+            self._apply_wall(constraint)
             entry_id = f"{constraint.kind}-{next(self._ids)}"
             if entry_id in self.entries:
                 raise ValueError(f"a constraint {entry_id!r} is already placed")

@@ -23,6 +23,7 @@ from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.robots import Robot
 
 from .limits import MAX_GHOST_OFFSET
+from .plant import PlantChoice
 from .trace import Trace
 
 
@@ -58,6 +59,7 @@ class Robots:
     traces: dict[str, Trace]
     last_records: dict[str, StepRecord | None]
     ghost_offset: np.ndarray
+    plant: PlantChoice
     _lock: threading.RLock
     _build_lock: threading.Lock
 
@@ -74,7 +76,8 @@ class Robots:
                                      twist_weight=None if weight == 1.0 else
                                      [1.0, 1.0, 1.0, weight, weight, weight])
         self._apply_damping(controller, damping)
-        return TeleopLoop(self.robot, controller, q0=q, config=config)
+        return TeleopLoop(self.robot, controller, q0=q, config=config,
+                          plant=self.plant.make(self.robot, config.dt))
 
     def _apply_damping(self, controller: Controller, damping: float | None = None) -> None:
         """The operator's constant damping on a controller that damps its task
@@ -124,6 +127,7 @@ class Robots:
                     old = self.loops.get(which, self.loops["main"])
                     loop.q = old.q.copy()
                     loop.t = old.t
+                    self._continue_plant(self.loops.get(which), loop)
                 if config is not self.config:  # every other loop follows the new period
                     others = {which: self._make_loop(self.specs[which], q=loop.q.copy(),
                                                      constraints=constraints, config=config,
@@ -131,6 +135,7 @@ class Robots:
                               for which, loop in self.loops.items() if which not in loops}
                     for which, loop in others.items():
                         loop.t = self.loops[which].t
+                        self._continue_plant(self.loops[which], loop)
                     loops.update(others)
                 for which in loops:
                     if which not in self.traces:

@@ -118,6 +118,7 @@ class Scenes:
         constraints = [placed.constraint for placed in scene.constraints]
         for constraint in constraints:
             constraint.gain = scene.gain
+            self._apply_wall(constraint)
         config = dataclasses.replace(self.config, rate=scene.rate)
         with self._lock:
             t = self.now

@@ -11,6 +11,7 @@ from controllers import StepStatus
 from teleop.loop import StepRecord
 
 from .limits import FOLLOWING, ON_TARGET, STALLED_SPEED
+from .plant import PortReading
 
 #: the control loop is behind when it achieves less than this fraction of its rate
 BEHIND_FRACTION = 0.95
@@ -76,3 +77,13 @@ def behind_words(achieved_rate: float, rate: float) -> str:
         return ""
     return (f"control loop behind: only {achieved_rate:.0f} of the {rate:.0f} Hz asked for "
             f"({100.0 * achieved_rate / rate:.0f} %); this machine is too busy for this rate")
+
+
+def port_words(ports: list[PortReading]) -> str:
+    """The wall's force at each port in words, ``"port force <id> 0.012 N (tissue
+    0.012 mm)"``; ``""`` without a port (docs/design.md section 17.2)."""
+    if not ports:
+        return ""
+    return "port force " + ", ".join(
+        f"{port.id} {port.magnitude:.3f} N (tissue {1e3 * port.displacement:.3f} mm)"
+        for port in ports)

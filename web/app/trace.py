@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import collections
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -13,7 +14,8 @@ from .limits import HISTORY_RATE, HISTORY_SECONDS
 
 _HISTORY_LENGTH = int(HISTORY_SECONDS * HISTORY_RATE)
 #: the plotted measures of each robot, in the order of the plots
-TRACE_COLUMNS = ("constraint_error", "constraint_velocity", "ee_error", "step_time")
+TRACE_COLUMNS = ("constraint_error", "constraint_velocity", "ee_error", "step_time",
+                 "port_force")
 
 
 def _deque() -> collections.deque:
@@ -29,6 +31,8 @@ class Trace:
     constraint_velocity: collections.deque = field(default_factory=_deque)
     ee_error: collections.deque = field(default_factory=_deque)
     step_time: collections.deque = field(default_factory=_deque)
+    #: the largest port force (N) of a physics plant; NaN without one
+    port_force: collections.deque = field(default_factory=_deque)
     #: |qd - qd_main| (rad/s): the ghost's deviation from the main robot's command
     qd_deviation: collections.deque = field(default_factory=_deque)
 
@@ -38,6 +42,7 @@ class Trace:
         self.constraint_velocity.append(float(np.linalg.norm(record.constraint_velocity)))
         self.ee_error.append(record.ee_position_error)
         self.step_time.append(record.step_time_us)
+        self.port_force.append(math.nan if record.plant is None else record.plant.port_force)
         self.qd_deviation.append(qd_deviation)
 
     def arrays(self) -> dict[str, np.ndarray]:

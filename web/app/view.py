@@ -14,6 +14,7 @@ from teleop.robots import Robot
 
 from .console import EEInput
 from .editing import ConstraintEntry
+from .plant import PlantChoice
 from .status import Limitation, describe_limitation
 from .trace import Trace
 
@@ -30,6 +31,7 @@ class View:
     entries: dict[str, ConstraintEntry]
     inputs: list[EEInput]
     joint_names: list[str]
+    plant: PlantChoice
     _lock: threading.RLock
     _view_data: pin.Data
 
@@ -77,11 +79,14 @@ class View:
                     "clutch": self.clutch, "motion_scale": self.motion_scale,
                     "ghost_offset": self.ghost_offset.copy(),
                     "recording": self.recorder is not None,
-                    "config": self.config, "gain": self.gain, "damping": self.damping}
+                    "config": self.config, "gain": self.gain, "damping": self.damping,
+                    "plant": self.plant}
 
     def _robot_snapshot(self, which: str, loop: TeleopLoop, history: bool) -> dict:
         """One robot's part of :meth:`snapshot` (caller holds the lock): its state, each
-        constraint's drawing at its configuration, what limits each EE."""
+        constraint's drawing at its configuration, what limits each EE, the wall's force
+        at each port (``ports``, :class:`web.app.plant.PortReading`; empty without a
+        physics plant)."""
         model = self.robot.model
         q = loop.q.copy()
         pin.framesForwardKinematics(model, self._view_data, q)
@@ -103,4 +108,5 @@ class View:
                 "trace": self.traces[which].arrays() if history else None,
                 "info": loop.controller.info, "constraints": constraints,
                 "limitations": limitations, "limitation": limitations[0],
-                "active_inequalities": self.active_inequalities(which)}
+                "active_inequalities": self.active_inequalities(which),
+                "ports": self._ports(loop, placements)}

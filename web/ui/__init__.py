@@ -3,17 +3,29 @@ that runs both (:func:`run_server`); one module per part (:mod:`web.ui.core`).""
 
 from .core import TeleopUI
 from .panels import CONTROLLER_CHOICES, NUDGES
-from .plots import GHOST_COLOR, MAIN_COLOR, PLOTS, PlotSpec, display_unit, plot_series
+from .plots import (
+    GHOST_COLOR,
+    MAIN_COLOR,
+    PLANT_PLOTS,
+    PLOTS,
+    PlotSpec,
+    display_unit,
+    plot_series,
+    plots_of,
+)
+from .port_forces import FORCE_ARROW_SCALE, force_arrow
 from .scene_view import STATUS_COLORS
 from .server import run_server
 from .shapes import LinkProfile, reach_from_axis
 
 __all__ = [
+    "FORCE_ARROW_SCALE",
     "CONTROLLER_CHOICES",
     "GHOST_COLOR",
     "LinkProfile",
     "MAIN_COLOR",
     "NUDGES",
+    "PLANT_PLOTS",
     "PLOTS",
     "PlotSpec",
     "STATUS_COLORS",
@@ -21,5 +33,7 @@ __all__ = [
     "display_unit",
     "reach_from_axis",
     "plot_series",
+    "plots_of",
+    "force_arrow",
     "run_server",
 ]

@@ -6,6 +6,8 @@
   base; per end effector an input gizmo and, where it differs, the target itself; per
   robot and EE a line from the EE to its target coloured by the step status;
 * constraints (:mod:`.markers`), each drawn from its own ``geometry()``;
+* on a physics plant, the wall's force on the instrument at each port, an arrow scaled in
+  newtons (:mod:`.port_forces`);
 * panels: a status (:mod:`.status_view`: rate, lateness, what limits each robot's EEs in
   words, the one-sided constraints held), then tabs: Teleop (controllers, side by side,
   clutch, motion scale, the active arm's nudges, home) and Settings (gain, damping, rate,
@@ -40,6 +42,7 @@ from .constraint_panel import ConstraintPanel
 from .markers import Markers
 from .panels import Panels
 from .plots import Plots
+from .port_forces import PortForces
 from .scene_view import SceneView
 from .shapes import LinkProfile, square_size
 from .status_view import StatusView
@@ -63,7 +66,7 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
     return names
 
 
-class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, StatusView, Plots):
+class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, PortForces, StatusView, Plots):
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -83,6 +86,8 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, StatusView, Plots):
         self._markers: dict[str, dict] = {}  # main robot: entry id -> handles
         self._ghost_markers: dict[str, dict] = {}
         self._views: dict[str, RobotView] = {}
+        self._port_arrows: dict[str, dict] = {}  # robot -> port id -> its force arrow
+        self._drawn: dict[tuple[str, str], object] = {}  # markers' last drawing (.markers)
         self._ghost_root = None
         self._ghost_style: tuple | None = None
         self._syncing = False  # widgets being set from the app: their callbacks do nothing
@@ -217,5 +222,6 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, StatusView, Plots):
         ghost = snapshot["robots"].get("ghost") if "ghost" in self._views else None
         self._draw_constraints(snapshot["constraints"],
                                None if ghost is None else ghost["constraints"])
+        self._draw_ports(robots)
         if status:
             self._draw_status(snapshot)

@@ -22,6 +22,9 @@ from .shapes import (
 )
 
 ERROR_VECTOR_SCALE = 100.0
+#: a constraint's drawing that moved less than this (m) since it was last drawn is not
+#: drawn again (the view thread shares the interpreter with the 1 kHz control loop)
+DRAWING_RESOLUTION = 1e-7
 ALLOWED_SIDE_ARROW = 0.08  # m
 POINT_COLOR = (20, 20, 20)
 ERROR_COLOR = (255, 0, 255)
@@ -30,7 +33,7 @@ ERROR_COLOR = (255, 0, 255)
 class Markers:
     """The constraint markers of :class:`web.ui.TeleopUI`, per robot: entry id -> its
     scene handles (``"shape"``, ``"point"``, ``"error"``, and ``"arrow"``, ``"gizmo"``
-    where they apply)."""
+    where they apply); moved only when their drawing moved by :data:`DRAWING_RESOLUTION`."""
 
     server: viser.ViserServer
     app: TeleopApp
@@ -38,6 +41,8 @@ class Markers:
     square_sizes: dict[str, float]
     _markers: dict[str, dict]
     _ghost_markers: dict[str, dict]
+    #: (marker prefix, entry id) -> what its markers were last drawn from
+    _drawn: dict[tuple[str, str], np.ndarray]
 
     def _draw_constraints(self, entries: list[dict], ghost: dict | None = None) -> None:
         """The main robot's constraint markers (``snapshot["constraints"]``) and, given the
@@ -52,13 +57,20 @@ class Markers:
                 if entry_id not in drawn:
                     for handle in markers_of.pop(entry_id).values():
                         handle.remove()
+                    self._drawn.pop((prefix, entry_id), None)
             for entry_id, drawing in drawn.items():
                 markers = markers_of.get(entry_id)
                 if markers is None:
                     markers = markers_of[entry_id] = self._create_markers(
                         f"{prefix}/{entry_id}", entry_id, drawing, goals[entry_id],
                         gizmo=markers_of is self._markers)
-                self._update_markers(markers, drawing)
+                    self._drawn.pop((prefix, entry_id), None)
+                state = self._drawn_state(drawing)
+                last = self._drawn.get((prefix, entry_id))
+                if last is None or last.shape != state.shape or \
+                        float(np.max(np.abs(state - last))) >= DRAWING_RESOLUTION:
+                    self._update_markers(markers, drawing)
+                    self._drawn[(prefix, entry_id)] = state
         self._list_placed(tuple(main))
 
     def _add_shape(self, name: str, drawing: dict):
@@ -153,6 +165,17 @@ class Markers:
 
             markers["gizmo"] = handle
         return markers
+
+    @staticmethod
+    def _drawn_state(drawing: dict) -> np.ndarray:
+        """What a constraint's markers are drawn from, as one vector: its geometry's
+        points and directions, its link's pose."""
+        geometry: ConstraintGeometry = drawing["geometry"]
+        placement = drawing["link_placement"]
+        parts = [geometry.anchor, geometry.point, geometry.error, placement.translation,
+                 placement.rotation]
+        parts += [v for v in (geometry.axis, geometry.allowed_side) if v is not None]
+        return np.concatenate([np.asarray(part, dtype=float).ravel() for part in parts])
 
     def _update_markers(self, markers: dict, drawing: dict) -> None:
         geometry: ConstraintGeometry = drawing["geometry"]

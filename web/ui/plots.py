@@ -19,7 +19,8 @@ GHOST_DASH = (6.0, 4.0)  # the ghost's plot lines are dashed: the main one shows
 UNITS = {"m": (("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("nm", 1e-9)),
          "m/s": (("m/s", 1.0), ("mm/s", 1e-3), ("µm/s", 1e-6), ("nm/s", 1e-9)),
          "us": (("µs", 1.0),),
-         "rad/s": (("rad/s", 1.0), ("mrad/s", 1e-3), ("µrad/s", 1e-6), ("nrad/s", 1e-9))}
+         "rad/s": (("rad/s", 1.0), ("mrad/s", 1e-3), ("µrad/s", 1e-6), ("nrad/s", 1e-9)),
+         "N": (("N", 1.0), ("mN", 1e-3), ("µN", 1e-6), ("nN", 1e-9))}
 
 
 def display_unit(values: np.ndarray, quantity: str, current: str | None = None) -> tuple[str, float]:
@@ -51,6 +52,15 @@ PLOTS = (PlotSpec("constraint_error", "constraint error", "m"),
          PlotSpec("step_time", "controller step time", "us"),
          PlotSpec("qd_deviation", "joint-velocity deviation |qd_ghost - qd_main|", "rad/s",
                   ghost_only=True))
+#: the plots of a session on a physics plant, after :data:`PLOTS`
+PLANT_PLOTS = (PlotSpec("port_force", "port force, the largest", "N"),)
+
+
+def plots_of(snapshot: dict) -> tuple[PlotSpec, ...]:
+    """The plots of the session ``snapshot`` shows: :data:`PLOTS`, and on a physics
+    plant :data:`PLANT_PLOTS`."""
+    return PLOTS + PLANT_PLOTS if snapshot["plant"].physical else PLOTS
+
 
 #: x: the last 10 s, "now" at 0. A fixed range: an auto-ranged x axis of a plot updated
 #: while its tab is hidden keeps a stale range in viser's client (the lines fall outside)
@@ -87,7 +97,7 @@ class Plots:
     def _plot(self, snapshot: dict) -> None:
         robots = snapshot["robots"]
         shown: set[str] = set()
-        for spec in PLOTS:
+        for spec in plots_of(snapshot):
             t, series = plot_series(snapshot, spec)
             if t.size < 2:
                 if spec.ghost_only and spec.key in self._plots and "ghost" not in robots:

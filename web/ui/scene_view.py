@@ -36,6 +36,8 @@ class SceneView:
     _ghost_seen: float | None
     _ghost_markers: dict[str, dict]
     _line_colors: dict[tuple[str, int], tuple]
+    _port_arrows: dict[str, dict]
+    _drawn: dict[tuple[str, str], object]
     _gone: set[int]
     _plotted: set[str]
 
@@ -132,6 +134,9 @@ class SceneView:
         self._ghost_root = None
         self._views.pop("ghost", None)
         self._ghost_markers.clear()
+        for key in [key for key in self._drawn if key[0].startswith("/ghost/")]:
+            self._drawn.pop(key)
+        self._port_arrows.pop("ghost", None)  # removed with the root
 
     def _ghost_due(self) -> bool:
         """Whether to draw a ghost that just joined: once the plots show it (or after

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import viser
 
+from teleop.plants import PlantSettings
 from teleop.robots import Robot
 
 from ..access import require_token
@@ -17,14 +18,19 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                controller: str = "cjm", ghost: str | None = None, rate: float = 1000.0,
                record_dir: str | Path = "sessions", scene: dict | None = None,
                notes: list[str] | tuple[str, ...] = (), scene_dir: str | Path = "scenes",
-               token: str | None = None
+               token: str | None = None, plant: str = "kinematic",
+               plant_settings: PlantSettings | None = None,
+               wall_stiffness: float | None = None
                ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
     threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
     The page reads and writes files in ``scene_dir`` and ``record_dir`` only; with a
-    ``token``, a page that does not present it gets nothing (:mod:`web.access`)."""
+    ``token``, a page that does not present it gets nothing (:mod:`web.access`).
+    ``plant``, ``plant_settings``, ``wall_stiffness``: what the loops run on
+    (:class:`web.app.TeleopApp`)."""
     app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
-                    scene_dir=scene_dir)
+                    scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
+                    wall_stiffness=wall_stiffness)
     if scene is not None:
         app.apply_scene(scene)
     server = viser.ViserServer(host=host, port=port, verbose=False)

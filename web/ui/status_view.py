@@ -1,12 +1,13 @@
 """The status panel: the control loop's rate and timing, what limits each robot's end
-effectors in words, the one-sided constraints held, the console's state; a red banner
+effectors in words, the one-sided constraints held, the force at each port (physics
+plant), the console's state; a red banner
 while the control loop falls behind (docs/design.md section 5.3)."""
 
 from __future__ import annotations
 
 import viser
 
-from ..app import ControlThread
+from ..app import ControlThread, port_words
 
 BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
 
@@ -39,11 +40,14 @@ class StatusView:
         timing = self.control.timing()
         control = (f"**control{' BEHIND' if self._behind else ''}** "
                    f"{timing.achieved_rate:.0f} Hz achieved (target "
-                   f"{snapshot['config'].rate:.0f} Hz), lateness p99 "
-                   f"{timing.lateness_p99_ms:.2f} ms, tick {timing.tick_p50_us:.0f} us "
-                   f"({timing.overhead_p50_us:.0f} us beyond the controllers), "
+                   f"{snapshot['config'].rate:.0f} Hz), {100 * timing.on_time:.1f} % of ticks "
+                   f"on time, lateness p99 {timing.lateness_p99_ms:.2f} ms, tick "
+                   f"{timing.tick_p50_us:.0f} us ({timing.overhead_p50_us:.0f} us beyond the "
+                   f"controllers{', physics included' if snapshot['plant'].physical else ''}), "
                    f"{timing.deadline_misses} deadline misses")
         lines = [control]
+        if snapshot["plant"].physical:
+            lines.append(f"**plant** {snapshot['plant'].describe()}")
         if self.control.error:
             lines.append(f"**control error** {self.control.error}")
         names = [self.ee_names[frame] for frame in snapshot["ee_frames"]]
@@ -62,6 +66,8 @@ class StatusView:
                 if record is not None:
                     words += (f" (constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
                               f"step {record.step_time_us:.0f} us)")
+            if robot["ports"]:
+                words += f"; {port_words(robot['ports'])}"
             if robot["active_inequalities"]:
                 words += (f"; one-sided constraints held: "
                           f"{', '.join(robot['active_inequalities'])}")

@@ -1,0 +1,322 @@
+"""The browser session on the MuJoCo plant, without a browser (docs/design.md sections 5.3
+and 17): each loop runs its own simulated robot, the wall's force at each port reaches the
+snapshot, the status words, the plots and the arrow, and equals the wall's stiffness times
+the instrument's offset from the port centre, computed here from Pinocchio's kinematics."""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import HealthCheck, given, settings
+from browser_helpers import free_port
+from hypothesis import strategies as st
+
+from constraints import Hole
+from teleop.plants import MujocoPlant, PlantSettings
+from web.app import ControlThread, PlantChoice, TeleopApp, port_words
+from web.ui import FORCE_ARROW_SCALE, PLANT_PLOTS, PLOTS, force_arrow, plot_series, plots_of
+
+#: the port force a gentle motion of the operator stays below (N): the issue's target
+GENTLE_FORCE = 0.2
+
+
+def run(app: TeleopApp, seconds: float) -> None:
+    for _ in range(int(round(seconds * app.config.rate))):
+        app.step()
+
+
+def nudge(app: TeleopApp, offset) -> None:
+    target = app.target
+    quaternion = pin.Quaternion(target.rotation)
+    app.set_target(target.translation + np.asarray(offset),
+                   [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
+
+
+def port_offset(robot, q: np.ndarray, hole: Hole) -> np.ndarray:
+    """The link axis's offset from the hole centre at ``q``, written out here: the point
+    of the axis nearest the centre minus the centre (world, m)."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    link = data.oMf[robot.model.getFrameId(hole.link)]
+    axis = link.rotation @ hole.link_axis / np.linalg.norm(hole.link_axis)
+    origin = link.translation
+    nearest = origin + float(axis @ (hole.center - origin)) * axis
+    return nearest - hole.center
+
+
+@pytest.fixture()
+def app(sda10f, tmp_path):
+    return TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path, scene_dir=tmp_path / "scenes")
+
+
+def test_each_loop_runs_its_own_simulated_robot(app):
+    main = app.loops["main"]
+    assert isinstance(main.plant, MujocoPlant) and main.plant.dt == app.config.dt
+    app.set_ghost("qp:daqp")
+    ghost = app.loops["ghost"]
+    assert isinstance(ghost.plant, MujocoPlant) and ghost.plant is not main.plant
+    plant = main.plant
+    app.set_controller("qp:proxqp")  # same rate: the same simulated robot goes on
+    assert app.loops["main"].plant is plant and app.loops["main"].q is not main.q
+    app.set_rate(500.0)  # a new period: new physics for every loop, at rest where it was
+    assert {id(loop.plant) for loop in app.loops.values()}.isdisjoint({id(plant), id(ghost.plant)})
+    assert all(loop.plant.dt == pytest.approx(2e-3) for loop in app.loops.values())
+    # the simulated robot is where the loop says it is
+    loop = app.loops["main"]
+    run(app, 0.05)
+    q_sim = np.empty(app.robot.model.nq)
+    loop.plant.joints.q_to_pinocchio(loop.plant.mj_data.qpos, q_sim)
+    np.testing.assert_allclose(q_sim, loop.q, atol=1e-12)
+    # the kinematic app has no plant
+    kinematic = TeleopApp(app.robot, record_dir=app.record_dir, scene_dir=app.scene_dir)
+    assert kinematic.loops["main"].plant is None
+    snapshot = kinematic.snapshot()
+    assert snapshot["robots"]["main"]["ports"] == [] and plots_of(snapshot) == PLOTS
+
+
+def test_a_moved_target_pushes_the_instrument_on_the_wall_and_the_view_says_how_hard(app):
+    hole_id = app.add_constraint("hole", distance=0.08)
+    run(app, 0.1)
+    ports = app.snapshot()["robots"]["main"]["ports"]
+    assert [port.id for port in ports] == [hole_id]
+    assert ports[0].magnitude < 1e-4  # at rest on the port: the wall hardly pushes
+    nudge(app, [0.0, 0.02, 0.0])  # 2 cm sideways: the motion caps make it gentle
+    peak = 0.0
+    for _ in range(100):
+        run(app, 0.01)
+        snapshot = app.snapshot(history=False)
+        (port,) = snapshot["robots"]["main"]["ports"]
+        peak = max(peak, port.magnitude)
+    assert 1e-3 < peak < GENTLE_FORCE, peak  # felt, and below the target
+    # the plots' port-force trace: finite, in newtons, its peak the one seen above
+    snapshot = app.snapshot()
+    assert plots_of(snapshot) == PLOTS + PLANT_PLOTS
+    t, series = plot_series(snapshot, PLANT_PLOTS[0])
+    assert t.size == 55 and np.isfinite(series["main"]).all()  # 1.1 s at 50 Hz
+    assert 1e-3 < series["main"].max() <= peak * (1 + 1e-9)
+    # the status words and the arrow of the last reading
+    (port,) = snapshot["robots"]["main"]["ports"]
+    assert port_words([port]) == (f"port force {hole_id} {port.magnitude:.3f} N "
+                                  f"(tissue {1e3 * port.displacement:.3f} mm)")
+    arrow = force_arrow(port, clearance=0.03)  # its tip 3 cm from the port, pushing on it
+    np.testing.assert_allclose(arrow[0, 1] - arrow[0, 0], FORCE_ARROW_SCALE * port.force,
+                               atol=1e-15)
+    np.testing.assert_allclose(arrow[0, 1] + 0.03 * port.force / port.magnitude, port.point,
+                               atol=1e-15)
+
+
+@settings(max_examples=6, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(wall_stiffness=st.one_of(st.none(), st.floats(200.0, 5000.0)),
+       lateral=st.floats(0.2e-3, 2e-3), angle=st.floats(0.0, 2 * math.pi))
+def test_the_port_force_is_the_wall_stiffness_times_the_offset(sda10f, tmp_path, wall_stiffness,
+                                                               lateral, angle):
+    """A hole ``lateral`` m off the instrument's axis (any direction across it) with no
+    drift gain: the controller holds the offset (no lateral velocity), the wall pushes;
+    at rest the reading equals ``k`` x the offset computed here from the loop's q (1 %),
+    towards the centre, and ``|F| = k`` x the reported displacement."""
+    app = TeleopApp(sda10f, plant="mujoco", wall_stiffness=wall_stiffness, record_dir=tmp_path,
+                    scene_dir=tmp_path / "scenes")
+    app.set_gain(0.0)
+    q = app.loops["main"].q.copy()
+    hole = Hole.on_link(sda10f, q, distance=0.1)
+    offset = port_offset(sda10f, q, hole)
+    assert np.linalg.norm(offset) < 1e-9
+    data = sda10f.model.createData()
+    pin.framesForwardKinematics(sda10f.model, data, q)
+    axis = data.oMf[sda10f.model.getFrameId(hole.link)].rotation @ hole.link_axis
+    across = np.cross(axis, [0.0, 0.0, 1.0])
+    across /= np.linalg.norm(across)
+    across = math.cos(angle) * across + math.sin(angle) * np.cross(axis, across)
+    hole.center = hole.center + lateral * across
+    hole_id = app.add_constraint(hole)
+    stiffness = 1000.0 if wall_stiffness is None else wall_stiffness
+    assert hole.tissue_stiffness == stiffness
+    run(app, 1.0)  # the arm gives a little under the push, then rests
+    (port,) = app.snapshot()["robots"]["main"]["ports"]
+    offset = port_offset(sda10f, app.loops["main"].q, hole)
+    assert 0.9 * lateral < np.linalg.norm(offset) < 1.1 * lateral
+    expected = -stiffness * offset
+    assert port.id == hole_id
+    assert np.linalg.norm(port.force - expected) <= 0.01 * np.linalg.norm(expected)
+    assert port.displacement == pytest.approx(np.linalg.norm(offset), rel=0.01)
+    assert port.magnitude == pytest.approx(stiffness * port.displacement, rel=0.01)
+
+
+def test_the_session_wall_stiffness_reaches_a_scenes_holes(sda10f, tmp_path):
+    saved = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path, scene_dir=tmp_path)
+    saved.add_constraint("hole", distance=0.08)
+    path = saved.save_scene("wall.json")
+    stiff = TeleopApp(sda10f, plant="mujoco", wall_stiffness=3000.0, record_dir=tmp_path,
+                      scene_dir=tmp_path)
+    stiff.load_scene(path.name)
+    (entry,) = stiff.entries.values()
+    assert entry.constraint.tissue_stiffness == 3000.0
+    run(stiff, 0.05)
+    assert [port.id for port in stiff.snapshot()["robots"]["main"]["ports"]] == [entry.id]
+    # and the scene's own stiffness without one
+    own = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path, scene_dir=tmp_path)
+    own.load_scene(path.name)
+    assert next(iter(own.entries.values())).constraint.tissue_stiffness == 1000.0
+
+
+def test_home_resets_the_simulated_robot(app):
+    nudge(app, [0.0, 0.0, 0.02])
+    run(app, 0.3)
+    app.home()  # no constraint: a reset
+    loop = app.loops["main"]
+    np.testing.assert_allclose(loop.q, app.robot.q_home)
+    q_sim = np.empty(app.robot.model.nq)
+    loop.plant.joints.q_to_pinocchio(loop.plant.mj_data.qpos, q_sim)
+    np.testing.assert_allclose(q_sim, app.robot.q_home, atol=1e-12)
+    assert not np.any(loop.plant.mj_data.qvel)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"plant": "bullet"}, "plant must be one of kinematic, mujoco, got 'bullet'"),
+    ({"plant": "mujoco", "wall_stiffness": 0.0}, "wall_stiffness must be > 0"),
+    ({"plant": "mujoco", "wall_stiffness": 1e9}, "wall_stiffness must be <= 100000"),
+    ({"plant": "mujoco", "wall_stiffness": float("nan")}, "wall_stiffness must be finite"),
+    ({"plant": "mujoco", "plant_settings": {"payload": 1}}, "plant settings must be PlantSettings"),
+])
+def test_bad_plant_choices_are_refused_naming_the_field(sda10f, tmp_path, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        TeleopApp(sda10f, record_dir=tmp_path, **kwargs)
+
+
+def test_the_control_thread_runs_the_plant(app):
+    """A generous no-starvation guard (2 shared cores): the thread runs the simulated
+    robot period after period, without error, and counts its ticks on time."""
+    app.add_constraint("hole", distance=0.08)
+    control = ControlThread(app)
+    control.start()
+    try:
+        time.sleep(2.0)
+    finally:
+        control.stop()
+    timing = control.timing()
+    assert control.error is None and timing.ticks > 200
+    assert app.now == pytest.approx(timing.ticks * app.config.dt)
+    assert 0.0 < timing.on_time <= 1.0
+
+
+def test_plant_choice_describes_itself():
+    choice = PlantChoice("mujoco", PlantSettings(payload=0.5), 2000.0)
+    assert choice.physical and "payload 0.5 kg" in choice.describe()
+    assert "wall 2 N/mm" in choice.describe()
+    assert not PlantChoice().physical and PlantChoice().make(None, 1e-3) is None
+
+
+# -- the view (a real viser server, no browser: tests/test_browser_plant.py has the page) ----
+
+
+def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
+    import viser
+
+    from web.ui import TeleopUI
+
+    server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    try:
+        ui = TeleopUI(server, app, ControlThread(app))
+        hole_id = app.add_constraint("hole", distance=0.08)
+        run(app, 0.1)
+        nudge(app, [0.012, 0.0, 0.0])
+        run(app, 0.02)  # setting off: the wall pushes
+        snapshot = app.snapshot()
+        ui._draw(snapshot)
+        ui._plot(snapshot)
+        (port,) = snapshot["robots"]["main"]["ports"]
+        assert port.magnitude > 1e-2
+        arrow = ui._port_arrows["main"][hole_id]
+        assert arrow.name == f"/ports/{hole_id}" and arrow.visible
+        segments = np.asarray(arrow.points, dtype=float)
+        # viser holds float32 points: a few float32 round-offs of coordinates under 1 m
+        float32 = 4 * float(np.finfo(np.float32).eps)
+        np.testing.assert_allclose(segments[0, 1] - segments[0, 0],
+                                   FORCE_ARROW_SCALE * port.force, atol=float32)
+        # its tip on the hole's ring, on the side the wall pushes from
+        ring = ui.ring_radius_at(snapshot["robots"]["main"]["constraints"][hole_id])
+        np.testing.assert_allclose(segments[0, 1], port.point - ring * port.force / port.magnitude,
+                                   atol=float32)
+        assert f"port force {hole_id} {port.magnitude:.3f} N" in ui.status.content
+        assert "% of ticks on time" in ui.status.content and "physics included" in \
+            ui.status.content and "**plant** MuJoCo plant at 2000 Hz" in ui.status.content
+        assert ui._plots["port_force"].title.startswith("port force, the largest (")
+        assert np.isfinite(ui._plots["port_force"].data[1]).all()
+        # a ghost gets its own arrows, under its own root; without it they go
+        app.set_ghost("qp:daqp")
+        run(app, 0.05)
+        ui._ghost_seen = -1e9  # drawn at once (no plots to wait for here)
+        ui._draw(app.snapshot())
+        assert ui._port_arrows["ghost"][hole_id].name == f"/ghost/ports/{hole_id}"
+        app.set_ghost(None)
+        ui._draw(app.snapshot())
+        assert "ghost" not in ui._port_arrows
+        app.remove_constraint(hole_id)
+        run(app, 0.01)
+        ui._draw(app.snapshot())
+        assert ui._port_arrows["main"] == {}
+    finally:
+        server.stop()
+
+
+# -- the command line ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--plant", "bullet"], "argument --plant: invalid choice: 'bullet'"),
+    (["--wall-stiffness", "2"], "--wall-stiffness needs --plant mujoco"),
+    (["--payload", "1", "--wall-stiffness", "2"],
+     "--wall-stiffness and --payload need --plant mujoco"),
+    (["--plant", "mujoco", "--wall-stiffness", "0"], "--wall-stiffness: must be a finite number > 0"),
+    (["--plant", "mujoco", "--wall-stiffness", "1000"], "--wall-stiffness must be at most 100 N/mm"),
+    (["--plant", "mujoco", "--payload", "-1"], "--payload must be >= 0, got -1"),
+    (["--plant", "mujoco", "--payload", "nan"], "--payload must be finite"),
+    (["--plant", "mujoco", "--payload", "1e9"], "--payload must be <= 100"),
+])
+def test_bad_plant_options_are_one_line_and_exit_2(args, message, capsys):
+    from web import cli as web_cli
+
+    try:
+        code = web_cli.main([*args, "--port", str(free_port())])
+    except SystemExit as exit_:  # argparse's own refusals exit from the parser
+        code = exit_.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+
+
+def test_teleop_web_plant_mujoco_starts_and_says_what_it_runs_on():
+    """``python -m web --plant mujoco ...`` as a user starts it (bounded): its start line
+    names the plant; Ctrl-C stops it with exit code 0."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "web", "--port", str(free_port()), "--plant", "mujoco",
+         "--wall-stiffness", "2", "--payload", "0.5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines, deadline = [], time.monotonic() + 90.0
+    try:
+        while time.monotonic() < deadline:
+            line = process.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            if "Ctrl-C stops" in line:
+                break
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    out = "".join(lines) + out
+    assert process.returncode == 0, err
+    assert "(controller cjm), on the MuJoCo plant at 2000 Hz, 20 Hz servos, payload 0.5 kg, " \
+        "wall 2 N/mm; Ctrl-C stops" in out, out
+    assert "Traceback" not in err, err
