@@ -316,6 +316,14 @@ class Controller(ABC):
         lower, upper = self.bounds(q)
         return np.clip(0.0, lower, upper)
 
+    def stop(self, q: np.ndarray) -> np.ndarray:
+        """:meth:`stop_command` sent in place of a step (the loop's answer to an input the
+        controller refused): it becomes the previous command the next step's acceleration
+        box counts from."""
+        command = self.stop_command(q)
+        self._previous_command()[:] = command
+        return command
+
     def posture_difference(self, q: np.ndarray, posture: np.ndarray) -> np.ndarray:
         """``posture (-) q`` (nv,, ``pin.difference``) with a mobile base's entries zero:
         the posture shapes the joints; the base stands where it is unless the task or a

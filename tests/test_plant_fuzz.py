@@ -1,6 +1,7 @@
 """Every controller in the closed loop on the MuJoCo plant, under random operator jumps, an
 unmodelled payload and a hole that may sit off the instrument: every command is finite and
-inside the joint box of the configuration it was computed for, and a step that did not
+inside the joint box of the configuration it was computed for (velocity, braking-aware
+position and acceleration limits around the previous command), and a step that did not
 hold its hole rows never says ``ok`` (docs/design.md sections 8, 17)."""
 
 from __future__ import annotations
@@ -52,6 +53,9 @@ def test_every_controller_on_the_plant_is_finite_in_its_box_and_honest(robots, r
     targets = loop.ee_placements()
     velocity_limit = controller.joint_bounds.velocity_limit
     slack = 1e-9 * np.where(np.isfinite(velocity_limit), velocity_limit, 1.0)
+    acceleration_step = controller.joint_bounds.acceleration_step
+    assert acceleration_step is not None and np.all(np.isfinite(acceleration_step))
+    previous = np.zeros(robot.model.nv)  # at rest
     for tick in range(TICKS):
         if tick % 50 == 0:  # the operator jumps: up to 5 cm and 0.3 rad per EE
             targets = [pose * pin.exp6(np.concatenate([rng.uniform(-0.05, 0.05, 3),
@@ -63,12 +67,16 @@ def test_every_controller_on_the_plant_is_finite_in_its_box_and_honest(robots, r
         assert np.all(np.isfinite(step.qd)), (spec, step.message)
         assert np.all(np.isfinite(loop.q)) and record.plant is not None
         assert np.all(np.isfinite(record.plant.port_forces))
-        lower, upper = controller.joint_bounds.box(step.sensed)
-        if step.status == "failed":
-            np.testing.assert_array_equal(step.qd, 0.0)
-        else:
-            assert np.all(step.qd >= lower - slack) and np.all(step.qd <= upper + slack), \
-                (spec, tick, step.status, step.message)
+        # the box of the sensed configuration around the previous command: velocity,
+        # braking-aware position and acceleration limits (a failed step's stop too)
+        lower, upper = controller.joint_bounds.box(step.sensed, previous)
+        assert np.all(step.qd >= lower - slack) and np.all(step.qd <= upper + slack), \
+            (spec, tick, step.status, step.message)
+        change = np.abs(step.qd - previous)
+        inside_position_box = np.all(previous >= lower - slack) & np.all(previous <= upper + slack)
+        if inside_position_box:  # the acceleration limit gives way only to position limits
+            assert np.all(change <= acceleration_step * (1 + 1e-9) + slack), (spec, tick)
+        previous = step.qd.copy()
         if step.status == "ok":  # the hole rows held at the sensed configuration
             assert record.constraint_velocity_residual <= 1e3 * EQUALITY_TOLERANCE, \
                 (spec, tick, record.constraint_velocity_residual)

@@ -410,12 +410,12 @@ class TeleopLoop:
             qd = self.controller.solve(sensed, np.concatenate(twists))
             status, message = self.controller.info.status.value, self.controller.info.message
             self.refused = ""
-        except ValueError as error:  # refused input: hold still, say why
-            qd, status, message = np.zeros(model.nv), "failed", str(error)
+        except ValueError as error:  # refused input: a controlled stop, say why
+            qd, status, message = self._stop(sensed), "failed", str(error)
             self.refused = message
         step_time = (time.perf_counter_ns() - solve_start) * 1e-3
         if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
-            qd, status, message = np.zeros(model.nv), "failed", "non-finite command replaced by zero"
+            qd, status, message = self._stop(sensed), "failed", "non-finite command replaced by a stop"
         moved = qd if self.plant is None else self.plant.actuate(qd, self.q, self.constraints)
         q_before = self.q
         self.q = pin.integrate(model, q_before, moved * self.config.dt)
@@ -427,6 +427,12 @@ class TeleopLoop:
             sensed=sensed, q_before=q_before, qd=qd, moved=moved,
             tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3, step_time_us=step_time,
             status=status, message=message, twist_saturated=saturated)
+
+    def _stop(self, sensed: np.ndarray) -> np.ndarray:
+        """The controller's controlled stop at ``sensed`` (inside its velocity, position and
+        acceleration box), or zero when even that is not finite (a non-finite ``sensed``)."""
+        command = self.controller.stop(sensed)
+        return command if math.isfinite(sum(command.tolist())) else np.zeros(self.model.nv)
 
     def measure_command(self, step: PendingStep) -> None:
         """The command's measures, into ``step``, at the state and geometry it was computed
