@@ -268,6 +268,10 @@ class Constraint(ABC):
     kind: ClassVar[str]
     #: the attribute holding the geometry's world reference point (:attr:`position`)
     position_attribute: ClassVar[str]
+    #: whether a physics plant puts a wall where it is (a hole's port: ``wall_force``)
+    has_wall: ClassVar[bool] = False
+    #: constructor fields :meth:`to_dict` leaves out while they hold their defaults
+    omitted_at_default: ClassVar[tuple[str, ...]] = ()
     #: how :meth:`geometry` says to draw it ("ring", "plane" or "point"), colour, label
     shape: ClassVar[str] = "point"
     color: ClassVar[tuple[int, int, int]] = (128, 128, 128)
@@ -447,12 +451,16 @@ class Constraint(ABC):
 
         ``Constraint.from_dict(c.to_dict())`` rebuilds ``c``. Each constructor argument is
         an attribute of the same name; ``velocity`` is left out while the geometry is at
-        rest (as in session files written before it was recorded).
+        rest (as in session files written before it was recorded), and the fields of
+        :attr:`omitted_at_default` while they hold their defaults.
         """
         data = {"kind": self.kind}
-        for name in constructor_fields(type(self)):
+        fields = constructor_fields(type(self))
+        for name in fields:
             value = getattr(self, name)
             if name == "velocity" and not np.any(value):
+                continue
+            if name in self.omitted_at_default and value == fields[name].default:
                 continue
             data[name] = value.tolist() if isinstance(value, (np.ndarray, np.generic)) else value
         return data

@@ -23,6 +23,13 @@ from .validation import as_number
 #: How far (m) a hole centre may lie off the link axis when a hole is built.
 DEFAULT_AXIS_TOLERANCE = 1e-3
 
+#: Lateral stiffness of the abdominal wall at a port (N/m): 1 N/mm (docs/design.md 17.2).
+DEFAULT_TISSUE_STIFFNESS = 1000.0
+
+#: Lateral damping of the abdominal wall at a port (N s/m): a 10 ms time constant with the
+#: default stiffness (docs/design.md 17.2).
+DEFAULT_TISSUE_DAMPING = 10.0
+
 
 class Hole(Constraint):
     """Two equalities: no velocity of the link across its axis at the hole (paper 5.2).
@@ -42,6 +49,8 @@ class Hole(Constraint):
     link_axis : (3,) unit vector along the link, link coordinates.
     gain : drift-feedback gain K (1/s).
     velocity : (3,) world velocity of the hole centre (m/s), fed forward.
+    tissue_stiffness, tissue_damping : the abdominal wall around the port, for a physics
+        plant (:meth:`wall_force`; N/m, N s/m); left out of :meth:`to_dict` at the defaults.
     """
 
     dim = 2
@@ -52,6 +61,8 @@ class Hole(Constraint):
     color = (255, 170, 0)
     label = "hole"
     placement: tuple[PlacementField, ...] = (ON_ARM, ALONG_LINK)
+    omitted_at_default = ("tissue_stiffness", "tissue_damping")
+    has_wall = True
 
     def __init__(
         self,
@@ -60,9 +71,13 @@ class Hole(Constraint):
         link_axis=(0.0, 0.0, 1.0),
         gain: float = DEFAULT_GAIN,
         velocity=(0.0, 0.0, 0.0),
+        tissue_stiffness: float = DEFAULT_TISSUE_STIFFNESS,
+        tissue_damping: float = DEFAULT_TISSUE_DAMPING,
     ) -> None:
         super().__init__(link, gain)
         self._set_anchor(as_vector(center, 3, "hole center"), as_vector(velocity, 3, "hole velocity"))
+        self.tissue_stiffness = as_number(tissue_stiffness, "tissue_stiffness", 0.0)
+        self.tissue_damping = as_number(tissue_damping, "tissue_damping", 0.0)
         self.link_axis = as_unit_vector(link_axis, "link_axis")
         self._C = perpendicular_basis(self.link_axis)
         self._C_perp = self.link_axis[None, :]
@@ -192,3 +207,23 @@ class Hole(Constraint):
 
     def feed_forward(self, placement: pin.SE3) -> np.ndarray:
         return self._C @ (placement.rotation.T @ self.velocity)
+
+    def port(self, rotation: np.ndarray, translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where the instrument crosses the wall, for a link frame at ``(rotation,
+        translation)`` (world): the point of the link axis nearest the centre,
+        ``P = o + ((c - o) . a) a``, and the world axis ``a`` (docs/design.md 17.2)."""
+        axis = rotation @ self.link_axis
+        return translation + float(axis @ (self.center - translation)) * axis, axis
+
+    def wall_force(self, point: np.ndarray, axis: np.ndarray,
+                   point_velocity: np.ndarray) -> np.ndarray:
+        """World force (N) of the abdominal wall on the instrument at the port (:meth:`port`),
+        ``F = -k (P - c) - c_d (v - v_c)_perp`` (docs/design.md 17.2): ``P - c`` is the
+        lateral offset of the link axis from the centre (:meth:`error_world`), ``v`` the
+        world velocity of the instrument's material point at ``P``, ``v_c`` the centre's,
+        ``perp`` across the axis. A spring-damper, not a rigid constraint: the
+        controller's error shows."""
+        relative = point_velocity - self.velocity
+        lateral_velocity = relative - float(axis @ relative) * axis
+        return (-self.tissue_stiffness * (point - self.center)
+                - self.tissue_damping * lateral_velocity)

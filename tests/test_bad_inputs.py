@@ -25,7 +25,7 @@ from teleop.cli.main import main as teleop_main
 from teleop.controller_specs import make_controller
 from teleop.experiments.bench import run_bench
 from teleop.experiments.compare import compare, run_plan
-from teleop.experiments.imperfect import Imperfections
+from teleop.plants.imperfect import Imperfections
 from teleop.experiments.scenarios import load_scenario
 from teleop.experiments.sessions import SessionError, load_session, record_plan, session_plan
 from teleop.loop import LoopConfig, TeleopLoop

@@ -26,7 +26,7 @@ from teleop.experiments.compare import (
     run_plan,
     write_outputs,
 )
-from teleop.experiments.imperfect import Imperfections, ImperfectPlant
+from teleop.plants.imperfect import Imperfections, ImperfectPlant
 from teleop.experiments.plan import Plan, home_pose
 from teleop.experiments.plots import overlap_groups
 from teleop.experiments.scenarios import load_scenario

@@ -194,7 +194,7 @@ def _run(plan, args: argparse.Namespace, config) -> int:
         output_directory,
         write_outputs,
     )
-    from teleop.experiments.imperfect import Imperfections
+    from teleop.plants.imperfect import Imperfections
     from teleop.experiments.metrics_table import format_table
 
     output_directory(args.out)  # before minutes of simulation

@@ -18,7 +18,7 @@ from teleop.controller_specs import make_controller
 from teleop.limits import MAX_DURATION_S, MAX_STEPS
 from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
 
-from .imperfect import Imperfections
+from teleop.plants.imperfect import Imperfections
 from .plan import Plan
 from .results import METRIC_KEYS, RunResult
 from .solver_output import SolverOutputCapture

@@ -97,17 +97,22 @@ class LoopConfig:
 
 class Plant(Protocol):
     """What stands between the controller and the robot's true joints (docs/design.md
-    section 15.1): the loop reads the configuration through :meth:`sense` and moves the
-    robot with what :meth:`actuate` returns."""
+    sections 15.1, 17): the loop reads the configuration through :meth:`sense` and moves
+    the robot with what :meth:`actuate` returns."""
 
     def sense(self, q: np.ndarray) -> np.ndarray:
         """The configuration the loop measures when the robot's true one is ``q``."""
 
-    def actuate(self, qd: np.ndarray) -> np.ndarray:
-        """The mean joint velocity over the coming period, given this period's command."""
+    def actuate(self, qd: np.ndarray, q: np.ndarray,
+                constraints: Sequence[Constraint]) -> np.ndarray:
+        """The mean joint velocity over the coming period, given this period's command,
+        the true configuration ``q`` and the constraints in the scene."""
 
-    def reset(self) -> None:
-        """Back to rest: no command in flight, joints still."""
+    def reset(self, q: np.ndarray | None = None) -> None:
+        """Back to rest (at ``q``, when the plant keeps a configuration of its own)."""
+
+    def measures(self) -> object | None:
+        """What the plant measured over the last period (its own type), or None."""
 
 
 def row_labels(constraints: Sequence[Constraint]) -> tuple[str, ...]:
@@ -181,6 +186,7 @@ class StepRecord:
     constraint_names: tuple[str, ...] = field(repr=False)  # one per constraint (constraint_names)
     status: str = "ok"  # the controller's step status (controllers.StepStatus value)
     message: str = ""
+    plant: object | None = field(default=None, repr=False)  # the plant's own measures
 
     @property
     def ee_position_error(self) -> float:
@@ -281,6 +287,8 @@ class TeleopLoop:
                                                    for name in robot.ee_frames)
         self.ee_frame_id = self.ee_frame_ids[0]
         self.q = as_vector(robot.q_home if q0 is None else q0, self.model.nq, "q0")
+        if plant is not None:
+            plant.reset(self.q)
         self.t = 0.0
         self._filtered_targets: list[pin.SE3] | None = None
         #: the filtered targets of the last period (their feed-forward), None at the start
@@ -321,7 +329,7 @@ class TeleopLoop:
         self.previous_targets = None
         self.last_qd = np.zeros(self.model.nv)
         if self.plant is not None:
-            self.plant.reset()
+            self.plant.reset(self.q)
 
     # -- one tick ----------------------------------------------------------------------
 
@@ -408,7 +416,7 @@ class TeleopLoop:
         step_time = (time.perf_counter_ns() - solve_start) * 1e-3
         if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
             qd, status, message = np.zeros(model.nv), "failed", "non-finite command replaced by zero"
-        moved = qd if self.plant is None else self.plant.actuate(qd)
+        moved = qd if self.plant is None else self.plant.actuate(qd, self.q, self.constraints)
         q_before = self.q
         self.q = pin.integrate(model, q_before, moved * self.config.dt)
         self.last_qd = qd
@@ -474,6 +482,7 @@ class TeleopLoop:
             actual_linear_velocities=step.actual_linear_velocities,
             constraint_errors=errors, constraint_names=self._names,
             status=step.status, message=step.message,
+            plant=None if self.plant is None else self.plant.measures(),
         )
 
     def _row_labels(self) -> tuple[str, ...]:

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import collections
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
+from constraints import Constraint
 from constraints.validation import as_number
 from teleop.limits import (
     MAX_ENCODER_NOISE_RAD,
@@ -119,8 +121,9 @@ class ImperfectPlant:
         self._mean_gain = tau * (1.0 - self._decay) / dt if tau > 0 else 0.0
         self.reset()
 
-    def reset(self) -> None:
-        """No command in flight, joints still (the noise sequence goes on)."""
+    def reset(self, q: np.ndarray | None = None) -> None:
+        """No command in flight, joints still (the noise sequence goes on); the
+        configuration ``q`` is the loop's, nothing here keeps one."""
         nv = self.model.nv
         self._queue = collections.deque(np.zeros(nv) for _ in range(self.imperfections.latency))
         self._velocity = np.zeros(nv)
@@ -132,10 +135,15 @@ class ImperfectPlant:
             return q
         return pin.integrate(self.model, q, self._rng.normal(0.0, sigma, self.model.nv))
 
-    def actuate(self, qd: np.ndarray) -> np.ndarray:
-        """The mean joint velocity over the coming period (delayed, then filtered)."""
+    def actuate(self, qd: np.ndarray, q: np.ndarray | None = None,
+                constraints: Sequence[Constraint] = ()) -> np.ndarray:
+        """The mean joint velocity over the coming period (delayed, then filtered); the
+        configuration and the constraints do not change it."""
         self._queue.append(np.array(qd, dtype=float))
         command = self._queue.popleft()
         start = self._velocity
         self._velocity = command + (start - command) * self._decay
         return command + (start - command) * self._mean_gain
+
+    def measures(self) -> None:
+        """Nothing measured beyond the loop's own figures."""

@@ -1,0 +1,76 @@
+"""How the simulated robot is built and driven (docs/design.md section 17.1)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from constraints.validation import as_number
+
+#: The control rate the physics must at least double (Hz): 2 kHz under a 1 kHz loop.
+MIN_PHYSICS_RATE_HZ = 2000.0
+
+
+@dataclass(frozen=True)
+class PlantSettings:
+    """The physics plant's body and servos (docs/design.md section 17.1).
+
+    Attributes
+    ----------
+    physics_rate : physics steps per second (Hz); at least :data:`MIN_PHYSICS_RATE_HZ` and
+        twice the control rate; a control period runs ``ceil(physics_rate dt)`` steps.
+    servo_bandwidth : natural frequency of each joint's position servo (Hz): the servo's
+        gains are ``kp = I w^2``, ``kd = 2 zeta I w`` with ``w = 2 pi bandwidth`` and ``I``
+        the joint's diagonal inertia (armature included) at the start configuration.
+    servo_damping_ratio : ``zeta`` of the servos (1: critically damped).
+    armature : reflected rotor inertia of every joint (kg m^2; kg on a prismatic joint).
+    joint_damping : viscous damping of every joint the servo does not know of (N m s/rad).
+    payload : mass (kg) carried at each end effector, unknown to the gravity compensation
+        and the controllers.
+    coulomb_friction : dry friction torque of every joint (N m), unknown to the servos.
+    viscous_friction : extra viscous friction of every joint (N m s/rad), unknown too.
+    gravity : gravity on (the servos compensate the modelled robot's, not the payload's).
+    """
+
+    physics_rate: float = MIN_PHYSICS_RATE_HZ
+    servo_bandwidth: float = 20.0
+    servo_damping_ratio: float = 1.0
+    armature: float = 0.1
+    joint_damping: float = 1.0
+    payload: float = 0.0
+    coulomb_friction: float = 0.0
+    viscous_friction: float = 0.0
+    gravity: bool = True
+
+    def __post_init__(self) -> None:
+        """Every field a finite number in its range (``ValueError`` naming it)."""
+        as_number(self.physics_rate, "physics_rate", MIN_PHYSICS_RATE_HZ, maximum=1e5)
+        as_number(self.servo_bandwidth, "servo_bandwidth", positive=True, maximum=200.0)
+        as_number(self.servo_damping_ratio, "servo_damping_ratio", positive=True, maximum=10.0)
+        as_number(self.armature, "armature", positive=True, maximum=1e3)
+        for name in ("joint_damping", "coulomb_friction", "viscous_friction"):
+            as_number(getattr(self, name), name, 0.0, maximum=1e4)
+        as_number(self.payload, "payload", 0.0, maximum=100.0)
+        if not isinstance(self.gravity, bool):
+            raise ValueError(f"gravity must be True or False, got {self.gravity!r}")
+
+    def substeps(self, dt: float) -> int:
+        """Physics steps per control period ``dt``: at least two."""
+        return max(2, math.ceil(self.physics_rate * dt - 1e-9))
+
+    def to_dict(self) -> dict[str, float | bool]:
+        """The ``plant`` entry of metrics.json (units in the key names)."""
+        return {"physics_rate_hz": self.physics_rate, "servo_bandwidth_hz": self.servo_bandwidth,
+                "servo_damping_ratio": self.servo_damping_ratio, "armature_kg_m2": self.armature,
+                "joint_damping_nms": self.joint_damping, "payload_kg": self.payload,
+                "coulomb_friction_nm": self.coulomb_friction,
+                "viscous_friction_nms": self.viscous_friction, "gravity": self.gravity}
+
+    def describe(self) -> str:
+        """One line for humans."""
+        extras = [f"payload {self.payload:g} kg"] if self.payload else []
+        if self.coulomb_friction or self.viscous_friction:
+            extras.append(f"friction {self.coulomb_friction:g} N m + "
+                          f"{self.viscous_friction:g} N m s/rad")
+        return (f"MuJoCo plant at {self.physics_rate:g} Hz, {self.servo_bandwidth:g} Hz servos"
+                + "".join(", " + extra for extra in extras))
