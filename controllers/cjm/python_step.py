@@ -228,14 +228,11 @@ class PythonStep:
         barriers activated again against the saturated command."""
         setup = self.setup
         barriers = self._barriers
-        step = setup.bounds.acceleration_step
-        acceleration = (None if self._reference is None
-                        else (self._reference - step, self._reference + step))
         for _ in range(len(barriers) + 1):
             rows, rows_rhs = self.rows(self._active)
             result = saturate_in_null_space(rows, rows_rhs, ee_jacobian, twist, lower, upper,
                                             setup.bounds.velocity_limit, setup.policy,
-                                            acceleration)
+                                            self._reference, setup.bounds.acceleration_step)
             waiting = [i for i in barriers if i not in self._active]
             violated = [i for i in waiting if self._barrier_violation(i, result.qd) > BARRIER_TOLERANCE]
             if not violated:

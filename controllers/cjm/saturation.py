@@ -146,19 +146,23 @@ def _inside(qd: np.ndarray, box: tuple[np.ndarray, np.ndarray]) -> bool:
 def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
                            twist: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                            velocity_limit: np.ndarray, policy: DampingPolicy,
-                           acceleration: tuple[np.ndarray, np.ndarray] | None = None
-                           ) -> Saturation:
+                           previous: np.ndarray | None = None,
+                           acceleration_step: np.ndarray | None = None) -> Saturation:
     """``qd`` inside ``[lower, upper]`` holding the rows first, the twist second.
 
     A joint whose *velocity* limit binds slows the task: Flacco et al.'s scaling, the
     direction of the twist kept; so does one whose *acceleration* bound binds (a bound
-    equal to its side of ``acceleration``, the box ``qd_prev -+ a dt``: docs/design.md
-    8.4), which the next steps widen again. A joint whose *position* bound binds (it is at, or a
+    equal to its side of the box ``previous -+ acceleration_step``: docs/design.md 8.4),
+    which the next steps widen again. A joint whose *position* bound binds (it is at, or a
     period away from, a position limit) is held there like a locked joint and the task
     is solved over the others, in the least-squares sense if they cannot give all of it
     (as the QP does); scaling for it would freeze the arm as the bound shrinks to zero.
+    With acceleration limits the rows' correction of the last resort starts from the
+    previous command brought into the box, not from rest (:func:`_scale_rows`).
     """
     nv = jacobian.shape[1]
+    acceleration = (None if previous is None
+                    else (previous - acceleration_step, previous + acceleration_step))
     free = np.ones(nv, dtype=bool)
     held = np.zeros(nv)
     box = (lower - BOX_MARGIN * (1.0 + np.abs(lower)), upper + BOX_MARGIN * (1.0 + np.abs(upper)))
@@ -194,7 +198,8 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
         split = _solve_over_free(rows, rows_rhs, jacobian, twist, free, held, policy)
         return _result(split.base + scale * split.direction, scale, 1.0, free, critical,
                        jacobian, twist, split)
-    return _scale_rows(rows, rows_rhs, lower, upper, jacobian, twist)
+    start = None if previous is None else np.minimum(np.maximum(previous, lower), upper)
+    return _scale_rows(rows, rows_rhs, lower, upper, jacobian, twist, start)
 
 
 def _acceleration_bound(bound: float, joint: int,
@@ -215,11 +220,15 @@ def _result(qd: np.ndarray, task_scale: float, rows_scale: float, free: np.ndarr
 
 
 def _scale_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                jacobian: np.ndarray, twist: np.ndarray) -> Saturation:
-    """No task, and the rows' correction scaled by the largest factor that fits the box."""
+                jacobian: np.ndarray, twist: np.ndarray,
+                start: np.ndarray | None = None) -> Saturation:
+    """No task, and the rows' correction from ``start`` (rest, or with acceleration limits
+    the previous command in the box), ``start + r A^+ (b - A start)``, scaled by the
+    largest ``r`` that fits the box."""
     _, rows_pinv, _ = nullspace(rows)
-    correction = rows_pinv @ rows_rhs
+    start = np.zeros(rows.shape[1]) if start is None else start
+    correction = rows_pinv @ (rows_rhs - rows @ start)
     everything = np.ones(correction.size, dtype=bool)
-    scale, _ = task_scale_limit(np.zeros_like(correction), correction, lower, upper, everything)
+    scale, _ = task_scale_limit(start, correction, lower, upper, everything)
     scale = max(scale, 0.0)  # -inf: a joint past its limit; the caller clips
-    return _result(scale * correction, 0.0, scale, everything, -1, jacobian, twist)
+    return _result(start + scale * correction, 0.0, scale, everything, -1, jacobian, twist)

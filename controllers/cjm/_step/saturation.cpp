@@ -185,14 +185,22 @@ void Step::saturation_result(const Inputs& in, double task_scale, double rows_sc
 
 void Step::scale_rows(const Inputs& in) {
   // no task, the rows' minimum-norm correction scaled by the largest factor in the box
+  // from rest, or with acceleration limits from the previous command brought into the box
   const Index m = row_count_;
   null_.factor(rows_.topRows(m));
-  null_.pseudo_solve(rhs_.head(m), direction_);
+  if (accelerating_) {
+    base_ = previous_.cwiseMax(lower_).cwiseMin(upper_);
+  } else {
+    base_.setZero();
+  }
+  auto rhs = rows_scratch_.head(m);
+  rhs.noalias() = rows_.topRows(m) * base_;
+  rhs = rhs_.head(m) - rhs;
+  null_.pseudo_solve(rhs, direction_);
   free_.setConstant(true);
-  base_.setZero();
   Index critical = -1;
   const double scale = std::max(task_scale_limit(base_, direction_, critical), 0.0);
-  sns_qd_ = scale * direction_;
+  sns_qd_ = base_ + scale * direction_;
   saturation_result(in, 0.0, scale, -1, Split());  // no task solved
 }
 
