@@ -157,8 +157,9 @@ def _add_plant_options(parser: argparse.ArgumentParser, base: str) -> None:
 
 def plant_choice(args: argparse.Namespace, base=None):
     """The plant the options ask for, over ``base`` (a ``PlantChoice``: a session's; None:
-    the kinematic plant): each option given replaces ``base``'s value. ``ValueError`` for
-    a physics option on the kinematic plant."""
+    the kinematic plant): each option given replaces ``base``'s value (``--plant
+    kinematic`` drops its physics settings). ``ValueError`` for a physics option on the
+    kinematic plant."""
     from dataclasses import replace
 
     from teleop.experiments.plant_choice import PlantChoice
@@ -171,7 +172,10 @@ def plant_choice(args: argparse.Namespace, base=None):
         raise ValueError(f"{', '.join(option for option, _ in given)} "
                          f"need{'s' * (len(given) == 1)} --plant mujoco (the kinematic plant "
                          "has no body)")
-    settings = replace(base.settings, **{name: getattr(args, name) for _, name in given})
+    from teleop.plants import PlantSettings
+
+    physics = base.settings if kind == "mujoco" else PlantSettings()  # none on kinematic
+    settings = replace(physics, **{name: getattr(args, name) for _, name in given})
     stiffness = base.wall_stiffness if args.wall_stiffness is None else args.wall_stiffness * 1e3
     return PlantChoice(kind, settings, stiffness)
 
