@@ -41,4 +41,4 @@ def power_fraction_above(velocity: np.ndarray, dt: float,
     if total <= 0.0:
         return 0.0
     frequencies = np.fft.rfftfreq(steps, dt)
-    return float(np.sum(power[frequencies > cutoff]) / total)
+    return min(1.0, float(np.sum(power[frequencies > cutoff]) / total))  # round-off above 1
