@@ -92,9 +92,22 @@ def check_07(out: str, tmp: Path) -> None:
     assert difference <= 5e-3
 
 
+def check_08(out: str, tmp: Path) -> None:
+    (ideal,) = numbers(r"kinematic plant: hole error max NUMBER mm", out)
+    (simulated,) = numbers(r"mujoco plant: hole error max NUMBER mm", out)
+    (force,) = numbers(r"port force max NUMBER N", out)
+    (displacement,) = numbers(r"tissue displacement of NUMBER mm", out)
+    assert ideal <= 1e-3 < simulated, (ideal, simulated)  # the body shows, in microns
+    assert simulated <= 0.1 and 0.0 < force <= 0.2  # the targets for the CJM
+    # the spring's share of the force, 1 N/mm x displacement, is at most the force (the
+    # damper adds the rest) and the displacement never exceeds the largest hole error
+    assert 1.0 * displacement <= force + 1e-4 and displacement <= simulated + 1e-4
+
+
 CHECKS = {"01_cjm_vs_qp.py": check_01, "02_closed_loop.py": check_02, "03_barrier.py": check_03,
           "04_any_urdf.py": check_04, "05_mink_peer.py": check_05,
-          "06_embed_teleop_app.py": check_06, "07_two_trocars.py": check_07}
+          "06_embed_teleop_app.py": check_06, "07_two_trocars.py": check_07,
+          "08_physics_plant.py": check_08}
 
 
 def test_the_examples_folder_has_the_documented_scripts():

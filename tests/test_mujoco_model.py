@@ -57,6 +57,8 @@ ROBOTS = {
     "ur5_instrument": lambda: load_robot("ur5_instrument"),
     "sda10f_dual_mobile": lambda: load_robot("sda10f_dual_mobile"),
     "panda_fingers_locked": panda_fingers_locked,
+    # continuous joints 1, 4 and 6: (cos, sin) in Pinocchio, an angle in MuJoCo
+    "kinova": lambda: EXAMPLE_ARMS["kinova"].load(),
 }
 
 
@@ -87,8 +89,11 @@ def site_pose(mj_model: mujoco.MjModel, data: mujoco.MjData, frame: str) -> pin.
 
 def test_the_model_has_pinocchios_joints(built):
     robot, frames, mj_model, joints = built
-    planar = 0 if joints.base is None else 1  # (cos, sin) in Pinocchio, th in MuJoCo
-    assert (mj_model.nq, mj_model.nv) == (robot.model.nq - planar, robot.model.nv)
+    # (cos, sin) in Pinocchio, an angle in MuJoCo: the planar heading, each continuous joint
+    planar = 0 if joints.base is None else 1
+    continuous = sum(1 for j in range(1, robot.model.njoints)
+                     if robot.model.nqs[j] == 2 and robot.model.nvs[j] == 1)
+    assert (mj_model.nq, mj_model.nv) == (robot.model.nq - planar - continuous, robot.model.nv)
     names = [robot.model.names[j] for j in range(1, robot.model.njoints)
              if robot.model.nvs[j] == 1]
     assert list(joints.names) == names
@@ -148,7 +153,16 @@ def test_the_joint_map_round_trips(built, seed):
 
 
 def test_a_joint_it_cannot_map_is_refused_by_name():
-    """Kinova's continuous joints are (cos, sin) in Pinocchio, an angle in MuJoCo."""
-    robot = EXAMPLE_ARMS["kinova"].load()
-    with pytest.raises(ValueError, match="j2s6s200_joint_1"):
-        build_mujoco_model(robot.model, robot.urdf_path.read_text(), [robot.ee_frame])
+    """A floating joint between two links (MuJoCo allows a free joint at the root only)."""
+    urdf = """<robot name="floating"><link name="base"/>
+      <link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
+        ixy="0" ixz="0" iyz="0"/></inertial></link>
+      <link name="b"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"
+        ixy="0" ixz="0" iyz="0"/></inertial></link>
+      <joint name="hinge" type="revolute"><parent link="base"/><child link="a"/>
+        <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="10" velocity="1"/></joint>
+      <joint name="loose" type="floating"><parent link="a"/><child link="b"/></joint>
+    </robot>"""
+    model = pin.buildModelFromXML(urdf)
+    with pytest.raises(ValueError, match="joint 'loose'.*JointModelFreeFlyer"):
+        build_mujoco_model(model, urdf, [])

@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from constraints import Hole
+from example_robots import EXAMPLE_ARMS
 from teleop.plants import Imperfections, MujocoPlant, PlantSettings
 
 DT = 1e-3
@@ -38,6 +39,18 @@ def test_with_zero_command_the_gravity_compensated_robot_holds_still(name, reque
     assert drift <= 1e-4, drift
     # the drives hold the robot's weight: a real torque, inside the URDF's effort limits
     assert 0.05 < plant.measures().torque_ratio < 1.0 and not plant.measures().saturated
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "xarm7", "kinova"])
+def test_any_urdf_holds_still_on_the_plant(name):
+    """Robots nobody here wrote (example-robot-data), the Panda's fingers locked, Kinova's
+    continuous joints ((cos, sin) in Pinocchio, an angle in MuJoCo)."""
+    locked = {"locked_joints": ["panda_finger_joint1", "panda_finger_joint2"]} if name == "panda" else {}
+    robot = EXAMPLE_ARMS[name].load(**locked)
+    plant = MujocoPlant(robot, DT)
+    q = run(plant, robot, robot.q_home.copy(), [np.zeros(robot.model.nv)] * 2000)
+    assert np.max(np.abs(pin.difference(robot.model, robot.q_home, q))) <= 1e-4
+    assert 0.05 < plant.measures().torque_ratio < 1.0
 
 
 def test_without_the_drives_compensation_the_robot_falls(sda10f):
@@ -190,3 +203,30 @@ def test_the_physics_runs_at_least_twice_the_control_rate():
     assert PlantSettings().substeps(0.25e-3) == 2  # a 4 kHz loop still gets two steps
     with pytest.raises(ValueError, match="physics_rate"):
         PlantSettings(physics_rate=1000.0)
+
+
+def test_the_slow_paper_scenario_on_the_plant_follows_the_ideal_integrator(sda10f):
+    """The paper's slow operator motion (+-1.5 cm) with the CJM: on the stiff plant the EE
+    stays within 20 um of its path on the ideal integrator (the servos' lag, `a / w^2`,
+    times the arm's reach, is a few microns) and the hole error within 1 um."""
+    from teleop.controller_specs import make_controller
+    from teleop.experiments.scenarios import load_scenario
+    from teleop.loop import LoopConfig, TeleopLoop
+
+    plan, config = load_scenario("paper-hole", sda10f), LoopConfig()
+    paths, hole_errors = {}, {}
+    for name in ("kinematic", "mujoco"):
+        constraints = plan.make_constraints()
+        controller = make_controller("cjm", sda10f, constraints, dt=config.dt)
+        plant = MujocoPlant(sda10f, config.dt) if name == "mujoco" else None
+        loop = TeleopLoop(sda10f, controller, q0=plan.q0, config=config, plant=plant)
+        path, worst = [], 0.0
+        for i in range(1500):
+            record = loop.tick(plan.target((i + 1) * config.dt))
+            path.append(loop.ee_placement().translation.copy())
+            worst = max(worst, record.constraint_error)
+            assert not record.failed, record.message
+        paths[name], hole_errors[name] = np.array(path), worst
+    apart = np.max(np.linalg.norm(paths["mujoco"] - paths["kinematic"], axis=1))
+    assert 1e-8 < apart < 20e-6, apart
+    assert hole_errors["mujoco"] < 1e-6, hole_errors

@@ -29,6 +29,9 @@ def site_name(frame_name: str) -> str:
 #: the root joint of a mobile base.
 _PLANAR = "JointModelPlanar"
 
+#: Pinocchio's unbounded revolute joints (``JointModelRUBX``, ...): ``(cos, sin)``, nv 1.
+_CONTINUOUS = "JointModelRUB"
+
 #: Names given to the MuJoCo joints of a planar root joint: suffixes to its Pinocchio name.
 PLANAR_SUFFIXES = (":x", ":y", ":heading")
 
@@ -66,9 +69,9 @@ def mujoco_spec(
     ``locked_joints`` (the robot's, joint name to its Pinocchio coordinates) are made
     fixed at those positions, as ``model`` has them.
 
-    Raises ``ValueError`` when a joint of ``model`` is not in the URDF (:func:`joint_map`
-    checks the rest: names, and joints that are neither 1-dof revolute/prismatic in both
-    nor a planar root joint).
+    Raises ``ValueError`` naming a joint of ``model`` that is not in the URDF or has more
+    than one degree of freedom (other than a planar root joint); :func:`joint_map` checks
+    the rest.
     """
     spec = mujoco.MjSpec.from_string(kinematic_urdf(urdf_text, locked_joints or {}))
     # massless links are fine for kinematics: bound mass/inertia so that they compile
@@ -80,6 +83,11 @@ def mujoco_spec(
         if _is_planar_root(model, j):
             bodies[j] = _add_planar_base(spec, model, name)
             continue
+        if model.nvs[j] != 1:
+            raise ValueError(
+                f"joint {name!r}: only 1-dof revolute/prismatic joints, continuous joints and "
+                f"a planar root joint are supported (Pinocchio {model.joints[j].shortname()}, "
+                f"nq={model.nqs[j]}, nv={model.nvs[j]})")
         joint = spec.joint(name)
         if joint is None:
             raise ValueError(f"joint {name!r} of the Pinocchio model is not in the MuJoCo model")
@@ -136,6 +144,7 @@ def joint_map(model: pin.Model, mj_model: mujoco.MjModel) -> JointMap:
         raise ValueError(
             f"joints differ between Pinocchio {pin_names} and MuJoCo {mj_names}")
     names, pin_q, pin_v, mj_q, mj_v = [], [], [], [], []
+    continuous_pin_q, continuous_mj_q = [], []
     base = None
     for j in range(1, model.njoints):
         name = model.names[j]
@@ -149,24 +158,34 @@ def joint_map(model: pin.Model, mj_model: mujoco.MjModel) -> JointMap:
                               mj_q=int(mj_model.jnt_qposadr[x]), mj_v=int(mj_model.jnt_dofadr[x]))
             continue
         jid = mj_model.joint(name).id
+        if (model.joints[j].shortname().startswith(_CONTINUOUS) and model.nvs[j] == 1
+                and int(mj_model.jnt_type[jid]) == int(mujoco.mjtJoint.mjJNT_HINGE)):
+            names.append(name)
+            pin_v.append(model.idx_vs[j])
+            mj_v.append(mj_model.jnt_dofadr[jid])
+            continuous_pin_q.append(model.idx_qs[j])
+            continuous_mj_q.append(mj_model.jnt_qposadr[jid])
+            continue
         if model.nqs[j] != 1 or model.nvs[j] != 1 or int(mj_model.jnt_type[jid]) not in scalar:
             raise ValueError(
-                f"joint {name!r}: only 1-dof revolute/prismatic joints and a planar root "
-                f"joint are supported (Pinocchio nq={model.nqs[j]}, nv={model.nvs[j]}, "
+                f"joint {name!r}: only 1-dof revolute/prismatic joints, continuous joints "
+                f"and a planar root joint are supported (Pinocchio nq={model.nqs[j]}, nv={model.nvs[j]}, "
                 f"MuJoCo type {mujoco.mjtJoint(int(mj_model.jnt_type[jid])).name})")
         names.append(name)
         pin_q.append(model.idx_qs[j])
         pin_v.append(model.idx_vs[j])
         mj_q.append(mj_model.jnt_qposadr[jid])
         mj_v.append(mj_model.jnt_dofadr[jid])
-    heading_coordinates = 0 if base is None else 1  # (cos, sin) in Pinocchio, th in MuJoCo
-    if mj_model.nq != model.nq - heading_coordinates or mj_model.nv != model.nv:
+    # (cos, sin) in Pinocchio, an angle in MuJoCo: the heading and each continuous joint
+    angle_coordinates = (0 if base is None else 1) + len(continuous_pin_q)
+    if mj_model.nq != model.nq - angle_coordinates or mj_model.nv != model.nv:
         raise ValueError(f"MuJoCo nq/nv = {mj_model.nq}/{mj_model.nv}, "
                          f"Pinocchio {model.nq}/{model.nv}")
     pin_q, pin_v, mj_q, mj_v = (np.array(i, dtype=int) for i in (pin_q, pin_v, mj_q, mj_v))
-    identity = bool(base is None
+    identity = bool(base is None and not continuous_pin_q
                     and np.array_equal(pin_q, mj_q) and np.array_equal(pin_v, mj_v)
                     and np.array_equal(pin_q, np.arange(model.nq))
                     and np.array_equal(pin_v, np.arange(model.nv)))
-    return JointMap(tuple(names), pin_q, pin_v, mj_q, mj_v, identity, base)
+    return JointMap(tuple(names), pin_q, pin_v, mj_q, mj_v, identity, base,
+                    np.array(continuous_pin_q, dtype=int), np.array(continuous_mj_q, dtype=int))
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -69,7 +69,9 @@ class JointMap:
     For every 1-dof joint ``k`` (revolute or prismatic): ``q_mj[mj_q[k]] = q_pin[pin_q[k]]``
     and ``v_mj[mj_v[k]] = v_pin[pin_v[k]]``. A planar root joint, if any, is ``base``
     (:class:`PlanarBase`): its velocity map turns with the heading, so the velocity and
-    column maps take the MuJoCo configuration ``q_mj`` they apply at. Built-in fixed-base
+    column maps take the MuJoCo configuration ``q_mj`` they apply at. A continuous joint
+    (Pinocchio's unbounded revolute, ``(cos, sin)`` at ``continuous_pin_q``) is an angle
+    at ``continuous_mj_q`` in MuJoCo; its velocity maps like any 1-dof joint's. Built-in fixed-base
     robots have 8 revolute joints in the same order in both models (``identity``, the
     maps then only copy), but nothing here assumes it.
     """
@@ -81,6 +83,8 @@ class JointMap:
     mj_v: np.ndarray
     identity: bool
     base: PlanarBase | None = None
+    continuous_pin_q: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    continuous_mj_q: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
     def q_to_mujoco(self, q_pin: np.ndarray, out: np.ndarray) -> np.ndarray:
         """MuJoCo ``qpos`` from a Pinocchio configuration, written into ``out``."""
@@ -88,6 +92,8 @@ class JointMap:
             out[:] = q_pin
             return out
         out[self.mj_q] = q_pin[self.pin_q]
+        cos, sin = q_pin[self.continuous_pin_q], q_pin[self.continuous_pin_q + 1]
+        out[self.continuous_mj_q] = np.arctan2(sin, cos)
         if self.base is not None:
             self.base.q_to_mujoco(q_pin, out)
         return out
@@ -98,6 +104,8 @@ class JointMap:
             out[:] = q_mj
             return out
         out[self.pin_q] = q_mj[self.mj_q]
+        angle = q_mj[self.continuous_mj_q]
+        out[self.continuous_pin_q], out[self.continuous_pin_q + 1] = np.cos(angle), np.sin(angle)
         if self.base is not None:
             self.base.q_to_pinocchio(q_mj, out)
         return out

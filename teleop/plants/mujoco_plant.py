@@ -79,7 +79,9 @@ class MujocoPlant:
         self.model: pin.Model = robot.model
         self.dt = float(dt)
         self.substeps = self.settings.substeps(self.dt)
-        self.shaping = ImperfectPlant(imperfections or Imperfections(), robot.model, dt)
+        #: the imperfect robot's noise, latency and lag (None: a perfect interface)
+        self.shaping: ImperfectPlant | None = (imperfections or Imperfections()).plant(
+            robot.model, dt)
         self.mj_model = self._compile(robot)
         self.mj_data = mujoco.MjData(self.mj_model)
         self.joints = joint_map(self.model, self.mj_model)
@@ -97,8 +99,8 @@ class MujocoPlant:
 
     @staticmethod
     def _site_frames(robot) -> list[str]:
-        frames = [frame.name for frame in robot.model.frames if frame.type == pin.FrameType.BODY]
-        return list(dict.fromkeys(frames + list(robot.ee_frames)))
+        """Every frame a constraint or an EE can sit on (all but the universe)."""
+        return list(dict.fromkeys(frame.name for frame in robot.model.frames[1:]))
 
     def _compile(self, robot) -> mujoco.MjModel:
         """The URDF's bodies, the drives' rotor inertia, damping and friction, two
@@ -194,12 +196,13 @@ class MujocoPlant:
         data.qvel[:] = 0.0
         data.act[self._activation] = data.qpos[self._qpos_of_dof[
             self._actuator_dofs[self._reference_actuators]]]
-        self.shaping.reset()
+        if self.shaping is not None:
+            self.shaping.reset()
         self.last = PlantMeasures(np.zeros((0, 3)), np.zeros(0), 0.0, False)
 
     def sense(self, q: np.ndarray) -> np.ndarray:
         """The simulated configuration ``q`` with the encoder noise on top."""
-        return self.shaping.sense(q)
+        return q if self.shaping is None else self.shaping.sense(q)
 
     def actuate(self, qd: np.ndarray, q: np.ndarray,
                 constraints: Sequence[Constraint] = ()) -> np.ndarray:
@@ -207,19 +210,21 @@ class MujocoPlant:
         filtered by the imperfections); the mean velocity that takes the loop's true
         configuration ``q`` to the simulated one."""
         model, data = self.mj_model, self.mj_data
-        command = self.joints.v_to_mujoco(self.shaping.actuate(qd), data.qpos)
+        shaped = qd if self.shaping is None else self.shaping.actuate(qd)
+        command = self.joints.v_to_mujoco(shaped, data.qpos)
         data.ctrl[:] = command[self._actuator_dofs]
         holes = [c for c in constraints if c.has_wall]
         forces, displacements = np.zeros((len(holes), 3)), np.zeros(len(holes))
         data.qfrc_applied[:] = 0.0
-        if not holes:  # one call: the physics steps without Python between them
+        if holes:  # each physics step split to apply the wall's force at its kinematics
+            for _ in range(self.substeps):
+                mujoco.mj_step1(model, data)
+                data.qfrc_applied[:] = 0.0
+                for i, hole in enumerate(holes):
+                    forces[i], displacements[i] = self._push(hole)
+                mujoco.mj_step2(model, data)
+        else:  # one call: the physics steps without Python between them
             mujoco.mj_step(model, data, self.substeps)
-        for _ in range(self.substeps if holes else 0):
-            mujoco.mj_step1(model, data)
-            data.qfrc_applied[:] = 0.0
-            for i, hole in enumerate(holes):
-                forces[i], displacements[i] = self._push(hole)
-            mujoco.mj_step2(model, data)
         torque = np.abs(data.qfrc_actuator) / self.effort_limit
         ratio = float(np.max(torque))
         saturated = ratio >= 1.0 - 1e-12
