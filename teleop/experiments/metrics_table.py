@@ -24,10 +24,10 @@ TABLE_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (
 #: The second table's columns (docs/design.md section 17.3): the robot's body (null on the
 #: kinematic plant, shown ``-``) and the run's smoothness.
 BODY_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (
-    ("hole err max (mm)", "hole_error_max_m", lambda v: f"{1e3 * v:.4f}"),
+    ("hole err max (um)", "hole_error_max_m", lambda v: f"{1e6 * v:.3g}"),
     ("port force max (N)", "port_force_max_n", lambda v: f"{v:.3f}"),
     ("port force RMS (N)", "port_force_rms_n", lambda v: f"{v:.3f}"),
-    ("tissue disp max (mm)", "port_displacement_max_m", lambda v: f"{1e3 * v:.4f}"),
+    ("tissue disp max (um)", "port_displacement_max_m", lambda v: f"{1e6 * v:.3g}"),
     ("EE pos max (mm)", "ee_position_error_max_m", lambda v: f"{1e3 * v:.3f}"),
     ("torque / limit max", "torque_ratio_max", lambda v: f"{v:.2f}"),
     ("saturated steps", "actuator_saturated_steps", lambda v: f"{v}"),

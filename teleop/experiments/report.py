@@ -172,11 +172,11 @@ def _body_table(document: dict) -> str:
     ports = list(first.get("ports", {}))
     if ports:
         rows += ["</table>", "<table>", "<tr><th>controller</th>"
-                 + "".join(f"<th>{e(p)}: force max / RMS (N), displacement max (mm)</th>"
+                 + "".join(f"<th>{e(p)}: force max / RMS (N), displacement max (um)</th>"
                            for p in ports) + "</tr>"]
         for spec, m in document["controllers"].items():
             cells = [f"{m['ports'][p]['force_max_n']:.3f} / {m['ports'][p]['force_rms_n']:.3f}, "
-                     f"{1e3 * m['ports'][p]['displacement_max_m']:.4f}"
+                     f"{1e6 * m['ports'][p]['displacement_max_m']:.3g}"
                      if p in m["ports"] else "-" for p in ports]
             rows.append(f"<tr><td>{e(spec)}</td>" + "".join(f"<td>{e(c)}</td>" for c in cells)
                         + "</tr>")
