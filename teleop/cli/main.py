@@ -46,6 +46,16 @@ time_constant = bounded(float, 0.0, MAX_TIME_CONSTANT_S, unit="s")
 latency = bounded(int, 0, MAX_LATENCY_PERIODS)
 count = bounded(int, 0)
 iterations = bounded(int, 1, MAX_BENCH_ITERATIONS)
+wall_stiffness = bounded(float, 0.0, 1e4, unit="N/mm")
+payload = bounded(float, 0.0, 100.0, unit="kg")
+friction = bounded(float, 0.0, 1e4)
+physics_rate = bounded(float, 2000.0, 1e5, unit="Hz")
+servo_bandwidth = bounded(float, 0.0, 200.0, inclusive_minimum=False, unit="Hz")
+
+#: The physics plant's options: (option, the PlantSettings field) (docs/cli.md).
+PLANT_OPTIONS = (("--payload", "payload"), ("--coulomb-friction", "coulomb_friction"),
+                 ("--viscous-friction", "viscous_friction"), ("--physics-rate", "physics_rate"),
+                 ("--servo-bandwidth", "servo_bandwidth"))
 
 
 def _controllers_epilog(context: str) -> str:
@@ -114,6 +124,60 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
                        help="first-order response of the joint velocities to their command, "
                        f"at most {MAX_TIME_CONSTANT_S:g}")
     robot.add_argument("--seed", type=count, default=0, help="seed of the encoder noise")
+    _add_plant_options(parser, "the session's plant (its header), else the defaults"
+                       if source == "session" else "its default")
+
+
+def _add_plant_options(parser: argparse.ArgumentParser, base: str) -> None:
+    """``--plant`` and its knobs; ``base`` says what an option left out means."""
+    plant = parser.add_argument_group(
+        "the plant", "the robot the loop drives, the same for every controller "
+        "(docs/design.md section 17); an option left out: " + base)
+    plant.add_argument("--plant", choices=("kinematic", "mujoco"),
+                       help="kinematic: the ideal integrator q += qd dt; mujoco: the URDF "
+                       "simulated in MuJoCo, servoed drives, a wall at every hole "
+                       "(default: kinematic)")
+    plant.add_argument("--wall-stiffness", type=wall_stiffness, metavar="N_PER_MM",
+                       help="lateral stiffness of the abdominal wall at every hole, at most "
+                       "1e4 (default: each hole's own, 1 N/mm)")
+    plant.add_argument("--payload", type=payload, metavar="KG",
+                       help="mass at each EE the plant carries and the gravity compensation "
+                       "and the controllers do not know of, at most 100 (mujoco; default: 0)")
+    plant.add_argument("--coulomb-friction", type=friction, metavar="NM",
+                       help="dry friction of every joint, at most 1e4 (mujoco; default: 0)")
+    plant.add_argument("--viscous-friction", type=friction, metavar="NMS",
+                       help="viscous friction of every joint (N m s/rad), at most 1e4 "
+                       "(mujoco; default: 0)")
+    plant.add_argument("--physics-rate", type=physics_rate, metavar="HZ",
+                       help="physics steps per second, in [2000, 1e5] (mujoco; default: 2000)")
+    plant.add_argument("--servo-bandwidth", type=servo_bandwidth, metavar="HZ",
+                       help="natural frequency of each joint's position servo, at most 200 "
+                       "(mujoco; default: 20)")
+
+
+def plant_choice(args: argparse.Namespace, base=None):
+    """The plant the options ask for, over ``base`` (a ``PlantChoice``: a session's; None:
+    the kinematic plant): each option given replaces ``base``'s value (``--plant
+    kinematic`` drops its physics settings). ``ValueError`` for a physics option on the
+    kinematic plant."""
+    from dataclasses import replace
+
+    from teleop.experiments.plant_choice import PlantChoice
+
+    base = base or PlantChoice()
+    kind = args.plant or base.kind
+    given = [(option, name) for option, name in PLANT_OPTIONS
+             if getattr(args, name) is not None]
+    if kind == "kinematic" and given:
+        raise ValueError(f"{', '.join(option for option, _ in given)} "
+                         f"need{'s' * (len(given) == 1)} --plant mujoco (the kinematic plant "
+                         "has no body)")
+    from teleop.plants import PlantSettings
+
+    physics = base.settings if kind == "mujoco" else PlantSettings()  # none on kinematic
+    settings = replace(physics, **{name: getattr(args, name) for _, name in given})
+    stiffness = base.wall_stiffness if args.wall_stiffness is None else args.wall_stiffness * 1e3
+    return PlantChoice(kind, settings, stiffness)
 
 
 def build_parser(registered: bool = True) -> argparse.ArgumentParser:
@@ -149,6 +213,8 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
                         help=f"seconds to record, at most {MAX_DURATION_S:g} (default: the whole "
                         "scenario)")
     record.add_argument("file", help="session file to write")
+    _add_plant_options(record, "its default; the plant is written in the session's header "
+                       "for 'teleop replay'")
 
     _add_command(commands, "scenarios", "list the scripted scenarios", _scenarios)
 
@@ -166,6 +232,8 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
                        help="skip the generated-chain scaling runs")
     bench.add_argument("--json", metavar="FILE",
                        help="also write the results as JSON to FILE (default: no JSON)")
+    _add_plant_options(bench, "its default; with --plant, each control period's tick is "
+                       "timed on the kinematic plant and on this one (the built-in robots)")
 
     if registered:
         _add_registered(commands)
@@ -186,8 +254,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
 
 
-def _run(plan, args: argparse.Namespace, config) -> int:
-    """Compare the controllers on ``plan``, write the outputs, print the table."""
+def _run(plan, args: argparse.Namespace, config, plant) -> int:
+    """Compare the controllers on ``plan`` on ``plant``, write the outputs, print the
+    tables."""
     from teleop.experiments.compare import (
         compare,
         metrics_document,
@@ -195,20 +264,22 @@ def _run(plan, args: argparse.Namespace, config) -> int:
         write_outputs,
     )
     from teleop.plants.imperfect import Imperfections
-    from teleop.experiments.metrics_table import format_table
+    from teleop.experiments.metrics_table import format_body_table, format_table
 
     output_directory(args.out)  # before minutes of simulation
     imperfections = Imperfections(args.encoder_noise, args.latency, args.joint_time_constant,
                                   args.seed)
     duration = args.duration or plan.duration
     results = compare(plan, args.controllers, config, duration, progress=not args.quiet,
-                      imperfections=imperfections)
+                      imperfections=imperfections, plant=plant)
     paths = write_outputs(plan, results, config, duration, args.out, plots=not args.no_plots,
-                          imperfections=imperfections)
-    document = metrics_document(plan, results, config, duration, imperfections)
+                          imperfections=imperfections, plant=plant)
+    document = metrics_document(plan, results, config, duration, imperfections, plant)
     print(f"{plan.name}: {plan.description} ({duration:g} s at {config.rate:g} Hz, "
-          f"{imperfections.describe()})")
+          f"{imperfections.describe()}; {plant.describe()})")
     print(format_table(document))
+    print()
+    print(format_body_table(document))
     for spec, result in results.items():
         if result.failure_messages:
             print(f"  {spec}: {len(result.failure_messages)}+ failed steps, first {result.failure_messages[0]}")
@@ -223,11 +294,12 @@ def _compare(args: argparse.Namespace) -> int:
     from teleop.experiments.scenarios import load_scenario
     from teleop.loop import LoopConfig
 
-    return _run(load_scenario(args.scenario), args, LoopConfig(rate=args.rate or 1000.0))
+    return _run(load_scenario(args.scenario), args, LoopConfig(rate=args.rate or 1000.0),
+                plant_choice(args))
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from teleop.experiments.sessions import load_session, session_plan
+    from teleop.experiments.sessions import load_session, session_plan, session_plant
     from teleop.loop import LoopConfig
 
     session = load_session(args.file)
@@ -235,14 +307,15 @@ def _replay(args: argparse.Namespace) -> int:
     config = LoopConfig(rate=args.rate or header.get("rate_hz", 1000.0),
                         kp=header.get("kp", 20.0),
                         target_time_constant=header.get("target_time_constant_s", 0.0))
-    return _run(session_plan(session), args, config)
+    return _run(session_plan(session), args, config, plant_choice(args, session_plant(session)))
 
 
 def _record(args: argparse.Namespace) -> int:
     from teleop.experiments.scenarios import load_scenario
     from teleop.experiments.sessions import record_plan
 
-    path = record_plan(load_scenario(args.scenario), args.file, args.rate, args.duration)
+    path = record_plan(load_scenario(args.scenario), args.file, args.rate, args.duration,
+                       plant=plant_choice(args))
     print(f"wrote {path}")
     return 0
 
@@ -259,7 +332,9 @@ def _bench(args: argparse.Namespace) -> int:
     from teleop.experiments.bench import format_table, run_bench, run_scaling, write_json
 
     iterations = 20 if args.quick else args.iterations
-    results = run_bench(args.robots, args.controllers, iterations=iterations)
+    plant = plant_choice(args)  # checked even when --plant is left out
+    results = run_bench(args.robots, args.controllers, iterations=iterations,
+                        plant=plant if args.plant else None)
     if not args.no_scaling:
         results += run_scaling(iterations=max(5, iterations // 5),
                                dofs=(8, 16) if args.quick else (8, 16, 32, 64),

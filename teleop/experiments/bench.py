@@ -5,6 +5,11 @@ Every controller of a problem solves the same configurations with the same twist
 commands are compared too: each one's largest ``|qd - qd_ref|`` against the first
 controller listed (docs/design.md section 15.3). The solvers' console output is kept off the
 console (section 15.5), in each timing's ``solver_messages``.
+
+With a plant (``--plant``, docs/design.md section 17) each built-in robot's controllers
+are also timed through a control period's tick, in the same run: the step followed by the
+kinematic integration (``pin.integrate``), and the step followed by the plant's period
+(its physics substeps, then the integration of the velocity it returns).
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
 from teleop.robots.chains import hole_links, load_chain
 
 from .metrics_table import format_status_counts
+from .plant_choice import PlantChoice
 from .solver_output import SolverOutputCapture
 
 #: hole distance along the constrained link of each built-in robot (m)
@@ -58,6 +64,11 @@ class StepTiming:
     #: controller (rad/s; 0 for that one)
     joint_velocity_deviation_max: float = 0.0
     solver_messages: dict[str, int] = field(default_factory=dict)  # kept off the console
+    plant: str = "kinematic"  # the plant of the tick timings (bench_ticks)
+    #: median of the step plus ``pin.integrate``, and of the step plus the plant's period
+    #: (its physics and the integration), over the same configurations (us; 0: not timed)
+    kinematic_tick_median_us: float = 0.0
+    plant_tick_median_us: float = 0.0
 
 
 def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
@@ -83,15 +94,7 @@ def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: in
     """Time one controller on ``holes`` over configurations near the robot's home; returns
     the timing and the commands, one row per configuration."""
     controller = make_controller(spec, robot, holes)
-    rng = np.random.default_rng(seed)
-    # near home, a little off the hole (<= 1e-3 rad or m per velocity coordinate:
-    # sub-millimetre drift to correct), on the configuration manifold (nq != nv on a base)
-    offsets = rng.uniform(-1e-3, 1e-3, (iterations, robot.model.nv))
-    rows = _hole_rows(robot, holes)
-    if len(rows) + robot.task_size > robot.model.nv:  # the twists over-determine qd: stay
-        offsets -= offsets @ rows.T @ np.linalg.pinv(rows).T  # on the holes, to first order
-    configurations = np.array([pin.integrate(robot.model, robot.q_home, offset)
-                               for offset in offsets])
+    configurations = bench_configurations(robot, holes, iterations, seed)
     twist = bench_twist(robot, holes)
     residual = 0.0
     statuses: collections.Counter[str] = collections.Counter()
@@ -118,19 +121,65 @@ def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: in
     return timing, commands
 
 
+def bench_ticks(robot: Robot, holes: Sequence[Hole], spec: str, configurations: np.ndarray,
+                plant: PlantChoice, dt: float = 1e-3) -> tuple[float, float]:
+    """Medians (us) over ``configurations`` of a control period's tick on the kinematic
+    plant (``solve``, then ``pin.integrate``) and on ``plant`` (``solve``, then the plant's
+    ``actuate``, then ``pin.integrate`` of the velocity it returns), each configuration
+    timed both ways in turn; the plant starts at home and keeps its own state."""
+    controller = make_controller(spec, robot, holes, dt=dt)
+    plant.apply_wall(holes)
+    simulated = plant.make(robot, dt)
+    twist = bench_twist(robot, holes)
+    model = robot.model
+    clock = time.perf_counter_ns
+    kinematic, physical = np.empty(len(configurations)), np.empty(len(configurations))
+    for i, q in enumerate(configurations):
+        start = clock()
+        pin.integrate(model, q, controller.solve(q, twist) * dt)
+        middle = clock()
+        command = controller.solve(q, twist)
+        moved = command if simulated is None else simulated.actuate(command, q, holes)
+        pin.integrate(model, q, moved * dt)
+        kinematic[i], physical[i] = (middle - start) * 1e-3, (clock() - middle) * 1e-3
+    return float(np.median(kinematic)), float(np.median(physical))
+
+
+def bench_configurations(robot: Robot, holes: Sequence[Hole], iterations: int,
+                         seed: int = 0) -> np.ndarray:
+    """``iterations`` configurations near home, a little off the holes (<= 1e-3 rad or m
+    per velocity coordinate: sub-millimetre drift to correct), on the configuration
+    manifold (nq != nv on a base)."""
+    rng = np.random.default_rng(seed)
+    offsets = rng.uniform(-1e-3, 1e-3, (iterations, robot.model.nv))
+    rows = _hole_rows(robot, holes)
+    if len(rows) + robot.task_size > robot.model.nv:  # the twists over-determine qd: stay
+        offsets -= offsets @ rows.T @ np.linalg.pinv(rows).T  # on the holes, to first order
+    return np.array([pin.integrate(robot.model, robot.q_home, offset) for offset in offsets])
+
+
 def bench_controllers(robot: Robot, holes: Sequence[Hole], specs: Sequence[str],
-                      iterations: int, warmup: int, label: str | None = None) -> list[StepTiming]:
+                      iterations: int, warmup: int, label: str | None = None,
+                      plant: PlantChoice | None = None) -> list[StepTiming]:
     """:func:`bench_problem` for every spec on one problem, each with its largest joint-
-    velocity deviation from the first spec's commands and its solvers' console output."""
+    velocity deviation from the first spec's commands and its solvers' console output;
+    with ``plant``, also its :func:`bench_ticks` over the same configurations."""
     timings = []
     reference = None
     with SolverOutputCapture() as capture:
         for spec in specs:
             timing, commands = bench_problem(robot, holes, spec, iterations, warmup, label=label)
             reference = commands if reference is None else reference
+            ticks = {}
+            if plant is not None:
+                kinematic, physical = bench_ticks(robot, holes, spec,
+                                                  bench_configurations(robot, holes, iterations),
+                                                  plant)
+                ticks = dict(plant=plant.kind, kinematic_tick_median_us=kinematic,
+                             plant_tick_median_us=physical)
             timings.append(replace(
                 timing, joint_velocity_deviation_max=float(np.max(np.abs(commands - reference))),
-                solver_messages=capture.collect()))
+                solver_messages=capture.collect(), **ticks))
     return timings
 
 
@@ -145,9 +194,10 @@ def check_iterations(iterations: int) -> int:
 
 def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
               controllers: Sequence[str] = default_specs("bench"),
-              iterations: int = 2000) -> list[StepTiming]:
+              iterations: int = 2000, plant: PlantChoice | None = None) -> list[StepTiming]:
     """The built-in robots, one hole on each constrained link (the paper's 6-before/2-after
-    case, on each arm of the dual robots). An unknown robot or an iteration count outside
+    case, on each arm of the dual robots); with ``plant``, each controller's
+    :func:`bench_ticks` too. An unknown robot or an iteration count outside
     [1, :data:`~teleop.limits.MAX_BENCH_ITERATIONS`] raises ``ValueError`` before any run."""
     check_iterations(iterations)
     if isinstance(robots, str):
@@ -160,7 +210,7 @@ def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
     for name in robots:
         robot = load_robot(name)
         results += bench_controllers(robot, bench_holes(robot), controllers, iterations,
-                                     max(1, iterations // 10))
+                                     max(1, iterations // 10), plant=plant)
     return results
 
 
@@ -252,6 +302,13 @@ def format_table(results: Sequence[StepTiming]) -> str:
             f"{'' if daqp_ratio is None else f'{daqp_ratio:.1f}':>8}"
             f"{r.max_constraint_residual:>10.1e}{r.joint_velocity_deviation_max:>10.1e}  "
             f"{r.method:<12}{format_status_counts(r.status_counts)}")
+    ticks = [r for r in results if r.plant_tick_median_us > 0]
+    if ticks:
+        lines += ["", f"{'problem':<20}  {'controller':<13}{'kinematic tick us':>18}"
+                      f"{ticks[0].plant + ' tick us':>18}{'ratio':>8}"]
+        lines += [f"{r.robot:<20}  {r.controller:<13}{r.kinematic_tick_median_us:>18.1f}"
+                  f"{r.plant_tick_median_us:>18.1f}"
+                  f"{r.plant_tick_median_us / r.kinematic_tick_median_us:>8.1f}" for r in ticks]
     return "\n".join(lines)
 
 

@@ -7,6 +7,7 @@ import csv
 import json
 import math
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -19,11 +20,13 @@ from teleop.limits import MAX_DURATION_S, MAX_STEPS
 from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
 
 from teleop.plants.imperfect import Imperfections
+
 from .plan import Plan
-from .results import METRIC_KEYS, RunResult
+from .plant_choice import PlantChoice
+from .results import BODY_METRIC_KEYS, METRIC_KEYS, RunResult
 from .solver_output import SolverOutputCapture
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 
 def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
@@ -63,30 +66,45 @@ def _check_specs(specs: Sequence[str]) -> list[str]:
 def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
              duration: float | None = None,
              on_step: Callable[[int], None] | None = None,
-             imperfections: Imperfections | None = None) -> RunResult:
+             imperfections: Imperfections | None = None,
+             plant: PlantChoice | None = None) -> RunResult:
     """Run one controller through ``plan`` and record every tick.
 
     ``imperfections`` (docs/design.md section 15.1) puts a robot that is not perfect under
-    the loop; None or the default: the perfect robot.
+    the loop; None or the default: the perfect robot. ``plant`` chooses the robot the loop
+    drives (docs/design.md section 17); None: the kinematic one.
     """
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
+    plant = plant or PlantChoice()
     constraints = plan.make_constraints()
+    plant.apply_wall(constraints)
     # simulated time: iteration caps only, no deadline (docs/design.md 10.6)
     controller = make_controller(spec, plan.robot, constraints, dt=config.dt, time_budget=None)
-    records, failures = _drive(plan, controller, constraints, config, steps, imperfections,
-                               on_step)
-    return _collect(spec, records, failures, plan.robot.ee_frames)
+    drive = _drive(plan, controller, constraints, config, steps, imperfections, on_step, plant)
+    return _collect(spec, drive, plan.robot.ee_frames)
+
+
+@dataclass
+class Drive:
+    """What :func:`_drive` recorded: the steps, the first failures, each step's command
+    and the names of the constraints with a wall (the holes' ports) at each step."""
+
+    records: list[StepRecord] = field(default_factory=list)
+    failures: list[str] = field(default_factory=list)
+    commands: list[np.ndarray] = field(default_factory=list)
+    ports: list[tuple[str, ...]] = field(default_factory=list)
 
 
 def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopConfig,
            steps: int, imperfections: Imperfections | None,
-           on_step: Callable[[int], None] | None) -> tuple[list[StepRecord], list[str]]:
-    """Tick ``controller`` (holding ``constraints``) through ``steps`` periods of ``plan``."""
-    plant = (imperfections or Imperfections()).plant(plan.robot.model, config.dt)
-    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config, plant=plant)
-    records: list[StepRecord] = []
-    failures: list[str] = []
+           on_step: Callable[[int], None] | None, plant: PlantChoice) -> Drive:
+    """Tick ``controller`` (holding ``constraints``) through ``steps`` periods of ``plan``
+    on the ``plant`` (every hole added on the way gets its wall)."""
+    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config,
+                      plant=plant.make(plan.robot, config.dt, imperfections))
+    drive = Drive()
+    records, failures = drive.records, drive.failures
     edits_at_measure: list[list[Constraint]] = []
 
     def advance_geometry(now: float) -> None:
@@ -103,20 +121,26 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
         edits_at_measure.clear()
         if changed is not None:
             constraints = changed
+            plant.apply_wall(constraints)
             loop.set_constraints(constraints)
         record = loop.tick(plan.target(t + config.dt), advance_geometry)
         records.append(record)
+        drive.commands.append(loop.last_qd.copy())
+        drive.ports.append(tuple(name for name, constraint
+                                 in zip(record.constraint_names, loop.constraints)
+                                 if constraint.has_wall))
         if record.failed and len(failures) < 10:
             failures.append(f"t={record.t:.3f}s: {record.message}")
         if on_step is not None:
             on_step(i)
-    return records, failures
+    return drive
 
 
-def _collect(spec: str, records: Sequence[StepRecord], failures: list[str],
-             ee_frames: Sequence[str]) -> RunResult:
+def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
     """The records as columns; constraint rows by label and constraints by name, NaN where
-    one did not exist; the EE errors one column per EE."""
+    one did not exist; the EE errors one column per EE; the plant's measures per port
+    (NaN where the port did not exist) when the plant measured them."""
+    records, failures = drive.records, drive.failures
     columns = {name: np.array([getattr(r, name) for r in records], dtype=float)
                for name in RECORD_FIELDS}
     labels = list(dict.fromkeys(label for r in records for label in r.constraint_velocity_labels))
@@ -137,6 +161,16 @@ def _collect(spec: str, records: Sequence[StepRecord], failures: list[str],
         for name, error in zip(r.constraint_names, r.constraint_errors):
             constraint_errors[name][i] = error
     count = len(ee_frames)
+    port_names = list(dict.fromkeys(name for ports in drive.ports for name in ports))
+    measured = [r.plant for r in records if r.plant is not None]
+    physical = len(measured) == len(records) and len(records) > 0
+    port_forces = {name: np.full((len(records), 3), np.nan) for name in port_names}
+    port_displacements = {name: np.full(len(records), np.nan) for name in port_names}
+    if physical:
+        for i, (r, ports) in enumerate(zip(records, drive.ports)):
+            for j, name in enumerate(ports):
+                port_forces[name][i] = r.plant.port_forces[j]
+                port_displacements[name][i] = r.plant.port_displacements[j]
 
     return RunResult(
         controller=spec, columns=columns, constraint_velocity=velocity,
@@ -151,7 +185,15 @@ def _collect(spec: str, records: Sequence[StepRecord], failures: list[str],
                                         for r in records]).reshape(-1, count),
         constraint_errors=constraint_errors,
         failure_messages=failures,
-        status_counts=dict(collections.Counter(r.status for r in records)))
+        status_counts=dict(collections.Counter(r.status for r in records)),
+        commanded_joint_velocity=np.array(drive.commands, dtype=float),
+        actual_linear_velocities=np.array([r.actual_linear_velocities for r in records],
+                                          dtype=float).reshape(-1, count, 3),
+        port_names=port_names,
+        port_forces=port_forces if physical else None,
+        port_displacements=port_displacements if physical else None,
+        torque_ratio=(np.array([m.torque_ratio for m in measured]) if physical else None),
+        actuator_saturated=(np.array([m.saturated for m in measured]) if physical else None))
 
 
 class ShadowedController:
@@ -203,21 +245,24 @@ class ShadowedController:
 def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
                              duration: float | None = None,
                              imperfections: Imperfections | None = None,
-                             on_step: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+                             on_step: Callable[[int], None] | None = None,
+                             plant: PlantChoice | None = None) -> dict[str, np.ndarray]:
     """Per step, ``max_j |qd_spec,j - qd_ref,j|`` (rad/s) of every spec against the first,
     all solved at the same ``q`` and twist along the first spec's closed-loop run (a shadow
     evaluation, docs/design.md section 15.3); zeros for the first spec itself."""
     specs = _check_specs(specs)
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
+    plant = plant or PlantChoice()
     constraints = plan.make_constraints()
+    plant.apply_wall(constraints)
     reference = make_controller(specs[0], plan.robot, constraints, dt=config.dt,
                                 time_budget=None)  # simulated time (docs/design.md 10.6)
     shadows = {spec: make_controller(spec, plan.robot, constraints, dt=config.dt,
                                      time_budget=None)
                for spec in specs[1:]}
     shadowed = ShadowedController(reference, shadows)
-    _drive(plan, shadowed, constraints, config, steps, imperfections, on_step)
+    _drive(plan, shadowed, constraints, config, steps, imperfections, on_step, plant)
     return {specs[0]: np.zeros(steps),
             **{spec: np.array(series) for spec, series in shadowed.deviations.items()}}
 
@@ -225,8 +270,9 @@ def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfi
 def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
             duration: float | None = None, progress: bool = True,
             imperfections: Imperfections | None = None,
-            agreement: bool = True) -> dict[str, RunResult]:
-    """Run every controller spec on the same plan (fresh constraints each).
+            agreement: bool = True, plant: PlantChoice | None = None) -> dict[str, RunResult]:
+    """Run every controller spec on the same plan (fresh constraints each), on the same
+    ``plant`` (None: the kinematic one; each run builds its own).
 
     With ``agreement`` and two or more specs, one more run of the first spec evaluates the
     others beside it (:func:`joint_velocity_agreement`). The solvers' console output and
@@ -239,6 +285,8 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
     steps = _steps(plan, config, duration)
     specs = _check_specs(specs)
     (imperfections or Imperfections()).check_period(config.dt)
+    plant = plant or PlantChoice()
+    plant.make(plan.robot, config.dt, imperfections)  # fail fast: the model compiles
     for spec in specs:  # fail fast on a bad spec, before minutes of simulation
         make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt)
     agreement = agreement and len(specs) > 1
@@ -251,13 +299,14 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
             for spec in specs:
                 if report is not None:
                     report.start(spec)
-                results[spec] = run_plan(plan, spec, config, duration, tick, imperfections)
+                results[spec] = run_plan(plan, spec, config, duration, tick, imperfections,
+                                         plant)
                 results[spec].solver_messages = capture.collect()
             if agreement:
                 if report is not None:
                     report.start(runs[-1])
                 deviations = joint_velocity_agreement(plan, specs, config, duration,
-                                                      imperfections, tick)
+                                                      imperfections, tick, plant)
                 capture.collect()
                 for spec, deviation in deviations.items():
                     results[spec].joint_velocity_deviation = deviation
@@ -312,7 +361,8 @@ class RunProgress:
 
 
 def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
-                     duration: float, imperfections: Imperfections | None = None) -> dict:
+                     duration: float, imperfections: Imperfections | None = None,
+                     plant: PlantChoice | None = None) -> dict:
     """The metrics.json document (schema: ``teleop/experiments/metrics.schema.json``)."""
     first = next(iter(results.values()), None)
     reference = (next(iter(results)) if first is not None
@@ -327,6 +377,7 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
         "duration_s": duration,
         "steps": int(round(duration * config.rate)),
         "imperfections": (imperfections or Imperfections()).to_dict(),
+        "plant": (plant or PlantChoice()).to_dict(),
         "joint_velocity_reference": reference,
         "controllers": {spec: result.metrics() for spec, result in results.items()},
     }
@@ -334,7 +385,8 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
 
 def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
                   duration: float, out_dir: str | Path, plots: bool = True,
-                  imperfections: Imperfections | None = None) -> list[Path]:
+                  imperfections: Imperfections | None = None,
+                  plant: PlantChoice | None = None) -> list[Path]:
     """metrics.json, metrics.csv and, with ``plots``, the PNG plots and report.html into
     ``out_dir``; returns the paths."""
     out = output_directory(out_dir)
@@ -342,19 +394,21 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         raise ValueError(f"cannot create output directory {str(out)!r}: {error.strerror}") from None
-    document = metrics_document(plan, results, config, duration, imperfections)
+    document = metrics_document(plan, results, config, duration, imperfections, plant)
     paths = [out / "metrics.json", out / "metrics.csv"]
     paths[0].write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     with paths[1].open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        writer.writerow(["controller", *METRIC_KEYS])
+        keys = (*METRIC_KEYS, *BODY_METRIC_KEYS)
+        writer.writerow(["controller", *keys])
         for spec, metrics in document["controllers"].items():
-            writer.writerow([spec, *(metrics[key] for key in METRIC_KEYS)])
+            writer.writerow([spec, *("" if metrics[key] is None else metrics[key]
+                                     for key in keys)])
     if plots:
         from .plots import write_plots
         from .report import write_report
 
-        figures = write_plots(plan, results, out)
+        figures = write_plots(plan, results, out, plant or PlantChoice())
         paths += [figure.path for figure in figures]
         paths.append(write_report(document, figures, out / "report.html"))
     return paths

@@ -21,6 +21,36 @@ TABLE_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (
 )
 
 
+#: The second table's columns (docs/design.md section 17.3): the robot's body (null on the
+#: kinematic plant, shown ``-``) and the run's smoothness.
+BODY_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (
+    ("hole err max (um)", "hole_error_max_m", lambda v: f"{1e6 * v:.3g}"),
+    ("port force max (N)", "port_force_max_n", lambda v: f"{v:.3f}"),
+    ("port force RMS (N)", "port_force_rms_n", lambda v: f"{v:.3f}"),
+    ("tissue disp max (um)", "port_displacement_max_m", lambda v: f"{1e6 * v:.3g}"),
+    ("EE pos max (mm)", "ee_position_error_max_m", lambda v: f"{1e3 * v:.3f}"),
+    ("torque / limit max", "torque_ratio_max", lambda v: f"{v:.2f}"),
+    ("saturated steps", "actuator_saturated_steps", lambda v: f"{v}"),
+    ("jerk RMS (rad/s^3)", "joint_jerk_rms_radps3", lambda v: f"{v:.3g}"),
+    ("EE v power > 3 Hz (%)", "ee_velocity_power_above_3hz", lambda v: f"{100 * v:.2f}"),
+)
+
+
+def body_cells(metrics: dict) -> list[str]:
+    """One controller's row of :data:`BODY_COLUMNS` (``-`` for a value not measured)."""
+    return ["-" if metrics.get(key) is None else fmt(metrics[key])
+            for _, key, fmt in BODY_COLUMNS]
+
+
+def format_body_table(document: dict) -> str:
+    """The body and smoothness table (Markdown), after :func:`format_table` on the terminal."""
+    headers = [header for header, _, _ in BODY_COLUMNS]
+    lines = ["| controller | " + " | ".join(headers) + " |", "|" + "---|" * (len(headers) + 1)]
+    lines += [f"| {spec} | " + " | ".join(body_cells(m)) + " |"
+              for spec, m in document["controllers"].items()]
+    return "\n".join(lines)
+
+
 def table_cells(metrics: dict) -> list[str]:
     """One controller's row of :data:`TABLE_COLUMNS` (``-`` for a value not computed)."""
     return ["-" if metrics[key] is None else fmt(metrics[key]) for _, key, fmt in TABLE_COLUMNS]

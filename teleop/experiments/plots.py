@@ -1,5 +1,7 @@
-"""PNG plots of a comparison (docs/design.md section 15.2): the paper's Figs 3-4, the
-constraint error, the joint-velocity agreement and the step time.
+"""PNG plots of a comparison (docs/design.md sections 15.2 and 17.3): the paper's Figs 3-4,
+the constraint error, the port force (on a plant with a body), the joint-velocity
+agreement and the step time. The figures are drawn from the runs on the comparison's plant
+and their titles name it.
 
 Controllers whose curves coincide are drawn once: :func:`overlap_groups` puts them in one
 group, each figure says which controllers a curve stands for and how far apart they are at
@@ -16,6 +18,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .plan import Plan
+    from .plant_choice import PlantChoice
     from .results import RunResult
 
 #: Curves coincide when they differ by at most this fraction of their largest |value|
@@ -128,13 +131,18 @@ def _spans(t: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]:
     return [(t[start] - dt, t[end - 1]) for start, end in zip(edges[::2], edges[1::2])]
 
 
-def write_plots(plan: "Plan", results: dict[str, "RunResult"], out: Path) -> list[Figure]:
-    """Write every plot into ``out`` and return them."""
+def write_plots(plan: "Plan", results: dict[str, "RunResult"], out: Path,
+                plant: "PlantChoice | None" = None) -> list[Figure]:
+    """Write every plot into ``out`` and return them (``plant``: the runs' plant, named in
+    the titles; None: the kinematic one)."""
     plt = _pyplot()
-    title = f"{plan.name} ({plan.robot.name})"
+    title = f"{plan.name} ({plan.robot.name}" + (
+        f", {plant.kind} plant)" if plant is not None else ")")
     figures = _constraint_velocity(plt, results, out, title)
     figures += _ee_velocity(plt, results, out, title)
     figures.append(_constraint_error(plt, results, out, title))
+    if any(r.port_forces for r in results.values()):
+        figures.append(_port_force(plt, results, out, title))
     if any(r.joint_velocity_deviation is not None for r in results.values()):
         figures.append(_agreement(plt, results, out, title))
     figures.append(_step_time(plt, results, out, title))
@@ -273,6 +281,27 @@ def _constraint_error(plt, results: dict[str, "RunResult"], out: Path, title: st
     caption = ("The largest equality error (or barrier penetration) at the end of each step, "
                "on the true configuration. " + " ".join(g.overlap("m") for g in groups))
     return Figure(path, "Constraint error", caption.strip())
+
+
+def _port_force(plt, results: dict[str, "RunResult"], out: Path, title: str) -> Figure:
+    """The abdominal wall's force at each port over time, one curve per controller and
+    port (N, linear axis)."""
+    fig, ax = plt.subplots(figsize=(12, 4), layout="constrained")
+    for spec, r in results.items():
+        for name, force in r.port_force_magnitudes().items():
+            ax.plot(r.columns["t"], force, lw=0.8,
+                    label=spec if len(r.port_names) == 1 else f"{spec}: {name}")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("port force |F| (N)")
+    ax.grid(alpha=0.3)
+    fig.legend(loc="outside right upper", fontsize=8)
+    fig.suptitle(f"Force of the abdominal wall on the instrument at each port ({title})",
+                 fontsize=10)
+    path = _save(fig, out / "port_force.png", plt)
+    caption = ("The lateral spring-damper force of the tissue at each hole's port, "
+               "|F| = |-k (P - c) - c_d v_perp| (design 17.2), at the last physics step of "
+               "every control period, on the simulated robot.")
+    return Figure(path, "Port force", caption)
 
 
 def _agreement(plt, results: dict[str, "RunResult"], out: Path, title: str) -> Figure:

@@ -1,7 +1,8 @@
 """``report.html``: one self-contained page per comparison (docs/design.md section 15.4).
 
-The scenario, the robot and how it was imperfect, the package versions, the metrics table
-with the best value of each column marked, the steps per status, the joint-velocity
+The scenario, the robot, its plant and how it was imperfect, the package versions, the
+metrics table with the best value of each column marked, the robot's body and the run's
+smoothness (docs/design.md section 17.3), the steps per status, the joint-velocity
 agreement, what the solvers said, and every plot embedded as base64: the page needs no
 network and no other file.
 """
@@ -15,7 +16,14 @@ from importlib import metadata
 from pathlib import Path
 from typing import Sequence
 
-from .metrics_table import TABLE_COLUMNS, format_status_counts, table_cells, table_headers
+from .metrics_table import (
+    BODY_COLUMNS,
+    TABLE_COLUMNS,
+    body_cells,
+    format_status_counts,
+    table_cells,
+    table_headers,
+)
 from .plots import Figure
 
 #: The distributions whose versions the report lists (importlib.metadata names).
@@ -82,12 +90,21 @@ def render_report(document: dict, figures: Sequence[Figure]) -> str:
         (f"<li>robot imperfections: encoder noise {imperfect['encoder_noise_rad']:g} rad, "
          f"latency {imperfect['latency_periods']} periods, joint time constant "
          f"{imperfect['joint_time_constant_s']:g} s, seed {imperfect['seed']}</li>"),
+        f"<li>plant: {e(_plant_line(document.get('plant')))}</li>",
         "</ul>",
         "<h2>Metrics</h2>", _metrics_table(document),
         '<p class="note">Bold: the smallest value of a column as printed (ties all '
         "marked; a column where every controller shows the same value has no mark)."
         + (f" qd dev: the largest |qd - qd_{e(reference)}| at the same q and twist along "
            f"{e(reference)}'s run (design 15.3)." if reference else "") + "</p>",
+        "<h2>The robot's body and the run's smoothness</h2>", _body_table(document),
+        '<p class="note">hole err: the holes\' axis offset on the true (simulated) '
+        "configuration; port force: the abdominal wall's lateral force on the instrument, "
+        "tissue disp: its displacement (design 17.2; - on the kinematic plant, which has no "
+        "body); torque / limit: the largest drive torque against the URDF's effort limit; "
+        "jerk: the jerkiest joint's RMS of (qd_k - 2 qd_k-1 + qd_k-2) / dt^2 over the "
+        "commands; EE v power > 3 Hz: the share of the achieved EE linear velocity's power "
+        "above 3 Hz (each component detrended, FFT), the worst EE.</p>",
         "<h2>Each end effector and each constraint</h2>", _parts_table(document),
         "<h2>Steps by status</h2>", _status_table(document),
         "<h2>What the solvers said</h2>", _solver_messages(document),
@@ -124,6 +141,45 @@ def _metrics_table(document: dict) -> str:
         cells = [f'<td class="best">{e(text)}</td>' if spec in best[key] else f"<td>{e(text)}</td>"
                  for (_, key, _), text in zip(TABLE_COLUMNS, table_cells(metrics))]
         rows.append(f"<tr><td>{e(spec)}</td>" + "".join(cells) + "</tr>")
+    rows.append("</table>")
+    return "\n".join(rows)
+
+
+def _plant_line(plant: dict | None) -> str:
+    """The plant of the runs in words (a document before schema 4: the kinematic one)."""
+    if plant is None or plant["kind"] == "kinematic":
+        text = "kinematic (q += qd dt)"
+    else:
+        s = plant["settings"]
+        text = (f"MuJoCo physics at {s['physics_rate_hz']:g} Hz, {s['servo_bandwidth_hz']:g} Hz "
+                f"servos (damping ratio {s['servo_damping_ratio']:g}), armature "
+                f"{s['armature_kg_m2']:g} kg m^2, joint damping {s['joint_damping_nms']:g} "
+                f"N m s/rad, payload {s['payload_kg']:g} kg, friction "
+                f"{s['coulomb_friction_nm']:g} N m + {s['viscous_friction_nms']:g} N m s/rad, "
+                f"gravity {'on' if s['gravity'] else 'off'}")
+    stiffness = None if plant is None else plant["wall_stiffness_n_per_m"]
+    return text + (", abdominal wall: each hole's own stiffness" if stiffness is None
+                   else f", abdominal wall {stiffness / 1000.0:g} N/mm at every hole")
+
+
+def _body_table(document: dict) -> str:
+    e = html.escape
+    rows = ["<table>", "<tr><th>controller</th>"
+            + "".join(f"<th>{e(header)}</th>" for header, _, _ in BODY_COLUMNS) + "</tr>"]
+    rows += [f"<tr><td>{e(spec)}</td>" + "".join(f"<td>{e(c)}</td>" for c in body_cells(m))
+             + "</tr>" for spec, m in document["controllers"].items()]
+    first = next(iter(document["controllers"].values()))
+    ports = list(first.get("ports", {}))
+    if ports:
+        rows += ["</table>", "<table>", "<tr><th>controller</th>"
+                 + "".join(f"<th>{e(p)}: force max / RMS (N), displacement max (um)</th>"
+                           for p in ports) + "</tr>"]
+        for spec, m in document["controllers"].items():
+            cells = [f"{m['ports'][p]['force_max_n']:.3f} / {m['ports'][p]['force_rms_n']:.3f}, "
+                     f"{1e6 * m['ports'][p]['displacement_max_m']:.3g}"
+                     if p in m["ports"] else "-" for p in ports]
+            rows.append(f"<tr><td>{e(spec)}</td>" + "".join(f"<td>{e(c)}</td>" for c in cells)
+                        + "</tr>")
     rows.append("</table>")
     return "\n".join(rows)
 

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .smoothness import HIGH_FREQUENCY_HZ, joint_jerk_rms, power_fraction_above
+
 #: per-controller numeric keys of metrics.json, in order (the CSV's columns; documented in
 #: metrics.schema.json and docs/design.md sections 7 and 15)
 METRIC_KEYS = (
@@ -17,6 +19,15 @@ METRIC_KEYS = (
     "joint_limit_violation_max_rad", "failed_steps",
     "step_time_median_us", "step_time_p99_us", "step_time_max_us", "tick_time_median_us",
     "joint_velocity_deviation_max_radps",
+)
+
+#: per-controller keys of the robot's body and the run's smoothness (docs/design.md section
+#: 17.3), after :data:`METRIC_KEYS` in the CSV: null where they do not apply (no hole; the
+#: port, torque and saturation keys on a plant without a body)
+BODY_METRIC_KEYS = (
+    "hole_error_max_m", "port_force_max_n", "port_force_rms_n", "port_displacement_max_m",
+    "torque_ratio_max", "actuator_saturated_steps", "joint_jerk_rms_radps3",
+    "ee_velocity_power_above_3hz",
 )
 
 
@@ -49,6 +60,14 @@ class RunResult:
     status_counts : steps per step status.
     solver_messages : what the solvers wrote or warned during the run, each distinct line
         with its count (docs/design.md section 15.5).
+    commanded_joint_velocity : (steps, nv) the command of each step (rad/s).
+    actual_linear_velocities : (steps, EEs, 3) each EE's achieved linear velocity (world).
+    port_names : the constraints with a wall (the holes), by name, in order of appearance.
+    port_forces : per port name, (steps, 3) the wall's force on the instrument (N, world),
+        NaN while the port does not exist; None on a plant without a body.
+    port_displacements : per port name, (steps,) the tissue's lateral displacement (m).
+    torque_ratio : (steps,) max over joints of |drive torque| / effort limit; None likewise.
+    actuator_saturated : (steps,) some drive held at its effort limit; None likewise.
     """
 
     controller: str
@@ -68,6 +87,25 @@ class RunResult:
     failure_messages: list[str] = field(default_factory=list)
     status_counts: dict[str, int] = field(default_factory=dict)
     solver_messages: dict[str, int] = field(default_factory=dict)
+    commanded_joint_velocity: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    actual_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))
+    port_names: list[str] = field(default_factory=list)
+    port_forces: dict[str, np.ndarray] | None = None
+    port_displacements: dict[str, np.ndarray] | None = None
+    torque_ratio: np.ndarray | None = None
+    actuator_saturated: np.ndarray | None = None
+
+    @property
+    def dt(self) -> float:
+        """The control period (s), from the step times (0 with fewer than two steps)."""
+        t = self.columns["t"]
+        return float(t[1] - t[0]) if len(t) > 1 else 0.0
+
+    def port_force_magnitudes(self) -> dict[str, np.ndarray]:
+        """Per port, ``|F|`` each step (N; NaN while the port does not exist); empty on a
+        plant without a body."""
+        return {name: np.linalg.norm(forces, axis=1)
+                for name, forces in (self.port_forces or {}).items()}
 
     @property
     def steps(self) -> int:
@@ -89,6 +127,13 @@ class RunResult:
 
         step = c["step_time_us"]
         deviation = self.joint_velocity_deviation
+        forces = self.port_force_magnitudes()
+        all_forces = np.concatenate([f for f in forces.values()]) if forces else np.zeros(0)
+        displacements = (np.concatenate(list(self.port_displacements.values()))
+                         if self.port_displacements else np.zeros(0))
+        physical = self.port_forces is not None
+        holes = [self.constraint_errors[name] for name in self.port_names
+                 if name in self.constraint_errors]
         return {
             "constraint_error_max_m": top(c["constraint_error"]),
             "constraint_error_rms_m": rms(c["constraint_error"]),
@@ -107,6 +152,18 @@ class RunResult:
             "step_time_max_us": top(step),
             "tick_time_median_us": float(np.median(c["tick_time_us"])) if step.size else 0.0,
             "joint_velocity_deviation_max_radps": None if deviation is None else top(deviation),
+            "hole_error_max_m": top(np.concatenate(holes)) if holes else None,
+            "port_force_max_n": top(all_forces) if physical else None,
+            "port_force_rms_n": rms(all_forces) if physical else None,
+            "port_displacement_max_m": top(displacements) if physical else None,
+            "torque_ratio_max": top(self.torque_ratio) if physical else None,
+            "actuator_saturated_steps": (int(np.sum(self.actuator_saturated)) if physical
+                                         else None),
+            "joint_jerk_rms_radps3": joint_jerk_rms(self.commanded_joint_velocity, self.dt),
+            "ee_velocity_power_above_3hz": max(
+                (power_fraction_above(self.actual_linear_velocities[:, i], self.dt,
+                                      HIGH_FREQUENCY_HZ)
+                 for i in range(self.actual_linear_velocities.shape[1])), default=0.0),
             "first_failure": self.failure_messages[0] if self.failure_messages else None,
             "status_counts": dict(self.status_counts),
             "solver_messages": dict(self.solver_messages),
@@ -118,4 +175,8 @@ class RunResult:
             } for i, frame in enumerate(self.ee_frames)},
             "constraints": {name: {"error_max_m": top(errors), "error_rms_m": rms(errors)}
                             for name, errors in self.constraint_errors.items()},
+            "ports": {name: {
+                "force_max_n": top(forces[name]), "force_rms_n": rms(forces[name]),
+                "displacement_max_m": top(self.port_displacements[name]),
+            } for name in self.port_names} if physical else {},
         }

@@ -9,7 +9,9 @@ Format (one JSON object per line, times ``t`` in seconds from the start, world f
   ``link_axis``); ``locked_joints`` maps each joint frozen out of the model to the
   coordinates it is held at (``q0`` is of the model without them). Version 1 files (no
   ``ee_frames``, ``root_joint``, ``locked_joints``: the robot's defaults, nothing locked)
-  are read too.
+  are read too. An optional ``plant`` (``PlantChoice.to_dict()``: ``kind``, ``settings``,
+  ``wall_stiffness_n_per_m``) is the plant a replay runs on unless told otherwise; without
+  it, the kinematic plant.
 * ``{"type": "target", "t": 0.05, "frame": "tool0", "position": [x, y, z],
   "quaternion_wxyz": [w, x, y, z]}`` - the operator's target for the EE ``frame`` (one of
   the header's ``ee_frames``; absent: the first); it holds until the next one for that
@@ -46,6 +48,7 @@ from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED, advance, steer
 from teleop.robots import Robot, load_robot
 
 from .plan import Plan, home_poses
+from .plant_choice import PlantChoice
 
 FORMAT = "cjm-teleop-session"
 VERSION = 2
@@ -72,10 +75,13 @@ class SessionRecorder:
     robot : the robot driven.
     q0 : start configuration.
     rate_hz, kp, target_time_constant_s : the loop settings, so a replay can use them.
+    plant : the plant the session ran on, written in the header when given, so a replay
+        runs on it too.
     """
 
     def __init__(self, path: str | Path, robot: Robot, q0: np.ndarray, rate_hz: float = 1000.0,
-                 kp: float = 20.0, target_time_constant_s: float = 0.0) -> None:
+                 kp: float = 20.0, target_time_constant_s: float = 0.0,
+                 plant: PlantChoice | None = None) -> None:
         self.path = Path(path)
         if self.path.is_dir():
             raise ValueError(f"session file {str(self.path)!r} is a directory")
@@ -100,6 +106,8 @@ class SessionRecorder:
         header.update(ee_frames=list(robot.ee_frames), root_joint=robot.root_joint,
                       locked_joints={name: list(coordinates)
                                      for name, coordinates in robot.locked_joints.items()})
+        if plant is not None:
+            header["plant"] = plant.to_dict()
         self.ee_frames = tuple(robot.ee_frames)
         self._write(header)
         self.last_t = 0.0
@@ -165,11 +173,12 @@ class SessionRecorder:
 
 
 def record_plan(plan: Plan, path: str | Path, rate_hz: float = 1000.0,
-                duration: float | None = None) -> Path:
+                duration: float | None = None, plant: PlantChoice | None = None) -> Path:
     """Write a scenario's operator input as a session, one target per control tick.
 
     Moving geometry is recorded as ``move`` events every tick. Replaying the file at the
-    same rate reproduces the scenario step for step.
+    same rate reproduces the scenario step for step. ``plant`` is written in the header
+    (and its wall stiffness into every hole added), so a replay runs on it.
     """
     rate_hz = as_number(rate_hz, "rate_hz", positive=True, maximum=MAX_RATE_HZ)
     duration = as_number(plan.duration if duration is None else duration, "duration",
@@ -179,8 +188,10 @@ def record_plan(plan: Plan, path: str | Path, rate_hz: float = 1000.0,
                          "control periods: lower the duration or the rate")
     dt = 1.0 / rate_hz
     constraints = plan.make_constraints()
+    if plant is not None:
+        plant.apply_wall(constraints)
     ids = [f"{c.kind}-{i + 1}" for i, c in enumerate(constraints)]
-    with SessionRecorder(path, plan.robot, plan.q0, rate_hz=rate_hz) as recorder:
+    with SessionRecorder(path, plan.robot, plan.q0, rate_hz=rate_hz, plant=plant) as recorder:
         for cid, constraint in zip(ids, constraints):
             recorder.add(0.0, cid, constraint)
         before = [c.position for c in constraints]
@@ -311,6 +322,8 @@ def _check_header(event: dict, where: str) -> None:
         locked = event.get("locked_joints")
         if locked is not None and not isinstance(locked, dict):
             raise ValueError("header 'locked_joints' must map joint names to coordinates")
+        if "plant" in event:
+            PlantChoice.from_dict(event["plant"], "header 'plant'")
     except ValueError as error:
         raise SessionError(f"{where}: {error}") from None
 
@@ -402,6 +415,13 @@ def _placed(constraint: Constraint, robot: Robot, q: np.ndarray, where: str) -> 
         raise SessionError(f"{where}: the {constraint.kind} is {off:.3g} m off link "
                            f"{constraint.link!r} when it is added (tolerance {ADD_TOLERANCE:g} m)")
     return constraint
+
+
+def session_plant(session: Session) -> PlantChoice:
+    """The plant of the session's header (the kinematic one when it names none)."""
+    if "plant" not in session.header:
+        return PlantChoice()
+    return PlantChoice.from_dict(session.header["plant"], "header 'plant'")
 
 
 def session_plan(session: Session, robot: Robot | None = None) -> Plan:

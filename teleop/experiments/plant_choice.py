@@ -1,0 +1,124 @@
+"""Which robot a run's loop drives (docs/design.md section 17): the ideal integrator
+``q += qd dt`` (``kinematic``) or the MuJoCo physics plant (``mujoco``) with its settings,
+and the abdominal wall's stiffness at every hole.
+
+One :class:`PlantChoice` is the same for every controller of a comparison; each run builds
+its own plant from it (:meth:`PlantChoice.make`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+from constraints import Constraint
+from constraints.validation import as_number, short_repr
+from teleop.plants import Imperfections, MujocoPlant, PlantSettings
+
+#: The plants a run can choose, by name.
+PLANT_KINDS = ("kinematic", "mujoco")
+
+#: :meth:`PlantSettings.to_dict`'s keys (units in the names) -> the settings' fields.
+SETTINGS_KEYS = {"physics_rate_hz": "physics_rate", "servo_bandwidth_hz": "servo_bandwidth",
+                 "servo_damping_ratio": "servo_damping_ratio", "armature_kg_m2": "armature",
+                 "joint_damping_nms": "joint_damping", "payload_kg": "payload",
+                 "coulomb_friction_nm": "coulomb_friction",
+                 "viscous_friction_nms": "viscous_friction", "gravity": "gravity"}
+
+
+@dataclass(frozen=True)
+class PlantChoice:
+    """The plant under every run of a comparison.
+
+    Attributes
+    ----------
+    kind : ``kinematic`` (the ideal integrator, imperfections on top when asked) or
+        ``mujoco`` (:class:`teleop.plants.MujocoPlant`, imperfections on top).
+    settings : the physics plant's (:class:`PlantSettings`); the kinematic plant takes
+        only the defaults (it has no body to carry a payload or feel friction).
+    wall_stiffness : lateral stiffness (N/m) given to every hole's abdominal wall
+        (``Hole.tissue_stiffness``); None: each hole keeps its own (1 N/mm by default).
+    """
+
+    kind: str = "kinematic"
+    settings: PlantSettings = field(default_factory=PlantSettings)
+    wall_stiffness: float | None = None
+
+    def __post_init__(self) -> None:
+        """``ValueError`` naming the field: an unknown kind, settings that are not
+        :class:`PlantSettings`, physics settings for the kinematic plant, a stiffness that is
+        not a finite number >= 0."""
+        if self.kind not in PLANT_KINDS:
+            raise ValueError(f"plant must be one of {', '.join(PLANT_KINDS)}, got "
+                             f"{short_repr(self.kind)}")
+        if not isinstance(self.settings, PlantSettings):
+            raise ValueError(f"plant settings must be PlantSettings, got "
+                             f"{type(self.settings).__name__}")
+        if self.kind == "kinematic" and self.settings != PlantSettings():
+            changed = [key for key, name in SETTINGS_KEYS.items()
+                       if getattr(self.settings, name) != getattr(PlantSettings(), name)]
+            raise ValueError(f"{', '.join(changed)} need the mujoco plant (plant is kinematic)")
+        if self.wall_stiffness is not None:
+            object.__setattr__(self, "wall_stiffness",
+                               as_number(self.wall_stiffness, "wall_stiffness", 0.0,
+                                         maximum=1e7))
+
+    @property
+    def physical(self) -> bool:
+        """A plant with a body: port forces, torques and saturation are measured."""
+        return self.kind == "mujoco"
+
+    def make(self, robot, dt: float, imperfections: Imperfections | None = None):
+        """A fresh plant for one run (a ``teleop.loop.Plant``), or None for the perfect
+        kinematic robot."""
+        imperfections = imperfections or Imperfections()
+        if self.kind == "kinematic":
+            return imperfections.plant(robot.model, dt)
+        imperfections.check_period(dt)
+        return MujocoPlant(robot, dt, self.settings, imperfections)
+
+    def apply_wall(self, constraints: Sequence[Constraint]) -> None:
+        """Give every constraint with a wall (a hole's port) :attr:`wall_stiffness`."""
+        if self.wall_stiffness is None:
+            return
+        for constraint in constraints:
+            if constraint.has_wall:
+                constraint.tissue_stiffness = self.wall_stiffness
+
+    def to_dict(self) -> dict:
+        """The ``plant`` entry of metrics.json and of a session header (units in the keys):
+        the kind, the physics settings (None for the kinematic plant) and the stiffness."""
+        return {"kind": self.kind,
+                "settings": self.settings.to_dict() if self.physical else None,
+                "wall_stiffness_n_per_m": self.wall_stiffness}
+
+    @classmethod
+    def from_dict(cls, data: object, where: str = "plant") -> "PlantChoice":
+        """The inverse of :meth:`to_dict` (``ValueError`` naming ``where`` and the field)."""
+        if not isinstance(data, dict):
+            raise ValueError(f"{where} must be an object, got {short_repr(data)}")
+        unknown = sorted(set(data) - {"kind", "settings", "wall_stiffness_n_per_m"})
+        if unknown:
+            raise ValueError(f"{where} has unknown fields {unknown}")
+        settings = data.get("settings")
+        if settings is None:
+            settings = {}
+        if not isinstance(settings, dict):
+            raise ValueError(f"{where} 'settings' must be an object, got {short_repr(settings)}")
+        unknown = sorted(set(settings) - set(SETTINGS_KEYS))
+        if unknown:
+            raise ValueError(f"{where} 'settings' has unknown fields {unknown}")
+        try:
+            return cls(kind=data.get("kind", "kinematic"),
+                       settings=PlantSettings(**{SETTINGS_KEYS[key]: value
+                                                 for key, value in settings.items()}),
+                       wall_stiffness=data.get("wall_stiffness_n_per_m"))
+        except ValueError as error:
+            raise ValueError(f"{where}: {error}") from None
+
+    def describe(self) -> str:
+        """One line for humans."""
+        wall = ("" if self.wall_stiffness is None
+                else f", abdominal wall {self.wall_stiffness / 1000.0:g} N/mm at every hole")
+        if not self.physical:
+            return "kinematic plant (q += qd dt)" + wall
+        return self.settings.describe() + wall
