@@ -41,7 +41,7 @@ CJM_VARIANTS = {"": {}, "analytical": {}, "general": {"form": "general"},
 CONTROLLER_HELP = ("cjm[:general|:paper|:python], qp:<solver>, mink:<solver> with <solver> any "
                    "installed qpsolvers backend")
 
-#: ``make_controller``'s default ``acceleration_limit``: the robot's own.
+#: ``make_controller(..., acceleration_limit=ROBOT)``: the robot's own acceleration limits.
 ROBOT = "robot"
 
 #: Default solver of ``qp`` and ``mink`` given without one.
@@ -115,11 +115,12 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
                     dt: float = 1e-3, twist_weight=None,
                     solver_settings: Mapping | None = None,
                     time_budget: float | None | str = "periods",
-                    acceleration_limit=ROBOT) -> Controller:
+                    acceleration_limit=None) -> Controller:
     """Build a controller from its spec string; unknown specs raise ``ValueError``.
     ``twist_weight`` (the task's diagonal weight, 6 per EE or one per entry) goes to every
-    family alike, as does ``acceleration_limit`` (``"robot"``, the default: the robot's own,
-    ``robot.acceleration_limit``; None: none; else nv values, docs/design.md 8.4);
+    family alike, as does ``acceleration_limit`` (None, the default: none, as in mink and
+    pink, where limits are opt-in; ``"robot"``: the robot's own, ``robot.acceleration_limit``;
+    else nv values, docs/design.md 8.4);
     ``solver_settings`` (a mapping of the QP backend's keyword settings) and
     ``time_budget`` (a step's CPU deadline, docs/design.md 10.6) to the ``qp`` and ``mink``
     families, which have a backend."""

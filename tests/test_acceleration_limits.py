@@ -24,7 +24,7 @@ from controllers.base import EQUALITY_TOLERANCE, StepStatus
 from controllers.joint_acceleration import braking_speed
 from controllers.joint_limits import JointBounds
 from teleop import load_robot
-from teleop.controller_specs import make_controller
+from teleop.controller_specs import ROBOT, make_controller
 from teleop.robots.chains import load_chain
 
 SPECS = ("cjm", "cjm:python", "cjm:general", "qp:proxqp", "qp:daqp", "qp:osqp", "mink:daqp",
@@ -144,7 +144,8 @@ def test_no_command_leaves_an_acceleration_velocity_or_position_limit(
     q = robot.random_configuration(rng, margin=0.02)
     constraints = [Hole.on_link(robot, q, distance=0.05, link=link)
                    for link in robot.constrained_links] if with_hole else []
-    controller = make_controller(spec, robot, constraints, time_budget=None)
+    controller = make_controller(spec, robot, constraints, time_budget=None,
+                                 acceleration_limit=ROBOT)
     assert controller.acceleration_limit is not None
     for k in range(40):
         if k % 10 == 0:  # a new random target direction every 10 ms
@@ -230,7 +231,7 @@ def test_a_binding_acceleration_limit_is_never_ok(spec):
     robot = load_robot("sda10f")
     q = robot.q_home.copy()
     controller = make_controller(spec, robot, [Hole.on_link(robot, q, distance=0.05)],
-                                 time_budget=None)
+                                 time_budget=None, acceleration_limit=ROBOT)
     controller.solve(q, np.array([0.2, 0.0, 0.1, 0.0, 0.3, 0.0]))  # from rest
     assert controller.info.status in (StepStatus.SCALED, StepStatus.LEAST_SQUARES), spec
     assert hole_is_held(controller, q, controller.reference)
@@ -257,7 +258,7 @@ def test_a_hole_correction_that_cannot_fit_is_constraint_degraded(spec):
 def test_the_stop_command_is_the_command_nearest_zero_in_the_box(spec):
     robot = load_robot("sda10f")
     q = robot.q_home.copy()
-    controller = make_controller(spec, robot, [], time_budget=None)
+    controller = make_controller(spec, robot, [], time_budget=None, acceleration_limit=ROBOT)
     moving = np.linspace(-1.0, 1.0, robot.nv)
     controller._previous_command()[:] = moving
     stop = controller.stop_command(q)
@@ -271,7 +272,7 @@ def test_the_loop_reset_resets_the_controller():
     from teleop.loop.closed_loop import TeleopLoop
 
     robot = load_robot("sda10f")
-    controller = make_controller("cjm", robot, [])
+    controller = make_controller("cjm", robot, [], acceleration_limit=ROBOT)
     loop = TeleopLoop(robot, controller)
     controller.solve(robot.q_home, np.array([0.1, 0, 0, 0, 0, 0]))
     assert np.abs(controller.reference).max() > 0.0

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from constraints import Barrier, Hole, Plane, PointLock
 from controllers.base import EQUALITY_TOLERANCE
 from teleop import load_robot
-from teleop.controller_specs import make_controller, spec_names
+from teleop.controller_specs import ROBOT, make_controller, spec_names
 
 #: A step's CPU time guard (s): far above the 10 ms budget, far below the 8.2 s it fixed.
 STEP_CPU_GUARD = 1.0
@@ -138,7 +138,8 @@ def test_every_controller_keeps_its_acceleration_box_over_a_sequence(robots, pro
                    for i, kind in enumerate(kinds)]
     if spec == "cjm:paper":
         constraints = [c for c in constraints if c.has_paper_form]
-    controller = make_controller(spec, robot, constraints, time_budget=None)
+    controller = make_controller(spec, robot, constraints, time_budget=None,
+                                 acceleration_limit=ROBOT)
     twist = scale * direction[:controller.task_size]
     velocity_limit = controller.joint_bounds.velocity_limit
     slack = 1e-9 * np.where(np.isfinite(velocity_limit), velocity_limit, 1.0)

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from constraints import Hole
 from controllers.base import EQUALITY_TOLERANCE
 from teleop import load_robot
-from teleop.controller_specs import make_controller
+from teleop.controller_specs import ROBOT, make_controller
 from teleop.loop import LoopConfig, TeleopLoop
 from teleop.plants import MujocoPlant, PlantSettings
 
@@ -47,7 +47,8 @@ def test_every_controller_on_the_plant_is_finite_in_its_box_and_honest(robots, r
     q0 = robot.q_home.copy()
     holes = [Hole.on_link(robot, q0, distance=0.05, link=link) for link in robot.constrained_links]
     holes[0].center = holes[0].center + np.array([off_axis, 0.0, 0.0])
-    controller = make_controller(spec, robot, holes, dt=config.dt, time_budget=None)
+    controller = make_controller(spec, robot, holes, dt=config.dt, time_budget=None,
+                                 acceleration_limit=ROBOT)
     plant = MujocoPlant(robot, config.dt, PlantSettings(payload=payload))
     loop = TeleopLoop(robot, controller, q0=q0, config=config, plant=plant)
     targets = loop.ee_placements()

@@ -111,6 +111,9 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     parser.add_argument("--no-plots", action="store_true",
                         help="write the metrics only, no plots and no report.html")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--acceleration-limits", action="store_true",
+                        help="every controller keeps the robot's joint acceleration limits "
+                        "(off by default; docs/design.md section 8.4)")
     robot = parser.add_argument_group(
         "a robot that is not perfect", "the same for every controller; off by default "
         "(docs/design.md section 15.1)")
@@ -271,12 +274,16 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
                                   args.seed)
     duration = args.duration or plan.duration
     results = compare(plan, args.controllers, config, duration, progress=not args.quiet,
-                      imperfections=imperfections, plant=plant)
+                      imperfections=imperfections, plant=plant,
+                      acceleration_limits=args.acceleration_limits)
     paths = write_outputs(plan, results, config, duration, args.out, plots=not args.no_plots,
-                          imperfections=imperfections, plant=plant)
-    document = metrics_document(plan, results, config, duration, imperfections, plant)
+                          imperfections=imperfections, plant=plant,
+                          acceleration_limits=args.acceleration_limits)
+    document = metrics_document(plan, results, config, duration, imperfections, plant,
+                                args.acceleration_limits)
+    limits = "; acceleration limits" if args.acceleration_limits else ""
     print(f"{plan.name}: {plan.description} ({duration:g} s at {config.rate:g} Hz, "
-          f"{imperfections.describe()}; {plant.describe()})")
+          f"{imperfections.describe()}; {plant.describe()}{limits})")
     print(format_table(document))
     print()
     print(format_body_table(document))

@@ -15,7 +15,7 @@ import numpy as np
 
 from constraints import Constraint
 from constraints.validation import as_number
-from teleop.controller_specs import make_controller
+from teleop.controller_specs import ROBOT, make_controller
 from teleop.limits import MAX_DURATION_S, MAX_STEPS
 from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
 
@@ -67,20 +67,21 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
              duration: float | None = None,
              on_step: Callable[[int], None] | None = None,
              imperfections: Imperfections | None = None,
-             plant: PlantChoice | None = None) -> RunResult:
+             plant: PlantChoice | None = None,
+             acceleration_limits: bool = False) -> RunResult:
     """Run one controller through ``plan`` and record every tick.
 
     ``imperfections`` (docs/design.md section 15.1) puts a robot that is not perfect under
     the loop; None or the default: the perfect robot. ``plant`` chooses the robot the loop
-    drives (docs/design.md section 17); None: the kinematic one.
+    drives (docs/design.md section 17); None: the kinematic one. ``acceleration_limits``:
+    the controller keeps the robot's (docs/design.md 8.4; off by default).
     """
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
     plant = plant or PlantChoice()
     constraints = plan.make_constraints()
     plant.apply_wall(constraints)
-    # simulated time: iteration caps only, no deadline (docs/design.md 10.6)
-    controller = make_controller(spec, plan.robot, constraints, dt=config.dt, time_budget=None)
+    controller = _controller(spec, plan, constraints, config, acceleration_limits)
     drive = _drive(plan, controller, constraints, config, steps, imperfections, on_step, plant)
     return _collect(spec, drive, plan.robot.ee_frames)
 
@@ -242,11 +243,20 @@ class ShadowedController:
         return qd
 
 
+def _controller(spec: str, plan: Plan, constraints: list[Constraint], config: LoopConfig,
+                acceleration_limits: bool):
+    """A run's controller: simulated time, so iteration caps only, no deadline
+    (docs/design.md 10.6); the robot's acceleration limits when asked for."""
+    return make_controller(spec, plan.robot, constraints, dt=config.dt, time_budget=None,
+                           acceleration_limit=ROBOT if acceleration_limits else None)
+
+
 def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
                              duration: float | None = None,
                              imperfections: Imperfections | None = None,
                              on_step: Callable[[int], None] | None = None,
-                             plant: PlantChoice | None = None) -> dict[str, np.ndarray]:
+                             plant: PlantChoice | None = None,
+                             acceleration_limits: bool = False) -> dict[str, np.ndarray]:
     """Per step, ``max_j |qd_spec,j - qd_ref,j|`` (rad/s) of every spec against the first,
     all solved at the same ``q`` and twist along the first spec's closed-loop run (a shadow
     evaluation, docs/design.md section 15.3); zeros for the first spec itself."""
@@ -256,10 +266,8 @@ def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfi
     plant = plant or PlantChoice()
     constraints = plan.make_constraints()
     plant.apply_wall(constraints)
-    reference = make_controller(specs[0], plan.robot, constraints, dt=config.dt,
-                                time_budget=None)  # simulated time (docs/design.md 10.6)
-    shadows = {spec: make_controller(spec, plan.robot, constraints, dt=config.dt,
-                                     time_budget=None)
+    reference = _controller(specs[0], plan, constraints, config, acceleration_limits)
+    shadows = {spec: _controller(spec, plan, constraints, config, acceleration_limits)
                for spec in specs[1:]}
     shadowed = ShadowedController(reference, shadows)
     _drive(plan, shadowed, constraints, config, steps, imperfections, on_step, plant)
@@ -270,9 +278,11 @@ def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfi
 def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
             duration: float | None = None, progress: bool = True,
             imperfections: Imperfections | None = None,
-            agreement: bool = True, plant: PlantChoice | None = None) -> dict[str, RunResult]:
+            agreement: bool = True, plant: PlantChoice | None = None,
+            acceleration_limits: bool = False) -> dict[str, RunResult]:
     """Run every controller spec on the same plan (fresh constraints each), on the same
-    ``plant`` (None: the kinematic one; each run builds its own).
+    ``plant`` (None: the kinematic one; each run builds its own), each controller with the
+    robot's acceleration limits when ``acceleration_limits``.
 
     With ``agreement`` and two or more specs, one more run of the first spec evaluates the
     others beside it (:func:`joint_velocity_agreement`). The solvers' console output and
@@ -300,13 +310,14 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
                 if report is not None:
                     report.start(spec)
                 results[spec] = run_plan(plan, spec, config, duration, tick, imperfections,
-                                         plant)
+                                         plant, acceleration_limits)
                 results[spec].solver_messages = capture.collect()
             if agreement:
                 if report is not None:
                     report.start(runs[-1])
                 deviations = joint_velocity_agreement(plan, specs, config, duration,
-                                                      imperfections, tick, plant)
+                                                      imperfections, tick, plant,
+                                                      acceleration_limits)
                 capture.collect()
                 for spec, deviation in deviations.items():
                     results[spec].joint_velocity_deviation = deviation
@@ -362,7 +373,8 @@ class RunProgress:
 
 def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
                      duration: float, imperfections: Imperfections | None = None,
-                     plant: PlantChoice | None = None) -> dict:
+                     plant: PlantChoice | None = None,
+                     acceleration_limits: bool = False) -> dict:
     """The metrics.json document (schema: ``teleop/experiments/metrics.schema.json``)."""
     first = next(iter(results.values()), None)
     reference = (next(iter(results)) if first is not None
@@ -378,6 +390,7 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
         "steps": int(round(duration * config.rate)),
         "imperfections": (imperfections or Imperfections()).to_dict(),
         "plant": (plant or PlantChoice()).to_dict(),
+        "acceleration_limits": bool(acceleration_limits),
         "joint_velocity_reference": reference,
         "controllers": {spec: result.metrics() for spec, result in results.items()},
     }
@@ -386,7 +399,8 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
 def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
                   duration: float, out_dir: str | Path, plots: bool = True,
                   imperfections: Imperfections | None = None,
-                  plant: PlantChoice | None = None) -> list[Path]:
+                  plant: PlantChoice | None = None,
+                  acceleration_limits: bool = False) -> list[Path]:
     """metrics.json, metrics.csv and, with ``plots``, the PNG plots and report.html into
     ``out_dir``; returns the paths."""
     out = output_directory(out_dir)
@@ -394,7 +408,8 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         raise ValueError(f"cannot create output directory {str(out)!r}: {error.strerror}") from None
-    document = metrics_document(plan, results, config, duration, imperfections, plant)
+    document = metrics_document(plan, results, config, duration, imperfections, plant,
+                                acceleration_limits)
     paths = [out / "metrics.json", out / "metrics.csv"]
     paths[0].write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     with paths[1].open("w", newline="", encoding="utf-8") as handle:
