@@ -199,6 +199,35 @@ def test_compare_on_the_physics_plant_from_the_command_line(tmp_path):
     assert "MuJoCo plant at 2000 Hz" in run.stdout and "port force max (N)" in run.stdout
 
 
+def test_acceleration_limits_from_the_command_line_bound_every_command(tmp_path):
+    """``--acceleration-limits``: recorded in metrics.json, and the commanded joint
+    accelerations the run measured stay within the robot's limits (the jerk metric's
+    first difference, from the commands themselves, in the test)."""
+    from teleop import load_robot
+    from teleop.experiments.compare import run_plan
+    from teleop.experiments.scenarios import load_scenario
+
+    out = tmp_path / "out"
+    run = teleop("compare", "--scenario", "fast-lateral", "--controllers", "cjm,qp:daqp",
+                 "--duration", "0.6", "--acceleration-limits", "--out", str(out), "--quiet",
+                 "--no-plots")
+    assert run.returncode == 0, run.stderr
+    document = json.loads((out / "metrics.json").read_text())
+    jsonschema.validate(document, SCHEMA)
+    assert document["acceleration_limits"] is True and "acceleration limits" in run.stdout
+    robot = load_robot("sda10f")
+    for limits in (False, True):
+        result = run_plan(load_scenario("fast-lateral", robot), "qp:daqp", duration=0.6,
+                          acceleration_limits=limits)
+        commands = np.vstack([np.zeros(robot.nv), result.commanded_joint_velocity])
+        acceleration = np.abs(np.diff(commands, axis=0)) / 1e-3
+        worst = float(np.max(acceleration / robot.acceleration_limit))
+        if limits:
+            assert worst <= 1 + 1e-9, worst
+        else:
+            assert worst > 1.5, worst  # the scenario needs them: without, they are exceeded
+
+
 def test_a_session_records_its_plant_and_a_replay_runs_on_it(tmp_path):
     session = tmp_path / "s.jsonl"
     run = teleop("record", "--scenario", "trocar-circle", "--duration", "0.1", "--plant",
