@@ -42,3 +42,6 @@ MAX_DAMPING = 1.0
 
 #: Timed steps per controller in ``teleop bench``: 1e6 steps of 50 us is under a minute.
 MAX_BENCH_ITERATIONS = 1_000_000
+
+#: The stiffest abdominal wall a plant takes (N/m): 100 N/mm, a hundred times the default.
+MAX_WALL_STIFFNESS = 1e5

@@ -22,10 +22,10 @@ from typing import Sequence
 from teleop.cli.arguments import csv_list, numbers, one_line, positive
 from teleop.cli.commands import Command
 from teleop.controller_specs import CONTROLLER_HELP
+from teleop.limits import MAX_WALL_STIFFNESS
+from teleop.plants import PLANT_KINDS
 from teleop.robots import BUILTIN_ROBOTS
 
-from .app.limits import MAX_WALL_STIFFNESS
-from .app.plant import PLANTS
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
     resolve_host
 
@@ -80,7 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     control.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
 
     plant = parser.add_argument_group("plant (docs/design.md section 17)")
-    plant.add_argument("--plant", choices=PLANTS, default="kinematic",
+    plant.add_argument("--plant", choices=PLANT_KINDS, default="kinematic",
                        help="what the loops run on: the ideal integrator (q += qd dt) or the "
                             "robot simulated in MuJoCo, the abdominal wall at each port "
                             "(default: kinematic)")

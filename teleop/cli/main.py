@@ -18,6 +18,7 @@ from teleop.limits import (
     MAX_LATENCY_S,
     MAX_RATE_HZ,
     MAX_TIME_CONSTANT_S,
+    MAX_WALL_STIFFNESS,
 )
 from teleop.robots import BUILTIN_ROBOTS
 
@@ -46,7 +47,7 @@ time_constant = bounded(float, 0.0, MAX_TIME_CONSTANT_S, unit="s")
 latency = bounded(int, 0, MAX_LATENCY_PERIODS)
 count = bounded(int, 0)
 iterations = bounded(int, 1, MAX_BENCH_ITERATIONS)
-wall_stiffness = bounded(float, 0.0, 1e4, unit="N/mm")
+wall_stiffness = bounded(float, 0.0, MAX_WALL_STIFFNESS / 1e3, unit="N/mm")
 payload = bounded(float, 0.0, 100.0, unit="kg")
 friction = bounded(float, 0.0, 1e4)
 physics_rate = bounded(float, 2000.0, 1e5, unit="Hz")
@@ -142,7 +143,7 @@ def _add_plant_options(parser: argparse.ArgumentParser, base: str) -> None:
                        "(default: kinematic)")
     plant.add_argument("--wall-stiffness", type=wall_stiffness, metavar="N_PER_MM",
                        help="lateral stiffness of the abdominal wall at every hole, at most "
-                       "1e4 (default: each hole's own, 1 N/mm)")
+                       f"{MAX_WALL_STIFFNESS / 1e3:g} (default: each hole's own, 1 N/mm)")
     plant.add_argument("--payload", type=payload, metavar="KG",
                        help="mass at each EE the plant carries and the gravity compensation "
                        "and the controllers do not know of, at most 100 (mujoco; default: 0)")
@@ -165,7 +166,7 @@ def plant_choice(args: argparse.Namespace, base=None):
     kinematic plant."""
     from dataclasses import replace
 
-    from teleop.experiments.plant_choice import PlantChoice
+    from teleop.plants.choice import PlantChoice
 
     base = base or PlantChoice()
     kind = args.plant or base.kind

@@ -30,7 +30,7 @@ from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
 from teleop.robots.chains import hole_links, load_chain
 
 from .metrics_table import format_status_counts
-from .plant_choice import PlantChoice
+from teleop.plants.choice import PlantChoice
 from .solver_output import SolverOutputCapture
 
 #: hole distance along the constrained link of each built-in robot (m)

@@ -22,7 +22,7 @@ from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
 from teleop.plants.imperfect import Imperfections
 
 from .plan import Plan
-from .plant_choice import PlantChoice
+from teleop.plants.choice import PlantChoice
 from .results import BODY_METRIC_KEYS, METRIC_KEYS, RunResult
 from .solver_output import SolverOutputCapture
 

@@ -18,7 +18,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .plan import Plan
-    from .plant_choice import PlantChoice
+    from teleop.plants.choice import PlantChoice
     from .results import RunResult
 
 #: Curves coincide when they differ by at most this fraction of their largest |value|

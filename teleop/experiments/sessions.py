@@ -48,7 +48,7 @@ from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED, advance, steer
 from teleop.robots import Robot, load_robot
 
 from .plan import Plan, home_poses
-from .plant_choice import PlantChoice
+from teleop.plants.choice import PlantChoice
 
 FORMAT = "cjm-teleop-session"
 VERSION = 2

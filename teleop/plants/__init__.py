@@ -1,9 +1,10 @@
 """What stands between the loop and the robot's true joints (docs/design.md sections 15.1
 and 17): the imperfect kinematic robot and the MuJoCo physics plant."""
 
+from .choice import PLANT_KINDS, PlantChoice
 from .imperfect import Imperfections, ImperfectPlant
 from .mujoco_plant import MujocoPlant, PlantMeasures
 from .settings import MIN_PHYSICS_RATE_HZ, PlantSettings
 
-__all__ = ["MIN_PHYSICS_RATE_HZ", "ImperfectPlant", "Imperfections", "MujocoPlant",
-           "PlantMeasures", "PlantSettings"]
+__all__ = ["MIN_PHYSICS_RATE_HZ", "PLANT_KINDS", "ImperfectPlant", "Imperfections",
+           "MujocoPlant", "PlantChoice", "PlantMeasures", "PlantSettings"]

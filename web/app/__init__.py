@@ -14,7 +14,7 @@ from .limits import (
     MAX_TARGET_DISTANCE,
     MIN_RATE,
 )
-from .plant import PLANTS, PlantChoice, PortReading
+from .plant import PortReading
 from .robots import default_ghost_offset
 from .status import BEHIND_FRACTION, Limitation, behind_words, describe_limitation, port_words
 
@@ -31,8 +31,6 @@ __all__ = [
     "MAX_RATE",
     "MAX_TARGET_DISTANCE",
     "MIN_RATE",
-    "PLANTS",
-    "PlantChoice",
     "PortReading",
     "SWITCH_INTERVAL",
     "TIMING_WINDOW",

@@ -47,6 +47,3 @@ def checked_rate(rate: float, what: str = "rate") -> float:
         raise ValueError(f"{what} must be between {MIN_RATE:g} and {MAX_RATE:g} Hz, "
                          f"got {rate:g}")
     return rate
-#: the abdominal wall's lateral stiffness at a port is at most this (N/m, 100 N/mm): far
-#: stiffer than tissue, and the wall's spring stays resolved by the 2 kHz physics
-MAX_WALL_STIFFNESS = 1e5

@@ -5,67 +5,15 @@ force on the instrument at each port (docs/design.md section 5.3)."""
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
-from constraints.validation import as_number
 from teleop.loop import TeleopLoop
-from teleop.plants import MujocoPlant, PlantSettings
+from teleop.plants import PlantChoice
 from teleop.robots import Robot
-
-from .limits import MAX_WALL_STIFFNESS
-
-#: the plants a session may run on: the ideal integrator, the MuJoCo physics
-PLANTS = ("kinematic", "mujoco")
-
-
-@dataclass(frozen=True)
-class PlantChoice:
-    """What every loop of the session runs on.
-
-    Attributes
-    ----------
-    kind : ``"kinematic"`` (``q += qd dt``, no plant) or ``"mujoco"`` (:class:`MujocoPlant`).
-    settings : the physics plant's body and servos (payload, friction...).
-    wall_stiffness : the abdominal wall's lateral stiffness (N/m) at every port of the
-        session, placed or loaded; None: each port's own (its constraint's default, 1 N/mm).
-    """
-
-    kind: str = "kinematic"
-    settings: PlantSettings = field(default_factory=PlantSettings)
-    wall_stiffness: float | None = None
-
-    def __post_init__(self) -> None:
-        """``ValueError`` naming the field for a kind not in :data:`PLANTS`, settings that
-        are not :class:`PlantSettings`, a stiffness not in (0, MAX_WALL_STIFFNESS]."""
-        if self.kind not in PLANTS:
-            raise ValueError(f"plant must be one of {', '.join(PLANTS)}, got {self.kind!r}")
-        if not isinstance(self.settings, PlantSettings):
-            raise ValueError(f"plant settings must be PlantSettings, got "
-                             f"{type(self.settings).__name__}")
-        if self.wall_stiffness is not None:
-            as_number(self.wall_stiffness, "wall_stiffness", positive=True,
-                      maximum=MAX_WALL_STIFFNESS)
-
-    @property
-    def physical(self) -> bool:
-        """Whether the loops run on a physics plant (ports, forces, torques)."""
-        return self.kind != "kinematic"
-
-    def make(self, robot: Robot, dt: float) -> MujocoPlant | None:
-        """A new plant for one loop at period ``dt`` (None: the ideal integrator)."""
-        return MujocoPlant(robot, dt, self.settings) if self.physical else None
-
-    def describe(self) -> str:
-        """One line for the operator."""
-        if not self.physical:
-            return "kinematic plant (q += qd dt)"
-        wall = ("each port's own wall" if self.wall_stiffness is None
-                else f"wall {self.wall_stiffness / 1e3:g} N/mm")
-        return f"{self.settings.describe()}, {wall}"
 
 
 @dataclass(frozen=True)

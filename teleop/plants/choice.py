@@ -2,8 +2,8 @@
 ``q += qd dt`` (``kinematic``) or the MuJoCo physics plant (``mujoco``) with its settings,
 and the abdominal wall's stiffness at every hole.
 
-One :class:`PlantChoice` is the same for every controller of a comparison; each run builds
-its own plant from it (:meth:`PlantChoice.make`)."""
+One :class:`PlantChoice` is the same for every controller of a comparison (and every loop
+of a UI session); each run or loop builds its own plant from it (:meth:`PlantChoice.make`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,11 @@ from typing import Sequence
 
 from constraints import Constraint
 from constraints.validation import as_number, short_repr
-from teleop.plants import Imperfections, MujocoPlant, PlantSettings
+from teleop.limits import MAX_WALL_STIFFNESS
+
+from .imperfect import Imperfections
+from .mujoco_plant import MujocoPlant
+from .settings import PlantSettings
 
 #: The plants a run can choose, by name.
 PLANT_KINDS = ("kinematic", "mujoco")
@@ -46,7 +50,7 @@ class PlantChoice:
     def __post_init__(self) -> None:
         """``ValueError`` naming the field: an unknown kind, settings that are not
         :class:`PlantSettings`, physics settings for the kinematic plant, a stiffness that is
-        not a finite number >= 0."""
+        not a finite number in [0, :data:`~teleop.limits.MAX_WALL_STIFFNESS`]."""
         if self.kind not in PLANT_KINDS:
             raise ValueError(f"plant must be one of {', '.join(PLANT_KINDS)}, got "
                              f"{short_repr(self.kind)}")
@@ -60,7 +64,7 @@ class PlantChoice:
         if self.wall_stiffness is not None:
             object.__setattr__(self, "wall_stiffness",
                                as_number(self.wall_stiffness, "wall_stiffness", 0.0,
-                                         maximum=1e7))
+                                         maximum=MAX_WALL_STIFFNESS))
 
     @property
     def physical(self) -> bool:
@@ -72,7 +76,7 @@ class PlantChoice:
         kinematic robot."""
         imperfections = imperfections or Imperfections()
         if self.kind == "kinematic":
-            return imperfections.plant(robot.model, dt)
+            return None if imperfections.perfect else imperfections.plant(robot.model, dt)
         imperfections.check_period(dt)
         return MujocoPlant(robot, dt, self.settings, imperfections)
 
@@ -118,7 +122,7 @@ class PlantChoice:
     def describe(self) -> str:
         """One line for humans."""
         wall = ("" if self.wall_stiffness is None
-                else f", abdominal wall {self.wall_stiffness / 1000.0:g} N/mm at every hole")
+                else f", abdominal wall {self.wall_stiffness / 1000.0:g} N/mm")
         if not self.physical:
             return "kinematic plant (q += qd dt)" + wall
         return self.settings.describe() + wall
