@@ -85,7 +85,9 @@ def fixed_step(model: pin.Model) -> _step.Step:
                           velocity_lower=np.full(model.nv, -1.0), velocity_upper=np.ones(model.nv),
                           velocity_limit=np.ones(model.nv), limited_q=[], limited_v=[],
                           q_min=np.zeros(0), q_max=np.zeros(0), position_gain=0.0,
-                          position_limits=False, box_test=np.zeros((0, model.nv + model.nq + 1))),
+                          position_limits=False, box_test=np.zeros((0, model.nv + model.nq + 1)),
+                          acceleration_step=np.zeros(0), dt=1e-3, limit_gain=1.0,
+                          slack=np.zeros(model.nv)),
                       posture_gain=0.0, posture_target=np.zeros(0),
                       tolerances=_step.Tolerances(**dataclasses.asdict(StepTolerances())))
 
