@@ -71,11 +71,9 @@ def problems(draw):
     return name, kinds, past, scale, np.array(direction), np.array(offsets), at_limits, spec
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(problem=problems())
-def test_every_controller_is_finite_in_its_limits_honest_and_bounded(robots, problem):
-    name, kinds, past, scale, direction, offset, at_limits, spec = problem
-    robot = robots[name]
+def drawn_configuration(robot, at_limits: list[int], past: float) -> np.ndarray:
+    """``q_home`` with each bounded joint ``past`` rad beyond its lower (-1) or upper (1)
+    limit, or left at home (0), as ``at_limits`` says (cycled over the joints)."""
     model = robot.model
     q = robot.q_home.copy()
     bounded = np.isfinite(model.lowerPositionLimit) & np.isfinite(model.upperPositionLimit) & (
@@ -85,6 +83,15 @@ def test_every_controller_is_finite_in_its_limits_honest_and_bounded(robots, pro
         if side:
             limit = model.upperPositionLimit[i] if side > 0 else model.lowerPositionLimit[i]
             q[i] = limit + side * past
+    return q
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(problem=problems())
+def test_every_controller_is_finite_in_its_limits_honest_and_bounded(robots, problem):
+    name, kinds, past, scale, direction, offset, at_limits, spec = problem
+    robot = robots[name]
+    q = drawn_configuration(robot, at_limits, past)
     links = list(robot.constrained_links)
     constraints = [constraint_of(robot, robot.q_home, kind, links[i % len(links)], offset)
                    for i, kind in enumerate(kinds)]
@@ -126,13 +133,7 @@ def test_every_controller_keeps_its_acceleration_box_over_a_sequence(robots, pro
     name, kinds, past, scale, direction, offset, at_limits, spec = problem
     robot = robots[name]
     model = robot.model
-    q = robot.q_home.copy()
-    bounded = np.isfinite(model.lowerPositionLimit) & np.isfinite(model.upperPositionLimit) & (
-        np.abs(model.upperPositionLimit) < 1e10)
-    for i in np.flatnonzero(bounded):
-        side = at_limits[i % len(at_limits)]
-        if side:
-            q[i] = (model.upperPositionLimit[i] if side > 0 else model.lowerPositionLimit[i]) + side * past
+    q = drawn_configuration(robot, at_limits, past)
     links = list(robot.constrained_links)
     constraints = [constraint_of(robot, robot.q_home, kind, links[i % len(links)], offset)
                    for i, kind in enumerate(kinds)]

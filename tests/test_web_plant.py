@@ -6,9 +6,6 @@ the instrument's offset from the port centre, computed here from Pinocchio's kin
 from __future__ import annotations
 
 import math
-import signal
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -21,6 +18,7 @@ from hypothesis import strategies as st
 from constraints import Hole
 from teleop.plants import MujocoPlant, PlantSettings
 from teleop.plants import PlantChoice
+from test_web_cli import serve
 from web.app import ControlThread, TeleopApp, port_words
 from web.ui import FORCE_ARROW_SCALE, PLANT_PLOTS, PLOTS, force_arrow, plot_series, plots_of
 
@@ -297,27 +295,8 @@ def test_bad_plant_options_are_one_line_and_exit_2(args, message, capsys):
 def test_teleop_web_plant_mujoco_starts_and_says_what_it_runs_on():
     """``python -m web --plant mujoco ...`` as a user starts it (bounded): its start line
     names the plant; Ctrl-C stops it with exit code 0."""
-    process = subprocess.Popen(
-        [sys.executable, "-m", "web", "--port", str(free_port()), "--plant", "mujoco",
-         "--wall-stiffness", "2", "--payload", "0.5"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines, deadline = [], time.monotonic() + 90.0
-    try:
-        while time.monotonic() < deadline:
-            line = process.stdout.readline()
-            if not line:
-                break
-            lines.append(line)
-            if "Ctrl-C stops" in line:
-                break
-        process.send_signal(signal.SIGINT)
-        out, err = process.communicate(timeout=30)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
-    out = "".join(lines) + out
-    assert process.returncode == 0, err
+    out, err, code = serve("--plant", "mujoco", "--wall-stiffness", "2", "--payload", "0.5")
+    assert code == 0, err
     assert "(controller cjm), on the MuJoCo plant at 2000 Hz, 20 Hz servos, payload 0.5 kg, " \
         "abdominal wall 2 N/mm; Ctrl-C stops" in out, out
     assert "Traceback" not in err, err
