@@ -230,3 +230,16 @@ def test_the_slow_paper_scenario_on_the_plant_follows_the_ideal_integrator(sda10
     apart = np.max(np.linalg.norm(paths["mujoco"] - paths["kinematic"], axis=1))
     assert 1e-8 < apart < 20e-6, apart
     assert hole_errors["mujoco"] < 1e-6, hole_errors
+
+
+@settings(max_examples=25, deadline=None)
+@given(payload=st.floats(0.0, 100.0), friction=st.floats(0.0, 1e4),
+       bandwidth=st.floats(0.1, 200.0), gravity=st.booleans())
+def test_plant_settings_round_trip_through_their_dict(payload, friction, bandwidth, gravity):
+    chosen = PlantSettings(payload=payload, coulomb_friction=friction,
+                           servo_bandwidth=bandwidth, gravity=gravity)
+    data = chosen.to_dict()
+    assert data["payload_kg"] == payload and data["servo_bandwidth_hz"] == bandwidth
+    assert PlantSettings.from_dict(data) == chosen
+    assert set(chosen.changed()) <= set(data)
+    assert ("payload_kg" in chosen.changed()) == (payload != 0.0)

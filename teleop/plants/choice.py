@@ -16,17 +16,11 @@ from teleop.limits import MAX_WALL_STIFFNESS
 
 from .imperfect import Imperfections
 from .mujoco_plant import MujocoPlant
-from .settings import PlantSettings
+from .settings import SETTINGS_KEYS, PlantSettings
 
 #: The plants a run can choose, by name.
 PLANT_KINDS = ("kinematic", "mujoco")
 
-#: :meth:`PlantSettings.to_dict`'s keys (units in the names) -> the settings' fields.
-SETTINGS_KEYS = {"physics_rate_hz": "physics_rate", "servo_bandwidth_hz": "servo_bandwidth",
-                 "servo_damping_ratio": "servo_damping_ratio", "armature_kg_m2": "armature",
-                 "joint_damping_nms": "joint_damping", "payload_kg": "payload",
-                 "coulomb_friction_nm": "coulomb_friction",
-                 "viscous_friction_nms": "viscous_friction", "gravity": "gravity"}
 
 
 @dataclass(frozen=True)
@@ -58,9 +52,8 @@ class PlantChoice:
             raise ValueError(f"plant settings must be PlantSettings, got "
                              f"{type(self.settings).__name__}")
         if self.kind == "kinematic" and self.settings != PlantSettings():
-            changed = [key for key, name in SETTINGS_KEYS.items()
-                       if getattr(self.settings, name) != getattr(PlantSettings(), name)]
-            raise ValueError(f"{', '.join(changed)} need the mujoco plant (plant is kinematic)")
+            raise ValueError(f"{', '.join(self.settings.changed())} need the mujoco plant "
+                             f"(plant is kinematic)")
         if self.wall_stiffness is not None:
             object.__setattr__(self, "wall_stiffness",
                                as_number(self.wall_stiffness, "wall_stiffness", 0.0,
@@ -113,8 +106,7 @@ class PlantChoice:
             raise ValueError(f"{where} 'settings' has unknown fields {unknown}")
         try:
             return cls(kind=data.get("kind", "kinematic"),
-                       settings=PlantSettings(**{SETTINGS_KEYS[key]: value
-                                                 for key, value in settings.items()}),
+                       settings=PlantSettings.from_dict(settings),
                        wall_stiffness=data.get("wall_stiffness_n_per_m"))
         except ValueError as error:
             raise ValueError(f"{where}: {error}") from None

@@ -11,6 +11,14 @@ from constraints.validation import as_number
 MIN_PHYSICS_RATE_HZ = 2000.0
 
 
+#: :meth:`PlantSettings.to_dict`'s keys (units in the names) -> the settings' fields.
+SETTINGS_KEYS = {"physics_rate_hz": "physics_rate", "servo_bandwidth_hz": "servo_bandwidth",
+                 "servo_damping_ratio": "servo_damping_ratio", "armature_kg_m2": "armature",
+                 "joint_damping_nms": "joint_damping", "payload_kg": "payload",
+                 "coulomb_friction_nm": "coulomb_friction",
+                 "viscous_friction_nms": "viscous_friction", "gravity": "gravity"}
+
+
 @dataclass(frozen=True)
 class PlantSettings:
     """The physics plant's body and servos (docs/design.md section 17.1).
@@ -59,12 +67,22 @@ class PlantSettings:
         return max(2, math.ceil(self.physics_rate * dt - 1e-9))
 
     def to_dict(self) -> dict[str, float | bool]:
-        """The ``plant`` entry of metrics.json (units in the key names)."""
-        return {"physics_rate_hz": self.physics_rate, "servo_bandwidth_hz": self.servo_bandwidth,
-                "servo_damping_ratio": self.servo_damping_ratio, "armature_kg_m2": self.armature,
-                "joint_damping_nms": self.joint_damping, "payload_kg": self.payload,
-                "coulomb_friction_nm": self.coulomb_friction,
-                "viscous_friction_nms": self.viscous_friction, "gravity": self.gravity}
+        """The ``settings`` of a plant in metrics.json and session headers (units in the
+        key names, :data:`SETTINGS_KEYS`)."""
+        return {key: getattr(self, name) for key, name in SETTINGS_KEYS.items()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "PlantSettings":
+        """The inverse of :meth:`to_dict`, keys left out at their defaults (``KeyError`` for
+        a key not in :data:`SETTINGS_KEYS`: the caller checks them and says where;
+        ``ValueError`` naming a bad value)."""
+        return cls(**{SETTINGS_KEYS[key]: value for key, value in data.items()})
+
+    def changed(self) -> list[str]:
+        """The :meth:`to_dict` keys whose values differ from the defaults."""
+        default = PlantSettings()
+        return [key for key, name in SETTINGS_KEYS.items()
+                if getattr(self, name) != getattr(default, name)]
 
     def describe(self) -> str:
         """One line for humans."""
