@@ -12,6 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint, RobotLike
+from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.kinematics import resolve_frame
 from constraints.validation import as_vector
 
@@ -112,6 +113,11 @@ class SolveInfo:
     saturated_joints : velocity indices of the joints held at a limit (CJM).
     active_barriers : indices (into ``constraints``) of the barriers held as equalities.
     equality_residual : ``max |A qd - b|`` over the equality rows held (m/s).
+    minimum_distance : with collision avoidance, the smallest distance (m) between the
+        pairs it measured at this step (``inf`` when none was within the detection
+        distance, or without collision avoidance); ``closest_pair`` names that pair.
+    active_pairs : the collision pairs whose rows the command holds at their bound
+        (docs/design.md section 18).
     """
 
     status: StepStatus = StepStatus.OK
@@ -123,6 +129,9 @@ class SolveInfo:
     saturated_joints: tuple[int, ...] = ()
     active_barriers: tuple[int, ...] = ()
     equality_residual: float = 0.0
+    minimum_distance: float = float("inf")
+    closest_pair: str = ""
+    active_pairs: tuple[str, ...] = ()
 
     @property
     def success(self) -> bool:
@@ -245,7 +254,7 @@ class Controller(ABC):
     def __init__(self, robot: RobotLike, dt: float = 1e-3,
                  limit_gain: float = DEFAULT_LIMIT_GAIN, position_limits: bool = True,
                  velocity_limits: bool = True, strict: bool = False,
-                 acceleration_limit=None) -> None:
+                 acceleration_limit=None, collisions: CollisionAvoidance | None = None) -> None:
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
@@ -264,6 +273,11 @@ class Controller(ABC):
         self._box_test = BoxTest(self.joint_bounds, self.model.nq, self.model.nv)
         self.constraints: list[Constraint] = []
         self.constraint_frames: list[int] = []
+        #: the collision pairs kept apart (docs/design.md section 18), or None
+        self.collisions: CollisionAvoidance | None = None
+        if collisions is not None:
+            collisions.check(self.model, self.dt)
+            self.collisions = collisions
         #: a mobile base's velocity indices: no posture there (docs/design.md section 11.3)
         self._base_velocity = (slice(0, self.model.nvs[1])
                                if getattr(robot, "root_joint", "fixed") == "planar" else None)
@@ -348,6 +362,29 @@ class Controller(ABC):
         except Exception:  # refused: the controller keeps, and says, the set it holds
             self.constraints, self.constraint_frames = previous
             raise
+
+    def set_collisions(self, collisions: CollisionAvoidance | None) -> None:
+        """Keep the pairs of ``collisions`` apart from the next step on, or none (None).
+
+        ``collisions`` must be built on this controller's robot model, with a damper
+        stable at ``dt`` (else ``ValueError``, and the controller keeps what it had).
+        """
+        if collisions is not None:
+            collisions.check(self.model, self.dt)
+        previous = self.collisions
+        self.collisions = collisions
+        try:
+            self._prepare()
+        except Exception:
+            self.collisions = previous
+            raise
+
+    def collision_rows(self) -> CollisionRows | None:
+        """The avoidance rows at the kinematics in ``self.data`` (joint placements and
+        Jacobians computed), or None without collision avoidance."""
+        if self.collisions is None:
+            return None
+        return self.collisions.rows(self.model, self.data)
 
     def _prepare(self) -> None:
         """Precompute per-constraint data after :meth:`set_constraints` (override)."""

@@ -1,0 +1,338 @@
+"""Collision avoidance: the pairs kept apart and their velocity-damper rows (docs/design.md 18).
+
+:class:`CollisionAvoidance` holds the robot's capsule geometry, the obstacles, the pairs
+to check (self-collision and robot-obstacle) and the damper's three numbers; at each step
+:meth:`CollisionAvoidance.rows` measures the pairs a bounding-sphere broadphase lets
+through and returns one row per pair closer than the detection distance
+(:class:`~constraints.collision.rows.CollisionRows`). The controllers hold the rows as
+inequalities: the CJM in its active set after the trocar rows, the QP in its constraints.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, Protocol
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ..validation import as_number
+from .geometry import (bounding_sphere, capsule_geometry, check_links, link_of, link_pairs,
+                       self_collision_pairs, shape_distance)
+from .obstacles import Obstacle
+from .rows import CollisionRows
+
+#: the distance (m) the damper keeps every pair apart, ``d_s``
+DEFAULT_SAFETY_DISTANCE = 0.005
+#: the distance (m) below which a pair gets its row, ``d_i``
+DEFAULT_DETECTION_DISTANCE = 0.05
+#: ``xi`` (m/s): how fast a pair may approach at the detection distance (0 at ``d_s``)
+DEFAULT_APPROACH_SPEED = 0.5
+
+
+class CollisionRobot(Protocol):
+    """What collision avoidance needs of a robot (``teleop.Robot`` satisfies it)."""
+
+    model: pin.Model
+    collision_model: pin.GeometryModel
+    q_home: np.ndarray
+
+
+class CollisionAvoidance:
+    """The pairs of bodies kept at least ``safety_distance`` apart (docs/design.md 18).
+
+    Each pair closer than ``detection_distance`` gets the velocity damper of Faverjon and
+    Tournassoud, ``d_dot >= -xi (d - d_s) / (d_i - d_s)`` (the obstacle's velocity fed
+    forward), a row of :class:`CollisionRows`. In discrete time at period ``dt`` the
+    damper is stable for ``xi dt / (d_i - d_s) < 1``, which :meth:`check` tests.
+
+    Parameters
+    ----------
+    robot : the robot (its ``model``, ``collision_model`` and ``q_home``; an optional
+        ``collision_disabled``: link pairs never checked, as an SRDF's).
+    obstacles : the world's obstacles (:mod:`constraints.collision.obstacles`).
+    safety_distance : ``d_s`` (m), >= 0.
+    detection_distance : ``d_i`` (m), > ``d_s``.
+    approach_speed : ``xi`` (m/s), > 0: the approach speed allowed at ``d_i``.
+    self_collision : check the robot's links against each other (else obstacles only).
+    disabled_pairs : link pairs added to the robot's disable list.
+    extra_pairs : link pairs checked whatever the rules say (adjacent ones included).
+    """
+
+    def __init__(self, robot: CollisionRobot, obstacles: Iterable[Obstacle] = (), *,
+                 safety_distance: float = DEFAULT_SAFETY_DISTANCE,
+                 detection_distance: float = DEFAULT_DETECTION_DISTANCE,
+                 approach_speed: float = DEFAULT_APPROACH_SPEED, self_collision: bool = True,
+                 disabled_pairs: Iterable[Sequence[str]] = (),
+                 extra_pairs: Iterable[Sequence[str]] = ()) -> None:
+        self.safety_distance = as_number(safety_distance, "safety_distance", 0.0)
+        self.detection_distance = as_number(detection_distance, "detection_distance")
+        if not self.detection_distance > self.safety_distance:
+            raise ValueError(f"detection_distance ({self.detection_distance:g} m) must exceed "
+                             f"safety_distance ({self.safety_distance:g} m)")
+        self.approach_speed = as_number(approach_speed, "approach_speed", positive=True)
+        if not isinstance(self_collision, (bool, np.bool_)):
+            raise ValueError(f"self_collision must be true or false, got {self_collision!r}")
+        self.self_collision = bool(self_collision)
+        self.model = robot.model
+        robot_disabled = link_pairs(getattr(robot, "collision_disabled", ()), "collision_disabled")
+        self.disabled_pairs = [tuple(sorted(key)) for key in link_pairs(disabled_pairs,
+                                                                         "disabled_pairs")]
+        self.extra_pairs = [tuple(sorted(key)) for key in link_pairs(extra_pairs, "extra_pairs")]
+        disabled = robot_disabled | {frozenset(pair) for pair in self.disabled_pairs}
+        extra = {frozenset(pair) for pair in self.extra_pairs}
+        check_links(self.model, disabled | extra, "a collision pair list")
+        self._robot_geometry = capsule_geometry(robot.collision_model)
+        self._self_pairs = (self_collision_pairs(self.model, self._robot_geometry, robot.q_home,
+                                                 self.safety_distance, disabled, extra)
+                            if self.self_collision else [])
+        self._links = [link_of(self.model, item)
+                       for item in self._robot_geometry.geometryObjects]
+        self._exempt: set[tuple[int, int]] = set()
+        self.obstacles: list[Obstacle] = []
+        self.set_obstacles(obstacles)
+
+    # -- the damper ------------------------------------------------------------------------
+
+    @property
+    def gain(self) -> float:
+        """``xi / (d_i - d_s)`` (1/s): the rate the gap above ``d_s`` may close at."""
+        return self.approach_speed / (self.detection_distance - self.safety_distance)
+
+    def check(self, model: pin.Model, dt: float) -> None:
+        """Refuse (``ValueError``) a controller whose model is not this robot's, or a
+        damper unstable at period ``dt`` (``gain dt >= 1``)."""
+        if model is not self.model and (model.nq != self.model.nq
+                                        or list(model.names) != list(self.model.names)):
+            raise ValueError("this collision avoidance was built for another robot model")
+        if not self.gain * dt < 1.0:
+            raise ValueError(
+                f"the collision damper's rate xi / (d_i - d_s) = {self.gain:g} 1/s is unstable "
+                f"at {1.0 / dt:g} Hz (needs < {1.0 / dt:g} 1/s): lower approach_speed or "
+                "widen the detection distance")
+
+    # -- the obstacles and the pairs -----------------------------------------------------------
+
+    def set_obstacles(self, obstacles: Iterable[Obstacle]) -> None:
+        """Replace the obstacles (each an :class:`Obstacle`; names made unique)."""
+        obstacles = list(obstacles)
+        for obstacle in obstacles:
+            if not isinstance(obstacle, Obstacle):
+                raise ValueError(f"an obstacle must be a Sphere, Box, Capsule or HalfSpace, "
+                                 f"got {obstacle!r}")
+        seen: dict[str, int] = {}
+        for obstacle in obstacles:
+            count = seen[obstacle.name] = seen.get(obstacle.name, 0) + 1
+            if count > 1:
+                obstacle.name = f"{obstacle.name}{count}"
+        self.obstacles = obstacles
+        self._build()
+
+    def add_obstacle(self, obstacle: Obstacle) -> None:
+        """Add one obstacle."""
+        self.set_obstacles([*self.obstacles, obstacle])
+
+    def remove_obstacle(self, obstacle: Obstacle) -> None:
+        """Remove one obstacle (``ValueError`` if it is not here)."""
+        if not any(item is obstacle for item in self.obstacles):
+            raise ValueError(f"{obstacle!r} is not one of the obstacles")
+        self.set_obstacles([item for item in self.obstacles if item is not obstacle])
+
+    def set_ports(self, constraints: Iterable[Any]) -> None:
+        """Leave the instrument inside each port alone: for every constraint with a wall
+        (a hole, ``has_wall``), the geometries on its link and the links after it are not
+        paired with an obstacle within the detection distance of its position (the body
+        the port goes through)."""
+        exempt = set()
+        robot_count = self._robot_geometry.ngeoms
+        for constraint in constraints:
+            if not getattr(constraint, "has_wall", False):
+                continue
+            joint = self.model.frames[self.model.getFrameId(constraint.link)].parentJoint
+            inside = set(self.model.subtrees[joint])
+            port = pin.SE3(np.eye(3), np.asarray(constraint.position, dtype=float))
+            point = coal.Sphere(1e-6)
+            for k, obstacle in enumerate(self.obstacles):
+                if shape_distance(point, port, obstacle.shape(), obstacle.pose()) \
+                        > self.detection_distance:
+                    continue
+                for g, item in enumerate(self._robot_geometry.geometryObjects):
+                    if item.parentJoint in inside:
+                        exempt.add((g, robot_count + k))
+        if exempt != self._exempt:
+            self._exempt = exempt
+            self._build()
+
+    @property
+    def pairs(self) -> list[tuple[str, str]]:
+        """Every pair checked, by the names of its links or obstacles."""
+        return [(self._names[i], self._names[j]) for i, j in self._pairs]
+
+    def _build(self) -> None:
+        """The geometry model of the robot and the obstacles, its pairs and broadphase data."""
+        geometry = self._robot_geometry.copy()
+        robot_count = geometry.ngeoms
+        for obstacle in self.obstacles:
+            geometry.addGeometryObject(pin.GeometryObject(
+                f"obstacle:{obstacle.name}", 0, 0, obstacle.pose(), obstacle.shape()))
+        pairs = list(self._self_pairs)
+        for k in range(len(self.obstacles)):
+            for g, item in enumerate(self._robot_geometry.geometryObjects):
+                if item.parentJoint != 0 and (g, robot_count + k) not in self._exempt:
+                    pairs.append((g, robot_count + k))
+        for i, j in pairs:
+            geometry.addCollisionPair(pin.CollisionPair(i, j))
+        self._geometry = geometry
+        self._geometry_data = geometry.createData()
+        self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+        self._names = [*self._links, *(obstacle.name for obstacle in self.obstacles)]
+        self._robot_count = robot_count
+        spheres = [bounding_sphere(item.geometry, item.placement)
+                   for item in self._robot_geometry.geometryObjects]
+        #: per robot geometry: its joint, its bounding sphere's centre there and radius
+        self._joints = np.array([item.parentJoint for item in self._robot_geometry.geometryObjects],
+                                dtype=int)
+        self._local_centres = np.array([centre for centre, _ in spheres]).reshape(-1, 3)
+        self._radii = np.array([radius for _, radius in spheres] +
+                               [bounding_sphere(o.shape(), pin.SE3.Identity())[1]
+                                for o in self.obstacles])
+        self._moving_joints = np.unique(self._joints)
+
+    # -- the rows ------------------------------------------------------------------------------
+
+    def _update(self, model: pin.Model, data: pin.Data) -> np.ndarray:
+        """Every geometry's world placement (``data.oMi`` must be current); returns the
+        world centres of the bounding spheres, robot geometries then obstacles."""
+        geometry, geometry_data = self._geometry, self._geometry_data
+        obstacle_poses = [obstacle.pose() for obstacle in self.obstacles]
+        for k, pose in enumerate(obstacle_poses):
+            geometry.geometryObjects[self._robot_count + k].placement = pose
+        pin.updateGeometryPlacements(model, data, geometry, geometry_data)
+        rotations = np.empty((model.njoints, 3, 3))
+        translations = np.empty((model.njoints, 3))
+        for joint in self._moving_joints.tolist():
+            placement = data.oMi[joint]
+            rotations[joint] = placement.rotation
+            translations[joint] = placement.translation
+        robot_centres = (np.einsum("kij,kj->ki", rotations[self._joints], self._local_centres)
+                         + translations[self._joints])
+        obstacle_centres = [pose.translation for pose in obstacle_poses]
+        return np.vstack([robot_centres, *obstacle_centres]) if obstacle_centres else robot_centres
+
+    def _near_pairs(self, centres: np.ndarray) -> np.ndarray:
+        """The pair indices whose bounding spheres come within the detection distance (a
+        half-space's pair: the sphere within that distance of its plane)."""
+        first, second = self._pairs[:, 0], self._pairs[:, 1]
+        gaps = (np.linalg.norm(centres[first] - centres[second], axis=1)
+                - self._radii[first] - self._radii[second])
+        infinite = ~np.isfinite(gaps)
+        if infinite.any():
+            for index in np.flatnonzero(infinite).tolist():
+                plane = self.obstacles[second[index] - self._robot_count]
+                gaps[index] = (float(plane.normal @ (centres[first[index]] - plane.center))
+                               - self._radii[first[index]])
+        return np.flatnonzero(gaps < self.detection_distance)
+
+    def rows(self, model: pin.Model, data: pin.Data) -> CollisionRows:
+        """The damper rows at the kinematics in ``data`` (``pin.computeJointJacobians`` run
+        at the current ``q``): one per pair closer than the detection distance."""
+        if not len(self._pairs):
+            return CollisionRows.empty(model.nv)
+        centres = self._update(model, data)
+        near = self._near_pairs(centres)
+        if not near.size:
+            return CollisionRows.empty(model.nv)
+        gain, safety = self.gain, self.safety_distance
+        rows, lower, names, distances, witnesses = [], [], [], [], []
+        minimum, closest = float("inf"), ""
+        for index in near.tolist():
+            result = pin.computeDistance(self._geometry, self._geometry_data, index)
+            distance = float(result.min_distance)
+            first, second = self._pairs[index].tolist()
+            name = f"{self._names[first]} | {self._names[second]}"
+            if distance < minimum:
+                minimum, closest = distance, name
+            if distance >= self.detection_distance:
+                continue
+            on_first, on_second = result.getNearestPoint1(), result.getNearestPoint2()
+            normal = -np.asarray(result.normal)  # from the second body towards the first
+            row = self._point_row(model, data, first, on_first, normal)
+            bound = -gain * (distance - safety)
+            if second < self._robot_count:
+                row -= self._point_row(model, data, second, on_second, normal)
+            else:
+                bound += float(normal @ self.obstacles[second - self._robot_count].velocity)
+            rows.append(row)
+            lower.append(bound)
+            names.append(name)
+            distances.append(distance)
+            witnesses.append((on_first, on_second))
+        if not rows:
+            return CollisionRows(np.zeros((0, model.nv)), np.zeros(0), (), np.zeros(0),
+                                 np.zeros((0, 2, 3)), minimum, closest)
+        return CollisionRows(np.array(rows), np.array(lower), tuple(names), np.array(distances),
+                             np.array(witnesses), minimum, closest)
+
+    def _point_row(self, model: pin.Model, data: pin.Data, geometry_index: int,
+                   point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+        """``normal^T J_p``: the rate along ``normal`` of the world ``point`` carried by the
+        joint of geometry ``geometry_index``, ``J_p = J_v - hat(point - o) J_w`` (world-aligned)."""
+        joint = int(self._joints[geometry_index])
+        jacobian = pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED)
+        arm = point - data.oMi[joint].translation
+        return normal @ jacobian[:3] + np.cross(arm, normal) @ jacobian[3:]
+
+    def distances(self, model: pin.Model, data: pin.Data) -> list[tuple[str, float]]:
+        """Every pair's name and signed distance (m) at the placements in ``data.oMi``
+        (no broadphase: for measures and tests)."""
+        self._update(model, data)
+        result = []
+        for index, (first, second) in enumerate(self._pairs.tolist()):
+            distance = pin.computeDistance(self._geometry, self._geometry_data, index).min_distance
+            result.append((f"{self._names[first]} | {self._names[second]}", float(distance)))
+        return result
+
+    def minimum_distance(self, q: np.ndarray) -> tuple[float, str]:
+        """The smallest distance (m) over every pair at ``q``, and its pair ("" when none)."""
+        data = self.model.createData()
+        pin.forwardKinematics(self.model, data, q)
+        measured = self.distances(self.model, data)
+        if not measured:
+            return float("inf"), ""
+        name, distance = min(measured, key=lambda item: item[1])
+        return distance, name
+
+    # -- description ---------------------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        """The settings and the obstacles, JSON-ready (:meth:`from_dict` rebuilds it)."""
+        return {"safety_distance": self.safety_distance,
+                "detection_distance": self.detection_distance,
+                "approach_speed": self.approach_speed, "self_collision": self.self_collision,
+                "disabled_pairs": [list(pair) for pair in self.disabled_pairs],
+                "extra_pairs": [list(pair) for pair in self.extra_pairs],
+                "obstacles": [obstacle.to_dict() for obstacle in self.obstacles]}
+
+    @classmethod
+    def from_dict(cls, robot: CollisionRobot, data: Mapping) -> "CollisionAvoidance":
+        """Collision avoidance on ``robot`` from :meth:`to_dict` output; bad input raises
+        ``ValueError`` naming the field."""
+        if not isinstance(data, Mapping):
+            raise ValueError(f"collision settings must be an object, got {data!r}")
+        known = {"safety_distance", "detection_distance", "approach_speed", "self_collision",
+                 "disabled_pairs", "extra_pairs", "obstacles"}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"unknown collision field {unknown[0]!r} (its fields: "
+                             f"{', '.join(sorted(known))})")
+        settings = dict(data)
+        obstacles = settings.pop("obstacles", [])
+        if not isinstance(obstacles, list):
+            raise ValueError(f"obstacles must be a list, got {obstacles!r}")
+        return cls(robot, [Obstacle.from_dict(item) for item in obstacles], **settings)
+
+    def __repr__(self) -> str:
+        return (f"CollisionAvoidance({len(self._pairs)} pairs, {len(self.obstacles)} obstacles, "
+                f"d_s={self.safety_distance:g} m, d_i={self.detection_distance:g} m, "
+                f"xi={self.approach_speed:g} m/s)")

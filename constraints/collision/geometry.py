@@ -1,0 +1,122 @@
+"""The robot's collision geometry and the pairs worth checking (docs/design.md 18.1).
+
+From the URDF's collision elements (Pinocchio's ``GeometryModel``): cylinders become
+capsules of the same radius and axis length (a cylinder's distance is not smooth at its
+rims, a capsule's is, and a capsule adds the rounded ends a joint housing has); meshes
+become their convex hulls; spheres and boxes stay. The self-collision pairs are every two
+geometries on links that are neither the same rigid body nor parent and child, that are
+farther apart than the safety distance at the robot's home configuration, and that no
+disable list names (an SRDF's ``disable_collisions``), plus any pair the user adds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+#: a link pair as two link names, in either order
+LinkPair = tuple[str, str]
+
+
+def capsule_geometry(collision_model: pin.GeometryModel) -> pin.GeometryModel:
+    """A copy of ``collision_model`` with capsules for cylinders and convex hulls for meshes."""
+    result = pin.GeometryModel()
+    for item in collision_model.geometryObjects:
+        shape = item.geometry
+        if isinstance(shape, coal.Cylinder):
+            shape = coal.Capsule(shape.radius, 2.0 * shape.halfLength)
+        elif isinstance(shape, coal.BVHModelBase):
+            shape.buildConvexHull(True, "Qt")
+            shape = shape.convex
+        result.addGeometryObject(pin.GeometryObject(
+            item.name, item.parentJoint, item.parentFrame, item.placement, shape))
+    return result
+
+
+def link_of(model: pin.Model, item: pin.GeometryObject) -> str:
+    """The name of the link (body frame) a geometry is attached to."""
+    return model.frames[item.parentFrame].name
+
+
+def adjacent(model: pin.Model, first: int, second: int) -> bool:
+    """Whether joints ``first`` and ``second`` carry one rigid body or a parent and its child."""
+    return (first == second or model.parents[first] == second
+            or model.parents[second] == first)
+
+
+def pair_key(first: str, second: str) -> frozenset[str]:
+    """A link pair, without order."""
+    return frozenset((first, second))
+
+
+def link_pairs(pairs: Iterable, what: str) -> set[frozenset[str]]:
+    """``pairs`` (two link names each) as unordered keys, else ``ValueError`` naming ``what``."""
+    keys = set()
+    for pair in pairs:
+        if (isinstance(pair, str) or not isinstance(pair, (list, tuple)) or len(pair) != 2
+                or not all(isinstance(name, str) for name in pair)):
+            raise ValueError(f"{what} must be pairs of two link names, got {pair!r}")
+        keys.add(pair_key(*pair))
+    return keys
+
+
+def check_links(model: pin.Model, keys: set[frozenset[str]], what: str) -> None:
+    """Every link named in ``keys`` exists in ``model``, else ``ValueError``."""
+    frames = {frame.name for frame in model.frames}
+    for key in keys:
+        for name in key:
+            if name not in frames:
+                raise ValueError(f"{what} names {name!r}, which is not a link of the robot")
+
+
+def self_collision_pairs(model: pin.Model, geometry: pin.GeometryModel, q_home: np.ndarray,
+                         safety_distance: float, disabled: set[frozenset[str]] = frozenset(),
+                         extra: set[frozenset[str]] = frozenset()) -> list[tuple[int, int]]:
+    """Geometry index pairs ``(i, j)``, ``i < j``, checked for self-collision.
+
+    A pair is kept when its links are neither one rigid body nor parent and child, it is
+    farther apart than ``safety_distance`` at ``q_home`` and ``disabled`` does not name
+    its links; a pair of links in ``extra`` is kept whatever the rest says (not on one
+    rigid body).
+    """
+    data = model.createData()
+    geometry_data = geometry.createData()
+    pin.updateGeometryPlacements(model, data, geometry, geometry_data, q_home)
+    objects = geometry.geometryObjects
+    pairs = []
+    for i in range(len(objects)):
+        for j in range(i + 1, len(objects)):
+            first, second = objects[i], objects[j]
+            if first.parentJoint == second.parentJoint:
+                continue
+            key = pair_key(link_of(model, first), link_of(model, second))
+            if key in extra:
+                pairs.append((i, j))
+                continue
+            if key in disabled or adjacent(model, first.parentJoint, second.parentJoint):
+                continue
+            if shape_distance(first.geometry, geometry_data.oMg[i],
+                              second.geometry, geometry_data.oMg[j]) > safety_distance:
+                pairs.append((i, j))
+    return pairs
+
+
+def shape_distance(first: coal.CollisionGeometry, first_pose: pin.SE3,
+                   second: coal.CollisionGeometry, second_pose: pin.SE3) -> float:
+    """The signed distance (m) between two posed coal shapes."""
+    request, result = coal.DistanceRequest(), coal.DistanceResult()
+    return coal.distance(first, coal.Transform3s(first_pose.rotation, first_pose.translation),
+                         second, coal.Transform3s(second_pose.rotation, second_pose.translation),
+                         request, result)
+
+
+def bounding_sphere(shape: coal.CollisionGeometry, placement: pin.SE3) -> tuple[np.ndarray, float]:
+    """Centre (in the parent joint's frame) and radius (m) of a sphere holding ``shape``
+    posed at ``placement``; an infinite radius for a half-space."""
+    if isinstance(shape, coal.Halfspace):
+        return placement.translation.copy(), float("inf")
+    shape.computeLocalAABB()
+    return placement.act(np.asarray(shape.aabb_center)), float(shape.aabb_radius)
