@@ -278,6 +278,7 @@ class Controller(ABC):
         if collisions is not None:
             collisions.check(self.model, self.dt)
             self.collisions = collisions
+            collisions.set_ports(self.constraints)
         #: a mobile base's velocity indices: no posture there (docs/design.md section 11.3)
         self._base_velocity = (slice(0, self.model.nvs[1])
                                if getattr(robot, "root_joint", "fixed") == "planar" else None)
@@ -362,6 +363,8 @@ class Controller(ABC):
         except Exception:  # refused: the controller keeps, and says, the set it holds
             self.constraints, self.constraint_frames = previous
             raise
+        if self.collisions is not None:
+            self.collisions.set_ports(constraints)
 
     def set_collisions(self, collisions: CollisionAvoidance | None) -> None:
         """Keep the pairs of ``collisions`` apart from the next step on, or none (None).
@@ -378,6 +381,8 @@ class Controller(ABC):
         except Exception:
             self.collisions = previous
             raise
+        if collisions is not None:
+            collisions.set_ports(self.constraints)
 
     def collision_rows(self) -> CollisionRows | None:
         """The avoidance rows at the kinematics in ``self.data`` (joint placements and

@@ -90,6 +90,8 @@ class CollisionAvoidance:
         self._links = [link_of(self.model, item)
                        for item in self._robot_geometry.geometryObjects]
         self._exempt: set[tuple[int, int]] = set()
+        #: the rows of the last :meth:`rows` call (for views and measures), or None
+        self.last_rows: CollisionRows | None = None
         self.obstacles: list[Obstacle] = []
         self.set_obstacles(obstacles)
 
@@ -236,7 +238,12 @@ class CollisionAvoidance:
 
     def rows(self, model: pin.Model, data: pin.Data) -> CollisionRows:
         """The damper rows at the kinematics in ``data`` (``pin.computeJointJacobians`` run
-        at the current ``q``): one per pair closer than the detection distance."""
+        at the current ``q``): one per pair closer than the detection distance; kept in
+        :attr:`last_rows`."""
+        self.last_rows = rows = self._rows(model, data)
+        return rows
+
+    def _rows(self, model: pin.Model, data: pin.Data) -> CollisionRows:
         if not len(self._pairs):
             return CollisionRows.empty(model.nv)
         centres = self._update(model, data)
