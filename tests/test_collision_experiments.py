@@ -7,7 +7,9 @@ from __future__ import annotations
 import functools
 import json
 import math
+from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -25,6 +27,9 @@ from teleop.loop import SAFETY_TOLERANCE, DistanceMeter, LoopConfig, TeleopLoop
 from teleop.plants.contact_geometry import OBSTACLE_GEOM, ROBOT_GEOM
 from teleop.plants.mujoco_plant import MujocoPlant
 from teleop.robots import load_robot
+
+SCHEMA = json.loads((Path(__file__).resolve().parent.parent / "teleop" / "experiments"
+                     / "metrics.schema.json").read_text())
 
 #: How far two coal distances of one pair at one q may differ (m): GJK's convergence
 #: tolerance (coal's default 1e-6) for a box, warm-started from the previous call or not.
@@ -156,6 +161,7 @@ def test_compare_writes_the_collision_metrics(tmp_path):
                  "0.05", "--out", str(tmp_path), "--quiet", "--safety-distance", "8"])
     assert code == 0
     document = json.loads((tmp_path / "metrics.json").read_text())
+    jsonschema.validate(document, SCHEMA)
     assert document["schema_version"] == 5
     assert document["collisions"]["safety_distance"] == pytest.approx(0.008)
     assert [o["name"] for o in document["collisions"]["obstacles"]] == ["organ"]
@@ -175,6 +181,7 @@ def test_no_collisions_and_collisions_override_the_scenario(tmp_path):
                  "0.01", "--out", str(tmp_path / "off"), "--quiet", "--no-plots",
                  "--no-collisions"]) == 0
     document = json.loads((tmp_path / "off" / "metrics.json").read_text())
+    jsonschema.validate(document, SCHEMA)
     assert document["collisions"] is None
     assert document["controllers"]["cjm"]["minimum_distance_m"] is None
     assert main(["compare", "--scenario", "paper-hole", "--controllers", "cjm", "--duration",
@@ -298,6 +305,7 @@ def test_compare_on_the_physics_plant_reports_contacts():
     results = compare(plan, ["cjm"], duration=0.05, progress=False, agreement=False,
                       plant=plant)
     document = metrics_document(plan, results, LoopConfig(), 0.05, plant=plant)
+    jsonschema.validate(json.loads(json.dumps(document)), SCHEMA)
     metrics = document["controllers"]["cjm"]
     assert metrics["contact_steps"] == 0  # 2 cm apart, 50 ms of slow motion
     assert metrics["contact_depth_max_m"] == 0.0
