@@ -427,7 +427,7 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
     paths[0].write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     with paths[1].open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        keys = (*METRIC_KEYS, *BODY_METRIC_KEYS, *COLLISION_METRIC_KEYS)
+        keys = (*METRIC_KEYS, *COLLISION_METRIC_KEYS, *BODY_METRIC_KEYS)
         writer.writerow(["controller", *keys])
         for spec, metrics in document["controllers"].items():
             writer.writerow([spec, *("" if metrics[key] is None else metrics[key]

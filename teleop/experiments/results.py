@@ -32,8 +32,8 @@ BODY_METRIC_KEYS = (
     "ee_velocity_power_above_3hz",
 )
 
-#: per-controller keys of collision avoidance (docs/design.md section 18.6), after
-#: :data:`BODY_METRIC_KEYS` in the CSV: null without collision avoidance (the contact keys:
+#: per-controller keys of collision avoidance (docs/design.md section 18.6), between
+#: :data:`METRIC_KEYS` and :data:`BODY_METRIC_KEYS` in the CSV: null without collision avoidance (the contact keys:
 #: also on a plant without a body)
 COLLISION_METRIC_KEYS = (
     "minimum_distance_m", "penetration_steps", "safety_violation_steps", "contact_steps",
