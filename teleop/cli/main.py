@@ -151,7 +151,8 @@ def _add_collision_options(parser: argparse.ArgumentParser, source: str) -> None
                         help=f"on, also for a {source} that declares none (self-collision, "
                         f"no obstacle) (default: what the {source} declares)")
     switch.add_argument("--no-collisions", dest="collisions", action="store_false",
-                        help=f"off, also for a {source} that declares it")
+                        default=None, help=f"off, also for a {source} that declares it "
+                        f"(default: what the {source} declares)")
     group.add_argument("--safety-distance", type=millimetres, metavar="MM",
                        help="d_s: the distance every pair is kept apart, in [0, 1000] "
                        "(default: 5)")
