@@ -27,9 +27,33 @@ def rows_at_bound(rows: CollisionRows, qd: np.ndarray, tolerance: float = AT_BOU
     return np.flatnonzero(rows.violation(qd) >= -tolerance)
 
 
+def closest_rows(rows: CollisionRows, indices: Sequence[int]) -> list[int]:
+    """``indices`` with one row per pair name (a link pair has a row per geometry pair):
+    the nearest, in the order the names first appear."""
+    nearest: dict[str, int] = {}
+    for index in map(int, indices):
+        name = rows.pairs[index]
+        if name not in nearest or rows.distances[index] < rows.distances[nearest[name]]:
+            nearest[name] = index
+    return list(nearest.values())
+
+
+def pair_names(rows: CollisionRows, indices: Sequence[int]) -> tuple[str, ...]:
+    """The pair names of ``indices``, each once."""
+    return tuple(rows.pairs[i] for i in closest_rows(rows, indices))
+
+
 def pair_list(rows: CollisionRows, indices: Sequence[int]) -> str:
-    """``"a | b (d = x mm), c | d (d = y mm)"``: the pairs of ``indices``, for messages."""
-    return ", ".join(rows.describe(int(i)) for i in indices)
+    """``"a | b (d = x mm), c | d (d = y mm)"``: the pairs of ``indices``, each once at its
+    nearest row, for messages."""
+    return ", ".join(rows.describe(i) for i in closest_rows(rows, indices))
+
+
+def describe_pair(rows: CollisionRows, name: str) -> str:
+    """``name`` with its nearest row's distance (``"a | b (d = x mm)"``), or the name alone
+    when no row has it."""
+    indices = [i for i, pair in enumerate(rows.pairs) if pair == name]
+    return pair_list(rows, indices) if indices else name
 
 
 def record_distances(info: SolveInfo, rows: CollisionRows) -> None:
@@ -52,7 +76,7 @@ def report_conflict(info: SolveInfo, rows: CollisionRows, indices: Sequence[int]
     """``constraint_degraded`` naming the pairs (``indices``) the least-residual command
     holds at their bound while the constraint rows cannot all be held."""
     if len(indices):
-        plural = "s" if len(indices) > 1 else ""
+        plural = "s" if len(pair_names(rows, indices)) > 1 else ""
         info.report(StepStatus.CONSTRAINT_DEGRADED,
                     f"collision pair{plural} {pair_list(rows, indices)} cannot be kept apart "
                     "together with the constraint rows")

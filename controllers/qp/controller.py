@@ -31,7 +31,7 @@ from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from ..numerics import INFINITE_BOUND, SOLVER_SETTINGS
 from ..optimization.budget import ITERATION_CAPS, BudgetExceeded, StepBudget, TimeBudget
-from ..optimization.collision_report import (AT_BOUND, pair_list, record_distances,
+from ..optimization.collision_report import (AT_BOUND, pair_list, pair_names, record_distances,
                                              report_conflict, report_held_back, rows_at_bound)
 from ..optimization.least_residual import HeldRows, held_note, held_rows, least_residual_problem
 from ..optimization.problem import QPSolution, QuadraticProgram
@@ -254,7 +254,7 @@ class QPController(GuardedController):
         if collisions is not None:
             record_distances(self.info, collisions)
             held_pairs = rows_at_bound(collisions, qd, self._at_bound)
-            report_held_back(self.info, [collisions.pairs[i] for i in held_pairs],
+            report_held_back(self.info, pair_names(collisions, held_pairs),
                              pair_list(collisions, held_pairs), missed)
         return qd
 
