@@ -288,6 +288,8 @@ class MinkController(GuardedController):
                 self._assemble_limits()
             self._scene.place_obstacles(self.mj_model)
         collisions = self.collision_rows()
+        if collisions is not None:  # measured whatever the solve does
+            record_distances(self.info, collisions)
         configuration = self.configuration
         q_mj = self.joints.q_to_mujoco(kinematics.q, out=self._q_mj)
         configuration.update(q_mj)
@@ -355,7 +357,6 @@ class MinkController(GuardedController):
         missed = self._report_twist_error(kinematics.ee_jacobian, qd, twist,
                                           None if self._unit_weight else self._twist_scale)
         if collisions is not None:
-            record_distances(self.info, collisions)
             names = self._held_pairs(qd, q_mj)
             report_held_back(self.info, names, ", ".join(
                 describe_pair(collisions, name) for name in names), missed)

@@ -210,6 +210,8 @@ class QPController(GuardedController):
         jacobian = kinematics.ee_jacobian
         A, b = self.constraint_rows(self._equalities) if self._equalities else (None, None)
         collisions = self.collision_rows()
+        if collisions is not None:  # measured whatever the solve does
+            record_distances(self.info, collisions)
         barrier_rows, barrier_bound = self._inequality_rows(collisions)
         lower, upper = bounded_box(*self.bounds(kinematics.q))
         weighted_jacobian = jacobian if self._unit_weight else self._twist_rows * jacobian
@@ -252,7 +254,6 @@ class QPController(GuardedController):
         missed = self._report_twist_error(jacobian, qd, twist,
                                           None if self._unit_weight else self._twist_scale)
         if collisions is not None:
-            record_distances(self.info, collisions)
             held_pairs = rows_at_bound(collisions, qd, self._at_bound)
             report_held_back(self.info, pair_names(collisions, held_pairs),
                              pair_list(collisions, held_pairs), missed)
