@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 from strategies import unit3
 
@@ -52,6 +52,8 @@ PROPERTY = settings(max_examples=25, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 BARE = dict(position_limits=False, velocity_limits=False, singular_threshold=0.0,
             posture_gain=0.0)
+# every controller here runs on its iteration caps alone (time_budget=None): a loaded
+# machine's CPU time must not decide a step
 
 
 @functools.cache
@@ -111,6 +113,8 @@ configurations = st.lists(st.floats(-0.3, 0.3), min_size=8, max_size=8).map(np.a
 @pytest.mark.parametrize("solver", ["proxqp", "daqp", "osqp"])
 @PROPERTY
 @given(offset=configurations, direction=unit3, speed=st.floats(0.05, 0.5))
+@example(offset=np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.25, 0.0]),  # two nearly equal rows
+         direction=np.array([0.0, 1.0, 1.0]) / np.sqrt(2.0), speed=0.5)
 def test_pair_at_safety_distance_does_not_close(solver, offset, direction, speed):
     robot = sda10f()
     q = robot.q_home + offset
@@ -119,10 +123,10 @@ def test_pair_at_safety_distance_does_not_close(solver, offset, direction, speed
     rows = collisions.rows(robot.model, kinematics(robot, q))
     assume(rows.size and abs(rows.minimum_distance - collisions.safety_distance) < 1e-9)
     twist = push_towards(robot, q, sphere.center, speed)
-    free = QPController(robot, solver=solver).solve(q, twist)
+    free = QPController(robot, solver=solver, time_budget=None).solve(q, twist)
     assume(np.max(rows.violation(free)) > 1e-4)  # without the rows the pair would close
 
-    controller = QPController(robot, solver=solver, collisions=collisions)
+    controller = QPController(robot, solver=solver, collisions=collisions, time_budget=None)
     qd = controller.solve(q, twist)
 
     assert np.max(rows.violation(qd)) <= ROW_TOLERANCE[solver]
@@ -134,7 +138,7 @@ def test_pair_at_safety_distance_does_not_close(solver, offset, direction, speed
     assert info.minimum_distance == pytest.approx(collisions.safety_distance, abs=1e-9)
     assert info.closest_pair == rows.closest_pair
     if info.status is StepStatus.FAILED:  # an honest stop (zero command): proxqp only
-        assert solver == "proxqp" and "iteration limit" in info.message
+        assert solver == "proxqp" and "iteration limit" in info.message, info.message
         return
     if info.status is not StepStatus.OK:  # the push is held back: the step says by what
         assert info.status is StepStatus.LEAST_SQUARES
@@ -170,7 +174,8 @@ def test_one_active_row_is_the_null_space_solution(solver, offset, direction, ga
     assume(rows.violation(np.linalg.pinv(jacobian) @ twist)[0] > 1e-3)  # the row binds
     reference = np.linalg.pinv(stacked) @ np.concatenate([twist, rows.lower])
 
-    controller = QPController(robot, solver=solver, collisions=collisions, **BARE)
+    controller = QPController(robot, solver=solver, collisions=collisions, time_budget=None,
+                              **BARE)
     qd = controller.solve(q, twist)
 
     assert np.max(np.abs(qd - reference)) <= AGREEMENT
@@ -222,7 +227,7 @@ def arms_close() -> np.ndarray:
     robot = dual()
     collisions = CollisionAvoidance(robot)
     controller = QPController(robot, solver="daqp", dt=5e-3, collisions=collisions,
-                              twist_weight=(1, 1, 1, 0, 0, 0))
+                              twist_weight=(1, 1, 1, 0, 0, 0), time_budget=None)
     q = robot.q_home.copy()
     for _ in range(1000):
         q = pin.integrate(robot.model, q, 5e-3 * controller.solve(q, tips_together(q, 0.1)))
@@ -251,7 +256,8 @@ def push_arms(controller_type, solver: str, steps: int = 300, dt: float = 1e-3):
     holes = [Hole.on_link(robot, q, 0.08, link=link)
              for link in ("arm_left_link_5_r", "arm_right_link_5_r")]
     collisions = CollisionAvoidance(robot)
-    controller = controller_type(robot, holes, solver=solver, dt=dt, collisions=collisions)
+    controller = controller_type(robot, holes, solver=solver, dt=dt, collisions=collisions,
+                                 time_budget=None)
     closest, trocar = np.inf, 0.0
     for _ in range(steps):
         q = pin.integrate(robot.model, q, dt * controller.solve(q, tips_together(q, 0.05)))
@@ -275,3 +281,26 @@ def test_trocars_held_while_the_arms_are_pushed_together(controller_type, solver
     assert info.active_pairs == ("arm_left_link_7_t | arm_right_link_7_t",)
     assert "held back by collision pair arm_left_link_7_t | arm_right_link_7_t" in info.message
     assert info.closest_pair == "arm_left_link_7_t | arm_right_link_7_t"
+
+
+def test_mink_follows_the_obstacles_set():
+    """Obstacles added after the controller was built get their geoms and pairs at the
+    next step (the MuJoCo model rebuilt), one geom pair per avoidance pair; removing them
+    takes them away; without collision avoidance there is no collision limit."""
+    robot = dual()
+    collisions = CollisionAvoidance(robot, self_collision=False)
+    controller = MinkController(robot, collisions=collisions)
+    assert controller.collision_limit.geom_id_pairs == []
+    ball = Sphere([0.65, 0.0, 0.06], 0.1)  # between the two tools
+    collisions.add_obstacle(ball)
+    controller.solve(robot.q_home, np.zeros(12))
+    limit = controller.collision_limit
+    assert list(limit.names) == [f"{first} | {second}" for first, second in collisions.pairs]
+    assert len(set(limit.geom_id_pairs)) == len(collisions.pairs)
+    assert controller.info.closest_pair.endswith("| sphere")
+    assert controller.info.minimum_distance < collisions.detection_distance
+    collisions.remove_obstacle(ball)
+    controller.solve(robot.q_home, np.zeros(12))
+    assert controller.collision_limit.geom_id_pairs == []
+    controller.set_collisions(None)
+    assert controller.collision_limit is None
