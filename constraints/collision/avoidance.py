@@ -17,6 +17,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from ..base import cross
 from ..validation import as_number
 from .geometry import (bounding_segment, capsule_geometry, check_links, link_of, link_pairs,
                        segment_distances, self_collision_pairs, shape_distance)
@@ -260,6 +261,7 @@ class CollisionAvoidance:
         gain, safety = self.gain, self.safety_distance
         rows, lower, names, distances, witnesses = [], [], [], [], []
         minimum, closest = float("inf"), ""
+        jacobians: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # per joint, this step
         for index in near.tolist():
             result = pin.computeDistance(self._geometry, self._geometry_data, index)
             distance = float(result.min_distance)
@@ -271,10 +273,10 @@ class CollisionAvoidance:
                 continue
             on_first, on_second = result.getNearestPoint1(), result.getNearestPoint2()
             normal = -np.asarray(result.normal)  # from the second body towards the first
-            row = self._point_row(model, data, first, on_first, normal)
+            row = self._point_row(model, data, jacobians, first, on_first, normal)
             bound = -gain * (distance - safety)
             if second < self._robot_count:
-                row -= self._point_row(model, data, second, on_second, normal)
+                row -= self._point_row(model, data, jacobians, second, on_second, normal)
             else:
                 bound += float(normal @ self.obstacles[second - self._robot_count].velocity)
             rows.append(row)
@@ -288,14 +290,19 @@ class CollisionAvoidance:
         return CollisionRows(np.array(rows), np.array(lower), tuple(names), np.array(distances),
                              np.array(witnesses), minimum, closest)
 
-    def _point_row(self, model: pin.Model, data: pin.Data, geometry_index: int,
+    def _point_row(self, model: pin.Model, data: pin.Data,
+                   jacobians: dict[int, tuple[np.ndarray, np.ndarray]], geometry_index: int,
                    point: np.ndarray, normal: np.ndarray) -> np.ndarray:
         """``normal^T J_p``: the rate along ``normal`` of the world ``point`` carried by the
-        joint of geometry ``geometry_index``, ``J_p = J_v - hat(point - o) J_w`` (world-aligned)."""
+        joint of geometry ``geometry_index``, ``J_p = J_v - hat(point - o) J_w``
+        (world-aligned), so ``normal^T J_p = normal^T J_v + (arm x normal)^T J_w``; each
+        joint's Jacobian taken once a step (``jacobians``)."""
         joint = int(self._joints[geometry_index])
-        jacobian = pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED)
-        arm = point - data.oMi[joint].translation
-        return normal @ jacobian[:3] + np.cross(arm, normal) @ jacobian[3:]
+        if joint not in jacobians:
+            jacobians[joint] = (pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED),
+                                data.oMi[joint].translation)
+        jacobian, origin = jacobians[joint]
+        return normal @ jacobian[:3] + cross(point - origin, normal) @ jacobian[3:]
 
     def distances(self, model: pin.Model, data: pin.Data) -> list[tuple[str, float]]:
         """Every pair's name and signed distance (m) at the placements in ``data.oMi``
