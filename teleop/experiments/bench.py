@@ -286,8 +286,9 @@ def bench_twist(robot: Robot, holes: Sequence[Hole], base: np.ndarray | None = N
                                           for frame in others)])
 
 
-def _hole_rows(robot: Robot, holes: Sequence[Hole], base: np.ndarray) -> np.ndarray:
-    """The holes' stacked rows ``A`` (``A qd = b``) at ``base``."""
+def _hole_rows(robot: Robot, holes: Sequence[Hole], base: np.ndarray | None = None) -> np.ndarray:
+    """The holes' stacked rows ``A`` (``A qd = b``) at ``base`` (default: home)."""
+    base = robot.q_home if base is None else base
     model = robot.model
     data = model.createData()
     pin.computeJointJacobians(model, data, base)
