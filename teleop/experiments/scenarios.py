@@ -432,22 +432,28 @@ def _obstacle(robot: Robot) -> Plan:
         collisions=collision_settings(robot, [organ]))
 
 
-#: ``mobile-obstacles``: the gap (m) between the mobile base's sides and the boxes beside
-#: it, and between its front and the pole ahead.
+#: ``mobile-obstacles``: the gap (m) between the mobile base's sides and the obstacles
+#: beside it, and between its front and the pole ahead.
 MOBILE_CLEARANCE = 0.03
 
 
 def _mobile_obstacles(robot: Robot) -> Plan:
+    """The obstacles touch the base's box at an edge or a point, not face to face: a
+    damper row holds one witness point, and two parallel faces turning against each
+    other close at the far end of the face (docs/design.md 18.6)."""
     q0 = robot.q_home.copy()
     base = link_placement(robot, q0, "mobile_base")
-    half_length, half_width, height = 0.4, 0.3, 0.3  # the base's box (base frame)
-    box = np.array([0.6, 0.1, 0.5])
-    obstacles = [Box(base.act(np.array([0.0, side * (half_width + MOBILE_CLEARANCE
-                                                      + 0.5 * box[1]), 0.5 * box[2]])),
-                     box, name=f"{'left' if side > 0 else 'right'} box")
-                 for side in (1.0, -1.0)]
-    obstacles.append(Capsule(base.act(np.array([half_length + MOBILE_CLEARANCE + 0.05, 0.0,
-                                                0.5])), 0.05, 0.8, name="pole"))
+    half_length, half_width = 0.4, 0.3  # the base's box (base frame)
+    edge, post, height = 0.2, 0.05, 0.5  # a square box's edge, a post's radius (m)
+    turned = base.rotation @ pin.rpy.rpyToMatrix(0.0, 0.0, math.pi / 4.0)
+    obstacles = [
+        Box(base.act(np.array([0.0, half_width + MOBILE_CLEARANCE + edge / math.sqrt(2.0),
+                               0.5 * height])),
+            [edge, edge, height], pin.rpy.matrixToRpy(turned), name="left box"),
+        Capsule(base.act(np.array([0.0, -(half_width + MOBILE_CLEARANCE + post), 0.5])),
+                post, 0.8, name="right post"),
+        Capsule(base.act(np.array([half_length + MOBILE_CLEARANCE + post, 0.0, 0.5])),
+                post, 0.8, name="pole")]
 
     def make() -> list[Constraint]:
         return [Hole.on_link(robot, q0, distance=0.08, link=link)
@@ -463,8 +469,8 @@ def _mobile_obstacles(robot: Robot) -> Plan:
         "mobile-obstacles", robot, q0, duration, make,
         tips_through_constraints(robot, q0, make(), sway, duration),
         description=f"sda10f_dual_mobile, a trocar on each arm, both tips sway 8 cm sideways "
-                    f"and 5 cm forward; boxes {100 * MOBILE_CLEARANCE:g} cm beside the base, "
-                    "a pole ahead of it",
+                    f"and 5 cm forward; a box (its edge) and a post {100 * MOBILE_CLEARANCE:g} "
+                    "cm beside the base, a pole ahead of it",
         collisions=collision_settings(robot, obstacles))
 
 
