@@ -324,6 +324,7 @@ def _minimum_distance(plt, results: dict[str, "RunResult"], out: Path, title: st
     ax.axhline(1e3 * (safety - SAFETY_TOLERANCE), color="r", lw=0.8, ls=":",
                label="d_s - 0.5 mm")
     ax.axhline(0.0, color="r", lw=0.8, label="contact")
+    ax.set_xlim(0.0, max(float(r.columns["t"][-1]) for r in results.values()))
     ax.set_xlabel("time (s)")
     ax.set_ylabel("minimum distance (mm)")
     ax.grid(alpha=0.3)
