@@ -9,8 +9,8 @@ broadphase keeps every pair whose bounding spheres come within the detection dis
 is below ``d_i``, which is where penetrations (``d < 0``) and safety violations
 (``d < d_s -`` :data:`SAFETY_TOLERANCE`) live. Above ``d_i`` it is the nearest pair the
 broadphase measured (an upper bound on the true minimum), or ``inf`` when it measured
-none. Checking every pair (``CollisionAvoidance.minimum_distance``) costs about four
-times as much on ``sda10f_dual`` (502 pairs) at every period.
+none. Checking every pair (``CollisionAvoidance.minimum_distance``) would cost more at
+every period (docs/design.md 18.6).
 """
 
 from __future__ import annotations
