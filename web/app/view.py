@@ -89,9 +89,12 @@ class View:
     def _collisions_snapshot(self) -> dict:
         """The collision part of :meth:`snapshot` (caller holds the lock): the settings
         (``on``, ``self_collision``, ``safety_distance``, ``detection_distance``,
-        ``approach_speed``) and each obstacle's drawing (``id``, ``goal``, ``geometry``:
+        ``approach_speed``), ``checking`` (on, with pairs to check: self-collision or an
+        obstacle) and each obstacle's drawing (``id``, ``goal``, ``geometry``:
         :class:`constraints.collision.ObstacleGeometry`)."""
-        return {**self.collision_settings(),
+        settings = self.collision_settings()
+        return {**settings,
+                "checking": settings["on"] and bool(settings["self_collision"] or self.obstacles),
                 "obstacles": [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),
                                "geometry": entry.obstacle.geometry()}
                               for entry in self.obstacles.values()]}
