@@ -6,8 +6,8 @@ rows the control thread measures for the view (the highlighted pairs, the minimu
 Obstacles are placed from their kind's constructor (:data:`OBSTACLE_TYPES`): the fields the
 operator does not give take the kind's own default, else :data:`FIELD_DEFAULTS`; the
 centre goes :data:`FRONT_GAP` in front of a tip (along its tool's z axis, the surface that
-far from the tip; a half-space's plane that far from the tip). An obstacle moves like a constraint's
-geometry: it glides to where the operator put it, its velocity fed forward
+far from the tip; a half-space's boundary that far from the tip). An obstacle moves like a
+constraint's geometry: it glides to where the operator put it, its velocity fed forward
 (:mod:`teleop.loop.moving_geometry`).
 """
 
@@ -67,7 +67,7 @@ def obstacle_fields(kind: str) -> dict[str, object]:
 def in_front(obstacle: Obstacle, tip: pin.SE3) -> np.ndarray:
     """Where ``obstacle``'s centre goes so that its surface is :data:`FRONT_GAP` in front
     of ``tip`` along the tool's z axis; an unbounded shape (a half-space, no dimensions)
-    has its plane :data:`FRONT_GAP` from the tip on the far side of its normal."""
+    has its boundary :data:`FRONT_GAP` from the tip on the far side of its normal."""
     approach = tip.rotation[:, 2]
     reach = 0.0
     dimensions = obstacle.dimensions()

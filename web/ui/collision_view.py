@@ -151,7 +151,7 @@ class CollisionView:
             **pose)}
 
     def _add_halfspace_obstacle(self, name: str, geometry: ObstacleGeometry, pose: dict) -> dict:
-        """A half-space (or a shape this view does not know): its plane as a large thin
+        """A half-space (or a shape this view does not know): its boundary as a large thin
         square, an arrow to the free side."""
         scene = self.server.scene
         return {"shape": scene.add_box(f"{name}/shape", geometry.color,
