@@ -168,12 +168,15 @@ class CollisionView:
 
     def _draw_pairs(self, rows: CollisionRows | None, q: np.ndarray, collisions: dict) -> None:
         """The main robot's pairs closer than the detection distance (``rows``: the last
-        measured; None: none): per pair the witness segment and points, per link in a
-        pair its collision geometry, coloured by the distance."""
+        measured; None: none): per pair the witness segment and points (of its closest
+        geometries, when its links have several), per link in a pair its collision
+        geometry, coloured by the distance."""
         safety, detection = collisions["safety_distance"], collisions["detection_distance"]
-        pairs = {} if rows is None else {
-            name: (float(distance), witness)
-            for name, distance, witness in zip(rows.pairs, rows.distances, rows.witnesses)}
+        pairs: dict[str, tuple[float, np.ndarray]] = {}  # a pair's closest geometries
+        for name, distance, witness in ([] if rows is None else
+                                        zip(rows.pairs, rows.distances, rows.witnesses)):
+            if name not in pairs or distance < pairs[name][0]:
+                pairs[name] = (float(distance), witness)
         for name in list(self._pair_nodes):
             if name not in pairs:
                 for handle in self._pair_nodes.pop(name).values():
