@@ -297,6 +297,10 @@ def test_the_status_and_highlights_are_the_rows_at_the_apps_q(app, server):
     # the status's words and the plotted trace
     words = collision_words(shown, [])
     assert f"minimum distance {1e3 * expected.minimum_distance:.2f} mm ({expected.closest_pair})" in words
+    assert "held" not in words
+    assert collision_words(shown, list(expected.pairs[:1])).endswith(
+        f"; collision pairs held: {expected.pairs[0]}")
+    assert collision_words(None, []) == ""
     trace = snapshot["robots"]["main"]["trace"]["minimum_distance"]
     assert trace[-1] == pytest.approx(min(expected.minimum_distance,
                                           app.avoidance.detection_distance), abs=SAME)
