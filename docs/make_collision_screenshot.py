@@ -1,6 +1,6 @@
 """The README's screenshot of collision avoidance: docs/images/collision_dual.png.
 
-``python docs/make_collision_screenshot.py [--out PATH]`` serves `teleop web --robot
+``python docs/make_collision_screenshot.py [--out PATH] [--controller SPEC]`` serves `teleop web --robot
 sda10f_dual` (in process, on a free loopback port), opens it in headless Chromium
 (software WebGL), drives the two tips' targets across each other, waits until the
 controller holds the arms apart (the closest pair highlighted, its witness segment drawn)
@@ -47,13 +47,15 @@ def wait_until(predicate, what: str, timeout: float = WAIT):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--controller", default="cjm", help="the page's controller")
     args = parser.parse_args()
     from playwright.sync_api import sync_playwright
 
     robot = load_robot("sda10f_dual")
     port = free_port()
     scratch = Path("/tmp") / f"collision-screenshot-{port}"
-    server, app, control, ui = run_server(robot, port=port, record_dir=scratch / "sessions",
+    server, app, control, ui = run_server(robot, port=port, controller=args.controller,
+                                          record_dir=scratch / "sessions",
                                           scene_dir=scratch / "scenes")
     server.scene.configure_default_lights(cast_shadow=False)
     try:
