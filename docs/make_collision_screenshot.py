@@ -89,7 +89,7 @@ def main() -> None:
                 button.click()  # "software WebGL" and the like
             witness = np.asarray(rows.witnesses[list(rows.pairs).index(rows.closest_pair)])
             middle = witness.mean(axis=0)
-            client.camera.position = middle + np.array([0.32, -0.14, 0.24])
+            client.camera.position = middle + np.array([0.26, -0.12, 0.20])
             client.camera.look_at = middle + np.array([-0.08, 0.0, 0.02])
             time.sleep(3.0)  # the page draws the new view
             page.wait_for_function("() => true", polling="raf", timeout=1e3 * WAIT)
