@@ -512,9 +512,10 @@ class GuardedController(Controller):
         return clipped
 
     def _report_twist_error(self, jacobian: np.ndarray, qd: np.ndarray, twist: np.ndarray,
-                            weight_root: np.ndarray | None = None) -> None:
+                            weight_root: np.ndarray | None = None) -> bool:
         """``least_squares`` when ``J_e qd`` misses the twist (optimisers trade it off),
-        each entry's miss scaled by ``W^1/2`` (``weight_root``) when the task is weighted."""
+        each entry's miss scaled by ``W^1/2`` (``weight_root``) when the task is weighted;
+        returns whether it missed."""
         miss = jacobian @ qd - twist
         if weight_root is not None:
             miss *= weight_root
@@ -523,6 +524,8 @@ class GuardedController(Controller):
             self.info.report(StepStatus.LEAST_SQUARES,
                              f"twist not met exactly (error {error:.2e}): limits, barriers, "
                              "constraints or a singularity")
+            return True
+        return False
 
     @abstractmethod
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:

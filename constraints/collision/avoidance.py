@@ -17,9 +17,10 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from ..base import cross
 from ..validation import as_number
-from .geometry import (bounding_sphere, capsule_geometry, check_links, link_of, link_pairs,
-                       self_collision_pairs, shape_distance)
+from .geometry import (bounding_segment, capsule_geometry, check_links, link_of, link_pairs,
+                       segment_distances, self_collision_pairs, shape_distance)
 from .obstacles import Obstacle
 from .rows import CollisionRows
 
@@ -190,50 +191,58 @@ class CollisionAvoidance:
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self._names = [*self._links, *(obstacle.name for obstacle in self.obstacles)]
         self._robot_count = robot_count
-        spheres = [bounding_sphere(item.geometry, item.placement)
-                   for item in self._robot_geometry.geometryObjects]
-        #: per robot geometry: its joint, its bounding sphere's centre there and radius
-        self._joints = np.array([item.parentJoint for item in self._robot_geometry.geometryObjects],
-                                dtype=int)
-        self._local_centres = np.array([centre for centre, _ in spheres]).reshape(-1, 3)
-        self._radii = np.array([radius for _, radius in spheres] +
-                               [bounding_sphere(o.shape(), pin.SE3.Identity())[1]
-                                for o in self.obstacles])
-        self._moving_joints = np.unique(self._joints)
+        robot_objects = self._robot_geometry.geometryObjects
+        bounds = [bounding_segment(item.geometry, item.placement) for item in robot_objects]
+        #: per robot geometry: its joint, its bounding capsule's ends there (2 n, 3: the
+        #: starts then the ends) and radius; per obstacle its bounding capsule's radius
+        self._joints = np.array([item.parentJoint for item in robot_objects], dtype=int)
+        self._local_ends = np.array([start for start, _, _ in bounds]
+                                    + [end for _, end, _ in bounds]).reshape(-1, 3)
+        self._radii = np.array([radius for _, _, radius in bounds]
+                               + [bounding_segment(o.shape(), pin.SE3.Identity())[2]
+                                  for o in self.obstacles])
+        self._moving_joints = np.unique(self._joints).tolist()
 
     # -- the rows ------------------------------------------------------------------------------
 
-    def _update(self, model: pin.Model, data: pin.Data) -> np.ndarray:
+    def _update(self, model: pin.Model, data: pin.Data) -> tuple[np.ndarray, np.ndarray]:
         """Every geometry's world placement (``data.oMi`` must be current); returns the
-        world centres of the bounding spheres, robot geometries then obstacles."""
+        world ends ``(starts, ends)`` of the bounding capsules, robot geometries then
+        obstacles."""
         geometry, geometry_data = self._geometry, self._geometry_data
         obstacle_poses = [obstacle.pose() for obstacle in self.obstacles]
         for k, pose in enumerate(obstacle_poses):
             geometry.geometryObjects[self._robot_count + k].placement = pose
         pin.updateGeometryPlacements(model, data, geometry, geometry_data)
-        rotations = np.empty((model.njoints, 3, 3))
-        translations = np.empty((model.njoints, 3))
-        for joint in self._moving_joints.tolist():
-            placement = data.oMi[joint]
-            rotations[joint] = placement.rotation
-            translations[joint] = placement.translation
-        robot_centres = (np.einsum("kij,kj->ki", rotations[self._joints], self._local_centres)
-                         + translations[self._joints])
-        obstacle_centres = [pose.translation for pose in obstacle_poses]
-        return np.vstack([robot_centres, *obstacle_centres]) if obstacle_centres else robot_centres
+        placements = np.empty((model.njoints, 4, 4))
+        for joint in self._moving_joints:
+            placements[joint] = data.oMi[joint].homogeneous
+        joints = np.concatenate([self._joints, self._joints])
+        ends = (np.einsum("kij,kj->ki", placements[joints, :3, :3], self._local_ends)
+                + placements[joints, :3, 3])
+        robot_count = self._robot_count
+        starts, finishes = ends[:robot_count], ends[robot_count:]
+        if obstacle_poses:
+            obstacle_ends = [bounding_segment(obstacle.shape(), pose)
+                             for obstacle, pose in zip(self.obstacles, obstacle_poses)]
+            starts = np.vstack([starts, [start for start, _, _ in obstacle_ends]])
+            finishes = np.vstack([finishes, [end for _, end, _ in obstacle_ends]])
+        return starts, finishes
 
-    def _near_pairs(self, centres: np.ndarray) -> np.ndarray:
-        """The pair indices whose bounding spheres come within the detection distance (a
-        half-space's pair: the sphere within that distance of its plane)."""
+    def _near_pairs(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """The pair indices whose bounding capsules come within the detection distance (a
+        half-space's pair: the capsule within that distance of its plane)."""
         first, second = self._pairs[:, 0], self._pairs[:, 1]
-        gaps = (np.linalg.norm(centres[first] - centres[second], axis=1)
+        gaps = (segment_distances(starts[first], ends[first], starts[second], ends[second])
                 - self._radii[first] - self._radii[second])
         infinite = ~np.isfinite(gaps)
         if infinite.any():
             for index in np.flatnonzero(infinite).tolist():
                 plane = self.obstacles[second[index] - self._robot_count]
-                gaps[index] = (float(plane.normal @ (centres[first[index]] - plane.center))
-                               - self._radii[first[index]])
+                body = first[index]
+                heights = [float(plane.normal @ (point - plane.center))
+                           for point in (starts[body], ends[body])]
+                gaps[index] = min(heights) - self._radii[body]
         return np.flatnonzero(gaps < self.detection_distance)
 
     def rows(self, model: pin.Model, data: pin.Data) -> CollisionRows:
@@ -246,13 +255,13 @@ class CollisionAvoidance:
     def _rows(self, model: pin.Model, data: pin.Data) -> CollisionRows:
         if not len(self._pairs):
             return CollisionRows.empty(model.nv)
-        centres = self._update(model, data)
-        near = self._near_pairs(centres)
+        near = self._near_pairs(*self._update(model, data))
         if not near.size:
             return CollisionRows.empty(model.nv)
         gain, safety = self.gain, self.safety_distance
         rows, lower, names, distances, witnesses = [], [], [], [], []
         minimum, closest = float("inf"), ""
+        jacobians: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # per joint, this step
         for index in near.tolist():
             result = pin.computeDistance(self._geometry, self._geometry_data, index)
             distance = float(result.min_distance)
@@ -264,10 +273,10 @@ class CollisionAvoidance:
                 continue
             on_first, on_second = result.getNearestPoint1(), result.getNearestPoint2()
             normal = -np.asarray(result.normal)  # from the second body towards the first
-            row = self._point_row(model, data, first, on_first, normal)
+            row = self._point_row(model, data, jacobians, first, on_first, normal)
             bound = -gain * (distance - safety)
             if second < self._robot_count:
-                row -= self._point_row(model, data, second, on_second, normal)
+                row -= self._point_row(model, data, jacobians, second, on_second, normal)
             else:
                 bound += float(normal @ self.obstacles[second - self._robot_count].velocity)
             rows.append(row)
@@ -281,14 +290,19 @@ class CollisionAvoidance:
         return CollisionRows(np.array(rows), np.array(lower), tuple(names), np.array(distances),
                              np.array(witnesses), minimum, closest)
 
-    def _point_row(self, model: pin.Model, data: pin.Data, geometry_index: int,
+    def _point_row(self, model: pin.Model, data: pin.Data,
+                   jacobians: dict[int, tuple[np.ndarray, np.ndarray]], geometry_index: int,
                    point: np.ndarray, normal: np.ndarray) -> np.ndarray:
         """``normal^T J_p``: the rate along ``normal`` of the world ``point`` carried by the
-        joint of geometry ``geometry_index``, ``J_p = J_v - hat(point - o) J_w`` (world-aligned)."""
+        joint of geometry ``geometry_index``, ``J_p = J_v - hat(point - o) J_w``
+        (world-aligned), so ``normal^T J_p = normal^T J_v + (arm x normal)^T J_w``; each
+        joint's Jacobian taken once a step (``jacobians``)."""
         joint = int(self._joints[geometry_index])
-        jacobian = pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED)
-        arm = point - data.oMi[joint].translation
-        return normal @ jacobian[:3] + np.cross(arm, normal) @ jacobian[3:]
+        if joint not in jacobians:
+            jacobians[joint] = (pin.getJointJacobian(model, data, joint, pin.LOCAL_WORLD_ALIGNED),
+                                data.oMi[joint].translation)
+        jacobian, origin = jacobians[joint]
+        return normal @ jacobian[:3] + cross(point - origin, normal) @ jacobian[3:]
 
     def distances(self, model: pin.Model, data: pin.Data) -> list[tuple[str, float]]:
         """Every pair's name and signed distance (m) at the placements in ``data.oMi``

@@ -113,10 +113,57 @@ def shape_distance(first: coal.CollisionGeometry, first_pose: pin.SE3,
                          request, result)
 
 
-def bounding_sphere(shape: coal.CollisionGeometry, placement: pin.SE3) -> tuple[np.ndarray, float]:
-    """Centre (in the parent joint's frame) and radius (m) of a sphere holding ``shape``
-    posed at ``placement``; an infinite radius for a half-space."""
+def bounding_segment(shape: coal.CollisionGeometry,
+                     placement: pin.SE3) -> tuple[np.ndarray, np.ndarray, float]:
+    """A capsule holding ``shape`` posed at ``placement``: its segment's two ends (in the
+    parent frame) and its radius (m), for the broadphase. A capsule is its own; a sphere a
+    point; a box the segment along its longest edge with the radius of the other two's
+    half-diagonal; anything else the sphere of its bounding box. A half-space has none
+    (infinite radius: the broadphase tests its plane instead)."""
     if isinstance(shape, coal.Halfspace):
-        return placement.translation.copy(), float("inf")
+        return placement.translation.copy(), placement.translation.copy(), float("inf")
+    if isinstance(shape, coal.Capsule):
+        half = placement.rotation[:, 2] * shape.halfLength
+        return placement.translation - half, placement.translation + half, float(shape.radius)
+    if isinstance(shape, coal.Sphere):
+        return placement.translation.copy(), placement.translation.copy(), float(shape.radius)
+    if isinstance(shape, coal.Box):
+        half_sides = np.asarray(shape.halfSide, dtype=float)
+        longest = int(np.argmax(half_sides))
+        half = placement.rotation[:, longest] * half_sides[longest]
+        radius = float(np.linalg.norm(np.delete(half_sides, longest)))
+        return placement.translation - half, placement.translation + half, radius
     shape.computeLocalAABB()
-    return placement.act(np.asarray(shape.aabb_center)), float(shape.aabb_radius)
+    centre = placement.act(np.asarray(shape.aabb_center))
+    return centre, centre.copy(), float(shape.aabb_radius)
+
+
+def segment_distances(first_start: np.ndarray, first_end: np.ndarray,
+                      second_start: np.ndarray, second_end: np.ndarray) -> np.ndarray:
+    """The distances (n,) between n pairs of segments, each given by its ends (n, 3)
+    (the clamped closest points of Ericson, *Real-Time Collision Detection*, 5.1.9), to
+    1e-6 m: a segment shorter than that counts as its first end."""
+    d1, d2 = first_end - first_start, second_end - second_start
+    r = first_start - second_start
+    a = (d1 * d1).sum(1)
+    e = (d2 * d2).sum(1)
+    f = (d2 * r).sum(1)
+    c = (d1 * r).sum(1)
+    b = (d1 * d2).sum(1)
+    tiny = 1e-12
+    # a point for a segment: its length's square floored at ``tiny`` and the projection
+    # onto it then clamped to its one end (every division is by a positive number)
+    a_safe, e_safe = np.maximum(a, tiny), np.maximum(e, tiny)
+    s = unit_clamp((b * f - c * e) / np.maximum(a * e - b * b, tiny))
+    t = (b * s + f) / e_safe
+    s = np.where(t < 0.0, unit_clamp(-c / a_safe), np.where(t > 1.0, unit_clamp((b - c) / a_safe), s))
+    s = np.where(e > tiny, s, unit_clamp(-c / a_safe))
+    t = unit_clamp(t)
+    gap = r + d1 * s[:, None] - d2 * t[:, None]
+    return np.sqrt((gap * gap).sum(1))
+
+
+def unit_clamp(values: np.ndarray) -> np.ndarray:
+    """``values`` clamped to [0, 1] (``np.minimum(np.maximum(...))``: several times faster
+    than ``np.clip`` on short arrays)."""
+    return np.minimum(np.maximum(values, 0.0), 1.0)

@@ -7,6 +7,11 @@ to ``controllers.cjm._step`` once (the tolerances included), and then runs
 constraint has an affine form (the C++ side reads a hole's centre, velocity and gain
 before every step, as data), else Python writes the other constraints' terms between two calls.
 tests/test_compiled_step.py and tests/test_cjm_backends_fuzz.py hold the two equal.
+
+With collision avoidance (docs/design.md section 18.4) Python computes Pinocchio's joint
+Jacobians on the controller's ``data`` and the avoidance rows there, and writes them into
+the C++ step's buffer (its capacity: the number of pairs when built, grown if obstacles
+add pairs) before the C++ call; the C++ active set holds them as the Python step does.
 """
 
 from __future__ import annotations
@@ -84,10 +89,19 @@ def joint_box(setup: StepSetup) -> JointBox:
 class CompiledStep:
     """One controller's compiled step: ``solve(q, twist) -> (qd, report)``, buffers
     allocated once. Raises :class:`KinematicsMismatch` when the C++ copy of the model
-    does not reproduce Pinocchio's kinematics."""
+    does not reproduce Pinocchio's kinematics. ``data``: the controller's, where the
+    collision rows are measured (needed with ``setup.collisions`` only);
+    ``pair_capacity``: the collision rows the C++ step can take (default: every pair)."""
 
-    def __init__(self, setup: StepSetup) -> None:
+    def __init__(self, setup: StepSetup, data: pin.Data | None = None,
+                 pair_capacity: int | None = None) -> None:
         self.setup = setup
+        self.data = data
+        self._collisions = setup.collisions
+        if self._collisions is not None and data is None:
+            raise ValueError("a compiled step with collision avoidance needs the controller's data")
+        if pair_capacity is None:
+            pair_capacity = 0 if self._collisions is None else len(self._collisions.pairs)
         model = setup.model
         plans = setup.plans
         # the paper's S only where the analytical form can use it (one hole, form auto)
@@ -110,7 +124,8 @@ class CompiledStep:
                 post=plan.split.post.tolist() if plan.analytical else []) for plan in plans],
             box=joint_box(setup), posture_gain=setup.posture_gain,
             posture_target=setup.posture if one_coordinate and self._use_posture else np.zeros(0),
-            tolerances=Tolerances(**dataclasses.asdict(setup.tolerances)))
+            tolerances=Tolerances(**dataclasses.asdict(setup.tolerances)),
+            pair_capacity=pair_capacity)
         frames = [*setup.ee_frame_ids, *(plan.frame_id for plan in plans)]
         task_entries = (np.arange(setup.task_size) if setup.task_entries is None
                         else setup.task_entries)
@@ -127,6 +142,9 @@ class CompiledStep:
         self._saturated = step.saturated_joints
         self._active_barriers = step.active_barriers
         self._saturation_joints = step.saturation_joints
+        self._step = step
+        self._pair_rows, self._pair_lower = step.pair_rows, step.pair_lower
+        self._active_pairs = step.active_pairs
         terms, placements = pipeline.terms, pipeline.placements
         offsets = np.cumsum([0] + [terms_size(plan.constraint.dim) for plan in plans])
         #: (writer, terms view, link rotation and translation views) of the others
@@ -170,6 +188,8 @@ class CompiledStep:
     def solve(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         """``qd`` for the stacked EE twist at ``q`` and the step's report (section 8.3);
         bad input raises ``ValueError`` as the Python step does."""
+        if self._collisions is not None:
+            return self._solve_with_pairs(*self._checked(q, twist))
         pipeline = self.pipeline
         paper_form = True
         if self._one_call:
@@ -186,6 +206,37 @@ class CompiledStep:
         if paper_form and not (report[6] or report[7] or report[8]):  # no list, no event
             return qd, StepReport(STATUSES[int(report[0])], METHODS[int(report[1])], *report[2:6])
         return qd, self._step_report(report, paper_form)
+
+    def _solve_with_pairs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
+        """The step with the collision rows at ``q`` (measured on ``data``) in the C++
+        step's buffer; the report carries the rows and the pairs held."""
+        model, data = self.setup.model, self.data
+        pin.computeJointJacobians(model, data, q)
+        pairs = self._collisions.rows(model, data)
+        if pairs.size > self._step.pair_capacity:  # obstacles added since the build
+            self._grow(pairs.size)
+        self._pair_rows[:pairs.size] = pairs.rows
+        self._pair_lower[:pairs.size] = pairs.lower
+        self._step.set_pair_count(pairs.size)
+        pipeline = self.pipeline
+        paper_form = True
+        if self._one_call:
+            qd = pipeline.solve(q, twist, self._use_posture, True)
+        else:
+            pipeline.load(q, twist)
+            pipeline.prepare()
+            paper_form = self._write_in_python()
+            qd = pipeline.finish(self._use_posture, paper_form)
+        count = self._step.active_pair_count
+        return qd, self._step_report(self._report.tolist(), paper_form)._replace(
+            collision=pairs, active_pairs=tuple(self._active_pairs[:count].tolist()))
+
+    def _grow(self, pair_capacity: int) -> None:
+        """Build the C++ step again with room for ``pair_capacity`` collision rows, from
+        the command last sent."""
+        previous = self.previous.copy()
+        self.__init__(self.setup, self.data, pair_capacity)
+        self.previous[:] = previous
 
     def _checked(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return checked_inputs(q, twist, self.setup.model.nq, self.setup.task_size)

@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint, Parametrisation, RobotLike
+from constraints.collision import CollisionAvoidance
 from constraints.validation import as_number, as_vector
 
 from ..base import Controller, SolverError, StepStatus, as_twist_weight, velocity_joint_names
@@ -86,17 +87,22 @@ class CJMController(Controller):
         (docs/design.md section 11.2). Anything but the identity takes the general form.
     limit_gain, position_limits, velocity_limits, strict, acceleration_limit : see
         :class:`controllers.base.Controller`.
+    collisions : the collision pairs kept apart
+        (:class:`constraints.collision.CollisionAvoidance`), or None. Their velocity-damper
+        rows ``rows qd >= lower`` join the active set after the barriers, below the
+        equality rows (docs/design.md section 18.4); :meth:`set_collisions` changes them.
     backend : ``"compiled"`` (the whole step in C++, Pinocchio's kinematics included,
         :mod:`controllers.cjm.compiled`, docs/design.md section 16), ``"python"``
         (:mod:`controllers.cjm.python_step` and the forms: the readable reference) or ``"auto"`` (compiled when the
         extension is built and covers the robot's joints, else Python). ``"compiled"``
         raises ``ImportError`` without the extension and ``ValueError`` for a robot it
         does not cover. The compiled step computes its kinematics on its own copy of the
-        model: it leaves ``self.data`` as it was.
+        model: it leaves ``self.data`` as it was, except with ``collisions``, whose rows
+        Python measures on ``self.data`` before the C++ step.
 
     The step itself lives in :attr:`step` (built with :attr:`setup`, again whenever
-    ``policy``, ``posture``, ``posture_gain``, ``twist_weight`` or the constraints are
-    set): ``step.solve(q, twist)`` gives ``qd`` and a
+    ``policy``, ``posture``, ``posture_gain``, ``twist_weight``, the constraints or the
+    collisions are set): ``step.solve(q, twist)`` gives ``qd`` and a
     :class:`~controllers.cjm.report.StepReport`, which :meth:`solve` words into ``info``.
     """
 
@@ -119,10 +125,11 @@ class CJMController(Controller):
         strict: bool = False,
         backend: Backend = "auto",
         acceleration_limit=None,
+        collisions: CollisionAvoidance | None = None,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
                          velocity_limits=velocity_limits, strict=strict,
-                         acceleration_limit=acceleration_limit)
+                         acceleration_limit=acceleration_limit, collisions=collisions)
         if parametrisation not in ("nullspace", "paper"):
             raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
         if form not in ("auto", "general"):
@@ -228,7 +235,7 @@ class CJMController(Controller):
             from .compiled import CompiledStep, KinematicsMismatch
 
             try:
-                step = CompiledStep(setup)
+                step = CompiledStep(setup, self.data)
             except KinematicsMismatch:
                 if not self._python_if_needed:
                     raise
@@ -260,7 +267,8 @@ class CJMController(Controller):
             tolerances=StepTolerances(), task_entries=task_entries, task_scale=task_scale,
             posture=self._posture.copy(), posture_gain=self._posture_gain,
             posture_free=self._base_velocity,
-            parametrisation=self.parametrisation, form=self.form, joint_names=self.joint_names)
+            parametrisation=self.parametrisation, form=self.form, joint_names=self.joint_names,
+            collisions=self.collisions)
 
     # -- the step ----------------------------------------------------------------------
 

@@ -2,7 +2,8 @@
 
 :class:`PythonStep` runs one step of :class:`controllers.cjm.controller.CJMController`
 from its :class:`~controllers.cjm.step_setup.StepSetup`: the kinematics, the equality
-rows, the barriers' active set, the analytical or general form, saturation in the null
+rows, the barriers' and the collision rows' active set, the analytical or general form,
+saturation in the null
 space when the command leaves the joint box, the clip guard, and a
 :class:`~controllers.cjm.report.StepReport` of what happened. The compiled step
 (:mod:`controllers.cjm.compiled`) does the same in C++.
@@ -14,6 +15,8 @@ import math
 
 import numpy as np
 import pinocchio as pin
+
+from constraints.collision import CollisionRows
 
 from ..base import StepStatus, checked_inputs
 from .analytical import SquarePreChain, solve_redundant_pre_chain
@@ -41,6 +44,11 @@ class PythonStep:
         self._square_plans: dict[int, SquarePreChain] = {}
         self._active: list[int] = []
         self._equalities, self._barriers = setup.equalities, setup.barriers
+        #: the step's collision rows (empty without collision avoidance), the ones held
+        #: at their bound, and the bounds they are held at (lowered in a conflict)
+        self._pairs = CollisionRows.empty(setup.model.nv)
+        self._active_pairs: list[int] = []
+        self._pair_rhs = self._pairs.lower
         #: one task the analytical form may take (form auto, one EE, its full twist)
         self._analytical_task = setup.form == "auto" and setup.paper_task
         self._nq, self._task_size = setup.model.nq, setup.task_size
@@ -64,6 +72,9 @@ class PythonStep:
         setup = self.setup
         report = ReportBuilder()
         ee_jacobian = self._kinematics(q)
+        if setup.collisions is not None:
+            self._pairs = report.collision = setup.collisions.rows(setup.model, self.data)
+            self._pair_rhs = self._pairs.lower.copy()
         task = self._task(twist)
         try:
             qd = self._solve(q, ee_jacobian, task, report)
@@ -82,6 +93,7 @@ class PythonStep:
                 return self._fail(q, report, "", Event.NON_FINITE)
         if report.equality_residual > EQUALITY_TOLERANCE:
             report.event(Event.RESIDUAL, StepStatus.CONSTRAINT_DEGRADED, report.equality_residual)
+        report.active_pairs = tuple(self._active_pairs)
         return qd, report.freeze()
 
     def _fail(self, q: np.ndarray, report: ReportBuilder, error: str,
@@ -145,41 +157,69 @@ class PythonStep:
     def _solve(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
                report: ReportBuilder) -> np.ndarray:
         self._active = list(self._equalities)
+        self._active_pairs = []
         qd = self._solve_rows(q, ee_jacobian, twist, self._active, report)
-        if self._barriers:
-            qd = self._activate_barriers(q, ee_jacobian, twist, qd, report)
+        if self._barriers or self._pairs.size:
+            qd = self._activate(q, ee_jacobian, twist, qd, report)
         return qd
 
-    def _activate_barriers(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
-                           qd: np.ndarray, report: ReportBuilder) -> np.ndarray:
-        """Active set over the barriers: hold the most violated one as an equality, again."""
-        barriers = self._barriers
-        waiting = [i for i in barriers if i not in self._active]
-        while waiting:
+    def _activate(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
+                  qd: np.ndarray, report: ReportBuilder) -> np.ndarray:
+        """Active set over the barriers, then the collision rows: hold the most violated
+        one as an equality, again (a barrier before any collision row)."""
+        while self._activate_worst(qd):
+            qd = self._solve_rows(q, ee_jacobian, twist, self._active, report)
+        report.active_barriers = tuple(i for i in self._active if i in self._barriers)
+        return qd
+
+    def _activate_worst(self, qd: np.ndarray) -> bool:
+        """Add the most violated waiting barrier, else the most violated waiting collision
+        row, to the active set; False when none is violated."""
+        waiting = [i for i in self._barriers if i not in self._active]
+        if waiting:
             violations = [self._barrier_violation(i, qd) for i in waiting]
             worst = int(np.argmax(violations))
-            if violations[worst] <= BARRIER_TOLERANCE:
-                break
-            self._active.append(waiting.pop(worst))
-            qd = self._solve_rows(q, ee_jacobian, twist, self._active, report)
-        report.active_barriers = tuple(i for i in self._active if i in barriers)
-        return qd
+            if violations[worst] > BARRIER_TOLERANCE:
+                self._active.append(waiting[worst])
+                return True
+        waiting = [i for i in range(self._pairs.size) if i not in self._active_pairs]
+        if waiting:
+            violations = self._pairs.violation(qd)[waiting]
+            worst = int(np.argmax(violations))
+            if violations[worst] > BARRIER_TOLERANCE:
+                self._active_pairs.append(waiting[worst])
+                return True
+        return False
 
     def _barrier_violation(self, index: int, qd: np.ndarray) -> float:
         rows, rhs = self.rows([index])
         return float(rhs[0] - rows[0] @ qd)
 
+    def _held_rows(self, active: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """The rows held as equalities: the active constraints', then the active collision
+        rows at their bounds (docs/design.md section 18.4)."""
+        rows, rhs = self.rows(active)
+        if not self._active_pairs:
+            return rows, rhs
+        pairs = self._active_pairs
+        return (np.vstack([rows, self._pairs.rows[pairs]]),
+                np.concatenate([rhs, self._pair_rhs[pairs]]))
+
     def _solve_rows(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
                     active: list[int], report: ReportBuilder) -> np.ndarray:
         """The analytical form where it applies, else the general form, for these rows."""
         setup = self.setup
-        if len(active) == 1 and self._analytical_task:
+        pairs = self._active_pairs
+        if len(active) == 1 and self._analytical_task and not pairs:
             qd = self._solve_analytical(q, ee_jacobian, twist, active[0], report)
             if qd is not None:
                 return qd
-        rows, rows_rhs = self.rows(active)
-        return solve_general(rows, rows_rhs, ee_jacobian, twist, setup.policy,
-                             self._posture_velocity(q), report)
+        rows, rows_rhs = self._held_rows(active)
+        qd = solve_general(rows, rows_rhs, ee_jacobian, twist, setup.policy,
+                           self._posture_velocity(q), report, pairs)
+        if pairs:  # the bounds a conflict lowered stay lowered for the rest of the step
+            self._pair_rhs[pairs] = rows_rhs[len(rows_rhs) - len(pairs):]
+        return qd
 
     def _solve_analytical(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
                           index: int, report: ReportBuilder) -> np.ndarray | None:
@@ -225,19 +265,16 @@ class PythonStep:
     def _saturate(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
                   lower: np.ndarray, upper: np.ndarray, report: ReportBuilder) -> np.ndarray:
         """Saturation in the null space (module :mod:`controllers.cjm.saturation`), the
-        barriers activated again against the saturated command."""
+        barriers and the collision rows activated again against the saturated command."""
         setup = self.setup
         barriers = self._barriers
-        for _ in range(len(barriers) + 1):
-            rows, rows_rhs = self.rows(self._active)
+        for _ in range(len(barriers) + self._pairs.size + 1):
+            rows, rows_rhs = self._held_rows(self._active)
             result = saturate_in_null_space(rows, rows_rhs, ee_jacobian, twist, lower, upper,
                                             setup.bounds.velocity_limit, setup.policy,
                                             self._reference, setup.bounds.acceleration_step)
-            waiting = [i for i in barriers if i not in self._active]
-            violated = [i for i in waiting if self._barrier_violation(i, result.qd) > BARRIER_TOLERANCE]
-            if not violated:
+            if not self._activate_worst(result.qd):
                 break
-            self._active.append(max(violated, key=lambda i: self._barrier_violation(i, result.qd)))
         report.active_barriers = tuple(i for i in self._active if i in barriers)
         report.method = "saturated"
         report.scale = result.task_scale

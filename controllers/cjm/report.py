@@ -12,6 +12,8 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import NamedTuple, Sequence
 
+from constraints.collision import CollisionRows
+
 from ..base import NON_FINITE_NOTE, SolveInfo, StepStatus, clipped_note, residual_note
 from ..linalg import RANK_TOLERANCE
 
@@ -34,6 +36,7 @@ class Event(IntEnum):
     NON_FINITE = 11         # failed: the command came out non-finite
     PAPER_FORM_UNDEFINED = 12  # a = 0: the paper's 1/a form gave way to the null-space form
     LINEAR_ALGEBRA_ERROR = 13  # failed: a LAPACK error (StepReport.error says which)
+    PAIR_CONFLICT = 14      # a: collision row, b: shortfall (m/s) below the equality rows
 
 
 #: Event by its code (the C++ report's event log holds codes)
@@ -53,7 +56,10 @@ class StepReport(NamedTuple):
 
     ``saturation_joints``: the joints a saturated step held at a limit when it missed
     the task (the ``TASK_MISSED`` event names them); ``error``: the text of a
-    ``LINEAR_ALGEBRA_ERROR``. (A named tuple: immutable and built in one call, every step.)
+    ``LINEAR_ALGEBRA_ERROR``. With collision avoidance, ``collision`` holds the step's
+    :class:`~constraints.collision.CollisionRows` and ``active_pairs`` the indices of its
+    rows held at their bound (else None and ()). (A named tuple: immutable and built in
+    one call, every step.)
     """
 
     status: StepStatus = StepStatus.OK
@@ -67,6 +73,8 @@ class StepReport(NamedTuple):
     events: tuple[tuple[Event, float, float, float], ...] = ()
     saturation_joints: tuple[int, ...] = ()
     error: str = ""
+    collision: CollisionRows | None = None
+    active_pairs: tuple[int, ...] = ()
 
 
 class ReportBuilder:
@@ -84,6 +92,8 @@ class ReportBuilder:
     events: tuple[tuple[Event, float, float, float], ...] = ()
     saturation_joints: tuple[int, ...] = ()
     error: str = ""
+    collision: CollisionRows | None = None
+    active_pairs: tuple[int, ...] = ()
 
     def event(self, event: Event, status: StepStatus = StepStatus.OK, a: float = 0.0,
               b: float = 0.0, c: float = 0.0) -> None:
@@ -100,21 +110,30 @@ class ReportBuilder:
     def freeze(self) -> StepReport:
         return StepReport(self.status, self.method, self.sigma_min, self.damping, self.scale,
                           self.equality_residual, self.saturated_joints, self.active_barriers,
-                          self.events, self.saturation_joints, self.error)
+                          self.events, self.saturation_joints, self.error, self.collision,
+                          self.active_pairs)
 
 
 def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
     """The :class:`SolveInfo` of a step: its figures, and its events worded in order
     (``joint_names``: the joint's name per velocity index)."""
     (status, method, sigma_min, damping, scale, equality_residual, saturated_joints,
-     active_barriers, events, saturation_joints, error) = report
+     active_barriers, events, saturation_joints, error, collision, active_pairs) = report
     info = SolveInfo(status, method, "", sigma_min, damping, scale, saturated_joints,
                      active_barriers, equality_residual)  # the notes below leave the status
+    if collision is not None:
+        info.minimum_distance, info.closest_pair = collision.minimum_distance, collision.closest_pair
+        info.active_pairs = tuple(collision.pairs[i] for i in active_pairs)
     if not events:
         return info
-    for event, a, b, c in events:  # the frequent events first
+    # an active set solves again after each row it adds: the last solve's residual is the
+    # command's (the earlier ones keep the status they lowered, never their wording)
+    last_residual = max((i for i, (event, *_) in enumerate(events)
+                         if event is Event.TASK_RESIDUAL), default=-1)
+    for index, (event, a, b, c) in enumerate(events):  # the frequent events first
         if event is Event.TASK_RESIDUAL:
-            info.report(StepStatus.OK, task_residual_note(a, b))
+            if index == last_residual:
+                info.report(StepStatus.OK, task_residual_note(a, b))
         elif event is Event.TASK_MISSED:
             info.report(StepStatus.OK, task_missed_note(joint_names, saturation_joints, a, b))
         elif event is Event.TASK_SCALED:
@@ -125,6 +144,8 @@ def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
             info.report(StepStatus.OK, residual_note(a))
         elif event is Event.CONFLICT:
             info.report(StepStatus.OK, conflict_note(int(a), int(b), c))
+        elif event is Event.PAIR_CONFLICT:
+            info.report(StepStatus.OK, pair_conflict_note(collision.describe(int(a)), b))
         elif event is Event.ROWS_SCALED:
             info.report(StepStatus.OK, rows_scaled_note(a))
         elif event is Event.NO_FREE_JOINT:
@@ -139,7 +160,21 @@ def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
             info.message = NON_FINITE_NOTE
         elif event is Event.LINEAR_ALGEBRA_ERROR:
             info.message = error
+    if active_pairs and status in (StepStatus.LEAST_SQUARES, StepStatus.SCALED):
+        info.report(StepStatus.OK, held_back_note(collision, active_pairs))
     return info
+
+
+def pair_conflict_note(pair: str, shortfall: float) -> str:
+    """A collision pair the equality rows leave no way to keep apart (section 18.4)."""
+    return (f"collision pair {pair} cannot be kept apart with the constraints held: "
+            f"least squares below them, distance rate {shortfall:.2e} m/s short")
+
+
+def held_back_note(collision: CollisionRows, active_pairs: Sequence[int]) -> str:
+    """The collision rows a step that misses its twist holds at their bound."""
+    pairs = ", ".join(collision.describe(i) for i in active_pairs)
+    return f"held back by collision pair{'s' if len(active_pairs) > 1 else ''} {pairs}"
 
 
 def task_residual_note(damping: float, residual: float) -> str:

@@ -16,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint, Parametrisation
+from constraints.collision import CollisionAvoidance
 
 from ..base import posture_difference
 from ..joint_limits import BoxTest, JointBounds
@@ -59,6 +60,8 @@ class StepSetup:
     posture_free : the velocity indices the posture leaves alone (a mobile base's), or None.
     parametrisation, form : see :class:`CJMController`.
     joint_names : the joint's name per velocity index (for the messages).
+    collisions : the collision pairs kept apart (docs/design.md section 18.4), or None:
+        their rows ``rows qd >= lower`` are measured at every step, after the kinematics.
     """
 
     model: pin.Model
@@ -76,6 +79,7 @@ class StepSetup:
     parametrisation: Parametrisation
     form: Form
     joint_names: tuple[str, ...]
+    collisions: CollisionAvoidance | None = None
 
     def __post_init__(self) -> None:
         for array in (self.task_entries, self.task_scale, self.posture):

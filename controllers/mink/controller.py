@@ -12,6 +12,7 @@ import pinocchio as pin
 import qpsolvers
 
 from constraints import Constraint
+from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.validation import as_number, as_vector
 
 from ..base import EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus, as_twist_weight
@@ -20,14 +21,17 @@ from ..linalg import DampingPolicy
 from ..mujoco_model import build_mujoco_model, site_name
 from ..numerics import INFINITE_BOUND
 from ..optimization.budget import BudgetExceeded, StepBudget, TimeBudget
+from ..optimization.collision_report import (AT_BOUND, describe_pair, record_distances,
+                                             report_conflict, report_held_back, rows_at_bound)
 from ..optimization.least_residual import HeldRows, held_note, held_rows, least_residual_problem
 from ..optimization.task_damping import task_damping
 from .adapters import BarrierLimit, ConstraintTask, DampingTask, PostureTask
 from .acceleration_limit import AccelerationLimit
+from .collision_limit import CollisionPairsLimit, CollisionScene
 from .joint_box import JointBoxLimit
 from .rows import PinocchioRows, RowsCache
 from .backend import MinkBackend
-from .settings import DEFAULT_DAMPING, DEFAULT_POSTURE_COST
+from .settings import DEFAULT_DAMPING, DEFAULT_POSTURE_COST, VELOCITY_TOLERANCES
 
 #: Pinocchio's ``[x y z qx qy qz qw]`` re-ordered into mink's ``wxyz_xyz``.
 _WXYZ_XYZ = np.array([6, 3, 4, 5, 0, 1, 2])
@@ -143,9 +147,10 @@ class MinkController(GuardedController):
         max_damping: float = 0.05,
         strict: bool = False,
         acceleration_limit=None,
+        collisions: CollisionAvoidance | None = None,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, strict=strict,
-                         acceleration_limit=acceleration_limit)
+                         acceleration_limit=acceleration_limit, collisions=collisions)
         self.budget = StepBudget(time_budget, self.dt)
         self.policy = DampingPolicy(0.0, as_number(singular_threshold, "singular_threshold", 0.0),
                                     as_number(max_damping, "max_damping", 0.0))
@@ -168,25 +173,29 @@ class MinkController(GuardedController):
                                    self.budget)
         #: the backend's settings (one dict: changing it changes the next solve)
         self.settings = self.backend.settings
+        #: how close to its bound a collision row counts as held (m/s): the backend's accuracy
+        self._at_bound = max([AT_BOUND, *VELOCITY_TOLERANCES.get(solver, {}).values()])
 
-        # The MuJoCo side, built once, before the constraints that use it.
+        # The MuJoCo side, built before the constraints that use it (and again when the
+        # collision avoidance or its obstacles' shapes change).
         model: pin.Model = robot.model
         ee_frames = [model.frames[frame_id].name for frame_id in self.ee_frame_ids]
         frames = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
         frames.extend(ee_frames)
-        self.mj_model, self.joints = build_mujoco_model(
-            model, robot.urdf_path.read_text(), frames, getattr(robot, "locked_joints", None))
+        self._frames, self._ee_frames, self._limit_specs = frames, ee_frames, limits
         self.site_names = {name: site_name(name) for name in frames}
         self.ee_site = site_name(ee_frames[0])
-        self.configuration = mink.Configuration(self.mj_model)
+        #: the avoidance's shapes in the MuJoCo model, its pairs as mink's collision limit
+        #: (None without collision avoidance; docs/design.md 18.5)
+        self._scene: CollisionScene | None = None
+        self.collision_limit: CollisionPairsLimit | None = None
+        self._build_mujoco()
         #: one frame task per end effector, in ``robot.ee_frames`` order
         self.ee_tasks = [mink.FrameTask(site_name(name), "site",
                                         position_cost=self._twist_scale[6 * i:6 * i + 3],
                                         orientation_cost=self._twist_scale[6 * i + 3:6 * i + 6],
                                         gain=1.0, lm_damping=0.0)
                          for i, name in enumerate(ee_frames)]
-        self._ee_site_ids = [self.mj_model.site(site_name(name)).id for name in ee_frames]
-        self._q_mj = np.empty(self.mj_model.nq)
         #: the default limit, the controller's joint box (None with ``limits`` given)
         self._joint_box = (JointBoxLimit(self.joint_bounds, self.joints, model.nq)
                            if limits is None else None)
@@ -216,6 +225,29 @@ class MinkController(GuardedController):
         self._limits: list[mink.Limit] = list(self._base_limits)
         self.set_constraints(constraints)
 
+    def _build_mujoco(self) -> None:
+        """The MuJoCo model (with the avoidance's shapes, :class:`CollisionScene`), its
+        joint map, mink's configuration and the collision limit."""
+        robot = self.robot
+        self._scene = (None if self.collisions is None
+                       else CollisionScene(self.collisions, robot.collision_model, self.model))
+        self.mj_model, self.joints = build_mujoco_model(
+            self.model, robot.urdf_path.read_text(), self._frames,
+            getattr(robot, "locked_joints", None),
+            None if self._scene is None else self._scene.geometry())
+        self.configuration = mink.Configuration(self.mj_model)
+        self._ee_site_ids = [self.mj_model.site(site_name(name)).id for name in self._ee_frames]
+        self._q_mj = np.empty(self.mj_model.nq)
+        self.collision_limit = (None if self._scene is None
+                                else self._scene.limit(self.mj_model, self.dt))
+
+    def _rebuild_mujoco(self) -> None:
+        """:meth:`_build_mujoco` again, and the limits made on the model."""
+        self._build_mujoco()
+        self._base_limits = self._make_limits(self._limit_specs)
+        if self.acceleration_box is not None:
+            self._base_limits.append(self.acceleration_box)
+
     def _make_limits(self, limits: Sequence[LimitSpec] | None) -> list[mink.Limit]:
         if limits is None:
             return [self._joint_box]
@@ -232,17 +264,32 @@ class MinkController(GuardedController):
         return self.ee_tasks[0]
 
     def _prepare(self) -> None:
+        if (self._scene is None) != (self.collisions is None) or (
+                self._scene is not None and self._scene.collisions is not self.collisions):
+            self._rebuild_mujoco()
         rows = PinocchioRows(self.model, self.data, self.joints, self.mj_model.nq)
         self._rows = rows
         caches = [RowsCache(c, f, rows) for c, f in zip(self.constraints, self.constraint_frames)]
         self._equality_caches = [c for c in caches if c.constraint.is_equality]
         self.constraint_tasks = [ConstraintTask(c, self.dt) for c in self._equality_caches]
         self.barrier_limits = [BarrierLimit(c) for c in caches if not c.constraint.is_equality]
-        self._limits = [*self._base_limits, *self.barrier_limits]
+        self._assemble_limits()
+
+    def _assemble_limits(self) -> None:
+        self._limits = [*self._base_limits, *self.barrier_limits,
+                        *(() if self.collision_limit is None else (self.collision_limit,))]
 
     # -- the step ----------------------------------------------------------------------
 
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
+        if self._scene is not None:
+            if self._scene.changed():  # obstacles added, removed or reshaped
+                self._rebuild_mujoco()
+                self._assemble_limits()
+            self._scene.place_obstacles(self.mj_model)
+        collisions = self.collision_rows()
+        if collisions is not None:  # measured whatever the solve does
+            record_distances(self.info, collisions)
         configuration = self.configuration
         q_mj = self.joints.q_to_mujoco(kinematics.q, out=self._q_mj)
         configuration.update(q_mj)
@@ -273,16 +320,19 @@ class MinkController(GuardedController):
         try:
             qd = self._solve_rows(tasks, q_mj)
         except SolverError as error:  # infeasible rows, or a budget spent
-            if not (self._equality_caches or self.barrier_limits):
+            if not (self._equality_caches or self.barrier_limits or self.collision_limit):
                 raise
             try:
-                held = self._least_residual(A, b, kinematics.q)
+                held = self._least_residual(A, b, kinematics.q, collisions)
             except SolverError as second:
                 raise error from second
             if held.residual <= EQUALITY_TOLERANCE:
                 raise  # the rows fit the limits: the failure was something else
             self.info.report(StepStatus.CONSTRAINT_DEGRADED, held_note(held.residual))
-            self._hold(held)
+            if collisions is not None:
+                report_conflict(self.info, collisions,
+                                rows_at_bound(collisions, held.qd, self._at_bound))
+            self._hold(held, q_mj)
             try:
                 qd = self._solve_rows(tasks, q_mj)
             except BudgetExceeded:
@@ -292,7 +342,7 @@ class MinkController(GuardedController):
                 self.info.report(StepStatus.LEAST_SQUARES, f"mink under the held rows failed "
                                  f"({task_error}): the least-residual command")
             finally:
-                self._hold(None)
+                self._hold(None, q_mj)
         if A is not None:
             self.info.equality_residual = float(np.max(np.abs(A @ qd - b)))
         if self.barrier_limits:
@@ -304,9 +354,25 @@ class MinkController(GuardedController):
                 if np.any(rows.A_pin @ qd - rows.b < 1e-9):
                     active.append(index)
             self.info.active_barriers = tuple(active)
-        self._report_twist_error(kinematics.ee_jacobian, qd, twist,
-                                 None if self._unit_weight else self._twist_scale)
+        missed = self._report_twist_error(kinematics.ee_jacobian, qd, twist,
+                                          None if self._unit_weight else self._twist_scale)
+        if collisions is not None:
+            names = self._held_pairs(qd, q_mj)
+            report_held_back(self.info, names, ", ".join(
+                describe_pair(collisions, name) for name in names), missed)
         return qd
+
+    def _held_pairs(self, qd: np.ndarray, q_mj: np.ndarray) -> tuple[str, ...]:
+        """The pairs whose rows of mink's collision limit ``qd`` holds at their bound
+        (to the backend's accuracy), each named once."""
+        rows = self.collision_limit.last
+        if rows is None or rows.G is None:
+            return ()
+        displacement = self.joints.v_to_mujoco(qd, q_mj) * self.dt
+        near = np.flatnonzero(np.isfinite(rows.h))
+        slack = rows.h[near] - rows.G[near] @ displacement
+        held = near[slack <= self._at_bound * self.dt]
+        return tuple(dict.fromkeys(self.collision_limit.names[i] for i in held.tolist()))
 
     def _solve_rows(self, tasks: list[mink.Task], q_mj: np.ndarray) -> np.ndarray:
         """mink's ``qd`` (Pinocchio order) under the rows as the constraint tasks hold them
@@ -337,31 +403,44 @@ class MinkController(GuardedController):
         return np.vstack([c.A_pin for c in caches]), np.concatenate([c.b for c in caches])
 
     def _least_residual(self, A: np.ndarray | None, b: np.ndarray | None,
-                        q: np.ndarray) -> HeldRows:
-        """The rows as close to ``b`` as the box and the barriers allow
-        (:mod:`controllers.optimization.least_residual`), solved with this controller's
-        backend."""
+                        q: np.ndarray, collisions: CollisionRows | None) -> HeldRows:
+        """The rows as close to ``b`` as the box, the barriers and the avoidance's
+        collision rows allow (:mod:`controllers.optimization.least_residual`), solved
+        with this controller's backend."""
         lower, upper = self.bounds(q)
         lower = np.where(np.isfinite(lower), lower, -INFINITE_BOUND)
         upper = np.where(np.isfinite(upper), upper, INFINITE_BOUND)
-        G = h = None
+        blocks, bounds = [], []
         if self.barrier_limits:
             caches = [limit.cache.at(self.configuration) for limit in self.barrier_limits]
-            G = -np.vstack([c.A_pin for c in caches])
-            h = -np.concatenate([c.b for c in caches])
+            blocks.append(-np.vstack([c.A_pin for c in caches]))
+            bounds.append(-np.concatenate([c.b for c in caches]))
+        if collisions is not None and collisions.size:
+            blocks.append(-collisions.rows)
+            bounds.append(-collisions.lower)
+        G = np.vstack(blocks) if blocks else None
+        h = np.concatenate(bounds) if bounds else None
         problem = least_residual_problem(A, b, G, h, lower, upper, INFINITE_BOUND)
         return held_rows(self.backend.least_residual(problem), A, b, G, h, lower, upper)
 
-    def _hold(self, held: HeldRows | None) -> None:
-        """Make the constraint tasks and barrier limits hold ``held``'s rows (None: ``b``)."""
+    def _hold(self, held: HeldRows | None, q_mj: np.ndarray) -> None:
+        """Make the constraint tasks, barrier limits and the collision limit hold
+        ``held``'s rows (None: their own); the collision limit's bounds are raised to
+        what the least-residual command reaches on mink's own rows."""
         if held is None:
             for item in (*self.constraint_tasks, *self.barrier_limits):
                 item.held_rhs = None
+            if self.collision_limit is not None:
+                self.collision_limit.held_bound = None
             return
         for task in self.constraint_tasks:
             task.held_rhs = task.cache.A_pin @ held.qd
         for limit in self.barrier_limits:
             limit.held_rhs = np.minimum(limit.cache.b, limit.cache.A_pin @ held.qd)
+        rows = None if self.collision_limit is None else self.collision_limit.last
+        if rows is not None and rows.G is not None:
+            self.collision_limit.held_bound = rows.G @ (
+                self.joints.v_to_mujoco(held.qd, q_mj) * self.dt)
 
     def site_pose(self, frame: str) -> pin.SE3:
         """World pose of the MuJoCo site at Pinocchio frame ``frame`` (last ``solve``'s q)."""

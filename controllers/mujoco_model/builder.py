@@ -13,6 +13,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
+from .collision_geoms import add_collision_geoms
 from .joint_map import JointMap, PlanarBase
 from .kinematic_urdf import kinematic_urdf
 
@@ -39,15 +40,17 @@ PLANAR_SUFFIXES = (":x", ":y", ":heading")
 def build_mujoco_model(
     model: pin.Model, urdf_text: str, frames: Iterable[str],
     locked_joints: Mapping[str, Sequence[float]] | None = None,
+    geometry: pin.GeometryModel | None = None,
 ) -> tuple[mujoco.MjModel, JointMap]:
     """Compile :func:`mujoco_spec` and map its joints to ``model``'s (:func:`joint_map`)."""
-    mj_model = mujoco_spec(model, urdf_text, frames, locked_joints).compile()
+    mj_model = mujoco_spec(model, urdf_text, frames, locked_joints, geometry).compile()
     return mj_model, joint_map(model, mj_model)
 
 
 def mujoco_spec(
     model: pin.Model, urdf_text: str, frames: Iterable[str],
     locked_joints: Mapping[str, Sequence[float]] | None = None,
+    geometry: pin.GeometryModel | None = None,
 ) -> mujoco.MjSpec:
     """A MuJoCo spec of the URDF with a site at each Pinocchio frame in ``frames``, not yet
     compiled (a physics plant adds its actuators and payload before compiling).
@@ -68,6 +71,10 @@ def mujoco_spec(
 
     ``locked_joints`` (the robot's, joint name to its Pinocchio coordinates) are made
     fixed at those positions, as ``model`` has them.
+
+    ``geometry`` (a Pinocchio ``GeometryModel`` of ``model``, objects on joint 0 fixed in
+    the world), if given, becomes geoms for distances only (:func:`add_collision_geoms`);
+    the URDF's own collision and visual elements are always dropped.
 
     Raises ``ValueError`` naming a joint of ``model`` that is not in the URDF or has more
     than one degree of freedom (other than a planar root joint); :func:`joint_map` checks
@@ -102,6 +109,9 @@ def mujoco_spec(
             pos=placement.translation.copy(),
             quat=[quaternion.w, quaternion.x, quaternion.y, quaternion.z],
         )
+    if geometry is not None:
+        spec.compiler.discardvisual = False  # it would drop geoms that take no contacts
+        add_collision_geoms(spec, geometry, bodies)
     return spec
 
 

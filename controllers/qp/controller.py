@@ -23,6 +23,7 @@ import pinocchio as pin
 import qpsolvers
 
 from constraints import Constraint
+from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.validation import as_number, as_vector
 
 from ..base import EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus, as_twist_weight
@@ -30,6 +31,8 @@ from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from ..numerics import INFINITE_BOUND, SOLVER_SETTINGS
 from ..optimization.budget import ITERATION_CAPS, BudgetExceeded, StepBudget, TimeBudget
+from ..optimization.collision_report import (AT_BOUND, pair_list, pair_names, record_distances,
+                                             report_conflict, report_held_back, rows_at_bound)
 from ..optimization.least_residual import HeldRows, held_note, held_rows, least_residual_problem
 from ..optimization.problem import QPSolution, QuadraticProgram
 from ..optimization.proxqp import ProxQPSolver
@@ -54,6 +57,7 @@ class QPController(GuardedController):
 
         rows (hard)       A qd = b                         equality rows, same drift as the CJM
                           G qd <= h                        barrier rows: -n.v_c <= K d - n.v_plane
+                                                           collision rows: -d_dot <= k (d - d_s)
                           max(-qd_max, g (q_min - q)/dt) <= qd <= min(qd_max, g (q_max - q)/dt)
         task              min |J_e qd - V_e|_W^2            (least squares)
         posture           min |qd - qd_posture|^2,   qd_posture = posture_gain * (posture (-) q)
@@ -88,8 +92,9 @@ class QPController(GuardedController):
     Parameters
     ----------
     robot, constraints, dt, limit_gain, position_limits, velocity_limits, strict,
-    acceleration_limit : see
-        :class:`controllers.base.Controller`.
+    acceleration_limit, collisions : see
+        :class:`controllers.base.Controller`. The collision rows ``rows qd >= lower``
+        join the barriers' rows as inequalities in every stage (docs/design.md 18.5).
     solver : a ``qpsolvers`` backend: ``"proxqp"`` (default), ``"daqp"``, ``"osqp"``, ...
         proxqp runs as persistent ``proxsuite`` dense QPs (``init`` once per stage, then
         ``update`` + ``solve``; see
@@ -136,10 +141,11 @@ class QPController(GuardedController):
         max_damping: float = 0.05,
         strict: bool = False,
         acceleration_limit=None,
+        collisions: CollisionAvoidance | None = None,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
                          velocity_limits=velocity_limits, strict=strict,
-                         acceleration_limit=acceleration_limit)
+                         acceleration_limit=acceleration_limit, collisions=collisions)
         self.budget = StepBudget(time_budget, self.dt)
         self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
                                     as_number(singular_threshold, "singular_threshold", 0.0),
@@ -161,6 +167,8 @@ class QPController(GuardedController):
         user_settings = dict(solver_settings or {})
         self.settings = {**SOLVER_SETTINGS.get(solver, {}), **ITERATION_CAPS.get(solver, {}),
                          **user_settings}
+        #: how close to its bound a collision row counts as held (m/s): the backend's accuracy
+        self._at_bound = max(AT_BOUND, float(self.settings.get("eps_abs", 0.0)))
         weight = as_twist_weight(twist_weight, self.task_size)
         self.twist_weight = weight
         self._twist_scale = np.sqrt(weight)
@@ -201,10 +209,10 @@ class QPController(GuardedController):
         self.info.method = f"qp:{self.solver}"
         jacobian = kinematics.ee_jacobian
         A, b = self.constraint_rows(self._equalities) if self._equalities else (None, None)
-        barrier_rows = barrier_bound = None
-        if self._barriers:
-            rows, rhs = self.constraint_rows(self._barriers)
-            barrier_rows, barrier_bound = -rows, -rhs  # A qd >= b as -A qd <= -b
+        collisions = self.collision_rows()
+        if collisions is not None:  # measured whatever the solve does
+            record_distances(self.info, collisions)
+        barrier_rows, barrier_bound = self._inequality_rows(collisions)
         lower, upper = bounded_box(*self.bounds(kinematics.q))
         weighted_jacobian = jacobian if self._unit_weight else self._twist_rows * jacobian
         damping = task_damping(A, weighted_jacobian[self._weighted_rows], self.policy)
@@ -222,6 +230,9 @@ class QPController(GuardedController):
             if held.residual <= EQUALITY_TOLERANCE:
                 raise  # the rows fit the limits: the failure was something else
             self.info.report(StepStatus.CONSTRAINT_DEGRADED, held_note(held.residual))
+            if collisions is not None:
+                report_conflict(self.info, collisions,
+                                rows_at_bound(collisions, held.qd, self._at_bound))
             try:
                 qd = self._prioritised(kinematics.q, weighted_jacobian, twist, damping.rows,
                                        held.rows, held.rhs, barrier_rows, held.barrier_bound,
@@ -235,12 +246,37 @@ class QPController(GuardedController):
             barrier_bound = held.barrier_bound
         if A is not None:
             self.info.equality_residual = max(map(abs, (np.dot(A, qd) - b).tolist()))
-        if barrier_rows is not None:
-            held_barriers = np.flatnonzero(barrier_rows @ qd - barrier_bound > -1e-9)
+        if self._barriers:
+            count = len(self._barriers)  # one row each, before the collision rows
+            held_barriers = np.flatnonzero(barrier_rows[:count] @ qd - barrier_bound[:count]
+                                           > -1e-9)
             self.info.active_barriers = tuple(self._barriers[i] for i in held_barriers)
-        self._report_twist_error(jacobian, qd, twist,
-                                 None if self._unit_weight else self._twist_scale)
+        missed = self._report_twist_error(jacobian, qd, twist,
+                                          None if self._unit_weight else self._twist_scale)
+        if collisions is not None:
+            held_pairs = rows_at_bound(collisions, qd, self._at_bound)
+            report_held_back(self.info, pair_names(collisions, held_pairs),
+                             pair_list(collisions, held_pairs), missed)
         return qd
+
+    def _inequality_rows(self, collisions: CollisionRows | None
+                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """``G qd <= h``: the barriers' rows, then the ``collisions`` rows
+        (``rows qd >= lower`` as ``-rows qd <= -lower``; docs/design.md 18.5), or
+        ``(None, None)`` when there is none. Every stage holds them alike."""
+        blocks, bounds = [], []
+        if self._barriers:
+            rows, rhs = self.constraint_rows(self._barriers)
+            blocks.append(-rows)  # A qd >= b as -A qd <= -b
+            bounds.append(-rhs)
+        if collisions is not None and collisions.size:
+            blocks.append(-collisions.rows)
+            bounds.append(-collisions.lower)
+        if not blocks:
+            return None, None
+        if len(blocks) == 1:
+            return blocks[0], bounds[0]
+        return np.vstack(blocks), np.concatenate(bounds)
 
     def _prioritised(self, q: np.ndarray, weighted_jacobian: np.ndarray, twist: np.ndarray,
                      damping_rows: np.ndarray, A: np.ndarray | None, b: np.ndarray | None,

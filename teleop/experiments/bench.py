@@ -24,6 +24,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Hole
+from constraints.collision import CollisionAvoidance
 from teleop.controller_specs import default_specs, make_controller
 from teleop.limits import MAX_BENCH_ITERATIONS
 from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
@@ -89,15 +90,19 @@ def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
 
 
 def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: int,
-                  warmup: int, seed: int = 0,
-                  label: str | None = None) -> tuple[StepTiming, np.ndarray]:
-    """Time one controller on ``holes`` over configurations near the robot's home; returns
-    the timing and the commands, one row per configuration. The configurations are
-    unrelated, so no previous command exists: the acceleration limits are off (their
-    cost shows in the loop's tick, docs/design.md 8.4)."""
+                  warmup: int, seed: int = 0, label: str | None = None,
+                  base: np.ndarray | None = None,
+                  collisions: CollisionAvoidance | None = None) -> tuple[StepTiming, np.ndarray]:
+    """Time one controller on ``holes`` (and ``collisions``' pairs) over configurations
+    near ``base`` (default: the robot's home); returns the timing and the commands, one
+    row per configuration. The configurations are unrelated, so no previous command
+    exists: the acceleration limits are off (their cost shows in the loop's tick,
+    docs/design.md 8.4)."""
     controller = make_controller(spec, robot, holes, acceleration_limit=None)
-    configurations = bench_configurations(robot, holes, iterations, seed)
-    twist = bench_twist(robot, holes)
+    if collisions is not None:
+        controller.set_collisions(collisions)
+    configurations = bench_configurations(robot, holes, iterations, seed, base)
+    twist = bench_twist(robot, holes, base)
     residual = 0.0
     statuses: collections.Counter[str] = collections.Counter()
     commands = np.empty((iterations, robot.model.nv))
@@ -148,21 +153,23 @@ def bench_ticks(robot: Robot, holes: Sequence[Hole], spec: str, configurations: 
 
 
 def bench_configurations(robot: Robot, holes: Sequence[Hole], iterations: int,
-                         seed: int = 0) -> np.ndarray:
-    """``iterations`` configurations near home, a little off the holes (<= 1e-3 rad or m
-    per velocity coordinate: sub-millimetre drift to correct), on the configuration
-    manifold (nq != nv on a base)."""
+                         seed: int = 0, base: np.ndarray | None = None) -> np.ndarray:
+    """``iterations`` configurations near ``base`` (default: home), a little off the holes
+    (<= 1e-3 rad or m per velocity coordinate: sub-millimetre drift to correct), on the
+    configuration manifold (nq != nv on a base)."""
+    base = robot.q_home if base is None else base
     rng = np.random.default_rng(seed)
     offsets = rng.uniform(-1e-3, 1e-3, (iterations, robot.model.nv))
-    rows = _hole_rows(robot, holes)
+    rows = _hole_rows(robot, holes, base)
     if len(rows) + robot.task_size > robot.model.nv:  # the twists over-determine qd: stay
         offsets -= offsets @ rows.T @ np.linalg.pinv(rows).T  # on the holes, to first order
-    return np.array([pin.integrate(robot.model, robot.q_home, offset) for offset in offsets])
+    return np.array([pin.integrate(robot.model, base, offset) for offset in offsets])
 
 
 def bench_controllers(robot: Robot, holes: Sequence[Hole], specs: Sequence[str],
                       iterations: int, warmup: int, label: str | None = None,
-                      plant: PlantChoice | None = None) -> list[StepTiming]:
+                      plant: PlantChoice | None = None, base: np.ndarray | None = None,
+                      collisions: CollisionAvoidance | None = None) -> list[StepTiming]:
     """:func:`bench_problem` for every spec on one problem, each with its largest joint-
     velocity deviation from the first spec's commands and its solvers' console output;
     with ``plant``, also its :func:`bench_ticks` over the same configurations."""
@@ -170,7 +177,8 @@ def bench_controllers(robot: Robot, holes: Sequence[Hole], specs: Sequence[str],
     reference = None
     with SolverOutputCapture() as capture:
         for spec in specs:
-            timing, commands = bench_problem(robot, holes, spec, iterations, warmup, label=label)
+            timing, commands = bench_problem(robot, holes, spec, iterations, warmup, label=label,
+                                             base=base, collisions=collisions)
             reference = commands if reference is None else reference
             ticks = {}
             if plant is not None:
@@ -211,22 +219,66 @@ def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
     results = []
     for name in robots:
         robot = load_robot(name)
+        warmup = max(1, iterations // 10)
         results += bench_controllers(robot, bench_holes(robot), controllers, iterations,
-                                     max(1, iterations // 10), plant=plant)
+                                     warmup, plant=plant)
+        if name == "sda10f_dual":
+            results += bench_collisions(robot, controllers, iterations, warmup)
     return results
 
 
-def bench_twist(robot: Robot, holes: Sequence[Hole]) -> np.ndarray:
+def bench_collisions(robot: Robot, controllers: Sequence[str], iterations: int,
+                     warmup: int) -> list[StepTiming]:
+    """The dual robot's arms close together (:func:`close_arms`), a hole on each, timed
+    without collision avoidance (``sda10f_dual/close``) and with it
+    (``sda10f_dual/collisions``: every self-collision pair, a few within the detection
+    distance), over the same configurations."""
+    collisions = CollisionAvoidance(robot)
+    base = close_arms(robot, collisions)
+    holes = bench_holes(robot, base)
+    return [*bench_controllers(robot, holes, controllers, iterations, warmup,
+                               label=f"{robot.name}/close", base=base),
+            *bench_controllers(robot, holes, controllers, iterations, warmup,
+                               label=f"{robot.name}/collisions", base=base,
+                               collisions=collisions)]
+
+
+def close_arms(robot: Robot, collisions: CollisionAvoidance, seed: int = 1,
+               tries: int = 2000) -> np.ndarray:
+    """A configuration near home (normal offsets of 0.4 rad, ``seed``) where the most pairs
+    between the two arms lie within the detection distance, none closer than 1 cm: the
+    first found with four such pairs, else the best of ``tries``."""
+    model = robot.model
+    data = model.createData()
+    rng = np.random.default_rng(seed)
+    best, best_count = robot.q_home.copy(), -1
+    for _ in range(tries):
+        q = pin.integrate(model, robot.q_home, rng.normal(scale=0.4, size=model.nv))
+        pin.computeJointJacobians(model, data, q)
+        rows = collisions.rows(model, data)
+        if rows.size == 0 or rows.minimum_distance < 0.01:
+            continue
+        count = sum("left" in pair and "right" in pair for pair in rows.pairs)
+        if count > best_count:
+            best, best_count = q, count
+        if count >= 4:
+            break
+    return best
+
+
+def bench_twist(robot: Robot, holes: Sequence[Hole], base: np.ndarray | None = None) -> np.ndarray:
     """The stacked twist the bench asks for: :data:`BENCH_TWIST` for the first EE, and for
     the others what the least-norm ``qd`` with ``A qd = 0`` (the holes at home) and
     ``J_e1 qd = BENCH_TWIST`` gives them, so that the twists are consistent with the holes
-    (two trocars on one torso cannot meet any pair, docs/design.md section 11.2)."""
+    (two trocars on one torso cannot meet any pair, docs/design.md section 11.2), at
+    ``base`` (default: home)."""
+    base = robot.q_home if base is None else base
     model = robot.model
     data = model.createData()
-    pin.computeJointJacobians(model, data, robot.q_home)
+    pin.computeJointJacobians(model, data, base)
     pin.updateFramePlacements(model, data)
     first, *others = robot.ee_frame_ids
-    rows = np.vstack([_hole_rows(robot, holes),
+    rows = np.vstack([_hole_rows(robot, holes, base),
                       pin.getFrameJacobian(model, data, first, pin.LOCAL)])
     goal = np.concatenate([np.zeros(sum(hole.dim for hole in holes)), BENCH_TWIST])
     qd = np.linalg.lstsq(rows, goal, rcond=None)[0]
@@ -234,21 +286,24 @@ def bench_twist(robot: Robot, holes: Sequence[Hole]) -> np.ndarray:
                                           for frame in others)])
 
 
-def _hole_rows(robot: Robot, holes: Sequence[Hole]) -> np.ndarray:
-    """The holes' stacked rows ``A`` (``A qd = b``) at home."""
+def _hole_rows(robot: Robot, holes: Sequence[Hole], base: np.ndarray | None = None) -> np.ndarray:
+    """The holes' stacked rows ``A`` (``A qd = b``) at ``base`` (default: home)."""
+    base = robot.q_home if base is None else base
     model = robot.model
     data = model.createData()
-    pin.computeJointJacobians(model, data, robot.q_home)
+    pin.computeJointJacobians(model, data, base)
     pin.updateFramePlacements(model, data)
     return np.vstack([hole.rows(model, data, model.getFrameId(hole.link))[0] for hole in holes]
                      or [np.zeros((0, model.nv))])
 
 
-def bench_holes(robot: Robot) -> list[Hole]:
+def bench_holes(robot: Robot, base: np.ndarray | None = None) -> list[Hole]:
     """One hole on each of ``robot.constrained_links``, at the robot's
-    :data:`DEFAULT_HOLE_DISTANCE` (0.1 m for a robot not listed) along it, at home."""
+    :data:`DEFAULT_HOLE_DISTANCE` (0.1 m for a robot not listed) along it, at ``base``
+    (default: home)."""
     distance = DEFAULT_HOLE_DISTANCE.get(robot.name, 0.1)
-    return [Hole.on_link(robot, robot.q_home, distance=distance, link=link)
+    base = robot.q_home if base is None else base
+    return [Hole.on_link(robot, base, distance=distance, link=link)
             for link in robot.constrained_links]
 
 
@@ -293,13 +348,13 @@ def format_table(results: Sequence[StepTiming]) -> str:
     """One line per timing; ``qd dev``: the joint-velocity deviation from the problem's
     first controller (rad/s)."""
     ratios, daqp = mink_ratios(results), speedups(results, "qp:daqp")
-    lines = [(f"{'problem':<20}{'dof':>4}{'rows':>5}  {'controller':<13}{'median us':>10}"
+    lines = [(f"{'problem':<24}{'dof':>4}{'rows':>5}  {'controller':<13}{'median us':>10}"
               f"{'p99 us':>9}{'max us':>10}{'x mink':>8}{'x daqp':>8}{'residual':>10}{'qd dev':>10}  "
               f"{'method':<12}statuses")]
     for r in results:
         ratio, daqp_ratio = ratios.get((r.robot, r.controller)), daqp.get((r.robot, r.controller))
         lines.append(
-            f"{r.robot:<20}{r.dof:>4}{r.constraint_rows:>5}  {r.controller:<13}{r.median_us:>10.1f}"
+            f"{r.robot:<24}{r.dof:>4}{r.constraint_rows:>5}  {r.controller:<13}{r.median_us:>10.1f}"
             f"{r.p99_us:>9.1f}{r.max_us:>10.1f}{'' if ratio is None else f'{ratio:.1f}':>8}"
             f"{'' if daqp_ratio is None else f'{daqp_ratio:.1f}':>8}"
             f"{r.max_constraint_residual:>10.1e}{r.joint_velocity_deviation_max:>10.1e}  "

@@ -26,7 +26,10 @@ void Step::general(const Inputs& in, VectorRef qd) {
   null_.pseudo_solve(rhs, qd);  // qd_0 = A^+ b
   if (null_.rank() < m) {
     const double residual = residual_of(rows, qd, rhs, scratch_rows_.head(m));
-    if (residual > tol_.conflict_residual) {
+    if (residual > tol_.conflict_residual && !active_pairs_.empty()) {
+      hold_pairs_below();
+      null_.pseudo_solve(rhs, qd);
+    } else if (residual > tol_.conflict_residual) {
       report(Status::constraint_degraded);
       event(Event::conflict, static_cast<double>(null_.rank()), static_cast<double>(m), residual);
     }
@@ -66,6 +69,57 @@ void Step::general(const Inputs& in, VectorRef qd) {
   }
   equality_residual_ = residual_of(rows, qd, rhs, scratch_rows_.head(m));
   method_ = Method::general;
+}
+
+void Step::hold_pairs_below() {
+  const Index p = static_cast<Index>(active_pairs_.size());
+  const Index first = row_count_ - p;
+  const auto second = rows_.middleRows(first, p);
+  auto qd = first_qd_.head(nv_);
+  auto held = second_x_.head(p);
+  if (first == 0) {  // no row before them: least squares over every joint
+    null_second_.factor(second);
+    null_second_.pseudo_solve(rhs_.segment(first, p), qd);
+  } else {
+    const auto level_one = rows_.topRows(first);
+    null_first_.factor(level_one);
+    null_first_.pseudo_solve(rhs_.head(first), qd);
+    if (null_first_.rank() < first) {
+      const double residual = residual_of(level_one, qd, rhs_.head(first), scratch_rows_.head(first));
+      if (residual > tol_.conflict_residual) {
+        report(Status::constraint_degraded);
+        event(Event::conflict, static_cast<double>(null_first_.rank()),
+              static_cast<double>(first), residual);
+      }
+    }
+    const Index d = null_first_.dimension();
+    if (d > 0) {  // (A_2 N_1)^T = N_1^T A_2^T
+      auto second_t = second_t_.leftCols(p);
+      second_t = second.transpose();
+      auto second_null_t = second_null_t_.topLeftCorner(d, p);
+      null_first_.to_null(second_t, second_null_t);
+      auto second_null = second_null_.topLeftCorner(p, d);
+      second_null = second_null_t.transpose();
+      null_second_.factor(second_null);
+      held.noalias() = second * qd;
+      held = rhs_.segment(first, p) - held;
+      auto y = delta_.head(d);
+      null_second_.pseudo_solve(held, y);
+      auto step = direction_.head(nv_);  // free until saturation
+      null_first_.from_null(y, step);
+      qd += step;
+    }
+  }
+  held.noalias() = second * qd;
+  for (Index k = 0; k < p; ++k) {
+    const double shortfall = rhs_(first + k) - held(k);
+    if (shortfall > tol_.conflict_residual) {
+      report(Status::constraint_degraded);
+      event(Event::pair_conflict, static_cast<double>(active_pairs_[k]), shortfall);
+    }
+    pair_rhs_(active_pairs_[k]) = held(k);
+    rhs_(first + k) = held(k);
+  }
 }
 
 Step::Split Step::solve_over_free(const Inputs& in) {

@@ -134,15 +134,16 @@ PYBIND11_MODULE(_step, module) {
                        double max_damping, bool general_only,
                        std::vector<cjm::ConstraintPlan> constraints, cjm::JointBox box,
                        double posture_gain, cjm::Vector posture_target,
-                       cjm::Tolerances tolerances) {
+                       cjm::Tolerances tolerances, Index pair_capacity) {
              return new cjm::Step(nq, nv, task_rows, cjm::DampingPolicy{damping, threshold, max_damping},
                                   general_only, std::move(constraints), std::move(box),
-                                  posture_gain, std::move(posture_target), tolerances);
+                                  posture_gain, std::move(posture_target), tolerances,
+                                  pair_capacity);
            }),
            py::arg("nq"), py::arg("nv"), py::arg("task_rows"), py::arg("damping"),
            py::arg("threshold"), py::arg("max_damping"), py::arg("general_only"),
            py::arg("constraints"), py::arg("box"), py::arg("posture_gain"),
-           py::arg("posture_target"), py::arg("tolerances"))
+           py::arg("posture_target"), py::arg("tolerances"), py::arg("pair_capacity") = 0)
       .def_property_readonly("report", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.report().data(), {step.report().size()}, self);
@@ -166,7 +167,23 @@ PYBIND11_MODULE(_step, module) {
       .def_property_readonly("previous", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.previous().data(), {step.previous().size()}, self);
-      }, "The previous command (writable): the acceleration limits' reference.");
+      }, "The previous command (writable): the acceleration limits' reference.")
+      .def_property_readonly("pair_rows", [](py::object self) {
+        auto& step = self.cast<cjm::Step&>();
+        return view(step.pair_rows().data(), {step.pair_rows().rows(), step.pair_rows().cols()}, self);
+      }, "The collision rows (writable, pair_capacity x nv): ``pair_rows qd >= pair_lower``.")
+      .def_property_readonly("pair_lower", [](py::object self) {
+        auto& step = self.cast<cjm::Step&>();
+        return view(step.pair_lower().data(), {step.pair_lower().size()}, self);
+      }, "The collision rows' bounds (writable, pair_capacity).")
+      .def_property_readonly("pair_capacity", &cjm::Step::pair_capacity)
+      .def("set_pair_count", &cjm::Step::set_pair_count, py::arg("count"),
+           "How many of pair_rows the next step holds (ValueError beyond the capacity).")
+      .def_property_readonly("active_pairs", [](py::object self) {
+        auto& step = self.cast<cjm::Step&>();
+        return view(step.active_pairs().data(), {step.active_pairs().size()}, self);
+      })
+      .def_property_readonly("active_pair_count", &cjm::Step::active_pair_count);
 
   py::class_<BoundPipeline>(module, "Pipeline")
       .def(py::init([](std::vector<std::tuple<std::string, Index, Eigen::Matrix4d, Eigen::Vector3d>> joints,
@@ -273,6 +290,7 @@ PYBIND11_MODULE(_step, module) {
   events["residual"] = static_cast<int>(cjm::Event::residual);
   events["no_convergence"] = static_cast<int>(cjm::Event::no_convergence);
   events["non_finite"] = static_cast<int>(cjm::Event::non_finite);
+  events["pair_conflict"] = static_cast<int>(cjm::Event::pair_conflict);
   module.attr("EVENTS") = events;
   module.attr("JOINT_KINDS") = cjm::joint_kinds();
 }

@@ -17,23 +17,10 @@ double Step::gap_to_bound(double bound, double base, double noise) const {
 
 void Step::saturate(const Inputs& in, VectorRef qd) {
   ensure_rows(in);
-  for (size_t pass = 0; pass <= barriers_.size(); ++pass) {
+  for (Index pass = 0; pass <= static_cast<Index>(barriers_.size()) + pair_count_; ++pass) {
     gather_active_rows();
     saturate_in_null_space(in);
-    waiting_.clear();
-    for (Index i : barriers_)
-      if (std::find(active_.begin(), active_.end(), i) == active_.end()) waiting_.push_back(i);
-    Index worst = -1;
-    double worst_violation = tol_.barrier;
-    for (Index i : waiting_) {
-      const double violation = barrier_violation(i, sns_qd_);
-      if (violation > worst_violation) {
-        worst_violation = violation;
-        worst = i;
-      }
-    }
-    if (worst < 0) break;
-    active_.push_back(worst);
+    if (!activate_worst(sns_qd_)) break;
   }
   qd = sns_qd_;
   method_ = Method::saturated;

@@ -16,11 +16,12 @@ Index terms_size_of(Index k) { return 6 * (7 - k) + 7 * k; }
 
 Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool general_only,
            std::vector<ConstraintPlan> constraints, JointBox box, double posture_gain,
-           Vector posture_target, Tolerances tolerances)
+           Vector posture_target, Tolerances tolerances, Index pair_capacity)
     : nq_(nq), nv_(nv), task_rows_(task_rows), policy_(policy), tol_(tolerances),
       general_only_(general_only),
       constraints_(std::move(constraints)), box_(std::move(box)), posture_gain_(posture_gain),
       posture_target_(std::move(posture_target)),
+      null_first_(0, 0, tolerances.rank), null_second_(0, 0, tolerances.rank),
       null_(0, 0, tolerances.rank), dls_(0, 0, tolerances.rank), pre_svd_(6, std::max<Index>(nv, 6)), closest_svd_(nv, nv + 7) {
   if (nq < 1 || nv < 1 || task_rows < 1)
     throw std::invalid_argument("nq, nv and the task rows must be positive");
@@ -45,7 +46,8 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
         plan.off.push_back(j);
   }
   const Index n_constraints = static_cast<Index>(constraints_.size());
-  const Index m = std::max<Index>(1, total_rows_);
+  if (pair_capacity < 0) throw std::invalid_argument("pair_capacity must be >= 0");
+  const Index m = std::max<Index>(1, total_rows_ + pair_capacity);
   if (box_.velocity_lower.size() != nv || box_.velocity_upper.size() != nv ||
       box_.velocity_limit.size() != nv || box_.q_min.size() != static_cast<Index>(box_.limited_q.size()) ||
       box_.q_max.size() != box_.q_min.size() || box_.limited_v.size() != box_.limited_q.size() ||
@@ -64,7 +66,21 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   active_.reserve(n_constraints);
   waiting_.reserve(n_constraints);
   report_ = Vector::Zero(kReportSize);
-  events_ = RowMatrix::Zero(kEventsPerConstraint * (n_constraints + 2), 4);
+  events_ = RowMatrix::Zero(kEventsPerConstraint * (n_constraints + 2) + pair_capacity, 4);
+  pair_rows_ = RowMatrix::Zero(pair_capacity, nv);
+  pair_lower_ = Vector::Zero(pair_capacity);
+  pair_rhs_ = Vector::Zero(pair_capacity);
+  active_pairs_.reserve(pair_capacity);
+  active_pair_out_.resize(std::max<Index>(1, pair_capacity));
+  if (pair_capacity > 0) {
+    null_first_ = NullSpace(std::max<Index>(1, total_rows_), nv, tol_.rank);
+    null_second_ = NullSpace(pair_capacity, nv, tol_.rank);
+    second_t_.resize(nv, pair_capacity);
+    second_null_t_.resize(nv, pair_capacity);
+    second_null_.resize(pair_capacity, nv);
+    first_qd_.resize(nv);
+    second_x_.resize(std::max(nv, pair_capacity));
+  }
   saturated_.resize(nv);
   clip_joints_.resize(nv);
   saturation_joints_.resize(nv);
@@ -137,9 +153,11 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
   saturated_count_ = event_count_ = saturation_joint_count_ = 0;
   rows_ready_ = false;
   active_.assign(equalities_.begin(), equalities_.end());
+  active_pairs_.clear();
+  pair_rhs_.head(pair_count_) = pair_lower_.head(pair_count_);
   try {
     solve_rows(in, qd);
-    if (!barriers_.empty()) activate_barriers(in, qd);
+    if (!barriers_.empty() || pair_count_ > 0) activate(in, qd);
     if (!qd.allFinite()) {
       status_ = Status::failed;
       event(Event::non_finite);
@@ -170,32 +188,52 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
 // -- rows and forms ---------------------------------------------------------------------
 
 void Step::solve_rows(const Inputs& in, VectorRef qd) {
-  if (active_.size() == 1 && !general_only_ && in.analytical_allowed &&
+  if (active_.size() == 1 && active_pairs_.empty() && !general_only_ && in.analytical_allowed &&
       analytical(in, active_[0], qd))
     return;
   general(in, qd);
 }
 
-void Step::activate_barriers(const Inputs& in, VectorRef qd) {
+void Step::set_pair_count(Index count) {
+  if (count < 0 || count > pair_capacity())
+    throw std::invalid_argument("more collision rows than the step's capacity");
+  pair_count_ = count;
+}
+
+void Step::activate(const Inputs& in, VectorRef qd) {
   ensure_rows(in);
-  waiting_.clear();
-  for (Index i : barriers_)
-    if (std::find(active_.begin(), active_.end(), i) == active_.end()) waiting_.push_back(i);
-  while (!waiting_.empty()) {
-    Index worst = 0;
-    double worst_violation = -std::numeric_limits<double>::infinity();
-    for (Index w = 0; w < static_cast<Index>(waiting_.size()); ++w) {
-      const double violation = barrier_violation(waiting_[w], qd);
-      if (violation > worst_violation) {
-        worst_violation = violation;
-        worst = w;
-      }
+  while (activate_worst(qd)) solve_rows(in, qd);
+}
+
+bool Step::activate_worst(const ConstVectorRef& qd) {
+  Index worst = -1;
+  double worst_violation = -std::numeric_limits<double>::infinity();
+  for (Index i : barriers_) {
+    if (std::find(active_.begin(), active_.end(), i) != active_.end()) continue;
+    const double violation = barrier_violation(i, qd);
+    if (violation > worst_violation || worst < 0) {
+      worst_violation = violation;
+      worst = i;
     }
-    if (!(worst_violation > tol_.barrier)) break;
-    active_.push_back(waiting_[worst]);
-    waiting_.erase(waiting_.begin() + worst);
-    solve_rows(in, qd);
   }
+  if (worst >= 0 && worst_violation > tol_.barrier) {
+    active_.push_back(worst);
+    return true;
+  }
+  worst = -1;
+  for (Index i = 0; i < pair_count_; ++i) {
+    if (std::find(active_pairs_.begin(), active_pairs_.end(), i) != active_pairs_.end()) continue;
+    const double violation = pair_lower_(i) - pair_rows_.row(i).dot(qd);
+    if (violation > worst_violation || worst < 0) {
+      worst_violation = violation;
+      worst = i;
+    }
+  }
+  if (worst >= 0 && worst_violation > tol_.barrier) {
+    active_pairs_.push_back(worst);
+    return true;
+  }
+  return false;
 }
 
 void Step::ensure_rows(const Inputs& in) {
@@ -219,6 +257,11 @@ void Step::gather_active_rows() {
     rows_.middleRows(m, k) = all_rows_.middleRows(row_offset_[i], k);
     rhs_.segment(m, k) = all_rhs_.segment(row_offset_[i], k);
     m += k;
+  }
+  for (Index i : active_pairs_) {
+    rows_.row(m) = pair_rows_.row(i);
+    rhs_(m) = pair_rhs_(i);
+    ++m;
   }
   row_count_ = m;
 }
@@ -361,6 +404,7 @@ void Step::write_report() {
   report_(kScale) = scale_;
   report_(kEqualityResidual) = equality_residual_;
   report_(kSaturatedCount) = static_cast<double>(saturated_count_);
+  for (size_t i = 0; i < active_pairs_.size(); ++i) active_pair_out_(i) = active_pairs_[i];
   Index barrier_count = 0;
   for (Index i : active_)
     if (!constraints_[i].equality) active_barriers_(barrier_count++) = i;

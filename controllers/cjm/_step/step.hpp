@@ -37,6 +37,7 @@ enum class Event : int {
   residual,                // a: equality residual
   no_convergence,          // failed
   non_finite,              // failed
+  pair_conflict = 14,      // a: collision row, b: shortfall below the rows before it
 };
 
 //! Every tolerance the step decides with: controllers.cjm.tolerances.StepTolerances,
@@ -85,7 +86,7 @@ class Step {
   //! here; empty: Python passes it to solve().
   Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool general_only,
        std::vector<ConstraintPlan> constraints, JointBox box, double posture_gain,
-       Vector posture_target, Tolerances tolerances);
+       Vector posture_target, Tolerances tolerances, Index pair_capacity = 0);
 
   Index nq() const { return nq_; }
   Index nv() const { return nv_; }
@@ -112,6 +113,16 @@ class Step {
   //! Where constraint ``index``'s flat terms buffer starts in ``terms``.
   Index terms_offset(Index index) const { return terms_offset_[index]; }
 
+  //! Collision rows ``pair_rows() qd >= pair_lower()`` (docs/design.md section 18.4):
+  //! Python writes the first set_pair_count() of at most pair_capacity() before a step.
+  RowMatrix& pair_rows() { return pair_rows_; }
+  Vector& pair_lower() { return pair_lower_; }
+  Index pair_capacity() const { return pair_lower_.size(); }
+  void set_pair_count(Index count);
+  //! The collision rows the last step held at their bound, in the order activated.
+  Eigen::Matrix<Index, Eigen::Dynamic, 1>& active_pairs() { return active_pair_out_; }
+  Index active_pair_count() const { return static_cast<Index>(active_pairs_.size()); }
+
  private:
   struct Inputs {
     const ConstVectorRef& q;
@@ -133,7 +144,11 @@ class Step {
   // step.cpp: the driver, the barriers' active set, the box and the clip
   void check_sizes(const Inputs& in, const VectorRef& qd) const;
   void solve_rows(const Inputs& in, VectorRef qd);
-  void activate_barriers(const Inputs& in, VectorRef qd);
+  void activate(const Inputs& in, VectorRef qd);
+  //! The most violated waiting barrier, else collision row, made active; false if none.
+  bool activate_worst(const ConstVectorRef& qd);
+  //! controllers.cjm.general.hold_pairs_below on the gathered rows.
+  void hold_pairs_below();
   void ensure_rows(const Inputs& in);
   void gather_active_rows();
   double barrier_violation(Index index, const ConstVectorRef& qd) const;
@@ -191,13 +206,20 @@ class Step {
   Method method_ = Method::none;
   double sigma_min_ = 0.0, damping_ = 0.0, scale_ = 1.0, equality_residual_ = 0.0;
   Index saturated_count_ = 0, event_count_ = 0, saturation_joint_count_ = 0;
-  std::vector<Index> active_, waiting_;
+  std::vector<Index> active_, waiting_, active_pairs_;
   Vector report_;
   RowMatrix events_;
   Eigen::Matrix<Index, Eigen::Dynamic, 1> saturated_, active_barriers_, saturation_joints_, clip_joints_;
 
   // workspace, allocated once
   Matrix all_rows_, rows_;     // every constraint's rows; the active ones
+  RowMatrix pair_rows_;        // the collision rows (pair_capacity x nv)
+  Vector pair_lower_, pair_rhs_;  // their bounds; the bounds held (lowered in a conflict)
+  Index pair_count_ = 0;
+  Eigen::Matrix<Index, Eigen::Dynamic, 1> active_pair_out_;
+  NullSpace null_first_, null_second_;  // the two levels of a conflict
+  Matrix second_t_, second_null_t_, second_null_;
+  Vector first_qd_, second_x_;
   Vector all_rhs_, rhs_;
   Index row_count_ = 0;  // rows of the active set in rows_
   bool rows_ready_ = false;

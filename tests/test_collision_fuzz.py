@@ -1,0 +1,23 @@
+"""The closed-loop collision fuzz (tests/collision_fuzz.py), a few runs per controller:
+random crossing targets on sda10f_dual with a trocar on each arm. No pair penetrates, no
+pair comes closer than d_s - 0.5 mm, every command is finite and inside the joint box;
+the 2,000-run figures are in docs/results.md (``python -m tests.collision_fuzz``)."""
+
+from __future__ import annotations
+
+import pytest
+
+from collision_fuzz import fuzz
+
+RUNS, STEPS = 6, 600
+
+
+@pytest.mark.parametrize("spec", ["cjm", "cjm:python", "qp:daqp", "qp:proxqp", "qp:osqp",
+                                  "mink:daqp"])
+def test_no_pair_comes_closer_than_the_safety_distance(spec):
+    result = fuzz(spec, RUNS, STEPS, seed=7)
+    assert result.steps == RUNS * STEPS and result.non_finite == 0
+    assert result.box_violations == 0
+    assert result.penetrations == 0
+    assert result.below_safety == 0, (result.minimum_distance, result.worst_run)
+    assert result.minimum_distance >= 0.0045
