@@ -176,13 +176,15 @@ class Collisions:
         if unknown:
             raise ValueError(f"unknown collision setting {unknown[0]!r} ({', '.join(SETTINGS)})")
         with self._lock:
-            current = {name: getattr(self.avoidance, name) for name in SETTINGS}
             old = self.avoidance
-            avoidance = CollisionAvoidance(
-                self.robot, [entry.obstacle for entry in self.obstacles.values()],
-                **{**current, **settings}, disabled_pairs=old.disabled_pairs,
-                extra_pairs=old.extra_pairs)
-            avoidance.check(self.robot.model, self.config.dt)
+            current = {name: getattr(old, name) for name in SETTINGS}
+        # built outside the lock (tens of ms with self-collision: the control thread runs on)
+        avoidance = CollisionAvoidance(self.robot, **{**current, **settings},
+                                       disabled_pairs=old.disabled_pairs,
+                                       extra_pairs=old.extra_pairs)
+        avoidance.check(self.robot.model, self.config.dt)
+        with self._lock:
+            avoidance.set_obstacles([entry.obstacle for entry in self.obstacles.values()])
             self._attach(avoidance, self.collisions_on)
 
     def collision_settings(self) -> dict:

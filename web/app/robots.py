@@ -68,10 +68,10 @@ class Robots:
                    constraints: list[Constraint] | None = None,
                    config: LoopConfig | None = None,
                    orientation_weight: float | None = None,
-                   damping: float | None = None,
-                   collisions: CollisionAvoidance | None | str = "session") -> TeleopLoop:
-        """A loop of controller ``spec`` (the session's constraints, period, weight,
-        damping and collision avoidance unless given; ``collisions=None``: none)."""
+                   damping: float | None = None, avoidance: CollisionAvoidance | None = None,
+                   collisions_on: bool | None = None) -> TeleopLoop:
+        """A loop of controller ``spec``: the session's constraints, period, weight,
+        damping, collision avoidance and whether the controller holds it, unless given."""
         if constraints is None:
             constraints = [e.constraint for e in self.entries.values()]
         config = config or self.config
@@ -80,7 +80,7 @@ class Robots:
                                      twist_weight=None if weight == 1.0 else
                                      [1.0, 1.0, 1.0, weight, weight, weight])
         self._apply_damping(controller, damping)
-        controller.set_collisions(self._attached() if collisions == "session" else collisions)
+        controller.set_collisions(self._attached(avoidance, collisions_on))
         return TeleopLoop(self.robot, controller, q0=q, config=config,
                           plant=self.plant.make(self.robot, config.dt))
 

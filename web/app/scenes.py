@@ -133,8 +133,8 @@ class Scenes:
             constraint.gain = scene.gain
             self._apply_wall(constraint)
         config = dataclasses.replace(self.config, rate=scene.rate)
+        avoidance, collisions_on = self._scene_avoidance(scene, constraints, config.dt)
         with self._lock:
-            avoidance, collisions_on = self._scene_avoidance(scene, constraints, config.dt)
             t = self.now
             specs = {"main": scene.main, **({"ghost": scene.ghost} if scene.ghost else {})}
             loops = {}
@@ -143,7 +143,7 @@ class Scenes:
                                        config=config,
                                        orientation_weight=scene.orientation_weight,
                                        damping=scene.damping,
-                                       collisions=avoidance if collisions_on else None)
+                                       avoidance=avoidance, collisions_on=collisions_on)
                 loop.t = t
                 loops[which] = loop
             self.config, self.gain, self.damping = config, scene.gain, scene.damping
