@@ -98,7 +98,10 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         self._drawn: dict[tuple[str, str], object] = {}  # markers' last drawing (.markers)
         self._ghost_root = None
         self._ghost_style: tuple | None = None
-        self._syncing = False  # widgets being set from the app: their callbacks do nothing
+        #: ``active`` while this thread sets widgets from the app: the callbacks viser runs
+        #: synchronously for those assignments do nothing (a thread-local flag, so that an
+        #: operator's click, handled on viser's threads meanwhile, is never dropped)
+        self._syncing = threading.local()
         self._plots: dict[str, object] = {}
         self._plot_keys: dict[str, tuple] = {}
         self._line_colors: dict[tuple[str, int], tuple] = {}  # (robot, EE) -> its line colour
@@ -130,7 +133,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         """Post an operator action to the inbox (:mod:`web.inbox`: applied in order on its
         own thread; with a ``key``, the latest wins; ``throttled``, at most 10 a second);
         an impossible one becomes a notification, not a traceback."""
-        if self._syncing:
+        if getattr(self._syncing, "active", False):
             return
         self.inbox.post(action, key=key, context=event, throttled=throttled)
 
@@ -178,11 +181,11 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
 
     def _sync(self, action) -> None:
         """Set widgets from the app without their callbacks acting."""
-        self._syncing = True
+        self._syncing.active = True
         try:
             action()
         finally:
-            self._syncing = False
+            self._syncing.active = False
 
     # -- the view thread -------------------------------------------------------------------
 
