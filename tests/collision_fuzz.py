@@ -56,11 +56,14 @@ class FuzzResult:
 
 
 def close_start(robot, avoidance: CollisionAvoidance, rng: np.random.Generator) -> np.ndarray:
-    """A configuration near home (normal offsets of 0.4 rad) with a pair of the two arms
-    within the detection distance and every pair at least 1 cm apart."""
+    """A configuration near home (normal offsets of 0.4 rad, kept 0.1 rad inside the joint
+    limits) with a pair of the two arms within the detection distance and every pair at
+    least 1 cm apart."""
     model, data = robot.model, robot.model.createData()
+    lower, upper = model.lowerPositionLimit + 0.1, model.upperPositionLimit - 0.1
     while True:
-        q = pin.integrate(model, robot.q_home, rng.normal(scale=0.4, size=model.nv))
+        q = np.clip(pin.integrate(model, robot.q_home, rng.normal(scale=0.4, size=model.nv)),
+                    lower, upper)
         pin.computeJointJacobians(model, data, q)
         rows = avoidance.rows(model, data)
         if rows.minimum_distance > 0.01 and any("left" in pair and "right" in pair

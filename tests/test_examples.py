@@ -104,10 +104,22 @@ def check_08(out: str, tmp: Path) -> None:
     assert 1.0 * displacement <= force + 1e-4 and displacement <= simulated + 1e-4
 
 
+def check_09(out: str, tmp: Path) -> None:
+    (pairs,) = numbers(r"NUMBER pairs checked", out)
+    (start,) = numbers(r"arms NUMBER mm apart", out)
+    (distance,) = numbers(r"pushing: NUMBER mm between", out)
+    (trocar,) = numbers(r"trocar error NUMBER um", out)
+    assert pairs > 100 and start <= 10.0
+    # d_s - 0.5 mm at least (the bound), and no farther than d_s + 0.5 mm: the
+    # damper lets the pushed pair close on d_s; each trocar to 1 um
+    assert 4.5 <= distance <= 5.5 and trocar <= 1.0, (distance, trocar)
+    assert "status least_squares" in out and "held back by collision pair" in out
+
+
 CHECKS = {"01_cjm_vs_qp.py": check_01, "02_closed_loop.py": check_02, "03_barrier.py": check_03,
           "04_any_urdf.py": check_04, "05_mink_peer.py": check_05,
           "06_embed_teleop_app.py": check_06, "07_two_trocars.py": check_07,
-          "08_physics_plant.py": check_08}
+          "08_physics_plant.py": check_08, "09_collision_avoidance.py": check_09}
 
 
 def test_the_examples_folder_has_the_documented_scripts():

@@ -19,7 +19,9 @@ import time
 import warnings
 from typing import Sequence
 
-from teleop.cli.arguments import csv_list, numbers, one_line, positive
+from constraints.collision import (DEFAULT_APPROACH_SPEED, DEFAULT_DETECTION_DISTANCE,
+                                   DEFAULT_SAFETY_DISTANCE)
+from teleop.cli.arguments import bounded, csv_list, numbers, one_line, positive
 from teleop.cli.commands import Command
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.limits import MAX_WALL_STIFFNESS
@@ -28,6 +30,9 @@ from teleop.robots import BUILTIN_ROBOTS
 
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
     resolve_host
+
+#: a finite number >= 0
+non_negative = bounded(float, 0.0)
 
 SUMMARY = "browser teleoperation UI (viser) of a built-in robot or any URDF"
 
@@ -92,6 +97,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="mass carried at each end effector, unknown to the gravity "
                             "compensation and the controllers (default: 0); needs --plant "
                             "mujoco")
+
+    collisions = parser.add_argument_group("collision avoidance (docs/design.md section 18)")
+    collisions.add_argument("--collisions", action=argparse.BooleanOptionalAction, default=True,
+                            help="the controllers keep the robot's link pairs and the obstacles "
+                                 "placed in the page at least the safety distance apart "
+                                 "(default: on; a scene's own setting wins)")
+    collisions.add_argument("--self-collision", action=argparse.BooleanOptionalAction,
+                            default=None,
+                            help="check the robot's links against each other, not only against "
+                                 "the obstacles (default: on for a robot with several arms)")
+    collisions.add_argument("--safety-distance", type=non_negative, metavar="MM",
+                            help="d_s: no pair comes closer than this, in mm (default: "
+                                 f"{1e3 * DEFAULT_SAFETY_DISTANCE:g})")
+    collisions.add_argument("--detection-distance", type=positive, metavar="MM",
+                            help="d_i: a pair closer than this gets its avoidance row, in mm, "
+                                 "more than d_s (default: "
+                                 f"{1e3 * DEFAULT_DETECTION_DISTANCE:g})")
+    collisions.add_argument("--approach-speed", type=positive, metavar="M_PER_S",
+                            help="xi: how fast a pair may close at d_i, in m/s (0 at d_s; "
+                                 f"default: {DEFAULT_APPROACH_SPEED:g})")
 
     files = parser.add_argument_group("files (the page reads and writes only these folders)")
     files.add_argument("--scene-dir", default="scenes", metavar="DIR",
@@ -192,11 +217,31 @@ def _plant(args: argparse.Namespace) -> dict:
     return {"plant": args.plant, "plant_settings": settings, "wall_stiffness": stiffness}
 
 
+#: the collision options, by the keyword of the avoidance each sets, and its unit (to SI)
+COLLISION_OPTIONS = {"self_collision": ("--self-collision", None),
+                     "safety_distance": ("--safety-distance", 1e-3),
+                     "detection_distance": ("--detection-distance", 1e-3),
+                     "approach_speed": ("--approach-speed", 1.0)}
+
+
+def _collisions(args: argparse.Namespace) -> dict:
+    """The collision keywords of :func:`web.ui.run_server` the options ask for, in SI
+    units (values the avoidance cannot take together, such as d_i <= d_s or a damper
+    unstable at --rate, are its ``ValueError``: one line, exit 2)."""
+    settings = {}
+    for name, (_, unit) in COLLISION_OPTIONS.items():
+        value = getattr(args, name)
+        if value is not None:
+            settings[name] = value if unit is None else unit * value
+    return {"collisions": args.collisions, "collision_settings": settings}
+
+
 def run(args: argparse.Namespace, prog: str) -> int:
     """Serve the UI the options ``args`` ask for until Ctrl-C; 2 (and one line on stderr,
     naming ``prog``) when it cannot start."""
     try:
         plant = _plant(args)
+        collisions = _collisions(args)
         port, token = _address(args, prog)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -210,7 +255,8 @@ def run(args: argparse.Namespace, prog: str) -> int:
                                               controller=args.controller, ghost=args.ghost,
                                               rate=args.rate, record_dir=args.record_dir,
                                               scene_dir=args.scene_dir, scene=scene,
-                                              notes=notes, token=token, **plant)
+                                              notes=notes, token=token, **plant,
+                                              **collisions)
     except (OSError, ValueError) as error:  # no such URDF/scene, bad frame / q_home / spec, port
         print(f"{prog}: {one_line(error)}", file=sys.stderr)
         return 2

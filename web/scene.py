@@ -5,7 +5,7 @@ constraints (each its ``Constraint.to_dict()``, with its id and where its gizmo 
 the robots' configurations, the target, the controller specs, the drift gain, the damping,
 the control rate, the motion scale and the ghost's offset::
 
-    {"format": "cjm-teleop-scene", "version": 1,
+    {"format": "cjm-teleop-scene", "version": 2,
      "robot": {"source": "sda10f", "ee_frame": "tool0", "constrained_link": "arm_link_5_r",
                "link_axis": [0, 0, -1], "package_dirs": null, "q_home": [...]},
      "controllers": {"main": "cjm", "ghost": "qp:daqp"},
@@ -14,7 +14,18 @@ the control rate, the motion scale and the ghost's offset::
      "ghost_offset": [0.0, 0.9, 0.0],
      "q": {"main": [...], "ghost": [...]},
      "target": {"position": [x, y, z], "wxyz": [w, x, y, z]},
-     "constraints": [{"id": "<kind>-1", "goal": [x, y, z], "constraint": {"kind": "<kind>", ...}}]}
+     "constraints": [{"id": "<kind>-1", "goal": [x, y, z], "constraint": {"kind": "<kind>", ...}}],
+     "collisions": {"on": true, "self_collision": false, "safety_distance": 0.005,
+                    "detection_distance": 0.05, "approach_speed": 0.5,
+                    "disabled_pairs": [], "extra_pairs": []},
+     "obstacles": [{"id": "sphere-1", "goal": [x, y, z],
+                    "obstacle": {"kind": "sphere", "center": [x, y, z], "radius": 0.04}}]}
+
+Version 2 added ``"collisions"`` (whether the controllers keep the pairs apart, and the
+:class:`constraints.collision.CollisionAvoidance` settings, docs/design.md section 18) and
+``"obstacles"`` (each its ``Obstacle.to_dict()`` with its id and where its gizmo was put).
+A version 1 scene still loads: it has no obstacles and keeps the session's collision
+settings.
 
 A robot with several end effectors (docs/design.md section 11) adds ``"targets"``, one
 ``{"frame", "position", "wxyz"}`` per entry of ``robot.ee_frames`` in that order
@@ -39,13 +50,16 @@ from typing import Any
 import numpy as np
 
 from constraints import Constraint
+from constraints.collision import Obstacle
 from constraints.validation import as_number, as_vector, short_repr
 from teleop.json_text import parse_json
 from teleop.limits import MAX_DAMPING, MAX_RATE_HZ
 from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
 
 FORMAT = "cjm-teleop-scene"
-VERSION = 1
+VERSION = 2
+#: the versions this program reads
+VERSIONS = (1, 2)
 
 
 def robot_source(robot: Robot) -> str:
@@ -189,6 +203,15 @@ class PlacedConstraint:
 
 
 @dataclass(frozen=True)
+class PlacedObstacle:
+    """One obstacle of a scene: its id (its name), the obstacle, where its gizmo was put."""
+
+    id: str
+    obstacle: Obstacle
+    goal: np.ndarray
+
+
+@dataclass(frozen=True)
 class Scene:
     """A checked scene (see the module docstring for the file format)."""
 
@@ -208,6 +231,10 @@ class Scene:
     targets: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
     #: weight of the EE twists' angular entries (``TeleopApp.set_orientation_weight``)
     orientation_weight: float = 1.0
+    #: whether the controllers keep the pairs apart, and the avoidance's settings
+    #: (``CollisionAvoidance.to_dict()`` without its obstacles); None: a version 1 scene
+    collisions: dict | None = None
+    obstacles: tuple[PlacedObstacle, ...] = ()
 
 
 def _spec(value: Any, name: str, optional: bool = False) -> str | None:
@@ -256,9 +283,9 @@ def parse_scene(data: Any, nq: int | None = None, ee_frames: tuple[str, ...] | N
     if data.get("format") != FORMAT:
         raise ValueError(f"not a scene file: 'format' must be {FORMAT!r}, "
                          f"got {short_repr(data.get('format'))}")
-    if type(data.get("version")) is not int or data["version"] != VERSION:  # True is not 1
+    if type(data.get("version")) is not int or data["version"] not in VERSIONS:  # True is not 1
         raise ValueError(f"scene version {short_repr(data.get('version'))} is not supported "
-                         f"(this program reads version {VERSION})")
+                         f"(this program reads versions {', '.join(map(str, VERSIONS))})")
     robot = check_robot_fields(data.get("robot"))
     controllers = data.get("controllers")
     if not isinstance(controllers, Mapping):
@@ -291,6 +318,7 @@ def parse_scene(data: Any, nq: int | None = None, ee_frames: tuple[str, ...] | N
     ids = [p.id for p in placed]
     if len(set(ids)) != len(ids):
         raise ValueError(f"scene constraint ids must be unique, got {ids}")
+    collisions, obstacles = _collisions(data)
     return Scene(
         robot=dict(robot), main=main, ghost=ghost,
         gain=as_number(data.get("gain"), "scene gain", 0.0),
@@ -301,7 +329,55 @@ def parse_scene(data: Any, nq: int | None = None, ee_frames: tuple[str, ...] | N
         q=q, target_position=position, target_wxyz=wxyz, constraints=tuple(placed),
         targets=targets,
         orientation_weight=as_number(data.get("orientation_weight", 1.0),
-                                     "scene orientation_weight", 0.0, maximum=1.0))
+                                     "scene orientation_weight", 0.0, maximum=1.0),
+        collisions=collisions, obstacles=obstacles)
+
+
+#: the keys of a scene's ``"collisions"``: ``on`` and the avoidance's settings
+COLLISION_KEYS = ("on", "self_collision", "safety_distance", "detection_distance",
+                  "approach_speed", "disabled_pairs", "extra_pairs")
+
+
+def _collisions(data: Mapping) -> tuple[dict | None, tuple[PlacedObstacle, ...]]:
+    """A scene's collision settings (None in a version 1 scene) and its obstacles; the
+    settings' values are checked when the avoidance is built on the robot
+    (``CollisionAvoidance.from_dict``)."""
+    if data["version"] == 1:
+        for key in ("collisions", "obstacles"):
+            if key in data:
+                raise ValueError(f"scene {key!r} needs version 2, the file says version 1")
+        return None, ()
+    settings = data.get("collisions")
+    if not isinstance(settings, Mapping):
+        raise ValueError("scene 'collisions' must be an object with 'on' and the collision "
+                         "settings")
+    unknown = sorted(set(settings) - set(COLLISION_KEYS))
+    if unknown:
+        raise ValueError(f"unknown scene collisions field {unknown[0]!r} (its fields: "
+                         f"{', '.join(COLLISION_KEYS)})")
+    if not isinstance(settings.get("on"), bool):
+        raise ValueError(f"scene collisions.on must be true or false, got "
+                         f"{short_repr(settings.get('on'))}")
+    entries = data.get("obstacles", [])
+    if not isinstance(entries, list):
+        raise ValueError("scene 'obstacles' must be a list")
+    placed = []
+    for index, entry in enumerate(entries):
+        where = f"scene obstacles[{index}]"
+        if not isinstance(entry, Mapping) or not isinstance(entry.get("id"), str) \
+                or not entry["id"].strip():
+            raise ValueError(f"{where} must be an object with an 'id' and an 'obstacle'")
+        try:
+            obstacle = Obstacle.from_dict(entry.get("obstacle"))
+        except ValueError as error:
+            raise ValueError(f"{where}: {error}") from None
+        obstacle.name = entry["id"]
+        goal = as_vector(entry.get("goal", obstacle.position.tolist()), 3, f"{where}.goal")
+        placed.append(PlacedObstacle(entry["id"], obstacle, goal))
+    ids = [p.id for p in placed]
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"scene obstacle ids must be unique, got {ids}")
+    return dict(settings), tuple(placed)
 
 
 def read_scene_file(path: str | Path) -> dict:

@@ -126,9 +126,14 @@ def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
         info.active_pairs = tuple(collision.pairs[i] for i in active_pairs)
     if not events:
         return info
-    for event, a, b, c in events:  # the frequent events first
+    # an active set solves again after each row it adds: the last solve's residual is the
+    # command's (the earlier ones keep the status they lowered, never their wording)
+    last_residual = max((i for i, (event, *_) in enumerate(events)
+                         if event is Event.TASK_RESIDUAL), default=-1)
+    for index, (event, a, b, c) in enumerate(events):  # the frequent events first
         if event is Event.TASK_RESIDUAL:
-            info.report(StepStatus.OK, task_residual_note(a, b))
+            if index == last_residual:
+                info.report(StepStatus.OK, task_residual_note(a, b))
         elif event is Event.TASK_MISSED:
             info.report(StepStatus.OK, task_missed_note(joint_names, saturation_joints, a, b))
         elif event is Event.TASK_SCALED:

@@ -4,7 +4,8 @@ Everything the UI does goes through :class:`TeleopApp`, so it can be tested with
 viser. All public methods are thread-safe (one lock); actions that cannot be done raise
 ``ValueError`` with a message meant for the operator (the UI shows it as a notification).
 Its parts, one module each: the operator's console (:mod:`.console`), constraint editing
-(:mod:`.editing`, from the registry's declarations, :mod:`.placing`), the robots and their
+(:mod:`.editing`, from the registry's declarations, :mod:`.placing`), collision avoidance
+and the obstacles (:mod:`.collisions`), the robots and their
 controllers (:mod:`.robots`), settings (:mod:`.settings`), scenes (:mod:`.scenes`),
 recording (:mod:`.recording`), the control tick (:mod:`.tick`) and what the view reads
 (:mod:`.view`).
@@ -26,6 +27,7 @@ from teleop.plants import PlantSettings
 from teleop.robots import Robot
 
 from ..folders import Folder
+from .collisions import Collisions
 from .console import Console, EEInput
 from .editing import ConstraintEntry, Editing
 from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
@@ -39,7 +41,8 @@ from .trace import Trace
 from .view import View
 
 
-class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Recording, Tick, View):
+class TeleopApp(Console, Editing, Collisions, Robots, Plants, Settings, Scenes, Recording, Tick,
+                View):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
 
@@ -58,13 +61,18 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Recording, T
         section 17); ``plant_settings`` its body and servos (payload...).
     wall_stiffness : the abdominal wall's stiffness (N/m) at every port of the session;
         None: each port's own.
+    collisions : whether the controllers keep the robot's link pairs and the obstacles
+        apart (docs/design.md section 18; :mod:`.collisions`); ``collision_settings``
+        the avoidance's ``self_collision`` (default: on for a robot with several arms),
+        ``safety_distance``, ``detection_distance``, ``approach_speed``.
     """
 
     def __init__(self, robot: Robot, controller: str = "cjm", ghost: str | None = None,
                  rate: float = 1000.0, kp: float = 20.0, record_dir: str | Path = "sessions",
                  scene_dir: str | Path = "scenes", plant: str = "kinematic",
                  plant_settings: PlantSettings | None = None,
-                 wall_stiffness: float | None = None) -> None:
+                 wall_stiffness: float | None = None, collisions: bool = True,
+                 collision_settings: dict | None = None) -> None:
         rate = checked_rate(rate)
         self.plant = PlantChoice(plant, plant_settings or PlantSettings(), wall_stiffness)
         self.robot = robot
@@ -85,6 +93,7 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Recording, T
         self.record_dir, self.scene_dir = self.recordings.root, self.scenes.root
         self.entries: dict[str, ConstraintEntry] = {}
         self._ids = itertools.count(1)
+        self._init_collisions(collisions, dict(collision_settings or {}))
         self.specs = {"main": controller}
         self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(controller)}
         self.traces: dict[str, Trace] = {"main": Trace()}

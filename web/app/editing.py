@@ -41,6 +41,11 @@ class ConstraintEntry:
         """Where the geometry is now (world reference point, a copy)."""
         return self.constraint.position
 
+    @property
+    def moved(self) -> Constraint:
+        """What the gizmo moves (:mod:`teleop.loop.moving_geometry`)."""
+        return self.constraint
+
 
 class Editing:
     """The constraint editing of :class:`web.app.TeleopApp` (its state: ``entries`` by id

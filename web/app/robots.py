@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
+from constraints.collision import CollisionAvoidance
 from constraints.validation import as_vector
 from controllers import Controller
 from controllers.linalg import DampingPolicy
@@ -67,7 +68,10 @@ class Robots:
                    constraints: list[Constraint] | None = None,
                    config: LoopConfig | None = None,
                    orientation_weight: float | None = None,
-                   damping: float | None = None) -> TeleopLoop:
+                   damping: float | None = None, avoidance: CollisionAvoidance | None = None,
+                   collisions_on: bool | None = None) -> TeleopLoop:
+        """A loop of controller ``spec``: the session's constraints, period, weight,
+        damping, collision avoidance and whether the controller holds it, unless given."""
         if constraints is None:
             constraints = [e.constraint for e in self.entries.values()]
         config = config or self.config
@@ -76,6 +80,7 @@ class Robots:
                                      twist_weight=None if weight == 1.0 else
                                      [1.0, 1.0, 1.0, weight, weight, weight])
         self._apply_damping(controller, damping)
+        controller.set_collisions(self._attached(avoidance, collisions_on))
         return TeleopLoop(self.robot, controller, q0=q, config=config,
                           plant=self.plant.make(self.robot, config.dt))
 
@@ -96,7 +101,8 @@ class Robots:
         """What a loop build reads besides its own arguments: if any of it changed while
         a build ran outside the lock, the build is redone under the lock."""
         return (tuple(id(e.constraint) for e in self.entries.values()), self.gain,
-                self.damping, self.config, self.orientation_weight, tuple(self.specs.items()))
+                self.damping, self.config, self.orientation_weight, tuple(self.specs.items()),
+                id(self._attached()))
 
     def _rebuild(self, specs: dict[str, str], config: LoopConfig | None = None,
                  orientation_weight: float | None = None) -> None:

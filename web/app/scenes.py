@@ -1,5 +1,5 @@
 """Scenes: the whole state of a session (robots' configurations, constraints, targets,
-controllers, settings) saved to and loaded from the scene folder (format in
+controllers, settings, collision avoidance and obstacles) saved to and loaded from the scene folder (format in
 :mod:`web.scene`)."""
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from teleop.loop import LoopConfig, TeleopLoop
 from teleop.robots import Robot
@@ -29,6 +30,7 @@ from ..scene import (
     same_robot,
     write_scene_file,
 )
+from .collisions import ObstacleEntry
 from .console import EEInput, pose_from
 from .editing import ConstraintEntry
 from .limits import (
@@ -63,6 +65,9 @@ class Scenes:
     loops: dict[str, TeleopLoop]
     traces: dict[str, Trace]
     entries: dict[str, ConstraintEntry]
+    obstacles: dict[str, ObstacleEntry]
+    avoidance: CollisionAvoidance
+    collisions_on: bool
     inputs: list[EEInput]
     joint_names: list[str]
     scenes: Folder
@@ -76,6 +81,8 @@ class Scenes:
             targets = [pose_to_dict(hand.target) for hand in self.inputs]
             several = {} if len(targets) == 1 else {"targets": [
                 {"frame": hand.frame, **pose} for hand, pose in zip(self.inputs, targets)]}
+            settings = self.avoidance.to_dict()
+            del settings["obstacles"]  # with their ids and goals, below
             return {
                 "format": SCENE_FORMAT, "version": SCENE_VERSION,
                 "created": datetime.now().isoformat(timespec="seconds"),
@@ -90,6 +97,10 @@ class Scenes:
                 "constraints": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                  "constraint": e.constraint.to_dict()}
                                 for e in self.entries.values()],
+                "collisions": {"on": self.collisions_on, **settings},
+                "obstacles": [{"id": e.id, "goal": [float(x) for x in e.goal],
+                               "obstacle": e.obstacle.to_dict()}
+                              for e in self.obstacles.values()],
             }
 
     def save_scene(self, name: str | None = None) -> Path:
@@ -106,9 +117,11 @@ class Scenes:
 
     def apply_scene(self, data: dict) -> None:
         """Put the app in the state a scene describes: robots' configurations, constraints,
-        target, controllers, gain, damping, rate, motion scale, ghost offset. All or
-        nothing: a scene that cannot be applied raises ``ValueError`` and changes nothing.
-        The scene must be for this robot (another robot needs ``teleop web --scene``)."""
+        target, controllers, gain, damping, rate, motion scale, ghost offset, collision
+        avoidance and obstacles (a version 1 scene: no obstacles, the session's collision
+        settings). All or nothing: a scene that cannot be applied raises ``ValueError``
+        and changes nothing. The scene must be for this robot (another robot needs
+        ``teleop web --scene``)."""
         scene = parse_scene(data, self.robot.model.nq, self.robot.ee_frames)
         if not same_robot(self.robot, scene.robot):
             raise ValueError(f"this scene is for robot {scene.robot.get('source')!r}, this UI "
@@ -120,6 +133,7 @@ class Scenes:
             constraint.gain = scene.gain
             self._apply_wall(constraint)
         config = dataclasses.replace(self.config, rate=scene.rate)
+        avoidance, collisions_on = self._scene_avoidance(scene, constraints, config.dt)
         with self._lock:
             t = self.now
             specs = {"main": scene.main, **({"ghost": scene.ghost} if scene.ghost else {})}
@@ -128,7 +142,8 @@ class Scenes:
                 loop = self._make_loop(spec, q=scene.q[which], constraints=constraints,
                                        config=config,
                                        orientation_weight=scene.orientation_weight,
-                                       damping=scene.damping)
+                                       damping=scene.damping,
+                                       avoidance=avoidance, collisions_on=collisions_on)
                 loop.t = t
                 loops[which] = loop
             self.config, self.gain, self.damping = config, scene.gain, scene.damping
@@ -144,6 +159,14 @@ class Scenes:
             numbers = [int(p.id.rsplit("-", 1)[1]) for p in scene.constraints
                        if p.id.rsplit("-", 1)[-1].isdigit()]
             self._ids = itertools.count(max(numbers, default=0) + 1)
+            self.avoidance, self.collisions_on, self.collision_rows = avoidance, collisions_on, {}
+            self.obstacles = {placed.id: ObstacleEntry(
+                placed.id, placed.obstacle, placed.goal.copy(),
+                settled=bool(np.array_equal(placed.goal, placed.obstacle.position)))
+                for placed in scene.obstacles}
+            numbers = [int(p.id.rsplit("-", 1)[1]) for p in scene.obstacles
+                       if p.id.rsplit("-", 1)[-1].isdigit()]
+            self._obstacle_ids = itertools.count(max(numbers, default=0) + 1)
             self.ghost_offset = scene.ghost_offset.copy()
             self.motion_scale = scene.motion_scale
             self.clutch = False
@@ -152,6 +175,26 @@ class Scenes:
                 self.inputs[index].gizmo = self.inputs[index].target.copy()
             self._reanchor()
             self._next_history = t
+
+    def _scene_avoidance(self, scene, constraints: list, dt: float
+                         ) -> tuple[CollisionAvoidance, bool]:
+        """The collision avoidance a scene asks for, with its obstacles and ports, and
+        whether the controllers hold it (a version 1 scene: the session's settings, no
+        obstacle); ``ValueError`` naming the field for settings it cannot take."""
+        if scene.collisions is None:
+            settings, on = self.avoidance.to_dict(), self.collisions_on
+        else:
+            settings = {key: value for key, value in scene.collisions.items() if key != "on"}
+            on = scene.collisions["on"]
+        settings["obstacles"] = []
+        try:
+            avoidance = CollisionAvoidance.from_dict(self.robot, settings)
+            avoidance.check(self.robot.model, dt)
+        except ValueError as error:
+            raise ValueError(f"scene collisions: {error}") from None
+        avoidance.set_obstacles([placed.obstacle for placed in scene.obstacles])
+        avoidance.set_ports(constraints)
+        return avoidance, on
 
     def _check_scene(self, scene) -> None:
         """``ValueError`` for a parsed scene this app cannot take: a configuration outside

@@ -14,6 +14,7 @@ from teleop.experiments.sessions import SessionRecorder
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.moving_geometry import advance, steer
 
+from .collisions import ObstacleEntry
 from .console import EEInput
 from .editing import ConstraintEntry
 from .limits import HISTORY_RATE
@@ -32,6 +33,7 @@ class Tick:
     traces: dict[str, Trace]
     last_records: dict[str, StepRecord | None]
     entries: dict[str, ConstraintEntry]
+    obstacles: dict[str, ObstacleEntry]
     inputs: list[EEInput]
     recorder: SessionRecorder | None
     ticks: int
@@ -53,7 +55,8 @@ class Tick:
         """
         with self._lock:
             dt = self.config.dt
-            moving = [entry for entry in self.entries.values() if not entry.settled]
+            moving = [entry for entry in (*self.entries.values(), *self.obstacles.values())
+                      if not entry.settled]
             if moving:
                 self._steer(moving, dt)
             targets, start = [hand.target for hand in self.inputs], self.now
@@ -65,37 +68,40 @@ class Tick:
                 for loop in self.loops.values():  # the hot path only (no measures)
                     solve_us += loop.advance(targets).step_time_us
                 for entry in moving:  # where the period took the geometry
-                    advance(entry.constraint, dt)
+                    advance(entry.moved, dt)
             self.ticks += 1
             return solve_us
 
-    def _steer(self, moving: list[ConstraintEntry], dt: float) -> None:
-        """Moved geometry glides towards its goal, with feed-forward; settles there."""
+    def _steer(self, moving: list[ConstraintEntry | ObstacleEntry], dt: float) -> None:
+        """Moved geometry (a constraint's, an obstacle) glides towards its goal, with
+        feed-forward; settles there. A recording gets the constraints' moves."""
         alpha = 1.0 - math.exp(-dt / self.config.target_time_constant)
         for entry in moving:
-            constraint = entry.constraint
-            if float(np.linalg.norm(entry.goal - constraint.position)) < 1e-12:
-                constraint.move_to(entry.goal, (0.0, 0.0, 0.0))
+            geometry = entry.moved
+            if float(np.linalg.norm(entry.goal - geometry.position)) < 1e-12:
+                geometry.move_to(entry.goal, (0.0, 0.0, 0.0))
                 entry.settled = True
                 continue
-            steer(constraint, entry.goal, dt, smoothing=alpha)
-            if (self.recorder is not None and self.ticks % RECORD_MOVES_EVERY == 0
-                    and np.any(constraint.velocity)):
+            steer(geometry, entry.goal, dt, smoothing=alpha)
+            if (self.recorder is not None and isinstance(entry, ConstraintEntry)
+                    and self.ticks % RECORD_MOVES_EVERY == 0 and np.any(geometry.velocity)):
                 self.recorder.move(self.recording_time, entry.id,
-                                   constraint.position, constraint.velocity)
+                                   geometry.position, geometry.velocity)
 
-    def _measured_step(self, targets: list[pin.SE3], moving: list[ConstraintEntry],
-                       dt: float) -> float:
-        """A full tick with the measures, appended to the history."""
+    def _measured_step(self, targets: list[pin.SE3],
+                       moving: list[ConstraintEntry | ObstacleEntry], dt: float) -> float:
+        """A full tick with the measures, appended to the history (the collision rows at
+        every robot's configuration among them, :meth:`Collisions._measure_collisions`)."""
         pending = {which: loop.advance(targets) for which, loop in self.loops.items()}
         for which, loop in self.loops.items():  # before the geometry moves on
             loop.measure_command(pending[which])
         for entry in moving:
-            advance(entry.constraint, dt)
+            advance(entry.moved, dt)
+        self._measure_collisions()
         main_qd = self.loops["main"].last_qd
         for which, loop in self.loops.items():
             record = loop.measure(pending[which])
             self.last_records[which] = record
             deviation = 0.0 if which == "main" else float(np.linalg.norm(loop.last_qd - main_qd))
-            self.traces[which].add(record, deviation)
+            self.traces[which].add(record, deviation, self.traced_distance(which))
         return sum(step.step_time_us for step in pending.values())

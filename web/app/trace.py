@@ -15,7 +15,7 @@ from .limits import HISTORY_RATE, HISTORY_SECONDS
 _HISTORY_LENGTH = int(HISTORY_SECONDS * HISTORY_RATE)
 #: the plotted measures of each robot, in the order of the plots
 TRACE_COLUMNS = ("constraint_error", "constraint_velocity", "ee_error", "step_time",
-                 "port_force")
+                 "port_force", "minimum_distance")
 
 
 def _deque() -> collections.deque:
@@ -35,8 +35,12 @@ class Trace:
     port_force: collections.deque = field(default_factory=_deque)
     #: |qd - qd_main| (rad/s): the ghost's deviation from the main robot's command
     qd_deviation: collections.deque = field(default_factory=_deque)
+    #: the closest collision pair's distance (m), at most the detection distance; NaN
+    #: while collisions are off (:meth:`web.app.TeleopApp.traced_distance`)
+    minimum_distance: collections.deque = field(default_factory=_deque)
 
-    def add(self, record: StepRecord, qd_deviation: float = 0.0) -> None:
+    def add(self, record: StepRecord, qd_deviation: float = 0.0,
+            minimum_distance: float = math.nan) -> None:
         self.t.append(record.t)
         self.constraint_error.append(max(record.constraint_error, record.barrier_penetration))
         self.constraint_velocity.append(float(np.linalg.norm(record.constraint_velocity)))
@@ -44,6 +48,7 @@ class Trace:
         self.step_time.append(record.step_time_us)
         self.port_force.append(math.nan if record.plant is None else record.plant.port_force)
         self.qd_deviation.append(qd_deviation)
+        self.minimum_distance.append(minimum_distance)
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {name: np.array(getattr(self, name), dtype=float)

@@ -8,10 +8,12 @@ import threading
 import numpy as np
 import pinocchio as pin
 
+from constraints.collision import CollisionRows
 from constraints.kinematics import frame_placement
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.robots import Robot
 
+from .collisions import ObstacleEntry
 from .console import EEInput
 from .editing import ConstraintEntry
 from .plant import PlantChoice
@@ -29,6 +31,8 @@ class View:
     traces: dict[str, Trace]
     last_records: dict[str, StepRecord | None]
     entries: dict[str, ConstraintEntry]
+    obstacles: dict[str, ObstacleEntry]
+    collision_rows: dict[str, CollisionRows | None]
     inputs: list[EEInput]
     joint_names: list[str]
     plant: PlantChoice
@@ -80,7 +84,26 @@ class View:
                     "ghost_offset": self.ghost_offset.copy(),
                     "recording": self.recorder is not None,
                     "config": self.config, "gain": self.gain, "damping": self.damping,
-                    "plant": self.plant}
+                    "plant": self.plant, "collisions": self._collisions_snapshot()}
+
+    def _collisions_snapshot(self) -> dict:
+        """The collision part of :meth:`snapshot` (caller holds the lock): the settings
+        (``on``, ``self_collision``, ``safety_distance``, ``detection_distance``,
+        ``approach_speed``), ``checking`` (on, with pairs to check: self-collision or an
+        obstacle) and each obstacle's drawing (``id``, ``goal``, ``geometry``:
+        :class:`constraints.collision.ObstacleGeometry`)."""
+        settings = self.collision_settings()
+        return {**settings,
+                "checking": settings["on"] and bool(settings["self_collision"] or self.obstacles),
+                "obstacles": [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),
+                               "geometry": entry.obstacle.geometry()}
+                              for entry in self.obstacles.values()]}
+
+    def active_pairs(self, which: str = "main") -> list[str]:
+        """The collision pairs robot ``which``'s controller holds at their bound now (from
+        its step's :class:`controllers.SolveInfo`)."""
+        with self._lock:
+            return list(self.loops[which].controller.info.active_pairs)
 
     def _robot_snapshot(self, which: str, loop: TeleopLoop, history: bool) -> dict:
         """One robot's part of :meth:`snapshot` (caller holds the lock): its state, each
@@ -109,4 +132,7 @@ class View:
                 "info": loop.controller.info, "constraints": constraints,
                 "limitations": limitations, "limitation": limitations[0],
                 "active_inequalities": self.active_inequalities(which),
+                "active_pairs": self.active_pairs(which),
+                # the rows the control thread measured last (immutable), or None
+                "collision_rows": self.collision_rows.get(which),
                 "ports": self._ports(loop, placements)}

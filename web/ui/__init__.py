@@ -3,7 +3,9 @@ that runs both (:func:`run_server`); one module per part (:mod:`web.ui.core`).""
 
 from .core import TeleopUI
 from .panels import CONTROLLER_CHOICES, NUDGES
+from .collision_view import distance_color, node_name
 from .plots import (
+    COLLISION_PLOTS,
     GHOST_COLOR,
     MAIN_COLOR,
     PLANT_PLOTS,
@@ -19,6 +21,7 @@ from .server import run_server
 from .shapes import LinkProfile, reach_from_axis
 
 __all__ = [
+    "COLLISION_PLOTS",
     "FORCE_ARROW_SCALE",
     "CONTROLLER_CHOICES",
     "GHOST_COLOR",
@@ -31,6 +34,8 @@ __all__ = [
     "STATUS_COLORS",
     "TeleopUI",
     "display_unit",
+    "distance_color",
+    "node_name",
     "reach_from_axis",
     "plot_series",
     "plots_of",

@@ -6,13 +6,18 @@
   base; per end effector an input gizmo and, where it differs, the target itself; per
   robot and EE a line from the EE to its target coloured by the step status;
 * constraints (:mod:`.markers`), each drawn from its own ``geometry()``;
+* obstacles, each from its own ``geometry()`` with a gizmo, and the main robot's pairs
+  closer than the detection distance highlighted with their witness segments
+  (:mod:`.collision_view`);
 * on a physics plant, the wall's force on the instrument at each port, an arrow scaled in
   newtons (:mod:`.port_forces`);
 * panels: a status (:mod:`.status_view`: rate, lateness, what limits each robot's EEs in
   words, the one-sided constraints held), then tabs: Teleop (controllers, side by side,
   clutch, motion scale, the active arm's nudges, home) and Settings (gain, damping, rate,
   scenes, recording) (:mod:`.panels`), Constraints, built from the registry's
-  declarations (:mod:`.constraint_panel`), Plots (:mod:`.plots`, uPlot).
+  declarations (:mod:`.constraint_panel`), Collisions (the avoidance's settings and the
+  obstacles, from the obstacle registry, :mod:`.collision_panel`), Plots (:mod:`.plots`,
+  uPlot).
 
 A robot with several end effectors (docs/design.md section 11) gets a gizmo on each: each
 drives its own EE's target; the clutch and the motion scale act on all of them; the nudge
@@ -38,6 +43,8 @@ import viser
 from ..app import ControlThread, TeleopApp
 from ..inbox import Inbox
 from ..robot_view import RobotView, floor_height
+from .collision_panel import CollisionPanel
+from .collision_view import CollisionView
 from .constraint_panel import ConstraintPanel
 from .markers import Markers
 from .panels import Panels
@@ -66,7 +73,8 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
     return names
 
 
-class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, PortForces, StatusView, Plots):
+class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, CollisionView,
+               PortForces, StatusView, Plots):
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -90,7 +98,10 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, PortForces, StatusVi
         self._drawn: dict[tuple[str, str], object] = {}  # markers' last drawing (.markers)
         self._ghost_root = None
         self._ghost_style: tuple | None = None
-        self._syncing = False  # widgets being set from the app: their callbacks do nothing
+        #: ``active`` while this thread sets widgets from the app: the callbacks viser runs
+        #: synchronously for those assignments do nothing (a thread-local flag, so that an
+        #: operator's click, handled on viser's threads meanwhile, is never dropped)
+        self._syncing = threading.local()
         self._plots: dict[str, object] = {}
         self._plot_keys: dict[str, tuple] = {}
         self._line_colors: dict[tuple[str, int], tuple] = {}  # (robot, EE) -> its line colour
@@ -105,6 +116,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, PortForces, StatusVi
         self.floor = floor_height(app.robot)
         self.notes = list(notes)
         self._build_scene()
+        self._build_collision_view()
         self.notes += self._views["main"].problems
         self._build_panels()
         server.on_client_connect(self._greet)
@@ -121,7 +133,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, PortForces, StatusVi
         """Post an operator action to the inbox (:mod:`web.inbox`: applied in order on its
         own thread; with a ``key``, the latest wins; ``throttled``, at most 10 a second);
         an impossible one becomes a notification, not a traceback."""
-        if self._syncing:
+        if getattr(self._syncing, "active", False):
             return
         self.inbox.post(action, key=key, context=event, throttled=throttled)
 
@@ -154,6 +166,8 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, PortForces, StatusVi
             self._build_teleop_panel()
         with self.tabs.add_tab("Constraints"):
             self._build_constraint_panel()
+        with self.tabs.add_tab("Collisions"):
+            self._build_collision_panel()
         with self.tabs.add_tab("Settings"):
             self._build_settings_panel()
         self._plot_tab = self.tabs.add_tab("Plots")
@@ -167,11 +181,11 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, PortForces, StatusVi
 
     def _sync(self, action) -> None:
         """Set widgets from the app without their callbacks acting."""
-        self._syncing = True
+        self._syncing.active = True
         try:
             action()
         finally:
-            self._syncing = False
+            self._syncing.active = False
 
     # -- the view thread -------------------------------------------------------------------
 
@@ -223,5 +237,8 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, Markers, PortForces, StatusVi
         self._draw_constraints(snapshot["constraints"],
                                None if ghost is None else ghost["constraints"])
         self._draw_ports(robots)
+        self._draw_obstacles(snapshot["collisions"]["obstacles"])
+        self._draw_pairs(robots["main"]["collision_rows"], robots["main"]["q"],
+                         snapshot["collisions"])
         if status:
             self._draw_status(snapshot)

@@ -56,10 +56,16 @@ PLOTS = (PlotSpec("constraint_error", "constraint error", "m"),
 PLANT_PLOTS = (PlotSpec("port_force", "port force, the largest", "N"),)
 
 
+#: the plots of a session whose controllers avoid collisions, after the others
+COLLISION_PLOTS = (PlotSpec("minimum_distance",
+                            "minimum distance, closest collision pair (shown up to d_i)", "m"),)
+
+
 def plots_of(snapshot: dict) -> tuple[PlotSpec, ...]:
-    """The plots of the session ``snapshot`` shows: :data:`PLOTS`, and on a physics
-    plant :data:`PLANT_PLOTS`."""
-    return PLOTS + PLANT_PLOTS if snapshot["plant"].physical else PLOTS
+    """The plots of the session ``snapshot`` shows: :data:`PLOTS`, on a physics plant
+    :data:`PLANT_PLOTS`, with collision pairs to check :data:`COLLISION_PLOTS`."""
+    plots = PLOTS + PLANT_PLOTS if snapshot["plant"].physical else PLOTS
+    return plots + COLLISION_PLOTS if snapshot["collisions"]["checking"] else plots
 
 
 #: x: the last 10 s, "now" at 0. A fixed range: an auto-ranged x axis of a plot updated

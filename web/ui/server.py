@@ -20,17 +20,20 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                notes: list[str] | tuple[str, ...] = (), scene_dir: str | Path = "scenes",
                token: str | None = None, plant: str = "kinematic",
                plant_settings: PlantSettings | None = None,
-               wall_stiffness: float | None = None
+               wall_stiffness: float | None = None, collisions: bool = True,
+               collision_settings: dict | None = None
                ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
     threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
     The page reads and writes files in ``scene_dir`` and ``record_dir`` only; with a
     ``token``, a page that does not present it gets nothing (:mod:`web.access`).
-    ``plant``, ``plant_settings``, ``wall_stiffness``: what the loops run on
+    ``plant``, ``plant_settings``, ``wall_stiffness``: what the loops run on;
+    ``collisions``, ``collision_settings``: the collision avoidance
     (:class:`web.app.TeleopApp`)."""
     app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
                     scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
-                    wall_stiffness=wall_stiffness)
+                    wall_stiffness=wall_stiffness, collisions=collisions,
+                    collision_settings=collision_settings)
     if scene is not None:
         app.apply_scene(scene)
     server = viser.ViserServer(host=host, port=port, verbose=False)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+import trimesh
 
 from teleop.robots import Robot
 
@@ -178,3 +179,25 @@ SQUARE_SIZE = 0.3
 def square_size(robot: Robot, link: str) -> float:
     """The side (m) of the square a flat geometry on ``link`` is drawn as."""
     return max(SQUARE_SIZE, 4.0 * _link_extent(robot, link))
+
+
+def shape_mesh(shape) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (n, 3) and triangles (m, 3) of a coal shape in its own frame: a capsule,
+    sphere, box or cylinder as itself; a convex hull or mesh from its points' hull; any
+    other shape as its bounding box."""
+    kind = type(shape).__name__
+    if kind == "Capsule":
+        mesh = trimesh.creation.capsule(height=2.0 * shape.halfLength, radius=shape.radius,
+                                        count=[16, 16])
+    elif kind == "Sphere":
+        mesh = trimesh.creation.icosphere(subdivisions=2, radius=shape.radius)
+    elif kind == "Box":
+        mesh = trimesh.creation.box(extents=2.0 * np.asarray(shape.halfSide))
+    elif kind == "Cylinder":
+        mesh = trimesh.creation.cylinder(radius=shape.radius, height=2.0 * shape.halfLength,
+                                         sections=16)
+    else:
+        points = _geometry_points(shape)
+        mesh = trimesh.convex.convex_hull(points) if len(points) >= 4 else \
+            trimesh.creation.box(extents=(0.01, 0.01, 0.01))
+    return np.asarray(mesh.vertices, dtype=np.float32), np.asarray(mesh.faces, dtype=np.uint32)

@@ -1,15 +1,35 @@
 """The status panel: the control loop's rate and timing, what limits each robot's end
 effectors in words, the one-sided constraints held, the force at each port (physics
-plant), the console's state; a red banner
+plant), the minimum distance, closest pair and collision pairs held, the console's state; a red banner
 while the control loop falls behind (docs/design.md section 5.3)."""
 
 from __future__ import annotations
 
+import math
+
 import viser
+
+from constraints.collision import CollisionRows
 
 from ..app import ControlThread, port_words
 
 BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
+
+
+def collision_words(rows: CollisionRows | None, active_pairs: list[str]) -> str:
+    """The status's words on collisions: the minimum distance and the closest pair (of
+    the rows the control thread measured last; nothing before a measure or while
+    collisions are off), and the pairs the controller holds at their bound."""
+    if rows is None:
+        return ""
+    if math.isinf(rows.minimum_distance):
+        words = "; no collision pair near"
+    else:
+        words = (f"; minimum distance {1e3 * rows.minimum_distance:.2f} mm "
+                 f"({rows.closest_pair})")
+    if active_pairs:
+        words += f"; collision pairs held: {', '.join(active_pairs)}"
+    return words
 
 
 class StatusView:
@@ -71,6 +91,7 @@ class StatusView:
             if robot["active_inequalities"]:
                 words += (f"; one-sided constraints held: "
                           f"{', '.join(robot['active_inequalities'])}")
+            words += collision_words(robot["collision_rows"], robot["active_pairs"])
             lines.append(words)
         console = [f"motion scale {snapshot['motion_scale']:g}"]
         if snapshot["clutch"]:
