@@ -111,11 +111,18 @@ def _solver(family: str, option: str) -> str:
     return solver
 
 
+def _with_collisions(controller: Controller, collisions) -> Controller:
+    """``controller`` keeping the pairs of ``collisions`` apart (None: none)."""
+    if collisions is not None:
+        controller.set_collisions(collisions)
+    return controller
+
+
 def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
                     dt: float = 1e-3, twist_weight=None,
                     solver_settings: Mapping | None = None,
                     time_budget: float | None | str = "periods",
-                    acceleration_limit=None) -> Controller:
+                    acceleration_limit=None, collisions=None) -> Controller:
     """Build a controller from its spec string; unknown specs raise ``ValueError``.
     ``twist_weight`` (the task's diagonal weight, 6 per EE or one per entry) goes to every
     family alike, as does ``acceleration_limit`` (None, the default: none, as in mink and
@@ -123,7 +130,9 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
     else nv values, docs/design.md 8.4);
     ``solver_settings`` (a mapping of the QP backend's keyword settings) and
     ``time_budget`` (a step's CPU deadline, docs/design.md 10.6) to the ``qp`` and ``mink``
-    families, which have a backend."""
+    families, which have a backend. ``collisions`` (a
+    ``constraints.collision.CollisionAvoidance`` on ``robot``, or None) is attached to the
+    controller with its ``set_collisions`` (docs/design.md 18.6)."""
     if not isinstance(spec, str):
         raise ValueError(f"a controller spec must be a string such as 'cjm' or 'qp:daqp', "
                          f"got {spec!r}")
@@ -140,20 +149,23 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
             raise ValueError(f"unknown CJM variant {option!r}: analytical, general, paper or python")
         from controllers import CJMController
 
-        return CJMController(robot, constraints, dt=dt, twist_weight=twist_weight,
-                             acceleration_limit=acceleration_limit, **CJM_VARIANTS[option])
+        controller = CJMController(robot, constraints, dt=dt, twist_weight=twist_weight,
+                                   acceleration_limit=acceleration_limit, **CJM_VARIANTS[option])
+        return _with_collisions(controller, collisions)
     if family == "qp":
         from controllers import QPController
 
-        return QPController(robot, constraints, solver=_solver(family, option), dt=dt,
-                            twist_weight=twist_weight, solver_settings=settings,
-                            time_budget=time_budget, acceleration_limit=acceleration_limit)
+        controller = QPController(robot, constraints, solver=_solver(family, option), dt=dt,
+                                  twist_weight=twist_weight, solver_settings=settings,
+                                  time_budget=time_budget, acceleration_limit=acceleration_limit)
+        return _with_collisions(controller, collisions)
     if family == "mink":
         solver = _solver(family, option)  # checked before MuJoCo (heavy) is imported
         from controllers import MinkController
 
-        return MinkController(robot, constraints, solver=solver, dt=dt,
-                              twist_weight=twist_weight, solver_settings=settings,
-                              time_budget=time_budget, acceleration_limit=acceleration_limit)
+        controller = MinkController(robot, constraints, solver=solver, dt=dt,
+                                    twist_weight=twist_weight, solver_settings=settings,
+                                    time_budget=time_budget, acceleration_limit=acceleration_limit)
+        return _with_collisions(controller, collisions)
     raise ValueError(f"unknown controller {spec!r}: known {', '.join(spec_names())}; in general "
                      f"{CONTROLLER_HELP} ({', '.join(available_solvers())})")

@@ -52,6 +52,13 @@ payload = bounded(float, 0.0, 100.0, unit="kg")
 friction = bounded(float, 0.0, 1e4)
 physics_rate = bounded(float, 2000.0, 1e5, unit="Hz")
 servo_bandwidth = bounded(float, 0.0, 200.0, inclusive_minimum=False, unit="Hz")
+millimetres = bounded(float, 0.0, 1000.0, unit="mm")
+approach_speed = bounded(float, 0.0, 10.0, inclusive_minimum=False, unit="m/s")
+
+#: The collision damper's options: (option, the CollisionAvoidance field, factor to SI).
+COLLISION_OPTIONS = (("--safety-distance", "safety_distance", 1e-3),
+                     ("--detection-distance", "detection_distance", 1e-3),
+                     ("--approach-speed", "approach_speed", 1.0))
 
 #: The physics plant's options: (option, the PlantSettings field) (docs/cli.md).
 PLANT_OPTIONS = (("--payload", "payload"), ("--coulomb-friction", "coulomb_friction"),
@@ -130,6 +137,61 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     robot.add_argument("--seed", type=count, default=0, help="seed of the encoder noise")
     _add_plant_options(parser, "the session's plant (its header), else the defaults"
                        if source == "session" else "its default")
+    _add_collision_options(parser, source)
+
+
+def _add_collision_options(parser: argparse.ArgumentParser, source: str) -> None:
+    """``--collisions`` / ``--no-collisions`` and the damper's numbers (docs/cli.md)."""
+    group = parser.add_argument_group(
+        "collision avoidance", f"every controller keeps the robot's links apart and off the "
+        f"obstacles the {source} declares (docs/design.md section 18); an option left out: "
+        f"the {source}'s setting, else the default")
+    switch = group.add_mutually_exclusive_group()
+    switch.add_argument("--collisions", dest="collisions", action="store_true", default=None,
+                        help=f"on, also for a {source} that declares none (self-collision, "
+                        f"no obstacle) (default: what the {source} declares)")
+    switch.add_argument("--no-collisions", dest="collisions", action="store_false",
+                        default=None, help=f"off, also for a {source} that declares it "
+                        f"(default: what the {source} declares)")
+    group.add_argument("--safety-distance", type=millimetres, metavar="MM",
+                       help="d_s: the distance every pair is kept apart, in [0, 1000] "
+                       "(default: 5)")
+    group.add_argument("--detection-distance", type=millimetres, metavar="MM",
+                       help="d_i > d_s: pairs closer than this get their row, in [0, 1000] "
+                       "(default: 50)")
+    group.add_argument("--approach-speed", type=approach_speed, metavar="M_PER_S",
+                       help="xi: how fast a pair may approach at d_i, in (0, 10] "
+                       "(default: 0.5)")
+
+
+def collision_choice(args: argparse.Namespace, plan):
+    """``plan`` with the collision avoidance the options ask for over what it declares
+    (``plan.collisions``): ``--no-collisions`` drops it, ``--collisions`` adds the default
+    one (self-collision, no obstacle) when it declares none, each damper option given
+    replaces its value. ``ValueError`` (one line) for a damper option without collision
+    avoidance or settings it refuses (``d_i <= d_s``)."""
+    from dataclasses import replace
+
+    from constraints.collision import CollisionAvoidance
+
+    enabled = plan.collisions is not None if args.collisions is None else args.collisions
+    given = [(option, name, getattr(args, name) * factor)
+             for option, name, factor in COLLISION_OPTIONS if getattr(args, name) is not None]
+    if not enabled:
+        if given:
+            raise ValueError(f"{', '.join(option for option, _, _ in given)} "
+                             f"need{'s' * (len(given) == 1)} collision avoidance "
+                             f"(--collisions; {plan.name} declares "
+                             f"{'it' if plan.collisions is not None else 'none'})")
+        return replace(plan, collisions=None)
+    settings = dict(plan.collisions if plan.collisions is not None
+                    else CollisionAvoidance(plan.robot).to_dict())
+    settings.update({name: value for _, name, value in given})
+    try:
+        CollisionAvoidance.from_dict(plan.robot, settings)
+    except ValueError as error:
+        raise ValueError(f"collision avoidance: {error}") from None
+    return replace(plan, collisions=settings)
 
 
 def _add_plant_options(parser: argparse.ArgumentParser, base: str) -> None:
@@ -219,6 +281,7 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     record.add_argument("file", help="session file to write")
     _add_plant_options(record, "its default; the plant is written in the session's header "
                        "for 'teleop replay'")
+    _add_collision_options(record, "scenario")
 
     _add_command(commands, "scenarios", "list the scripted scenarios", _scenarios)
 
@@ -268,7 +331,8 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
         write_outputs,
     )
     from teleop.plants.imperfect import Imperfections
-    from teleop.experiments.metrics_table import format_body_table, format_table
+    from teleop.experiments.metrics_table import (format_body_table, format_collision_table,
+                                                  format_table)
 
     output_directory(args.out)  # before minutes of simulation
     imperfections = Imperfections(args.encoder_noise, args.latency, args.joint_time_constant,
@@ -283,11 +347,17 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
     document = metrics_document(plan, results, config, duration, imperfections, plant,
                                 args.acceleration_limits)
     limits = "; acceleration limits" if args.acceleration_limits else ""
+    if plan.collisions is not None:
+        limits += (f"; collision avoidance d_s = {1e3 * plan.collisions['safety_distance']:g} "
+                   f"mm, {len(plan.collisions['obstacles'])} obstacles")
     print(f"{plan.name}: {plan.description} ({duration:g} s at {config.rate:g} Hz, "
           f"{imperfections.describe()}; {plant.describe()}{limits})")
     print(format_table(document))
     print()
     print(format_body_table(document))
+    if plan.collisions is not None:
+        print()
+        print(format_collision_table(document))
     for spec, result in results.items():
         if result.failure_messages:
             print(f"  {spec}: {len(result.failure_messages)}+ failed steps, first {result.failure_messages[0]}")
@@ -302,8 +372,8 @@ def _compare(args: argparse.Namespace) -> int:
     from teleop.experiments.scenarios import load_scenario
     from teleop.loop import LoopConfig
 
-    return _run(load_scenario(args.scenario), args, LoopConfig(rate=args.rate or 1000.0),
-                plant_choice(args))
+    return _run(collision_choice(args, load_scenario(args.scenario)), args,
+                LoopConfig(rate=args.rate or 1000.0), plant_choice(args))
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -315,15 +385,16 @@ def _replay(args: argparse.Namespace) -> int:
     config = LoopConfig(rate=args.rate or header.get("rate_hz", 1000.0),
                         kp=header.get("kp", 20.0),
                         target_time_constant=header.get("target_time_constant_s", 0.0))
-    return _run(session_plan(session), args, config, plant_choice(args, session_plant(session)))
+    return _run(collision_choice(args, session_plan(session)), args, config,
+                plant_choice(args, session_plant(session)))
 
 
 def _record(args: argparse.Namespace) -> int:
     from teleop.experiments.scenarios import load_scenario
     from teleop.experiments.sessions import record_plan
 
-    path = record_plan(load_scenario(args.scenario), args.file, args.rate, args.duration,
-                       plant=plant_choice(args))
+    path = record_plan(collision_choice(args, load_scenario(args.scenario)), args.file,
+                       args.rate, args.duration, plant=plant_choice(args))
     print(f"wrote {path}")
     return 0
 
@@ -332,7 +403,7 @@ def _scenarios(args: argparse.Namespace) -> int:
     from teleop.experiments.scenarios import SCENARIOS, load_scenario
 
     for name in SCENARIOS:
-        print(f"{name:<15} {load_scenario(name).description}")
+        print(f"{name:<17} {load_scenario(name).description}")
     return 0
 
 

@@ -23,10 +23,10 @@ from teleop.plants.imperfect import Imperfections
 
 from .plan import Plan
 from teleop.plants.choice import PlantChoice
-from .results import BODY_METRIC_KEYS, METRIC_KEYS, RunResult
+from .results import BODY_METRIC_KEYS, COLLISION_METRIC_KEYS, METRIC_KEYS, RunResult
 from .solver_output import SolverOutputCapture
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 
 
 def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
@@ -83,7 +83,10 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
     plant.apply_wall(constraints)
     controller = _controller(spec, plan, constraints, config, acceleration_limits)
     drive = _drive(plan, controller, constraints, config, steps, imperfections, on_step, plant)
-    return _collect(spec, drive, plan.robot.ee_frames)
+    result = _collect(spec, drive, plan.robot.ee_frames)
+    if plan.collisions is not None:
+        result.safety_distance = controller.collisions.safety_distance
+    return result
 
 
 @dataclass
@@ -103,7 +106,9 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
     """Tick ``controller`` (holding ``constraints``) through ``steps`` periods of ``plan``
     on the ``plant`` (every hole added on the way gets its wall)."""
     loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config,
-                      plant=plant.make(plan.robot, config.dt, imperfections))
+                      plant=plant.make(plan.robot, config.dt, imperfections,
+                                       plan.make_collisions()),
+                      collisions=plan.make_collisions())
     drive = Drive()
     records, failures = drive.records, drive.failures
     edits_at_measure: list[list[Constraint]] = []
@@ -180,6 +185,7 @@ def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
         commanded_linear_velocity=vectors("commanded_linear_velocity"),
         actual_linear_velocity=vectors("actual_linear_velocity"),
         statuses=np.array([r.status for r in records], dtype=str),
+        closest_pairs=np.array([r.closest_pair for r in records], dtype=object),
         ee_frames=tuple(ee_frames),
         ee_position_errors=np.array([r.ee_position_errors for r in records]).reshape(-1, count),
         ee_orientation_errors=np.array([r.ee_orientation_errors
@@ -194,7 +200,9 @@ def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
         port_forces=port_forces if physical else None,
         port_displacements=port_displacements if physical else None,
         torque_ratio=(np.array([m.torque_ratio for m in measured]) if physical else None),
-        actuator_saturated=(np.array([m.saturated for m in measured]) if physical else None))
+        actuator_saturated=(np.array([m.saturated for m in measured]) if physical else None),
+        contacts=(np.array([m.contacts for m in measured]) if physical else None),
+        contact_depths=(np.array([m.contact_depth for m in measured]) if physical else None))
 
 
 class ShadowedController:
@@ -248,7 +256,8 @@ def _controller(spec: str, plan: Plan, constraints: list[Constraint], config: Lo
     """A run's controller: simulated time, so iteration caps only, no deadline
     (docs/design.md 10.6); the robot's acceleration limits when asked for."""
     return make_controller(spec, plan.robot, constraints, dt=config.dt, time_budget=None,
-                           acceleration_limit=ROBOT if acceleration_limits else None)
+                           acceleration_limit=ROBOT if acceleration_limits else None,
+                           collisions=plan.make_collisions())
 
 
 def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
@@ -282,7 +291,9 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
             acceleration_limits: bool = False) -> dict[str, RunResult]:
     """Run every controller spec on the same plan (fresh constraints each), on the same
     ``plant`` (None: the kinematic one; each run builds its own), each controller with the
-    robot's acceleration limits when ``acceleration_limits``.
+    robot's acceleration limits when ``acceleration_limits`` and with the plan's collision
+    avoidance (``plan.collisions``, a fresh one per controller; the loop measures the
+    minimum distance with one more, docs/design.md 18.6).
 
     With ``agreement`` and two or more specs, one more run of the first spec evaluates the
     others beside it (:func:`joint_velocity_agreement`). The solvers' console output and
@@ -297,8 +308,9 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
     (imperfections or Imperfections()).check_period(config.dt)
     plant = plant or PlantChoice()
     plant.make(plan.robot, config.dt, imperfections)  # fail fast: the model compiles
-    for spec in specs:  # fail fast on a bad spec, before minutes of simulation
-        make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt)
+    for spec in specs:  # fail fast on a bad spec or damper, before minutes of simulation
+        make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt,
+                        collisions=plan.make_collisions())
     agreement = agreement and len(specs) > 1
     runs = [*specs, *([f"joint velocities against {specs[0]}"] if agreement else [])]
     results = {}
@@ -391,6 +403,7 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
         "imperfections": (imperfections or Imperfections()).to_dict(),
         "plant": (plant or PlantChoice()).to_dict(),
         "acceleration_limits": bool(acceleration_limits),
+        "collisions": plan.collisions,
         "joint_velocity_reference": reference,
         "controllers": {spec: result.metrics() for spec, result in results.items()},
     }
@@ -414,7 +427,7 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
     paths[0].write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     with paths[1].open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        keys = (*METRIC_KEYS, *BODY_METRIC_KEYS)
+        keys = (*METRIC_KEYS, *COLLISION_METRIC_KEYS, *BODY_METRIC_KEYS)
         writer.writerow(["controller", *keys])
         for spec, metrics in document["controllers"].items():
             writer.writerow([spec, *("" if metrics[key] is None else metrics[key]

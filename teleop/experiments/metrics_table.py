@@ -87,3 +87,29 @@ def format_status_counts(counts: dict[str, int]) -> str:
     """``ok 9990, scaled 10``: the statuses in order of severity, zeros left out."""
     order = ("ok", "scaled", "least_squares", "constraint_degraded", "failed")
     return ", ".join(f"{status} {counts[status]}" for status in order if counts.get(status))
+
+
+#: The collision table's columns (docs/design.md section 18.6): the minimum distance at the
+#: true configuration, the steps below 0 and below ``d_s - 0.5 mm``, the physics plant's
+#: contacts (``-`` on the kinematic plant), beside the hole and EE errors.
+COLLISION_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (
+    ("min distance (mm)", "minimum_distance_m", lambda v: f"{1e3 * v:.2f}"),
+    ("penetrations", "penetration_steps", lambda v: f"{v}"),
+    ("safety violations", "safety_violation_steps", lambda v: f"{v}"),
+    ("contact steps", "contact_steps", lambda v: f"{v}"),
+    ("contact depth max (mm)", "contact_depth_max_m", lambda v: f"{1e3 * v:.2f}"),
+    ("hole err max (um)", "hole_error_max_m", lambda v: f"{1e6 * v:.3g}"),
+    ("EE pos max (mm)", "ee_position_error_max_m", lambda v: f"{1e3 * v:.3f}"),
+)
+
+
+def format_collision_table(document: dict) -> str:
+    """The collision avoidance table (Markdown): per controller the columns of
+    :data:`COLLISION_COLUMNS` and the closest pair."""
+    headers = [header for header, _, _ in COLLISION_COLUMNS]
+    lines = ["| controller | " + " | ".join(headers) + " | closest pair |",
+             "|" + "---|" * (len(headers) + 2)]
+    for spec, m in document["controllers"].items():
+        cells = ["-" if m.get(key) is None else fmt(m[key]) for _, key, fmt in COLLISION_COLUMNS]
+        lines.append(f"| {spec} | " + " | ".join(cells) + f" | {(m.get('closest_pair') or '-').replace('|', '/')} |")
+    return "\n".join(lines)

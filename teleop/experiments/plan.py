@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
+from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from teleop.loop import Targets
 from teleop.robots import Robot
@@ -31,6 +32,9 @@ class Plan:
         configuration at ``t``; moves geometry in place and returns a new list when the
         constraint set itself changes (else None).
     description : one line for humans.
+    collisions : the collision avoidance the plan declares (``CollisionAvoidance.to_dict()``:
+        the damper's settings and the obstacles), None: none (docs/design.md 18.6);
+        :meth:`make_collisions` builds a fresh one per controller and per measure.
     """
 
     name: str
@@ -42,6 +46,13 @@ class Plan:
     update: Callable[[float, list[Constraint], np.ndarray], list[Constraint] | None] = field(
         default=lambda t, constraints, q: None)
     description: str = ""
+    collisions: dict | None = None
+
+    def make_collisions(self) -> CollisionAvoidance | None:
+        """A fresh collision avoidance on the plan's robot with its own obstacles, or None."""
+        if self.collisions is None:
+            return None
+        return CollisionAvoidance.from_dict(self.robot, self.collisions)
 
 
 def smoothstep(x: float) -> float:

@@ -18,6 +18,7 @@ from typing import Sequence
 
 from .metrics_table import (
     BODY_COLUMNS,
+    COLLISION_COLUMNS,
     TABLE_COLUMNS,
     body_cells,
     format_status_counts,
@@ -105,6 +106,11 @@ def render_report(document: dict, figures: Sequence[Figure]) -> str:
         "jerk: the jerkiest joint's RMS of (qd_k - 2 qd_k-1 + qd_k-2) / dt^2 over the "
         "commands; EE v power > 3 Hz: the share of the achieved EE linear velocity's power "
         "above 3 Hz (each component detrended, FFT), the worst EE.</p>",
+        *(["<h2>Collision avoidance</h2>", _collision_table(document),
+           '<p class="note">min distance: the smallest distance between the collision pairs '
+           "on the true configuration (design 18.6); penetrations: steps below 0; safety "
+           "violations: steps below d_s - 0.5 mm; contacts: the physics plant's.</p>"]
+          if document.get("collisions") is not None else []),
         "<h2>Each end effector and each constraint</h2>", _parts_table(document),
         "<h2>Steps by status</h2>", _status_table(document),
         "<h2>What the solvers said</h2>", _solver_messages(document),
@@ -180,6 +186,22 @@ def _body_table(document: dict) -> str:
                      if p in m["ports"] else "-" for p in ports]
             rows.append(f"<tr><td>{e(spec)}</td>" + "".join(f"<td>{e(c)}</td>" for c in cells)
                         + "</tr>")
+    rows.append("</table>")
+    return "\n".join(rows)
+
+
+def _collision_table(document: dict) -> str:
+    """Per controller: the minimum distance, penetrations, safety violations, contacts
+    (design 18.6), beside the hole and EE errors, and the closest pair."""
+    e = html.escape
+    rows = ["<table>", "<tr><th>controller</th>"
+            + "".join(f"<th>{e(header)}</th>" for header, _, _ in COLLISION_COLUMNS)
+            + "<th>closest pair</th></tr>"]
+    for spec, m in document["controllers"].items():
+        cells = ["-" if m.get(key) is None else fmt(m[key]) for _, key, fmt in COLLISION_COLUMNS]
+        cells.append(m.get("closest_pair") or "-")
+        rows.append(f"<tr><td>{e(spec)}</td>" + "".join(f"<td>{e(c)}</td>" for c in cells)
+                    + "</tr>")
     rows.append("</table>")
     return "\n".join(rows)
 

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from teleop.loop import SAFETY_TOLERANCE
+
 from .smoothness import HIGH_FREQUENCY_HZ, joint_jerk_rms, power_fraction_above
 
 #: per-controller numeric keys of metrics.json, in order (the CSV's columns; documented in
@@ -28,6 +30,14 @@ BODY_METRIC_KEYS = (
     "hole_error_max_m", "port_force_max_n", "port_force_rms_n", "port_displacement_max_m",
     "torque_ratio_max", "actuator_saturated_steps", "joint_jerk_rms_radps3",
     "ee_velocity_power_above_3hz",
+)
+
+#: per-controller keys of collision avoidance (docs/design.md section 18.6), between
+#: :data:`METRIC_KEYS` and :data:`BODY_METRIC_KEYS` in the CSV: null without collision avoidance (the contact keys:
+#: also on a plant without a body)
+COLLISION_METRIC_KEYS = (
+    "minimum_distance_m", "penetration_steps", "safety_violation_steps", "contact_steps",
+    "contact_depth_max_m",
 )
 
 
@@ -68,6 +78,12 @@ class RunResult:
     port_displacements : per port name, (steps,) the tissue's lateral displacement (m).
     torque_ratio : (steps,) max over joints of |drive torque| / effort limit; None likewise.
     actuator_saturated : (steps,) some drive held at its effort limit; None likewise.
+    closest_pairs : (steps,) the pair of the ``minimum_distance`` column each step ("" when
+        none was measured).
+    safety_distance : the collision avoidance's ``d_s`` (m); None: the run had none.
+    contacts : (steps,) the simulated robot's contacts at each period's end (robot-robot
+        and robot-obstacle pairs of the collision avoidance); None on a plant without a body.
+    contact_depths : (steps,) the deepest of them (m, 0 without contact); None likewise.
     """
 
     controller: str
@@ -94,6 +110,33 @@ class RunResult:
     port_displacements: dict[str, np.ndarray] | None = None
     torque_ratio: np.ndarray | None = None
     actuator_saturated: np.ndarray | None = None
+    closest_pairs: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=object))
+    safety_distance: float | None = None
+    contacts: np.ndarray | None = None
+    contact_depths: np.ndarray | None = None
+
+    def collision_metrics(self) -> dict[str, float | int | str | None]:
+        """The minimum distance over the run (m; null without collision avoidance or when
+        no pair came within the broadphase's reach), its pair, the steps with a
+        penetration (``d < 0``) and with a safety violation (``d < d_s - 0.5 mm``,
+        ``teleop.loop.SAFETY_TOLERANCE``); the plant's contact steps and deepest contact."""
+        measured = self.safety_distance is not None
+        distance = self.columns.get("minimum_distance", np.zeros(0))
+        finite = np.isfinite(distance)
+        lowest = int(np.argmin(np.where(finite, distance, np.inf))) if finite.any() else None
+        bodily = measured and self.contacts is not None
+        return {
+            "minimum_distance_m": (float(distance[lowest]) if measured and lowest is not None
+                                   else None),
+            "closest_pair": (str(self.closest_pairs[lowest]) if measured and lowest is not None
+                             else None),
+            "penetration_steps": int(np.sum(distance < 0.0)) if measured else None,
+            "safety_violation_steps": (int(np.sum(distance < self.safety_distance
+                                                  - SAFETY_TOLERANCE)) if measured else None),
+            "contact_steps": int(np.sum(self.contacts > 0)) if bodily else None,
+            "contact_depth_max_m": (float(np.max(self.contact_depths, initial=0.0)) if bodily
+                                    else None),
+        }
 
     @property
     def dt(self) -> float:
@@ -164,6 +207,7 @@ class RunResult:
                 (power_fraction_above(self.actual_linear_velocities[:, i], self.dt,
                                       HIGH_FREQUENCY_HZ)
                  for i in range(self.actual_linear_velocities.shape[1])), default=0.0),
+            **self.collision_metrics(),
             "first_failure": self.failure_messages[0] if self.failure_messages else None,
             "status_counts": dict(self.status_counts),
             "solver_messages": dict(self.solver_messages),

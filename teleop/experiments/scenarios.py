@@ -16,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Barrier, Constraint, Hole, Plane
+from constraints.collision import Box, Capsule, CollisionAvoidance, Sphere
 from teleop.robots import Robot, load_robot
 
 from .plan import Plan, home_pose, home_poses, link_placement, smoothstep
@@ -353,6 +354,126 @@ def _fast_lateral(robot: Robot) -> Plan:
                     "at up to 0.2 m/s, then a quick 3 cm insertion and back")
 
 
+# ------------------------------------------------------------ with collision avoidance
+
+
+def collision_settings(robot: Robot, obstacles: Sequence = ()) -> dict:
+    """What a scenario declares (docs/design.md 18.6): self-collision and ``obstacles``
+    with the damper's default distances and speed (``CollisionAvoidance.to_dict()``)."""
+    return CollisionAvoidance(robot, obstacles).to_dict()
+
+
+def moving_tips(starts: Sequence[np.ndarray], moves: Sequence[np.ndarray], begin: float,
+                length: float) -> list[Callable[[float], np.ndarray]]:
+    """Each tip's path: from its start, ``moves[i]`` (m) over ``length`` s from ``begin``
+    (a quintic, :func:`smoothstep`), then held."""
+    return [lambda t, start=start, move=np.asarray(move, dtype=float):
+            start + smoothstep((t - begin) / length) * move
+            for start, move in zip(starts, moves)]
+
+
+#: How far (m) each tip of ``bimanual-crossing`` moves towards the other's side: the tips
+#: start 0.27 m apart along y, their targets end 5 cm past each other (and 4 cm apart in z).
+CROSSING_MOVE = np.array([0.0, 0.16, 0.0])
+
+
+#: Where ``bimanual-crossing`` puts each arm's trocar: on the wrist link, this far along it (m)
+#: (on link 5, as in ``bimanual-trocars``, the tips cannot move sideways: the r joints
+#: reach 0, where the arms lose rank).
+CROSSING_HOLE_LINK, CROSSING_HOLE_DISTANCE = "link_6_b", 0.05
+
+
+def _bimanual_crossing(robot: Robot) -> Plan:
+    q0 = robot.q_home.copy()
+
+    def make() -> list[Constraint]:
+        return [Hole.on_link(robot, q0, distance=CROSSING_HOLE_DISTANCE,
+                             link=f"arm_{side}_{CROSSING_HOLE_LINK}")
+                for side in ("left", "right")]
+
+    starts = [pose.translation for pose in home_poses(robot, q0)]
+    # the left tip (+y) goes right and 2 cm down, the right tip left and 2 cm up: the
+    # instruments, pivoting in their trocars, would pass through each other
+    tips = moving_tips(starts, [-CROSSING_MOVE + [0.0, 0.0, -0.02],
+                                CROSSING_MOVE + [0.0, 0.0, 0.02]], 0.5, 3.0)
+    duration = 5.0
+    return Plan(
+        "bimanual-crossing", robot, q0, duration, make,
+        tips_through_constraints(robot, q0, make(), tips, duration),
+        description="sda10f_dual, a trocar on each wrist, the two tips' targets cross 16 cm "
+                    "towards each other: the arms must stay apart (self-collision)",
+        collisions=collision_settings(robot))
+
+
+#: The organ of ``obstacle``: a sphere of this radius (m), its centre this far below the
+#: tip (m): 2 cm below the instrument's collision capsule (3 cm in radius about the tip).
+ORGAN_RADIUS, ORGAN_DEPTH = 0.03, 0.08
+
+
+def _obstacle(robot: Robot) -> Plan:
+    q0 = robot.q_home.copy()
+    start = home_pose(robot, q0).translation
+    organ = Sphere(start - [0.0, 0.0, ORGAN_DEPTH], ORGAN_RADIUS, name="organ")
+
+    def make() -> list[Constraint]:
+        return [Hole.on_link(robot, q0, distance=0.08)]
+
+    duration = 5.0
+    # the tip's target goes 5 cm down, through the organ's top, then 3 cm sideways
+    tips = [lambda t: start + smoothstep((t - 0.5) / 2.0) * np.array([0.0, 0.0, -0.05])
+            + smoothstep((t - 2.5) / 2.0) * np.array([0.0, 0.03, 0.0])]
+    return Plan(
+        "obstacle", robot, q0, duration, make,
+        lambda t, target=tips_through_constraints(robot, q0, make(), tips, duration):
+            target(t)[0],
+        description=f"sda10f, trocar held, the tip's target goes 5 cm down into an organ "
+                    f"(a {100 * ORGAN_RADIUS:g} cm sphere 2 cm below the instrument), then "
+                    "sideways",
+        collisions=collision_settings(robot, [organ]))
+
+
+#: ``mobile-obstacles``: the gap (m) between the mobile base's sides and the obstacles
+#: beside it, and between its front and the pole ahead.
+MOBILE_CLEARANCE = 0.03
+
+
+def _mobile_obstacles(robot: Robot) -> Plan:
+    """The obstacles touch the base's box at an edge or a point, not face to face: a
+    damper row holds one witness point, and two parallel faces turning against each
+    other close at the far end of the face (docs/design.md 18.6)."""
+    q0 = robot.q_home.copy()
+    base = link_placement(robot, q0, "mobile_base")
+    half_length, half_width = 0.4, 0.3  # the base's box (base frame)
+    edge, post, height = 0.2, 0.05, 0.5  # a square box's edge, a post's radius (m)
+    turned = base.rotation @ pin.rpy.rpyToMatrix(0.0, 0.0, math.pi / 4.0)
+    obstacles = [
+        Box(base.act(np.array([0.0, half_width + MOBILE_CLEARANCE + edge / math.sqrt(2.0),
+                               0.5 * height])),
+            [edge, edge, height], pin.rpy.matrixToRpy(turned), name="left box"),
+        Capsule(base.act(np.array([0.0, -(half_width + MOBILE_CLEARANCE + post), 0.5])),
+                post, 0.8, name="right post"),
+        Capsule(base.act(np.array([half_length + MOBILE_CLEARANCE + post, 0.0, 0.5])),
+                post, 0.8, name="pole")]
+
+    def make() -> list[Constraint]:
+        return [Hole.on_link(robot, q0, distance=0.08, link=link)
+                for link in robot.constrained_links]
+
+    starts = [pose.translation for pose in home_poses(robot, q0)]
+    # both tips sweep together 8 cm to each side and 5 cm forward: the whole body,
+    # base included, moves between the boxes, the pole ahead
+    sway = [lissajous(start, (0.05, 0.08, 0.0), (0.1, 0.15, 0.0), (0.0, 0.0, 0.0))
+            for start in starts]
+    duration = 8.0
+    return Plan(
+        "mobile-obstacles", robot, q0, duration, make,
+        tips_through_constraints(robot, q0, make(), sway, duration),
+        description=f"sda10f_dual_mobile, a trocar on each arm, both tips sway 8 cm sideways "
+                    f"and 5 cm forward; a box (its edge) and a post {100 * MOBILE_CLEARANCE:g} "
+                    "cm beside the base, a pole ahead of it",
+        collisions=collision_settings(robot, obstacles))
+
+
 #: scenario name -> (robot name, builder)
 SCENARIOS: dict[str, tuple[str, Callable[[Robot], Plan]]] = {
     "paper-hole": ("sda10f", _paper_hole),
@@ -367,6 +488,9 @@ SCENARIOS: dict[str, tuple[str, Callable[[Robot], Plan]]] = {
     "bimanual-trocars": ("sda10f_dual", _bimanual_trocars),
     "mobile-wall": ("sda10f_dual_mobile", _mobile_wall),
     "fast-lateral": ("sda10f", _fast_lateral),
+    "bimanual-crossing": ("sda10f_dual", _bimanual_crossing),
+    "obstacle": ("sda10f", _obstacle),
+    "mobile-obstacles": ("sda10f_dual_mobile", _mobile_obstacles),
 }
 
 

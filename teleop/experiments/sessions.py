@@ -11,7 +11,11 @@ Format (one JSON object per line, times ``t`` in seconds from the start, world f
   ``ee_frames``, ``root_joint``, ``locked_joints``: the robot's defaults, nothing locked)
   are read too. An optional ``plant`` (``PlantChoice.to_dict()``: ``kind``, ``settings``,
   ``wall_stiffness_n_per_m``) is the plant a replay runs on unless told otherwise; without
-  it, the kinematic plant.
+  it, the kinematic plant. Version 3 adds an optional ``collisions``
+  (``CollisionAvoidance.to_dict()``: ``safety_distance``, ``detection_distance``,
+  ``approach_speed``, ``self_collision``, ``disabled_pairs``, ``extra_pairs`` and the
+  ``obstacles``, each an obstacle's ``to_dict()``): the collision avoidance a replay runs
+  with unless told otherwise; without it, none.
 * ``{"type": "target", "t": 0.05, "frame": "tool0", "position": [x, y, z],
   "quaternion_wxyz": [w, x, y, z]}`` - the operator's target for the EE ``frame`` (one of
   the header's ``ee_frames``; absent: the first); it holds until the next one for that
@@ -39,6 +43,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
+from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from constraints.validation import as_number, as_vector, short_repr
 from teleop.json_text import parse_json
@@ -51,9 +56,10 @@ from .plan import Plan, home_poses
 from teleop.plants.choice import PlantChoice
 
 FORMAT = "cjm-teleop-session"
-VERSION = 2
-#: the versions :func:`load_session` reads (1: a single EE, no root joint or locked joints)
-READABLE_VERSIONS = (1, 2)
+VERSION = 3
+#: the versions :func:`load_session` reads (1: a single EE, no root joint or locked joints;
+#: 2: no collision avoidance)
+READABLE_VERSIONS = (1, 2, 3)
 EVENT_TYPES = ("target", "add", "move", "remove", "end")
 #: events within this of a tick's time belong to that tick (float time stamps)
 TIME_EPSILON = 1e-9
@@ -77,11 +83,15 @@ class SessionRecorder:
     rate_hz, kp, target_time_constant_s : the loop settings, so a replay can use them.
     plant : the plant the session ran on, written in the header when given, so a replay
         runs on it too.
+    collisions : the collision avoidance the session ran with (``CollisionAvoidance``, or
+        its ``to_dict()``), written in the header when given, so a replay keeps it too.
     """
 
     def __init__(self, path: str | Path, robot: Robot, q0: np.ndarray, rate_hz: float = 1000.0,
                  kp: float = 20.0, target_time_constant_s: float = 0.0,
-                 plant: PlantChoice | None = None) -> None:
+                 plant: PlantChoice | None = None, collisions=None) -> None:
+        if collisions is not None and not isinstance(collisions, dict):
+            collisions = collisions.to_dict()
         self.path = Path(path)
         if self.path.is_dir():
             raise ValueError(f"session file {str(self.path)!r} is a directory")
@@ -108,6 +118,8 @@ class SessionRecorder:
                                      for name, coordinates in robot.locked_joints.items()})
         if plant is not None:
             header["plant"] = plant.to_dict()
+        if collisions is not None:
+            header["collisions"] = CollisionAvoidance.from_dict(robot, collisions).to_dict()
         self.ee_frames = tuple(robot.ee_frames)
         self._write(header)
         self.last_t = 0.0
@@ -178,7 +190,8 @@ def record_plan(plan: Plan, path: str | Path, rate_hz: float = 1000.0,
 
     Moving geometry is recorded as ``move`` events every tick. Replaying the file at the
     same rate reproduces the scenario step for step. ``plant`` is written in the header
-    (and its wall stiffness into every hole added), so a replay runs on it.
+    (and its wall stiffness into every hole added), so a replay runs on it; the plan's
+    collision avoidance (``plan.collisions``) too.
     """
     rate_hz = as_number(rate_hz, "rate_hz", positive=True, maximum=MAX_RATE_HZ)
     duration = as_number(plan.duration if duration is None else duration, "duration",
@@ -191,7 +204,8 @@ def record_plan(plan: Plan, path: str | Path, rate_hz: float = 1000.0,
     if plant is not None:
         plant.apply_wall(constraints)
     ids = [f"{c.kind}-{i + 1}" for i, c in enumerate(constraints)]
-    with SessionRecorder(path, plan.robot, plan.q0, rate_hz=rate_hz, plant=plant) as recorder:
+    with SessionRecorder(path, plan.robot, plan.q0, rate_hz=rate_hz, plant=plant,
+                         collisions=plan.collisions) as recorder:
         for cid, constraint in zip(ids, constraints):
             recorder.add(0.0, cid, constraint)
         before = [c.position for c in constraints]
@@ -324,6 +338,13 @@ def _check_header(event: dict, where: str) -> None:
             raise ValueError("header 'locked_joints' must map joint names to coordinates")
         if "plant" in event:
             PlantChoice.from_dict(event["plant"], "header 'plant'")
+        if "collisions" in event:
+            if version < 3:
+                raise ValueError(f"header 'collisions' needs version 3 (this file says "
+                                 f"{version})")
+            if event["collisions"] is not None and not isinstance(event["collisions"], dict):
+                raise ValueError(f"header 'collisions' must be an object or null, got "
+                                 f"{short_repr(event['collisions'])}")
     except ValueError as error:
         raise SessionError(f"{where}: {error}") from None
 
@@ -424,10 +445,24 @@ def session_plant(session: Session) -> PlantChoice:
     return PlantChoice.from_dict(session.header["plant"], "header 'plant'")
 
 
+def session_collisions(session: Session, robot: Robot) -> dict | None:
+    """The collision avoidance of the session's header on ``robot`` (its ``to_dict()``),
+    None when it has none; ``SessionError`` at the header's line naming the field."""
+    collisions = session.header.get("collisions")
+    if collisions is None:
+        return None
+    try:
+        return CollisionAvoidance.from_dict(robot, collisions).to_dict()
+    except ValueError as error:
+        raise SessionError(f"{session.path}:1: header 'collisions': {error}") from None
+
+
 def session_plan(session: Session, robot: Robot | None = None) -> Plan:
     """A :class:`Plan` that replays the session: zero-order hold of the targets, and the
-    constraint edits applied at their times (each run starts from no constraint)."""
+    constraint edits applied at their times (each run starts from no constraint); the
+    header's collision avoidance, if any."""
     robot = robot or session_robot(session)
+    collisions = session_collisions(session, robot)
     q0 = np.asarray(session.header["q0"], dtype=float)
     if q0.shape != (robot.model.nq,):
         raise SessionError(f"{session.path}:1: header 'q0' has {q0.size} values, the robot "
@@ -497,4 +532,4 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
 
     return Plan(name=session.path.stem, robot=robot, q0=q0, duration=session.duration,
                 make_constraints=make_constraints, target=target, update=update,
-                description=f"recorded session {session.path.name}")
+                description=f"recorded session {session.path.name}", collisions=collisions)

@@ -28,15 +28,19 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
+from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from constraints.validation import as_number, as_vector
 from teleop.limits import MAX_RATE_HZ, MAX_TIME_CONSTANT_S
+
+from .distance_meter import DistanceMeter
 
 #: Columns of the per-step record, in order (see :class:`StepRecord`).
 RECORD_FIELDS = (
     "t", "constraint_error", "constraint_velocity_residual", "barrier_penetration",
     "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed",
     "step_time_us", "tick_time_us", "constraint_velocity_floor", "twist_saturated",
+    "minimum_distance",
 )
 
 #: An operator target: one pose for a single-EE robot, else one per ``robot.ee_frames`` entry.
@@ -187,6 +191,10 @@ class StepRecord:
     status: str = "ok"  # the controller's step status (controllers.StepStatus value)
     message: str = ""
     plant: object | None = field(default=None, repr=False)  # the plant's own measures
+    #: the collision pairs' smallest distance at the true configuration (m; inf without
+    #: collision avoidance or no pair measured; exact below d_i, teleop.loop.distance_meter)
+    minimum_distance: float = math.inf
+    closest_pair: str = ""  # the pair of minimum_distance ("first | second"), "" when none
 
     @property
     def ee_position_error(self) -> float:
@@ -268,13 +276,18 @@ class TeleopLoop:
     config : :class:`LoopConfig`.
     plant : what stands between the loop and the true joints (:class:`Plant`,
         docs/design.md section 15.1); None: the loop reads and drives them exactly.
+    collisions : a collision avoidance of the loop's own (not the controller's) whose
+        pairs' minimum distance every period measures at the true configuration
+        (:class:`~teleop.loop.distance_meter.DistanceMeter`, docs/design.md 18.6); None:
+        not measured.
 
     Targets (:data:`Targets`) are one ``pin.SE3`` per entry of ``robot.ee_frames``, in
     that order; a single-EE robot also takes the pose alone.
     """
 
     def __init__(self, robot, controller, q0: np.ndarray | None = None,
-                 config: LoopConfig | None = None, plant: Plant | None = None) -> None:
+                 config: LoopConfig | None = None, plant: Plant | None = None,
+                 collisions: CollisionAvoidance | None = None) -> None:
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
@@ -283,6 +296,8 @@ class TeleopLoop:
             raise ValueError(f"config must be a LoopConfig, got {type(config).__name__}")
         self.config = config or LoopConfig()
         self.plant = plant
+        #: the minimum distance's meter and its counts (None: not measured)
+        self.distance_meter = None if collisions is None else DistanceMeter(collisions)
         self.ee_frame_ids: tuple[int, ...] = tuple(self.model.getFrameId(name)
                                                    for name in robot.ee_frames)
         self.ee_frame_id = self.ee_frame_ids[0]
@@ -298,6 +313,8 @@ class TeleopLoop:
         self._labels_key: tuple[int, ...] = ()
         self._labels: tuple[str, ...] = ()
         self._names: tuple[str, ...] = ()
+        if self.distance_meter is not None:
+            self.distance_meter.set_constraints(self.constraints)
 
     # -- state -------------------------------------------------------------------------
 
@@ -307,6 +324,8 @@ class TeleopLoop:
 
     def set_constraints(self, constraints: Sequence[Constraint]) -> None:
         self.controller.set_constraints(list(constraints))
+        if self.distance_meter is not None:
+            self.distance_meter.set_constraints(self.constraints)
 
     def ee_placement(self, q: np.ndarray | None = None) -> pin.SE3:
         """World placement of the first EE at ``q`` (default: the current state)."""
@@ -330,6 +349,8 @@ class TeleopLoop:
         self.last_qd = np.zeros(self.model.nv)
         if self.plant is not None:
             self.plant.reset(self.q)
+        if self.distance_meter is not None:
+            self.distance_meter.reset()
 
     # -- one tick ----------------------------------------------------------------------
 
@@ -474,6 +495,8 @@ class TeleopLoop:
                                        for ee, target in zip(placements, step.targets)])
         violation = float(max(0.0, np.max(self.q - model.upperPositionLimit),
                               np.max(model.lowerPositionLimit - self.q)))
+        distance = (None if self.distance_meter is None
+                    else self.distance_meter.measure(model, data, self.q))
         return StepRecord(
             t=self.t, constraint_error=error, constraint_velocity_residual=step.residual,
             barrier_penetration=penetration, ee_position_errors=position_errors,
@@ -489,6 +512,8 @@ class TeleopLoop:
             constraint_errors=errors, constraint_names=self._names,
             status=step.status, message=step.message,
             plant=None if self.plant is None else self.plant.measures(),
+            minimum_distance=math.inf if distance is None else distance.minimum_distance,
+            closest_pair="" if distance is None else distance.closest_pair,
         )
 
     def _row_labels(self) -> tuple[str, ...]:

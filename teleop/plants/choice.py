@@ -64,14 +64,16 @@ class PlantChoice:
         """A plant with a body: port forces, torques and saturation are measured."""
         return self.kind == "mujoco"
 
-    def make(self, robot, dt: float, imperfections: Imperfections | None = None):
+    def make(self, robot, dt: float, imperfections: Imperfections | None = None,
+             collisions=None):
         """A fresh plant for one run (a ``teleop.loop.Plant``), or None for the perfect
-        kinematic robot."""
+        kinematic robot; the physics plant simulates the contacts of ``collisions`` (a
+        ``CollisionAvoidance`` of its own, or None)."""
         imperfections = imperfections or Imperfections()
         if self.kind == "kinematic":
             return None if imperfections.perfect else imperfections.plant(robot.model, dt)
         imperfections.check_period(dt)
-        return MujocoPlant(robot, dt, self.settings, imperfections)
+        return MujocoPlant(robot, dt, self.settings, imperfections, collisions)
 
     def apply_wall(self, constraints: Sequence[Constraint]) -> None:
         """Give every constraint with a wall (a hole's port) :attr:`wall_stiffness`."""

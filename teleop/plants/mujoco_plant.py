@@ -10,7 +10,10 @@ servo with velocity feed-forward and gravity compensation of the modelled robot,
 clipped to the joint's effort limit, at ``h = dt / substeps`` (2 kHz or faster under a
 1 kHz loop). Every hole puts a port into the scene: the abdominal wall pushes on the
 instrument with the hole's own spring-damper (:meth:`constraints.Hole.wall_force`),
-applied at the instrument's point nearest the port centre.
+applied at the instrument's point nearest the port centre. With a collision avoidance,
+the robot's collision geometry and the obstacles are in the scene, in contact in the
+avoidance's pairs (:mod:`teleop.plants.contact_geometry`), and each period counts the
+contacts (docs/design.md section 18.6).
 """
 
 from __future__ import annotations
@@ -26,6 +29,9 @@ import pinocchio as pin
 from constraints import Constraint
 from controllers.mujoco_model import joint_map, mujoco_spec, site_name
 
+from constraints.collision import CollisionAvoidance
+
+from .contact_geometry import add_contact_geometry
 from .imperfect import Imperfections, ImperfectPlant
 from .settings import PlantSettings
 
@@ -45,12 +51,17 @@ class PlantMeasures:
     torque_ratio : max over joints of |drive torque| / effort limit (gravity compensation
         included) at the period's last physics step.
     saturated : some drive was held at its effort limit at that step.
+    contacts : the robot's contacts at that step in the collision avoidance's pairs
+        (robot-robot, robot-obstacle); 0 without collision avoidance.
+    contact_depth : the deepest of them (m), 0 without contact.
     """
 
     port_forces: np.ndarray
     port_displacements: np.ndarray
     torque_ratio: float
     saturated: bool
+    contacts: int = 0
+    contact_depth: float = 0.0
 
     @property
     def port_force(self) -> float:
@@ -69,10 +80,14 @@ class MujocoPlant:
     settings : :class:`PlantSettings` (defaults documented there).
     imperfections : encoder noise, latency and joint lag on top of the physics
         (:class:`Imperfections`); the lag filters the velocity the drives receive.
+    collisions : a collision avoidance on ``robot``: its geometry, obstacles and pairs go
+        into the simulation (:func:`~teleop.plants.contact_geometry.add_contact_geometry`);
+        None: the robot has no collision geometry (nothing touches).
     """
 
     def __init__(self, robot, dt: float, settings: PlantSettings | None = None,
-                 imperfections: Imperfections | None = None) -> None:
+                 imperfections: Imperfections | None = None,
+                 collisions: CollisionAvoidance | None = None) -> None:
         if settings is not None and not isinstance(settings, PlantSettings):
             raise ValueError(f"settings must be PlantSettings, got {type(settings).__name__}")
         self.settings = settings or PlantSettings()
@@ -82,7 +97,7 @@ class MujocoPlant:
         #: the imperfect robot's noise, latency and lag (None: a perfect interface)
         self.shaping: ImperfectPlant | None = (imperfections or Imperfections()).plant(
             robot.model, dt)
-        self.mj_model = self._compile(robot)
+        self.mj_model = self._compile(robot, collisions)
         self.mj_data = mujoco.MjData(self.mj_model)
         self.joints = joint_map(self.model, self.mj_model)
         self._q_pin = np.empty(self.model.nq)
@@ -102,10 +117,10 @@ class MujocoPlant:
         """Every frame a constraint or an EE can sit on (all but the universe)."""
         return list(dict.fromkeys(frame.name for frame in robot.model.frames[1:]))
 
-    def _compile(self, robot) -> mujoco.MjModel:
+    def _compile(self, robot, collisions: CollisionAvoidance | None) -> mujoco.MjModel:
         """The URDF's bodies, the drives' rotor inertia, damping and friction, two
         actuators per degree of freedom (the servo, :meth:`_set_servo_gains`), the payload
-        at each EE."""
+        at each EE, the collision geometry with ``collisions``."""
         settings = self.settings
         spec = mujoco_spec(robot.model, robot.urdf_path.read_text(), self._site_frames(robot),
                            robot.locked_joints)
@@ -140,6 +155,8 @@ class MujocoPlant:
                 payload.ipos = [0.0, 0.0, 0.0]  # its mass at the EE (not MuJoCo's default)
                 payload.inertia = [settings.payload * _PAYLOAD_INERTIA_PER_KG] * 3
                 payload.gravcomp = 0.0  # unknown to the drives
+        if collisions is not None:
+            add_contact_geometry(spec, robot, collisions)
         return spec.compile()
 
     @staticmethod
@@ -228,7 +245,9 @@ class MujocoPlant:
         torque = np.abs(data.qfrc_actuator) / self.effort_limit
         ratio = float(np.max(torque))
         saturated = ratio >= 1.0 - 1e-12
-        self.last = PlantMeasures(forces, displacements, ratio, saturated)
+        depths = data.contact.dist[:data.ncon]
+        self.last = PlantMeasures(forces, displacements, ratio, saturated, int(data.ncon),
+                                  float(max(0.0, -np.min(depths, initial=0.0))))
         self.joints.q_to_pinocchio(data.qpos, self._q_pin)
         return pin.difference(self.model, q, self._q_pin) / self.dt
 
