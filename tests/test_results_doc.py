@@ -84,7 +84,9 @@ def test_the_tables_carry_the_numbers_of_the_run(small_run):
             assert abs(shown - median) <= (0.5 if median >= 100 else 0.05), (robot, spec)
 
     timings = table(lines, "problem")
-    assert len(timings) == len(bench) == 6
+    # the two robots' holes, then the dual robot's arms close without and with collision
+    # avoidance (sda10f_dual/close, sda10f_dual/collisions): four problems, three controllers
+    assert len(timings) == len(bench) == 12
     for row, timing in zip(timings, bench):
         assert row["problem"] == timing["robot"]
         assert row["controller"] == f"`{timing['controller']}`"
