@@ -92,7 +92,8 @@ def test_every_subcommand_help_shows_each_option_default(command):
                and not isinstance(a, (argparse._HelpAction, argparse._VersionAction))]
     for action in options:
         flag = action.option_strings[-1]
-        (block,) = [b for b in blocks if re.match(rf"{re.escape(flag)}(?![\w-])", b)]
+        # the block starts with the action's flags ("--collisions, --no-collisions")
+        (block,) = [b for b in blocks if re.match(rf"(?:-[\w-]+, )*{re.escape(flag)}(?![\w-])", b)]
         if action.required:
             continue  # no default to show
         assert "(default" in block, f"{command} {flag}: no default in {block!r}"

@@ -305,3 +305,17 @@ def test_compare_on_the_physics_plant_reports_contacts():
     metrics = document["controllers"]["cjm"]
     assert metrics["contact_steps"] == 0  # 2 cm apart, 50 ms of slow motion
     assert metrics["contact_depth_max_m"] == 0.0
+
+
+def test_the_damper_options_state_the_avoidance_defaults():
+    """The CLIs' help (written without importing coal, to stay fast) says the defaults
+    CollisionAvoidance has."""
+    from constraints.collision import (DEFAULT_APPROACH_SPEED, DEFAULT_DETECTION_DISTANCE,
+                                       DEFAULT_SAFETY_DISTANCE)
+    from teleop.cli.arguments import DAMPER_OPTIONS
+
+    defaults = {"safety_distance": 1e3 * DEFAULT_SAFETY_DISTANCE,
+                "detection_distance": 1e3 * DEFAULT_DETECTION_DISTANCE,
+                "approach_speed": DEFAULT_APPROACH_SPEED}
+    for _, name, _, help_text in DAMPER_OPTIONS:
+        assert f"(default: {defaults[name]:g})" in help_text

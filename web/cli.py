@@ -19,9 +19,8 @@ import time
 import warnings
 from typing import Sequence
 
-from constraints.collision import (DEFAULT_APPROACH_SPEED, DEFAULT_DETECTION_DISTANCE,
-                                   DEFAULT_SAFETY_DISTANCE)
-from teleop.cli.arguments import bounded, csv_list, numbers, one_line, positive
+from teleop.cli.arguments import (add_damper_options, bounded, csv_list, damper_settings,
+                                  numbers, one_line, positive)
 from teleop.cli.commands import Command
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.limits import MAX_WALL_STIFFNESS
@@ -32,7 +31,6 @@ from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, 
     resolve_host
 
 #: a finite number >= 0
-non_negative = bounded(float, 0.0)
 
 SUMMARY = "browser teleoperation UI (viser) of a built-in robot or any URDF"
 
@@ -99,7 +97,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             "mujoco")
 
     collisions = parser.add_argument_group("collision avoidance (docs/design.md section 18)")
-    collisions.add_argument("--collisions", action=argparse.BooleanOptionalAction, default=True,
+    collisions.add_argument("--collisions", action=argparse.BooleanOptionalAction, default=None,
                             help="the controllers keep the robot's link pairs and the obstacles "
                                  "placed in the page at least the safety distance apart "
                                  "(default: on; a scene's own setting wins)")
@@ -107,16 +105,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             default=None,
                             help="check the robot's links against each other, not only against "
                                  "the obstacles (default: on for a robot with several arms)")
-    collisions.add_argument("--safety-distance", type=non_negative, metavar="MM",
-                            help="d_s: no pair comes closer than this, in mm (default: "
-                                 f"{1e3 * DEFAULT_SAFETY_DISTANCE:g})")
-    collisions.add_argument("--detection-distance", type=positive, metavar="MM",
-                            help="d_i: a pair closer than this gets its avoidance row, in mm, "
-                                 "more than d_s (default: "
-                                 f"{1e3 * DEFAULT_DETECTION_DISTANCE:g})")
-    collisions.add_argument("--approach-speed", type=positive, metavar="M_PER_S",
-                            help="xi: how fast a pair may close at d_i, in m/s (0 at d_s; "
-                                 f"default: {DEFAULT_APPROACH_SPEED:g})")
+    add_damper_options(collisions)
 
     files = parser.add_argument_group("files (the page reads and writes only these folders)")
     files.add_argument("--scene-dir", default="scenes", metavar="DIR",
@@ -217,23 +206,14 @@ def _plant(args: argparse.Namespace) -> dict:
     return {"plant": args.plant, "plant_settings": settings, "wall_stiffness": stiffness}
 
 
-#: the collision options, by the keyword of the avoidance each sets, and its unit (to SI)
-COLLISION_OPTIONS = {"self_collision": ("--self-collision", None),
-                     "safety_distance": ("--safety-distance", 1e-3),
-                     "detection_distance": ("--detection-distance", 1e-3),
-                     "approach_speed": ("--approach-speed", 1.0)}
-
-
 def _collisions(args: argparse.Namespace) -> dict:
     """The collision keywords of :func:`web.ui.run_server` the options ask for, in SI
     units (values the avoidance cannot take together, such as d_i <= d_s or a damper
     unstable at --rate, are its ``ValueError``: one line, exit 2)."""
-    settings = {}
-    for name, (_, unit) in COLLISION_OPTIONS.items():
-        value = getattr(args, name)
-        if value is not None:
-            settings[name] = value if unit is None else unit * value
-    return {"collisions": args.collisions, "collision_settings": settings}
+    settings = {name: value for name, (_, value) in damper_settings(args).items()}
+    if args.self_collision is not None:
+        settings["self_collision"] = args.self_collision
+    return {"collisions": args.collisions is not False, "collision_settings": settings}
 
 
 def run(args: argparse.Namespace, prog: str) -> int:

@@ -106,3 +106,29 @@ def bounded(kind: type[float] | type[int], minimum: float, maximum: float | None
 
 #: A finite number > 0.
 positive = bounded(float, 0.0, inclusive_minimum=False)
+
+
+#: The collision damper's options: (option, the CollisionAvoidance field, factor to SI,
+#: help) (docs/design.md section 18.3)
+DAMPER_OPTIONS = (
+    ("--safety-distance", "safety_distance", 1e-3,
+     "d_s: the distance every pair is kept apart, mm in [0, 1000] (default: 5)"),
+    ("--detection-distance", "detection_distance", 1e-3,
+     "d_i > d_s: pairs closer than this get their row, mm in [0, 1000] (default: 50)"),
+    ("--approach-speed", "approach_speed", 1.0,
+     "xi: how fast a pair may close at d_i (0 at d_s), m/s in (0, 10] (default: 0.5)"))
+millimetres = bounded(float, 0.0, 1000.0, unit="mm")
+speed = bounded(float, 0.0, 10.0, inclusive_minimum=False, unit="m/s")
+
+
+def add_damper_options(group: argparse._ActionsContainer) -> None:
+    """``--safety-distance``, ``--detection-distance``, ``--approach-speed`` (left out: None)."""
+    for option, _, factor, help_text in DAMPER_OPTIONS:
+        group.add_argument(option, type=millimetres if factor == 1e-3 else speed,
+                           metavar="MM" if factor == 1e-3 else "M_PER_S", help=help_text)
+
+
+def damper_settings(args: argparse.Namespace) -> dict[str, tuple[str, float]]:
+    """The damper options given: ``CollisionAvoidance`` field -> (option, value in SI)."""
+    return {name: (option, getattr(args, name) * factor)
+            for option, name, factor, _ in DAMPER_OPTIONS if getattr(args, name) is not None}

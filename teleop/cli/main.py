@@ -22,7 +22,8 @@ from teleop.limits import (
 )
 from teleop.robots import BUILTIN_ROBOTS
 
-from .arguments import ArgumentParser, HelpFormatter, bounded, csv_list, one_line, sentence
+from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bounded, csv_list,
+                        damper_settings, one_line, sentence)
 from .commands import Command, registered_commands
 
 PACKAGE = "cjm-teleop"
@@ -52,13 +53,6 @@ payload = bounded(float, 0.0, 100.0, unit="kg")
 friction = bounded(float, 0.0, 1e4)
 physics_rate = bounded(float, 2000.0, 1e5, unit="Hz")
 servo_bandwidth = bounded(float, 0.0, 200.0, inclusive_minimum=False, unit="Hz")
-millimetres = bounded(float, 0.0, 1000.0, unit="mm")
-approach_speed = bounded(float, 0.0, 10.0, inclusive_minimum=False, unit="m/s")
-
-#: The collision damper's options: (option, the CollisionAvoidance field, factor to SI).
-COLLISION_OPTIONS = (("--safety-distance", "safety_distance", 1e-3),
-                     ("--detection-distance", "detection_distance", 1e-3),
-                     ("--approach-speed", "approach_speed", 1.0))
 
 #: The physics plant's options: (option, the PlantSettings field) (docs/cli.md).
 PLANT_OPTIONS = (("--payload", "payload"), ("--coulomb-friction", "coulomb_friction"),
@@ -153,15 +147,7 @@ def _add_collision_options(parser: argparse.ArgumentParser, source: str) -> None
     switch.add_argument("--no-collisions", dest="collisions", action="store_false",
                         default=None, help=f"off, also for a {source} that declares it "
                         f"(default: what the {source} declares)")
-    group.add_argument("--safety-distance", type=millimetres, metavar="MM",
-                       help="d_s: the distance every pair is kept apart, in [0, 1000] "
-                       "(default: 5)")
-    group.add_argument("--detection-distance", type=millimetres, metavar="MM",
-                       help="d_i > d_s: pairs closer than this get their row, in [0, 1000] "
-                       "(default: 50)")
-    group.add_argument("--approach-speed", type=approach_speed, metavar="M_PER_S",
-                       help="xi: how fast a pair may approach at d_i, in (0, 10] "
-                       "(default: 0.5)")
+    add_damper_options(group)
 
 
 def collision_choice(args: argparse.Namespace, plan):
@@ -175,18 +161,17 @@ def collision_choice(args: argparse.Namespace, plan):
     from constraints.collision import CollisionAvoidance
 
     enabled = plan.collisions is not None if args.collisions is None else args.collisions
-    given = [(option, name, getattr(args, name) * factor)
-             for option, name, factor in COLLISION_OPTIONS if getattr(args, name) is not None]
+    given = damper_settings(args)
     if not enabled:
         if given:
-            raise ValueError(f"{', '.join(option for option, _, _ in given)} "
+            raise ValueError(f"{', '.join(option for option, _ in given.values())} "
                              f"need{'s' * (len(given) == 1)} collision avoidance "
                              f"(--collisions; {plan.name} declares "
                              f"{'it' if plan.collisions is not None else 'none'})")
         return replace(plan, collisions=None)
     settings = dict(plan.collisions if plan.collisions is not None
                     else CollisionAvoidance(plan.robot).to_dict())
-    settings.update({name: value for _, name, value in given})
+    settings.update({name: value for name, (_, value) in given.items()})
     try:
         CollisionAvoidance.from_dict(plan.robot, settings)
     except ValueError as error:
