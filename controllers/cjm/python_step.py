@@ -3,8 +3,7 @@
 :class:`PythonStep` runs one step of :class:`controllers.cjm.controller.CJMController`
 from its :class:`~controllers.cjm.step_setup.StepSetup`: the kinematics, the equality
 rows, the barriers' and the collision rows' active set, the analytical or general form,
-saturation in the null
-space when the command leaves the joint box, the clip guard, and a
+saturation in the null space when the command leaves the joint box, the clip guard, and a
 :class:`~controllers.cjm.report.StepReport` of what happened. The compiled step
 (:mod:`controllers.cjm.compiled`) does the same in C++.
 """
