@@ -52,6 +52,7 @@ class FuzzResult:
     box_violations: int = 0        # commands outside the joint box (beyond its test's slack)
     non_finite: int = 0
     statuses: dict[str, int] = field(default_factory=dict)
+    failures: dict[str, int] = field(default_factory=dict)  # failed steps by their message
     seconds: float = 0.0
 
 
@@ -129,6 +130,9 @@ def fuzz(controller_spec: str, runs: int, steps: int = 400, seed: int = 0) -> Fu
             qd = controller.solve(q, steering_twist(robot, data, targets))
             status = controller.info.status.value
             result.statuses[status] = result.statuses.get(status, 0) + 1
+            if status == "failed":
+                reason = controller.info.message[:80]
+                result.failures[reason] = result.failures.get(reason, 0) + 1
             if not np.all(np.isfinite(qd)):
                 result.non_finite += 1
                 break
@@ -159,6 +163,8 @@ def format_results(results: list[FuzzResult]) -> str:
         lines.append(f"{r.controller:<14}{r.runs:>6}{r.steps:>9}{1e3 * r.minimum_distance:>13.3f}"
                      f"{r.penetrations:>6}{r.below_safety:>11}{1e6 * r.hole_error_max:>9.3f}"
                      f"{r.box_violations:>5}{r.seconds:>8.1f}  {statuses}")
+        lines += [f"    failed {count}: {reason}" for reason, count in
+                  sorted(r.failures.items(), key=lambda item: -item[1])[:3]]
     return "\n".join(lines)
 
 
