@@ -187,7 +187,7 @@ def collision_rounding_bound(controller: CJMController, q: np.ndarray) -> float:
     report = controller.report
     held = [c.rows(model, data, f)[0] for c, f in zip(controller.constraints, controller.constraint_frames)
             if c.is_equality]
-    held += [report.collision.rows[report.active_pairs]] if report.active_pairs else []
+    held += [report.collision.rows[list(report.active_pairs)]] if report.active_pairs else []
     setup = controller.setup
     stacked = np.vstack([pin.getFrameJacobian(model, data, f, pin.LOCAL) for f in controller.ee_frame_ids])
     jacobian = setup.task_scale[:, None] * stacked[setup.task_entries]
