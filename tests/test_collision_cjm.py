@@ -316,3 +316,23 @@ def test_collisions_can_be_set_and_removed(dual, apart):
     assert controller.info.minimum_distance < controller.collisions.detection_distance
     controller.set_collisions(None)
     np.testing.assert_array_equal(controller.solve(apart, twist), without)
+
+
+def test_the_compiled_step_grows_its_buffer_for_more_collision_rows(dual, apart):
+    """More rows near than the buffer holds (obstacles added after the build): the C++ step
+    is built again with room for them and agrees with the Python step."""
+    from controllers.cjm.compiled import CompiledStep
+
+    collisions = CollisionAvoidance(dual)
+    q = drive(dual, apart, 7)
+    python = CJMController(dual, backend="python", collisions=collisions, twist_weight=TRANSLATION)
+    compiled = CJMController(dual, backend="compiled", collisions=collisions, twist_weight=TRANSLATION)
+    compiled.step = CompiledStep(compiled.setup, compiled.data, pair_capacity=0)
+    twist = push_together(dual, q, 0.5)
+    expected, actual = python.solve(q, twist), compiled.solve(q, twist)
+    rows = rows_at(collisions, dual.model, q)
+    assert rows.size > 0  # rows to hold where the buffer had room for none
+    assert python.info.active_pairs and compiled.info.active_pairs == python.info.active_pairs
+    np.testing.assert_allclose(actual, expected, rtol=0,
+                               atol=collision_rounding_bound(python, q) * (1.0 + np.max(np.abs(expected))))
+    assert compiled.step.pair_capacity >= rows.size

@@ -213,7 +213,7 @@ class CompiledStep:
         model, data = self.setup.model, self.data
         pin.computeJointJacobians(model, data, q)
         pairs = self._collisions.rows(model, data)
-        if pairs.size > self._step.pair_capacity:  # obstacles added since the build
+        if pairs.size > self.pair_capacity:  # obstacles added since the build
             self._grow(pairs.size)
         self._pair_rows[:pairs.size] = pairs.rows
         self._pair_lower[:pairs.size] = pairs.lower
@@ -230,6 +230,11 @@ class CompiledStep:
         count = self._step.active_pair_count
         return qd, self._step_report(self._report.tolist(), paper_form)._replace(
             collision=pairs, active_pairs=tuple(self._active_pairs[:count].tolist()))
+
+    @property
+    def pair_capacity(self) -> int:
+        """How many collision rows the C++ step's buffer takes."""
+        return self._step.pair_capacity
 
     def _grow(self, pair_capacity: int) -> None:
         """Build the C++ step again with room for ``pair_capacity`` collision rows, from

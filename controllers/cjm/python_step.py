@@ -44,7 +44,8 @@ class PythonStep:
         self._active: list[int] = []
         self._equalities, self._barriers = setup.equalities, setup.barriers
         #: the step's collision rows (empty without collision avoidance), the ones held
-        #: at their bound, and the bounds they are held at (lowered in a conflict)
+        #: at their bound, and the bounds they are held at (in a conflict, what the
+        #: equality rows leave them: docs/design.md section 18.4)
         self._pairs = CollisionRows.empty(setup.model.nv)
         self._active_pairs: list[int] = []
         self._pair_rhs = self._pairs.lower
@@ -216,7 +217,7 @@ class PythonStep:
         rows, rows_rhs = self._held_rows(active)
         qd = solve_general(rows, rows_rhs, ee_jacobian, twist, setup.policy,
                            self._posture_velocity(q), report, pairs)
-        if pairs:  # the bounds a conflict lowered stay lowered for the rest of the step
+        if pairs:  # the bounds a conflict set stay set for the rest of the step
             self._pair_rhs[pairs] = rows_rhs[len(rows_rhs) - len(pairs):]
         return qd
 
