@@ -338,7 +338,7 @@ def push_arms(controller_type, solver: str, steps: int = 300, dt: float = 1e-3):
 
 @pytest.mark.parametrize("controller_type,solver", [
     (QPController, "proxqp"), (QPController, "daqp"), (QPController, "osqp"),
-    (MinkController, "daqp")])
+    (MinkController, "proxqp"), (MinkController, "daqp"), (MinkController, "osqp")])
 def test_trocars_held_while_the_arms_are_pushed_together(controller_type, solver):
     """mink, the outside peer, holds the same bound: its limit with ``gain = k dt^2`` is
     the damper above ``d_s`` (docs/design.md 18.5)."""
