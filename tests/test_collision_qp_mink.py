@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import functools
+import warnings
 
 import mujoco
 import numpy as np
@@ -23,6 +24,7 @@ import pinocchio as pin
 import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
+from example_robots import EXAMPLE_ARMS
 from strategies import unit3
 
 from constraints import Hole, PointLock
@@ -68,6 +70,13 @@ def sda10f():
 @functools.cache
 def dual():
     return load_robot("sda10f_dual")
+
+
+@functools.cache
+def ur5():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # meshes it cannot draw: not needed here
+        return EXAMPLE_ARMS["ur5"].load()
 
 
 def kinematics(robot, q: np.ndarray) -> pin.Data:
@@ -251,6 +260,34 @@ def test_mink_holds_a_pair_inside_the_safety_distance_still(offset, direction, g
     assert "arm_link_4_u | sphere" in controller.info.active_pairs
 
 
+def mujoco_and_coal_distances(controller: MinkController, collisions: CollisionAvoidance,
+                              robot, q: np.ndarray) -> tuple[dict[str, float], dict[str, float]]:
+    """Each pair's distance (its nearest geometries) from mink's MuJoCo model at the last
+    step and from the avoidance's coal shapes at ``q``."""
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, q)
+    coal_distances: dict[str, float] = {}
+    for name, distance in collisions.distances(robot.model, data):
+        coal_distances[name] = min(distance, coal_distances.get(name, np.inf))
+    limit = controller.collision_limit
+    mj_distances: dict[str, float] = {}
+    fromto = np.zeros(6)
+    for (first, second), name in zip(limit.geom_id_pairs, limit.names):
+        distance = mujoco.mj_geomDistance(controller.mj_model, controller.configuration.data,
+                                          first, second, 10.0, fromto)
+        mj_distances[name] = min(distance, mj_distances.get(name, np.inf))
+    return mj_distances, coal_distances
+
+
+def assert_same_distances(mj_distances: dict[str, float], coal_distances: dict[str, float]):
+    assert set(mj_distances) == set(coal_distances)
+    for name, distance in coal_distances.items():
+        if distance > 0.0:
+            assert mj_distances[name] == pytest.approx(distance, abs=SHAPE_AGREEMENT), name
+        else:  # penetration depths are each library's own: only the sign is shared
+            assert mj_distances[name] <= SHAPE_AGREEMENT, name
+
+
 @settings(max_examples=10, deadline=None)
 @given(offset=st.lists(st.floats(-0.4, 0.4), min_size=15, max_size=15).map(np.array))
 def test_mink_geoms_are_the_avoidance_shapes(offset):
@@ -266,24 +303,20 @@ def test_mink_geoms_are_the_avoidance_shapes(offset):
     for move in ([0.0, 0.0, 0.0], [0.05, -0.1, 0.02]):
         box.move_to(box.position + move)
         controller.solve(q, np.zeros(12))
-        data = robot.model.createData()
-        pin.forwardKinematics(robot.model, data, q)
-        coal_distances: dict[str, float] = {}
-        for name, distance in collisions.distances(robot.model, data):
-            coal_distances[name] = min(distance, coal_distances.get(name, np.inf))
-        limit = controller.collision_limit
-        mj_distances: dict[str, float] = {}
-        fromto = np.zeros(6)
-        for (first, second), name in zip(limit.geom_id_pairs, limit.names):
-            distance = mujoco.mj_geomDistance(controller.mj_model, controller.configuration.data,
-                                              first, second, 10.0, fromto)
-            mj_distances[name] = min(distance, mj_distances.get(name, np.inf))
-        assert set(mj_distances) == set(coal_distances)
-        for name, distance in coal_distances.items():
-            if distance > 0.0:
-                assert mj_distances[name] == pytest.approx(distance, abs=SHAPE_AGREEMENT), name
-            else:  # penetration depths are each library's own: only the sign is shared
-                assert mj_distances[name] <= SHAPE_AGREEMENT, name
+        assert_same_distances(*mujoco_and_coal_distances(controller, collisions, robot, q))
+
+
+@settings(max_examples=5, deadline=None)
+@given(offset=st.lists(st.floats(-0.5, 0.5), min_size=6, max_size=6).map(np.array))
+def test_mink_mesh_geoms_are_the_convex_hulls(offset):
+    """A robot with mesh collision geometry (the UR5 of example-robot-data): the
+    avoidance's convex hulls as MuJoCo meshes give the same distances."""
+    robot = ur5()
+    collisions = CollisionAvoidance(robot, [Sphere([0.4, 0.2, 0.3], 0.05)])
+    controller = MinkController(robot, collisions=collisions)
+    q = robot.q_home + offset
+    controller.solve(q, np.zeros(6))
+    assert_same_distances(*mujoco_and_coal_distances(controller, collisions, robot, q))
 
 
 # -- both trocars held while the arms are pushed into each other ---------------------------
