@@ -260,6 +260,37 @@ def test_mink_holds_a_pair_inside_the_safety_distance_still(offset, direction, g
     assert "arm_link_4_u | sphere" in controller.info.active_pairs
 
 
+@pytest.mark.parametrize("solver", ["proxqp", "daqp", "osqp"])
+@settings(max_examples=10, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@given(offset=configurations, direction=unit3, gap=st.floats(0.001, 0.004))
+def test_mink_pair_in_conflict_with_a_pulling_lock_is_degraded(solver, offset, direction, gap):
+    """The lock's target 1 mm towards the sphere: its row pulls the link in, which mink's
+    own bound (``d_dot >= 0`` inside ``d_s``) refuses. mink's step falls back on the
+    least-residual stage (the avoidance's rows), which leaves the pair's row and the lock
+    the same miss (``min r_1^2 + r_2^2`` with ``r_1 + r_2`` fixed; to mink's
+    ``equality_tolerance``, to which it holds the held rows), and names the pair."""
+    robot, q, lock, collisions, rows, target = locked_elbow_against_a_sphere(offset, direction,
+                                                                             gap)
+    assume(len(target) == 1)
+    others = [i for i in range(rows.size) if i != target[0]]
+    assume(np.all(rows.lower[others] < 0.0))
+    pulling = PointLock(lock.link, lock.link_point, lock.target + 1e-3 * direction)
+    controller = MinkController(robot, [pulling], solver=solver, collisions=collisions,
+                                time_budget=None)
+    qd = controller.solve(q, np.zeros(6))
+    violation = rows.violation(qd)
+    assume(np.all(violation[others] < -1e-6))
+    A, b = pulling.rows(robot.model, kinematics(robot, q), robot.model.getFrameId(lock.link))
+    assert violation[target[0]] > 0.0
+    assert violation[target[0]] == pytest.approx(np.linalg.norm(A @ qd - b),
+                                                 abs=controller.equality_tolerance)
+    info = controller.info
+    assert info.status is StepStatus.CONSTRAINT_DEGRADED
+    assert "collision pair arm_link_4_u | sphere" in info.message
+    assert "cannot be kept apart" in info.message
+
+
 def mujoco_and_coal_distances(controller: MinkController, collisions: CollisionAvoidance,
                               robot, q: np.ndarray) -> tuple[dict[str, float], dict[str, float]]:
     """Each pair's distance (its nearest geometries) from mink's MuJoCo model at the last
