@@ -6,11 +6,15 @@
   below the damper's bound; the step names the pair.
 * With one collision row active and nothing else binding, the QP's command is the
   null-space solution written here: ``qd = [J_e; c]^+ [V; l]``.
-* mink's MuJoCo geoms are the avoidance's shapes: ``mj_geomDistance`` over each pair's
-  geoms equals the avoidance's coal distance.
+* A pair that a ``PointLock`` keeps from moving out: the least-residual stage leaves the
+  row and the lock equal misses, the step is ``constraint_degraded`` naming the pair (the
+  QP; mink, whose own bound inside ``d_s`` is 0, once the lock pulls the link in).
+* mink's MuJoCo geoms are the avoidance's shapes (primitives and convex hulls):
+  ``mj_geomDistance`` over each pair's geoms equals the avoidance's coal distance, and
+  they follow the obstacles as they move, come and go.
 * Both trocars held to 1 um while the arms of ``sda10f_dual`` are pushed into each other
   (``q = pin.integrate(model, q, qd dt)``): the true minimum distance stays above
-  ``d_s - 0.5 mm`` for the three QP backends and for mink, the step names the pair.
+  ``d_s - 0.5 mm`` for the QP and mink on three backends, the step names the pair.
 """
 
 from __future__ import annotations
@@ -23,8 +27,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
-from hypothesis import strategies as st
 from example_robots import EXAMPLE_ARMS
+from hypothesis import strategies as st
 from strategies import unit3
 
 from constraints import Hole, PointLock
@@ -40,8 +44,8 @@ ROW_TOLERANCE = {"proxqp": 1e-9, "daqp": 1e-9, "osqp": 1e-6}
 #: 8e-8 (its tolerance, 1e-11 at most, over the stage's small curvature), daqp 3e-17,
 #: OSQP 3e-11 (polished); OSQP gets ten times its eps_abs all the same
 SPLIT_TOLERANCE = {"proxqp": 1e-6, "daqp": 1e-9, "osqp": 1e-6}
-#: central-difference step (s) and the error it leaves on a distance's rate (m/s):
-#: coal's distances are exact to rounding for these primitives, ~1e-12 m over 2 h
+#: central-difference step (s) and the error allowed on a distance's rate (m/s): the
+#: truncation, |qd|^2 h^2 over the shapes' radii, is below 1e-7 m/s at |qd| ~ 3 rad/s
 STEP, RATE_ERROR = 1e-4, 1e-6
 #: agreement of the QP with the null-space solution (rad/s), as tests/test_qp_priorities.py
 AGREEMENT = 1e-6
