@@ -45,7 +45,7 @@ ROW_TOLERANCE = {"proxqp": 1e-9, "daqp": 1e-9, "osqp": 1e-6}
 #: OSQP 3e-11 (polished); OSQP gets ten times its eps_abs all the same
 SPLIT_TOLERANCE = {"proxqp": 1e-6, "daqp": 1e-9, "osqp": 1e-6}
 #: central-difference step (s) and the error allowed on a distance's rate (m/s): the
-#: truncation, |qd|^2 h^2 over the shapes' radii, is below 1e-7 m/s at |qd| ~ 3 rad/s
+#: truncation (h^2 d_ddd / 6) and the rounding (eps d / h) are orders below it
 STEP, RATE_ERROR = 1e-4, 1e-6
 #: agreement of the QP with the null-space solution (rad/s), as tests/test_qp_priorities.py
 AGREEMENT = 1e-6
