@@ -51,6 +51,7 @@ class MinkController(GuardedController):
         s.t.    A dq = b dt                         ConstraintTask per equality (hard)
                 -A_b dq <= -b_b dt                  BarrierLimit per barrier
                 lower dt <= dq <= upper dt          JointBoxLimit (JointBounds.box(q))
+                -d_dot dt <= k dt^2 (d - d_s) / dt  CollisionPairsLimit, per pair within d_i
         qd = dq / dt                                (solve_ik's return value)
 
     **Why this tracks V exactly.** mink's frame error is ``e = log(T_e^-1 T_t) = V dt``
@@ -95,6 +96,11 @@ class MinkController(GuardedController):
         a fixed base or on a planar root joint (:func:`build_mujoco_model`).
     constraints, strict, acceleration_limit : see :class:`controllers.base.Controller`
         (the acceleration box is :class:`controllers.mink.acceleration_limit.AccelerationLimit`).
+    collisions : the pairs kept apart (:class:`constraints.collision.CollisionAvoidance`),
+        posed to mink as its own ``CollisionAvoidanceLimit`` on geoms of the same shapes
+        in its MuJoCo model, ``gain = k dt^2`` (the damper's rate ``k``), obstacles as
+        world geoms posed each step (:mod:`controllers.mink.collision_limit`,
+        docs/design.md 18.5); ``info``'s distances are the avoidance's own.
     solver : any qpsolvers backend mink accepts: ``"daqp"`` (default), ``"proxqp"``,
         ``"osqp"``, ...
     dt : control period (s): mink's integration step.
