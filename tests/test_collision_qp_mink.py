@@ -19,9 +19,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import warnings
 
+import coal
 import mujoco
 import numpy as np
 import pinocchio as pin
@@ -200,15 +202,31 @@ def test_one_active_row_is_the_null_space_solution(solver, offset, direction, ga
     assert controller.info.active_pairs == rows.pairs
 
 
+#: radius (m) of the elbow's joint housing (the sphere of the URDF's visual)
+ELBOW_RADIUS = 0.05175
+
+
+@functools.cache
+def sda10f_with_elbow_housing():
+    """``sda10f`` with a collision sphere centred on the elbow link's origin (the built-in
+    robot's capsules cover its housing, but no geometry of theirs is centred there)."""
+    robot = sda10f()
+    geometry = robot.collision_model.copy()
+    frame = robot.model.getFrameId("arm_link_4_u")
+    geometry.addGeometryObject(pin.GeometryObject(
+        "arm_link_4_u_housing", robot.model.frames[frame].parentJoint, frame,
+        robot.model.frames[frame].placement, coal.Sphere(ELBOW_RADIUS)))
+    return dataclasses.replace(robot, collision_model=geometry)
+
+
 def locked_elbow_against_a_sphere(offset: np.ndarray, direction: np.ndarray, gap: float):
     """The elbow link's origin locked (``PointLock``) and a sphere ``gap`` (< d_s) from the
-    link's own sphere geometry, which is centred on that origin: the pair's rate is
+    link's housing sphere, which is centred on that origin: the pair's rate is
     ``n . v_origin``, which the lock holds at 0 while the damper asks ``k (d_s - gap) > 0``."""
-    robot = sda10f()
+    robot = sda10f_with_elbow_housing()
     q = robot.q_home + offset
     origin = kinematics(robot, q).oMf[robot.model.getFrameId("arm_link_4_u")].translation
-    radius = robot.collision_model.geometryObjects[
-        robot.collision_model.getGeometryId("arm_link_4_u_1")].geometry.radius
+    radius = ELBOW_RADIUS
     sphere = Sphere(origin + (radius + gap + 0.05) * direction, 0.05)
     collisions = CollisionAvoidance(robot, [sphere], self_collision=False)
     lock = PointLock("arm_link_4_u", [0.0, 0.0, 0.0], origin)
