@@ -20,7 +20,7 @@ from teleop.limits import (
     MAX_TIME_CONSTANT_S,
     MAX_WALL_STIFFNESS,
 )
-from teleop.experiments.bench_names import DEFAULT_PROBLEMS
+from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
 
 from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bounded, csv_list,
                         damper_settings, one_line, sentence)

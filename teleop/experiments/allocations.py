@@ -32,6 +32,10 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from teleop.controller_specs import make_controller
+
+from .bench_problems import bench_configurations, bench_problem_named, bench_twist
+
 #: the shim's C source, shipped with the package
 COUNTER_SOURCE = Path(__file__).with_name("alloc_counter.c")
 #: steps each controller takes before the count (caches filled, solvers warmed)
@@ -123,9 +127,6 @@ def measure(problem: str, controllers: Sequence[str], steps: int,
             count: Callable[[], int]) -> dict[str, StepAllocations]:
     """Each controller's :class:`StepAllocations` on ``problem``, read with ``count``
     (runs in the subprocess that preloads the shim)."""
-    from teleop.controller_specs import make_controller  # noqa: PLC0415
-    from .bench import bench_configurations, bench_problem_named, bench_twist  # noqa: PLC0415
-
     bench = bench_problem_named(problem)
     robot, constraints = bench.robot, bench.constraints
     configurations = bench_configurations(robot, constraints, WARMUP_STEPS + 2 * steps,
