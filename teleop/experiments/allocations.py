@@ -1,4 +1,5 @@
-"""Heap allocations per step for ``teleop bench`` (docs/design.md section 16.6).
+"""Heap allocations per step for ``teleop bench`` (docs/design.md section 16, the
+bench).
 
 A malloc-counting shim (``alloc_counter.c``: ``malloc``, ``calloc``, ``realloc`` and the
 aligned allocations counted, then handed to glibc) is compiled once with the C compiler

@@ -11,8 +11,8 @@ for each other constraint type, ``sda10f/plane``, ``sda10f/lock`` and ``sda10f/b
 and the generated chains of the scaling runs (:mod:`.bench_problems`). Each row has the
 median and the p99; a compiled CJM row also the same step timed in a C++ loop (the C++
 floor, ``CompiledStep.time_steps``); every row its heap allocations per step
-(:mod:`.allocations`); :func:`target_checks` sets the ratios of docs/design.md section 16.6
-against their targets.
+(:mod:`.allocations`); :func:`target_checks` sets the ratios against their targets
+(docs/design.md section 16, the bench).
 
 With a plant (``--plant``, docs/design.md section 17) each built-in robot's controllers
 are also timed through a control period's tick, in the same run: the step followed by the
@@ -319,8 +319,8 @@ def speedups(results: Sequence[StepTiming], reference_prefix: str) -> dict[tuple
             for r in results if (r.robot, r.constraint_rows) in reference}
 
 
-#: The ratios a compiled CJM row is held to (docs/design.md section 16.6): its median
-#: over the same controller's on the ``sda10f`` hole, at most
+#: The ratios a compiled CJM row is held to (docs/design.md section 16, the bench): its
+#: median over the same controller's on the ``sda10f`` hole, at most
 HOLE_RATIO_TARGETS = {"sda10f/plane": 1.5, "sda10f/lock": 1.5, "sda10f/barrier": 1.5,
                       "sda10f_dual": 2.5, "sda10f_dual/collisions": 5.0, "chain64": 5.0}
 #: p99 over median, at most, on these problems
@@ -421,7 +421,8 @@ def format_table(results: Sequence[StepTiming]) -> str:
             f"{'' if daqp_ratio is None else f'{daqp_ratio:.1f}':>8}"
             f"{r.max_constraint_residual:>10.1e}{r.joint_velocity_deviation_max:>10.1e}  "
             f"{r.method:<12}{format_status_counts(r.status_counts)}")
-    barriers = [r for r in results if r.robot.endswith("/barrier") and r.controller.startswith("cjm")]
+    barriers = [r for r in results
+                if r.robot.endswith("/barrier") and r.controller.startswith("cjm")]
     if barriers:
         lines += [""] + [f"{r.robot} {r.controller}: the barrier held in {r.active_barrier_steps} "
                          f"of {r.iterations} steps ({r.active_barrier_steps / r.iterations:.0%})"
@@ -435,8 +436,8 @@ def format_table(results: Sequence[StepTiming]) -> str:
                   f"{r.plant_tick_median_us / r.kinematic_tick_median_us:>8.1f}" for r in ticks]
     checks = target_checks(results)
     if checks:
-        lines += ["", f"targets (docs/design.md 16.6), this run: {sum(c.met for c in checks)} "
-                      f"of {len(checks)} met",
+        lines += ["", f"targets (docs/design.md section 16, the bench), this run: "
+                      f"{sum(c.met for c in checks)} of {len(checks)} met",
                   f"{'problem':<24}  {'controller':<13}{'ratio':<22}{'value':>8}{'target':>10}"]
         lines += [f"{c.problem:<24}  {c.controller:<13}{c.measure:<22}{c.value:>8.2f}"
                   f"{('>= ' if c.at_least else '<= ') + format(c.limit, 'g'):>10}"

@@ -1,5 +1,5 @@
 """``teleop bench``'s problems: their names, their constraints, the configurations and
-the twist they are timed at (docs/design.md section 16.6).
+the twist they are timed at (docs/design.md section 16, the bench).
 
 Beside the built-in robots (one hole on each constrained link), one constraint of each
 other type on sda10f (:func:`bench_constraints`), the dual robot's arms close together
