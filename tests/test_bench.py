@@ -20,8 +20,8 @@ from constraints import Barrier, Hole, Plane, PointLock
 from controllers import CJMController
 from teleop import load_robot
 from teleop.experiments.allocations import count_allocations, counter_library
-from teleop.experiments.bench import (StepTiming, bench_named, format_table, run_bench,
-                                      target_checks)
+from teleop.experiments.bench import (StepTiming, bench_named, format_table, format_targets,
+                                      run_bench, target_checks)
 from teleop.experiments.bench_problems import (BARRIER_OFFSET, BENCH_TWIST,
                                                DEFAULT_HOLE_DISTANCE, bench_configurations,
                                                bench_problem_named, bench_twist)
@@ -226,6 +226,9 @@ def test_the_targets_are_the_ratios_of_the_rows():
     # the Python reference is not held to them; a row without a floor has no such ratio
     assert not any(c.controller == "cjm:python" for c in checks.values())
     assert ("sda10f/plane", "cjm", "called / C++ floor") not in checks
+    (plane,) = [line for line in format_targets(list(checks.values()))
+                if line.startswith("sda10f/plane ")]
+    assert plane.split()[1:] == ["cjm", "1.75*", "4.29*", "30.00"]  # no qp:daqp row, no floor
 
 
 def test_the_command_line_writes_the_rows_ratios_and_targets(tmp_path):

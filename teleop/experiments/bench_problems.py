@@ -115,6 +115,7 @@ def _loaded(name: str) -> Robot:
 
 @functools.cache
 def _close_arms(name: str) -> np.ndarray:
+    """:func:`close_arms` of a built-in robot, found once a process."""
     robot = _loaded(name)
     return close_arms(robot, CollisionAvoidance(robot))
 
