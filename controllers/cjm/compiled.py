@@ -279,3 +279,13 @@ class CompiledStep:
             tuple(recorded),
             (tuple(self._saturation_joints[:int(saturation_joints)].tolist())
              if saturation_joints else ()))
+
+    def time_steps(self, configurations: np.ndarray, twists: np.ndarray) -> np.ndarray | None:
+        """The C++ floor (docs/design.md section 16): per-step nanoseconds of this step in
+        a C++ loop over ``configurations`` (steps x nq) and ``twists`` (steps x stacked
+        twist), no Python between the steps; ``None`` when a step is not one C++ call
+        (Python writes terms, a posture velocity or collision rows between two calls)."""
+        if not self._one_call or self._collisions is not None:
+            return None
+        return self.pipeline.time_steps(np.asarray(configurations, dtype=float),
+                                        np.asarray(twists, dtype=float), self._use_posture)

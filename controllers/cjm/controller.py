@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from typing import Iterable, Literal
 
 import numpy as np
@@ -21,6 +22,21 @@ from .step_setup import ConstraintPlan, Form, StepSetup
 from .tolerances import StepTolerances
 
 Backend = Literal["auto", "compiled", "python"]
+
+#: The environment variable that makes ``backend="auto"`` choose the Python step, as on a
+#: machine where the extension is not built (docs/design.md section 16): ``python``; unset,
+#: empty or ``auto`` leaves the choice to the build.
+BACKEND_VARIABLE = "CJM_BACKEND"
+
+
+def python_step_forced() -> bool:
+    """Whether :data:`BACKEND_VARIABLE` asks ``backend="auto"`` for the Python step
+    (``ValueError`` naming the variable for a value other than ``auto`` or ``python``)."""
+    value = os.environ.get(BACKEND_VARIABLE, "").strip().lower()
+    if value not in ("", "auto", "python"):
+        raise ValueError(f"{BACKEND_VARIABLE} must be 'auto' or 'python' (or unset), "
+                         f"got {os.environ[BACKEND_VARIABLE]!r}")
+    return value == "python"
 
 
 def compiled_step_available() -> bool:
@@ -94,7 +110,8 @@ class CJMController(Controller):
     backend : ``"compiled"`` (the whole step in C++, Pinocchio's kinematics included,
         :mod:`controllers.cjm.compiled`, docs/design.md section 16), ``"python"``
         (:mod:`controllers.cjm.python_step` and the forms: the readable reference) or ``"auto"`` (compiled when the
-        extension is built and covers the robot's joints, else Python). ``"compiled"``
+        extension is built and covers the robot's joints, else Python; ``CJM_BACKEND=python``
+        in the environment makes it Python, :data:`BACKEND_VARIABLE`). ``"compiled"``
         raises ``ImportError`` without the extension and ``ValueError`` for a robot it
         does not cover. The compiled step computes its kinematics on its own copy of the
         model: it leaves ``self.data`` as it was, except with ``collisions``, whose rows
@@ -147,7 +164,8 @@ class CJMController(Controller):
         #: whether the Python step may stand in when the compiled one cannot take the robot
         self._python_if_needed = backend == "auto"
         if backend == "auto":
-            backend = "compiled" if available and not unsupported else "python"
+            compiled = available and not unsupported and not python_step_forced()
+            backend = "compiled" if compiled else "python"
         self.backend: Backend = backend
         self.parametrisation: Parametrisation = parametrisation
         self.form: Form = form

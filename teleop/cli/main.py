@@ -20,7 +20,7 @@ from teleop.limits import (
     MAX_TIME_CONSTANT_S,
     MAX_WALL_STIFFNESS,
 )
-from teleop.robots import BUILTIN_ROBOTS
+from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
 
 from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bounded, csv_list,
                         damper_settings, one_line, sentence)
@@ -29,7 +29,7 @@ from .commands import Command, registered_commands
 PACKAGE = "cjm-teleop"
 DEFAULT_CONTROLLERS = ", ".join(default_specs("compare"))
 DEFAULT_BENCH_CONTROLLERS = ", ".join(default_specs("bench"))
-DEFAULT_BENCH_ROBOTS = ", ".join(BUILTIN_ROBOTS)
+DEFAULT_BENCH_PROBLEMS = ", ".join(DEFAULT_PROBLEMS)
 
 
 def package_version() -> str:
@@ -272,8 +272,11 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
 
     bench = _add_command(commands, "bench", "time one control step of each controller on each "
                          "robot", _bench, epilog=_controllers_epilog("bench"))
-    bench.add_argument("--robots", type=csv_list, default=DEFAULT_BENCH_ROBOTS,
-                       help="comma-separated built-in robots")
+    bench.add_argument("--robots", type=csv_list, default=DEFAULT_BENCH_PROBLEMS,
+                       help="comma-separated built-in robots (one hole on each constrained "
+                            "link) and problems: sda10f/plane, sda10f/lock, sda10f/barrier "
+                            "(one constraint of that type), chain8..chain64 (one hole), "
+                            "chain32/2holes..chain32/8holes")
     bench.add_argument("--controllers", type=csv_list, default=DEFAULT_BENCH_CONTROLLERS,
                        help="comma-separated controllers, see the list below")
     bench.add_argument("--iterations", type=iterations, default=2000,
@@ -282,8 +285,12 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
                        help="20 iterations and small scaling runs (CI smoke run)")
     bench.add_argument("--no-scaling", action="store_true",
                        help="skip the generated-chain scaling runs")
+    bench.add_argument("--no-allocations", action="store_true",
+                       help="skip counting the heap allocations per step (a subprocess per "
+                            "problem; without a C compiler they read n/a)")
     bench.add_argument("--json", metavar="FILE",
-                       help="also write the results as JSON to FILE (default: no JSON)")
+                       help="also write the results, their ratios and the targets as JSON to "
+                            "FILE (default: no JSON)")
     _add_plant_options(bench, "its default; with --plant, each control period's tick is "
                        "timed on the kinematic plant and on this one (the built-in robots)")
 
@@ -398,11 +405,13 @@ def _bench(args: argparse.Namespace) -> int:
     iterations = 20 if args.quick else args.iterations
     plant = plant_choice(args)  # checked even when --plant is left out
     results = run_bench(args.robots, args.controllers, iterations=iterations,
-                        plant=plant if args.plant else None)
+                        plant=plant if args.plant else None,
+                        allocations=not args.no_allocations)
     if not args.no_scaling:
         results += run_scaling(iterations=max(5, iterations // 5),
                                dofs=(8, 16) if args.quick else (8, 16, 32, 64),
-                               holes=(1, 2) if args.quick else (1, 2, 4, 8))
+                               holes=(1, 2) if args.quick else (1, 2, 4, 8),
+                               allocations=not args.no_allocations)
     print(format_table(results))
     for r in results:
         if r.solver_messages:

@@ -6,6 +6,14 @@ commands are compared too: each one's largest ``|qd - qd_ref|`` against the firs
 controller listed (docs/design.md section 15.3). The solvers' console output is kept off the
 console (section 15.5), in each timing's ``solver_messages``.
 
+Beside the built-in robots (one hole on each constrained link) the bench has a problem
+for each other constraint type, ``sda10f/plane``, ``sda10f/lock`` and ``sda10f/barrier``,
+and the generated chains of the scaling runs (:mod:`.bench_problems`). Each row has the
+median and the p99; a compiled CJM row also the same step timed in a C++ loop (the C++
+floor, ``CompiledStep.time_steps``); every row its heap allocations per step
+(:mod:`.allocations`); :func:`target_checks` sets the ratios against their targets
+(docs/design.md section 16, the bench).
+
 With a plant (``--plant``, docs/design.md section 17) each built-in robot's controllers
 are also timed through a control period's tick, in the same run: the step followed by the
 kinematic integration (``pin.integrate``), and the step followed by the plant's period
@@ -23,27 +31,25 @@ from typing import Callable, Sequence
 import numpy as np
 import pinocchio as pin
 
-from constraints import Hole
+from constraints import Constraint
 from constraints.collision import CollisionAvoidance
 from teleop.controller_specs import default_specs, make_controller
 from teleop.limits import MAX_BENCH_ITERATIONS
-from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
-from teleop.robots.chains import hole_links, load_chain
+from teleop.robots import BUILTIN_ROBOTS, Robot
 
+from .allocations import StepAllocations, count_allocations, counter_library
+# DEFAULT_HOLE_DISTANCE and _hole_rows: read from here by tests/test_compiled_step.py
+from .bench_problems import (CONSTRAINT_PROBLEMS, DEFAULT_HOLE_DISTANCE,  # noqa: F401
+                             SCALING_DOFS, SCALING_HOLES, _hole_rows, bench_configurations,
+                             bench_problem_named, bench_twist, known_problems, problem_labels,
+                             scaling_problems)
 from .metrics_table import format_status_counts
 from teleop.plants.choice import PlantChoice
 from .solver_output import SolverOutputCapture
 
-#: hole distance along the constrained link of each built-in robot (m)
-DEFAULT_HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20, "sda10f_dual": 0.08,
-                         "sda10f_dual_mobile": 0.08}
-
-#: A teleoperation-sized body twist of the first EE (a few mm/s, mrad/s): no joint near
-#: its velocity limit, so every controller solves the plain constrained problem.
-BENCH_TWIST = (0.001, -0.002, 0.0015, 0.005, -0.003, 0.002)
-SCALING_DOFS = (8, 16, 32, 64)
-SCALING_HOLES = (1, 2, 4, 8)
 SCALING_CONTROLLERS = default_specs("scaling")
+#: most steps whose heap allocations are counted per controller (after a warm-up)
+ALLOCATION_STEPS = 200
 
 
 @dataclass(frozen=True)
@@ -70,6 +76,24 @@ class StepTiming:
     #: (its physics and the integration), over the same configurations (us; 0: not timed)
     kinematic_tick_median_us: float = 0.0
     plant_tick_median_us: float = 0.0
+    #: the same step in a C++ loop, no Python between the steps (CompiledStep.time_steps;
+    #: None: the controller has no such loop, or its step is not one C++ call)
+    floor_median_us: float | None = None
+    floor_p99_us: float | None = None
+    #: heap allocations per step of that C++ loop and of ``solve`` called from Python
+    #: (:mod:`.allocations`; None: not counted, e.g. without a C compiler)
+    floor_allocations: float | None = None
+    called_allocations: float | None = None
+    active_barrier_steps: int = 0  # timed steps whose command holds a barrier (CJM)
+
+    @property
+    def p99_over_median(self) -> float:
+        return self.p99_us / self.median_us
+
+    @property
+    def called_over_floor(self) -> float | None:
+        """The Python-called median over the C++ floor's: the binding's overhead."""
+        return None if not self.floor_median_us else self.median_us / self.floor_median_us
 
 
 def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
@@ -89,7 +113,7 @@ def time_steps(step: Callable[[np.ndarray], None], configurations: np.ndarray,
     return times
 
 
-def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: int,
+def bench_problem(robot: Robot, holes: Sequence[Constraint], spec: str, iterations: int,
                   warmup: int, seed: int = 0, label: str | None = None,
                   base: np.ndarray | None = None,
                   collisions: CollisionAvoidance | None = None) -> tuple[StepTiming, np.ndarray]:
@@ -97,13 +121,15 @@ def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: in
     near ``base`` (default: the robot's home); returns the timing and the commands, one
     row per configuration. The configurations are unrelated, so no previous command
     exists: the acceleration limits are off (their cost shows in the loop's tick,
-    docs/design.md 8.4)."""
+    docs/design.md 8.4). A controller whose step runs in a C++ loop too
+    (``controller.step.time_steps``) is timed there after, on the same configurations."""
     controller = make_controller(spec, robot, holes, acceleration_limit=None)
     if collisions is not None:
         controller.set_collisions(collisions)
     configurations = bench_configurations(robot, holes, iterations, seed, base)
     twist = bench_twist(robot, holes, base)
     residual = 0.0
+    barrier_steps = 0
     statuses: collections.Counter[str] = collections.Counter()
     commands = np.empty((iterations, robot.model.nv))
     command = np.empty(0)
@@ -113,22 +139,41 @@ def bench_problem(robot: Robot, holes: Sequence[Hole], spec: str, iterations: in
         command = controller.solve(q, twist)
 
     def record(i: int) -> None:
-        nonlocal residual
+        nonlocal residual, barrier_steps
         commands[i] = command
         residual = max(residual, controller.info.equality_residual)
+        barrier_steps += bool(controller.info.active_barriers)
         statuses[controller.info.status.value] += 1
 
     times = time_steps(step, configurations, warmup, record)
+    floor = time_floor(controller, configurations, twist, warmup)
     timing = StepTiming(robot=label or robot.name, controller=spec, dof=robot.model.nv,
                         constraint_rows=sum(h.dim for h in holes),
                         median_us=float(np.median(times)),
                         p99_us=float(np.percentile(times, 99)), max_us=float(times.max()),
                         iterations=iterations, max_constraint_residual=residual,
-                        method=controller.info.method, status_counts=dict(statuses))
+                        method=controller.info.method, status_counts=dict(statuses),
+                        active_barrier_steps=barrier_steps,
+                        floor_median_us=None if floor is None else float(np.median(floor)),
+                        floor_p99_us=None if floor is None else float(np.percentile(floor, 99)))
     return timing, commands
 
 
-def bench_ticks(robot: Robot, holes: Sequence[Hole], spec: str, configurations: np.ndarray,
+def time_floor(controller: object, configurations: np.ndarray, twist: np.ndarray,
+               warmup: int) -> np.ndarray | None:
+    """Per-step wall time (us) of ``controller``'s step in its C++ loop over
+    ``configurations`` with ``twist`` after a warm-up (``CompiledStep.time_steps``);
+    None for a controller without one."""
+    time_steps_in_cpp = getattr(getattr(controller, "step", None), "time_steps", None)
+    if time_steps_in_cpp is None:
+        return None
+    twists = np.tile(twist, (len(configurations), 1))
+    if time_steps_in_cpp(configurations[:warmup], twists[:warmup]) is None:
+        return None
+    return time_steps_in_cpp(configurations, twists) * 1e-3
+
+
+def bench_ticks(robot: Robot, holes: Sequence[Constraint], spec: str, configurations: np.ndarray,
                 plant: PlantChoice, dt: float = 1e-3) -> tuple[float, float]:
     """Medians (us) over ``configurations`` of a control period's tick on the kinematic
     plant (``solve``, then ``pin.integrate``) and on ``plant`` (``solve``, then the plant's
@@ -152,21 +197,7 @@ def bench_ticks(robot: Robot, holes: Sequence[Hole], spec: str, configurations: 
     return float(np.median(kinematic)), float(np.median(physical))
 
 
-def bench_configurations(robot: Robot, holes: Sequence[Hole], iterations: int,
-                         seed: int = 0, base: np.ndarray | None = None) -> np.ndarray:
-    """``iterations`` configurations near ``base`` (default: home), a little off the holes
-    (<= 1e-3 rad or m per velocity coordinate: sub-millimetre drift to correct), on the
-    configuration manifold (nq != nv on a base)."""
-    base = robot.q_home if base is None else base
-    rng = np.random.default_rng(seed)
-    offsets = rng.uniform(-1e-3, 1e-3, (iterations, robot.model.nv))
-    rows = _hole_rows(robot, holes, base)
-    if len(rows) + robot.task_size > robot.model.nv:  # the twists over-determine qd: stay
-        offsets -= offsets @ rows.T @ np.linalg.pinv(rows).T  # on the holes, to first order
-    return np.array([pin.integrate(robot.model, base, offset) for offset in offsets])
-
-
-def bench_controllers(robot: Robot, holes: Sequence[Hole], specs: Sequence[str],
+def bench_controllers(robot: Robot, holes: Sequence[Constraint], specs: Sequence[str],
                       iterations: int, warmup: int, label: str | None = None,
                       plant: PlantChoice | None = None, base: np.ndarray | None = None,
                       collisions: CollisionAvoidance | None = None) -> list[StepTiming]:
@@ -204,127 +235,71 @@ def check_iterations(iterations: int) -> int:
 
 def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
               controllers: Sequence[str] = default_specs("bench"),
-              iterations: int = 2000, plant: PlantChoice | None = None) -> list[StepTiming]:
-    """The built-in robots, one hole on each constrained link (the paper's 6-before/2-after
-    case, on each arm of the dual robots); with ``plant``, each controller's
-    :func:`bench_ticks` too. An unknown robot or an iteration count outside
-    [1, :data:`~teleop.limits.MAX_BENCH_ITERATIONS`] raises ``ValueError`` before any run."""
+              iterations: int = 2000, plant: PlantChoice | None = None,
+              allocations: bool = True) -> list[StepTiming]:
+    """The named problems (:func:`known_problems`): a built-in robot with one hole on each
+    constrained link (the paper's 6-before/2-after case, on each arm of the dual robots;
+    the dual robot's arms close together too, without and with collision avoidance,
+    :func:`problem_labels`), a constraint problem (:data:`CONSTRAINT_PROBLEMS`) or a
+    generated chain of the scaling runs; with ``plant``, each built-in robot's controllers'
+    :func:`bench_ticks` too; with ``allocations``, each row's heap allocations per step
+    where a C compiler is at hand (:mod:`.allocations`). An unknown name or an iteration
+    count outside [1, :data:`~teleop.limits.MAX_BENCH_ITERATIONS`] raises ``ValueError``
+    before any run."""
     check_iterations(iterations)
     if isinstance(robots, str):
         raise ValueError(f"robots must be a list of built-in robot names, got {robots!r}")
+    known = known_problems()
     for name in robots:
-        if name not in BUILTIN_ROBOTS:
+        if name not in known:
             raise ValueError(f"unknown robot {name!r}: the bench runs the built-in robots "
-                             f"{', '.join(BUILTIN_ROBOTS)}")
+                             f"{', '.join(BUILTIN_ROBOTS)}, the problems "
+                             f"{', '.join(CONSTRAINT_PROBLEMS)} and the chains "
+                             f"{', '.join(scaling_problems())}")
+    library = counter_library() if allocations else None
+    warmup = max(1, iterations // 10)
     results = []
     for name in robots:
-        robot = load_robot(name)
-        warmup = max(1, iterations // 10)
-        results += bench_controllers(robot, bench_holes(robot), controllers, iterations,
-                                     warmup, plant=plant)
-        if name == "sda10f_dual":
-            results += bench_collisions(robot, controllers, iterations, warmup)
+        for label in problem_labels(name):
+            results += bench_named(label, controllers, iterations, warmup,
+                                   plant=plant if label in BUILTIN_ROBOTS else None,
+                                   library=library)
     return results
 
 
-def bench_collisions(robot: Robot, controllers: Sequence[str], iterations: int,
-                     warmup: int) -> list[StepTiming]:
-    """The dual robot's arms close together (:func:`close_arms`), a hole on each, timed
-    without collision avoidance (``sda10f_dual/close``) and with it
-    (``sda10f_dual/collisions``: every self-collision pair, a few within the detection
-    distance), over the same configurations."""
-    collisions = CollisionAvoidance(robot)
-    base = close_arms(robot, collisions)
-    holes = bench_holes(robot, base)
-    return [*bench_controllers(robot, holes, controllers, iterations, warmup,
-                               label=f"{robot.name}/close", base=base),
-            *bench_controllers(robot, holes, controllers, iterations, warmup,
-                               label=f"{robot.name}/collisions", base=base,
-                               collisions=collisions)]
+def bench_named(label: str, controllers: Sequence[str], iterations: int, warmup: int,
+                plant: PlantChoice | None = None,
+                library: str | None = None) -> list[StepTiming]:
+    """:func:`bench_controllers` on the problem ``label``; with the allocation counter
+    ``library`` (:func:`~.allocations.counter_library`), each row's allocations per step
+    over at most :data:`ALLOCATION_STEPS` of the same configurations."""
+    problem = bench_problem_named(label)
+    timings = bench_controllers(problem.robot, problem.constraints, controllers, iterations,
+                                warmup, label=label, plant=plant, base=problem.base,
+                                collisions=problem.collisions)
+    if library is None:
+        return timings
+    counted = count_allocations(label, controllers, min(iterations, ALLOCATION_STEPS), library)
+    return [with_allocations(timing, counted.get(timing.controller)) for timing in timings]
 
 
-def close_arms(robot: Robot, collisions: CollisionAvoidance, seed: int = 1,
-               tries: int = 2000) -> np.ndarray:
-    """A configuration near home (normal offsets of 0.4 rad, ``seed``) where the most pairs
-    between the two arms lie within the detection distance, none closer than 1 cm: the
-    first found with four such pairs, else the best of ``tries``."""
-    model = robot.model
-    data = model.createData()
-    rng = np.random.default_rng(seed)
-    best, best_count = robot.q_home.copy(), -1
-    for _ in range(tries):
-        q = pin.integrate(model, robot.q_home, rng.normal(scale=0.4, size=model.nv))
-        pin.computeJointJacobians(model, data, q)
-        rows = collisions.rows(model, data)
-        if rows.size == 0 or rows.minimum_distance < 0.01:
-            continue
-        count = sum("left" in pair and "right" in pair for pair in rows.pairs)
-        if count > best_count:
-            best, best_count = q, count
-        if count >= 4:
-            break
-    return best
-
-
-def bench_twist(robot: Robot, holes: Sequence[Hole], base: np.ndarray | None = None) -> np.ndarray:
-    """The stacked twist the bench asks for: :data:`BENCH_TWIST` for the first EE, and for
-    the others what the least-norm ``qd`` with ``A qd = 0`` (the holes at home) and
-    ``J_e1 qd = BENCH_TWIST`` gives them, so that the twists are consistent with the holes
-    (two trocars on one torso cannot meet any pair, docs/design.md section 11.2), at
-    ``base`` (default: home)."""
-    base = robot.q_home if base is None else base
-    model = robot.model
-    data = model.createData()
-    pin.computeJointJacobians(model, data, base)
-    pin.updateFramePlacements(model, data)
-    first, *others = robot.ee_frame_ids
-    rows = np.vstack([_hole_rows(robot, holes, base),
-                      pin.getFrameJacobian(model, data, first, pin.LOCAL)])
-    goal = np.concatenate([np.zeros(sum(hole.dim for hole in holes)), BENCH_TWIST])
-    qd = np.linalg.lstsq(rows, goal, rcond=None)[0]
-    return np.concatenate([BENCH_TWIST, *(pin.getFrameJacobian(model, data, frame, pin.LOCAL) @ qd
-                                          for frame in others)])
-
-
-def _hole_rows(robot: Robot, holes: Sequence[Hole], base: np.ndarray | None = None) -> np.ndarray:
-    """The holes' stacked rows ``A`` (``A qd = b``) at ``base`` (default: home)."""
-    base = robot.q_home if base is None else base
-    model = robot.model
-    data = model.createData()
-    pin.computeJointJacobians(model, data, base)
-    pin.updateFramePlacements(model, data)
-    return np.vstack([hole.rows(model, data, model.getFrameId(hole.link))[0] for hole in holes]
-                     or [np.zeros((0, model.nv))])
-
-
-def bench_holes(robot: Robot, base: np.ndarray | None = None) -> list[Hole]:
-    """One hole on each of ``robot.constrained_links``, at the robot's
-    :data:`DEFAULT_HOLE_DISTANCE` (0.1 m for a robot not listed) along it, at ``base``
-    (default: home)."""
-    distance = DEFAULT_HOLE_DISTANCE.get(robot.name, 0.1)
-    base = robot.q_home if base is None else base
-    return [Hole.on_link(robot, base, distance=distance, link=link)
-            for link in robot.constrained_links]
+def with_allocations(timing: StepTiming, counted: StepAllocations | None) -> StepTiming:
+    """``timing`` with its allocations per step (as it is when they were not counted)."""
+    if counted is None:
+        return timing
+    return replace(timing, floor_allocations=counted.floor, called_allocations=counted.called)
 
 
 def run_scaling(iterations: int = 300, controllers: Sequence[str] = SCALING_CONTROLLERS,
-                dofs: Sequence[int] = SCALING_DOFS,
-                holes: Sequence[int] = SCALING_HOLES) -> list[StepTiming]:
-    """Generated chains: 1 hole on 8..64 DoF, then 1..8 holes on the 32-DoF chain."""
-    results = []
+                dofs: Sequence[int] = SCALING_DOFS, holes: Sequence[int] = SCALING_HOLES,
+                allocations: bool = True) -> list[StepTiming]:
+    """Generated chains: 1 hole on 8..64 DoF, then 1..8 holes on the 32-DoF chain
+    (:func:`scaling_problems`), each row with its allocations per step as in
+    :func:`run_bench`."""
+    library = counter_library() if allocations else None
     warmup = max(1, iterations // 10)
-    for dof in dofs:
-        robot = load_chain(dof)
-        problem = [Hole.on_link(robot, robot.q_home, 0.05, link=hole_links(dof, 1)[0])]
-        results += bench_controllers(robot, problem, controllers, iterations, warmup,
-                                     label=f"chain{dof}")
-    robot = load_chain(32)
-    for count in holes:
-        problem = [Hole.on_link(robot, robot.q_home, 0.05, link=link)
-                   for link in hole_links(32, count)]
-        results += bench_controllers(robot, problem, controllers, iterations, warmup,
-                                     label=f"chain32/{count}holes")
-    return results
+    return [timing for label in scaling_problems(dofs, holes)
+            for timing in bench_named(label, controllers, iterations, warmup, library=library)]
 
 
 def mink_ratios(results: Sequence[StepTiming]) -> dict[tuple[str, str], float]:
@@ -344,21 +319,115 @@ def speedups(results: Sequence[StepTiming], reference_prefix: str) -> dict[tuple
             for r in results if (r.robot, r.constraint_rows) in reference}
 
 
+#: The ratios a compiled CJM row is held to (docs/design.md section 16, the bench): its
+#: median over the same controller's on the ``sda10f`` hole, at most
+HOLE_RATIO_TARGETS = {"sda10f/plane": 1.5, "sda10f/lock": 1.5, "sda10f/barrier": 1.5,
+                      "sda10f_dual": 2.5, "sda10f_dual/collisions": 5.0, "chain64": 5.0}
+#: p99 over median, at most, on these problems
+P99_TARGET, P99_PROBLEMS = 3.0, CONSTRAINT_PROBLEMS
+#: how many times faster than ``mink:daqp`` and ``qp:daqp`` on the same problem, at least
+MINK_TARGET, QP_DAQP_TARGET = 25.0, 8.0
+#: the Python-called median over the C++ floor's, at most
+FLOOR_TARGET = 2.0
+#: the problem every ``HOLE_RATIO_TARGETS`` ratio divides by
+HOLE_PROBLEM = "sda10f"
+
+
+@dataclass(frozen=True)
+class TargetCheck:
+    """One ratio of one row against its target: ``value <= limit`` (``value >= limit``
+    with ``at_least``)."""
+
+    problem: str
+    controller: str
+    measure: str
+    value: float
+    limit: float
+    at_least: bool = False
+
+    @property
+    def met(self) -> bool:
+        return self.value >= self.limit if self.at_least else self.value <= self.limit
+
+
+def held_to_targets(timing: StepTiming) -> bool:
+    """The rows the targets are for: the CJM's compiled step (``cjm:python``, the readable
+    reference, is not)."""
+    return timing.controller.startswith("cjm") and timing.controller != "cjm:python"
+
+
+def hole_medians(results: Sequence[StepTiming]) -> dict[str, float]:
+    """Each controller's median on :data:`HOLE_PROBLEM` in ``results`` (the first row)."""
+    medians: dict[str, float] = {}
+    for r in results:
+        if r.robot == HOLE_PROBLEM:
+            medians.setdefault(r.controller, r.median_us)
+    return medians
+
+
+def target_checks(results: Sequence[StepTiming]) -> list[TargetCheck]:
+    """Every target ratio of ``results``' CJM rows (:func:`held_to_targets`) that this run
+    measured, in the rows' order: the median over the hole's, p99 over median, the
+    speed-ups over ``mink:daqp`` and ``qp:daqp``, the Python-called median over the C++
+    floor's."""
+    hole, mink, daqp = hole_medians(results), mink_ratios(results), speedups(results, "qp:daqp")
+    checks = []
+    for r in filter(held_to_targets, results):
+        key = (r.robot, r.controller)
+        if r.robot in HOLE_RATIO_TARGETS and r.controller in hole:
+            checks.append(TargetCheck(r.robot, r.controller, f"median / {HOLE_PROBLEM} hole",
+                                      r.median_us / hole[r.controller],
+                                      HOLE_RATIO_TARGETS[r.robot]))
+        if r.robot in P99_PROBLEMS:
+            checks.append(TargetCheck(r.robot, r.controller, "p99 / median", r.p99_over_median,
+                                      P99_TARGET))
+        if key in mink:
+            checks.append(TargetCheck(r.robot, r.controller, "x mink:daqp", mink[key],
+                                      MINK_TARGET, at_least=True))
+        if key in daqp:
+            checks.append(TargetCheck(r.robot, r.controller, "x qp:daqp", daqp[key],
+                                      QP_DAQP_TARGET, at_least=True))
+        if r.called_over_floor is not None:
+            checks.append(TargetCheck(r.robot, r.controller, "called / C++ floor",
+                                      r.called_over_floor, FLOOR_TARGET))
+    return checks
+
+
+def _number(value: float | None, digits: str = ".1f") -> str:
+    return "n/a" if value is None else format(value, digits)
+
+
 def format_table(results: Sequence[StepTiming]) -> str:
-    """One line per timing; ``qd dev``: the joint-velocity deviation from the problem's
-    first controller (rad/s)."""
+    """One line per timing, then the barriers held, the plant's ticks and the targets
+    (:func:`format_targets`).
+    ``p99/med``: p99 over median; ``floor us``: the same step in a C++ loop, ``x floor``
+    the median over it; ``alloc C++``/``alloc py``: heap allocations per step in that loop
+    and from Python; ``qd dev``: the joint-velocity deviation from the problem's first
+    controller (rad/s)."""
     ratios, daqp = mink_ratios(results), speedups(results, "qp:daqp")
     lines = [(f"{'problem':<24}{'dof':>4}{'rows':>5}  {'controller':<13}{'median us':>10}"
-              f"{'p99 us':>9}{'max us':>10}{'x mink':>8}{'x daqp':>8}{'residual':>10}{'qd dev':>10}  "
-              f"{'method':<12}statuses")]
+              f"{'p99 us':>9}{'p99/med':>8}{'max us':>10}{'floor us':>9}{'x floor':>8}"
+              f"{'alloc C++':>10}{'alloc py':>9}{'x mink':>8}{'x daqp':>8}{'residual':>10}"
+              f"{'qd dev':>10}  {'method':<12}statuses")]
     for r in results:
         ratio, daqp_ratio = ratios.get((r.robot, r.controller)), daqp.get((r.robot, r.controller))
         lines.append(
             f"{r.robot:<24}{r.dof:>4}{r.constraint_rows:>5}  {r.controller:<13}{r.median_us:>10.1f}"
-            f"{r.p99_us:>9.1f}{r.max_us:>10.1f}{'' if ratio is None else f'{ratio:.1f}':>8}"
+            f"{r.p99_us:>9.1f}{r.p99_over_median:>8.1f}{r.max_us:>10.1f}"
+            f"{'' if r.floor_median_us is None else f'{r.floor_median_us:.1f}':>9}"
+            f"{'' if r.called_over_floor is None else f'{r.called_over_floor:.1f}':>8}"
+            f"{_number(r.floor_allocations, '.3g') if r.floor_median_us is not None else '':>10}"
+            f"{_number(r.called_allocations, '.3g'):>9}"
+            f"{'' if ratio is None else f'{ratio:.1f}':>8}"
             f"{'' if daqp_ratio is None else f'{daqp_ratio:.1f}':>8}"
             f"{r.max_constraint_residual:>10.1e}{r.joint_velocity_deviation_max:>10.1e}  "
             f"{r.method:<12}{format_status_counts(r.status_counts)}")
+    barriers = [r for r in results
+                if r.robot.endswith("/barrier") and r.controller.startswith("cjm")]
+    if barriers:
+        lines += [""] + [f"{r.robot} {r.controller}: the barrier held in {r.active_barrier_steps} "
+                         f"of {r.iterations} steps ({r.active_barrier_steps / r.iterations:.0%})"
+                         for r in barriers]
     ticks = [r for r in results if r.plant_tick_median_us > 0]
     if ticks:
         lines += ["", f"{'problem':<20}  {'controller':<13}{'kinematic tick us':>18}"
@@ -366,13 +435,58 @@ def format_table(results: Sequence[StepTiming]) -> str:
         lines += [f"{r.robot:<20}  {r.controller:<13}{r.kinematic_tick_median_us:>18.1f}"
                   f"{r.plant_tick_median_us:>18.1f}"
                   f"{r.plant_tick_median_us / r.kinematic_tick_median_us:>8.1f}" for r in ticks]
+    lines += format_targets(target_checks(results))
     return "\n".join(lines)
 
 
+#: the targets' columns under the table: (measure, header)
+TARGET_COLUMNS = (("median / sda10f hole", "/ hole"), ("p99 / median", "p99/med"),
+                  ("x mink:daqp", "x mink"), ("x qp:daqp", "x daqp"),
+                  ("called / C++ floor", "/ floor"))
+
+
+def format_targets(checks: Sequence[TargetCheck]) -> list[str]:
+    """The checks as lines under the table: one per CJM row, a column per ratio, ``*``
+    after a ratio that misses its target (no lines without checks)."""
+    if not checks:
+        return []
+    rows: dict[tuple[str, str], dict[str, TargetCheck]] = {}
+    for check in checks:
+        rows.setdefault((check.problem, check.controller), {})[check.measure] = check
+    hole_limits = ", ".join(f"{problem} {limit:g}"
+                            for problem, limit in HOLE_RATIO_TARGETS.items())
+    lines = ["", f"targets (docs/design.md section 16, the bench), this run: "
+                 f"{sum(c.met for c in checks)} of {len(checks)} met; * marks a miss",
+             f"  / hole: the median over the same controller's on {HOLE_PROBLEM}, at most "
+             f"{hole_limits}",
+             f"  p99/med at most {P99_TARGET:g}; x mink, x daqp at least {MINK_TARGET:g}, "
+             f"{QP_DAQP_TARGET:g}; / floor: the median over the C++ floor's, at most "
+             f"{FLOOR_TARGET:g}",
+             f"{'problem':<24}  {'controller':<13}"
+             + "".join(f"{header:>10}" for _, header in TARGET_COLUMNS)]
+    for (problem, controller), measured in rows.items():
+        cells = [measured.get(measure) for measure, _ in TARGET_COLUMNS]
+        lines.append((f"{problem:<24}  {controller:<13}" + "".join(
+            f"{'' if c is None else f'{c.value:.2f}' + (' ' if c.met else '*'):>10}"
+            for c in cells)).rstrip())
+    return lines
+
+
 def write_json(results: Sequence[StepTiming], path: str) -> None:
+    """One object per row: its fields, the speed-ups over ``mink`` and ``qp:daqp``, its
+    ratios (p99 over median, the median over the C++ floor's and over the same
+    controller's on the ``sda10f`` hole) and its :func:`target_checks`."""
     ratios = mink_ratios(results)
     daqp = speedups(results, "qp:daqp")
+    hole = hole_medians(results)
+    checks: dict[tuple[str, str], list[dict]] = collections.defaultdict(list)
+    for check in target_checks(results):
+        checks[(check.problem, check.controller)].append({**asdict(check), "met": check.met})
     rows = [{**asdict(r), "speedup_vs_mink": ratios.get((r.robot, r.controller)),
-             "speedup_vs_qp_daqp": daqp.get((r.robot, r.controller))} for r in results]
+             "speedup_vs_qp_daqp": daqp.get((r.robot, r.controller)),
+             "p99_over_median": r.p99_over_median, "called_over_floor": r.called_over_floor,
+             "median_over_sda10f_hole": (r.median_us / hole[r.controller]
+                                         if r.controller in hole else None),
+             "targets": checks.get((r.robot, r.controller), [])} for r in results]
     with open(path, "w", encoding="utf-8") as handle:
         json.dump(rows, handle, indent=2)

@@ -6,6 +6,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <chrono>
+#include <cstdint>
+
 #include "pipeline.hpp"
 
 namespace py = pybind11;
@@ -240,6 +243,34 @@ PYBIND11_MODULE(_step, module) {
              return finish(pipeline, use_posture, analytical_allowed);
            }, py::arg("q"), py::arg("twist"), py::arg("use_posture"), py::arg("analytical_allowed"),
            "load, prepare and finish in one call; None when load() would be false.")
+      .def("time_steps", [](BoundPipeline& pipeline, const cjm::RowMatrix& configurations,
+                            const cjm::RowMatrix& twists, bool use_posture) {
+             if (configurations.cols() != pipeline.q().size() ||
+                 twists.cols() != pipeline.twist().size() || twists.rows() != configurations.rows())
+               throw std::invalid_argument("time_steps needs one q (nq) and one stacked twist per step");
+             if (!configurations.allFinite() || !twists.allFinite())
+               throw std::invalid_argument("time_steps needs finite configurations and twists");
+             pipeline.read_sources();
+             py::array_t<std::int64_t> nanoseconds(configurations.rows());
+             std::int64_t* times = nanoseconds.mutable_data();
+             cjm::Vector qd(pipeline.nv());
+             {
+               py::gil_scoped_release release;
+               for (Index i = 0; i < configurations.rows(); ++i) {
+                 const auto start = std::chrono::steady_clock::now();
+                 pipeline.q() = configurations.row(i).transpose();
+                 pipeline.twist() = twists.row(i).transpose();
+                 pipeline.prepare();
+                 pipeline.finish(use_posture, true, qd);
+                 times[i] = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                std::chrono::steady_clock::now() - start).count();
+               }
+             }
+             return nanoseconds;
+           }, py::arg("configurations"), py::arg("twists"), py::arg("use_posture"),
+           "The C++ floor: per-step nanoseconds of load, prepare and finish (the one-call "
+           "step of solve) over ``configurations`` (steps x nq) and ``twists`` (steps x "
+           "stacked twist), in a C++ loop with the GIL released; the anchors read once.")
       .def_property_readonly("step", [](BoundPipeline& pipeline) -> cjm::Step& { return pipeline.step(); },
                              py::return_value_policy::reference_internal)
       .def_property_readonly("q", [](py::object self) {
