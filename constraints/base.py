@@ -25,6 +25,7 @@ from typing import ClassVar, Literal, Protocol
 import numpy as np
 import pinocchio as pin
 
+from .compiled_form import CompiledForm
 from .kinematics import frame_placement, resolve_frame
 from .placement import PlacementField
 from .registry import constraint_type
@@ -233,23 +234,10 @@ def structure_of(state: ConstraintPoint, parametrisation: Parametrisation = "nul
     raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
 
 
-@cache
-def declares_compiled_form(constraint_type: type) -> bool:
-    """Whether ``constraint_type`` has a compiled kind whose math it keeps: the class that
-    set :attr:`Constraint.compiled_kind` defines every method of
-    :attr:`Constraint.compiled_math` the type uses (a subclass with its own geometry gets
-    no compiled form it does not compute)."""
-    if constraint_type.compiled_kind is None:
-        return False
-    declaring = next(cls for cls in constraint_type.__mro__ if "compiled_kind" in cls.__dict__)
-    return all(getattr(constraint_type, name) is getattr(declaring, name)
-               for name in constraint_type.compiled_math)
-
-
 # ----------------------------------------------------------------------------- base
 
 
-class Constraint(ABC):
+class Constraint(CompiledForm, ABC):
     """A constraint on one point of one link of the chain.
 
     Subclasses say where the point is and which directions are constrained; this base
@@ -294,19 +282,6 @@ class Constraint(ABC):
     placement: ClassVar[tuple[PlacementField, ...]] = ()
     #: world velocity (m/s) of the reference point, fed forward (set by :meth:`move_to`)
     velocity: np.ndarray
-    #: the compiled CJM step's name of this type's terms ("hole", "plane", "point_lock";
-    #: docs/design.md section 16), or None: the compiled step has Python write them
-    compiled_kind: ClassVar[str | None] = None
-    #: the attributes :meth:`compiled_values` reads: assigning one declares the
-    #: parameters anew (and stores a read-only copy of an array)
-    compiled_fields: ClassVar[tuple[str, ...]] = ()
-    #: the methods whose math the compiled kind repeats: a subclass overriding one of them
-    #: declares no compiled form (its own math runs in Python)
-    compiled_math: ClassVar[tuple[str, ...]] = (
-        "point", "directions", "free_directions", "error", "feed_forward", "evaluate")
-    #: the declared parameters (read-only, replaced whenever the constraint changes), set
-    #: once every field of :attr:`compiled_fields` is
-    compiled_parameters: np.ndarray
 
     def __init__(self, link: str, gain: float = DEFAULT_GAIN) -> None:
         if not isinstance(link, str) or not link:
@@ -370,47 +345,6 @@ class Constraint(ABC):
         if problem is not None:
             raise ValueError(problem)
         self._checked_period = dt
-
-    # -- what the compiled step computes from (docs/design.md section 16) ----------------
-
-    def compiled_form(self) -> tuple[str, np.ndarray] | None:
-        """``(kind, parameters)``: the compiled CJM step computes this constraint's terms
-        from them in C++ (the layout of each kind: :meth:`compiled_values` and
-        controllers/cjm/_step/terms.hpp), reading the parameters again whenever the array
-        is replaced; None when the type declares none (Python then writes its terms)."""
-        if not declares_compiled_form(type(self)):
-            return None
-        return self.compiled_kind, self.compiled_parameters
-
-    def compiled_values(self) -> np.ndarray:
-        """The parameters of :attr:`compiled_kind`, from the fields (a new float array)."""
-        raise NotImplementedError(f"{type(self).__name__} declares no compiled form")
-
-    def __setattr__(self, name: str, value: object) -> None:
-        """Assigning a field of :attr:`compiled_fields` declares the parameters anew (an
-        array is stored as a read-only copy, so it changes only by assignment)."""
-        if name not in self.compiled_fields:
-            object.__setattr__(self, name, value)
-            return
-        if isinstance(value, np.ndarray):
-            value = value.copy()
-            value.flags.writeable = False
-        object.__setattr__(self, name, value)
-        self._declare()
-
-    def _declare(self) -> None:
-        """Replace :attr:`compiled_parameters` once every field is set."""
-        if all(name in self.__dict__ for name in self.compiled_fields):
-            parameters = self.compiled_values()
-            parameters.flags.writeable = False
-            object.__setattr__(self, "compiled_parameters", parameters)
-
-    def __setstate__(self, state: dict) -> None:
-        """A copy (``copy.deepcopy``, ``pickle``) keeps its fields read-only and declares
-        its parameters anew."""
-        for name, value in state.items():
-            if name != "compiled_parameters":
-                Constraint.__setattr__(self, name, value)
 
     # -- geometry, in F_a coordinates, given the link's world placement --------------
 

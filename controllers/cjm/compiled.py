@@ -23,6 +23,8 @@ import dataclasses
 import numpy as np
 import pinocchio as pin
 
+from constraints.compiled_form import UNIT_TOLERANCE
+
 from ..base import StepStatus, checked_inputs
 from ._step import EVENTS, REPORT_FIELDS as CPP_REPORT_FIELDS, JointBox, Pipeline, Step, Tolerances
 from ._step import ConstraintPlan as CompiledPlan
@@ -154,7 +156,7 @@ class CompiledStep:
         for i, plan in enumerate(plans):
             constraint = plan.constraint
             if constraint.compiled_form() is not None:
-                pipeline.declare(i, constraint, self._paper, PAPER_FORM_MIN_A)
+                pipeline.declare(i, constraint, self._paper, PAPER_FORM_MIN_A, UNIT_TOLERANCE)
             else:
                 row = placements[len(setup.ee_frame_ids) + i]
                 writer = TermsWriter(constraint, "paper" if self._paper else "nullspace")

@@ -52,19 +52,21 @@ struct BoundPipeline : cjm::Pipeline {
 
   struct Source {
     Index index;
+    double unit_tolerance;              // of a declared axis or normal
     py::object constraint, parameters;  // the constraint and the array last copied
   };
   std::vector<Source> sources;
   py::str parameters_name{"compiled_parameters"};
 
   //! Constraint ``index`` computes its terms here from its declaration.
-  void declare(Index index, py::object constraint, bool paper, double paper_min_a) {
+  void declare(Index index, py::object constraint, bool paper, double paper_min_a,
+               double unit_tolerance) {
     const py::object form = constraint.attr("compiled_form")();
     if (form.is_none())
       throw std::invalid_argument("the constraint declares no compiled form");
     const auto declared = form.cast<std::tuple<std::string, py::object>>();
     set_form(index, cjm::terms_kind(std::get<0>(declared)), paper, paper_min_a);
-    Source source{index, std::move(constraint), py::none()};
+    Source source{index, unit_tolerance, std::move(constraint), py::none()};
     load(source, std::get<1>(declared));
     sources.push_back(std::move(source));
   }
@@ -82,7 +84,8 @@ struct BoundPipeline : cjm::Pipeline {
     const Index size = entries.shape(0);
     double values[cjm::kMaxParameters];
     for (Index i = 0; i < std::min(size, cjm::kMaxParameters); ++i) values[i] = entries(i);
-    cjm::load_parameters(this->kind(source.index), values, size, this->parameters(source.index));
+    cjm::load_parameters(this->kind(source.index), values, size, source.unit_tolerance,
+                         this->parameters(source.index));
     source.parameters = py::reinterpret_borrow<py::object>(parameters);
   }
 
@@ -231,11 +234,12 @@ PYBIND11_MODULE(_step, module) {
            "universe; ``frames``: (parent joint, placement 4x4), the EE frames then one per "
            "constraint; ``step`` is copied.")
       .def("declare", &BoundPipeline::declare, py::arg("index"), py::arg("constraint"),
-           py::arg("paper") = false, py::arg("paper_min_a") = 0.0,
+           py::arg("paper"), py::arg("paper_min_a"), py::arg("unit_tolerance"),
            "Constraint ``index``'s terms computed here from its compiled_form() (the "
            "parameters read again whenever its ``compiled_parameters`` array is replaced); "
            "``paper``: a hole's structure matrix in the paper's parametrisation where "
-           "|p| >= ``paper_min_a``. ValueError for a bad declaration, naming the field.")
+           "|p| >= ``paper_min_a``; a declared axis or normal within ``unit_tolerance`` of "
+           "unit norm. ValueError for a bad declaration, naming the field.")
       .def("load", [](BoundPipeline& pipeline, py::handle q, py::handle twist) {
              return load_vector(q, pipeline.q()) && load_vector(twist, pipeline.twist());
            }, py::arg("q"), py::arg("twist"),

@@ -34,9 +34,6 @@ constexpr Field kPlaneFields[] = {{"link_point", 0, 3, false}, {"plane_point", 3
 constexpr Field kLockFields[] = {{"link_point", 0, 3, false}, {"target", 3, 3, false},
                                  {"velocity", 6, 3, false}, {"gain", 9, 1, false}};
 
-//! Unit vectors are checked as constraints.validation.as_unit_vector does.
-constexpr double kUnitTolerance = 1e-6;
-
 Eigen::Matrix3d hat(const Vector3& p) {
   Eigen::Matrix3d skew;
   skew << 0.0, -p(2), p(1), p(2), 0.0, -p(0), -p(1), p(0), 0.0;
@@ -189,7 +186,8 @@ Index kind_rows(TermsKind kind) {
   return 0;
 }
 
-void load_parameters(TermsKind kind, const double* values, Index size, Parameters& parameters) {
+void load_parameters(TermsKind kind, const double* values, Index size, double unit_tolerance,
+                     Parameters& parameters) {
   const std::string prefix = std::string(kind_name(kind)) + " compiled_parameters: ";
   if (size != parameter_count(kind))
     throw std::invalid_argument(prefix + "needs " + std::to_string(parameter_count(kind)) +
@@ -201,7 +199,7 @@ void load_parameters(TermsKind kind, const double* values, Index size, Parameter
     const Eigen::Map<const Vector> entries(values + field.offset, field.size);
     if (!entries.allFinite())
       throw std::invalid_argument(prefix + field.name + " must be finite");
-    if (field.unit && std::abs(entries.norm() - 1.0) > kUnitTolerance)
+    if (field.unit && !(std::abs(entries.norm() - 1.0) <= unit_tolerance))
       throw std::invalid_argument(prefix + field.name + " must be a unit vector");
     if (field.size == 1 && entries(0) < 0.0)
       throw std::invalid_argument(prefix + field.name + " must be >= 0");

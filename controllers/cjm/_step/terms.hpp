@@ -39,8 +39,10 @@ Index kind_rows(TermsKind kind);
 
 //! Checks ``values`` (``size`` entries) against ``kind``'s declaration and copies them to
 //! ``parameters``: std::invalid_argument naming the field for a wrong size, a non-finite
-//! entry, a non-unit axis or normal, or a negative gain.
-void load_parameters(TermsKind kind, const double* values, Index size, Parameters& parameters);
+//! entry, an axis or normal whose norm is more than ``unit_tolerance`` from 1
+//! (constraints.compiled_form.UNIT_TOLERANCE), or a negative gain.
+void load_parameters(TermsKind kind, const double* values, Index size, double unit_tolerance,
+                     Parameters& parameters);
 
 //! The link's world placement (rotation, translation), a row of Kinematics::placements.
 using Rotation = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
