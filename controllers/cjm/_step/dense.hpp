@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/Jacobi>
 
 #include <algorithm>
 #include <cmath>
@@ -111,16 +112,10 @@ inline void jacobi_columns(MatrixRef x, MatrixRef v, VectorRef norms) {
         const double c = 1.0 / std::sqrt(1.0 + t * t), s = c * t;
         norms(i) = alpha - t * gamma;
         norms(j) = beta + t * gamma;
-        for (Index r = 0; r < x.rows(); ++r) {
-          const double xi = x(r, i), xj = x(r, j);
-          x(r, i) = c * xi - s * xj;
-          x(r, j) = s * xi + c * xj;
-        }
-        for (Index r = 0; r < q; ++r) {
-          const double vi = v(r, i), vj = v(r, j);
-          v(r, i) = c * vi - s * vj;
-          v(r, j) = s * vi + c * vj;
-        }
+        // columns i, j <- (c x_i - s x_j, s x_i + c x_j), vectorised over the rows
+        const Eigen::JacobiRotation<double> rotation(c, s);
+        x.applyOnTheRight(i, j, rotation);
+        v.applyOnTheRight(i, j, rotation);
       }
     }
     if (!rotated) return;
