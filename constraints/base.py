@@ -25,6 +25,7 @@ from typing import ClassVar, Literal, Protocol
 import numpy as np
 import pinocchio as pin
 
+from .compiled_form import CompiledForm
 from .kinematics import frame_placement, resolve_frame
 from .placement import PlacementField
 from .registry import constraint_type
@@ -236,7 +237,7 @@ def structure_of(state: ConstraintPoint, parametrisation: Parametrisation = "nul
 # ----------------------------------------------------------------------------- base
 
 
-class Constraint(ABC):
+class Constraint(CompiledForm, ABC):
     """A constraint on one point of one link of the chain.
 
     Subclasses say where the point is and which directions are constrained; this base

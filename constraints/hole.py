@@ -63,6 +63,8 @@ class Hole(Constraint):
     placement: tuple[PlacementField, ...] = (ON_ARM, ALONG_LINK)
     omitted_at_default = ("tissue_stiffness", "tissue_damping")
     has_wall = True
+    compiled_kind = "hole"
+    compiled_fields = ("_anchor", "_link_axis", "_gain")
 
     def __init__(
         self,
@@ -78,9 +80,7 @@ class Hole(Constraint):
         self._set_anchor(as_vector(center, 3, "hole center"), as_vector(velocity, 3, "hole velocity"))
         self.tissue_stiffness = as_number(tissue_stiffness, "tissue_stiffness", 0.0)
         self.tissue_damping = as_number(tissue_damping, "tissue_damping", 0.0)
-        self.link_axis = as_unit_vector(link_axis, "link_axis")
-        self._C = perpendicular_basis(self.link_axis)
-        self._C_perp = self.link_axis[None, :]
+        self.link_axis = link_axis
 
     @classmethod
     def on_link(
@@ -160,15 +160,24 @@ class Hole(Constraint):
     def velocity(self, value: np.typing.ArrayLike) -> None:
         self._set_anchor(self._anchor[:3], as_vector(value, 3, "hole velocity"))
 
-    def _set_anchor(self, center: np.ndarray, velocity: np.ndarray) -> None:
-        anchor = np.concatenate([center, velocity])
-        anchor.flags.writeable = False  # changed only through the setters: a new array
-        self._anchor = anchor
+    @property
+    def link_axis(self) -> np.ndarray:
+        """(3,) unit vector along the link, link coordinates; read-only (assign a new one)."""
+        return self._link_axis
 
-    def __setstate__(self, state: dict) -> None:
-        """A copy (``copy.deepcopy``, ``pickle``) keeps the anchor read-only."""
-        self.__dict__.update(state)
-        self._anchor.flags.writeable = False
+    @link_axis.setter
+    def link_axis(self, value: np.typing.ArrayLike) -> None:
+        axis = as_unit_vector(value, "link_axis")
+        self._C = perpendicular_basis(axis)
+        self._C_perp = axis[None, :]
+        self._link_axis = axis
+
+    def _set_anchor(self, center: np.ndarray, velocity: np.ndarray) -> None:
+        self._anchor = np.concatenate([center, velocity])  # read-only: a new array per change
+
+    def compiled_values(self) -> np.ndarray:
+        """``[center, velocity, link_axis, gain]`` (10,), world frame but the axis."""
+        return np.concatenate([self._anchor, self._link_axis, [self._gain]])
 
     def axis_world(self, placement: pin.SE3) -> np.ndarray:
         """The link axis in the world frame (the hole's ring is drawn around it)."""

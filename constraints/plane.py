@@ -42,6 +42,8 @@ class Plane(Constraint):
     default_gain: float = DEFAULT_GAIN
     kind = "plane"
     position_attribute = "plane_point"
+    compiled_kind = "plane"
+    compiled_fields = ("link_point", "plane_point", "normal", "velocity", "_gain")
     shape = "plane"
     color = (60, 140, 255)
     label = "plane"
@@ -113,6 +115,12 @@ class Plane(Constraint):
                 f"link point is {abs(signed_distance):.4g} m from the plane "
                 f"(tolerance {tolerance:g} m): the point must lie on the plane"
             )
+
+    def compiled_values(self) -> np.ndarray:
+        """``[link_point, plane_point, normal, velocity, gain]`` (13,); a barrier declares
+        the same (its rows are inequalities)."""
+        return np.concatenate([self.link_point, self.plane_point, self.normal, self.velocity,
+                               [self._gain]])
 
     # ``plane.move_to(plane_point, velocity)`` (inherited) moves the plane (a world point
     # on it, m) and sets its velocity (m/s).

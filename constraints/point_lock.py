@@ -33,6 +33,8 @@ class PointLock(Constraint):
     dim = 3
     kind = "point_lock"
     position_attribute = "target"
+    compiled_kind = "point_lock"
+    compiled_fields = ("link_point", "target", "velocity", "_gain")
     shape = "point"
     color = (40, 170, 90)
     label = "point lock"
@@ -57,6 +59,10 @@ class PointLock(Constraint):
     def place(cls, robot: RobotLike, q: np.ndarray, link: str, distance: float) -> "PointLock":
         """:meth:`on_link`: the point ``distance`` m along ``link``'s axis, where it is at ``q``."""
         return cls.on_link(robot, q, distance=distance, link=link)
+
+    def compiled_values(self) -> np.ndarray:
+        """``[link_point, target, velocity, gain]`` (10,)."""
+        return np.concatenate([self.link_point, self.target, self.velocity, [self._gain]])
 
     # ``lock.move_to(target, velocity)`` (inherited) moves the lock point (world, m) and
     # sets its velocity (m/s).

@@ -344,3 +344,221 @@ def test_joints_off_the_path_take_the_posture_in_both_backends_as_in_the_qp():
         np.testing.assert_allclose(qd_qp[fingers], qd[fingers], rtol=0, atol=1e-6)
         assert python.info.damping == 0.0, python.info
         np.testing.assert_allclose(qd_qp, qd, rtol=0, atol=1e-6, err_msg=str(links))
+
+
+# -- constraints that change between steps (docs/design.md section 16: the declaration) ---
+
+
+def change_constraint(constraint: Constraint, change: str, rng: np.random.Generator) -> None:
+    """Move, re-aim or re-tune ``constraint`` as a user or a scenario does between steps."""
+    if change == "move":  # move_to with a velocity: moving geometry, fed forward
+        constraint.move_to(constraint.position + rng.uniform(-2e-3, 2e-3, 3),
+                           velocity=rng.uniform(-0.05, 0.05, 3))
+    elif change == "gain":  # stable at the controllers' 1 kHz for every type (K dt < 1)
+        constraint.gain = float(rng.uniform(0.0, 900.0))
+    elif change == "velocity":
+        constraint.velocity = rng.uniform(-0.05, 0.05, 3)
+    elif change == "normal" and isinstance(constraint, Plane):
+        normal = rng.normal(size=3)
+        constraint.normal = normal / np.linalg.norm(normal)
+
+
+@st.composite
+def changing_problems(draw):
+    """A problem of :func:`problems` and, for each of 2-4 steps, what changes before it."""
+    robot, constraints, q, twist, options = draw(problems())
+    changes = draw(st.lists(st.lists(st.sampled_from(["move", "gain", "velocity", "normal", "none"]),
+                                     min_size=len(constraints), max_size=len(constraints)),
+                            min_size=2, max_size=4))
+    return robot, constraints, q, twist, options, changes, draw(st.integers(0, 2**32 - 1))
+
+
+@settings(max_examples=150, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(drawn=changing_problems())
+def test_both_steps_agree_while_the_constraints_change_between_steps(drawn):
+    """Moving geometry (velocities fed forward), gains, normals and ``move_to`` changed
+    between steps, on both backends' shared constraints: the compiled step reads each
+    change at the next step (its parameter array replaced) and gives the Python step's
+    command and report (:func:`assert_same_step`); ``q`` follows the command."""
+    robot, constraints, q, twist, options, changes, seed = drawn
+    rng = np.random.default_rng(seed)
+    python = CJMController(robot, constraints, backend="python", **options)
+    compiled = CJMController(robot, constraints, backend="compiled", **options)
+    for step_changes in changes:
+        for constraint, change in zip(constraints, step_changes):
+            change_constraint(constraint, change, rng)
+        reference = CJMController(robot, constraints, backend="python", **options)
+        reference.solve(q, twist)
+        message = reference.info.message
+        assume(not ("constraints conflict" in message
+                    and "correction exceeds the joint limits" in message))
+        assert_same_step(python, compiled, q, twist)
+        q = pin.integrate(robot.model, q, python.solve(q, twist) * python.dt)
+
+
+def off_by(constraint: Constraint, offset: list[float]) -> Constraint:
+    """``constraint`` moved by ``offset`` (m, world): an error its gain corrects."""
+    constraint.move_to(constraint.position + offset)
+    return constraint
+
+
+CHANGES = {
+    "hole moved": (lambda r, q: Hole.on_link(r, q, distance=0.08),
+                   lambda c: c.move_to(c.position + [0.0, 3e-3, -2e-3], velocity=[0.0, 0.02, 0.0])),
+    "hole gain": (lambda r, q: off_by(Hole.on_link(r, q, distance=0.08), [0.0, 2e-3, 0.0]),
+                  lambda c: setattr(c, "gain", 10.0)),
+    "plane normal": (lambda r, q: Plane.through_link_point(r, q, [0.0, 0.0, 1.0], distance=0.05),
+                     lambda c: setattr(c, "normal", [0.28, 0.0, 0.96])),
+    "plane moved": (lambda r, q: Plane.through_link_point(r, q, [0.0, 0.0, 1.0], distance=0.05),
+                    lambda c: c.move_to(c.position + [0.0, 0.0, 4e-3], velocity=[0.0, 0.0, 0.01])),
+    "barrier moved past the point": (
+        lambda r, q: Barrier.through_link_point(r, q, [0.0, 0.0, 1.0], distance=0.05),
+        lambda c: c.move_to(c.position + [0.0, 0.0, 4e-3])),
+    "lock target": (lambda r, q: PointLock.on_link(r, q, distance=0.05),
+                    lambda c: setattr(c, "target", c.target + [2e-3, 0.0, 0.0])),
+    "lock link point": (lambda r, q: PointLock.on_link(r, q, distance=0.05),
+                        lambda c: setattr(c, "link_point", c.link_point + [0.0, 0.0, 0.01])),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CHANGES))
+def test_a_constraint_changed_between_steps_is_not_stale(sda10f, case):
+    """Change a constraint after a compiled step: the next step must be the step of a
+    controller built after the change (bit for bit: the same code on the same
+    parameters), not the one before (the change moves the command), and hold the changed
+    constraint's rows, measured by Pinocchio (a barrier moved past the point pushes it
+    back: its row active)."""
+    build, change = CHANGES[case]
+    q = sda10f.q_home.copy()
+    twist = np.array([0.01, -0.005, 0.0, 0.02, 0.0, -0.01])
+    constraint = build(sda10f, q)
+    controller = CJMController(sda10f, [constraint], backend="compiled")
+    before = controller.solve(q, twist)
+    change(constraint)
+    after = controller.solve(q, twist)
+    fresh = CJMController(sda10f, [constraint], backend="compiled").solve(q, twist)
+    np.testing.assert_array_equal(after, fresh)
+    assert np.max(np.abs(after - before)) > 1e-6
+    model, data = sda10f.model, sda10f.model.createData()
+    pin.computeJointJacobians(model, data, q)
+    A, b = constraint.rows(model, data)
+    # the rows held exactly (the task may be scaled or least squares: a barrier 4 mm
+    # behind asks 0.4 m/s of the point); a barrier held as an equality, its row active
+    assert controller.info.status in (StepStatus.OK, StepStatus.SCALED,
+                                      StepStatus.LEAST_SQUARES), controller.info
+    assert constraint.is_equality or controller.info.active_barriers == (0,)
+    assert np.max(np.abs(A @ after - b)) <= 1e-9
+
+
+def test_the_paper_form_undefined_and_defined_again_after_move_to(sda10f):
+    """A hole whose constrained point is the link frame's origin (``a = 0``): the paper's
+    form is undefined, both steps record PAPER_FORM_UNDEFINED and take the general form;
+    moved 8 cm along the axis (``move_to``), the next step is the analytical one again."""
+    q = sda10f.q_home.copy()
+    hole = Hole.on_link(sda10f, q, distance=0.0)
+    python = CJMController(sda10f, [hole], backend="python", parametrisation="paper")
+    compiled = CJMController(sda10f, [hole], backend="compiled", parametrisation="paper")
+    twist = np.array([0.01, 0.0, 0.0, 0.0, 0.02, 0.0])
+    assert_same_step(python, compiled, q, twist)
+    assert compiled.report.events[0][0] is Event.PAPER_FORM_UNDEFINED
+    assert compiled.info.method == "general"
+    hole.move_to(Hole.on_link(sda10f, q, distance=0.08).center)
+    assert_same_step(python, compiled, q, twist)
+    assert compiled.info.method == "analytical"
+    assert not compiled.report.events
+
+
+class _BadPlane(Plane):
+    """A plane whose declaration is wrong in one way, set per test."""
+
+    bad: str = ""
+
+    def compiled_values(self) -> np.ndarray:
+        values = super().compiled_values()
+        if self.bad == "normal":
+            values[6:9] *= 2.0
+        elif self.bad == "size":
+            values = values[:12]
+        elif self.bad == "dtype":
+            values = values.astype(np.float32)
+        elif self.bad == "gain":
+            values[12] = -1.0
+        return values
+
+
+@pytest.mark.parametrize("bad, field", [("normal", "normal must be a unit vector"),
+                                        ("size", "needs 13 entries, got 12"),
+                                        ("dtype", "float64"), ("gain", "gain must be >= 0")])
+def test_bad_declarations_raise_value_error_naming_the_field(sda10f, bad, field):
+    plane = type("BadPlane", (_BadPlane,), {"bad": bad}).through_link_point(
+        sda10f, sda10f.q_home, [0.0, 0.0, 1.0], distance=0.05)
+    with pytest.raises(ValueError, match=field):
+        CJMController(sda10f, [plane], backend="compiled")
+
+
+def test_a_bad_declaration_between_steps_raises_naming_the_field(sda10f):
+    """A parameter array replaced by a bad one after the build (a non-finite plane point)
+    is refused at the next step, naming the field; the unknown kind at the build."""
+    plane = Plane.through_link_point(sda10f, sda10f.q_home, [0.0, 0.0, 1.0], distance=0.05)
+    controller = CJMController(sda10f, [plane], backend="compiled")
+    controller.solve(sda10f.q_home, np.zeros(6))
+    bad = plane.compiled_parameters.copy()
+    bad[4] = np.nan
+    object.__setattr__(plane, "compiled_parameters", bad)
+    with pytest.raises(ValueError, match="plane_point must be finite"):
+        controller.solve(sda10f.q_home, np.zeros(6))
+    torus = type("Torus", (Plane,), {"compiled_kind": "torus"}).through_link_point(
+        sda10f, sda10f.q_home, [0.0, 0.0, 1.0], distance=0.05)
+    with pytest.raises(ValueError, match="unknown kind 'torus'"):
+        CJMController(sda10f, [torus], backend="compiled")
+
+
+def test_the_declarations_carry_the_fields_and_are_replaced_on_change(sda10f):
+    """Each type declares its kind and fields (a barrier: a plane; its rows inequalities);
+    the array is read-only and replaced, never edited, when a field changes."""
+    q = sda10f.q_home
+    hole = Hole("arm_link_5_r", [0.1, 0.2, 0.3], link_axis=[0.0, 1.0, 0.0], gain=5.0,
+                velocity=[0.0, 0.0, 0.1])
+    plane = Plane.through_link_point(sda10f, q, [0.0, 0.0, 1.0], distance=0.05)
+    barrier = Barrier.through_link_point(sda10f, q, [0.0, 1.0, 0.0], distance=0.05)
+    lock = PointLock.on_link(sda10f, q, distance=0.05)
+    kind, values = hole.compiled_form()
+    assert kind == "hole"
+    np.testing.assert_array_equal(values, [0.1, 0.2, 0.3, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 5.0])
+    for constraint, kind, fields in (
+            (plane, "plane", ("link_point", "plane_point", "normal", "velocity")),
+            (barrier, "plane", ("link_point", "plane_point", "normal", "velocity")),
+            (lock, "point_lock", ("link_point", "target", "velocity"))):
+        declared_kind, values = constraint.compiled_form()
+        assert declared_kind == kind
+        np.testing.assert_array_equal(
+            values, np.concatenate([*(getattr(constraint, f) for f in fields), [constraint.gain]]))
+    for constraint in (hole, plane, lock):
+        values = constraint.compiled_parameters
+        with pytest.raises(ValueError, match="read-only"):
+            values[0] = 1.0
+        with pytest.raises(ValueError, match="read-only"):
+            constraint.velocity[0] = 1.0
+        constraint.gain = 7.0
+        assert constraint.compiled_parameters is not values
+        assert constraint.compiled_parameters[-1] == 7.0
+
+
+def test_a_user_type_without_a_compiled_form_runs_through_python_terms(sda10f):
+    """A plane subclass with its own error (a user's type) declares no compiled form (the
+    compiled kind's math would not be its math): Python writes its terms, and the step
+    is the Python step's."""
+
+    class HalfErrorPlane(Plane):
+        def error(self, placement: pin.SE3) -> np.ndarray:
+            return 0.5 * super().error(placement)
+
+    q = sda10f.q_home.copy()
+    plane = HalfErrorPlane.through_link_point(sda10f, q, [0.0, 0.0, 1.0], distance=0.05)
+    plane.move_to(plane.position + [0.0, 0.0, 3e-3])
+    assert plane.compiled_form() is None
+    hole = Hole.on_link(sda10f, q, distance=0.08)  # declared: computed in C++ beside it
+    python = CJMController(sda10f, [hole, plane], backend="python")
+    compiled = CJMController(sda10f, [hole, plane], backend="compiled")
+    assert_same_step(python, compiled, q, np.array([0.01, 0.0, 0.0, 0.0, 0.01, 0.0]))

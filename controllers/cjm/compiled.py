@@ -3,9 +3,11 @@
 :class:`CompiledStep` takes a :class:`~controllers.cjm.step_setup.StepSetup`, hands it
 to ``controllers.cjm._step`` once (the tolerances included), and then runs
 ``solve(q, twist) -> (qd, report)`` as the Python reference
-(:class:`~controllers.cjm.python_step.PythonStep`) does: one C++ call a step when every
-constraint has an affine form (the C++ side reads a hole's centre, velocity and gain
-before every step, as data), else Python writes the other constraints' terms between two calls.
+(:class:`~controllers.cjm.python_step.PythonStep`) does: one C++ call a step for any mix of
+holes (both parametrisations), planes, barriers and point locks, whose terms the C++ side
+computes from what each declares (:meth:`constraints.Constraint.compiled_form`, read again
+only when its parameter array is replaced). A constraint type that declares no compiled
+form (a user's own) has its terms written by Python between two calls.
 tests/test_compiled_step.py and tests/test_cjm_backends_fuzz.py hold the two equal.
 
 With collision avoidance (docs/design.md section 18.4) Python computes Pinocchio's joint
@@ -21,6 +23,8 @@ import dataclasses
 import numpy as np
 import pinocchio as pin
 
+from constraints.compiled_form import UNIT_TOLERANCE
+
 from ..base import StepStatus, checked_inputs
 from ._step import EVENTS, REPORT_FIELDS as CPP_REPORT_FIELDS, JointBox, Pipeline, Step, Tolerances
 from ._step import ConstraintPlan as CompiledPlan
@@ -28,6 +32,7 @@ from .analytical import TermsWriter, terms_size
 from .python_step import paper_form_defined
 from .report import EVENT_BY_CODE, METHODS, Event, StepReport
 from .step_setup import StepSetup
+from .tolerances import PAPER_FORM_MIN_A
 
 #: StepStatus by the C++ code (the enum's order, best to worst)
 STATUSES = tuple(StepStatus)
@@ -107,8 +112,6 @@ class CompiledStep:
         # the paper's S only where the analytical form can use it (one hole, form auto)
         self._paper = (setup.parametrisation == "paper" and len(plans) == 1
                        and setup.form == "auto" and setup.paper_task)
-        writers = [TermsWriter(plan.constraint, "paper" if self._paper else "nullspace")
-                   for plan in plans]
         self._fallback_writer = TermsWriter(plans[0].constraint, "nullspace") if self._paper else None
         self._use_posture = setup.posture_gain > 0.0
         one_coordinate = all(model.nqs[j] == 1 and model.nvs[j] == 1 for j in range(1, model.njoints))
@@ -147,16 +150,16 @@ class CompiledStep:
         self._active_pairs = step.active_pairs
         terms, placements = pipeline.terms, pipeline.placements
         offsets = np.cumsum([0] + [terms_size(plan.constraint.dim) for plan in plans])
-        #: (writer, terms view, link rotation and translation views) of the others
+        #: (writer, terms view, link rotation and translation views) of the constraints
+        #: that declare no compiled form: Python writes their terms
         self._in_python: list[tuple[TermsWriter, np.ndarray, np.ndarray, np.ndarray]] = []
-        for i, writer in enumerate(writers):
-            if writer.affine_terms is not None:
-                affine = writer.affine_terms
-                # the C++ side reads the constraint's anchor and gain before every step
-                pipeline.set_affine(i, affine.of_x, affine.of_f, affine.offset,
-                                    affine.of_x_per_gain, affine.offset_per_gain, writer.constraint)
+        for i, plan in enumerate(plans):
+            constraint = plan.constraint
+            if constraint.compiled_form() is not None:
+                pipeline.declare(i, constraint, self._paper, PAPER_FORM_MIN_A, UNIT_TOLERANCE)
             else:
                 row = placements[len(setup.ee_frame_ids) + i]
+                writer = TermsWriter(constraint, "paper" if self._paper else "nullspace")
                 self._in_python.append((writer, terms[offsets[i]:offsets[i + 1]],
                                         row[:9].reshape(3, 3), row[9:]))
         self._one_call = not self._in_python and not self._posture_in_python
@@ -191,16 +194,16 @@ class CompiledStep:
         if self._collisions is not None:
             return self._solve_with_pairs(*self._checked(q, twist))
         pipeline = self.pipeline
-        paper_form = True
         if self._one_call:
             qd = pipeline.solve(q, twist, self._use_posture, True)
             if qd is None:  # not finite float vectors of the right sizes: say what is wrong
                 qd = pipeline.solve(*self._checked(q, twist), self._use_posture, True)
+            paper_form = not self._paper or pipeline.paper_form
         else:
             if not pipeline.load(q, twist):
                 pipeline.load(*self._checked(q, twist))
             pipeline.prepare()
-            paper_form = self._write_in_python()
+            paper_form = self._write_in_python() and pipeline.paper_form
             qd = pipeline.finish(self._use_posture, paper_form)
         report = self._report.tolist()
         if paper_form and not (report[6] or report[7] or report[8]):  # no list, no event
@@ -247,9 +250,9 @@ class CompiledStep:
         return checked_inputs(q, twist, self.setup.model.nq, self.setup.task_size)
 
     def _write_in_python(self) -> bool:
-        """The terms of the constraints without an affine form, and a posture velocity
-        Python computes; returns whether the paper's form is defined (else the analytical
-        form may not run)."""
+        """The terms of the constraints that declare no compiled form, and a posture
+        velocity Python computes; returns whether the paper's form is defined (else the
+        analytical form may not run)."""
         setup = self.setup
         paper_form = True
         for writer, terms, rotation, translation in self._in_python:

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/Jacobi>
 
 #include <algorithm>
 #include <cmath>
@@ -77,7 +78,8 @@ inline void apply_q(const ConstMatrixRef& qr, const ConstVectorRef& tau, MatrixR
 //! One-sided Jacobi (Hestenes): rotates the columns of ``x`` (p x q) until they are
 //! orthogonal, so ``x_in = x_out v^T`` with ``v`` (q x q) orthogonal; the column norms
 //! of ``x_out`` are the singular values. Accurate to the last digits of the small ones.
-inline void jacobi_columns(MatrixRef x, MatrixRef v) {
+//! ``norms`` (q): workspace.
+inline void jacobi_columns(MatrixRef x, MatrixRef v, VectorRef norms) {
   const Index q = x.cols();
   v.setIdentity();
   const double eps = std::numeric_limits<double>::epsilon();
@@ -89,31 +91,31 @@ inline void jacobi_columns(MatrixRef x, MatrixRef v) {
   // product and the sweeps never end (seen on sda10f_dual), so after 100 sweeps the
   // cosine need only be below sqrt(p) eps, LAPACK dgesvj's tolerance
   const double strict = eps, loose = std::sqrt(static_cast<double>(x.rows())) * eps;
+  // the columns' squared norms, computed at each sweep's start and updated by each
+  // rotation (``alpha - t gamma``, ``beta + t gamma``: exact in exact arithmetic)
   for (int sweep = 0; sweep < 130; ++sweep) {
     const double tolerance = sweep < 100 ? strict : loose;
     bool rotated = false;
+    for (Index i = 0; i < q; ++i) norms(i) = x.col(i).squaredNorm();
     for (Index i = 0; i + 1 < q; ++i) {
       for (Index j = i + 1; j < q; ++j) {
-        const double alpha = x.col(i).squaredNorm();
-        const double beta = x.col(j).squaredNorm();
+        const double alpha = norms(i), beta = norms(j);
         const double gamma = x.col(i).dot(x.col(j));
         if (!(std::abs(gamma) > tolerance * std::sqrt(alpha * beta)) || alpha <= negligible ||
             beta <= negligible)
           continue;
         rotated = true;
         const double zeta = (beta - alpha) / (2.0 * gamma);
-        const double t = std::copysign(1.0, zeta) / (std::abs(zeta) + std::hypot(1.0, zeta));
+        // sqrt(1 + zeta^2) where zeta^2 cannot overflow (hypot's cost without its need)
+        const double root = std::abs(zeta) < 1e150 ? std::sqrt(1.0 + zeta * zeta) : std::abs(zeta);
+        const double t = std::copysign(1.0, zeta) / (std::abs(zeta) + root);
         const double c = 1.0 / std::sqrt(1.0 + t * t), s = c * t;
-        for (Index r = 0; r < x.rows(); ++r) {
-          const double xi = x(r, i), xj = x(r, j);
-          x(r, i) = c * xi - s * xj;
-          x(r, j) = s * xi + c * xj;
-        }
-        for (Index r = 0; r < q; ++r) {
-          const double vi = v(r, i), vj = v(r, j);
-          v(r, i) = c * vi - s * vj;
-          v(r, j) = s * vi + c * vj;
-        }
+        norms(i) = alpha - t * gamma;
+        norms(j) = beta + t * gamma;
+        // columns i, j <- (c x_i - s x_j, s x_i + c x_j), vectorised over the rows
+        const Eigen::JacobiRotation<double> rotation(c, s);
+        x.applyOnTheRight(i, j, rotation);
+        v.applyOnTheRight(i, j, rotation);
       }
     }
     if (!rotated) return;
@@ -134,6 +136,7 @@ class ThinSvd {
     u_.resize(max_rows > 0 ? max_rows : 1, small);
     v_.resize(max_cols > 0 ? max_cols : 1, small);
     s_.resize(small);
+    norms_.resize(small);
   }
 
   //! ``m = U diag(s) V^T`` with ``t = min(p, q)`` singular values (unsorted), ``U``
@@ -151,7 +154,7 @@ class ThinSvd {
     auto r = square_.topLeftCorner(t, t);
     r = tall_copy.topRows(t).triangularView<Eigen::Upper>();
     auto rotations = rotations_.topLeftCorner(t, t);
-    jacobi_columns(r, rotations);  // R = (R rotations) rotations^T, R rotations = U_R S
+    jacobi_columns(r, rotations, norms_.head(t));  // R = (R rotations) rotations^T, R rotations = U_R S
     // the tall orientation's left vectors: Q [U_R; 0]; its right vectors: the rotations
     auto left = (tall ? u_ : v_).topLeftCorner(p, t);
     auto right = (tall ? v_ : u_).topLeftCorner(t, t);
@@ -174,7 +177,7 @@ class ThinSvd {
 
  private:
   Matrix work_, square_, rotations_, u_, v_;
-  Vector tau_, s_;
+  Vector tau_, s_, norms_;
   Index rows_ = 0, cols_ = 0;
 };
 

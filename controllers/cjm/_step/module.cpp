@@ -6,6 +6,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdint>
 
@@ -42,33 +43,61 @@ bool load_vector(py::handle source, cjm::Vector& target) {
   return target.allFinite();
 }
 
-//! A Pipeline that also holds the constraints with an affine form, whose anchor
-//! (``affine_anchor()``, 6 entries) and ``gain`` it copies in before every step: the
-//! constraints' data read each step, with no Python loop (docs/design.md section 16).
+//! A Pipeline that also holds the constraints that declare a compiled form
+//! (Constraint.compiled_form: a kind and a read-only float64 array of parameters,
+//! replaced by a new array whenever the constraint changes). Before every step it reads
+//! each one's ``compiled_parameters`` attribute and copies the values only when the array
+//! object changed: the constraints' data read each step, with no Python loop and no
+//! method call (docs/design.md section 16).
 struct BoundPipeline : cjm::Pipeline {
   using cjm::Pipeline::Pipeline;
 
   struct Source {
     Index index;
-    py::object constraint, affine_anchor;  // the constraint and its bound affine_anchor
+    double unit_tolerance;              // of a declared axis or normal
+    py::object constraint, parameters;  // the constraint and the array last copied
   };
   std::vector<Source> sources;
-  py::str gain_name{"gain"};
+  py::str parameters_name{"compiled_parameters"};
 
-  void add_source(Index index, py::object constraint) {
-    py::object method = constraint.attr("affine_anchor");
-    sources.push_back(Source{index, std::move(constraint), std::move(method)});
+  //! Constraint ``index`` computes its terms here from its declaration.
+  void declare(Index index, py::object constraint, bool paper, double paper_min_a,
+               double unit_tolerance) {
+    const py::object form = constraint.attr("compiled_form")();
+    if (form.is_none())
+      throw std::invalid_argument("the constraint declares no compiled form");
+    const auto declared = form.cast<std::tuple<std::string, py::object>>();
+    set_form(index, cjm::terms_kind(std::get<0>(declared)), paper, paper_min_a);
+    Source source{index, unit_tolerance, std::move(constraint), py::none()};
+    load(source, std::get<1>(declared));
+    sources.push_back(std::move(source));
   }
 
+  //! Copies ``parameters`` in after checking them (ValueError naming the field).
+  void load(Source& source, py::handle parameters) {
+    const char* kind = cjm::kind_name(this->kind(source.index));
+    if (!py::isinstance<py::array_t<double>>(parameters))
+      throw std::invalid_argument(std::string(kind) +
+                                  " compiled_parameters must be a float64 array");
+    const auto array = py::reinterpret_borrow<py::array_t<double>>(parameters);
+    if (array.ndim() != 1)
+      throw std::invalid_argument(std::string(kind) + " compiled_parameters must be 1-D");
+    const auto entries = array.unchecked<1>();
+    const Index size = entries.shape(0);
+    double values[cjm::kMaxParameters];
+    for (Index i = 0; i < std::min(size, cjm::kMaxParameters); ++i) values[i] = entries(i);
+    cjm::load_parameters(this->kind(source.index), values, size, source.unit_tolerance,
+                         this->parameters(source.index));
+    source.parameters = py::reinterpret_borrow<py::object>(parameters);
+  }
+
+  //! Each declared constraint's parameters, copied when their array was replaced.
   void read_sources() {
-    for (const Source& source : sources) {
-      const py::object anchor = source.affine_anchor();
-      if (!py::isinstance<py::array_t<double>>(anchor))
-        throw std::invalid_argument("affine_anchor() must give a float64 array");
-      const auto entries = py::reinterpret_borrow<py::array_t<double>>(anchor).unchecked<1>();
-      if (entries.shape(0) != 6) throw std::invalid_argument("affine_anchor() must give 6 entries");
-      for (py::ssize_t i = 0; i < 6; ++i) anchors()(source.index, i) = entries(i);
-      gains()(source.index) = source.constraint.attr(gain_name).cast<double>();
+    for (Source& source : sources) {
+      PyObject* current = PyObject_GetAttr(source.constraint.ptr(), parameters_name.ptr());
+      if (current == nullptr) throw py::error_already_set();
+      const py::object held = py::reinterpret_steal<py::object>(current);
+      if (current != source.parameters.ptr()) load(source, held);
     }
   }
 };
@@ -206,17 +235,13 @@ PYBIND11_MODULE(_step, module) {
            "``joints``: (kind, parent, placement 4x4, axis) per joint of pin.Model after the "
            "universe; ``frames``: (parent joint, placement 4x4), the EE frames then one per "
            "constraint; ``step`` is copied.")
-      .def("set_affine", [](BoundPipeline& pipeline, Index index, cjm::RowMatrix of_x,
-                            cjm::RowMatrix of_f, cjm::Vector offset, cjm::RowMatrix of_x_per_gain,
-                            cjm::Vector offset_per_gain, py::object source) {
-             pipeline.set_affine(index, cjm::AffineTerms{std::move(of_x), std::move(of_f),
-                                                         std::move(of_x_per_gain), std::move(offset),
-                                                         std::move(offset_per_gain)});
-             pipeline.add_source(index, std::move(source));
-           }, py::arg("index"), py::arg("of_x"), py::arg("of_f"), py::arg("offset"),
-           py::arg("of_x_per_gain"), py::arg("offset_per_gain"), py::arg("source"),
-           "Constraint ``index``'s affine map; ``source`` (the constraint) gives its anchor "
-           "and gain, read before every step.")
+      .def("declare", &BoundPipeline::declare, py::arg("index"), py::arg("constraint"),
+           py::arg("paper"), py::arg("paper_min_a"), py::arg("unit_tolerance"),
+           "Constraint ``index``'s terms computed here from its compiled_form() (the "
+           "parameters read again whenever its ``compiled_parameters`` array is replaced); "
+           "``paper``: a hole's structure matrix in the paper's parametrisation where "
+           "|p| >= ``paper_min_a``; a declared axis or normal within ``unit_tolerance`` of "
+           "unit norm. ValueError for a bad declaration, naming the field.")
       .def("load", [](BoundPipeline& pipeline, py::handle q, py::handle twist) {
              return load_vector(q, pipeline.q()) && load_vector(twist, pipeline.twist());
            }, py::arg("q"), py::arg("twist"),
@@ -227,8 +252,8 @@ PYBIND11_MODULE(_step, module) {
              py::gil_scoped_release release;
              pipeline.prepare();
            },
-           "The constraints' anchors and gains read, then the kinematics, the task rows and "
-           "the affine terms at the loaded q.")
+           "The declared constraints' parameters read (when replaced), then the kinematics, "
+           "the task rows and the declared terms at the loaded q.")
       .def("finish", &finish, py::arg("use_posture"), py::arg("analytical_allowed"),
            "The step, after prepare() and the terms Python writes: a new qd.")
       .def("solve", [](BoundPipeline& pipeline, py::handle q, py::handle twist, bool use_posture,
@@ -285,10 +310,8 @@ PYBIND11_MODULE(_step, module) {
         auto& vector = self.cast<BoundPipeline&>().posture();
         return view(vector.data(), {vector.size()}, self);
       })
-      .def_property_readonly("anchors", [](py::object self) {
-        auto& matrix = self.cast<BoundPipeline&>().anchors();
-        return view(matrix.data(), {matrix.rows(), matrix.cols()}, self);
-      })
+      .def_property_readonly("paper_form", &BoundPipeline::paper_form,
+                             "False when the last step found the paper's form undefined.")
       .def_property_readonly("placements", [](py::object self) {
         return read_only(self.cast<BoundPipeline&>().placements(), self);
       })

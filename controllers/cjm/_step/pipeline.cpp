@@ -2,6 +2,7 @@
 #include "pipeline.hpp"
 
 #include <stdexcept>
+#include <string>
 
 namespace cjm {
 
@@ -22,8 +23,7 @@ Pipeline::Pipeline(Kinematics kinematics, Step step, Index ee_count,
   for (Index i = 0; i < n_constraints; ++i)
     terms_size_.push_back((i + 1 < n_constraints ? step_.terms_offset(i + 1) : step_.terms_size()) -
                           step_.terms_offset(i));
-  has_affine_.assign(n_constraints, false);
-  affine_.resize(n_constraints);
+  forms_.resize(n_constraints);
   const Index nv = kinematics_.nv();
   q_ = Vector::Zero(kinematics_.nq());
   twist_ = Vector::Zero(6 * ee_count_);
@@ -31,51 +31,47 @@ Pipeline::Pipeline(Kinematics kinematics, Step step, Index ee_count,
   terms_ = Vector::Zero(step_.terms_size());
   posture_ = Vector::Zero(nv);
   ee_jacobian_ = RowMatrix::Zero(task_twist_.size(), nv);
-  anchors_ = RowMatrix::Zero(n_constraints, 6);
-  gains_ = Vector::Zero(n_constraints);
 }
 
-void Pipeline::set_affine(Index index, AffineTerms terms) {
-  if (index < 0 || index >= static_cast<Index>(affine_.size()))
+void Pipeline::set_form(Index index, TermsKind kind, bool paper, double paper_min_a) {
+  if (index < 0 || index >= static_cast<Index>(forms_.size()))
     throw std::invalid_argument("constraint index out of range");
-  const Index size = terms_size_[index];
-  if (terms.of_x.rows() != size || terms.of_x.cols() != 3 || terms.of_f.rows() != size ||
-      terms.of_f.cols() != 3 || terms.offset.size() != size ||
-      terms.of_x_per_gain.rows() != size || terms.of_x_per_gain.cols() != 3 ||
-      terms.offset_per_gain.size() != size)
-    throw std::invalid_argument("affine terms of the wrong size");
-  affine_[index] = std::move(terms);
-  has_affine_[index] = true;
+  if (terms_size_[index] != 6 * (7 - kind_rows(kind)) + 7 * kind_rows(kind))
+    throw std::invalid_argument(std::string("a ") + kind_name(kind) + " has " +
+                                std::to_string(kind_rows(kind)) +
+                                " rows: the step was built with another number");
+  if (paper && kind != TermsKind::hole)
+    throw std::invalid_argument("the paper's parametrisation is compiled for a hole only");
+  Form& form = forms_[index];
+  form.declared = true;
+  form.kind = kind;
+  form.paper = paper;
+  form.paper_min_a = paper_min_a;
 }
 
 void Pipeline::prepare() {
-  kinematics_.compute(q_);
+  compute_kinematics();
+  compute_terms();
+}
+
+void Pipeline::compute_kinematics() { kinematics_.compute(q_); }
+
+void Pipeline::compute_terms() {
   const RowMatrix& jacobians = kinematics_.jacobians();
   for (Index r = 0; r < task_twist_.size(); ++r) {
     task_twist_(r) = task_scale_(r) * twist_(task_entries_[r]);
     ee_jacobian_.row(r) = task_scale_(r) * jacobians.row(task_entries_[r]);
   }
   const RowMatrix& placements = kinematics_.placements();
-  for (Index i = 0; i < static_cast<Index>(affine_.size()); ++i) {
-    if (!has_affine_[i]) continue;
-    const auto placement = placements.row(ee_count_ + i);
-    const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> rotation(placement.data());
-    x_.noalias() = rotation.transpose() * (anchors_.row(i).head<3>().transpose() -
-                                           placement.tail<3>().transpose());
-    auto terms = terms_.segment(step_.terms_offset(i), terms_size_[i]);
-    const AffineTerms& affine = affine_[i];
-    terms.noalias() = affine.of_x * x_;
-    terms += affine.offset;
-    const double gain = gains_(i);
-    if (gain != 0.0) {
-      terms.noalias() += gain * (affine.of_x_per_gain * x_);
-      terms += gain * affine.offset_per_gain;
-    }
-    const auto velocity = anchors_.row(i).tail<3>();
-    if ((velocity.array() != 0.0).any()) {  // a moving anchor (AffineTerms.write's f)
-      f_.noalias() = rotation.transpose() * velocity.transpose();
-      terms.noalias() += affine.of_f * f_;
-    }
+  paper_form_ = true;
+  for (Index i = 0; i < static_cast<Index>(forms_.size()); ++i) {
+    const Form& form = forms_[i];
+    if (!form.declared) continue;
+    const double* placement = placements.row(ee_count_ + i).data();
+    const Rotation rotation(placement);
+    const Translation translation(placement + 9);
+    paper_form_ &= write_terms(form.kind, form.parameters, rotation, translation, form.paper,
+                               form.paper_min_a, terms_.data() + step_.terms_offset(i));
   }
 }
 
@@ -84,7 +80,7 @@ void Pipeline::finish(bool use_posture, bool analytical_allowed, VectorRef qd) {
   const RowMatrix& jacobians = kinematics_.jacobians();
   step_.solve(q_, task_twist_, ee_jacobian_,
               jacobians.bottomRows(jacobians.rows() - frames_start), terms_, posture_,
-              use_posture, analytical_allowed, qd);
+              use_posture, analytical_allowed && paper_form_, qd);
 }
 
 }  // namespace cjm

@@ -1,26 +1,20 @@
 // One CJM step from q (docs/design.md section 16): Pinocchio's kinematics
-// (kinematics.hpp), the terms of the constraints with an affine form, the task weighting,
-// then the dense step (step.hpp), on buffers allocated once.
+// (kinematics.hpp), the task weighting, each constraint's terms from what it declares
+// (terms.hpp), then the dense step (step.hpp), on buffers allocated once.
 //
-// A step from Python is one call when every constraint has an affine form
-// (Constraint.affine_anchor, a hole); otherwise Python writes the other constraints'
-// terms from the placements between prepare() and finish().
+// A step from Python is one call when every constraint declares a compiled form
+// (Constraint.compiled_form: holes, planes, barriers, point locks); a constraint type
+// that declares none has its terms written by Python from the placements between
+// prepare() and finish().
 #pragma once
 
 #include <vector>
 
 #include "kinematics.hpp"
 #include "step.hpp"
+#include "terms.hpp"
 
 namespace cjm {
-
-//! A constraint's terms as ``offset + of_x x + of_f f + K (offset_per_gain +
-//! of_x_per_gain x)`` with ``x = R^T (point - t)`` and ``f = R^T velocity`` in its link's
-//! frame and ``K`` its gain (controllers.cjm.analytical.AffineTerms).
-struct AffineTerms {
-  RowMatrix of_x, of_f, of_x_per_gain;  // terms_size x 3
-  Vector offset, offset_per_gain;
-};
 
 class Pipeline {
  public:
@@ -30,24 +24,33 @@ class Pipeline {
   Pipeline(Kinematics kinematics, Step step, Index ee_count, std::vector<Index> task_entries,
            Vector task_scale);
 
-  //! Constraint ``index``'s affine map; without one, Python writes its terms.
-  void set_affine(Index index, AffineTerms terms);
+  //! Constraint ``index`` declares terms of ``kind`` (its parameters: parameters(index));
+  //! ``paper``: a hole's structure matrix in the paper's parametrisation where |p| >=
+  //! ``paper_min_a``. Without a declared kind, Python writes the constraint's terms.
+  void set_form(Index index, TermsKind kind, bool paper, double paper_min_a);
+  //! Constraint ``index``'s declared kind (set_form first).
+  TermsKind kind(Index index) const { return forms_[index].kind; }
+  //! Where the declared parameters of constraint ``index`` are copied (load_parameters).
+  Parameters& parameters(Index index) { return forms_[index].parameters; }
 
-  //! The kinematics at q(), the task rows and the affine terms.
+  //! The kinematics at q(), then the task rows and the declared terms.
   void prepare();
-  //! The step into ``qd``, after prepare() (and Python's terms).
+  //! Pinocchio's kinematics at q(): placements() and jacobians().
+  void compute_kinematics();
+  //! The weighted task rows and every declared constraint's terms, after the kinematics.
+  void compute_terms();
+  //! The step into ``qd``, after prepare() (and Python's terms); the analytical form only
+  //! when ``analytical_allowed`` and paper_form().
   void finish(bool use_posture, bool analytical_allowed, VectorRef qd);
+  //! False when the last prepare() found the paper's form undefined (null-space terms
+  //! written instead: the analytical form does not run, as in the Python step).
+  bool paper_form() const { return paper_form_; }
 
   Index nv() const { return kinematics_.nv(); }
   Vector& q() { return q_; }
   Vector& twist() { return twist_; }
   Vector& terms() { return terms_; }
   Vector& posture() { return posture_; }
-  //! Per constraint: its world anchor point, then its world velocity (affine ones only).
-  RowMatrix& anchors() { return anchors_; }
-  //! Per constraint: its drift-feedback gain (affine ones only; with the anchors, read
-  //! from the constraint before every step by the bindings).
-  Vector& gains() { return gains_; }
   const RowMatrix& placements() const { return kinematics_.placements(); }
   const RowMatrix& jacobians() const { return kinematics_.jacobians(); }
   Step& step() { return step_; }
@@ -59,11 +62,17 @@ class Pipeline {
   std::vector<Index> task_entries_;
   Vector task_scale_;
   std::vector<Index> terms_size_;  // per constraint (its buffer starts at step_.terms_offset)
-  std::vector<bool> has_affine_;
-  std::vector<AffineTerms> affine_;
-  Vector q_, twist_, task_twist_, terms_, posture_, gains_;
-  RowMatrix ee_jacobian_, anchors_;
-  Eigen::Vector3d x_, f_;
+  struct Form {
+    bool declared = false;
+    TermsKind kind = TermsKind::hole;
+    bool paper = false;
+    double paper_min_a = 0.0;
+    Parameters parameters = Parameters::Zero();
+  };
+  std::vector<Form> forms_;
+  bool paper_form_ = true;
+  Vector q_, twist_, task_twist_, terms_, posture_;
+  RowMatrix ee_jacobian_;
 };
 
 }  // namespace cjm
