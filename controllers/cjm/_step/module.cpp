@@ -6,6 +6,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "collision_bindings.hpp"
 #include "pipeline.hpp"
 
 namespace py = pybind11;
@@ -67,7 +68,10 @@ struct BoundPipeline : cjm::Pipeline {
       for (py::ssize_t i = 0; i < 6; ++i) anchors()(source.index, i) = entries(i);
       gains()(source.index) = source.constraint.attr(gain_name).cast<double>();
     }
+    obstacle_sources.read(collisions());
   }
+
+  cjm_collision::ObstacleSources obstacle_sources;  // with compiled collision rows
 };
 
 //! The step into a new array (the GIL released while it runs).
@@ -240,6 +244,18 @@ PYBIND11_MODULE(_step, module) {
              return finish(pipeline, use_posture, analytical_allowed);
            }, py::arg("q"), py::arg("twist"), py::arg("use_posture"), py::arg("analytical_allowed"),
            "load, prepare and finish in one call; None when load() would be false.")
+      .def("set_collisions", &cjm_collision::set_collisions<BoundPipeline>, py::arg("body_joints"),
+           py::arg("body_placements"), py::arg("body_kinds"), py::arg("body_dimensions"),
+           py::arg("obstacles"), py::arg("obstacle_kinds"), py::arg("obstacle_dimensions"),
+           py::arg("obstacle_rotations"), py::arg("pairs"), py::arg("safety_distance"),
+           py::arg("detection_distance"), py::arg("gain"),
+           "The collision rows measured in prepare() (docs/design.md section 18.4).")
+      .def("clear_collisions", [](BoundPipeline& pipeline) {
+             pipeline.set_collisions(nullptr);
+             pipeline.obstacle_sources = {};
+           }, "No collision rows measured here (Python writes them, if any).")
+      .def("collision_views", &cjm_collision::collision_views<BoundPipeline>,
+           "(row pairs, distances, witnesses, (count, minimum distance, its pair)).")
       .def_property_readonly("step", [](BoundPipeline& pipeline) -> cjm::Step& { return pipeline.step(); },
                              py::return_value_policy::reference_internal)
       .def_property_readonly("q", [](py::object self) {
@@ -293,4 +309,5 @@ PYBIND11_MODULE(_step, module) {
   events["pair_conflict"] = static_cast<int>(cjm::Event::pair_conflict);
   module.attr("EVENTS") = events;
   module.attr("JOINT_KINDS") = cjm::joint_kinds();
+  cjm_collision::bind(module);
 }

@@ -48,8 +48,15 @@ void Pipeline::set_affine(Index index, AffineTerms terms) {
   has_affine_[index] = true;
 }
 
+void Pipeline::set_collisions(std::unique_ptr<Collisions> collisions) {
+  if (collisions && collisions->pair_count() > step_.pair_capacity())
+    throw std::invalid_argument("more collision pairs than the step's pair capacity");
+  collisions_ = std::move(collisions);
+}
+
 void Pipeline::prepare() {
   kinematics_.compute(q_);
+  if (collisions_) collisions_->write_rows(kinematics_, step_);
   const RowMatrix& jacobians = kinematics_.jacobians();
   for (Index r = 0; r < task_twist_.size(); ++r) {
     task_twist_(r) = task_scale_(r) * twist_(task_entries_[r]);

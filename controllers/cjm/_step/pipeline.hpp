@@ -7,8 +7,10 @@
 // terms from the placements between prepare() and finish().
 #pragma once
 
+#include <memory>
 #include <vector>
 
+#include "collision.hpp"
 #include "kinematics.hpp"
 #include "step.hpp"
 
@@ -51,6 +53,12 @@ class Pipeline {
   const RowMatrix& placements() const { return kinematics_.placements(); }
   const RowMatrix& jacobians() const { return kinematics_.jacobians(); }
   Step& step() { return step_; }
+  const Kinematics& kinematics() const { return kinematics_; }
+
+  //! The collision rows prepare() writes into the step's pair buffer after the
+  //! kinematics (docs/design.md section 18.4); none: Python writes them, if any.
+  void set_collisions(std::unique_ptr<Collisions> collisions);
+  Collisions* collisions() { return collisions_.get(); }
 
  private:
   Kinematics kinematics_;
@@ -64,6 +72,7 @@ class Pipeline {
   Vector q_, twist_, task_twist_, terms_, posture_, gains_;
   RowMatrix ee_jacobian_, anchors_;
   Eigen::Vector3d x_, f_;
+  std::unique_ptr<Collisions> collisions_;
 };
 
 }  // namespace cjm
