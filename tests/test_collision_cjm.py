@@ -12,6 +12,8 @@ written with NumPy.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -233,7 +235,7 @@ def test_the_compiled_step_equals_the_python_step_with_collision_rows(
     assert (b.status, b.active_pairs, b.closest_pair) == (a.status, a.active_pairs, a.closest_pair)
     # the compiled step measures the distances itself (docs/design.md 18.4): coal's to
     # rounding for capsules, to its GJK tolerance (1e-10, 1e-9 m here) with a box
-    assert abs(b.minimum_distance - a.minimum_distance) <= DISTANCE_AGREEMENT
+    assert math.isclose(b.minimum_distance, a.minimum_distance, rel_tol=0.0, abs_tol=DISTANCE_AGREEMENT)
     assert b.message == a.message
     assert_same_report(python.report, compiled.report)
 

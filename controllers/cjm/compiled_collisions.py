@@ -70,6 +70,10 @@ class CompiledCollisions:
             self.pipeline.collision_views()
         self._names = description.pair_names
 
+    def pair_indices(self) -> np.ndarray:
+        """The index (into ``collisions.pairs``) of each row of the last step."""
+        return self._row_pairs[:int(self._summary[0])].copy()
+
     def rows(self, pair_rows: np.ndarray, pair_lower: np.ndarray) -> CollisionRows:
         """The rows the last step measured (copies of the C++ buffers ``pair_rows`` and
         ``pair_lower``, the step's), kept as ``collisions.last_rows``."""
