@@ -197,7 +197,7 @@ class CompiledStep:
         """``qd`` for the stacked EE twist at ``q`` and the step's report (section 8.3);
         bad input raises ``ValueError`` as the Python step does."""
         if self._collisions is not None:
-            return self._solve_with_pairs(*self._checked(q, twist))
+            return self._solve_with_pairs(q, twist)
         pipeline = self.pipeline
         paper_form = True
         if self._one_call:
@@ -218,25 +218,32 @@ class CompiledStep:
     def _solve_with_pairs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         """The step with the collision rows at ``q``, measured by the C++ pipeline (or by
         Python, :meth:`_write_python_pairs`, for shapes it does not cover); the report
-        carries the rows and the pairs held."""
+        carries the rows and the pairs held. Bad input raises ``ValueError`` as
+        :meth:`solve` does."""
         collisions = self.collision_rows
         if collisions.stale():  # the pairs rebuilt: obstacles added or removed, ports
             if collisions.pair_count() > self.pair_capacity:
                 self._grow(collisions.pair_count())
                 return self._solve_with_pairs(q, twist)
             collisions.describe()
-        pairs = None if collisions.fallback is None else self._write_python_pairs(q)
+        pairs = None
+        if collisions.fallback is not None:
+            q, twist = self._checked(q, twist)
+            pairs = self._write_python_pairs(q)
         pipeline = self.pipeline
         paper_form = True
         if self._one_call:
             qd = pipeline.solve(q, twist, self._use_posture, True)
+            if qd is None:  # not finite float vectors of the right sizes: say what is wrong
+                qd = pipeline.solve(*self._checked(q, twist), self._use_posture, True)
         else:
-            pipeline.load(q, twist)
+            if not pipeline.load(q, twist):
+                pipeline.load(*self._checked(q, twist))
             pipeline.prepare()
             paper_form = self._write_in_python()
             qd = pipeline.finish(self._use_posture, paper_form)
         if pairs is None:
-            pairs = collisions.rows(self._pair_rows, self._pair_lower)
+            pairs = collisions.rows()
         count = self._step.active_pair_count
         return qd, self._step_report(self._report.tolist(), paper_form)._replace(
             collision=pairs, active_pairs=tuple(self._active_pairs[:count].tolist()))

@@ -7,8 +7,8 @@ signed distances and witness points, the damper rows into the step's pair buffer
 only checks, before each step, that the pairs have not been rebuilt since
 (``CollisionAvoidance.revision``: obstacles added or removed, ports); the obstacles'
 centres and velocities are read by the C++ side (a replaced array is copied). After the
-step :meth:`CompiledCollisions.rows` reads the rows back as the
-:class:`~constraints.collision.CollisionRows` the report carries.
+step :meth:`CompiledCollisions.rows` reads the rows back (one C++ call copying them) as
+the :class:`~constraints.collision.CollisionRows` the report carries.
 
 A body or obstacle that is not a primitive (a mesh's convex hull) leaves the rows to
 Python: :attr:`CompiledCollisions.fallback` says which.
@@ -37,8 +37,6 @@ class CompiledCollisions:
         #: why Python measures the rows (the shapes it cannot), None when the C++ does
         self.fallback: str | None = None
         self._revision: int | None = None
-        self._names: tuple[str, ...] = ()
-        self._nv = pipeline.step.pair_rows.shape[1]
 
     def stale(self) -> bool:
         """Whether the pairs were rebuilt since they were last described."""
@@ -64,25 +62,16 @@ class CompiledCollisions:
             description.body_kinds.tolist(), list(description.body_dimensions),
             list(description.obstacles), description.obstacle_kinds.tolist(),
             list(description.obstacle_dimensions), list(description.obstacle_rotations),
-            description.pairs.tolist(), description.safety_distance,
+            description.pairs.tolist(), list(description.pair_names), description.safety_distance,
             description.detection_distance, description.gain)
-        self._row_pairs, self._distances, self._witnesses, self._summary = \
-            self.pipeline.collision_views()
-        self._names = description.pair_names
+        self._row_pairs, _, _, self._summary = self.pipeline.collision_views()
 
     def pair_indices(self) -> np.ndarray:
         """The index (into ``collisions.pairs``) of each row of the last step."""
         return self._row_pairs[:int(self._summary[0])].copy()
 
-    def rows(self, pair_rows: np.ndarray, pair_lower: np.ndarray) -> CollisionRows:
-        """The rows the last step measured (copies of the C++ buffers ``pair_rows`` and
-        ``pair_lower``, the step's), kept as ``collisions.last_rows``."""
-        count, minimum, closest = self._summary.tolist()
-        count = int(count)
-        rows = CollisionRows(
-            pair_rows[:count].copy(), pair_lower[:count].copy(),
-            tuple(map(self._names.__getitem__, self._row_pairs[:count].tolist())),
-            self._distances[:count].copy(), self._witnesses[:count].reshape(count, 2, 3).copy(),
-            minimum, self._names[int(closest)] if closest >= 0 else "")
-        self.collisions.last_rows = rows
+    def rows(self) -> CollisionRows:
+        """The rows the last step measured (copies of the C++ buffers), kept as
+        ``collisions.last_rows``."""
+        self.collisions.last_rows = rows = CollisionRows(*self.pipeline.collision_report())
         return rows

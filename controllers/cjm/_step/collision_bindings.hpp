@@ -20,12 +20,14 @@ namespace cjm_collision {
 namespace py = pybind11;
 using cjm::Index;
 
-//! Each obstacle's Python object and the centre and velocity arrays last copied from it.
-struct ObstacleSources {
+//! Each obstacle's Python object and the centre and velocity arrays last copied from it,
+//! and each pair's name.
+struct CollisionSources {
   struct Source {
     py::object obstacle, center, velocity;
   };
   std::vector<Source> sources;
+  std::vector<py::object> pair_names;
   py::str center_name{"center"}, velocity_name{"velocity"};
 
   static void copy(const py::object& array, cjm::Vector3& target, const char* what) {
@@ -71,13 +73,14 @@ void set_collisions(BoundPipeline& pipeline, const std::vector<Index>& body_join
                     py::list obstacles, const std::vector<int>& obstacle_kinds,
                     const std::vector<cjm::Vector3>& obstacle_dimensions,
                     const std::vector<cjm::Matrix3>& obstacle_rotations,
-                    const std::vector<std::array<Index, 2>>& pairs, double safety_distance,
-                    double detection_distance, double gain) {
+                    const std::vector<std::array<Index, 2>>& pairs, py::list pair_names,
+                    double safety_distance, double detection_distance, double gain) {
   const size_t n_bodies = body_joints.size(), n_obstacles = obstacles.size();
   if (body_placements.size() != n_bodies || body_kinds.size() != n_bodies ||
       body_dimensions.size() != n_bodies || obstacle_kinds.size() != n_obstacles ||
       obstacle_dimensions.size() != n_obstacles || obstacle_rotations.size() != n_obstacles)
     throw std::invalid_argument("one placement, kind and dimensions per body and obstacle");
+  if (pair_names.size() != pairs.size()) throw std::invalid_argument("one name per pair");
   std::vector<cjm::CollisionBody> bodies;
   for (size_t i = 0; i < n_bodies; ++i)
     bodies.push_back(cjm::CollisionBody{
@@ -85,20 +88,58 @@ void set_collisions(BoundPipeline& pipeline, const std::vector<Index>& body_join
         cjm::Pose{body_placements[i].topLeftCorner<3, 3>(), body_placements[i].topRightCorner<3, 1>()},
         shape(body_kinds[i], body_dimensions[i])});
   std::vector<cjm::CollisionObstacle> described;
-  ObstacleSources sources;
+  CollisionSources sources;
   for (size_t k = 0; k < n_obstacles; ++k) {
     cjm::CollisionObstacle obstacle{shape(obstacle_kinds[k], obstacle_dimensions[k]), obstacle_rotations[k]};
     py::object source = py::reinterpret_borrow<py::object>(obstacles[k]);
     py::object center = source.attr("center"), velocity = source.attr("velocity");
-    ObstacleSources::copy(center, obstacle.center, "center");
-    ObstacleSources::copy(velocity, obstacle.velocity, "velocity");
+    CollisionSources::copy(center, obstacle.center, "center");
+    CollisionSources::copy(velocity, obstacle.velocity, "velocity");
     sources.sources.push_back({source, center, velocity});
     described.push_back(obstacle);
   }
   pipeline.set_collisions(std::make_unique<cjm::Collisions>(
       std::move(bodies), std::move(described), pairs, safety_distance, detection_distance, gain,
       pipeline.kinematics()));
-  pipeline.obstacle_sources = std::move(sources);
+  for (py::handle name : pair_names) sources.pair_names.push_back(py::reinterpret_borrow<py::object>(name));
+  pipeline.collision_sources = std::move(sources);
+}
+
+//! A copy of the first ``rows`` rows of ``matrix`` as a new array.
+inline py::array_t<double> copy_rows(const cjm::RowMatrix& matrix, Index rows, Index columns) {
+  py::array_t<double> array({rows, columns});
+  std::copy(matrix.data(), matrix.data() + rows * columns, array.mutable_data());
+  return array;
+}
+
+//! A copy of the first ``count`` entries of ``vector`` as a new array.
+inline py::array_t<double> copy_head(const cjm::Vector& vector, Index count) {
+  py::array_t<double> array(count);
+  std::copy(vector.data(), vector.data() + count, array.mutable_data());
+  return array;
+}
+
+//! Pipeline.collision_report: the last step's rows as CollisionRows' fields (rows,
+//! lower, pair names, distances, witnesses (m x 2 x 3), minimum distance, its pair), copies.
+template <typename BoundPipeline>
+py::tuple collision_report(BoundPipeline& pipeline) {
+  cjm::Collisions* collisions = pipeline.collisions();
+  if (collisions == nullptr) throw std::invalid_argument("no collision rows are set");
+  const cjm::Vector& summary = collisions->summary();
+  const auto count = static_cast<Index>(summary(0));
+  const auto closest = static_cast<Index>(summary(2));
+  cjm::Step& step = pipeline.step();
+  const Index nv = step.pair_rows().cols();
+  py::tuple names(count);
+  for (Index i = 0; i < count; ++i)
+    names[i] = pipeline.collision_sources.pair_names[static_cast<size_t>(collisions->row_pairs()(i))];
+  py::array_t<double> witnesses({count, Index{2}, Index{3}});
+  std::copy(collisions->witnesses().data(), collisions->witnesses().data() + 6 * count,
+            witnesses.mutable_data());
+  return py::make_tuple(
+      copy_rows(step.pair_rows(), count, nv), copy_head(step.pair_lower(), count),
+      names, copy_head(collisions->distances(), count), witnesses, summary(1),
+      closest >= 0 ? pipeline.collision_sources.pair_names[static_cast<size_t>(closest)] : py::str(""));
 }
 
 template <typename Scalar>

@@ -68,10 +68,10 @@ struct BoundPipeline : cjm::Pipeline {
       for (py::ssize_t i = 0; i < 6; ++i) anchors()(source.index, i) = entries(i);
       gains()(source.index) = source.constraint.attr(gain_name).cast<double>();
     }
-    obstacle_sources.read(collisions());
+    collision_sources.read(collisions());
   }
 
-  cjm_collision::ObstacleSources obstacle_sources;  // with compiled collision rows
+  cjm_collision::CollisionSources collision_sources;  // with compiled collision rows
 };
 
 //! The step into a new array (the GIL released while it runs).
@@ -247,15 +247,17 @@ PYBIND11_MODULE(_step, module) {
       .def("set_collisions", &cjm_collision::set_collisions<BoundPipeline>, py::arg("body_joints"),
            py::arg("body_placements"), py::arg("body_kinds"), py::arg("body_dimensions"),
            py::arg("obstacles"), py::arg("obstacle_kinds"), py::arg("obstacle_dimensions"),
-           py::arg("obstacle_rotations"), py::arg("pairs"), py::arg("safety_distance"),
+           py::arg("obstacle_rotations"), py::arg("pairs"), py::arg("pair_names"), py::arg("safety_distance"),
            py::arg("detection_distance"), py::arg("gain"),
            "The collision rows measured in prepare() (docs/design.md section 18.4).")
       .def("clear_collisions", [](BoundPipeline& pipeline) {
              pipeline.set_collisions(nullptr);
-             pipeline.obstacle_sources = {};
+             pipeline.collision_sources = {};
            }, "No collision rows measured here (Python writes them, if any).")
       .def("collision_views", &cjm_collision::collision_views<BoundPipeline>,
            "(row pairs, distances, witnesses, (count, minimum distance, its pair)).")
+      .def("collision_report", &cjm_collision::collision_report<BoundPipeline>,
+           "The last step's collision rows as CollisionRows' fields, copied.")
       .def_property_readonly("step", [](BoundPipeline& pipeline) -> cjm::Step& { return pipeline.step(); },
                              py::return_value_policy::reference_internal)
       .def_property_readonly("q", [](py::object self) {
