@@ -11,13 +11,10 @@ before every step.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 import coal
 import numpy as np
-
-if TYPE_CHECKING:
-    from .obstacles import Obstacle
 
 #: the primitive kinds by code (the C++ ``cjm::Shape::Kind``'s order)
 PRIMITIVE_KINDS = ("sphere", "capsule", "box", "halfspace")
@@ -49,7 +46,8 @@ class CollisionPrimitives:
     body_names : (b,) each robot body's geometry name.
     body_joints : (b,) each body's joint; ``body_placements`` (b, 4, 4) its placement there.
     body_kinds, body_dimensions : (b,), (b, 3): :func:`primitive` of each body.
-    obstacles : the obstacles (their ``center`` and ``velocity`` read before each step).
+    obstacles : the :class:`~constraints.collision.obstacles.Obstacle` objects (their
+        ``center`` and ``velocity`` read before each step).
     obstacle_kinds, obstacle_dimensions, obstacle_rotations : (o,), (o, 3), (o, 3, 3).
     pairs : (m, 2) indices into the bodies then the obstacles; ``pair_names`` (m,)
         ``"first | second"``.
@@ -62,7 +60,7 @@ class CollisionPrimitives:
     body_placements: np.ndarray
     body_kinds: np.ndarray
     body_dimensions: np.ndarray
-    obstacles: tuple["Obstacle", ...]
+    obstacles: tuple[Any, ...]
     obstacle_kinds: np.ndarray
     obstacle_dimensions: np.ndarray
     obstacle_rotations: np.ndarray
