@@ -332,6 +332,8 @@ void Collisions::place(const Kinematics& kinematics) {
     bounds_[i].start += translation;
     bounds_[i].end.noalias() = rotation * local_end_[i];
     bounds_[i].end += translation;
+    bounds_[i].center = 0.5 * (bounds_[i].start + bounds_[i].end);
+    bounds_[i].half_length = 0.5 * (bounds_[i].end - bounds_[i].start).norm();
   }
   for (size_t k = 0; k < obstacles_.size(); ++k) {
     const CollisionObstacle& obstacle = obstacles_[k];
@@ -339,7 +341,7 @@ void Collisions::place(const Kinematics& kinematics) {
     pose.rotation = obstacle.rotation;
     pose.translation = obstacle.center;
     const Vector3 along = obstacle.rotation * bounding_half(obstacle.shape).first;
-    bounds_[n_bodies + k] = Bound{obstacle.center - along, obstacle.center + along};
+    bounds_[n_bodies + k] = Bound{obstacle.center - along, obstacle.center + along, obstacle.center, along.norm()};
   }
 }
 
@@ -353,6 +355,11 @@ double Collisions::gap(Index first, Index second) const {
            bound_radius_[first];
   }
   const Bound& other = bounds_[second];
+  // the segments are at least their centres' distance less their half lengths apart:
+  // a pair that far beyond d_i needs no segment distance
+  const double beyond = (body.center - other.center).norm() - body.half_length - other.half_length -
+                        bound_radius_[first] - bound_radius_[second];
+  if (beyond >= detection_) return beyond;
   return bounding_distance(body.start, body.end, other.start, other.end) - bound_radius_[first] -
          bound_radius_[second];
 }

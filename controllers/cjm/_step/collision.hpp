@@ -91,8 +91,9 @@ class Collisions {
   Vector& summary() { return summary_; }
 
  private:
-  struct Bound {  // a bounding capsule in the world
-    Vector3 start, end;
+  struct Bound {  // a bounding capsule in the world: its segment, centre and half length
+    Vector3 start, end, center;
+    double half_length = 0.0;
   };
   void place(const Kinematics& kinematics);
   double gap(Index first, Index second) const;
