@@ -12,6 +12,8 @@ written with NumPy.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -29,6 +31,8 @@ BACKENDS = ("compiled", "python")
 #: the twist's translations only: through a trocar an instrument's tip cannot also keep
 #: its orientation, and the arms are pushed together by their tips' positions
 TRANSLATION = [1.0, 1.0, 1.0, 0.0, 0.0, 0.0] * 2
+#: how closely the compiled step's distances (m) agree with coal's (the Python step's)
+DISTANCE_AGREEMENT = 1e-9
 #: the issue's bound on every distance (m): the safety distance less 0.5 mm
 MARGIN = 0.5e-3
 SETTINGS = settings(max_examples=25, deadline=None,
@@ -228,8 +232,10 @@ def test_the_compiled_step_equals_the_python_step_with_collision_rows(
     bound = collision_rounding_bound(python, q) * (1.0 + float(np.max(np.abs(expected))))
     assert float(np.max(np.abs(actual - expected))) <= bound, (python.info, compiled.info)
     a, b = python.info, compiled.info
-    assert (b.status, b.active_pairs, b.closest_pair, b.minimum_distance) == \
-        (a.status, a.active_pairs, a.closest_pair, a.minimum_distance)
+    assert (b.status, b.active_pairs, b.closest_pair) == (a.status, a.active_pairs, a.closest_pair)
+    # the compiled step measures the distances itself (docs/design.md 18.4): coal's to
+    # rounding for capsules, to its GJK tolerance (1e-10, 1e-9 m here) with a box
+    assert math.isclose(b.minimum_distance, a.minimum_distance, rel_tol=0.0, abs_tol=DISTANCE_AGREEMENT)
     assert b.message == a.message
     assert_same_report(python.report, compiled.report)
 

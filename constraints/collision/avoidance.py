@@ -22,8 +22,13 @@ from ..validation import as_number
 from .geometry import (bounding_segment, capsule_geometry, check_links, link_of, link_pairs,
                        segment_distances, self_collision_pairs, shape_distance)
 from .obstacles import Obstacle
+from .primitives import CollisionPrimitives, primitive
 from .rows import CollisionRows
 
+#: coal's GJK and EPA tolerance on the pairs with a box (coal's default, 1e-6, leaves a
+#: box pair's normal 2e-3 rad off: the error of its distance's square root; at 1e-10 the
+#: distance, normal and witness points are exact to 1e-9, docs/design.md 18.4)
+GJK_TOLERANCE = 1e-10
 #: the distance (m) the damper keeps every pair apart, ``d_s``
 DEFAULT_SAFETY_DISTANCE = 0.005
 #: the distance (m) below which a pair gets its row, ``d_i``
@@ -91,6 +96,9 @@ class CollisionAvoidance:
         self._links = [link_of(self.model, item)
                        for item in self._robot_geometry.geometryObjects]
         self._exempt: set[tuple[int, int]] = set()
+        #: counts the rebuilds of the pairs (obstacles added or removed, ports): the
+        #: compiled step describes the pairs again when it changes (:meth:`primitives`)
+        self.revision = 0
         #: the rows of the last :meth:`rows` call (for views and measures), or None
         self.last_rows: CollisionRows | None = None
         self.obstacles: list[Obstacle] = []
@@ -188,6 +196,8 @@ class CollisionAvoidance:
             geometry.addCollisionPair(pin.CollisionPair(i, j))
         self._geometry = geometry
         self._geometry_data = geometry.createData()
+        for request in self._geometry_data.distanceRequests:
+            request.gjk_tolerance = request.epa_tolerance = GJK_TOLERANCE
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self._names = [*self._links, *(obstacle.name for obstacle in self.obstacles)]
         self._robot_count = robot_count
@@ -202,6 +212,28 @@ class CollisionAvoidance:
                                + [bounding_segment(o.shape(), pin.SE3.Identity())[2]
                                   for o in self.obstacles])
         self._moving_joints = np.unique(self._joints).tolist()
+        self.revision += 1
+
+    def primitives(self) -> CollisionPrimitives:
+        """The bodies, obstacles and pairs as primitives, for the compiled step (its
+        ``uncovered`` names any shape it cannot measure: a mesh's convex hull)."""
+        objects = self._robot_geometry.geometryObjects
+        bodies = [primitive(item.geometry) for item in objects]
+        obstacles = [obstacle.primitive() for obstacle in self.obstacles]
+        return CollisionPrimitives(
+            body_names=tuple(item.name for item in objects),
+            body_joints=self._joints.copy(),
+            body_placements=np.array([item.placement.homogeneous for item in objects]).reshape(-1, 4, 4),
+            body_kinds=np.array([kind for kind, _ in bodies], dtype=int),
+            body_dimensions=np.array([dimensions for _, dimensions in bodies]).reshape(-1, 3),
+            obstacles=tuple(self.obstacles),
+            obstacle_kinds=np.array([kind for kind, _, _ in obstacles], dtype=int),
+            obstacle_dimensions=np.array([dimensions for _, dimensions, _ in obstacles]).reshape(-1, 3),
+            obstacle_rotations=np.array([rotation for _, _, rotation in obstacles]).reshape(-1, 3, 3),
+            pairs=self._pairs.copy(),
+            pair_names=tuple(f"{first} | {second}" for first, second in self.pairs),
+            safety_distance=self.safety_distance, detection_distance=self.detection_distance,
+            gain=self.gain)
 
     # -- the rows ------------------------------------------------------------------------------
 

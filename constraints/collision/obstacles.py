@@ -22,6 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..validation import as_number, as_unit_vector, as_vector
+from .primitives import primitive
 
 #: ``kind -> type`` of every obstacle, in the order messages and the UI list them
 OBSTACLE_TYPES: dict[str, type["Obstacle"]] = {}
@@ -88,6 +89,14 @@ class Obstacle(ABC):
         """The world placement of the shape's own frame."""
         return pin.SE3(self.rotation(), self.center.copy())
 
+    def primitive(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """``(kind code, dimensions, rotation)`` of the shape for the compiled step
+        (:func:`~constraints.collision.primitives.primitive`); the step reads
+        :attr:`center` and :attr:`velocity` before every step, copying them when
+        :meth:`move_to` has replaced them."""
+        kind, dimensions = primitive(self.shape())
+        return kind, dimensions, self.rotation()
+
     @abstractmethod
     def dimensions(self) -> dict[str, object]:
         """The shape's dimensions, for drawing (m)."""
@@ -98,7 +107,9 @@ class Obstacle(ABC):
         return self.center.copy()
 
     def move_to(self, position, velocity=(0.0, 0.0, 0.0)) -> None:
-        """Move the reference point (m) and set the velocity fed forward (m/s)."""
+        """Move the reference point (m) and set the velocity fed forward (m/s): new
+        :attr:`center` and :attr:`velocity` arrays (the compiled step sees a replaced
+        array, not one changed in place)."""
         position = as_vector(position, 3, "center")
         self.velocity = as_vector(velocity, 3, f"{self.kind} velocity")
         self.center = position

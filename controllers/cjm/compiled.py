@@ -10,10 +10,13 @@ only when its parameter array is replaced). A constraint type that declares no c
 form (a user's own) has its terms written by Python between two calls.
 tests/test_compiled_step.py and tests/test_cjm_backends_fuzz.py hold the two equal.
 
-With collision avoidance (docs/design.md section 18.4) Python computes Pinocchio's joint
-Jacobians on the controller's ``data`` and the avoidance rows there, and writes them into
-the C++ step's buffer (its capacity: the number of pairs when built, grown if obstacles
-add pairs) before the C++ call; the C++ active set holds them as the Python step does.
+With collision avoidance (docs/design.md section 18.4) the C++ pipeline measures the
+avoidance rows right after its kinematics and writes them into the step's buffer (its
+capacity: the number of pairs when built, grown if obstacles add pairs;
+:mod:`controllers.cjm.compiled_collisions`), one C++ call a step as without them; the C++
+active set holds them as the Python step does. A robot body that is not a primitive (a
+mesh's convex hull) leaves the rows to Python: it computes Pinocchio's joint Jacobians on
+the controller's ``data`` and the rows there, and writes them into the buffer.
 """
 
 from __future__ import annotations
@@ -23,12 +26,14 @@ import dataclasses
 import numpy as np
 import pinocchio as pin
 
+from constraints.collision import CollisionRows
 from constraints.compiled_form import UNIT_TOLERANCE
 
 from ..base import StepStatus, checked_inputs
 from ._step import EVENTS, REPORT_FIELDS as CPP_REPORT_FIELDS, JointBox, Pipeline, Step, Tolerances
 from ._step import ConstraintPlan as CompiledPlan
 from .analytical import TermsWriter, terms_size
+from .compiled_collisions import CompiledCollisions
 from .python_step import paper_form_defined
 from .report import EVENT_BY_CODE, METHODS, Event, StepReport
 from .step_setup import StepSetup
@@ -166,6 +171,8 @@ class CompiledStep:
         #: the previous command, the acceleration limits' reference (a view of the C++ step's)
         self.previous = step.previous
         self._check_kinematics(frames)
+        #: the collision rows measured in C++ (None without collision avoidance)
+        self.collision_rows = None if self._collisions is None else CompiledCollisions(pipeline, self._collisions)
 
     def _check_kinematics(self, frames: list[int]) -> None:
         """The copy of the model against Pinocchio, once, at the posture: a joint it
@@ -192,7 +199,7 @@ class CompiledStep:
         """``qd`` for the stacked EE twist at ``q`` and the step's report (section 8.3);
         bad input raises ``ValueError`` as the Python step does."""
         if self._collisions is not None:
-            return self._solve_with_pairs(*self._checked(q, twist))
+            return self._solve_with_pairs(q, twist)
         pipeline = self.pipeline
         if self._one_call:
             qd = pipeline.solve(q, twist, self._use_posture, True)
@@ -211,28 +218,50 @@ class CompiledStep:
         return qd, self._step_report(report, paper_form)
 
     def _solve_with_pairs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
-        """The step with the collision rows at ``q`` (measured on ``data``) in the C++
-        step's buffer; the report carries the rows and the pairs held."""
-        model, data = self.setup.model, self.data
-        pin.computeJointJacobians(model, data, q)
-        pairs = self._collisions.rows(model, data)
-        if pairs.size > self.pair_capacity:  # obstacles added since the build
-            self._grow(pairs.size)
-        self._pair_rows[:pairs.size] = pairs.rows
-        self._pair_lower[:pairs.size] = pairs.lower
-        self._step.set_pair_count(pairs.size)
+        """The step with the collision rows at ``q``, measured by the C++ pipeline (or by
+        Python, :meth:`_write_python_pairs`, for shapes it does not cover); the report
+        carries the rows and the pairs held. Bad input raises ``ValueError`` as
+        :meth:`solve` does."""
+        collisions = self.collision_rows
+        if collisions.stale():  # the pairs rebuilt: obstacles added or removed, ports
+            if collisions.pair_count() > self.pair_capacity:
+                self._grow(collisions.pair_count())
+                return self._solve_with_pairs(q, twist)
+            collisions.describe()
+        pairs = None
+        if collisions.fallback is not None:
+            q, twist = self._checked(q, twist)
+            pairs = self._write_python_pairs(q)
         pipeline = self.pipeline
         paper_form = True
         if self._one_call:
             qd = pipeline.solve(q, twist, self._use_posture, True)
+            if qd is None:  # not finite float vectors of the right sizes: say what is wrong
+                qd = pipeline.solve(*self._checked(q, twist), self._use_posture, True)
         else:
-            pipeline.load(q, twist)
+            if not pipeline.load(q, twist):
+                pipeline.load(*self._checked(q, twist))
             pipeline.prepare()
             paper_form = self._write_in_python()
             qd = pipeline.finish(self._use_posture, paper_form)
+        if pairs is None:
+            pairs = collisions.rows()
         count = self._step.active_pair_count
         return qd, self._step_report(self._report.tolist(), paper_form)._replace(
             collision=pairs, active_pairs=tuple(self._active_pairs[:count].tolist()))
+
+    def _write_python_pairs(self, q: np.ndarray) -> CollisionRows:
+        """The collision rows at ``q`` measured by Python on ``data`` and written into the
+        C++ step's buffer (grown if they do not fit)."""
+        model, data = self.setup.model, self.data
+        pin.computeJointJacobians(model, data, q)
+        pairs = self._collisions.rows(model, data)
+        if pairs.size > self.pair_capacity:
+            self._grow(pairs.size)
+        self._pair_rows[:pairs.size] = pairs.rows
+        self._pair_lower[:pairs.size] = pairs.lower
+        self._step.set_pair_count(pairs.size)
+        return pairs
 
     @property
     def pair_capacity(self) -> int:

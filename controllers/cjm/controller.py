@@ -114,8 +114,8 @@ class CJMController(Controller):
         in the environment makes it Python, :data:`BACKEND_VARIABLE`). ``"compiled"``
         raises ``ImportError`` without the extension and ``ValueError`` for a robot it
         does not cover. The compiled step computes its kinematics on its own copy of the
-        model: it leaves ``self.data`` as it was, except with ``collisions``, whose rows
-        Python measures on ``self.data`` before the C++ step.
+        model: it leaves ``self.data`` as it was, except with ``collisions`` on a body it
+        does not measure (a mesh's hull), whose rows Python measures on ``self.data``.
 
     The step itself lives in :attr:`step` (built with :attr:`setup`, again whenever
     ``policy``, ``posture``, ``posture_gain``, ``twist_weight``, the constraints or the

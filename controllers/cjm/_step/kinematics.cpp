@@ -100,6 +100,31 @@ Kinematics::Kinematics(Kinematics&&) noexcept = default;
 Index Kinematics::nq() const { return pinocchio_->model.nq; }
 Index Kinematics::nv() const { return pinocchio_->model.nv; }
 
+Index Kinematics::njoints() const { return pinocchio_->model.njoints; }
+
+const Eigen::Matrix3d& Kinematics::joint_rotation(Index joint) const {
+  return pinocchio_->data.oMi[static_cast<size_t>(joint)].rotation();
+}
+
+const Eigen::Vector3d& Kinematics::joint_translation(Index joint) const {
+  return pinocchio_->data.oMi[static_cast<size_t>(joint)].translation();
+}
+
+const Eigen::Matrix<double, 6, Eigen::Dynamic>& Kinematics::world_jacobians() const {
+  return pinocchio_->data.J;
+}
+
+std::vector<Index> Kinematics::support_columns(Index joint) const {
+  const pin::Model& model = pinocchio_->model;
+  if (joint < 0 || joint >= model.njoints) throw std::invalid_argument("joint index out of range");
+  std::vector<Index> columns;
+  for (const pin::JointIndex support : model.supports[static_cast<size_t>(joint)]) {
+    if (support == 0) continue;
+    for (int v = 0; v < model.nvs[support]; ++v) columns.push_back(model.idx_vs[support] + v);
+  }
+  return columns;
+}
+
 void Kinematics::compute(const ConstVectorRef& q) {
   const pin::Model& model = pinocchio_->model;
   pin::Data& data = pinocchio_->data;

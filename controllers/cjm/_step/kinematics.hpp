@@ -50,6 +50,17 @@ class Kinematics {
   //! One row per frame: its rotation (row-major) then its translation, world frame.
   const RowMatrix& placements() const { return placements_; }
 
+  //! The joints of the model, the universe (0) included.
+  Index njoints() const;
+  //! Joint ``joint``'s world placement (Pinocchio's data.oMi), after compute().
+  const Eigen::Matrix3d& joint_rotation(Index joint) const;
+  const Eigen::Vector3d& joint_translation(Index joint) const;
+  //! Every joint's column of the WORLD-frame Jacobian (Pinocchio's data.J: the velocity
+  //! of the point at the world origin, then the angular velocity), after compute().
+  const Eigen::Matrix<double, 6, Eigen::Dynamic>& world_jacobians() const;
+  //! The velocity columns joint ``joint``'s motion depends on (its supporting joints').
+  std::vector<Index> support_columns(Index joint) const;
+
  private:
   struct Pinocchio;  // pinocchio::Model, Data and a Jacobian buffer: kinematics.cpp only
   std::unique_ptr<Pinocchio> pinocchio_;

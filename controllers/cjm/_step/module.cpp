@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cstdint>
 
+#include "collision_bindings.hpp"
 #include "pipeline.hpp"
 
 namespace py = pybind11;
@@ -99,7 +100,10 @@ struct BoundPipeline : cjm::Pipeline {
       const py::object held = py::reinterpret_steal<py::object>(current);
       if (current != source.parameters.ptr()) load(source, held);
     }
+    collision_sources.read(collisions());
   }
+
+  cjm_collision::CollisionSources collision_sources;  // with compiled collision rows
 };
 
 //! The step into a new array (the GIL released while it runs).
@@ -296,6 +300,20 @@ PYBIND11_MODULE(_step, module) {
            "The C++ floor: per-step nanoseconds of load, prepare and finish (the one-call "
            "step of solve) over ``configurations`` (steps x nq) and ``twists`` (steps x "
            "stacked twist), in a C++ loop with the GIL released; the anchors read once.")
+      .def("set_collisions", &cjm_collision::set_collisions<BoundPipeline>, py::arg("body_joints"),
+           py::arg("body_placements"), py::arg("body_kinds"), py::arg("body_dimensions"),
+           py::arg("obstacles"), py::arg("obstacle_kinds"), py::arg("obstacle_dimensions"),
+           py::arg("obstacle_rotations"), py::arg("pairs"), py::arg("pair_names"), py::arg("safety_distance"),
+           py::arg("detection_distance"), py::arg("gain"),
+           "The collision rows measured in prepare() (docs/design.md section 18.4).")
+      .def("clear_collisions", [](BoundPipeline& pipeline) {
+             pipeline.set_collisions(nullptr);
+             pipeline.collision_sources = {};
+           }, "No collision rows measured here (Python writes them, if any).")
+      .def("collision_views", &cjm_collision::collision_views<BoundPipeline>,
+           "(row pairs, distances, witnesses, (count, minimum distance, its pair)).")
+      .def("collision_report", &cjm_collision::collision_report<BoundPipeline>,
+           "The last step's collision rows as CollisionRows' fields, copied.")
       .def_property_readonly("step", [](BoundPipeline& pipeline) -> cjm::Step& { return pipeline.step(); },
                              py::return_value_policy::reference_internal)
       .def_property_readonly("q", [](py::object self) {
@@ -347,4 +365,5 @@ PYBIND11_MODULE(_step, module) {
   events["pair_conflict"] = static_cast<int>(cjm::Event::pair_conflict);
   module.attr("EVENTS") = events;
   module.attr("JOINT_KINDS") = cjm::joint_kinds();
+  cjm_collision::bind(module);
 }

@@ -49,12 +49,21 @@ void Pipeline::set_form(Index index, TermsKind kind, bool paper, double paper_mi
   form.paper_min_a = paper_min_a;
 }
 
+void Pipeline::set_collisions(std::unique_ptr<Collisions> collisions) {
+  if (collisions && collisions->pair_count() > step_.pair_capacity())
+    throw std::invalid_argument("more collision pairs than the step's pair capacity");
+  collisions_ = std::move(collisions);
+}
+
 void Pipeline::prepare() {
   compute_kinematics();
   compute_terms();
 }
 
-void Pipeline::compute_kinematics() { kinematics_.compute(q_); }
+void Pipeline::compute_kinematics() {
+  kinematics_.compute(q_);
+  if (collisions_) collisions_->write_rows(kinematics_, step_);
+}
 
 void Pipeline::compute_terms() {
   const RowMatrix& jacobians = kinematics_.jacobians();

@@ -8,8 +8,10 @@
 // prepare() and finish().
 #pragma once
 
+#include <memory>
 #include <vector>
 
+#include "collision.hpp"
 #include "kinematics.hpp"
 #include "step.hpp"
 #include "terms.hpp"
@@ -54,6 +56,12 @@ class Pipeline {
   const RowMatrix& placements() const { return kinematics_.placements(); }
   const RowMatrix& jacobians() const { return kinematics_.jacobians(); }
   Step& step() { return step_; }
+  const Kinematics& kinematics() const { return kinematics_; }
+
+  //! The collision rows prepare() writes into the step's pair buffer after the
+  //! kinematics (docs/design.md section 18.4); none: Python writes them, if any.
+  void set_collisions(std::unique_ptr<Collisions> collisions);
+  Collisions* collisions() { return collisions_.get(); }
 
  private:
   Kinematics kinematics_;
@@ -73,6 +81,7 @@ class Pipeline {
   bool paper_form_ = true;
   Vector q_, twist_, task_twist_, terms_, posture_;
   RowMatrix ee_jacobian_;
+  std::unique_ptr<Collisions> collisions_;
 };
 
 }  // namespace cjm
