@@ -2,7 +2,7 @@
 added, moved and removed through :class:`web.app.TeleopApp`, scenes that keep them, the
 settings, and what the view shows (the minimum distance, the highlighted pairs and their
 witness segments) against :class:`constraints.collision.CollisionAvoidance` rows computed
-here, independently, at the app's configuration.
+here, independently, at the configuration the controller computed its own from.
 """
 
 from __future__ import annotations

@@ -37,6 +37,13 @@ class Timing:
     #: ticks started less than a period after their deadline, over the ticks due in the
     #: window (those skipped by a resynchronisation count as late)
     on_time: float = math.nan
+    #: the tick's median parts (us): the controllers' steps; the loops' hot path beyond
+    #: them (TeleopLoop.advance: targets, kinematics, twists, integration); the UI's own
+    #: (the tick beyond the loops' hot path: the lock, the bookkeeping, the measures of a
+    #: history tick)
+    solve_p50_us: float = math.nan
+    loop_p50_us: float = math.nan
+    ui_p50_us: float = math.nan
 
 
 class ControlThread:
@@ -59,6 +66,7 @@ class ControlThread:
         self._lateness = np.zeros(TIMING_WINDOW)
         self._tick = np.zeros(TIMING_WINDOW)
         self._solve = np.zeros(TIMING_WINDOW)
+        self._advance = np.zeros(TIMING_WINDOW)
         self._start = np.zeros(TIMING_WINDOW)
         self._count = 0
         self._switch_interval: float | None = None
@@ -94,6 +102,7 @@ class ControlThread:
             return Timing(self.achieved_rate, math.nan, math.nan, math.nan, math.nan,
                           math.nan, self.deadline_misses, 0)
         lateness, tick, solve = self._lateness[:n].copy(), self._tick[:n].copy(), self._solve[:n].copy()
+        advance = self._advance[:n].copy()
         period = self.app.config.dt
         starts = self._start[:n].copy()
         due = max(n, round((float(starts.max() - starts.min()) + period) / period))
@@ -105,7 +114,10 @@ class ControlThread:
             tick_p99_us=1e6 * float(np.percentile(tick, 99)),
             overhead_p50_us=float(np.percentile(1e6 * tick - solve, 50)),
             deadline_misses=self.deadline_misses, ticks=self._count,
-            on_time=float(np.sum(lateness < period)) / due)
+            on_time=float(np.sum(lateness < period)) / due,
+            solve_p50_us=float(np.percentile(solve, 50)),
+            loop_p50_us=float(np.percentile(advance - solve, 50)),
+            ui_p50_us=float(np.percentile(1e6 * tick - advance, 50)))
 
     def _run(self) -> None:
         clock = time.perf_counter
@@ -117,9 +129,10 @@ class ControlThread:
                 period = self.app.config.dt
                 window_start, window_ticks = clock(), 0
             start = clock()
-            solve_us = 0.0
+            solve_us = advance_us = 0.0
             try:
                 solve_us = self.app.step()
+                advance_us = self.app.advance_us
             except Exception as error:  # keep the robot still and say why
                 self.error = f"{type(error).__name__}: {error}"
                 time.sleep(0.01)
@@ -128,6 +141,7 @@ class ControlThread:
             self._lateness[slot] = max(0.0, start - next_tick)
             self._tick[slot] = end - start
             self._solve[slot] = solve_us
+            self._advance[slot] = advance_us
             self._start[slot] = start
             self._count += 1
             window_ticks += 1

@@ -63,7 +63,9 @@ class StatusView:
                    f"{snapshot['config'].rate:.0f} Hz), {100 * timing.on_time:.1f} % of ticks "
                    f"on time, lateness p99 {timing.lateness_p99_ms:.2f} ms, tick "
                    f"{timing.tick_p50_us:.0f} us ({timing.overhead_p50_us:.0f} us beyond the "
-                   f"controllers{', physics included' if snapshot['plant'].physical else ''}), "
+                   f"controllers{', physics included' if snapshot['plant'].physical else ''}; "
+                   f"medians: controllers {timing.solve_p50_us:.0f} us, loop "
+                   f"{timing.loop_p50_us:.0f} us, UI {timing.ui_p50_us:.0f} us), "
                    f"{timing.deadline_misses} deadline misses")
         lines = [control]
         if snapshot["plant"].physical:
