@@ -101,23 +101,24 @@ class ControlThread:
         if n == 0:
             return Timing(self.achieved_rate, math.nan, math.nan, math.nan, math.nan,
                           math.nan, self.deadline_misses, 0)
-        lateness, tick, solve = self._lateness[:n].copy(), self._tick[:n].copy(), self._solve[:n].copy()
-        advance = self._advance[:n].copy()
+        lateness, tick = self._lateness[:n].copy(), 1e6 * self._tick[:n]
+        solve, advance = self._solve[:n].copy(), self._advance[:n].copy()
         period = self.app.config.dt
         starts = self._start[:n].copy()
         due = max(n, round((float(starts.max() - starts.min()) + period) / period))
+        # the percentiles of every column at once (the view thread computes them: it
+        # shares the interpreter with the control thread)
+        columns = np.stack([1e3 * lateness, tick, tick - solve, solve, advance - solve,
+                            tick - advance])
+        late_50, tick_50, overhead_50, solve_50, loop_50, ui_50 = np.percentile(
+            columns, 50, axis=1).tolist()
+        late_99, tick_99 = np.percentile(columns[:2], 99, axis=1).tolist()
         return Timing(
-            achieved_rate=self.achieved_rate,
-            lateness_p50_ms=1e3 * float(np.percentile(lateness, 50)),
-            lateness_p99_ms=1e3 * float(np.percentile(lateness, 99)),
-            tick_p50_us=1e6 * float(np.percentile(tick, 50)),
-            tick_p99_us=1e6 * float(np.percentile(tick, 99)),
-            overhead_p50_us=float(np.percentile(1e6 * tick - solve, 50)),
+            achieved_rate=self.achieved_rate, lateness_p50_ms=late_50, lateness_p99_ms=late_99,
+            tick_p50_us=tick_50, tick_p99_us=tick_99, overhead_p50_us=overhead_50,
             deadline_misses=self.deadline_misses, ticks=self._count,
             on_time=float(np.sum(lateness < period)) / due,
-            solve_p50_us=float(np.percentile(solve, 50)),
-            loop_p50_us=float(np.percentile(advance - solve, 50)),
-            ui_p50_us=float(np.percentile(1e6 * tick - advance, 50)))
+            solve_p50_us=solve_50, loop_p50_us=loop_50, ui_p50_us=ui_50)
 
     def _run(self) -> None:
         clock = time.perf_counter
