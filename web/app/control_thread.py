@@ -106,19 +106,18 @@ class ControlThread:
         period = self.app.config.dt
         starts = self._start[:n].copy()
         due = max(n, round((float(starts.max() - starts.min()) + period) / period))
-        # the percentiles of every column at once (the view thread computes them: it
-        # shares the interpreter with the control thread)
-        columns = np.stack([1e3 * lateness, tick, tick - solve, solve, advance - solve,
-                            tick - advance])
-        late_50, tick_50, overhead_50, solve_50, loop_50, ui_50 = np.percentile(
-            columns, 50, axis=1).tolist()
-        late_99, tick_99 = np.percentile(columns[:2], 99, axis=1).tolist()
         return Timing(
-            achieved_rate=self.achieved_rate, lateness_p50_ms=late_50, lateness_p99_ms=late_99,
-            tick_p50_us=tick_50, tick_p99_us=tick_99, overhead_p50_us=overhead_50,
+            achieved_rate=self.achieved_rate,
+            lateness_p50_ms=1e3 * float(np.percentile(lateness, 50)),
+            lateness_p99_ms=1e3 * float(np.percentile(lateness, 99)),
+            tick_p50_us=float(np.percentile(tick, 50)),
+            tick_p99_us=float(np.percentile(tick, 99)),
+            overhead_p50_us=float(np.percentile(tick - solve, 50)),
             deadline_misses=self.deadline_misses, ticks=self._count,
             on_time=float(np.sum(lateness < period)) / due,
-            solve_p50_us=solve_50, loop_p50_us=loop_50, ui_p50_us=ui_50)
+            solve_p50_us=float(np.percentile(solve, 50)),
+            loop_p50_us=float(np.percentile(advance - solve, 50)),
+            ui_p50_us=float(np.percentile(tick - advance, 50)))
 
     def _run(self) -> None:
         clock = time.perf_counter
