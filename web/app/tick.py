@@ -12,8 +12,8 @@ import threading
 import numpy as np
 import pinocchio as pin
 
-from teleop.experiments.sessions import SessionRecorder
 from constraints.collision import CollisionAvoidance, CollisionRows
+from teleop.experiments.sessions import SessionRecorder
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.closed_loop import PendingStep
 from teleop.loop.moving_geometry import advance, steer
