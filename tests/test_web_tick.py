@@ -15,9 +15,13 @@ import pinocchio as pin
 import pytest
 import viser
 from browser_helpers import free_port
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from constraints.collision import CollisionAvoidance
 from web.app import HISTORY_RATE, ControlThread, TeleopApp
+from web.app.control_thread import percentiles
 from web.ui import TeleopUI
 
 #: two computations of the same pair at the same q (as in tests/test_web_collisions.py)
@@ -207,3 +211,12 @@ def test_the_status_split_is_the_ticks_own(app):
     assert timing.solve_p50_us == pytest.approx(np.percentile(solve, 50))
     assert timing.loop_p50_us == pytest.approx(np.percentile(advance - solve, 50))
     assert timing.ui_p50_us == pytest.approx(np.percentile(tick - advance, 50))
+
+
+@given(columns=st.integers(1, 4096).flatmap(lambda n: arrays(
+           float, (3, n), elements=st.floats(-1e6, 1e6, allow_nan=False))),
+       q=st.sampled_from([0.0, 50.0, 99.0, 100.0]))
+def test_the_status_percentiles_are_numpys(columns, q):
+    expected = np.percentile(columns, q, axis=1)
+    np.testing.assert_allclose(percentiles(columns, q), expected, rtol=1e-12,
+                               atol=1e-12 * max(1.0, float(np.abs(columns).max())))
