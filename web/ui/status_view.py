@@ -18,7 +18,7 @@ BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
 
 def collision_words(rows: CollisionRows | None, active_pairs: list[str]) -> str:
     """The status's words on collisions: the minimum distance and the closest pair (of
-    the rows the control thread measured last; nothing before a measure or while
+    the rows the controller computed for its last step; nothing before a step or while
     collisions are off), and the pairs the controller holds at their bound."""
     if rows is None:
         return ""
