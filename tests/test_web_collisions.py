@@ -2,7 +2,7 @@
 added, moved and removed through :class:`web.app.TeleopApp`, scenes that keep them, the
 settings, and what the view shows (the minimum distance, the highlighted pairs and their
 witness segments) against :class:`constraints.collision.CollisionAvoidance` rows computed
-here, independently, at the app's configuration.
+here, independently, at the configuration the controller computed its own from.
 """
 
 from __future__ import annotations
@@ -50,12 +50,15 @@ def run(app, seconds: float) -> None:
         app.step()
 
 
-def run_to_measure(app) -> None:
-    """Step until the next measured (history) tick: the rows the view reads were then
-    measured at the app's configuration now."""
-    record = app.last_records["main"]
-    while app.last_records["main"] is record:
+def run_to_measure(app, which: str = "main") -> np.ndarray:
+    """Step until the next measured (history) tick; robot ``which``'s configuration its
+    command was computed from on that tick (the kinematic plant senses the true q), where
+    its controller computed the rows the view reads."""
+    record = app.last_records[which]
+    while app.last_records[which] is record:
+        q = app.loops[which].q.copy()
         app.step()
+    return q
 
 
 def tip(app, ee: int = 0) -> pin.SE3:
@@ -66,15 +69,15 @@ def tip(app, ee: int = 0) -> pin.SE3:
     return data.oMf[robot.ee_frame_ids[ee]].copy()
 
 
-def independent_rows(app, which: str = "main"):
+def independent_rows(app, which: str = "main", q: np.ndarray | None = None):
     """The rows of a new avoidance with the app's settings and copies of its obstacles, at
-    robot ``which``'s q, on a fresh ``pin.Data``."""
+    ``q`` (default: robot ``which``'s q now), on a fresh ``pin.Data``."""
     settings = app.avoidance.to_dict()
     avoidance = CollisionAvoidance.from_dict(app.robot, settings)
     avoidance.set_ports([entry.constraint for entry in app.entries.values()])
     model = app.robot.model
     data = model.createData()
-    pin.computeJointJacobians(model, data, app.loops[which].q)
+    pin.computeJointJacobians(model, data, app.loops[which].q if q is None else q)
     return avoidance.rows(model, data)
 
 
@@ -275,14 +278,16 @@ def near_obstacle(app) -> str:
                             center=pose.translation + 0.05 * pose.rotation[:, 2])
 
 
-def test_the_status_and_highlights_are_the_rows_at_the_apps_q(app, server):
+def test_the_status_and_highlights_are_the_controllers_rows(app, server):
+    """The view shows the rows the main controller held on the measured tick, at the
+    configuration its command was computed from (not computed again for the view)."""
     near_obstacle(app)
     app.nudge_target([0.0, 0.0, 0.01])
     run(app, 0.3)
-    run_to_measure(app)
+    q = run_to_measure(app)
     snapshot = app.snapshot()
     shown = snapshot["robots"]["main"]["collision_rows"]
-    expected = independent_rows(app)
+    expected = independent_rows(app, q=q)
     assert expected.size >= 1 and shown.pairs == expected.pairs
     np.testing.assert_allclose(shown.distances, expected.distances, atol=SAME)
     np.testing.assert_allclose(shown.witnesses, expected.witnesses, atol=SAME)
@@ -291,7 +296,7 @@ def test_the_status_and_highlights_are_the_rows_at_the_apps_q(app, server):
     assert shown.closest_pair == expected.closest_pair
     # each is one of coal's distances of its pair (a link has several geometries)
     links = {pair.split(" | ")[0] for pair in expected.pairs}
-    every = app.avoidance.distances(app.robot.model, pin_data(app))
+    every = app.avoidance.distances(app.robot.model, pin_data(app, q))
     for pair, distance in zip(shown.pairs, shown.distances):
         assert min(abs(d - distance) for name, d in every if name == pair) < SAME
     # the status's words and the plotted trace
@@ -322,9 +327,9 @@ def test_the_status_and_highlights_are_the_rows_at_the_apps_q(app, server):
     assert set(ui._link_nodes) == links
 
 
-def pin_data(app) -> pin.Data:
+def pin_data(app, q: np.ndarray) -> pin.Data:
     data = app.robot.model.createData()
-    pin.forwardKinematics(app.robot.model, data, app.loops["main"].q)
+    pin.forwardKinematics(app.robot.model, data, q)
     return data
 
 
@@ -336,21 +341,21 @@ def test_the_colour_goes_from_red_at_d_s_to_yellow_at_d_i():
     assert all(min(a, b) <= c <= max(a, b) for a, b, c in zip(NEAR_COLOR, FAR_COLOR, middle))
 
 
-def test_the_dual_arms_pairs_are_the_rows_at_the_apps_q(dual_app):
+def test_the_dual_arms_pairs_are_the_controllers_rows(dual_app):
     """Both arms driven towards each other: the self-collision pairs the view shows are
-    those of an avoidance built here, at the app's q."""
+    those of an avoidance built here, at the q the command was computed from."""
     app = dual_app
     for ee, side in ((0, -1.0), (1, 1.0)):
         for _ in range(8):
             app.nudge_target([0.0, 0.01 * side, 0.0], ee)
             run(app, 0.25)
-    run_to_measure(app)
+    q = run_to_measure(app)
     shown = app.snapshot()["robots"]["main"]["collision_rows"]
-    expected = independent_rows(app)
+    expected = independent_rows(app, q=q)
     assert shown.pairs == expected.pairs
     np.testing.assert_allclose(shown.distances, expected.distances, atol=SAME)
     assert shown.closest_pair == expected.closest_pair
-    minimum, pair = app.avoidance.minimum_distance(app.loops["main"].q)
+    minimum, pair = app.avoidance.minimum_distance(q)
     if expected.size:
         assert minimum == pytest.approx(expected.minimum_distance, abs=SAME)
 

@@ -1,7 +1,8 @@
 """Collision avoidance in the browser session (docs/design.md section 18): one
 :class:`constraints.collision.CollisionAvoidance` for the session's robot, attached to the
 main and the ghost controllers; the obstacles the operator adds, moves and removes; the
-rows the control thread measures for the view (the highlighted pairs, the minimum distance).
+rows the view shows (the highlighted pairs, the minimum distance): those each controller
+computed for its last step.
 
 Obstacles are placed from their kind's constructor (:data:`OBSTACLE_TYPES`): the fields the
 operator does not give take the kind's own default, else :data:`FIELD_DEFAULTS`; the
@@ -269,20 +270,19 @@ class Collisions:
             raise ValueError(f"no obstacle {short_repr(entry_id)}")
         return self.obstacles[entry_id]
 
-    # -- what the control thread measures for the view -----------------------------------------
+    # -- the rows the view shows ---------------------------------------------------------------
 
-    def _measure_collisions(self) -> None:
-        """The avoidance's rows at each robot's configuration now, for the view (the control
-        thread, caller holds the lock); none while collisions are off."""
+    def _measure_collisions(self, configurations: dict[str, np.ndarray]) -> None:
+        """The avoidance's rows at each given robot's configuration, for the view (the
+        control thread, caller holds the lock): for a robot whose controller computed none
+        in its step (:meth:`Tick._advance`); none while collisions are off."""
         if not self.collisions_on:
             self.collision_rows = {}
             return
         model, data = self.robot.model, self._collision_data
-        rows = {}
-        for which, loop in self.loops.items():
-            pin.computeJointJacobians(model, data, loop.q)
-            rows[which] = self.avoidance.rows(model, data)
-        self.collision_rows = rows
+        for which, q in configurations.items():
+            pin.computeJointJacobians(model, data, q)
+            self.collision_rows[which] = self.avoidance.rows(model, data)
 
     def traced_distance(self, which: str) -> float:
         """The minimum distance the plots show for robot ``which`` (m): the closest pair

@@ -22,6 +22,20 @@ TIMING_WINDOW = 4096
 SWITCH_INTERVAL = 2e-4
 
 
+def percentiles(columns: np.ndarray, q: float) -> np.ndarray:
+    """The ``q``-th percentile of each row of ``columns``, as ``np.percentile(columns, q,
+    axis=1)`` computes it (linear between the two nearest order statistics), from one
+    partial sort: the view thread computes these, and it shares the interpreter with the
+    control thread."""
+    n = columns.shape[1]
+    index = q / 100.0 * (n - 1)
+    below = math.floor(index)
+    above = min(below + 1, n - 1)
+    ordered = np.partition(columns, (below, above), axis=1)
+    low, high = ordered[:, below], ordered[:, above]
+    return low + (high - low) * (index - below)
+
+
 @dataclass(frozen=True)
 class Timing:
     """The control thread's timing over its last :data:`TIMING_WINDOW` ticks."""
@@ -37,6 +51,13 @@ class Timing:
     #: ticks started less than a period after their deadline, over the ticks due in the
     #: window (those skipped by a resynchronisation count as late)
     on_time: float = math.nan
+    #: the tick's median parts (us): the controllers' steps; the loops' hot path beyond
+    #: them (TeleopLoop.advance: targets, kinematics, twists, integration); the UI's own
+    #: (the tick beyond the loops' hot path: the lock, the bookkeeping, the measures of a
+    #: history tick)
+    solve_p50_us: float = math.nan
+    loop_p50_us: float = math.nan
+    ui_p50_us: float = math.nan
 
 
 class ControlThread:
@@ -59,6 +80,7 @@ class ControlThread:
         self._lateness = np.zeros(TIMING_WINDOW)
         self._tick = np.zeros(TIMING_WINDOW)
         self._solve = np.zeros(TIMING_WINDOW)
+        self._advance = np.zeros(TIMING_WINDOW)
         self._start = np.zeros(TIMING_WINDOW)
         self._count = 0
         self._switch_interval: float | None = None
@@ -93,19 +115,21 @@ class ControlThread:
         if n == 0:
             return Timing(self.achieved_rate, math.nan, math.nan, math.nan, math.nan,
                           math.nan, self.deadline_misses, 0)
-        lateness, tick, solve = self._lateness[:n].copy(), self._tick[:n].copy(), self._solve[:n].copy()
+        lateness, tick = self._lateness[:n].copy(), 1e6 * self._tick[:n]
+        solve, advance = self._solve[:n].copy(), self._advance[:n].copy()
         period = self.app.config.dt
         starts = self._start[:n].copy()
         due = max(n, round((float(starts.max() - starts.min()) + period) / period))
+        columns = np.stack([1e3 * lateness, tick, tick - solve, solve, advance - solve,
+                            tick - advance])
+        late_50, tick_50, overhead_50, solve_50, loop_50, ui_50 = percentiles(columns, 50).tolist()
+        late_99, tick_99 = percentiles(columns[:2], 99).tolist()
         return Timing(
-            achieved_rate=self.achieved_rate,
-            lateness_p50_ms=1e3 * float(np.percentile(lateness, 50)),
-            lateness_p99_ms=1e3 * float(np.percentile(lateness, 99)),
-            tick_p50_us=1e6 * float(np.percentile(tick, 50)),
-            tick_p99_us=1e6 * float(np.percentile(tick, 99)),
-            overhead_p50_us=float(np.percentile(1e6 * tick - solve, 50)),
+            achieved_rate=self.achieved_rate, lateness_p50_ms=late_50, lateness_p99_ms=late_99,
+            tick_p50_us=tick_50, tick_p99_us=tick_99, overhead_p50_us=overhead_50,
             deadline_misses=self.deadline_misses, ticks=self._count,
-            on_time=float(np.sum(lateness < period)) / due)
+            on_time=float(np.sum(lateness < period)) / due,
+            solve_p50_us=solve_50, loop_p50_us=loop_50, ui_p50_us=ui_50)
 
     def _run(self) -> None:
         clock = time.perf_counter
@@ -117,9 +141,10 @@ class ControlThread:
                 period = self.app.config.dt
                 window_start, window_ticks = clock(), 0
             start = clock()
-            solve_us = 0.0
+            solve_us = advance_us = 0.0
             try:
                 solve_us = self.app.step()
+                advance_us = self.app.advance_us
             except Exception as error:  # keep the robot still and say why
                 self.error = f"{type(error).__name__}: {error}"
                 time.sleep(0.01)
@@ -128,6 +153,7 @@ class ControlThread:
             self._lateness[slot] = max(0.0, start - next_tick)
             self._tick[slot] = end - start
             self._solve[slot] = solve_us
+            self._advance[slot] = advance_us
             self._start[slot] = start
             self._count += 1
             window_ticks += 1

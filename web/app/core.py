@@ -110,3 +110,4 @@ class TeleopApp(Console, Editing, Collisions, Robots, Plants, Settings, Scenes, 
         self._record_start = 0.0
         self._next_history = 0.0
         self.ticks = 0
+        self.advance_us = 0.0

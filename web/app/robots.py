@@ -59,6 +59,7 @@ class Robots:
     loops: dict[str, TeleopLoop]
     traces: dict[str, Trace]
     last_records: dict[str, StepRecord | None]
+    collision_rows: dict
     ghost_offset: np.ndarray
     plant: PlantChoice
     _lock: threading.RLock
@@ -162,7 +163,8 @@ class Robots:
         """
         if not spec:
             with self._lock:
-                for store in (self.loops, self.specs, self.traces, self.last_records):
+                for store in (self.loops, self.specs, self.traces, self.last_records,
+                              self.collision_rows):
                     store.pop("ghost", None)
             return
         self._rebuild({"ghost": spec})

@@ -1,6 +1,8 @@
 """The control tick: one control period of every robot, called by the control thread
 (docs/design.md section 5.3). Every tick computes what the controllers need; the measures
-of the live plots and the status are taken on the history ticks only."""
+of the live plots and the status are taken on the history ticks only. The collision rows
+the view draws are those the controllers computed for their own step (no second
+computation on the control thread)."""
 
 from __future__ import annotations
 
@@ -10,8 +12,10 @@ import threading
 import numpy as np
 import pinocchio as pin
 
+from constraints.collision import CollisionAvoidance, CollisionRows
 from teleop.experiments.sessions import SessionRecorder
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.loop.closed_loop import PendingStep
 from teleop.loop.moving_geometry import advance, steer
 
 from .collisions import ObstacleEntry
@@ -36,7 +40,13 @@ class Tick:
     obstacles: dict[str, ObstacleEntry]
     inputs: list[EEInput]
     recorder: SessionRecorder | None
+    avoidance: CollisionAvoidance
+    collisions_on: bool
+    collision_rows: dict[str, CollisionRows | None]
     ticks: int
+    #: the loops' hot path in the last tick (us): every robot's ``TeleopLoop.advance``,
+    #: the controllers' steps included (the control thread's status splits the tick by it)
+    advance_us: float
     _next_history: float
     _lock: threading.RLock
 
@@ -47,7 +57,8 @@ class Tick:
 
     def step(self) -> float:
         """One control period for every robot (called by the control thread); returns the
-        time the controllers took (us).
+        time the controllers took (us), and leaves the loops' whole hot path in
+        :attr:`advance_us`.
 
         Every tick computes what the controllers need; the measures of the live plots and
         the status (constraint errors, EE error, ...) are taken on the history ticks only
@@ -60,17 +71,34 @@ class Tick:
             if moving:
                 self._steer(moving, dt)
             targets, start = [hand.target for hand in self.inputs], self.now
+            held: dict[str, CollisionRows] = {}
+            pending = {which: self._advance(which, loop, targets, held)
+                       for which, loop in self.loops.items()}
+            if self.collisions_on:
+                self.collision_rows.update(held)
             if start >= self._next_history - 0.5 * dt:
-                solve_us = self._measured_step(targets, moving, dt)
+                self._measure(pending, moving, dt, held)
                 self._next_history = start + 1.0 / HISTORY_RATE
             else:
-                solve_us = 0.0
-                for loop in self.loops.values():  # the hot path only (no measures)
-                    solve_us += loop.advance(targets).step_time_us
                 for entry in moving:  # where the period took the geometry
                     advance(entry.moved, dt)
             self.ticks += 1
-            return solve_us
+            self.advance_us = sum(step.tick_time_us for step in pending.values())
+            return sum(step.step_time_us for step in pending.values())
+
+    def _advance(self, which: str, loop: TeleopLoop, targets: list[pin.SE3],
+                 held: dict[str, CollisionRows]) -> PendingStep:
+        """Robot ``which``'s hot path (:meth:`TeleopLoop.advance`); the collision rows its
+        controller computed for this step (the avoidance's :attr:`last_rows`, at the
+        configuration the command was computed from) go into ``held``: the view reads
+        them (:attr:`collision_rows`, immutable) instead of the control thread computing
+        them again."""
+        before = self.avoidance.last_rows
+        step = loop.advance(targets)
+        rows = self.avoidance.last_rows
+        if rows is not before and rows is not None:
+            held[which] = rows
+        return step
 
     def _steer(self, moving: list[ConstraintEntry | ObstacleEntry], dt: float) -> None:
         """Moved geometry (a constraint's, an obstacle) glides towards its goal, with
@@ -88,20 +116,23 @@ class Tick:
                 self.recorder.move(self.recording_time, entry.id,
                                    geometry.position, geometry.velocity)
 
-    def _measured_step(self, targets: list[pin.SE3],
-                       moving: list[ConstraintEntry | ObstacleEntry], dt: float) -> float:
-        """A full tick with the measures, appended to the history (the collision rows at
-        every robot's configuration among them, :meth:`Collisions._measure_collisions`)."""
-        pending = {which: loop.advance(targets) for which, loop in self.loops.items()}
+    def _measure(self, pending: dict[str, PendingStep],
+                 moving: list[ConstraintEntry | ObstacleEntry], dt: float,
+                 held: dict[str, CollisionRows]) -> None:
+        """The measures of the tick just advanced (``pending``), appended to the history:
+        the command's, then, once the geometry has moved on, the end of the period's. The
+        collision rows of a robot whose controller computed none this tick (not in
+        ``held``) are measured here, where its command was computed from
+        (:meth:`Collisions._measure_collisions`)."""
         for which, loop in self.loops.items():  # before the geometry moves on
             loop.measure_command(pending[which])
+        self._measure_collisions({which: step.sensed for which, step in pending.items()
+                                  if which not in held})
         for entry in moving:
             advance(entry.moved, dt)
-        self._measure_collisions()
         main_qd = self.loops["main"].last_qd
         for which, loop in self.loops.items():
             record = loop.measure(pending[which])
             self.last_records[which] = record
             deviation = 0.0 if which == "main" else float(np.linalg.norm(loop.last_qd - main_qd))
             self.traces[which].add(record, deviation, self.traced_distance(which))
-        return sum(step.step_time_us for step in pending.values())

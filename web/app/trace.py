@@ -16,6 +16,8 @@ _HISTORY_LENGTH = int(HISTORY_SECONDS * HISTORY_RATE)
 #: the plotted measures of each robot, in the order of the plots
 TRACE_COLUMNS = ("constraint_error", "constraint_velocity", "ee_error", "step_time",
                  "port_force", "minimum_distance")
+#: every column kept: the time, the plotted measures, the ghost's deviation
+_NAMES = ("t", *TRACE_COLUMNS, "qd_deviation")
 
 
 def _deque() -> collections.deque:
@@ -50,6 +52,14 @@ class Trace:
         self.qd_deviation.append(qd_deviation)
         self.minimum_distance.append(minimum_distance)
 
+    def columns(self) -> dict[str, list[float]]:
+        """A copy of every column (cheap: no array built; :meth:`arrays_of` builds them)."""
+        return {name: list(getattr(self, name)) for name in _NAMES}
+
     def arrays(self) -> dict[str, np.ndarray]:
-        return {name: np.array(getattr(self, name), dtype=float)
-                for name in ("t", *TRACE_COLUMNS, "qd_deviation")}
+        return self.arrays_of(self.columns())
+
+    @staticmethod
+    def arrays_of(columns: dict[str, list[float]]) -> dict[str, np.ndarray]:
+        """:meth:`columns` as arrays, one per column."""
+        return {name: np.array(values, dtype=float) for name, values in columns.items()}

@@ -3,11 +3,13 @@ of each robot in words (:mod:`web.app.status`)."""
 
 from __future__ import annotations
 
+import copy
 import threading
 
 import numpy as np
 import pinocchio as pin
 
+from constraints import Constraint
 from constraints.collision import CollisionRows
 from constraints.kinematics import frame_placement
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
@@ -68,23 +70,33 @@ class View:
 
     def snapshot(self, history: bool = True) -> dict:
         """A consistent copy of everything the view shows (``history``: with the plots'
-        data)."""
+        data).
+
+        Only copies are taken under the lock (the robots' state and link placements,
+        each constraint as it is now, the traces' columns); the drawings, the words and
+        the plots' arrays are made from them after it, so the control thread never waits
+        for them (docs/design.md section 5.3)."""
         with self._lock:
-            robots = {which: self._robot_snapshot(which, loop, history)
+            constraints = {entry.id: copy.copy(entry.constraint)
+                           for entry in self.entries.values()}
+            states = {which: self._robot_state(which, loop, history)
                       for which, loop in self.loops.items()}
-            entries = [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),
-                        **robots["main"]["constraints"][entry.id]}  # geometry, link_axis
-                       for entry in self.entries.values()]
-            return {"robots": robots, "constraints": entries,
-                    "ee_frames": self.robot.ee_frames,
-                    "targets": [hand.target.copy() for hand in self.inputs],
-                    "gizmos": [hand.gizmo.copy() for hand in self.inputs],
-                    "target": self.target.copy(), "gizmo": self.gizmo.copy(),
-                    "clutch": self.clutch, "motion_scale": self.motion_scale,
-                    "ghost_offset": self.ghost_offset.copy(),
-                    "recording": self.recorder is not None,
-                    "config": self.config, "gain": self.gain, "damping": self.damping,
-                    "plant": self.plant, "collisions": self._collisions_snapshot()}
+            goals = {entry.id: (entry.kind, entry.goal.copy()) for entry in self.entries.values()}
+            targets = [hand.target.copy() for hand in self.inputs]
+            snapshot = {"ee_frames": self.robot.ee_frames, "targets": targets,
+                        "gizmos": [hand.gizmo.copy() for hand in self.inputs],
+                        "target": targets[0].copy(), "gizmo": self.gizmo.copy(),
+                        "clutch": self.clutch, "motion_scale": self.motion_scale,
+                        "ghost_offset": self.ghost_offset.copy(),
+                        "recording": self.recorder is not None,
+                        "config": self.config, "gain": self.gain, "damping": self.damping,
+                        "plant": self.plant, "collisions": self._collisions_snapshot()}
+        robots = {which: self._robot_snapshot(state, constraints, targets)
+                  for which, state in states.items()}
+        entries = [{"id": entry_id, "kind": kind, "goal": goal,
+                    **robots["main"]["constraints"][entry_id]}  # geometry, link_axis
+                   for entry_id, (kind, goal) in goals.items()]
+        return {"robots": robots, "constraints": entries, **snapshot}
 
     def _collisions_snapshot(self) -> dict:
         """The collision part of :meth:`snapshot` (caller holds the lock): the settings
@@ -105,34 +117,51 @@ class View:
         with self._lock:
             return list(self.loops[which].controller.info.active_pairs)
 
-    def _robot_snapshot(self, which: str, loop: TeleopLoop, history: bool) -> dict:
-        """One robot's part of :meth:`snapshot` (caller holds the lock): its state, each
-        constraint's drawing at its configuration, what limits each EE, the wall's force
+    def _robot_state(self, which: str, loop: TeleopLoop, history: bool) -> dict:
+        """What :meth:`_robot_snapshot` makes robot ``which``'s part of :meth:`snapshot`
+        from, copied (caller holds the lock): its state, the placements of its EEs and of
+        the constrained links at its configuration, the traces' columns, the wall's force
         at each port (``ports``, :class:`web.app.plant.PortReading`; empty without a
         physics plant)."""
         model = self.robot.model
         q = loop.q.copy()
         pin.framesForwardKinematics(model, self._view_data, q)
         placements = self._view_data.oMf
-        constraints = {}
-        for entry in self.entries.values():
-            link = entry.constraint.link
-            placement = placements[model.getFrameId(link)]
-            axis = self.robot.link_axes.get(link)
-            constraints[entry.id] = {
-                "geometry": entry.constraint.geometry(placement),
-                "link": link, "link_placement": placement.copy(),
-                "link_axis": None if axis is None else placement.rotation @ axis}
-        ees = [placements[frame].copy() for frame in self.robot.ee_frame_ids]
-        limitations = [self._limitation(which, ee, index) for index, ee in enumerate(ees)]
+        links = {entry.id: placements[model.getFrameId(entry.constraint.link)].copy()
+                 for entry in self.entries.values()}
         return {"spec": self.specs[which], "q": q, "t": loop.t,
-                "ees": ees, "ee": ees[0],  # every EE, the first
-                "record": self.last_records.get(which),
-                "trace": self.traces[which].arrays() if history else None,
-                "info": loop.controller.info, "constraints": constraints,
-                "limitations": limitations, "limitation": limitations[0],
+                "ees": [placements[frame].copy() for frame in self.robot.ee_frame_ids],
+                "links": links, "record": self.last_records.get(which),
+                "columns": self.traces[which].columns() if history else None,
+                "info": loop.controller.info, "refused": loop.refused,
                 "active_inequalities": self.active_inequalities(which),
                 "active_pairs": self.active_pairs(which),
-                # the rows the control thread measured last (immutable), or None
+                # the rows its controller computed last (immutable), or None
                 "collision_rows": self.collision_rows.get(which),
                 "ports": self._ports(loop, placements)}
+
+    def _robot_snapshot(self, state: dict, constraints: dict[str, Constraint],
+                        targets: list[pin.SE3]) -> dict:
+        """One robot's part of :meth:`snapshot` from its copied ``state``
+        (:meth:`_robot_state`), outside the lock: each constraint's drawing at its
+        configuration (``constraints``: copies), what limits each EE (``targets``: every
+        EE's), the plots' arrays."""
+        drawings = {}
+        for entry_id, placement in state.pop("links").items():
+            constraint = constraints[entry_id]
+            axis = self.robot.link_axes.get(constraint.link)
+            drawings[entry_id] = {
+                "geometry": constraint.geometry(placement), "link": constraint.link,
+                "link_placement": placement,
+                "link_axis": None if axis is None else placement.rotation @ axis}
+        info, record, refused = state["info"], state["record"], state.pop("refused")
+        limitations = [
+            describe_limitation(info, record, float(np.linalg.norm(ee.translation
+                                                                   - target.translation)),
+                                self.joint_names, refused, index)
+            for index, (ee, target) in enumerate(zip(state["ees"], targets))]
+        columns = state.pop("columns")
+        return {**state, "ee": state["ees"][0],  # every EE, the first
+                "trace": None if columns is None else Trace.arrays_of(columns),
+                "constraints": drawings, "limitations": limitations,
+                "limitation": limitations[0]}

@@ -5,7 +5,7 @@ robot closer than the detection distance drawn highlighted: its links' collision
 geometry in a see-through colour and the witness segment between the two witness points,
 coloured by the distance (red at the safety distance, yellow at the detection distance).
 
-The pairs come from the rows the control thread measured last
+The pairs come from the rows the main controller computed for its last step
 (``snapshot["robots"]["main"]["collision_rows"]``, an immutable
 :class:`constraints.collision.CollisionRows`); the view never measures.
 """

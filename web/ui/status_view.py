@@ -18,7 +18,7 @@ BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
 
 def collision_words(rows: CollisionRows | None, active_pairs: list[str]) -> str:
     """The status's words on collisions: the minimum distance and the closest pair (of
-    the rows the control thread measured last; nothing before a measure or while
+    the rows the controller computed for its last step; nothing before a step or while
     collisions are off), and the pairs the controller holds at their bound."""
     if rows is None:
         return ""
@@ -63,7 +63,9 @@ class StatusView:
                    f"{snapshot['config'].rate:.0f} Hz), {100 * timing.on_time:.1f} % of ticks "
                    f"on time, lateness p99 {timing.lateness_p99_ms:.2f} ms, tick "
                    f"{timing.tick_p50_us:.0f} us ({timing.overhead_p50_us:.0f} us beyond the "
-                   f"controllers{', physics included' if snapshot['plant'].physical else ''}), "
+                   f"controllers{', physics included' if snapshot['plant'].physical else ''}; "
+                   f"medians: controllers {timing.solve_p50_us:.0f} us, loop "
+                   f"{timing.loop_p50_us:.0f} us, UI {timing.ui_p50_us:.0f} us), "
                    f"{timing.deadline_misses} deadline misses")
         lines = [control]
         if snapshot["plant"].physical:
