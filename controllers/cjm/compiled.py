@@ -200,22 +200,26 @@ class CompiledStep:
         bad input raises ``ValueError`` as the Python step does."""
         if self._collisions is not None:
             return self._solve_with_pairs(q, twist)
+        qd, paper_form = self._run(q, twist)
+        report = self._report.tolist()
+        if paper_form and not (report[6] or report[7] or report[8]):  # no list, no event
+            return qd, StepReport(STATUSES[int(report[0])], METHODS[int(report[1])], *report[2:6])
+        return qd, self._step_report(report, paper_form)
+
+    def _run(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The pipeline's step at ``q``: one C++ call, or two around the terms Python
+        writes; returns ``qd`` and whether the paper's form was defined."""
         pipeline = self.pipeline
         if self._one_call:
             qd = pipeline.solve(q, twist, self._use_posture, True)
             if qd is None:  # not finite float vectors of the right sizes: say what is wrong
                 qd = pipeline.solve(*self._checked(q, twist), self._use_posture, True)
-            paper_form = not self._paper or pipeline.paper_form
-        else:
-            if not pipeline.load(q, twist):
-                pipeline.load(*self._checked(q, twist))
-            pipeline.prepare()
-            paper_form = self._write_in_python() and pipeline.paper_form
-            qd = pipeline.finish(self._use_posture, paper_form)
-        report = self._report.tolist()
-        if paper_form and not (report[6] or report[7] or report[8]):  # no list, no event
-            return qd, StepReport(STATUSES[int(report[0])], METHODS[int(report[1])], *report[2:6])
-        return qd, self._step_report(report, paper_form)
+            return qd, not self._paper or pipeline.paper_form
+        if not pipeline.load(q, twist):
+            pipeline.load(*self._checked(q, twist))
+        pipeline.prepare()
+        paper_form = self._write_in_python() and pipeline.paper_form
+        return pipeline.finish(self._use_posture, paper_form), paper_form
 
     def _solve_with_pairs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         """The step with the collision rows at ``q``, measured by the C++ pipeline (or by
@@ -232,18 +236,7 @@ class CompiledStep:
         if collisions.fallback is not None:
             q, twist = self._checked(q, twist)
             pairs = self._write_python_pairs(q)
-        pipeline = self.pipeline
-        paper_form = True
-        if self._one_call:
-            qd = pipeline.solve(q, twist, self._use_posture, True)
-            if qd is None:  # not finite float vectors of the right sizes: say what is wrong
-                qd = pipeline.solve(*self._checked(q, twist), self._use_posture, True)
-        else:
-            if not pipeline.load(q, twist):
-                pipeline.load(*self._checked(q, twist))
-            pipeline.prepare()
-            paper_form = self._write_in_python()
-            qd = pipeline.finish(self._use_posture, paper_form)
+        qd, paper_form = self._run(q, twist)
         if pairs is None:
             pairs = collisions.rows()
         count = self._step.active_pair_count
@@ -315,9 +308,15 @@ class CompiledStep:
     def time_steps(self, configurations: np.ndarray, twists: np.ndarray) -> np.ndarray | None:
         """The C++ floor (docs/design.md section 16): per-step nanoseconds of this step in
         a C++ loop over ``configurations`` (steps x nq) and ``twists`` (steps x stacked
-        twist), no Python between the steps; ``None`` when a step is not one C++ call
-        (Python writes terms, a posture velocity or collision rows between two calls)."""
-        if not self._one_call or self._collisions is not None:
+        twist), no Python between the steps (the collision rows measured in the C++ step
+        too); ``None`` when a step is not one C++ call (Python writes terms, a posture
+        velocity or collision rows between two calls)."""
+        if not self._one_call:
             return None
+        if self._collisions is not None:
+            if self.collision_rows.stale():  # describe the pairs (the first step does)
+                self.solve(configurations[0], twists[0])
+            if self.collision_rows.fallback is not None:
+                return None
         return self.pipeline.time_steps(np.asarray(configurations, dtype=float),
                                         np.asarray(twists, dtype=float), self._use_posture)
