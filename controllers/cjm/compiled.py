@@ -279,3 +279,32 @@ class CompiledStep:
             tuple(recorded),
             (tuple(self._saturation_joints[:int(saturation_joints)].tolist())
              if saturation_joints else ()))
+
+    # -- what the loop's compiled tick needs (compiled_tick.py, docs/design.md 5.1) ------
+
+    @property
+    def tick_ready(self) -> bool:
+        """Whether the loop's compiled tick can run this step around its pipeline: not
+        with collision rows, which Python measures at ``q`` before the C++ step."""
+        return self._collisions is None
+
+    @property
+    def one_call(self) -> bool:
+        """Whether the pipeline computes every term itself (else :meth:`write_terms`)."""
+        return self._one_call
+
+    @property
+    def use_posture(self) -> bool:
+        return self._use_posture
+
+    def write_terms(self) -> bool:
+        """The terms Python writes between the pipeline's kinematics and its step; whether
+        the paper's form is defined (:meth:`last_report` takes it)."""
+        return self._write_in_python()
+
+    def last_report(self, paper_form: bool) -> StepReport:
+        """The report of the step the pipeline has just run, as :meth:`solve` gives it."""
+        report = self._report.tolist()
+        if paper_form and not (report[6] or report[7] or report[8]):  # no list, no event
+            return StepReport(STATUSES[int(report[0])], METHODS[int(report[1])], *report[2:6])
+        return self._step_report(report, paper_form)

@@ -11,6 +11,11 @@ One tick (docs/design.md section 5), for every end effector ``i`` of ``robot.ee_
 and every tick records the measures of docs/design.md section 7, computed here from Pinocchio
 and the constraints themselves, not taken from the controller's own report.
 
+A controller that can run that hot path in C++ offers it (``controller.loop_tick``, the
+CJM's compiled backend); the loop then runs a period in one call and keeps the Python
+path below as the reference, taken when ``compiled_tick=False`` or when the controller's
+step cannot tick compiled (docs/design.md section 5.1).
+
 A :class:`Plant` (docs/design.md section 15.1) may stand between the loop and the robot's
 true joints: the loop then computes the command from the configuration the plant senses,
 and the robot moves with the joint velocity the plant applies; the measures stay on the
@@ -19,6 +24,7 @@ true configuration.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -250,6 +256,54 @@ class PendingStep:
     actual_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
+#: the measures' defaults of a compiled period (replaced, never written in place)
+NO_ROWS = np.zeros(0)
+NO_ROWS.flags.writeable = False
+NO_VECTORS = np.zeros((0, 3))
+NO_VECTORS.flags.writeable = False
+
+
+class CompiledPendingStep(PendingStep):
+    """A period the compiled tick ran (docs/design.md 5.1). Its poses and twists are in
+    ``period``, a copy of the tick's buffer (per EE: the filtered target, the previous
+    target, the EE placement, rows of 12, and the commanded twist); they become
+    ``pin.SE3`` objects and arrays only when a measure reads them, so the periods
+    nobody measures build none."""
+
+    def __init__(self, period: np.ndarray, has_previous: bool, *, sensed: np.ndarray,
+                 q_before: np.ndarray, qd: np.ndarray, moved: np.ndarray, tick_time_us: float,
+                 step_time_us: float, status: str, message: str,
+                 twist_saturated: bool) -> None:
+        self.period, self.has_previous = period, has_previous
+        self.sensed, self.q_before, self.qd, self.moved = sensed, q_before, qd, moved
+        self.tick_time_us, self.step_time_us = tick_time_us, step_time_us
+        self.status, self.message, self.twist_saturated = status, message, twist_saturated
+        self.constraint_velocity = self.drift_velocity = NO_ROWS
+        self.operator_linear_velocities = NO_VECTORS
+        self.commanded_linear_velocities = self.actual_linear_velocities = NO_VECTORS
+
+    @functools.cached_property
+    def targets(self) -> list[pin.SE3]:
+        return [pose_of_row(row[:12]) for row in self.period]
+
+    @functools.cached_property
+    def previous_targets(self) -> list[pin.SE3] | None:
+        return [pose_of_row(row[12:24]) for row in self.period] if self.has_previous else None
+
+    @functools.cached_property
+    def placements(self) -> list[pin.SE3]:
+        return [pose_of_row(row[24:36]) for row in self.period]
+
+    @functools.cached_property
+    def twists(self) -> list[np.ndarray]:
+        return list(self.period[:, 36:42])
+
+
+def pose_of_row(row: np.ndarray) -> pin.SE3:
+    """The pose in a row of 12: the rotation row-major, then the translation."""
+    return pin.SE3(row[:9].reshape(3, 3), row[9:12])
+
+
 def saturate_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
     """Scale ``[v; w]`` uniformly so that ``|v| <= max_linear`` and ``|w| <= max_angular``;
     ``twist`` itself when it is within both (the common case)."""
@@ -280,6 +334,9 @@ class TeleopLoop:
         pairs' minimum distance every period measures at the true configuration
         (:class:`~teleop.loop.distance_meter.DistanceMeter`, docs/design.md 18.6); None:
         not measured.
+    compiled_tick : run the hot path compiled (one C++ call a period:
+        ``controller.loop_tick``, the CJM's compiled backend) when the controller offers
+        it; False: always the Python path, the readable reference (docs/design.md 5.1).
 
     Targets (:data:`Targets`) are one ``pin.SE3`` per entry of ``robot.ee_frames``, in
     that order; a single-EE robot also takes the pose alone.
@@ -287,7 +344,8 @@ class TeleopLoop:
 
     def __init__(self, robot, controller, q0: np.ndarray | None = None,
                  config: LoopConfig | None = None, plant: Plant | None = None,
-                 collisions: CollisionAvoidance | None = None) -> None:
+                 collisions: CollisionAvoidance | None = None,
+                 compiled_tick: bool = True) -> None:
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
@@ -306,8 +364,11 @@ class TeleopLoop:
             plant.reset(self.q)
         self.t = 0.0
         self._filtered_targets: list[pin.SE3] | None = None
-        #: the filtered targets of the last period (their feed-forward), None at the start
-        self.previous_targets: list[pin.SE3] | None = None
+        self._previous_targets: list[pin.SE3] | None = None
+        #: the hot path compiled around the controller's step, when it offers one and
+        #: ``compiled_tick`` (docs/design.md 5.1); None: the Python path below
+        self.compiled = (None if not compiled_tick else self._loop_tick(controller))
+        self._history_in_tick = False  # the filter's state lives in self.compiled
         self.last_qd = np.zeros(self.model.nv)
         self.refused = ""  # why the controller refused the last input (ValueError), if it did
         self._labels_key: tuple[int, ...] = ()
@@ -316,7 +377,22 @@ class TeleopLoop:
         if self.distance_meter is not None:
             self.distance_meter.set_constraints(self.constraints)
 
+    def _loop_tick(self, controller):
+        """``controller.loop_tick`` for this loop's settings, or None."""
+        loop_tick = getattr(controller, "loop_tick", None)
+        config = self.config
+        return None if loop_tick is None else loop_tick(
+            config.dt, config.kp, config.max_linear_speed, config.max_angular_speed,
+            config.target_time_constant, config.feed_forward)
+
     # -- state -------------------------------------------------------------------------
+
+    @property
+    def previous_targets(self) -> list[pin.SE3] | None:
+        """The filtered targets of the last period (their feed-forward), None at the start."""
+        if self._history_in_tick:
+            return self.compiled.history()[1]
+        return self._previous_targets
 
     @property
     def constraints(self) -> list[Constraint]:
@@ -345,7 +421,8 @@ class TeleopLoop:
         self.q = np.array(self.robot.q_home if q0 is None else q0, dtype=float)
         self.t = 0.0
         self._filtered_targets = None
-        self.previous_targets = None
+        self._previous_targets = None
+        self._history_in_tick = False
         self.last_qd = np.zeros(self.model.nv)
         if self.plant is not None:
             self.plant.reset(self.q)
@@ -381,7 +458,7 @@ class TeleopLoop:
                      targets: Sequence[pin.SE3]) -> list[np.ndarray]:
         """Each EE's body twist ``K_p log6(T_e,i^-1 T*_i) + Ad_(T_e,i^-1 T*_i) V_ff,i``
         before the speed caps, fed forward from :attr:`previous_targets`."""
-        previous = self.previous_targets
+        previous = self._previous_targets
         twists = []
         for i, (ee, target) in enumerate(zip(placements, targets)):
             error = ee.actInv(target)
@@ -414,40 +491,98 @@ class TeleopLoop:
 
     def advance(self, target: Targets) -> PendingStep:
         """The hot path of a period: filter the targets, the EE poses, the command, the
-        controller's step, the integration. No measures (:meth:`measure_command`)."""
+        controller's step, the integration. No measures (:meth:`measure_command`).
+
+        It runs compiled (:attr:`compiled`, one C++ call) when the controller offers it
+        and its current step can take it; else, and on a period whose sensed
+        configuration the C++ side does not take, the Python reference
+        (:meth:`_advance_python`), to which the filter's state is handed over."""
         tick_start = time.perf_counter_ns()
-        model, data = self.model, self.data
-        targets = self.filter_targets(target)
+        poses = self.targets(target)
         sensed = self.q if self.plant is None else self.plant.sense(self.q)
+        compiled = self.compiled
+        if compiled is not None and compiled.ready():
+            if not self._history_in_tick:
+                compiled.set_history(self._filtered_targets, self._previous_targets)
+                self._history_in_tick = True
+            result = compiled.run(poses, sensed, self.plant is None)
+            if result is not None:
+                return self._advance_compiled(result, sensed, tick_start)
+        if self._history_in_tick:
+            self._filtered_targets, self._previous_targets = compiled.history()
+            self._history_in_tick = False
+        return self._advance_python(poses, sensed, tick_start)
+
+    def _advance_python(self, poses: list[pin.SE3], sensed: np.ndarray,
+                        tick_start: int) -> PendingStep:
+        """The period in Python (the reference): Pinocchio's kinematics for the EE poses,
+        the twists, ``controller.solve``, ``pin.integrate``."""
+        model, data = self.model, self.data
+        targets = self.filter_targets(poses)
         pin.forwardKinematics(model, data, sensed)
         placements = [pin.updateFramePlacement(model, data, frame).copy()
                       for frame in self.ee_frame_ids]
         requested = self._pose_twists(placements, targets)
         twists = [self._saturate(twist) for twist in requested]
         # filter_targets makes a new list of new poses every period: no copy needed
-        previous, self.previous_targets = self.previous_targets, targets
-        solve_start = time.perf_counter_ns()
-        try:
-            qd = self.controller.solve(sensed, np.concatenate(twists))
-            status, message = self.controller.info.status.value, self.controller.info.message
-            self.refused = ""
-        except ValueError as error:  # refused input: a controlled stop, say why
-            qd, status, message = self._stop(sensed), "failed", str(error)
-            self.refused = message
-        step_time = (time.perf_counter_ns() - solve_start) * 1e-3
-        if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
-            qd, status, message = self._stop(sensed), "failed", "non-finite command replaced by a stop"
-        moved = qd if self.plant is None else self.plant.actuate(qd, self.q, self.constraints)
-        q_before = self.q
-        self.q = pin.integrate(model, q_before, moved * self.config.dt)
-        self.last_qd = qd
-        self.t += self.config.dt
+        previous, self._previous_targets = self._previous_targets, targets
+        qd, status, message, step_time = self._solve(sensed, np.concatenate(twists))
+        q_before, qd, moved, status, message = self._move(sensed, qd, status, message, None)
         saturated = any(capped is not twist for capped, twist in zip(twists, requested))
         return PendingStep(
             targets=targets, previous_targets=previous, placements=placements, twists=twists,
             sensed=sensed, q_before=q_before, qd=qd, moved=moved,
             tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3, step_time_us=step_time,
             status=status, message=message, twist_saturated=saturated)
+
+    def _advance_compiled(self, result: tuple, sensed: np.ndarray,
+                          tick_start: int) -> PendingStep:
+        """The rest of a period the compiled tick ran: a refused twist goes to the
+        controller (which says why, a controlled stop follows), a plant moves the robot,
+        else the tick's own integration is the next configuration."""
+        compiled = self.compiled
+        outcome, qd, next_q = result
+        if qd is None:  # a twist that is not finite: the controller refuses it, says why
+            qd, status, message, step_time = self._solve(sensed, compiled.twist.copy())
+        else:
+            info = self.controller.info
+            status, message, step_time = info.status.value, info.message, compiled.step_time_us
+            self.refused = ""
+        q_before, qd, moved, status, message = self._move(sensed, qd, status, message, next_q)
+        return CompiledPendingStep(
+            compiled.period.copy(), compiled.period_has_previous, sensed=sensed,
+            q_before=q_before, qd=qd, moved=moved,
+            tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3, step_time_us=step_time,
+            status=status, message=message, twist_saturated=compiled.twist_saturated)
+
+    def _solve(self, sensed: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, str, str, float]:
+        """``controller.solve``: the command, its status and message, its time (us); a
+        refused input (``ValueError``) gives the controlled stop, ``failed`` and why."""
+        solve_start = time.perf_counter_ns()
+        try:
+            qd = self.controller.solve(sensed, twist)
+            status, message = self.controller.info.status.value, self.controller.info.message
+            self.refused = ""
+        except ValueError as error:  # refused input: a controlled stop, say why
+            qd, status, message = self._stop(sensed), "failed", str(error)
+            self.refused = message
+        return qd, status, message, (time.perf_counter_ns() - solve_start) * 1e-3
+
+    def _move(self, sensed: np.ndarray, qd: np.ndarray, status: str, message: str,
+              next_q: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, str, str]:
+        """Never a non-finite command (a stop instead); the plant moves the robot, or the
+        command itself; ``q <- integrate(q, moved dt)`` (``next_q``: already integrated).
+        Returns the configuration before, the command, the velocity moved with, the
+        status and the message."""
+        if next_q is None and not math.isfinite(sum(qd.tolist())):  # never integrate it
+            qd, status, message = self._stop(sensed), "failed", "non-finite command replaced by a stop"
+        moved = qd if self.plant is None else self.plant.actuate(qd, self.q, self.constraints)
+        q_before = self.q
+        self.q = (pin.integrate(self.model, q_before, moved * self.config.dt)
+                  if next_q is None else next_q)
+        self.last_qd = qd
+        self.t += self.config.dt
+        return q_before, qd, moved, status, message
 
     def _stop(self, sensed: np.ndarray) -> np.ndarray:
         """The controller's controlled stop at ``sensed`` (inside its velocity, position and

@@ -1,12 +1,14 @@
 // Python bindings of the compiled CJM step (pybind11): controllers.cjm._step's Pipeline
-// (kinematics, terms and step in one call) and the Step it runs.
-// controllers/cjm/compiled.py is its only user (docs/design.md section 16).
+// (kinematics, terms and step in one call) and the Step it runs, and the closed loop's
+// Tick around a Pipeline. controllers/cjm/compiled.py and compiled_tick.py are their only
+// users (docs/design.md sections 5.1 and 16).
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
 #include "pipeline.hpp"
+#include "tick.hpp"
 
 namespace py = pybind11;
 using cjm::Index;
@@ -78,6 +80,73 @@ py::array_t<double> finish(BoundPipeline& pipeline, bool use_posture, bool analy
   pipeline.finish(use_posture, analytical_allowed, qd_map);
   return qd;
 }
+
+
+//! What Tick.run and Tick.finish give back: the step ran and its command is finite
+//! (TICK_STEPPED), the twist was not finite so it did not run (TICK_REFUSED: Python asks
+//! the controller, which says why), or its command is not finite (TICK_NOT_FINITE).
+enum TickOutcome { kTickStepped = 0, kTickRefused = 1, kTickNotFinite = 2 };
+
+//! A Tick bound to the BoundPipeline it runs (kept alive while attached).
+struct BoundTick : cjm::Tick {
+  using cjm::Tick::Tick;
+
+  py::object pipeline_object;
+  py::str homogeneous{"homogeneous"};
+
+  BoundPipeline& pipeline() { return pipeline_object.cast<BoundPipeline&>(); }
+
+  void attach_object(py::object pipeline) {
+    attach(pipeline.cast<BoundPipeline&>());
+    pipeline_object = std::move(pipeline);
+  }
+
+  //! The targets (a sequence of pin.SE3, one per EE, checked by Python) and q copied in;
+  //! false unless q is a finite float64 vector of the pipeline's nq.
+  bool load(py::handle targets, py::handle q) {
+    if (!load_vector(q, pipeline().q())) return false;
+    const auto poses = py::reinterpret_borrow<py::sequence>(targets);
+    cjm::RowMatrix& rows = operator_targets();
+    if (static_cast<Index>(poses.size()) != rows.rows())
+      throw std::invalid_argument("one target pose per end effector");
+    for (Index i = 0; i < rows.rows(); ++i) {
+      const auto matrix = py::array_t<double, py::array::forcecast>(
+          poses[static_cast<size_t>(i)].attr(homogeneous));
+      const auto entries = matrix.unchecked<2>();
+      for (py::ssize_t r = 0; r < 3; ++r) {
+        for (py::ssize_t c = 0; c < 3; ++c) rows(i, 3 * r + c) = entries(r, c);
+        rows(i, 9 + r) = entries(r, 3);
+      }
+    }
+    return true;
+  }
+
+  //! load() then begin(): None when load() is false, else whether the twist is finite.
+  py::object start(py::handle targets, py::handle q) {
+    if (!load(targets, q)) return py::none();
+    pipeline().read_sources();
+    py::gil_scoped_release release;
+    begin();
+    return py::bool_(pipeline().twist().allFinite());
+  }
+
+  //! finish() and, with ``integrate``, integrate(): (outcome, qd, next q or None).
+  py::tuple end(bool use_posture, bool analytical_allowed, bool integrate_q) {
+    bool finite;
+    {
+      py::gil_scoped_release release;
+      finite = finish(use_posture, analytical_allowed);
+      if (finite && integrate_q) integrate();
+    }
+    py::array_t<double> qd_array(qd().size());
+    std::copy(qd().data(), qd().data() + qd().size(), qd_array.mutable_data());
+    if (!finite) return py::make_tuple(static_cast<int>(kTickNotFinite), qd_array, py::none());
+    if (!integrate_q) return py::make_tuple(static_cast<int>(kTickStepped), qd_array, py::none());
+    py::array_t<double> next(next_q().size());
+    std::copy(next_q().data(), next_q().data() + next_q().size(), next.mutable_data());
+    return py::make_tuple(static_cast<int>(kTickStepped), qd_array, next);
+  }
+};
 
 }  // namespace
 
@@ -264,6 +333,64 @@ PYBIND11_MODULE(_step, module) {
       .def_property_readonly("jacobians", [](py::object self) {
         return read_only(self.cast<BoundPipeline&>().jacobians(), self);
       });
+
+  py::class_<BoundTick>(module, "Tick")
+      .def(py::init([](py::object pipeline, Index ee_count, double dt, double kp,
+                       double max_linear, double max_angular, double smoothing,
+                       bool feed_forward) {
+             auto tick = std::make_unique<BoundTick>(
+                 ee_count, cjm::TickSettings{dt, kp, max_linear, max_angular, smoothing, feed_forward});
+             tick->attach_object(std::move(pipeline));
+             return tick;
+           }),
+           py::arg("pipeline"), py::arg("ee_count"), py::arg("dt"), py::arg("kp"),
+           py::arg("max_linear"), py::arg("max_angular"), py::arg("smoothing"),
+           py::arg("feed_forward"),
+           "The loop's hot path on ``pipeline`` (tick.hpp): ``smoothing`` is "
+           "``alpha = 1 - exp(-dt / tau)``, 1 for none.")
+      .def("attach", &BoundTick::attach_object, py::arg("pipeline"),
+           "Run the next periods on ``pipeline`` (a rebuilt step's); the filter's state stays.")
+      .def("run", [](BoundTick& tick, py::handle targets, py::handle q, bool use_posture,
+                     bool integrate_q) -> py::object {
+             const py::object started = tick.start(targets, q);
+             if (started.is_none()) return started;
+             if (!started.cast<bool>())
+               return py::make_tuple(static_cast<int>(kTickRefused), py::none(), py::none());
+             return tick.end(use_posture, true, integrate_q);
+           }, py::arg("targets"), py::arg("q"), py::arg("use_posture"), py::arg("integrate"),
+           "One period in one call (every constraint with an affine form): None when q is not "
+           "a finite float64 vector of nq, else (outcome, qd, next q or None).")
+      .def("start", &BoundTick::start, py::arg("targets"), py::arg("q"),
+           "The period up to the step (filter, kinematics, twists, task rows, affine terms): "
+           "None when q is not a finite float64 vector of nq, else whether the twist is finite.")
+      .def("end", &BoundTick::end, py::arg("use_posture"), py::arg("analytical_allowed"),
+           py::arg("integrate"),
+           "The step after start() (and the terms Python writes): (outcome, qd, next q or None).")
+      .def_property_readonly("period", [](py::object self) {
+        return read_only(self.cast<BoundTick&>().period(), self);
+      }, "Per EE: filtered target, previous target, EE placement (12 each), twist (6).")
+      .def_property_readonly("period_has_previous", &BoundTick::period_has_previous)
+      .def_property_readonly("twist_saturated", &BoundTick::twist_saturated)
+      .def_property_readonly("step_time_us", &BoundTick::step_time_us)
+      .def_property_readonly("twist", [](py::object self) {
+        auto& vector = self.cast<BoundTick&>().pipeline().twist();
+        return view(vector.data(), {vector.size()}, self);
+      }, "The stacked twist of the period (after the caps).")
+      .def_property_readonly("filtered", [](py::object self) {
+        auto& matrix = self.cast<BoundTick&>().filtered();
+        return view(matrix.data(), {matrix.rows(), matrix.cols()}, self);
+      }, "The filtered targets (writable rows of 12), valid when has_filtered.")
+      .def_property_readonly("previous", [](py::object self) {
+        auto& matrix = self.cast<BoundTick&>().previous();
+        return view(matrix.data(), {matrix.rows(), matrix.cols()}, self);
+      }, "The previous period's filtered targets (writable rows of 12), valid when has_previous.")
+      .def_property_readonly("has_filtered", &BoundTick::has_filtered)
+      .def_property_readonly("has_previous", &BoundTick::has_previous)
+      .def("set_history", &BoundTick::set_history, py::arg("has_filtered"), py::arg("has_previous"),
+           "Which of filtered and previous hold poses (after writing them).");
+  module.attr("TICK_STEPPED") = static_cast<int>(kTickStepped);
+  module.attr("TICK_REFUSED") = static_cast<int>(kTickRefused);
+  module.attr("TICK_NOT_FINITE") = static_cast<int>(kTickNotFinite);
 
   py::dict fields;
   fields["status"] = static_cast<int>(cjm::kStatus);

@@ -49,7 +49,13 @@ void Pipeline::set_affine(Index index, AffineTerms terms) {
 }
 
 void Pipeline::prepare() {
-  kinematics_.compute(q_);
+  compute_kinematics();
+  prepare_terms();
+}
+
+void Pipeline::compute_kinematics() { kinematics_.compute(q_); }
+
+void Pipeline::prepare_terms() {
   const RowMatrix& jacobians = kinematics_.jacobians();
   for (Index r = 0; r < task_twist_.size(); ++r) {
     task_twist_(r) = task_scale_(r) * twist_(task_entries_[r]);

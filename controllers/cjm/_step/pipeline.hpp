@@ -33,8 +33,13 @@ class Pipeline {
   //! Constraint ``index``'s affine map; without one, Python writes its terms.
   void set_affine(Index index, AffineTerms terms);
 
-  //! The kinematics at q(), the task rows and the affine terms.
+  //! The kinematics at q(), the task rows and the affine terms: compute_kinematics(),
+  //! then prepare_terms().
   void prepare();
+  //! The kinematics at q(): the frames' placements and Jacobians.
+  void compute_kinematics();
+  //! The task rows and the affine terms, after compute_kinematics() (and twist() set).
+  void prepare_terms();
   //! The step into ``qd``, after prepare() (and Python's terms).
   void finish(bool use_posture, bool analytical_allowed, VectorRef qd);
 
@@ -51,6 +56,7 @@ class Pipeline {
   const RowMatrix& placements() const { return kinematics_.placements(); }
   const RowMatrix& jacobians() const { return kinematics_.jacobians(); }
   Step& step() { return step_; }
+  const Kinematics& kinematics() const { return kinematics_; }
 
  private:
   Kinematics kinematics_;
