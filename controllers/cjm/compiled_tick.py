@@ -22,9 +22,12 @@ from ._step import TICK_REFUSED, Tick
 
 #: What :meth:`CompiledTick.run` gives back: the outcome (``_step.TICK_STEPPED``,
 #: ``TICK_REFUSED``: the twist was not finite and no step ran, ``TICK_NOT_FINITE``: the
-#: command is not finite), the command (None when refused) and the next configuration
-#: (None unless the tick integrated it).
-TickResult = tuple[int, "np.ndarray | None", "np.ndarray | None"]
+#: command is not finite), the command (None when refused), the next configuration
+#: (None unless the tick integrated it), the period (per EE: the filtered target, the
+#: previous target, the EE placement, rows of 12, and the commanded twist, 6), the
+#: step's time (us, timed in C++), whether the speed caps scaled a twist, and whether
+#: the period had a previous target.
+TickResult = tuple[int, "np.ndarray | None", "np.ndarray | None", np.ndarray, float, bool, bool]
 
 
 def pose_rows(poses: Sequence[pin.SE3] | None, count: int) -> np.ndarray:
@@ -58,6 +61,8 @@ class CompiledTick:
                               max_angular=max_angular_speed, smoothing=smoothing,
                               feed_forward=bool(feed_forward))
         self._tick: Tick | None = None
+        #: the last period's stacked twist after the caps (a view, set by :meth:`ready`)
+        self.twist: np.ndarray | None = None
         self._step = None  # the CompiledStep whose pipeline the tick runs
         self._pipeline = None
 
@@ -75,6 +80,7 @@ class CompiledTick:
             else:
                 self._tick.attach(pipeline)
             self._step, self._pipeline = step, pipeline
+            self.twist = self._tick.twist
         return True
 
     def run(self, poses: Sequence[pin.SE3], q: np.ndarray, integrate: bool) -> TickResult | None:
@@ -92,38 +98,14 @@ class CompiledTick:
             if started is None:
                 return None
             if not started:
-                return TICK_REFUSED, None, None
+                return tick.refused()
             paper_form = step.write_terms()
             result = tick.end(step.use_posture, paper_form, integrate)
         if result is not None and result[0] != TICK_REFUSED:
             self.controller.take_report(step.last_report(paper_form))
         return result
 
-    # -- what the loop's measures read, and the filter's state -----------------------
-
-    @property
-    def period(self) -> np.ndarray:
-        """Per EE, of the last period: filtered target, previous target, EE placement
-        (rows of 12) and commanded twist (6), a read-only view overwritten every period."""
-        return self._tick.period
-
-    @property
-    def period_has_previous(self) -> bool:
-        return self._tick.period_has_previous
-
-    @property
-    def twist_saturated(self) -> bool:
-        return self._tick.twist_saturated
-
-    @property
-    def step_time_us(self) -> float:
-        """The last period's step (us), timed in C++."""
-        return self._tick.step_time_us
-
-    @property
-    def twist(self) -> np.ndarray:
-        """The last period's stacked twist (a view)."""
-        return self._tick.twist
+    # -- the filter's state, handed over to and from the loop's Python path -----------
 
     def history(self) -> tuple[list[pin.SE3] | None, list[pin.SE3] | None]:
         """The filtered targets and the previous period's, as poses (None: none yet)."""

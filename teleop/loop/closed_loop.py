@@ -182,7 +182,7 @@ class StepRecord:
     ee_orientation_errors: np.ndarray  # (EEs,) |log3(R_e^T R*)| of each EE
     joint_limit_violation: float  # max over joints of the distance past a limit (rad)
     failed: bool
-    step_time_us: float  # the controller's solve
+    step_time_us: float  # the controller's solve (the compiled tick: its C++ step alone)
     tick_time_us: float  # the period's hot path, the solve included (the measures are not)
     constraint_velocity_floor: float  # float64 round-off of C v_c (m/s, _constraint_velocity)
     twist_saturated: bool  # the speed caps scaled some EE's commanded twist down
@@ -265,12 +265,16 @@ NO_VECTORS.flags.writeable = False
 
 class CompiledPendingStep(PendingStep):
     """A period the compiled tick ran (docs/design.md 5.1). Its poses and twists are in
-    ``period``, a copy of the tick's buffer (per EE: the filtered target, the previous
-    target, the EE placement, rows of 12, and the commanded twist); they become
-    ``pin.SE3`` objects and arrays only when a measure reads them, so the periods
-    nobody measures build none."""
+    ``period``, the tick's copy (per EE: the filtered target, the previous target, the
+    EE placement, rows of 12, and the commanded twist); they become ``pin.SE3`` objects
+    and arrays only when a measure reads them, so the periods nobody measures build
+    none. The measures' fields start empty, as :class:`PendingStep`'s."""
 
-    def __init__(self, period: np.ndarray, has_previous: bool, *, sensed: np.ndarray,
+    constraint_velocity = drift_velocity = NO_ROWS
+    operator_linear_velocities = commanded_linear_velocities = NO_VECTORS
+    actual_linear_velocities = NO_VECTORS
+
+    def __init__(self, period: np.ndarray, has_previous: bool, sensed: np.ndarray,
                  q_before: np.ndarray, qd: np.ndarray, moved: np.ndarray, tick_time_us: float,
                  step_time_us: float, status: str, message: str,
                  twist_saturated: bool) -> None:
@@ -278,9 +282,6 @@ class CompiledPendingStep(PendingStep):
         self.sensed, self.q_before, self.qd, self.moved = sensed, q_before, qd, moved
         self.tick_time_us, self.step_time_us = tick_time_us, step_time_us
         self.status, self.message, self.twist_saturated = status, message, twist_saturated
-        self.constraint_velocity = self.drift_velocity = NO_ROWS
-        self.operator_linear_velocities = NO_VECTORS
-        self.commanded_linear_velocities = self.actual_linear_velocities = NO_VECTORS
 
     @functools.cached_property
     def targets(self) -> list[pin.SE3]:
@@ -537,23 +538,21 @@ class TeleopLoop:
 
     def _advance_compiled(self, result: tuple, sensed: np.ndarray,
                           tick_start: int) -> PendingStep:
-        """The rest of a period the compiled tick ran: a refused twist goes to the
-        controller (which says why, a controlled stop follows), a plant moves the robot,
-        else the tick's own integration is the next configuration."""
-        compiled = self.compiled
-        outcome, qd, next_q = result
+        """The rest of a period the compiled tick ran (``result``: its ``TickResult``): a
+        refused twist goes to the controller (which says why, a controlled stop
+        follows), a plant moves the robot, else the tick's own integration is the next
+        configuration."""
+        _, qd, next_q, period, step_time, saturated, has_previous = result
         if qd is None:  # a twist that is not finite: the controller refuses it, says why
-            qd, status, message, step_time = self._solve(sensed, compiled.twist.copy())
+            qd, status, message, step_time = self._solve(sensed, self.compiled.twist.copy())
         else:
             info = self.controller.info
-            status, message, step_time = info.status.value, info.message, compiled.step_time_us
+            status, message = info.status.value, info.message
             self.refused = ""
         q_before, qd, moved, status, message = self._move(sensed, qd, status, message, next_q)
-        return CompiledPendingStep(
-            compiled.period.copy(), compiled.period_has_previous, sensed=sensed,
-            q_before=q_before, qd=qd, moved=moved,
-            tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3, step_time_us=step_time,
-            status=status, message=message, twist_saturated=compiled.twist_saturated)
+        return CompiledPendingStep(period, has_previous, sensed, q_before, qd, moved,
+                                   (time.perf_counter_ns() - tick_start) * 1e-3, step_time,
+                                   status, message, saturated)
 
     def _solve(self, sensed: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, str, str, float]:
         """``controller.solve``: the command, its status and message, its time (us); a

@@ -82,27 +82,39 @@ py::array_t<double> finish(BoundPipeline& pipeline, bool use_posture, bool analy
 }
 
 
-//! What Tick.run and Tick.finish give back: the step ran and its command is finite
-//! (TICK_STEPPED), the twist was not finite so it did not run (TICK_REFUSED: Python asks
-//! the controller, which says why), or its command is not finite (TICK_NOT_FINITE).
+//! A period's outcome: the step ran and its command is finite (TICK_STEPPED), the twist
+//! was not finite so it did not run (TICK_REFUSED: Python asks the controller, which says
+//! why), or its command is not finite (TICK_NOT_FINITE).
 enum TickOutcome { kTickStepped = 0, kTickRefused = 1, kTickNotFinite = 2 };
+
+//! A new float64 array holding ``matrix``.
+template <typename Matrix>
+py::array_t<double> copied(const Matrix& matrix, std::vector<py::ssize_t> shape) {
+  py::array_t<double> array(shape);
+  std::copy(matrix.data(), matrix.data() + matrix.size(), array.mutable_data());
+  return array;
+}
 
 //! A Tick bound to the BoundPipeline it runs (kept alive while attached).
 struct BoundTick : cjm::Tick {
   using cjm::Tick::Tick;
 
-  py::object pipeline_object;
+  py::object pipeline_object;        // keeps the attached pipeline alive
+  BoundPipeline* bound = nullptr;    // that pipeline (read without the GIL)
   py::str homogeneous{"homogeneous"};
 
-  BoundPipeline& pipeline() { return pipeline_object.cast<BoundPipeline&>(); }
+  BoundPipeline& pipeline() { return *bound; }
 
   void attach_object(py::object pipeline) {
-    attach(pipeline.cast<BoundPipeline&>());
+    BoundPipeline& attached = pipeline.cast<BoundPipeline&>();
+    attach(attached);
+    bound = &attached;
     pipeline_object = std::move(pipeline);
   }
 
-  //! The targets (a sequence of pin.SE3, one per EE, checked by Python) and q copied in;
-  //! false unless q is a finite float64 vector of the pipeline's nq.
+  //! The targets (a sequence of pin.SE3, one per EE, checked by Python) and q copied in,
+  //! the affine constraints' anchors read; false unless q is a finite float64 vector of
+  //! the pipeline's nq.
   bool load(py::handle targets, py::handle q) {
     if (!load_vector(q, pipeline().q())) return false;
     const auto poses = py::reinterpret_borrow<py::sequence>(targets);
@@ -118,33 +130,28 @@ struct BoundTick : cjm::Tick {
         rows(i, 9 + r) = entries(r, 3);
       }
     }
+    pipeline().read_sources();
     return true;
   }
 
-  //! load() then begin(): None when load() is false, else whether the twist is finite.
-  py::object start(py::handle targets, py::handle q) {
-    if (!load(targets, q)) return py::none();
-    pipeline().read_sources();
-    py::gil_scoped_release release;
-    begin();
-    return py::bool_(pipeline().twist().allFinite());
+  //! finish() and, when the command is finite and ``integrate_q``, integrate().
+  TickOutcome step(bool use_posture, bool analytical_allowed, bool integrate_q) {
+    if (!finish(use_posture, analytical_allowed)) return kTickNotFinite;
+    if (integrate_q) integrate();
+    return kTickStepped;
   }
 
-  //! finish() and, with ``integrate``, integrate(): (outcome, qd, next q or None).
-  py::tuple end(bool use_posture, bool analytical_allowed, bool integrate_q) {
-    bool finite;
-    {
-      py::gil_scoped_release release;
-      finite = finish(use_posture, analytical_allowed);
-      if (finite && integrate_q) integrate();
-    }
-    py::array_t<double> qd_array(qd().size());
-    std::copy(qd().data(), qd().data() + qd().size(), qd_array.mutable_data());
-    if (!finite) return py::make_tuple(static_cast<int>(kTickNotFinite), qd_array, py::none());
-    if (!integrate_q) return py::make_tuple(static_cast<int>(kTickStepped), qd_array, py::none());
-    py::array_t<double> next(next_q().size());
-    std::copy(next_q().data(), next_q().data() + next_q().size(), next.mutable_data());
-    return py::make_tuple(static_cast<int>(kTickStepped), qd_array, next);
+  //! (outcome, qd or None, next q or None, the period's copy, the step's time in us,
+  //! whether the caps scaled a twist, whether the period had a previous target).
+  py::tuple result(TickOutcome outcome, bool integrate_q) {
+    const Index ee_count = period().rows();
+    return py::make_tuple(
+        static_cast<int>(outcome),
+        outcome == kTickRefused ? py::object(py::none()) : py::object(copied(qd(), {qd().size()})),
+        outcome == kTickStepped && integrate_q ? py::object(copied(next_q(), {next_q().size()}))
+                                               : py::object(py::none()),
+        copied(period(), {ee_count, period().cols()}),
+        outcome == kTickRefused ? 0.0 : step_time_us(), twist_saturated(), period_has_previous());
   }
 };
 
@@ -352,26 +359,40 @@ PYBIND11_MODULE(_step, module) {
            "Run the next periods on ``pipeline`` (a rebuilt step's); the filter's state stays.")
       .def("run", [](BoundTick& tick, py::handle targets, py::handle q, bool use_posture,
                      bool integrate_q) -> py::object {
-             const py::object started = tick.start(targets, q);
-             if (started.is_none()) return started;
-             if (!started.cast<bool>())
-               return py::make_tuple(static_cast<int>(kTickRefused), py::none(), py::none());
-             return tick.end(use_posture, true, integrate_q);
+             if (!tick.load(targets, q)) return py::none();
+             TickOutcome outcome;
+             {
+               py::gil_scoped_release release;
+               tick.begin();
+               outcome = tick.pipeline().twist().allFinite()
+                             ? tick.step(use_posture, true, integrate_q)
+                             : kTickRefused;
+             }
+             return tick.result(outcome, integrate_q);
            }, py::arg("targets"), py::arg("q"), py::arg("use_posture"), py::arg("integrate"),
            "One period in one call (every constraint with an affine form): None when q is not "
-           "a finite float64 vector of nq, else (outcome, qd, next q or None).")
-      .def("start", &BoundTick::start, py::arg("targets"), py::arg("q"),
+           "a finite float64 vector of nq (nothing ran), else (outcome, qd, next q, period, "
+           "step time in us, twist saturated, period had a previous target).")
+      .def("start", [](BoundTick& tick, py::handle targets, py::handle q) -> py::object {
+             if (!tick.load(targets, q)) return py::none();
+             py::gil_scoped_release release;
+             tick.begin();
+             return py::bool_(tick.pipeline().twist().allFinite());
+           }, py::arg("targets"), py::arg("q"),
            "The period up to the step (filter, kinematics, twists, task rows, affine terms): "
            "None when q is not a finite float64 vector of nq, else whether the twist is finite.")
-      .def("end", &BoundTick::end, py::arg("use_posture"), py::arg("analytical_allowed"),
-           py::arg("integrate"),
-           "The step after start() (and the terms Python writes): (outcome, qd, next q or None).")
-      .def_property_readonly("period", [](py::object self) {
-        return read_only(self.cast<BoundTick&>().period(), self);
-      }, "Per EE: filtered target, previous target, EE placement (12 each), twist (6).")
-      .def_property_readonly("period_has_previous", &BoundTick::period_has_previous)
-      .def_property_readonly("twist_saturated", &BoundTick::twist_saturated)
-      .def_property_readonly("step_time_us", &BoundTick::step_time_us)
+      .def("end", [](BoundTick& tick, bool use_posture, bool analytical_allowed,
+                     bool integrate_q) {
+             TickOutcome outcome;
+             {
+               py::gil_scoped_release release;
+               outcome = tick.step(use_posture, analytical_allowed, integrate_q);
+             }
+             return tick.result(outcome, integrate_q);
+           }, py::arg("use_posture"), py::arg("analytical_allowed"), py::arg("integrate"),
+           "The step after start() (and the terms Python writes): run()'s tuple.")
+      .def("refused", [](BoundTick& tick) { return tick.result(kTickRefused, false); },
+           "run()'s tuple for a period start() found a twist that is not finite in.")
       .def_property_readonly("twist", [](py::object self) {
         auto& vector = self.cast<BoundTick&>().pipeline().twist();
         return view(vector.data(), {vector.size()}, self);
