@@ -71,6 +71,8 @@ class CompiledTick:
         without collision rows; a rebuilt step's pipeline is attached (the filter's state
         stays)."""
         step = self.controller.step
+        if step is self._step:  # the step of the last period (a grown one has collisions)
+            return True
         pipeline = getattr(step, "pipeline", None)
         if pipeline is None or not step.tick_ready:
             return False

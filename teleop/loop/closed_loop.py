@@ -435,6 +435,8 @@ class TeleopLoop:
     def targets(self, target: Targets) -> list[pin.SE3]:
         """``target`` as one pose per EE; ``ValueError`` unless it has one per
         ``robot.ee_frames`` entry (a lone ``pin.SE3`` counts as one)."""
+        if len(self.ee_frame_ids) == 1 and isinstance(target, pin.SE3):  # the common case
+            return [target]
         poses = target_poses(target)
         if len(poses) != len(self.ee_frame_ids):
             raise ValueError(f"expected {len(self.ee_frame_ids)} target poses, one per EE frame "
@@ -528,7 +530,7 @@ class TeleopLoop:
         # filter_targets makes a new list of new poses every period: no copy needed
         previous, self._previous_targets = self._previous_targets, targets
         qd, status, message, step_time = self._solve(sensed, np.concatenate(twists))
-        q_before, qd, moved, status, message = self._move(sensed, qd, status, message, None)
+        q_before, qd, moved, status, message = self._move(sensed, qd, status, message)
         saturated = any(capped is not twist for capped, twist in zip(twists, requested))
         return PendingStep(
             targets=targets, previous_targets=previous, placements=placements, twists=twists,
@@ -549,7 +551,11 @@ class TeleopLoop:
             info = self.controller.info
             status, message = info.status.value, info.message
             self.refused = ""
-        q_before, qd, moved, status, message = self._move(sensed, qd, status, message, next_q)
+        if next_q is None:  # a plant, or a command to check
+            q_before, qd, moved, status, message = self._move(sensed, qd, status, message)
+        else:  # the tick integrated its finite command
+            q_before, moved, self.q, self.last_qd = self.q, qd, next_q, qd
+            self.t += self.config.dt
         return CompiledPendingStep(period, has_previous, sensed, q_before, qd, moved,
                                    (time.perf_counter_ns() - tick_start) * 1e-3, step_time,
                                    status, message, saturated)
@@ -567,18 +573,16 @@ class TeleopLoop:
             self.refused = message
         return qd, status, message, (time.perf_counter_ns() - solve_start) * 1e-3
 
-    def _move(self, sensed: np.ndarray, qd: np.ndarray, status: str, message: str,
-              next_q: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, str, str]:
+    def _move(self, sensed: np.ndarray, qd: np.ndarray, status: str,
+              message: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, str, str]:
         """Never a non-finite command (a stop instead); the plant moves the robot, or the
-        command itself; ``q <- integrate(q, moved dt)`` (``next_q``: already integrated).
-        Returns the configuration before, the command, the velocity moved with, the
-        status and the message."""
-        if next_q is None and not math.isfinite(sum(qd.tolist())):  # never integrate it
+        command itself; ``q <- integrate(q, moved dt)``. Returns the configuration
+        before, the command, the velocity moved with, the status and the message."""
+        if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
             qd, status, message = self._stop(sensed), "failed", "non-finite command replaced by a stop"
         moved = qd if self.plant is None else self.plant.actuate(qd, self.q, self.constraints)
         q_before = self.q
-        self.q = (pin.integrate(self.model, q_before, moved * self.config.dt)
-                  if next_q is None else next_q)
+        self.q = pin.integrate(self.model, q_before, moved * self.config.dt)
         self.last_qd = qd
         self.t += self.config.dt
         return q_before, qd, moved, status, message
