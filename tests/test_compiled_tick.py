@@ -81,6 +81,16 @@ def test_the_loop_ticks_compiled_where_offered() -> None:
     qp = make_controller("qp:daqp", plan.robot, plan.make_constraints())
     assert TeleopLoop(plan.robot, qp, q0=plan.q0).compiled is None
 
+    class Wrapper:  # hands its attributes on, loop_tick too: its own solve must be called
+        def __init__(self, controller) -> None:
+            self.controller = controller
+
+        def __getattr__(self, name: str):
+            return getattr(self.controller, name)
+
+    cjm = make_controller("cjm", plan.robot, plan.make_constraints())
+    assert TeleopLoop(plan.robot, Wrapper(cjm), q0=plan.q0).compiled is None
+
 
 @pytest.mark.parametrize("name", sorted(SCENARIOS))
 def test_per_tick_equal_over_a_scenario(name: str) -> None:

@@ -223,12 +223,15 @@ class TeleopLoop:
             self.distance_meter.set_constraints(self.constraints)
 
     def _loop_tick(self, controller):
-        """``controller.loop_tick`` for this loop's settings, or None."""
+        """``controller.loop_tick`` for this loop's settings, or None: also when the tick
+        is another object's (a wrapper handing its attributes on, whose own ``solve`` the
+        loop must call)."""
         loop_tick = getattr(controller, "loop_tick", None)
         config = self.config
-        return None if loop_tick is None else loop_tick(
+        tick = None if loop_tick is None else loop_tick(
             config.dt, config.kp, config.max_linear_speed, config.max_angular_speed,
             config.target_time_constant, config.feed_forward)
+        return tick if tick is not None and tick.controller is controller else None
 
     # -- state -------------------------------------------------------------------------
 
