@@ -339,6 +339,13 @@ class Controller(ABC):
         self._previous_command()[:] = command
         return command
 
+    def loop_tick(self, dt: float, kp: float, max_linear_speed: float, max_angular_speed: float,
+                  target_time_constant: float, feed_forward: bool) -> object | None:
+        """The closed loop's hot path compiled around this controller's step, when it has
+        one (the CJM's compiled backend: docs/design.md 5.1); None: the loop runs its
+        Python reference."""
+        return None
+
     def posture_difference(self, q: np.ndarray, posture: np.ndarray) -> np.ndarray:
         """``posture (-) q`` (nv,, ``pin.difference``) with a mobile base's entries zero:
         the posture shapes the joints; the base stands where it is unless the task or a

@@ -239,8 +239,13 @@ class CompiledStep:
         qd, paper_form = self._run(q, twist)
         if pairs is None:
             pairs = collisions.rows()
+        return qd, self._report_with_pairs(self._report.tolist(), paper_form, pairs)
+
+    def _report_with_pairs(self, report: list[float], paper_form: bool,
+                           pairs: CollisionRows) -> StepReport:
+        """:meth:`_step_report` with the step's collision rows and the pairs it held."""
         count = self._step.active_pair_count
-        return qd, self._step_report(self._report.tolist(), paper_form)._replace(
+        return self._step_report(report, paper_form)._replace(
             collision=pairs, active_pairs=tuple(self._active_pairs[:count].tolist()))
 
     def _write_python_pairs(self, q: np.ndarray) -> CollisionRows:
@@ -320,3 +325,42 @@ class CompiledStep:
                 return None
         return self.pipeline.time_steps(np.asarray(configurations, dtype=float),
                                         np.asarray(twists, dtype=float), self._use_posture)
+
+    # -- what the loop's compiled tick needs (compiled_tick.py, docs/design.md 5.1) ------
+
+    @property
+    def tick_ready(self) -> bool:
+        """Whether the loop's compiled tick can run this step around its pipeline: with
+        collision rows, only while the pipeline measures them (described since the pairs
+        last changed, no shape left to Python)."""
+        rows = self.collision_rows
+        return rows is None or (not rows.stale() and rows.fallback is None)
+
+    @property
+    def one_call(self) -> bool:
+        """Whether the pipeline computes every term itself (else :meth:`write_terms`)."""
+        return self._one_call
+
+    @property
+    def use_posture(self) -> bool:
+        return self._use_posture
+
+    @property
+    def paper_form(self) -> bool:
+        """Whether the paper's form was defined at the pipeline's last step (always, when
+        the step does not use it)."""
+        return not self._paper or self.pipeline.paper_form
+
+    def write_terms(self) -> bool:
+        """The terms Python writes between the pipeline's kinematics and its step; whether
+        the paper's form is defined (:meth:`last_report` takes it)."""
+        return self._write_in_python() and self.pipeline.paper_form
+
+    def last_report(self, paper_form: bool) -> StepReport:
+        """The report of the step the pipeline has just run, as :meth:`solve` gives it."""
+        report = self._report.tolist()
+        if self._collisions is not None:
+            return self._report_with_pairs(report, paper_form, self.collision_rows.rows())
+        if paper_form and not (report[6] or report[7] or report[8]):  # no list, no event
+            return StepReport(STATUSES[int(report[0])], METHODS[int(report[1])], *report[2:6])
+        return self._step_report(report, paper_form)

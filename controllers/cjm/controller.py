@@ -298,11 +298,31 @@ class CJMController(Controller):
         """:meth:`Controller.solve`, by the backend's step (docs/design.md section 16):
         its report kept in :attr:`report` and worded into :attr:`info`."""
         qd, report = self.step.solve(q, twist)
+        self.take_report(report)
+        return qd
+
+    def take_report(self, report: StepReport) -> None:
+        """A step's report kept in :attr:`report` and worded into :attr:`info`
+        (``SolverError`` for a failed step when ``strict``)."""
         self.report = report
         info = self.info = solve_info(report, self.joint_names)
         if self.strict and info.status is StepStatus.FAILED:
             raise SolverError(info.message)
-        return qd
+
+    def loop_tick(self, dt: float, kp: float, max_linear_speed: float, max_angular_speed: float,
+                  target_time_constant: float, feed_forward: bool):
+        """The closed loop's hot path in C++ around the compiled step
+        (:class:`~controllers.cjm.compiled_tick.CompiledTick`, docs/design.md 5.1), or
+        None on the Python backend."""
+        if self.backend != "compiled":
+            return None
+        try:
+            from .compiled_tick import CompiledTick
+        except ImportError:  # an extension built before the tick
+            return None
+
+        return CompiledTick(self, dt, kp, max_linear_speed, max_angular_speed,
+                            target_time_constant, feed_forward)
 
     # -- chain structure ---------------------------------------------------------------
 

@@ -1,10 +1,8 @@
 """The closed teleoperation loop: operator target -> EE twist -> controller -> integrate."""
 
 from .closed_loop import (
-    RECORD_FIELDS,
     LoopConfig,
     Plant,
-    StepRecord,
     Targets,
     TeleopLoop,
     constraint_names,
@@ -13,6 +11,7 @@ from .closed_loop import (
     target_poses,
 )
 from .distance_meter import SAFETY_TOLERANCE, DistanceMeasure, DistanceMeter
+from .records import RECORD_FIELDS, CompiledPendingStep, PendingStep, StepRecord
 
-__all__ = ["RECORD_FIELDS", "SAFETY_TOLERANCE", "DistanceMeasure", "DistanceMeter", "LoopConfig", "Plant", "StepRecord", "Targets", "TeleopLoop",
+__all__ = ["RECORD_FIELDS", "SAFETY_TOLERANCE", "CompiledPendingStep", "DistanceMeasure", "DistanceMeter", "LoopConfig", "PendingStep", "Plant", "StepRecord", "Targets", "TeleopLoop",
            "constraint_names", "row_labels", "saturate_twist", "target_poses"]

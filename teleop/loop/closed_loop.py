@@ -11,6 +11,11 @@ One tick (docs/design.md section 5), for every end effector ``i`` of ``robot.ee_
 and every tick records the measures of docs/design.md section 7, computed here from Pinocchio
 and the constraints themselves, not taken from the controller's own report.
 
+A controller that can run that hot path in C++ offers it (``controller.loop_tick``, the
+CJM's compiled backend); the loop then runs a period in one call and keeps the Python
+path below as the reference, taken when ``compiled_tick=False`` or when the controller's
+step cannot tick compiled (docs/design.md section 5.1).
+
 A :class:`Plant` (docs/design.md section 15.1) may stand between the loop and the robot's
 true joints: the loop then computes the command from the configuration the plant senses,
 and the robot moves with the joint velocity the plant applies; the measures stay on the
@@ -21,7 +26,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Protocol, Sequence, Union
 
 import numpy as np
@@ -34,14 +39,7 @@ from constraints.validation import as_number, as_vector
 from teleop.limits import MAX_RATE_HZ, MAX_TIME_CONSTANT_S
 
 from .distance_meter import DistanceMeter
-
-#: Columns of the per-step record, in order (see :class:`StepRecord`).
-RECORD_FIELDS = (
-    "t", "constraint_error", "constraint_velocity_residual", "barrier_penetration",
-    "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed",
-    "step_time_us", "tick_time_us", "constraint_velocity_floor", "twist_saturated",
-    "minimum_distance",
-)
+from .records import CompiledPendingStep, PendingStep, StepRecord
 
 #: An operator target: one pose for a single-EE robot, else one per ``robot.ee_frames`` entry.
 Targets = Union[pin.SE3, Sequence[pin.SE3]]
@@ -151,105 +149,6 @@ def constraint_names(constraints: Sequence[Constraint]) -> tuple[str, ...]:
     return tuple(names)
 
 
-@dataclass
-class StepRecord:
-    """What one tick measured. Errors in m / rad, velocities in m/s, times in us.
-
-    The velocities are those the robot moves with over the period, at its true
-    configuration (docs/design.md section 15.2): every equality row's ``C v_c`` relative to
-    the constraint's moving geometry, and each EE's linear velocity, world frame. Beside the
-    achieved EE velocity: the operator's (filtered) target velocity and the commanded twist's
-    linear part, which also carries the pose-error term and the speed caps.
-
-    Per end effector (``robot.ee_frames`` order): ``ee_position_errors``,
-    ``ee_orientation_errors`` and the ``*_linear_velocities`` rows. The single-EE names
-    read them: ``ee_position_error`` and ``ee_orientation_error`` are the worst EE's, the
-    ``*_linear_velocity`` vectors the first EE's (``robot.ee_frame``); with one EE both are
-    that EE's, as they always were.
-    """
-
-    t: float
-    constraint_error: float  # max over equality constraints of |e|
-    constraint_velocity_residual: float  # max |C v_c - (-K e + ff)| over equalities
-    barrier_penetration: float  # max depth behind a barrier (0 on the allowed side)
-    ee_position_errors: np.ndarray  # (EEs,) |p_e - p*| of each EE against its filtered target
-    ee_orientation_errors: np.ndarray  # (EEs,) |log3(R_e^T R*)| of each EE
-    joint_limit_violation: float  # max over joints of the distance past a limit (rad)
-    failed: bool
-    step_time_us: float  # the controller's solve
-    tick_time_us: float  # the period's hot path, the solve included (the measures are not)
-    constraint_velocity_floor: float  # float64 round-off of C v_c (m/s, _constraint_velocity)
-    twist_saturated: bool  # the speed caps scaled some EE's commanded twist down
-    constraint_velocity: np.ndarray = field(repr=False)  # C v_c - C v_geom, every equality row
-    constraint_velocity_labels: tuple[str, ...] = field(repr=False)  # one per row (row_labels)
-    drift_velocity: np.ndarray = field(repr=False)  # -K e per row at the true configuration
-    operator_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) the filtered targets'
-    commanded_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) of the commanded twists
-    actual_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) world frame
-    constraint_errors: np.ndarray = field(repr=False)  # each constraint's violation (m)
-    constraint_names: tuple[str, ...] = field(repr=False)  # one per constraint (constraint_names)
-    status: str = "ok"  # the controller's step status (controllers.StepStatus value)
-    message: str = ""
-    plant: object | None = field(default=None, repr=False)  # the plant's own measures
-    #: the collision pairs' smallest distance at the true configuration (m; inf without
-    #: collision avoidance or no pair measured; exact below d_i, teleop.loop.distance_meter)
-    minimum_distance: float = math.inf
-    closest_pair: str = ""  # the pair of minimum_distance ("first | second"), "" when none
-
-    @property
-    def ee_position_error(self) -> float:
-        """The worst EE's position error (m)."""
-        return float(np.max(self.ee_position_errors))
-
-    @property
-    def ee_orientation_error(self) -> float:
-        """The worst EE's orientation error (rad)."""
-        return float(np.max(self.ee_orientation_errors))
-
-    @property
-    def operator_linear_velocity(self) -> np.ndarray:
-        """The first EE's filtered target velocity (world, m/s)."""
-        return self.operator_linear_velocities[0]
-
-    @property
-    def commanded_linear_velocity(self) -> np.ndarray:
-        """The first EE's commanded linear velocity (world, m/s)."""
-        return self.commanded_linear_velocities[0]
-
-    @property
-    def actual_linear_velocity(self) -> np.ndarray:
-        """The first EE's achieved linear velocity (world, m/s)."""
-        return self.actual_linear_velocities[0]
-
-
-@dataclass
-class PendingStep:
-    """One period as :meth:`TeleopLoop.advance` ran it (the hot path), then its command's
-    measures (:meth:`TeleopLoop.measure_command`), waiting for the end-of-period ones."""
-
-    targets: list[pin.SE3]  # the filtered target of each EE
-    previous_targets: list[pin.SE3] | None  # the period before's (the operator's velocity)
-    placements: list[pin.SE3]  # each EE's pose the command was computed from
-    twists: list[np.ndarray]  # each EE's commanded body twist, after the speed caps
-    sensed: np.ndarray  # the configuration the controller saw
-    q_before: np.ndarray  # the true configuration before the integration
-    qd: np.ndarray  # the command
-    moved: np.ndarray  # the joint velocities the robot moved with (the plant's)
-    tick_time_us: float  # the hot path: filter, kinematics, command, solve, integration
-    step_time_us: float
-    status: str
-    message: str
-    twist_saturated: bool
-    residual: float = 0.0
-    floor: float = 0.0
-    constraint_velocity: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    drift_velocity: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    labels: tuple[str, ...] = ()
-    operator_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    commanded_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    actual_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-
-
 def saturate_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
     """Scale ``[v; w]`` uniformly so that ``|v| <= max_linear`` and ``|w| <= max_angular``;
     ``twist`` itself when it is within both (the common case)."""
@@ -280,6 +179,9 @@ class TeleopLoop:
         pairs' minimum distance every period measures at the true configuration
         (:class:`~teleop.loop.distance_meter.DistanceMeter`, docs/design.md 18.6); None:
         not measured.
+    compiled_tick : run the hot path compiled (one C++ call a period:
+        ``controller.loop_tick``, the CJM's compiled backend) when the controller offers
+        it; False: always the Python path, the readable reference (docs/design.md 5.1).
 
     Targets (:data:`Targets`) are one ``pin.SE3`` per entry of ``robot.ee_frames``, in
     that order; a single-EE robot also takes the pose alone.
@@ -287,7 +189,8 @@ class TeleopLoop:
 
     def __init__(self, robot, controller, q0: np.ndarray | None = None,
                  config: LoopConfig | None = None, plant: Plant | None = None,
-                 collisions: CollisionAvoidance | None = None) -> None:
+                 collisions: CollisionAvoidance | None = None,
+                 compiled_tick: bool = True) -> None:
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
@@ -306,8 +209,11 @@ class TeleopLoop:
             plant.reset(self.q)
         self.t = 0.0
         self._filtered_targets: list[pin.SE3] | None = None
-        #: the filtered targets of the last period (their feed-forward), None at the start
-        self.previous_targets: list[pin.SE3] | None = None
+        self._previous_targets: list[pin.SE3] | None = None
+        #: the hot path compiled around the controller's step, when it offers one and
+        #: ``compiled_tick`` (docs/design.md 5.1); None: the Python path below
+        self.compiled = (None if not compiled_tick else self._loop_tick(controller))
+        self._history_in_tick = False  # the filter's state lives in self.compiled
         self.last_qd = np.zeros(self.model.nv)
         self.refused = ""  # why the controller refused the last input (ValueError), if it did
         self._labels_key: tuple[int, ...] = ()
@@ -316,7 +222,25 @@ class TeleopLoop:
         if self.distance_meter is not None:
             self.distance_meter.set_constraints(self.constraints)
 
+    def _loop_tick(self, controller):
+        """``controller.loop_tick`` for this loop's settings, or None: also when the tick
+        is another object's (a wrapper handing its attributes on, whose own ``solve`` the
+        loop must call)."""
+        loop_tick = getattr(controller, "loop_tick", None)
+        config = self.config
+        tick = None if loop_tick is None else loop_tick(
+            config.dt, config.kp, config.max_linear_speed, config.max_angular_speed,
+            config.target_time_constant, config.feed_forward)
+        return tick if tick is not None and tick.controller is controller else None
+
     # -- state -------------------------------------------------------------------------
+
+    @property
+    def previous_targets(self) -> list[pin.SE3] | None:
+        """The filtered targets of the last period (their feed-forward), None at the start."""
+        if self._history_in_tick:
+            return self.compiled.history()[1]
+        return self._previous_targets
 
     @property
     def constraints(self) -> list[Constraint]:
@@ -345,7 +269,8 @@ class TeleopLoop:
         self.q = np.array(self.robot.q_home if q0 is None else q0, dtype=float)
         self.t = 0.0
         self._filtered_targets = None
-        self.previous_targets = None
+        self._previous_targets = None
+        self._history_in_tick = False
         self.last_qd = np.zeros(self.model.nv)
         if self.plant is not None:
             self.plant.reset(self.q)
@@ -357,6 +282,8 @@ class TeleopLoop:
     def targets(self, target: Targets) -> list[pin.SE3]:
         """``target`` as one pose per EE; ``ValueError`` unless it has one per
         ``robot.ee_frames`` entry (a lone ``pin.SE3`` counts as one)."""
+        if len(self.ee_frame_ids) == 1 and isinstance(target, pin.SE3):  # the common case
+            return [target]
         poses = target_poses(target)
         if len(poses) != len(self.ee_frame_ids):
             raise ValueError(f"expected {len(self.ee_frame_ids)} target poses, one per EE frame "
@@ -381,7 +308,7 @@ class TeleopLoop:
                      targets: Sequence[pin.SE3]) -> list[np.ndarray]:
         """Each EE's body twist ``K_p log6(T_e,i^-1 T*_i) + Ad_(T_e,i^-1 T*_i) V_ff,i``
         before the speed caps, fed forward from :attr:`previous_targets`."""
-        previous = self.previous_targets
+        previous = self._previous_targets
         twists = []
         for i, (ee, target) in enumerate(zip(placements, targets)):
             error = ee.actInv(target)
@@ -414,40 +341,98 @@ class TeleopLoop:
 
     def advance(self, target: Targets) -> PendingStep:
         """The hot path of a period: filter the targets, the EE poses, the command, the
-        controller's step, the integration. No measures (:meth:`measure_command`)."""
+        controller's step, the integration. No measures (:meth:`measure_command`).
+
+        It runs compiled (:attr:`compiled`, one C++ call) when the controller offers it
+        and its current step can take it; else, and on a period whose sensed
+        configuration the C++ side does not take, the Python reference
+        (:meth:`_advance_python`), to which the filter's state is handed over."""
         tick_start = time.perf_counter_ns()
-        model, data = self.model, self.data
-        targets = self.filter_targets(target)
+        poses = self.targets(target)
         sensed = self.q if self.plant is None else self.plant.sense(self.q)
+        compiled = self.compiled
+        if compiled is not None and compiled.ready():
+            if not self._history_in_tick:
+                compiled.set_history(self._filtered_targets, self._previous_targets)
+                self._history_in_tick = True
+            result = compiled.run(poses, sensed, self.plant is None)
+            if result is not None:
+                return self._advance_compiled(result, sensed, tick_start)
+        if self._history_in_tick:
+            self._filtered_targets, self._previous_targets = compiled.history()
+            self._history_in_tick = False
+        return self._advance_python(poses, sensed, tick_start)
+
+    def _advance_python(self, poses: list[pin.SE3], sensed: np.ndarray,
+                        tick_start: int) -> PendingStep:
+        """The period in Python (the reference): Pinocchio's kinematics for the EE poses,
+        the twists, ``controller.solve``, ``pin.integrate``."""
+        model, data = self.model, self.data
+        targets = self.filter_targets(poses)
         pin.forwardKinematics(model, data, sensed)
         placements = [pin.updateFramePlacement(model, data, frame).copy()
                       for frame in self.ee_frame_ids]
         requested = self._pose_twists(placements, targets)
         twists = [self._saturate(twist) for twist in requested]
         # filter_targets makes a new list of new poses every period: no copy needed
-        previous, self.previous_targets = self.previous_targets, targets
-        solve_start = time.perf_counter_ns()
-        try:
-            qd = self.controller.solve(sensed, np.concatenate(twists))
-            status, message = self.controller.info.status.value, self.controller.info.message
-            self.refused = ""
-        except ValueError as error:  # refused input: a controlled stop, say why
-            qd, status, message = self._stop(sensed), "failed", str(error)
-            self.refused = message
-        step_time = (time.perf_counter_ns() - solve_start) * 1e-3
-        if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
-            qd, status, message = self._stop(sensed), "failed", "non-finite command replaced by a stop"
-        moved = qd if self.plant is None else self.plant.actuate(qd, self.q, self.constraints)
-        q_before = self.q
-        self.q = pin.integrate(model, q_before, moved * self.config.dt)
-        self.last_qd = qd
-        self.t += self.config.dt
+        previous, self._previous_targets = self._previous_targets, targets
+        qd, status, message, step_time = self._solve(sensed, np.concatenate(twists))
+        q_before, qd, moved, status, message = self._move(sensed, qd, status, message)
         saturated = any(capped is not twist for capped, twist in zip(twists, requested))
         return PendingStep(
             targets=targets, previous_targets=previous, placements=placements, twists=twists,
             sensed=sensed, q_before=q_before, qd=qd, moved=moved,
             tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3, step_time_us=step_time,
             status=status, message=message, twist_saturated=saturated)
+
+    def _advance_compiled(self, result: tuple, sensed: np.ndarray,
+                          tick_start: int) -> PendingStep:
+        """The rest of a period the compiled tick ran (``result``: its ``TickResult``): a
+        refused twist goes to the controller (which says why, a controlled stop
+        follows), a plant moves the robot, else the tick's own integration is the next
+        configuration."""
+        _, qd, next_q, period, step_time, saturated, has_previous = result
+        if qd is None:  # a twist that is not finite: the controller refuses it, says why
+            qd, status, message, step_time = self._solve(sensed, self.compiled.twist.copy())
+        else:
+            info = self.controller.info
+            status, message = info.status.value, info.message
+            self.refused = ""
+        if next_q is None:  # a plant, or a command to check
+            q_before, qd, moved, status, message = self._move(sensed, qd, status, message)
+        else:  # the tick integrated its finite command
+            q_before, moved, self.q, self.last_qd = self.q, qd, next_q, qd
+            self.t += self.config.dt
+        return CompiledPendingStep(period, has_previous, sensed, q_before, qd, moved,
+                                   (time.perf_counter_ns() - tick_start) * 1e-3, step_time,
+                                   status, message, saturated)
+
+    def _solve(self, sensed: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, str, str, float]:
+        """``controller.solve``: the command, its status and message, its time (us); a
+        refused input (``ValueError``) gives the controlled stop, ``failed`` and why."""
+        solve_start = time.perf_counter_ns()
+        try:
+            qd = self.controller.solve(sensed, twist)
+            status, message = self.controller.info.status.value, self.controller.info.message
+            self.refused = ""
+        except ValueError as error:  # refused input: a controlled stop, say why
+            qd, status, message = self._stop(sensed), "failed", str(error)
+            self.refused = message
+        return qd, status, message, (time.perf_counter_ns() - solve_start) * 1e-3
+
+    def _move(self, sensed: np.ndarray, qd: np.ndarray, status: str,
+              message: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, str, str]:
+        """Never a non-finite command (a stop instead); the plant moves the robot, or the
+        command itself; ``q <- integrate(q, moved dt)``. Returns the configuration
+        before, the command, the velocity moved with, the status and the message."""
+        if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
+            qd, status, message = self._stop(sensed), "failed", "non-finite command replaced by a stop"
+        moved = qd if self.plant is None else self.plant.actuate(qd, self.q, self.constraints)
+        q_before = self.q
+        self.q = pin.integrate(self.model, q_before, moved * self.config.dt)
+        self.last_qd = qd
+        self.t += self.config.dt
+        return q_before, qd, moved, status, message
 
     def _stop(self, sensed: np.ndarray) -> np.ndarray:
         """The controller's controlled stop at ``sensed`` (inside its velocity, position and

@@ -3,6 +3,7 @@
 
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/multibody.hpp>
 
 #include <cmath>
@@ -139,6 +140,11 @@ void Kinematics::compute(const ConstVectorRef& q) {
     for (Index r = 0; r < 3; ++r) row.segment(3 * r, 3) = placement.rotation().row(r);
     row.tail(3) = placement.translation().transpose();
   }
+}
+
+void Kinematics::integrate(const ConstVectorRef& q, const ConstVectorRef& v,
+                           VectorRef result) const {
+  pin::integrate(pinocchio_->model, q, v, result);
 }
 
 }  // namespace cjm

@@ -45,6 +45,9 @@ class Kinematics {
   //! ``computeJointJacobians`` at ``q``, then every frame's placement and LOCAL Jacobian.
   void compute(const ConstVectorRef& q);
 
+  //! Pinocchio's ``integrate(model, q, v)`` into ``result`` (nq != nv for a base).
+  void integrate(const ConstVectorRef& q, const ConstVectorRef& v, VectorRef result) const;
+
   //! The frames' LOCAL Jacobians stacked in the order given (6 per frame, nv columns).
   const RowMatrix& jacobians() const { return jacobians_; }
   //! One row per frame: its rotation (row-major) then its translation, world frame.

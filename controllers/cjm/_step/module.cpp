@@ -1,6 +1,7 @@
 // Python bindings of the compiled CJM step (pybind11): controllers.cjm._step's Pipeline
-// (kinematics, terms and step in one call) and the Step it runs.
-// controllers/cjm/compiled.py is its only user (docs/design.md section 16).
+// (kinematics, terms and step in one call) and the Step it runs, and the closed loop's
+// Tick around a Pipeline. controllers/cjm/compiled.py and compiled_tick.py are their only
+// users (docs/design.md sections 5.1 and 16).
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -12,6 +13,7 @@
 
 #include "collision_bindings.hpp"
 #include "pipeline.hpp"
+#include "tick.hpp"
 
 namespace py = pybind11;
 using cjm::Index;
@@ -114,6 +116,80 @@ py::array_t<double> finish(BoundPipeline& pipeline, bool use_posture, bool analy
   pipeline.finish(use_posture, analytical_allowed, qd_map);
   return qd;
 }
+
+
+//! A period's outcome: the step ran and its command is finite (TICK_STEPPED), the twist
+//! was not finite so it did not run (TICK_REFUSED: Python asks the controller, which says
+//! why), or its command is not finite (TICK_NOT_FINITE).
+enum TickOutcome { kTickStepped = 0, kTickRefused = 1, kTickNotFinite = 2 };
+
+//! A new float64 array holding ``matrix``.
+template <typename Matrix>
+py::array_t<double> copied(const Matrix& matrix, std::vector<py::ssize_t> shape) {
+  py::array_t<double> array(shape);
+  std::copy(matrix.data(), matrix.data() + matrix.size(), array.mutable_data());
+  return array;
+}
+
+//! A Tick bound to the BoundPipeline it runs (kept alive while attached).
+struct BoundTick : cjm::Tick {
+  using cjm::Tick::Tick;
+
+  py::object pipeline_object;        // keeps the attached pipeline alive
+  BoundPipeline* bound = nullptr;    // that pipeline (read without the GIL)
+  py::str homogeneous{"homogeneous"};
+
+  BoundPipeline& pipeline() { return *bound; }
+
+  void attach_object(py::object pipeline) {
+    BoundPipeline& attached = pipeline.cast<BoundPipeline&>();
+    attach(attached);
+    bound = &attached;
+    pipeline_object = std::move(pipeline);
+  }
+
+  //! The targets (a sequence of pin.SE3, one per EE, checked by Python) and q copied in,
+  //! the declared constraints' parameters read; false unless q is a finite float64 vector of
+  //! the pipeline's nq.
+  bool load(py::handle targets, py::handle q) {
+    if (!load_vector(q, pipeline().q())) return false;
+    const auto poses = py::reinterpret_borrow<py::sequence>(targets);
+    cjm::RowMatrix& rows = operator_targets();
+    if (static_cast<Index>(poses.size()) != rows.rows())
+      throw std::invalid_argument("one target pose per end effector");
+    for (Index i = 0; i < rows.rows(); ++i) {
+      const auto matrix = py::array_t<double, py::array::forcecast>(
+          poses[static_cast<size_t>(i)].attr(homogeneous));
+      const auto entries = matrix.unchecked<2>();
+      for (py::ssize_t r = 0; r < 3; ++r) {
+        for (py::ssize_t c = 0; c < 3; ++c) rows(i, 3 * r + c) = entries(r, c);
+        rows(i, 9 + r) = entries(r, 3);
+      }
+    }
+    pipeline().read_sources();
+    return true;
+  }
+
+  //! finish() and, when the command is finite and ``integrate_q``, integrate().
+  TickOutcome step(bool use_posture, bool analytical_allowed, bool integrate_q) {
+    if (!finish(use_posture, analytical_allowed)) return kTickNotFinite;
+    if (integrate_q) integrate();
+    return kTickStepped;
+  }
+
+  //! (outcome, qd or None, next q or None, the period's copy, the step's time in us,
+  //! whether the caps scaled a twist, whether the period had a previous target).
+  py::tuple result(TickOutcome outcome, bool integrate_q) {
+    const Index ee_count = period().rows();
+    return py::make_tuple(
+        static_cast<int>(outcome),
+        outcome == kTickRefused ? py::object(py::none()) : py::object(copied(qd(), {qd().size()})),
+        outcome == kTickStepped && integrate_q ? py::object(copied(next_q(), {next_q().size()}))
+                                               : py::object(py::none()),
+        copied(period(), {ee_count, period().cols()}),
+        outcome == kTickRefused ? 0.0 : step_time_us(), twist_saturated(), period_has_previous());
+  }
+};
 
 }  // namespace
 
@@ -336,6 +412,78 @@ PYBIND11_MODULE(_step, module) {
       .def_property_readonly("jacobians", [](py::object self) {
         return read_only(self.cast<BoundPipeline&>().jacobians(), self);
       });
+
+  py::class_<BoundTick>(module, "Tick")
+      .def(py::init([](py::object pipeline, Index ee_count, double dt, double kp,
+                       double max_linear, double max_angular, double smoothing,
+                       bool feed_forward) {
+             auto tick = std::make_unique<BoundTick>(
+                 ee_count, cjm::TickSettings{dt, kp, max_linear, max_angular, smoothing, feed_forward});
+             tick->attach_object(std::move(pipeline));
+             return tick;
+           }),
+           py::arg("pipeline"), py::arg("ee_count"), py::arg("dt"), py::arg("kp"),
+           py::arg("max_linear"), py::arg("max_angular"), py::arg("smoothing"),
+           py::arg("feed_forward"),
+           "The loop's hot path on ``pipeline`` (tick.hpp): ``smoothing`` is "
+           "``alpha = 1 - exp(-dt / tau)``, 1 for none.")
+      .def("attach", &BoundTick::attach_object, py::arg("pipeline"),
+           "Run the next periods on ``pipeline`` (a rebuilt step's); the filter's state stays.")
+      .def("run", [](BoundTick& tick, py::handle targets, py::handle q, bool use_posture,
+                     bool integrate_q) -> py::object {
+             if (!tick.load(targets, q)) return py::none();
+             TickOutcome outcome;
+             {
+               py::gil_scoped_release release;
+               tick.begin();
+               outcome = tick.pipeline().twist().allFinite()
+                             ? tick.step(use_posture, true, integrate_q)
+                             : kTickRefused;
+             }
+             return tick.result(outcome, integrate_q);
+           }, py::arg("targets"), py::arg("q"), py::arg("use_posture"), py::arg("integrate"),
+           "One period in one call (every constraint declares a compiled form): None when q is not "
+           "a finite float64 vector of nq (nothing ran), else (outcome, qd, next q, period, "
+           "step time in us, twist saturated, period had a previous target).")
+      .def("start", [](BoundTick& tick, py::handle targets, py::handle q) -> py::object {
+             if (!tick.load(targets, q)) return py::none();
+             py::gil_scoped_release release;
+             tick.begin();
+             return py::bool_(tick.pipeline().twist().allFinite());
+           }, py::arg("targets"), py::arg("q"),
+           "The period up to the step (filter, kinematics, twists, task rows, declared terms): "
+           "None when q is not a finite float64 vector of nq, else whether the twist is finite.")
+      .def("end", [](BoundTick& tick, bool use_posture, bool analytical_allowed,
+                     bool integrate_q) {
+             TickOutcome outcome;
+             {
+               py::gil_scoped_release release;
+               outcome = tick.step(use_posture, analytical_allowed, integrate_q);
+             }
+             return tick.result(outcome, integrate_q);
+           }, py::arg("use_posture"), py::arg("analytical_allowed"), py::arg("integrate"),
+           "The step after start() (and the terms Python writes): run()'s tuple.")
+      .def("refused", [](BoundTick& tick) { return tick.result(kTickRefused, false); },
+           "run()'s tuple for a period start() found a twist that is not finite in.")
+      .def_property_readonly("twist", [](py::object self) {
+        auto& vector = self.cast<BoundTick&>().pipeline().twist();
+        return view(vector.data(), {vector.size()}, self);
+      }, "The stacked twist of the period (after the caps).")
+      .def_property_readonly("filtered", [](py::object self) {
+        auto& matrix = self.cast<BoundTick&>().filtered();
+        return view(matrix.data(), {matrix.rows(), matrix.cols()}, self);
+      }, "The filtered targets (writable rows of 12), valid when has_filtered.")
+      .def_property_readonly("previous", [](py::object self) {
+        auto& matrix = self.cast<BoundTick&>().previous();
+        return view(matrix.data(), {matrix.rows(), matrix.cols()}, self);
+      }, "The previous period's filtered targets (writable rows of 12), valid when has_previous.")
+      .def_property_readonly("has_filtered", &BoundTick::has_filtered)
+      .def_property_readonly("has_previous", &BoundTick::has_previous)
+      .def("set_history", &BoundTick::set_history, py::arg("has_filtered"), py::arg("has_previous"),
+           "Which of filtered and previous hold poses (after writing them).");
+  module.attr("TICK_STEPPED") = static_cast<int>(kTickStepped);
+  module.attr("TICK_REFUSED") = static_cast<int>(kTickRefused);
+  module.attr("TICK_NOT_FINITE") = static_cast<int>(kTickNotFinite);
 
   py::dict fields;
   fields["status"] = static_cast<int>(cjm::kStatus);

@@ -1,0 +1,127 @@
+"""The closed loop's hot path in C++ around the compiled CJM step (docs/design.md 5.1, 16).
+
+One period of ``teleop.loop.TeleopLoop.advance`` (the target filter, the EE placements,
+the pose twists with their feed-forward and speed caps, the step, the integration) in one
+call to ``controllers.cjm._step.Tick`` (``_step/tick.hpp``), on the pipeline of the
+controller's :class:`~controllers.cjm.compiled.CompiledStep`: the EE placements are the
+ones the step's own kinematics computes, so the kinematics run once a period (and the
+collision rows, when the pipeline measures them). A constraint that declares no compiled
+form has its terms written by Python between two calls (``start``, ``end``), as
+``CompiledStep.solve`` does. The loop's Python path stays the reference;
+tests/test_compiled_tick.py holds the two equal.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from ._step import TICK_REFUSED, Tick
+
+#: What :meth:`CompiledTick.run` gives back: the outcome (``_step.TICK_STEPPED``,
+#: ``TICK_REFUSED``: the twist was not finite and no step ran, ``TICK_NOT_FINITE``: the
+#: command is not finite), the command (None when refused), the next configuration
+#: (None unless the tick integrated it), the period (per EE: the filtered target, the
+#: previous target, the EE placement, rows of 12, and the commanded twist, 6), the
+#: step's time (us, timed in C++), whether the speed caps scaled a twist, and whether
+#: the period had a previous target.
+TickResult = tuple[int, "np.ndarray | None", "np.ndarray | None", np.ndarray, float, bool, bool]
+
+
+def pose_rows(poses: Sequence[pin.SE3] | None, count: int) -> np.ndarray:
+    """``poses`` as the tick's rows of 12 (rotation row-major, translation); zeros for None."""
+    rows = np.zeros((count, 12))
+    for row, pose in zip(rows, poses or ()):
+        row[:9], row[9:] = pose.rotation.ravel(), pose.translation
+    return rows
+
+
+def row_pose(row: np.ndarray) -> pin.SE3:
+    """The pose in a row of 12 (rotation row-major, translation)."""
+    return pin.SE3(row[:9].reshape(3, 3), row[9:12])
+
+
+class CompiledTick:
+    """A loop's hot path on ``controller``'s compiled step, its filter's state kept in C++.
+
+    The settings are ``teleop.loop.LoopConfig``'s; the smoothing runs with
+    ``alpha = 1 - exp(-dt / tau)`` as the loop computes it (``tau = 0``: none).
+    """
+
+    def __init__(self, controller, dt: float, kp: float, max_linear_speed: float,
+                 max_angular_speed: float, target_time_constant: float,
+                 feed_forward: bool) -> None:
+        self.controller = controller
+        self.ee_count = len(controller.ee_frame_ids)
+        smoothing = (1.0 if target_time_constant == 0.0
+                     else 1.0 - math.exp(-dt / target_time_constant))
+        self._settings = dict(ee_count=self.ee_count, dt=dt, kp=kp, max_linear=max_linear_speed,
+                              max_angular=max_angular_speed, smoothing=smoothing,
+                              feed_forward=bool(feed_forward))
+        self._tick: Tick | None = None
+        #: the last period's stacked twist after the caps (a view, set by :meth:`ready`)
+        self.twist: np.ndarray | None = None
+        self._step = None  # the CompiledStep whose pipeline the tick runs
+        self._pipeline = None
+
+    def ready(self) -> bool:
+        """Whether this period can run compiled: the controller's step is compiled (its
+        collision rows, if any, measured by its pipeline); a rebuilt step's pipeline is
+        attached (the filter's state stays)."""
+        step = self.controller.step
+        if step is self._step:  # the step of the last period: are its collision pairs current?
+            return step.collision_rows is None or step.tick_ready
+        pipeline = getattr(step, "pipeline", None)
+        if pipeline is None or not step.tick_ready:
+            return False
+        if pipeline is not self._pipeline:
+            if self._tick is None:
+                self._tick = Tick(pipeline, **self._settings)
+            else:
+                self._tick.attach(pipeline)
+            self._step, self._pipeline = step, pipeline
+            self.twist = self._tick.twist
+        return True
+
+    def run(self, poses: Sequence[pin.SE3], q: np.ndarray, integrate: bool) -> TickResult | None:
+        """One period towards ``poses`` (one ``pin.SE3`` per EE, checked by the caller) at
+        ``q``, after :meth:`ready`; None when ``q`` is not a finite float64 vector of
+        ``nq`` (nothing ran: the loop's Python path takes the period). With
+        ``integrate``, the next configuration ``integrate(q, qd dt)`` too. The
+        controller's ``report`` and ``info`` are the step's, as after its ``solve``."""
+        step, tick = self._step, self._tick
+        if step.one_call:
+            result = tick.run(poses, q, step.use_posture, integrate)
+            paper_form = step.paper_form
+        else:
+            started = tick.start(poses, q)
+            if started is None:
+                return None
+            if not started:
+                return tick.refused()
+            paper_form = step.write_terms()
+            result = tick.end(step.use_posture, paper_form, integrate)
+        if result is not None and result[0] != TICK_REFUSED:
+            self.controller.take_report(step.last_report(paper_form))
+        return result
+
+    # -- the filter's state, handed over to and from the loop's Python path -----------
+
+    def history(self) -> tuple[list[pin.SE3] | None, list[pin.SE3] | None]:
+        """The filtered targets and the previous period's, as poses (None: none yet)."""
+        tick = self._tick
+        if tick is None:
+            return None, None
+        return ([row_pose(row) for row in tick.filtered] if tick.has_filtered else None,
+                [row_pose(row) for row in tick.previous] if tick.has_previous else None)
+
+    def set_history(self, filtered: Sequence[pin.SE3] | None,
+                    previous: Sequence[pin.SE3] | None) -> None:
+        """Take over the filter's state (after :meth:`ready`)."""
+        tick = self._tick
+        tick.filtered[:] = pose_rows(filtered, self.ee_count)
+        tick.previous[:] = pose_rows(previous, self.ee_count)
+        tick.set_history(filtered is not None, previous is not None)

@@ -1,0 +1,168 @@
+"""What a period records (docs/design.md sections 5.1 and 7): the hot path's
+:class:`PendingStep` (a :class:`CompiledPendingStep` when the compiled tick ran it), then
+the measured :class:`StepRecord`."""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+#: Columns of the per-step record, in order (see :class:`StepRecord`).
+RECORD_FIELDS = (
+    "t", "constraint_error", "constraint_velocity_residual", "barrier_penetration",
+    "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed",
+    "step_time_us", "tick_time_us", "constraint_velocity_floor", "twist_saturated",
+    "minimum_distance",
+)
+
+
+@dataclass
+class StepRecord:
+    """What one tick measured. Errors in m / rad, velocities in m/s, times in us.
+
+    The velocities are those the robot moves with over the period, at its true
+    configuration (docs/design.md section 15.2): every equality row's ``C v_c`` relative to
+    the constraint's moving geometry, and each EE's linear velocity, world frame. Beside the
+    achieved EE velocity: the operator's (filtered) target velocity and the commanded twist's
+    linear part, which also carries the pose-error term and the speed caps.
+
+    Per end effector (``robot.ee_frames`` order): ``ee_position_errors``,
+    ``ee_orientation_errors`` and the ``*_linear_velocities`` rows. The single-EE names
+    read them: ``ee_position_error`` and ``ee_orientation_error`` are the worst EE's, the
+    ``*_linear_velocity`` vectors the first EE's (``robot.ee_frame``); with one EE both are
+    that EE's, as they always were.
+    """
+
+    t: float
+    constraint_error: float  # max over equality constraints of |e|
+    constraint_velocity_residual: float  # max |C v_c - (-K e + ff)| over equalities
+    barrier_penetration: float  # max depth behind a barrier (0 on the allowed side)
+    ee_position_errors: np.ndarray  # (EEs,) |p_e - p*| of each EE against its filtered target
+    ee_orientation_errors: np.ndarray  # (EEs,) |log3(R_e^T R*)| of each EE
+    joint_limit_violation: float  # max over joints of the distance past a limit (rad)
+    failed: bool
+    step_time_us: float  # the controller's solve (the compiled tick: its C++ step alone)
+    tick_time_us: float  # the period's hot path, the solve included (the measures are not)
+    constraint_velocity_floor: float  # float64 round-off of C v_c (m/s, _constraint_velocity)
+    twist_saturated: bool  # the speed caps scaled some EE's commanded twist down
+    constraint_velocity: np.ndarray = field(repr=False)  # C v_c - C v_geom, every equality row
+    constraint_velocity_labels: tuple[str, ...] = field(repr=False)  # one per row (row_labels)
+    drift_velocity: np.ndarray = field(repr=False)  # -K e per row at the true configuration
+    operator_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) the filtered targets'
+    commanded_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) of the commanded twists
+    actual_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) world frame
+    constraint_errors: np.ndarray = field(repr=False)  # each constraint's violation (m)
+    constraint_names: tuple[str, ...] = field(repr=False)  # one per constraint (constraint_names)
+    status: str = "ok"  # the controller's step status (controllers.StepStatus value)
+    message: str = ""
+    plant: object | None = field(default=None, repr=False)  # the plant's own measures
+    #: the collision pairs' smallest distance at the true configuration (m; inf without
+    #: collision avoidance or no pair measured; exact below d_i, teleop.loop.distance_meter)
+    minimum_distance: float = math.inf
+    closest_pair: str = ""  # the pair of minimum_distance ("first | second"), "" when none
+
+    @property
+    def ee_position_error(self) -> float:
+        """The worst EE's position error (m)."""
+        return float(np.max(self.ee_position_errors))
+
+    @property
+    def ee_orientation_error(self) -> float:
+        """The worst EE's orientation error (rad)."""
+        return float(np.max(self.ee_orientation_errors))
+
+    @property
+    def operator_linear_velocity(self) -> np.ndarray:
+        """The first EE's filtered target velocity (world, m/s)."""
+        return self.operator_linear_velocities[0]
+
+    @property
+    def commanded_linear_velocity(self) -> np.ndarray:
+        """The first EE's commanded linear velocity (world, m/s)."""
+        return self.commanded_linear_velocities[0]
+
+    @property
+    def actual_linear_velocity(self) -> np.ndarray:
+        """The first EE's achieved linear velocity (world, m/s)."""
+        return self.actual_linear_velocities[0]
+
+
+@dataclass
+class PendingStep:
+    """One period as :meth:`TeleopLoop.advance` ran it (the hot path), then its command's
+    measures (:meth:`TeleopLoop.measure_command`), waiting for the end-of-period ones."""
+
+    targets: list[pin.SE3]  # the filtered target of each EE
+    previous_targets: list[pin.SE3] | None  # the period before's (the operator's velocity)
+    placements: list[pin.SE3]  # each EE's pose the command was computed from
+    twists: list[np.ndarray]  # each EE's commanded body twist, after the speed caps
+    sensed: np.ndarray  # the configuration the controller saw
+    q_before: np.ndarray  # the true configuration before the integration
+    qd: np.ndarray  # the command
+    moved: np.ndarray  # the joint velocities the robot moved with (the plant's)
+    tick_time_us: float  # the hot path: filter, kinematics, command, solve, integration
+    step_time_us: float
+    status: str
+    message: str
+    twist_saturated: bool
+    residual: float = 0.0
+    floor: float = 0.0
+    constraint_velocity: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drift_velocity: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    labels: tuple[str, ...] = ()
+    operator_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    commanded_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    actual_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+
+#: the measures' defaults of a compiled period (replaced, never written in place)
+NO_ROWS = np.zeros(0)
+NO_ROWS.flags.writeable = False
+NO_VECTORS = np.zeros((0, 3))
+NO_VECTORS.flags.writeable = False
+
+
+class CompiledPendingStep(PendingStep):
+    """A period the compiled tick ran (docs/design.md 5.1). Its poses and twists are in
+    ``period``, the tick's copy (per EE: the filtered target, the previous target, the
+    EE placement, rows of 12, and the commanded twist); they become ``pin.SE3`` objects
+    and arrays only when a measure reads them, so the periods nobody measures build
+    none. The measures' fields start empty, as :class:`PendingStep`'s."""
+
+    constraint_velocity = drift_velocity = NO_ROWS
+    operator_linear_velocities = commanded_linear_velocities = NO_VECTORS
+    actual_linear_velocities = NO_VECTORS
+
+    def __init__(self, period: np.ndarray, has_previous: bool, sensed: np.ndarray,
+                 q_before: np.ndarray, qd: np.ndarray, moved: np.ndarray, tick_time_us: float,
+                 step_time_us: float, status: str, message: str,
+                 twist_saturated: bool) -> None:
+        self.period, self.has_previous = period, has_previous
+        self.sensed, self.q_before, self.qd, self.moved = sensed, q_before, qd, moved
+        self.tick_time_us, self.step_time_us = tick_time_us, step_time_us
+        self.status, self.message, self.twist_saturated = status, message, twist_saturated
+
+    @functools.cached_property
+    def targets(self) -> list[pin.SE3]:
+        return [pose_of_row(row[:12]) for row in self.period]
+
+    @functools.cached_property
+    def previous_targets(self) -> list[pin.SE3] | None:
+        return [pose_of_row(row[12:24]) for row in self.period] if self.has_previous else None
+
+    @functools.cached_property
+    def placements(self) -> list[pin.SE3]:
+        return [pose_of_row(row[24:36]) for row in self.period]
+
+    @functools.cached_property
+    def twists(self) -> list[np.ndarray]:
+        return list(self.period[:, 36:42])
+
+
+def pose_of_row(row: np.ndarray) -> pin.SE3:
+    """The pose in a row of 12: the rotation row-major, then the translation."""
+    return pin.SE3(row[:9].reshape(3, 3), row[9:12])
