@@ -262,3 +262,22 @@ def test_the_command_line_writes_the_rows_ratios_and_targets(tmp_path):
 def test_an_unknown_problem_is_refused_before_any_run():
     with pytest.raises(ValueError, match=r"^unknown robot 'sda10f/nope'.*sda10f/plane"):
         run_bench(["sda10f/nope"])
+
+
+def test_the_loop_bench_times_every_period_of_both_paths():
+    """``teleop bench``'s loop section: each path runs every period of the scenario; the
+    loop time is the sum of the ticks, each tick costs at least the step it contains (the
+    compiled tick's ``step_time_us``, timed in C++), the targets scale with the step."""
+    from teleop.experiments.bench_loop import format_loop_table, scenario_loop, time_loop
+
+    compiled, python = (time_loop("paper-hole", flag, duration=0.2) for flag in (True, False))
+    assert compiled.ticks == python.ticks == 200
+    loop, targets = scenario_loop("paper-hole", True, 0.05)
+    pending = [loop.advance(target) for target in targets]
+    assert loop.compiled is not None and len(pending) == 50
+    assert all(p.tick_time_us >= p.step_time_us > 0.0 for p in pending)
+    table = format_loop_table([compiled, python], step_us=4.5)
+    assert f"{0.15 * 0.2 / 10:>9.3f}" in table.splitlines()[2]  # the target, scaled by 1x
+    for timing in (compiled, python):  # a sum over the ticks: half of them >= the median
+        assert timing.loop_time_s >= timing.ticks / 2 * timing.tick_median_us * 1e-6
+        assert timing.tick_median_us <= timing.tick_p99_us

@@ -288,6 +288,9 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     bench.add_argument("--no-allocations", action="store_true",
                        help="skip counting the heap allocations per step (a subprocess per "
                             "problem; without a C compiler they read n/a)")
+    bench.add_argument("--no-loop", action="store_true",
+                       help="skip timing the closed loop's hot path on paper-hole (10 s at "
+                            "1 kHz, the compiled tick and the Python path; 1 s with --quick)")
     bench.add_argument("--json", metavar="FILE",
                        help="also write the results, their ratios and the targets as JSON to "
                             "FILE (default: no JSON)")
@@ -401,6 +404,7 @@ def _scenarios(args: argparse.Namespace) -> int:
 
 def _bench(args: argparse.Namespace) -> int:
     from teleop.experiments.bench import format_table, run_bench, run_scaling, write_json
+    from teleop.experiments.bench_loop import format_loop_table, run_loop_bench
 
     iterations = 20 if args.quick else args.iterations
     plant = plant_choice(args)  # checked even when --plant is left out
@@ -413,6 +417,10 @@ def _bench(args: argparse.Namespace) -> int:
                                holes=(1, 2) if args.quick else (1, 2, 4, 8),
                                allocations=not args.no_allocations)
     print(format_table(results))
+    if not args.no_loop:
+        loop_timings, step_us = run_loop_bench(duration=1.0 if args.quick else None)
+        print()
+        print(format_loop_table(loop_timings, step_us))
     for r in results:
         if r.solver_messages:
             print(f"  {r.robot} {r.controller}: the solver wrote "

@@ -1,0 +1,112 @@
+"""The closed loop's hot path timed (``teleop bench``'s loop section, docs/design.md 5.1).
+
+A scenario (default ``paper-hole``, 10 s at 1 kHz) driven through
+:meth:`teleop.loop.TeleopLoop.advance` alone, the measures left out, once with the
+compiled tick and once on the loop's Python path; beside them the controller's step alone
+(``solve`` from Python at the same configurations and twists), so that the tick's cost
+beyond the step reads against the issue's targets: at most 0.5x the step, and a 10 s run
+in at most 0.15 s of loop time where the hole step takes 4.5 us (scaled by the step's
+median here: absolute times differ 3x between machines of one class).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from teleop.controller_specs import make_controller
+from teleop.loop import LoopConfig, TeleopLoop
+
+from .scenarios import load_scenario
+
+#: the loop time target of a 10 s run (s) on a machine whose hole step is REFERENCE_STEP_US
+LOOP_TIME_TARGET_S = 0.15
+REFERENCE_STEP_US = 4.5
+#: the tick beyond the step, at most this times the step's median
+BEYOND_STEP_TARGET = 0.5
+
+
+@dataclass(frozen=True)
+class LoopTiming:
+    """One run's ``advance`` times (us) and their sum (s), the compiled tick or not."""
+
+    scenario: str
+    compiled_tick: bool
+    ticks: int
+    loop_time_s: float
+    tick_median_us: float
+    tick_p99_us: float
+
+
+def scenario_loop(scenario: str, compiled_tick: bool,
+                  duration: float | None) -> tuple[TeleopLoop, list]:
+    """A fresh loop with the CJM on ``scenario`` and its targets over ``duration`` s
+    (default the scenario's own) at 1 kHz, drawn first as a device's would arrive."""
+    plan = load_scenario(scenario)
+    config = LoopConfig()
+    steps = int(round((plan.duration if duration is None else duration) / config.dt))
+    controller = make_controller("cjm", plan.robot, plan.make_constraints(), dt=config.dt)
+    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config,
+                      compiled_tick=compiled_tick)
+    return loop, [plan.target((i + 1) * config.dt) for i in range(steps)]
+
+
+def time_loop(scenario: str, compiled_tick: bool, duration: float | None = None) -> LoopTiming:
+    """``scenario`` through ``advance`` alone, nothing else between the periods."""
+    loop, targets = scenario_loop(scenario, compiled_tick, duration)
+    ticks = np.array([loop.advance(target).tick_time_us for target in targets])
+    return LoopTiming(scenario, compiled_tick, len(targets), float(ticks.sum()) * 1e-6,
+                      float(np.median(ticks)), float(np.percentile(ticks, 99)))
+
+
+def time_step(scenario: str, duration: float | None = None) -> float:
+    """The median (us) of the CJM's ``solve`` from Python alone at the configurations and
+    stacked twists of the scenario's periods (a run through the loop first, then a fresh
+    controller with the scenario's constraints timed at each)."""
+    loop, targets = scenario_loop(scenario, True, duration)
+    periods = []
+    for target in targets:
+        q = loop.q.copy()
+        periods.append((q, np.concatenate(loop.advance(target).twists)))
+    plan = load_scenario(scenario)
+    solver = make_controller("cjm", plan.robot, plan.make_constraints(), dt=loop.config.dt)
+    clock = time.perf_counter_ns
+    times = np.empty(len(periods))
+    for i, (q, twist) in enumerate(periods):
+        start = clock()
+        solver.solve(q, twist)
+        times[i] = (clock() - start) * 1e-3
+    return float(np.median(times))
+
+
+def run_loop_bench(scenario: str = "paper-hole",
+                   duration: float | None = None) -> tuple[list[LoopTiming], float]:
+    """The compiled tick's and the Python path's runs, then the step's median (us)."""
+    return ([time_loop(scenario, True, duration), time_loop(scenario, False, duration)],
+            time_step(scenario, duration))
+
+
+def format_loop_table(timings: list[LoopTiming], step_us: float) -> str:
+    """The runs, each tick's median beyond the step over the step, and the loop time
+    against its target scaled by the step here."""
+    scale = step_us / REFERENCE_STEP_US
+    lines = [f"the loop: {timings[0].scenario}, {timings[0].ticks} periods at 1 kHz through "
+             f"advance (no measures); the step alone (solve from Python) {step_us:.1f} us",
+             f"{'tick':<14}{'median us':>10}{'p99 us':>9}{'beyond step':>13}{'/ step':>8}"
+             f"{'loop time s':>13}{'target s':>10}"]
+    for timing in timings:
+        beyond = timing.tick_median_us - step_us
+        per_second = 10.0 / (timing.ticks * 1e-3)  # the target is for a 10 s run
+        target = LOOP_TIME_TARGET_S * scale / per_second
+        missed = [timing.compiled_tick and beyond / step_us > BEYOND_STEP_TARGET,
+                  timing.compiled_tick and timing.loop_time_s > target]
+        lines.append(f"{'compiled' if timing.compiled_tick else 'python':<14}"
+                     f"{timing.tick_median_us:>10.1f}{timing.tick_p99_us:>9.1f}{beyond:>13.1f}"
+                     f"{beyond / step_us:>7.2f}{'*' if missed[0] else ' '}"
+                     f"{timing.loop_time_s:>12.3f}{'*' if missed[1] else ' '}{target:>9.3f}")
+    lines.append(f"targets (the compiled tick, * = missed): beyond the step at most "
+                 f"{BEYOND_STEP_TARGET}x the step; the loop time at most {LOOP_TIME_TARGET_S} s "
+                 f"per 10 s where the step is {REFERENCE_STEP_US} us ({scale:.2f}x that here)")
+    return "\n".join(lines)
