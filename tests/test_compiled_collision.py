@@ -29,7 +29,7 @@ from constraints.collision.avoidance import GJK_TOLERANCE
 from constraints.collision.primitives import PRIMITIVE_KINDS
 from controllers import CJMController
 from controllers.cjm._step import shape_distance
-from teleop.experiments.bench import close_arms
+from teleop.experiments.bench_problems import close_arms
 from teleop.robots import load_robot
 from test_collision_cjm import TRANSLATION, collision_rounding_bound, push_together
 
@@ -165,8 +165,12 @@ def test_primitive_distances_and_witness_points_equal_coal(first, second, first_
         assert abs(surface_distance(*first, first_pose, on_first)) <= SURFACE_TOLERANCE
         assert abs(surface_distance(*second, second_pose, on_second)) <= SURFACE_TOLERANCE
         np.testing.assert_allclose(on_first - on_second, distance * normal, rtol=0, atol=1e-12)
-        # the normal of two separated convex bodies is unique: coal's, negated
-        np.testing.assert_allclose(normal, -np.asarray(reference.normal), rtol=0, atol=WITNESS_TOLERANCE)
+        # the normal of two separated convex bodies is unique: coal's, negated, except
+        # where coal takes two capsules as parallel (its normal then tilts with its
+        # error; the witness points' check above holds ours)
+        if not coal_parallel_error(first, second, first_pose, second_pose):
+            np.testing.assert_allclose(normal, -np.asarray(reference.normal), rtol=0,
+                                       atol=WITNESS_TOLERANCE)
         if unique_closest_points(first, second, first_pose, second_pose):
             np.testing.assert_allclose(on_first, reference.getNearestPoint1(), rtol=0, atol=WITNESS_TOLERANCE)
             np.testing.assert_allclose(on_second, reference.getNearestPoint2(), rtol=0, atol=WITNESS_TOLERANCE)
