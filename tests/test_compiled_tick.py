@@ -19,6 +19,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from constraints.collision import Sphere
 from controllers.cjm.controller import compiled_step_available
 from controllers.cjm.python_step import PythonStep
 from teleop.controller_specs import make_controller
@@ -311,3 +312,34 @@ def test_measures_of_a_compiled_period_equal_the_python_ones() -> None:
                  "actual_linear_velocities", "constraint_velocity"):
         np.testing.assert_allclose(getattr(records[0], name), getattr(records[1], name),
                                    rtol=0.0, atol=1e-9)
+
+
+def test_an_obstacle_added_while_ticking_reaches_the_compiled_tick() -> None:
+    """An obstacle added while the loop ticks compiled adds more pairs than the step's
+    buffer holds: the step is rebuilt larger, and the tick runs on the rebuilt step's
+    pipeline, its rows holding the new obstacle's pairs, command for command as the
+    Python path's loop given the same obstacle."""
+    plan = load_scenario("bimanual-crossing")
+    loops = [make_loop(plan, compiled) for compiled in (True, False)]
+    dt = loops[0].config.dt
+    for i in range(50):
+        for loop in loops:
+            loop.advance(plan.target((i + 1) * dt))
+    capacity = loops[0].controller.step.pair_capacity
+    tip = loops[0].ee_placements()[0].translation
+    for loop in loops:
+        loop.controller.collisions.add_obstacle(Sphere(tip - [0.0, 0.0, 0.03], 0.01, name="organ"))
+    kinds = []
+    for i in range(50, 100):
+        steps = [loop.advance(plan.target((i + 1) * dt)) for loop in loops]
+        kinds.append(type(steps[0]).__name__)
+        assert steps[0].status == steps[1].status, steps[1].message
+        scale = 1.0 + float(np.max(np.abs(steps[1].qd)))
+        assert float(np.max(np.abs(steps[0].qd - steps[1].qd))) <= COMMAND_TOLERANCE * scale
+    compiled_step = loops[0].controller.step
+    assert compiled_step.pair_capacity > capacity
+    assert loops[0].compiled._pipeline is compiled_step.pipeline  # the rebuilt one
+    assert kinds[-1] == "CompiledPendingStep" and kinds.count("CompiledPendingStep") >= 48
+    pairs = loops[0].controller.report.collision.pairs
+    assert any(name.endswith("| organ") for name in pairs), pairs
+    assert pairs == loops[1].controller.report.collision.pairs

@@ -72,12 +72,12 @@ class CollisionAvoidance:
                  approach_speed: float = DEFAULT_APPROACH_SPEED, self_collision: bool = True,
                  disabled_pairs: Iterable[Sequence[str]] = (),
                  extra_pairs: Iterable[Sequence[str]] = ()) -> None:
-        self.safety_distance = as_number(safety_distance, "safety_distance", 0.0)
-        self.detection_distance = as_number(detection_distance, "detection_distance")
+        self._safety_distance = as_number(safety_distance, "safety_distance", 0.0)
+        self._detection_distance = as_number(detection_distance, "detection_distance")
         if not self.detection_distance > self.safety_distance:
             raise ValueError(f"detection_distance ({self.detection_distance:g} m) must exceed "
                              f"safety_distance ({self.safety_distance:g} m)")
-        self.approach_speed = as_number(approach_speed, "approach_speed", positive=True)
+        self._approach_speed = as_number(approach_speed, "approach_speed", positive=True)
         if not isinstance(self_collision, (bool, np.bool_)):
             raise ValueError(f"self_collision must be true or false, got {self_collision!r}")
         self.self_collision = bool(self_collision)
@@ -105,6 +105,24 @@ class CollisionAvoidance:
         self.set_obstacles(obstacles)
 
     # -- the damper ------------------------------------------------------------------------
+
+    # the damper's settings are fixed: the compiled step copies them when it describes the
+    # pairs (other settings: a new CollisionAvoidance, set on the controllers)
+
+    @property
+    def safety_distance(self) -> float:
+        """``d_s`` (m): every pair is kept at least this far apart."""
+        return self._safety_distance
+
+    @property
+    def detection_distance(self) -> float:
+        """``d_i`` (m): a pair closer than this gets its damper row."""
+        return self._detection_distance
+
+    @property
+    def approach_speed(self) -> float:
+        """``xi`` (m/s): how fast a pair may approach at ``d_i``."""
+        return self._approach_speed
 
     @property
     def gain(self) -> float:

@@ -139,7 +139,8 @@ class AffineTerms:
 class TermsWriter:
     """Writes one constraint's flat terms buffer at its link's placement: through its
     affine form (:class:`AffineTerms`) where it has one and the parametrisation is the
-    null-space one, else by evaluating the constraint."""
+    null-space one, else by evaluating the constraint. The Python step's, and the
+    compiled step's for a constraint that declares no compiled form (section 16)."""
 
     def __init__(self, constraint: Constraint, parametrisation: Parametrisation) -> None:
         self.constraint = constraint

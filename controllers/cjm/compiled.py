@@ -201,10 +201,7 @@ class CompiledStep:
         if self._collisions is not None:
             return self._solve_with_pairs(q, twist)
         qd, paper_form = self._run(q, twist)
-        report = self._report.tolist()
-        if paper_form and not (report[6] or report[7] or report[8]):  # no list, no event
-            return qd, StepReport(STATUSES[int(report[0])], METHODS[int(report[1])], *report[2:6])
-        return qd, self._step_report(report, paper_form)
+        return qd, self.last_report(paper_form)
 
     def _run(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, bool]:
         """The pipeline's step at ``q``: one C++ call, or two around the terms Python
@@ -250,12 +247,10 @@ class CompiledStep:
 
     def _write_python_pairs(self, q: np.ndarray) -> CollisionRows:
         """The collision rows at ``q`` measured by Python on ``data`` and written into the
-        C++ step's buffer (grown if they do not fit)."""
+        C++ step's buffer (sized for every pair before the pairs are described)."""
         model, data = self.setup.model, self.data
         pin.computeJointJacobians(model, data, q)
         pairs = self._collisions.rows(model, data)
-        if pairs.size > self.pair_capacity:
-            self._grow(pairs.size)
         self._pair_rows[:pairs.size] = pairs.rows
         self._pair_lower[:pairs.size] = pairs.lower
         self._step.set_pair_count(pairs.size)

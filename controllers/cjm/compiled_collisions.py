@@ -49,12 +49,13 @@ class CompiledCollisions:
     def describe(self) -> None:
         """Hand the pairs to the pipeline, or record why Python measures them."""
         description = self.collisions.primitives()
-        self._revision = self.collisions.revision
+        revision = self.collisions.revision
         uncovered = description.uncovered
         if uncovered:
             self.fallback = (f"the compiled step measures spheres, capsules, boxes and half-spaces "
                              f"only, not {', '.join(uncovered)}: Python measures the collision rows")
             self.pipeline.clear_collisions()
+            self._revision = revision
             return
         self.fallback = None
         self.pipeline.set_collisions(
@@ -64,11 +65,12 @@ class CompiledCollisions:
             list(description.obstacle_dimensions), list(description.obstacle_rotations),
             description.pairs.tolist(), list(description.pair_names), description.safety_distance,
             description.detection_distance, description.gain)
-        self._row_pairs, _, _, self._summary = self.pipeline.collision_views()
+        self._revision = revision  # only once the pipeline took them
 
     def pair_indices(self) -> np.ndarray:
-        """The index (into ``collisions.pairs``) of each row of the last step."""
-        return self._row_pairs[:int(self._summary[0])].copy()
+        """The index (into ``collisions.pairs``) of each row of the last step (a copy)."""
+        row_pairs, _, _, summary = self.pipeline.collision_views()
+        return row_pairs[:int(summary[0])].copy()
 
     def rows(self) -> CollisionRows:
         """The rows the last step measured (copies of the C++ buffers), kept as

@@ -72,8 +72,8 @@ class CompiledTick:
         collision rows, if any, measured by its pipeline); a rebuilt step's pipeline is
         attached (the filter's state stays)."""
         step = self.controller.step
-        if step is self._step:  # the step of the last period: are its collision pairs current?
-            return step.collision_rows is None or step.tick_ready
+        if step is self._step and step.pipeline is self._pipeline:  # the last period's
+            return step.collision_rows is None or step.tick_ready  # pairs still current?
         pipeline = getattr(step, "pipeline", None)
         if pipeline is None or not step.tick_ready:
             return False

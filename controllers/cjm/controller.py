@@ -42,7 +42,7 @@ def python_step_forced() -> bool:
 def compiled_step_available() -> bool:
     """Whether the C++ extension of the compiled step (section 16) is built here."""
     try:
-        from ._step import JOINT_KINDS, Pipeline, Tolerances  # noqa: F401  (an older build lacks them)
+        from ._step import JOINT_KINDS, SHAPE_KINDS, Pipeline, Tick, Tolerances  # noqa: F401  (an older build lacks them)
     except ImportError:
         return False
     return True
@@ -316,10 +316,7 @@ class CJMController(Controller):
         None on the Python backend."""
         if self.backend != "compiled":
             return None
-        try:
-            from .compiled_tick import CompiledTick
-        except ImportError:  # an extension built before the tick
-            return None
+        from .compiled_tick import CompiledTick
 
         return CompiledTick(self, dt, kp, max_linear_speed, max_angular_speed,
                             target_time_constant, feed_forward)

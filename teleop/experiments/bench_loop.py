@@ -98,8 +98,8 @@ def format_loop_table(timings: list[LoopTiming], step_us: float) -> str:
              f"{'loop time s':>13}{'target s':>10}"]
     for timing in timings:
         beyond = timing.tick_median_us - step_us
-        per_second = 10.0 / (timing.ticks * 1e-3)  # the target is for a 10 s run
-        target = LOOP_TIME_TARGET_S * scale / per_second
+        run_seconds = timing.ticks * LoopConfig().dt  # the target is for a 10 s run
+        target = LOOP_TIME_TARGET_S * scale * run_seconds / 10.0
         missed = [timing.compiled_tick and beyond / step_us > BEYOND_STEP_TARGET,
                   timing.compiled_tick and timing.loop_time_s > target]
         lines.append(f"{'compiled' if timing.compiled_tick else 'python':<14}"

@@ -355,7 +355,10 @@ class TeleopLoop:
             if not self._history_in_tick:
                 compiled.set_history(self._filtered_targets, self._previous_targets)
                 self._history_in_tick = True
-            result = compiled.run(poses, sensed, self.plant is None)
+            try:
+                result = compiled.run(poses, sensed, self.plant is None)
+            except ValueError:  # a declaration refused: the Python path's controlled stop
+                result = None
             if result is not None:
                 return self._advance_compiled(result, sensed, tick_start)
         if self._history_in_tick:

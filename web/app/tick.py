@@ -15,7 +15,7 @@ import pinocchio as pin
 from constraints.collision import CollisionAvoidance, CollisionRows
 from teleop.experiments.sessions import SessionRecorder
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
-from teleop.loop.closed_loop import PendingStep
+from teleop.loop import PendingStep
 from teleop.loop.moving_geometry import advance, steer
 
 from .collisions import ObstacleEntry

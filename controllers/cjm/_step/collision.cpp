@@ -206,6 +206,7 @@ Contact core_distance(const Core& first, const Core& second) {
     Vector3 axis;
     if (overlapping(first, second, depth, axis)) return penetration(first, second);
     contact.distance = closest_disjoint(first, second, contact.on_first, contact.on_second);
+    if (!(contact.distance > kTouching)) return penetration(first, second);
   }
   contact.normal = (contact.on_first - contact.on_second) / contact.distance;
   return contact;
@@ -318,6 +319,7 @@ Collisions::Collisions(std::vector<CollisionBody> bodies, std::vector<CollisionO
   distances_ = Vector::Zero(std::max<Index>(1, n_pairs));
   witnesses_ = RowMatrix::Zero(std::max<Index>(1, n_pairs), 6);
   summary_ = Vector::Zero(3);
+  summary_ << 0.0, kInfinity, -1.0;  // no pair measured yet
 }
 
 void Collisions::place(const Kinematics& kinematics) {

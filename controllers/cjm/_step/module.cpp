@@ -447,9 +447,13 @@ PYBIND11_MODULE(_step, module) {
            "step time in us, twist saturated, period had a previous target).")
       .def("start", [](BoundTick& tick, py::handle targets, py::handle q) -> py::object {
              if (!tick.load(targets, q)) return py::none();
-             py::gil_scoped_release release;
-             tick.begin();
-             return py::bool_(tick.pipeline().twist().allFinite());
+             bool finite = false;
+             {
+               py::gil_scoped_release release;
+               tick.begin();
+               finite = tick.pipeline().twist().allFinite();
+             }
+             return py::bool_(finite);
            }, py::arg("targets"), py::arg("q"),
            "The period up to the step (filter, kinematics, twists, task rows, declared terms): "
            "None when q is not a finite float64 vector of nq, else whether the twist is finite.")
@@ -466,8 +470,9 @@ PYBIND11_MODULE(_step, module) {
       .def("refused", [](BoundTick& tick) { return tick.result(kTickRefused, false); },
            "run()'s tuple for a period start() found a twist that is not finite in.")
       .def_property_readonly("twist", [](py::object self) {
-        auto& vector = self.cast<BoundTick&>().pipeline().twist();
-        return view(vector.data(), {vector.size()}, self);
+        BoundTick& tick = self.cast<BoundTick&>();
+        auto& vector = tick.pipeline().twist();
+        return view(vector.data(), {vector.size()}, tick.pipeline_object);
       }, "The stacked twist of the period (after the caps).")
       .def_property_readonly("filtered", [](py::object self) {
         auto& matrix = self.cast<BoundTick&>().filtered();

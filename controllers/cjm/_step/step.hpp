@@ -114,7 +114,8 @@ class Step {
   Index terms_offset(Index index) const { return terms_offset_[index]; }
 
   //! Collision rows ``pair_rows() qd >= pair_lower()`` (docs/design.md section 18.4):
-  //! Python writes the first set_pair_count() of at most pair_capacity() before a step.
+  //! The first set_pair_count() of at most pair_capacity(), written before a step by the
+  //! pipeline's collision rows (Collisions::write_rows) or, for shapes it does not cover, by Python.
   RowMatrix& pair_rows() { return pair_rows_; }
   Vector& pair_lower() { return pair_lower_; }
   Index pair_capacity() const { return pair_lower_.size(); }
