@@ -151,11 +151,7 @@ def bench_twist(robot: Robot, holes: Sequence[Constraint],
     ``J_e1 qd = BENCH_TWIST`` gives them, so that the twists are consistent with the holes
     (two trocars on one torso cannot meet any pair, docs/design.md section 11.2), at
     ``base`` (default: home)."""
-    base = robot.q_home if base is None else base
-    model = robot.model
-    data = model.createData()
-    pin.computeJointJacobians(model, data, base)
-    pin.updateFramePlacements(model, data)
+    model, data = _kinematics_at(robot, base)
     first, *others = robot.ee_frame_ids
     rows = np.vstack([_hole_rows(robot, holes, base),
                       pin.getFrameJacobian(model, data, first, pin.LOCAL)])
@@ -165,15 +161,21 @@ def bench_twist(robot: Robot, holes: Sequence[Constraint],
                                           for frame in others)])
 
 
+def _kinematics_at(robot: Robot, base: np.ndarray | None) -> tuple[pin.Model, pin.Data]:
+    """The model and a data with its joint Jacobians and frame placements at ``base``
+    (default: home)."""
+    model = robot.model
+    data = model.createData()
+    pin.computeJointJacobians(model, data, robot.q_home if base is None else base)
+    pin.updateFramePlacements(model, data)
+    return model, data
+
+
 def _hole_rows(robot: Robot, holes: Sequence[Constraint],
                base: np.ndarray | None = None) -> np.ndarray:
     """The constraints' stacked rows ``A`` (``A qd = b``; a barrier's as an equality) at
     ``base`` (default: home)."""
-    base = robot.q_home if base is None else base
-    model = robot.model
-    data = model.createData()
-    pin.computeJointJacobians(model, data, base)
-    pin.updateFramePlacements(model, data)
+    model, data = _kinematics_at(robot, base)
     return np.vstack([hole.rows(model, data, model.getFrameId(hole.link))[0] for hole in holes]
                      or [np.zeros((0, model.nv))])
 
