@@ -25,6 +25,8 @@ from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
 from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bounded, csv_list,
                         damper_settings, one_line, sentence)
 from .commands import Command, registered_commands
+from .sweep import add_arguments as add_sweep_arguments
+from .sweep import run as run_sweep_command
 
 PACKAGE = "cjm-teleop"
 DEFAULT_CONTROLLERS = ", ".join(default_specs("compare"))
@@ -297,13 +299,19 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     _add_plant_options(bench, "its default; with --plant, each control period's tick is "
                        "timed on the kinematic plant and on this one (the built-in robots)")
 
+    sweep = _add_command(commands, "sweep", "run compare cells over a grid of scenarios, "
+                         "controllers, seeds and imperfections on a process pool or Ray, "
+                         "resumable, with a results database and a summary", _sweep,
+                         epilog="docs/sweep.md has the spec's fields and the database")
+    add_sweep_arguments(sweep)
+
     if registered:
         _add_registered(commands)
     return parser
 
 
 #: The subcommands defined here: running one loads no registered command.
-BUILT_IN = ("compare", "replay", "record", "scenarios", "bench")
+BUILT_IN = ("compare", "replay", "record", "scenarios", "bench", "sweep")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -429,6 +437,10 @@ def _bench(args: argparse.Namespace) -> int:
     if args.json:
         write_json(results, args.json)
     return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    return run_sweep_command(args)
 
 
 if __name__ == "__main__":

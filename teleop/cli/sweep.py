@@ -1,0 +1,171 @@
+"""``teleop sweep``: its options, and running, showing and reporting cells (docs/sweep.md)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .arguments import csv_list, numbers
+
+def _ints(text: str) -> list[int]:
+    try:
+        return [int(item) for item in csv_list(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+
+
+def _seeds(text: str) -> int | list[int]:
+    """``20`` (a count: seeds 0 to 19) or ``3,7,11`` (those seeds)."""
+    values = _ints(text)
+    return values[0] if "," not in text else values
+
+
+def _pair(text: str) -> list[float]:
+    values = numbers(text)
+    if len(values) != 2:
+        raise argparse.ArgumentTypeError(f"expected MM,MRAD, got {text!r}")
+    return values
+
+
+#: The grid options: (option, spec field, parser of its text, metavar, help).
+GRID_OPTIONS = (
+    ("--scenarios", "scenarios", csv_list, "NAMES", "comma-separated scenarios"),
+    ("--controllers", "controllers", csv_list, "SPECS", "comma-separated controllers"),
+    ("--seeds", "seeds", _seeds, "N|S1,S2", "a count N (seeds 0 to N-1) or a list"),
+    ("--duration", "duration", numbers, "S", "seconds per cell (default: each scenario's)"),
+    ("--rate", "rate", numbers, "HZ", "control rate (default 1000)"),
+    ("--plants", "plants", csv_list, "KINDS", "kinematic, mujoco (default kinematic)"),
+    ("--payload", "payload", numbers, "KG", "payload at each EE, mujoco only (default 0)"),
+    ("--kp", "kp", numbers, "K", "pose-error gains (default 20)"),
+    ("--constraint-gain", "constraint_gain", numbers, "K",
+     "constraints' drift gains (default: their own)"),
+    ("--encoder-noise", "encoder_noise", numbers, "RAD", "encoder noise stds (default 0)"),
+    ("--latency", "latency", _ints, "PERIODS", "command latencies (default 0)"),
+    ("--joint-time-constant", "joint_time_constant", numbers, "S",
+     "joint lag time constants (default 0)"),
+    ("--trocar-shift", "trocar_shift", numbers, "M",
+     "half-width of each trocar's random slide along its link (default 0)"),
+    ("--path-amplitude", "path_amplitude", numbers, "M",
+     "bound of the random motion added to each EE target (default 0)"),
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("action", nargs="?", choices=("run", "show", "report"), default="run",
+                        help="run the sweep; show a cell (its inputs, outcome and the "
+                        "compare command that redoes it); make a cell's compare report")
+    parser.add_argument("key", nargs="?", help="the cell's key, or its first digits (show, "
+                        "report)")
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="the sweep's folder: results.sqlite, summary.html, reports/")
+    parser.add_argument("--spec", metavar="FILE",
+                        help="a TOML or JSON spec (docs/sweep.md); options given replace its "
+                        "fields")
+    grid = parser.add_argument_group("the grid", "each a single value or a comma-separated "
+                                     "list: every combination is a cell")
+    for option, name, kind, metavar, text in GRID_OPTIONS:
+        grid.add_argument(option, dest=name, type=kind, metavar=metavar, help=text)
+    grid.add_argument("--calibration-error", dest="calibration_error", type=_pair,
+                      metavar="MM,MRAD", help="std of the calibration error of every joint "
+                      "placement (default 0,0)")
+    grid.add_argument("--time-limit", dest="time_limit", type=float, metavar="S",
+                      help="wall-clock limit of one cell (default 600)")
+    engine = parser.add_argument_group("the engine")
+    engine.add_argument("--engine", choices=("local", "ray"), default="local",
+                        help="local: a pool of worker processes; ray: Ray tasks")
+    engine.add_argument("--workers", type=int, help="cells at once (default: the cores)")
+    engine.add_argument("--address", help="an existing Ray cluster (default: a local "
+                        "instance, started and stopped here)")
+    engine.add_argument("--retries", type=int, default=2,
+                        help="runs of a cell again after its worker died")
+    engine.add_argument("--retry-failed", action="store_true",
+                        help="run again the cells the database holds as failed")
+    parser.add_argument("--reports", type=int, default=3, metavar="N",
+                        help="make the compare reports of the N worst done cells at the end")
+    parser.add_argument("--quiet", action="store_true", help="no progress")
+
+
+def options_document(args: argparse.Namespace) -> dict:
+    """The grid options given, as spec fields."""
+    given = {name: getattr(args, name) for _, name, *_ in GRID_OPTIONS
+             if getattr(args, name) is not None}
+    for name in ("duration", "rate", "payload", "kp", "constraint_gain", "encoder_noise",
+                 "latency", "joint_time_constant", "trocar_shift", "path_amplitude"):
+        if name in given and len(given[name]) == 1:
+            given[name] = given[name][0]
+    if args.calibration_error is not None:
+        given["calibration_error_mm"], given["calibration_error_mrad"] = args.calibration_error
+    if args.time_limit is not None:
+        given["time_limit"] = args.time_limit
+    return given
+
+
+def run(args: argparse.Namespace) -> int:
+    """``teleop sweep``: run, show or report (exit code)."""
+    if args.action in ("show", "report"):
+        if args.key is None:
+            raise ValueError(f"{args.action} needs a cell's key")
+        return show(args) if args.action == "show" else report(args)
+    if args.key is not None:
+        raise ValueError(f"unexpected argument {args.key!r} (a key goes after show or report)")
+    return run_grid(args)
+
+
+def run_grid(args: argparse.Namespace) -> int:
+    from teleop.experiments.sweep import build_spec, load_spec, run_sweep
+    from teleop.experiments.sweep.driver import default_workers, sweep_folder
+    from teleop.experiments.sweep.summary import finish_sweep
+
+    options = options_document(args)
+    spec = load_spec(args.spec, options) if args.spec else build_spec(options)
+    workers = default_workers() if args.workers is None else args.workers
+    folder = sweep_folder(args.out)
+    for note in spec.notes:
+        print(f"note: {note}", file=sys.stderr)
+    print(f"sweep: {spec.size} cells ({spec.source}) into {folder}, engine {args.engine}, "
+          f"{workers} workers", file=sys.stderr)
+    try:
+        outcome = run_sweep(spec, folder, args.engine, workers, args.retries, args.address,
+                            args.retry_failed, progress=not args.quiet)
+    except KeyboardInterrupt:
+        print("sweep: interrupted; every finished cell is written, the same command resumes",
+              file=sys.stderr)
+        return 130
+    print(outcome.throughput_line(workers))
+    if outcome.skipped:
+        print(f"skipped {outcome.skipped} cells the database held")
+    if outcome.written_elsewhere:
+        print(f"{outcome.written_elsewhere} cells were written by another sweep first")
+    print(finish_sweep(spec, folder, args.reports))
+    return 0
+
+
+def show(args: argparse.Namespace) -> int:
+    from teleop.experiments.sweep.summary import describe_row
+    from teleop.experiments.sweep.database import DATABASE_NAME, ResultsDatabase
+
+    with ResultsDatabase(_existing(args.out) / DATABASE_NAME) as database:
+        print(describe_row(database.row(args.key)))
+    return 0
+
+
+def report(args: argparse.Namespace) -> int:
+    from teleop.experiments.sweep.database import DATABASE_NAME, ResultsDatabase
+    from teleop.experiments.sweep.summary import make_report
+
+    folder = _existing(args.out)
+    with ResultsDatabase(folder / DATABASE_NAME) as database:
+        row = database.row(args.key)
+    print(f"wrote {make_report(row, folder)}")
+    return 0
+
+
+def _existing(out: str):
+    from pathlib import Path
+
+    from teleop.experiments.sweep.database import DATABASE_NAME
+
+    folder = Path(out)
+    if not (folder / DATABASE_NAME).is_file():
+        raise ValueError(f"{folder} holds no sweep ({DATABASE_NAME} missing)")
+    return folder

@@ -1,0 +1,114 @@
+"""The Ray engine: each cell a Ray task (docs/sweep.md).
+
+On a local instance (started here: as many CPUs as workers, no dashboard) or an existing
+cluster (``address``; every node needs this package installed). A task whose worker dies
+is retried by Ray (``max_retries``); a task still running ``grace`` seconds past the cell's
+time limit is cancelled (``ray.cancel(force=True)`` kills its worker) and the cell failed.
+As many tasks are in flight as there are workers, so a task starts when it is submitted
+and its clock is the cell's.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from typing import Any, Callable, Iterator
+
+from .cell import FAILED, run_cell
+from .pool import GRACE_S, SINGLE_THREADED, Finished
+from .spec import Cell
+
+
+def _import_ray():
+    try:
+        import ray
+    except ImportError:
+        raise ValueError("--engine ray needs Ray: pip install -e \".[ray]\"") from None
+    return ray
+
+
+def run_cell_task(key: str, inputs: dict[str, Any], time_limit: float) -> tuple[str, dict, float]:
+    """A Ray task: the cell's outcome and the time it started (the worker's clock)."""
+    started = time.time()
+    return key, run_cell(inputs, time_limit), started
+
+
+class RayEngine:
+    """Cells as Ray tasks, at most ``workers`` in flight."""
+
+    def __init__(self, workers: int, retries: int = 2, address: str | None = None,
+                 grace: float = GRACE_S) -> None:
+        self.workers, self.retries, self.address, self.grace = workers, retries, address, grace
+        self.started_instance = False
+
+    def _connect(self):
+        ray = _import_ray()
+        if ray.is_initialized():
+            return ray
+        options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
+                       runtime_env={"env_vars": SINGLE_THREADED})
+        try:
+            if self.address:
+                ray.init(address=self.address, **options)
+            else:
+                ray.init(num_cpus=self.workers, **options)
+                self.started_instance = True
+        except (ConnectionError, RuntimeError, ValueError) as error:
+            where = f"the Ray cluster at {self.address}" if self.address else "a local Ray instance"
+            raise ValueError(f"cannot start or reach {where}: {' '.join(str(error).split())}") from None
+        return ray
+
+    def shutdown(self) -> None:
+        """Stop the local instance this engine started (an existing cluster stays up)."""
+        if self.started_instance:
+            _import_ray().shutdown()
+            self.started_instance = False
+
+    def run(self, cells: list[Cell], time_limit: float,
+            on_start: Callable[[Cell], None] | None = None) -> Iterator[Finished]:
+        """Run ``cells``; yields each one's :class:`Finished` in the order they end."""
+        ray = self._connect()
+        task = ray.remote(num_cpus=1, max_retries=self.retries, retry_exceptions=False)(
+            run_cell_task)
+        queue = deque(cells)
+        in_flight: dict[Any, tuple[Cell, float]] = {}
+        last_end: dict[str, float] = {}
+        try:
+            while queue or in_flight:
+                while queue and len(in_flight) < self.workers:
+                    cell = queue.popleft()
+                    in_flight[task.remote(cell.key, cell.inputs, time_limit)] = (
+                        cell, time.monotonic())
+                    if on_start is not None:
+                        on_start(cell)
+                ready, _ = ray.wait(list(in_flight), num_returns=1, timeout=1.0)
+                for ref in ready:
+                    cell, submitted = in_flight.pop(ref)
+                    yield self._finished(ray, ref, cell, submitted, last_end)
+                now = time.monotonic()
+                for ref, (cell, submitted) in list(in_flight.items()):
+                    if now > submitted + time_limit + self.grace:
+                        ray.cancel(ref, force=True)
+                        del in_flight[ref]
+                        yield Finished(cell, {
+                            "status": FAILED, "metrics": None, "elapsed_s": now - submitted,
+                            "reason": f"time limit {time_limit:g} s exceeded and no answer "
+                                      f"{self.grace:g} s later: its task was cancelled"}, 1)
+        finally:
+            for ref in in_flight:
+                ray.cancel(ref, force=True)
+
+    def _finished(self, ray, ref, cell: Cell, submitted: float,
+                  last_end: dict[str, float]) -> Finished:
+        try:
+            _, outcome, started = ray.get(ref)
+        except ray.exceptions.RayError as error:  # its worker died more than retries times
+            reason = " ".join(str(error).split())[:300]
+            return Finished(cell, {"status": FAILED, "metrics": None,
+                                   "elapsed_s": time.monotonic() - submitted,
+                                   "reason": f"{type(error).__name__}: {reason}"},
+                            self.retries + 1)
+        worker = outcome.get("worker", "")
+        gap = None if worker not in last_end else started - last_end[worker]
+        last_end[worker] = started + outcome.get("elapsed_s", 0.0)
+        return Finished(cell, outcome, 1, gap)

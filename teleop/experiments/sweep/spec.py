@@ -1,0 +1,365 @@
+"""A sweep: a grid of ``compare`` cells (docs/sweep.md, docs/design.md section 15.7).
+
+A spec names scenarios, controllers, seeds and every other input of a run, each either one
+value or a list of values; the grid is every combination of the lists. One combination
+with one controller is a :class:`Cell`: one ``teleop compare`` run, reproducible alone from
+its inputs. A cell's inputs are a flat mapping of :data:`CELL_FIELDS` with the fields at
+their defaults left out, so a field added later with a neutral default changes no key; its
+key is the SHA-256 of their canonical JSON.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+from constraints.validation import short_repr
+
+#: Hex digits of a cell's key (80 bits: no collision in any sweep of this world).
+KEY_DIGITS = 20
+
+#: The largest seed: SQLite's and NumPy's 64-bit integers.
+MAX_SEED = 2**63 - 1
+
+#: The most cells one spec may expand to: far beyond a month of a large cluster.
+MAX_CELLS = 1_000_000
+
+#: Default wall-clock limit of one cell (s).
+DEFAULT_TIME_LIMIT_S = 600.0
+
+
+def _text(value: Any, name: str) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise ValueError(f"{name} must be a non-empty string, got {short_repr(value)}")
+    return value.strip()
+
+
+def _real(minimum: float | None = None, maximum: float | None = None,
+          positive: bool = False) -> Callable[[Any, str], float]:
+    """A checker of a finite float in range (``1`` and ``1.0`` are one value)."""
+    def check(value: Any, name: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{name} must be a number, got {short_repr(value)}")
+        try:
+            number = float(value)
+        except OverflowError:
+            raise ValueError(f"{name} must be finite, got an integer of {len(str(value))} "
+                             "digits") from None
+        if not math.isfinite(number):
+            raise ValueError(f"{name} must be finite, got {number}")
+        if positive and not number > 0:
+            raise ValueError(f"{name} must be > 0, got {number:g}")
+        if minimum is not None and number < minimum:
+            raise ValueError(f"{name} must be >= {minimum:g}, got {number:g}")
+        if maximum is not None and number > maximum:
+            raise ValueError(f"{name} must be <= {maximum:g}, got {number:g}")
+        return number
+    return check
+
+
+def _integer(minimum: int = 0, maximum: int | None = None) -> Callable[[Any, str], int]:
+    def check(value: Any, name: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"{name} must be an integer, got {short_repr(value)}")
+        if value < minimum or (maximum is not None and value > maximum):
+            bound = f"in [{minimum}, {maximum}]" if maximum is not None else f">= {minimum}"
+            raise ValueError(f"{name} must be an integer {bound}, got {value}")
+        return value
+    return check
+
+
+def _optional(check: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
+    return lambda value, name: None if value is None else check(value, name)
+
+
+@dataclass(frozen=True)
+class CellField:
+    """One input of a cell: its name, its default (left out of the key when equal), how a
+    value is checked and normalised, the ``teleop compare`` option that sets it (None: the
+    command has a form of its own for it) and the spec table it may be written in."""
+
+    name: str
+    default: Any
+    check: Callable[[Any, str], Any]
+    option: str | None = None
+    group: str | None = None
+    help: str = ""
+
+
+def _cell_fields() -> tuple[CellField, ...]:
+    from teleop.limits import (MAX_DURATION_S, MAX_ENCODER_NOISE_RAD, MAX_LATENCY_PERIODS,
+                               MAX_RATE_HZ, MAX_TIME_CONSTANT_S)
+
+    return (
+        CellField("scenario", None, _text, "--scenario", help="scenario names"),
+        CellField("controller", None, _text, "--controllers", help="controller specs"),
+        CellField("seed", 0, _integer(0, MAX_SEED), "--seed",
+                  help="seeds the encoder noise, the calibration error and the random "
+                       "trocar and path"),
+        CellField("duration", None, _optional(_real(positive=True, maximum=MAX_DURATION_S)),
+                  "--duration", help="seconds (default: each scenario's)"),
+        CellField("rate", 1000.0, _real(positive=True, maximum=MAX_RATE_HZ), "--rate",
+                  help="control rate (Hz)"),
+        CellField("plant", "kinematic", _plant_kind, "--plant", help="kinematic or mujoco"),
+        CellField("payload", 0.0, _real(0.0, 100.0), "--payload",
+                  help="kg at each EE (mujoco)"),
+        CellField("kp", 20.0, _real(positive=True), "--kp", help="pose-error gain (1/s)"),
+        CellField("constraint_gain", None, _optional(_real(0.0)), "--constraint-gain",
+                  help="every constraint's drift gain (default: their own)"),
+        CellField("encoder_noise", 0.0, _real(0.0, MAX_ENCODER_NOISE_RAD), "--encoder-noise",
+                  "imperfections", "rad"),
+        CellField("latency", 0, _integer(0, MAX_LATENCY_PERIODS), "--latency",
+                  "imperfections", "control periods"),
+        CellField("joint_time_constant", 0.0, _real(0.0, MAX_TIME_CONSTANT_S),
+                  "--joint-time-constant", "imperfections", "s"),
+        CellField("calibration_error_mm", 0.0, _real(0.0, 50.0), None, "imperfections",
+                  "std of each joint placement's translation error (mm)"),
+        CellField("calibration_error_mrad", 0.0, _real(0.0, 200.0), None, "imperfections",
+                  "std of each joint placement's rotation error (mrad)"),
+        CellField("trocar_shift", 0.0, _real(0.0, 0.1), "--trocar-shift", "variations",
+                  "half-width (m) of each trocar's uniform slide along its link"),
+        CellField("path_amplitude", 0.0, _real(0.0, 0.1), "--path-amplitude", "variations",
+                  "bound (m) of the smooth random motion added to each EE target"),
+    )
+
+
+def _plant_kind(value: Any, name: str) -> str:
+    from teleop.plants.choice import PLANT_KINDS
+
+    if value not in PLANT_KINDS:
+        raise ValueError(f"{name} must be one of {', '.join(PLANT_KINDS)}, got "
+                         f"{short_repr(value)}")
+    return value
+
+
+CELL_FIELDS: tuple[CellField, ...] = _cell_fields()
+FIELDS_BY_NAME = {f.name: f for f in CELL_FIELDS}
+
+#: The spec's own fields beside the cells' (plural names for the lists of the grid).
+SPEC_KEYS = {"scenarios": "scenario", "controllers": "controller", "seeds": "seed",
+             "plants": "plant"}
+RUN_KEYS = ("time_limit",)
+GROUPS = ("imperfections", "variations")
+
+
+def cell_key(inputs: Mapping[str, Any]) -> str:
+    """The key of a cell's inputs: SHA-256 of their canonical JSON, :data:`KEY_DIGITS` hex."""
+    text = json.dumps(dict(inputs), sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:KEY_DIGITS]
+
+
+def canonical_inputs(values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` checked field by field (``ValueError`` naming it), normalised, and the
+    fields at their defaults left out; ``scenario`` and ``controller`` are required."""
+    unknown = sorted(set(values) - set(FIELDS_BY_NAME))
+    if unknown:
+        raise ValueError(f"unknown cell field {unknown[0]!r}")
+    inputs = {}
+    for cell_field in CELL_FIELDS:
+        if cell_field.name not in values:
+            if cell_field.default is None and cell_field.name in ("scenario", "controller"):
+                raise ValueError(f"{cell_field.name} is required")
+            continue
+        value = cell_field.check(values[cell_field.name], cell_field.name)
+        if value != cell_field.default or cell_field.name in ("scenario", "controller"):
+            inputs[cell_field.name] = value
+    return inputs
+
+
+def cell_value(inputs: Mapping[str, Any], name: str) -> Any:
+    """A field of a cell's inputs, its default when left out."""
+    return inputs.get(name, FIELDS_BY_NAME[name].default)
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One ``compare`` run of the grid: its canonical inputs and their key."""
+
+    inputs: dict[str, Any]
+    key: str
+
+    @classmethod
+    def of(cls, values: Mapping[str, Any]) -> "Cell":
+        inputs = canonical_inputs(values)
+        return cls(inputs, cell_key(inputs))
+
+    def __getitem__(self, name: str) -> Any:
+        return cell_value(self.inputs, name)
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A sweep: every grid field as the list of its values, and the run's own settings.
+
+    ``grid`` maps each cell field to the values it takes (one value: a list of one);
+    ``time_limit`` is each cell's wall-clock limit (s), not part of a cell's key.
+    """
+
+    grid: dict[str, list[Any]]
+    time_limit: float = DEFAULT_TIME_LIMIT_S
+    source: str = "the command line"
+    notes: tuple[str, ...] = field(default=())
+
+    def cells(self) -> list[Cell]:
+        """Every combination of the grid, a seed's controllers side by side."""
+        names = [f.name for f in CELL_FIELDS if f.name in self.grid]
+        order = [n for n in names if n not in ("seed", "controller")] + ["seed", "controller"]
+        combinations = itertools.product(*(self.grid[name] for name in order))
+        return [Cell.of(dict(zip(order, values))) for values in combinations]
+
+    @property
+    def size(self) -> int:
+        return math.prod(len(values) for values in self.grid.values())
+
+
+def build_spec(document: Mapping[str, Any], source: str = "the command line") -> SweepSpec:
+    """A :class:`SweepSpec` from a spec document (a TOML or JSON file's table, or the
+    command line's options as one); ``ValueError`` naming the field for anything wrong:
+    an unknown or missing field, a value out of range, an empty list, a value given twice,
+    an unknown scenario or controller."""
+    if not isinstance(document, Mapping):
+        raise ValueError(f"a spec must be a table of fields, got {type(document).__name__}")
+    flat: dict[str, Any] = {}
+    for name, value in document.items():
+        if name in GROUPS:
+            if not isinstance(value, Mapping):
+                raise ValueError(f"{name} must be a table, got {short_repr(value)}")
+            for inner, inner_value in value.items():
+                cell_field = FIELDS_BY_NAME.get(inner)
+                if cell_field is None or cell_field.group != name:
+                    raise ValueError(f"unknown field {name}.{inner}")
+                flat[inner] = inner_value
+        elif name in SPEC_KEYS or name in RUN_KEYS or name in FIELDS_BY_NAME:
+            if name in ("scenario", "controller", "seed", "plant"):
+                raise ValueError(f"unknown field {name!r} (did you mean {name}s?)")
+            flat[name] = value
+        else:
+            raise ValueError(f"unknown field {name!r}")
+    for required in ("scenarios", "controllers"):
+        if required not in flat:
+            raise ValueError(f"{required} is required")
+    time_limit = _real(positive=True, maximum=86_400.0)(
+        flat.pop("time_limit", DEFAULT_TIME_LIMIT_S), "time_limit")
+    grid: dict[str, list[Any]] = {}
+    for name, value in flat.items():
+        cell_name = SPEC_KEYS.get(name, name)
+        grid[cell_name] = _values(name, cell_name, value)
+    _check_names(grid)
+    if any(grid.get("payload", [0.0])) and "kinematic" in grid.get("plant", ["kinematic"]):
+        raise ValueError("payload needs the mujoco plant (plants lists kinematic)")
+    spec = SweepSpec(grid, time_limit, source)
+    if spec.size > MAX_CELLS:
+        raise ValueError(f"the grid has {spec.size} cells, more than {MAX_CELLS}")
+    return SweepSpec(grid, time_limit, source, _notes(grid))
+
+
+def _values(name: str, cell_name: str, value: Any) -> list[Any]:
+    """One grid field's values: checked, normalised, none twice, at least one."""
+    cell_field = FIELDS_BY_NAME[cell_name]
+    if name == "seeds" and isinstance(value, int) and not isinstance(value, bool):
+        if not 1 <= value <= MAX_CELLS:
+            raise ValueError(f"seeds as a count must be in [1, {MAX_CELLS}], got {value}")
+        return list(range(value))
+    values = list(value) if isinstance(value, (list, tuple)) else [value]
+    if not values:
+        raise ValueError(f"{name} is empty: the grid would have no cell")
+    checked = [cell_field.check(v, name) for v in values]
+    repeated = sorted({repr(v) for v in checked if checked.count(v) > 1})
+    if repeated:
+        raise ValueError(f"{name} lists {repeated[0]} twice")
+    return checked
+
+
+def _check_names(grid: dict[str, list[Any]]) -> None:
+    """Every scenario loads and every controller builds on each scenario's robot."""
+    from teleop.controller_specs import make_controller
+    from teleop.experiments.scenarios import load_scenario
+
+    for scenario in grid["scenario"]:
+        try:
+            plan = load_scenario(scenario)
+        except ValueError as error:
+            raise ValueError(f"scenarios: {error}") from None
+        for controller in grid["controller"]:
+            try:
+                make_controller(controller, plan.robot, plan.make_constraints(),
+                                collisions=plan.make_collisions())
+            except ValueError as error:
+                raise ValueError(f"controllers: {error}") from None
+
+
+def _notes(grid: dict[str, list[Any]]) -> tuple[str, ...]:
+    """What a human should know before running: seeds that change nothing."""
+    random = ("encoder_noise", "calibration_error_mm", "calibration_error_mrad",
+              "trocar_shift", "path_amplitude")
+    if len(grid["seed"]) > 1 and not any(any(v for v in grid.get(name, [0])) for name in random):
+        return (f"the {len(grid['seed'])} seeds change nothing: no encoder noise, calibration "
+                "error, trocar shift or path amplitude is on, so each seed's cells repeat the "
+                "same run",)
+    return ()
+
+
+def load_spec(path: str | Path, options: Mapping[str, Any] | None = None) -> SweepSpec:
+    """A spec file, TOML (``.toml``) or JSON (anything else), with the command line's
+    ``options`` over its fields (:func:`merge_options`); ``ValueError`` naming the file
+    and what is wrong."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        reason = getattr(error, "strerror", None) or error
+        raise ValueError(f"{path}: cannot read the spec ({reason})") from None
+    document = _parse(path, text)
+    try:
+        if options:
+            document = merge_options(document, options)
+        return build_spec(document, str(path))
+    except ValueError as error:
+        raise ValueError(f"{path}: {error}") from None
+
+
+def _parse(path: Path, text: str) -> Any:
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+
+    if path.suffix.lower() == ".toml":
+        try:
+            return tomllib.loads(text)
+        except tomllib.TOMLDecodeError as error:
+            raise ValueError(f"{path}: not a TOML spec ({error})") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}:{error.lineno}: not a JSON spec ({error.msg})") from None
+
+
+def merge_options(document: Mapping[str, Any], options: Mapping[str, Any]) -> dict[str, Any]:
+    """A spec document with the command line's options over it (an option given replaces
+    the file's field, in its table when it has one)."""
+    merged = {name: (dict(value) if isinstance(value, Mapping) else value)
+              for name, value in document.items()}
+    for name, value in options.items():
+        group = FIELDS_BY_NAME[name].group if name in FIELDS_BY_NAME else None
+        if group is not None:
+            merged.setdefault(group, {})
+            if not isinstance(merged[group], dict):
+                raise ValueError(f"{group} must be a table, got {short_repr(merged[group])}")
+            merged[group][name] = value
+        else:
+            merged[name] = value
+    return merged
+
+
+def describe_cell(inputs: Mapping[str, Any]) -> str:
+    """One line: the scenario, controller, seed and every other input not at its default."""
+    rest = ", ".join(f"{name} {value}" for name, value in inputs.items()
+                     if name not in ("scenario", "controller", "seed"))
+    return (f"{inputs['scenario']} / {inputs['controller']} / seed {cell_value(inputs, 'seed')}"
+            + (f" ({rest})" if rest else ""))
