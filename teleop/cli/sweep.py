@@ -113,12 +113,11 @@ def run(args: argparse.Namespace) -> int:
 
 def run_grid(args: argparse.Namespace) -> int:
     from teleop.experiments.sweep import build_spec, load_spec, run_sweep
-    from teleop.experiments.sweep.driver import default_workers, sweep_folder
-    from teleop.experiments.sweep.summary import finish_sweep
-
+    from teleop.experiments.sweep.driver import default_workers, make_engine, sweep_folder
     options = options_document(args)
     spec = load_spec(args.spec, options) if args.spec else build_spec(options)
     workers = default_workers() if args.workers is None else args.workers
+    make_engine(args.engine, workers, args.retries, args.address)  # refused before any work
     folder = sweep_folder(args.out)
     for note in spec.notes:
         print(f"note: {note}", file=sys.stderr)
@@ -136,6 +135,8 @@ def run_grid(args: argparse.Namespace) -> int:
         print(f"skipped {outcome.skipped} cells the database held")
     if outcome.written_elsewhere:
         print(f"{outcome.written_elsewhere} cells were written by another sweep first")
+    from teleop.experiments.sweep.summary import finish_sweep
+
     print(finish_sweep(spec, folder, args.reports))
     return 0
 

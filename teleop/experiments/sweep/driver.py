@@ -63,7 +63,12 @@ def default_workers() -> int:
 
 
 def make_engine(engine: str, workers: int, retries: int, address: str | None):
-    """The engine by name (``ValueError`` for an unknown one, or Ray missing)."""
+    """The engine by name (``ValueError`` for an unknown one, Ray missing, fewer than one
+    worker, negative retries)."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+        raise ValueError(f"retries must be >= 0, got {retries}")
     if engine == "local":
         if address:
             raise ValueError("--address needs --engine ray")
@@ -89,11 +94,8 @@ def run_sweep(spec: SweepSpec, out: str | Path, engine: str = "local",
     main module).
     """
     console = console or sys.stderr
-    if retries < 0:
-        raise ValueError(f"retries must be >= 0, got {retries}")
     workers = default_workers() if workers is None else workers
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+    runner = make_engine(engine, workers, retries, address)
     folder = sweep_folder(out)
     cells = spec.cells()
     with ResultsDatabase(folder / DATABASE_NAME) as database:
@@ -105,7 +107,6 @@ def run_sweep(spec: SweepSpec, out: str | Path, engine: str = "local",
         run = SweepRun(total=len(cells), skipped=len(cells) - len(todo))
         if not todo:
             return run
-        runner = make_engine(engine, workers, retries, address)
         bar = Progress(len(todo), console, progress)
         started = time.monotonic()
         try:

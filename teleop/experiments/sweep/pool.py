@@ -98,9 +98,9 @@ class LocalPool:
         worker.process.join(timeout=5.0)
         worker.connection.close()
 
-    def worker_pids(self) -> list[int]:
-        """The process ids of the workers running now."""
-        return [w.process.pid for w in self._pool]
+    def running(self) -> dict[str, int]:
+        """The cells running now: each key with its worker's process id."""
+        return {w.cell.key: w.process.pid for w in self._pool if w.cell is not None}
 
     def run(self, cells: list[Cell], time_limit: float,
             on_start: Callable[[Cell], None] | None = None) -> Iterator[Finished]:

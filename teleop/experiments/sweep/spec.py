@@ -249,6 +249,7 @@ def build_spec(document: Mapping[str, Any], source: str = "the command line") ->
     for name, value in flat.items():
         cell_name = SPEC_KEYS.get(name, name)
         grid[cell_name] = _values(name, cell_name, value)
+    grid.setdefault("seed", [0])
     _check_names(grid)
     if any(grid.get("payload", [0.0])) and "kinematic" in grid.get("plant", ["kinematic"]):
         raise ValueError("payload needs the mujoco plant (plants lists kinematic)")
