@@ -370,9 +370,21 @@ def test_ray_and_the_pool_give_identical_metrics_cell_by_cell(tmp_path, ray_inst
         assert deterministic(pool[key].metrics) == deterministic(on_ray[key].metrics), key
 
 
-def test_a_ray_worker_killed_mid_sweep_loses_no_cell(tmp_path, ray_instance):
-    import psutil
+def ray_task_pids(title: str = "ray::run_cell_task") -> list[int]:
+    """The processes whose title is ``title`` (Ray names a worker after its task)."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+            except OSError:  # ended meanwhile
+                continue
+            if title in cmdline:
+                pids.append(int(entry.name))
+    return pids
 
+
+def test_a_ray_worker_killed_mid_sweep_loses_no_cell(tmp_path, ray_instance):
     spec = build_spec({**SMALL, "duration": 1.0})
     killed = []
 
@@ -381,11 +393,9 @@ def test_a_ray_worker_killed_mid_sweep_loses_no_cell(tmp_path, ray_instance):
             return
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and not killed:
-            for process in psutil.process_iter(["pid", "cmdline"]):
-                if "ray::run_cell_task" in " ".join(process.info["cmdline"] or []):
-                    os.kill(process.info["pid"], signal.SIGKILL)
-                    killed.append(process.info["pid"])
-                    break
+            for pid in ray_task_pids()[:1]:
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
             time.sleep(0.05)
 
     from teleop.experiments.sweep.ray_engine import RayEngine
