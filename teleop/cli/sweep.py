@@ -29,24 +29,24 @@ def _pair(text: str) -> list[float]:
 
 #: The grid options: (option, spec field, parser of its text, metavar, help).
 GRID_OPTIONS = (
-    ("--scenarios", "scenarios", csv_list, "NAMES", "comma-separated scenarios"),
-    ("--controllers", "controllers", csv_list, "SPECS", "comma-separated controllers"),
-    ("--seeds", "seeds", _seeds, "N|S1,S2", "a count N (seeds 0 to N-1) or a list"),
+    ("--scenarios", "scenarios", csv_list, "NAMES", "comma-separated scenarios (default: the spec's)"),
+    ("--controllers", "controllers", csv_list, "SPECS", "comma-separated controllers (default: the spec's)"),
+    ("--seeds", "seeds", _seeds, "N|S1,S2", "a count N (seeds 0 to N-1) or a list (default: 1, seed 0)"),
     ("--duration", "duration", numbers, "S", "seconds per cell (default: each scenario's)"),
-    ("--rate", "rate", numbers, "HZ", "control rate (default 1000)"),
-    ("--plants", "plants", csv_list, "KINDS", "kinematic, mujoco (default kinematic)"),
-    ("--payload", "payload", numbers, "KG", "payload at each EE, mujoco only (default 0)"),
-    ("--kp", "kp", numbers, "K", "pose-error gains (default 20)"),
+    ("--rate", "rate", numbers, "HZ", "control rates in Hz (default: 1000)"),
+    ("--plants", "plants", csv_list, "KINDS", "kinematic, mujoco (default: kinematic)"),
+    ("--payload", "payload", numbers, "KG", "payload at each EE, mujoco only (default: 0)"),
+    ("--kp", "kp", numbers, "K", "pose-error gains in 1/s (default: 20)"),
     ("--constraint-gain", "constraint_gain", numbers, "K",
      "constraints' drift gains (default: their own)"),
-    ("--encoder-noise", "encoder_noise", numbers, "RAD", "encoder noise stds (default 0)"),
-    ("--latency", "latency", _ints, "PERIODS", "command latencies (default 0)"),
+    ("--encoder-noise", "encoder_noise", numbers, "RAD", "encoder noise stds in rad (default: 0)"),
+    ("--latency", "latency", _ints, "PERIODS", "command latencies in control periods (default: 0)"),
     ("--joint-time-constant", "joint_time_constant", numbers, "S",
-     "joint lag time constants (default 0)"),
+     "joint lag time constants in s (default: 0)"),
     ("--trocar-shift", "trocar_shift", numbers, "M",
-     "half-width of each trocar's random slide along its link (default 0)"),
+     "half-width in m of each trocar's random slide along its link (default: 0)"),
     ("--path-amplitude", "path_amplitude", numbers, "M",
-     "bound of the random motion added to each EE target (default 0)"),
+     "bound in m of the random motion added to each EE target (default: 0)"),
 )
 
 
@@ -55,21 +55,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run the sweep; show a cell (its inputs, outcome and the "
                         "compare command that redoes it); make a cell's compare report")
     parser.add_argument("key", nargs="?", help="the cell's key, or its first digits (show, "
-                        "report)")
+                        "report)", default="")
     parser.add_argument("--out", required=True, metavar="DIR",
                         help="the sweep's folder: results.sqlite, summary.html, reports/")
     parser.add_argument("--spec", metavar="FILE",
                         help="a TOML or JSON spec (docs/sweep.md); options given replace its "
-                        "fields")
+                        "fields (default: the options alone)")
     grid = parser.add_argument_group("the grid", "each a single value or a comma-separated "
                                      "list: every combination is a cell")
     for option, name, kind, metavar, text in GRID_OPTIONS:
         grid.add_argument(option, dest=name, type=kind, metavar=metavar, help=text)
     grid.add_argument("--calibration-error", dest="calibration_error", type=_pair,
                       metavar="MM,MRAD", help="std of the calibration error of every joint "
-                      "placement (default 0,0)")
+                      "placement (default: 0,0)")
     grid.add_argument("--time-limit", dest="time_limit", type=float, metavar="S",
-                      help="wall-clock limit of one cell (default 600)")
+                      help="wall-clock limit of one cell in s (default: 600)")
     engine = parser.add_argument_group("the engine")
     engine.add_argument("--engine", choices=("local", "ray"), default="local",
                         help="local: a pool of worker processes; ray: Ray tasks")
@@ -103,10 +103,10 @@ def options_document(args: argparse.Namespace) -> dict:
 def run(args: argparse.Namespace) -> int:
     """``teleop sweep``: run, show or report (exit code)."""
     if args.action in ("show", "report"):
-        if args.key is None:
+        if not args.key:
             raise ValueError(f"{args.action} needs a cell's key")
         return show(args) if args.action == "show" else report(args)
-    if args.key is not None:
+    if args.key:
         raise ValueError(f"unexpected argument {args.key!r} (a key goes after show or report)")
     return run_grid(args)
 
