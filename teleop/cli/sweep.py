@@ -54,8 +54,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("action", nargs="?", choices=("run", "show", "report"), default="run",
                         help="run the sweep; show a cell (its inputs, outcome and the "
                         "compare command that redoes it); make a cell's compare report")
-    parser.add_argument("key", nargs="?", help="the cell's key, or its first digits (show, "
-                        "report)", default="")
+    parser.add_argument("key", nargs="?", help="the cell's key, or its first digits, for show and "
+                        "report (default: none)", default="")
     parser.add_argument("--out", required=True, metavar="DIR",
                         help="the sweep's folder: results.sqlite, summary.html, reports/")
     parser.add_argument("--spec", metavar="FILE",
