@@ -436,6 +436,32 @@ class Constraint(CompiledForm, ABC):
             error=self.error_world(placement), color=self.color, label=self.label,
             allowed_side=None if self.is_equality else axis)
 
+    # -- sliding along its link (random trocar placements, docs/design.md 15.1.1) ----------
+
+    def sliding_axis(self, robot: RobotLike, q: np.ndarray) -> np.ndarray | None:
+        """Unit world axis ``a`` (at ``q``) along which the geometry may slide with its link,
+        the constraint's error unchanged; None (the default): no such axis."""
+        return None
+
+    def slid_along_link(self, robot: RobotLike, q: np.ndarray, offset: float) -> "Constraint":
+        """A new constraint like this one slid ``offset`` m along :meth:`sliding_axis`: its
+        world reference point moves by ``d = offset a``, a point fixed on the link by
+        ``R_a^T d`` (:meth:`slid_link_fields`), so the error at ``q`` stays what it was;
+        ``self`` when there is no sliding axis."""
+        axis = self.sliding_axis(robot, q)
+        if axis is None:
+            return self
+        world_shift = as_number(offset, "offset") * axis
+        link_shift = frame_placement(robot.model, q, self.link).rotation.T @ world_shift
+        return type(self).from_dict({
+            **self.to_dict(), self.position_attribute: (self.position + world_shift).tolist(),
+            **self.slid_link_fields(link_shift)})
+
+    def slid_link_fields(self, link_shift: np.ndarray) -> dict:
+        """The constructor fields in link coordinates that :meth:`slid_along_link` moves by
+        ``link_shift`` (a point fixed on the link); none by default."""
+        return {}
+
     # -- placing it on a robot as the robot is now -------------------------------------------
 
     @classmethod

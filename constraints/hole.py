@@ -183,6 +183,10 @@ class Hole(Constraint):
         """The link axis in the world frame (the hole's ring is drawn around it)."""
         return placement.rotation @ self.link_axis
 
+    def sliding_axis(self, robot: RobotLike, q: np.ndarray) -> np.ndarray:
+        """The link axis in the world at ``q``: the centre slides along it, still on it."""
+        return self.axis_world(frame_placement(robot.model, q, self.link))
+
     def _center_local(self, placement: pin.SE3) -> np.ndarray:
         return placement.actInv(self.center)
 

@@ -10,6 +10,8 @@ from .base import (
     Constraint,
     RobotLike,
     as_vector,
+    frame_placement,
+    link_axis_of,
     link_point_at,
 )
 from .placement import ALONG_LINK, ON_ARM, PlacementField
@@ -66,6 +68,15 @@ class PointLock(Constraint):
 
     # ``lock.move_to(target, velocity)`` (inherited) moves the lock point (world, m) and
     # sets its velocity (m/s).
+
+    def sliding_axis(self, robot: RobotLike, q: np.ndarray) -> np.ndarray:
+        """The link's long axis (``link_axis_of``) in the world at ``q``: the link point and
+        the target slide along it together."""
+        return frame_placement(robot.model, q, self.link).rotation @ link_axis_of(robot, self.link)
+
+    def slid_link_fields(self, link_shift: np.ndarray) -> dict:
+        """The link point, moved with the target."""
+        return {"link_point": (self.link_point + link_shift).tolist()}
 
     def point(self, placement: pin.SE3) -> np.ndarray:
         return self.link_point

@@ -45,3 +45,11 @@ MAX_BENCH_ITERATIONS = 1_000_000
 
 #: The stiffest abdominal wall a plant takes (N/m): 100 N/mm, a hundred times the default.
 MAX_WALL_STIFFNESS = 1e5
+
+#: How far (m) a random trocar placement may slide a constraint along its link: a metre is
+#: longer than any instrument shaft or arm link.
+MAX_TROCAR_SHIFT_M = 1.0
+
+#: The largest excursion (m) of a random operator path from the scripted target: a metre is
+#: beyond the reach of a surgical arm around its home pose.
+MAX_PATH_AMPLITUDE_M = 1.0

@@ -16,8 +16,10 @@ from teleop.limits import (
     MAX_ENCODER_NOISE_RAD,
     MAX_LATENCY_PERIODS,
     MAX_LATENCY_S,
+    MAX_PATH_AMPLITUDE_M,
     MAX_RATE_HZ,
     MAX_TIME_CONSTANT_S,
+    MAX_TROCAR_SHIFT_M,
     MAX_WALL_STIFFNESS,
 )
 from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
@@ -55,6 +57,10 @@ payload = bounded(float, 0.0, 100.0, unit="kg")
 friction = bounded(float, 0.0, 1e4)
 physics_rate = bounded(float, 2000.0, 1e5, unit="Hz")
 servo_bandwidth = bounded(float, 0.0, 200.0, inclusive_minimum=False, unit="Hz")
+trocar_shift = bounded(float, 0.0, MAX_TROCAR_SHIFT_M, unit="m")
+path_amplitude = bounded(float, 0.0, MAX_PATH_AMPLITUDE_M, unit="m")
+pose_gain = bounded(float, 0.0, inclusive_minimum=False, unit="1/s")
+drift_gain = bounded(float, 0.0, unit="1/s")
 
 #: The physics plant's options: (option, the PlantSettings field) (docs/cli.md).
 PLANT_OPTIONS = (("--payload", "payload"), ("--coulomb-friction", "coulomb_friction"),
@@ -130,10 +136,33 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     robot.add_argument("--joint-time-constant", type=time_constant, default=0.0, metavar="S",
                        help="first-order response of the joint velocities to their command, "
                        f"at most {MAX_TIME_CONSTANT_S:g}")
-    robot.add_argument("--seed", type=count, default=0, help="seed of the encoder noise")
+    robot.add_argument("--seed", type=count, default=0,
+                       help="seed of the encoder noise and of the random variations (each "
+                       "its own stream)")
+    _add_variation_options(parser, source)
     _add_plant_options(parser, "the session's plant (its header), else the defaults"
                        if source == "session" else "its default")
     _add_collision_options(parser, source)
+
+
+def _add_variation_options(parser: argparse.ArgumentParser, source: str) -> None:
+    """The random variations and the gains (docs/cli.md; docs/design.md section 15.1.1)."""
+    group = parser.add_argument_group(
+        "random variations", f"the {source}'s trocars and operator paths drawn from --seed, "
+        "the same for every controller; off by default (docs/design.md section 15.1.1)")
+    group.add_argument("--trocar-shift", type=trocar_shift, default=0.0, metavar="M",
+                       help="slide each constraint along its link by U(-M, M) m, still holding "
+                       f"where it starts, at most {MAX_TROCAR_SHIFT_M:g}")
+    group.add_argument("--path-amplitude", type=path_amplitude, default=0.0, metavar="M",
+                       help="add to each EE target a smooth random path (three sinusoids, "
+                       f"0.05-0.5 Hz, from rest) of at most M m, at most {MAX_PATH_AMPLITUDE_M:g}")
+    gains = parser.add_argument_group("gains", "the loop's and the constraints' feedback gains")
+    gains.add_argument("--kp", type=pose_gain, metavar="K",
+                       help="pose-error gain K_p (1/s) of the loop, > 0 (default: "
+                       + ("the session's, else 20)" if source == "session" else "20)"))
+    gains.add_argument("--constraint-gain", type=drift_gain, metavar="K",
+                       help="drift-feedback gain (1/s) of every constraint, >= 0, K dt < 2 (1 "
+                       "for a barrier) (default: each constraint's own)")
 
 
 def _add_collision_options(parser: argparse.ArgumentParser, source: str) -> None:
@@ -337,22 +366,35 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
     from teleop.experiments.metrics_table import (format_body_table, format_collision_table,
                                                   format_table)
 
+    from teleop.experiments.variations import Variation
+    from teleop.loop import LoopConfig
+
     output_directory(args.out)  # before minutes of simulation
     imperfections = Imperfections(args.encoder_noise, args.latency, args.joint_time_constant,
                                   args.seed)
+    variation = Variation(args.trocar_shift, args.path_amplitude, args.seed)
+    plan = variation.apply(plan)
+    if args.constraint_gain is not None:
+        plan = plan.with_constraint_gain(args.constraint_gain)
     duration = args.duration or plan.duration
     results = compare(plan, args.controllers, config, duration, progress=not args.quiet,
                       imperfections=imperfections, plant=plant,
                       acceleration_limits=args.acceleration_limits)
     paths = write_outputs(plan, results, config, duration, args.out, plots=not args.no_plots,
                           imperfections=imperfections, plant=plant,
-                          acceleration_limits=args.acceleration_limits)
+                          acceleration_limits=args.acceleration_limits, variation=variation)
     document = metrics_document(plan, results, config, duration, imperfections, plant,
-                                args.acceleration_limits)
+                                args.acceleration_limits, variation)
     limits = "; acceleration limits" if args.acceleration_limits else ""
     if plan.collisions is not None:
         limits += (f"; collision avoidance d_s = {1e3 * plan.collisions['safety_distance']:g} "
                    f"mm, {len(plan.collisions['obstacles'])} obstacles")
+    if config.kp != LoopConfig.kp:
+        limits += f"; K_p {config.kp:g} 1/s"
+    if variation.active:
+        limits += f"; {variation.describe()}"
+    if plan.constraint_gain is not None:
+        limits += f"; constraint gain {plan.constraint_gain:g} 1/s"
     print(f"{plan.name}: {plan.description} ({duration:g} s at {config.rate:g} Hz, "
           f"{imperfections.describe()}; {plant.describe()}{limits})")
     print(format_table(document))
@@ -376,7 +418,8 @@ def _compare(args: argparse.Namespace) -> int:
     from teleop.loop import LoopConfig
 
     return _run(collision_choice(args, load_scenario(args.scenario)), args,
-                LoopConfig(rate=args.rate or 1000.0), plant_choice(args))
+                LoopConfig(rate=args.rate or 1000.0, kp=args.kp or LoopConfig.kp),
+                plant_choice(args))
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -386,7 +429,7 @@ def _replay(args: argparse.Namespace) -> int:
     session = load_session(args.file)
     header = session.header
     config = LoopConfig(rate=args.rate or header.get("rate_hz", 1000.0),
-                        kp=header.get("kp", 20.0),
+                        kp=args.kp or header.get("kp", LoopConfig.kp),
                         target_time_constant=header.get("target_time_constant_s", 0.0))
     return _run(collision_choice(args, session_plan(session)), args, config,
                 plant_choice(args, session_plant(session)))

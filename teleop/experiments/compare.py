@@ -23,10 +23,11 @@ from teleop.plants.imperfect import Imperfections
 
 from .plan import Plan
 from teleop.plants.choice import PlantChoice
+from .variations import Variation
 from .results import BODY_METRIC_KEYS, COLLISION_METRIC_KEYS, METRIC_KEYS, RunResult
 from .solver_output import SolverOutputCapture
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 
 
 def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
@@ -39,6 +40,20 @@ def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
         raise ValueError(f"duration {duration:g} s at {config.rate:g} Hz is {steps} control "
                          f"periods, more than {MAX_STEPS}: lower the duration or the rate")
     return steps
+
+
+def check_constraint_gain(plan: Plan, dt: float) -> None:
+    """Refuse the plan's :attr:`~Plan.constraint_gain` where it is unstable at control
+    period ``dt`` for one of the constraints the plan starts with (``ValueError`` naming
+    ``constraint_gain``; docs/design.md 3.4); those its ``update`` adds are checked by the
+    controller that takes them."""
+    if plan.constraint_gain is None:
+        return
+    for constraint in plan.make_constraints():
+        try:
+            constraint.check_gain(dt)
+        except ValueError as error:
+            raise ValueError(f"constraint_gain: {error}") from None
 
 
 def output_directory(out_dir: str | Path) -> Path:
@@ -306,6 +321,7 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
     steps = _steps(plan, config, duration)
     specs = _check_specs(specs)
     (imperfections or Imperfections()).check_period(config.dt)
+    check_constraint_gain(plan, config.dt)
     plant = plant or PlantChoice()
     plant.make(plan.robot, config.dt, imperfections)  # fail fast: the model compiles
     for spec in specs:  # fail fast on a bad spec or damper, before minutes of simulation
@@ -386,8 +402,11 @@ class RunProgress:
 def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
                      duration: float, imperfections: Imperfections | None = None,
                      plant: PlantChoice | None = None,
-                     acceleration_limits: bool = False) -> dict:
-    """The metrics.json document (schema: ``teleop/experiments/metrics.schema.json``)."""
+                     acceleration_limits: bool = False,
+                     variation: Variation | None = None) -> dict:
+    """The metrics.json document (schema: ``teleop/experiments/metrics.schema.json``);
+    ``variation`` is what :meth:`Variation.apply` made ``plan`` of (None: nothing), the
+    constraint gain the plan's (:meth:`Plan.with_constraint_gain`)."""
     first = next(iter(results.values()), None)
     reference = (next(iter(results)) if first is not None
                  and first.joint_velocity_deviation is not None else None)
@@ -403,6 +422,9 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
         "imperfections": (imperfections or Imperfections()).to_dict(),
         "plant": (plant or PlantChoice()).to_dict(),
         "acceleration_limits": bool(acceleration_limits),
+        "variation": (variation or Variation()).to_dict(),
+        "kp": config.kp,
+        "constraint_gain": plan.constraint_gain,
         "collisions": plan.collisions,
         "joint_velocity_reference": reference,
         "controllers": {spec: result.metrics() for spec, result in results.items()},
@@ -413,16 +435,17 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
                   duration: float, out_dir: str | Path, plots: bool = True,
                   imperfections: Imperfections | None = None,
                   plant: PlantChoice | None = None,
-                  acceleration_limits: bool = False) -> list[Path]:
+                  acceleration_limits: bool = False,
+                  variation: Variation | None = None) -> list[Path]:
     """metrics.json, metrics.csv and, with ``plots``, the PNG plots and report.html into
-    ``out_dir``; returns the paths."""
+    ``out_dir`` (``variation``: :func:`metrics_document`); returns the paths."""
     out = output_directory(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         raise ValueError(f"cannot create output directory {str(out)!r}: {error.strerror}") from None
     document = metrics_document(plan, results, config, duration, imperfections, plant,
-                                acceleration_limits)
+                                acceleration_limits, variation)
     paths = [out / "metrics.json", out / "metrics.csv"]
     paths[0].write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     with paths[1].open("w", newline="", encoding="utf-8") as handle:

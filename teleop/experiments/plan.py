@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -11,6 +11,7 @@ import pinocchio as pin
 from constraints import Constraint
 from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
+from constraints.validation import as_number
 from teleop.loop import Targets
 from teleop.robots import Robot
 
@@ -35,6 +36,8 @@ class Plan:
     collisions : the collision avoidance the plan declares (``CollisionAvoidance.to_dict()``:
         the damper's settings and the obstacles), None: none (docs/design.md 18.6);
         :meth:`make_collisions` builds a fresh one per controller and per measure.
+    constraint_gain : the drift-feedback gain (1/s) every constraint is given
+        (:meth:`with_constraint_gain`), None: each keeps its own.
     """
 
     name: str
@@ -47,12 +50,38 @@ class Plan:
         default=lambda t, constraints, q: None)
     description: str = ""
     collisions: dict | None = None
+    constraint_gain: float | None = None
 
     def make_collisions(self) -> CollisionAvoidance | None:
         """A fresh collision avoidance on the plan's robot with its own obstacles, or None."""
         if self.collisions is None:
             return None
         return CollisionAvoidance.from_dict(self.robot, self.collisions)
+
+    def with_constraint_gain(self, gain: float) -> "Plan":
+        """A new plan whose constraints all have the drift-feedback gain ``K = gain`` (1/s,
+        finite, >= 0; ``ValueError`` naming ``constraint_gain``), those of
+        ``make_constraints`` and those ``update`` adds alike (docs/design.md 15.1.1).
+        Whether ``K dt < 2`` (1 for a barrier) holds depends on the control period: the
+        run checks it (:func:`teleop.experiments.compare.check_constraint_gain`)."""
+        gain = as_number(gain, "constraint_gain", 0.0)
+        make, update = self.make_constraints, self.update
+
+        def with_gain(constraints: list[Constraint]) -> list[Constraint]:
+            for constraint in constraints:
+                constraint.gain = gain
+            return constraints
+
+        def make_constraints() -> list[Constraint]:
+            return with_gain(make())
+
+        def update_with_gain(t: float, constraints: list[Constraint],
+                             q: np.ndarray) -> list[Constraint] | None:
+            changed = update(t, constraints, q)
+            return None if changed is None else with_gain(changed)
+
+        return replace(self, make_constraints=make_constraints, update=update_with_gain,
+                       constraint_gain=gain)
 
 
 def smoothstep(x: float) -> float:
