@@ -333,9 +333,11 @@ def test_the_mujoco_plant_refuses_a_calibration_error_before_simulating(sda10f):
     ("x,2", "position std expected a number"), ("-1,2", "position std must be in [0, 50] mm"),
     ("1,201", "rotation std must be in [0, 200] mrad"), ("1,nan", "rotation std must be"),
 ])
-def test_bad_calibration_error_flags_are_one_line_and_exit_2(value, message, capsys):
+@pytest.mark.parametrize("command", [["compare", "--scenario", "paper-hole"],
+                                     ["replay", "session.jsonl"]])
+def test_bad_calibration_error_flags_are_one_line_and_exit_2(command, value, message, capsys):
     with pytest.raises(SystemExit) as exit_:
-        main(["compare", "--scenario", "paper-hole", f"--calibration-error={value}"])
+        main([*command, f"--calibration-error={value}"])
     assert exit_.value.code == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "--calibration-error" in err, err
