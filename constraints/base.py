@@ -269,6 +269,9 @@ class Constraint(CompiledForm, ABC):
     kind: ClassVar[str]
     #: the attribute holding the geometry's world reference point (:attr:`position`)
     position_attribute: ClassVar[str]
+    #: the constructor fields holding world directions (velocities, normals), which
+    #: :meth:`moved` rotates; the world point it moves is :attr:`position`
+    world_directions: ClassVar[tuple[str, ...]] = ("velocity",)
     #: whether a physics plant puts a wall where it is (a hole's port: ``wall_force``)
     has_wall: ClassVar[bool] = False
     #: constructor fields :meth:`to_dict` leaves out while they hold their defaults
@@ -410,6 +413,19 @@ class Constraint(CompiledForm, ABC):
         velocity = as_vector(velocity, 3, f"{self.kind} velocity")
         setattr(self, self.position_attribute, position)
         self.velocity = velocity
+
+    def moved(self, motion: pin.SE3) -> "Constraint":
+        """A copy whose world geometry the rigid ``motion`` ``G`` carries: the reference
+        point ``x -> G x``, each of :attr:`world_directions` ``d -> R_G d``; link
+        coordinates and gains as they are. At the link placement ``G T_a`` the copy's
+        error is this one's at ``T_a``, so ``G = T_true T_model^-1`` puts the geometry
+        where the real link met it (docs/design.md section 15.1, "Calibration error")."""
+        data = self.to_dict()
+        data[self.position_attribute] = motion.act(self.position).tolist()
+        for name in self.world_directions:
+            if name in data:
+                data[name] = (motion.rotation @ np.asarray(data[name], dtype=float)).tolist()
+        return type(self).from_dict(data)
 
     # -- what a view draws -----------------------------------------------------------------
 

@@ -44,6 +44,7 @@ class Plane(Constraint):
     default_gain: float = DEFAULT_GAIN
     kind = "plane"
     position_attribute = "plane_point"
+    world_directions = ("normal", "velocity")
     compiled_kind = "plane"
     compiled_fields = ("link_point", "plane_point", "normal", "velocity", "_gain")
     shape = "plane"

@@ -31,6 +31,12 @@ MAX_LATENCY_PERIODS = int(MAX_LATENCY_S * MAX_RATE_HZ)
 #: thousands of counts of any joint encoder.
 MAX_ENCODER_NOISE_RAD = 0.1
 
+#: Standard deviation of the simulated calibration error of every joint placement: 5 cm
+#: and 0.2 rad (11 degrees) per axis, far beyond any robot that was ever calibrated
+#: (docs/design.md section 15.1, "Calibration error").
+MAX_CALIBRATION_POSITION_STD_M = 0.05
+MAX_CALIBRATION_ROTATION_STD_RAD = 0.2
+
 #: Time constant (s) of the simulated joint velocity response, and of the target
 #: smoothing: a joint or a filter slower than a second is not following its command.
 MAX_TIME_CONSTANT_S = 1.0

@@ -207,7 +207,9 @@ def test_noisy_late_runs_are_deterministic_for_a_seed_and_recorded(tmp_path):
     document = json.loads((tmp_path / "metrics.json").read_text())
     jsonschema.validate(document, SCHEMA)
     assert document["imperfections"] == {"encoder_noise_rad": 1e-4, "latency_periods": 2,
-                                         "joint_time_constant_s": 0.01, "seed": 5}
+                                         "joint_time_constant_s": 0.01, "seed": 5,
+                                         "calibration_position_std_m": 0.0,
+                                         "calibration_rotation_std_rad": 0.0}
 
 
 # ----------------------------------------------------------------------------- agreement

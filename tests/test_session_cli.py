@@ -170,7 +170,9 @@ def test_cli_imperfect_robot_options_are_recorded(tmp_path):
         in run.stdout
     document = json.loads((out / "metrics.json").read_text())
     assert document["imperfections"] == {"encoder_noise_rad": 1e-4, "latency_periods": 2,
-                                         "joint_time_constant_s": 0.005, "seed": 9}
+                                         "joint_time_constant_s": 0.005, "seed": 9,
+                                         "calibration_position_std_m": 0.0,
+                                         "calibration_rotation_std_rad": 0.0}
 
 
 def test_cli_replay_keeps_the_solver_off_the_console(tmp_path, ur5_instrument):

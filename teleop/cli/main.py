@@ -12,6 +12,8 @@ from typing import Callable, Sequence
 from teleop.controller_specs import CONTROLLER_HELP, CONTROLLER_SPECS, default_specs
 from teleop.limits import (
     MAX_BENCH_ITERATIONS,
+    MAX_CALIBRATION_POSITION_STD_M,
+    MAX_CALIBRATION_ROTATION_STD_RAD,
     MAX_DURATION_S,
     MAX_ENCODER_NOISE_RAD,
     MAX_LATENCY_PERIODS,
@@ -61,6 +63,26 @@ trocar_shift = bounded(float, 0.0, MAX_TROCAR_SHIFT_M, unit="m")
 path_amplitude = bounded(float, 0.0, MAX_PATH_AMPLITUDE_M, unit="m")
 pose_gain = bounded(float, 0.0, inclusive_minimum=False, unit="1/s")
 drift_gain = bounded(float, 0.0, unit="1/s")
+calibration_mm = bounded(float, 0.0, MAX_CALIBRATION_POSITION_STD_M * 1e3, unit="mm")
+calibration_mrad = bounded(float, 0.0, MAX_CALIBRATION_ROTATION_STD_RAD * 1e3, unit="mrad")
+
+
+def calibration_error(text: str) -> tuple[float, float]:
+    """``"MM,MRAD"`` -> the calibration error's stds ``(m, rad)`` (argparse type), each
+    bounded by :mod:`teleop.limits`."""
+    parts = text.split(",")
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"expected MM,MRAD (two numbers), got {text!r}")
+    position, rotation = parts
+    try:
+        millimetres = calibration_mm(position.strip())
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(f"the position std {error}") from None
+    try:
+        milliradians = calibration_mrad(rotation.strip())
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(f"the rotation std {error}") from None
+    return millimetres * 1e-3, milliradians * 1e-3
 
 #: The physics plant's options: (option, the PlantSettings field) (docs/cli.md).
 PLANT_OPTIONS = (("--payload", "payload"), ("--coulomb-friction", "coulomb_friction"),
@@ -136,9 +158,16 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     robot.add_argument("--joint-time-constant", type=time_constant, default=0.0, metavar="S",
                        help="first-order response of the joint velocities to their command, "
                        f"at most {MAX_TIME_CONSTANT_S:g}")
+    robot.add_argument("--calibration-error", type=calibration_error, metavar="MM,MRAD",
+                       help="std of the translation (mm) and rotation (mrad) error, per axis, "
+                       "of every joint placement of the true robot; the controllers keep the "
+                       "model, the errors are measured on the true robot, at most "
+                       f"{MAX_CALIBRATION_POSITION_STD_M * 1e3:g},"
+                       f"{MAX_CALIBRATION_ROTATION_STD_RAD * 1e3:g}; the kinematic plant only "
+                       "(default: 0,0)")
     robot.add_argument("--seed", type=count, default=0,
-                       help="seed of the encoder noise and of the random variations (each "
-                       "its own stream)")
+                       help="seed of the encoder noise, the calibration error and the random "
+                       "variations (each its own stream)")
     _add_variation_options(parser, source)
     _add_plant_options(parser, "the session's plant (its header), else the defaults"
                        if source == "session" else "its default")
@@ -370,8 +399,10 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
     from teleop.loop import LoopConfig
 
     output_directory(args.out)  # before minutes of simulation
+    position_std, rotation_std = args.calibration_error or (0.0, 0.0)
     imperfections = Imperfections(args.encoder_noise, args.latency, args.joint_time_constant,
-                                  args.seed)
+                                  args.seed, calibration_position_std=position_std,
+                                  calibration_rotation_std=rotation_std)
     variation = Variation(args.trocar_shift, args.path_amplitude, args.seed)
     plan = variation.apply(plan)
     if args.constraint_gain is not None:

@@ -119,11 +119,15 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
            steps: int, imperfections: Imperfections | None,
            on_step: Callable[[int], None] | None, plant: PlantChoice) -> Drive:
     """Tick ``controller`` (holding ``constraints``) through ``steps`` periods of ``plan``
-    on the ``plant`` (every hole added on the way gets its wall)."""
+    on the ``plant`` (every hole added on the way gets its wall), the measures on the true
+    robot's kinematics (``imperfections.true_model``: with a calibration error, the same
+    draw for every run)."""
+    imperfections = imperfections or Imperfections()
     loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config,
                       plant=plant.make(plan.robot, config.dt, imperfections,
                                        plan.make_collisions()),
-                      collisions=plan.make_collisions())
+                      collisions=plan.make_collisions(),
+                      true_model=imperfections.true_model(plan.robot.model))
     drive = Drive()
     records, failures = drive.records, drive.failures
     edits_at_measure: list[list[Constraint]] = []

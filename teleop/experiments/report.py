@@ -90,7 +90,10 @@ def render_report(document: dict, figures: Sequence[Figure]) -> str:
          f"({document['steps']} steps)</li>"),
         (f"<li>robot imperfections: encoder noise {imperfect['encoder_noise_rad']:g} rad, "
          f"latency {imperfect['latency_periods']} periods, joint time constant "
-         f"{imperfect['joint_time_constant_s']:g} s, seed {imperfect['seed']}</li>"),
+         f"{imperfect['joint_time_constant_s']:g} s, calibration error "
+         f"{1e3 * imperfect.get('calibration_position_std_m', 0.0):g} mm, "
+         f"{1e3 * imperfect.get('calibration_rotation_std_rad', 0.0):g} mrad, "
+         f"seed {imperfect['seed']}</li>"),
         f"<li>plant: {e(_plant_line(document.get('plant')))}</li>",
         "</ul>",
         "<h2>Metrics</h2>", _metrics_table(document),

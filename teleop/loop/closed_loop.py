@@ -19,7 +19,9 @@ step cannot tick compiled (docs/design.md section 5.1).
 A :class:`Plant` (docs/design.md section 15.1) may stand between the loop and the robot's
 true joints: the loop then computes the command from the configuration the plant senses,
 and the robot moves with the joint velocity the plant applies; the measures stay on the
-true configuration.
+true configuration. With a calibration error (``true_model``), the measures take the true
+kinematics there too (:mod:`teleop.loop.true_kinematics`); the hot path stays the
+controller's, on the model.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from teleop.limits import MAX_RATE_HZ, MAX_TIME_CONSTANT_S
 
 from .distance_meter import DistanceMeter
 from .records import CompiledPendingStep, PendingStep, StepRecord
+from .true_kinematics import TrueKinematics
 
 #: An operator target: one pose for a single-EE robot, else one per ``robot.ee_frames`` entry.
 Targets = Union[pin.SE3, Sequence[pin.SE3]]
@@ -182,6 +185,10 @@ class TeleopLoop:
     compiled_tick : run the hot path compiled (one C++ call a period:
         ``controller.loop_tick``, the CJM's compiled backend) when the controller offers
         it; False: always the Python path, the readable reference (docs/design.md 5.1).
+    true_model : the real robot's kinematics when they differ from ``robot.model`` (a
+        calibration error, docs/design.md section 15.1); the measures take them
+        (:class:`~teleop.loop.true_kinematics.TrueKinematics`), the controller and the hot
+        path keep the model. None: the model is the robot.
 
     Targets (:data:`Targets`) are one ``pin.SE3`` per entry of ``robot.ee_frames``, in
     that order; a single-EE robot also takes the pose alone.
@@ -190,10 +197,13 @@ class TeleopLoop:
     def __init__(self, robot, controller, q0: np.ndarray | None = None,
                  config: LoopConfig | None = None, plant: Plant | None = None,
                  collisions: CollisionAvoidance | None = None,
-                 compiled_tick: bool = True) -> None:
+                 compiled_tick: bool = True, true_model: pin.Model | None = None) -> None:
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
+        #: the measures' kinematics when the robot is not its model (None: the model's)
+        self.true_kinematics = (None if true_model is None
+                                else TrueKinematics(self.model, true_model))
         self.controller = controller
         if config is not None and not isinstance(config, LoopConfig):
             raise ValueError(f"config must be a LoopConfig, got {type(config).__name__}")
@@ -447,18 +457,20 @@ class TeleopLoop:
         """The command's measures, into ``step``, at the state and geometry it was computed
         for: its residual ``max |A qd - b|`` at the sensed configuration; the velocities
         the joints moved with at the true one (each equality row's ``C v_c`` relative to
-        its geometry, the drift ``-K e``, the EE velocities); the operator's and the
-        commanded EE velocities (world)."""
+        its geometry, the drift ``-K e``, the EE velocities), with the true kinematics when
+        they differ (:meth:`_measured_kinematics`); the operator's and the commanded EE
+        velocities (world)."""
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, step.sensed)
         pin.updateFramePlacements(model, data)
         step.residual, step.constraint_velocity, step.drift_velocity, step.floor = \
-            self._constraint_velocity(step.qd)
-        if self.plant is not None:
+            self._constraint_velocity(step.qd, model, data, self.constraints)
+        if self.plant is not None or self.true_kinematics is not None:
+            model, data, constraints = self._measured_kinematics(step.q_before)
             pin.computeJointJacobians(model, data, step.q_before)
             pin.updateFramePlacements(model, data)
             _, step.constraint_velocity, step.drift_velocity, step.floor = \
-                self._constraint_velocity(step.moved)
+                self._constraint_velocity(step.moved, model, data, constraints)
         step.actual_linear_velocities = np.array([
             data.oMf[frame].rotation
             @ (pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:3] @ step.moved)
@@ -473,9 +485,10 @@ class TeleopLoop:
         step.labels = self._row_labels()
 
     def measure(self, step: PendingStep) -> StepRecord:
-        """The end of the period's measures (after :meth:`measure_command`)."""
-        model, data = self.model, self.data
-        errors, error, penetration = self._constraint_errors()
+        """The end of the period's measures (after :meth:`measure_command`), at the true
+        configuration with the true kinematics (:meth:`_measured_kinematics`)."""
+        model, data, constraints = self._measured_kinematics(self.q)
+        errors, error, penetration = self._constraint_errors(model, data, constraints)
         placements = [data.oMf[frame] for frame in self.ee_frame_ids]
         position_errors = np.array([np.linalg.norm(ee.translation - target.translation)
                                     for ee, target in zip(placements, step.targets)])
@@ -512,21 +525,34 @@ class TeleopLoop:
             self._names = constraint_names(self.constraints)
         return self._labels
 
-    def _constraint_velocity(self, qd: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, float]:
-        """At the kinematics in ``self.data``: ``max |A qd - b|`` over the equalities, every
+    def _measured_kinematics(self, q: np.ndarray) -> tuple[pin.Model, pin.Data, list[Constraint]]:
+        """The model, data and constraints the measures at the true configuration ``q``
+        take: the loop's own, or with a calibration error the true model's and each
+        constraint moved to where the real link met it
+        (:meth:`TrueKinematics.constraints`, registered at ``q`` when first met)."""
+        true = self.true_kinematics
+        if true is None:
+            return self.model, self.data, self.constraints
+        return (true.model, true.data,
+                true.constraints(self.constraints, self.controller.constraint_frames, q))
+
+    def _constraint_velocity(self, qd: np.ndarray, model: pin.Model, data: pin.Data,
+                             constraints: Sequence[Constraint],
+                             ) -> tuple[float, np.ndarray, np.ndarray, float]:
+        """At the kinematics in ``data``: ``max |A qd - b|`` over the equalities, every
         equality row's ``C v_c - C v_geom`` (the point's velocity relative to its moving
         geometry), its drift correction ``-K e``, and the round-off floor of those
         velocities, ``eps max (sum_j |A_ij qd_j| + K |x|)`` with ``x`` the point's world
         position, from which ``e`` is computed (m/s; docs/design.md section 15.2)."""
         residual, floor = 0.0, 0.0
         velocity, drift = [], []
-        for constraint, frame in zip(self.constraints, self.controller.constraint_frames):
+        for constraint, frame in zip(constraints, self.controller.constraint_frames):
             if not constraint.is_equality:
                 continue
-            A, b = constraint.rows(self.model, self.data, frame)
+            A, b = constraint.rows(model, data, frame)
             achieved = A @ qd
             residual = max(residual, float(np.max(np.abs(achieved - b))))
-            placement = self.data.oMf[frame]  # rows() updated it
+            placement = data.oMf[frame]  # rows() updated it
             correction = -constraint.gain * constraint.error(placement)
             velocity.append(achieved - (b - correction))
             drift.append(correction)
@@ -537,14 +563,16 @@ class TeleopLoop:
         return (residual, np.concatenate(velocity), np.concatenate(drift),
                 floor * np.finfo(float).eps)
 
-    def _constraint_errors(self) -> tuple[np.ndarray, float, float]:
-        """After integration: each constraint's own ``violation``, then the max |e| over
-        equalities and the max inequality (barrier) penetration."""
-        pin.framesForwardKinematics(self.model, self.data, self.q)  # every frame at once
+    def _constraint_errors(self, model: pin.Model, data: pin.Data,
+                           constraints: Sequence[Constraint]) -> tuple[np.ndarray, float, float]:
+        """After integration, at ``self.q`` on ``model``: each constraint's own
+        ``violation``, then the max |e| over equalities and the max inequality (barrier)
+        penetration."""
+        pin.framesForwardKinematics(model, data, self.q)  # every frame at once
         error, penetration = 0.0, 0.0
         violations = []
-        for constraint, frame in zip(self.constraints, self.controller.constraint_frames):
-            violation = constraint.violation(self.data.oMf[frame])
+        for constraint, frame in zip(constraints, self.controller.constraint_frames):
+            violation = constraint.violation(data.oMf[frame])
             violations.append(violation)
             if constraint.is_equality:
                 error = max(error, violation)

@@ -1,10 +1,12 @@
 """A robot that is not perfect (docs/design.md section 15.1): encoder noise on the measured
-configuration, a command latency and a first-order joint velocity response.
+configuration, a command latency, a first-order joint velocity response and a calibration
+error of its kinematics.
 
 :class:`Imperfections` is the setting, the same for every controller of a run (off by
 default); :class:`ImperfectPlant` is the :class:`teleop.loop.Plant` one run's loop uses. The
 controller sees the noisy measured ``q``; the true ``q`` moves with the delayed, filtered
-command; the loop takes its measures on the true ``q``.
+command; the loop takes its measures on the true ``q``, with the true kinematics
+(:meth:`Imperfections.true_model`) when they differ from the model.
 """
 
 from __future__ import annotations
@@ -19,7 +21,11 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.validation import as_number
+
+from .calibration import miscalibrated_model
 from teleop.limits import (
+    MAX_CALIBRATION_POSITION_STD_M,
+    MAX_CALIBRATION_ROTATION_STD_RAD,
     MAX_ENCODER_NOISE_RAD,
     MAX_LATENCY_PERIODS,
     MAX_LATENCY_S,
@@ -39,14 +45,22 @@ class Imperfections:
         keep still until the first one arrives).
     joint_time_constant : time constant (s) of the first-order response of each joint's
         velocity to the command it receives; 0: the joints follow at once.
-    seed : seed of the noise; one run per controller, each from this seed, so every
-        controller meets the same noise sequence.
+    seed : seed of the noise and of the calibration error (a stream of its own,
+        :mod:`teleop.plants.calibration`); one run per controller, each from this seed, so
+        every controller meets the same noise sequence and the same true robot.
+    calibration_position_std : standard deviation (m) of each axis of the translation
+        error of every joint placement of the true robot (docs/design.md section 15.1,
+        "Calibration error"); the controllers keep the model.
+    calibration_rotation_std : standard deviation (rad) of each axis of the rotation
+        vector of that error.
     """
 
     encoder_noise: float = 0.0
     latency: int = 0
     joint_time_constant: float = 0.0
     seed: int = 0
+    calibration_position_std: float = 0.0
+    calibration_rotation_std: float = 0.0
 
     def __post_init__(self) -> None:
         """Each field a number in its range, at most the maxima of :mod:`teleop.limits`
@@ -54,6 +68,10 @@ class Imperfections:
         as_number(self.encoder_noise, "encoder_noise", 0.0, maximum=MAX_ENCODER_NOISE_RAD)
         as_number(self.joint_time_constant, "joint_time_constant", 0.0,
                   maximum=MAX_TIME_CONSTANT_S)
+        as_number(self.calibration_position_std, "calibration_position_std", 0.0,
+                  maximum=MAX_CALIBRATION_POSITION_STD_M)
+        as_number(self.calibration_rotation_std, "calibration_rotation_std", 0.0,
+                  maximum=MAX_CALIBRATION_ROTATION_STD_RAD)
         for name, maximum in (("latency", MAX_LATENCY_PERIODS), ("seed", None)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
@@ -69,21 +87,33 @@ class Imperfections:
                              f"periods of {dt:g} s = {self.latency * dt:g} s")
 
     @property
-    def perfect(self) -> bool:
+    def exact_joints(self) -> bool:
         """No noise, no latency, no lag: the loop reads and drives the joints exactly."""
         return self.encoder_noise == 0 and self.latency == 0 and self.joint_time_constant == 0
+
+    @property
+    def calibrated(self) -> bool:
+        """No calibration error: the true kinematics are the model's."""
+        return self.calibration_position_std == 0 and self.calibration_rotation_std == 0
+
+    @property
+    def perfect(self) -> bool:
+        """Exact joints and exact kinematics: the ideal robot the controllers assume."""
+        return self.exact_joints and self.calibrated
 
     def to_dict(self) -> dict[str, float | int]:
         """The ``imperfections`` entry of metrics.json (units in the key names)."""
         return {"encoder_noise_rad": float(self.encoder_noise),
                 "latency_periods": int(self.latency),
                 "joint_time_constant_s": float(self.joint_time_constant),
-                "seed": int(self.seed)}
+                "seed": int(self.seed),
+                "calibration_position_std_m": float(self.calibration_position_std),
+                "calibration_rotation_std_rad": float(self.calibration_rotation_std)}
 
     def describe(self) -> str:
         """One line for humans: ``perfect robot`` or what is on."""
         if self.perfect:
-            return "perfect robot (no encoder noise, latency or joint lag)"
+            return "perfect robot (no encoder noise, latency, joint lag or calibration error)"
         parts = []
         if self.encoder_noise:
             parts.append(f"encoder noise {self.encoder_noise:g} rad")
@@ -91,12 +121,25 @@ class Imperfections:
             parts.append(f"latency {self.latency} period{'s' * (self.latency > 1)}")
         if self.joint_time_constant:
             parts.append(f"joint time constant {self.joint_time_constant:g} s")
+        if not self.calibrated:
+            parts.append(f"calibration error {1e3 * self.calibration_position_std:g} mm, "
+                         f"{1e3 * self.calibration_rotation_std:g} mrad")
         return ", ".join(parts) + f" (seed {self.seed})"
 
     def plant(self, model: pin.Model, dt: float) -> "ImperfectPlant | None":
-        """A fresh plant for one run, or None for the perfect robot."""
+        """A fresh plant for one run, or None when the joints are read and driven exactly
+        (:attr:`exact_joints`; a calibration error is the loop's, :meth:`true_model`)."""
         self.check_period(dt)
-        return None if self.perfect else ImperfectPlant(self, model, dt)
+        return None if self.exact_joints else ImperfectPlant(self, model, dt)
+
+    def true_model(self, model: pin.Model) -> pin.Model | None:
+        """The true robot's kinematics, ``model`` with this calibration error drawn from
+        :attr:`seed` (:func:`~teleop.plants.calibration.miscalibrated_model`), or None
+        without one (the true kinematics are ``model``'s)."""
+        if self.calibrated:
+            return None
+        return miscalibrated_model(model, self.calibration_position_std,
+                                   self.calibration_rotation_std, self.seed)
 
 
 class ImperfectPlant:

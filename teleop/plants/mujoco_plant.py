@@ -79,7 +79,8 @@ class MujocoPlant:
     dt : the control period (s).
     settings : :class:`PlantSettings` (defaults documented there).
     imperfections : encoder noise, latency and joint lag on top of the physics
-        (:class:`Imperfections`); the lag filters the velocity the drives receive.
+        (:class:`Imperfections`); the lag filters the velocity the drives receive. A
+        calibration error is refused (``ValueError``): the body is the URDF's.
     collisions : a collision avoidance on ``robot``: its geometry, obstacles and pairs go
         into the simulation (:func:`~teleop.plants.contact_geometry.add_contact_geometry`);
         None: the robot has no collision geometry (nothing touches).
@@ -90,6 +91,10 @@ class MujocoPlant:
                  collisions: CollisionAvoidance | None = None) -> None:
         if settings is not None and not isinstance(settings, PlantSettings):
             raise ValueError(f"settings must be PlantSettings, got {type(settings).__name__}")
+        if imperfections is not None and not imperfections.calibrated:
+            raise ValueError("calibration error (calibration_position_std, "
+                             "calibration_rotation_std) needs the kinematic plant: the mujoco "
+                             "plant builds its body from the URDF, the controllers' model")
         self.settings = settings or PlantSettings()
         self.model: pin.Model = robot.model
         self.dt = float(dt)
