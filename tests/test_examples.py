@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import sqlite3
 import subprocess
 import sys
 from pathlib import Path
@@ -116,10 +117,26 @@ def check_09(out: str, tmp: Path) -> None:
     assert "status least_squares" in out and "held back by collision pair" in out
 
 
+def check_10(out: str, tmp: Path) -> None:
+    assert numbers(r"cells done = NUMBER, failed = NUMBER, skipped = NUMBER",
+                   out) == [8, 0, 0], out
+    folder = tmp / "sweep_out"
+    assert (folder / "summary.html").stat().st_size > 0
+    with sqlite3.connect(folder / "results.sqlite") as connection:
+        rows = connection.execute("SELECT controller, status, hole_error_max_m FROM cells").fetchall()
+    assert sorted(controller for controller, _, _ in rows) == ["cjm"] * 4 + ["qp:daqp"] * 4
+    # every trocar slid and every path varied, the hole held to a micron all the same
+    assert all(status == "done" and error <= 1e-6 for _, status, error in rows), rows
+    again = subprocess.run([sys.executable, str(EXAMPLES_DIR / "10_sweep.py")], cwd=tmp,
+                           capture_output=True, text=True, timeout=TIMEOUT)
+    assert "cells done = 0, failed = 0, skipped = 8" in again.stdout, again.stderr
+
+
 CHECKS = {"01_cjm_vs_qp.py": check_01, "02_closed_loop.py": check_02, "03_barrier.py": check_03,
           "04_any_urdf.py": check_04, "05_mink_peer.py": check_05,
           "06_embed_teleop_app.py": check_06, "07_two_trocars.py": check_07,
-          "08_physics_plant.py": check_08, "09_collision_avoidance.py": check_09}
+          "08_physics_plant.py": check_08, "09_collision_avoidance.py": check_09,
+          "10_sweep.py": check_10}
 
 
 def test_the_examples_folder_has_the_documented_scripts():

@@ -3,6 +3,7 @@ written as it finishes; the progress; the figures of the run (docs/sweep.md)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import statistics
 import sys
@@ -110,9 +111,10 @@ def run_sweep(spec: SweepSpec, out: str | Path, engine: str = "local",
         bar = Progress(len(todo), console, progress)
         started = time.monotonic()
         try:
-            for finished in runner.run(todo, spec.time_limit):
-                _record(database, finished, run)
-                bar.update(run, finished)
+            with contextlib.closing(runner.run(todo, spec.time_limit)) as finishing:
+                for finished in finishing:  # closed on any exit: the workers stopped
+                    _record(database, finished, run)
+                    bar.update(run, finished)
         finally:
             run.wall_s = time.monotonic() - started
             bar.close()
