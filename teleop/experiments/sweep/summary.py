@@ -21,7 +21,7 @@ import numpy as np
 
 from .cell import DONE, compare_command
 from .database import DATABASE_NAME, CellRow, ResultsDatabase
-from .spec import DEFAULT_TIME_LIMIT_S, SweepSpec, describe_cell
+from .spec import CELL_FIELDS, DEFAULT_TIME_LIMIT_S, SweepSpec, describe_cell
 
 #: The summary page's name in the sweep's folder.
 SUMMARY_NAME = "summary.html"
@@ -29,8 +29,9 @@ SUMMARY_NAME = "summary.html"
 #: The folder of the cells' compare reports in the sweep's folder (one folder per key).
 REPORTS_FOLDER = "reports"
 
-#: The most cells the worst-cells list shows.
+#: The most cells the worst-cells list shows: on the page, and printed at the end of a run.
 WORST_LISTED = 20
+WORST_PRINTED = 10
 
 #: A report's time beyond its cell's limit: the imports and the plots (s).
 REPORT_MARGIN_S = 120.0
@@ -173,6 +174,11 @@ def outcome_line(row: CellRow) -> str:
     return ", ".join(shown)
 
 
+def ordered_inputs(inputs: Mapping[str, Any]) -> dict[str, Any]:
+    """A cell's inputs in the order of the spec's fields (the database keeps them sorted)."""
+    return {f.name: inputs[f.name] for f in CELL_FIELDS if f.name in inputs}
+
+
 def report_command(key: str, folder: Path) -> str:
     """The command that makes a cell's report into the sweep's folder."""
     return shlex.join(["teleop", "sweep", "report", key, "--out", str(folder)])
@@ -192,8 +198,8 @@ def format_worst(rows: Sequence[CellRow], folder: Path, report_links: Mapping[st
     for row in worst[:listed]:
         where = (str(folder / report_links[row.key]) if row.key in report_links
                  else report_command(row.key, folder))
-        lines += [f"{row.key}  {describe_cell(row.inputs)}", f"    {outcome_line(row)}",
-                  f"    report: {where}"]
+        lines += [f"{row.key}  {describe_cell(ordered_inputs(row.inputs))}",
+                  f"    {outcome_line(row)}", f"    report: {where}"]
     if len(worst) > listed:
         lines.append(f"({len(worst) - listed} more cells; {show_command('KEY', folder)} "
                      "describes any)")
@@ -255,7 +261,7 @@ def _worst_html(rows: Sequence[CellRow], folder: Path, report_links: Mapping[str
             report = f"<code>{e(report_command(row.key, folder))}</code>"
         kind = "text" if row.status == DONE else "text failed"
         parts.append(f'<tr><td><code>{e(row.key)}</code></td>'
-                     f'<td class="text">{e(describe_cell(row.inputs))}</td>'
+                     f'<td class="text">{e(describe_cell(ordered_inputs(row.inputs)))}</td>'
                      f'<td class="{kind}">{e(outcome_line(row))}</td>'
                      f'<td class="text">{report}</td></tr>')
     parts.append("</table>")
@@ -331,13 +337,16 @@ def make_report(row: CellRow, folder: Path, timeout: float | None = None) -> Pat
 def describe_row(row: CellRow) -> str:
     """A cell for ``teleop sweep show``: its key, inputs, outcome, main metrics, run and
     the ``teleop compare`` command that redoes it."""
-    lines = [f"cell {row.key}: {describe_cell(row.inputs)}", "inputs (the others at their "
+    inputs = ordered_inputs(row.inputs)
+    lines = [f"cell {row.key}: {describe_cell(inputs)}", "inputs (the others at their "
              "defaults):"]
-    lines += [f"  {name}: {value}" for name, value in row.inputs.items()]
+    lines += [f"  {name}: {value}" for name, value in inputs.items()]
     lines.append(f"status: {row.status}")
     if row.status != DONE:
         lines.append(f"reason: {row.reason or 'no reason recorded'}")
     metrics = row.metrics or {}
+    if metrics:
+        lines.append("metrics:")
     for metric in (*SUMMARY_METRICS, *DETAIL_METRICS):
         if metrics.get(metric.key) is not None:
             lines.append(f"  {metric.heading}: {_g(float(metrics[metric.key]) * metric.scale)}")
@@ -347,7 +356,7 @@ def describe_row(row: CellRow) -> str:
     elapsed = "-" if row.elapsed_s is None else f"{row.elapsed_s:.2f} s"
     lines += [f"elapsed: {elapsed}, attempts: {row.attempts}, finished {finished}",
               f"worker: {row.worker or '-'}, version: {row.version or 'unknown'}",
-              f"redo: {compare_command(row.inputs)}"]
+              f"redo: {compare_command(inputs)}"]
     return "\n".join(lines)
 
 
@@ -372,7 +381,8 @@ def finish_sweep(spec: SweepSpec, folder: Path, reports: int) -> str:
         links[row.key] = report.relative_to(folder.resolve()).as_posix()
     path = write_summary(rows, folder, links, controllers)
     text = [format_statistics(statistics(rows, controllers)), "", "worst cells:",
-            format_worst(rows, folder, links) or "(none)", *problems, f"wrote {path}"]
+            format_worst(rows, folder, links, WORST_PRINTED) or "(none)", *problems,
+            f"wrote {path}"]
     if len(versions) > 1:
         text.append(f"note: the database holds cells of {len(versions)} package versions "
                     f"({', '.join(versions)}); teleop sweep show KEY tells a cell's")
