@@ -125,8 +125,12 @@ def check_10(out: str, tmp: Path) -> None:
     with sqlite3.connect(folder / "results.sqlite") as connection:
         rows = connection.execute("SELECT controller, status, hole_error_max_m FROM cells").fetchall()
     assert sorted(controller for controller, _, _ in rows) == ["cjm"] * 4 + ["qp:daqp"] * 4
-    # every trocar slid and every path varied, the hole held to a micron all the same
-    assert all(status == "done" and error <= 1e-6 for _, status, error in rows), rows
+    # the hole error is the encoder noise's (1e-4 rad on each joint, levers under 0.5 m:
+    # tens of um, measured 50-61 um); without noise it is 0.3 um (the perfect robot)
+    assert all(status == "done" and 1e-6 < error <= 2e-4 for _, status, error in rows), rows
+    # paired cells: both controllers hold the same hole against the same noise
+    by_controller = {c: sorted(e for c2, _, e in rows if c2 == c) for c in ("cjm", "qp:daqp")}
+    assert by_controller["cjm"] == pytest.approx(by_controller["qp:daqp"], rel=1e-3)
     again = subprocess.run([sys.executable, str(EXAMPLES_DIR / "10_sweep.py")], cwd=tmp,
                            capture_output=True, text=True, timeout=TIMEOUT)
     assert "cells done = 0, failed = 0, skipped = 8" in again.stdout, again.stderr

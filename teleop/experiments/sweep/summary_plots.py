@@ -66,6 +66,7 @@ def box_plot(values: Mapping[str, Sequence[float]], title: str, axis_label: str,
         ax.set_yscale("log")
     elif integer:
         ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_ylim(-0.5, max(1.0, float(every.max())) * 1.1 + 0.5)  # counts: none below 0
     ax.set_ylabel(axis_label)
     ax.set_title(title)
     ax.grid(True, axis="y", which="major", alpha=0.3)
