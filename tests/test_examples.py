@@ -118,8 +118,8 @@ def check_09(out: str, tmp: Path) -> None:
 
 
 def check_10(out: str, tmp: Path) -> None:
-    assert numbers(r"cells done = NUMBER, failed = NUMBER, skipped = NUMBER",
-                   out) == [8, 0, 0], out
+    assert [numbers(rf"{word} = NUMBER", out) for word in ("cells done", "failed", "skipped")] \
+        == [[8], [0], [0]], out
     folder = tmp / "sweep_out"
     assert (folder / "summary.html").stat().st_size > 0
     with sqlite3.connect(folder / "results.sqlite") as connection:

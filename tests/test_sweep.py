@@ -352,8 +352,9 @@ def _keys(folder: Path) -> set[str]:
 def ray_instance():
     """A local Ray instance started by the test: 2 CPUs, no dashboard (Ray is in the test
     extra)."""
-    import ray
+    from teleop.experiments.sweep.ray_engine import _import_ray
 
+    ray = _import_ray(local=True)  # on loopback only
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     yield
     ray.shutdown()

@@ -75,9 +75,9 @@ def make_engine(engine: str, workers: int, retries: int, address: str | None):
             raise ValueError("--address needs --engine ray")
         return LocalPool(workers, retries)
     if engine == "ray":
-        from .ray_engine import RayEngine, _import_ray
+        from .ray_engine import RayEngine, check_ray
 
-        _import_ray()
+        check_ray()
         return RayEngine(workers, retries, address)
     raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
 

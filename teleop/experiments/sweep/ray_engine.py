@@ -10,6 +10,9 @@ and its clock is the cell's.
 
 from __future__ import annotations
 
+import importlib.util
+import os
+import sys
 import time
 from collections import deque
 from typing import Any, Callable, Iterator
@@ -19,11 +22,26 @@ from .pool import GRACE_S, SINGLE_THREADED, Finished
 from .spec import Cell
 
 
-def _import_ray():
-    try:
-        import ray
-    except ImportError:
-        raise ValueError("--engine ray needs Ray: pip install -e \".[ray]\"") from None
+#: Set before Ray is imported, Ray's own switch makes a local instance use the loopback
+#: address for every one of its servers (Ray otherwise binds this machine's network
+#: address); an existing cluster keeps its addresses.
+LOOPBACK_ONLY = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
+
+
+def check_ray() -> None:
+    """``ValueError`` unless Ray is installed (nothing imported)."""
+    if importlib.util.find_spec("ray") is None:
+        raise ValueError("--engine ray needs Ray: pip install -e \".[ray]\"")
+
+
+def _import_ray(local: bool):
+    """Ray, imported for a local instance on loopback (``local``) or a cluster."""
+    check_ray()
+    if local and "ray" not in sys.modules:
+        for name, value in LOOPBACK_ONLY.items():
+            os.environ.setdefault(name, value)
+    import ray
+
     return ray
 
 
@@ -42,7 +60,7 @@ class RayEngine:
         self.started_instance = False
 
     def _connect(self):
-        ray = _import_ray()
+        ray = _import_ray(local=not self.address)
         if ray.is_initialized():
             return ray
         options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
@@ -61,7 +79,7 @@ class RayEngine:
     def shutdown(self) -> None:
         """Stop the local instance this engine started (an existing cluster stays up)."""
         if self.started_instance:
-            _import_ray().shutdown()
+            sys.modules["ray"].shutdown()
             self.started_instance = False
 
     def run(self, cells: list[Cell], time_limit: float,
