@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from constraints.validation import short_repr
+from constraints.validation import as_number, short_repr
 
 #: Hex digits of a cell's key (80 bits: no collision in any sweep of this world).
 KEY_DIGITS = 20
@@ -42,24 +42,8 @@ def _text(value: Any, name: str) -> str:
 def _real(minimum: float | None = None, maximum: float | None = None,
           positive: bool = False) -> Callable[[Any, str], float]:
     """A checker of a finite float in range (``1`` and ``1.0`` are one value)."""
-    def check(value: Any, name: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"{name} must be a number, got {short_repr(value)}")
-        try:
-            number = float(value)
-        except OverflowError:
-            raise ValueError(f"{name} must be finite, got an integer of {len(str(value))} "
-                             "digits") from None
-        if not math.isfinite(number):
-            raise ValueError(f"{name} must be finite, got {number}")
-        if positive and not number > 0:
-            raise ValueError(f"{name} must be > 0, got {number:g}")
-        if minimum is not None and number < minimum:
-            raise ValueError(f"{name} must be >= {minimum:g}, got {number:g}")
-        if maximum is not None and number > maximum:
-            raise ValueError(f"{name} must be <= {maximum:g}, got {number:g}")
-        return number
-    return check
+    return lambda value, name: as_number(value, name, minimum, positive=positive,
+                                         maximum=maximum)
 
 
 def _integer(minimum: int = 0, maximum: int | None = None) -> Callable[[Any, str], int]:
@@ -92,8 +76,10 @@ class CellField:
 
 
 def _cell_fields() -> tuple[CellField, ...]:
-    from teleop.limits import (MAX_DURATION_S, MAX_ENCODER_NOISE_RAD, MAX_LATENCY_PERIODS,
-                               MAX_RATE_HZ, MAX_TIME_CONSTANT_S)
+    from teleop.limits import (MAX_CALIBRATION_POSITION_STD_M,
+                               MAX_CALIBRATION_ROTATION_STD_RAD, MAX_DURATION_S,
+                               MAX_ENCODER_NOISE_RAD, MAX_LATENCY_PERIODS, MAX_PATH_AMPLITUDE_M,
+                               MAX_RATE_HZ, MAX_TIME_CONSTANT_S, MAX_TROCAR_SHIFT_M)
 
     return (
         CellField("scenario", None, _text, "--scenario", help="scenario names"),
@@ -117,13 +103,13 @@ def _cell_fields() -> tuple[CellField, ...]:
                   "imperfections", "control periods"),
         CellField("joint_time_constant", 0.0, _real(0.0, MAX_TIME_CONSTANT_S),
                   "--joint-time-constant", "imperfections", "s"),
-        CellField("calibration_error_mm", 0.0, _real(0.0, 50.0), None, "imperfections",
+        CellField("calibration_error_mm", 0.0, _real(0.0, MAX_CALIBRATION_POSITION_STD_M * 1e3), None, "imperfections",
                   "std of each joint placement's translation error (mm)"),
-        CellField("calibration_error_mrad", 0.0, _real(0.0, 200.0), None, "imperfections",
+        CellField("calibration_error_mrad", 0.0, _real(0.0, MAX_CALIBRATION_ROTATION_STD_RAD * 1e3), None, "imperfections",
                   "std of each joint placement's rotation error (mrad)"),
-        CellField("trocar_shift", 0.0, _real(0.0, 0.1), "--trocar-shift", "variations",
+        CellField("trocar_shift", 0.0, _real(0.0, MAX_TROCAR_SHIFT_M), "--trocar-shift", "variations",
                   "half-width (m) of each trocar's uniform slide along its link"),
-        CellField("path_amplitude", 0.0, _real(0.0, 0.1), "--path-amplitude", "variations",
+        CellField("path_amplitude", 0.0, _real(0.0, MAX_PATH_AMPLITUDE_M), "--path-amplitude", "variations",
                   "bound (m) of the smooth random motion added to each EE target"),
     )
 
