@@ -118,6 +118,8 @@ def run_grid(args: argparse.Namespace) -> int:
     spec = load_spec(args.spec, options) if args.spec else build_spec(options)
     workers = default_workers() if args.workers is None else args.workers
     make_engine(args.engine, workers, args.retries, args.address)  # refused before any work
+    if args.reports < 0:
+        raise ValueError(f"--reports must be >= 0, got {args.reports}")
     folder = sweep_folder(args.out)
     for note in spec.notes:
         print(f"note: {note}", file=sys.stderr)
