@@ -36,9 +36,10 @@ STREAM = 0xCA1
 
 
 def stated_draw(joints: int, seed: int) -> np.ndarray:
-    """The standard normals of the documented draw: ``default_rng([seed, 0xCA1])``, one
-    row ``[t / s_m, r / s_rad]`` per joint."""
-    return np.random.default_rng([seed, STREAM]).standard_normal((joints, 6))
+    """The standard normals of the documented draw: the child ``0xCA1`` of the seed's
+    ``SeedSequence``, one row ``[t / s_m, r / s_rad]`` per joint."""
+    sequence = np.random.SeedSequence(seed, spawn_key=(STREAM,))
+    return np.random.default_rng(sequence).standard_normal((joints, 6))
 
 
 def joint_errors(model: pin.Model, true_model: pin.Model) -> list[pin.SE3]:
@@ -360,3 +361,14 @@ def test_the_flag_reaches_metrics_json_and_the_mujoco_plant_refuses_it(tmp_path,
                  "--plant", "mujoco", "--quiet", "--out", str(tmp_path / "mujoco")]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "calibration error" in err, err
+
+
+def test_the_calibration_stream_is_no_other_seeds_encoder_noise():
+    """``default_rng([s, c])`` would be the seed ``s + c 2^32``'s encoder noise; the
+    child stream of the seed is not (teleop/seeds.py)."""
+    seed = 5
+    colliding_seed = seed + STREAM * 2**32
+    ours = stated_draw(3, seed).ravel()
+    assert not np.allclose(ours, np.random.default_rng(colliding_seed).standard_normal(18))
+    assert np.array_equal(np.random.default_rng([seed, STREAM]).standard_normal(3),
+                          np.random.default_rng(colliding_seed).standard_normal(3))

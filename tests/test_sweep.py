@@ -113,6 +113,11 @@ BAD_SPECS = [
     ({"scenarios": ["paper-hole"], "controllers": ["cjm"], "seeds": 0}, "seeds"),
     ({"scenarios": [3], "controllers": ["cjm"]}, "scenarios"),
     ({"scenarios": ["paper-hole"], "controllers": ["cjm"], "time_limit": -1}, "time_limit"),
+    ({"scenarios": ["paper-hole"], "controllers": ["cjm"], "plants": ["kinematic", "mujoco"],
+      "imperfections": {"calibration_error_mm": 1.0}}, "calibration error needs"),
+    ({"scenarios": ["paper-hole"], "controllers": ["cjm"], "constraint_gain": [5.0, 5000.0]},
+     "constraint_gain"),
+    ({"scenarios": ["paper-hole"], "controllers": ["cjm"], "rate": 1e-9}, "control periods"),
 ]
 
 
@@ -139,6 +144,8 @@ def test_a_file_that_is_not_a_spec_is_one_line_and_exit_2(content, named, tmp_pa
 
 @pytest.mark.parametrize("args, named", [
     (["--address", "127.0.0.1:1"], "--address needs --engine ray"),
+    (["--engine", "ray", "--address", "127.0.0.1:1"], "cannot reach the Ray cluster"),
+    (["--engine", "ray", "--address", "nowhere"], "HOST:PORT"),
     (["--workers", "0"], "workers must be >= 1"),
     (["--retries", "-1"], "retries must be >= 0"),
     (["--seeds", "a"], "--seeds"),
@@ -295,6 +302,37 @@ def test_a_pool_worker_killed_in_its_cell_is_replaced_and_the_cell_runs_again(tm
     key, pid = killed[0]
     assert finished[key].attempts == 2
     assert all(f.attempts == 1 for k, f in finished.items() if k != key)
+
+
+def test_a_pool_worker_that_dies_between_cells_is_replaced(tmp_path):
+    cells = build_spec({**SMALL, "seeds": 1, "controllers": ["cjm"]}).cells()
+    pool = LocalPool(workers=1, retries=0)
+    finished = []
+    for end in pool.run(cells, time_limit=300):
+        finished.append(end)
+        if len(finished) == 1:  # the worker is idle now: kill it before its next cell
+            (worker,) = pool._pool
+            worker.process.kill()
+            worker.process.join(timeout=30)
+    assert [f.outcome["status"] for f in finished] == [DONE, DONE]
+    assert [f.attempts for f in finished] == [1, 1]  # a dead idle worker costs no attempt
+
+
+def test_retry_failed_runs_only_the_failed_cells_again(tmp_path):
+    spec = build_spec({"scenarios": ["paper-hole"], "controllers": ["cjm", "cjm:python"],
+                       "duration": 0.3, "time_limit": 0.01})
+    first = run_sweep(spec, tmp_path, workers=1, progress=False)
+    assert first.failed >= 1  # cjm:python cannot run 300 steps in 10 ms
+    failed = {k for k, row in rows_by_key(tmp_path).items() if row.status == FAILED}
+    done = {k: row for k, row in rows_by_key(tmp_path).items() if row.status == DONE}
+    again = run_sweep(build_spec({**{"scenarios": ["paper-hole"],
+                                     "controllers": ["cjm", "cjm:python"]},
+                                  "duration": 0.3, "time_limit": 300}),
+                      tmp_path, workers=1, retry_failed=True, progress=False)
+    assert (again.ran, again.skipped) == (len(failed), len(done))
+    after = rows_by_key(tmp_path)
+    assert all(after[k].status == DONE for k in failed)
+    assert all(after[k] == row for k, row in done.items())
 
 
 def test_a_stuck_worker_is_killed_past_the_limit_and_the_sweep_goes_on(tmp_path):

@@ -21,11 +21,12 @@ from teleop.limits import MAX_PATH_AMPLITUDE_M, MAX_TROCAR_SHIFT_M
 from teleop.loop import Targets
 from teleop.loop.closed_loop import target_poses
 from teleop.robots import Robot
+from teleop.seeds import stream
 
 from .plan import Plan, smoothstep
 
-#: The second entry of the seed sequences of the draws, ``default_rng([seed, stream])``: the
-#: encoder noise draws from ``default_rng(seed)``, so the three streams are independent.
+#: The draws' streams of the seed (:func:`teleop.seeds.stream`): the encoder noise draws
+#: from ``default_rng(seed)``, so the three streams are independent.
 TROCAR_STREAM, PATH_STREAM = 0x7120CA, 0x9A7B
 
 #: Sinusoids per EE path, the range (Hz) their frequencies are drawn from, and the fade-in (s).
@@ -158,13 +159,13 @@ class Variation:
 
     def trocar_rng(self) -> np.random.Generator:
         """A fresh generator of the trocar offsets: the same draws at every call."""
-        return np.random.default_rng([self.seed, TROCAR_STREAM])
+        return stream(self.seed, TROCAR_STREAM)
 
     def operator_paths(self, count: int) -> list[OperatorPath]:
         """One :class:`OperatorPath` per EE, each term of amplitude ``path_amplitude /``
         :data:`PATH_TERMS`: per EE, unit directions (normalised Gaussian vectors),
         frequencies ``U(`` :data:`PATH_FREQUENCY_RANGE_HZ` ``)``, phases ``U(0, 2 pi)``."""
-        rng = np.random.default_rng([self.seed, PATH_STREAM])
+        rng = stream(self.seed, PATH_STREAM)
         paths = []
         for _ in range(count):
             directions = rng.standard_normal((PATH_TERMS, 3))

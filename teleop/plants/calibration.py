@@ -16,8 +16,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-#: The second word of the calibration draw's seed, ``default_rng([seed, CALIBRATION_STREAM])``:
-#: a stream apart from the encoder noise's ``default_rng(seed)``.
+from teleop.seeds import stream
+
+#: The calibration draw's stream of the seed (:func:`teleop.seeds.stream`): apart from the
+#: encoder noise's ``default_rng(seed)`` and from every other seed's streams.
 CALIBRATION_STREAM = 0xCA1
 
 #: Per joint, the draw's columns: the translation's three, then the rotation vector's three.
@@ -29,12 +31,11 @@ def joint_placement_errors(joints: int, position_std: float, rotation_std: float
     """The rigid errors ``E_1 .. E_joints`` of the module's formula, in joint order.
 
     One ``(joints, 6)`` block of standard normals ``z`` is drawn from
-    ``default_rng([seed, CALIBRATION_STREAM])``; ``t_j = s_m z_j[:3]`` and
+    ``stream(seed, CALIBRATION_STREAM)``; ``t_j = s_m z_j[:3]`` and
     ``r_j = s_rad z_j[3:]``. The same seed gives the same ``z`` whatever the stds, so
     a zero std leaves the other part of the draw as it was.
     """
-    normals = np.random.default_rng([int(seed), CALIBRATION_STREAM]).standard_normal(
-        (joints, DRAWS_PER_JOINT))
+    normals = stream(seed, CALIBRATION_STREAM).standard_normal((joints, DRAWS_PER_JOINT))
     return [pin.SE3(pin.exp3(rotation_std * row[3:]), position_std * row[:3])
             for row in normals]
 

@@ -160,6 +160,12 @@ class ResultsDatabase:
         except sqlite3.IntegrityError:
             db.execute("ROLLBACK")
             return False
+        except BaseException as error:
+            if db.in_transaction:
+                db.execute("ROLLBACK")
+            if isinstance(error, sqlite3.OperationalError):  # locked past 30 s, disk full
+                raise ValueError(f"{self.path}: cannot write cell {key}: {error}") from None
+            raise
         return True
 
     def delete(self, keys: Iterable[str]) -> None:

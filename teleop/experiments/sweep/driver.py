@@ -75,9 +75,11 @@ def make_engine(engine: str, workers: int, retries: int, address: str | None):
             raise ValueError("--address needs --engine ray")
         return LocalPool(workers, retries)
     if engine == "ray":
-        from .ray_engine import RayEngine, check_ray
+        from .ray_engine import RayEngine, check_address, check_ray
 
         check_ray()
+        if address:
+            check_address(address)
         return RayEngine(workers, retries, address)
     raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
 
@@ -101,8 +103,8 @@ def run_sweep(spec: SweepSpec, out: str | Path, engine: str = "local",
     cells = spec.cells()
     with ResultsDatabase(folder / DATABASE_NAME) as database:
         if retry_failed:
-            database.delete(cell.key for cell in cells
-                            if cell.key in database.keys(FAILED))
+            failed = database.keys(FAILED)
+            database.delete(cell.key for cell in cells if cell.key in failed)
         held = database.keys()
         todo = [cell for cell in cells if cell.key not in held]
         run = SweepRun(total=len(cells), skipped=len(cells) - len(todo))

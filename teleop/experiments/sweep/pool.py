@@ -99,7 +99,8 @@ class LocalPool:
         worker.connection.close()
 
     def running(self) -> dict[str, int]:
-        """The cells running now: each key with its worker's process id."""
+        """The cells running now: each key with its worker's process id (to watch or
+        signal a worker, as the tests do)."""
         return {w.cell.key: w.process.pid for w in self._pool if w.cell is not None}
 
     def run(self, cells: list[Cell], time_limit: float,
@@ -111,8 +112,11 @@ class LocalPool:
         self._pool = [self._start() for _ in range(min(self.workers, len(cells)))]
         try:
             while queue or any(w.cell is not None for w in self._pool):
-                for worker in self._pool:
+                for index, worker in enumerate(self._pool):
                     if worker.cell is None and queue:
+                        if not worker.process.is_alive():  # died idle: a fresh one
+                            self._stop(worker)
+                            worker = self._pool[index] = self._start()
                         self._give(worker, *queue.popleft(), time_limit, on_start)
                 busy = [w for w in self._pool if w.cell is not None]
                 waitables = [w.connection for w in busy] + [w.process.sentinel for w in busy]
@@ -140,7 +144,10 @@ class LocalPool:
               on_start: Callable[[Cell], None] | None) -> None:
         worker.cell, worker.attempts = cell, attempts + 1
         worker.started = time.monotonic()
-        worker.connection.send((cell.key, cell.inputs, time_limit))
+        try:
+            worker.connection.send((cell.key, cell.inputs, time_limit))
+        except OSError:  # it died meanwhile: its sentinel says so, the cell runs again
+            return
         if on_start is not None:
             on_start(cell)
 

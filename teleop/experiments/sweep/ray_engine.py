@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import socket
 import sys
 import time
 from collections import deque
@@ -22,9 +23,9 @@ from .pool import GRACE_S, SINGLE_THREADED, Finished
 from .spec import Cell
 
 
-#: Set before Ray is imported, Ray's own switch makes a local instance use the loopback
-#: address for every one of its servers (Ray otherwise binds this machine's network
-#: address); an existing cluster keeps its addresses.
+#: Set before Ray is imported: Ray's switch for its cluster mode (on by default on Linux);
+#: off, Ray takes 127.0.0.1 as the node's address, so a local instance's servers listen on
+#: loopback only (else on this machine's network address). Not set for an existing cluster.
 LOOPBACK_ONLY = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
 
 
@@ -32,6 +33,23 @@ def check_ray() -> None:
     """``ValueError`` unless Ray is installed (nothing imported)."""
     if importlib.util.find_spec("ray") is None:
         raise ValueError("--engine ray needs Ray: pip install -e \".[ray]\"")
+
+
+#: Seconds to wait for a cluster's address to answer before refusing it (``ray.init`` itself
+#: waits without end for an address where nothing listens).
+CONNECT_TIMEOUT_S = 5.0
+
+
+def check_address(address: str) -> None:
+    """``ValueError`` unless ``address`` is ``HOST:PORT`` and something listens there."""
+    host, _, port = address.rpartition(":")
+    if address.startswith("ray://") or not host or not port.isdigit():
+        raise ValueError(f"--address must be HOST:PORT of a Ray cluster's head, got {address!r}")
+    try:
+        socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as error:
+        raise ValueError(f"cannot reach the Ray cluster at {address}: "
+                         f"{error.strerror or error}") from None
 
 
 def _import_ray(local: bool):

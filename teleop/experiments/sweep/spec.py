@@ -236,9 +236,7 @@ def build_spec(document: Mapping[str, Any], source: str = "the command line") ->
         cell_name = SPEC_KEYS.get(name, name)
         grid[cell_name] = _values(name, cell_name, value)
     grid.setdefault("seed", [0])
-    _check_names(grid)
-    if any(grid.get("payload", [0.0])) and "kinematic" in grid.get("plant", ["kinematic"]):
-        raise ValueError("payload needs the mujoco plant (plants lists kinematic)")
+    _check_grid(grid)
     spec = SweepSpec(grid, time_limit, source)
     if spec.size > MAX_CELLS:
         raise ValueError(f"the grid has {spec.size} cells, more than {MAX_CELLS}")
@@ -262,11 +260,22 @@ def _values(name: str, cell_name: str, value: Any) -> list[Any]:
     return checked
 
 
-def _check_names(grid: dict[str, list[Any]]) -> None:
-    """Every scenario loads and every controller builds on each scenario's robot."""
+def _check_grid(grid: dict[str, list[Any]]) -> None:
+    """What the cells' runs would refuse, refused before any runs: an unknown scenario or
+    controller (each controller built on each scenario's robot), a payload or a
+    calibration error on a plant that cannot take it, a duration of no control period or
+    too many, a constraint gain unstable at a rate (docs/design.md 3.4)."""
     from teleop.controller_specs import make_controller
+    from teleop.experiments.compare import check_constraint_gain
     from teleop.experiments.scenarios import load_scenario
+    from teleop.limits import MAX_STEPS
 
+    plants = grid.get("plant", ["kinematic"])
+    if any(grid.get("payload", [0.0])) and "kinematic" in plants:
+        raise ValueError("payload needs the mujoco plant (plants lists kinematic)")
+    if (any(grid.get("calibration_error_mm", [0.0]))
+            or any(grid.get("calibration_error_mrad", [0.0]))) and "mujoco" in plants:
+        raise ValueError("calibration error needs the kinematic plant (plants lists mujoco)")
     for scenario in grid["scenario"]:
         try:
             plan = load_scenario(scenario)
@@ -278,6 +287,16 @@ def _check_names(grid: dict[str, list[Any]]) -> None:
                                 collisions=plan.make_collisions())
             except ValueError as error:
                 raise ValueError(f"controllers: {error}") from None
+        for rate in grid.get("rate", [FIELDS_BY_NAME["rate"].default]):
+            for duration in grid.get("duration", [None]):
+                seconds = duration or plan.duration
+                steps = int(round(seconds * rate))
+                if not 1 <= steps <= MAX_STEPS:
+                    raise ValueError(f"duration {seconds:g} s at rate {rate:g} Hz is {steps} "
+                                     f"control periods, not in [1, {MAX_STEPS}] ({scenario})")
+            for gain in grid.get("constraint_gain", [None]):
+                if gain is not None:
+                    check_constraint_gain(plan.with_constraint_gain(gain), 1.0 / rate)
 
 
 def _notes(grid: dict[str, list[Any]]) -> tuple[str, ...]:
