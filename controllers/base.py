@@ -42,7 +42,8 @@ def clipped_note(joints: list[int], change: float) -> str:
 #: float64 of the other byte order takes the slow path, which converts it)
 FLOAT64 = np.dtype(np.float64)
 
-#: The message of a step whose command came out non-finite (the command is zero).
+#: The message of a step whose command came out non-finite (the command is the stop:
+#: the command nearest zero inside the box).
 NON_FINITE_NOTE = "non-finite joint velocity computed"
 
 
@@ -77,7 +78,8 @@ class StepStatus(str, Enum):
       a singularity, damping acting): the closest twist is commanded.
     * ``constraint_degraded``: a constraint is not held exactly (conflicting constraints,
       or the joint limits cannot accommodate its correction).
-    * ``failed``: no command could be computed; the command is zero.
+    * ``failed``: no command could be computed; the command is the stop, the command
+      nearest zero inside the box (zero unless a joint past its limit must come back).
     """
 
     OK = "ok"
@@ -324,10 +326,10 @@ class Controller(ABC):
         return self.joint_bounds.box(q, self._previous_command())
 
     def stop_command(self, q: np.ndarray) -> np.ndarray:
-        """The fallback of a failed step: zero without acceleration limits, else a
-        controlled stop, the command nearest zero inside the box (docs/design.md 8.4)."""
-        if self.joint_bounds.acceleration_step is None:
-            return np.zeros(self.model.nv)
+        """The fallback of a failed step: the command nearest zero inside the box
+        (docs/design.md 8.2-8.4): zero, unless a joint past its position limit must come
+        back (its box excludes zero) or the acceleration limits cannot stop at once (a
+        controlled stop)."""
         lower, upper = self.bounds(q)
         return np.clip(0.0, lower, upper)
 

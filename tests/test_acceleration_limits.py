@@ -329,3 +329,18 @@ def test_without_acceleration_limits_nothing_changes():
     first = plain.solve(q, twist)
     np.testing.assert_array_equal(plain.solve(q, twist), first)
     np.testing.assert_array_equal(plain.bounds(q)[0], plain.joint_bounds.box(q)[0])
+
+
+@pytest.mark.parametrize("spec", ["cjm", "cjm:python", "qp:daqp", "mink:daqp"])
+def test_without_acceleration_limits_the_stop_brings_a_joint_past_its_limit_back(spec):
+    """Zero is outside the box of a joint past its position limit (the box asks it back):
+    the stop is the command nearest zero inside it, not zero."""
+    robot = load_robot("sda10f")
+    q = robot.q_home.copy()
+    q[2] = robot.model.lowerPositionLimit[2] - 0.03  # joint 2 below its lower limit
+    controller = make_controller(spec, robot, [], time_budget=None)
+    lower, upper = controller.joint_bounds.box(q)
+    stop = controller.stop_command(q)
+    np.testing.assert_array_equal(stop, np.clip(0.0, lower, upper))
+    assert lower[2] > 0 and stop[2] == lower[2]  # back towards the limit
+    assert np.count_nonzero(stop) == 1

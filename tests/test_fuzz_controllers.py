@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from constraints import Barrier, Hole, Plane, PointLock
@@ -86,8 +86,17 @@ def drawn_configuration(robot, at_limits: list[int], past: float) -> np.ndarray:
     return q
 
 
+#: Drawn by Hypothesis 6.170 in a fresh CI venv: the Panda, every joint 0.03 rad below its
+#: lower limit (its box pins each joint at the speed that brings it back), a 1e6 twist;
+#: mink:proxqp stops at its iteration cap and its failed step sent zero, outside the box.
+PANDA_PAST_ITS_LIMITS = ("panda", [], 0.03125, 1e6,
+                         np.array([1.0, 0, 0, 1.0, 0, 0, 0, 0, 0, 0, 0, 0]), np.zeros(3), [-1],
+                         "mink:proxqp")
+
+
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(problem=problems())
+@example(problem=PANDA_PAST_ITS_LIMITS)
 def test_every_controller_is_finite_in_its_limits_honest_and_bounded(robots, problem):
     name, kinds, past, scale, direction, offset, at_limits, spec = problem
     robot = robots[name]
@@ -110,8 +119,8 @@ def test_every_controller_is_finite_in_its_limits_honest_and_bounded(robots, pro
     # the controllers' box tolerance: 1e-9 of each joint's velocity limit (BoxTest)
     velocity_limit = controller.joint_bounds.velocity_limit
     slack = 1e-9 * np.where(np.isfinite(velocity_limit), velocity_limit, 1.0)
-    if info.status.value == "failed":  # the zero command: hold (the box may ask to come back)
-        np.testing.assert_array_equal(qd, 0.0)
+    if info.status.value == "failed":  # the stop: the command nearest zero inside the box
+        np.testing.assert_array_equal(qd, np.clip(0.0, lower, upper))
         assert info.message, spec
     else:
         assert np.all(qd >= lower - slack) and np.all(qd <= upper + slack), (spec, info.message)
@@ -122,8 +131,11 @@ def test_every_controller_is_finite_in_its_limits_honest_and_bounded(robots, pro
             assert np.max(np.abs(A @ qd - b)) <= 1e3 * EQUALITY_TOLERANCE, (spec, info)
 
 
+
+
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(problem=problems(), steps=st.integers(2, 12))
+@example(problem=PANDA_PAST_ITS_LIMITS, steps=2)
 def test_every_controller_keeps_its_acceleration_box_over_a_sequence(robots, problem, steps):
     """The same draws as above, run for several steps from the drawn configuration (joints
     at and past their limits) on the ideal integrator: every command is inside the box

@@ -102,9 +102,8 @@ class PythonStep:
         return self.stop_command(q), report.freeze()
 
     def stop_command(self, q: np.ndarray) -> np.ndarray:
-        """Zero without acceleration limits, else the command nearest zero in the box."""
-        if self._reference is None:
-            return np.zeros(self.setup.model.nv)
+        """The command nearest zero in the box (zero unless a joint past its limit must come
+        back, or the acceleration limits cannot stop at once)."""
         lower, upper = self.setup.bounds.box(q, self._reference)
         return np.clip(0.0, lower, upper)
 

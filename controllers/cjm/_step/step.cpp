@@ -337,8 +337,8 @@ double Step::braking_speed(double distance, double step) const {
 }
 
 void Step::stop(const ConstVectorRef& q, VectorRef qd) {
-  qd.setZero();
-  if (!accelerating_) return;
+  // the command nearest zero inside the box: zero unless a joint past its limit must
+  // come back, or the acceleration limits cannot stop at once
   compute_box(q);
   for (Index i = 0; i < nv_; ++i) qd(i) = std::min(std::max(0.0, lower_(i)), upper_(i));
 }
