@@ -115,6 +115,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="folder the page writes recorded sessions to (created on the "
                             "first recording)")
 
+    devices = parser.add_argument_group("input devices (docs/inputs.md)")
+    devices.add_argument("--input", action="append", metavar="SOURCE",
+                         help="what drives an end effector besides the gizmo: udp:PORT (a "
+                              "network master, bound to --host) or spacemouse; each takes the "
+                              "next EE, or the one named after @ (udp:9870@right); repeatable "
+                              "(default: the gizmo only)")
+    devices.add_argument("--input-timeout", type=positive, default=100.0, metavar="MS",
+                         help="a network master silent this long is released: its target "
+                              "holds and the robot stops (default: 100 ms)")
     server = parser.add_argument_group("server")
     server.add_argument("--host", default="127.0.0.1",
                         help="address to bind; the UI commands a robot, so only this machine "
@@ -176,7 +185,9 @@ def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
         print(f"{prog}: warning: listening on {args.host} ({', '.join(addresses)}): anyone "
               "who can reach this port and has the token can move the robot and read and "
               f"write files in {args.scene_dir} and {args.record_dir}; the token and the "
-              "page travel unencrypted (an SSH tunnel to 127.0.0.1 avoids both)",
+              "page travel unencrypted (an SSH tunnel to 127.0.0.1 avoids both)"
+              + ("; whoever can send to the --input udp ports moves the robot, no token "
+                 "asked" if any(spec.startswith("udp:") for spec in args.input or ()) else ""),
               file=sys.stderr)
     return port, token
 
@@ -216,6 +227,51 @@ def _collisions(args: argparse.Namespace) -> dict:
     return {"collisions": args.collisions is not False, "collision_settings": settings}
 
 
+def _ee_index(name: str, frames: list[str], default: int, spec: str) -> int:
+    """The EE an ``--input`` names after ``@`` (its index, frame or short name as the page
+    shows it), else the ``default``; ``ValueError`` for one the robot does not have."""
+    from web.ui.core import short_names
+
+    names = {**{str(i): i for i in range(len(frames))},
+             **{frame: i for i, frame in enumerate(frames)},
+             **{short: frames.index(frame) for frame, short in short_names(tuple(frames)).items()}}
+    index = names.get(name) if name else default
+    if index is None or index >= len(frames):
+        raise ValueError(f"--input {spec}: no end effector {name or default} (this robot's: "
+                         f"{', '.join(frames)})")
+    return index
+
+
+def _inputs(args: argparse.Namespace, robot, prog: str) -> list:
+    """The input sources ``--input`` asks for, each on its EE; ``ValueError`` for a bad
+    one or a port that cannot be bound. A SpaceMouse that is not there is one warning
+    line: the UI runs without it."""
+    from teleop.inputs import UdpMaster
+
+    sources = []
+    try:
+        for index, spec in enumerate(args.input or ()):
+            kind, _, name = spec.partition("@")
+            ee = _ee_index(name, list(robot.ee_frames), index, spec)
+            if kind == "spacemouse":
+                from teleop.inputs.spacemouse import SpaceMouse
+                try:
+                    sources.append(SpaceMouse.open(ee))
+                except ValueError as error:
+                    print(f"{prog}: warning: --input spacemouse: {one_line(error)}; the UI "
+                          "runs without it", file=sys.stderr)
+            elif kind.startswith("udp:"):
+                sources.append(UdpMaster(check_port(kind[4:]), host=args.host, ee=ee,
+                                         max_age=args.input_timeout / 1e3))
+            else:
+                raise ValueError(f"--input {spec}: expected udp:PORT or spacemouse")
+    except ValueError:
+        for source in sources:
+            source.close()
+        raise
+    return sources
+
+
 def run(args: argparse.Namespace, prog: str) -> int:
     """Serve the UI the options ``args`` ask for until Ctrl-C; 2 (and one line on stderr,
     naming ``prog``) when it cannot start."""
@@ -231,12 +287,19 @@ def run(args: argparse.Namespace, prog: str) -> int:
             print(f"{prog}: warning: {note}", file=sys.stderr)
         from web.ui import run_server
 
-        server, app, control, ui = run_server(robot, host=args.host, port=port,
-                                              controller=args.controller, ghost=args.ghost,
-                                              rate=args.rate, record_dir=args.record_dir,
-                                              scene_dir=args.scene_dir, scene=scene,
-                                              notes=notes, token=token, **plant,
-                                              **collisions)
+        inputs = _inputs(args, robot, prog)
+        try:
+            server, app, control, ui = run_server(robot, host=args.host, port=port,
+                                                  controller=args.controller, ghost=args.ghost,
+                                                  rate=args.rate, record_dir=args.record_dir,
+                                                  scene_dir=args.scene_dir, scene=scene,
+                                                  notes=notes, token=token, **plant,
+                                                  **collisions, inputs=inputs,
+                                                  input_timeout=args.input_timeout / 1e3)
+        except BaseException:
+            for source in inputs:
+                source.close()
+            raise
     except (OSError, ValueError) as error:  # no such URDF/scene, bad frame / q_home / spec, port
         print(f"{prog}: {one_line(error)}", file=sys.stderr)
         return 2
@@ -255,6 +318,7 @@ def run(args: argparse.Namespace, prog: str) -> int:
     finally:
         ui.stop()
         control.stop()
+        app.close_inputs()
         server.stop()
     return 0
 

@@ -27,6 +27,11 @@ Format (one JSON object per line, times ``t`` in seconds from the start, world f
 * ``{"type": "move", "t": 1.2, "id": "hole-1", "position": [...], "velocity": [...]}`` -
   a hole's centre, a plane's point or a lock's target moves (velocity for feed-forward).
 * ``{"type": "remove", "t": 3.0, "id": "hole-1"}``
+* ``{"type": "input", "t": 2.0, "source": "udp:9870", "ee": 0, "counts": {...},
+  "latency_ms": {"n": 1000, "p50": 0.4, "p99": 1.1, "max": 1.6}}`` - version 4: an input
+  device's counts (received, applied, dropped by reason...) and the arrival-to-command
+  latency of the commands since its previous line (docs/design.md section 19.2); a
+  replay reads past it.
 * ``{"type": "end", "t": 10.0}`` - optional; the session's duration.
 """
 
@@ -56,11 +61,11 @@ from .plan import Plan, home_poses
 from teleop.plants.choice import PlantChoice
 
 FORMAT = "cjm-teleop-session"
-VERSION = 3
+VERSION = 4
 #: the versions :func:`load_session` reads (1: a single EE, no root joint or locked joints;
 #: 2: no collision avoidance)
-READABLE_VERSIONS = (1, 2, 3)
-EVENT_TYPES = ("target", "add", "move", "remove", "end")
+READABLE_VERSIONS = (1, 2, 3, 4)
+EVENT_TYPES = ("target", "add", "move", "remove", "input", "end")
 #: events within this of a tick's time belong to that tick (float time stamps)
 TIME_EPSILON = 1e-9
 
@@ -165,6 +170,15 @@ class SessionRecorder:
         self._write({"type": "move", "t": self._stamp(t), "id": str(constraint_id),
                      "position": [float(x) for x in position],
                      "velocity": [float(x) for x in velocity]})
+
+    def input(self, t: float, source: str, ee: int, counts: dict[str, int],
+              latencies: np.ndarray) -> None:
+        """An input source's counts and the latencies (s) since its previous line."""
+        latency = ({"n": int(latencies.size), "p50": 1e3 * float(np.percentile(latencies, 50)),
+                    "p99": 1e3 * float(np.percentile(latencies, 99)),
+                    "max": 1e3 * float(latencies.max())} if latencies.size else {"n": 0})
+        self._write({"type": "input", "t": self._stamp(t), "source": str(source), "ee": int(ee),
+                     "counts": counts, "latency_ms": latency})
 
     def remove(self, t: float, constraint_id: str) -> None:
         self._write({"type": "remove", "t": self._stamp(t), "id": str(constraint_id)})
@@ -388,6 +402,8 @@ def _check_event(event: dict) -> None:
     elif kind == "remove":
         if not isinstance(event.get("id"), str):
             raise ValueError("'remove' needs a string 'id'")
+    elif kind == "input" and not isinstance(event.get("source"), str):
+        raise ValueError("'input' needs a string 'source'")
 
 
 def session_robot(session: Session) -> Robot:

@@ -287,6 +287,17 @@ class TeleopLoop:
         if self.distance_meter is not None:
             self.distance_meter.reset()
 
+    def hold(self, ee: int, pose: pin.SE3) -> None:
+        """EE ``ee``'s filtered target and its feed-forward at ``pose``: the next command
+        asks it no motion but towards ``pose`` (a watchdog's stop, docs/design.md 19.2)."""
+        if self._history_in_tick:
+            self._filtered_targets, self._previous_targets = self.compiled.history()
+        for history in (self._filtered_targets, self._previous_targets):
+            if history is not None:
+                history[ee] = pose.copy()
+        if self._history_in_tick:
+            self.compiled.set_history(self._filtered_targets, self._previous_targets)
+
     # -- one tick ----------------------------------------------------------------------
 
     def targets(self, target: Targets) -> list[pin.SE3]:

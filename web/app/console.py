@@ -2,12 +2,14 @@
 motion scale, nudges and home (docs/design.md section 5.3).
 
 As on a surgical or industrial console, a **clutch** decouples the gizmos from the
-targets, and **motion scaling** maps a gizmo displacement ``d`` since the last clutch
-release to a target displacement ``scale d`` (orientation follows the gizmo's rotation
-since then, unscaled). A robot with several end effectors (docs/design.md section 11) has
+targets, and **motion scaling** maps each gizmo displacement ``d`` to a target
+displacement ``scale d`` (orientation follows the gizmo's rotation, unscaled): the
+gizmo is an input source in the world's frame, mapped as every device is
+(:func:`teleop.inputs.followed_pose`, docs/design.md section 19.1), so the clutch and a
+new motion scale never make a target jump. A robot with several end effectors (docs/design.md section 11) has
 a target and a gizmo per EE (:class:`EEInput`); the actions take the EE's index ``ee``
 (0: ``robot.ee_frame``). The clutch and the motion scale are shared by every gizmo; each
-gizmo keeps its own anchors.
+gizmo moves its own target.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints.validation import as_number, as_vector
+from teleop.inputs import followed_pose
 from teleop.loop import TeleopLoop
 from teleop.robots import Robot
 
@@ -31,32 +34,16 @@ MAX_NUDGE = 0.1
 
 @dataclass
 class EEInput:
-    """The operator's input for one end effector: its target, its gizmo, and the poses of
-    both at the last re-anchoring (clutch release, motion-scale change, nudge)."""
+    """The operator's input for one end effector: its target and its gizmo."""
 
     frame: str  # the EE frame (an entry of robot.ee_frames)
     target: pin.SE3
     gizmo: pin.SE3
-    gizmo_anchor: pin.SE3
-    target_anchor: pin.SE3
 
     @classmethod
     def at(cls, frame: str, pose: pin.SE3) -> "EEInput":
         """Target and gizmo both at ``pose``."""
-        return cls(frame, pose.copy(), pose.copy(), pose.copy(), pose.copy())
-
-    def reanchor(self) -> None:
-        """From now on the target moves by the gizmo's motion since this instant."""
-        self.gizmo_anchor = self.gizmo.copy()
-        self.target_anchor = self.target.copy()
-
-    def followed(self, scale: float) -> pin.SE3:
-        """The target the gizmo asks for: the target anchor moved by ``scale`` times the
-        gizmo's displacement since its anchor, turned by the gizmo's rotation since then."""
-        anchor, start = self.gizmo_anchor, self.target_anchor
-        position = start.translation + scale * (self.gizmo.translation - anchor.translation)
-        rotation = self.gizmo.rotation @ anchor.rotation.T @ start.rotation
-        return pin.SE3(rotation, position)
+        return cls(frame, pose.copy(), pose.copy())
 
 
 def pose_from(position, wxyz, what: str) -> pin.SE3:
@@ -123,11 +110,6 @@ class Console:
         self.inputs[ee].target = target
         self._record_target(ee)
 
-    def _reanchor(self) -> None:
-        """From now on every target moves by its gizmo's motion since this instant."""
-        for hand in self.inputs:
-            hand.reanchor()
-
     def set_target(self, position, wxyz, ee=0) -> None:
         """The operator's target pose of EE ``ee`` directly (world position, quaternion
         w, x, y, z). Its gizmo's later motion continues from this target."""
@@ -136,7 +118,6 @@ class Console:
         with self._lock:
             self._check_target(target, ee)
             self._set_target(target, ee)
-            self.inputs[ee].reanchor()
 
     def move_gizmo(self, position, wxyz, ee=0) -> None:
         """EE ``ee``'s input gizmo pose. Unless the clutch is engaged, its target moves by
@@ -148,7 +129,8 @@ class Console:
             hand = self.inputs[ee]
             previous, hand.gizmo = hand.gizmo, gizmo
             if not self.clutch:
-                target = hand.followed(self.motion_scale)
+                target = followed_pose(hand.target, previous, gizmo, np.eye(3),
+                                       self.motion_scale)
                 try:
                     self._check_target(target, ee, "the gizmo's target")
                 except ValueError:
@@ -157,24 +139,21 @@ class Console:
                 self._set_target(target, ee)
 
     def set_clutch(self, engaged: bool) -> None:
-        """Engage (the gizmos move alone) or release the clutch; on release every target
-        continues from where it is, so none jumps."""
+        """Engage (the gizmos and devices move alone) or release the clutch; on release
+        every target continues from where it is, so none jumps."""
         if not isinstance(engaged, (bool, np.bool_)):
             raise ValueError(f"the clutch is engaged (True) or released (False), got {engaged!r}")
         with self._lock:
             self.clutch = bool(engaged)
-            if not self.clutch:
-                self._reanchor()
 
     def set_motion_scale(self, scale: float) -> None:
-        """Target displacement per gizmo displacement, in (0, 10], for every gizmo; no
-        target jumps."""
+        """Target displacement per gizmo or device displacement, in (0, 10], for every
+        input; no target jumps (the mapping is incremental)."""
         scale = as_number(scale, "motion scale")
         if not 0.0 < scale <= MAX_MOTION_SCALE:
             raise ValueError(f"motion scale must be in (0, {MAX_MOTION_SCALE:g}], got {scale:g}")
         with self._lock:
             self.motion_scale = scale
-            self._reanchor()
 
     def nudge_target(self, displacement, ee=0) -> None:
         """Move EE ``ee``'s target by ``displacement`` (world, m), its gizmo staying where
@@ -188,7 +167,6 @@ class Console:
             target.translation = target.translation + displacement
             self._check_target(target, ee, "nudged target")
             self._set_target(target, ee)
-            self.inputs[ee].reanchor()
 
     def hold_where_the_robot_is(self, ee=None) -> None:
         """Every target and gizmo (or EE ``ee``'s) on the main robot's EE pose now: what a
@@ -208,7 +186,6 @@ class Console:
         with self._lock:
             hand = self.inputs[ee]
             hand.gizmo = hand.target.copy()
-            hand.reanchor()
             return hand.gizmo.copy()
 
     def home(self, ee=None) -> None:
@@ -229,9 +206,7 @@ class Console:
                                self._view_data.oMf[self.robot.ee_frame_ids[index]].copy())
 
     def _put_hand(self, ee: int, pose: pin.SE3) -> None:
-        """EE ``ee``'s target and gizmo both at ``pose``, anchored there (caller holds the
-        lock)."""
+        """EE ``ee``'s target and gizmo both at ``pose`` (caller holds the lock)."""
         hand = self.inputs[ee]
         self._set_target(pose, ee)
         hand.gizmo = hand.target.copy()
-        hand.reanchor()

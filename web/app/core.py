@@ -29,6 +29,7 @@ from teleop.robots import Robot
 from ..folders import Folder
 from .collisions import Collisions
 from .console import Console, EEInput
+from .devices import Devices
 from .editing import ConstraintEntry, Editing
 from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
 from .plant import PlantChoice, Plants
@@ -41,7 +42,7 @@ from .trace import Trace
 from .view import View
 
 
-class TeleopApp(Console, Editing, Collisions, Robots, Plants, Settings, Scenes, Recording, Tick,
+class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings, Scenes, Recording, Tick,
                 View):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
@@ -106,6 +107,7 @@ class TeleopApp(Console, Editing, Collisions, Robots, Plants, Settings, Scenes, 
                        zip(robot.ee_frames, self.loops["main"].ee_placements())]
         self.motion_scale = 1.0
         self.clutch = False
+        self._init_devices()
         self.recorder = None
         self._record_start = 0.0
         self._next_history = 0.0

@@ -173,7 +173,6 @@ class Scenes:
             for index, (position, wxyz) in enumerate(scene.targets):
                 self._set_target(pose_from(position, wxyz, "target"), index)
                 self.inputs[index].gizmo = self.inputs[index].target.copy()
-            self._reanchor()
             self._next_history = t
 
     def _scene_avoidance(self, scene, constraints: list, dt: float

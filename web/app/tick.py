@@ -39,6 +39,7 @@ class Tick:
     entries: dict[str, ConstraintEntry]
     obstacles: dict[str, ObstacleEntry]
     inputs: list[EEInput]
+    devices: list
     recorder: SessionRecorder | None
     avoidance: CollisionAvoidance
     collisions_on: bool
@@ -56,7 +57,8 @@ class Tick:
         return self.loops["main"].t
 
     def step(self) -> float:
-        """One control period for every robot (called by the control thread); returns the
+        """One control period for every robot (called by the control thread), the input
+        devices' samples applied before it (:mod:`.devices`); returns the
         time the controllers took (us), and leaves the loops' whole hot path in
         :attr:`advance_us`.
 
@@ -70,13 +72,18 @@ class Tick:
                       if not entry.settled]
             if moving:
                 self._steer(moving, dt)
+            if self.devices:
+                self._apply_devices(dt)
             targets, start = [hand.target for hand in self.inputs], self.now
             held: dict[str, CollisionRows] = {}
             pending = {which: self._advance(which, loop, targets, held)
                        for which, loop in self.loops.items()}
             if self.collisions_on:
                 self.collision_rows.update(held)
-            if start >= self._next_history - 0.5 * dt:
+            history = start >= self._next_history - 0.5 * dt
+            if self.devices:
+                self._devices_commanded(history)
+            if history:
                 self._measure(pending, moving, dt, held)
                 self._next_history = start + 1.0 / HISTORY_RATE
             else:

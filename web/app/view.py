@@ -90,7 +90,9 @@ class View:
                         "ghost_offset": self.ghost_offset.copy(),
                         "recording": self.recorder is not None,
                         "config": self.config, "gain": self.gain, "damping": self.damping,
-                        "plant": self.plant, "collisions": self._collisions_snapshot()}
+                        "plant": self.plant, "collisions": self._collisions_snapshot(),
+                        "devices": self.devices_snapshot(),
+                        "absolute_orientation": self.absolute_orientation}
         robots = {which: self._robot_snapshot(state, constraints, targets)
                   for which, state in states.items()}
         entries = [{"id": entry_id, "kind": kind, "goal": goal,

@@ -11,6 +11,8 @@
   (:mod:`.collision_view`);
 * on a physics plant, the wall's force on the instrument at each port, an arrow scaled in
   newtons (:mod:`.port_forces`);
+* the input devices (:mod:`.device_view`): they move in the frame of the view of the
+  browser whose camera moved last; their state in the status; the feedback force plotted;
 * panels: a status (:mod:`.status_view`: rate, lateness, what limits each robot's EEs in
   words, the one-sided constraints held), then tabs: Teleop (controllers, side by side,
   clutch, motion scale, the active arm's nudges, home) and Settings (gain, damping, rate,
@@ -46,6 +48,7 @@ from ..robot_view import RobotView, floor_height
 from .collision_panel import CollisionPanel
 from .collision_view import CollisionView
 from .constraint_panel import ConstraintPanel
+from .device_view import DeviceView
 from .markers import Markers
 from .panels import Panels
 from .plots import Plots
@@ -74,7 +77,7 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
 
 
 class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, CollisionView,
-               PortForces, StatusView, Plots):
+               PortForces, StatusView, Plots, DeviceView):
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -164,6 +167,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         self.tabs = gui.add_tab_group()
         with self.tabs.add_tab("Teleop"):
             self._build_teleop_panel()
+            self._build_device_panel()
         with self.tabs.add_tab("Constraints"):
             self._build_constraint_panel()
         with self.tabs.add_tab("Collisions"):
@@ -212,6 +216,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
                     next_status = start + 1.0 / STATUS_RATE
                 if plot:
                     self._plot(snapshot)
+                    self._plot_feedback(snapshot)
                     next_plot = start + 1.0 / PLOT_RATE
             except Exception as error:  # the view must never take the control loop down
                 self.status.content = f"view error: {type(error).__name__}: {error}"

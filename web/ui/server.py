@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Sequence
 
 import viser
 
+from teleop.inputs import InputSource
 from teleop.plants import PlantSettings
 from teleop.robots import Robot
 
@@ -21,7 +23,8 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                token: str | None = None, plant: str = "kinematic",
                plant_settings: PlantSettings | None = None,
                wall_stiffness: float | None = None, collisions: bool = True,
-               collision_settings: dict | None = None
+               collision_settings: dict | None = None,
+               inputs: Sequence[InputSource] = (), input_timeout: float | None = None
                ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
     threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
@@ -29,13 +32,19 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     ``token``, a page that does not present it gets nothing (:mod:`web.access`).
     ``plant``, ``plant_settings``, ``wall_stiffness``: what the loops run on;
     ``collisions``, ``collision_settings``: the collision avoidance
-    (:class:`web.app.TeleopApp`)."""
+    (:class:`web.app.TeleopApp`); ``inputs``: the devices that drive the EEs, each its
+    own (docs/design.md section 19), released after ``input_timeout`` s of silence
+    (default 0.1 s); the caller closes them (:meth:`TeleopApp.close_inputs`)."""
     app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
                     scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
                     wall_stiffness=wall_stiffness, collisions=collisions,
                     collision_settings=collision_settings)
     if scene is not None:
         app.apply_scene(scene)
+    if input_timeout is not None:
+        app.set_input_timeout(input_timeout)
+    for source in inputs:
+        app.attach_input(source)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     if token is not None:
         require_token(server, token)

@@ -100,6 +100,7 @@ class StatusView:
             console.insert(0, "**clutch engaged**: the gizmo moves alone" if len(names) == 1
                            else "**clutch engaged**: the gizmos move alone")
         lines.append(", ".join(console))
+        lines += self._device_lines(snapshot)
         self.status.content = "  \n".join(lines)
         label = "Release clutch" if snapshot["clutch"] else "Clutch"
         if self.clutch_button.label != label:

@@ -1,0 +1,61 @@
+"""A network master over the UDP protocol: the UI core runs headless here, a hole holds
+on link 6, and this script plays the master: a 5 s circle (1 cm radius, in the plane of
+the operator's view) streamed at 1 kHz, the feedback read back; then it goes silent and
+the watchdog stops the robot (docs/design.md section 19, docs/inputs.md).
+
+Run:  python examples/11_network_master.py
+"""
+
+import math
+import time
+
+import numpy as np
+
+from teleop import load_robot
+from teleop.inputs import MasterClient, UdpMaster
+from web.app import ControlThread, TeleopApp
+
+RATE, SECONDS, RADIUS = 1000.0, 5.0, 0.01
+
+app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0)
+app.add_constraint("hole", distance=0.08)
+master = UdpMaster(port=0)  # any free port on 127.0.0.1
+app.attach_input(master)
+control = ControlThread(app)
+control.start()
+
+client = MasterClient(master.port)
+errors, holes, forces = [], [], []
+start = time.perf_counter()
+for k in range(int(RATE * SECONDS) + 1):
+    angle = 2.0 * math.pi * k / (RATE * SECONDS)
+    client.send_pose((RADIUS * (math.cos(angle) - 1.0), RADIUS * math.sin(angle), 0.0))
+    if k % 10 == 0 and k > 500:  # after the first half second, every 10 ms
+        errors.append(app.limitation().distance)
+        record = app.last_records["main"]
+        holes.append(record.constraint_error if record is not None else 0.0)
+    feedback = client.feedback()
+    if feedback is not None:
+        forces.append(np.linalg.norm(feedback.wrench[:3]))
+    time.sleep(max(0.0, start + (k + 1) / RATE - time.perf_counter()))
+
+silent_from = time.perf_counter()  # the master goes silent: the watchdog releases it
+while app.devices[0].state.name != "HELD" or np.max(np.abs(app.loops["main"].last_qd)) >= 1e-3:
+    time.sleep(0.001)
+stopped_ms = 1e3 * (time.perf_counter() - silent_from)
+control.stop()
+client.feedback()
+stats = master.statistics()
+app.close_inputs()
+client.close()
+
+print(f"sent {client.sequence} commands, received {stats['received']}, applied "
+      f"{stats['applied']}, superseded {stats.get('superseded', 0)}, dropped {stats['dropped']}")
+print(f"feedback received: {len(client.received)}, force max {max(forces):.3f} N, "
+      f"round trip p50 {1e3 * np.percentile(client.round_trips, 50):.3f} ms")
+print(f"latency arrival-to-command p50 {stats['latency_p50_ms']:.3f} ms, "
+      f"p99 {stats['latency_p99_ms']:.3f} ms")
+print(f"tracking error RMS {1e3 * math.sqrt(np.mean(np.square(errors))):.3f} mm, "
+      f"max {1e3 * max(errors):.3f} mm; hole error max {1e6 * max(holes):.3f} um")
+print(f"master silent: robot stopped {stopped_ms:.0f} ms later "
+      f"({app.devices[0].reason if app.devices else 'released'})")

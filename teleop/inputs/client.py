@@ -1,0 +1,71 @@
+"""The master's side of the protocol (:mod:`teleop.inputs.protocol`): what a program
+driving a haptic device or a script sends, and the feedback it reads back."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+from .protocol import (FEEDBACK_SIZE, Feedback, PacketError, decode_feedback,
+                       encode_command)
+
+
+class MasterClient:
+    """Sends commands to ``teleop web --input udp:PORT`` (or a
+    :class:`~teleop.inputs.UdpMaster`) and reads its feedback.
+
+    Each command gets the next sequence number and the time of ``clock`` (s); the
+    feedback answering it arrives on the same socket (:meth:`feedback`).
+    """
+
+    def __init__(self, port: int, host: str = "127.0.0.1", ee: int = 0,
+                 clock=time.perf_counter) -> None:
+        self.address = (host, int(port))
+        self.ee = ee
+        self.clock = clock
+        self.sequence = 0
+        self._socket = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET,
+                                     socket.SOCK_DGRAM)
+        self._socket.setblocking(False)
+        self.received: list[Feedback] = []
+        self.round_trips: list[float] = []  # s, per feedback: now - the command's time
+
+    def close(self) -> None:
+        self._socket.close()
+
+    def __enter__(self) -> "MasterClient":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def send(self, kind: str, values, buttons: int = 0) -> int:
+        """One command (``kind`` "pose": x y z qw qx qy qz; "twist": vx vy vz wx wy wz);
+        returns its sequence number."""
+        self.sequence += 1
+        self._socket.sendto(encode_command(kind, values, self.sequence, self.clock(), self.ee,
+                                           buttons), self.address)
+        return self.sequence
+
+    def send_pose(self, position, wxyz=(1.0, 0.0, 0.0, 0.0), buttons: int = 0) -> int:
+        return self.send("pose", [*position, *wxyz], buttons)
+
+    def send_twist(self, linear, angular=(0.0, 0.0, 0.0), buttons: int = 0) -> int:
+        return self.send("twist", [*linear, *angular], buttons)
+
+    def feedback(self) -> Feedback | None:
+        """Reads every feedback waiting (kept in :attr:`received`); the newest, or None."""
+        newest = None
+        while True:
+            try:
+                datagram = self._socket.recv(FEEDBACK_SIZE + 1)
+            except (BlockingIOError, InterruptedError):
+                return newest
+            except OSError:  # nothing listens yet (an ICMP error of an earlier command)
+                continue
+            try:
+                newest = decode_feedback(datagram)
+            except PacketError:
+                continue
+            self.received.append(newest)
+            self.round_trips.append(self.clock() - newest.device_time)

@@ -1,0 +1,158 @@
+"""The network master's protocol, version 1: fixed-size little-endian UDP datagrams
+(docs/design.md section 19.2; the field tables are in docs/inputs.md).
+
+A **command** (master -> teleop, :data:`COMMAND_SIZE` bytes)::
+
+    magic "CJMI" | version u8 | kind u8 | ee u8 | buttons u8 | sequence u32 |
+    device_time f64 | values 7 x f64
+
+``kind`` 1 (pose: position x y z in m, quaternion w x y z) or 2 (twist: v x y z in m/s,
+w x y z in rad/s, the seventh value 0), in the device's frame (x right, y up, z towards
+the operator); ``buttons`` bit 0 the clutch (held: the master moves alone), bit 1 the
+mode; ``sequence`` increases by one per packet; ``device_time`` the master's clock (s).
+
+A **feedback** (teleop -> master, :data:`FEEDBACK_SIZE` bytes), one per command
+received::
+
+    magic "CJMF" | version u8 | state u8 | ee u8 | flags u8 | sequence u32 |
+    applied u32 | device_time f64 | wrench 6 x f64 | latency f64
+
+``sequence`` and ``device_time`` echo the command answered (the master measures its
+round trip from them); ``applied`` the newest command a robot command has used;
+``wrench`` the force (N) and torque (N m) to render, in the device's frame; ``latency``
+that command's arrival-to-command time (s); ``state`` :class:`FeedbackState`; ``flags``
+bit 0: the wrench includes a measured port force (a physics plant).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from dataclasses import dataclass
+
+MAGIC_COMMAND = b"CJMI"
+MAGIC_FEEDBACK = b"CJMF"
+VERSION = 1
+COMMAND_FORMAT = struct.Struct("<4sBBBBId7d")
+FEEDBACK_FORMAT = struct.Struct("<4sBBBBIId6dd")
+COMMAND_SIZE = COMMAND_FORMAT.size
+FEEDBACK_SIZE = FEEDBACK_FORMAT.size
+KIND_POSE, KIND_TWIST = 1, 2
+KINDS = {KIND_POSE: "pose", KIND_TWIST: "twist"}
+#: buttons: bit 0 the clutch (held: the master moves alone), bit 1 the mode
+CLUTCH, MODE = 1, 2
+BUTTON_MASK = CLUTCH | MODE
+#: a master's position is within this of its origin (m); a pose farther is refused
+MAX_DEVICE_POSITION = 10.0
+#: a quaternion's norm must be within these (it is normalised after)
+QUATERNION_NORM = (0.5, 2.0)
+#: a rate command is at most this fast (m/s, rad/s) before the motion scale and the
+#: loop's speed caps
+MAX_DEVICE_SPEED = (10.0, 100.0)
+#: flags of a feedback: the wrench includes a measured port force
+PORT_FORCE_MEASURED = 1
+
+
+class FeedbackState(enum.IntEnum):
+    """What the teleoperation does with the master's commands."""
+
+    FOLLOWING = 0  # its EE follows the master
+    CLUTCHED = 1  # the master moves alone (its clutch button, or the console's)
+    HELD = 2  # the watchdog released it after a silence: the target holds
+
+
+class PacketError(ValueError):
+    """A datagram that is not a valid command; ``reason`` is the counter it goes to."""
+
+    def __init__(self, reason: str, message: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class Command:
+    """One decoded command (:func:`decode_command`)."""
+
+    kind: str  # "pose" or "twist"
+    ee: int
+    buttons: int
+    sequence: int
+    device_time: float
+    values: tuple[float, ...]  # 7 numbers: a pose's x y z qw qx qy qz, a twist's v w and 0
+
+
+def encode_command(kind: str, values, sequence: int, device_time: float, ee: int = 0,
+                   buttons: int = 0) -> bytes:
+    """A command datagram (what a master sends); a twist takes 6 values."""
+    codes = {name: code for code, name in KINDS.items()}
+    values = [float(v) for v in values]
+    if kind == "twist" and len(values) == 6:
+        values.append(0.0)
+    return COMMAND_FORMAT.pack(MAGIC_COMMAND, VERSION, codes[kind], ee, buttons,
+                               sequence & 0xFFFFFFFF, float(device_time), *values)
+
+
+def decode_command(datagram: bytes, ee: int) -> Command:
+    """The command in ``datagram`` for EE ``ee`` (the one its source drives), or
+    :class:`PacketError` naming why not (reasons: ``malformed``, ``version``,
+    ``wrong_ee``, ``not_finite``, ``out_of_range``)."""
+    if len(datagram) != COMMAND_SIZE:
+        raise PacketError("malformed", f"{len(datagram)} bytes, a command has {COMMAND_SIZE}")
+    magic, version, kind, packet_ee, buttons, sequence, device_time, *values = \
+        COMMAND_FORMAT.unpack(datagram)
+    if magic != MAGIC_COMMAND:
+        raise PacketError("malformed", f"magic {magic!r}, expected {MAGIC_COMMAND!r}")
+    if version != VERSION:
+        raise PacketError("version", f"protocol version {version}, this is version {VERSION}")
+    if kind not in KINDS or buttons & ~BUTTON_MASK:
+        raise PacketError("malformed", f"kind {kind}, buttons {buttons:#x}")
+    if packet_ee != ee:
+        raise PacketError("wrong_ee", f"for EE {packet_ee}, this source drives EE {ee}")
+    if not (math.isfinite(device_time) and all(math.isfinite(v) for v in values)):
+        raise PacketError("not_finite", "a number is not finite")
+    if kind == KIND_POSE:
+        norm = math.sqrt(sum(v * v for v in values[3:]))
+        if (math.hypot(*values[:3]) > MAX_DEVICE_POSITION
+                or not QUATERNION_NORM[0] <= norm <= QUATERNION_NORM[1]):
+            raise PacketError("out_of_range", "position farther than "
+                              f"{MAX_DEVICE_POSITION:g} m or quaternion norm {norm:.3g}")
+        values[3:] = [v / norm for v in values[3:]]
+    elif (math.hypot(*values[:3]) > MAX_DEVICE_SPEED[0]
+          or math.hypot(*values[3:6]) > MAX_DEVICE_SPEED[1] or values[6] != 0.0):
+        raise PacketError("out_of_range", "twist faster than "
+                          f"{MAX_DEVICE_SPEED[0]:g} m/s or {MAX_DEVICE_SPEED[1]:g} rad/s")
+    return Command(KINDS[kind], ee, buttons, sequence, device_time, tuple(values))
+
+
+@dataclass(frozen=True)
+class Feedback:
+    """One feedback datagram's content (:func:`encode_feedback`, :func:`decode_feedback`)."""
+
+    state: FeedbackState
+    ee: int
+    sequence: int
+    applied: int
+    device_time: float
+    wrench: tuple[float, ...]  # force (N), torque (N m), device frame
+    latency: float  # s
+    port_force_measured: bool = False
+
+
+def encode_feedback(feedback: Feedback) -> bytes:
+    return FEEDBACK_FORMAT.pack(MAGIC_FEEDBACK, VERSION, int(feedback.state), feedback.ee,
+                                PORT_FORCE_MEASURED if feedback.port_force_measured else 0,
+                                feedback.sequence & 0xFFFFFFFF, feedback.applied & 0xFFFFFFFF,
+                                feedback.device_time, *feedback.wrench, feedback.latency)
+
+
+def decode_feedback(datagram: bytes) -> Feedback:
+    """What a master reads; :class:`PacketError` for a datagram that is not a feedback."""
+    if len(datagram) != FEEDBACK_SIZE:
+        raise PacketError("malformed", f"{len(datagram)} bytes, a feedback has {FEEDBACK_SIZE}")
+    magic, version, state, ee, flags, sequence, applied, device_time, *rest = \
+        FEEDBACK_FORMAT.unpack(datagram)
+    if magic != MAGIC_FEEDBACK or version != VERSION:
+        raise PacketError("malformed", f"not a version-{VERSION} feedback")
+    return Feedback(FeedbackState(state), ee, sequence, applied, device_time, tuple(rest[:6]),
+                    rest[6], bool(flags & PORT_FORCE_MEASURED))

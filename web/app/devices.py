@@ -1,0 +1,252 @@
+"""The operator's input devices (docs/design.md section 19): each drives one end
+effector's target through the same clutch, motion scale and view mapping as the gizmo.
+
+The control tick, before the robots' step, takes each source's newest sample
+(:meth:`Devices._apply_devices`): a pose moves the target by the device's motion since
+its previous sample, a twist integrates over the period (:mod:`teleop.inputs.mapping`),
+both in the frame of the operator's view (:meth:`Devices.set_view`). After the step
+(:meth:`Devices._devices_commanded`) each sample a command used gets its latency, and
+each source that renders feedback the wrench to render (:mod:`teleop.inputs.feedback`).
+
+The **watchdog**: a streaming source silent longer than :attr:`input_timeout` is
+released: its target is put where the robot's EE is and the loops' filtered targets with
+it, so the next command asks no motion (the robot stops), and the status says why. The
+next sample starts a new stream, from where the target is (no jump).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from constraints.collision import CollisionAvoidance, CollisionRows
+from constraints.validation import as_number
+from teleop.experiments.sessions import SessionRecorder
+from teleop.inputs import (DEFAULT_VIEW, FeedbackGains, FeedbackState, InputSample, InputSource,
+                           device_pose, feedback_wrench, followed_pose, integrated_twist,
+                           view_rotation)
+from teleop.loop import TeleopLoop
+
+from .console import EEInput
+from .limits import HISTORY_RATE, HISTORY_SECONDS, MAX_TARGET_DISTANCE
+
+#: a streaming source silent longer than this is released (s)
+DEFAULT_INPUT_TIMEOUT = 0.1
+#: the watchdog's timeout is within these (s)
+INPUT_TIMEOUT_RANGE = (0.005, 5.0)
+#: a device's target is written to a recording every this many ticks
+RECORD_TARGET_EVERY = 10
+#: a recording gets each source's statistics this often (s)
+RECORD_INPUT_EVERY = 1.0
+#: the status's latency percentiles are over the last this many commands
+STATUS_LATENCIES = 4096
+
+
+@dataclass
+class DeviceBinding:
+    """A source driving EE ``source.ee``, and what it did last."""
+
+    source: InputSource
+    state: FeedbackState = FeedbackState.HELD
+    reason: str = "waiting for its first command"
+    previous: pin.SE3 | None = None  # the device's previous pose (pose sources)
+    twist: np.ndarray = field(default_factory=lambda: np.zeros(6))  # rate command held
+    used: InputSample | None = None  # the sample this tick's command uses
+    wrench: np.ndarray = field(default_factory=lambda: np.zeros(6))  # device frame
+    #: the feedback force (device frame, N) at the history rate: time, fx, fy, fz
+    history: list[tuple[float, float, float, float]] = field(default_factory=list)
+    recorded_applied: int = 0  # the applied count at the last recording of statistics
+
+
+class Devices:
+    """The input devices of :class:`web.app.TeleopApp` (its state: ``devices``,
+    ``view_rotation``, ``absolute_orientation``, ``input_timeout``, ``feedback_gains``)."""
+
+    inputs: list[EEInput]
+    loops: dict[str, TeleopLoop]
+    clutch: bool
+    motion_scale: float
+    ticks: int
+    recorder: SessionRecorder | None
+    avoidance: CollisionAvoidance
+    collision_rows: dict[str, CollisionRows | None]
+    devices: list[DeviceBinding]
+    view_rotation: np.ndarray
+    absolute_orientation: bool
+    input_timeout: float
+    feedback_gains: FeedbackGains
+    _lock: threading.RLock
+
+    def _init_devices(self) -> None:
+        self.devices = []
+        self.view_rotation = DEFAULT_VIEW.copy()
+        self.absolute_orientation = False
+        self.input_timeout = DEFAULT_INPUT_TIMEOUT
+        self.feedback_gains = FeedbackGains()
+        self._next_input_record = 0.0
+
+    def attach_input(self, source: InputSource) -> None:
+        """``source`` drives EE ``source.ee`` from the next tick (one source per EE); the
+        app starts it, and closes it on :meth:`close_inputs`."""
+        if not 0 <= source.ee < len(self.inputs):
+            raise ValueError(f"{source.name}: no end effector {source.ee} (this robot has "
+                             f"{len(self.inputs)})")
+        with self._lock:
+            taken = [d.source.name for d in self.devices if d.source.ee == source.ee]
+            if taken:
+                raise ValueError(f"{source.name}: EE {source.ee} is already driven by "
+                                 f"{taken[0]}")
+            self.devices.append(DeviceBinding(source))
+        source.start()
+
+    def close_inputs(self) -> None:
+        with self._lock:
+            devices, self.devices = self.devices, []
+        for device in devices:
+            device.source.close()
+
+    def set_input_timeout(self, seconds: float) -> None:
+        seconds = as_number(seconds, "input timeout")
+        low, high = INPUT_TIMEOUT_RANGE
+        if not low <= seconds <= high:
+            raise ValueError(f"input timeout must be between {1e3 * low:g} and "
+                             f"{1e3 * high:g} ms, got {1e3 * seconds:g} ms")
+        with self._lock:
+            self.input_timeout = seconds
+
+    def set_view(self, camera_wxyz) -> None:
+        """The operator's view: the browser camera's orientation (viser's ``wxyz``); the
+        devices' motion is mapped into it from now on (no target jumps)."""
+        rotation = view_rotation(camera_wxyz)
+        if not np.all(np.isfinite(rotation)):
+            raise ValueError("the camera orientation must be finite")
+        with self._lock:
+            self.view_rotation = rotation
+
+    def set_orientation_mode(self, absolute: bool) -> None:
+        """Orientation relative (through the clutch: the device's rotation since it was
+        last coupled) or absolute with respect to the view."""
+        if not isinstance(absolute, (bool, np.bool_)):
+            raise ValueError(f"absolute orientation is True or False, got {absolute!r}")
+        with self._lock:
+            self.absolute_orientation = bool(absolute)
+
+    # -- the control tick -----------------------------------------------------------------
+
+    def _apply_devices(self, dt: float) -> None:
+        """Each source's newest sample onto its EE's target (caller holds the lock)."""
+        now = time.perf_counter()
+        for device in self.devices:
+            source = device.source
+            sample = device.used = source.take()
+            if sample is None:
+                silent = (source.last_arrival is not None
+                          and now - source.last_arrival > self.input_timeout)
+                if source.watchdog and device.state != FeedbackState.HELD and silent:
+                    self._release(device, 1e3 * (now - source.last_arrival))
+                elif device.state == FeedbackState.FOLLOWING and not self.clutch \
+                        and np.any(device.twist):
+                    self._move_target(device, integrated_twist(
+                        self.inputs[source.ee].target, device.twist, self.view_rotation,
+                        self.motion_scale, dt))
+                continue
+            if device.state == FeedbackState.HELD:  # a new stream: from where the target is
+                device.previous = None
+            coupled = not self.clutch and not sample.clutched
+            device.state = FeedbackState.FOLLOWING if coupled else FeedbackState.CLUTCHED
+            device.reason = "following" if coupled else "clutched: the device moves alone"
+            hand = self.inputs[source.ee]
+            if sample.kind == "pose":
+                pose, previous = device_pose(sample.values), device.previous
+                device.previous = pose
+                if coupled and previous is not None:
+                    self._move_target(device, followed_pose(
+                        hand.target, previous, pose, self.view_rotation, self.motion_scale,
+                        self.absolute_orientation))
+            else:
+                device.twist = np.array(sample.values[:6]) if coupled else np.zeros(6)
+                if coupled:
+                    self._move_target(device, integrated_twist(
+                        hand.target, device.twist, self.view_rotation, self.motion_scale, dt))
+
+    def _move_target(self, device: DeviceBinding, target: pin.SE3) -> None:
+        """EE ``device.source.ee``'s target from its device; one farther than
+        :data:`MAX_TARGET_DISTANCE` from the EE is refused (counted ``refused``)."""
+        ee = device.source.ee
+        ee_now = self.loops["main"].ee_placements()[ee].translation
+        if not np.linalg.norm(target.translation - ee_now) <= MAX_TARGET_DISTANCE:
+            device.source.counts["refused"] += 1
+            return
+        self.inputs[ee].target = target
+        if self.recorder is not None and self.ticks % RECORD_TARGET_EVERY == 0:
+            self._record_target(ee)
+
+    def _release(self, device: DeviceBinding, silent_ms: float) -> None:
+        """The watchdog: the source is released, its target holds where the robot's EE is
+        and every loop's filtered target with it (caller holds the lock)."""
+        ee = device.source.ee
+        device.state = FeedbackState.HELD
+        device.reason = (f"silent for {silent_ms:.0f} ms (timeout "
+                         f"{1e3 * self.input_timeout:g} ms): released, the robot holds")
+        device.twist = np.zeros(6)
+        device.source.counts["releases"] += 1
+        release = getattr(device.source, "release", None)
+        if release is not None:
+            release()
+        pose = self.loops["main"].ee_placements()[ee]
+        self.inputs[ee].target = pose.copy()
+        self.inputs[ee].gizmo = pose.copy()
+        self._record_target(ee)
+        for loop in self.loops.values():
+            loop.hold(ee, pose)
+
+    def _devices_commanded(self, history: bool) -> None:
+        """After the robots' step (caller holds the lock): each used sample's latency, each
+        feedback (``history``: a history tick, the feedback force is kept for the plot)."""
+        if not self.devices:
+            return
+        command_time = time.perf_counter()
+        loop = self.loops["main"]
+        placements = None
+        for device in self.devices:
+            if device.used is not None:
+                device.source.used(device.used, command_time)
+            if not device.source.renders_feedback and not history:
+                continue
+            if placements is None:
+                placements = loop.ee_placements()
+            port_forces = [] if loop.plant is None else loop.plant.measures().port_forces
+            device.wrench = feedback_wrench(
+                placements[device.source.ee], self.inputs[device.source.ee].target,
+                port_forces, self.collision_rows.get("main"),
+                self.avoidance.detection_distance, self.view_rotation, self.feedback_gains)
+            device.source.set_feedback(device.wrench, device.state, loop.plant is not None)
+            if history:
+                device.history.append((loop.t, *device.wrench[:3]))
+                del device.history[:-int(HISTORY_SECONDS * HISTORY_RATE)]
+        if self.recorder is not None and loop.t >= self._next_input_record:
+            self._record_inputs()
+            self._next_input_record = loop.t + RECORD_INPUT_EVERY
+
+    def _record_inputs(self) -> None:
+        """Each source's counts and its latencies since the last such line, to the
+        recording (caller holds the lock)."""
+        for device in self.devices:
+            source = device.source
+            fresh = min(source.counts["applied"] - device.recorded_applied, 4096)
+            device.recorded_applied = source.counts["applied"]
+            latencies = source.latencies.values()[-fresh:] if fresh else np.zeros(0)
+            self.recorder.input(self.recording_time, source.name, source.ee,
+                                {key: int(value) for key, value in source.counts.items()},
+                                latencies)
+
+    def devices_snapshot(self) -> list[dict]:
+        """What the status and the plot show of each device (caller holds the lock)."""
+        return [{"name": d.source.name, "ee": d.source.ee, "state": d.state,
+                 "reason": d.reason, "wrench": d.wrench.copy(),
+                 "history": list(d.history), "source": d.source}
+                for d in self.devices]

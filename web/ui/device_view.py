@@ -1,0 +1,103 @@
+"""The input devices in the page (docs/design.md section 19): the operator's view
+follows the browser's camera, a choice of orientation mapping, each device's state in
+the status, and the feedback force it renders, plotted."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import viser
+import viser.uplot as uplot
+
+from ..app import HISTORY_SECONDS, TeleopApp
+
+#: the feedback plot's lines: the force along the device's x (right), y (up), z (back)
+FEEDBACK_COLORS = ("#dc2626", "#16a34a", "#2563eb")
+ORIENTATIONS = ("relative", "absolute")
+
+
+def device_words(device: dict, ee_name: str, rate: float | None) -> str:
+    """A device's line of the status: its state, what it received and dropped, the
+    arrival-to-command latency, the force it renders."""
+    stats = device["source"].statistics(window=4096)
+    words = f"**input {device['name']}** ({ee_name}) {device['reason']}"
+    if stats.get("received"):
+        dropped = ", ".join(f"{reason.replace('_', ' ')} {stats[reason]}"
+                            for reason in stats["drop_reasons"] if stats.get(reason))
+        words += (f"; {stats['received']} received" + (f" ({rate:.0f}/s)" if rate else "")
+                  + f", {stats.get('applied', 0)} applied, {stats.get('superseded', 0)} "
+                  f"superseded, {stats['dropped']} dropped{' (' + dropped + ')' if dropped else ''}"
+                  f", {stats.get('lost', 0)} lost")
+    if not math.isnan(stats["latency_p50_ms"]):
+        words += (f"; latency arrival-to-command p50 {stats['latency_p50_ms']:.2f} ms, "
+                  f"p99 {stats['latency_p99_ms']:.2f} ms")
+    if device["source"].renders_feedback:
+        words += f"; feedback |F| {np.linalg.norm(device['wrench'][:3]):.2f} N"
+    return words
+
+
+class DeviceView:
+    """The devices' part of :class:`web.ui.TeleopUI`."""
+
+    server: viser.ViserServer
+    app: TeleopApp
+    ee_names: dict[str, str]
+    _plot_tab: object
+    _feedback_plot: object | None
+    _received: dict[str, tuple[float, int]]
+
+    def _build_device_panel(self) -> None:
+        """The orientation mapping of the devices (the gizmo's is always relative)."""
+        self._feedback_plot = None
+        self._received = {}
+        self.orientation_menu = self.server.gui.add_dropdown(
+            "device orientation", ORIENTATIONS, initial_value=ORIENTATIONS[0],
+            hint="relative: the tool turns by the device's rotation since it was coupled; "
+                 "absolute: the tool's orientation in the view is the device's")
+        self.orientation_menu.on_update(lambda event: self._guarded(
+            event, lambda: self.app.set_orientation_mode(
+                self.orientation_menu.value == "absolute"), key="orientation"))
+        self.server.on_client_connect(self._watch_view)
+
+    def _watch_view(self, client: viser.ClientHandle) -> None:
+        """The devices move in the view of the browser whose camera moved last."""
+        camera = client.camera
+        camera.on_update(lambda _: self._guarded(
+            None, lambda wxyz=np.array(camera.wxyz): self.app.set_view(wxyz), key="view"))
+
+    def _device_lines(self, snapshot: dict) -> list[str]:
+        frames = snapshot["ee_frames"]
+        lines = []
+        for device in snapshot["devices"]:
+            name = self.ee_names[frames[device["ee"]]]
+            count = device["source"].counts["received"]
+            now = snapshot["robots"]["main"]["t"]
+            before = self._received.get(device["name"])
+            rate = None if before is None or now <= before[0] else \
+                (count - before[1]) / (now - before[0])
+            self._received[device["name"]] = (now, count)
+            lines.append(device_words(device, name, rate))
+        return lines
+
+    def _plot_feedback(self, snapshot: dict) -> None:
+        """The force the first feedback-rendering device renders, in its frame."""
+        shown = [d for d in snapshot["devices"] if d["source"].renders_feedback]
+        if not shown or len(shown[0]["history"]) < 2:
+            return
+        history = np.array(shown[0]["history"])
+        data = (history[:, 0] - snapshot["robots"]["main"]["t"],
+                history[:, 1], history[:, 2], history[:, 3])
+        if self._feedback_plot is not None:
+            self._feedback_plot.data = data
+            return
+        with self._plot_tab:
+            self._feedback_plot = self.server.gui.add_uplot(
+                data=data, title=f"feedback force, {shown[0]['name']} (N, device frame)",
+                series=(uplot.Series(label="t - now (s)"),
+                        *[uplot.Series(label=axis, stroke=color, width=1.5)
+                          for axis, color in zip(("x right", "y up", "z back"),
+                                                 FEEDBACK_COLORS)]),
+                aspect=2.2, scales={"x": uplot.Scale(time=False, auto=False,
+                                                     range=(-HISTORY_SECONDS, 0.0)),
+                                    "y": uplot.Scale(auto=True)})
