@@ -309,8 +309,9 @@ def run(args: argparse.Namespace, prog: str) -> int:
         ghost = app.specs.get("ghost")
         print(f"{prog}: {robot.name} on {page_url(args.host, server.get_port(), token)} "
               f"(controller {app.specs['main']}{', ghost ' + ghost if ghost else ''})"
-              f"{', on the ' + app.plant.describe() if app.plant.physical else ''}; "
-              "Ctrl-C stops", flush=True)
+              f"{', on the ' + app.plant.describe() if app.plant.physical else ''}"
+              + "".join(f", input {device.source.name} on {robot.ee_frames[device.source.ee]}"
+                        for device in app.devices) + "; Ctrl-C stops", flush=True)
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:

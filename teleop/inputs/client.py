@@ -28,7 +28,6 @@ class MasterClient:
                                      socket.SOCK_DGRAM)
         self._socket.setblocking(False)
         self.received: list[Feedback] = []
-        self.round_trips: list[float] = []  # s, per feedback: now - the command's time
 
     def close(self) -> None:
         self._socket.close()
@@ -68,4 +67,3 @@ class MasterClient:
             except PacketError:
                 continue
             self.received.append(newest)
-            self.round_trips.append(self.clock() - newest.device_time)

@@ -6,7 +6,8 @@ control tick or dropped and counted by reason. Besides a bad datagram
 (:func:`~teleop.inputs.protocol.decode_command`):
 
 * ``out_of_order``: a sequence number not above the newest accepted (a replay, a
-  reordered datagram); a gap in the numbers counts the missing ones as ``lost``;
+  reordered datagram); a gap in the numbers counts the ones that never arrived as
+  ``lost``;
 * ``stale``: a command that spent more than ``max_age`` in transit, measured against the
   fastest transit seen (``arrival - device_time`` at its minimum: the two clocks' offset);
 * ``foreign``: from another address than the master's while the master is live (the
@@ -68,6 +69,7 @@ class UdpMaster(InputSource):
         self._master: tuple | None = None  # the sender's address
         self._newest_sequence: int | None = None
         self._clock_offset: float | None = None  # min over accepted of arrival - device_time
+        self._stale_in_gap = 0  # stale commands since the newest accepted
         self._feedback = Feedback(FeedbackState.HELD, ee, 0, 0, 0.0, (0.0,) * 6, float("nan"))
 
     def start(self) -> None:
@@ -86,6 +88,7 @@ class UdpMaster(InputSource):
             self._master = None
             self._newest_sequence = None
             self._clock_offset = None
+            self._stale_in_gap = 0
 
     def set_feedback(self, wrench: np.ndarray, state: FeedbackState,
                      port_force_measured: bool) -> None:
@@ -142,9 +145,11 @@ class UdpMaster(InputSource):
             return "out_of_order"
         transit = arrival - device_time
         if self._clock_offset is not None and transit - self._clock_offset > self.max_age:
+            self._stale_in_gap += 1  # it arrived: not lost
             return "stale"
         if newest is not None:
-            self.counts["lost"] += sequence - newest - 1
+            self.counts["lost"] += sequence - newest - 1 - self._stale_in_gap
+        self._stale_in_gap = 0
         self._master = sender
         self._newest_sequence = sequence
         self._clock_offset = transit if self._clock_offset is None else min(self._clock_offset,

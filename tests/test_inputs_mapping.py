@@ -1,0 +1,220 @@
+"""From a device's motion to its EE's target (docs/design.md section 19.1), the feedback
+wrench (19.3) and the watchdog (19.2), through the UI core's control tick."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import given, strategies as st
+
+from constraints.collision import CollisionRows
+from teleop import load_robot
+from teleop.experiments.sessions import load_session
+from teleop.inputs import (CLUTCH, DEFAULT_VIEW, FeedbackGains, FeedbackState, InputSample,
+                           InputSource, feedback_wrench, followed_pose,
+                           integrated_twist, view_rotation)
+from web.app import TeleopApp
+
+unit = st.floats(-1.0, 1.0, allow_nan=False)
+small = st.floats(-0.05, 0.05, allow_nan=False)
+
+
+def rotation_of(axis_angle) -> np.ndarray:
+    return pin.exp3(np.asarray(axis_angle, dtype=float))
+
+
+poses = st.tuples(st.tuples(small, small, small), st.tuples(unit, unit, unit)).map(
+    lambda pa: pin.SE3(rotation_of(pa[1]), np.array(pa[0])))
+
+
+@given(path=st.lists(poses, min_size=2, max_size=8), view=st.tuples(unit, unit, unit),
+       scale=st.floats(0.05, 5.0), start=poses)
+def test_incremental_mapping_equals_the_motion_since_the_first_sample(path, view, scale, start):
+    """Sample by sample, the target ends where the anchored formula written here puts it:
+    p0 + s R (p_n - p_0), R R_n R_0^T R^T R*_0."""
+    rotation = rotation_of(view)
+    target = start
+    for previous, current in zip(path, path[1:]):
+        target = followed_pose(target, previous, current, rotation, scale)
+    expected_position = start.translation + scale * rotation @ (path[-1].translation
+                                                                - path[0].translation)
+    expected_rotation = rotation @ path[-1].rotation @ path[0].rotation.T @ rotation.T \
+        @ start.rotation
+    assert target.translation == pytest.approx(expected_position, abs=1e-12)
+    assert target.rotation == pytest.approx(expected_rotation, abs=1e-9)
+
+
+@given(device=poses, view=st.tuples(unit, unit, unit))
+def test_absolute_orientation_is_the_devices_in_the_view(device, view):
+    rotation = rotation_of(view)
+    target = followed_pose(pin.SE3.Identity(), device, device, rotation, 1.0,
+                           absolute_orientation=True)
+    assert target.rotation == pytest.approx(rotation @ device.rotation, abs=1e-12)
+    assert target.translation == pytest.approx(np.zeros(3), abs=0.0)
+
+
+@given(twist=st.tuples(*[st.floats(-0.1, 0.1)] * 6), view=st.tuples(unit, unit, unit),
+       scale=st.floats(0.1, 3.0), steps=st.integers(1, 50))
+def test_a_held_rate_command_integrates_to_its_exponential(twist, view, scale, steps):
+    rotation, dt = rotation_of(view), 1e-3
+    target = start = pin.SE3(rotation_of((0.1, -0.2, 0.3)), np.array([0.4, 0.1, 0.9]))
+    for _ in range(steps):
+        target = integrated_twist(target, twist, rotation, scale, dt)
+    v, w = np.array(twist[:3]), np.array(twist[3:])
+    assert target.translation == pytest.approx(start.translation
+                                               + scale * steps * dt * rotation @ v, abs=1e-12)
+    assert target.rotation == pytest.approx(pin.exp3(steps * dt * rotation @ w)
+                                            @ start.rotation, abs=1e-10)
+
+
+def look_at_wxyz(position, target, up=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """An OpenCV camera (x right, y down, z forward) at ``position`` looking at
+    ``target``: its wxyz, and the screen's right in the world, written independently."""
+    forward = np.subtract(target, position, dtype=float)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    quaternion = pin.Quaternion(np.column_stack([right, down, forward]))
+    return np.array([quaternion.w, quaternion.x, quaternion.y, quaternion.z]), right
+
+
+@given(azimuth=st.floats(-math.pi, math.pi), elevation=st.floats(-1.2, 1.2))
+def test_the_devices_x_is_the_screens_right_and_its_y_the_screens_up(azimuth, elevation):
+    position = 2.0 * np.array([math.cos(azimuth) * math.cos(elevation),
+                               math.sin(azimuth) * math.cos(elevation), math.sin(elevation)])
+    wxyz, right = look_at_wxyz(position, (0.0, 0.0, 0.0))
+    rotation = view_rotation(wxyz)
+    assert rotation[:, 0] == pytest.approx(right, abs=1e-9)
+    assert rotation[:, 2] == pytest.approx(position / 2.0, abs=1e-9)  # towards the operator
+    assert rotation[:, 1] @ np.array([0.0, 0.0, 1.0]) >= -1e-12  # up is not down
+    assert np.linalg.det(rotation) == pytest.approx(1.0)
+
+
+def test_the_feedback_wrench_is_its_three_terms_bounded():
+    ee = pin.SE3(rotation_of((0.0, 0.0, 0.02)), np.array([0.5, 0.0, 0.8]))
+    target = pin.SE3(np.eye(3), np.array([0.5, 0.003, 0.8]))
+    rows = CollisionRows(np.zeros((2, 7)), np.zeros(2), ("link_a | box", "link_b | box"),
+                         np.array([0.01, 0.2]),
+                         np.array([[[0.0, 0.0, 0.01], [0.0, 0.0, 0.0]],
+                                   [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]]))
+    gains = FeedbackGains()
+    wrench = feedback_wrench(ee, target, [np.array([0.1, 0.0, 0.0])], rows, 0.05, DEFAULT_VIEW,
+                             gains)
+    # tracking 100 N/m x -3 mm along y, the port 0.1 N along x, the obstacle within
+    # d_i = 5 cm: 200 N/m x 4 cm along +z; the far pair adds nothing
+    force_world = np.array([0.1, -0.3, 8.0])
+    force_world *= gains.max_force / np.linalg.norm(force_world)
+    torque_world = gains.rotation_stiffness * np.array([0.0, 0.0, 0.02])
+    assert wrench[:3] == pytest.approx(DEFAULT_VIEW.T @ force_world, abs=1e-12)
+    assert wrench[3:] == pytest.approx(DEFAULT_VIEW.T @ torque_world, abs=1e-12)
+    assert np.linalg.norm(wrench[:3]) == pytest.approx(gains.max_force)
+
+
+@pytest.fixture
+def app():
+    return TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0)
+
+
+def pose_sample(position, sequence, buttons=0, arrival=None) -> InputSample:
+    return InputSample("pose", (*position, 1.0, 0.0, 0.0, 0.0), buttons, sequence,
+                       sequence * 1e-3 if arrival is None else arrival)
+
+
+def test_a_pose_source_moves_its_target_through_the_clutch_and_a_new_scale_without_jumps(app):
+    source = InputSource("test")
+    app.attach_input(source)
+    start = app.targets[0].translation.copy()
+    source.offer(pose_sample((0.3, 0.2, 0.1), 1))  # the first sample only anchors
+    app.step()
+    assert app.targets[0].translation == pytest.approx(start, abs=0.0)
+    source.offer(pose_sample((0.31, 0.2, 0.1), 2))
+    app.step()
+    moved = start + DEFAULT_VIEW @ np.array([0.01, 0.0, 0.0])
+    assert app.targets[0].translation == pytest.approx(moved, abs=1e-12)
+    source.offer(pose_sample((0.33, 0.2, 0.1), 3, buttons=CLUTCH))  # the device's clutch
+    app.step()
+    assert app.targets[0].translation == pytest.approx(moved, abs=1e-12)
+    assert app.devices[0].state == FeedbackState.CLUTCHED
+    app.set_motion_scale(0.5)  # while the device is clutched: no jump on coupling
+    source.offer(pose_sample((0.33, 0.2, 0.1), 4))
+    app.step()
+    assert app.targets[0].translation == pytest.approx(moved, abs=1e-12)
+    source.offer(pose_sample((0.33, 0.22, 0.1), 5))
+    app.step()
+    assert app.targets[0].translation == pytest.approx(
+        moved + 0.5 * DEFAULT_VIEW @ np.array([0.0, 0.02, 0.0]), abs=1e-12)
+    assert source.counts["applied"] == 5 and source.latencies.count == 5
+
+
+def test_a_twist_source_integrates_its_rate_command_each_period(app):
+    source = InputSource("rate")
+    source.watchdog = False
+    app.attach_input(source)
+    start = app.targets[0].translation.copy()
+    source.offer(InputSample("twist", (0.02, 0.0, -0.01, 0.0, 0.0, 0.0), 0, 1, 0.0))
+    for _ in range(100):
+        app.step()
+    expected = start + 100 * 1e-3 * DEFAULT_VIEW @ np.array([0.02, 0.0, -0.01])
+    assert app.targets[0].translation == pytest.approx(expected, abs=1e-12)
+    app.set_clutch(True)  # the console's clutch stops it
+    app.step()
+    assert app.targets[0].translation == pytest.approx(expected, abs=1e-12)
+
+
+def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(app):
+    """A silent source: its target goes where the EE is and every loop's filtered target
+    with it, so the next command is (nearly) zero although the robot was moving."""
+    app.add_constraint("hole", distance=0.08)
+    source = InputSource("test")
+    app.attach_input(source)
+    for k in range(1, 301):  # 3 cm/s along the device's x
+        source.offer(pose_sample((3e-5 * k, 0.0, 0.0), k, arrival=time.perf_counter()))
+        app.step()
+    moving = float(np.max(np.abs(app.loops["main"].last_qd)))
+    assert moving > 1e-2
+    source.last_arrival = time.perf_counter() - 0.2  # silent for 200 ms
+    app.step()
+    assert app.devices[0].state == FeedbackState.HELD
+    assert "silent for 200 ms" in app.devices[0].reason
+    ee = app.loops["main"].ee_placements()[0]
+    app.step()
+    assert np.max(np.abs(app.loops["main"].last_qd)) < 1e-3
+    assert app.targets[0].translation == pytest.approx(ee.translation, abs=1e-4)
+    # the next stream starts where the target is: its first sample only anchors
+    held = app.targets[0].translation.copy()
+    source.offer(pose_sample((5.0, 5.0, 5.0), 1, arrival=time.perf_counter()))
+    app.step()
+    assert app.targets[0].translation == pytest.approx(held, abs=0.0)
+    assert app.devices[0].state == FeedbackState.FOLLOWING
+
+
+def test_a_recording_gets_each_sources_counts_and_latencies(tmp_path):
+    app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0, record_dir=tmp_path)
+    source = InputSource("test")
+    app.attach_input(source)
+    path = app.start_recording("devices.jsonl")
+    for k in range(1, 1501):
+        source.offer(pose_sample((1e-5 * k, 0.0, 0.0), k, arrival=0.0))
+        app.step()
+    app.stop_recording()
+    session = load_session(path)
+    lines = [event for event in session.events if event["type"] == "input"]
+    assert [line["source"] for line in lines] == ["test", "test"]
+    assert lines[0]["counts"]["applied"] >= 1 and lines[-1]["latency_ms"]["n"] >= 499
+    assert all(line["latency_ms"]["p99"] >= line["latency_ms"]["p50"] > 0 for line in lines)
+    assert any(event["type"] == "target" for event in session.events)
+
+
+def test_a_second_source_on_the_same_ee_or_one_on_no_ee_is_refused(app):
+    app.attach_input(InputSource("first"))
+    with pytest.raises(ValueError, match="already driven by first"):
+        app.attach_input(InputSource("second"))
+    with pytest.raises(ValueError, match="no end effector 3"):
+        app.attach_input(InputSource("third", ee=3))
+    with pytest.raises(ValueError, match="input timeout"):
+        app.set_input_timeout(0.0)
