@@ -136,11 +136,26 @@ def check_10(out: str, tmp: Path) -> None:
     assert "cells done = 0, failed = 0, skipped = 8" in again.stdout, again.stderr
 
 
+def check_11(out: str, tmp: Path) -> None:
+    (counts,) = re.findall(r"sent (\d+) commands, received (\d+), applied (\d+), "
+                           r"superseded (\d+), dropped (\d+), lost (\d+)", out)
+    sent, received, applied, superseded, dropped, lost = (int(n) for n in counts)
+    assert sent == received == 5001 and dropped == lost == 0, out
+    assert applied + superseded == received
+    (feedback,) = numbers(r"feedback received: NUMBER", out)
+    assert feedback == sent
+    (rms,) = numbers(r"tracking error RMS NUMBER mm", out)
+    (hole,) = numbers(r"hole error max NUMBER um", out)
+    (stopped,) = numbers(r"robot stopped NUMBER ms later", out)
+    # the bounds: RMS 1 mm, hole 1 um, stopped within 150 ms of the silence
+    assert rms <= 1.0 and hole <= 1.0 and 100.0 <= stopped <= 150.0, out
+
+
 CHECKS = {"01_cjm_vs_qp.py": check_01, "02_closed_loop.py": check_02, "03_barrier.py": check_03,
           "04_any_urdf.py": check_04, "05_mink_peer.py": check_05,
           "06_embed_teleop_app.py": check_06, "07_two_trocars.py": check_07,
           "08_physics_plant.py": check_08, "09_collision_avoidance.py": check_09,
-          "10_sweep.py": check_10}
+          "10_sweep.py": check_10, "11_network_master.py": check_11}
 
 
 def test_the_examples_folder_has_the_documented_scripts():
