@@ -38,7 +38,8 @@ from .limits import HISTORY_RATE, HISTORY_SECONDS, MAX_TARGET_DISTANCE
 DEFAULT_INPUT_TIMEOUT = 0.1
 #: the watchdog's timeout is within these (s)
 INPUT_TIMEOUT_RANGE = (0.005, 5.0)
-#: a device's target is written to a recording every this many ticks
+#: a device's moving target is written to a recording at most once per this many ticks
+#: (its last move at most this many ticks late)
 RECORD_TARGET_EVERY = 10
 #: a recording gets each source's statistics this often (s)
 RECORD_INPUT_EVERY = 1.0
@@ -60,6 +61,8 @@ class DeviceBinding:
     #: the feedback force (device frame, N) at the history rate: time, fx, fy, fz
     history: list[tuple[float, float, float, float]] = field(default_factory=list)
     recorded_applied: int = 0  # the applied count at the last recording of statistics
+    unrecorded: bool = False  # its target moved since it was last written to a recording
+    recorded_tick: int = 0  # the tick it was last written at
 
 
 class Devices:
@@ -182,8 +185,7 @@ class Devices:
             device.source.counts["refused"] += 1
             return
         self.inputs[ee].target = target
-        if self.recorder is not None and self.ticks % RECORD_TARGET_EVERY == 0:
-            self._record_target(ee)
+        device.unrecorded = True
 
     def _release(self, device: DeviceBinding, silent_ms: float) -> None:
         """The watchdog: the source is released, its target holds where the robot's EE is
@@ -215,6 +217,10 @@ class Devices:
         for device in self.devices:
             if device.used is not None:
                 device.source.used(device.used, command_time)
+            if (device.unrecorded and self.recorder is not None
+                    and self.ticks - device.recorded_tick >= RECORD_TARGET_EVERY):
+                self._record_target(device.source.ee)
+                device.unrecorded, device.recorded_tick = False, self.ticks
             if not device.source.renders_feedback and not history:
                 continue
             if placements is None:
