@@ -121,9 +121,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "network master, bound to --host) or spacemouse; each takes the "
                               "next EE, or the one named after @ (udp:9870@right); repeatable "
                               "(default: the gizmo only)")
-    devices.add_argument("--input-timeout", type=positive, default=100.0, metavar="MS",
-                         help="a network master silent this long is released: its target "
-                              "holds and the robot stops (default: 100 ms)")
+    devices.add_argument("--input-timeout", type=positive, default="100", metavar="MS",
+                         help="a network master silent this long (ms, 5-5000) is released: "
+                              "its target holds and the robot stops (default: 100)")
     server = parser.add_argument_group("server")
     server.add_argument("--host", default="127.0.0.1",
                         help="address to bind; the UI commands a robot, so only this machine "
