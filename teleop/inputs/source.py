@@ -97,6 +97,8 @@ class InputSource:
         self.latencies = LatencyWindow()
         self.applied_sequence = 0
         self.last_latency = float("nan")
+        #: what went wrong with the device, for the operator ("" while nothing has)
+        self.problem = ""
 
     def start(self) -> None:
         """Begin receiving (a thread of the source's own); the base has none."""

@@ -22,6 +22,8 @@ def device_words(device: dict, ee_name: str, rate: float | None) -> str:
     arrival-to-command latency, the force it renders."""
     stats = device["source"].statistics(window=4096)
     words = f"**input {device['name']}** ({ee_name}) {device['reason']}"
+    if device["source"].problem:
+        words += f" (**{device['source'].problem}**)"
     if stats.get("received"):
         dropped = ", ".join(f"{reason.replace('_', ' ')} {stats[reason]}"
                             for reason in stats["drop_reasons"] if stats.get(reason))

@@ -1,0 +1,111 @@
+"""The SpaceMouse (docs/design.md section 19.4): its HID reports decoded, written here
+byte by byte in the documented layouts, the deadband and speed curve against their
+formula, and the source's samples."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+from teleop.inputs import CLUTCH, MODE
+from teleop.inputs.spacemouse import DEVICES, ReportState, SpaceMouse, SpeedCurve
+
+NAVIGATOR = next(m for m in DEVICES if m.name == "SpaceNavigator")  # split reports
+WIRELESS = next(m for m in DEVICES if m.name == "SpaceMouse Wireless")  # combined
+int16 = st.integers(-32768, 32767)
+
+
+def device_axes(x: int, y: int, z: int, full_scale: float = 350.0) -> np.ndarray:
+    """The device frame (x right, y up, z towards the operator) of raw counts x right, y
+    towards the user, z down: (x, -z, y), each over the full scale, clipped."""
+    return np.clip(np.array([x, -z, y]) / full_scale, -1.0, 1.0)
+
+
+def test_split_reports_translation_rotation_and_buttons():
+    state = ReportState(NAVIGATOR)
+    state.update(struct.pack("<B3h", 1, 175, -70, 350))  # right, towards the user, down
+    assert state.translation == pytest.approx([0.5, -1.0, -0.2])
+    assert state.rotation == pytest.approx([0.0, 0.0, 0.0])
+    state.update(struct.pack("<B3h", 2, -35, 0, 70))
+    assert state.rotation == pytest.approx([-0.1, -0.2, 0.0])
+    assert state.translation == pytest.approx([0.5, -1.0, -0.2])  # kept from report 1
+    state.update(bytes([3, 0b01, 0]))
+    assert state.buttons == CLUTCH
+    state.update(bytes([3, 0b10, 0]))
+    assert state.buttons == MODE
+    state.update(bytes([3, 0b11]))
+    assert state.buttons == CLUTCH | MODE
+
+
+def test_the_combined_report_carries_all_six_axes():
+    state = ReportState(WIRELESS)
+    state.update(struct.pack("<B6h", 1, 10, 20, 30, -40, -50, -60))
+    assert state.translation == pytest.approx(device_axes(10, 20, 30))
+    assert state.rotation == pytest.approx(device_axes(-40, -50, -60))
+    state.update(struct.pack("<B6h", 1, 0, 0, 0, 0, 0, 0) + bytes(6))  # padded by a receiver
+    assert not np.any(state.translation) and not np.any(state.rotation)
+
+
+@pytest.mark.parametrize("model, report, message", [
+    (NAVIGATOR, struct.pack("<B2h", 1, 1, 2), "has 4 bytes, needs 6"),
+    (WIRELESS, struct.pack("<B3h", 1, 1, 2, 3), "has 6 bytes, needs 12"),
+    (WIRELESS, struct.pack("<B3h", 2, 1, 2, 3), "report id 2 is not one of"),
+    (NAVIGATOR, bytes([7, 0, 0]), "report id 7"),
+    (NAVIGATOR, bytes([3]), "report 3 has 0 bytes"),
+    (NAVIGATOR, b"", "empty"),
+])
+def test_a_report_that_cannot_be_read_is_a_value_error_naming_it(model, report, message):
+    with pytest.raises(ValueError, match=message):
+        ReportState(model).update(report)
+
+
+@given(counts=st.tuples(int16, int16, int16, int16, int16, int16))
+def test_any_counts_decode_to_bounded_axes_and_a_bounded_twist(counts):
+    state = ReportState(WIRELESS)
+    state.update(struct.pack("<B6h", 1, *counts))
+    assert state.translation == pytest.approx(device_axes(*counts[:3]), abs=1e-15)
+    assert state.rotation == pytest.approx(device_axes(*counts[3:]), abs=1e-15)
+    curve = SpeedCurve()
+    twist = curve.twist(state.translation, state.rotation)
+    assert np.all(np.abs(twist[:3]) <= curve.max_linear)
+    assert np.all(np.abs(twist[3:]) <= curve.max_angular)
+
+
+@pytest.mark.parametrize("u", [-1.0, -0.55, -0.1000001, -0.1, 0.0, 0.0999999, 0.1, 0.1000001,
+                               0.3, 0.75, 1.0])
+def test_the_speed_curve_is_its_formula(u):
+    curve = SpeedCurve(deadband=0.1, power=2.0)
+    expected = 0.0 if abs(u) <= 0.1 else np.sign(u) * ((abs(u) - 0.1) / 0.9) ** 2
+    assert curve.shaped(np.array([u]))[0] == pytest.approx(expected, abs=1e-15)
+
+
+def test_a_bad_speed_curve_is_refused():
+    with pytest.raises(ValueError, match="deadband"):
+        SpeedCurve(deadband=1.0)
+
+
+def test_the_source_offers_the_twist_each_report_asks_for():
+    source = SpaceMouse(NAVIGATOR)
+    curve = source.curve
+    source.handle_report(struct.pack("<B3h", 1, 350, 0, 0), 1.0)  # a full push right
+    sample = source.take()
+    assert sample.kind == "twist" and sample.sequence == 1 and sample.arrival == 1.0
+    assert sample.values == pytest.approx([curve.max_linear, 0, 0, 0, 0, 0])
+    source.handle_report(struct.pack("<B3h", 2, 0, 0, -210), 2.0)  # twist the cap
+    source.handle_report(bytes([3, 1]), 3.0)  # the left button: the clutch
+    sample = source.take()
+    yaw = -((0.6 - 0.1) / 0.9) ** 2 * curve.max_angular  # rz up = -(raw z)
+    assert sample.values == pytest.approx([curve.max_linear, 0, 0, 0, -yaw, 0])
+    assert sample.clutched and sample.sequence == 3
+    assert source.counts["superseded"] == 1
+    source.handle_report(bytes([9, 9]), 4.0)
+    assert source.counts["malformed"] == 1 and source.take() is None
+
+
+def test_open_without_a_device_is_one_line():
+    with pytest.raises(ValueError) as raised:
+        SpaceMouse.open()
+    assert "SpaceMouse" in str(raised.value) and "\n" not in str(raised.value)
