@@ -14,7 +14,7 @@ from teleop.inputs import CLUTCH, MODE
 from teleop.inputs.spacemouse import DEVICES, ReportState, SpaceMouse, SpeedCurve
 
 NAVIGATOR = next(m for m in DEVICES if m.name == "SpaceNavigator")  # split reports
-WIRELESS = next(m for m in DEVICES if m.name == "SpaceMouse Wireless")  # combined
+COMPACT = next(m for m in DEVICES if m.product_id == 0xC635)  # split, vendor 0x256f
 int16 = st.integers(-32768, 32767)
 
 
@@ -25,7 +25,7 @@ def device_axes(x: int, y: int, z: int, full_scale: float = 350.0) -> np.ndarray
 
 
 def test_split_reports_translation_rotation_and_buttons():
-    state = ReportState(NAVIGATOR)
+    state = ReportState(NAVIGATOR.full_scale)
     state.update(struct.pack("<B3h", 1, 175, -70, 350))  # right, towards the user, down
     assert state.translation == pytest.approx([0.5, -1.0, -0.2])
     assert state.rotation == pytest.approx([0.0, 0.0, 0.0])
@@ -40,8 +40,29 @@ def test_split_reports_translation_rotation_and_buttons():
     assert state.buttons == CLUTCH | MODE
 
 
+def test_the_compact_sends_split_reports():
+    """Its report log (7-byte reports 1 and 2, CloudCompare pull request 2339) as bytes."""
+    state = ReportState(COMPACT.full_scale)
+    state.update(bytes.fromhex("02 20 00 00 00 17 00"))
+    state.update(bytes.fromhex("01 12 00 00 00 f8 00"))
+    assert state.rotation == pytest.approx(device_axes(0x20, 0, 0x17))
+    assert state.translation == pytest.approx(device_axes(0x12, 0, 0xF8))
+
+
+def test_each_raw_direction_lands_on_the_device_axis_it_means():
+    """A push right is +x, a lift of the cap (raw -z) +y, a pull towards the operator
+    (raw +y) +z; a rotation turns like its axis (the frames are right-handed)."""
+    state = ReportState()
+    for raw, expected in (((350, 0, 0), [1, 0, 0]), ((0, 0, -350), [0, 1, 0]),
+                          ((0, 350, 0), [0, 0, 1])):
+        state.update(struct.pack("<B3h", 1, *raw))
+        state.update(struct.pack("<B3h", 2, *raw))
+        assert state.translation == pytest.approx(expected)
+        assert state.rotation == pytest.approx(expected)
+
+
 def test_the_combined_report_carries_all_six_axes():
-    state = ReportState(WIRELESS)
+    state = ReportState()
     state.update(struct.pack("<B6h", 1, 10, 20, 30, -40, -50, -60))
     assert state.translation == pytest.approx(device_axes(10, 20, 30))
     assert state.rotation == pytest.approx(device_axes(-40, -50, -60))
@@ -49,22 +70,36 @@ def test_the_combined_report_carries_all_six_axes():
     assert not np.any(state.translation) and not np.any(state.rotation)
 
 
-@pytest.mark.parametrize("model, report, message", [
-    (NAVIGATOR, struct.pack("<B2h", 1, 1, 2), "has 4 bytes, needs 6"),
-    (WIRELESS, struct.pack("<B3h", 1, 1, 2, 3), "has 6 bytes, needs 12"),
-    (WIRELESS, struct.pack("<B3h", 2, 1, 2, 3), "report id 2 is not one of"),
-    (NAVIGATOR, bytes([7, 0, 0]), "report id 7"),
-    (NAVIGATOR, bytes([3]), "report 3 has 0 bytes"),
-    (NAVIGATOR, b"", "empty"),
+def test_a_pro_button_report_reads_its_first_two_bits():
+    """The Pro family's report 3 has four bytes of buttons: Menu (bit 0) and Fit (bit 1)
+    are the clutch and the mode; the others change nothing."""
+    state = ReportState()
+    state.update(struct.pack("<BI", 3, 0xFFFF_FFFC))
+    assert state.buttons == 0
+    state.update(struct.pack("<BI", 3, 0x0000_1003))
+    assert state.buttons == CLUTCH | MODE
+
+
+@pytest.mark.parametrize("report, message", [
+    (struct.pack("<B2h", 1, 1, 2), "report 1 has 4 bytes, needs 6"),
+    (struct.pack("<B2h", 2, 1, 2), "report 2 has 4 bytes, needs 6"),
+    (bytes([7, 0, 0]), "report id 7"),
+    (bytes([3]), "report 3 has 0 bytes"),
+    (b"", "empty"),
 ])
-def test_a_report_that_cannot_be_read_is_a_value_error_naming_it(model, report, message):
+def test_a_report_that_cannot_be_read_is_a_value_error_naming_it(report, message):
     with pytest.raises(ValueError, match=message):
-        ReportState(model).update(report)
+        ReportState().update(report)
+
+
+def test_a_full_scale_must_be_positive():
+    with pytest.raises(ValueError, match="full_scale"):
+        ReportState(0.0)
 
 
 @given(counts=st.tuples(int16, int16, int16, int16, int16, int16))
 def test_any_counts_decode_to_bounded_axes_and_a_bounded_twist(counts):
-    state = ReportState(WIRELESS)
+    state = ReportState()
     state.update(struct.pack("<B6h", 1, *counts))
     assert state.translation == pytest.approx(device_axes(*counts[:3]), abs=1e-15)
     assert state.rotation == pytest.approx(device_axes(*counts[3:]), abs=1e-15)
@@ -109,3 +144,18 @@ def test_open_without_a_device_is_one_line():
     with pytest.raises(ValueError) as raised:
         SpaceMouse.open()
     assert "SpaceMouse" in str(raised.value) and "\n" not in str(raised.value)
+
+
+def test_a_combined_device_offers_its_clipped_twist_per_report():
+    """A SpaceMouse Wireless's 13-byte reports; counts past the full scale are a full push."""
+    source = SpaceMouse(next(m for m in DEVICES if m.product_id == 0xC62E))
+    curve = source.curve
+    source.handle_report(struct.pack("<B6h", 1, 700, 0, -32768, 0, 0, 0), 1.0)
+    sample = source.take()
+    assert sample.values == pytest.approx([curve.max_linear, curve.max_linear, 0, 0, 0, 0])
+    source.handle_report(struct.pack("<B6h", 1, 0, 0, 0, 0, 35 + 175, 0), 2.0)
+    source.handle_report(bytes([3, 2]), 3.0)  # the right button: the mode
+    sample = source.take()
+    tilt = ((0.6 - 0.1) / 0.9) ** 2 * curve.max_angular  # raw ry (towards the user) is +z
+    assert sample.values == pytest.approx([0, 0, 0, 0, 0, tilt])
+    assert sample.buttons == MODE and not sample.clutched and sample.sequence == 3

@@ -1,28 +1,39 @@
 """A 3Dconnexion SpaceMouse: rate control from its HID reports (docs/design.md section
 19.4).
 
-**Reports.** Two layouts, by product (:data:`DEVICES`):
+**Reports.** Every model sends three input reports, an id byte then the payload:
 
-* *split* (SpaceNavigator, SpaceExplorer, SpaceMouse Pro, ... of vendor 0x046d): report 1
-  is the translation x, y, z and report 2 the rotation rx, ry, rz, each three int16
-  little-endian after the report id (7 bytes);
-* *combined* (the SpaceMouse Wireless, Compact, Pro Wireless, Enterprise of vendor
-  0x256f): report 1 carries all six, translation then rotation (13 bytes);
+* report 1, the *split* layout (SpaceNavigator, SpaceExplorer, SpaceMouse Pro, the
+  SpaceMouse Compact, ...): the translation x, y, z, three int16 little-endian (7 bytes);
+  report 2 then carries the rotation rx, ry, rz the same way;
+* report 1, the *combined* layout (the SpaceMouse Wireless, Pro Wireless, Enterprise):
+  all six, translation then rotation (13 bytes), and no report 2;
+* report 3, the buttons: a bitfield after the id, bit 0 the clutch (held), bit 1 the
+  mode. Those are the left and right buttons of the two-button models (SpaceNavigator,
+  Compact, Wireless), buttons 1 and 2 of the SpaceExplorer and SpacePilot, Menu and Fit
+  of the Pro family (SpacePilot Pro, SpaceMouse Pro, Pro Wireless, Enterprise); the
+  SpaceMouse USB has none.
 
-and report 3, the buttons: a bitfield after the id, bit 0 the left button (the clutch,
-held), bit 1 the right button (the mode). A report may be longer than its payload (a
-receiver pads to its size); one shorter, or of another id, is refused (``ValueError``).
+The layout is read from the length of each report 1, not from the model: the Compact,
+of vendor 0x256f like the combined models, sends split reports (7 bytes, ids 1 and 2).
+hidapi returns a report at its own length (hidraw,
+macOS) or padded to the device's longest input report (Windows), so a split device's
+report 1 never reaches 13 bytes. A report 1 or 2 shorter than its payload, a report 3
+without its bitfield, or another id, is refused (``ValueError`` naming it).
 
 **Axes.** The device reports x to the right, y towards the user and z down (pushing the
-cap is +z), rotations about those axes. The device frame of :mod:`teleop.inputs.mapping`
+cap is +z), and its rotations right-handed about those axes (the HID usage tables'
+convention; the frame is right-handed). The device frame of :mod:`teleop.inputs.mapping`
 is x right, y up, z towards the operator, so ``u_device = A u_raw`` with
 
-    A = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]     (a rotation: det A = 1)
+    A = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
 
-for both the translation and the rotation axes.
+(up is -z_raw, towards the operator is +y_raw). ``A`` is a proper rotation (a quarter
+turn about x, det A = 1), so the same ``A`` turns the rotation axes: a rotation vector
+keeps its right-hand rule.
 
-**Speed curve.** Each axis's counts over its full scale, ``u`` clipped to [-1, 1]; a
-deadband ``d`` and a curve of power ``p``:
+**Speed curve.** Each axis's counts over its model's full scale, ``u`` clipped to
+[-1, 1]; a deadband ``d`` and a curve of power ``p``:
 
     u' = sign(u) ((|u| - d) / (1 - d))^p    if |u| > d,    else 0
 
@@ -48,6 +59,8 @@ RAW_TO_DEVICE = np.array([[1.0, 0.0, 0.0],
                           [0.0, 0.0, -1.0],
                           [0.0, 1.0, 0.0]])
 TRANSLATION, ROTATION, BUTTONS = 1, 2, 3  # report ids
+#: the payload bytes of three axes (int16 each)
+AXES_BYTES = 6
 #: the bytes read per report (the longest payload and its id, with room for padding)
 READ_SIZE = 64
 #: the reading thread's wait for a report before it checks whether to stop (ms)
@@ -56,28 +69,33 @@ READ_TIMEOUT_MS = 50
 
 @dataclass(frozen=True)
 class DeviceModel:
-    """A SpaceMouse model: its USB ids, its report layout and its axes' full scale."""
+    """A SpaceMouse model: its USB ids and its axes' full scale."""
 
     name: str
     vendor_id: int
     product_id: int
-    combined: bool  # translation and rotation in one report 1
     full_scale: float = 350.0  # counts of a full push
 
 
+#: the known models; the layout each sends is in the comment (the decoding reads it from
+#: the report's length)
 DEVICES = (
-    DeviceModel("SpaceNavigator", 0x046D, 0xC626, False),
-    DeviceModel("SpaceNavigator for Notebooks", 0x046D, 0xC628, False),
-    DeviceModel("SpaceExplorer", 0x046D, 0xC627, False),
-    DeviceModel("SpacePilot", 0x046D, 0xC625, False),
-    DeviceModel("SpacePilot Pro", 0x046D, 0xC629, False),
-    DeviceModel("SpaceMouse Pro", 0x046D, 0xC62B, False),
-    DeviceModel("SpaceMouse Wireless", 0x256F, 0xC62E, True),
-    DeviceModel("SpaceMouse Wireless (receiver)", 0x256F, 0xC62F, True),
-    DeviceModel("SpaceMouse Pro Wireless", 0x256F, 0xC631, True),
-    DeviceModel("SpaceMouse Pro Wireless (receiver)", 0x256F, 0xC632, True),
-    DeviceModel("SpaceMouse Enterprise", 0x256F, 0xC633, True),
-    DeviceModel("SpaceMouse Compact", 0x256F, 0xC635, True),
+    DeviceModel("SpaceNavigator", 0x046D, 0xC626),  # split
+    DeviceModel("SpaceNavigator for Notebooks", 0x046D, 0xC628),  # split
+    DeviceModel("SpaceExplorer", 0x046D, 0xC627),  # split
+    DeviceModel("SpacePilot", 0x046D, 0xC625),  # split
+    DeviceModel("SpacePilot Pro", 0x046D, 0xC629),  # split
+    DeviceModel("SpaceMouse Pro", 0x046D, 0xC62B),  # split
+    DeviceModel("SpaceMouse Compact", 0x256F, 0xC635),  # split
+    DeviceModel("SpaceMouse USB", 0x256F, 0xC641),  # split, no buttons
+    DeviceModel("SpaceMouse Wireless", 0x256F, 0xC62E),  # combined
+    DeviceModel("SpaceMouse Wireless (receiver)", 0x256F, 0xC62F),  # combined
+    DeviceModel("SpaceMouse Wireless", 0x256F, 0xC63A),  # combined, a newer one
+    DeviceModel("SpaceMouse Pro Wireless", 0x256F, 0xC631),  # combined
+    DeviceModel("SpaceMouse Pro Wireless (receiver)", 0x256F, 0xC632),  # combined
+    DeviceModel("SpaceMouse Pro Wireless (Bluetooth)", 0x256F, 0xC638),  # combined
+    DeviceModel("SpaceMouse Enterprise", 0x256F, 0xC633),  # combined
+    DeviceModel("3Dconnexion Universal Receiver", 0x256F, 0xC652),  # combined
 )
 
 
@@ -117,34 +135,37 @@ def decode_axes(payload: bytes, full_scale: float) -> np.ndarray:
 
 class ReportState:
     """The axes and buttons a SpaceMouse's reports have set so far (the split layout
-    sends translation and rotation apart)."""
+    sends the translation and the rotation apart, so each keeps the other's last)."""
 
-    def __init__(self, model: DeviceModel) -> None:
-        self.model = model
+    def __init__(self, full_scale: float = 350.0) -> None:
+        if not full_scale > 0.0:
+            raise ValueError(f"a SpaceMouse's full_scale must be positive, not {full_scale}")
+        self.full_scale = full_scale
         self.translation = np.zeros(3)  # normalised, device frame
         self.rotation = np.zeros(3)
         self.buttons = 0  # CLUTCH | MODE
 
     def update(self, report: bytes) -> None:
-        """Read one report (its id first); ``ValueError`` for one too short or of an
-        unknown id."""
+        """Read one report (its id first): report 1 of at least 12 payload bytes is the
+        combined layout, of 6 to 11 the split one's translation. ``ValueError`` for a
+        report too short or of an unknown id."""
         if not report:
             raise ValueError("an empty SpaceMouse report")
         report_id, payload = report[0], bytes(report[1:])
-        needed = {TRANSLATION: 12 if self.model.combined else 6, ROTATION: 6, BUTTONS: 1}
-        if report_id not in needed or (report_id == ROTATION and self.model.combined):
-            raise ValueError(f"SpaceMouse report id {report_id} is not one of the "
-                             f"{self.model.name}'s")
+        needed = {TRANSLATION: AXES_BYTES, ROTATION: AXES_BYTES, BUTTONS: 1}
+        if report_id not in needed:
+            raise ValueError(f"SpaceMouse report id {report_id} is none of "
+                             f"{sorted(needed)} (translation, rotation, buttons)")
         if len(payload) < needed[report_id]:
             raise ValueError(f"SpaceMouse report {report_id} has {len(payload)} bytes, "
                              f"needs {needed[report_id]}")
-        scale = self.model.full_scale
         if report_id == TRANSLATION:
-            self.translation = decode_axes(payload[:6], scale)
-            if self.model.combined:
-                self.rotation = decode_axes(payload[6:12], scale)
+            self.translation = decode_axes(payload[:AXES_BYTES], self.full_scale)
+            if len(payload) >= 2 * AXES_BYTES:
+                self.rotation = decode_axes(payload[AXES_BYTES:2 * AXES_BYTES],
+                                            self.full_scale)
         elif report_id == ROTATION:
-            self.rotation = decode_axes(payload[:6], scale)
+            self.rotation = decode_axes(payload[:AXES_BYTES], self.full_scale)
         else:
             self.buttons = (CLUTCH if payload[0] & 1 else 0) | (MODE if payload[0] & 2 else 0)
 
@@ -166,7 +187,7 @@ class SpaceMouse(InputSource):
         super().__init__("spacemouse", ee)
         self.model = model
         self.curve = curve
-        self.state = ReportState(model)
+        self.state = ReportState(model.full_scale)
         self._device = device
         self._sequence = 0
         self._stop = threading.Event()
