@@ -34,6 +34,9 @@ from .source import InputSample, InputSource
 RECEIVE_SIZE = 2048
 #: the receiving thread wakes this often to see whether it should stop (s)
 POLL_INTERVAL = 0.05
+#: the socket's receive buffer asked for (bytes; the system may cap it): commands that
+#: arrive while the receiving thread waits for the interpreter queue here, not lost
+RECEIVE_BUFFER = 1 << 22
 
 
 class UdpMaster(InputSource):
@@ -60,6 +63,7 @@ class UdpMaster(InputSource):
             self._socket.close()
             raise ValueError(f"cannot receive the master on udp {host}:{port}: "
                              f"{error.strerror or error}") from None
+        self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
         self._socket.settimeout(POLL_INTERVAL)
         self.port = self._socket.getsockname()[1]
         self.name = f"udp:{self.port}"

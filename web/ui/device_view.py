@@ -5,6 +5,7 @@ the status, and the feedback force it renders, plotted."""
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import viser
@@ -46,6 +47,7 @@ class DeviceView:
     app: TeleopApp
     ee_names: dict[str, str]
     _plot_tab: object
+    plot_note: viser.GuiMarkdownHandle  # the Plots tab's first line
     _feedback_plot: object | None
     _received: dict[str, tuple[float, int]]
 
@@ -69,17 +71,18 @@ class DeviceView:
             None, lambda wxyz=np.array(camera.wxyz): self.app.set_view(wxyz), key="view"))
 
     def _device_lines(self, snapshot: dict) -> list[str]:
+        """Each device's status line; its rate of commands received since the previous
+        line, over the wall clock (the loop's time lags it when the loop falls behind)."""
         frames = snapshot["ee_frames"]
         lines = []
+        now = time.monotonic()
         for device in snapshot["devices"]:
-            name = self.ee_names[frames[device["ee"]]]
             count = device["source"].counts["received"]
-            now = snapshot["robots"]["main"]["t"]
             before = self._received.get(device["name"])
             rate = None if before is None or now <= before[0] else \
                 (count - before[1]) / (now - before[0])
             self._received[device["name"]] = (now, count)
-            lines.append(device_words(device, name, rate))
+            lines.append(device_words(device, self.ee_names[frames[device["ee"]]], rate))
         return lines
 
     def _plot_feedback(self, snapshot: dict) -> None:
@@ -100,6 +103,7 @@ class DeviceView:
                         *[uplot.Series(label=axis, stroke=color, width=1.5)
                           for axis, color in zip(("x right", "y up", "z back"),
                                                  FEEDBACK_COLORS)]),
-                aspect=2.2, scales={"x": uplot.Scale(time=False, auto=False,
+                aspect=2.2, order=self.plot_note.order + 0.5,  # the Plots tab's first
+                scales={"x": uplot.Scale(time=False, auto=False,
                                                      range=(-HISTORY_SECONDS, 0.0)),
                                     "y": uplot.Scale(auto=True)})
