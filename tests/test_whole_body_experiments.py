@@ -94,8 +94,9 @@ def test_a_session_with_two_targets_replays_the_plan_to_float_precision(tmp_path
     path = record_plan(plan, tmp_path / "two.jsonl", duration=0.3)
     lines = [json.loads(line) for line in path.read_text().splitlines()]
     header = lines[0]
-    # written at the current version (3 since the header may carry collision avoidance)
-    assert header["version"] == 3 and header["ee_frames"] == list(plan.robot.ee_frames)
+    # written at the current version (3 since the header may carry collision avoidance,
+    # 4 since input devices write their lines)
+    assert header["version"] == 4 and header["ee_frames"] == list(plan.robot.ee_frames)
     assert header["root_joint"] == "fixed" and header["locked_joints"] == {}
     targets = [line for line in lines if line["type"] == "target"]
     assert len(targets) == 600
