@@ -46,6 +46,8 @@ for k in range(int(RATE * SECONDS) + 1):
 
 silent_from = time.perf_counter()  # the master goes silent: the watchdog releases it
 while app.devices[0].state.name != "HELD" or np.max(np.abs(app.loops["main"].last_qd)) >= 1e-3:
+    if time.perf_counter() - silent_from > 10.0:
+        raise SystemExit("the robot did not stop within 10 s of the master's silence")
     time.sleep(0.001)
 stopped_ms = 1e3 * (time.perf_counter() - silent_from)
 control.stop()

@@ -51,9 +51,10 @@ class Streamer:
 
 @pytest.fixture(scope="module")
 def console(tmp_path_factory):
-    master = UdpMaster(port=0)
+    master = UdpMaster(port=0, max_age=1.0)
+    # not a test of the watchdog: a stall of the shared process never releases the master
     with open_web(load_robot("sda10f"), tmp_path_factory.mktemp("sessions"),
-                  inputs=[master]) as served:
+                  inputs=[master], input_timeout=1.0) as served:
         streamer = Streamer(master.port)
         try:
             yield served, master, streamer

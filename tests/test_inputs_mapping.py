@@ -222,3 +222,67 @@ def test_a_second_source_on_the_same_ee_or_one_on_no_ee_is_refused(app):
         app.attach_input(InputSource("third", ee=3))
     with pytest.raises(ValueError, match="input timeout"):
         app.set_input_timeout(0.0)
+
+
+def test_a_gizmo_drag_after_a_release_moves_the_target_by_the_drag_only(app):
+    """The watchdog puts the target on the EE; the gizmo's handle stays where it was, and
+    a drag from there moves the target by the drag, not by the gap."""
+    source = InputSource("test")
+    app.attach_input(source)
+    for k in range(1, 41):  # the device takes the target 4 cm along its x
+        source.offer(pose_sample((1e-3 * k, 0.0, 0.0), k, arrival=time.perf_counter()))
+        app.step()
+    source.last_arrival = time.perf_counter() - 1.0
+    app.step()
+    assert app.devices[0].state == FeedbackState.HELD
+    before = app.targets[0].translation.copy()
+    handle = app.gizmo.copy()  # where the page's handle still is
+    app.move_gizmo(handle.translation + [0.0, 0.0, 1e-3], (1.0, 0.0, 0.0, 0.0))
+    assert app.targets[0].translation - before == pytest.approx([0.0, 0.0, 1e-3], abs=1e-12)
+
+
+def test_absolute_orientation_follows_only_once_the_device_agrees_with_the_tool(app):
+    source = InputSource("test")
+    app.attach_input(source)
+    app.set_orientation_mode(True)
+    target = app.targets[0].copy()
+    turned = pin.exp3(np.array([0.0, 0.0, math.pi / 2])) @ DEFAULT_VIEW.T @ target.rotation
+    quaternion = pin.Quaternion(turned)
+    source.offer(InputSample("pose", (0.0, 0.0, 0.0, quaternion.w, quaternion.x, quaternion.y,
+                                      quaternion.z), 0, 1, time.perf_counter()))
+    app.step()
+    assert app.devices[0].state == FeedbackState.CLUTCHED
+    assert "align the device with the tool: 90 deg apart" in app.devices[0].reason
+    assert app.targets[0].rotation == pytest.approx(target.rotation, abs=1e-12)
+    aligned = pin.Quaternion(DEFAULT_VIEW.T @ target.rotation)  # the tool's, in the view
+    for k, x in ((2, 0.0), (3, 0.01)):
+        source.offer(InputSample("pose", (x, 0.0, 0.0, aligned.w, aligned.x, aligned.y,
+                                          aligned.z), 0, k, time.perf_counter()))
+        app.step()
+    assert app.devices[0].state == FeedbackState.FOLLOWING
+    assert app.targets[0].translation == pytest.approx(
+        target.translation + DEFAULT_VIEW @ [0.01, 0.0, 0.0], abs=1e-9)
+    app.set_view((1.0, 0.0, 0.0, 0.0))  # another view: align again before moving
+    source.offer(InputSample("pose", (0.02, 0.0, 0.0, aligned.w, aligned.x, aligned.y,
+                                      aligned.z), 0, 4, time.perf_counter()))
+    app.step()
+    assert app.devices[0].state == FeedbackState.CLUTCHED
+    assert app.targets[0].translation == pytest.approx(
+        target.translation + DEFAULT_VIEW @ [0.01, 0.0, 0.0], abs=1e-9)
+
+
+def test_a_rate_command_does_not_wind_the_target_up_ahead_of_the_robot(app):
+    """Ten times the speed the robot may go: the target stays within the lead of the EE."""
+    from web.app.devices import RATE_LEAD
+
+    source = InputSource("rate")
+    source.watchdog = False
+    app.attach_input(source)
+    app.set_motion_scale(10.0)
+    source.offer(InputSample("twist", (0.05, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 1, 0.0))
+    for _ in range(500):
+        app.step()
+        ee = app.loops["main"].ee_placements()[0].translation
+        assert np.linalg.norm(app.targets[0].translation - ee) <= RATE_LEAD + 0.5 * 1e-3
+    assert source.counts["held_back"] > 100
+    assert app.limitation().distance > 0.5 * RATE_LEAD  # it was pushing all along

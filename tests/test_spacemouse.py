@@ -5,6 +5,7 @@ formula, and the source's samples."""
 from __future__ import annotations
 
 import struct
+import time
 
 import numpy as np
 import pytest
@@ -159,3 +160,45 @@ def test_a_combined_device_offers_its_clipped_twist_per_report():
     tilt = ((0.6 - 0.1) / 0.9) ** 2 * curve.max_angular  # raw ry (towards the user) is +z
     assert sample.values == pytest.approx([0, 0, 0, 0, 0, tilt])
     assert sample.buttons == MODE and not sample.clutched and sample.sequence == 3
+
+
+class RecordedDevice:
+    """A HID device that plays recorded reports, then answers nothing (or fails): what
+    easyhid's device gives the reading thread."""
+
+    def __init__(self, reports: list[bytes], then_fail: bool) -> None:
+        self.reports, self.then_fail, self.closed = list(reports), then_fail, False
+
+    def read(self, size: int, timeout_ms: int) -> bytes:
+        if self.reports:
+            return self.reports.pop(0)
+        if self.then_fail:
+            raise OSError("read error: device disconnected")
+        time.sleep(timeout_ms / 1e3)
+        return b""
+
+    def close(self) -> None:
+        self.closed = True
+
+
+@pytest.mark.parametrize("then_fail", [True, False])
+def test_a_device_that_fails_or_falls_silent_while_deflected_stops_the_motion(then_fail):
+    """Unplugged (a read error) or out of radio range (no report while the cap is pushed):
+    the source offers a zero twist; the first also says so in its problem."""
+    push = struct.pack("<B3h", 1, 350, 0, 0)
+    source = SpaceMouse(NAVIGATOR, device=RecordedDevice([push], then_fail))
+    source.start()
+    try:
+        started = time.monotonic()
+        while source.counts_now().get("accepted", 0) < 2:  # the push, then the stop
+            assert time.monotonic() - started < 10.0, "the motion was not stopped"
+            time.sleep(0.005)
+        stopped = source.take()
+        assert stopped.kind == "twist" and not any(stopped.values) and stopped.sequence == 2
+        if then_fail:
+            assert "stopped answering" in source.problem
+        else:  # after the silence limit, not before
+            assert time.monotonic() - started >= 0.2 and source.problem == ""
+    finally:
+        source.close()
+    assert source._device.closed

@@ -255,6 +255,9 @@ def _inputs(args: argparse.Namespace, robot, prog: str) -> list:
             ee = _ee_index(name, list(robot.ee_frames), index, spec)
             if kind == "spacemouse":
                 from teleop.inputs.spacemouse import SpaceMouse
+                if any(isinstance(source, SpaceMouse) for source in sources):
+                    raise ValueError(f"--input {spec}: one SpaceMouse only (it would drive "
+                                     "both end effectors)")
                 try:
                     sources.append(SpaceMouse.open(ee))
                 except ValueError as error:

@@ -1,7 +1,7 @@
 """The operator's input sources (docs/design.md section 19): the interface
-(:mod:`.source`), the network master's protocol (:mod:`.protocol`) and receiver
-(:mod:`.udp`) and client (:mod:`.client`), the SpaceMouse (:mod:`.spacemouse`), the view mapping (:mod:`.mapping`),
-the feedback wrench (:mod:`.feedback`)."""
+(:mod:`.source`), the network master's protocol (:mod:`.protocol`), receiver (:mod:`.udp`)
+and client (:mod:`.client`), the SpaceMouse (:mod:`.spacemouse`), the view mapping
+(:mod:`.mapping`), the feedback wrench (:mod:`.feedback`)."""
 
 from .client import MasterClient
 from .feedback import FeedbackGains, feedback_wrench
@@ -11,7 +11,8 @@ from .protocol import (CLUTCH, MODE, Command, Feedback, FeedbackState, PacketErr
 from .source import DROP_REASONS, InputSample, InputSource
 from .udp import UdpMaster
 
-__all__ = ["CLUTCH", "DEFAULT_VIEW", "Command", "DROP_REASONS", "Feedback", "FeedbackGains", "FeedbackState",
-           "InputSample", "InputSource", "MODE", "MasterClient", "PacketError", "UdpMaster", "decode_command",
-           "decode_feedback", "device_pose", "encode_command", "encode_feedback",
-           "feedback_wrench", "followed_pose", "integrated_twist", "view_rotation"]
+__all__ = ["CLUTCH", "DEFAULT_VIEW", "Command", "DROP_REASONS", "Feedback", "FeedbackGains",
+           "FeedbackState", "InputSample", "InputSource", "MODE", "MasterClient",
+           "PacketError", "UdpMaster", "decode_command", "decode_feedback", "device_pose",
+           "encode_command", "encode_feedback", "feedback_wrench", "followed_pose",
+           "integrated_twist", "view_rotation"]

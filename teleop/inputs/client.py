@@ -60,7 +60,7 @@ class MasterClient:
                 datagram = self._socket.recv(FEEDBACK_SIZE + 1)
             except (BlockingIOError, InterruptedError):
                 return newest
-            except OSError:  # nothing listens yet (an ICMP error of an earlier command)
+            except ConnectionRefusedError:  # nothing listens (an earlier command's ICMP error)
                 continue
             try:
                 newest = decode_feedback(datagram)

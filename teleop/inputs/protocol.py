@@ -86,9 +86,14 @@ def encode_command(kind: str, values, sequence: int, device_time: float, ee: int
                    buttons: int = 0) -> bytes:
     """A command datagram (what a master sends); a twist takes 6 values."""
     codes = {name: code for code, name in KINDS.items()}
+    if kind not in codes:
+        raise ValueError(f"a command's kind is 'pose' or 'twist', got {kind!r}")
     values = [float(v) for v in values]
     if kind == "twist" and len(values) == 6:
         values.append(0.0)
+    if len(values) != 7:
+        raise ValueError(f"a {kind} command takes {7 if kind == 'pose' else 6} values, "
+                         f"got {len(values)}")
     return COMMAND_FORMAT.pack(MAGIC_COMMAND, VERSION, codes[kind], ee, buttons,
                                sequence & 0xFFFFFFFF, float(device_time), *values)
 

@@ -75,13 +75,10 @@ class InputSource:
 
     name : what the operator reads (``udp:9870``, ``spacemouse``).
     ee : the index of the end effector it drives.
-    frame : ``"view"`` (its motion is in the operator's view, docs/design.md 19.1) or
-        ``"world"`` (the browser's gizmo).
     watchdog : whether a silence longer than the app's timeout releases it (a network
         master streams even at rest; a SpaceMouse is silent at rest).
     """
 
-    frame = "view"
     watchdog = True
     #: whether it renders feedback (the app computes a wrench only for those that do)
     renders_feedback = False
@@ -127,7 +124,17 @@ class InputSource:
         self.last_latency = command_time - sample.arrival
         self.latencies.add(self.last_latency)
         self.applied_sequence = sample.sequence
-        self.counts["applied"] += 1
+        self.count("applied")
+
+    def count(self, what: str, number: int = 1) -> None:
+        """Add ``number`` to the count ``what`` (from any thread)."""
+        with self._lock:
+            self.counts[what] += number
+
+    def counts_now(self) -> dict[str, int]:
+        """A consistent copy of the counts."""
+        with self._lock:
+            return dict(self.counts)
 
     def set_feedback(self, wrench: np.ndarray, state: FeedbackState,
                      port_force_measured: bool) -> None:
@@ -136,13 +143,13 @@ class InputSource:
 
     def dropped(self) -> int:
         """Datagrams or reports refused, every reason together."""
-        return sum(self.counts[reason] for reason in DROP_REASONS)
+        counts = self.counts_now()
+        return sum(counts.get(reason, 0) for reason in DROP_REASONS)
 
     def statistics(self, window: int | None = None) -> dict:
         """The counts, the drops by reason (``drop_reasons`` names them) and the
         latency's p50 / p99 (ms) over the last ``window`` commands (None: all kept)."""
-        with self._lock:
-            counts = dict(self.counts)
+        counts = self.counts_now()
         latencies = self.latencies.values()[-(window or LATENCY_WINDOW):]
         p50, p99 = (np.percentile(latencies, (50, 99)) if latencies.size
                     else (float("nan"), float("nan")))

@@ -17,8 +17,8 @@
 The layout is read from the length of each report 1, not from the model: the Compact,
 of vendor 0x256f like the combined models, sends split reports (7 bytes, ids 1 and 2).
 hidapi returns a report at its own length (hidraw, macOS) or padded to the device's
-longest input report (Windows), so a split device's report 1 never reaches 13 bytes. A report 1 or 2 shorter than its payload, a report 3
-without its bitfield, or another id, is refused (``ValueError`` naming it).
+longest input report (Windows), so a split device's report 1 never reaches 13 bytes. A
+report 1 or 2 shorter than its payload, a report 3 without its bitfield, or another id, is refused (``ValueError`` naming it).
 
 **Axes.** The device reports x to the right, y towards the user and z down (pushing the
 cap is +z), and its rotations right-handed about those axes (the HID usage tables'
@@ -64,6 +64,9 @@ AXES_BYTES = 6
 READ_SIZE = 64
 #: the reading thread's wait for a report before it checks whether to stop (ms)
 READ_TIMEOUT_MS = 50
+#: a deflected cap reports continuously; silent this long while deflected (s), the link
+#: is taken as lost and the motion stopped (a wireless receiver out of range)
+SILENT_DEFLECTED = 0.2
 
 
 @dataclass(frozen=True)
@@ -232,11 +235,11 @@ class SpaceMouse(InputSource):
     def handle_report(self, report: bytes, arrival: float) -> None:
         """One report: the state updated and the twist it now asks for offered (a
         report that cannot be read is counted ``malformed``)."""
-        self.counts["received"] += 1
+        self.count("received")
         try:
             self.state.update(report)
         except ValueError:
-            self.counts["malformed"] += 1
+            self.count("malformed")
             return
         self._sequence += 1
         twist = self.curve.twist(self.state.translation, self.state.rotation)
@@ -244,15 +247,27 @@ class SpaceMouse(InputSource):
                                self._sequence, arrival))
 
     def _read(self) -> None:
+        last_report = time.perf_counter()
         while not self._stop.is_set():
             try:
                 report = self._device.read(READ_SIZE, READ_TIMEOUT_MS)
             except Exception as error:  # unplugged: stop the motion and say so
                 self.problem = f"the {self.model.name} stopped answering ({error})"
-                self._sequence += 1
-                self.offer(InputSample("twist", (0.0,) * 6, 0, self._sequence,
-                                       time.perf_counter()))
+                self.stop_motion(time.perf_counter())
                 return
+            now = time.perf_counter()
             if report:
-                self.handle_report(bytes(report), time.perf_counter())
+                last_report = now
+                self.handle_report(bytes(report), now)
+            elif now - last_report > SILENT_DEFLECTED and self._moving():
+                self.stop_motion(now)  # a deflected cap reports without pause: link lost
 
+    def _moving(self) -> bool:
+        return bool(np.any(self.curve.twist(self.state.translation, self.state.rotation)))
+
+    def stop_motion(self, arrival: float) -> None:
+        """Offer a zero twist (the device stopped answering, or went silent while its
+        cap was deflected); the state rests until the next report."""
+        self.state.translation, self.state.rotation = np.zeros(3), np.zeros(3)
+        self._sequence += 1
+        self.offer(InputSample("twist", (0.0,) * 6, 0, self._sequence, arrival))

@@ -9,7 +9,9 @@ control tick or dropped and counted by reason. Besides a bad datagram
   reordered datagram); a gap in the numbers counts the ones that never arrived as
   ``lost``;
 * ``stale``: a command that spent more than ``max_age`` in transit, measured against the
-  fastest transit seen (``arrival - device_time`` at its minimum: the two clocks' offset);
+  fastest transit seen (``arrival - device_time`` at its minimum, which rises by
+  :data:`OFFSET_DRIFT` per second so that clocks drifting apart are followed: the two
+  clocks' offset); ``device_time`` must not go back;
 * ``foreign``: from another address than the master's while the master is live (the
   first sender becomes the master; after a silence that released it, the next sender).
 
@@ -37,6 +39,9 @@ POLL_INTERVAL = 0.05
 #: the socket's receive buffer asked for (bytes; the system may cap it): commands that
 #: arrive while the receiving thread waits for the interpreter queue here, not lost
 RECEIVE_BUFFER = 1 << 22
+#: how fast the clocks' offset estimate may rise (s per s): two clocks drifting apart by up
+#: to 1000 ppm, or a master's clock stepping back, never make its commands all stale
+OFFSET_DRIFT = 1e-3
 
 
 class UdpMaster(InputSource):
@@ -74,6 +79,7 @@ class UdpMaster(InputSource):
         self._newest_sequence: int | None = None
         self._clock_offset: float | None = None  # min over accepted of arrival - device_time
         self._stale_in_gap = 0  # stale commands since the newest accepted
+        self._offset_time = 0.0  # when the offset was last updated
         self._feedback = Feedback(FeedbackState.HELD, ee, 0, 0, 0.0, (0.0,) * 6, float("nan"))
 
     def start(self) -> None:
@@ -107,20 +113,22 @@ class UdpMaster(InputSource):
                 datagram, sender = receive(RECEIVE_SIZE)
             except TimeoutError:
                 continue
-            except OSError:  # closed under us, or an ICMP error from a previous reply
-                if self._stop.is_set():
-                    return
-                continue
+            except ConnectionRefusedError:  # an ICMP error of a previous reply: the master
+                continue  # is gone, the watchdog will say so
+            except OSError as error:  # closed under us, or a broken socket: stop receiving
+                if not self._stop.is_set():
+                    self.problem = f"receiving stopped: {error}"
+                return
             self.handle(datagram, sender, clock())
 
     def handle(self, datagram: bytes, sender: tuple, arrival: float) -> None:
         """One datagram from ``sender`` arrived at ``arrival`` (``perf_counter``): offered
         to the control tick and answered, or dropped and counted."""
-        self.counts["received"] += 1
+        self.count("received")
         try:
             command = decode_command(datagram, self.ee)
         except PacketError as error:
-            self.counts[error.reason] += 1
+            self.count(error.reason)
             return
         with self._lock:
             reason = self._refusal(command.sequence, command.device_time, sender, arrival)
@@ -136,7 +144,7 @@ class UdpMaster(InputSource):
         try:
             self._socket.sendto(encode_feedback(reply), sender)
         except OSError:
-            self.counts["feedback_not_sent"] += 1
+            self.count("feedback_not_sent")
 
     def _refusal(self, sequence: int, device_time: float, sender: tuple,
                  arrival: float) -> str:
@@ -154,9 +162,13 @@ class UdpMaster(InputSource):
         if newest is not None:
             self.counts["lost"] += sequence - newest - 1 - self._stale_in_gap
         self._stale_in_gap = 0
+        if self._clock_offset is not None:  # the minimum forgets slowly: the clocks drift
+            self._clock_offset = min(transit, self._clock_offset
+                                     + OFFSET_DRIFT * (arrival - self._offset_time))
+        else:
+            self._clock_offset = transit
+        self._offset_time = arrival
         self._master = sender
         self._newest_sequence = sequence
-        self._clock_offset = transit if self._clock_offset is None else min(self._clock_offset,
-                                                                            transit)
         return ""
 

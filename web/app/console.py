@@ -6,8 +6,8 @@ targets, and **motion scaling** maps each gizmo displacement ``d`` to a target
 displacement ``scale d`` (orientation follows the gizmo's rotation, unscaled): the
 gizmo is an input source in the world's frame, mapped as every device is
 (:func:`teleop.inputs.followed_pose`, docs/design.md section 19.1), so the clutch and a
-new motion scale never make a target jump. A robot with several end effectors (docs/design.md section 11) has
-a target and a gizmo per EE (:class:`EEInput`); the actions take the EE's index ``ee``
+new motion scale never make a target jump. A robot with several end effectors
+(docs/design.md section 11) has a target and a gizmo per EE (:class:`EEInput`); the actions take the EE's index ``ee``
 (0: ``robot.ee_frame``). The clutch and the motion scale are shared by every gizmo; each
 gizmo moves its own target.
 """
@@ -121,8 +121,8 @@ class Console:
 
     def move_gizmo(self, position, wxyz, ee=0) -> None:
         """EE ``ee``'s input gizmo pose. Unless the clutch is engaged, its target moves by
-        ``motion_scale`` times the gizmo's displacement since the last clutch release
-        (and turns with the gizmo's rotation since then); the other targets stay."""
+        ``motion_scale`` times the gizmo's displacement since its previous pose (and turns
+        with the gizmo's rotation since then); the other targets stay."""
         ee = self.ee_index(ee)
         gizmo = pose_from(position, wxyz, "gizmo")
         with self._lock:

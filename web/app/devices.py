@@ -43,6 +43,11 @@ INPUT_TIMEOUT_RANGE = (0.005, 5.0)
 RECORD_TARGET_EVERY = 10
 #: a recording gets each source's statistics this often (s)
 RECORD_INPUT_EVERY = 1.0
+#: absolute orientation follows once the device and the tool agree within this (rad)
+ALIGNMENT = np.radians(10.0)
+#: a rate command keeps its target within this of the EE (m, rad): a few periods at the
+#: speed caps, so a device held against a limit does not wind the target up
+RATE_LEAD, RATE_TURN_LEAD = 0.01, 0.05
 #: the status's latency percentiles are over the last this many commands
 STATUS_LATENCIES = 4096
 
@@ -63,6 +68,8 @@ class DeviceBinding:
     recorded_applied: int = 0  # the applied count at the last recording of statistics
     unrecorded: bool = False  # its target moved since it was last written to a recording
     recorded_tick: int = 0  # the tick it was last written at
+    aligned: bool = False  # absolute orientation: the device agreed with its tool
+    rate_control: bool = False  # its last sample was a twist
 
 
 class Devices:
@@ -128,6 +135,8 @@ class Devices:
         if not np.all(np.isfinite(rotation)):
             raise ValueError("the camera orientation must be finite")
         with self._lock:
+            if not np.allclose(rotation, self.view_rotation, atol=1e-9):
+                self._unalign()
             self.view_rotation = rotation
 
     def set_orientation_mode(self, absolute: bool) -> None:
@@ -137,6 +146,13 @@ class Devices:
             raise ValueError(f"absolute orientation is True or False, got {absolute!r}")
         with self._lock:
             self.absolute_orientation = bool(absolute)
+            self._unalign()
+
+    def _unalign(self) -> None:
+        """In absolute orientation, every device must agree with its tool again before
+        it moves it (caller holds the lock)."""
+        for device in self.devices:
+            device.aligned = False
 
     # -- the control tick -----------------------------------------------------------------
 
@@ -160,13 +176,18 @@ class Devices:
             if device.state == FeedbackState.HELD:  # a new stream: from where the target is
                 device.previous = None
             coupled = not self.clutch and not sample.clutched
+            if not coupled:
+                device.aligned = False
             device.state = FeedbackState.FOLLOWING if coupled else FeedbackState.CLUTCHED
             device.reason = "following" if coupled else "clutched: the device moves alone"
             hand = self.inputs[source.ee]
+            device.rate_control = sample.kind == "twist"
             if sample.kind == "pose":
                 pose, previous = device_pose(sample.values), device.previous
                 device.previous = pose
-                if coupled and previous is not None:
+                if coupled and self.absolute_orientation and not device.aligned:
+                    self._align(device, hand.target, pose)
+                elif coupled and previous is not None:
                     self._move_target(device, followed_pose(
                         hand.target, previous, pose, self.view_rotation, self.motion_scale,
                         self.absolute_orientation))
@@ -176,14 +197,40 @@ class Devices:
                     self._move_target(device, integrated_twist(
                         hand.target, device.twist, self.view_rotation, self.motion_scale, dt))
 
+    def _align(self, device: DeviceBinding, target: pin.SE3, pose: pin.SE3) -> None:
+        """Absolute orientation: the device follows only once its orientation in the view
+        agrees with the tool's within :data:`ALIGNMENT` (the dVRK's alignment); until
+        then it is held clutched, the status saying how far apart they are."""
+        apart = float(np.linalg.norm(pin.log3(self.view_rotation @ pose.rotation
+                                              @ target.rotation.T)))
+        device.aligned = apart <= ALIGNMENT
+        if not device.aligned:
+            device.state = FeedbackState.CLUTCHED
+            device.reason = (f"align the device with the tool: {np.degrees(apart):.0f} deg "
+                             f"apart (absolute orientation follows within "
+                             f"{np.degrees(ALIGNMENT):.0f} deg)")
+
     def _move_target(self, device: DeviceBinding, target: pin.SE3) -> None:
         """EE ``device.source.ee``'s target from its device; one farther than
-        :data:`MAX_TARGET_DISTANCE` from the EE is refused (counted ``refused``)."""
+        :data:`MAX_TARGET_DISTANCE` from the EE is refused (counted ``refused``); a rate
+        command does not take the target farther than :data:`RATE_LEAD` (or turned more
+        than :data:`RATE_TURN_LEAD`) from the EE than it is: held against a constraint, a
+        limit or the speed caps, it does not wind up (counted ``held_back``)."""
         ee = device.source.ee
-        ee_now = self.loops["main"].ee_placements()[ee].translation
-        if not np.linalg.norm(target.translation - ee_now) <= MAX_TARGET_DISTANCE:
-            device.source.counts["refused"] += 1
+        now = self.loops["main"].ee_placements()[ee]
+        ahead = float(np.linalg.norm(target.translation - now.translation))
+        if not ahead <= MAX_TARGET_DISTANCE:
+            device.source.count("refused")
             return
+        if device.rate_control:
+            current = self.inputs[ee].target
+            was = float(np.linalg.norm(current.translation - now.translation))
+            turned = float(np.linalg.norm(pin.log3(target.rotation @ now.rotation.T)))
+            turned_was = float(np.linalg.norm(pin.log3(current.rotation @ now.rotation.T)))
+            if (ahead > RATE_LEAD and ahead > was) or (turned > RATE_TURN_LEAD
+                                                       and turned > turned_was):
+                device.source.count("held_back")
+                return
         self.inputs[ee].target = target
         device.unrecorded = True
 
@@ -195,13 +242,12 @@ class Devices:
         device.reason = (f"silent for {silent_ms:.0f} ms (timeout "
                          f"{1e3 * self.input_timeout:g} ms): released, the robot holds")
         device.twist = np.zeros(6)
-        device.source.counts["releases"] += 1
+        device.source.count("releases")
         release = getattr(device.source, "release", None)
         if release is not None:
             release()
         pose = self.loops["main"].ee_placements()[ee]
         self.inputs[ee].target = pose.copy()
-        self.inputs[ee].gizmo = pose.copy()
         self._record_target(ee)
         for loop in self.loops.values():
             loop.hold(ee, pose)
@@ -226,8 +272,10 @@ class Devices:
             if placements is None:
                 placements = loop.ee_placements()
             port_forces = [] if loop.plant is None else loop.plant.measures().port_forces
+            ee = placements[device.source.ee]  # no spring while the device moves alone
             device.wrench = feedback_wrench(
-                placements[device.source.ee], self.inputs[device.source.ee].target,
+                ee, self.inputs[device.source.ee].target
+                if device.state == FeedbackState.FOLLOWING else ee,
                 port_forces, self.collision_rows.get("main"),
                 self.avoidance.detection_distance, self.view_rotation, self.feedback_gains)
             device.source.set_feedback(device.wrench, device.state, loop.plant is not None)
@@ -243,11 +291,12 @@ class Devices:
         recording (caller holds the lock)."""
         for device in self.devices:
             source = device.source
-            fresh = min(source.counts["applied"] - device.recorded_applied, 4096)
-            device.recorded_applied = source.counts["applied"]
+            counts = source.counts_now()
+            fresh = min(counts.get("applied", 0) - device.recorded_applied, 4096)
+            device.recorded_applied = counts.get("applied", 0)
             latencies = source.latencies.values()[-fresh:] if fresh else np.zeros(0)
             self.recorder.input(self.recording_time, source.name, source.ee,
-                                {key: int(value) for key, value in source.counts.items()},
+                                {key: int(value) for key, value in counts.items()},
                                 latencies)
 
     def devices_snapshot(self) -> list[dict]:

@@ -65,10 +65,13 @@ class DeviceView:
         self.server.on_client_connect(self._watch_view)
 
     def _watch_view(self, client: viser.ClientHandle) -> None:
-        """The devices move in the view of the browser whose camera moved last."""
+        """The devices move in the view of the browser whose camera moved last; a new
+        browser's view counts from its first camera report."""
         camera = client.camera
         camera.on_update(lambda _: self._guarded(
             None, lambda wxyz=np.array(camera.wxyz): self.app.set_view(wxyz), key="view"))
+        self._guarded(None, lambda wxyz=np.array(camera.wxyz): self.app.set_view(wxyz),
+                      key="view")
 
     def _device_lines(self, snapshot: dict) -> list[str]:
         """Each device's status line; its rate of commands received since the previous
