@@ -44,6 +44,18 @@ def wait_until(predicate, what: str, timeout: float = WAIT):
     return value
 
 
+def open_page(playwright, server, port: int, height: int):
+    """Headless Chromium (software WebGL) on the page at ``port``, 1400 px wide, once it
+    has connected to ``server``: the browser, the page, its viser client."""
+    browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                         args=list(CHROMIUM_ARGS))
+    page = browser.new_page(viewport={"width": 1400, "height": height})
+    page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
+    client = wait_until(lambda: next(iter(server.get_clients().values()), None),
+                        "the page to connect")
+    return browser, page, client
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=OUT)
@@ -60,12 +72,7 @@ def main() -> None:
     server.scene.configure_default_lights(cast_shadow=False)
     try:
         with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True,
-                                                 args=list(CHROMIUM_ARGS))
-            page = browser.new_page(viewport={"width": 1400, "height": 900})
-            page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-            client = wait_until(lambda: next(iter(server.get_clients().values()), None),
-                                "the page to connect")
+            browser, page, client = open_page(playwright, server, port, height=900)
             # the tips point at each other (along y): their targets cross
             for ee, side in ((0, -1.0), (1, 1.0)):
                 for _ in range(int(CROSSING / 0.02)):

@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from make_collision_screenshot import CHROMIUM, CHROMIUM_ARGS, free_port, wait_until
+from make_collision_screenshot import free_port, open_page, wait_until
 
 from teleop import load_robot
 from teleop.inputs import UdpMaster
@@ -73,12 +73,7 @@ def main() -> None:
     master_process = None
     try:
         with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True,
-                                                 args=list(CHROMIUM_ARGS))
-            page = browser.new_page(viewport={"width": 1400, "height": 1000})
-            page.goto(f"http://127.0.0.1:{port}/", wait_until="domcontentloaded")
-            client = wait_until(lambda: next(iter(server.get_clients().values()), None),
-                                "the page to connect")
+            browser, page, client = open_page(playwright, server, port, height=1000)
             target = app.targets[0].translation
             # from behind-left: the circle in this view keeps the arm away from the
             # singularity a front-right view drives it into
