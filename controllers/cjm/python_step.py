@@ -22,6 +22,7 @@ from .analytical import SquarePreChain, solve_redundant_pre_chain
 from .general import solve_general
 from .report import Event, ReportBuilder, StepReport
 from .saturation import saturate_in_null_space
+from .saturation_walk import saturate_around_previous
 from .step_setup import StepSetup
 from .tolerances import BARRIER_TOLERANCE, EQUALITY_TOLERANCE, PAPER_FORM_MIN_A, StepTolerances
 
@@ -269,9 +270,12 @@ class PythonStep:
         barriers = self._barriers
         for _ in range(len(barriers) + self._pairs.size + 1):
             rows, rows_rhs = self._held_rows(self._active)
-            result = saturate_in_null_space(rows, rows_rhs, ee_jacobian, twist, lower, upper,
-                                            setup.bounds.velocity_limit, setup.policy,
-                                            self._reference, setup.bounds.acceleration_step)
+            if self._reference is None:
+                result = saturate_in_null_space(rows, rows_rhs, ee_jacobian, twist, lower,
+                                                upper, setup.bounds.velocity_limit, setup.policy)
+            else:
+                result = saturate_around_previous(rows, rows_rhs, ee_jacobian, twist, lower,
+                                                  upper, setup.policy, self._reference)
             if not self._activate_worst(result.qd):
                 break
         report.active_barriers = tuple(i for i in self._active if i in barriers)

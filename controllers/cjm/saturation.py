@@ -17,6 +17,10 @@ is treated as locked, the task solved over the others (see
 :func:`saturate_in_null_space`). If not even the rows fit inside
 the box, their right-hand side (drift feedback and feed-forward) is scaled down as
 little as needed: the constraint then converges as fast as the limits allow.
+
+This is the saturation without acceleration limits. With them the box is a narrow window
+around the previous command and :mod:`controllers.cjm.saturation_walk` saturates around
+that command instead (docs/design.md section 12).
 """
 
 from __future__ import annotations
@@ -68,15 +72,19 @@ class _Split:
     damping: float = 0.0
 
 
-def _solve_over_free(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
+def solve_over_free(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
                      twist: np.ndarray, free: np.ndarray, held: np.ndarray,
-                     policy: DampingPolicy) -> _Split:
+                     policy: DampingPolicy, centre: np.ndarray | None = None) -> _Split:
     """The rows exactly, then the task, over the free joints; ``held`` on the others
-    (``held`` is zero on the free joints, so products with it need no masks)."""
+    (``held`` is zero on the free joints, so products with it need no masks). The
+    damping pulls the free joints towards ``centre`` (zero if None)."""
     rhs = rows_rhs - rows @ held
     rows_free = rows[:, free]
     null_basis, rows_pinv, _ = nullspace(rows_free)
-    x_0 = rows_pinv @ rhs
+    if centre is None:
+        x_0 = rows_pinv @ rhs
+    else:
+        x_0 = centre[free] + rows_pinv @ (rhs - rows_free @ centre[free])
     rows_residual = float(np.max(np.abs(rows_free @ x_0 - rhs), initial=0.0))
     base = held.copy()
     base[free] = x_0
@@ -145,31 +153,23 @@ def _inside(qd: np.ndarray, box: tuple[np.ndarray, np.ndarray]) -> bool:
 
 def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
                            twist: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                           velocity_limit: np.ndarray, policy: DampingPolicy,
-                           previous: np.ndarray | None = None,
-                           acceleration_step: np.ndarray | None = None) -> Saturation:
+                           velocity_limit: np.ndarray, policy: DampingPolicy) -> Saturation:
     """``qd`` inside ``[lower, upper]`` holding the rows first, the twist second.
 
     A joint whose *velocity* limit binds slows the task: Flacco et al.'s scaling, the
-    direction of the twist kept; so does one whose *acceleration* bound binds (a bound
-    equal to its side of the box ``previous -+ acceleration_step``: docs/design.md 8.4),
-    which the next steps widen again. A joint whose *position* bound binds (it is at, or a
+    direction of the twist kept. A joint whose *position* bound binds (it is at, or a
     period away from, a position limit) is held there like a locked joint and the task
     is solved over the others, in the least-squares sense if they cannot give all of it
     (as the QP does); scaling for it would freeze the arm as the bound shrinks to zero.
-    With acceleration limits the rows' correction of the last resort starts from the
-    previous command brought into the box, not from rest (:func:`_scale_rows`).
     """
     nv = jacobian.shape[1]
-    acceleration = (None if previous is None
-                    else (previous - acceleration_step, previous + acceleration_step))
     free = np.ones(nv, dtype=bool)
     held = np.zeros(nv)
     box = (lower - BOX_MARGIN * (1.0 + np.abs(lower)), upper + BOX_MARGIN * (1.0 + np.abs(upper)))
     scaled: tuple[float, np.ndarray, np.ndarray, int] | None = None  # scale, free, held, joint
     reference_rank = None  # the task rank before any velocity saturation
     for _ in range(nv + 1):
-        split = _solve_over_free(rows, rows_rhs, jacobian, twist, free, held, policy)
+        split = solve_over_free(rows, rows_rhs, jacobian, twist, free, held, policy)
         reference_rank = split.task_rank if reference_rank is None else reference_rank
         if split.rows_residual > ROWS_TOLERANCE:
             break  # too few free joints left for the rows
@@ -184,8 +184,7 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
         bound = upper[critical] if qd[critical] > upper[critical] else lower[critical]
         held[critical] = bound
         free[critical] = False
-        if (abs(bound) < velocity_limit[critical] * (1.0 - BOX_MARGIN)
-                and not _acceleration_bound(bound, critical, acceleration)):  # a position bound
+        if abs(bound) < velocity_limit[critical] * (1.0 - BOX_MARGIN):  # a position bound
             reference_rank, scaled = None, None
         elif scale >= 0.0 and (scaled is None or scale > scaled[0]):
             candidate_free, candidate_held = free.copy(), held.copy()
@@ -195,17 +194,10 @@ def saturate_in_null_space(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.
             break
     if scaled is not None:
         scale, free, held, critical = scaled
-        split = _solve_over_free(rows, rows_rhs, jacobian, twist, free, held, policy)
+        split = solve_over_free(rows, rows_rhs, jacobian, twist, free, held, policy)
         return _result(split.base + scale * split.direction, scale, 1.0, free, critical,
                        jacobian, twist, split)
-    start = None if previous is None else np.minimum(np.maximum(previous, lower), upper)
-    return _scale_rows(rows, rows_rhs, lower, upper, jacobian, twist, start)
-
-
-def _acceleration_bound(bound: float, joint: int,
-                        acceleration: tuple[np.ndarray, np.ndarray] | None) -> bool:
-    """Whether ``bound`` is the joint's acceleration bound (the box takes it exactly)."""
-    return acceleration is not None and bound in (acceleration[0][joint], acceleration[1][joint])
+    return _scale_rows(rows, rows_rhs, lower, upper, jacobian, twist)
 
 
 def _result(qd: np.ndarray, task_scale: float, rows_scale: float, free: np.ndarray,
@@ -220,15 +212,12 @@ def _result(qd: np.ndarray, task_scale: float, rows_scale: float, free: np.ndarr
 
 
 def _scale_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                jacobian: np.ndarray, twist: np.ndarray,
-                start: np.ndarray | None = None) -> Saturation:
-    """No task, and the rows' correction from ``start`` (rest, or with acceleration limits
-    the previous command in the box), ``start + r A^+ (b - A start)``, scaled by the
+                jacobian: np.ndarray, twist: np.ndarray) -> Saturation:
+    """No task, and the rows' minimum-norm correction ``r A^+ b`` from rest, scaled by the
     largest ``r`` that fits the box."""
     _, rows_pinv, _ = nullspace(rows)
-    start = np.zeros(rows.shape[1]) if start is None else start
-    correction = rows_pinv @ (rows_rhs - rows @ start)
+    correction = rows_pinv @ rows_rhs
     everything = np.ones(correction.size, dtype=bool)
-    scale, _ = task_scale_limit(start, correction, lower, upper, everything)
+    scale, _ = task_scale_limit(np.zeros(correction.size), correction, lower, upper, everything)
     scale = max(scale, 0.0)  # -inf: a joint past its limit; the caller clips
-    return _result(start + scale * correction, 0.0, scale, everything, -1, jacobian, twist)
+    return _result(scale * correction, 0.0, scale, everything, -1, jacobian, twist)

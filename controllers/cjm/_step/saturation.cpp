@@ -1,6 +1,7 @@
 // Joint limits by saturation in the null space (controllers/cjm/saturation.py and the
 // CJM's _saturate, docs/design.md section 9): Flacco, De Luca, Khatib, IEEE T-RO 2015,
-// Algorithm 1, with the constraint rows as a hard first priority.
+// Algorithm 1, with the constraint rows as a hard first priority. With acceleration
+// limits the saturation walks around the previous command instead (saturation_walk.cpp).
 #include "step.hpp"
 
 namespace cjm {
@@ -19,7 +20,11 @@ void Step::saturate(const Inputs& in, VectorRef qd) {
   ensure_rows(in);
   for (Index pass = 0; pass <= static_cast<Index>(barriers_.size()) + pair_count_; ++pass) {
     gather_active_rows();
-    saturate_in_null_space(in);
+    if (accelerating_) {
+      saturate_around_previous(in);
+    } else {
+      saturate_in_null_space(in);
+    }
     if (!activate_worst(sns_qd_)) break;
   }
   qd = sns_qd_;
@@ -84,10 +89,7 @@ void Step::saturate_in_null_space(const Inputs& in) {
     const double bound = sns_qd_(critical) > upper_(critical) ? upper_(critical) : lower_(critical);
     held_(critical) = bound;
     free_(critical) = false;
-    const bool acceleration_bound =  // the box takes it exactly (section 8.4)
-        accelerating_ && (bound == accel_lower_(critical) || bound == accel_upper_(critical));
-    if (std::abs(bound) < box_.velocity_limit(critical) * (1.0 - tol_.box_margin) &&
-        !acceleration_bound) {  // a position bound
+    if (std::abs(bound) < box_.velocity_limit(critical) * (1.0 - tol_.box_margin)) {  // a position bound
       have_reference = have_scaled = false;
     } else if (scale >= 0.0 && (!have_scaled || scale > best_scale)) {
       have_scaled = true;
@@ -171,19 +173,11 @@ void Step::saturation_result(const Inputs& in, double task_scale, double rows_sc
 }
 
 void Step::scale_rows(const Inputs& in) {
-  // no task, the rows' minimum-norm correction scaled by the largest factor in the box
-  // from rest, or with acceleration limits from the previous command brought into the box
+  // no task, the rows' minimum-norm correction from rest scaled by the largest factor in the box
   const Index m = row_count_;
   null_.factor(rows_.topRows(m));
-  if (accelerating_) {
-    base_ = previous_.cwiseMax(lower_).cwiseMin(upper_);
-  } else {
-    base_.setZero();
-  }
-  auto rhs = rows_scratch_.head(m);
-  rhs.noalias() = rows_.topRows(m) * base_;
-  rhs = rhs_.head(m) - rhs;
-  null_.pseudo_solve(rhs, direction_);
+  base_.setZero();
+  null_.pseudo_solve(rhs_.head(m), direction_);
   free_.setConstant(true);
   Index critical = -1;
   const double scale = std::max(task_scale_limit(base_, direction_, critical), 0.0);

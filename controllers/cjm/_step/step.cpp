@@ -61,8 +61,6 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   posture_velocity_.resize(nv);
   accelerating_ = box_.acceleration_step.size() != 0;
   previous_ = Vector::Zero(nv);
-  accel_lower_.resize(nv);
-  accel_upper_.resize(nv);
   active_.reserve(n_constraints);
   waiting_.reserve(n_constraints);
   report_ = Vector::Zero(kReportSize);
@@ -97,7 +95,8 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   task_rhs_.resize(task_rows, 2);
   task_x_.resize(nv + 7, 2);
   for (Vector* v : {&qd0_, &delta_, &lower_, &upper_, &box_lower_, &box_upper_, &free_x_,
-                    &posture_null_, &held_, &best_held_, &base_, &direction_, &sns_qd_})
+                    &posture_null_, &held_, &best_held_, &base_, &direction_, &sns_qd_,
+                    &walk_point_, &walk_goal_, &walk_move_, &centre_})
     v->resize(nv);
   stacked_.resize(std::max<Index>(box_.box_test.rows(), 1));
   scratch_rows_.resize(std::max(m, task_rows));
@@ -315,8 +314,6 @@ void Step::compute_box(const ConstVectorRef& q) {
   for (Index i = 0; i < nv_; ++i) {
     const double step = box_.acceleration_step(i);
     double low = previous_(i) - step, high = previous_(i) + step;
-    accel_lower_(i) = low;
-    accel_upper_(i) = high;
     if (low > upper_(i) || high < lower_(i)) {
       low = high = std::min(std::max(std::min(std::max(lower_(i), low), high), lower_(i)), upper_(i));
     }

@@ -178,7 +178,7 @@ class Step {
 
   // general.cpp
   void general(const Inputs& in, VectorRef qd);
-  Split solve_over_free(const Inputs& in);
+  Split solve_over_free(const Inputs& in, bool centred = false);
 
   // saturation.cpp
   void saturate(const Inputs& in, VectorRef qd);
@@ -189,6 +189,19 @@ class Step {
   void saturation_result(const Inputs& in, double task_scale, double rows_scale,
                          Index limiting_joint, const Split& split);
   void scale_rows(const Inputs& in);
+
+  // saturation_walk.cpp: with acceleration limits (docs/design.md section 12)
+  void saturate_around_previous(const Inputs& in);
+  //! Level 1: walk_point_ moved in the box towards the rows; the fraction of the rows'
+  //! starting residual removed (1: they hold).
+  double walk_to_rows();
+  //! The held joint whose release reduces the rows' residual (-1: none).
+  Index wrong_side(const ConstVectorRef& residual);
+  //! walk_point_ moved towards walk_goal_ until a free joint reaches its bound (that
+  //! joint, -1: the goal reached).
+  Index walk();
+  void walk_result(const Inputs& in, double rows_scale, Index limiting_joint,
+                   double sigma_min, double damping);
 
   // problem
   Index nq_, nv_, task_rows_;
@@ -228,13 +241,14 @@ class Step {
   DampedLeastSquares dls_;
   Matrix task_t_, task_null_t_, task_null_, task_rhs_, task_x_;  // (J N)^T and its solves
   bool accelerating_ = false;  // acceleration limits on
-  Vector previous_, accel_lower_, accel_upper_;  // the reference and its raw box
+  Vector previous_;  // the acceleration limits' reference
   Vector qd0_, delta_, lower_, upper_, box_lower_, box_upper_, stacked_, scratch_rows_, rows_scratch_;
   Vector free_x_, posture_null_, rank_weights_;
   Matrix columns_, task_columns_;  // rows and J over the free joints (SNS)
   // SNS
   Eigen::Array<bool, Eigen::Dynamic, 1> free_, best_free_;
   Vector held_, best_held_, base_, direction_, sns_qd_;
+  Vector walk_point_, walk_goal_, walk_move_, centre_;  // saturation around the previous command
   double sns_task_scale_ = 1.0, sns_rows_scale_ = 1.0;
   double sns_sigma_min_ = 0.0, sns_damping_ = 0.0;  // of the task's DLS that gave sns_qd_
   Index sns_limiting_ = -1;

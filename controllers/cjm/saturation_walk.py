@@ -1,0 +1,149 @@
+"""Joint limits with acceleration limits: saturation around the previous command,
+docs/design.md section 12.
+
+With acceleration limits the joint box is a narrow window around the previous command
+``qd_prev``. SNS's line ``base + s direction`` starts at the minimum-norm rows solution,
+centred on zero, and crosses that window only by chance. Here every point is reached by
+walking from ``qd_prev`` (brought into the box) and never leaving the box:
+
+0. a joint whose box excludes ``qd_prev`` is held at the bound nearest it;
+1. **rows**: walk towards ``point + A_F^+ (b - A point)`` over the free joints ``F``;
+   where a free joint reaches its bound, hold it there and walk again over the others;
+   where the free joints can reduce the residual no further, release a held joint whose
+   bound pushes the wrong way (the gradient ``A^T (A point - b)`` points inside its box):
+   an active-set bounded least squares, so the rows hold exactly whenever some command in
+   the box holds them;
+2. **task**: from that point, walk towards ``c``, the rows exactly and the twist by damped
+   least squares over the free joints, the damping acting on the change ``qd - qd_prev``
+   (docs/design.md 12.1: it measured lower port forces and jerk than damping ``qd``)
+   (:func:`controllers.cjm.saturation.solve_over_free`), holding each joint where it
+   reaches its bound, until ``c`` is inside the box or the held joints leave the rows no
+   freedom.
+
+Every iterate of level 2 is a convex combination of points that hold the rows and lies in
+the box, and the result moves continuously with ``q``, the twist and the box: there is no
+switch between a "scaled" and a "least-squares" candidate.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..base import TWIST_TOLERANCE
+from ..linalg import DampingPolicy, nullspace
+from .saturation import Saturation, gap_to_bound, solve_over_free
+from .tolerances import AT_BOUND, ROWS_TOLERANCE, STILL_DIRECTION
+
+
+def saturate_around_previous(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
+                             twist: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                             policy: DampingPolicy, previous: np.ndarray) -> Saturation:
+    """``qd`` inside ``[lower, upper]`` reached from ``previous``: the rows ``A qd = b``
+    first (exactly when the box allows it), the twist second (module docstring)."""
+    nv = jacobian.shape[1]
+    point = np.minimum(np.maximum(previous, lower), upper)
+    free = (previous >= lower) & (previous <= upper)
+    point, free, rows_scale = walk_to_rows(rows, rows_rhs, lower, upper, point, free)
+    if rows_scale < 1.0:
+        return _walk_result(point, rows_scale, free, -1, jacobian, twist)
+    limiting_joint, sigma_min, damping = -1, float("nan"), 0.0
+    for _ in range(nv + 1):
+        if not free.any():
+            break
+        split = solve_over_free(rows, rows_rhs, jacobian, twist, free,
+                                np.where(free, 0.0, point), policy, previous)
+        if split.rows_residual > ROWS_TOLERANCE:
+            break  # the held joints leave the rows no freedom
+        sigma_min, damping = split.sigma_min, split.damping
+        point, joint = _walk(point, split.base + split.direction, lower, upper, free)
+        if joint < 0:
+            break
+        free[joint] = False
+        limiting_joint = joint if limiting_joint < 0 else limiting_joint
+    return _walk_result(point, 1.0, free, limiting_joint, jacobian, twist, sigma_min, damping)
+
+
+def walk_to_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray,
+                 upper: np.ndarray, point: np.ndarray,
+                 free: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Level 1: ``point`` moved inside the box until ``rows point = rows_rhs`` or no move
+    in the box reduces ``|rows point - rows_rhs|``; the point, the free joints and the
+    fraction ``r`` of the starting residual removed (1: the rows hold)."""
+    point, free = point.copy(), free.copy()
+    nv = point.size
+    initial = float(np.max(np.abs(rows_rhs - rows @ point), initial=0.0))
+    residual = initial
+    for _ in range(3 * nv + 1):
+        residual_vector = rows_rhs - rows @ point
+        residual = float(np.max(np.abs(residual_vector), initial=0.0))
+        if residual <= ROWS_TOLERANCE:
+            return point, free, 1.0
+        correction = np.zeros(nv)
+        if free.any():
+            _, rows_pinv, _ = nullspace(rows[:, free])
+            correction[free] = rows_pinv @ residual_vector
+        reduction = float(np.max(np.abs(rows @ correction)))
+        if reduction <= ROWS_TOLERANCE:
+            joint = _wrong_side(rows, residual_vector, point, lower, upper, free)
+            if joint < 0:
+                break  # the least-squares point of the box: the rows cannot hold
+            free[joint] = True
+            continue
+        point, joint = _walk(point, point + correction, lower, upper, free)
+        if joint >= 0:
+            free[joint] = False
+    residual = float(np.max(np.abs(rows_rhs - rows @ point), initial=0.0))
+    if residual <= ROWS_TOLERANCE:
+        return point, free, 1.0
+    return point, free, max(0.0, 1.0 - residual / initial)
+
+
+def _wrong_side(rows: np.ndarray, residual: np.ndarray, point: np.ndarray,
+                lower: np.ndarray, upper: np.ndarray, free: np.ndarray) -> int:
+    """The held joint whose release reduces the residual most at first order (-1: none):
+    the gradient of ``|rows qd - rhs|^2 / 2``, ``-rows^T residual``, points into its box."""
+    descent = rows.T @ residual  # minus the gradient
+    inward = np.where(point >= upper, -descent, np.where(point <= lower, descent, -np.inf))
+    inward[free] = -np.inf
+    joint = int(np.argmax(inward))
+    return joint if inward[joint] > ROWS_TOLERANCE else -1
+
+
+def _walk(point: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+          free: np.ndarray) -> tuple[np.ndarray, int]:
+    """``point + t (goal - point)`` with the largest ``t`` in [0, 1] that keeps the free
+    joints in the box (the ratio test), and the joint that stops it, placed exactly on
+    the bound it reaches (-1: the goal reached). A joint at its bound up to rounding
+    (:func:`controllers.cjm.saturation.gap_to_bound`) stops the walk at once."""
+    move = goal - point
+    noise = float(np.max(np.abs(point), initial=0.0))
+    still = max(STILL_DIRECTION, AT_BOUND * float(np.max(np.abs(move), initial=0.0)))
+    fraction, joint, bound = 1.0, -1, 0.0
+    for i in np.flatnonzero(free & (np.abs(move) > still)).tolist():
+        side = upper[i] if move[i] > 0.0 else lower[i]
+        reach = max(gap_to_bound(side, point[i], noise) / move[i], 0.0)
+        if reach < fraction:
+            fraction, joint, bound = reach, i, side
+    moved = np.where(free, point + fraction * move, point)
+    if joint >= 0:
+        moved[joint] = bound
+    return np.minimum(np.maximum(moved, lower), upper), joint
+
+
+def _walk_result(qd: np.ndarray, rows_scale: float, free: np.ndarray, limiting_joint: int,
+                 jacobian: np.ndarray, twist: np.ndarray, sigma_min: float = float("nan"),
+                 damping: float = 0.0) -> Saturation:
+    """The walk's command and what it gives of the twist: the scale ``s`` of the twist
+    along which ``J qd`` lies when it does (``scaled``), else a least-squares task."""
+    achieved = jacobian @ qd
+    twist_norm = float(twist @ twist)
+    if rows_scale < 1.0:
+        task_scale = 0.0
+    elif twist_norm > 0.0:
+        task_scale = min(max(float(achieved @ twist) / twist_norm, 0.0), 1.0)
+    else:
+        task_scale = 1.0
+    tolerance = TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(twist), initial=0.0)))
+    missed = float(np.max(np.abs(achieved - task_scale * twist), initial=0.0)) > tolerance
+    return Saturation(qd, task_scale, rows_scale, tuple(np.flatnonzero(~free).tolist()),
+                      limiting_joint, missed, sigma_min, damping)
