@@ -73,18 +73,14 @@ class _Split:
 
 
 def solve_over_free(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
-                     twist: np.ndarray, free: np.ndarray, held: np.ndarray,
-                     policy: DampingPolicy, centre: np.ndarray | None = None) -> _Split:
+                    twist: np.ndarray, free: np.ndarray, held: np.ndarray,
+                    policy: DampingPolicy) -> _Split:
     """The rows exactly, then the task, over the free joints; ``held`` on the others
-    (``held`` is zero on the free joints, so products with it need no masks). The
-    damping pulls the free joints towards ``centre`` (zero if None)."""
+    (``held`` is zero on the free joints, so products with it need no masks)."""
     rhs = rows_rhs - rows @ held
     rows_free = rows[:, free]
     null_basis, rows_pinv, _ = nullspace(rows_free)
-    if centre is None:
-        x_0 = rows_pinv @ rhs
-    else:
-        x_0 = centre[free] + rows_pinv @ (rhs - rows_free @ centre[free])
+    x_0 = rows_pinv @ rhs
     rows_residual = float(np.max(np.abs(rows_free @ x_0 - rhs), initial=0.0))
     base = held.copy()
     base[free] = x_0

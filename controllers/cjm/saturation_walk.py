@@ -1,5 +1,5 @@
 """Joint limits with acceleration limits: saturation around the previous command,
-docs/design.md section 12.
+docs/design.md section 9.1.
 
 With acceleration limits the joint box is a narrow window around the previous command
 ``qd_prev``. SNS's line ``base + s direction`` starts at the minimum-norm rows solution,
@@ -14,9 +14,9 @@ walking from ``qd_prev`` (brought into the box) and never leaving the box:
    an active-set bounded least squares, so the rows hold exactly whenever some command in
    the box holds them;
 2. **task**: from that point, walk towards ``c``, the rows exactly and the twist by damped
-   least squares over the free joints, the damping acting on the change ``qd - qd_prev``
-   (docs/design.md 12.1: it measured lower port forces and jerk than damping ``qd``)
-   (:func:`controllers.cjm.saturation.solve_over_free`), holding each joint where it
+   least squares over the free joints
+   (:func:`controllers.cjm.saturation.solve_over_free`), the damping rising below
+   :data:`~controllers.cjm.tolerances.SATURATED_TASK_THRESHOLD`, holding each joint where it
    reaches its bound, until ``c`` is inside the box or the held joints leave the rows no
    freedom.
 
@@ -32,7 +32,7 @@ import numpy as np
 from ..base import TWIST_TOLERANCE
 from ..linalg import DampingPolicy, nullspace
 from .saturation import Saturation, gap_to_bound, solve_over_free
-from .tolerances import AT_BOUND, ROWS_TOLERANCE, STILL_DIRECTION
+from .tolerances import AT_BOUND, ROWS_TOLERANCE, SATURATED_TASK_THRESHOLD, STILL_DIRECTION
 
 
 def saturate_around_previous(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
@@ -41,6 +41,8 @@ def saturate_around_previous(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: n
     """``qd`` inside ``[lower, upper]`` reached from ``previous``: the rows ``A qd = b``
     first (exactly when the box allows it), the twist second (module docstring)."""
     nv = jacobian.shape[1]
+    task_policy = DampingPolicy(policy.damping, max(policy.threshold, SATURATED_TASK_THRESHOLD),
+                                policy.max_damping)
     point = np.minimum(np.maximum(previous, lower), upper)
     free = (previous >= lower) & (previous <= upper)
     point, free, rows_scale = walk_to_rows(rows, rows_rhs, lower, upper, point, free)
@@ -51,7 +53,7 @@ def saturate_around_previous(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: n
         if not free.any():
             break
         split = solve_over_free(rows, rows_rhs, jacobian, twist, free,
-                                np.where(free, 0.0, point), policy, previous)
+                                np.where(free, 0.0, point), task_policy)
         if split.rows_residual > ROWS_TOLERANCE:
             break  # the held joints leave the rows no freedom
         sigma_min, damping = split.sigma_min, split.damping

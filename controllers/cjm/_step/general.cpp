@@ -122,10 +122,8 @@ void Step::hold_pairs_below() {
   }
 }
 
-Step::Split Step::solve_over_free(const Inputs& in, bool centred) {
-  // rows exactly over the free joints, held ones moved to the right-hand side; with
-  // ``centred`` the rows' solution nearest the previous command, so the task's damping
-  // acts on the change from it (saturation_walk.cpp)
+Step::Split Step::solve_over_free(const Inputs& in, const DampingPolicy& policy) {
+  // rows exactly over the free joints, held ones moved to the right-hand side
   const Index m = row_count_;
   Index n_free = 0;
   for (Index j = 0; j < nv_; ++j) {
@@ -140,17 +138,7 @@ Step::Split Step::solve_over_free(const Inputs& in, bool centred) {
   const auto rows_free = columns_.topLeftCorner(m, n_free);
   null_.factor(rows_free);
   auto x0 = free_x_.head(n_free);
-  if (centred) {
-    auto centre = centre_.head(n_free);
-    for (Index j = 0, f = 0; j < nv_; ++j)
-      if (free_(j)) centre(f++) = previous_(j);
-    rhs.noalias() -= rows_free * centre;
-    null_.pseudo_solve(rhs, x0);
-    x0 += centre;
-    rhs.noalias() += rows_free * centre;
-  } else {
-    null_.pseudo_solve(rhs, x0);
-  }
+  null_.pseudo_solve(rhs, x0);
   Split split;
   if (m > 0) {
     auto check = rows_scratch_.head(m);
@@ -174,7 +162,7 @@ Step::Split Step::solve_over_free(const Inputs& in, bool centred) {
     task_rhs.col(0) = in.twist;
     task_rhs.col(1).noalias() = in.ee_jacobian * base_;
     task_rhs.col(1) = -task_rhs.col(1);
-    dls_.factor(task_null, policy_);
+    dls_.factor(task_null, policy);
     auto x = task_x_.topLeftCorner(d, 2);
     dls_.solve(task_rhs, x);
     auto delta = delta_.head(n_free);

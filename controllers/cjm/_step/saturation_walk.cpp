@@ -15,7 +15,7 @@ void Step::saturate_around_previous(const Inputs& in) {
   if (rows_scale >= 1.0) {
     for (Index iteration = 0; iteration <= nv_ && free_.any(); ++iteration) {
       for (Index j = 0; j < nv_; ++j) held_(j) = free_(j) ? 0.0 : walk_point_(j);
-      const Split split = solve_over_free(in, true);
+      const Split split = solve_over_free(in, walk_policy_);
       if (split.rows_residual > tol_.rows) break;  // the held joints leave the rows no freedom
       sigma_min = split.sigma_min;
       damping = split.damping;

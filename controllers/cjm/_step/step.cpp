@@ -60,6 +60,8 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
     throw std::invalid_argument("a posture target needs nq == nv and one entry per joint");
   posture_velocity_.resize(nv);
   accelerating_ = box_.acceleration_step.size() != 0;
+  walk_policy_ = DampingPolicy{policy_.damping, std::max(policy_.threshold, tol_.saturated_task_threshold),
+                               policy_.max_damping};
   previous_ = Vector::Zero(nv);
   active_.reserve(n_constraints);
   waiting_.reserve(n_constraints);
@@ -96,7 +98,7 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   task_x_.resize(nv + 7, 2);
   for (Vector* v : {&qd0_, &delta_, &lower_, &upper_, &box_lower_, &box_upper_, &free_x_,
                     &posture_null_, &held_, &best_held_, &base_, &direction_, &sns_qd_,
-                    &walk_point_, &walk_goal_, &walk_move_, &centre_})
+                    &walk_point_, &walk_goal_, &walk_move_})
     v->resize(nv);
   stacked_.resize(std::max<Index>(box_.box_test.rows(), 1));
   scratch_rows_.resize(std::max(m, task_rows));

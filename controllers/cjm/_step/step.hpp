@@ -45,7 +45,7 @@ enum class Event : int {
 struct Tolerances {
   double equality, twist, barrier, rank, pre_chain_pivot_ratio, pre_chain_min_singular_value,
       fast_path_min_sigma, least_squares_rcond, conflict_residual, rows, at_bound, box_margin,
-      still_direction;
+      still_direction, saturated_task_threshold;
 };
 
 //! One constraint: its rows and, when the analytical form may take it, its chain split.
@@ -178,7 +178,7 @@ class Step {
 
   // general.cpp
   void general(const Inputs& in, VectorRef qd);
-  Split solve_over_free(const Inputs& in, bool centred = false);
+  Split solve_over_free(const Inputs& in, const DampingPolicy& policy);
 
   // saturation.cpp
   void saturate(const Inputs& in, VectorRef qd);
@@ -248,7 +248,8 @@ class Step {
   // SNS
   Eigen::Array<bool, Eigen::Dynamic, 1> free_, best_free_;
   Vector held_, best_held_, base_, direction_, sns_qd_;
-  Vector walk_point_, walk_goal_, walk_move_, centre_;  // saturation around the previous command
+  Vector walk_point_, walk_goal_, walk_move_;  // saturation around the previous command
+  DampingPolicy walk_policy_;  // the saturated task's damping with acceleration limits
   double sns_task_scale_ = 1.0, sns_rows_scale_ = 1.0;
   double sns_sigma_min_ = 0.0, sns_damping_ = 0.0;  // of the task's DLS that gave sns_qd_
   Index sns_limiting_ = -1;
