@@ -27,9 +27,10 @@ import pinocchio as pin
 
 from .compiled_form import CompiledForm
 from .kinematics import frame_placement, resolve_frame
+from .limits import MAX_CONSTRAINT_GAIN, MAX_POSITION_M, MAX_SPEED_M_S
 from .placement import PlacementField
 from .registry import constraint_type
-from .validation import as_number, as_unit_vector, as_vector
+from .validation import as_number, as_unit_vector, as_vector, short_repr
 
 #: Default drift-feedback gain (1/s). Stable at a control period dt when 0 < K dt < 2;
 #: 100 1/s at the default 1 kHz gives K dt = 0.1, a 10 ms error time constant.
@@ -288,7 +289,7 @@ class Constraint(CompiledForm, ABC):
 
     def __init__(self, link: str, gain: float = DEFAULT_GAIN) -> None:
         if not isinstance(link, str) or not link:
-            raise ValueError(f"link must be a non-empty link name, got {link!r}")
+            raise ValueError(f"link must be a non-empty link name, got {short_repr(link)}")
         self.link = link
         #: the control period (s) a controller last accepted this constraint at
         #: (:meth:`check_gain`), or None before any did
@@ -313,7 +314,7 @@ class Constraint(CompiledForm, ABC):
 
     @gain.setter
     def gain(self, value: float) -> None:
-        gain = as_number(value, "gain", 0.0)
+        gain = as_number(value, "gain", 0.0, maximum=MAX_CONSTRAINT_GAIN)
         if self._checked_period is not None:
             problem = self._instability(gain, self._checked_period)
             if problem is not None:
@@ -409,8 +410,8 @@ class Constraint(CompiledForm, ABC):
                     f"{type(self).__name__}.move_to() takes the point as position or "
                     f"{self.position_attribute}, once; got {sorted(named)}")
             position = named[self.position_attribute]
-        position = as_vector(position, 3, self.position_attribute)
-        velocity = as_vector(velocity, 3, f"{self.kind} velocity")
+        position = as_vector(position, 3, self.position_attribute, MAX_POSITION_M)
+        velocity = as_vector(velocity, 3, f"{self.kind} velocity", MAX_SPEED_M_S)
         setattr(self, self.position_attribute, position)
         self.velocity = velocity
 
@@ -516,7 +517,7 @@ class Constraint(CompiledForm, ABC):
         an unknown or missing field, or a bad value.
         """
         if not isinstance(data, Mapping):
-            raise ValueError(f"a constraint must be an object with a 'kind', got {data!r}")
+            raise ValueError(f"a constraint must be an object with a 'kind', got {short_repr(data)}")
         kind_type = constraint_type(data.get("kind"))
         kind = kind_type.kind
         if not issubclass(kind_type, cls):

@@ -18,6 +18,7 @@ from .base import (
     perpendicular_basis,
 )
 from .placement import ALONG_LINK, ON_ARM, PlacementField
+from .limits import MAX_POSITION_M, MAX_SPEED_M_S, MAX_TISSUE_DAMPING, MAX_TISSUE_STIFFNESS
 from .validation import as_number
 
 #: How far (m) a hole centre may lie off the link axis when a hole is built.
@@ -77,9 +78,12 @@ class Hole(Constraint):
         tissue_damping: float = DEFAULT_TISSUE_DAMPING,
     ) -> None:
         super().__init__(link, gain)
-        self._set_anchor(as_vector(center, 3, "hole center"), as_vector(velocity, 3, "hole velocity"))
-        self.tissue_stiffness = as_number(tissue_stiffness, "tissue_stiffness", 0.0)
-        self.tissue_damping = as_number(tissue_damping, "tissue_damping", 0.0)
+        self._set_anchor(as_vector(center, 3, "hole center", MAX_POSITION_M),
+                         as_vector(velocity, 3, "hole velocity", MAX_SPEED_M_S))
+        self.tissue_stiffness = as_number(tissue_stiffness, "tissue_stiffness", 0.0,
+                                          maximum=MAX_TISSUE_STIFFNESS)
+        self.tissue_damping = as_number(tissue_damping, "tissue_damping", 0.0,
+                                        maximum=MAX_TISSUE_DAMPING)
         self.link_axis = link_axis
 
     @classmethod
@@ -149,7 +153,7 @@ class Hole(Constraint):
 
     @center.setter
     def center(self, value: np.typing.ArrayLike) -> None:
-        self._set_anchor(as_vector(value, 3, "hole center"), self._anchor[3:])
+        self._set_anchor(as_vector(value, 3, "hole center", MAX_POSITION_M), self._anchor[3:])
 
     @property
     def velocity(self) -> np.ndarray:
@@ -158,7 +162,7 @@ class Hole(Constraint):
 
     @velocity.setter
     def velocity(self, value: np.typing.ArrayLike) -> None:
-        self._set_anchor(self._anchor[:3], as_vector(value, 3, "hole velocity"))
+        self._set_anchor(self._anchor[:3], as_vector(value, 3, "hole velocity", MAX_SPEED_M_S))
 
     @property
     def link_axis(self) -> np.ndarray:

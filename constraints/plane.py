@@ -17,6 +17,7 @@ from .base import (
     perpendicular_basis,
 )
 from .placement import ALONG_LINK, ON_ANY_LINK, ON_LINK_POINT, PlacementField
+from .limits import MAX_POSITION_M, MAX_SPEED_M_S
 from .validation import as_number
 
 #: How far (m) the link point may be from the plane when a plane is built.
@@ -66,10 +67,10 @@ class Plane(Constraint):
         velocity=(0.0, 0.0, 0.0),
     ) -> None:
         super().__init__(link, self.default_gain if gain is None else gain)
-        self.link_point = as_vector(link_point, 3, "link_point")
-        self.plane_point = as_vector(plane_point, 3, "plane_point")
+        self.link_point = as_vector(link_point, 3, "link_point", MAX_POSITION_M)
+        self.plane_point = as_vector(plane_point, 3, "plane_point", MAX_POSITION_M)
         self.normal = as_unit_vector(normal, "plane normal")
-        self.velocity = as_vector(velocity, 3, "plane velocity")
+        self.velocity = as_vector(velocity, 3, "plane velocity", MAX_SPEED_M_S)
 
     @classmethod
     def through_link_point(

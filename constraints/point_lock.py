@@ -14,6 +14,7 @@ from .base import (
     link_axis_of,
     link_point_at,
 )
+from .limits import MAX_POSITION_M, MAX_SPEED_M_S
 from .placement import ALONG_LINK, ON_ARM, PlacementField
 
 
@@ -45,9 +46,9 @@ class PointLock(Constraint):
     def __init__(self, link: str, link_point, target, gain: float = DEFAULT_GAIN,
                  velocity=(0.0, 0.0, 0.0)) -> None:
         super().__init__(link, gain)
-        self.link_point = as_vector(link_point, 3, "link_point")
-        self.target = as_vector(target, 3, "target")
-        self.velocity = as_vector(velocity, 3, "target velocity")
+        self.link_point = as_vector(link_point, 3, "link_point", MAX_POSITION_M)
+        self.target = as_vector(target, 3, "target", MAX_POSITION_M)
+        self.velocity = as_vector(velocity, 3, "target velocity", MAX_SPEED_M_S)
 
     @classmethod
     def on_link(cls, robot: RobotLike, q: np.ndarray, link_point=None,

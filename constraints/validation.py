@@ -44,16 +44,20 @@ def as_number(value, name: str, minimum: float | None = None, *, positive: bool 
 REAL_KINDS = "fiu"
 
 
-def as_vector(value, size: int, name: str) -> np.ndarray:
+def as_vector(value, size: int, name: str, maximum: float | None = None) -> np.ndarray:
     """``value`` as a new finite float array of shape ``(size,)``, else ``ValueError``.
 
     Only real numbers are read: a complex array (whose imaginary part a float cast would
-    drop), booleans, strings, ``None`` or other objects are refused.
+    drop), booleans, strings, ``None`` or other objects are refused. ``maximum`` bounds
+    each component's magnitude (inclusive).
     """
     try:
         array = np.asarray(value)
     except (TypeError, ValueError, OverflowError, RecursionError):  # ragged, odd objects
         array = None
+    if isinstance(value, (list, tuple)) and any(isinstance(item, (bool, np.bool_))
+                                                for item in value):
+        array = None  # [True, 0, 0] is an integer array to NumPy
     if array is None or array.dtype.kind not in REAL_KINDS:
         raise ValueError(f"{name} must be an array of {size} numbers, got {short_repr(value)}")
     array = np.array(array, dtype=float)
@@ -61,6 +65,9 @@ def as_vector(value, size: int, name: str) -> np.ndarray:
         raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
     if not np.isfinite(array).all():
         raise ValueError(f"{name} must be finite, got {short_repr(array.tolist())}")
+    if maximum is not None and np.abs(array).max(initial=0.0) > maximum:
+        raise ValueError(f"{name} must have every component in [-{maximum:g}, {maximum:g}], "
+                         f"got {short_repr(array.tolist())}")
     return array
 
 

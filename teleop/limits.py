@@ -1,12 +1,27 @@
-"""The largest rates, durations, sizes, latencies and noise the teleop layer accepts.
+"""The one table of limits: the largest rates, durations, sizes, latencies, noise, gains,
+stiffnesses and counts any input may carry.
 
-Every entry point (the Python API, the CLI, session and scene files) checks its input
-against these, so that no input makes a run allocate without end or never finish
-(docs/design.md section 15.6). Each bound is far beyond any real use; the line above it
-says why.
+Every entry point (the Python API, the CLI, session and scene files, sweep specs) checks
+its input against these, so that no input makes a run allocate without end, never finish
+or leave the physics stable in name only (docs/design.md section 15.6; the table for
+users: docs/sessions.md, "Limits"). Each bound is far beyond any real use; the line above
+it says why. The bounds of what constraints and obstacles carry are checked where those
+are built, in the layer below: they are written in :mod:`constraints.limits` and listed
+here with the rest.
 """
 
 from __future__ import annotations
+
+from constraints.limits import (  # noqa: F401 (listed here: the one table)
+    MAX_COLLISION_DISTANCE_M,
+    MAX_CONSTRAINT_GAIN,
+    MAX_OBSTACLE_SIZE_M,
+    MAX_OBSTACLES,
+    MAX_POSITION_M,
+    MAX_SPEED_M_S,
+    MAX_TISSUE_DAMPING,
+    MAX_TISSUE_STIFFNESS,
+)
 
 #: Control rate (Hz). Robot joint interfaces run at 1-8 kHz; at 1e12 Hz a simulated second
 #: would never finish.
@@ -49,8 +64,33 @@ MAX_DAMPING = 1.0
 #: Timed steps per controller in ``teleop bench``: 1e6 steps of 50 us is under a minute.
 MAX_BENCH_ITERATIONS = 1_000_000
 
-#: The stiffest abdominal wall a plant takes (N/m): 100 N/mm, a hundred times the default.
-MAX_WALL_STIFFNESS = 1e5
+#: The stiffest abdominal wall a plant takes (N/m): every hole's ``tissue_stiffness``.
+MAX_WALL_STIFFNESS = MAX_TISSUE_STIFFNESS
+
+#: The pose-error gain kp (1/s): kp dt = 1 at the fastest rate closes the error in one
+#: period; the default is 20.
+MAX_POSE_GAIN = 10_000.0
+
+#: The physics plant (docs/design.md section 17.1): a payload (kg) at each end effector
+#: beyond any arm's rating; physics steps per second (Hz), from twice the 1 kHz loop to
+#: ten times the fastest useful; the servos' natural frequency (Hz) above any joint's
+#: drive; friction and damping (N m, N m s/rad) beyond any joint's.
+MAX_PAYLOAD_KG = 100.0
+MIN_PHYSICS_RATE_HZ = 2_000.0
+MAX_PHYSICS_RATE_HZ = 1e5
+MAX_SERVO_BANDWIDTH_HZ = 200.0
+MAX_JOINT_FRICTION = 1e4
+
+#: Bytes of a sweep spec file: a hand-written spec is a few hundred; read no further
+#: (``--spec /dev/zero`` ends).
+MAX_SPEC_BYTES = 1_000_000
+
+#: Cells of one sweep: far beyond a month of a large cluster.
+MAX_CELLS = 1_000_000
+
+#: Cells a sweep runs without ``--yes``: 10,000 cells of a minute are a week on a 1-core
+#: machine; a larger grid is more often a typo (seeds 1000000) than a plan.
+MAX_CELLS_UNCONFIRMED = 10_000
 
 #: How far (m) a random trocar placement may slide a constraint along its link: a metre is
 #: longer than any instrument shaft or arm link.

@@ -323,7 +323,7 @@ def test_bad_settings_are_refused_by_name(dual, keywords, message):
 
 
 def test_an_unstable_damper_and_another_robot_are_refused(dual):
-    avoidance = CollisionAvoidance(dual, approach_speed=50.0)
+    avoidance = CollisionAvoidance(dual, approach_speed=10.0, detection_distance=0.01)
     with pytest.raises(ValueError, match="unstable at 1000 Hz"):
         avoidance.check(dual.model, 1e-3)
     with pytest.raises(ValueError, match="another robot"):

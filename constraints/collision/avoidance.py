@@ -18,7 +18,9 @@ import numpy as np
 import pinocchio as pin
 
 from ..base import cross
-from ..validation import as_number
+from ..kinematics import resolve_frame
+from ..limits import MAX_COLLISION_DISTANCE_M, MAX_OBSTACLES, MAX_SPEED_M_S
+from ..validation import as_number, short_repr
 from .geometry import (bounding_segment, capsule_geometry, check_links, link_of, link_pairs,
                        segment_distances, self_collision_pairs, shape_distance)
 from .obstacles import Obstacle
@@ -72,23 +74,28 @@ class CollisionAvoidance:
                  approach_speed: float = DEFAULT_APPROACH_SPEED, self_collision: bool = True,
                  disabled_pairs: Iterable[Sequence[str]] = (),
                  extra_pairs: Iterable[Sequence[str]] = ()) -> None:
-        self._safety_distance = as_number(safety_distance, "safety_distance", 0.0)
-        self._detection_distance = as_number(detection_distance, "detection_distance")
+        self._safety_distance = as_number(safety_distance, "safety_distance", 0.0,
+                                          maximum=MAX_COLLISION_DISTANCE_M)
+        self._detection_distance = as_number(detection_distance, "detection_distance",
+                                             maximum=MAX_COLLISION_DISTANCE_M)
         if not self.detection_distance > self.safety_distance:
             raise ValueError(f"detection_distance ({self.detection_distance:g} m) must exceed "
                              f"safety_distance ({self.safety_distance:g} m)")
-        self._approach_speed = as_number(approach_speed, "approach_speed", positive=True)
+        self._approach_speed = as_number(approach_speed, "approach_speed", positive=True,
+                                         maximum=MAX_SPEED_M_S)
         if not isinstance(self_collision, (bool, np.bool_)):
-            raise ValueError(f"self_collision must be true or false, got {self_collision!r}")
+            raise ValueError(f"self_collision must be true or false, got {short_repr(self_collision)}")
         self.self_collision = bool(self_collision)
         self.model = robot.model
-        robot_disabled = link_pairs(getattr(robot, "collision_disabled", ()), "collision_disabled")
-        self.disabled_pairs = [tuple(sorted(key)) for key in link_pairs(disabled_pairs,
-                                                                         "disabled_pairs")]
-        self.extra_pairs = [tuple(sorted(key)) for key in link_pairs(extra_pairs, "extra_pairs")]
-        disabled = robot_disabled | {frozenset(pair) for pair in self.disabled_pairs}
-        extra = {frozenset(pair) for pair in self.extra_pairs}
-        check_links(self.model, disabled | extra, "a collision pair list")
+        pairs = {}
+        for name, given in (("collision_disabled", getattr(robot, "collision_disabled", ())),
+                            ("disabled_pairs", disabled_pairs), ("extra_pairs", extra_pairs)):
+            pairs[name] = link_pairs(given, name)
+            check_links(self.model, pairs[name], name)
+        self.disabled_pairs = [tuple(sorted(key)) for key in pairs["disabled_pairs"]]
+        self.extra_pairs = [tuple(sorted(key)) for key in pairs["extra_pairs"]]
+        disabled = pairs["collision_disabled"] | pairs["disabled_pairs"]
+        extra = pairs["extra_pairs"]
         self._robot_geometry = capsule_geometry(robot.collision_model)
         self._self_pairs = (self_collision_pairs(self.model, self._robot_geometry, robot.q_home,
                                                  self.safety_distance, disabled, extra)
@@ -144,8 +151,11 @@ class CollisionAvoidance:
     # -- the obstacles and the pairs -----------------------------------------------------------
 
     def set_obstacles(self, obstacles: Iterable[Obstacle]) -> None:
-        """Replace the obstacles (each an :class:`Obstacle`; names made unique)."""
+        """Replace the obstacles (each an :class:`Obstacle`, at most
+        :data:`~constraints.limits.MAX_OBSTACLES`; names made unique)."""
         obstacles = list(obstacles)
+        if len(obstacles) > MAX_OBSTACLES:
+            raise ValueError(f"obstacles must be at most {MAX_OBSTACLES}, got {len(obstacles)}")
         for obstacle in obstacles:
             if not isinstance(obstacle, Obstacle):
                 raise ValueError(f"an obstacle must be a Sphere, Box, Capsule or HalfSpace, "
@@ -178,7 +188,7 @@ class CollisionAvoidance:
         for constraint in constraints:
             if not getattr(constraint, "has_wall", False):
                 continue
-            joint = self.model.frames[self.model.getFrameId(constraint.link)].parentJoint
+            joint = self.model.frames[resolve_frame(self.model, constraint.link)].parentJoint
             inside = set(self.model.subtrees[joint])
             port = pin.SE3(np.eye(3), np.asarray(constraint.position, dtype=float))
             point = coal.Sphere(1e-6)
@@ -390,7 +400,7 @@ class CollisionAvoidance:
         """Collision avoidance on ``robot`` from :meth:`to_dict` output; bad input raises
         ``ValueError`` naming the field."""
         if not isinstance(data, Mapping):
-            raise ValueError(f"collision settings must be an object, got {data!r}")
+            raise ValueError(f"collision settings must be an object, got {short_repr(data)}")
         known = {"safety_distance", "detection_distance", "approach_speed", "self_collision",
                  "disabled_pairs", "extra_pairs", "obstacles"}
         unknown = sorted(set(data) - known)
@@ -400,7 +410,7 @@ class CollisionAvoidance:
         settings = dict(data)
         obstacles = settings.pop("obstacles", [])
         if not isinstance(obstacles, list):
-            raise ValueError(f"obstacles must be a list, got {obstacles!r}")
+            raise ValueError(f"obstacles must be a list, got {short_repr(obstacles)}")
         return cls(robot, [Obstacle.from_dict(item) for item in obstacles], **settings)
 
     def __repr__(self) -> str:

@@ -17,6 +17,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from ..validation import short_repr
+
 #: a link pair as two link names, in either order
 LinkPair = tuple[str, str]
 
@@ -53,12 +55,15 @@ def pair_key(first: str, second: str) -> frozenset[str]:
 
 
 def link_pairs(pairs: Iterable, what: str) -> set[frozenset[str]]:
-    """``pairs`` (two link names each) as unordered keys, else ``ValueError`` naming ``what``."""
+    """``pairs`` (a list, tuple or set of two link names each) as unordered keys, else
+    ``ValueError`` naming ``what``."""
+    if not isinstance(pairs, (list, tuple, set, frozenset)):
+        raise ValueError(f"{what} must be a list of link pairs, got {short_repr(pairs)}")
     keys = set()
     for pair in pairs:
         if (isinstance(pair, str) or not isinstance(pair, (list, tuple)) or len(pair) != 2
                 or not all(isinstance(name, str) for name in pair)):
-            raise ValueError(f"{what} must be pairs of two link names, got {pair!r}")
+            raise ValueError(f"{what} must be pairs of two link names, got {short_repr(pair)}")
         keys.add(pair_key(*pair))
     return keys
 

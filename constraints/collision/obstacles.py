@@ -21,7 +21,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..validation import as_number, as_unit_vector, as_vector
+from ..limits import MAX_OBSTACLE_SIZE_M, MAX_POSITION_M, MAX_SPEED_M_S
+from ..validation import as_number, as_unit_vector, as_vector, short_repr
 from .primitives import primitive
 
 #: ``kind -> type`` of every obstacle, in the order messages and the UI list them
@@ -71,10 +72,10 @@ class Obstacle(ABC):
     color: ClassVar[tuple[int, int, int]] = (205, 150, 95)
 
     def __init__(self, center, velocity=(0.0, 0.0, 0.0), name: str | None = None) -> None:
-        self.center = as_vector(center, 3, "center")
-        self.velocity = as_vector(velocity, 3, f"{self.kind} velocity")
+        self.center = as_vector(center, 3, "center", MAX_POSITION_M)
+        self.velocity = as_vector(velocity, 3, f"{self.kind} velocity", MAX_SPEED_M_S)
         if name is not None and (not isinstance(name, str) or not name.strip()):
-            raise ValueError(f"an obstacle's name must be a non-empty string, got {name!r}")
+            raise ValueError(f"an obstacle's name must be a non-empty string, got {short_repr(name)}")
         self.name = name or self.kind
 
     @abstractmethod
@@ -110,8 +111,8 @@ class Obstacle(ABC):
         """Move the reference point (m) and set the velocity fed forward (m/s): new
         :attr:`center` and :attr:`velocity` arrays (the compiled step sees a replaced
         array, not one changed in place)."""
-        position = as_vector(position, 3, "center")
-        self.velocity = as_vector(velocity, 3, f"{self.kind} velocity")
+        position = as_vector(position, 3, "center", MAX_POSITION_M)
+        self.velocity = as_vector(velocity, 3, f"{self.kind} velocity", MAX_SPEED_M_S)
         self.center = position
 
     def geometry(self) -> ObstacleGeometry:
@@ -138,10 +139,10 @@ class Obstacle(ABC):
         """Build an obstacle from :meth:`to_dict` output (``kind`` picks the type); bad
         input raises ``ValueError`` naming the field."""
         if not isinstance(data, Mapping):
-            raise ValueError(f"an obstacle must be an object with a 'kind', got {data!r}")
+            raise ValueError(f"an obstacle must be an object with a 'kind', got {short_repr(data)}")
         kind = data.get("kind")
         if not isinstance(kind, str) or kind not in OBSTACLE_TYPES:
-            raise ValueError(f"unknown obstacle kind {kind!r}: {', '.join(OBSTACLE_TYPES)}")
+            raise ValueError(f"unknown obstacle kind {short_repr(kind)}: {', '.join(OBSTACLE_TYPES)}")
         kind_type = OBSTACLE_TYPES[kind]
         fields = inspect.signature(kind_type).parameters
         given = {name: value for name, value in data.items() if name != "kind"}
@@ -178,7 +179,7 @@ class Sphere(Obstacle):
     def __init__(self, center, radius: float, velocity=(0.0, 0.0, 0.0),
                  name: str | None = None) -> None:
         super().__init__(center, velocity, name)
-        self.radius = as_number(radius, "radius", positive=True)
+        self.radius = as_number(radius, "radius", positive=True, maximum=MAX_OBSTACLE_SIZE_M)
 
     def shape(self) -> coal.CollisionGeometry:
         return coal.Sphere(self.radius)
@@ -198,7 +199,7 @@ class Box(Obstacle):
     def __init__(self, center, size, rpy=(0.0, 0.0, 0.0), velocity=(0.0, 0.0, 0.0),
                  name: str | None = None) -> None:
         super().__init__(center, velocity, name)
-        self.size = as_vector(size, 3, "size")
+        self.size = as_vector(size, 3, "size", MAX_OBSTACLE_SIZE_M)
         if not np.all(self.size > 0.0):
             raise ValueError(f"size must be three edges > 0 m, got {self.size.tolist()}")
         self.rpy = as_vector(rpy, 3, "rpy")
@@ -224,8 +225,8 @@ class Capsule(Obstacle):
     def __init__(self, center, radius: float, length: float, axis=(0.0, 0.0, 1.0),
                  velocity=(0.0, 0.0, 0.0), name: str | None = None) -> None:
         super().__init__(center, velocity, name)
-        self.radius = as_number(radius, "radius", positive=True)
-        self.length = as_number(length, "length", 0.0)
+        self.radius = as_number(radius, "radius", positive=True, maximum=MAX_OBSTACLE_SIZE_M)
+        self.length = as_number(length, "length", 0.0, maximum=MAX_OBSTACLE_SIZE_M)
         self.axis = as_unit_vector(axis, "axis")
 
     def shape(self) -> coal.CollisionGeometry:

@@ -8,6 +8,8 @@ import argparse
 import math
 from typing import Callable, NoReturn
 
+from teleop.limits import MAX_COLLISION_DISTANCE_M, MAX_SPEED_M_S
+
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     """Every option's help shows its default ("(default: ...)" appended unless the help
@@ -112,13 +114,16 @@ positive = bounded(float, 0.0, inclusive_minimum=False)
 #: help) (docs/design.md section 18.3)
 DAMPER_OPTIONS = (
     ("--safety-distance", "safety_distance", 1e-3,
-     "d_s: the distance every pair is kept apart, mm in [0, 1000] (default: 5)"),
+     f"d_s: the distance every pair is kept apart, mm in [0, {MAX_COLLISION_DISTANCE_M * 1e3:g}] "
+     "(default: 5)"),
     ("--detection-distance", "detection_distance", 1e-3,
-     "d_i > d_s: pairs closer than this get their row, mm in [0, 1000] (default: 50)"),
+     f"d_i > d_s: pairs closer than this get their row, mm in [0, "
+     f"{MAX_COLLISION_DISTANCE_M * 1e3:g}] (default: 50)"),
     ("--approach-speed", "approach_speed", 1.0,
-     "xi: how fast a pair may close at d_i (0 at d_s), m/s in (0, 10] (default: 0.5)"))
-millimetres = bounded(float, 0.0, 1000.0, unit="mm")
-speed = bounded(float, 0.0, 10.0, inclusive_minimum=False, unit="m/s")
+     f"xi: how fast a pair may close at d_i (0 at d_s), m/s in (0, {MAX_SPEED_M_S:g}] "
+     "(default: 0.5)"))
+millimetres = bounded(float, 0.0, MAX_COLLISION_DISTANCE_M * 1e3, unit="mm")
+speed = bounded(float, 0.0, MAX_SPEED_M_S, inclusive_minimum=False, unit="m/s")
 
 
 def add_damper_options(group: argparse._ActionsContainer) -> None:

@@ -14,15 +14,22 @@ from teleop.limits import (
     MAX_BENCH_ITERATIONS,
     MAX_CALIBRATION_POSITION_STD_M,
     MAX_CALIBRATION_ROTATION_STD_RAD,
+    MAX_CONSTRAINT_GAIN,
     MAX_DURATION_S,
     MAX_ENCODER_NOISE_RAD,
+    MAX_JOINT_FRICTION,
     MAX_LATENCY_PERIODS,
     MAX_LATENCY_S,
     MAX_PATH_AMPLITUDE_M,
+    MAX_PAYLOAD_KG,
+    MAX_PHYSICS_RATE_HZ,
+    MAX_POSE_GAIN,
     MAX_RATE_HZ,
+    MAX_SERVO_BANDWIDTH_HZ,
     MAX_TIME_CONSTANT_S,
     MAX_TROCAR_SHIFT_M,
     MAX_WALL_STIFFNESS,
+    MIN_PHYSICS_RATE_HZ,
 )
 from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
 
@@ -55,14 +62,14 @@ latency = bounded(int, 0, MAX_LATENCY_PERIODS)
 count = bounded(int, 0)
 iterations = bounded(int, 1, MAX_BENCH_ITERATIONS)
 wall_stiffness = bounded(float, 0.0, MAX_WALL_STIFFNESS / 1e3, unit="N/mm")
-payload = bounded(float, 0.0, 100.0, unit="kg")
-friction = bounded(float, 0.0, 1e4)
-physics_rate = bounded(float, 2000.0, 1e5, unit="Hz")
-servo_bandwidth = bounded(float, 0.0, 200.0, inclusive_minimum=False, unit="Hz")
+payload = bounded(float, 0.0, MAX_PAYLOAD_KG, unit="kg")
+friction = bounded(float, 0.0, MAX_JOINT_FRICTION)
+physics_rate = bounded(float, MIN_PHYSICS_RATE_HZ, MAX_PHYSICS_RATE_HZ, unit="Hz")
+servo_bandwidth = bounded(float, 0.0, MAX_SERVO_BANDWIDTH_HZ, inclusive_minimum=False, unit="Hz")
 trocar_shift = bounded(float, 0.0, MAX_TROCAR_SHIFT_M, unit="m")
 path_amplitude = bounded(float, 0.0, MAX_PATH_AMPLITUDE_M, unit="m")
-pose_gain = bounded(float, 0.0, inclusive_minimum=False, unit="1/s")
-drift_gain = bounded(float, 0.0, unit="1/s")
+pose_gain = bounded(float, 0.0, MAX_POSE_GAIN, inclusive_minimum=False, unit="1/s")
+drift_gain = bounded(float, 0.0, MAX_CONSTRAINT_GAIN, unit="1/s")
 calibration_mm = bounded(float, 0.0, MAX_CALIBRATION_POSITION_STD_M * 1e3, unit="mm")
 calibration_mrad = bounded(float, 0.0, MAX_CALIBRATION_ROTATION_STD_RAD * 1e3, unit="mrad")
 
@@ -187,11 +194,12 @@ def _add_variation_options(parser: argparse.ArgumentParser, source: str) -> None
                        f"0.05-0.5 Hz, from rest) of at most M m, at most {MAX_PATH_AMPLITUDE_M:g}")
     gains = parser.add_argument_group("gains", "the loop's and the constraints' feedback gains")
     gains.add_argument("--kp", type=pose_gain, metavar="K",
-                       help="pose-error gain K_p (1/s) of the loop, > 0 (default: "
+                       help=f"pose-error gain K_p (1/s) of the loop, in (0, {MAX_POSE_GAIN:g}] (default: "
                        + ("the session's, else 20)" if source == "session" else "20)"))
     gains.add_argument("--constraint-gain", type=drift_gain, metavar="K",
-                       help="drift-feedback gain (1/s) of every constraint, >= 0, K dt < 2 (1 "
-                       "for a barrier) (default: each constraint's own)")
+                       help=f"drift-feedback gain (1/s) of every constraint, in [0, "
+                       f"{MAX_CONSTRAINT_GAIN:g}], K dt < 2 (1 for a barrier) (default: each "
+                       "constraint's own)")
 
 
 def _add_collision_options(parser: argparse.ArgumentParser, source: str) -> None:
@@ -253,17 +261,19 @@ def _add_plant_options(parser: argparse.ArgumentParser, base: str) -> None:
                        f"{MAX_WALL_STIFFNESS / 1e3:g} (default: each hole's own, 1 N/mm)")
     plant.add_argument("--payload", type=payload, metavar="KG",
                        help="mass at each EE the plant carries and the gravity compensation "
-                       "and the controllers do not know of, at most 100 (mujoco; default: 0)")
+                       f"and the controllers do not know of, at most {MAX_PAYLOAD_KG:g} (mujoco; default: 0)")
     plant.add_argument("--coulomb-friction", type=friction, metavar="NM",
-                       help="dry friction of every joint, at most 1e4 (mujoco; default: 0)")
+                       help=f"dry friction of every joint, at most {MAX_JOINT_FRICTION:g} (mujoco; "
+                       "default: 0)")
     plant.add_argument("--viscous-friction", type=friction, metavar="NMS",
-                       help="viscous friction of every joint (N m s/rad), at most 1e4 "
-                       "(mujoco; default: 0)")
+                       help="viscous friction of every joint (N m s/rad), at most "
+                       f"{MAX_JOINT_FRICTION:g} (mujoco; default: 0)")
     plant.add_argument("--physics-rate", type=physics_rate, metavar="HZ",
-                       help="physics steps per second, in [2000, 1e5] (mujoco; default: 2000)")
+                       help=f"physics steps per second, in [{MIN_PHYSICS_RATE_HZ:g}, "
+                       f"{MAX_PHYSICS_RATE_HZ:g}] (mujoco; default: {MIN_PHYSICS_RATE_HZ:g})")
     plant.add_argument("--servo-bandwidth", type=servo_bandwidth, metavar="HZ",
-                       help="natural frequency of each joint's position servo, at most 200 "
-                       "(mujoco; default: 20)")
+                       help="natural frequency of each joint's position servo, at most "
+                       f"{MAX_SERVO_BANDWIDTH_HZ:g} (mujoco; default: 20)")
 
 
 def plant_choice(args: argparse.Namespace, base=None):
@@ -485,11 +495,14 @@ def _scenarios(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from teleop.experiments.bench import format_table, run_bench, run_scaling, write_json
+    from teleop.experiments.bench import (check_json_path, format_table, run_bench, run_scaling,
+                                          write_json)
     from teleop.experiments.bench_loop import format_loop_table, run_loop_bench
 
     iterations = 20 if args.quick else args.iterations
     plant = plant_choice(args)  # checked even when --plant is left out
+    if args.json:
+        check_json_path(args.json)  # before minutes of benchmarking
     results = run_bench(args.robots, args.controllers, iterations=iterations,
                         plant=plant if args.plant else None,
                         allocations=not args.no_allocations)

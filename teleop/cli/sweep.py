@@ -5,7 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from teleop.limits import MAX_CELLS_UNCONFIRMED
+
 from .arguments import csv_list, numbers
+
 
 def _ints(text: str) -> list[int]:
     try:
@@ -82,6 +85,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run again the cells the database holds as failed")
     parser.add_argument("--reports", type=int, default=3, metavar="N",
                         help="make the compare reports of the N worst done cells at the end")
+    parser.add_argument("--yes", action="store_true",
+                        help=f"run a grid of more than {MAX_CELLS_UNCONFIRMED} cells "
+                        "(refused without it)")
     parser.add_argument("--quiet", action="store_true", help="no progress")
 
 
@@ -116,6 +122,9 @@ def run_grid(args: argparse.Namespace) -> int:
     from teleop.experiments.sweep.driver import default_workers, make_engine, sweep_folder
     options = options_document(args)
     spec = load_spec(args.spec, options) if args.spec else build_spec(options)
+    if spec.size > MAX_CELLS_UNCONFIRMED and not args.yes:
+        raise ValueError(f"the grid has {spec.size} cells, more than {MAX_CELLS_UNCONFIRMED}: "
+                         "give --yes to run them all")
     workers = default_workers() if args.workers is None else args.workers
     make_engine(args.engine, workers, args.retries, args.address)  # refused before any work
     if args.reports < 0:

@@ -26,6 +26,7 @@ import collections
 import json
 import time
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
@@ -472,6 +473,22 @@ def format_targets(checks: Sequence[TargetCheck]) -> list[str]:
     return lines
 
 
+def check_json_path(path: str) -> None:
+    """``ValueError`` unless :func:`write_json` can write ``path``: asked before minutes of
+    benchmarking (a file it makes to find out is removed)."""
+    target = Path(path)
+    if target.is_dir():
+        raise ValueError(f"--json {path!r} is a directory")
+    existed = target.exists()
+    try:
+        with target.open("a", encoding="utf-8"):
+            pass
+    except OSError as error:
+        raise ValueError(f"cannot write --json {path!r}: {error.strerror or error}") from None
+    if not existed:
+        target.unlink()
+
+
 def write_json(results: Sequence[StepTiming], path: str) -> None:
     """One object per row: its fields, the speed-ups over ``mink`` and ``qp:daqp``, its
     ratios (p99 over median, the median over the C++ floor's and over the same
@@ -488,5 +505,8 @@ def write_json(results: Sequence[StepTiming], path: str) -> None:
              "median_over_sda10f_hole": (r.median_us / hole[r.controller]
                                          if r.controller in hole else None),
              "targets": checks.get((r.robot, r.controller), [])} for r in results]
-    with open(path, "w", encoding="utf-8") as handle:
-        json.dump(rows, handle, indent=2)
+    try:
+        with open(path, "w", encoding="utf-8") as handle:
+            json.dump(rows, handle, indent=2)
+    except OSError as error:
+        raise ValueError(f"cannot write --json {path!r}: {error.strerror or error}") from None

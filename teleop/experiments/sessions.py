@@ -52,7 +52,8 @@ from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from constraints.validation import as_number, as_vector, short_repr
 from teleop.json_text import parse_json
-from teleop.limits import MAX_DURATION_S, MAX_RATE_HZ, MAX_STEPS, MAX_TIME_CONSTANT_S
+from teleop.limits import (MAX_DURATION_S, MAX_POSE_GAIN, MAX_POSITION_M, MAX_RATE_HZ,
+                           MAX_SPEED_M_S, MAX_STEPS, MAX_TIME_CONSTANT_S)
 from teleop.loop import target_poses
 from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED, advance, steer
 from teleop.robots import Robot, load_robot
@@ -334,7 +335,7 @@ def _check_header(event: dict, where: str) -> None:
         if "rate_hz" in event:
             as_number(event["rate_hz"], "header 'rate_hz'", positive=True, maximum=MAX_RATE_HZ)
         if "kp" in event:
-            as_number(event["kp"], "header 'kp'", positive=True)
+            as_number(event["kp"], "header 'kp'", positive=True, maximum=MAX_POSE_GAIN)
         if "target_time_constant_s" in event:
             as_number(event["target_time_constant_s"], "header 'target_time_constant_s'", 0.0,
                       maximum=MAX_TIME_CONSTANT_S)
@@ -386,7 +387,7 @@ def _check_event(event: dict) -> None:
     if kind == "target":
         if "frame" in event and not isinstance(event["frame"], str):
             raise ValueError(f"target 'frame' must be an EE frame name, got {event['frame']!r}")
-        as_vector(event.get("position"), 3, "target 'position'")
+        as_vector(event.get("position"), 3, "target 'position'", MAX_POSITION_M)
         quaternion = as_vector(event.get("quaternion_wxyz"), 4, "target 'quaternion_wxyz'")
         if abs(np.linalg.norm(quaternion) - 1.0) > 1e-6:
             raise ValueError(f"quaternion must be unit, got norm {np.linalg.norm(quaternion):.6g}")
@@ -397,8 +398,8 @@ def _check_event(event: dict) -> None:
     elif kind == "move":
         if not isinstance(event.get("id"), str):
             raise ValueError("'move' needs a string 'id'")
-        as_vector(event.get("position"), 3, "move 'position'")
-        as_vector(event.get("velocity", (0.0, 0.0, 0.0)), 3, "move 'velocity'")
+        as_vector(event.get("position"), 3, "move 'position'", MAX_POSITION_M)
+        as_vector(event.get("velocity", (0.0, 0.0, 0.0)), 3, "move 'velocity'", MAX_SPEED_M_S)
     elif kind == "remove":
         if not isinstance(event.get("id"), str):
             raise ValueError("'remove' needs a string 'id'")

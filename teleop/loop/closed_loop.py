@@ -38,7 +38,7 @@ from constraints import Constraint
 from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from constraints.validation import as_number, as_vector
-from teleop.limits import MAX_RATE_HZ, MAX_TIME_CONSTANT_S
+from teleop.limits import MAX_POSE_GAIN, MAX_RATE_HZ, MAX_TIME_CONSTANT_S
 
 from .distance_meter import DistanceMeter
 from .records import CompiledPendingStep, PendingStep, StepRecord
@@ -77,12 +77,12 @@ class LoopConfig:
     feed_forward: bool = True
 
     def __post_init__(self) -> None:
-        """Every field a real number in its range (``ValueError`` naming it); the rate
-        and the smoothing at most :data:`~teleop.limits.MAX_RATE_HZ` and
-        :data:`~teleop.limits.MAX_TIME_CONSTANT_S`."""
+        """Every field a real number in its range (``ValueError`` naming it); the rate,
+        kp and the smoothing at most :data:`~teleop.limits.MAX_RATE_HZ`,
+        :data:`~teleop.limits.MAX_POSE_GAIN` and :data:`~teleop.limits.MAX_TIME_CONSTANT_S`."""
         checked = {
             "rate": as_number(self.rate, "rate", positive=True, maximum=MAX_RATE_HZ),
-            "kp": as_number(self.kp, "kp", positive=True),
+            "kp": as_number(self.kp, "kp", positive=True, maximum=MAX_POSE_GAIN),
             "max_linear_speed": as_number(self.max_linear_speed, "max_linear_speed",
                                           positive=True),
             "max_angular_speed": as_number(self.max_angular_speed, "max_angular_speed",

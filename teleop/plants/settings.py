@@ -6,9 +6,8 @@ import math
 from dataclasses import dataclass
 
 from constraints.validation import as_number
-
-#: The control rate the physics must at least double (Hz): 2 kHz under a 1 kHz loop.
-MIN_PHYSICS_RATE_HZ = 2000.0
+from teleop.limits import (MAX_JOINT_FRICTION, MAX_PAYLOAD_KG, MAX_PHYSICS_RATE_HZ,
+                           MAX_SERVO_BANDWIDTH_HZ, MIN_PHYSICS_RATE_HZ)
 
 
 #: :meth:`PlantSettings.to_dict`'s keys (units in the names) -> the settings' fields.
@@ -52,13 +51,15 @@ class PlantSettings:
 
     def __post_init__(self) -> None:
         """Every field a finite number in its range (``ValueError`` naming it)."""
-        as_number(self.physics_rate, "physics_rate", MIN_PHYSICS_RATE_HZ, maximum=1e5)
-        as_number(self.servo_bandwidth, "servo_bandwidth", positive=True, maximum=200.0)
+        as_number(self.physics_rate, "physics_rate", MIN_PHYSICS_RATE_HZ,
+                  maximum=MAX_PHYSICS_RATE_HZ)
+        as_number(self.servo_bandwidth, "servo_bandwidth", positive=True,
+                  maximum=MAX_SERVO_BANDWIDTH_HZ)
         as_number(self.servo_damping_ratio, "servo_damping_ratio", positive=True, maximum=10.0)
         as_number(self.armature, "armature", positive=True, maximum=1e3)
         for name in ("joint_damping", "coulomb_friction", "viscous_friction"):
-            as_number(getattr(self, name), name, 0.0, maximum=1e4)
-        as_number(self.payload, "payload", 0.0, maximum=100.0)
+            as_number(getattr(self, name), name, 0.0, maximum=MAX_JOINT_FRICTION)
+        as_number(self.payload, "payload", 0.0, maximum=MAX_PAYLOAD_KG)
         if not isinstance(self.gravity, bool):
             raise ValueError(f"gravity must be True or False, got {self.gravity!r}")
 

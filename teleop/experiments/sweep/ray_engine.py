@@ -36,20 +36,44 @@ def check_ray() -> None:
 
 
 #: Seconds to wait for a cluster's address to answer before refusing it (``ray.init`` itself
-#: waits without end for an address where nothing listens).
+#: waits without end for an address where nothing listens, or where something that is not
+#: Ray does).
 CONNECT_TIMEOUT_S = 5.0
+
+#: A Ray head's address is its GCS, a gRPC server: to HTTP/2's client preface and an empty
+#: SETTINGS frame it answers with a frame of its own whose 9-byte header has type 4
+#: (SETTINGS, RFC 9113 section 3.4).
+HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+FRAME_HEADER_BYTES = 9
+SETTINGS_FRAME = 4
 
 
 def check_address(address: str) -> None:
-    """``ValueError`` unless ``address`` is ``HOST:PORT`` and something listens there."""
+    """``ValueError`` unless ``address`` is ``HOST:PORT`` and a gRPC server (a Ray head)
+    answers there within :data:`CONNECT_TIMEOUT_S`."""
     host, _, port = address.rpartition(":")
     if address.startswith("ray://") or not host or not port.isdigit():
         raise ValueError(f"--address must be HOST:PORT of a Ray cluster's head, got {address!r}")
+    deadline = time.monotonic() + CONNECT_TIMEOUT_S
     try:
-        socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S).close()
+        with socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S) as connection:
+            connection.sendall(HTTP2_PREFACE)
+            answer = b""
+            while len(answer) < FRAME_HEADER_BYTES:
+                connection.settimeout(max(deadline - time.monotonic(), 1e-3))
+                chunk = connection.recv(FRAME_HEADER_BYTES - len(answer))
+                if not chunk:
+                    break
+                answer += chunk
+    except TimeoutError:
+        raise ValueError(f"the Ray cluster at {address} did not answer within "
+                         f"{CONNECT_TIMEOUT_S:g} s: is it a Ray head's address?") from None
     except OSError as error:
         raise ValueError(f"cannot reach the Ray cluster at {address}: "
                          f"{error.strerror or error}") from None
+    if len(answer) < FRAME_HEADER_BYTES or answer[3] != SETTINGS_FRAME:
+        raise ValueError(f"{address} is not a Ray cluster's head: it does not answer as "
+                         "a gRPC server")
 
 
 def _import_ray(local: bool):

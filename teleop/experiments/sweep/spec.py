@@ -19,15 +19,14 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from constraints.validation import as_number, short_repr
+from teleop.json_text import parse_json
+from teleop.limits import MAX_CELLS, MAX_SPEC_BYTES
 
 #: Hex digits of a cell's key (80 bits: no collision in any sweep of this world).
 KEY_DIGITS = 20
 
 #: The largest seed: SQLite's and NumPy's 64-bit integers.
 MAX_SEED = 2**63 - 1
-
-#: The most cells one spec may expand to: far beyond a month of a large cluster.
-MAX_CELLS = 1_000_000
 
 #: Default wall-clock limit of one cell (s).
 DEFAULT_TIME_LIMIT_S = 600.0
@@ -77,9 +76,10 @@ class CellField:
 
 def _cell_fields() -> tuple[CellField, ...]:
     from teleop.limits import (MAX_CALIBRATION_POSITION_STD_M,
-                               MAX_CALIBRATION_ROTATION_STD_RAD, MAX_DURATION_S,
-                               MAX_ENCODER_NOISE_RAD, MAX_LATENCY_PERIODS, MAX_PATH_AMPLITUDE_M,
-                               MAX_RATE_HZ, MAX_TIME_CONSTANT_S, MAX_TROCAR_SHIFT_M)
+                               MAX_CALIBRATION_ROTATION_STD_RAD, MAX_CONSTRAINT_GAIN,
+                               MAX_DURATION_S, MAX_ENCODER_NOISE_RAD, MAX_LATENCY_PERIODS,
+                               MAX_PATH_AMPLITUDE_M, MAX_PAYLOAD_KG, MAX_POSE_GAIN, MAX_RATE_HZ,
+                               MAX_TIME_CONSTANT_S, MAX_TROCAR_SHIFT_M)
 
     return (
         CellField("scenario", None, _text, "--scenario", help="scenario names"),
@@ -92,10 +92,12 @@ def _cell_fields() -> tuple[CellField, ...]:
         CellField("rate", 1000.0, _real(positive=True, maximum=MAX_RATE_HZ), "--rate",
                   help="control rate (Hz)"),
         CellField("plant", "kinematic", _plant_kind, "--plant", help="kinematic or mujoco"),
-        CellField("payload", 0.0, _real(0.0, 100.0), "--payload",
+        CellField("payload", 0.0, _real(0.0, MAX_PAYLOAD_KG), "--payload",
                   help="kg at each EE (mujoco)"),
-        CellField("kp", 20.0, _real(positive=True), "--kp", help="pose-error gain (1/s)"),
-        CellField("constraint_gain", None, _optional(_real(0.0)), "--constraint-gain",
+        CellField("kp", 20.0, _real(positive=True, maximum=MAX_POSE_GAIN), "--kp",
+                  help="pose-error gain (1/s)"),
+        CellField("constraint_gain", None, _optional(_real(0.0, MAX_CONSTRAINT_GAIN)),
+                  "--constraint-gain",
                   help="every constraint's drift gain (default: their own)"),
         CellField("encoder_noise", 0.0, _real(0.0, MAX_ENCODER_NOISE_RAD), "--encoder-noise",
                   "imperfections", "rad"),
@@ -311,12 +313,17 @@ def _notes(grid: dict[str, list[Any]]) -> tuple[str, ...]:
 
 
 def load_spec(path: str | Path, options: Mapping[str, Any] | None = None) -> SweepSpec:
-    """A spec file, TOML (``.toml``) or JSON (anything else), with the command line's
-    ``options`` over its fields (:func:`merge_options`); ``ValueError`` naming the file
-    and what is wrong."""
+    """A spec file, TOML (``.toml``) or JSON (anything else), of at most
+    :data:`~teleop.limits.MAX_SPEC_BYTES`, with the command line's ``options`` over its
+    fields (:func:`merge_options`); ``ValueError`` naming the file and what is wrong."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as file:
+            data = file.read(MAX_SPEC_BYTES + 1)  # no further: /dev/zero has no end
+        if len(data) > MAX_SPEC_BYTES:
+            raise ValueError(f"{path}: a spec is at most {MAX_SPEC_BYTES} bytes, this file "
+                             "is longer")
+        text = data.decode("utf-8")
     except (OSError, UnicodeDecodeError) as error:
         reason = getattr(error, "strerror", None) or error
         raise ValueError(f"{path}: cannot read the spec ({reason})") from None
@@ -340,10 +347,9 @@ def _parse(path: Path, text: str) -> Any:
             return tomllib.loads(text)
         except tomllib.TOMLDecodeError as error:
             raise ValueError(f"{path}: not a TOML spec ({error})") from None
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{path}:{error.lineno}: not a JSON spec ({error.msg})") from None
+        except RecursionError:
+            raise ValueError(f"{path}: TOML nested too deeply") from None
+    return parse_json(text, str(path))
 
 
 def merge_options(document: Mapping[str, Any], options: Mapping[str, Any]) -> dict[str, Any]:
