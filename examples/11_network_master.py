@@ -1,7 +1,8 @@
 """A network master over the UDP protocol: the UI core runs headless here, a hole holds
 on link 6, and this script plays the master: a 5 s circle (1 cm radius, in the plane of
 the operator's view) streamed at 1 kHz, the feedback read back; then it goes silent and
-the watchdog stops the robot (docs/design.md section 19, docs/inputs.md).
+the watchdog stops the robot (docs/design.md section 19, docs/inputs.md). Every datagram
+carries an HMAC of the key the receiver drew (``master.key``; ``teleop web`` prints it).
 
 Run:  python examples/11_network_master.py [--seconds 60]
       (--seconds: how long the circles are streamed, one circle per 5 s; the closing note's
@@ -24,12 +25,12 @@ RATE, SECONDS, RADIUS, PERIOD = 1000.0, parser.parse_args().seconds, 0.01, 5.0
 
 app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0)
 app.add_constraint("hole", distance=0.08)
-master = UdpMaster(port=0)  # any free port on 127.0.0.1
+master = UdpMaster(port=0)  # any free port on 127.0.0.1, a key drawn at random
 app.attach_input(master)
 control = ControlThread(app)
 control.start()
 
-client = MasterClient(master.port)
+client = MasterClient(master.port, key=master.key)  # the master holds the same key
 errors, holes, forces = [], [], []
 start = time.perf_counter()
 for k in range(int(RATE * SECONDS) + 1):

@@ -30,8 +30,8 @@ class Streamer:
     """A master streaming its current device position at 200 Hz from a thread, so the
     watchdog never releases it between the test's moves."""
 
-    def __init__(self, port: int) -> None:
-        self.client = MasterClient(port)
+    def __init__(self, port: int, key: bytes) -> None:
+        self.client = MasterClient(port, key=key)
         self.position = np.zeros(3)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -55,7 +55,7 @@ def console(tmp_path_factory):
     # not a test of the watchdog: a stall of the shared process never releases the master
     with open_web(load_robot("sda10f"), tmp_path_factory.mktemp("sessions"),
                   inputs=[master], input_timeout=1.0) as served:
-        streamer = Streamer(master.port)
+        streamer = Streamer(master.port, master.key)
         try:
             yield served, master, streamer
         finally:

@@ -21,7 +21,7 @@ MASTER = """
 import math, sys, time
 from teleop.inputs import MasterClient
 port, rate, seconds, radius, period = int(sys.argv[1]), *map(float, sys.argv[2:6])
-client = MasterClient(port)
+client = MasterClient(port, key=sys.argv[6])
 start, k = time.perf_counter(), 0
 while True:
     angle = 2.0 * math.pi * min(k / rate, seconds) / period
@@ -58,7 +58,7 @@ def test_a_master_process_at_1khz_is_tracked_with_the_hole_held_and_its_death_st
     app, master, control = console
     start_target = app.targets[0].translation.copy()
     process = subprocess.Popen([sys.executable, "-c", MASTER, str(master.port), str(RATE),
-                                str(SECONDS), str(RADIUS), str(PERIOD)],
+                                str(SECONDS), str(RADIUS), str(PERIOD), master.key.hex()],
                                stdout=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60.0

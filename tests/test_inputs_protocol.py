@@ -4,6 +4,7 @@ dropped and counted, none applied."""
 
 from __future__ import annotations
 
+import hmac
 import math
 import socket
 import struct
@@ -17,7 +18,10 @@ from teleop.inputs import (CLUTCH, DROP_REASONS, Feedback, FeedbackState, Packet
                            UdpMaster, decode_command, decode_feedback, encode_command,
                            encode_feedback)
 from teleop.inputs.protocol import (COMMAND_FORMAT, COMMAND_SIZE, FEEDBACK_SIZE,
-                                    MAX_DEVICE_POSITION, MAX_DEVICE_SPEED)
+                                    MAX_DEVICE_POSITION, MAX_DEVICE_SPEED, TAG_SIZE, tag)
+
+#: the key both sides hold in these tests
+KEY = bytes(range(32))
 
 finite = st.floats(-1.0, 1.0, allow_nan=False)
 
@@ -30,9 +34,9 @@ finite = st.floats(-1.0, 1.0, allow_nan=False)
 def test_a_pose_command_decodes_to_what_was_sent(position, quaternion, sequence, device_time,
                                                  buttons):
     datagram = encode_command("pose", [*position, *quaternion], sequence, device_time, 1,
-                              buttons)
-    assert len(datagram) == COMMAND_SIZE == 76
-    command = decode_command(datagram, ee=1)
+                              buttons, key=KEY)
+    assert len(datagram) == COMMAND_SIZE == 100
+    command = decode_command(datagram, ee=1, key=KEY)
     norm = math.sqrt(sum(v * v for v in quaternion))
     assert command.kind == "pose" and command.sequence == sequence
     assert command.buttons == buttons and command.device_time == device_time
@@ -42,7 +46,7 @@ def test_a_pose_command_decodes_to_what_was_sent(position, quaternion, sequence,
 
 @given(twist=st.tuples(*[st.floats(-3.0, 3.0)] * 6))
 def test_a_twist_command_decodes_to_what_was_sent(twist):
-    command = decode_command(encode_command("twist", twist, 7, 1.5), ee=0)
+    command = decode_command(encode_command("twist", twist, 7, 1.5, key=KEY), ee=0, key=KEY)
     assert command.kind == "twist" and command.values == (*twist, 0.0)
 
 
@@ -50,30 +54,42 @@ def test_a_twist_command_decodes_to_what_was_sent(twist):
        state=st.sampled_from(list(FeedbackState)), measured=st.booleans())
 def test_a_feedback_decodes_to_what_was_sent(wrench, sequence, state, measured):
     sent = Feedback(state, 0, sequence, sequence // 2, 3.25, wrench, 4e-4, measured)
-    datagram = encode_feedback(sent)
-    assert len(datagram) == FEEDBACK_SIZE == 80
-    assert decode_feedback(datagram) == sent
+    datagram = encode_feedback(sent, KEY)
+    assert len(datagram) == FEEDBACK_SIZE == 96
+    assert decode_feedback(datagram, KEY) == sent
+    with pytest.raises(PacketError, match="tag"):
+        decode_feedback(datagram, bytes(32))  # a forged feedback: never rendered
 
 
 def _valid(sequence: int = 1, device_time: float = 0.0) -> list:
     """The fields of a valid pose command, to spoil one by one."""
-    return [b"CJMI", 1, 1, 0, 0, sequence, device_time, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+    return [b"CJMI", 2, 1, 0, 0, sequence, device_time, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1]
+
+
+def tagged(body: bytes) -> bytes:
+    return body + tag(KEY, body)
 
 
 def hostile_datagrams(rng: np.random.Generator, count: int) -> list[tuple[bytes, str]]:
     """``count`` datagrams, each spoilt one way, with the reason it must be dropped for."""
     spoilers = []
-    valid = COMMAND_FORMAT.pack(*_valid())
+    valid = tagged(COMMAND_FORMAT.pack(*_valid()))
 
     def field(index: int, value) -> bytes:
         fields = _valid()
         fields[index] = value
-        return COMMAND_FORMAT.pack(*fields)
+        return tagged(COMMAND_FORMAT.pack(*fields))
 
     spoilers.append(lambda: (valid[:rng.integers(0, COMMAND_SIZE)], "malformed"))  # truncated
     spoilers.append(lambda: (valid + bytes(rng.integers(1, 1500)), "malformed"))  # too long
     spoilers.append(lambda: (rng.bytes(COMMAND_SIZE), "malformed"))  # noise, bad magic
-    spoilers.append(lambda: (field(1, int(rng.choice([0, 2, 3, 255]))), "version"))
+    spoilers.append(lambda: (field(1, int(rng.choice([0, 1, 3, 255]))), "version"))
+    spoilers.append(lambda: (struct.pack("<4sBBBBId7d", b"CJMI", 1, 1, 0, 0, 1, 0.0, 0, 0, 0,
+                                         1, 0, 0, 0), "version"))  # a version-1 master
+    spoilers.append(lambda: (COMMAND_FORMAT.pack(*_valid()) + rng.bytes(TAG_SIZE),
+                             "unauthenticated"))  # a forged tag
+    spoilers.append(lambda: (COMMAND_FORMAT.pack(*_valid()) + tag(bytes(32), COMMAND_FORMAT.pack(
+        *_valid())), "unauthenticated"))  # another key's
     spoilers.append(lambda: (field(2, int(rng.choice([0, 3, 200]))), "malformed"))  # kind
     spoilers.append(lambda: (field(4, int(rng.integers(4, 256))), "malformed"))  # buttons
     spoilers.append(lambda: (field(3, int(rng.integers(1, 256))), "wrong_ee"))
@@ -84,12 +100,12 @@ def hostile_datagrams(rng: np.random.Generator, count: int) -> list[tuple[bytes,
                                          * MAX_DEVICE_POSITION)), "out_of_range"))
     spoilers.append(lambda: (field(10, 0.0), "out_of_range"))  # a zero quaternion
     spoilers.append(lambda: (field(10, 1e10), "out_of_range"))  # a huge one
-    twist = [b"CJMI", 1, 2, 0, 0, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    twist = [b"CJMI", 2, 2, 0, 0, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1]
 
     def fast_twist() -> tuple[bytes, str]:
         fields = list(twist)
         fields[int(rng.integers(7, 13))] = 1.01 * MAX_DEVICE_SPEED[1]
-        return COMMAND_FORMAT.pack(*fields), "out_of_range"
+        return tagged(COMMAND_FORMAT.pack(*fields)), "out_of_range"
     spoilers.append(fast_twist)
     return [spoilers[int(rng.integers(len(spoilers)))]() for _ in range(count)]
 
@@ -100,11 +116,11 @@ def test_ten_thousand_hostile_datagrams_are_dropped_and_counted():
     rng = np.random.default_rng(24)
     datagrams = hostile_datagrams(rng, 10_000)
     expected = {reason: sum(1 for _, r in datagrams if r == reason) for reason in DROP_REASONS}
-    master = UdpMaster(port=0)
+    master = UdpMaster(port=0, key=KEY)
     master.start()
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        first = encode_command("pose", [0, 0, 0, 1, 0, 0, 0], 1, time.perf_counter())
+        first = encode_command("pose", [0, 0, 0, 1, 0, 0, 0], 1, time.perf_counter(), key=KEY)
         sender.sendto(first, ("127.0.0.1", master.port))
         _wait_for(lambda: master.counts["accepted"] == 1)
         assert master.take().sequence == 1
@@ -119,8 +135,8 @@ def test_ten_thousand_hostile_datagrams_are_dropped_and_counted():
             {reason: expected[reason] for reason in DROP_REASONS}
         assert master.dropped() == 10_000
         # still alive: a valid command after all that is taken
-        sender.sendto(encode_command("pose", [0, 0, 0, 1, 0, 0, 0], 2, time.perf_counter()),
-                      ("127.0.0.1", master.port))
+        sender.sendto(encode_command("pose", [0, 0, 0, 1, 0, 0, 0], 2, time.perf_counter(),
+                                     key=KEY), ("127.0.0.1", master.port))
         _wait_for(lambda: master.counts["accepted"] == 2)
         assert master.take().sequence == 2
     finally:
@@ -138,14 +154,14 @@ def _wait_for(condition, timeout: float = 30.0) -> None:
 def test_replayed_reordered_stale_and_foreign_commands_are_dropped_and_counted():
     """Driven through :meth:`UdpMaster.handle` with chosen arrival times (no socket
     timing): the sequence, the transit and the sender decide."""
-    master = UdpMaster(port=0, max_age=0.1)
+    master = UdpMaster(port=0, max_age=0.1, key=KEY)
     try:
         here, there = ("127.0.0.1", 5000), ("127.0.0.1", 5001)
         pose = [0, 0, 0, 1, 0, 0, 0]
 
-        def send(sequence, device_time, arrival, sender=here, buttons=0):
-            master.handle(encode_command("pose", pose, sequence, device_time, 0, buttons),
-                          sender, arrival)
+        def send(sequence, device_time, arrival, sender=here, buttons=0, stream=1):
+            master.handle(encode_command("pose", pose, sequence, device_time, 0, buttons,
+                                         key=KEY, stream=stream), sender, arrival)
 
         send(10, 0.000, 50.001)  # transit 50.001: the clock offset
         send(11, 0.001, 50.002)
@@ -162,9 +178,21 @@ def test_replayed_reordered_stale_and_foreign_commands_are_dropped_and_counted()
                 counts["stale"], counts["foreign"], counts["superseded"]) == (8, 4, 2, 3, 1, 1, 3)
         sample = master.take()
         assert sample.sequence == 17 and sample.clutched and sample.arrival == 50.0075
-        master.release()  # the watchdog: a new stream from anyone, any sequence
-        send(1, 900.0, 60.0, sender=there)
-        assert master.take().sequence == 1 and master.counts["accepted"] == 5
+        master.release()  # the watchdog: the master stays bound
+        send(1, 900.0, 60.0, sender=there)  # its stream from elsewhere: foreign
+        send(12, 0.01, 60.01)  # its own, replayed: out of order
+        assert master.take() is None and master.master == here
+        assert (counts["foreign"], counts["out_of_order"]) == (2, 3)
+        send(900, 10.0, 60.02)  # it resumes (a silence's gap is not lost)
+        assert master.take().sequence == 900 and counts["lost"] == 3
+        master.release()
+        send(1, 900.0, 61.0, sender=there, stream=2)  # a restarted master (holds the key)
+        assert master.take().sequence == 1 and master.master == there
+        send(901, 10.1, 61.01)  # the old one while the new is live: foreign
+        master.release()
+        send(902, 10.2, 61.2)  # the stream it left, replayed after a silence
+        assert master.take() is None and (counts["foreign"], counts["replayed"]) == (3, 1)
+        assert master.master == there and counts["accepted"] == 6
     finally:
         master.close()
 
@@ -182,7 +210,7 @@ def test_a_port_in_use_is_a_value_error_naming_it():
 @given(datagram=st.binary(max_size=200))
 def test_any_bytes_decode_or_raise_a_packet_error(datagram):
     try:
-        command = decode_command(datagram, ee=0)
+        command = decode_command(datagram, ee=0, key=KEY)
     except PacketError as error:
         assert error.reason in DROP_REASONS
     else:
@@ -191,8 +219,13 @@ def test_any_bytes_decode_or_raise_a_packet_error(datagram):
 
 def test_the_command_layout_is_the_documented_one():
     """The byte offsets docs/inputs.md gives, read back with plain struct calls."""
-    datagram = encode_command("pose", [1, 2, 3, 1, 0, 0, 0], 0x01020304, 2.5, 1, CLUTCH)
-    assert datagram[:4] == b"CJMI" and datagram[4:8] == bytes([1, 1, 1, 1])
+    datagram = encode_command("pose", [1, 2, 3, 1, 0, 0, 0], 0x01020304, 2.5, 1, CLUTCH,
+                              key=KEY, stream=0x0102030405060708)
+    assert datagram[:4] == b"CJMI" and datagram[4:8] == bytes([2, 1, 1, 1])
     assert struct.unpack_from("<I", datagram, 8) == (0x01020304,)
     assert struct.unpack_from("<d", datagram, 12) == (2.5,)
     assert struct.unpack_from("<7d", datagram, 20) == (1, 2, 3, 1, 0, 0, 0)
+    assert struct.unpack_from("<Q", datagram, 76) == (0x0102030405060708,)
+    assert datagram[84:] == hmac.digest(KEY, datagram[:84], "sha256")[:16]
+    feedback = encode_feedback(Feedback(FeedbackState.HELD, 1, 5, 4, 2.5, (0.0,) * 6, 0.0), KEY)
+    assert feedback[80:] == hmac.digest(KEY, feedback[:80], "sha256")[:16]

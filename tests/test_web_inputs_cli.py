@@ -3,6 +3,7 @@ that is not there, and what cannot be opened (one line, exit 2)."""
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
@@ -16,15 +17,17 @@ from web import cli as web_cli
 
 
 def start(*args: str) -> tuple[subprocess.Popen, str]:
-    """``python -m web ARGS`` started, and its "Ctrl-C stops" line."""
+    """``python -m web ARGS`` started, and its lines up to the "Ctrl-C stops" one."""
     process = subprocess.Popen([sys.executable, "-m", "web", "--port", str(free_port()), *args],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 90.0
+    lines = ""
     while time.monotonic() < deadline:
         line = process.stdout.readline()
+        lines += line
         if not line or "Ctrl-C stops" in line:
-            return process, line
-    return process, ""
+            return process, lines
+    return process, lines
 
 
 def stop(process: subprocess.Popen) -> tuple[str, int]:
@@ -50,7 +53,8 @@ def test_a_network_master_drives_the_robot_through_the_command_line():
     process, line = start("--input", f"udp:{port}")
     try:
         assert f"input udp:{port} on tool0" in line, line
-        with MasterClient(port) as client:
+        (key,) = re.findall(r"network master key ([0-9a-f]{64}) ", line)
+        with MasterClient(port, key=key) as client:
             deadline = time.monotonic() + 30.0
             feedback = None
             while feedback is None or feedback.state != FeedbackState.FOLLOWING:

@@ -121,6 +121,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "network master, bound to --host) or spacemouse; each takes the "
                               "next EE, or the one named after @ (udp:9870@right); repeatable "
                               "(default: the gizmo only)")
+    devices.add_argument("--input-key", metavar="FILE",
+                         help="file holding the key of the network masters (hex digits, "
+                              "16-64 bytes; e.g. `python -c \"import secrets; "
+                              "print(secrets.token_hex(32))\" > key`): every datagram must "
+                              "carry its HMAC (default: a key drawn at start and printed)")
     devices.add_argument("--input-timeout", type=positive, default="100", metavar="MS",
                          help="a network master silent this long (ms, 5-5000) is released: "
                               "its target holds and the robot stops (default: 100)")
@@ -186,8 +191,8 @@ def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
               "who can reach this port and has the token can move the robot and read and "
               f"write files in {args.scene_dir} and {args.record_dir}; the token and the "
               "page travel unencrypted (an SSH tunnel to 127.0.0.1 avoids both)"
-              + ("; whoever can send to the --input udp ports moves the robot, no token "
-                 "asked" if any(spec.startswith("udp:") for spec in args.input or ()) else ""),
+              + ("; the --input udp ports take only datagrams carrying the key's HMAC"
+                 if any(spec.startswith("udp:") for spec in args.input or ()) else ""),
               file=sys.stderr)
     return port, token
 
@@ -242,12 +247,30 @@ def _ee_index(name: str, frames: list[str], default: int, spec: str) -> int:
     return index
 
 
+def _input_key(args: argparse.Namespace, prog: str) -> bytes | None:
+    """The network masters' key: ``--input-key``'s, else one drawn now and printed (None
+    without a udp input); ``ValueError`` naming a key file that cannot be used."""
+    from teleop.inputs import new_key, read_key_file
+
+    if not any(spec.startswith("udp:") for spec in args.input or ()):
+        if args.input_key is not None:
+            raise ValueError("--input-key needs an --input udp:PORT")
+        return None
+    if args.input_key is not None:
+        return read_key_file(args.input_key)
+    key = new_key()
+    print(f"{prog}: network master key {key.hex()} (the master tags every datagram with "
+          "it; --input-key FILE to give one)", flush=True)
+    return key
+
+
 def _inputs(args: argparse.Namespace, robot, prog: str) -> list:
     """The input sources ``--input`` asks for, each on its EE; ``ValueError`` for a bad
     one or a port that cannot be bound. A SpaceMouse that is not there is one warning
     line: the UI runs without it."""
     from teleop.inputs import UdpMaster
 
+    key = _input_key(args, prog)
     sources = []
     try:
         for index, spec in enumerate(args.input or ()):
@@ -265,7 +288,7 @@ def _inputs(args: argparse.Namespace, robot, prog: str) -> list:
                           "runs without it", file=sys.stderr)
             elif kind.startswith("udp:"):
                 sources.append(UdpMaster(check_port(kind[4:]), host=args.host, ee=ee,
-                                         max_age=args.input_timeout / 1e3))
+                                         max_age=args.input_timeout / 1e3, key=key))
             else:
                 raise ValueError(f"--input {spec}: expected udp:PORT or spacemouse")
     except ValueError:

@@ -6,28 +6,37 @@ from __future__ import annotations
 import socket
 import time
 
-from .protocol import (FEEDBACK_SIZE, Feedback, PacketError, decode_feedback,
-                       encode_command)
+from .protocol import (FEEDBACK_SIZE, Feedback, PacketError, as_key, decode_feedback,
+                       encode_command, new_stream)
 
 
 class MasterClient:
     """Sends commands to ``teleop web --input udp:PORT`` (or a
     :class:`~teleop.inputs.UdpMaster`) and reads its feedback.
 
-    Each command gets the next sequence number and the time of ``clock`` (s); the
-    feedback answering it arrives on the same socket (:meth:`feedback`).
+    key : the key ``teleop web`` printed or read from ``--input-key`` (bytes or hex
+        text); every command is tagged with it, and a feedback not tagged with it is
+        ignored (counted in :attr:`refused`).
+
+    Each command gets the next sequence number, the time of ``clock`` (s) and the
+    client's :attr:`stream` (drawn at random: a new client is a new stream); the feedback
+    answering it arrives on the same socket (:meth:`feedback`).
     """
 
-    def __init__(self, port: int, host: str = "127.0.0.1", ee: int = 0,
+    def __init__(self, port: int, key: bytes | str, host: str = "127.0.0.1", ee: int = 0,
                  clock=time.perf_counter) -> None:
+        self.key = as_key(key)
         self.address = (host, int(port))
         self.ee = ee
         self.clock = clock
         self.sequence = 0
+        self.stream = new_stream()
         self._socket = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET,
                                      socket.SOCK_DGRAM)
         self._socket.setblocking(False)
         self.received: list[Feedback] = []
+        #: datagrams read that were not a feedback tagged with the key
+        self.refused = 0
 
     def close(self) -> None:
         self._socket.close()
@@ -43,7 +52,8 @@ class MasterClient:
         returns its sequence number."""
         self.sequence += 1
         self._socket.sendto(encode_command(kind, values, self.sequence, self.clock(), self.ee,
-                                           buttons), self.address)
+                                           buttons, key=self.key, stream=self.stream),
+                            self.address)
         return self.sequence
 
     def send_pose(self, position, wxyz=(1.0, 0.0, 0.0, 0.0), buttons: int = 0) -> int:
@@ -63,7 +73,8 @@ class MasterClient:
             except ConnectionRefusedError:  # nothing listens (an earlier command's ICMP error)
                 continue
             try:
-                newest = decode_feedback(datagram)
+                newest = decode_feedback(datagram, self.key)
             except PacketError:
+                self.refused += 1
                 continue
             self.received.append(newest)

@@ -1,35 +1,42 @@
 """The network master: commands over UDP in, feedback out (docs/design.md section 19.2,
 the protocol in :mod:`teleop.inputs.protocol`).
 
-A thread receives; each datagram is decoded and checked, then either offered to the
-control tick or dropped and counted by reason. Besides a bad datagram
-(:func:`~teleop.inputs.protocol.decode_command`):
+A thread receives; each datagram is checked, then either offered to the control tick or
+dropped and counted by reason. The master is **bound** to the first sender whose command
+authenticates (its address and its stream number); from then on:
 
+* ``foreign``: from another address while the bound master is live, counted before it
+  is even decoded (a flood costs little); after a silence that released it, from another
+  address with the bound stream;
+* a bad datagram (:func:`~teleop.inputs.protocol.decode_command`): ``version`` (another
+  protocol version), ``malformed``, ``unauthenticated`` (its tag is not the key's), ...;
 * ``out_of_order``: a sequence number not above the newest accepted (a replay, a
-  reordered datagram); a gap in the numbers counts the ones that never arrived as
-  ``lost``;
+  reordered datagram), or more than :data:`SEQUENCE_WINDOW` above it while the master is
+  live; a gap in the numbers counts the ones that never arrived as ``lost``;
+* ``replayed``: a stream the master has already left (a recording of it);
 * ``stale``: a command that spent more than ``max_age`` in transit, measured against the
   fastest transit seen (``arrival - device_time`` at its minimum, which rises by
   :data:`OFFSET_DRIFT` per second so that clocks drifting apart are followed: the two
-  clocks' offset); ``device_time`` must not go back;
-* ``foreign``: from another address than the master's while the master is live (the
-  first sender becomes the master; after a silence that released it, the next sender).
+  clocks' offset); ``device_time`` must not go back.
 
-After a silence (:meth:`release`) the next command starts a new stream: any sequence
-number and clock are taken. Every accepted command is answered with the newest
-feedback, to the sender, at the master's rate.
+The watchdog's :meth:`release` keeps the binding: the silent master may resume (its
+stream, its next sequence numbers), and only a new stream that authenticates (a
+restarted master, who holds the key) may take its place. Every accepted command is
+answered with the newest feedback, tagged, to its sender, at the master's rate.
 """
 
 from __future__ import annotations
 
+import ipaddress
 import socket
 import threading
 import time
+from collections import OrderedDict
 
 import numpy as np
 
-from .protocol import (Feedback, FeedbackState, PacketError, decode_command,
-                       encode_feedback)
+from .protocol import (Feedback, FeedbackState, PacketError, as_key, decode_command,
+                       encode_feedback, new_key)
 from .source import InputSample, InputSource
 
 #: the largest datagram read: a longer one is read whole and refused as malformed
@@ -42,13 +49,29 @@ RECEIVE_BUFFER = 1 << 22
 #: how fast the clocks' offset estimate may rise (s per s): two clocks drifting apart by up
 #: to 1000 ppm, or a master's clock stepping back, never make its commands all stale
 OFFSET_DRIFT = 1e-3
+#: a live master's next sequence number is at most this far above its newest (17 min of
+#: commands at 1 kHz): the ``lost`` count of one gap is bounded by it
+SEQUENCE_WINDOW = 1 << 20
+#: streams a master has left, remembered so that a recording of them is refused
+RETIRED_STREAMS = 4096
+#: reasons that mean someone other than the master is sending (the page warns of them)
+INTRUSIONS = ("foreign", "unauthenticated", "replayed", "version")
+
+
+def _is_loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host.split("%")[0]).is_loopback
+    except ValueError:
+        return host == "localhost"
 
 
 class UdpMaster(InputSource):
     """A network master on ``host:port`` (UDP) driving EE ``ee``.
 
-    host : the address to bind (loopback by default: whoever can send to it moves the
-        robot).
+    host : the address to bind (loopback by default).
+    key : the shared key (bytes or hex text, :func:`~teleop.inputs.protocol.as_key`)
+        every command's tag is checked with; None draws one (:attr:`key`) on a loopback
+        address, and is a ``ValueError`` on any other.
     max_age : a command older than this on arrival, against the fastest transit seen,
         is dropped as ``stale`` (s).
     """
@@ -56,8 +79,13 @@ class UdpMaster(InputSource):
     renders_feedback = True
 
     def __init__(self, port: int, host: str = "127.0.0.1", ee: int = 0,
-                 max_age: float = 0.1) -> None:
+                 max_age: float = 0.1, key: bytes | str | None = None) -> None:
         super().__init__(f"udp:{port}", ee)
+        if key is None and not _is_loopback(host):
+            raise ValueError(f"a network master on {host} (beyond this machine) needs a key: "
+                             "give the key file the master holds")
+        #: the shared key (give it to the master)
+        self.key = new_key() if key is None else as_key(key)
         self.host = host
         self.max_age = float(max_age)
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -75,11 +103,17 @@ class UdpMaster(InputSource):
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._receive, name=f"input {self.name}",
                                         daemon=True)
-        self._master: tuple | None = None  # the sender's address
+        #: the bound master's address and stream (None before any command authenticated)
+        self.master: tuple | None = None
+        self._stream: int | None = None
+        self._released = False  # the watchdog released it: it may resume, or a new stream
+        self._retired: OrderedDict[int, None] = OrderedDict()  # streams the master left
         self._newest_sequence: int | None = None
         self._clock_offset: float | None = None  # min over accepted of arrival - device_time
         self._stale_in_gap = 0  # stale commands since the newest accepted
         self._offset_time = 0.0  # when the offset was last updated
+        #: the address the newest intruding datagram came from, and what it was
+        self.intruder: tuple | None = None
         self._feedback = Feedback(FeedbackState.HELD, ee, 0, 0, 0.0, (0.0,) * 6, float("nan"))
 
     def start(self) -> None:
@@ -92,12 +126,10 @@ class UdpMaster(InputSource):
         self._socket.close()
 
     def release(self) -> None:
-        """The watchdog released this master: the next command, from whichever address,
-        starts a new stream."""
+        """The watchdog released this master: it stays bound (it may resume its stream);
+        only a new stream that authenticates may take its place."""
         with self._lock:
-            self._master = None
-            self._newest_sequence = None
-            self._clock_offset = None
+            self._released = True
             self._stale_in_gap = 0
 
     def set_feedback(self, wrench: np.ndarray, state: FeedbackState,
@@ -105,6 +137,18 @@ class UdpMaster(InputSource):
         self._feedback = Feedback(state, self.ee, 0, self.applied_sequence, 0.0,
                                   tuple(float(w) for w in wrench), self.last_latency,
                                   port_force_measured)
+
+    def intrusions(self) -> str:
+        """What the operator should know about datagrams from someone other than the
+        master ("" while there were none)."""
+        counts = self.counts_now()
+        seen = [f"{counts[reason]} {reason}" for reason in INTRUSIONS if counts.get(reason)]
+        if not seen:
+            return ""
+        sender = self.intruder
+        where = f" (the newest from {sender[0]}:{sender[1]})" if sender else ""
+        old = " - an old-protocol master is refused, update it" if counts.get("version") else ""
+        return f"refusing datagrams not from the master: {', '.join(seen)}{where}{old}"
 
     def _receive(self) -> None:
         receive, clock = self._socket.recvfrom, time.perf_counter
@@ -124,16 +168,28 @@ class UdpMaster(InputSource):
     def handle(self, datagram: bytes, sender: tuple, arrival: float) -> None:
         """One datagram from ``sender`` arrived at ``arrival`` (``perf_counter``): offered
         to the control tick and answered, or dropped and counted."""
-        self.count("received")
+        with self._lock:
+            self.counts["received"] += 1
+            if self.master is not None and not self._released and sender != self.master:
+                self._intrusion("foreign", sender)
+                return
         try:
-            command = decode_command(datagram, self.ee)
+            command = decode_command(datagram, self.ee, self.key)
         except PacketError as error:
-            self.count(error.reason)
+            with self._lock:
+                if error.reason in INTRUSIONS:
+                    self._intrusion(error.reason, sender)
+                else:
+                    self.counts[error.reason] += 1
             return
         with self._lock:
-            reason = self._refusal(command.sequence, command.device_time, sender, arrival)
+            reason = self._refusal(command.stream, command.sequence, command.device_time,
+                                   sender, arrival)
             if reason:
-                self.counts[reason] += 1
+                if reason in INTRUSIONS:
+                    self._intrusion(reason, sender)
+                else:
+                    self.counts[reason] += 1
                 return
         self.offer(InputSample(command.kind, command.values, command.buttons,
                                command.sequence, arrival))
@@ -142,25 +198,36 @@ class UdpMaster(InputSource):
                          command.device_time, feedback.wrench, feedback.latency,
                          feedback.port_force_measured)
         try:
-            self._socket.sendto(encode_feedback(reply), sender)
+            self._socket.sendto(encode_feedback(reply, self.key), sender)
         except OSError:
             self.count("feedback_not_sent")
 
-    def _refusal(self, sequence: int, device_time: float, sender: tuple,
+    def _intrusion(self, reason: str, sender: tuple) -> None:
+        """Count a datagram from someone other than the master (caller holds the lock)."""
+        self.counts[reason] += 1
+        self.intruder = sender
+
+    def _refusal(self, stream: int, sequence: int, device_time: float, sender: tuple,
                  arrival: float) -> str:
-        """Why a valid command cannot be taken ("" when it can; caller holds the lock),
-        updating the stream's state when it can."""
-        if self._master is not None and sender != self._master:
-            return "foreign"
+        """Why an authenticated, valid command cannot be taken ("" when it can; caller
+        holds the lock), updating the stream's state when it can."""
+        if stream in self._retired:
+            return "replayed"
+        resumed = self._released
+        if self.master is None or (self._released and stream != self._stream):
+            self._bind(sender, stream)  # the first master, or a restarted one
+        elif sender != self.master:
+            return "foreign"  # the bound stream from elsewhere, or another stream while live
         newest = self._newest_sequence
-        if newest is not None and sequence <= newest:
+        if newest is not None and (sequence <= newest or (
+                not resumed and sequence - newest > SEQUENCE_WINDOW)):
             return "out_of_order"
         transit = arrival - device_time
         if self._clock_offset is not None and transit - self._clock_offset > self.max_age:
             self._stale_in_gap += 1  # it arrived: not lost
             return "stale"
-        if newest is not None:
-            self.counts["lost"] += sequence - newest - 1 - self._stale_in_gap
+        if newest is not None and not resumed:  # a silence's gap is not counted lost
+            self.counts["lost"] += max(0, sequence - newest - 1 - self._stale_in_gap)
         self._stale_in_gap = 0
         if self._clock_offset is not None:  # the minimum forgets slowly: the clocks drift
             self._clock_offset = min(transit, self._clock_offset
@@ -168,7 +235,18 @@ class UdpMaster(InputSource):
         else:
             self._clock_offset = transit
         self._offset_time = arrival
-        self._master = sender
         self._newest_sequence = sequence
+        self._released = False
         return ""
 
+    def _bind(self, sender: tuple, stream: int) -> None:
+        """The master is now ``sender``'s ``stream``: a new sequence and clock (caller
+        holds the lock)."""
+        if self._stream is not None:
+            self._retired[self._stream] = None
+            while len(self._retired) > RETIRED_STREAMS:
+                self._retired.popitem(last=False)
+        self.master, self._stream = sender, stream
+        self._newest_sequence = None
+        self._clock_offset = None
+        self._stale_in_gap = 0

@@ -25,6 +25,10 @@ def device_words(device: dict, ee_name: str, rate: float | None) -> str:
     words = f"**input {device['name']}** ({ee_name}) {device['reason']}"
     if device["source"].problem:
         words += f" (**{device['source'].problem}**)"
+    intrusions = getattr(device["source"], "intrusions", None)
+    warning = intrusions() if intrusions is not None else ""
+    if warning:
+        words += f" (**{warning}**)"
     if stats.get("received"):
         dropped = ", ".join(f"{reason.replace('_', ' ')} {stats[reason]}"
                             for reason in stats["drop_reasons"] if stats.get(reason))
