@@ -29,6 +29,13 @@ def as_acceleration_limit(value, size: int, name: str = "acceleration_limit") ->
     return array
 
 
+#: the relative margin the braking bound is rounded down by: it covers the roundings of
+#: ``d / (a dt^2)`` and back, and of the caller's ``v dt`` (about 8 half-ulps)
+ROUNDING_MARGIN = 8.0 * np.finfo(float).eps
+#: below it a double is subnormal: its relative precision is lost
+SMALLEST_NORMAL = np.finfo(float).tiny
+
+
 def braking_speed(distance: np.ndarray, step: np.ndarray, dt: float, gain: float) -> np.ndarray:
     """The largest speed (>= 0) towards a position limit ``distance >= 0`` away from which
     the joint can still stop, slowing by ``step = a dt`` per period, with every period
@@ -40,6 +47,10 @@ def braking_speed(distance: np.ndarray, step: np.ndarray, dt: float, gain: float
     ``k``, least at ``k* = sqrt(2 D + c - c^2) - c``: the bound is the least of ``x_0 = g D``
     and ``x_k`` at the two integers around ``k*``. The set is invariant: from ``x`` inside
     at ``D``, ``x - 1`` is inside at ``D - x``, so braking is always possible.
+
+    Rounding errs on the safe side: the bound is rounded down by :data:`ROUNDING_MARGIN`
+    (so ``bound * dt`` never exceeds ``gain * distance`` by an ulp), and a bound below the
+    smallest normal double, which has lost its relative precision, is 0.
     """
     c = 1.0 / gain
     scaled = distance / (step * dt)
@@ -48,7 +59,9 @@ def braking_speed(distance: np.ndarray, step: np.ndarray, dt: float, gain: float
     x_k = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c)
     k = k + 1.0
     x_next = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c)
-    return step * np.minimum(np.minimum(x_0, x_k), x_next)
+    bound = step * np.minimum(np.minimum(x_0, x_k), x_next) * (1.0 - ROUNDING_MARGIN)
+    bound[bound < SMALLEST_NORMAL] = 0.0
+    return bound
 
 
 def acceleration_box(lower: np.ndarray, upper: np.ndarray, previous: np.ndarray,

@@ -1,5 +1,6 @@
 """Shared fixtures: the built-in robots, loaded once, and a hole on each; Hypothesis's
-profile (under ``CI``, the same examples every run)."""
+profiles (by default the same examples every run; ``HYPOTHESIS_PROFILE=explore`` draws new
+ones, CONTRIBUTING.md)."""
 
 from __future__ import annotations
 
@@ -12,11 +13,13 @@ from hypothesis import settings
 
 from teleop import load_robot
 
-# Locally every run draws new examples (a failing one is saved in .hypothesis and replayed
-# first next time); a CI run draws the same ones, so that it does not depend on its luck.
-settings.register_profile("ci", derandomize=True, print_blob=True)
-if os.environ.get("CI"):
-    settings.load_profile("ci")
+# "pinned", the default, locally and in CI: every run draws the same examples (seeded by
+# each test's own code), so a run does not depend on its luck. "explore", run on purpose:
+# new examples every run, a failing one kept in .hypothesis/ and replayed first next time;
+# what it finds becomes an @example on the test, so the default run checks it from then on.
+settings.register_profile("pinned", derandomize=True, database=None, print_blob=True)
+settings.register_profile("explore", derandomize=False, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "pinned"))
 
 #: hole distance along the constrained link for each built-in robot (m)
 HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20}

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from constraints import Hole
@@ -54,6 +54,9 @@ def braked_to_a_stop(speed: float, distance: float, step: float, dt: float, gain
 @settings(max_examples=200, deadline=None)
 @given(distance=st.floats(0.0, 2.0), acceleration=st.floats(0.1, 100.0),
        dt=st.sampled_from([1e-3, 2e-3, 1e-2]), gain=st.floats(0.5, 1.0))
+# a subnormal distance: the bound was 2.47e-321, above gain * distance / dt (0 in doubles)
+@example(distance=5e-324, acceleration=1.0, dt=1e-3, gain=0.5)
+@example(distance=2.2250738585072014e-308, acceleration=0.1, dt=1e-2, gain=1.0)  # the least normal
 def test_braking_speed_is_the_largest_speed_that_can_still_stop(distance, acceleration, dt, gain):
     step = acceleration * dt
     bound = float(braking_speed(np.array([distance]), np.array([step]), dt, gain)[0])
@@ -68,6 +71,11 @@ def test_braking_speed_is_the_largest_speed_that_can_still_stop(distance, accele
 @given(distance=st.floats(1e-9, 2.0), fraction=st.floats(0.0, 1.0),
        acceleration=st.floats(0.1, 100.0), dt=st.sampled_from([1e-3, 1e-2]),
        gain=st.floats(0.5, 1.0))
+# at the bound with gain 1, rounding made v dt exceed the distance (left -2.07e-25)
+@example(distance=1.060395928589771e-09, fraction=1.0, acceleration=85.75468723109817,
+         dt=1e-2, gain=1.0)
+@example(distance=0.0003066433223308079, fraction=1.0, acceleration=69.65188909973531,
+         dt=1e-2, gain=1.0)
 def test_the_braking_bound_is_invariant(distance, fraction, acceleration, dt, gain):
     """From any speed it allows, one period on the bound's next value still admits the
     speed one acceleration step lower (the box never empties on the ideal integrator)."""
