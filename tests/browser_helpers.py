@@ -256,17 +256,19 @@ def watchdog():
 
 
 @contextlib.contextmanager
-def open_web(robot, record_dir, token: str | None = None, **server_options):
+def open_web(robot, record_dir, token: str | None = "auto", **server_options):
     """The real server (``run_server``, port picked free) and one Chromium page connected
-    to it (at the address ``teleop web`` prints: with ``token``, the page presents it): a
-    namespace with server, app, control, ui, robot, page, client, response, page_errors,
-    hole_time, url."""
+    to it (at the address ``teleop web`` prints: with ``token``, random by default as
+    ``teleop web``'s, the page presents it): a namespace with server, app, control, ui,
+    robot, page, client, response, page_errors, hole_time, url."""
     from playwright.sync_api import sync_playwright
 
+    from web.access import make_token
     from web.ui import run_server
 
     executable = chromium_executable()  # fails (does not skip) when Chromium is missing
     server_options.setdefault("scene_dir", Path(record_dir) / "scenes")
+    token = None if token is None else make_token(token)
     port = free_port()
     server, app, control, ui = run_server(robot, port=port, record_dir=record_dir,
                                           token=token, **server_options)

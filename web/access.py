@@ -1,21 +1,31 @@
-"""Who may reach the UI: the address it binds, and the token a page must present.
+"""Who may reach the UI: the address it binds, the token and the Origin a page must present.
 
 The UI moves a robot and reads and writes files in two folders (docs/design.md section
-5.3). By default it binds the loopback interface only. Bound to anything else it needs a
-**token** (``teleop web --host ADDRESS --token TOKEN``): every browser connection
-(a websocket) must present it in its URL, ``/?token=TOKEN``, or it is closed before it
-receives anything (no scene, no panels) and before any of its messages is read. The page
-is opened at :func:`page_url`, which tells viser's page to connect its websocket there.
+5.3). By default it binds the loopback interface only. Every browser connection (a
+websocket) is checked during its opening handshake, before viser sees it
+(:func:`require_access`), and refused with HTTP 403 unless
+
+* its **Origin** is the page's own: ``http://127.0.0.1:PORT``, ``http://localhost:PORT``
+  or ``http://[::1]:PORT`` for a loopback server, else ``http://`` and the Host it asked
+  for: a page from any other site the operator has open (cross-site websocket
+  hijacking) gets nothing;
+* and, when the server has a **token**, its URL carries it, ``/?token=TOKEN``.
+
+``teleop web`` always has a token, drawn per launch unless ``--token`` gives one (as
+Jupyter does); beyond loopback it must be given. The page is opened at
+:func:`page_url`, which tells viser's page to connect its websocket there.
 
 The token travels in clear text over HTTP: it keeps out other users of a network you
 trust, not an eavesdropper; across an untrusted network use an SSH tunnel to a loopback
-server instead.
+server instead (with the same port on both ends: the Origin names it).
 """
 
 from __future__ import annotations
 
 import errno
+import gc
 import hmac
+import http
 import ipaddress
 import re
 import secrets
@@ -24,6 +34,7 @@ import threading
 from urllib.parse import parse_qs, urlsplit
 
 import viser
+import websockets.asyncio.server
 
 #: seconds a host name may take to resolve before it is refused
 RESOLVE_TIMEOUT = 5.0
@@ -126,24 +137,92 @@ def presented_token(path: str) -> str:
     return values[0] if len(values) == 1 else ""
 
 
-def require_token(server: viser.ViserServer, token: str) -> None:
-    """Close every websocket of ``server`` whose URL does not carry ``token``, before it
-    is sent anything or any of its messages is read.
+def page_origins(host: str, port: int) -> frozenset[str] | None:
+    """The Origins a page of a server bound to ``host:port`` may have: the loopback names
+    for a loopback server, None (the Host the browser asked for) for any other."""
+    try:
+        loopback = is_loopback([host]) if host != "localhost" else True
+    except ValueError:  # a host name
+        loopback = False
+    if not loopback:
+        return None
+    return frozenset(f"http://{name}:{port}" for name in ("127.0.0.1", "localhost", "[::1]"))
 
-    viser runs the websocket server's connect callbacks before it starts a connection's
-    senders and reader; this one is registered on that server (viser's own
-    ``on_client_connect`` fires only later, on the page's first camera message).
+
+class Access:
+    """The checks every websocket of one server passes: its Origin, and the token.
+
+    token : what the URL must carry (None: no token asked).
+    origins : the Origins a page may have (None: ``http://`` and the request's Host).
     """
+
+    def __init__(self, token: str | None, origins: frozenset[str] | None) -> None:
+        self.token = token
+        self.origins = origins
+        #: websockets refused so far
+        self.refused = 0
+
+    def refusal(self, path: str, headers) -> str:
+        """Why a websocket request (its path and headers) is refused, "" when it is not."""
+        origin = (headers.get("Origin") or "").strip().lower()
+        if not origin:
+            return "no Origin: only the UI's own page may connect"
+        own = self.origins if self.origins is not None else {
+            f"http://{(headers.get('Host') or '').strip().lower()}"}
+        if origin not in own:
+            return f"Origin {origin[:100]} is not this UI's page"
+        if self.token is not None and not hmac.compare_digest(
+                presented_token(path).encode(), self.token.encode()):
+            return "this UI needs its token: open the address `teleop web` printed"
+        return ""
+
+
+def _handshake_server(server: viser.ViserServer):
+    """The websockets server behind ``server`` (which viser does not expose), found by
+    its listening port; None if it cannot be found."""
+    port = server.get_port()
+    for candidate in gc.get_objects():
+        if isinstance(candidate, websockets.asyncio.server.Server) and \
+                candidate.server is not None and any(
+                    sock.getsockname()[1] == port for sock in candidate.server.sockets):
+            return candidate
+    return None
+
+
+def require_access(server: viser.ViserServer, token: str | None, host: str) -> Access:
+    """Refuse every websocket of ``server`` (bound to ``host``) whose Origin is not the
+    page's own or whose URL does not carry ``token`` (None: no token asked).
+
+    The check runs in the opening handshake (an HTTP 403: the connection never reaches
+    viser, which is sent and reads nothing). As a second line, in case the handshake
+    cannot be hooked, the same check runs first among the websocket server's connect
+    callbacks, before viser starts a connection's senders, and closes it.
+    """
+    access = Access(token, page_origins(host, server.get_port()))
     websocket_server = server._websock_server
-    expected = token.encode()
+    handshake = _handshake_server(server)
+    if handshake is not None:
+        serve_page = handshake.process_request
+
+        def gate(connection, request):
+            if (request.headers.get("Upgrade") or "").lower() == "websocket":
+                reason = access.refusal(request.path, request.headers)
+                if reason:
+                    access.refused += 1
+                    return connection.respond(http.HTTPStatus.FORBIDDEN, reason + "\n")
+            return None if serve_page is None else serve_page(connection, request)
+
+        handshake.process_request = gate
 
     async def check(connection) -> None:
         websocket = websocket_server._live_connections.get(connection.client_id)
         if websocket is None:
             return
-        presented = presented_token(websocket.request.path if websocket.request else "")
-        if not hmac.compare_digest(presented.encode(), expected):
-            await websocket.close(REFUSED, "this UI needs its token: open the address "
-                                           "`teleop web` printed")
+        request = websocket.request
+        reason = access.refusal(request.path, request.headers) if request else "no request"
+        if reason:
+            access.refused += 1
+            await websocket.close(REFUSED, reason[:120])
 
-    websocket_server.on_client_connect(check)
+    websocket_server._client_connect_cb.insert(0, check)
+    return access

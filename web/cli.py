@@ -38,9 +38,13 @@ SECURITY = """what the server exposes:
 Whoever opens the page can move the robot, and read and write scene files in --scene-dir
 and recordings in --record-dir (file names only, nothing outside those folders). The
 server listens on this machine only (127.0.0.1) unless --host says otherwise; another
-address needs --token, and the page must then be opened at the address printed at start.
-From another machine, prefer an SSH tunnel to the loopback server:
-  ssh -L 8080:127.0.0.1:8080 robot-pc   then open http://127.0.0.1:8080/"""
+address needs --token. The page must be opened at the address printed at start (it
+carries the token, random per launch unless --token gives it), and a websocket whose
+Origin is not the page's own is refused: no other site open in the browser can connect.
+From another machine, prefer an SSH tunnel to the loopback server, same port both ends:
+  ssh -L 8080:127.0.0.1:8080 robot-pc   then open the printed address there
+Network masters (--input udp:PORT) must tag every datagram with the key printed at start
+(or --input-key FILE)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -140,7 +144,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "of A-Z a-z 0-9 _ - . ~, or 'auto' for a random one); required "
                              "when --host is not a loopback address; open the address printed "
                              "at start. It travels unencrypted: across an untrusted network use "
-                             "an SSH tunnel (default: none on loopback)")
+                             "an SSH tunnel (default: a random one per launch)")
 
 
 ROBOT_OPTIONS = ("robot", "ee_frame", "constrained_link", "link_axis", "package_dirs", "q_home",
@@ -176,14 +180,14 @@ def _load(args: argparse.Namespace):
 
 
 def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
-    """The port and token to serve with; ``ValueError`` for a port or host that cannot be
-    served, or a host beyond loopback without a token (then a warning line is printed)."""
+    """The port and token to serve with (a random one per launch unless ``--token``
+    gives it); ``ValueError`` for a port or host that cannot be served, a bad token, or a
+    host beyond loopback without ``--token`` (then a warning line is printed)."""
     port = check_port(args.port)
     addresses = resolve_host(args.host)
     check_bind(addresses, port)
-    token = None if args.token is None else make_token(args.token)
     if not is_loopback(addresses):
-        if token is None:
+        if args.token is None:
             raise ValueError(f"--host {args.host} serves the UI beyond this machine: give "
                              "--token TOKEN (or --token auto), or use an SSH tunnel to "
                              "127.0.0.1")
@@ -194,7 +198,7 @@ def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
               + ("; the --input udp ports take only datagrams carrying the key's HMAC"
                  if any(spec.startswith("udp:") for spec in args.input or ()) else ""),
               file=sys.stderr)
-    return port, token
+    return port, make_token("auto" if args.token is None else args.token)
 
 
 def _plant(args: argparse.Namespace) -> dict:

@@ -11,7 +11,7 @@ from teleop.inputs import InputSource
 from teleop.plants import PlantSettings
 from teleop.robots import Robot
 
-from ..access import require_token
+from ..access import make_token, require_access
 from ..app import ControlThread, TeleopApp
 from .core import TeleopUI
 
@@ -28,8 +28,10 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
     threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
-    The page reads and writes files in ``scene_dir`` and ``record_dir`` only; with a
-    ``token``, a page that does not present it gets nothing (:mod:`web.access`).
+    The page reads and writes files in ``scene_dir`` and ``record_dir`` only; a websocket
+    whose Origin is not the page's own gets nothing, nor, with a ``token`` ("auto": a
+    random one, then ``ui.access.token``), one that does not present it
+    (:mod:`web.access`).
     ``plant``, ``plant_settings``, ``wall_stiffness``: what the loops run on;
     ``collisions``, ``collision_settings``: the collision avoidance
     (:class:`web.app.TeleopApp`); ``inputs``: the devices that drive the EEs, each its
@@ -46,13 +48,13 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     for source in inputs:
         app.attach_input(source)
     server = viser.ViserServer(host=host, port=port, verbose=False)
-    if token is not None:
-        require_token(server, token)
-        # a page that connected before the check was in place (nothing is served yet)
-        # reconnects, and is checked
-        server._websock_server.disconnect_all_clients()
+    access = require_access(server, None if token is None else make_token(token), host)
+    # a page that connected before the check was in place (nothing is served yet)
+    # reconnects, and is checked
+    server._websock_server.disconnect_all_clients()
     control = ControlThread(app)
     ui = TeleopUI(server, app, control, notes=notes)
+    ui.access = access
     control.start()
     ui.start()
     return server, app, control, ui
