@@ -180,7 +180,7 @@ def test_compare_on_the_physics_plant_from_the_command_line(tmp_path):
     assert run.returncode == 0, run.stderr
     document = json.loads((out / "metrics.json").read_text())
     jsonschema.validate(document, SCHEMA)
-    assert document["schema_version"] == 6  # 6: random variations and the gains (docs/design.md 15.1.1)
+    assert document["schema_version"] == 7  # 7: the supervisor (docs/design.md 5.2)
     plant = document["plant"]
     assert plant["kind"] == "mujoco" and plant["wall_stiffness_n_per_m"] == 2000.0
     assert plant["settings"]["payload_kg"] == 0.5

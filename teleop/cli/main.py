@@ -36,6 +36,7 @@ from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
 from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bounded, csv_list,
                         damper_settings, one_line, sentence)
 from .commands import Command, registered_commands
+from .supervisor_options import add_supervisor_options, supervisor_choice
 from .sweep import add_arguments as add_sweep_arguments
 from .sweep import run as run_sweep_command
 
@@ -179,6 +180,7 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     _add_plant_options(parser, "the session's plant (its header), else the defaults"
                        if source == "session" else "its default")
     _add_collision_options(parser, source)
+    add_supervisor_options(parser)
 
 
 def _add_variation_options(parser: argparse.ArgumentParser, source: str) -> None:
@@ -437,7 +439,8 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
     if plan.constraint_gain is not None:
         limits += f"; constraint gain {plan.constraint_gain:g} 1/s"
     print(f"{plan.name}: {plan.description} ({duration:g} s at {config.rate:g} Hz, "
-          f"{imperfections.describe()}; {plant.describe()}{limits})")
+          f"{imperfections.describe()}; {plant.describe()}{limits}; "
+          f"{config.supervisor.describe()})")
     print(format_table(document))
     print()
     print(format_body_table(document))
@@ -459,7 +462,8 @@ def _compare(args: argparse.Namespace) -> int:
     from teleop.loop import LoopConfig
 
     return _run(collision_choice(args, load_scenario(args.scenario)), args,
-                LoopConfig(rate=args.rate or 1000.0, kp=args.kp or LoopConfig.kp),
+                LoopConfig(rate=args.rate or 1000.0, kp=args.kp or LoopConfig.kp,
+                           supervisor=supervisor_choice(args)),
                 plant_choice(args))
 
 
@@ -471,7 +475,8 @@ def _replay(args: argparse.Namespace) -> int:
     header = session.header
     config = LoopConfig(rate=args.rate or header.get("rate_hz", 1000.0),
                         kp=args.kp or header.get("kp", LoopConfig.kp),
-                        target_time_constant=header.get("target_time_constant_s", 0.0))
+                        target_time_constant=header.get("target_time_constant_s", 0.0),
+                        supervisor=supervisor_choice(args))
     return _run(collision_choice(args, session_plan(session)), args, config,
                 plant_choice(args, session_plant(session)))
 

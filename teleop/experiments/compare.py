@@ -27,7 +27,7 @@ from .variations import Variation
 from .results import BODY_METRIC_KEYS, COLLISION_METRIC_KEYS, METRIC_KEYS, RunResult
 from .solver_output import SolverOutputCapture
 
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 
 
 def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
@@ -212,6 +212,9 @@ def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
         constraint_errors=constraint_errors,
         failure_messages=failures,
         status_counts=dict(collections.Counter(r.status for r in records)),
+        controller_status_counts=dict(collections.Counter(r.controller_status for r in records)),
+        supervisor_first_action=next((f"t={r.t:.3f}s: {r.message}" for r in records
+                                      if r.supervisor_action != "none"), None),
         commanded_joint_velocity=np.array(drive.commands, dtype=float),
         actual_linear_velocities=np.array([r.actual_linear_velocities for r in records],
                                           dtype=float).reshape(-1, count, 3),
@@ -428,6 +431,7 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
         "acceleration_limits": bool(acceleration_limits),
         "variation": (variation or Variation()).to_dict(),
         "kp": config.kp,
+        "supervisor": config.supervisor.to_dict(),
         "constraint_gain": plan.constraint_gain,
         "collisions": plan.collisions,
         "joint_velocity_reference": reference,

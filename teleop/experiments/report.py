@@ -2,7 +2,8 @@
 
 The scenario, the robot, its plant and how it was imperfect, the package versions, the
 metrics table with the best value of each column marked, the robot's body and the run's
-smoothness (docs/design.md section 17.3), the steps per status, the joint-velocity
+smoothness (docs/design.md section 17.3), the steps per status, what the supervisor
+measured and did (docs/design.md 5.2), the joint-velocity
 agreement, what the solvers said, and every plot embedded as base64: the page needs no
 network and no other file.
 """
@@ -116,6 +117,7 @@ def render_report(document: dict, figures: Sequence[Figure]) -> str:
           if document.get("collisions") is not None else []),
         "<h2>Each end effector and each constraint</h2>", _parts_table(document),
         "<h2>Steps by status</h2>", _status_table(document),
+        "<h2>The supervisor</h2>", _supervisor_table(document),
         "<h2>What the solvers said</h2>", _solver_messages(document),
         "<h2>Plots</h2>",
     ]
@@ -245,7 +247,44 @@ def _status_table(document: dict) -> str:
     rows.append("</table>")
     summary = "; ".join(f"{spec}: {format_status_counts(m['status_counts'])}"
                         for spec, m in document["controllers"].items())
-    return "\n".join(rows) + f'\n<p class="note">{e(summary)}</p>'
+    own = "; ".join(f"{spec}: {format_status_counts(m['controller_status_counts'])}"
+                    for spec, m in document["controllers"].items()
+                    if "controller_status_counts" in m)
+    note = ("The loop's status: the controller's, or constraint_degraded where the supervisor "
+            "measured a constraint error or port force beyond tolerance at the sensed "
+            f"configuration (design 5.2). {summary}."
+            + (f" The controllers' own step status: {own}." if own else ""))
+    return "\n".join(rows) + f'\n<p class="note">{e(note)}</p>'
+
+
+def _supervisor_table(document: dict) -> str:
+    """What the supervisor measured and did, per controller, and its thresholds (design
+    5.2); a line saying so for a document written before it existed."""
+    e = html.escape
+    config = document.get("supervisor")
+    if config is None:
+        return "<p>Not recorded (metrics written before the supervisor).</p>"
+    rows = ["<table>", "<tr><th>controller</th><th>measured error max (mm)</th>"
+            "<th>measured port force max (N)</th><th>scaled steps</th><th>held steps</th>"
+            "<th>smallest scale</th><th>first action</th></tr>"]
+    for spec, metrics in document["controllers"].items():
+        m = metrics["supervisor"]
+        force = m["measured_port_force_max_n"]
+        cells = [f"{1e3 * m['measured_error_max_m']:.3f}",
+                 "-" if force is None else f"{force:.3f}", str(m["scaled_steps"]),
+                 str(m["held_steps"]), f"{m['scale_min']:.2f}"]
+        rows.append(f"<tr><td>{e(spec)}</td>" + "".join(f"<td>{c}</td>" for c in cells)
+                    + f'<td style="text-align:left">{e(m["first_action"] or "-")}</td></tr>')
+    rows.append("</table>")
+    note = (f"Measured every period at the sensed configuration (encoder noise included) and, "
+            f"on the physics plant, the port force: ok up to {1e3 * config['tolerance_m']:g} mm "
+            f"and {config['force_tolerance_n']:g} N; "
+            + ("the operator's twist scaled from 1 at "
+               f"{1e3 * config['error_warn_m']:g} mm ({config['force_warn_n']:g} N) to 0 at "
+               f"{1e3 * config['error_hold_m']:g} mm ({config['force_hold_n']:g} N), where the "
+               f"target is held; back up in no less than {config['release_time_s']:g} s."
+               if config["acting"] else "measuring only: it never scaled nor held."))
+    return "\n".join(rows) + f'\n<p class="note">{e(note)}</p>'
 
 
 def _solver_messages(document: dict) -> str:

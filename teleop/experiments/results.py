@@ -56,7 +56,9 @@ class RunResult:
     operator_linear_velocity, commanded_linear_velocity, actual_linear_velocity :
         (steps, 3) world-frame EE linear velocities: the filtered target's, the commanded
         twist's, the one achieved.
-    statuses : (steps,) the controller's step status each step.
+    statuses : (steps,) the loop's status each step: the controller's, or
+        ``constraint_degraded`` when the supervisor measured beyond tolerance
+        (docs/design.md 5.2).
     ee_frames : the robot's EE frames, in order.
     ee_position_errors, ee_orientation_errors : (steps, EEs) each EE's error against its
         target (m, rad); the ``ee_*`` columns are the worst EE's.
@@ -67,7 +69,10 @@ class RunResult:
         solve at the reference run's ``q`` and twist (rad/s, docs/design.md section 15.3),
         zeros for the reference itself; None when not computed.
     failure_messages : the first failures, with their time.
-    status_counts : steps per step status.
+    status_counts : steps per status (the loop's, :attr:`statuses`).
+    controller_status_counts : steps per the controller's own step status.
+    supervisor_first_action : the first period the supervisor scaled or held the twist, in
+        words with its time (None: it never acted).
     solver_messages : what the solvers wrote or warned during the run, each distinct line
         with its count (docs/design.md section 15.5).
     commanded_joint_velocity : (steps, nv) the command of each step (rad/s).
@@ -102,6 +107,8 @@ class RunResult:
     joint_velocity_deviation: np.ndarray | None = None
     failure_messages: list[str] = field(default_factory=list)
     status_counts: dict[str, int] = field(default_factory=dict)
+    controller_status_counts: dict[str, int] = field(default_factory=dict)
+    supervisor_first_action: str | None = None
     solver_messages: dict[str, int] = field(default_factory=dict)
     commanded_joint_velocity: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     actual_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))
@@ -136,6 +143,25 @@ class RunResult:
             "contact_steps": int(np.sum(self.contacts > 0)) if bodily else None,
             "contact_depth_max_m": (float(np.max(self.contact_depths, initial=0.0)) if bodily
                                     else None),
+        }
+
+    def supervisor_metrics(self) -> dict[str, float | int | str | None]:
+        """What the supervisor measured at the sensed configuration and did
+        (docs/design.md 5.2): the largest measured constraint error and port force (null
+        when the plant measured none), the steps it scaled and held the operator's twist,
+        the smallest scale, its first action in words."""
+        c = self.columns
+        scale = c.get("supervisor_scale", np.ones(0))
+        measured = c.get("measured_constraint_error", np.zeros(0))
+        force = c.get("measured_port_force", np.zeros(0))
+        force = force[np.isfinite(force)]
+        return {
+            "measured_error_max_m": float(np.max(measured, initial=0.0)),
+            "measured_port_force_max_n": float(np.max(force)) if force.size else None,
+            "scaled_steps": int(np.sum((scale > 0.0) & (scale < 1.0))),
+            "held_steps": int(np.sum(scale == 0.0)),
+            "scale_min": float(np.min(scale, initial=1.0)),
+            "first_action": self.supervisor_first_action,
         }
 
     @property
@@ -210,6 +236,8 @@ class RunResult:
             **self.collision_metrics(),
             "first_failure": self.failure_messages[0] if self.failure_messages else None,
             "status_counts": dict(self.status_counts),
+            "controller_status_counts": dict(self.controller_status_counts),
+            "supervisor": self.supervisor_metrics(),
             "solver_messages": dict(self.solver_messages),
             "end_effectors": {frame: {
                 "position_error_max_m": top(self.ee_position_errors[:, i]),

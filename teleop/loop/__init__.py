@@ -5,13 +5,13 @@ from .closed_loop import (
     Plant,
     Targets,
     TeleopLoop,
-    constraint_names,
-    row_labels,
     saturate_twist,
     target_poses,
 )
 from .distance_meter import SAFETY_TOLERANCE, DistanceMeasure, DistanceMeter
+from .naming import constraint_names, row_labels
 from .records import RECORD_FIELDS, CompiledPendingStep, PendingStep, StepRecord
+from .supervisor import Supervision, Supervisor, SupervisorConfig
 
-__all__ = ["RECORD_FIELDS", "SAFETY_TOLERANCE", "CompiledPendingStep", "DistanceMeasure", "DistanceMeter", "LoopConfig", "PendingStep", "Plant", "StepRecord", "Targets", "TeleopLoop",
+__all__ = ["RECORD_FIELDS", "SAFETY_TOLERANCE", "CompiledPendingStep", "DistanceMeasure", "DistanceMeter", "LoopConfig", "PendingStep", "Plant", "StepRecord", "Supervision", "Supervisor", "SupervisorConfig", "Targets", "TeleopLoop",
            "constraint_names", "row_labels", "saturate_twist", "target_poses"]

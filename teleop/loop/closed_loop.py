@@ -41,19 +41,13 @@ from constraints.validation import as_number, as_vector
 from teleop.limits import MAX_POSE_GAIN, MAX_RATE_HZ, MAX_TIME_CONSTANT_S
 
 from .distance_meter import DistanceMeter
+from .naming import constraint_names, row_labels
 from .records import CompiledPendingStep, PendingStep, StepRecord
+from .supervisor import Supervision, Supervisor, SupervisorConfig
 from .true_kinematics import TrueKinematics
 
 #: An operator target: one pose for a single-EE robot, else one per ``robot.ee_frames`` entry.
 Targets = Union[pin.SE3, Sequence[pin.SE3]]
-
-#: What the velocity along a constraint's rows is called, by its number of rows k
-#: (a plane: its normal; a hole: the two directions across the link; a lock: world x, y, z).
-ROW_WORDS = {1: ("normal velocity at {name}",),
-             2: ("lateral velocity at {name}, direction 1",
-                 "lateral velocity at {name}, direction 2"),
-             3: ("x velocity at {name}", "y velocity at {name}", "z velocity at {name}")}
-
 
 @dataclass(frozen=True)
 class LoopConfig:
@@ -67,6 +61,7 @@ class LoopConfig:
         the twist is scaled uniformly so its direction is kept.
     target_time_constant : first-order smoothing of the operator target (s); 0 = none.
     feed_forward : add the target's own twist to the command.
+    supervisor : the measured status's and the supervisor's thresholds (docs/design.md 5.2).
     """
 
     rate: float = 1000.0
@@ -75,6 +70,7 @@ class LoopConfig:
     max_angular_speed: float = 1.5
     target_time_constant: float = 0.0
     feed_forward: bool = True
+    supervisor: SupervisorConfig = SupervisorConfig()
 
     def __post_init__(self) -> None:
         """Every field a real number in its range (``ValueError`` naming it); the rate,
@@ -92,6 +88,9 @@ class LoopConfig:
         }
         if not isinstance(self.feed_forward, (bool, np.bool_)):
             raise ValueError(f"feed_forward must be True or False, got {self.feed_forward!r}")
+        if not isinstance(self.supervisor, SupervisorConfig):
+            raise ValueError(f"supervisor must be a SupervisorConfig, got "
+                             f"{type(self.supervisor).__name__}")
         for name, value in checked.items():
             object.__setattr__(self, name, value)
 
@@ -120,19 +119,6 @@ class Plant(Protocol):
         """What the plant measured over the last period (its own type), or None."""
 
 
-def row_labels(constraints: Sequence[Constraint]) -> tuple[str, ...]:
-    """Words for every equality row, in order: ``"lateral velocity at hole 1, direction 1
-    (m/s)"``; constraints are numbered by kind in list order (docs/design.md section 15.2)."""
-    labels, numbers = [], {}
-    for constraint in constraints:
-        if not constraint.is_equality:
-            continue
-        numbers[constraint.label] = numbers.get(constraint.label, 0) + 1
-        name = f"{constraint.label} {numbers[constraint.label]}"
-        labels += [f"{words.format(name=name)} (m/s)" for words in ROW_WORDS[constraint.dim]]
-    return tuple(labels)
-
-
 def target_poses(target: Targets) -> list[pin.SE3]:
     """``target`` as a list of poses (a lone ``pin.SE3`` becomes a list of one)."""
     poses = [target] if isinstance(target, pin.SE3) else list(target)
@@ -140,16 +126,6 @@ def target_poses(target: Targets) -> list[pin.SE3]:
         if not isinstance(pose, pin.SE3):
             raise ValueError(f"a target must be a pin.SE3, got {type(pose).__name__}")
     return poses
-
-
-def constraint_names(constraints: Sequence[Constraint]) -> tuple[str, ...]:
-    """One name per constraint, in order: ``"hole 2 (arm_right_link_5_r)"``, numbered by
-    kind in list order (equalities and barriers alike) and naming the link it holds."""
-    names, numbers = [], {}
-    for constraint in constraints:
-        numbers[constraint.label] = numbers.get(constraint.label, 0) + 1
-        names.append(f"{constraint.label} {numbers[constraint.label]} ({constraint.link})")
-    return tuple(names)
 
 
 def saturate_twist(twist: np.ndarray, max_linear: float, max_angular: float) -> np.ndarray:
@@ -217,6 +193,9 @@ class TeleopLoop:
         self.q = as_vector(robot.q_home if q0 is None else q0, self.model.nq, "q0")
         if plant is not None:
             plant.reset(self.q)
+        #: measures the sensed robot, scales the twist; what it did last (design.md 5.2)
+        self.supervisor = Supervisor(self.model, self.config.supervisor, self.config.dt)
+        self.supervision: Supervision | None = None
         self.t = 0.0
         self._filtered_targets: list[pin.SE3] | None = None
         self._previous_targets: list[pin.SE3] | None = None
@@ -282,6 +261,8 @@ class TeleopLoop:
         self._previous_targets = None
         self._history_in_tick = False
         self.last_qd = np.zeros(self.model.nv)
+        self.supervisor.reset()
+        self.supervision = None
         if self.plant is not None:
             self.plant.reset(self.q)
         if self.distance_meter is not None:
@@ -367,12 +348,14 @@ class TeleopLoop:
         It runs compiled (:attr:`compiled`, one C++ call) when the controller offers it
         and its current step can take it; else, and on a period whose sensed
         configuration the C++ side does not take, the Python reference
-        (:meth:`_advance_python`), to which the filter's state is handed over."""
+        (:meth:`_advance_python`), to which the filter's state is handed over; also a
+        period whose twist the supervisor scales (:meth:`supervise`, run first)."""
         tick_start = time.perf_counter_ns()
         poses = self.targets(target)
         sensed = self.q if self.plant is None else self.plant.sense(self.q)
+        supervision = self.supervise(sensed)
         compiled = self.compiled
-        if compiled is not None and compiled.ready():
+        if compiled is not None and supervision.scale == 1.0 and compiled.ready():
             if not self._history_in_tick:
                 compiled.set_history(self._filtered_targets, self._previous_targets)
                 self._history_in_tick = True
@@ -381,16 +364,35 @@ class TeleopLoop:
             except ValueError:  # a declaration refused: the Python path's controlled stop
                 result = None
             if result is not None:
-                return self._advance_compiled(result, sensed, tick_start)
+                return self._supervised(self._advance_compiled(result, sensed, tick_start),
+                                        supervision)
         if self._history_in_tick:
             self._filtered_targets, self._previous_targets = compiled.history()
             self._history_in_tick = False
-        return self._advance_python(poses, sensed, tick_start)
+        return self._supervised(
+            self._advance_python(poses, sensed, tick_start, supervision.scale), supervision)
+
+    def supervise(self, sensed: np.ndarray) -> Supervision:
+        """The supervisor's measures at ``sensed`` and of the plant's port forces, and its
+        action (docs/design.md 5.2), kept in :attr:`supervision`."""
+        measures = None if self.plant is None else self.plant.measures()
+        self._row_labels()  # the constraints' names, when the set changed
+        self.supervision = self.supervisor.supervise(
+            sensed, self.constraints, self.controller.constraint_frames, self._names,
+            getattr(measures, "port_forces", None))
+        return self.supervision
+
+    @staticmethod
+    def _supervised(step: PendingStep, supervision: Supervision) -> PendingStep:
+        """``step`` with the loop's status (:meth:`Supervision.status_of`)."""
+        step.controller_status, step.supervision = step.status, supervision
+        step.status, step.message = supervision.status_of(step.status, step.message)
+        return step
 
     def _advance_python(self, poses: list[pin.SE3], sensed: np.ndarray,
-                        tick_start: int) -> PendingStep:
+                        tick_start: int, scale: float = 1.0) -> PendingStep:
         """The period in Python (the reference): Pinocchio's kinematics for the EE poses,
-        the twists, ``controller.solve``, ``pin.integrate``."""
+        the twists times the supervisor's ``scale``, the solve, ``pin.integrate``."""
         model, data = self.model, self.data
         targets = self.filter_targets(poses)
         pin.forwardKinematics(model, data, sensed)
@@ -398,11 +400,13 @@ class TeleopLoop:
                       for frame in self.ee_frame_ids]
         requested = self._pose_twists(placements, targets)
         twists = [self._saturate(twist) for twist in requested]
+        saturated = any(capped is not twist for capped, twist in zip(twists, requested))
+        if scale != 1.0:
+            twists = [twist * scale for twist in twists]
         # filter_targets makes a new list of new poses every period: no copy needed
         previous, self._previous_targets = self._previous_targets, targets
         qd, status, message, step_time = self._solve(sensed, np.concatenate(twists))
         q_before, qd, moved, status, message = self._move(sensed, qd, status, message)
-        saturated = any(capped is not twist for capped, twist in zip(twists, requested))
         return PendingStep(
             targets=targets, previous_targets=previous, placements=placements, twists=twists,
             sensed=sensed, q_before=q_before, qd=qd, moved=moved,
@@ -523,6 +527,10 @@ class TeleopLoop:
             actual_linear_velocities=step.actual_linear_velocities,
             constraint_errors=errors, constraint_names=self._names,
             status=step.status, message=step.message,
+            controller_status=step.controller_status,
+            measured_constraint_error=step.supervision.error,
+            measured_port_force=step.supervision.port_force,
+            supervisor_scale=step.supervision.scale, supervisor_action=step.supervision.action,
             plant=None if self.plant is None else self.plant.measures(),
             minimum_distance=math.inf if distance is None else distance.minimum_distance,
             closest_pair="" if distance is None else distance.closest_pair,

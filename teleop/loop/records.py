@@ -11,12 +11,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from .supervisor import Supervision
+
 #: Columns of the per-step record, in order (see :class:`StepRecord`).
 RECORD_FIELDS = (
     "t", "constraint_error", "constraint_velocity_residual", "barrier_penetration",
     "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed",
     "step_time_us", "tick_time_us", "constraint_velocity_floor", "twist_saturated",
-    "minimum_distance",
+    "minimum_distance", "measured_constraint_error", "measured_port_force", "supervisor_scale",
 )
 
 
@@ -57,8 +59,16 @@ class StepRecord:
     actual_linear_velocities: np.ndarray = field(repr=False)  # (EEs, 3) world frame
     constraint_errors: np.ndarray = field(repr=False)  # each constraint's violation (m)
     constraint_names: tuple[str, ...] = field(repr=False)  # one per constraint (constraint_names)
-    status: str = "ok"  # the controller's step status (controllers.StepStatus value)
+    #: the loop's status: the controller's, or ``constraint_degraded`` when a measure at
+    #: the sensed configuration is beyond the supervisor's tolerance (docs/design.md 5.2)
+    status: str = "ok"
     message: str = ""
+    controller_status: str = "ok"  # the controller's own step status (controllers.StepStatus)
+    #: the largest constraint error measured at the sensed configuration (m)
+    measured_constraint_error: float = 0.0
+    measured_port_force: float = math.nan  # the largest port force measured (N), NaN: none
+    supervisor_scale: float = 1.0  # what the supervisor multiplied the commanded twists by
+    supervisor_action: str = "none"  # teleop.loop.supervisor.ACTIONS
     plant: object | None = field(default=None, repr=False)  # the plant's own measures
     #: the collision pairs' smallest distance at the true configuration (m; inf without
     #: collision avoidance or no pair measured; exact below d_i, teleop.loop.distance_meter)
@@ -106,9 +116,11 @@ class PendingStep:
     moved: np.ndarray  # the joint velocities the robot moved with (the plant's)
     tick_time_us: float  # the hot path: filter, kinematics, command, solve, integration
     step_time_us: float
-    status: str
+    status: str  # the controller's, then the loop's (TeleopLoop._supervised)
     message: str
     twist_saturated: bool
+    controller_status: str = "ok"
+    supervision: Supervision | None = None  # what the supervisor measured and did
     residual: float = 0.0
     floor: float = 0.0
     constraint_velocity: np.ndarray = field(default_factory=lambda: np.zeros(0))

@@ -9,6 +9,7 @@ import numpy as np
 
 from controllers import StepStatus
 from teleop.loop import StepRecord
+from teleop.loop.supervisor import Supervision
 
 from .limits import FOLLOWING, ON_TARGET, STALLED_SPEED
 from .plant import PortReading
@@ -77,6 +78,18 @@ def behind_words(achieved_rate: float, rate: float) -> str:
         return ""
     return (f"control loop behind: only {achieved_rate:.0f} of the {rate:.0f} Hz asked for "
             f"({100.0 * achieved_rate / rate:.0f} %); this machine is too busy for this rate")
+
+
+def supervision_words(supervision: Supervision | None) -> str:
+    """What the supervisor measured beyond tolerance at the sensed configuration and what
+    it did, ``"measured: hole 1 (link_6) 0.812 mm off (tolerance 0.1 mm); supervisor
+    scaled the operator's twist to 79 % (...)"``; ``""`` when all is within tolerance and
+    it did nothing (docs/design.md 5.2)."""
+    if supervision is None:
+        return ""
+    parts = ([f"measured: {supervision.breach}"] if supervision.breach else []) + (
+        [supervision.words] if supervision.words else [])
+    return "; ".join(parts)
 
 
 def port_words(ports: list[PortReading]) -> str:

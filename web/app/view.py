@@ -140,7 +140,9 @@ class View:
                 "active_pairs": self.active_pairs(which),
                 # the rows its controller computed last (immutable), or None
                 "collision_rows": self.collision_rows.get(which),
-                "ports": self._ports(loop, placements)}
+                "ports": self._ports(loop, placements),
+                # what the supervisor measured and did in the last period (immutable)
+                "supervision": loop.supervision}
 
     def _robot_snapshot(self, state: dict, constraints: dict[str, Constraint],
                         targets: list[pin.SE3]) -> dict:

@@ -11,7 +11,7 @@ import viser
 
 from constraints.collision import CollisionRows
 
-from ..app import ControlThread, port_words
+from ..app import ControlThread, port_words, supervision_words
 
 BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
 
@@ -90,6 +90,9 @@ class StatusView:
                               f"step {record.step_time_us:.0f} us)")
             if robot["ports"]:
                 words += f"; {port_words(robot['ports'])}"
+            supervised = supervision_words(robot.get("supervision"))
+            if supervised:
+                words += f"; **{supervised}**"
             if robot["active_inequalities"]:
                 words += (f"; one-sided constraints held: "
                           f"{', '.join(robot['active_inequalities'])}")

@@ -1,0 +1,56 @@
+"""The supervisor's command-line options (docs/cli.md, docs/design.md 5.2): the measured
+status's tolerances, the warning and hold levels, or a supervisor that only measures."""
+
+from __future__ import annotations
+
+import argparse
+
+from teleop.loop.supervisor import SupervisorConfig
+
+from .arguments import positive
+
+#: the defaults, shown in the options' help
+DEFAULT = SupervisorConfig()
+
+
+def _pair(text: str) -> tuple[float, float]:
+    """``"A,B"`` -> two finite numbers > 0 (argparse type)."""
+    parts = text.split(",")
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"expected two numbers A,B, got {text!r}")
+    return positive(parts[0].strip()), positive(parts[1].strip())
+
+
+def add_supervisor_options(parser: argparse.ArgumentParser) -> None:
+    """``--measured-tolerance``, ``--supervisor-error``, ``--supervisor-force``,
+    ``--no-supervisor`` in a group of their own (left out: the defaults)."""
+    group = parser.add_argument_group(
+        "the supervisor", "measures each constraint's error at the sensed configuration (and "
+        "the port force on the mujoco plant) every period: a step is ok only within tolerance; "
+        "it scales the operator's twist from 1 at the warning level to 0 at the hold level "
+        "(docs/design.md section 5.2)")
+    group.add_argument("--measured-tolerance", type=_pair, metavar="MM,N",
+                       help="a measured constraint error (mm) or port force (N) above these: "
+                       f"the step is not ok (default: {1e3 * DEFAULT.tolerance:g},"
+                       f"{DEFAULT.force_tolerance:g})")
+    group.add_argument("--supervisor-error", type=_pair, metavar="WARN_MM,HOLD_MM",
+                       help="measured constraint error where the twist starts to be scaled "
+                       f"down, and where it is zero (default: {1e3 * DEFAULT.error_warn:g},"
+                       f"{1e3 * DEFAULT.error_hold:g})")
+    group.add_argument("--supervisor-force", type=_pair, metavar="WARN_N,HOLD_N",
+                       help="the same for the measured port force (default: "
+                       f"{DEFAULT.force_warn:g},{DEFAULT.force_hold:g})")
+    group.add_argument("--no-supervisor", action="store_true",
+                       help="measure and flag, never scale nor hold the operator's twist")
+
+
+def supervisor_choice(args: argparse.Namespace) -> SupervisorConfig:
+    """The :class:`SupervisorConfig` the options ask for (``ValueError`` naming the field
+    when a warning level is not below its hold level)."""
+    tolerance = args.measured_tolerance or (1e3 * DEFAULT.tolerance, DEFAULT.force_tolerance)
+    error = args.supervisor_error or (1e3 * DEFAULT.error_warn, 1e3 * DEFAULT.error_hold)
+    force = args.supervisor_force or (DEFAULT.force_warn, DEFAULT.force_hold)
+    return SupervisorConfig(tolerance=1e-3 * tolerance[0], error_warn=1e-3 * error[0],
+                            error_hold=1e-3 * error[1], force_tolerance=tolerance[1],
+                            force_warn=force[0], force_hold=force[1],
+                            acting=not args.no_supervisor)
