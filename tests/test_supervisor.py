@@ -20,7 +20,7 @@ from teleop.experiments.compare import run_plan
 from teleop.experiments.plan import Plan
 from teleop.experiments.scenarios import load_scenario
 from teleop.loop import LoopConfig, TeleopLoop
-from teleop.loop.supervisor import SupervisorConfig, ramp
+from teleop.loop.supervisor import Supervision, SupervisorConfig, ramp
 from teleop.plants.choice import PlantChoice
 from teleop.plants.imperfect import Imperfections
 
@@ -163,3 +163,20 @@ def test_the_command_line_sets_the_thresholds_into_metrics_json(tmp_path):
                           "fast-lateral", "--supervisor-error", "3,2", "--out", str(out)],
                          capture_output=True, text=True, timeout=600)
     assert bad.returncode != 0 and "error_warn must be below error_hold" in bad.stderr
+
+
+def test_the_ui_status_line_says_what_the_supervisor_measured_and_did():
+    from web.app import supervision_words
+
+    calm = Supervision(2e-5, 0.01, 1.0, "none", "", "")
+    assert supervision_words(None) == "" and supervision_words(calm) == ""
+    held = Supervision(2.3e-3, 2.4, 0.0, "held", "hole 1 (link_6) 2.300 mm off (tolerance 0.1 mm)",
+                       "supervisor held the target: twist zero (hole 1 (link_6) 2.300 mm off; "
+                       "warn 0.5 mm, hold 2 mm)")
+    assert supervision_words(held) == (
+        "measured: hole 1 (link_6) 2.300 mm off (tolerance 0.1 mm); supervisor held the "
+        "target: twist zero (hole 1 (link_6) 2.300 mm off; warn 0.5 mm, hold 2 mm)")
+    assert held.status_of("least_squares", "joint 3 at its limit") == (
+        "constraint_degraded", f"measured: {held.breach}; {held.words}; controller: "
+        "least_squares, joint 3 at its limit")
+    assert held.status_of("failed", "no command")[0] == "failed"

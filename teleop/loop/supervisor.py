@@ -205,15 +205,16 @@ class Supervisor:
     def _action_words(self, action: str, scale: float, wanted: float, error: float,
                       error_words: str, force: float, force_words: str) -> str:
         """``"supervisor scaled the operator's twist to 40 % (hole 1 (link_6) 1.100 mm
-        off; warn 0.5 mm, hold 2 mm)"``: the action and the measure that set it."""
+        off; warn 0.5 mm, hold 2 mm)"``: the action and the measure that set it (the
+        ``error`` or the ``force``, whichever asks the smaller scale)."""
+        if wanted == 1.0:
+            return f"supervisor releasing the operator's twist: {100 * scale:.0f} %"
         config = self.config
         by_force = ramp(force, config.force_warn, config.force_hold) < ramp(
             error, config.error_warn, config.error_hold)
         cause = (f"{force_words}; warn {config.force_warn:g} N, hold {config.force_hold:g} N"
                  if by_force else f"{error_words}; warn {1e3 * config.error_warn:g} mm, "
                  f"hold {1e3 * config.error_hold:g} mm")
-        if wanted == 1.0:
-            return f"supervisor releasing the operator's twist: {100 * scale:.0f} %"
         releasing = ", releasing" if scale < wanted else ""
         if action == "held":
             return f"supervisor held the target: twist zero ({cause})"
