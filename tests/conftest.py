@@ -5,6 +5,7 @@ ones, CONTRIBUTING.md)."""
 from __future__ import annotations
 
 import os
+from fnmatch import fnmatch
 
 import numpy as np
 import pinocchio as pin
@@ -20,6 +21,24 @@ from teleop import load_robot
 settings.register_profile("pinned", derandomize=True, database=None, print_blob=True)
 settings.register_profile("explore", derandomize=False, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "pinned"))
+
+#: the tiers (CONTRIBUTING.md): the markers each test file's tests carry, by file name
+#: (a test may also carry one itself, e.g. ``timing``); a new file that drives the
+#: browser, runs MuJoCo, fuzzes or takes more than about 10 s is added here
+FILE_MARKERS = {
+    "browser": ("test_browser*.py",),
+    "physics": ("test_mujoco_*.py", "test_plant_*.py", "test_web_plant.py",
+                "test_browser_plant.py", "test_supervisor.py"),
+    "fuzz": ("*fuzz*.py",),
+    "slow": ("test_examples.py", "test_inputs_master.py"),
+}
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        for marker, patterns in FILE_MARKERS.items():
+            if any(fnmatch(item.path.name, pattern) for pattern in patterns):
+                item.add_marker(marker)
 
 #: hole distance along the constrained link for each built-in robot (m)
 HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20}

@@ -137,6 +137,8 @@ def check_10(out: str, tmp: Path) -> None:
 
 
 def check_11(out: str, tmp: Path) -> None:
+    """What holds however loaded the machine is (the real-time figures: the timing test
+    below)."""
     (counts,) = re.findall(r"sent (\d+) commands, received (\d+), applied (\d+), "
                            r"superseded (\d+), dropped (\d+), lost (\d+)", out)
     sent, received, applied, superseded, dropped, lost = (int(n) for n in counts)
@@ -144,11 +146,10 @@ def check_11(out: str, tmp: Path) -> None:
     assert applied + superseded == received
     (feedback,) = numbers(r"feedback received: NUMBER", out)
     assert feedback == sent
-    (rms,) = numbers(r"tracking error RMS NUMBER mm", out)
     (hole,) = numbers(r"hole error max NUMBER um", out)
     (stopped,) = numbers(r"robot stopped NUMBER ms later", out)
-    # the issue's bounds: RMS 1 mm, hole 1 um, stopped within 150 ms of the silence
-    assert rms <= 1.0 and hole <= 1.0 and 100.0 <= stopped <= 150.0, out
+    # the issue's bound: hole 1 um; the watchdog (100 ms) never stops the robot early
+    assert hole <= 1.0 and stopped >= 100.0, out
 
 
 CHECKS = {"01_cjm_vs_qp.py": check_01, "02_closed_loop.py": check_02, "03_barrier.py": check_03,
@@ -165,14 +166,30 @@ def test_the_examples_folder_has_the_documented_scripts():
     assert all(name in readme for name in names), "examples/README.md must list every script"
 
 
-@pytest.mark.parametrize("script", EXAMPLES, ids=[path.name for path in EXAMPLES])
-def test_example_runs_and_prints_its_numbers(script: Path, tmp_path: Path):
+def run(script: Path, tmp_path: Path) -> str:
+    """What ``script`` printed, run headless in ``tmp_path``; it must succeed."""
     arguments = [a.format(tmp=tmp_path) for a in ARGUMENTS.get(script.name, [])]
     env = dict(os.environ, MPLBACKEND="Agg", PYTHONUNBUFFERED="1")
     result = subprocess.run([sys.executable, str(script), *arguments], cwd=tmp_path, env=env,
                             capture_output=True, text=True, timeout=TIMEOUT)
     assert result.returncode == 0, f"{script.name} failed:\n{result.stdout}\n{result.stderr}"
     assert result.stdout.strip(), f"{script.name} printed nothing"
+    return result.stdout
+
+
+@pytest.mark.parametrize("script", EXAMPLES, ids=[path.name for path in EXAMPLES])
+def test_example_runs_and_prints_its_numbers(script: Path, tmp_path: Path):
+    out = run(script, tmp_path)
     check = CHECKS.get(script.name)
     if check is not None:
-        check(result.stdout, tmp_path)
+        check(out, tmp_path)
+
+
+@pytest.mark.timing
+def test_the_network_master_example_meets_its_real_time_bounds(tmp_path: Path):
+    """The issue's bounds, which need the 1 kHz loop to keep its rate: the EE tracks the
+    circle to 1 mm RMS and stops within 150 ms of the master's silence."""
+    out = run(EXAMPLES_DIR / "11_network_master.py", tmp_path)
+    (rms,) = numbers(r"tracking error RMS NUMBER mm", out)
+    (stopped,) = numbers(r"robot stopped NUMBER ms later", out)
+    assert rms <= 1.0 and stopped <= 150.0, out

@@ -1,6 +1,14 @@
 """A real master process streaming over UDP at 1 kHz against the UI core (docs/design.md
-section 19.2): the EE tracks the master's circle with a hole held, and killing the
-master stops the robot through the watchdog."""
+section 19.2): the EE follows the master's circle with a hole held, and killing the
+master stops the robot through the watchdog.
+
+One session is recorded (module fixture) and checked twice. The default test checks what
+holds however loaded the machine is: each applied command moves the target by the
+master's motion, the hole holds, nothing is lost, the watchdog stops the robot and not
+before its timeout. The ``timing`` test checks the real-time figures, which need the
+1 kHz loop to keep its rate (an idle machine; CONTRIBUTING.md): the tracking error, the
+stop within 150 ms, the feedback keeping up and no release while the master streams.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +16,7 @@ import math
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -40,23 +49,40 @@ def circle(sequence: int) -> np.ndarray:
     return np.array([RADIUS * (math.cos(angle) - 1.0), RADIUS * math.sin(angle), 0.0])
 
 
-@pytest.fixture
-def console():
+@dataclass
+class Session:
+    """What one session with a master process recorded."""
+
+    #: every 10 ms: the applied command's sequence, the target it gave, whether the device
+    #: was following, and how many times the target was decoupled from the master so far
+    #: (watchdog releases and refused moves)
+    snapshots: list[tuple[int, np.ndarray, bool, int]]
+    errors: list[float]  # EE to target (m), after the first 0.5 s
+    holes: list[float]  # the hole's constraint error (m), after the first 0.5 s
+    sent: int  # commands the master had sent at the end of its motion
+    feedback: int  # feedback it had read by then
+    releases_streaming: int  # watchdog releases while the master streamed
+    stopped: float  # from the master's last command to the robot at rest (s)
+    input_timeout: float  # the watchdog's (s)
+    reason: str  # the device's status once stopped
+    held_moved: float  # how far the target moved in 0.2 s after the stop (m)
+    qd_held: float  # the largest joint speed then (rad/s)
+    stats: dict
+
+
+def decoupled(master: UdpMaster) -> int:
+    counts = master.counts_now()
+    return counts.get("releases", 0) + counts.get("refused", 0)
+
+
+@pytest.fixture(scope="module")
+def session() -> Session:
     app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=RATE)
     app.add_constraint("hole", distance=0.08)
     master = UdpMaster(port=0)
     app.attach_input(master)
     control = ControlThread(app)
     control.start()
-    yield app, master, control
-    control.stop()
-    app.close_inputs()
-
-
-def test_a_master_process_at_1khz_is_tracked_with_the_hole_held_and_its_death_stops_the_robot(
-        console):
-    app, master, control = console
-    start_target = app.targets[0].translation.copy()
     process = subprocess.Popen([sys.executable, "-c", MASTER, str(master.port), str(RATE),
                                 str(SECONDS), str(RADIUS), str(PERIOD), master.key.hex()],
                                stdout=subprocess.PIPE, text=True)
@@ -65,27 +91,20 @@ def test_a_master_process_at_1khz_is_tracked_with_the_hole_held_and_its_death_st
         while master.counts["applied"] == 0:
             assert time.monotonic() < deadline and process.poll() is None, "no command applied"
             time.sleep(0.001)
-        errors, holes, mapped = [], [], []
+        snapshots, errors, holes = [], [], []
         began = time.monotonic()
         while time.monotonic() - began < SECONDS - 1.0:
             time.sleep(0.01)
             with app._lock:  # the target and the command it came from, together
-                sequence, target = master.applied_sequence, app.inputs[0].target.translation.copy()
-            mapped.append((sequence, target))
+                snapshots.append((master.applied_sequence,
+                                  app.inputs[0].target.translation.copy(),
+                                  app.devices[0].state == FeedbackState.FOLLOWING,
+                                  decoupled(master)))
             if time.monotonic() - began > 0.5:  # past the start of the motion
                 errors.append(app.limitation().distance)
                 holes.append(app.last_records["main"].constraint_error)
-        line = process.stdout.readline()
-        # the target is the first command's target moved by the master's motion since,
-        # in the default view (written here: right = -y, up = +z, back = -x)
-        for sequence, target in mapped[::50]:
-            expected = start_target + DEFAULT_VIEW @ (circle(sequence) - circle(1))
-            assert target == pytest.approx(expected, abs=1e-9), sequence
-        rms = math.sqrt(float(np.mean(np.square(errors))))
-        assert rms <= 1e-3, f"EE tracking RMS {1e3 * rms:.3f} mm"
-        assert max(holes) <= 1e-6, f"hole error {max(holes):.3g} m"
-        sent, feedback = (int(word) for word in line.split()[1::2])
-        assert sent == int(RATE * SECONDS) + 1 and feedback >= 0.99 * sent, line
+        sent, feedback = (int(word) for word in process.stdout.readline().split()[1::2])
+        releases_streaming = master.counts_now().get("releases", 0)
 
         process.kill()  # the master dies
         process.wait(10)
@@ -93,23 +112,59 @@ def test_a_master_process_at_1khz_is_tracked_with_the_hole_held_and_its_death_st
         deadline = time.monotonic() + 10.0
         while not (app.devices[0].state == FeedbackState.HELD
                    and np.max(np.abs(app.loops["main"].last_qd)) < 1e-3):
-            assert time.monotonic() < deadline, "the robot did not stop"
+            assert time.monotonic() < deadline, "the robot did not stop within 10 s"
             time.sleep(0.0005)
         stopped = time.perf_counter() - last
-        assert stopped <= 0.150, f"stopped {1e3 * stopped:.0f} ms after the last command"
-        assert "silent" in app.devices[0].reason and "the robot holds" in app.devices[0].reason
         held = app.targets[0].translation.copy()
         time.sleep(0.2)  # held: the target stays and the robot with it
-        assert app.targets[0].translation == pytest.approx(held, abs=0.0)
-        assert np.max(np.abs(app.loops["main"].last_qd)) < 1e-3
-        # every command the master sent until it died: received, none dropped or lost,
-        # each either used by a command or replaced by a newer one before any tick
-        # (a command the receiving thread reads late on a loaded machine is stale: counted,
-        # not applied; a lost one would have been dropped by the kernel)
-        stats = master.statistics()
-        assert stats["dropped"] == stats.get("stale", 0) and stats.get("lost", 0) == 0
-        assert stats["received"] == stats["accepted"] + stats["dropped"] >= sent
-        assert stats["accepted"] == stats["applied"] + stats.get("superseded", 0)
+        return Session(snapshots, errors, holes, sent, feedback, releases_streaming, stopped,
+                       app.input_timeout, app.devices[0].reason,
+                       float(np.max(np.abs(app.targets[0].translation - held))),
+                       float(np.max(np.abs(app.loops["main"].last_qd))), master.statistics())
     finally:
         process.kill()
         process.wait(10)
+        control.stop()
+        app.close_inputs()
+
+
+def test_a_master_process_is_followed_with_the_hole_held_and_its_death_stops_the_robot(
+        session: Session):
+    # within a stretch where the device follows (no release or refused move between), the
+    # target moves by the master's motion between the commands applied, in the default
+    # view (written here: right = -y, up = +z, back = -x)
+    stretches: dict[int, tuple[int, np.ndarray]] = {}
+    checked = 0
+    for sequence, target, following, stretch in session.snapshots:
+        if not following:
+            continue
+        first_sequence, first_target = stretches.setdefault(stretch, (sequence, target))
+        expected = first_target + DEFAULT_VIEW @ (circle(sequence) - circle(first_sequence))
+        assert target == pytest.approx(expected, abs=1e-9), (sequence, first_sequence)
+        checked += sequence != first_sequence
+    assert checked >= len(session.snapshots) // 2, (checked, len(session.snapshots))
+    assert max(session.holes) <= 1e-6, f"hole error {max(session.holes):.3g} m"
+    assert session.sent == int(RATE * SECONDS) + 1
+
+    # the watchdog stopped the robot, not before its timeout after the last command
+    assert session.stopped > session.input_timeout
+    assert "silent" in session.reason and "the robot holds" in session.reason
+    assert session.held_moved == 0.0 and session.qd_held < 1e-3
+    # every command the master sent until it died: received, none dropped or lost,
+    # each either used by a command or replaced by a newer one before any tick
+    # (a command the receiving thread reads late on a loaded machine is stale: counted,
+    # not applied; a lost one would have been dropped by the kernel)
+    stats = session.stats
+    assert stats["dropped"] == stats.get("stale", 0) and stats.get("lost", 0) == 0
+    assert stats["received"] == stats["accepted"] + stats["dropped"] >= session.sent
+    assert stats["accepted"] == stats["applied"] + stats.get("superseded", 0)
+
+
+@pytest.mark.timing
+def test_a_master_process_at_1khz_is_tracked_within_1mm_and_stopped_within_150ms(
+        session: Session):
+    rms = math.sqrt(float(np.mean(np.square(session.errors))))
+    assert rms <= 1e-3, f"EE tracking RMS {1e3 * rms:.3f} mm"
+    assert session.releases_streaming == 0, "the watchdog released a streaming master"
+    assert session.feedback >= 0.99 * session.sent, (session.feedback, session.sent)
+    assert session.stopped <= 0.150, f"stopped {1e3 * session.stopped:.0f} ms after the last command"
