@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from make_collision_screenshot import free_port, open_page, wait_until
+from make_collision_screenshot import free_port, open_page
 
 from teleop import load_robot
 from teleop.inputs import UdpMaster

@@ -4,12 +4,13 @@ each arm, every self-collision pair kept apart (docs/design.md section 18.7).
 Each run starts at a random configuration near home where the two arms are within the
 detection distance of each other (none closer than 1 cm), places a hole on each
 constrained link there, draws a target point for each tip (5 to 20 cm towards and past
-the other tip, 5 cm of noise each way), and steers both tips to it for ``steps`` periods of 1 ms: ``q`` integrated from
-the command (``pin.integrate``), the tips' linear velocities from a proportional law
-saturated at 0.15 m/s (the task is the tips' positions: an instrument through a trocar
-cannot hold its orientation while it moves sideways). After every step it measures, with its own collision avoidance, the
-smallest distance of every pair within the detection distance (coal's, exact), and the
-holes' errors; it checks each command against the joint box.
+the other tip, 5 cm of noise each way), and steers both tips to it for ``steps`` periods
+of 1 ms: ``q`` integrated from the command (``pin.integrate``), the tips' linear velocities
+from a proportional law saturated at 0.15 m/s (the task is the tips' positions: an
+instrument through a trocar cannot hold its orientation while it moves sideways). After
+every step it measures, with its own collision avoidance, the smallest distance of every
+pair within the detection distance (coal's, exact), and the holes' errors; it checks each
+command against the joint box.
 
 ``python -m tests.collision_fuzz --runs 2000`` prints the figures per controller.
 """

@@ -248,7 +248,8 @@ EVENTS = [
     ("gain 'abc'", [hole_added(gain="abc")], 2, r"bad hole: gain must be a number, got 'abc'"),
     ("gain -500", [hole_added(gain=-500)], 2, r"bad hole: gain must be >= 0"),
     ("gain null", [hole_added(gain=None)], 2, r"bad hole: gain must be a number, got None"),
-    ("end at 1e12 s", [{"type": "end", "t": 1e12}], 2, r"'t' must be a time in \[0, 3600\] s, got 1000000000000.0$"),
+    ("end at 1e12 s", [{"type": "end", "t": 1e12}], 2,
+     r"'t' must be a time in \[0, 3600\] s, got 1000000000000.0$"),
     ("t 'abc'", [{"type": "end", "t": "abc"}], 2, r"'t' must be a time"),
     ("t true", [{"type": "end", "t": True}], 2, r"'t' must be a time .*got True"),
     ("nested JSON", [DEEP], 2, r"JSON nested too deeply$"),
@@ -326,7 +327,8 @@ def test_a_bad_scene_names_the_field(changes, pattern):
 
 @pytest.mark.parametrize("text, pattern", [
     pytest.param(DEEP, r"JSON nested too deeply$", id="nested JSON"),
-    pytest.param("{", r": not JSON \(Expecting property name enclosed in double quotes, column 2\)$", id="not JSON"),
+    pytest.param("{", r": not JSON \(Expecting property name enclosed in double quotes, column 2\)$",
+                 id="not JSON"),
     pytest.param('{"rate": ' + "9" * 5000 + "}", r": not readable JSON", id="5000-digit integer"),
 ])
 def test_a_bad_scene_file_is_one_line(text, pattern, tmp_path):

@@ -36,9 +36,10 @@ def obstacles_near(robot, q) -> list[Obstacle]:
     wrist = data.oMf[model.getFrameId("arm_left_link_5_r")].translation
     return [Sphere(wrist + [0.0, 0.0, 0.12], 0.05, velocity=(0.0, 0.0, -0.1), name="organ"),
             Box(wrist + [0.12, 0.0, 0.0], (0.06, 0.08, 0.1), rpy=(0.3, 0.1, -0.2), name="box"),
-            Capsule(wrist + [0.0, 0.13, 0.0], 0.03, 0.2, axis=np.array([1.0, 0.0, 1.0]) / np.sqrt(2), name="bar"),
-            HalfSpace(wrist - [0.0, 0.0, 0.1], np.array([0.0, 0.2, 1.0]) / np.hypot(0.2, 1.0), velocity=(0.0, 0.0, 0.05),
-                      name="table")]
+            Capsule(wrist + [0.0, 0.13, 0.0], 0.03, 0.2, axis=np.array([1.0, 0.0, 1.0]) / np.sqrt(2),
+                    name="bar"),
+            HalfSpace(wrist - [0.0, 0.0, 0.1], np.array([0.0, 0.2, 1.0]) / np.hypot(0.2, 1.0),
+                      velocity=(0.0, 0.0, 0.05), name="table")]
 
 
 # -- the broadphase's segment distance ------------------------------------------------------

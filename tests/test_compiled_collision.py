@@ -125,8 +125,9 @@ def coal_distance(first, first_pose, second, second_pose) -> coal.DistanceResult
 def coal_parallel_error(first, second, first_pose, second_pose) -> float:
     """coal's error (m) on two capsules whose axes it takes as parallel: up to their length
     times the sine of their angle, the drift of one axis along the other (2.5e-9 m at 2e-8
-    rad on 0.125 m crossing, 1.5e-5 m at 2e-3 rad on 7.8 mm side by side). Probed: it does when the axes' ``a e - b^2`` of Ericson's closest points,
-    ``(2 h_1 2 h_2 sin)^2``, is below about 1e-14; here when ``4 h_1 h_2 sin < 1e-6``
+    rad on 0.125 m crossing, 1.5e-5 m at 2e-3 rad on 7.8 mm side by side). Probed: it does
+    when the axes' ``a e - b^2`` of Ericson's closest points, ``(2 h_1 2 h_2 sin)^2``, is
+    below about 1e-14; here when ``4 h_1 h_2 sin < 1e-6``
     (1e-12 for that square); zero for any other pair."""
     if (first[0], second[0]) != ("capsule", "capsule"):
         return 0.0
@@ -172,8 +173,10 @@ def test_primitive_distances_and_witness_points_equal_coal(first, second, first_
             np.testing.assert_allclose(normal, -np.asarray(reference.normal), rtol=0,
                                        atol=WITNESS_TOLERANCE)
         if unique_closest_points(first, second, first_pose, second_pose):
-            np.testing.assert_allclose(on_first, reference.getNearestPoint1(), rtol=0, atol=WITNESS_TOLERANCE)
-            np.testing.assert_allclose(on_second, reference.getNearestPoint2(), rtol=0, atol=WITNESS_TOLERANCE)
+            np.testing.assert_allclose(on_first, reference.getNearestPoint1(), rtol=0,
+                                       atol=WITNESS_TOLERANCE)
+            np.testing.assert_allclose(on_second, reference.getNearestPoint2(), rtol=0,
+                                       atol=WITNESS_TOLERANCE)
     else:
         # penetrating: each witness point is its body's deepest point along the normal,
         # inside (or on) the other body, and the normal separates them by the depth
@@ -280,7 +283,8 @@ def test_the_compiled_rows_are_the_python_rows(dual, close, seed):
     expected = collisions.rows(model, data)
     assert compiled.pairs == expected.pairs
     assert (compiled.closest_pair, compiled.size) == (expected.closest_pair, expected.size)
-    assert math.isclose(compiled.minimum_distance, expected.minimum_distance, rel_tol=0.0, abs_tol=DISTANCE_TOLERANCE)
+    assert math.isclose(compiled.minimum_distance, expected.minimum_distance, rel_tol=0.0,
+                        abs_tol=DISTANCE_TOLERANCE)
     description, placed = body_poses(collisions, model, q)
     velocities = [np.zeros(3)] * len(description.body_kinds) + [o.velocity for o in description.obstacles]
     for i, index in enumerate(indices.tolist()):
@@ -305,7 +309,8 @@ def test_the_compiled_rows_are_the_python_rows(dual, close, seed):
         np.testing.assert_allclose(compiled.rows[i], row, rtol=0,
                                    atol=1e-12 + 10 * np.finfo(float).eps / distance, err_msg=str(distance))
         if np.abs(compiled.witnesses[i] - expected.witnesses[i]).max() <= WITNESS_TOLERANCE:
-            np.testing.assert_allclose(compiled.rows[i], expected.rows[i], rtol=0, atol=10 * WITNESS_TOLERANCE)
+            np.testing.assert_allclose(compiled.rows[i], expected.rows[i], rtol=0,
+                                       atol=10 * WITNESS_TOLERANCE)
         else:  # closest points not unique (a box's face parallel to the other body)
             for point, body in ((on_first, first), (on_second, second),
                                 (expected.witnesses[i][0], first), (expected.witnesses[i][1], second)):

@@ -109,7 +109,8 @@ def every_kind_model() -> pin.Model:
     placements between them, and a frame on each joint."""
     parts, parent = [], "base"
     for i, (kind, axis) in enumerate(URDF_JOINTS):
-        limits = '<limit lower="-2" upper="2" effort="1" velocity="1"/>' if kind in ("revolute", "prismatic") else ""
+        limits = ('<limit lower="-2" upper="2" effort="1" velocity="1"/>'
+                  if kind in ("revolute", "prismatic") else "")
         parts.append(f'<link name="l{i}"/><joint name="j{i}" type="{kind}"><parent link="{parent}"/>'
                      f'<child link="l{i}"/><origin xyz="0.1 -0.05 0.2" rpy="0.3 -0.2 0.5"/>'
                      f'<axis xyz="{axis}"/>{limits}</joint>')

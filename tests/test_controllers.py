@@ -202,7 +202,8 @@ def test_velocity_limits_slow_the_task_and_keep_the_constraint(ur5_instrument):
     hole = offset_hole(robot, q, rng)  # drift term active: b != 0
     twist = np.array([2.0, -1.0, 1.5, 3.0, 2.0, -1.0])
     raw = CJMController(robot, [hole], velocity_limits=False, position_limits=False).solve(q, twist)
-    drift_only = CJMController(robot, [hole], velocity_limits=False, position_limits=False).solve(q, np.zeros(6))
+    drift_only = CJMController(robot, [hole], velocity_limits=False,
+                               position_limits=False).solve(q, np.zeros(6))
     controller = CJMController(robot, [hole])
     qd = controller.solve(q, twist)
     assert 0.0 < controller.info.scale < 1.0

@@ -83,7 +83,8 @@ def test_cjm_matches_finite_differences_of_the_chain(robot):
     rng = np.random.default_rng(3)
     q = near_home(robot, rng)
     hole = Hole.on_link(robot, q, distance=HOLE_DISTANCE[robot.name])
-    controller = CJMController(robot, [hole], singular_threshold=0.0, velocity_limits=False, position_limits=False)
+    controller = CJMController(robot, [hole], singular_threshold=0.0, velocity_limits=False,
+                               position_limits=False)
     twist = rng.normal(size=6) * 0.05
     qd = controller.solve(q, twist)
     before = kinematics(robot, q).oMf[robot.model.getFrameId(robot.ee_frame)]

@@ -165,7 +165,8 @@ def test_ur5_instrument_chain(ur5: Robot) -> None:
         assert model.velocityLimit[model.idx_vs[j]] == pytest.approx(vel)
 
 
-@pytest.mark.parametrize("name, max_cond, min_sigma", [("sda10f", 30.0, 0.05), ("ur5_instrument", 30.0, 0.01)])
+@pytest.mark.parametrize("name, max_cond, min_sigma",
+                         [("sda10f", 30.0, 0.05), ("ur5_instrument", 30.0, 0.01)])
 def test_q_home_well_conditioned(name: str, max_cond: float, min_sigma: float) -> None:
     robot = load_robot(name)
     q = robot.q_home.copy()

@@ -95,8 +95,10 @@ def test_constraints_added_and_removed_mid_session(tmp_path, ur5_instrument):
     ("{not json", r"edits.jsonl:2: not JSON"),
     ('{"type": "teleport", "t": 0}', r"edits.jsonl:2: unknown event type 'teleport'"),
     ('{"type": "target", "t": -1, "position": [0,0,0], "quaternion_wxyz": [1,0,0,0]}', r"'t' must be a time"),
-    ('{"type": "target", "t": 0, "position": [0,0,0], "quaternion_wxyz": [2,0,0,0]}', r"quaternion must be unit"),
-    ('{"type": "add", "t": 0, "id": "x", "constraint": {"kind": "wormhole"}}', r"unknown constraint kind 'wormhole'"),
+    ('{"type": "target", "t": 0, "position": [0,0,0], "quaternion_wxyz": [2,0,0,0]}',
+     r"quaternion must be unit"),
+    ('{"type": "add", "t": 0, "id": "x", "constraint": {"kind": "wormhole"}}',
+     r"unknown constraint kind 'wormhole'"),
 ])
 def test_bad_session_lines_are_named(tmp_path, line, message):
     path = tmp_path / "edits.jsonl"

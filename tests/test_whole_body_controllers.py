@@ -19,7 +19,6 @@ from conftest import kinematics, near_home
 
 from constraints import Barrier, Hole
 from controllers import CJMController, QPController
-from teleop import load_robot
 
 HOLE_DISTANCE = 0.08
 SEEDS = st.integers(0, 2**32 - 1)
@@ -175,7 +174,6 @@ def test_mobile_jacobians_and_rows_match_finite_differences(mobile, seed, headin
     q_minus = pin.integrate(mobile.model, q, -step * qd)
     data_plus, data_minus = kinematics(mobile, q_plus), kinematics(mobile, q_minus)
     jacobian = stacked_ee_jacobian(mobile, q)
-    data = kinematics(mobile, q)
     for i, frame in enumerate(mobile.ee_frame_ids):
         twist = pin.log6(data_minus.oMf[frame].actInv(data_plus.oMf[frame])).vector / (2 * step)
         # log6 of the relative motion over 2 steps is the body twist at the midpoint, q

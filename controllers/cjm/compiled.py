@@ -172,7 +172,8 @@ class CompiledStep:
         self.previous = step.previous
         self._check_kinematics(frames)
         #: the collision rows measured in C++ (None without collision avoidance)
-        self.collision_rows = None if self._collisions is None else CompiledCollisions(pipeline, self._collisions)
+        self.collision_rows = (None if self._collisions is None
+                               else CompiledCollisions(pipeline, self._collisions))
 
     def _check_kinematics(self, frames: list[int]) -> None:
         """The copy of the model against Pinocchio, once, at the posture: a joint it

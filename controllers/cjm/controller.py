@@ -109,8 +109,9 @@ class CJMController(Controller):
         equality rows (docs/design.md section 18.4); :meth:`set_collisions` changes them.
     backend : ``"compiled"`` (the whole step in C++, Pinocchio's kinematics included,
         :mod:`controllers.cjm.compiled`, docs/design.md section 16), ``"python"``
-        (:mod:`controllers.cjm.python_step` and the forms: the readable reference) or ``"auto"`` (compiled when the
-        extension is built and covers the robot's joints, else Python; ``CJM_BACKEND=python``
+        (:mod:`controllers.cjm.python_step` and the forms: the readable reference) or
+        ``"auto"`` (compiled when the extension is built and covers the robot's joints,
+        else Python; ``CJM_BACKEND=python``
         in the environment makes it Python, :data:`BACKEND_VARIABLE`). ``"compiled"``
         raises ``ImportError`` without the extension and ``ValueError`` for a robot it
         does not cover. The compiled step computes its kinematics on its own copy of the

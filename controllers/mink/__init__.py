@@ -25,8 +25,9 @@ Conventions of mink 1.3.0 (read from ``mink/solve_ik.py``, ``mink/tasks/task.py`
 * The global ``damping`` adds ``damping * I`` to the Hessian in ``dq``: since the whole
   objective scales as ``dt^2`` it acts like the QP controller's ``mu`` on ``v``.
 * A planar root joint is MuJoCo's slide x, slide y, hinge z
-  (:class:`controllers.mujoco_model.PlanarBase`), which ``configuration.integrate`` moves by ``(x, y, th) + v dt`` where Pinocchio integrates
-  the SE(2) exponential: the two agree to first order in ``dt``, and mink only uses the
+  (:class:`controllers.mujoco_model.PlanarBase`), which ``configuration.integrate``
+  moves by ``(x, y, th) + v dt`` where Pinocchio integrates the SE(2) exponential: the
+  two agree to first order in ``dt``, and mink only uses the
   velocity, never the integrated configuration.
 
 The package: :mod:`.controller` (:class:`MinkController`, the step), :mod:`.adapters`

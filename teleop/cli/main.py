@@ -449,7 +449,8 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
         print(format_collision_table(document))
     for spec, result in results.items():
         if result.failure_messages:
-            print(f"  {spec}: {len(result.failure_messages)}+ failed steps, first {result.failure_messages[0]}")
+            print(f"  {spec}: {len(result.failure_messages)}+ failed steps, "
+                  f"first {result.failure_messages[0]}")
         if result.solver_messages:
             print(f"  {spec}: the solver wrote {sum(result.solver_messages.values())} lines "
                   f"({len(result.solver_messages)} distinct), kept in metrics.json")

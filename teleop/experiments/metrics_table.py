@@ -111,5 +111,6 @@ def format_collision_table(document: dict) -> str:
              "|" + "---|" * (len(headers) + 2)]
     for spec, m in document["controllers"].items():
         cells = ["-" if m.get(key) is None else fmt(m[key]) for _, key, fmt in COLLISION_COLUMNS]
-        lines.append(f"| {spec} | " + " | ".join(cells) + f" | {(m.get('closest_pair') or '-').replace('|', '/')} |")
+        pair = (m.get("closest_pair") or "-").replace("|", "/")
+        lines.append(f"| {spec} | " + " | ".join(cells) + f" | {pair} |")
     return "\n".join(lines)

@@ -33,8 +33,8 @@ BODY_METRIC_KEYS = (
 )
 
 #: per-controller keys of collision avoidance (docs/design.md section 18.6), between
-#: :data:`METRIC_KEYS` and :data:`BODY_METRIC_KEYS` in the CSV: null without collision avoidance (the contact keys:
-#: also on a plant without a body)
+#: :data:`METRIC_KEYS` and :data:`BODY_METRIC_KEYS` in the CSV: null without collision
+#: avoidance (the contact keys: also on a plant without a body)
 COLLISION_METRIC_KEYS = (
     "minimum_distance_m", "penetration_steps", "safety_violation_steps", "contact_steps",
     "contact_depth_max_m",

@@ -2,9 +2,9 @@
 
 A scenario builds a :class:`Plan`: the robot, the start configuration, fresh constraint
 objects (each controller run gets its own, since a moving hole is mutated), the operator
-target ``T*(t)`` (one per EE of a several-EE robot) and, for moving geometry, what moves at time ``t``. Every trajectory
-starts at the EE's home pose with zero velocity (smooth ramps), so no controller is
-handed a step.
+target ``T*(t)`` (one per EE of a several-EE robot) and, for moving geometry, what moves
+at time ``t``. Every trajectory starts at the EE's home pose with zero velocity (smooth
+ramps), so no controller is handed a step.
 """
 
 from __future__ import annotations

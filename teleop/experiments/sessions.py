@@ -500,7 +500,8 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
     state: dict = {}
 
     def make_constraints() -> list[Constraint]:
-        state.update(cursor=0, by_id={}, goals={}, t=None, dt=1.0 / float(session.header.get("rate_hz", 1000.0)))
+        state.update(cursor=0, by_id={}, goals={}, t=None,
+                     dt=1.0 / float(session.header.get("rate_hz", 1000.0)))
         return []
 
     def target(t: float) -> list[pin.SE3]:

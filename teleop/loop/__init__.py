@@ -13,5 +13,7 @@ from .naming import constraint_names, row_labels
 from .records import RECORD_FIELDS, CompiledPendingStep, PendingStep, StepRecord
 from .supervisor import Supervision, Supervisor, SupervisorConfig
 
-__all__ = ["RECORD_FIELDS", "SAFETY_TOLERANCE", "CompiledPendingStep", "DistanceMeasure", "DistanceMeter", "LoopConfig", "PendingStep", "Plant", "StepRecord", "Supervision", "Supervisor", "SupervisorConfig", "Targets", "TeleopLoop",
-           "constraint_names", "row_labels", "saturate_twist", "target_poses"]
+__all__ = ["RECORD_FIELDS", "SAFETY_TOLERANCE", "CompiledPendingStep", "DistanceMeasure",
+           "DistanceMeter", "LoopConfig", "PendingStep", "Plant", "StepRecord", "Supervision",
+           "Supervisor", "SupervisorConfig", "Targets", "TeleopLoop", "constraint_names",
+           "row_labels", "saturate_twist", "target_poses"]

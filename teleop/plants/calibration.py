@@ -13,7 +13,6 @@ noise of the same seed draws the same sequence with or without it.
 
 from __future__ import annotations
 
-import numpy as np
 import pinocchio as pin
 
 from teleop.seeds import stream

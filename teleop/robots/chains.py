@@ -41,7 +41,8 @@ def chain_urdf(dof: int, link_length: float = 0.12) -> str:
             f'  <link name="link_{i}">',
             f'    <visual><origin xyz="0 0 {link_length / 2}"/><geometry>'
             f'<cylinder radius="0.02" length="{link_length}"/></geometry></visual>',
-            '    <inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>',
+            '    <inertial><mass value="1"/>'
+            '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>',
             '  </link>',
         ]
         parent = f"link_{i}"

@@ -216,7 +216,8 @@ def _check_q_home(model: pin.Model, q_home: Any, what: str = "q_home",
     if q.shape != (model.nq,):
         raise ValueError(f"{what} must have size nq = {model.nq}, got shape {q.shape}")
     if not np.all(np.isfinite(q)):  # which joints, not only that (as_vector would say less)
-        raise ValueError(f"{what} has non-finite entries at indices {np.flatnonzero(~np.isfinite(q)).tolist()}")
+        raise ValueError(f"{what} has non-finite entries at indices "
+                         f"{np.flatnonzero(~np.isfinite(q)).tolist()}")
     outside = (q < model.lowerPositionLimit) | (q > model.upperPositionLimit)
     if checked is not None:
         outside &= np.isin(np.arange(model.nq), checked)

@@ -15,7 +15,7 @@ from typing import TextIO
 from .cell import DONE, FAILED
 from .database import DATABASE_NAME, ResultsDatabase
 from .pool import Finished, LocalPool
-from .spec import Cell, SweepSpec, describe_cell
+from .spec import SweepSpec, describe_cell
 
 #: The engines, by name.
 ENGINES = ("local", "ray")

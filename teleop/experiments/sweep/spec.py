@@ -16,7 +16,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping
 
 from constraints.validation import as_number, short_repr
 from teleop.json_text import parse_json
@@ -105,9 +105,10 @@ def _cell_fields() -> tuple[CellField, ...]:
                   "imperfections", "control periods"),
         CellField("joint_time_constant", 0.0, _real(0.0, MAX_TIME_CONSTANT_S),
                   "--joint-time-constant", "imperfections", "s"),
-        CellField("calibration_error_mm", 0.0, _real(0.0, MAX_CALIBRATION_POSITION_STD_M * 1e3), None, "imperfections",
-                  "std of each joint placement's translation error (mm)"),
-        CellField("calibration_error_mrad", 0.0, _real(0.0, MAX_CALIBRATION_ROTATION_STD_RAD * 1e3), None, "imperfections",
+        CellField("calibration_error_mm", 0.0, _real(0.0, MAX_CALIBRATION_POSITION_STD_M * 1e3),
+                  None, "imperfections", "std of each joint placement's translation error (mm)"),
+        CellField("calibration_error_mrad", 0.0,
+                  _real(0.0, MAX_CALIBRATION_ROTATION_STD_RAD * 1e3), None, "imperfections",
                   "std of each joint placement's rotation error (mrad)"),
         CellField("trocar_shift", 0.0, _real(0.0, MAX_TROCAR_SHIFT_M), "--trocar-shift", "variations",
                   "half-width (m) of each trocar's uniform slide along its link"),
