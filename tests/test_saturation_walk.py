@@ -98,15 +98,31 @@ def test_a_previous_command_outside_the_box_is_brought_back_towards_the_rows():
 @pytest.mark.parametrize("spec", ["cjm", "cjm:python"])
 def test_fast_lateral_with_acceleration_limits_does_not_run_away(spec):
     """The runaway of issue 32: on the ideal integrator with the robot's acceleration limits
-    the CJM's EE stays within 40 mm of the target (it reached 250 mm), and the tool is
-    still (below 1 mm/s) 0.1 s after the target stops (it coasted at 45 mm/s)."""
+    the CJM's EE stays within 40 mm of the target (it reached 250 mm and coasted on at
+    45 mm/s after the target stopped). Here the tool, 5 mm behind when the target stops,
+    closes the gap as the pose servo asks: within 1 um 0.5 s later, and still (below
+    1 mm/s) from then on; the hole holds throughout."""
     plan = load_scenario("fast-lateral")
     result = run_plan(plan, spec, duration=4.0, acceleration_limits=True)
-    assert result.ee_position_errors.max() <= 0.040
+    errors = result.ee_position_errors[:, 0]
+    assert errors.max() <= 0.040
     target_speed = np.linalg.norm(result.operator_linear_velocity, axis=1)
     stopped = int(np.flatnonzero(target_speed > 1e-6)[-1]) + 1
+    settled = stopped + round(0.5 * 1000.0)  # the loop's default 1 kHz
+    assert errors[settled:].max() <= 1e-6
     tool_speed = np.linalg.norm(result.actual_linear_velocity, axis=1)
-    periods = round(0.1 * 1000.0)  # the loop's default 1 kHz
-    assert tool_speed[stopped + periods:].max() <= 1e-3
+    assert tool_speed[settled:].max() <= 1e-3
     hole_error = next(iter(result.constraint_errors.values()))
     assert np.nanmax(hole_error) <= 1e-4
+
+
+def test_with_acceleration_limits_the_cjm_is_the_qps_first_stage():
+    """The walk ends at the box's optimum of the damped task under the rows: on
+    fast-lateral with the limits every command is the lexicographic QP's (proxqp) to its
+    tolerance, step for step, at the same configurations (docs/design.md 9.1)."""
+    plan = load_scenario("fast-lateral")
+    cjm = run_plan(plan, "cjm", duration=1.5, acceleration_limits=True)
+    qp = run_plan(plan, "qp:proxqp", duration=1.5, acceleration_limits=True)
+    np.testing.assert_allclose(cjm.commanded_joint_velocity, qp.commanded_joint_velocity,
+                               rtol=0, atol=1e-7)
+    assert cjm.status_counts.get("least_squares", 0) > 500  # the box binds most of the run

@@ -13,16 +13,15 @@ walking from ``qd_prev`` (brought into the box) and never leaving the box:
    bound pushes the wrong way (the gradient ``A^T (A point - b)`` points inside its box):
    an active-set bounded least squares, so the rows hold exactly whenever some command in
    the box holds them;
-2. **task**: from that point, walk towards ``c``, the rows exactly and the twist by damped
-   least squares over the free joints
-   (:func:`controllers.cjm.saturation.solve_over_free`), the damping rising below
-   :data:`~controllers.cjm.tolerances.SATURATED_TASK_THRESHOLD`, holding each joint where it
-   reaches its bound, until ``c`` is inside the box or the held joints leave the rows no
-   freedom.
+2. **task**: the same active set on ``|J qd - V|^2 + |D qd|^2`` under the rows, ``D`` the
+   CJM's damping rows of the whole problem (:func:`~controllers.optimization.task_damping.
+   task_damping`, the QP's too: docs/design.md 10.7): walk towards the rows-exact
+   least-squares point over the free joints, hold the joint that stops the walk, and once
+   that point is reached release a held joint whose reduced gradient points into its
+   box. It ends at the box's optimum of the damped task, the QP's first stage.
 
 Every iterate of level 2 is a convex combination of points that hold the rows and lies in
-the box, and the result moves continuously with ``q``, the twist and the box: there is no
-switch between a "scaled" and a "least-squares" candidate.
+the box, and the result moves continuously with ``q``, the twist and the box.
 """
 
 from __future__ import annotations
@@ -31,38 +30,49 @@ import numpy as np
 
 from ..base import TWIST_TOLERANCE
 from ..linalg import DampingPolicy, nullspace
+from ..optimization.task_damping import task_damping
 from .saturation import Saturation, gap_to_bound, solve_over_free
-from .tolerances import AT_BOUND, ROWS_TOLERANCE, SATURATED_TASK_THRESHOLD, STILL_DIRECTION
+from .tolerances import (AT_BOUND, BOX_MARGIN, RELEASE_TOLERANCE, ROWS_TOLERANCE,
+                         STILL_DIRECTION)
+
+#: The damping is in the task's rows (``D``): the least squares over the free joints is exact.
+UNDAMPED = DampingPolicy(0.0, 0.0, 0.0)
 
 
 def saturate_around_previous(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
                              twist: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                              policy: DampingPolicy, previous: np.ndarray) -> Saturation:
     """``qd`` inside ``[lower, upper]`` reached from ``previous``: the rows ``A qd = b``
-    first (exactly when the box allows it), the twist second (module docstring)."""
+    first (exactly when the box allows it), the damped twist second (module docstring)."""
     nv = jacobian.shape[1]
-    task_policy = DampingPolicy(policy.damping, max(policy.threshold, SATURATED_TASK_THRESHOLD),
-                                policy.max_damping)
     point = np.minimum(np.maximum(previous, lower), upper)
-    free = (previous >= lower) & (previous <= upper)
+    free = ((previous >= lower - BOX_MARGIN * (1.0 + np.abs(lower)))  # outside beyond rounding:
+            & (previous <= upper + BOX_MARGIN * (1.0 + np.abs(upper))))  # held (step 0)
     point, free, rows_scale = walk_to_rows(rows, rows_rhs, lower, upper, point, free)
+    damping = task_damping(rows, jacobian, policy)
     if rows_scale < 1.0:
-        return _walk_result(point, rows_scale, free, -1, jacobian, twist)
-    limiting_joint, sigma_min, damping = -1, float("nan"), 0.0
-    for _ in range(nv + 1):
-        if not free.any():
-            break
-        split = solve_over_free(rows, rows_rhs, jacobian, twist, free,
-                                np.where(free, 0.0, point), task_policy)
-        if split.rows_residual > ROWS_TOLERANCE:
-            break  # the held joints leave the rows no freedom
-        sigma_min, damping = split.sigma_min, split.damping
-        point, joint = _walk(point, split.base + split.direction, lower, upper, free)
+        return _walk_result(point, rows_scale, free, -1, jacobian, twist, damping.sigma_min,
+                            damping.damping)
+    task = np.vstack([jacobian, damping.rows])
+    task_rhs = np.concatenate([twist, np.zeros(damping.rows.shape[0])])
+    limiting_joint = -1
+    for _ in range(3 * nv + 1):
+        if free.any():
+            split = solve_over_free(rows, rows_rhs, task, task_rhs, free,
+                                    np.where(free, 0.0, point), UNDAMPED)
+            if split.rows_residual > ROWS_TOLERANCE:
+                break  # the held joints leave the rows no freedom
+            point, joint = _walk(point, split.base + split.direction, lower, upper, free)
+            if joint >= 0:
+                free[joint] = False
+                limiting_joint = joint if limiting_joint < 0 else limiting_joint
+                continue
+        joint = _task_wrong_side(rows, task, task_rhs, point, lower, upper, free)
         if joint < 0:
-            break
-        free[joint] = False
-        limiting_joint = joint if limiting_joint < 0 else limiting_joint
-    return _walk_result(point, 1.0, free, limiting_joint, jacobian, twist, sigma_min, damping)
+            break  # the box's optimum
+        free[joint] = True
+    return _walk_result(point, 1.0, free, limiting_joint, jacobian, twist, damping.sigma_min,
+                        damping.damping)
 
 
 def walk_to_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray,
@@ -74,18 +84,15 @@ def walk_to_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray,
     point, free = point.copy(), free.copy()
     nv = point.size
     initial = float(np.max(np.abs(rows_rhs - rows @ point), initial=0.0))
-    residual = initial
     for _ in range(3 * nv + 1):
         residual_vector = rows_rhs - rows @ point
-        residual = float(np.max(np.abs(residual_vector), initial=0.0))
-        if residual <= ROWS_TOLERANCE:
+        if float(np.max(np.abs(residual_vector), initial=0.0)) <= ROWS_TOLERANCE:
             return point, free, 1.0
         correction = np.zeros(nv)
         if free.any():
             _, rows_pinv, _ = nullspace(rows[:, free])
             correction[free] = rows_pinv @ residual_vector
-        reduction = float(np.max(np.abs(rows @ correction)))
-        if reduction <= ROWS_TOLERANCE:
+        if float(np.max(np.abs(rows @ correction))) <= ROWS_TOLERANCE:
             joint = _wrong_side(rows, residual_vector, point, lower, upper, free)
             if joint < 0:
                 break  # the least-squares point of the box: the rows cannot hold
@@ -102,13 +109,36 @@ def walk_to_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray,
 
 def _wrong_side(rows: np.ndarray, residual: np.ndarray, point: np.ndarray,
                 lower: np.ndarray, upper: np.ndarray, free: np.ndarray) -> int:
-    """The held joint whose release reduces the residual most at first order (-1: none):
-    the gradient of ``|rows qd - rhs|^2 / 2``, ``-rows^T residual``, points into its box."""
-    descent = rows.T @ residual  # minus the gradient
-    inward = np.where(point >= upper, -descent, np.where(point <= lower, descent, -np.inf))
+    """The held joint whose release reduces the rows' residual most at first order (-1:
+    none): the gradient of ``|rows qd - rhs|^2 / 2``, ``-rows^T residual``, points into
+    its box."""
+    return _inward(-(rows.T @ residual), point, lower, upper, free, ROWS_TOLERANCE)
+
+
+def _task_wrong_side(rows: np.ndarray, task: np.ndarray, task_rhs: np.ndarray,
+                     point: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                     free: np.ndarray) -> int:
+    """The held joint whose release reduces the damped task's error most at first order
+    under the rows (-1: none). With ``g = T^T (T qd - r)`` and the rows' multipliers
+    ``mu = -(A_F^T)^+ g_F`` of the free joints' stationarity, joint ``i``'s reduced
+    gradient is ``g_i + a_i^T mu = g_i - (A_F^+ a_i)^T g_F``."""
+    gradient = task.T @ (task @ point - task_rhs)
+    reduced = gradient.copy()
+    if rows.shape[0] and free.any():
+        _, rows_pinv, _ = nullspace(rows[:, free])
+        reduced -= (rows_pinv @ rows).T @ gradient[free]
+    tolerance = RELEASE_TOLERANCE * (1.0 + float(np.max(np.abs(gradient))))
+    return _inward(reduced, point, lower, upper, free, tolerance)
+
+
+def _inward(gradient: np.ndarray, point: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+            free: np.ndarray, tolerance: float) -> int:
+    """The held joint at a bound whose ``-gradient`` points into its box the most, beyond
+    ``tolerance`` (-1: none)."""
+    inward = np.where(point >= upper, gradient, np.where(point <= lower, -gradient, -np.inf))
     inward[free] = -np.inf
     joint = int(np.argmax(inward))
-    return joint if inward[joint] > ROWS_TOLERANCE else -1
+    return joint if inward[joint] > tolerance else -1
 
 
 def _walk(point: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
@@ -133,8 +163,8 @@ def _walk(point: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndar
 
 
 def _walk_result(qd: np.ndarray, rows_scale: float, free: np.ndarray, limiting_joint: int,
-                 jacobian: np.ndarray, twist: np.ndarray, sigma_min: float = float("nan"),
-                 damping: float = 0.0) -> Saturation:
+                 jacobian: np.ndarray, twist: np.ndarray, sigma_min: float,
+                 damping: float) -> Saturation:
     """The walk's command and what it gives of the twist: the scale ``s`` of the twist
     along which ``J qd`` lies when it does (``scaled``), else a least-squares task."""
     achieved = jacobian @ qd

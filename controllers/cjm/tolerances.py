@@ -55,12 +55,9 @@ BOX_MARGIN = 1e-12
 #: A direction entry at most this (rad/s) is a joint the task does not move.
 STILL_DIRECTION = 1e-12
 
-#: With acceleration limits, the saturated task's damping (docs/design.md 9.1) rises
-#: below this smallest singular value of the task over the rows' null space (m/s or rad/s
-#: per rad/s; the controller's own threshold when that is larger): the walk then moves
-#: little along directions the twist barely sees, which the acceleration window would
-#: otherwise swing between its bounds.
-SATURATED_TASK_THRESHOLD = 0.3
+#: With acceleration limits a held joint is released when its reduced gradient points
+#: into its box by more than this, relative to ``1 + max |gradient|`` (docs/design.md 9.1).
+RELEASE_TOLERANCE = 1e-9
 
 #: The paper's ``1/a`` structure matrix is undefined where ``a = |p|`` is below this (m).
 PAPER_FORM_MIN_A = 1e-6
@@ -83,4 +80,4 @@ class StepTolerances:
     at_bound: float = AT_BOUND
     box_margin: float = BOX_MARGIN
     still_direction: float = STILL_DIRECTION
-    saturated_task_threshold: float = SATURATED_TASK_THRESHOLD
+    release_tolerance: float = RELEASE_TOLERANCE

@@ -122,14 +122,15 @@ void Step::hold_pairs_below() {
   }
 }
 
-Step::Split Step::solve_over_free(const Inputs& in, const DampingPolicy& policy) {
+Step::Split Step::solve_over_free(const Eigen::Ref<const RowMatrix>& task,
+                                  const ConstVectorRef& twist, const DampingPolicy& policy) {
   // rows exactly over the free joints, held ones moved to the right-hand side
-  const Index m = row_count_;
+  const Index m = row_count_, p = task.rows();
   Index n_free = 0;
   for (Index j = 0; j < nv_; ++j) {
     if (!free_(j)) continue;
     columns_.col(n_free).head(m) = rows_.col(j).head(m);
-    task_columns_.col(n_free) = in.ee_jacobian.col(j);
+    task_columns_.col(n_free).head(p) = task.col(j);
     ++n_free;
   }
   auto rhs = scratch_rows_.head(m);
@@ -152,15 +153,15 @@ Step::Split Step::solve_over_free(const Inputs& in, const DampingPolicy& policy)
   if (d > 0) {
     for (Index j = 0, f = 0; j < nv_; ++j)
       if (free_(j)) base_(j) = x0(f++);
-    auto task_t = task_t_.topLeftCorner(n_free, task_rows_);
-    task_t = task_columns_.leftCols(n_free).transpose();
-    auto task_null_t = task_null_t_.topLeftCorner(d, task_rows_);
+    auto task_t = task_t_.topLeftCorner(n_free, p);
+    task_t = task_columns_.topLeftCorner(p, n_free).transpose();
+    auto task_null_t = task_null_t_.topLeftCorner(d, p);
     null_.to_null(task_t, task_null_t);
-    auto task_null = task_null_.topLeftCorner(task_rows_, d);
+    auto task_null = task_null_.topLeftCorner(p, d);
     task_null = task_null_t.transpose();
-    auto task_rhs = task_rhs_.topRows(task_rows_);
-    task_rhs.col(0) = in.twist;
-    task_rhs.col(1).noalias() = in.ee_jacobian * base_;
+    auto task_rhs = task_rhs_.topRows(p);
+    task_rhs.col(0) = twist;
+    task_rhs.col(1).noalias() = task * base_;
     task_rhs.col(1) = -task_rhs.col(1);
     dls_.factor(task_null, policy);
     auto x = task_x_.topLeftCorner(d, 2);

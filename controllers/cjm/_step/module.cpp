@@ -228,17 +228,17 @@ PYBIND11_MODULE(_step, module) {
                        double pre_chain_pivot_ratio, double pre_chain_min_singular_value,
                        double fast_path_min_sigma, double least_squares_rcond,
                        double conflict_residual, double rows, double at_bound, double box_margin,
-                       double still_direction, double saturated_task_threshold) {
+                       double still_direction, double release_tolerance) {
              return cjm::Tolerances{equality, twist, barrier, rank, pre_chain_pivot_ratio,
                                     pre_chain_min_singular_value, fast_path_min_sigma,
                                     least_squares_rcond, conflict_residual, rows, at_bound,
-                                    box_margin, still_direction, saturated_task_threshold};
+                                    box_margin, still_direction, release_tolerance};
            }),
            py::arg("equality"), py::arg("twist"), py::arg("barrier"), py::arg("rank"),
            py::arg("pre_chain_pivot_ratio"), py::arg("pre_chain_min_singular_value"),
            py::arg("fast_path_min_sigma"), py::arg("least_squares_rcond"),
            py::arg("conflict_residual"), py::arg("rows"), py::arg("at_bound"),
-           py::arg("box_margin"), py::arg("still_direction"), py::arg("saturated_task_threshold"),
+           py::arg("box_margin"), py::arg("still_direction"), py::arg("release_tolerance"),
            "controllers.cjm.tolerances.StepTolerances, field by field.");
 
   py::class_<cjm::Step>(module, "Step")

@@ -1,33 +1,118 @@
 // Joint limits with acceleration limits: saturation around the previous command
-// (controllers/cjm/saturation_walk.py, docs/design.md section 12). Every point is reached
+// (controllers/cjm/saturation_walk.py, docs/design.md section 9.1). Every point is reached
 // by walking from the previous command inside the box: the rows first (an active-set
-// bounded least squares, exact whenever the box allows it), then the twist.
+// bounded least squares, exact whenever the box allows it), then the damped twist (the
+// same active set on [J_e; D], D the CJM's damping rows of the whole problem).
 #include "step.hpp"
 
 namespace cjm {
 
 void Step::saturate_around_previous(const Inputs& in) {
   walk_point_ = previous_.cwiseMax(lower_).cwiseMin(upper_);
-  for (Index j = 0; j < nv_; ++j) free_(j) = previous_(j) >= lower_(j) && previous_(j) <= upper_(j);
+  for (Index j = 0; j < nv_; ++j)  // outside beyond rounding: held at its bound (step 0)
+    free_(j) = previous_(j) >= lower_(j) - tol_.box_margin * (1.0 + std::abs(lower_(j))) &&
+               previous_(j) <= upper_(j) + tol_.box_margin * (1.0 + std::abs(upper_(j)));
   const double rows_scale = walk_to_rows();
+  const Index damping_count = task_damping_rows(in);
   Index limiting_joint = -1;
-  double sigma_min = std::numeric_limits<double>::quiet_NaN(), damping = 0.0;
   if (rows_scale >= 1.0) {
-    for (Index iteration = 0; iteration <= nv_ && free_.any(); ++iteration) {
-      for (Index j = 0; j < nv_; ++j) held_(j) = free_(j) ? 0.0 : walk_point_(j);
-      const Split split = solve_over_free(in, walk_policy_);
-      if (split.rows_residual > tol_.rows) break;  // the held joints leave the rows no freedom
-      sigma_min = split.sigma_min;
-      damping = split.damping;
-      walk_goal_ = base_ + direction_;
-      const Index joint = walk();
-      if (joint < 0) break;
-      free_(joint) = false;
-      if (limiting_joint < 0) limiting_joint = joint;
+    const Index p = task_rows_ + damping_count;
+    walk_task_.topRows(task_rows_) = in.ee_jacobian;
+    walk_rhs_.head(task_rows_) = in.twist;
+    walk_rhs_.segment(task_rows_, damping_count).setZero();
+    const auto task = walk_task_.topRows(p);
+    const auto task_rhs = walk_rhs_.head(p);
+    const DampingPolicy undamped{0.0, 0.0, 0.0};  // the damping is in the task's rows
+    for (Index iteration = 0; iteration <= 3 * nv_; ++iteration) {
+      if (free_.any()) {
+        for (Index j = 0; j < nv_; ++j) held_(j) = free_(j) ? 0.0 : walk_point_(j);
+        const Split split = solve_over_free(task, task_rhs, undamped);
+        if (split.rows_residual > tol_.rows) break;  // the held joints leave the rows no freedom
+        walk_goal_ = base_ + direction_;
+        const Index joint = walk();
+        if (joint >= 0) {
+          free_(joint) = false;
+          if (limiting_joint < 0) limiting_joint = joint;
+          continue;
+        }
+      }
+      const Index joint = task_wrong_side(task, task_rhs);
+      if (joint < 0) break;  // the box's optimum
+      free_(joint) = true;
     }
   }
   sns_qd_ = walk_point_;
-  walk_result(in, rows_scale, limiting_joint, sigma_min, damping);
+  walk_result(in, rows_scale, limiting_joint);
+}
+
+Index Step::task_damping_rows(const Inputs& in) {
+  const Index m = row_count_;
+  null_.factor(rows_.topRows(m));
+  const Index d = null_.dimension();
+  walk_sigma_min_ = std::numeric_limits<double>::quiet_NaN();
+  walk_damping_ = 0.0;
+  if (d == 0) return 0;
+  auto task_t = task_t_.topLeftCorner(nv_, task_rows_);
+  task_t = in.ee_jacobian.transpose();
+  auto task_null_t = task_null_t_.topLeftCorner(d, task_rows_);
+  null_.to_null(task_t, task_null_t);
+  auto task_null = task_null_.topLeftCorner(task_rows_, d);
+  task_null = task_null_t.transpose();
+  dls_.factor(task_null, policy_);
+  walk_sigma_min_ = dls_.sigma_min();
+  walk_damping_ = dls_.damping();
+  if (walk_damping_ == 0.0) return 0;
+  const Index rank = dls_.rank();
+  for (Index k = 0; k < rank; ++k) {  // D = lambda V_r^T N^T, one row per kept direction
+    null_.from_null(dls_.row_space().col(k), delta_);
+    walk_task_.row(task_rows_ + k) = walk_damping_ * delta_.transpose();
+  }
+  return rank;
+}
+
+Index Step::task_wrong_side(const Eigen::Ref<const RowMatrix>& task,
+                            const ConstVectorRef& task_rhs) {
+  auto residual = walk_residual_.head(task.rows());
+  residual.noalias() = task * walk_point_;
+  residual -= task_rhs;
+  gradient_.noalias() = task.transpose() * residual;
+  reduced_ = gradient_;
+  const Index m = row_count_;
+  Index n_free = 0;
+  for (Index j = 0; j < nv_; ++j) {
+    if (!free_(j)) continue;
+    columns_.col(n_free).head(m) = rows_.col(j).head(m);
+    gradient_free_(n_free++) = gradient_(j);
+  }
+  if (m > 0 && n_free > 0) {  // g_i + a_i^T mu = g_i - (A_F^+ a_i)^T g_F
+    null_.factor(columns_.topLeftCorner(m, n_free));
+    auto weights = free_x_.head(n_free);
+    for (Index j = 0; j < nv_; ++j) {
+      if (free_(j)) continue;
+      null_.pseudo_solve(rows_.col(j).head(m), weights);
+      reduced_(j) -= weights.dot(gradient_free_.head(n_free));
+    }
+  }
+  return inward(reduced_, tol_.release_tolerance * (1.0 + gradient_.cwiseAbs().maxCoeff()));
+}
+
+Index Step::inward(const ConstVectorRef& gradient, double tolerance) const {
+  Index best = -1;
+  double best_inward = tolerance;
+  for (Index j = 0; j < nv_; ++j) {
+    if (free_(j)) continue;
+    double inward_slope = -std::numeric_limits<double>::infinity();
+    if (walk_point_(j) >= upper_(j)) {
+      inward_slope = gradient(j);
+    } else if (walk_point_(j) <= lower_(j)) {
+      inward_slope = -gradient(j);
+    }
+    if (inward_slope > best_inward) {
+      best_inward = inward_slope;
+      best = j;
+    }
+  }
+  return best;
 }
 
 double Step::walk_to_rows() {
@@ -72,25 +157,9 @@ double Step::walk_to_rows() {
 }
 
 Index Step::wrong_side(const ConstVectorRef& residual) {
-  const Index m = row_count_;
-  auto descent = delta_.head(nv_);  // minus the gradient of |rows qd - rhs|^2 / 2
-  descent.noalias() = rows_.topRows(m).transpose() * residual;
-  Index best = -1;
-  double best_inward = tol_.rows;
-  for (Index j = 0; j < nv_; ++j) {
-    if (free_(j)) continue;
-    double inward = -std::numeric_limits<double>::infinity();
-    if (walk_point_(j) >= upper_(j)) {
-      inward = -descent(j);
-    } else if (walk_point_(j) <= lower_(j)) {
-      inward = descent(j);
-    }
-    if (inward > best_inward) {
-      best_inward = inward;
-      best = j;
-    }
-  }
-  return best;
+  auto gradient = delta_.head(nv_);  // of |rows qd - rhs|^2 / 2: -rows^T residual
+  gradient.noalias() = -(rows_.topRows(row_count_).transpose() * residual);
+  return inward(gradient, tol_.rows);
 }
 
 Index Step::walk() {
@@ -117,8 +186,7 @@ Index Step::walk() {
   return joint;
 }
 
-void Step::walk_result(const Inputs& in, double rows_scale, Index limiting_joint,
-                       double sigma_min, double damping) {
+void Step::walk_result(const Inputs& in, double rows_scale, Index limiting_joint) {
   auto achieved = scratch_rows_.head(task_rows_);
   achieved.noalias() = in.ee_jacobian * sns_qd_;
   const double twist_norm = in.twist.squaredNorm();
@@ -134,8 +202,8 @@ void Step::walk_result(const Inputs& in, double rows_scale, Index limiting_joint
   sns_task_scale_ = task_scale;
   sns_rows_scale_ = rows_scale;
   sns_limiting_ = limiting_joint;
-  sns_sigma_min_ = sigma_min;
-  sns_damping_ = damping;
+  sns_sigma_min_ = walk_sigma_min_;
+  sns_damping_ = walk_damping_;
 }
 
 }  // namespace cjm

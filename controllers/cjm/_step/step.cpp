@@ -60,8 +60,6 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
     throw std::invalid_argument("a posture target needs nq == nv and one entry per joint");
   posture_velocity_.resize(nv);
   accelerating_ = box_.acceleration_step.size() != 0;
-  walk_policy_ = DampingPolicy{policy_.damping, std::max(policy_.threshold, tol_.saturated_task_threshold),
-                               policy_.max_damping};
   previous_ = Vector::Zero(nv);
   active_.reserve(n_constraints);
   waiting_.reserve(n_constraints);
@@ -90,22 +88,26 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   all_rhs_.resize(m);
   rhs_.resize(m);
   null_ = NullSpace(m, nv, tol_.rank);
-  dls_ = DampedLeastSquares(task_rows, std::max<Index>(nv + 7, 8), tol_.rank);
-  task_t_.resize(nv, task_rows);
-  task_null_t_.resize(nv, task_rows);
-  task_null_.resize(task_rows, nv);
-  task_rhs_.resize(task_rows, 2);
+  // the saturation around the previous command solves [J_e; D] (at most 2 task_rows rows)
+  dls_ = DampedLeastSquares(2 * task_rows, std::max<Index>(nv + 7, 8), tol_.rank);
+  task_t_.resize(nv, 2 * task_rows);
+  task_null_t_.resize(nv, 2 * task_rows);
+  task_null_.resize(2 * task_rows, nv);
+  task_rhs_.resize(2 * task_rows, 2);
+  walk_task_.resize(2 * task_rows, nv);
+  walk_rhs_.resize(2 * task_rows);
+  walk_residual_.resize(2 * task_rows);
   task_x_.resize(nv + 7, 2);
   for (Vector* v : {&qd0_, &delta_, &lower_, &upper_, &box_lower_, &box_upper_, &free_x_,
                     &posture_null_, &held_, &best_held_, &base_, &direction_, &sns_qd_,
-                    &walk_point_, &walk_goal_, &walk_move_})
+                    &walk_point_, &walk_goal_, &walk_move_, &gradient_, &reduced_, &gradient_free_})
     v->resize(nv);
   stacked_.resize(std::max<Index>(box_.box_test.rows(), 1));
   scratch_rows_.resize(std::max(m, task_rows));
   rows_scratch_.resize(m);
   rank_weights_.resize(nv);
   columns_.resize(m, nv);
-  task_columns_.resize(task_rows, nv);
+  task_columns_.resize(2 * task_rows, nv);
   free_.resize(nv);
   best_free_.resize(nv);
   pre_jacobian_.resize(6, nv);

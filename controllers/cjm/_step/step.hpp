@@ -45,7 +45,7 @@ enum class Event : int {
 struct Tolerances {
   double equality, twist, barrier, rank, pre_chain_pivot_ratio, pre_chain_min_singular_value,
       fast_path_min_sigma, least_squares_rcond, conflict_residual, rows, at_bound, box_margin,
-      still_direction, saturated_task_threshold;
+      still_direction, release_tolerance;
 };
 
 //! One constraint: its rows and, when the analytical form may take it, its chain split.
@@ -178,7 +178,8 @@ class Step {
 
   // general.cpp
   void general(const Inputs& in, VectorRef qd);
-  Split solve_over_free(const Inputs& in, const DampingPolicy& policy);
+  Split solve_over_free(const Eigen::Ref<const RowMatrix>& task, const ConstVectorRef& twist,
+                        const DampingPolicy& policy);
 
   // saturation.cpp
   void saturate(const Inputs& in, VectorRef qd);
@@ -190,18 +191,24 @@ class Step {
                          Index limiting_joint, const Split& split);
   void scale_rows(const Inputs& in);
 
-  // saturation_walk.cpp: with acceleration limits (docs/design.md section 12)
+  // saturation_walk.cpp: with acceleration limits (docs/design.md section 9.1)
   void saturate_around_previous(const Inputs& in);
   //! Level 1: walk_point_ moved in the box towards the rows; the fraction of the rows'
   //! starting residual removed (1: they hold).
   double walk_to_rows();
   //! The held joint whose release reduces the rows' residual (-1: none).
   Index wrong_side(const ConstVectorRef& residual);
+  //! controllers.optimization.task_damping: the damping rows D of the whole problem in
+  //! damping_rows_ (their count), walk_sigma_min_ and walk_damping_.
+  Index task_damping_rows(const Inputs& in);
+  //! The held joint whose release reduces the damped task's error under the rows (-1: none).
+  Index task_wrong_side(const Eigen::Ref<const RowMatrix>& task, const ConstVectorRef& task_rhs);
+  //! The held joint at a bound whose -gradient points into its box most, beyond tolerance.
+  Index inward(const ConstVectorRef& gradient, double tolerance) const;
   //! walk_point_ moved towards walk_goal_ until a free joint reaches its bound (that
   //! joint, -1: the goal reached).
   Index walk();
-  void walk_result(const Inputs& in, double rows_scale, Index limiting_joint,
-                   double sigma_min, double damping);
+  void walk_result(const Inputs& in, double rows_scale, Index limiting_joint);
 
   // problem
   Index nq_, nv_, task_rows_;
@@ -248,8 +255,11 @@ class Step {
   // SNS
   Eigen::Array<bool, Eigen::Dynamic, 1> free_, best_free_;
   Vector held_, best_held_, base_, direction_, sns_qd_;
-  Vector walk_point_, walk_goal_, walk_move_;  // saturation around the previous command
-  DampingPolicy walk_policy_;  // the saturated task's damping with acceleration limits
+  // saturation around the previous command
+  Vector walk_point_, walk_goal_, walk_move_, walk_rhs_, walk_residual_, gradient_, reduced_,
+      gradient_free_;
+  RowMatrix walk_task_;  // [J_e; D]
+  double walk_sigma_min_ = 0.0, walk_damping_ = 0.0;
   double sns_task_scale_ = 1.0, sns_rows_scale_ = 1.0;
   double sns_sigma_min_ = 0.0, sns_damping_ = 0.0;  // of the task's DLS that gave sns_qd_
   Index sns_limiting_ = -1;
