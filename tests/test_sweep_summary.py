@@ -58,11 +58,12 @@ GRID = {"scenarios": ["paper-hole", "paper-plane"], "controllers": ["qp:osqp", "
         "seeds": [1, 2], "duration": 0.5, "encoder_noise": 1e-4}
 
 #: Cells beside the grid: one with failed steps (OSQP at its iteration cap under heavy
-#: noise), a CJM one under heavier noise (a larger hole error, no failed step), one on the
-#: physics plant (port forces), all of another version.
+#: noise, without acceleration limits: their box keeps it within its cap), a CJM one under
+#: heavier noise (a larger hole error, no failed step), one on the physics plant (port
+#: forces), all of another version.
 EXTRA = [
     {"scenario": "multi", "controller": "qp:osqp", "seed": 1, "encoder_noise": 0.05,
-     "duration": 0.5},
+     "duration": 0.5, "acceleration_limits": False},
     {"scenario": "multi", "controller": "cjm", "seed": 1, "encoder_noise": 0.1,
      "duration": 0.5},
     {"scenario": "trocar-circle", "controller": "cjm", "plant": "mujoco", "duration": 0.3},
@@ -78,7 +79,8 @@ def run_and_write(database: ResultsDatabase, cell: Cell, version: str = "0.1.0")
                           cell["duration"], imperfections=Imperfections(
                               cell["encoder_noise"], cell["latency"],
                               cell["joint_time_constant"], cell["seed"]),
-                          plant=PlantChoice(cell["plant"]))
+                          plant=PlantChoice(cell["plant"]),
+                          acceleration_limits=cell["acceleration_limits"])
         result.solver_messages = capture.collect()
     outcome = {"status": "done", "reason": None, "metrics": result.metrics(),
                "elapsed_s": time.monotonic() - started, "worker": "test:1", "version": version}
@@ -290,17 +292,18 @@ def test_describe_row_tells_the_cell_and_the_command_that_redoes_it(sweep):
     text = describe_row(done)
     lines = text.splitlines()
     assert lines[0] == f"cell {done.key}: multi / qp:osqp / seed 1 (duration 0.5, " \
-        "encoder_noise 0.05)"
-    assert lines[1:7] == ["inputs (the others at their defaults):", "  scenario: multi",
+        "acceleration_limits False, encoder_noise 0.05)"
+    assert lines[1:8] == ["inputs (the others at their defaults):", "  scenario: multi",
                           "  controller: qp:osqp", "  seed: 1", "  duration: 0.5",
-                          "  encoder_noise: 0.05"]
+                          "  acceleration_limits: False", "  encoder_noise: 0.05"]
     assert "status: done" in lines
     assert f"  failed steps: {done.metrics['failed_steps']:.3g}" in lines
     assert f"  hole error max (um): {done.metrics['hole_error_max_m'] * 1e6:.3g}" in lines
     assert f"attempts: {done.attempts}" in text and f"version: {done.version}" in text
     command = lines[-1].removeprefix("redo: ")
     assert command == compare_command({name: done.inputs[name] for name in (
-        "scenario", "controller", "seed", "duration", "encoder_noise")})
+        "scenario", "controller", "seed", "duration", "acceleration_limits", "encoder_noise")})
+    assert "--no-acceleration-limits" in shlex.split(command)
     args = build_parser().parse_args(shlex.split(command)[1:])
     assert (args.scenario, args.controllers, args.seed, args.encoder_noise, args.duration) == (
         "multi", ["qp:osqp"], 1, 0.05, 0.5)

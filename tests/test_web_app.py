@@ -204,10 +204,15 @@ def test_recording_writes_a_session_that_replay_accepts(app, tmp_path):
     kinds = [e["type"] for e in session.events]
     assert kinds.count("add") == 2 and kinds.count("remove") == 1 and kinds[-1] == "end"
     assert session.duration == pytest.approx(0.4, abs=2e-3)
-    result = run_plan(session_plan(session), "cjm")
+    # the plane added while the arm moves: held at once without acceleration limits; with
+    # them (the default) the joints need a few periods to turn (23 um measured)
+    result = run_plan(session_plan(session), "cjm", acceleration_limits=False)
     metrics = result.metrics()
     assert metrics["failed_steps"] == 0
     assert metrics["constraint_error_max_m"] < 1e-5
+    limited = run_plan(session_plan(session), "cjm")
+    assert limited.metrics()["failed_steps"] == 0
+    assert limited.metrics()["constraint_error_max_m"] < 1e-4
 
 
 def test_control_thread_runs_and_reports_its_rate(app):
@@ -436,7 +441,11 @@ def test_a_robot_without_a_constrained_link_says_how_to_get_one(tmp_path):
 # -- scenes ---------------------------------------------------------------------------------
 
 
-def test_a_scene_saved_and_loaded_restores_constraints_and_settings(app, tmp_path):
+def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_path):
+    # the moved hole is corrected within 0.3 s without acceleration limits; with them its
+    # drift feedback overshoots (docs/design.md 8.4)
+    app = TeleopApp(sda10f, controller="cjm", record_dir=tmp_path, scene_dir=tmp_path / "scenes",
+                    acceleration_limits=False)
     hole_id = app.add_constraint("hole", distance=0.08)
     barrier_id = app.add_constraint("barrier", distance=0.04, normal=[0.0, 0.0, 1.0], offset=0.01)
     app.set_ghost("qp:daqp")

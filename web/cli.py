@@ -85,6 +85,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "target, drawn beside the main one; a scene's own wins "
                               "(default: no second robot)")
     control.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
+    control.add_argument("--acceleration-limits", action=argparse.BooleanOptionalAction,
+                         default=True,
+                         help="the controllers keep the robot's joint acceleration limits "
+                              "(docs/design.md section 8.4); --no-acceleration-limits: none")
 
     plant = parser.add_argument_group("plant (docs/design.md section 17)")
     plant.add_argument("--plant", choices=PLANT_KINDS, default="kinematic",
@@ -324,6 +328,7 @@ def run(args: argparse.Namespace, prog: str) -> int:
                                                   rate=args.rate, record_dir=args.record_dir,
                                                   scene_dir=args.scene_dir, scene=scene,
                                                   notes=notes, token=token, **plant,
+                                                  acceleration_limits=args.acceleration_limits,
                                                   **collisions, inputs=inputs,
                                                   input_timeout=args.input_timeout / 1e3)
         except BaseException:

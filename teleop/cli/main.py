@@ -151,9 +151,10 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     parser.add_argument("--no-plots", action="store_true",
                         help="write the metrics only, no plots and no report.html")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.add_argument("--acceleration-limits", action="store_true",
+    parser.add_argument("--acceleration-limits", action=argparse.BooleanOptionalAction,
+                        default=True,
                         help="every controller keeps the robot's joint acceleration limits "
-                        "(off by default; docs/design.md section 8.4)")
+                        "(docs/design.md section 8.4); --no-acceleration-limits: none")
     robot = parser.add_argument_group(
         "a robot that is not perfect", "the same for every controller; off by default "
         "(docs/design.md section 15.1)")
@@ -503,7 +504,8 @@ def _scenarios(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     from teleop.experiments.bench import (check_json_path, format_table, run_bench, run_scaling,
                                           write_json)
-    from teleop.experiments.bench_loop import format_loop_table, run_loop_bench
+    from teleop.experiments.bench_loop import (format_acceleration_line, format_loop_table,
+                                               run_acceleration_bench, run_loop_bench)
 
     iterations = 20 if args.quick else args.iterations
     plant = plant_choice(args)  # checked even when --plant is left out
@@ -522,6 +524,8 @@ def _bench(args: argparse.Namespace) -> int:
         loop_timings, step_us = run_loop_bench(duration=1.0 if args.quick else None)
         print()
         print(format_loop_table(loop_timings, step_us))
+        print(format_acceleration_line(*run_acceleration_bench(
+            duration=1.0 if args.quick else None)))
     for r in results:
         if r.solver_messages:
             print(f"  {r.robot} {r.controller}: the solver wrote "

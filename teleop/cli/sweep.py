@@ -71,6 +71,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     grid.add_argument("--calibration-error", dest="calibration_error", type=_pair,
                       metavar="MM,MRAD", help="std of the calibration error of every joint "
                       "placement (default: 0,0)")
+    grid.add_argument("--no-acceleration-limits", dest="acceleration_limits",
+                      action="store_false", default=None,
+                      help="the controllers without the robot's joint acceleration limits "
+                      "(default: the spec's, else with them; docs/design.md 8.4)")
     grid.add_argument("--time-limit", dest="time_limit", type=float, metavar="S",
                       help="wall-clock limit of one cell in s (default: 600)")
     engine = parser.add_argument_group("the engine")
@@ -101,6 +105,8 @@ def options_document(args: argparse.Namespace) -> dict:
             given[name] = given[name][0]
     if args.calibration_error is not None:
         given["calibration_error_mm"], given["calibration_error_mrad"] = args.calibration_error
+    if args.acceleration_limits is not None:
+        given["acceleration_limits"] = args.acceleration_limits
     if args.time_limit is not None:
         given["time_limit"] = args.time_limit
     return given

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from teleop.controller_specs import make_controller
+from teleop.controller_specs import ROBOT, make_controller
 from teleop.loop import LoopConfig, TeleopLoop
 
 from .scenarios import load_scenario
@@ -26,6 +26,10 @@ LOOP_TIME_TARGET_S = 0.15
 REFERENCE_STEP_US = 4.5
 #: the tick beyond the step, at most this times the step's median
 BEYOND_STEP_TARGET = 0.5
+#: a scenario whose commands the acceleration box binds most of the time (docs/design.md 9.1)
+ACCELERATION_SCENARIO = "fast-lateral"
+#: the compiled tick with acceleration limits, at most this times the tick without
+ACCELERATION_COST_TARGET = 1.5
 
 
 @dataclass(frozen=True)
@@ -40,22 +44,25 @@ class LoopTiming:
     tick_p99_us: float
 
 
-def scenario_loop(scenario: str, compiled_tick: bool,
-                  duration: float | None) -> tuple[TeleopLoop, list]:
-    """A fresh loop with the CJM on ``scenario`` and its targets over ``duration`` s
-    (default the scenario's own) at 1 kHz, drawn first as a device's would arrive."""
+def scenario_loop(scenario: str, compiled_tick: bool, duration: float | None,
+                  acceleration_limits: bool = False) -> tuple[TeleopLoop, list]:
+    """A fresh loop with the CJM on ``scenario`` (the robot's acceleration limits kept
+    when ``acceleration_limits``) and its targets over ``duration`` s (default the
+    scenario's own) at 1 kHz, drawn first as a device's would arrive."""
     plan = load_scenario(scenario)
     config = LoopConfig()
     steps = int(round((plan.duration if duration is None else duration) / config.dt))
-    controller = make_controller("cjm", plan.robot, plan.make_constraints(), dt=config.dt)
+    controller = make_controller("cjm", plan.robot, plan.make_constraints(), dt=config.dt,
+                                 acceleration_limit=ROBOT if acceleration_limits else None)
     loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config,
                       compiled_tick=compiled_tick)
     return loop, [plan.target((i + 1) * config.dt) for i in range(steps)]
 
 
-def time_loop(scenario: str, compiled_tick: bool, duration: float | None = None) -> LoopTiming:
+def time_loop(scenario: str, compiled_tick: bool, duration: float | None = None,
+              acceleration_limits: bool = False) -> LoopTiming:
     """``scenario`` through ``advance`` alone, nothing else between the periods."""
-    loop, targets = scenario_loop(scenario, compiled_tick, duration)
+    loop, targets = scenario_loop(scenario, compiled_tick, duration, acceleration_limits)
     ticks = np.array([loop.advance(target).tick_time_us for target in targets])
     return LoopTiming(scenario, compiled_tick, len(targets), float(ticks.sum()) * 1e-6,
                       float(np.median(ticks)), float(np.percentile(ticks, 99)))
@@ -110,3 +117,20 @@ def format_loop_table(timings: list[LoopTiming], step_us: float) -> str:
                  f"{BEYOND_STEP_TARGET}x the step; the loop time at most {LOOP_TIME_TARGET_S} s "
                  f"per 10 s where the step is {REFERENCE_STEP_US} us ({scale:.2f}x that here)")
     return "\n".join(lines)
+
+
+def run_acceleration_bench(duration: float | None = None) -> tuple[LoopTiming, LoopTiming]:
+    """The compiled tick on :data:`ACCELERATION_SCENARIO` without, then with, the robot's
+    acceleration limits (their saturation around the previous command, docs/design.md 9.1)."""
+    return (time_loop(ACCELERATION_SCENARIO, True, duration),
+            time_loop(ACCELERATION_SCENARIO, True, duration, acceleration_limits=True))
+
+
+def format_acceleration_line(without: LoopTiming, limited: LoopTiming) -> str:
+    """The ticks' medians and p99s with and without the limits, against the target."""
+    ratio = limited.tick_median_us / without.tick_median_us
+    return (f"acceleration limits: {without.scenario}, the compiled tick's median "
+            f"{limited.tick_median_us:.1f} us (p99 {limited.tick_p99_us:.1f}) with them, "
+            f"{without.tick_median_us:.1f} us (p99 {without.tick_p99_us:.1f}) without: "
+            f"{ratio:.2f}x{'*' if ratio > ACCELERATION_COST_TARGET else ''} "
+            f"(target at most {ACCELERATION_COST_TARGET}x)")

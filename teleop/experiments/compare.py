@@ -83,13 +83,13 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
              on_step: Callable[[int], None] | None = None,
              imperfections: Imperfections | None = None,
              plant: PlantChoice | None = None,
-             acceleration_limits: bool = False) -> RunResult:
+             acceleration_limits: bool = True) -> RunResult:
     """Run one controller through ``plan`` and record every tick.
 
     ``imperfections`` (docs/design.md section 15.1) puts a robot that is not perfect under
     the loop; None or the default: the perfect robot. ``plant`` chooses the robot the loop
     drives (docs/design.md section 17); None: the kinematic one. ``acceleration_limits``:
-    the controller keeps the robot's (docs/design.md 8.4; off by default).
+    the controller keeps the robot's (docs/design.md 8.4; on by default, False: none).
     """
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
@@ -287,7 +287,7 @@ def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfi
                              imperfections: Imperfections | None = None,
                              on_step: Callable[[int], None] | None = None,
                              plant: PlantChoice | None = None,
-                             acceleration_limits: bool = False) -> dict[str, np.ndarray]:
+                             acceleration_limits: bool = True) -> dict[str, np.ndarray]:
     """Per step, ``max_j |qd_spec,j - qd_ref,j|`` (rad/s) of every spec against the first,
     all solved at the same ``q`` and twist along the first spec's closed-loop run (a shadow
     evaluation, docs/design.md section 15.3); zeros for the first spec itself."""
@@ -310,7 +310,7 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
             duration: float | None = None, progress: bool = True,
             imperfections: Imperfections | None = None,
             agreement: bool = True, plant: PlantChoice | None = None,
-            acceleration_limits: bool = False) -> dict[str, RunResult]:
+            acceleration_limits: bool = True) -> dict[str, RunResult]:
     """Run every controller spec on the same plan (fresh constraints each), on the same
     ``plant`` (None: the kinematic one; each run builds its own), each controller with the
     robot's acceleration limits when ``acceleration_limits`` and with the plan's collision
@@ -409,7 +409,7 @@ class RunProgress:
 def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
                      duration: float, imperfections: Imperfections | None = None,
                      plant: PlantChoice | None = None,
-                     acceleration_limits: bool = False,
+                     acceleration_limits: bool = True,
                      variation: Variation | None = None) -> dict:
     """The metrics.json document (schema: ``teleop/experiments/metrics.schema.json``);
     ``variation`` is what :meth:`Variation.apply` made ``plan`` of (None: nothing), the
@@ -443,7 +443,7 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
                   duration: float, out_dir: str | Path, plots: bool = True,
                   imperfections: Imperfections | None = None,
                   plant: PlantChoice | None = None,
-                  acceleration_limits: bool = False,
+                  acceleration_limits: bool = True,
                   variation: Variation | None = None) -> list[Path]:
     """metrics.json, metrics.csv and, with ``plots``, the PNG plots and report.html into
     ``out_dir`` (``variation``: :func:`metrics_document`); returns the paths."""

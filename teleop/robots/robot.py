@@ -462,10 +462,11 @@ def load_robot(
     return robot
 
 
-#: Seconds a built-in robot's joint takes from rest to its velocity limit at its default
-#: acceleration limit. The makers publish joint speeds (Yaskawa's SDA10F datasheet: 130-400
-#: deg/s, the URDFs' velocity limits) but no joint accelerations; 0.2 s to full speed is an
-#: engineering choice typical of arms of this class (docs/design.md section 8.4).
+#: Seconds a joint takes from rest to its velocity limit at its default acceleration limit
+#: (every robot whose URDF gives no ``<limit acceleration>``). The makers publish joint
+#: speeds (Yaskawa's SDA10F datasheet: 130-400 deg/s, the URDFs' velocity limits) but no
+#: joint accelerations; 0.2 s to full speed is an engineering choice typical of arms of
+#: this class (docs/design.md section 8.4).
 ACCELERATION_RAMP_TIME = 0.2
 
 #: Default acceleration limits of a built-in planar base (m/s^2, m/s^2, rad/s^2): 0.5 s to
@@ -499,9 +500,9 @@ def acceleration_limits(model: pin.Model, urdf: pathlib.Path, given: Any,
                         planar_base: bool) -> np.ndarray | None:
     """The robot's (nv,) acceleration limits, read-only: ``given`` (nv values, or one for
     every joint) when given; else the URDF's ``<limit acceleration>`` (``inf`` where a
-    joint has none); else, for a built-in robot, the velocity limit over
-    :data:`ACCELERATION_RAMP_TIME` and a planar base's :data:`ROOT_ACCELERATION_LIMIT`;
-    else None."""
+    joint has none); else the velocity limit over :data:`ACCELERATION_RAMP_TIME` (``inf``
+    where a joint has no positive, finite velocity limit) and a planar base's
+    :data:`ROOT_ACCELERATION_LIMIT`; None when no joint has one."""
     from controllers.joint_acceleration import as_acceleration_limit
 
     if given is not None:
@@ -514,12 +515,13 @@ def acceleration_limits(model: pin.Model, urdf: pathlib.Path, given: Any,
             limits[start:start + model.nvs[joint]] = from_urdf[model.names[joint]]
     if from_urdf:
         return _readonly(limits)
-    if urdf.parent != ROBOTS_DIR:
-        return None
-    limits = np.asarray(model.velocityLimit, dtype=float) / ACCELERATION_RAMP_TIME
+    velocity = np.asarray(model.velocityLimit, dtype=float)
+    limits = np.full(model.nv, np.inf)
+    limited = np.isfinite(velocity) & (velocity > 0.0)
+    limits[limited] = velocity[limited] / ACCELERATION_RAMP_TIME
     if planar_base:
         limits[:3] = ROOT_ACCELERATION_LIMIT
-    return _readonly(limits)
+    return _readonly(limits) if np.isfinite(limits).any() else None
 
 
 #: Default velocity limits of a planar root joint: (m/s, m/s, rad/s).

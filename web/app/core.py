@@ -66,6 +66,8 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
         apart (docs/design.md section 18; :mod:`.collisions`); ``collision_settings``
         the avoidance's ``self_collision`` (default: on for a robot with several arms),
         ``safety_distance``, ``detection_distance``, ``approach_speed``.
+    acceleration_limits : whether the controllers keep the robot's joint acceleration
+        limits (docs/design.md section 8.4; on by default).
     """
 
     def __init__(self, robot: Robot, controller: str = "cjm", ghost: str | None = None,
@@ -73,8 +75,10 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
                  scene_dir: str | Path = "scenes", plant: str = "kinematic",
                  plant_settings: PlantSettings | None = None,
                  wall_stiffness: float | None = None, collisions: bool = True,
-                 collision_settings: dict | None = None) -> None:
+                 collision_settings: dict | None = None,
+                 acceleration_limits: bool = True) -> None:
         rate = checked_rate(rate)
+        self.acceleration_limits = acceleration_limits
         self.plant = PlantChoice(plant, plant_settings or PlantSettings(), wall_stiffness)
         self.robot = robot
         self._lock = threading.RLock()

@@ -19,7 +19,7 @@ from constraints.collision import CollisionAvoidance
 from constraints.validation import as_vector
 from controllers import Controller
 from controllers.linalg import DampingPolicy
-from teleop.controller_specs import make_controller
+from teleop.controller_specs import ROBOT, make_controller
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.robots import Robot
 
@@ -62,6 +62,7 @@ class Robots:
     collision_rows: dict
     ghost_offset: np.ndarray
     plant: PlantChoice
+    acceleration_limits: bool
     _lock: threading.RLock
     _build_lock: threading.Lock
 
@@ -79,7 +80,9 @@ class Robots:
         weight = self.orientation_weight if orientation_weight is None else orientation_weight
         controller = make_controller(spec, self.robot, constraints, dt=config.dt,
                                      twist_weight=None if weight == 1.0 else
-                                     [1.0, 1.0, 1.0, weight, weight, weight])
+                                     [1.0, 1.0, 1.0, weight, weight, weight],
+                                     acceleration_limit=ROBOT if self.acceleration_limits
+                                     else None)
         self._apply_damping(controller, damping)
         controller.set_collisions(self._attached(avoidance, collisions_on))
         return TeleopLoop(self.robot, controller, q0=q, config=config,

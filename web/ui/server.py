@@ -24,7 +24,8 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                plant_settings: PlantSettings | None = None,
                wall_stiffness: float | None = None, collisions: bool = True,
                collision_settings: dict | None = None,
-               inputs: Sequence[InputSource] = (), input_timeout: float | None = None
+               inputs: Sequence[InputSource] = (), input_timeout: float | None = None,
+               acceleration_limits: bool = True
                ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
     threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
@@ -33,14 +34,16 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     random one, then ``ui.access.token``), one that does not present it
     (:mod:`web.access`).
     ``plant``, ``plant_settings``, ``wall_stiffness``: what the loops run on;
-    ``collisions``, ``collision_settings``: the collision avoidance
+    ``collisions``, ``collision_settings``: the collision avoidance;
+    ``acceleration_limits``: the robot's joint acceleration limits kept (on by default)
     (:class:`web.app.TeleopApp`); ``inputs``: the devices that drive the EEs, each its
     own (docs/design.md section 19), released after ``input_timeout`` s of silence
     (default 0.1 s); the caller closes them (:meth:`TeleopApp.close_inputs`)."""
     app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
                     scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
                     wall_stiffness=wall_stiffness, collisions=collisions,
-                    collision_settings=collision_settings)
+                    collision_settings=collision_settings,
+                    acceleration_limits=acceleration_limits)
     if scene is not None:
         app.apply_scene(scene)
     if input_timeout is not None:

@@ -30,13 +30,14 @@ class TimeLimitExceeded(Exception):
 @dataclass(frozen=True)
 class CellRun:
     """What a cell's inputs build: the plan (scenario and variation), the loop settings,
-    the imperfections, the plant, the duration."""
+    the imperfections, the plant, the duration, whether the acceleration limits are kept."""
 
     plan: Any
     config: Any
     imperfections: Any
     plant: Any
     duration: float
+    acceleration_limits: bool
 
 
 def build_run(inputs: Mapping[str, Any]) -> CellRun:
@@ -65,7 +66,7 @@ def build_run(inputs: Mapping[str, Any]) -> CellRun:
                else PlantSettings())
     plant = PlantChoice(value("plant"), physics)
     duration = value("duration") or plan.duration
-    return CellRun(plan, config, imperfections, plant, duration)
+    return CellRun(plan, config, imperfections, plant, duration, value("acceleration_limits"))
 
 
 def run_cell(inputs: Mapping[str, Any], time_limit: float) -> dict[str, Any]:
@@ -92,7 +93,7 @@ def run_cell(inputs: Mapping[str, Any], time_limit: float) -> dict[str, Any]:
 
         with SolverOutputCapture() as capture:
             result = run_plan(run.plan, inputs["controller"], run.config, run.duration,
-                              check_time, run.imperfections, run.plant)
+                              check_time, run.imperfections, run.plant, run.acceleration_limits)
             result.solver_messages = capture.collect()
         outcome.update(status=DONE, metrics=result.metrics())
     except TimeLimitExceeded as error:
@@ -118,6 +119,9 @@ def compare_command(inputs: Mapping[str, Any], out: str = "out") -> str:
     words = ["teleop", "compare"]
     for name, value in inputs.items():
         if name in ("calibration_error_mm", "calibration_error_mrad"):
+            continue
+        if name == "acceleration_limits":
+            words += [] if value else ["--no-acceleration-limits"]
             continue
         words += [FIELDS_BY_NAME[name].option, _shown(value)]
     if "calibration_error_mm" in inputs or "calibration_error_mrad" in inputs:

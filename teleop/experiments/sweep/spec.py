@@ -56,6 +56,12 @@ def _integer(minimum: int = 0, maximum: int | None = None) -> Callable[[Any, str
     return check
 
 
+def _boolean(value: Any, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise ValueError(f"{name} must be true or false, got {short_repr(value)}")
+    return value
+
+
 def _optional(check: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
     return lambda value, name: None if value is None else check(value, name)
 
@@ -92,6 +98,8 @@ def _cell_fields() -> tuple[CellField, ...]:
         CellField("rate", 1000.0, _real(positive=True, maximum=MAX_RATE_HZ), "--rate",
                   help="control rate (Hz)"),
         CellField("plant", "kinematic", _plant_kind, "--plant", help="kinematic or mujoco"),
+        CellField("acceleration_limits", True, _boolean, None,
+                  help="the robot's joint acceleration limits kept (docs/design.md 8.4)"),
         CellField("payload", 0.0, _real(0.0, MAX_PAYLOAD_KG), "--payload",
                   help="kg at each EE (mujoco)"),
         CellField("kp", 20.0, _real(positive=True, maximum=MAX_POSE_GAIN), "--kp",
