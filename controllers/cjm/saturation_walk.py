@@ -12,7 +12,7 @@ walking from ``qd_prev`` (brought into the box) and never leaving the box:
    where the free joints can reduce the residual no further, release a held joint whose
    bound pushes the wrong way (the gradient ``A^T (A point - b)`` points inside its box):
    an active-set bounded least squares, so the rows hold exactly whenever some command in
-   the box holds them;
+   the box holds them, and otherwise keep the box's least residual through level 2;
 2. **task**: the same active set on ``|J qd - V|^2 + |D qd|^2`` under the rows, ``D`` the
    CJM's damping rows of the whole problem (:func:`~controllers.optimization.task_damping.
    task_damping`, the QP's too: docs/design.md 10.7): walk towards the rows-exact
@@ -49,10 +49,9 @@ def saturate_around_previous(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: n
     free = ((previous >= lower - BOX_MARGIN * (1.0 + np.abs(lower)))  # outside beyond rounding:
             & (previous <= upper + BOX_MARGIN * (1.0 + np.abs(upper))))  # held (step 0)
     point, free, rows_scale = walk_to_rows(rows, rows_rhs, lower, upper, point, free)
+    if rows_scale < 1.0:  # the task keeps the rows' least residual (the QP's recovery, 10.7)
+        rows_rhs = rows @ point
     damping = task_damping(rows, jacobian, policy)
-    if rows_scale < 1.0:
-        return _walk_result(point, rows_scale, free, -1, jacobian, twist, damping.sigma_min,
-                            damping.damping)
     task = np.vstack([jacobian, damping.rows])
     task_rhs = np.concatenate([twist, np.zeros(damping.rows.shape[0])])
     limiting_joint = -1
@@ -71,8 +70,8 @@ def saturate_around_previous(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: n
         if joint < 0:
             break  # the box's optimum
         free[joint] = True
-    return _walk_result(point, 1.0, free, limiting_joint, jacobian, twist, damping.sigma_min,
-                        damping.damping)
+    return _walk_result(point, rows_scale, free, limiting_joint, jacobian, twist,
+                        damping.sigma_min, damping.damping)
 
 
 def walk_to_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray,
@@ -169,9 +168,7 @@ def _walk_result(qd: np.ndarray, rows_scale: float, free: np.ndarray, limiting_j
     along which ``J qd`` lies when it does (``scaled``), else a least-squares task."""
     achieved = jacobian @ qd
     twist_norm = float(twist @ twist)
-    if rows_scale < 1.0:
-        task_scale = 0.0
-    elif twist_norm > 0.0:
+    if twist_norm > 0.0:
         task_scale = min(max(float(achieved @ twist) / twist_norm, 0.0), 1.0)
     else:
         task_scale = 1.0

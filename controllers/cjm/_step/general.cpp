@@ -122,7 +122,8 @@ void Step::hold_pairs_below() {
   }
 }
 
-Step::Split Step::solve_over_free(const Eigen::Ref<const RowMatrix>& task,
+Step::Split Step::solve_over_free(const ConstVectorRef& rows_rhs,
+                                  const Eigen::Ref<const RowMatrix>& task,
                                   const ConstVectorRef& twist, const DampingPolicy& policy) {
   // rows exactly over the free joints, held ones moved to the right-hand side
   const Index m = row_count_, p = task.rows();
@@ -134,7 +135,7 @@ Step::Split Step::solve_over_free(const Eigen::Ref<const RowMatrix>& task,
     ++n_free;
   }
   auto rhs = scratch_rows_.head(m);
-  rhs = rhs_.head(m);
+  rhs = rows_rhs;
   rhs.noalias() -= rows_.topRows(m) * held_;
   const auto rows_free = columns_.topLeftCorner(m, n_free);
   null_.factor(rows_free);

@@ -71,7 +71,7 @@ void Step::saturate_in_null_space(const Inputs& in) {
   double best_scale = 0.0;
   Index best_critical = -1, reference_rank = 0;
   for (Index iteration = 0; iteration <= nv_; ++iteration) {
-    const Split split = solve_over_free(in.ee_jacobian, in.twist, policy_);
+    const Split split = solve_over_free(rhs_.head(row_count_), in.ee_jacobian, in.twist, policy_);
     if (!have_reference) {
       reference_rank = split.task_rank;
       have_reference = true;
@@ -105,7 +105,7 @@ void Step::saturate_in_null_space(const Inputs& in) {
   if (have_scaled) {
     free_ = best_free_;
     held_ = best_held_;
-    const Split best = solve_over_free(in.ee_jacobian, in.twist, policy_);
+    const Split best = solve_over_free(rhs_.head(row_count_), in.ee_jacobian, in.twist, policy_);
     sns_qd_ = base_ + best_scale * direction_;
     saturation_result(in, best_scale, 1.0, best_critical, best);
     return;

@@ -13,9 +13,16 @@ void Step::saturate_around_previous(const Inputs& in) {
     free_(j) = previous_(j) >= lower_(j) - tol_.box_margin * (1.0 + std::abs(lower_(j))) &&
                previous_(j) <= upper_(j) + tol_.box_margin * (1.0 + std::abs(upper_(j)));
   const double rows_scale = walk_to_rows();
+  const Index m = row_count_;
+  auto rows_rhs = walk_rows_rhs_.head(m);  // the task keeps the rows' least residual
+  if (rows_scale < 1.0) {
+    rows_rhs.noalias() = rows_.topRows(m) * walk_point_;
+  } else {
+    rows_rhs = rhs_.head(m);
+  }
   const Index damping_count = task_damping_rows(in);
   Index limiting_joint = -1;
-  if (rows_scale >= 1.0) {
+  {
     const Index p = task_rows_ + damping_count;
     walk_task_.topRows(task_rows_) = in.ee_jacobian;
     walk_rhs_.head(task_rows_) = in.twist;
@@ -26,7 +33,7 @@ void Step::saturate_around_previous(const Inputs& in) {
     for (Index iteration = 0; iteration <= 3 * nv_; ++iteration) {
       if (free_.any()) {
         for (Index j = 0; j < nv_; ++j) held_(j) = free_(j) ? 0.0 : walk_point_(j);
-        const Split split = solve_over_free(task, task_rhs, undamped);
+        const Split split = solve_over_free(rows_rhs, task, task_rhs, undamped);
         if (split.rows_residual > tol_.rows) break;  // the held joints leave the rows no freedom
         walk_goal_ = base_ + direction_;
         const Index joint = walk();
@@ -191,9 +198,7 @@ void Step::walk_result(const Inputs& in, double rows_scale, Index limiting_joint
   achieved.noalias() = in.ee_jacobian * sns_qd_;
   const double twist_norm = in.twist.squaredNorm();
   double task_scale = 1.0;
-  if (rows_scale < 1.0) {
-    task_scale = 0.0;
-  } else if (twist_norm > 0.0) {
+  if (twist_norm > 0.0) {
     task_scale = std::min(std::max(achieved.dot(in.twist) / twist_norm, 0.0), 1.0);
   }
   achieved -= task_scale * in.twist;

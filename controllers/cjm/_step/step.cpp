@@ -97,6 +97,7 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   walk_task_.resize(2 * task_rows, nv);
   walk_rhs_.resize(2 * task_rows);
   walk_residual_.resize(2 * task_rows);
+  walk_rows_rhs_.resize(m);
   task_x_.resize(nv + 7, 2);
   for (Vector* v : {&qd0_, &delta_, &lower_, &upper_, &box_lower_, &box_upper_, &free_x_,
                     &posture_null_, &held_, &best_held_, &base_, &direction_, &sns_qd_,

@@ -178,8 +178,9 @@ class Step {
 
   // general.cpp
   void general(const Inputs& in, VectorRef qd);
-  Split solve_over_free(const Eigen::Ref<const RowMatrix>& task, const ConstVectorRef& twist,
-                        const DampingPolicy& policy);
+  //! The rows ``rows_ qd = rows_rhs`` exactly over the free joints, then ``task qd ~ twist``.
+  Split solve_over_free(const ConstVectorRef& rows_rhs, const Eigen::Ref<const RowMatrix>& task,
+                        const ConstVectorRef& twist, const DampingPolicy& policy);
 
   // saturation.cpp
   void saturate(const Inputs& in, VectorRef qd);
@@ -257,7 +258,7 @@ class Step {
   Vector held_, best_held_, base_, direction_, sns_qd_;
   // saturation around the previous command
   Vector walk_point_, walk_goal_, walk_move_, walk_rhs_, walk_residual_, gradient_, reduced_,
-      gradient_free_;
+      gradient_free_, walk_rows_rhs_;
   RowMatrix walk_task_;  // [J_e; D]
   double walk_sigma_min_ = 0.0, walk_damping_ = 0.0;
   double sns_task_scale_ = 1.0, sns_rows_scale_ = 1.0;
