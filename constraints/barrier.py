@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 import pinocchio as pin
 
@@ -32,7 +34,7 @@ class Barrier(Plane):
     kind = "barrier"
     color = (230, 40, 40)
     label = "barrier"
-    placement: tuple[PlacementField, ...] = (
+    placement: ClassVar[tuple[PlacementField, ...]] = (
         *Plane.placement,
         PlacementField("offset", "number", "offset (m)", default=0.01, step=0.005,
                        hint="how far the barrier lies behind the point, along the normal "

@@ -44,12 +44,16 @@ SHAPES = ("ring", "plane", "point")
 
 
 class RobotLike(Protocol):
-    """What a constraint needs from a robot (``teleop.Robot`` satisfies it)."""
+    """What a constraint needs from a robot (``teleop.Robot`` satisfies it); read only."""
 
-    model: pin.Model
-    constrained_link: str | None
-    link_axis: np.ndarray
-    link_axes: Mapping[str, np.ndarray]
+    @property
+    def model(self) -> pin.Model: ...
+    @property
+    def constrained_link(self) -> str | None: ...
+    @property
+    def link_axis(self) -> np.ndarray: ...
+    @property
+    def link_axes(self) -> Mapping[str, np.ndarray]: ...
 
 
 def link_axis_of(robot: RobotLike, link: str) -> np.ndarray:

@@ -43,7 +43,8 @@ class CompiledForm:
         """``(kind, parameters)``: the compiled CJM step computes this constraint's terms
         from them in C++, reading the parameters again whenever the array is replaced;
         None when the type declares none (Python then writes its terms)."""
-        if not declares_compiled_form(type(self)):
+        # (mypy takes the class's __hash__ for an unbound method: not Hashable)
+        if not declares_compiled_form(type(self)):  # type: ignore[arg-type]
             return None
         return self.compiled_kind, self.compiled_parameters
 
@@ -55,8 +56,9 @@ class CompiledForm:
         """Assigning a field of :attr:`compiled_fields` declares the parameters anew."""
         if name in self.compiled_fields:
             if isinstance(value, np.ndarray):
-                value = value.copy()
-                value.flags.writeable = False
+                frozen = value.copy()
+                frozen.flags.writeable = False
+                value = frozen
             object.__setattr__(self, name, value)
             self._declare()
         else:
@@ -78,7 +80,7 @@ class CompiledForm:
 
 
 @cache
-def declares_compiled_form(constraint_type: type) -> bool:
+def declares_compiled_form(constraint_type: type[CompiledForm]) -> bool:
     """Whether ``constraint_type`` has a compiled kind whose math it keeps: the class
     that set :attr:`CompiledForm.compiled_kind` defines every method of
     :attr:`CompiledForm.compiled_math` the type uses (a subclass with its own geometry

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 import pinocchio as pin
 
@@ -61,7 +63,7 @@ class Hole(Constraint):
     shape = "ring"
     color = (255, 170, 0)
     label = "hole"
-    placement: tuple[PlacementField, ...] = (ON_ARM, ALONG_LINK)
+    placement: ClassVar[tuple[PlacementField, ...]] = (ON_ARM, ALONG_LINK)
     omitted_at_default = ("tissue_stiffness", "tissue_damping")
     has_wall = True
     compiled_kind = "hole"
@@ -110,7 +112,8 @@ class Hole(Constraint):
         return cls(link, center, link_axis=axis, gain=gain)
 
     @classmethod
-    def place(cls, robot: RobotLike, q: np.ndarray, link: str, distance: float) -> "Hole":
+    def place(  # type: ignore[override]  # the type's own placement fields
+            cls, robot: RobotLike, q: np.ndarray, link: str, distance: float) -> "Hole":
         """:meth:`on_link`: a hole ``distance`` m along ``link``'s axis, where it is at ``q``."""
         return cls.on_link(robot, q, distance, link=link)
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 import pinocchio as pin
 
@@ -51,7 +53,7 @@ class Plane(Constraint):
     shape = "plane"
     color = (60, 140, 255)
     label = "plane"
-    placement: tuple[PlacementField, ...] = (
+    placement: ClassVar[tuple[PlacementField, ...]] = (
         ON_ANY_LINK, ALONG_LINK, ON_LINK_POINT,
         PlacementField("normal", "direction", "normal (world)", default=(0.0, 1.0, 0.0),
                        step=0.1, hint="in world coordinates; a barrier keeps the point on "
@@ -101,8 +103,9 @@ class Plane(Constraint):
         return plane
 
     @classmethod
-    def place(cls, robot: RobotLike, q: np.ndarray, link: str, normal, distance=None,
-              link_point=None, offset: float = 0.0) -> "Plane":
+    def place(  # type: ignore[override]  # the type's own placement fields
+            cls, robot: RobotLike, q: np.ndarray, link: str, normal, distance=None,
+            link_point=None, offset: float = 0.0) -> "Plane":
         """Through a point of ``link`` as it is at ``q`` (``distance`` m along its axis, or
         ``link_point`` in its coordinates), moved ``offset`` m against the unit world
         ``normal`` (:meth:`through_link_point`: the point must then satisfy the type's

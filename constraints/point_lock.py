@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 import pinocchio as pin
 
@@ -41,7 +43,7 @@ class PointLock(Constraint):
     shape = "point"
     color = (40, 170, 90)
     label = "point lock"
-    placement: tuple[PlacementField, ...] = (ON_ARM, ALONG_LINK)
+    placement: ClassVar[tuple[PlacementField, ...]] = (ON_ARM, ALONG_LINK)
 
     def __init__(self, link: str, link_point, target, gain: float = DEFAULT_GAIN,
                  velocity=(0.0, 0.0, 0.0)) -> None:
@@ -59,7 +61,8 @@ class PointLock(Constraint):
         return cls(link, link_point, placement.act(link_point), gain=gain)
 
     @classmethod
-    def place(cls, robot: RobotLike, q: np.ndarray, link: str, distance: float) -> "PointLock":
+    def place(  # type: ignore[override]  # the type's own placement fields
+            cls, robot: RobotLike, q: np.ndarray, link: str, distance: float) -> "PointLock":
         """:meth:`on_link`: the point ``distance`` m along ``link``'s axis, where it is at ``q``."""
         return cls.on_link(robot, q, distance=distance, link=link)
 

@@ -11,6 +11,8 @@ each constructor argument as an attribute of the same name) plus :func:`register
 
 from __future__ import annotations
 
+from typing import Any
+
 #: ``kind -> type``, in the order error messages and the UI list them
 CONSTRAINT_TYPES: dict[str, type] = {}
 
@@ -30,7 +32,7 @@ def register(constraint_type: type) -> type:
     return constraint_type
 
 
-def constraint_type(kind) -> type:
+def constraint_type(kind) -> type[Any]:
     """The constraint type named ``kind``; an unknown kind raises ``ValueError`` listing them."""
     if isinstance(kind, str) and kind in CONSTRAINT_TYPES:
         return CONSTRAINT_TYPES[kind]

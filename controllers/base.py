@@ -6,7 +6,7 @@ import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from enum import Enum
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -260,8 +260,9 @@ class Controller(ABC):
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
+        named: Any = robot  # a robot names its end effectors: ee_frames, or one ee_frame
         self.ee_frame_ids = [resolve_frame(self.model, name)
-                             for name in getattr(robot, "ee_frames", None) or (robot.ee_frame,)]
+                             for name in getattr(named, "ee_frames", None) or (named.ee_frame,)]
         self.ee_frame_id = self.ee_frame_ids[0]
         #: entries of the stacked EE twist: 6 per end effector
         self.task_size = 6 * len(self.ee_frame_ids)

@@ -56,12 +56,10 @@ class JointBounds:
         #: (2, nv): the velocity box alone, ``-qd_max`` and ``qd_max`` (+-inf where none or off)
         self.velocity_box = (np.vstack([-velocity, velocity]) if self.velocity_limits
                               else np.vstack([np.full(nv, -np.inf), np.full(nv, np.inf)]))
-        q_index, v_index = [], []
-        for joint in range(1, model.njoints):
-            if model.nqs[joint] == 1 and model.nvs[joint] == 1:
-                q_index.append(model.idx_qs[joint])
-                v_index.append(model.idx_vs[joint])
-        q_index, v_index = np.array(q_index, dtype=int), np.array(v_index, dtype=int)
+        scalar = [joint for joint in range(1, model.njoints)
+                  if model.nqs[joint] == 1 and model.nvs[joint] == 1]
+        q_index = np.array([model.idx_qs[joint] for joint in scalar], dtype=int)
+        v_index = np.array([model.idx_vs[joint] for joint in scalar], dtype=int)
         q_min = model.lowerPositionLimit[q_index]
         q_max = model.upperPositionLimit[q_index]
         finite = np.isfinite(q_min) & np.isfinite(q_max) & (q_max > q_min)

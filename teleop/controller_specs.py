@@ -19,8 +19,8 @@ Nothing heavy is imported here until a controller is built, so the CLI's help is
 from __future__ import annotations
 
 from dataclasses import dataclass
-from collections.abc import Mapping
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Mapping, Set
+from typing import TYPE_CHECKING, Any, Literal, Sequence
 
 if TYPE_CHECKING:
     from constraints import Constraint
@@ -34,7 +34,7 @@ __all__ = ["CONTEXTS", "CONTROLLER_HELP", "CONTROLLER_SPECS", "ControllerSpec",
 CONTEXTS = ("compare", "bench", "scaling", "ui")
 
 #: The CJM variants (``cjm:<variant>``) and the CJMController keywords of each.
-CJM_VARIANTS = {"": {}, "analytical": {}, "general": {"form": "general"},
+CJM_VARIANTS: dict[str, dict[str, Any]] = {"": {}, "analytical": {}, "general": {"form": "general"},
                 "paper": {"parametrisation": "paper"}, "python": {"backend": "python"}}
 
 #: The spec forms in one line, for help texts (no import: ``teleop --help`` stays fast).
@@ -54,7 +54,7 @@ class ControllerSpec:
 
     name: str
     description: str
-    offered_in: frozenset[str] = frozenset()  # a subset of CONTEXTS
+    offered_in: Set[str] = frozenset()  # a subset of CONTEXTS (kept as a frozenset)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "offered_in", frozenset(self.offered_in))
@@ -121,7 +121,7 @@ def _with_collisions(controller: Controller, collisions) -> Controller:
 def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
                     dt: float = 1e-3, twist_weight=None,
                     solver_settings: Mapping | None = None,
-                    time_budget: float | None | str = "periods",
+                    time_budget: float | Literal["periods"] | None = "periods",
                     acceleration_limit=None, collisions=None) -> Controller:
     """Build a controller from its spec string; unknown specs raise ``ValueError``.
     ``twist_weight`` (the task's diagonal weight, 6 per EE or one per entry) goes to every
@@ -149,8 +149,9 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
             raise ValueError(f"unknown CJM variant {option!r}: analytical, general, paper or python")
         from controllers import CJMController
 
-        controller = CJMController(robot, constraints, dt=dt, twist_weight=twist_weight,
-                                   acceleration_limit=acceleration_limit, **CJM_VARIANTS[option])
+        controller: Controller = CJMController(
+            robot, constraints, dt=dt, twist_weight=twist_weight,
+            acceleration_limit=acceleration_limit, **CJM_VARIANTS[option])
         return _with_collisions(controller, collisions)
     if family == "qp":
         from controllers import QPController

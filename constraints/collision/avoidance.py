@@ -42,9 +42,12 @@ DEFAULT_APPROACH_SPEED = 0.5
 class CollisionRobot(Protocol):
     """What collision avoidance needs of a robot (``teleop.Robot`` satisfies it)."""
 
-    model: pin.Model
-    collision_model: pin.GeometryModel
-    q_home: np.ndarray
+    @property
+    def model(self) -> pin.Model: ...
+    @property
+    def collision_model(self) -> pin.GeometryModel: ...
+    @property
+    def q_home(self) -> np.ndarray: ...
 
 
 class CollisionAvoidance:

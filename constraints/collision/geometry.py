@@ -11,7 +11,7 @@ disable list names (an SRDF's ``disable_collisions``), plus any pair the user ad
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Set
 
 import coal
 import numpy as np
@@ -78,8 +78,8 @@ def check_links(model: pin.Model, keys: set[frozenset[str]], what: str) -> None:
 
 
 def self_collision_pairs(model: pin.Model, geometry: pin.GeometryModel, q_home: np.ndarray,
-                         safety_distance: float, disabled: set[frozenset[str]] = frozenset(),
-                         extra: set[frozenset[str]] = frozenset()) -> list[tuple[int, int]]:
+                         safety_distance: float, disabled: Set[frozenset[str]] = frozenset(),
+                         extra: Set[frozenset[str]] = frozenset()) -> list[tuple[int, int]]:
     """Geometry index pairs ``(i, j)``, ``i < j``, checked for self-collision.
 
     A pair is kept when its links are neither one rigid body nor parent and child, it is

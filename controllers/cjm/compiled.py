@@ -30,6 +30,7 @@ from constraints.collision import CollisionRows
 from constraints.compiled_form import UNIT_TOLERANCE
 
 from ..base import StepStatus, checked_inputs
+from ..joint_acceleration import DAMPER_BRAKING_SHARE, braked_pairs
 from ._step import EVENTS, REPORT_FIELDS as CPP_REPORT_FIELDS, JointBox, Pipeline, Step, Tolerances
 from ._step import ConstraintPlan as CompiledPlan
 from .analytical import TermsWriter, terms_size
@@ -93,7 +94,9 @@ def joint_box(setup: StepSetup) -> JointBox:
         box_test=setup.box_test.matrix,
         acceleration_step=(np.zeros(0) if bounds.acceleration_step is None
                            else bounds.acceleration_step),
-        dt=bounds.dt, limit_gain=bounds.limit_gain, slack=setup.box_test.slack)
+        dt=bounds.dt, limit_gain=bounds.limit_gain, slack=setup.box_test.slack,
+        damper_step=(np.zeros(0) if bounds.acceleration_step is None
+                     else DAMPER_BRAKING_SHARE * bounds.acceleration_step))
 
 
 class CompiledStep:
@@ -155,9 +158,10 @@ class CompiledStep:
         self._active_pairs = step.active_pairs
         terms, placements = pipeline.terms, pipeline.placements
         offsets = np.cumsum([0] + [terms_size(plan.constraint.dim) for plan in plans])
-        #: (writer, terms view, link rotation and translation views) of the constraints
-        #: that declare no compiled form: Python writes their terms
-        self._in_python: list[tuple[TermsWriter, np.ndarray, np.ndarray, np.ndarray]] = []
+        #: (index, writer, terms view, link rotation and translation views) of the
+        #: constraints that declare no compiled form: Python writes their terms (and an
+        #: inequality's damper gap and gain, docs/design.md 12)
+        self._in_python: list[tuple[int, TermsWriter, np.ndarray, np.ndarray, np.ndarray]] = []
         for i, plan in enumerate(plans):
             constraint = plan.constraint
             if constraint.compiled_form() is not None:
@@ -165,7 +169,7 @@ class CompiledStep:
             else:
                 row = placements[len(setup.ee_frame_ids) + i]
                 writer = TermsWriter(constraint, "paper" if self._paper else "nullspace")
-                self._in_python.append((writer, terms[offsets[i]:offsets[i + 1]],
+                self._in_python.append((i, writer, terms[offsets[i]:offsets[i + 1]],
                                         row[:9].reshape(3, 3), row[9:]))
         self._one_call = not self._in_python and not self._posture_in_python
         #: the previous command, the acceleration limits' reference (a view of the C++ step's)
@@ -251,7 +255,9 @@ class CompiledStep:
         C++ step's buffer (sized for every pair before the pairs are described)."""
         model, data = self.setup.model, self.data
         pin.computeJointJacobians(model, data, q)
-        pairs = self._collisions.rows(model, data)
+        bounds = self.setup.bounds
+        pairs = braked_pairs(self._collisions.rows(model, data), self._collisions,
+                             bounds.acceleration_limit, bounds.dt)
         self._pair_rows[:pairs.size] = pairs.rows
         self._pair_lower[:pairs.size] = pairs.lower
         self._step.set_pair_count(pairs.size)
@@ -266,7 +272,7 @@ class CompiledStep:
         """Build the C++ step again with room for ``pair_capacity`` collision rows, from
         the command last sent."""
         previous = self.previous.copy()
-        self.__init__(self.setup, self.data, pair_capacity)
+        CompiledStep.__init__(self, self.setup, self.data, pair_capacity)
         self.previous[:] = previous
 
     def _checked(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -278,8 +284,12 @@ class CompiledStep:
         analytical form may not run)."""
         setup = self.setup
         paper_form = True
-        for writer, terms, rotation, translation in self._in_python:
+        gaps, gains = self._step.damper_gaps, self._step.damper_gains
+        for index, writer, terms, rotation, translation in self._in_python:
             placement = pin.SE3(rotation, translation)
+            if not writer.constraint.is_equality:
+                gaps[index] = writer.constraint.error(placement)[0]
+                gains[index] = writer.constraint.gain
             if self._paper and not paper_form_defined(writer.constraint, placement):
                 paper_form, writer = False, self._fallback_writer
             writer.write(placement, terms)

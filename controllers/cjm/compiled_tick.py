@@ -14,12 +14,15 @@ tests/test_compiled_tick.py holds the two equal.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 import pinocchio as pin
 
 from ._step import TICK_REFUSED, Tick
+
+if TYPE_CHECKING:
+    from .compiled import CompiledStep
 
 #: What :meth:`CompiledTick.run` gives back: the outcome (``_step.TICK_STEPPED``,
 #: ``TICK_REFUSED``: the twist was not finite and no step ran, ``TICK_NOT_FINITE``: the
@@ -64,7 +67,7 @@ class CompiledTick:
         self._tick: Tick | None = None
         #: the last period's stacked twist after the caps (a view, set by :meth:`ready`)
         self.twist: np.ndarray | None = None
-        self._step = None  # the CompiledStep whose pipeline the tick runs
+        self._step: CompiledStep | None = None  # the step whose pipeline the tick runs
         self._pipeline = None
 
     def ready(self) -> bool:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from typing import Iterable, Literal
+from typing import TYPE_CHECKING, Iterable, Literal
 
 import numpy as np
 import pinocchio as pin
@@ -20,6 +20,9 @@ from .python_step import PythonStep
 from .report import StepReport, solve_info
 from .step_setup import ConstraintPlan, Form, StepSetup
 from .tolerances import StepTolerances
+
+if TYPE_CHECKING:
+    from .compiled import CompiledStep
 
 Backend = Literal["auto", "compiled", "python"]
 
@@ -249,7 +252,7 @@ class CJMController(Controller):
                         "(its 1/a form needs the constrained directions perpendicular to p "
                         "at every configuration, as a hole's are): use 'nullspace'")
         setup = self._step_setup()
-        step = PythonStep(setup, self.data)
+        step: PythonStep | CompiledStep = PythonStep(setup, self.data)
         if self.backend == "compiled":
             from .compiled import CompiledStep, KinematicsMismatch
 

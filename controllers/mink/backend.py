@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Any, Sequence
 
 import mink
 import numpy as np
@@ -37,7 +37,7 @@ class MinkBackend:
         self.solver = solver
         self.dt = dt
         self.budget = budget
-        self.settings = {key: value * dt
+        self.settings: dict[str, Any] = {key: value * dt
                          for key, value in VELOCITY_TOLERANCES.get(solver, {}).items()}
         self.settings.update(FIXED_SETTINGS.get(solver, {}))
         self.settings.update(MINK_ITERATION_CAPS.get(solver, {}))
@@ -64,8 +64,8 @@ class MinkBackend:
         if self._proxqp_rho_tuned and self._proxqp is None:
             self.settings["rho"] = PROXQP_RHO * cost**2
 
-    def solve_ik(self, configuration: mink.Configuration, tasks: list[mink.Task],
-                 damping: float, limits: list[mink.Limit], constraints: list[mink.Task],
+    def solve_ik(self, configuration: mink.Configuration, tasks: Sequence[mink.Task],
+                 damping: float, limits: list[mink.Limit], constraints: Sequence[mink.Task],
                  variable_bounds: Sequence[JointBoxLimit | AccelerationLimit]) -> np.ndarray:
         """``mink.build_ik`` solved within the step's budget (``solve_ik``'s two lines, so
         that a budget spent is told from an infeasible problem): MuJoCo's velocity ``v``.

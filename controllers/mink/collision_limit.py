@@ -44,7 +44,7 @@ class CollisionPairsLimit(mink.CollisionAvoidanceLimit):
     def __init__(self, model: mujoco.MjModel, pairs: Sequence[tuple[int, int]],
                  names: Sequence[str], gain: float, safety_distance: float,
                  detection_distance: float) -> None:
-        self._given_pairs = [tuple(pair) for pair in pairs]
+        self._given_pairs = [(int(first), int(second)) for first, second in pairs]
         #: each row's pair, named as the avoidance names it ("first | second")
         self.names = tuple(names)
         super().__init__(model, [], gain=gain,

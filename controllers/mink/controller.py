@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Sequence
+from typing import Any
 
 import mink
 import mujoco
@@ -234,7 +235,7 @@ class MinkController(GuardedController):
     def _build_mujoco(self) -> None:
         """The MuJoCo model (with the avoidance's shapes, :class:`CollisionScene`), its
         joint map, mink's configuration and the collision limit."""
-        robot = self.robot
+        robot: Any = self.robot  # a teleop.Robot: its collision model and URDF too
         self._scene = (None if self.collisions is None
                        else CollisionScene(self.collisions, robot.collision_model, self.model))
         self.mj_model, self.joints = build_mujoco_model(
@@ -380,7 +381,7 @@ class MinkController(GuardedController):
         held = near[slack <= self._at_bound * self.dt]
         return tuple(dict.fromkeys(self.collision_limit.names[i] for i in held.tolist()))
 
-    def _solve_rows(self, tasks: list[mink.Task], q_mj: np.ndarray) -> np.ndarray:
+    def _solve_rows(self, tasks: Sequence[mink.Task], q_mj: np.ndarray) -> np.ndarray:
         """mink's ``qd`` (Pinocchio order) under the rows as the constraint tasks hold them
         (``b``, or the least residual's), which it must meet to ``equality_tolerance``."""
         v_mj = self.backend.solve_ik(self.configuration, tasks, self.damping, self._limits,
@@ -434,8 +435,10 @@ class MinkController(GuardedController):
         ``held``'s rows (None: their own); the collision limit's bounds are raised to
         what the least-residual command reaches on mink's own rows."""
         if held is None:
-            for item in (*self.constraint_tasks, *self.barrier_limits):
-                item.held_rhs = None
+            for task in self.constraint_tasks:
+                task.held_rhs = None
+            for limit in self.barrier_limits:
+                limit.held_rhs = None
             if self.collision_limit is not None:
                 self.collision_limit.held_bound = None
             return

@@ -191,11 +191,11 @@ def joint_map(model: pin.Model, mj_model: mujoco.MjModel) -> JointMap:
     if mj_model.nq != model.nq - angle_coordinates or mj_model.nv != model.nv:
         raise ValueError(f"MuJoCo nq/nv = {mj_model.nq}/{mj_model.nv}, "
                          f"Pinocchio {model.nq}/{model.nv}")
-    pin_q, pin_v, mj_q, mj_v = (np.array(i, dtype=int) for i in (pin_q, pin_v, mj_q, mj_v))
+    pin_qs, pin_vs, mj_qs, mj_vs = (np.array(i, dtype=int) for i in (pin_q, pin_v, mj_q, mj_v))
     identity = bool(base is None and not continuous_pin_q
-                    and np.array_equal(pin_q, mj_q) and np.array_equal(pin_v, mj_v)
-                    and np.array_equal(pin_q, np.arange(model.nq))
-                    and np.array_equal(pin_v, np.arange(model.nv)))
-    return JointMap(tuple(names), pin_q, pin_v, mj_q, mj_v, identity, base,
+                    and np.array_equal(pin_qs, mj_qs) and np.array_equal(pin_vs, mj_vs)
+                    and np.array_equal(pin_qs, np.arange(model.nq))
+                    and np.array_equal(pin_vs, np.arange(model.nv)))
+    return JointMap(tuple(names), pin_qs, pin_vs, mj_qs, mj_vs, identity, base,
                     np.array(continuous_pin_q, dtype=int), np.array(continuous_mj_q, dtype=int))
 

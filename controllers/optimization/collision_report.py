@@ -27,7 +27,7 @@ def rows_at_bound(rows: CollisionRows, qd: np.ndarray, tolerance: float = AT_BOU
     return np.flatnonzero(rows.violation(qd) >= -tolerance)
 
 
-def closest_rows(rows: CollisionRows, indices: Sequence[int]) -> list[int]:
+def closest_rows(rows: CollisionRows, indices: Sequence[int] | np.ndarray) -> list[int]:
     """``indices`` with one row per pair name (a link pair has a row per geometry pair):
     the nearest, in the order the names first appear."""
     nearest: dict[str, int] = {}
@@ -38,12 +38,12 @@ def closest_rows(rows: CollisionRows, indices: Sequence[int]) -> list[int]:
     return list(nearest.values())
 
 
-def pair_names(rows: CollisionRows, indices: Sequence[int]) -> tuple[str, ...]:
+def pair_names(rows: CollisionRows, indices: Sequence[int] | np.ndarray) -> tuple[str, ...]:
     """The pair names of ``indices``, each once."""
     return tuple(rows.pairs[i] for i in closest_rows(rows, indices))
 
 
-def pair_list(rows: CollisionRows, indices: Sequence[int]) -> str:
+def pair_list(rows: CollisionRows, indices: Sequence[int] | np.ndarray) -> str:
     """``"a | b (d = x mm), c | d (d = y mm)"``: the pairs of ``indices``, each once at its
     nearest row, for messages."""
     return ", ".join(rows.describe(i) for i in closest_rows(rows, indices))
@@ -72,7 +72,7 @@ def report_held_back(info: SolveInfo, names: Sequence[str], described: str,
         info.report(StepStatus.LEAST_SQUARES, f"held back by collision pair{plural} {described}")
 
 
-def report_conflict(info: SolveInfo, rows: CollisionRows, indices: Sequence[int]) -> None:
+def report_conflict(info: SolveInfo, rows: CollisionRows, indices: Sequence[int] | np.ndarray) -> None:
     """``constraint_degraded`` naming the pairs (``indices``) the least-residual command
     holds at their bound while the constraint rows cannot all be held."""
     if len(indices):

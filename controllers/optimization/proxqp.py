@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from ..base import SolverError
 from ..numerics import PROXQP_PRIMAL_INFEASIBILITY, PROXQP_RHO
 from .budget import StepBudget
@@ -60,7 +62,7 @@ class ProxQPSolver:
         self.fallback_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
         self.solved = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
         self.tuned = tuned  # of "eps_abs", "rho": set from the curvature, per solve
-        self.solvers: dict[tuple[int, int, int, bool], object] = {}
+        self.solvers: dict[tuple[int, int, int, bool], Any] = {}  # proxsuite's dense QPs
 
     @staticmethod
     def accepts(settings: dict) -> bool:

@@ -104,22 +104,23 @@ def polish_on_face(stage_1: QPSolution, held_joints: np.ndarray, held_rows: np.n
         [task.rows[held_rows]] if held_rows.any() else [])
     narrowed = null_basis @ nullspace(np.vstack(held) @ null_basis, RANK_TOLERANCE)[0]
     on_joints, on_rows = held_joints.copy(), held_rows.copy()
-    face, face_target = [], []
+    face_rows: list[np.ndarray] = []
+    face_targets: list[np.ndarray] = []
     if task.equality_matrix is not None:
-        face.append(task.equality_matrix)
-        face_target.append(task.equality_rhs)
+        face_rows.append(task.equality_matrix)
+        face_targets.append(task.equality_rhs)
     if task.lower is not None:
         at_upper = qd_1 >= task.upper - EQUALITY_TOLERANCE
         if held_joints.any():  # a held joint's side is its multiplier's
             at_upper[held_joints] = stage_1.box_multipliers[held_joints] > 0.0
         on_joints |= at_upper | (qd_1 <= task.lower + EQUALITY_TOLERANCE)
-        face.append(np.eye(qd_1.size)[on_joints])
-        face_target.append(np.where(at_upper, task.upper, task.lower)[on_joints])
+        face_rows.append(np.eye(qd_1.size)[on_joints])
+        face_targets.append(np.where(at_upper, task.upper, task.lower)[on_joints])
     if task.rows is not None:
         on_rows |= task.rows @ qd_1 >= task.rows_upper - EQUALITY_TOLERANCE
-        face.append(task.rows[on_rows])
-        face_target.append(task.rows_upper[on_rows])
-    face, face_target = np.vstack(face), np.concatenate(face_target)
+        face_rows.append(task.rows[on_rows])
+        face_targets.append(task.rows_upper[on_rows])
+    face, face_target = np.vstack(face_rows), np.concatenate(face_targets)
     face_basis, face_pinv, _ = nullspace(face, RANK_TOLERANCE)
     on_face = qd_1 + face_pinv @ (face_target - face @ qd_1)
     task_on_face = stacked @ face_basis

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 from importlib import metadata
+from collections.abc import Set
 from typing import Callable
 
 from .arguments import ArgumentParser, HelpFormatter, one_line, sentence
@@ -65,7 +66,7 @@ def _load(entry_point: metadata.EntryPoint) -> Registered:
     return Registered(entry_point.name, command)
 
 
-def registered_commands(taken: set[str] = frozenset()) -> list[Registered]:
+def registered_commands(taken: Set[str] = frozenset()) -> list[Registered]:
     """The commands of :data:`COMMAND_GROUP`, by name, loaded; a name in ``taken`` (a
     built-in command's, which keeps it) is left out."""
     found = []

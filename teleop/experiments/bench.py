@@ -27,7 +27,7 @@ import json
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -212,7 +212,7 @@ def bench_controllers(robot: Robot, holes: Sequence[Constraint], specs: Sequence
             timing, commands = bench_problem(robot, holes, spec, iterations, warmup, label=label,
                                              base=base, collisions=collisions)
             reference = commands if reference is None else reference
-            ticks = {}
+            ticks: dict[str, Any] = {}
             if plant is not None:
                 kinematic, physical = bench_ticks(robot, holes, spec,
                                                   bench_configurations(robot, holes, iterations),

@@ -180,7 +180,7 @@ def _hole_rows(robot: Robot, holes: Sequence[Constraint],
                      or [np.zeros((0, model.nv))])
 
 
-def bench_holes(robot: Robot, base: np.ndarray | None = None) -> list[Hole]:
+def bench_holes(robot: Robot, base: np.ndarray | None = None) -> list[Constraint]:
     """One hole on each of ``robot.constrained_links``, at the robot's
     :data:`DEFAULT_HOLE_DISTANCE` (0.1 m for a robot not listed) along it, at ``base``
     (default: home)."""

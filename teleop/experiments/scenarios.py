@@ -29,12 +29,12 @@ def operator_motion(start: pin.SE3, amplitude: Sequence[float], frequencies: Seq
     Position offsets (world frame) ``A_i sin(2 pi f_i t)``; attitude wobble of
     ``angle_amplitude`` rad about a slowly turning axis; both faded in over ``ramp`` s.
     """
-    amplitude = np.asarray(amplitude, dtype=float)
-    frequencies = np.asarray(frequencies, dtype=float)
+    amplitudes = np.asarray(amplitude, dtype=float)
+    frequencies_hz = np.asarray(frequencies, dtype=float)
 
     def target(t: float) -> pin.SE3:
         envelope = smoothstep(t / ramp)
-        offset = envelope * amplitude * np.sin(2.0 * np.pi * frequencies * t)
+        offset = envelope * amplitudes * np.sin(2.0 * np.pi * frequencies_hz * t)
         wobble = envelope * angle_amplitude * np.array([
             math.sin(2 * math.pi * 0.13 * t), math.sin(2 * math.pi * 0.21 * t + 1.0),
             math.sin(2 * math.pi * 0.09 * t + 2.0)])
@@ -198,12 +198,12 @@ def lissajous(start: np.ndarray, amplitude: Sequence[float], frequencies: Sequen
               phases: Sequence[float], ramp: float = 2.5) -> Callable[[float], np.ndarray]:
     """A smooth closed path about ``start`` (world, m): ``A_i sin(2 pi f_i t + phi_i)`` per
     axis, faded in over ``ramp`` s (zero velocity at ``t = 0``, when it is at ``start``)."""
-    amplitude, frequencies, phases = (np.asarray(x, dtype=float)
-                                      for x in (amplitude, frequencies, phases))
+    amplitudes, frequencies_hz, phases_rad = (np.asarray(x, dtype=float)
+                                              for x in (amplitude, frequencies, phases))
 
     def point(t: float) -> np.ndarray:
-        return start + smoothstep(t / ramp) * amplitude * (
-            np.sin(2.0 * np.pi * frequencies * t + phases) - np.sin(phases))
+        return start + smoothstep(t / ramp) * amplitudes * (
+            np.sin(2.0 * np.pi * frequencies_hz * t + phases_rad) - np.sin(phases_rad))
 
     return point
 
@@ -367,9 +367,10 @@ def moving_tips(starts: Sequence[np.ndarray], moves: Sequence[np.ndarray], begin
                 length: float) -> list[Callable[[float], np.ndarray]]:
     """Each tip's path: from its start, ``moves[i]`` (m) over ``length`` s from ``begin``
     (a quintic, :func:`smoothstep`), then held."""
-    return [lambda t, start=start, move=np.asarray(move, dtype=float):
-            start + smoothstep((t - begin) / length) * move
-            for start, move in zip(starts, moves)]
+    def path(start: np.ndarray, move: np.ndarray) -> Callable[[float], np.ndarray]:
+        return lambda t: start + smoothstep((t - begin) / length) * move
+
+    return [path(start, np.asarray(move, dtype=float)) for start, move in zip(starts, moves)]
 
 
 #: How far (m) each tip of ``bimanual-crossing`` moves towards the other's side: the tips
@@ -422,10 +423,9 @@ def _obstacle(robot: Robot) -> Plan:
     # the tip's target goes 5 cm down, through the organ's top, then 3 cm sideways
     tips = [lambda t: start + smoothstep((t - 0.5) / 2.0) * np.array([0.0, 0.0, -0.05])
             + smoothstep((t - 2.5) / 2.0) * np.array([0.0, 0.03, 0.0])]
+    target = tips_through_constraints(robot, q0, make(), tips, duration)
     return Plan(
-        "obstacle", robot, q0, duration, make,
-        lambda t, target=tips_through_constraints(robot, q0, make(), tips, duration):
-            target(t)[0],
+        "obstacle", robot, q0, duration, make, lambda t: target(t)[0],
         description=f"sda10f, trocar held, the tip's target goes 5 cm down into an organ "
                     f"(a {100 * ORGAN_RADIUS:g} cm sphere 2 cm below the instrument), then "
                     "sideways",

@@ -55,7 +55,7 @@ class SolverOutputCapture(contextlib.AbstractContextManager):
 
     def __init__(self) -> None:
         self.console: TextIO | None = None
-        self._file = None
+        self._file: io.FileIO | None = None
         self._offset = 0
         self._saved: dict[int, int] = {}
         self._streams = contextlib.ExitStack()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -185,9 +186,10 @@ class Variation:
         serves the run of the latest ``make_constraints`` call. With ``path_amplitude``,
         each EE target's translation gains its :class:`OperatorPath`.
         """
-        changes = {}
+        changes: dict[str, Any] = {}
         if self.trocar_shift:
-            make, update, runs = plan.make_constraints, plan.update, []
+            make, update = plan.make_constraints, plan.update
+            runs: list[SlidConstraints] = []
 
             def make_constraints() -> list[Constraint]:
                 runs[:] = [SlidConstraints(plan.robot, self.trocar_shift, self.trocar_rng())]

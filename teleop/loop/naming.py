@@ -18,7 +18,8 @@ ROW_WORDS = {1: ("normal velocity at {name}",),
 def row_labels(constraints: Sequence[Constraint]) -> tuple[str, ...]:
     """Words for every equality row, in order: ``"lateral velocity at hole 1, direction 1
     (m/s)"``; constraints are numbered by kind in list order (docs/design.md section 15.2)."""
-    labels, numbers = [], {}
+    labels: list[str] = []
+    numbers: dict[str, int] = {}
     for constraint in constraints:
         if not constraint.is_equality:
             continue
@@ -31,7 +32,8 @@ def row_labels(constraints: Sequence[Constraint]) -> tuple[str, ...]:
 def constraint_names(constraints: Sequence[Constraint]) -> tuple[str, ...]:
     """One name per constraint, in order: ``"hole 2 (arm_right_link_5_r)"``, numbered by
     kind in list order (equalities and barriers alike) and naming the link it holds."""
-    names, numbers = [], {}
+    names: list[str] = []
+    numbers: dict[str, int] = {}
     for constraint in constraints:
         numbers[constraint.label] = numbers.get(constraint.label, 0) + 1
         names.append(f"{constraint.label} {numbers[constraint.label]} ({constraint.link})")

@@ -57,8 +57,10 @@ _RANK_SAMPLES = 4
 class HomeRobot(ConstraintRobot, Protocol):
     """What the home search needs from a robot (``teleop.Robot`` satisfies it)."""
 
-    ee_frames: tuple[str, ...]
-    constrained_links: tuple[str, ...]
+    @property
+    def ee_frames(self) -> tuple[str, ...]: ...
+    @property
+    def constrained_links(self) -> tuple[str, ...]: ...
 
 
 class HomeWarning(UserWarning):
@@ -117,10 +119,10 @@ def joint_box(model: pin.Model) -> JointBox:
             q_index.append(i)
             v_index.append(model.idx_vs[joint])
             names.append(model.names[joint])
-    q_index = np.array(q_index, dtype=int)
-    return JointBox(q_index, np.array(v_index, dtype=int),
-                    np.array(model.lowerPositionLimit[q_index], dtype=float),
-                    np.array(model.upperPositionLimit[q_index], dtype=float), tuple(names))
+    q_indices = np.array(q_index, dtype=int)
+    return JointBox(q_indices, np.array(v_index, dtype=int),
+                    np.array(model.lowerPositionLimit[q_indices], dtype=float),
+                    np.array(model.upperPositionLimit[q_indices], dtype=float), tuple(names))
 
 
 @dataclass(frozen=True)

@@ -370,12 +370,13 @@ def load_robot(
                           ("root_joint", root_joint)):
         if value is not None and not isinstance(value, str):
             raise ValueError(f"{option} must be a name, got {value!r}")
-    for option, value, kinds in (("ee_frames", ee_frames, str),
-                                 ("package_dirs", package_dirs, (str, os.PathLike))):
-        listed = value if isinstance(value, (list, tuple)) else ()
-        if not isinstance(value, (type(None), str, os.PathLike, Iterable)) or not all(
+    lists: tuple[tuple[str, Any, type | tuple[type, ...]], ...] = (
+        ("ee_frames", ee_frames, str), ("package_dirs", package_dirs, (str, os.PathLike)))
+    for option, given, kinds in lists:
+        listed = given if isinstance(given, (list, tuple)) else ()
+        if not isinstance(given, (type(None), str, os.PathLike, Iterable)) or not all(
                 isinstance(item, kinds) for item in listed):
-            raise ValueError(f"{option} must be a list of names, got {value!r}")
+            raise ValueError(f"{option} must be a list of names, got {given!r}")
     key = os.fspath(name_or_urdf_path)
     builtin = isinstance(key, str) and key in BUILTIN_ROBOTS
     if builtin:

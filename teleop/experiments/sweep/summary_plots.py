@@ -15,7 +15,7 @@ LOG_SPAN = 100.0
 MAX_DOTS = 500
 
 
-def axis_scale(values: Sequence[float]) -> tuple[str, float | None]:
+def axis_scale(values: Sequence[float] | np.ndarray) -> tuple[str, float | None]:
     """The y scale for ``values``: ``("log", None)`` when the positive ones span
     :data:`LOG_SPAN` or more and none is 0, ``("symlog", t)`` when they span it with zeros
     among them (linear below the smallest positive value ``t``), else ``("linear", None)``."""
