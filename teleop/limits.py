@@ -81,6 +81,11 @@ MAX_PHYSICS_RATE_HZ = 1e5
 MAX_SERVO_BANDWIDTH_HZ = 200.0
 MAX_JOINT_FRICTION = 1e4
 
+#: The physics plant's interface jerk limit (rad/s^3, docs/design.md section 17.1): a
+#: Franka's joints refuse commands beyond 3,750-10,000 rad/s^3 (libfranka's
+#: ``kMaxJointJerk``); 1e8 is a jerk no drive could follow.
+MAX_INTERFACE_JERK = 1e8
+
 #: Bytes of a sweep spec file: a hand-written spec is a few hundred; read no further
 #: (``--spec /dev/zero`` ends).
 MAX_SPEC_BYTES = 1_000_000

@@ -50,7 +50,10 @@ def test_every_scenario_runs_on_the_physics_plant_for_every_controller(scenario)
         assert metrics["failed_steps"] == 0, (spec, metrics["first_failure"])
         assert len(metrics["ports"]) == len(holes), spec
         for key in BODY_METRIC_KEYS:
-            if key == "hole_error_max_m" and not holes:
+            if key.startswith("interface_"):  # the interface's check is off by default
+                assert metrics[key] is None, (spec, key)
+            elif key in ("hole_error_max_m", "port_force_peak_spring_n",
+                         "port_force_peak_damper_n") and not holes:
                 assert metrics[key] is None
             else:
                 assert np.isfinite(metrics[key]) and metrics[key] >= 0, (spec, key)
@@ -176,11 +179,11 @@ def test_compare_on_the_physics_plant_from_the_command_line(tmp_path):
     run = teleop("compare", "--plant", "mujoco", "--payload", "0.5", "--scenario",
                  "fast-lateral", "--controllers", "cjm,qp:daqp", "--duration", "0.3",
                  "--wall-stiffness", "2", "--coulomb-friction", "0.1", "--out", str(out),
-                 "--quiet")
+                 "--interface-limits", "count", "--quiet")
     assert run.returncode == 0, run.stderr
     document = json.loads((out / "metrics.json").read_text())
     jsonschema.validate(document, SCHEMA)
-    assert document["schema_version"] == 7  # 7: the supervisor (docs/design.md 5.2)
+    assert document["schema_version"] == 8  # 8: the plant's interface and wall parts (17)
     plant = document["plant"]
     assert plant["kind"] == "mujoco" and plant["wall_stiffness_n_per_m"] == 2000.0
     assert plant["settings"]["payload_kg"] == 0.5
@@ -190,12 +193,23 @@ def test_compare_on_the_physics_plant_from_the_command_line(tmp_path):
         assert metrics["port_force_max_n"] > 0 and metrics["failed_steps"] == 0
         (port,) = metrics["ports"].values()
         assert port["force_max_n"] == metrics["port_force_max_n"]
+        # the spring part is k x displacement (docs/design.md 17.2); the check counted
+        assert metrics["port_force_spring_max_n"] == pytest.approx(
+            2000.0 * metrics["port_displacement_max_m"], rel=1e-12)
+        assert port["spring_force_max_n"] == metrics["port_force_spring_max_n"]
+        assert metrics["port_force_peak_spring_n"] + metrics["port_force_peak_damper_n"] \
+            >= metrics["port_force_max_n"] - 1e-12  # |a + b| <= |a| + |b|
+        assert isinstance(metrics["interface_faults"], int)
+    assert plant["settings"]["interface_limits"] == "count"
     report = (out / "report.html").read_text()
     assert "payload 0.5 kg" in report and "abdominal wall 2 N/mm" in report
     assert "port force max (N)" in report and "port_force.png" in report
     assert (out / "port_force.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     csv_header = (out / "metrics.csv").read_text().splitlines()[0]
-    assert csv_header.endswith("joint_jerk_rms_radps3,ee_velocity_power_above_3hz")
+    assert csv_header.endswith("joint_jerk_rms_radps3,ee_velocity_power_above_3hz,"
+                               "port_force_spring_max_n,port_force_damper_max_n,"
+                               "port_force_peak_spring_n,port_force_peak_damper_n,"
+                               "interface_faults,interface_first_fault_t_s")
     assert "MuJoCo plant at 2000 Hz" in run.stdout and "port force max (N)" in run.stdout
 
 

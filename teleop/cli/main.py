@@ -17,6 +17,7 @@ from teleop.limits import (
     MAX_CONSTRAINT_GAIN,
     MAX_DURATION_S,
     MAX_ENCODER_NOISE_RAD,
+    MAX_INTERFACE_JERK,
     MAX_JOINT_FRICTION,
     MAX_LATENCY_PERIODS,
     MAX_LATENCY_S,
@@ -67,6 +68,7 @@ payload = bounded(float, 0.0, MAX_PAYLOAD_KG, unit="kg")
 friction = bounded(float, 0.0, MAX_JOINT_FRICTION)
 physics_rate = bounded(float, MIN_PHYSICS_RATE_HZ, MAX_PHYSICS_RATE_HZ, unit="Hz")
 servo_bandwidth = bounded(float, 0.0, MAX_SERVO_BANDWIDTH_HZ, inclusive_minimum=False, unit="Hz")
+interface_jerk = bounded(float, 0.0, MAX_INTERFACE_JERK, inclusive_minimum=False, unit="rad/s^3")
 trocar_shift = bounded(float, 0.0, MAX_TROCAR_SHIFT_M, unit="m")
 path_amplitude = bounded(float, 0.0, MAX_PATH_AMPLITUDE_M, unit="m")
 pose_gain = bounded(float, 0.0, MAX_POSE_GAIN, inclusive_minimum=False, unit="1/s")
@@ -95,7 +97,9 @@ def calibration_error(text: str) -> tuple[float, float]:
 #: The physics plant's options: (option, the PlantSettings field) (docs/cli.md).
 PLANT_OPTIONS = (("--payload", "payload"), ("--coulomb-friction", "coulomb_friction"),
                  ("--viscous-friction", "viscous_friction"), ("--physics-rate", "physics_rate"),
-                 ("--servo-bandwidth", "servo_bandwidth"))
+                 ("--servo-bandwidth", "servo_bandwidth"),
+                 ("--interface-limits", "interface_limits"),
+                 ("--interface-jerk-limit", "interface_jerk_limit"))
 
 
 def _controllers_epilog(context: str) -> str:
@@ -277,6 +281,15 @@ def _add_plant_options(parser: argparse.ArgumentParser, base: str) -> None:
     plant.add_argument("--servo-bandwidth", type=servo_bandwidth, metavar="HZ",
                        help="natural frequency of each joint's position servo, at most "
                        f"{MAX_SERVO_BANDWIDTH_HZ:g} (mujoco; default: 20)")
+    plant.add_argument("--interface-limits", choices=("off", "count", "strict"),
+                       help="the robot's velocity interface checks each command's joint "
+                       "acceleration against the robot's limits (and the jerk against "
+                       "--interface-jerk-limit), 1%% tolerance: count counts the faults, "
+                       "strict stops the robot at the first, as a Franka's reflex does "
+                       "(mujoco; default: off)")
+    plant.add_argument("--interface-jerk-limit", type=interface_jerk, metavar="RAD_PER_S3",
+                       help="the interface's jerk limit of every joint, at most "
+                       f"{MAX_INTERFACE_JERK:g} (mujoco, with --interface-limits; default: none)")
 
 
 def plant_choice(args: argparse.Namespace, base=None):

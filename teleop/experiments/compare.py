@@ -27,7 +27,7 @@ from .variations import Variation
 from .results import BODY_METRIC_KEYS, COLLISION_METRIC_KEYS, METRIC_KEYS, RunResult
 from .solver_output import SolverOutputCapture
 
-SCHEMA_VERSION = 7
+SCHEMA_VERSION = 8
 
 
 def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
@@ -99,6 +99,7 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
     controller = _controller(spec, plan, constraints, config, acceleration_limits)
     drive = _drive(plan, controller, constraints, config, steps, imperfections, on_step, plant)
     result = _collect(spec, drive, plan.robot.ee_frames)
+    result.interface_limits = plant.settings.interface_limits if plant.physical else None
     if plan.collisions is not None:
         result.safety_distance = controller.collisions.safety_distance
     return result
@@ -191,11 +192,13 @@ def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
     physical = len(measured) == len(records) and len(records) > 0
     port_forces = {name: np.full((len(records), 3), np.nan) for name in port_names}
     port_displacements = {name: np.full(len(records), np.nan) for name in port_names}
+    port_springs = {name: np.full((len(records), 3), np.nan) for name in port_names}
     if physical:
         for i, (r, ports) in enumerate(zip(records, drive.ports)):
             for j, name in enumerate(ports):
                 port_forces[name][i] = r.plant.port_forces[j]
                 port_displacements[name][i] = r.plant.port_displacements[j]
+                port_springs[name][i] = r.plant.port_spring_forces[j]
 
     return RunResult(
         controller=spec, columns=columns, constraint_velocity=velocity,
@@ -224,7 +227,13 @@ def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
         torque_ratio=(np.array([m.torque_ratio for m in measured]) if physical else None),
         actuator_saturated=(np.array([m.saturated for m in measured]) if physical else None),
         contacts=(np.array([m.contacts for m in measured]) if physical else None),
-        contact_depths=(np.array([m.contact_depth for m in measured]) if physical else None))
+        contact_depths=(np.array([m.contact_depth for m in measured]) if physical else None),
+        port_spring_forces=port_springs if physical else None,
+        interface_faults=(np.array([m.interface_fault is not None for m in measured])
+                          if physical else None),
+        interface_first_fault=next(((r.t, r.plant.interface_fault) for r in records
+                                    if physical and r.plant.interface_fault is not None),
+                                   None))
 
 
 class ShadowedController:

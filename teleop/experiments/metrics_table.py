@@ -27,10 +27,13 @@ BODY_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (
     ("hole err max (um)", "hole_error_max_m", lambda v: f"{1e6 * v:.3g}"),
     ("port force max (N)", "port_force_max_n", lambda v: f"{v:.3f}"),
     ("port force RMS (N)", "port_force_rms_n", lambda v: f"{v:.3f}"),
+    ("spring at peak (N)", "port_force_peak_spring_n", lambda v: f"{v:.3f}"),
+    ("damper at peak (N)", "port_force_peak_damper_n", lambda v: f"{v:.3f}"),
     ("tissue disp max (um)", "port_displacement_max_m", lambda v: f"{1e6 * v:.3g}"),
     ("EE pos max (mm)", "ee_position_error_max_m", lambda v: f"{1e3 * v:.3f}"),
     ("torque / limit max", "torque_ratio_max", lambda v: f"{v:.2f}"),
     ("saturated steps", "actuator_saturated_steps", lambda v: f"{v}"),
+    ("interface faults", "interface_faults", lambda v: f"{v}"),
     ("jerk RMS (rad/s^3)", "joint_jerk_rms_radps3", lambda v: f"{v:.3g}"),
     ("EE v power > 3 Hz (%)", "ee_velocity_power_above_3hz", lambda v: f"{100 * v:.2f}"),
 )

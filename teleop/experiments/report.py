@@ -106,7 +106,11 @@ def render_report(document: dict, figures: Sequence[Figure]) -> str:
         '<p class="note">hole err: the holes\' axis offset on the true (simulated) '
         "configuration; port force: the abdominal wall's lateral force on the instrument, "
         "tissue disp: its displacement (design 17.2; - on the kinematic plant, which has no "
-        "body); torque / limit: the largest drive torque against the URDF's effort limit; "
+        "body); spring and damper at peak: the two parts of the port force, k |P - c| and "
+        "c_d |v_perp|, at the step of its peak; interface faults: the commands the robot's "
+        "interface refused or counted beyond its acceleration or jerk limits (design 17.1; - "
+        "with the check off), " + html.escape(_first_faults(document)) + "; "
+        "torque / limit: the largest drive torque against the URDF's effort limit; "
         "jerk: the jerkiest joint's RMS of (qd_k - 2 qd_k-1 + qd_k-2) / dt^2 over the "
         "commands; EE v power > 3 Hz: the share of the achieved EE linear velocity's power "
         "above 3 Hz (each component detrended, FFT), the worst EE.</p>",
@@ -167,10 +171,21 @@ def _plant_line(plant: dict | None) -> str:
                 f"{s['armature_kg_m2']:g} kg m^2, joint damping {s['joint_damping_nms']:g} "
                 f"N m s/rad, payload {s['payload_kg']:g} kg, friction "
                 f"{s['coulomb_friction_nm']:g} N m + {s['viscous_friction_nms']:g} N m s/rad, "
-                f"gravity {'on' if s['gravity'] else 'off'}")
+                f"gravity {'on' if s['gravity'] else 'off'}, interface limits "
+                f"{s.get('interface_limits', 'off')}"
+                + ("" if s.get("interface_jerk_limit_radps3") is None
+                   else f" (jerk {s['interface_jerk_limit_radps3']:g} rad/s^3)"))
     stiffness = None if plant is None else plant["wall_stiffness_n_per_m"]
     return text + (", abdominal wall: each hole's own stiffness" if stiffness is None
                    else f", abdominal wall {stiffness / 1000.0:g} N/mm at every hole")
+
+
+def _first_faults(document: dict) -> str:
+    """Each controller's first interface fault in words, or that there was none."""
+    faults = [f"{spec}: {m['interface_first_fault']}"
+              for spec, m in document["controllers"].items()
+              if m.get("interface_first_fault") is not None]
+    return "the first: " + "; ".join(faults) if faults else "none"
 
 
 def _body_table(document: dict) -> str:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from teleop.loop import SAFETY_TOLERANCE
+from teleop.plants.interface import InterfaceFault
 
 from .smoothness import HIGH_FREQUENCY_HZ, joint_jerk_rms, power_fraction_above
 
@@ -25,11 +26,14 @@ METRIC_KEYS = (
 
 #: per-controller keys of the robot's body and the run's smoothness (docs/design.md section
 #: 17.3), after :data:`METRIC_KEYS` in the CSV: null where they do not apply (no hole; the
-#: port, torque and saturation keys on a plant without a body)
+#: port, torque and saturation keys on a plant without a body; the interface's with its
+#: check off)
 BODY_METRIC_KEYS = (
     "hole_error_max_m", "port_force_max_n", "port_force_rms_n", "port_displacement_max_m",
     "torque_ratio_max", "actuator_saturated_steps", "joint_jerk_rms_radps3",
-    "ee_velocity_power_above_3hz",
+    "ee_velocity_power_above_3hz", "port_force_spring_max_n", "port_force_damper_max_n",
+    "port_force_peak_spring_n", "port_force_peak_damper_n", "interface_faults",
+    "interface_first_fault_t_s",
 )
 
 #: per-controller keys of collision avoidance (docs/design.md section 18.6), between
@@ -81,6 +85,8 @@ class RunResult:
     port_forces : per port name, (steps, 3) the wall's force on the instrument (N, world),
         NaN while the port does not exist; None on a plant without a body.
     port_displacements : per port name, (steps,) the tissue's lateral displacement (m).
+    port_spring_forces : per port name, (steps, 3) the spring part ``-k (P - c)`` of the
+        wall's force (N; the rest is the damper's, docs/design.md 17.2); None likewise.
     torque_ratio : (steps,) max over joints of |drive torque| / effort limit; None likewise.
     actuator_saturated : (steps,) some drive held at its effort limit; None likewise.
     closest_pairs : (steps,) the pair of the ``minimum_distance`` column each step ("" when
@@ -89,6 +95,11 @@ class RunResult:
     contacts : (steps,) the simulated robot's contacts at each period's end (robot-robot
         and robot-obstacle pairs of the collision avoidance); None on a plant without a body.
     contact_depths : (steps,) the deepest of them (m, 0 without contact); None likewise.
+    interface_limits : the plant's interface mode (``off``, ``count``, ``strict``,
+        docs/design.md 17.1); None on a plant without a body.
+    interface_faults : (steps,) the interface refused (``strict``) or counted the step's
+        command; None on a plant without a body.
+    interface_first_fault : the time (s) and the fault of the first, None: none.
     """
 
     controller: str
@@ -121,6 +132,10 @@ class RunResult:
     safety_distance: float | None = None
     contacts: np.ndarray | None = None
     contact_depths: np.ndarray | None = None
+    port_spring_forces: dict[str, np.ndarray] | None = None
+    interface_limits: str | None = None
+    interface_faults: np.ndarray | None = None
+    interface_first_fault: tuple[float, InterfaceFault] | None = None
 
     def collision_metrics(self) -> dict[str, float | int | str | None]:
         """The minimum distance over the run (m; null without collision avoidance or when
@@ -164,6 +179,51 @@ class RunResult:
             "first_action": self.supervisor_first_action,
         }
 
+    def wall_metrics(self) -> dict[str, float | None]:
+        """The largest spring and damper parts of the wall's force over steps and ports,
+        and the two parts where ``|F|`` peaks (N; docs/design.md 17.2; the parts peak at
+        different times, the damper's with the velocity); null on a plant without a body
+        (the peak's also without a port)."""
+        if self.port_spring_forces is None:
+            return dict.fromkeys(("port_force_spring_max_n", "port_force_damper_max_n",
+                                  "port_force_peak_spring_n", "port_force_peak_damper_n"))
+        springs, dampers = self._wall_parts()
+        names = list(springs)
+        spring, damper = (np.column_stack([parts[name] for name in names]) if names
+                          else np.zeros((self.steps, 0)) for parts in (springs, dampers))
+        total = np.column_stack([self.port_force_magnitudes()[name] for name in names]) \
+            if names else np.zeros((self.steps, 0))
+        finite = np.isfinite(total)
+        peak = (np.unravel_index(np.argmax(np.where(finite, total, -np.inf)), total.shape)
+                if finite.any() else None)
+        return {"port_force_spring_max_n": float(np.max(spring[finite], initial=0.0)),
+                "port_force_damper_max_n": float(np.max(damper[finite], initial=0.0)),
+                "port_force_peak_spring_n": None if peak is None else float(spring[peak]),
+                "port_force_peak_damper_n": None if peak is None else float(damper[peak])}
+
+    def _wall_parts(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Per port, ``|F_spring|`` and ``|F - F_spring|`` each step (N, NaN while the port
+        does not exist)."""
+        springs = self.port_spring_forces or {}
+        forces = self.port_forces or {}
+        return ({name: np.linalg.norm(springs[name], axis=1) for name in springs},
+                {name: np.linalg.norm(forces[name] - springs[name], axis=1)
+                 for name in springs})
+
+    def interface_metrics(self) -> dict[str, float | int | str | None]:
+        """The interface's faults (docs/design.md 17.1): their number, the first's time,
+        joint and words; the count null where nothing was checked (no body, or the check
+        off), the first's keys null without a fault."""
+        checked = self.interface_limits not in (None, "off") and self.interface_faults is not None
+        first = self.interface_first_fault
+        return {
+            "interface_faults": int(np.sum(self.interface_faults)) if checked else None,
+            "interface_first_fault_t_s": None if first is None else first[0],
+            "interface_first_fault_joint": None if first is None else first[1].joint,
+            "interface_first_fault": (None if first is None
+                                      else f"t={first[0]:.3f}s: {first[1].describe()}"),
+        }
+
     @property
     def dt(self) -> float:
         """The control period (s), from the step times (0 with fewer than two steps)."""
@@ -201,6 +261,7 @@ class RunResult:
         displacements = (np.concatenate(list(self.port_displacements.values()))
                          if self.port_displacements else np.zeros(0))
         physical = self.port_forces is not None
+        springs, dampers = self._wall_parts()
         holes = [self.constraint_errors[name] for name in self.port_names
                  if name in self.constraint_errors]
         return {
@@ -233,6 +294,8 @@ class RunResult:
                 (power_fraction_above(self.actual_linear_velocities[:, i], self.dt,
                                       HIGH_FREQUENCY_HZ)
                  for i in range(self.actual_linear_velocities.shape[1])), default=0.0),
+            **self.wall_metrics(),
+            **self.interface_metrics(),
             **self.collision_metrics(),
             "first_failure": self.failure_messages[0] if self.failure_messages else None,
             "status_counts": dict(self.status_counts),
@@ -250,5 +313,7 @@ class RunResult:
             "ports": {name: {
                 "force_max_n": top(forces[name]), "force_rms_n": rms(forces[name]),
                 "displacement_max_m": top(self.port_displacements[name]),
+                "spring_force_max_n": top(springs[name]),
+                "damper_force_max_n": top(dampers[name]),
             } for name in self.port_names} if physical else {},
         }

@@ -182,8 +182,17 @@ class ImperfectPlant:
                 constraints: Sequence[Constraint] = ()) -> np.ndarray:
         """The mean joint velocity over the coming period (delayed, then filtered); the
         configuration and the constraints do not change it."""
+        return self.respond(self.delay(qd))
+
+    def delay(self, qd: np.ndarray) -> np.ndarray:
+        """The command that reaches the robot this period: ``qd`` of ``latency`` periods
+        ago (zero before the first arrives)."""
         self._queue.append(np.array(qd, dtype=float))
-        command = self._queue.popleft()
+        return self._queue.popleft()
+
+    def respond(self, command: np.ndarray) -> np.ndarray:
+        """The joints' mean velocity over the period under the command that reached them
+        (the first-order response)."""
         start = self._velocity
         self._velocity = command + (start - command) * self._decay
         return command + (start - command) * self._mean_gain

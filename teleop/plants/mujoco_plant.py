@@ -8,7 +8,9 @@ servo with velocity feed-forward and gravity compensation of the modelled robot,
     q_ref <- q_ref + v_cmd h,    tau = kp (q_ref - q) + kd (v_cmd - qd) + g(q),
 
 clipped to the joint's effort limit, at ``h = dt / substeps`` (2 kHz or faster under a
-1 kHz loop). Every hole puts a port into the scene: the abdominal wall pushes on the
+1 kHz loop). The command reaches the drives after the imperfections' latency, through the
+interface's check of the robot's acceleration and jerk limits
+(:mod:`teleop.plants.interface`), then the joint lag. Every hole puts a port into the scene: the abdominal wall pushes on the
 instrument with the hole's own spring-damper (:meth:`constraints.Hole.wall_force`),
 applied at the instrument's point nearest the port centre. With a collision avoidance,
 the robot's collision geometry and the obstacles are in the scene, in contact in the
@@ -20,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -31,8 +33,10 @@ from controllers.mujoco_model import joint_map, mujoco_spec, site_name
 
 from constraints.collision import CollisionAvoidance
 
+from .armature import urdf_armatures
 from .contact_geometry import add_contact_geometry
 from .imperfect import Imperfections, ImperfectPlant
+from .interface import CommandInterface, InterfaceFault
 from .settings import PlantSettings
 
 #: A payload's inertia: a 5 cm solid sphere's per kilogram (kg m^2 / kg).
@@ -47,6 +51,8 @@ class PlantMeasures:
     ----------
     port_forces : (holes, 3) the wall's force on each instrument, world frame (N), at the
         period's last physics step, in the order of the holes among the constraints.
+    port_spring_forces : (holes, 3) its spring part ``-k (P - c)`` (N); the rest,
+        ``port_forces - port_spring_forces``, is the damper's (docs/design.md 17.2).
     port_displacements : (holes,) the tissue's lateral displacement at each port (m).
     torque_ratio : max over joints of |drive torque| / effort limit (gravity compensation
         included) at the period's last physics step.
@@ -54,14 +60,21 @@ class PlantMeasures:
     contacts : the robot's contacts at that step in the collision avoidance's pairs
         (robot-robot, robot-obstacle); 0 without collision avoidance.
     contact_depth : the deepest of them (m), 0 without contact.
+    interface_fault : the command the interface refused (``strict``) or counted
+        (``count``) this period, None: none (docs/design.md 17.1, "The interface").
+    interface_stopped : the interface has stopped the robot (``strict``, from the first
+        fault on).
     """
 
     port_forces: np.ndarray
     port_displacements: np.ndarray
     torque_ratio: float
     saturated: bool
+    port_spring_forces: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     contacts: int = 0
     contact_depth: float = 0.0
+    interface_fault: InterfaceFault | None = None
+    interface_stopped: bool = False
 
     @property
     def port_force(self) -> float:
@@ -79,8 +92,9 @@ class MujocoPlant:
     dt : the control period (s).
     settings : :class:`PlantSettings` (defaults documented there).
     imperfections : encoder noise, latency and joint lag on top of the physics
-        (:class:`Imperfections`); the lag filters the velocity the drives receive. A
-        calibration error is refused (``ValueError``): the body is the URDF's.
+        (:class:`Imperfections`): the latency delays the command before the interface,
+        the lag filters the velocity the drives receive after it. A calibration error is
+        refused (``ValueError``): the body is the URDF's.
     collisions : a collision avoidance on ``robot``: its geometry, obstacles and pairs go
         into the simulation (:func:`~teleop.plants.contact_geometry.add_contact_geometry`);
         None: the robot has no collision geometry (nothing touches).
@@ -102,6 +116,10 @@ class MujocoPlant:
         #: the imperfect robot's noise, latency and lag (None: a perfect interface)
         self.shaping: ImperfectPlant | None = (imperfections or Imperfections()).plant(
             robot.model, dt)
+        #: the velocity interface's check of the robot's acceleration and jerk limits
+        self.interface = CommandInterface(self.settings.interface_limits, robot.model, dt,
+                                          robot.acceleration_limit,
+                                          self.settings.interface_jerk_limit)
         self.mj_model = self._compile(robot, collisions)
         self.mj_data = mujoco.MjData(self.mj_model)
         self.joints = joint_map(self.model, self.mj_model)
@@ -123,12 +141,15 @@ class MujocoPlant:
         return list(dict.fromkeys(frame.name for frame in robot.model.frames[1:]))
 
     def _compile(self, robot, collisions: CollisionAvoidance | None) -> mujoco.MjModel:
-        """The URDF's bodies, the drives' rotor inertia, damping and friction, two
-        actuators per degree of freedom (the servo, :meth:`_set_servo_gains`), the payload
-        at each EE, the collision geometry with ``collisions``."""
+        """The URDF's bodies, the drives' rotor inertia (the URDF's where it gives one,
+        :func:`~teleop.plants.armature.urdf_armatures`, else the ``armature`` setting),
+        damping and friction, two actuators per degree of freedom (the servo,
+        :meth:`_set_servo_gains`), the payload at each EE, the collision geometry with
+        ``collisions``."""
         settings = self.settings
-        spec = mujoco_spec(robot.model, robot.urdf_path.read_text(), self._site_frames(robot),
-                           robot.locked_joints)
+        urdf = robot.urdf_path.read_text()
+        spec = mujoco_spec(robot.model, urdf, self._site_frames(robot), robot.locked_joints)
+        armatures = urdf_armatures(urdf, str(robot.urdf_path))
         spec.option.timestep = self.dt / self.substeps
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         spec.option.gravity = [0.0, 0.0, -9.81 if settings.gravity else 0.0]
@@ -136,7 +157,7 @@ class MujocoPlant:
             body.gravcomp = 1.0  # the drives know the modelled robot's weight
         effort = self._urdf_efforts(robot.model)
         for joint in spec.joints:
-            joint.armature = settings.armature
+            joint.armature = armatures.get(joint.name, settings.armature)
             joint.damping = [settings.joint_damping + settings.viscous_friction, 0.0, 0.0]
             joint.frictionloss = settings.coulomb_friction
             joint.actgravcomp = True  # the compensation is the drive's torque, within its limit
@@ -220,6 +241,7 @@ class MujocoPlant:
             self._actuator_dofs[self._reference_actuators]]]
         if self.shaping is not None:
             self.shaping.reset()
+        self.interface.reset()
         self.last = PlantMeasures(np.zeros((0, 3)), np.zeros(0), 0.0, False)
 
     def sense(self, q: np.ndarray) -> np.ndarray:
@@ -228,22 +250,26 @@ class MujocoPlant:
 
     def actuate(self, qd: np.ndarray, q: np.ndarray,
                 constraints: Sequence[Constraint] = ()) -> np.ndarray:
-        """Run the physics for one control period under the command ``qd`` (delayed and
-        filtered by the imperfections); the mean velocity that takes the loop's true
-        configuration ``q`` to the simulated one."""
+        """Run the physics for one control period under the command ``qd`` (delayed by
+        the imperfections' latency, checked by the interface, filtered by the joint lag);
+        the mean velocity that takes the loop's true configuration ``q`` to the simulated
+        one."""
         model, data = self.mj_model, self.mj_data
-        shaped = qd if self.shaping is None else self.shaping.actuate(qd)
+        arrived = qd if self.shaping is None else self.shaping.delay(qd)
+        accepted, fault = self.interface.receive(arrived)
+        shaped = accepted if self.shaping is None else self.shaping.respond(accepted)
         command = self.joints.v_to_mujoco(shaped, data.qpos)
         data.ctrl[:] = command[self._actuator_dofs]
         holes = [c for c in constraints if c.has_wall]
         forces, displacements = np.zeros((len(holes), 3)), np.zeros(len(holes))
+        springs = np.zeros((len(holes), 3))
         data.qfrc_applied[:] = 0.0
         if holes:  # each physics step split to apply the wall's force at its kinematics
             for _ in range(self.substeps):
                 mujoco.mj_step1(model, data)
                 data.qfrc_applied[:] = 0.0
                 for i, hole in enumerate(holes):
-                    forces[i], displacements[i] = self._push(hole)
+                    forces[i], springs[i], displacements[i] = self._push(hole)
                 mujoco.mj_step2(model, data)
         else:  # one call: the physics steps without Python between them
             mujoco.mj_step(model, data, self.substeps)
@@ -251,8 +277,10 @@ class MujocoPlant:
         ratio = float(np.max(torque))
         saturated = ratio >= 1.0 - 1e-12
         depths = data.contact.dist[:data.ncon]
-        self.last = PlantMeasures(forces, displacements, ratio, saturated, int(data.ncon),
-                                  float(max(0.0, -np.min(depths, initial=0.0))))
+        self.last = PlantMeasures(forces, displacements, ratio, saturated, springs,
+                                  int(data.ncon),
+                                  float(max(0.0, -np.min(depths, initial=0.0))),
+                                  fault, self.interface.stopped)
         self.joints.q_to_pinocchio(data.qpos, self._q_pin)
         return pin.difference(self.model, q, self._q_pin) / self.dt
 
@@ -262,9 +290,10 @@ class MujocoPlant:
 
     # -- the abdominal wall ----------------------------------------------------------------
 
-    def _push(self, hole: Constraint) -> tuple[np.ndarray, float]:
+    def _push(self, hole: Constraint) -> tuple[np.ndarray, np.ndarray, float]:
         """Apply the wall's force at ``hole`` to the instrument (at the kinematics of
-        ``mj_step1``); the force (N) and the tissue's displacement (m)."""
+        ``mj_step1``); the force (N), its spring part ``-k (P - c)`` (the first term of
+        :meth:`constraints.Hole.wall_force`) and the tissue's displacement (m)."""
         model, data, jacobian = self.mj_model, self.mj_data, self._jacobian
         site = self._site_ids[hole.link]
         point, axis = hole.port(data.site_xmat[site].reshape(3, 3), data.site_xpos[site])
@@ -272,4 +301,5 @@ class MujocoPlant:
         mujoco.mj_jac(model, data, jacobian, None, point, body)
         force = hole.wall_force(point, axis, jacobian @ data.qvel)
         mujoco.mj_applyFT(model, data, force, self._no_torque, point, body, data.qfrc_applied)
-        return force, math.dist(point, hole.center)
+        spring = -hole.tissue_stiffness * (point - hole.center)
+        return force, spring, math.dist(point, hole.center)

@@ -6,8 +6,10 @@ import math
 from dataclasses import dataclass
 
 from constraints.validation import as_number
-from teleop.limits import (MAX_JOINT_FRICTION, MAX_PAYLOAD_KG, MAX_PHYSICS_RATE_HZ,
-                           MAX_SERVO_BANDWIDTH_HZ, MIN_PHYSICS_RATE_HZ)
+from teleop.limits import (MAX_INTERFACE_JERK, MAX_JOINT_FRICTION, MAX_PAYLOAD_KG,
+                           MAX_PHYSICS_RATE_HZ, MAX_SERVO_BANDWIDTH_HZ, MIN_PHYSICS_RATE_HZ)
+
+from .interface import INTERFACE_MODES
 
 
 #: :meth:`PlantSettings.to_dict`'s keys (units in the names) -> the settings' fields.
@@ -15,7 +17,9 @@ SETTINGS_KEYS = {"physics_rate_hz": "physics_rate", "servo_bandwidth_hz": "servo
                  "servo_damping_ratio": "servo_damping_ratio", "armature_kg_m2": "armature",
                  "joint_damping_nms": "joint_damping", "payload_kg": "payload",
                  "coulomb_friction_nm": "coulomb_friction",
-                 "viscous_friction_nms": "viscous_friction", "gravity": "gravity"}
+                 "viscous_friction_nms": "viscous_friction", "gravity": "gravity",
+                 "interface_limits": "interface_limits",
+                 "interface_jerk_limit_radps3": "interface_jerk_limit"}
 
 
 @dataclass(frozen=True)
@@ -30,13 +34,22 @@ class PlantSettings:
         gains are ``kp = I w^2``, ``kd = 2 zeta I w`` with ``w = 2 pi bandwidth`` and ``I``
         the joint's diagonal inertia (armature included) at the start configuration.
     servo_damping_ratio : ``zeta`` of the servos (1: critically damped).
-    armature : reflected rotor inertia of every joint (kg m^2; kg on a prismatic joint).
+    armature : reflected rotor inertia (kg m^2; kg on a prismatic joint) of every joint
+        whose URDF gives none (``drake:rotor_inertia`` and ``drake:gear_ratio``,
+        :func:`teleop.plants.armature.urdf_armatures`).
     joint_damping : viscous damping of every joint the servo does not know of (N m s/rad).
     payload : mass (kg) carried at each end effector, unknown to the gravity compensation
         and the controllers.
     coulomb_friction : dry friction torque of every joint (N m), unknown to the servos.
     viscous_friction : extra viscous friction of every joint (N m s/rad), unknown too.
     gravity : gravity on (the servos compensate the modelled robot's, not the payload's).
+    interface_limits : the velocity interface's check of each command against the robot's
+        acceleration limits and :attr:`interface_jerk_limit` (docs/design.md section 17.1,
+        :mod:`teleop.plants.interface`): ``off`` (the default), ``count`` (counted, the
+        robot not stopped) or ``strict`` (the first fault stops the robot, as a Franka's
+        reflex does).
+    interface_jerk_limit : the interface's jerk limit of every joint (rad/s^3; m/s^3 on a
+        prismatic or base joint), None: no jerk limit.
     """
 
     physics_rate: float = MIN_PHYSICS_RATE_HZ
@@ -48,6 +61,8 @@ class PlantSettings:
     coulomb_friction: float = 0.0
     viscous_friction: float = 0.0
     gravity: bool = True
+    interface_limits: str = "off"
+    interface_jerk_limit: float | None = None
 
     def __post_init__(self) -> None:
         """Every field a finite number in its range (``ValueError`` naming it)."""
@@ -62,12 +77,21 @@ class PlantSettings:
         as_number(self.payload, "payload", 0.0, maximum=MAX_PAYLOAD_KG)
         if not isinstance(self.gravity, bool):
             raise ValueError(f"gravity must be True or False, got {self.gravity!r}")
+        if self.interface_limits not in INTERFACE_MODES:
+            raise ValueError(f"interface_limits must be one of {', '.join(INTERFACE_MODES)}, "
+                             f"got {self.interface_limits!r}")
+        if self.interface_jerk_limit is not None:
+            as_number(self.interface_jerk_limit, "interface_jerk_limit", positive=True,
+                      maximum=MAX_INTERFACE_JERK)
+            if self.interface_limits == "off":
+                raise ValueError("interface_jerk_limit needs interface_limits count or strict "
+                                 "(interface_limits is off)")
 
     def substeps(self, dt: float) -> int:
         """Physics steps per control period ``dt``: at least two."""
         return max(2, math.ceil(self.physics_rate * dt - 1e-9))
 
-    def to_dict(self) -> dict[str, float | bool]:
+    def to_dict(self) -> dict[str, float | bool | str | None]:
         """The ``settings`` of a plant in metrics.json and session headers (units in the
         key names, :data:`SETTINGS_KEYS`)."""
         return {key: getattr(self, name) for key, name in SETTINGS_KEYS.items()}
@@ -91,5 +115,9 @@ class PlantSettings:
         if self.coulomb_friction or self.viscous_friction:
             extras.append(f"friction {self.coulomb_friction:g} N m + "
                           f"{self.viscous_friction:g} N m s/rad")
+        if self.interface_limits != "off":
+            jerk = ("" if self.interface_jerk_limit is None
+                    else f", jerk {self.interface_jerk_limit:g} rad/s^3")
+            extras.append(f"interface limits {self.interface_limits}{jerk}")
         return (f"MuJoCo plant at {self.physics_rate:g} Hz, {self.servo_bandwidth:g} Hz servos"
                 + "".join(", " + extra for extra in extras))
