@@ -1,10 +1,14 @@
 """Joint acceleration limits: the braking-aware position bound and the acceleration box
-(docs/design.md section 8.4)."""
+(docs/design.md section 8.4), and the braking-aware velocity dampers of the barriers and
+the collision pairs (sections 12 and 18.3)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
+from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.validation import REAL_KINDS, short_repr
 
 
@@ -77,3 +81,48 @@ def acceleration_box(lower: np.ndarray, upper: np.ndarray, previous: np.ndarray,
         accel_lower[miss] = point[miss]
         accel_upper[miss] = point[miss]
     return accel_lower, accel_upper
+
+
+#: The share of the deceleration its joints could give a point along a damper's row, at
+#: their acceleration limits, that the braking-aware damper counts on (docs/design.md 12):
+#: the rest is left to the other rows the same joints hold (a trocar, a second barrier or
+#: pair on the same joints) and to the row turning with ``q`` between two steps.
+DAMPER_BRAKING_SHARE = 0.5
+
+
+def damper_deceleration(rows: np.ndarray, acceleration_limit: np.ndarray) -> np.ndarray:
+    """Per row ``r`` of ``rows`` (m, nv): ``a_n = DAMPER_BRAKING_SHARE * sum_i |r_i| a_i``,
+    the deceleration (m/s^2) the damper counts on along the row (docs/design.md 12); ``inf``
+    where a joint without an acceleration limit moves the point, 0 where no joint does."""
+    reach = np.abs(rows) * np.where(rows != 0.0, acceleration_limit, 0.0)
+    return DAMPER_BRAKING_SHARE * reach.sum(axis=1)
+
+
+def braked_lower(rows: np.ndarray, lower: np.ndarray, gaps: np.ndarray, gains: np.ndarray,
+                 acceleration_limit: np.ndarray | None, dt: float) -> np.ndarray:
+    """The bounds of velocity dampers ``rows qd >= lower`` (``lower = f - K g``: a gap
+    ``g`` closing at most at ``K g``, ``f`` the fed-forward velocity) made braking-aware
+    (docs/design.md 12, 18.3): where ``g > 0`` the allowed approach is ``min(K g, s)``, ``s``
+    the :func:`braking_speed` for ``g`` with the deceleration ``a_n`` of
+    :func:`damper_deceleration` (step ``a_n dt``, every period covering at most ``K dt`` of
+    the gap), so ``lower`` is raised by ``K g - s >= 0``. ``lower`` itself (not a copy)
+    without acceleration limits, where nothing is raised."""
+    if acceleration_limit is None or not lower.size:
+        return lower
+    deceleration = damper_deceleration(rows, acceleration_limit)
+    braked = (gaps > 0.0) & (gains > 0.0) & (deceleration > 0.0) & np.isfinite(deceleration)
+    if not braked.any():
+        return lower
+    gap, gain = gaps[braked], gains[braked]
+    raised = lower.copy()
+    raised[braked] += gain * gap - braking_speed(gap, deceleration[braked] * dt, dt, gain * dt)
+    return raised
+
+
+def braked_pairs(pairs: CollisionRows, avoidance: CollisionAvoidance,
+                 acceleration_limit: np.ndarray | None, dt: float) -> CollisionRows:
+    """The collision rows with their bounds made braking-aware (:func:`braked_lower`, the
+    gap ``d - d_s`` at the avoidance's rate); ``pairs`` itself where nothing is raised."""
+    lower = braked_lower(pairs.rows, pairs.lower, pairs.distances - avoidance.safety_distance,
+                         np.full(pairs.size, avoidance.gain), acceleration_limit, dt)
+    return pairs if lower is pairs.lower else dataclasses.replace(pairs, lower=lower)

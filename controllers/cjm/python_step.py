@@ -18,6 +18,7 @@ import pinocchio as pin
 from constraints.collision import CollisionRows
 
 from ..base import StepStatus, checked_inputs
+from ..joint_acceleration import braked_lower, braked_pairs
 from .analytical import SquarePreChain, solve_redundant_pre_chain
 from .general import solve_general
 from .report import Event, ReportBuilder, StepReport
@@ -57,6 +58,8 @@ class PythonStep:
         self.previous = np.zeros(setup.model.nv)
         #: the box's reference when there are acceleration limits, else None
         self._reference = None if setup.bounds.acceleration_step is None else self.previous
+        #: the acceleration limits the dampers brake with (None: none; docs/design.md 12)
+        self._acceleration_limit = setup.bounds.acceleration_limit
 
     # -- the step template (controllers.base.GuardedController.solve) ------------------
 
@@ -74,7 +77,9 @@ class PythonStep:
         report = ReportBuilder()
         ee_jacobian = self._kinematics(q)
         if setup.collisions is not None:
-            self._pairs = report.collision = setup.collisions.rows(setup.model, self.data)
+            self._pairs = report.collision = braked_pairs(
+                setup.collisions.rows(setup.model, self.data), setup.collisions,
+                self._acceleration_limit, setup.bounds.dt)
             self._pair_rhs = self._pairs.lower.copy()
         task = self._task(twist)
         try:
@@ -143,14 +148,27 @@ class PythonStep:
         return clipped
 
     def rows(self, indices: list[int] | tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-        """Stacked rows ``(A, b)`` of the chosen constraints at the kinematics in ``data``."""
+        """Stacked rows ``(A, b)`` of the chosen constraints at the kinematics in ``data``,
+        a barrier's bound braking-aware with acceleration limits (docs/design.md 12)."""
         plans, model, data = self.setup.plans, self.setup.model, self.data
-        blocks = [plans[i].constraint.rows(model, data, plans[i].frame_id) for i in indices]
+        blocks = [self._braked(i, *plans[i].constraint.rows(model, data, plans[i].frame_id))
+                  for i in indices]
         if len(blocks) == 1:
             return blocks[0]
         if not blocks:
             return np.zeros((0, model.nv)), np.zeros(0)
         return np.vstack([A for A, _ in blocks]), np.concatenate([b for _, b in blocks])
+
+    def _braked(self, index: int, rows: np.ndarray, rhs: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Constraint ``index``'s rows, its bound :func:`braked_lower` if it is an
+        inequality (a damper whose gap is its error) and there are acceleration limits."""
+        constraint = self.setup.plans[index].constraint
+        if self._acceleration_limit is None or constraint.is_equality:
+            return rows, rhs
+        gap = constraint.error(self.data.oMf[self.setup.plans[index].frame_id])
+        return rows, braked_lower(rows, rhs, gap, np.array([constraint.gain]),
+                                  self._acceleration_limit, self.setup.bounds.dt)
 
     # -- the forms and the barriers (docs/design.md sections 4-7) ------------------------
 
@@ -210,7 +228,9 @@ class PythonStep:
         """The analytical form where it applies, else the general form, for these rows."""
         setup = self.setup
         pairs = self._active_pairs
-        if len(active) == 1 and self._analytical_task and not pairs:
+        if len(active) == 1 and self._analytical_task and not pairs and not (
+                self._acceleration_limit is not None and active[0] in self._barriers):
+            # (a braking-aware barrier's bound needs its joint-space row: the general form)
             qd = self._solve_analytical(q, ee_jacobian, twist, active[0], report)
             if qd is not None:
                 return qd

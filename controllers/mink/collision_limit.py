@@ -14,7 +14,7 @@ the distances and normals are MuJoCo's.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import mink
 import mujoco
@@ -52,6 +52,9 @@ class CollisionPairsLimit(mink.CollisionAvoidanceLimit):
                          collision_detection_distance=detection_distance)
         self.last: LimitRows | None = None
         self.held_bound: np.ndarray | None = None
+        #: ``braking(G, h, q_mj)``: the bounds made braking-aware with acceleration limits
+        #: (the controller's, docs/design.md 12), or None: mink's
+        self.braking: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
 
     def _construct_geom_id_pairs(self, geom_pairs) -> list[tuple[int, int]]:
         return list(self._given_pairs)
@@ -59,6 +62,8 @@ class CollisionPairsLimit(mink.CollisionAvoidanceLimit):
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float
                                 ) -> LimitRows:
         rows = super().compute_qp_inequalities(configuration, dt)
+        if self.braking is not None and rows.G is not None:
+            rows = LimitRows(G=rows.G, h=self.braking(rows.G, rows.h, configuration.q))
         if self.held_bound is not None:
             rows = LimitRows(G=rows.G, h=np.maximum(rows.h, self.held_bound))
         self.last = rows

@@ -17,6 +17,7 @@ from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.validation import as_number, as_vector
 
 from ..base import EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus, as_twist_weight
+from ..joint_acceleration import braked_lower, braked_pairs
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from ..mujoco_model import build_mujoco_model, site_name
@@ -247,6 +248,8 @@ class MinkController(GuardedController):
         self._q_mj = np.empty(self.mj_model.nq)
         self.collision_limit = (None if self._scene is None
                                 else self._scene.limit(self.mj_model, self.dt))
+        if self.collision_limit is not None and self.acceleration_limit is not None:
+            self.collision_limit.braking = self._braked_collision_bound
 
     def _rebuild_mujoco(self) -> None:
         """:meth:`_build_mujoco` again, and the limits made on the model."""
@@ -274,7 +277,8 @@ class MinkController(GuardedController):
         if (self._scene is None) != (self.collisions is None) or (
                 self._scene is not None and self._scene.collisions is not self.collisions):
             self._rebuild_mujoco()
-        rows = PinocchioRows(self.model, self.data, self.joints, self.mj_model.nq)
+        rows = PinocchioRows(self.model, self.data, self.joints, self.mj_model.nq,
+                             self.acceleration_limit, self.dt)
         self._rows = rows
         caches = [RowsCache(c, f, rows) for c, f in zip(self.constraints, self.constraint_frames)]
         self._equality_caches = [c for c in caches if c.constraint.is_equality]
@@ -297,6 +301,8 @@ class MinkController(GuardedController):
         collisions = self.collision_rows()
         if collisions is not None:  # measured whatever the solve does
             record_distances(self.info, collisions)
+            collisions = braked_pairs(collisions, self.collisions, self.acceleration_limit,
+                                      self.dt)
         configuration = self.configuration
         q_mj = self.joints.q_to_mujoco(kinematics.q, out=self._q_mj)
         configuration.update(q_mj)
@@ -368,6 +374,23 @@ class MinkController(GuardedController):
             report_held_back(self.info, names, ", ".join(
                 describe_pair(collisions, name) for name in names), missed)
         return qd
+
+    def _braked_collision_bound(self, G: np.ndarray, h: np.ndarray, q_mj: np.ndarray
+                                ) -> np.ndarray:
+        """mink's collision bounds ``G dq <= h`` (``h = k dt (d - d_s)``, 0 at or below
+        ``d_s``, inf beyond ``d_i``) made braking-aware: the rows ``-G v >= -h / dt``
+        on the Pinocchio velocity ``v`` through :func:`braked_lower` (docs/design.md 12)."""
+        near = np.flatnonzero(np.isfinite(h) & (h > 0.0))
+        if not near.size:
+            return h
+        dt, rate = self.dt, self.collisions.gain
+        to_mujoco = np.column_stack([self.joints.v_to_mujoco(column, q_mj)
+                                     for column in np.eye(self.model.nv)])
+        rows = -G[near] @ to_mujoco
+        braked = h.copy()
+        braked[near] = -dt * braked_lower(rows, -h[near] / dt, h[near] / (rate * dt),
+                                          np.full(near.size, rate), self.acceleration_limit, dt)
+        return braked
 
     def _held_pairs(self, qd: np.ndarray, q_mj: np.ndarray) -> tuple[str, ...]:
         """The pairs whose rows of mink's collision limit ``qd`` holds at their bound

@@ -8,6 +8,7 @@ import pinocchio as pin
 
 from constraints import Constraint
 
+from ..joint_acceleration import braked_lower
 from ..mujoco_model import JointMap
 
 
@@ -21,10 +22,14 @@ class PinocchioRows:
     """
 
     def __init__(self, model: pin.Model, data: pin.Data, joints: JointMap,
-                 mujoco_nq: int) -> None:
+                 mujoco_nq: int, acceleration_limit: np.ndarray | None = None,
+                 dt: float = 0.0) -> None:
         self.model = model
         self.data = data
         self.joints = joints
+        #: the acceleration limits (Pinocchio order; None: none) and the period the
+        #: barriers' bounds brake with (docs/design.md 12)
+        self.acceleration_limit, self.dt = acceleration_limit, dt
         self._q_mj = np.full(mujoco_nq, np.nan)
         self._q_pin = np.empty(model.nq)
         self.version = 0
@@ -46,7 +51,8 @@ class PinocchioRows:
 
 
 class RowsCache:
-    """``(A_pin, A_mj, b)`` of one constraint, recomputed when the kinematics change."""
+    """``(A_pin, A_mj, b)`` of one constraint, recomputed when the kinematics change; an
+    inequality's ``b`` braking-aware with acceleration limits (docs/design.md 12)."""
 
     def __init__(self, constraint: Constraint, frame_id: int, rows: PinocchioRows) -> None:
         self.constraint = constraint
@@ -59,7 +65,13 @@ class RowsCache:
         rows = self.rows
         rows.ensure(configuration)
         if self._version != rows.version:
-            self.A_pin, self.b = self.constraint.rows(rows.model, rows.data, self.frame_id)
+            constraint = self.constraint
+            self.A_pin, self.b = constraint.rows(rows.model, rows.data, self.frame_id)
+            if rows.acceleration_limit is not None and not constraint.is_equality:
+                self.b = braked_lower(self.A_pin, self.b,
+                                      constraint.error(rows.data.oMf[self.frame_id]),
+                                      np.array([constraint.gain]), rows.acceleration_limit,
+                                      rows.dt)
             self.A_mj = rows.joints.columns_to_mujoco(self.A_pin, configuration.q)
             self._version = rows.version
         return self

@@ -27,6 +27,7 @@ from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.validation import as_number, as_vector
 
 from ..base import EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus, as_twist_weight
+from ..joint_acceleration import braked_lower, braked_pairs
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from ..numerics import INFINITE_BOUND, SOLVER_SETTINGS
@@ -212,6 +213,8 @@ class QPController(GuardedController):
         collisions = self.collision_rows()
         if collisions is not None:  # measured whatever the solve does
             record_distances(self.info, collisions)
+            collisions = braked_pairs(collisions, self.collisions, self.acceleration_limit,
+                                      self.dt)
         barrier_rows, barrier_bound = self._inequality_rows(collisions)
         lower, upper = bounded_box(*self.bounds(kinematics.q))
         weighted_jacobian = jacobian if self._unit_weight else self._twist_rows * jacobian
@@ -263,10 +266,18 @@ class QPController(GuardedController):
                          ) -> tuple[np.ndarray | None, np.ndarray | None]:
         """``G qd <= h``: the barriers' rows, then the ``collisions`` rows
         (``rows qd >= lower`` as ``-rows qd <= -lower``; docs/design.md 18.5), or
-        ``(None, None)`` when there is none. Every stage holds them alike."""
+        ``(None, None)`` when there is none. Every stage holds them alike. With
+        acceleration limits the barriers' bounds are braking-aware (docs/design.md 12; the
+        collision rows come braked)."""
         blocks, bounds = [], []
         if self._barriers:
             rows, rhs = self.constraint_rows(self._barriers)
+            if self.acceleration_limit is not None:
+                barriers = [self.constraints[i] for i in self._barriers]
+                gaps = np.concatenate([c.error(self.data.oMf[self.constraint_frames[i]])
+                                       for c, i in zip(barriers, self._barriers)])
+                rhs = braked_lower(rows, rhs, gaps, np.array([c.gain for c in barriers]),
+                                   self.acceleration_limit, self.dt)
             blocks.append(-rows)  # A qd >= b as -A qd <= -b
             bounds.append(-rhs)
         if collisions is not None and collisions.size:

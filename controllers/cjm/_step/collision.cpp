@@ -402,7 +402,7 @@ void Collisions::write_rows(const Kinematics& kinematics, Step& step) {
       add_point_row(kinematics, bodies_[second].joint, contact.on_second, contact.normal, -1.0, row);
     else
       bound += contact.normal.dot(obstacles_[second - n_bodies].velocity);
-    lower(count) = bound;
+    lower(count) = bound + step.damper_raise(row, contact.distance - safety_, gain_);
     row_pairs_(count) = p;
     distances_(count) = contact.distance;
     witnesses_.row(count).head<3>() = contact.on_first.transpose();

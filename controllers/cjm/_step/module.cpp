@@ -210,18 +210,21 @@ PYBIND11_MODULE(_step, module) {
                        std::vector<Index> limited_v, cjm::Vector q_min, cjm::Vector q_max,
                        double position_gain, bool position_limits, cjm::RowMatrix box_test,
                        cjm::Vector acceleration_step, double dt, double limit_gain,
-                       cjm::Vector slack) {
+                       cjm::Vector slack, cjm::Vector damper_step) {
              return cjm::JointBox{std::move(velocity_lower), std::move(velocity_upper),
                                   std::move(velocity_limit), std::move(limited_q),
                                   std::move(limited_v), std::move(q_min), std::move(q_max),
                                   position_gain, position_limits, std::move(box_test),
-                                  std::move(acceleration_step), dt, limit_gain, std::move(slack)};
+                                  std::move(acceleration_step), dt, limit_gain, std::move(slack),
+                                  std::move(damper_step)};
            }),
            py::arg("velocity_lower"), py::arg("velocity_upper"), py::arg("velocity_limit"),
            py::arg("limited_q"), py::arg("limited_v"), py::arg("q_min"), py::arg("q_max"),
            py::arg("position_gain"), py::arg("position_limits"), py::arg("box_test"),
            py::arg("acceleration_step"), py::arg("dt"), py::arg("limit_gain"), py::arg("slack"),
-           "``acceleration_step`` (a dt per joint) empty: no acceleration limit.");
+           py::arg("damper_step") = cjm::Vector(),
+           "``acceleration_step`` (a dt per joint) empty: no acceleration limit; "
+           "``damper_step`` its share the braking-aware dampers count on (the same size).");
 
   py::class_<cjm::Tolerances>(module, "Tolerances")
       .def(py::init([](double equality, double twist, double barrier, double rank,
@@ -288,6 +291,14 @@ PYBIND11_MODULE(_step, module) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.pair_lower().data(), {step.pair_lower().size()}, self);
       }, "The collision rows' bounds (writable, pair_capacity).")
+      .def_property_readonly("damper_gaps", [](py::object self) {
+        auto& step = self.cast<cjm::Step&>();
+        return view(step.damper_gaps().data(), {step.damper_gaps().size()}, self);
+      }, "Each constraint's damper gap (writable): Python writes it with the terms it writes.")
+      .def_property_readonly("damper_gains", [](py::object self) {
+        auto& step = self.cast<cjm::Step&>();
+        return view(step.damper_gains().data(), {step.damper_gains().size()}, self);
+      }, "Each constraint's damper gain (writable), as damper_gaps.")
       .def_property_readonly("pair_capacity", &cjm::Step::pair_capacity)
       .def("set_pair_count", &cjm::Step::set_pair_count, py::arg("count"),
            "How many of pair_rows the next step holds (ValueError beyond the capacity).")

@@ -80,7 +80,9 @@ void Pipeline::compute_terms() {
     const Rotation rotation(placement);
     const Translation translation(placement + 9);
     paper_form_ &= write_terms(form.kind, form.parameters, rotation, translation, form.paper,
-                               form.paper_min_a, terms_.data() + step_.terms_offset(i));
+                               form.paper_min_a, terms_.data() + step_.terms_offset(i),
+                               step_.damper_gaps()(i));
+    step_.damper_gains()(i) = declared_gain(form.kind, form.parameters);
   }
 }
 

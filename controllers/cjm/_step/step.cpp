@@ -54,13 +54,16 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
       (box_.box_test.rows() > 0 && box_.box_test.cols() != nv + nq + 1) ||
       (box_.acceleration_step.size() != 0 &&
        (box_.acceleration_step.size() != nv || box_.slack.size() != nv || !(box_.dt > 0.0) ||
-        !(box_.limit_gain > 0.0))))
+        !(box_.limit_gain > 0.0))) ||
+      box_.damper_step.size() != box_.acceleration_step.size())
     throw std::invalid_argument("joint box of the wrong size");
   if (posture_target_.size() != 0 && (posture_target_.size() != nq || nq != nv))
     throw std::invalid_argument("a posture target needs nq == nv and one entry per joint");
   posture_velocity_.resize(nv);
   accelerating_ = box_.acceleration_step.size() != 0;
   previous_ = Vector::Zero(nv);
+  damper_gaps_ = Vector::Zero(n_constraints);
+  damper_gains_ = Vector::Zero(n_constraints);
   active_.reserve(n_constraints);
   waiting_.reserve(n_constraints);
   report_ = Vector::Zero(kReportSize);
@@ -192,8 +195,9 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
 // -- rows and forms ---------------------------------------------------------------------
 
 void Step::solve_rows(const Inputs& in, VectorRef qd) {
+  // a braking-aware barrier's bound needs its joint-space row: the general form
   if (active_.size() == 1 && active_pairs_.empty() && !general_only_ && in.analytical_allowed &&
-      analytical(in, active_[0], qd))
+      !(accelerating_ && !constraints_[active_[0]].equality) && analytical(in, active_[0], qd))
     return;
   general(in, qd);
 }
@@ -250,6 +254,9 @@ void Step::ensure_rows(const Inputs& in) {
     all_rows_.middleRows(row_offset_[i], k).noalias() =
         residual_rows.rightCols(6) * in.frame_jacobians.middleRows(6 * i, 6);
     all_rhs_.segment(row_offset_[i], k) = -residual_rows.col(0);
+    if (!constraints_[i].equality)
+      all_rhs_(row_offset_[i]) +=
+          damper_raise(all_rows_.row(row_offset_[i]), damper_gaps_(i), damper_gains_(i));
   }
   rows_ready_ = true;
 }
@@ -303,8 +310,8 @@ void Step::compute_box(const ConstVectorRef& q) {
       const double below = box_.q_min(i) - q_i, above = box_.q_max(i) - q_i;
       double low = below * box_.position_gain, high = above * box_.position_gain;
       if (accelerating_ && std::isfinite(box_.acceleration_step(v))) {  // braking-aware
-        if (below <= 0.0) low = -braking_speed(-below, box_.acceleration_step(v));
-        if (above >= 0.0) high = braking_speed(above, box_.acceleration_step(v));
+        if (below <= 0.0) low = -braking_speed(-below, box_.acceleration_step(v), box_.limit_gain);
+        if (above >= 0.0) high = braking_speed(above, box_.acceleration_step(v), box_.limit_gain);
       }
       lower_(v) = std::max(lower_(v), low);
       upper_(v) = std::min(upper_(v), high);
@@ -327,8 +334,8 @@ void Step::compute_box(const ConstVectorRef& q) {
   }
 }
 
-double Step::braking_speed(double distance, double step) const {
-  const double c = 1.0 / box_.limit_gain;
+double Step::braking_speed(double distance, double step, double gain) const {
+  const double c = 1.0 / gain;
   const double scaled = distance / (step * box_.dt);
   double k = std::floor(std::max(std::sqrt(std::max(2.0 * scaled + c - c * c, 0.0)) - c, 0.0));
   const double x_0 = scaled / c;
@@ -336,6 +343,16 @@ double Step::braking_speed(double distance, double step) const {
   k = k + 1.0;
   const double x_next = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c);
   return step * std::min(std::min(x_0, x_k), x_next);
+}
+
+double Step::damper_raise(const Eigen::Ref<const Eigen::RowVectorXd, 0, Eigen::InnerStride<>>& row,
+                          double gap, double gain) const {
+  if (!accelerating_ || !(gap > 0.0) || !(gain > 0.0)) return 0.0;
+  double step = 0.0;  // a_n dt: the share of sum_i |r_i| a_i dt
+  for (Index i = 0; i < nv_; ++i)
+    if (row(i) != 0.0) step += std::abs(row(i)) * box_.damper_step(i);
+  if (!(step > 0.0) || !std::isfinite(step)) return 0.0;
+  return std::max(0.0, gain * gap - braking_speed(gap, step, gain * box_.dt));
 }
 
 void Step::stop(const ConstVectorRef& q, VectorRef qd) {

@@ -71,6 +71,9 @@ struct JointBox {
   Vector acceleration_step;
   double dt = 0.0, limit_gain = 1.0;
   Vector slack;                // BoxTest.slack: the test's tolerance per joint
+  //! DAMPER_BRAKING_SHARE a dt per joint: the deceleration step the braking-aware dampers
+  //! count on (controllers.joint_acceleration.damper_deceleration; docs/design.md 12)
+  Vector damper_step;
 };
 
 //! Positions in report(): SolveInfo's numbers.
@@ -112,6 +115,16 @@ class Step {
   Index constraint_count() const { return static_cast<Index>(constraints_.size()); }
   //! Where constraint ``index``'s flat terms buffer starts in ``terms``.
   Index terms_offset(Index index) const { return terms_offset_[index]; }
+
+  //! Each constraint's damper gap (its first row's error) and gain, written before a step
+  //! with its terms (by the pipeline, or by Python for the terms it writes); an
+  //! inequality's bound is braking-aware with acceleration limits (docs/design.md 12).
+  Vector& damper_gaps() { return damper_gaps_; }
+  Vector& damper_gains() { return damper_gains_; }
+  //! controllers.joint_acceleration.braked_lower for one row ``row qd >= f - gain gap``:
+  //! how much its bound rises (0 without acceleration limits).
+  double damper_raise(const Eigen::Ref<const Eigen::RowVectorXd, 0, Eigen::InnerStride<>>& row,
+                      double gap, double gain) const;
 
   //! Collision rows ``pair_rows() qd >= pair_lower()`` (docs/design.md section 18.4):
   //! The first set_pair_count() of at most pair_capacity(), written before a step by the
@@ -155,8 +168,8 @@ class Step {
   double barrier_violation(Index index, const ConstVectorRef& qd) const;
   bool box_contains(const ConstVectorRef& q, const ConstVectorRef& qd);
   void compute_box(const ConstVectorRef& q);
-  //! controllers.joint_acceleration.braking_speed for one joint.
-  double braking_speed(double distance, double step) const;
+  //! controllers.joint_acceleration.braking_speed at ``gain`` (without its rounding margin).
+  double braking_speed(double distance, double step, double gain) const;
   //! The fallback of a failed step: zero, or with acceleration limits the command
   //! nearest zero inside the box.
   void stop(const ConstVectorRef& q, VectorRef qd);
@@ -243,6 +256,7 @@ class Step {
   Matrix second_t_, second_null_t_, second_null_;
   Vector first_qd_, second_x_;
   Vector all_rhs_, rhs_;
+  Vector damper_gaps_, damper_gains_;  // per constraint
   Index row_count_ = 0;  // rows of the active set in rows_
   bool rows_ready_ = false;
   NullSpace null_;

@@ -18,6 +18,7 @@ struct Point {
   Vector3 p;
   Rows3 C, C_perp;
   Small rhs;
+  double first_error = 0.0;  // the first row's error
 };
 
 struct Field {
@@ -63,6 +64,7 @@ Point hole_point(const Parameters& parameters, const Rotation& rotation,
   point.C = perpendicular_basis(axis);
   point.C_perp = axis.transpose();
   const Small error = -(point.C * x);
+  point.first_error = error(0);
   point.rhs = -parameters(9) * error;
   const Vector3 velocity = parameters.segment<3>(3);
   if ((velocity.array() != 0.0).any()) point.rhs += point.C * (rotation.transpose() * velocity);
@@ -84,6 +86,7 @@ Point plane_point(const Parameters& parameters, const Rotation& rotation,
       normal.dot(rotation * link_point + translation - parameters.segment<3>(3));
   point.rhs.resize(1);
   point.rhs(0) = normal.dot(parameters.segment<3>(9)) - parameters(12) * error;
+  point.first_error = error;
   return point;
 }
 
@@ -98,6 +101,7 @@ Point lock_point(const Parameters& parameters, const Rotation& rotation,
   point.C_perp.resize(0, 3);
   const Vector3 error = rotation * link_point + translation - parameters.segment<3>(3);
   point.rhs = parameters.segment<3>(6) - parameters(9) * error;
+  point.first_error = error(0);
   return point;
 }
 
@@ -207,8 +211,13 @@ void load_parameters(TermsKind kind, const double* values, Index size, double un
   parameters.head(size) = Eigen::Map<const Vector>(values, size);
 }
 
+double declared_gain(TermsKind kind, const Parameters& parameters) {
+  return parameters(parameter_count(kind) - 1);
+}
+
 bool write_terms(TermsKind kind, const Parameters& parameters, const Rotation& rotation,
-                 const Translation& translation, bool paper, double paper_min_a, double* terms) {
+                 const Translation& translation, bool paper, double paper_min_a, double* terms,
+                 double& gap) {
   Point point;
   switch (kind) {
     case TermsKind::hole: point = hole_point(parameters, rotation, translation); break;
@@ -216,6 +225,7 @@ bool write_terms(TermsKind kind, const Parameters& parameters, const Rotation& r
     case TermsKind::point_lock: point = lock_point(parameters, rotation, translation); break;
   }
   const Index k = point.C.rows();
+  gap = point.first_error;
   write_point(point, terms);
   Eigen::Map<Matrix, 0, Eigen::OuterStride<6>> S(terms + 6, 6, 6 - k, Eigen::OuterStride<6>(6));
   const double a = point.p.norm();

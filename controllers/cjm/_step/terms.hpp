@@ -36,6 +36,8 @@ const char* kind_name(TermsKind kind);
 Index parameter_count(TermsKind kind);
 //! Rows k of a kind's terms (2, 1, 3).
 Index kind_rows(TermsKind kind);
+//! The drift-feedback gain K among the declared parameters (every kind's last entry).
+double declared_gain(TermsKind kind, const Parameters& parameters);
 
 //! Checks ``values`` (``size`` entries) against ``kind``'s declaration and copies them to
 //! ``parameters``: std::invalid_argument naming the field for a wrong size, a non-finite
@@ -52,7 +54,9 @@ using Translation = Eigen::Map<const Eigen::Vector3d>;
 //! entries). ``paper``: the hole's structure matrix in the paper's parametrisation (eqs
 //! 11-13) where it is defined (``|p| >= paper_min_a``); returns false when it is not
 //! (the null-space one written instead, as controllers.cjm.compiled falls back).
+//! ``gap``: the first row's error ``e``, an inequality's damper gap (docs/design.md 12).
 bool write_terms(TermsKind kind, const Parameters& parameters, const Rotation& rotation,
-                 const Translation& translation, bool paper, double paper_min_a, double* terms);
+                 const Translation& translation, bool paper, double paper_min_a, double* terms,
+                 double& gap);
 
 }  // namespace cjm
