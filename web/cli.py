@@ -19,7 +19,7 @@ import time
 import warnings
 from typing import Sequence
 
-from teleop.cli.arguments import (add_damper_options, bounded, csv_list, damper_settings,
+from teleop.cli.arguments import (add_damper_options, csv_list, damper_settings,
                                   numbers, one_line, positive)
 from teleop.cli.commands import Command
 from teleop.controller_specs import CONTROLLER_HELP

@@ -168,7 +168,8 @@ def robot_from_dict(data: Any) -> Robot:
                        locked_joints=list(locked) or None, root_joint=data.get("root_joint"))
     if not same_robot(robot, data):
         raise ValueError(f"scene robot: {source!r} does not have the constrained links "
-                         f"{dict(links or {})}; it has {dict(robot_to_dict(robot).get('constrained_links', {}))}")
+                         f"{dict(links or {})}; it has "
+                         f"{dict(robot_to_dict(robot).get('constrained_links', {}))}")
     return robot
 
 

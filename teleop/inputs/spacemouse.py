@@ -18,7 +18,8 @@ The layout is read from the length of each report 1, not from the model: the Com
 of vendor 0x256f like the combined models, sends split reports (7 bytes, ids 1 and 2).
 hidapi returns a report at its own length (hidraw, macOS) or padded to the device's
 longest input report (Windows), so a split device's report 1 never reaches 13 bytes. A
-report 1 or 2 shorter than its payload, a report 3 without its bitfield, or another id, is refused (``ValueError`` naming it).
+report 1 or 2 shorter than its payload, a report 3 without its bitfield, or another id, is refused
+(``ValueError`` naming it).
 
 **Axes.** The device reports x to the right, y towards the user and z down (pushing the
 cap is +z), and its rotations right-handed about those axes (the HID usage tables'

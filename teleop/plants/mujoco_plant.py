@@ -10,7 +10,8 @@ servo with velocity feed-forward and gravity compensation of the modelled robot,
 clipped to the joint's effort limit, at ``h = dt / substeps`` (2 kHz or faster under a
 1 kHz loop). The command reaches the drives after the imperfections' latency, through the
 interface's check of the robot's acceleration and jerk limits
-(:mod:`teleop.plants.interface`), then the joint lag. Every hole puts a port into the scene: the abdominal wall pushes on the
+(:mod:`teleop.plants.interface`), then the joint lag. Every hole puts a port into the scene: the
+abdominal wall pushes on the
 instrument with the hole's own spring-damper (:meth:`constraints.Hole.wall_force`),
 applied at the instrument's point nearest the port centre. With a collision avoidance,
 the robot's collision geometry and the obstacles are in the scene, in contact in the

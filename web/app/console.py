@@ -7,7 +7,8 @@ displacement ``scale d`` (orientation follows the gizmo's rotation, unscaled): t
 gizmo is an input source in the world's frame, mapped as every device is
 (:func:`teleop.inputs.followed_pose`, docs/design.md section 19.1), so the clutch and a
 new motion scale never make a target jump. A robot with several end effectors
-(docs/design.md section 11) has a target and a gizmo per EE (:class:`EEInput`); the actions take the EE's index ``ee``
+(docs/design.md section 11) has a target and a gizmo per EE (:class:`EEInput`); the actions take
+the EE's index ``ee``
 (0: ``robot.ee_frame``). The clutch and the motion scale are shared by every gizmo; each
 gizmo moves its own target.
 """

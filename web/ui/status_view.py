@@ -78,7 +78,8 @@ class StatusView:
             if len(names) == 1:
                 words = f"**{which}** `{robot['spec']}` **{limitation.status}**: {limitation.words}"
                 if record is not None:
-                    words += (f" (constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
+                    words += (" (constraint "
+                              f"{max(record.constraint_error, record.barrier_penetration):.1e} m, "
                               f"EE {1e3 * limitation.distance:.2f} mm from the target, "
                               f"step {record.step_time_us:.0f} us)")
             else:  # one status per robot, what keeps each EE from its target
@@ -86,7 +87,8 @@ class StatusView:
                     f"*{name}* {each.words} ({1e3 * each.distance:.2f} mm from its target)"
                     for name, each in zip(names, robot["limitations"]))
                 if record is not None:
-                    words += (f" (constraint {max(record.constraint_error, record.barrier_penetration):.1e} m, "
+                    words += (" (constraint "
+                              f"{max(record.constraint_error, record.barrier_penetration):.1e} m, "
                               f"step {record.step_time_us:.0f} us)")
             if robot["ports"]:
                 words += f"; {port_words(robot['ports'])}"
