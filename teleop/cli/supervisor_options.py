@@ -23,25 +23,32 @@ def _pair(text: str) -> tuple[float, float]:
 
 def add_supervisor_options(parser: argparse.ArgumentParser) -> None:
     """``--measured-tolerance``, ``--supervisor-error``, ``--supervisor-force``,
-    ``--no-supervisor`` in a group of their own (left out: the defaults)."""
+    ``--supervisor-ramp``, ``--no-supervisor`` in a group of their own (left out: the
+    defaults)."""
     group = parser.add_argument_group(
         "the supervisor", "measures each constraint's error at the sensed configuration (and "
         "the port force on the mujoco plant) every period: a step is ok only within tolerance; "
-        "it scales the operator's twist from 1 at the warning level to 0 at the hold level "
-        "(docs/design.md section 5.2)")
+        "it scales the operator's motion from 1 at the warning level to 0 at the hold level, "
+        "where the target is held (docs/design.md section 5.2)")
     group.add_argument("--measured-tolerance", type=_pair, metavar="MM,N",
                        help="a measured constraint error (mm) or port force (N) above these: "
                        f"the step is not ok (default: {1e3 * DEFAULT.tolerance:g},"
                        f"{DEFAULT.force_tolerance:g})")
     group.add_argument("--supervisor-error", type=_pair, metavar="WARN_MM,HOLD_MM",
-                       help="measured constraint error where the twist starts to be scaled "
-                       f"down, and where it is zero (default: {1e3 * DEFAULT.error_warn:g},"
+                       help="measured constraint error where the operator's motion starts to "
+                       f"be scaled down, and where the target is held (default: "
+                       f"{1e3 * DEFAULT.error_warn:g},"
                        f"{1e3 * DEFAULT.error_hold:g})")
     group.add_argument("--supervisor-force", type=_pair, metavar="WARN_N,HOLD_N",
                        help="the same for the measured port force (default: "
                        f"{DEFAULT.force_warn:g},{DEFAULT.force_hold:g})")
+    group.add_argument("--supervisor-ramp", type=_pair, metavar="FALL_S,RELEASE_S",
+                       help="the scale on the operator's motion falls from 1 to 0 and rises "
+                       "back in no less than these (default: "
+                       f"{DEFAULT.fall_time:g},{DEFAULT.release_time:g})")
     group.add_argument("--no-supervisor", action="store_true",
-                       help="measure and flag, never scale nor hold the operator's twist")
+                       help="measure and flag, never scale the operator's motion nor hold "
+                       "the target")
 
 
 def supervisor_choice(args: argparse.Namespace) -> SupervisorConfig:
@@ -50,7 +57,8 @@ def supervisor_choice(args: argparse.Namespace) -> SupervisorConfig:
     tolerance = args.measured_tolerance or (1e3 * DEFAULT.tolerance, DEFAULT.force_tolerance)
     error = args.supervisor_error or (1e3 * DEFAULT.error_warn, 1e3 * DEFAULT.error_hold)
     force = args.supervisor_force or (DEFAULT.force_warn, DEFAULT.force_hold)
+    ramp_times = args.supervisor_ramp or (DEFAULT.fall_time, DEFAULT.release_time)
     return SupervisorConfig(tolerance=1e-3 * tolerance[0], error_warn=1e-3 * error[0],
                             error_hold=1e-3 * error[1], force_tolerance=tolerance[1],
-                            force_warn=force[0], force_hold=force[1],
-                            acting=not args.no_supervisor)
+                            force_warn=force[0], force_hold=force[1], fall_time=ramp_times[0],
+                            release_time=ramp_times[1], acting=not args.no_supervisor)

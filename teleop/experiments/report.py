@@ -294,10 +294,12 @@ def _supervisor_table(document: dict) -> str:
     note = (f"Measured every period at the sensed configuration (encoder noise included) and, "
             f"on the physics plant, the port force: ok up to {1e3 * config['tolerance_m']:g} mm "
             f"and {config['force_tolerance_n']:g} N; "
-            + ("the operator's twist scaled from 1 at "
+            + ("the operator's motion scaled from 1 at "
                f"{1e3 * config['error_warn_m']:g} mm ({config['force_warn_n']:g} N) to 0 at "
                f"{1e3 * config['error_hold_m']:g} mm ({config['force_hold_n']:g} N), where the "
-               f"target is held; back up in no less than {config['release_time_s']:g} s."
+               f"target is held; the scale down in no less than "
+               f"{config.get('fall_time_s', 0.0):g} s, back up in no less than "
+               f"{config['release_time_s']:g} s; the offset left is kept (a clutch)."
                if config["acting"] else "measuring only: it never scaled nor held."))
     return "\n".join(rows) + f'\n<p class="note">{e(note)}</p>'
 

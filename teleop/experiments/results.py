@@ -163,10 +163,12 @@ class RunResult:
     def supervisor_metrics(self) -> dict[str, float | int | str | None]:
         """What the supervisor measured at the sensed configuration and did
         (docs/design.md 5.2): the largest measured constraint error and port force (null
-        when the plant measured none), the steps it scaled and held the operator's twist,
-        the smallest scale, its first action in words."""
+        when the plant measured none), the steps it scaled and held the operator's motion,
+        the smallest scale, the largest offset of the supervised target from the
+        operator's, its first action in words."""
         c = self.columns
         scale = c.get("supervisor_scale", np.ones(0))
+        offset = c.get("supervisor_target_offset", np.zeros(0))
         measured = c.get("measured_constraint_error", np.zeros(0))
         force = c.get("measured_port_force", np.zeros(0))
         force = force[np.isfinite(force)]
@@ -176,6 +178,7 @@ class RunResult:
             "scaled_steps": int(np.sum((scale > 0.0) & (scale < 1.0))),
             "held_steps": int(np.sum(scale == 0.0)),
             "scale_min": float(np.min(scale, initial=1.0)),
+            "target_offset_max_m": float(np.max(offset, initial=0.0)),
             "first_action": self.supervisor_first_action,
         }
 

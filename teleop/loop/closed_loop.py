@@ -2,6 +2,7 @@
 
 One tick (docs/design.md section 5), for every end effector ``i`` of ``robot.ee_frames``::
 
+    T*_i    <- the supervised target: moved by s times the operator's motion (section 5.2)
     T*_f,i <- T*_f,i exp6(alpha log6(T*_f,i^-1 T*_i))   target smoothing (browser: ~20 Hz input)
     V_ff,i  = log6(T*_f,i,prev^-1 T*_f,i) / dt           feed-forward: the target's own twist
     V_e,i   = K_p log6(T_e,i^-1 T*_f,i) + Ad V_ff,i      EE body twist, then saturated
@@ -193,7 +194,8 @@ class TeleopLoop:
         self.q = as_vector(robot.q_home if q0 is None else q0, self.model.nq, "q0")
         if plant is not None:
             plant.reset(self.q)
-        #: measures the sensed robot, scales the twist; what it did last (design.md 5.2)
+        #: measures the sensed robot, scales the operator's motion into the target the
+        #: loop follows; what it did last (docs/design.md 5.2)
         self.supervisor = Supervisor(self.model, self.config.supervisor, self.config.dt)
         self.supervision: Supervision | None = None
         self.t = 0.0
@@ -276,6 +278,7 @@ class TeleopLoop:
         for history in (self._filtered_targets, self._previous_targets):
             if history is not None:
                 history[ee] = pose.copy()
+        self.supervisor.hold(ee, pose)
         if self._history_in_tick:
             self.compiled.set_history(self._filtered_targets, self._previous_targets)
 
@@ -342,20 +345,20 @@ class TeleopLoop:
         return self.measure(step)
 
     def advance(self, target: Targets) -> PendingStep:
-        """The hot path of a period: filter the targets, the EE poses, the command, the
+        """The hot path of a period: the supervisor (:meth:`supervise`: its measures, the
+        supervised targets), filter the targets, the EE poses, the command, the
         controller's step, the integration. No measures (:meth:`measure_command`).
 
         It runs compiled (:attr:`compiled`, one C++ call) when the controller offers it
         and its current step can take it; else, and on a period whose sensed
         configuration the C++ side does not take, the Python reference
-        (:meth:`_advance_python`), to which the filter's state is handed over; also a
-        period whose twist the supervisor scales (:meth:`supervise`, run first)."""
+        (:meth:`_advance_python`), to which the filter's state is handed over."""
         tick_start = time.perf_counter_ns()
-        poses = self.targets(target)
         sensed = self.q if self.plant is None else self.plant.sense(self.q)
-        supervision = self.supervise(sensed)
+        supervision = self.supervise(sensed, self.targets(target))
+        poses = self.supervisor.followed_targets
         compiled = self.compiled
-        if compiled is not None and supervision.scale == 1.0 and compiled.ready():
+        if compiled is not None and compiled.ready():
             if not self._history_in_tick:
                 compiled.set_history(self._filtered_targets, self._previous_targets)
                 self._history_in_tick = True
@@ -369,17 +372,18 @@ class TeleopLoop:
         if self._history_in_tick:
             self._filtered_targets, self._previous_targets = compiled.history()
             self._history_in_tick = False
-        return self._supervised(
-            self._advance_python(poses, sensed, tick_start, supervision.scale), supervision)
+        return self._supervised(self._advance_python(poses, sensed, tick_start), supervision)
 
-    def supervise(self, sensed: np.ndarray) -> Supervision:
+    def supervise(self, sensed: np.ndarray, operator_targets: list[pin.SE3]) -> Supervision:
         """The supervisor's measures at ``sensed`` and of the plant's port forces, and its
-        action (docs/design.md 5.2), kept in :attr:`supervision`."""
+        action: the operator's motion to ``operator_targets`` scaled into the targets the
+        loop follows, ``self.supervisor.followed_targets`` (docs/design.md 5.2); kept in
+        :attr:`supervision`."""
         measures = None if self.plant is None else self.plant.measures()
         self._row_labels()  # the constraints' names, when the set changed
         self.supervision = self.supervisor.supervise(
-            sensed, self.constraints, self.controller.constraint_frames, self._names,
-            getattr(measures, "port_forces", None))
+            sensed, operator_targets, self.constraints, self.controller.constraint_frames,
+            self._names, getattr(measures, "port_forces", None))
         return self.supervision
 
     @staticmethod
@@ -390,9 +394,9 @@ class TeleopLoop:
         return step
 
     def _advance_python(self, poses: list[pin.SE3], sensed: np.ndarray,
-                        tick_start: int, scale: float = 1.0) -> PendingStep:
+                        tick_start: int) -> PendingStep:
         """The period in Python (the reference): Pinocchio's kinematics for the EE poses,
-        the twists times the supervisor's ``scale``, the solve, ``pin.integrate``."""
+        the twists, the solve, ``pin.integrate``."""
         model, data = self.model, self.data
         targets = self.filter_targets(poses)
         pin.forwardKinematics(model, data, sensed)
@@ -401,8 +405,6 @@ class TeleopLoop:
         requested = self._pose_twists(placements, targets)
         twists = [self._saturate(twist) for twist in requested]
         saturated = any(capped is not twist for capped, twist in zip(twists, requested))
-        if scale != 1.0:
-            twists = [twist * scale for twist in twists]
         # filter_targets makes a new list of new poses every period: no copy needed
         previous, self._previous_targets = self._previous_targets, targets
         qd, status, message, step_time = self._solve(sensed, np.concatenate(twists))
@@ -531,6 +533,7 @@ class TeleopLoop:
             measured_constraint_error=step.supervision.error,
             measured_port_force=step.supervision.port_force,
             supervisor_scale=step.supervision.scale, supervisor_action=step.supervision.action,
+            supervisor_target_offset=step.supervision.target_offset,
             plant=None if self.plant is None else self.plant.measures(),
             minimum_distance=math.inf if distance is None else distance.minimum_distance,
             closest_pair="" if distance is None else distance.closest_pair,

@@ -19,6 +19,7 @@ RECORD_FIELDS = (
     "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed",
     "step_time_us", "tick_time_us", "constraint_velocity_floor", "twist_saturated",
     "minimum_distance", "measured_constraint_error", "measured_port_force", "supervisor_scale",
+    "supervisor_target_offset",
 )
 
 
@@ -67,8 +68,10 @@ class StepRecord:
     #: the largest constraint error measured at the sensed configuration (m)
     measured_constraint_error: float = 0.0
     measured_port_force: float = math.nan  # the largest port force measured (N), NaN: none
-    supervisor_scale: float = 1.0  # what the supervisor multiplied the commanded twists by
+    supervisor_scale: float = 1.0  # what the supervisor multiplied the operator's motion by
     supervisor_action: str = "none"  # teleop.loop.supervisor.ACTIONS
+    #: the largest distance between an EE's supervised target and the operator's (m)
+    supervisor_target_offset: float = 0.0
     plant: object | None = field(default=None, repr=False)  # the plant's own measures
     #: the collision pairs' smallest distance at the true configuration (m; inf without
     #: collision avoidance or no pair measured; exact below d_i, teleop.loop.distance_meter)

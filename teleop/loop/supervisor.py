@@ -9,12 +9,20 @@ measures it, the largest port force of the period before. From them:
   ``tolerance`` and the port force within ``force_tolerance``; else the loop records
   ``constraint_degraded`` with the constraint and the measured value in words, the
   controller's own status kept beside it (``StepRecord.controller_status``);
-* **the action**: every EE's commanded twist is scaled by ``s``, the smaller of
+* **the action**: the operator's motion is scaled by ``s``, which follows the smaller of
   ``ramp(e; error_warn, error_hold)`` and ``ramp(F; force_warn, force_hold)`` with
-  ``ramp(x; a, b) = clip((b - x) / (b - a), 0, 1)``: 1 below the warning level, falling
-  linearly to 0 at the hold level, where the twist is zero and the target held where the
-  EE is (the controller still corrects its rows). ``s`` falls at once and rises back by
-  at most ``dt / release_time`` a period.
+  ``ramp(x; a, b) = clip((b - x) / (b - a), 0, 1)`` (1 below the warning level, falling
+  linearly to 0 at the hold level) at a bounded rate: down by at most ``dt / fall_time``,
+  up by at most ``dt / release_time`` a period. The loop follows the **supervised
+  target** (:meth:`Supervisor.follow`), which moves by ``s`` times the operator target's
+  motion of each period, as the input mapping moves a target (docs/design.md 19.1)::
+
+      p_s <- p_s + s (p_k - p_k-1)
+      R_s <- exp3(s log3(R_k R_k-1^T)) R_s
+
+  so at ``s = 0`` the target is held where it was and the pose servo brings the EE to it
+  at its own pace; the offset from the operator's target that builds while ``s < 1`` is
+  kept afterwards, as a clutch's.
 """
 
 from __future__ import annotations
@@ -40,12 +48,13 @@ class SupervisorConfig:
     Attributes
     ----------
     tolerance : a measured constraint error above it makes the step not ``ok``.
-    error_warn, error_hold : the operator's twist is scaled down from 1 at ``error_warn``
-        to 0 at ``error_hold``, where the target is held.
+    error_warn, error_hold : the operator's motion is scaled down from 1 at
+        ``error_warn`` to 0 at ``error_hold``, where the target is held.
     force_tolerance, force_warn, force_hold : the same for the largest port force, where
         the plant measures it (the MuJoCo plant's wall).
-    release_time : the scale rises back from 0 to 1 in no less than this (s); it falls at
-        once.
+    fall_time : the scale falls from 1 to 0 in no less than this (s): the target
+        decelerates from the operator's speed over it, never at once.
+    release_time : the scale rises back from 0 to 1 in no less than this (s).
     acting : False: the supervisor measures and flags, never scales nor holds.
     """
 
@@ -55,7 +64,8 @@ class SupervisorConfig:
     force_tolerance: float = 0.5
     force_warn: float = 0.5
     force_hold: float = 2.0
-    release_time: float = 0.1
+    fall_time: float = 0.2
+    release_time: float = 0.3
     acting: bool = True
 
     def __post_init__(self) -> None:
@@ -64,8 +74,8 @@ class SupervisorConfig:
         for name in ("tolerance", "error_warn", "error_hold", "force_tolerance", "force_warn",
                      "force_hold"):
             object.__setattr__(self, name, as_number(getattr(self, name), name, positive=True))
-        object.__setattr__(self, "release_time",
-                           as_number(self.release_time, "release_time", 0.0))
+        for name in ("fall_time", "release_time"):
+            object.__setattr__(self, name, as_number(getattr(self, name), name, 0.0))
         for warn, hold in (("error_warn", "error_hold"), ("force_warn", "force_hold")):
             if not getattr(self, warn) < getattr(self, hold):
                 raise ValueError(f"{warn} must be below {hold}, got {getattr(self, warn):g} "
@@ -78,7 +88,8 @@ class SupervisorConfig:
         return {"tolerance_m": self.tolerance, "error_warn_m": self.error_warn,
                 "error_hold_m": self.error_hold, "force_tolerance_n": self.force_tolerance,
                 "force_warn_n": self.force_warn, "force_hold_n": self.force_hold,
-                "release_time_s": self.release_time, "acting": bool(self.acting)}
+                "fall_time_s": self.fall_time, "release_time_s": self.release_time,
+                "acting": bool(self.acting)}
 
     def describe(self) -> str:
         """One line for the command line's summary."""
@@ -105,11 +116,13 @@ class Supervision:
     error : the largest constraint error measured at the sensed configuration (m).
     port_force : the largest port force the plant measured the period before (N); NaN
         when not measured.
-    scale : what every EE's commanded twist was multiplied by.
+    scale : what the operator's motion of the period was multiplied by.
     action : one of :data:`ACTIONS`.
     breach : why the step is not ``ok`` in words (the measure beyond its tolerance), ``""``
         within tolerance.
     words : what the supervisor did and why, ``""`` when it did nothing.
+    target_offset : the largest distance between an EE's supervised target and the
+        operator's (m): what the scaled motion left behind, kept as a clutch's.
     """
 
     error: float
@@ -118,6 +131,7 @@ class Supervision:
     action: str
     breach: str
     words: str
+    target_offset: float = 0.0
 
     def status_of(self, status: str, message: str) -> tuple[str, str]:
         """The loop's status and message for a step whose controller said ``status`` and
@@ -136,25 +150,49 @@ class Supervision:
 
 
 class Supervisor:
-    """Measures the sensed robot every period and scales the operator's twist
-    (:class:`SupervisorConfig`; docs/design.md 5.2)."""
+    """Measures the sensed robot every period and scales the operator's motion into the
+    target the loop follows (:class:`SupervisorConfig`; docs/design.md 5.2)."""
 
     def __init__(self, model: pin.Model, config: SupervisorConfig, dt: float) -> None:
         self.model = model
         self.data = model.createData()
         self.config = config
+        self.fall = math.inf if config.fall_time == 0.0 else dt / config.fall_time
         self.rise = math.inf if config.release_time == 0.0 else dt / config.release_time
         self.scale = 1.0  # the last period's
+        #: the operator's targets of the period before (copies), None before the first
+        self.operator_targets: list[pin.SE3] | None = None
+        #: per EE, the supervised target's offset from the operator's: a world translation
+        #: ``d`` and a rotation ``R_d`` (``p_s = p + d``, ``R_s = R_d R``); None: none built
+        self.offsets: list[tuple[np.ndarray, np.ndarray]] | None = None
+        self.target_offset = 0.0  # the largest |d| (m)
+        #: the targets the loop follows; None while they are the operator's own (no offset)
+        self.supervised_targets: list[pin.SE3] | None = None
 
     def reset(self) -> None:
         self.scale = 1.0
+        self.operator_targets = None
+        self.offsets = None
+        self.target_offset = 0.0
+        self.supervised_targets = None
 
-    def supervise(self, sensed: np.ndarray, constraints: Sequence[Constraint],
-                  frames: Sequence[int], names: Sequence[str],
-                  port_forces: np.ndarray | None) -> Supervision:
+    def hold(self, ee: int, pose: pin.SE3) -> None:
+        """The operator's previous target of EE ``ee`` at ``pose`` and its offset gone (a
+        watchdog's stop: the operator's target and the loop's are set there)."""
+        if self.operator_targets is not None:
+            self.operator_targets[ee] = pose.copy()
+        if self.offsets is not None:
+            self.offsets[ee] = (np.zeros(3), np.eye(3))
+            self.target_offset = max(float(np.linalg.norm(d)) for d, _ in self.offsets)
+
+    def supervise(self, sensed: np.ndarray, operator_targets: Sequence[pin.SE3],
+                  constraints: Sequence[Constraint], frames: Sequence[int],
+                  names: Sequence[str], port_forces: np.ndarray | None) -> Supervision:
         """Measure at ``sensed`` (each constraint at its frame in ``frames``, named by
         ``names``) and the ``port_forces`` (ports, 3) of the period before (None: not
-        measured); the period's :class:`Supervision`."""
+        measured), move the supervised targets by the period's share of the operator's
+        motion to ``operator_targets`` (:meth:`follow`, read them in
+        :attr:`followed_targets`); the period's :class:`Supervision`."""
         config = self.config
         errors = self._errors(sensed, constraints, frames)
         error = max(errors, default=0.0)
@@ -163,8 +201,10 @@ class Supervisor:
         force = max(forces, default=math.nan)
         wanted = min(ramp(error, config.error_warn, config.error_hold),
                      ramp(force, config.force_warn, config.force_hold)) if config.acting else 1.0
-        self.scale = scale = min(wanted, self.scale + self.rise)
-        if error <= config.tolerance and not force > config.force_tolerance and scale == 1.0:
+        self.scale = scale = min(max(wanted, self.scale - self.fall), self.scale + self.rise)
+        offset = self.follow(operator_targets, scale)
+        if (error <= config.tolerance and not force > config.force_tolerance and scale == 1.0
+                and self.offsets is None):
             return Supervision(error, force, 1.0, "none", "", "")  # the common case, no words
         worst = errors.index(error) if errors else -1
         port = forces.index(force) if forces else -1
@@ -178,9 +218,46 @@ class Supervisor:
             breaches.append(f"{force_words} (tolerance {config.force_tolerance:g} N)")
         breach = "; ".join(breaches)
         action = "none" if scale == 1.0 else "held" if scale == 0.0 else "scaled"
-        words = "" if action == "none" else self._action_words(action, scale, wanted, error,
-                                                               error_words, force, force_words)
-        return Supervision(error, force, scale, action, breach, words)
+        words = self._action_words(action, scale, wanted, error, error_words, force,
+                                   force_words, offset)
+        return Supervision(error, force, scale, action, breach, words, offset)
+
+    @property
+    def followed_targets(self) -> list[pin.SE3]:
+        """The targets the loop follows this period: the supervised ones, or the
+        operator's own while no offset was ever built."""
+        return self.supervised_targets or self.operator_targets
+
+    def follow(self, operator_targets: Sequence[pin.SE3], scale: float) -> float:
+        """Move each supervised target by ``scale`` times the operator target's motion
+        since the period before (world frame, docs/design.md 5.2):
+        ``p_s += s dp``, ``R_s <- exp3(s log3(R_k R_k-1^T)) R_s``, kept as the offset from
+        the operator's target (:meth:`_scale_motion`, which only ``s < 1`` changes); the
+        largest offset (m). Without an offset they are the operator's own (copies)."""
+        previous = self.operator_targets
+        self.operator_targets = [pose.copy() for pose in operator_targets]
+        if scale != 1.0 and previous is not None:
+            self._scale_motion(previous, operator_targets, scale)
+        offsets = self.offsets
+        self.supervised_targets = None if offsets is None else [
+            pin.SE3(rotation @ pose.rotation, pose.translation + translation)
+            for (translation, rotation), pose in zip(offsets, operator_targets)]
+        return self.target_offset
+
+    def _scale_motion(self, previous: Sequence[pin.SE3], operator_targets: Sequence[pin.SE3],
+                      scale: float) -> None:
+        """Each offset grown by the share of the operator's motion from ``previous`` the
+        ``scale`` leaves out: ``d += (s - 1) dp``, ``R_d <- exp3(s log3(turn)) R_d turn^T``
+        with ``turn = R_k R_k-1^T``, so that the supervised target moves by ``s dp`` and
+        turns by ``exp3(s log3(turn))``."""
+        offsets = self.offsets or [(np.zeros(3), np.eye(3)) for _ in operator_targets]
+        grown = []
+        for (translation, rotation), before, now in zip(offsets, previous, operator_targets):
+            turn = now.rotation @ before.rotation.T
+            grown.append((translation + (scale - 1.0) * (now.translation - before.translation),
+                          pin.exp3(scale * pin.log3(turn)) @ rotation @ turn.T))
+        self.offsets = grown
+        self.target_offset = max(float(np.linalg.norm(d)) for d, _ in grown)
 
     def _errors(self, sensed: np.ndarray, constraints: Sequence[Constraint],
                 frames: Sequence[int]) -> list[float]:
@@ -203,19 +280,27 @@ class Supervisor:
         return walls[port] if 0 <= port < len(walls) else f"port {port + 1}"
 
     def _action_words(self, action: str, scale: float, wanted: float, error: float,
-                      error_words: str, force: float, force_words: str) -> str:
-        """``"supervisor scaled the operator's twist to 40 % (hole 1 (link_6) 1.100 mm
-        off; warn 0.5 mm, hold 2 mm)"``: the action and the measure that set it (the
-        ``error`` or the ``force``, whichever asks the smaller scale)."""
+                      error_words: str, force: float, force_words: str, offset: float) -> str:
+        """``"supervisor scaled the operator's motion to 79 % (hole 1 (link_6) 0.812 mm
+        off; warn 0.5 mm, hold 2 mm); target 0.310 mm from the operator's"``: the action,
+        the measure that set it (the ``error`` or the ``force``, whichever asks the
+        smaller scale) and the ``offset`` the scaled motion left (m), which stays when the
+        scale is back at 1 (a clutch's)."""
+        offset_words = f"target {1e3 * offset:.3f} mm from the operator's"
+        if action == "none":
+            return f"supervisor: {offset_words} (kept, as a clutch)"
         if wanted == 1.0:
-            return f"supervisor releasing the operator's twist: {100 * scale:.0f} %"
+            return (f"supervisor releasing: the operator's motion scaled to {100 * scale:.3g} %; "
+                    f"{offset_words}")
         config = self.config
         by_force = ramp(force, config.force_warn, config.force_hold) < ramp(
             error, config.error_warn, config.error_hold)
         cause = (f"{force_words}; warn {config.force_warn:g} N, hold {config.force_hold:g} N"
                  if by_force else f"{error_words}; warn {1e3 * config.error_warn:g} mm, "
                  f"hold {1e3 * config.error_hold:g} mm")
-        releasing = ", releasing" if scale < wanted else ""
         if action == "held":
-            return f"supervisor held the target: twist zero ({cause})"
-        return f"supervisor scaled the operator's twist to {100 * scale:.0f} % ({cause}{releasing})"
+            return f"supervisor: target held, the operator's motion not followed ({cause}); " \
+                   f"{offset_words}"
+        direction = "falling" if scale > wanted else "rising" if scale < wanted else ""
+        return (f"supervisor scaled the operator's motion to {100 * scale:.3g} % ({cause}"
+                f"{', ' + direction if direction else ''}); {offset_words}")

@@ -83,8 +83,8 @@ def behind_words(achieved_rate: float, rate: float) -> str:
 def supervision_words(supervision: Supervision | None) -> str:
     """What the supervisor measured beyond tolerance at the sensed configuration and what
     it did, ``"measured: <constraint> 0.812 mm off (tolerance 0.1 mm); supervisor
-    scaled the operator's twist to 79 % (...)"``; ``""`` when all is within tolerance and
-    it did nothing (docs/design.md 5.2)."""
+    scaled the operator's motion to 79 % (...); target 0.310 mm from the operator's"``;
+    ``""`` when all is within tolerance and it did nothing (docs/design.md 5.2)."""
     if supervision is None:
         return ""
     parts = ([f"measured: {supervision.breach}"] if supervision.breach else []) + (
