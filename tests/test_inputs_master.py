@@ -4,10 +4,12 @@ master stops the robot through the watchdog.
 
 One session is recorded (module fixture) and checked twice. The default test checks what
 holds however loaded the machine is: each applied command moves the target by the
-master's motion, the hole holds, nothing is lost, the watchdog stops the robot and not
-before its timeout. The ``timing`` test checks the real-time figures, which need the
-1 kHz loop to keep its rate (an idle machine; CONTRIBUTING.md): the tracking error, the
-stop within 150 ms, the feedback keeping up and no release while the master streams.
+master's motion, the hole stays within the supervisor's tolerance, nothing is lost, the
+watchdog stops the robot and not before its timeout. The ``timing`` test checks the
+real-time figures, which need the 1 kHz loop to keep its rate (an idle machine;
+CONTRIBUTING.md): the tracking error, the hole to 1 um (late ticks make the target jump
+and the arm move faster: 2.4 um measured at a load of 12 on 2 cores), the stop within
+150 ms, the feedback keeping up and no release while the master streams.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import pytest
 
 from teleop import load_robot
 from teleop.inputs import DEFAULT_VIEW, FeedbackState, UdpMaster
+from teleop.loop import SupervisorConfig
 from web.app import ControlThread, TeleopApp
 
 RATE, SECONDS, RADIUS, PERIOD = 1000.0, 10.0, 0.01, 5.0
@@ -143,7 +146,8 @@ def test_a_master_process_is_followed_with_the_hole_held_and_its_death_stops_the
         assert target == pytest.approx(expected, abs=1e-9), (sequence, first_sequence)
         checked += sequence != first_sequence
     assert checked >= len(session.snapshots) // 2, (checked, len(session.snapshots))
-    assert max(session.holes) <= 1e-6, f"hole error {max(session.holes):.3g} m"
+    # every step ok by the supervisor's measure
+    assert max(session.holes) <= SupervisorConfig().tolerance, f"hole error {max(session.holes):.3g} m"
     assert session.sent == int(RATE * SECONDS) + 1
 
     # the watchdog stopped the robot, not before its timeout after the last command
@@ -165,6 +169,7 @@ def test_a_master_process_at_1khz_is_tracked_within_1mm_and_stopped_within_150ms
         session: Session):
     rms = math.sqrt(float(np.mean(np.square(session.errors))))
     assert rms <= 1e-3, f"EE tracking RMS {1e3 * rms:.3f} mm"
+    assert max(session.holes) <= 1e-6, f"hole error {max(session.holes):.3g} m"
     assert session.releases_streaming == 0, "the watchdog released a streaming master"
     assert session.feedback >= 0.99 * session.sent, (session.feedback, session.sent)
     assert session.stopped <= 0.150, f"stopped {1e3 * session.stopped:.0f} ms after the last command"
