@@ -30,7 +30,11 @@ FILE_MARKERS = {
     "physics": ("test_mujoco_*.py", "test_plant_*.py", "test_web_plant.py",
                 "test_browser_plant.py", "test_supervisor.py"),
     "fuzz": ("*fuzz*.py",),
-    "slow": ("test_examples.py", "test_inputs_master.py"),
+    "slow": ("test_examples.py", "test_inputs_master.py", "test_whole_body_experiments.py",
+             "test_loop.py", "test_sweep.py", "test_python_backend.py", "test_cli.py",
+             "test_collision_experiments.py", "test_session_cli.py", "test_web_cli.py",
+             "test_experiments.py", "test_sweep_summary.py", "test_results_doc.py",
+             "test_bench.py", "test_web_trust.py"),
 }
 
 
