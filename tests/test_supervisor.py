@@ -98,7 +98,7 @@ def test_the_supervised_target_moves_by_the_scaled_motion_and_keeps_the_offset()
     """The operator moves 1, -2, 0.5 mm and turns 10 mrad about z each period: at
     ``s = 0.25`` the supervised target moves a quarter of that, at 0 it stays where it was,
     back at 1 it moves with the operator again 1.75 periods' motion behind (a clutch); a
-    watchdog's hold there removes the offset."""
+    target that is not finite leaves the offset as it was; a watchdog's hold removes it."""
     supervisor = Supervisor(pin.Model(), DEFAULT, 1e-3)
     step = pin.SE3(pin.exp3(np.array([0.0, 0.0, 0.01])), np.array([1e-3, -2e-3, 0.5e-3]))
     operator = [pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.1])), np.array([0.4, 0.1, 0.6]))]
@@ -106,7 +106,7 @@ def test_the_supervised_target_moves_by_the_scaled_motion_and_keeps_the_offset()
         operator.append(pin.SE3(step.rotation @ operator[-1].rotation,
                                 operator[-1].translation + step.translation))
     per_period = np.concatenate([step.translation, [0.0, 0.0, 0.01]])
-    assert supervisor.follow([operator[0]], 1.0) == 0.0
+    assert supervisor.follow([operator[0]], 1.0) == (0.0, 0.0)
     assert supervisor.supervised_targets is None
     assert supervisor.followed_targets[0].isApprox(operator[0], 0.0)
     offsets = [supervisor.follow([operator[1]], 0.25)]
@@ -120,10 +120,13 @@ def test_the_supervised_target_moves_by_the_scaled_motion_and_keeps_the_offset()
                                atol=1e-15)
     np.testing.assert_allclose(supervisor.offsets[0][0], -1.75 * step.translation, atol=1e-15)
     length = np.linalg.norm(step.translation)
-    np.testing.assert_allclose(offsets, [0.75 * length, 1.75 * length, 1.75 * length],
-                               rtol=1e-12)
+    np.testing.assert_allclose(offsets, [(0.75 * length, 0.0075), (1.75 * length, 0.0175),
+                                         (1.75 * length, 0.0175)], rtol=1e-12)
+    lost = pin.SE3(operator[3].rotation, np.full(3, np.nan))  # a bad target: offset kept
+    assert supervisor.follow([lost], 0.5) == offsets[-1]
+    assert supervisor.follow([operator[3]], 0.5) == offsets[-1]
     supervisor.hold(0, operator[3])
-    assert supervisor.follow([operator[3]], 1.0) == 0.0
+    assert supervisor.follow([operator[3]], 1.0) == (0.0, 0.0)
 
 
 def test_the_scale_changes_at_the_configured_rate():
@@ -194,8 +197,9 @@ def test_an_operator_three_times_faster_is_scaled_on_the_plant():
                                      "(tolerance 0.1 mm); ")
     assert (f"supervisor scaled the operator's motion to {100 * scaled.supervisor_scale:.3g} % "
             in scaled.message)
-    assert scaled.message.endswith(f"; target {1e3 * scaled.supervisor_target_offset:.3f} mm "
-                                   "from the operator's")
+    assert scaled.message.endswith(
+        f"; target {1e3 * scaled.supervisor_target_offset:.3f} mm, "
+        f"{np.degrees(scaled.supervisor_target_offset_angle):.2f} deg from the operator's")
 
 
 def test_the_metrics_say_what_the_supervisor_did():
@@ -212,6 +216,8 @@ def test_the_metrics_say_what_the_supervisor_did():
     assert metrics["supervisor"]["scale_min"] == float(np.min(scale))
     assert metrics["supervisor"]["target_offset_max_m"] == float(
         np.max(result.columns["supervisor_target_offset"])) > 7e-3
+    assert metrics["supervisor"]["target_offset_angle_max_rad"] == float(
+        np.max(result.columns["supervisor_target_offset_angle"]))
     assert "supervisor scaled the operator's motion to" in metrics["supervisor"]["first_action"]
     assert sum(metrics["status_counts"].values()) == sum(
         metrics["controller_status_counts"].values())
@@ -256,8 +262,9 @@ def test_a_held_target_says_so():
                                    f"{1e3 * held.measured_constraint_error:.3f} mm off "
                                    "(tolerance 0.1 mm); supervisor: target held, the "
                                    "operator's motion not followed (hole 1 (")
-    assert f"target {1e3 * held.supervisor_target_offset:.3f} mm from the operator's" in (
-        held.message)
+    assert held.message.endswith(
+        f"target {1e3 * held.supervisor_target_offset:.3f} mm, "
+        f"{np.degrees(held.supervisor_target_offset_angle):.2f} deg from the operator's")
     assert held.controller_status in ("ok", "scaled", "least_squares", "constraint_degraded")
 
 
@@ -267,7 +274,7 @@ def test_the_command_line_sets_the_thresholds_into_metrics_json(tmp_path):
                           "fast-lateral", "--controllers", "qp:daqp", "--duration", "0.05",
                           "--plant", "mujoco", "--no-plots", "--quiet", "--out", str(out),
                           "--measured-tolerance", "0.2,0.8", "--supervisor-error", "1,3",
-                          "--supervisor-force", "1,4", "--supervisor-ramp", "0.1,0.5",
+                          "--supervisor-force", "1,4", "--supervisor-ramp", "0,0.5",
                           "--no-supervisor"],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr
@@ -276,7 +283,7 @@ def test_the_command_line_sets_the_thresholds_into_metrics_json(tmp_path):
     assert document["supervisor"] == {
         "tolerance_m": 2e-4, "error_warn_m": 1e-3, "error_hold_m": 3e-3,
         "force_tolerance_n": 0.8, "force_warn_n": 1.0, "force_hold_n": 4.0,
-        "fall_time_s": 0.1, "release_time_s": 0.5, "acting": False}
+        "fall_time_s": 0.0, "release_time_s": 0.5, "acting": False}
     assert "supervisor measuring only" in run.stdout
     bad = subprocess.run([sys.executable, "-m", "teleop.cli", "compare", "--scenario",
                           "fast-lateral", "--supervisor-error", "3,2", "--out", str(out)],
@@ -291,12 +298,12 @@ def test_the_ui_status_line_says_what_the_supervisor_measured_and_did():
     assert supervision_words(None) == "" and supervision_words(calm) == ""
     held = Supervision(2.3e-3, 2.4, 0.0, "held", "hole 1 (link_6) 2.300 mm off (tolerance 0.1 mm)",
                        "supervisor: target held, the operator's motion not followed (hole 1 "
-                       "(link_6) 2.300 mm off; warn 0.5 mm, hold 2 mm); target 3.100 mm from "
-                       "the operator's", 3.1e-3)
+                       "(link_6) 2.300 mm off; warn 0.5 mm, hold 2 mm); target 3.100 mm, "
+                       "1.20 deg from the operator's", 3.1e-3, np.radians(1.2))
     assert supervision_words(held) == (
         "measured: hole 1 (link_6) 2.300 mm off (tolerance 0.1 mm); supervisor: target "
         "held, the operator's motion not followed (hole 1 (link_6) 2.300 mm off; warn 0.5 "
-        "mm, hold 2 mm); target 3.100 mm from the operator's")
+        "mm, hold 2 mm); target 3.100 mm, 1.20 deg from the operator's")
     assert held.status_of("least_squares", "joint 3 at its limit") == (
         "constraint_degraded", f"measured: {held.breach}; {held.words}; controller: "
         "least_squares, joint 3 at its limit")

@@ -4,21 +4,32 @@ status's tolerances, the warning and hold levels, or a supervisor that only meas
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 
 from teleop.loop.supervisor import SupervisorConfig
 
-from .arguments import positive
+from .arguments import bounded, positive
 
 #: the defaults, shown in the options' help
 DEFAULT = SupervisorConfig()
 
 
-def _pair(text: str) -> tuple[float, float]:
-    """``"A,B"`` -> two finite numbers > 0 (argparse type)."""
+#: a time of the scale's ramp: a finite number of seconds >= 0 (0: at once)
+seconds = bounded(float, 0.0, unit="s")
+
+
+def _pair(text: str, number: Callable[[str], float] = positive) -> tuple[float, float]:
+    """``"A,B"`` -> two finite numbers, each parsed by ``number`` (> 0 by default;
+    argparse type)."""
     parts = text.split(",")
     if len(parts) != 2:
         raise argparse.ArgumentTypeError(f"expected two numbers A,B, got {text!r}")
-    return positive(parts[0].strip()), positive(parts[1].strip())
+    return number(parts[0].strip()), number(parts[1].strip())
+
+
+def _times(text: str) -> tuple[float, float]:
+    """``"A,B"`` -> two finite numbers of seconds >= 0 (argparse type)."""
+    return _pair(text, seconds)
 
 
 def add_supervisor_options(parser: argparse.ArgumentParser) -> None:
@@ -42,9 +53,9 @@ def add_supervisor_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--supervisor-force", type=_pair, metavar="WARN_N,HOLD_N",
                        help="the same for the measured port force (default: "
                        f"{DEFAULT.force_warn:g},{DEFAULT.force_hold:g})")
-    group.add_argument("--supervisor-ramp", type=_pair, metavar="FALL_S,RELEASE_S",
+    group.add_argument("--supervisor-ramp", type=_times, metavar="FALL_S,RELEASE_S",
                        help="the scale on the operator's motion falls from 1 to 0 and rises "
-                       "back in no less than these (default: "
+                       "back in no less than these, 0: at once (default: "
                        f"{DEFAULT.fall_time:g},{DEFAULT.release_time:g})")
     group.add_argument("--no-supervisor", action="store_true",
                        help="measure and flag, never scale the operator's motion nor hold "

@@ -165,10 +165,11 @@ class RunResult:
         (docs/design.md 5.2): the largest measured constraint error and port force (null
         when the plant measured none), the steps it scaled and held the operator's motion,
         the smallest scale, the largest offset of the supervised target from the
-        operator's, its first action in words."""
+        operator's (distance and angle), its first action in words."""
         c = self.columns
         scale = c.get("supervisor_scale", np.ones(0))
         offset = c.get("supervisor_target_offset", np.zeros(0))
+        angle = c.get("supervisor_target_offset_angle", np.zeros(0))
         measured = c.get("measured_constraint_error", np.zeros(0))
         force = c.get("measured_port_force", np.zeros(0))
         force = force[np.isfinite(force)]
@@ -179,6 +180,7 @@ class RunResult:
             "held_steps": int(np.sum(scale == 0.0)),
             "scale_min": float(np.min(scale, initial=1.0)),
             "target_offset_max_m": float(np.max(offset, initial=0.0)),
+            "target_offset_angle_max_rad": float(np.max(angle, initial=0.0)),
             "first_action": self.supervisor_first_action,
         }
 

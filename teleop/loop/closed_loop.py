@@ -534,6 +534,7 @@ class TeleopLoop:
             measured_port_force=step.supervision.port_force,
             supervisor_scale=step.supervision.scale, supervisor_action=step.supervision.action,
             supervisor_target_offset=step.supervision.target_offset,
+            supervisor_target_offset_angle=step.supervision.target_offset_angle,
             plant=None if self.plant is None else self.plant.measures(),
             minimum_distance=math.inf if distance is None else distance.minimum_distance,
             closest_pair="" if distance is None else distance.closest_pair,

@@ -19,7 +19,7 @@ RECORD_FIELDS = (
     "ee_position_error", "ee_orientation_error", "joint_limit_violation", "failed",
     "step_time_us", "tick_time_us", "constraint_velocity_floor", "twist_saturated",
     "minimum_distance", "measured_constraint_error", "measured_port_force", "supervisor_scale",
-    "supervisor_target_offset",
+    "supervisor_target_offset", "supervisor_target_offset_angle",
 )
 
 
@@ -72,6 +72,7 @@ class StepRecord:
     supervisor_action: str = "none"  # teleop.loop.supervisor.ACTIONS
     #: the largest distance between an EE's supervised target and the operator's (m)
     supervisor_target_offset: float = 0.0
+    supervisor_target_offset_angle: float = 0.0  # the largest angle between them (rad)
     plant: object | None = field(default=None, repr=False)  # the plant's own measures
     #: the collision pairs' smallest distance at the true configuration (m; inf without
     #: collision avoidance or no pair measured; exact below d_i, teleop.loop.distance_meter)

@@ -123,6 +123,7 @@ class Supervision:
     words : what the supervisor did and why, ``""`` when it did nothing.
     target_offset : the largest distance between an EE's supervised target and the
         operator's (m): what the scaled motion left behind, kept as a clutch's.
+    target_offset_angle : the largest angle between their orientations (rad).
     """
 
     error: float
@@ -132,6 +133,7 @@ class Supervision:
     breach: str
     words: str
     target_offset: float = 0.0
+    target_offset_angle: float = 0.0
 
     def status_of(self, status: str, message: str) -> tuple[str, str]:
         """The loop's status and message for a step whose controller said ``status`` and
@@ -166,6 +168,7 @@ class Supervisor:
         #: ``d`` and a rotation ``R_d`` (``p_s = p + d``, ``R_s = R_d R``); None: none built
         self.offsets: list[tuple[np.ndarray, np.ndarray]] | None = None
         self.target_offset = 0.0  # the largest |d| (m)
+        self.target_offset_angle = 0.0  # the largest |log3(R_d)| (rad)
         #: the targets the loop follows; None while they are the operator's own (no offset)
         self.supervised_targets: list[pin.SE3] | None = None
 
@@ -173,7 +176,7 @@ class Supervisor:
         self.scale = 1.0
         self.operator_targets = None
         self.offsets = None
-        self.target_offset = 0.0
+        self.target_offset = self.target_offset_angle = 0.0
         self.supervised_targets = None
 
     def hold(self, ee: int, pose: pin.SE3) -> None:
@@ -183,7 +186,7 @@ class Supervisor:
             self.operator_targets[ee] = pose.copy()
         if self.offsets is not None:
             self.offsets[ee] = (np.zeros(3), np.eye(3))
-            self.target_offset = max(float(np.linalg.norm(d)) for d, _ in self.offsets)
+            self._measure_offsets()
 
     def supervise(self, sensed: np.ndarray, operator_targets: Sequence[pin.SE3],
                   constraints: Sequence[Constraint], frames: Sequence[int],
@@ -202,7 +205,7 @@ class Supervisor:
         wanted = min(ramp(error, config.error_warn, config.error_hold),
                      ramp(force, config.force_warn, config.force_hold)) if config.acting else 1.0
         self.scale = scale = min(max(wanted, self.scale - self.fall), self.scale + self.rise)
-        offset = self.follow(operator_targets, scale)
+        offset, angle = self.follow(operator_targets, scale)
         if (error <= config.tolerance and not force > config.force_tolerance and scale == 1.0
                 and self.offsets is None):
             return Supervision(error, force, 1.0, "none", "", "")  # the common case, no words
@@ -218,9 +221,11 @@ class Supervisor:
             breaches.append(f"{force_words} (tolerance {config.force_tolerance:g} N)")
         breach = "; ".join(breaches)
         action = "none" if scale == 1.0 else "held" if scale == 0.0 else "scaled"
+        offset_words = (f"target {1e3 * offset:.3f} mm, {math.degrees(angle):.2f} deg from "
+                        "the operator's")
         words = self._action_words(action, scale, wanted, error, error_words, force,
-                                   force_words, offset)
-        return Supervision(error, force, scale, action, breach, words, offset)
+                                   force_words, offset_words)
+        return Supervision(error, force, scale, action, breach, words, offset, angle)
 
     @property
     def followed_targets(self) -> list[pin.SE3]:
@@ -228,12 +233,14 @@ class Supervisor:
         operator's own while no offset was ever built."""
         return self.supervised_targets or self.operator_targets
 
-    def follow(self, operator_targets: Sequence[pin.SE3], scale: float) -> float:
+    def follow(self, operator_targets: Sequence[pin.SE3],
+               scale: float) -> tuple[float, float]:
         """Move each supervised target by ``scale`` times the operator target's motion
         since the period before (world frame, docs/design.md 5.2):
         ``p_s += s dp``, ``R_s <- exp3(s log3(R_k R_k-1^T)) R_s``, kept as the offset from
         the operator's target (:meth:`_scale_motion`, which only ``s < 1`` changes); the
-        largest offset (m). Without an offset they are the operator's own (copies)."""
+        largest offset's distance (m) and angle (rad). Without an offset they are the
+        operator's own (copies)."""
         previous = self.operator_targets
         self.operator_targets = [pose.copy() for pose in operator_targets]
         if scale != 1.0 and previous is not None:
@@ -242,22 +249,34 @@ class Supervisor:
         self.supervised_targets = None if offsets is None else [
             pin.SE3(rotation @ pose.rotation, pose.translation + translation)
             for (translation, rotation), pose in zip(offsets, operator_targets)]
-        return self.target_offset
+        return self.target_offset, self.target_offset_angle
 
     def _scale_motion(self, previous: Sequence[pin.SE3], operator_targets: Sequence[pin.SE3],
                       scale: float) -> None:
         """Each offset grown by the share of the operator's motion from ``previous`` the
         ``scale`` leaves out: ``d += (s - 1) dp``, ``R_d <- exp3(s log3(turn)) R_d turn^T``
         with ``turn = R_k R_k-1^T``, so that the supervised target moves by ``s dp`` and
-        turns by ``exp3(s log3(turn))``."""
+        turns by ``exp3(s log3(turn))``. A motion that is not finite (a bad target, which
+        the controller refuses, docs/design.md 15.6) leaves the offset as it was."""
         offsets = self.offsets or [(np.zeros(3), np.eye(3)) for _ in operator_targets]
         grown = []
         for (translation, rotation), before, now in zip(offsets, previous, operator_targets):
+            motion = now.translation - before.translation
             turn = now.rotation @ before.rotation.T
-            grown.append((translation + (scale - 1.0) * (now.translation - before.translation),
+            if not math.isfinite(float(motion.sum() + turn.sum())):
+                grown.append((translation, rotation))
+                continue
+            grown.append((translation + (scale - 1.0) * motion,
                           pin.exp3(scale * pin.log3(turn)) @ rotation @ turn.T))
         self.offsets = grown
-        self.target_offset = max(float(np.linalg.norm(d)) for d, _ in grown)
+        self._measure_offsets()
+
+    def _measure_offsets(self) -> None:
+        """:attr:`target_offset` and :attr:`target_offset_angle` of :attr:`offsets`."""
+        offsets = self.offsets or []
+        self.target_offset = max((float(np.linalg.norm(d)) for d, _ in offsets), default=0.0)
+        self.target_offset_angle = max((float(np.linalg.norm(pin.log3(rotation)))
+                                        for _, rotation in offsets), default=0.0)
 
     def _errors(self, sensed: np.ndarray, constraints: Sequence[Constraint],
                 frames: Sequence[int]) -> list[float]:
@@ -280,13 +299,13 @@ class Supervisor:
         return walls[port] if 0 <= port < len(walls) else f"port {port + 1}"
 
     def _action_words(self, action: str, scale: float, wanted: float, error: float,
-                      error_words: str, force: float, force_words: str, offset: float) -> str:
+                      error_words: str, force: float, force_words: str,
+                      offset_words: str) -> str:
         """``"supervisor scaled the operator's motion to 79 % (hole 1 (link_6) 0.812 mm
-        off; warn 0.5 mm, hold 2 mm); target 0.310 mm from the operator's"``: the action,
-        the measure that set it (the ``error`` or the ``force``, whichever asks the
-        smaller scale) and the ``offset`` the scaled motion left (m), which stays when the
+        off; warn 0.5 mm, hold 2 mm); target 0.310 mm, 0.00 deg from the operator's"``:
+        the action, the measure that set it (the ``error`` or the ``force``, whichever asks
+        the smaller scale) and the offset the scaled motion left, which stays when the
         scale is back at 1 (a clutch's)."""
-        offset_words = f"target {1e3 * offset:.3f} mm from the operator's"
         if action == "none":
             return f"supervisor: {offset_words} (kept, as a clutch)"
         if wanted == 1.0:
