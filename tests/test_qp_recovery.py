@@ -57,8 +57,15 @@ def test_every_controller_is_back_on_the_hole_within_half_a_second(sda10f, spec)
     back = int(off[-1]) + 1 if off.size else 0
     print(f"{spec}: back on the hole (< {BACK_ON_THE_HOLE:g} m) after {back} ms")
     assert back < 500, (spec, errors[-1])
+    # the controller's degraded steps give the rows' residual; the loop's own (the hole
+    # measured off at the sensed configuration, docs/design.md 5.2) the error in mm
     degraded = [r for r in records if r.status == StepStatus.CONSTRAINT_DEGRADED.value]
-    assert degraded and all("m/s" in r.message for r in degraded)
+    assert degraded
+    for record in degraded:
+        if record.controller_status == StepStatus.CONSTRAINT_DEGRADED.value:
+            assert "m/s" in record.message, record.message
+        else:
+            assert record.message.startswith("measured: ") and "mm off" in record.message
 
 
 def slow_case(solver: str, time_budget=None) -> tuple[QPController, np.ndarray, np.ndarray]:

@@ -342,7 +342,10 @@ double Step::braking_speed(double distance, double step, double gain) const {
   const double x_k = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c);
   k = k + 1.0;
   const double x_next = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c);
-  return step * std::min(std::min(x_0, x_k), x_next);
+  // rounded down (ROUNDING_MARGIN), 0 below the smallest normal double, as in Python
+  const double bound = step * std::min(std::min(x_0, x_k), x_next) *
+                       (1.0 - 8.0 * std::numeric_limits<double>::epsilon());
+  return bound < std::numeric_limits<double>::min() ? 0.0 : bound;
 }
 
 double Step::damper_raise(const Eigen::Ref<const Eigen::RowVectorXd, 0, Eigen::InnerStride<>>& row,

@@ -168,7 +168,7 @@ class Step {
   double barrier_violation(Index index, const ConstVectorRef& qd) const;
   bool box_contains(const ConstVectorRef& q, const ConstVectorRef& qd);
   void compute_box(const ConstVectorRef& q);
-  //! controllers.joint_acceleration.braking_speed at ``gain`` (without its rounding margin).
+  //! controllers.joint_acceleration.braking_speed at ``gain``.
   double braking_speed(double distance, double step, double gain) const;
   //! The fallback of a failed step: zero, or with acceleration limits the command
   //! nearest zero inside the box.
