@@ -145,6 +145,11 @@ def test_the_scale_changes_at_the_configured_rate():
     assert rising == pytest.approx(0.985 + 1.0 / 300.0, abs=1e-15)
     at_once = Supervisor(pin.Model(), SupervisorConfig(fall_time=0.0), 1e-3)
     assert at_once.supervise(np.zeros(0), pose, [], [], [], hold).scale == 0.0
+    # beyond tolerance, below the warning level: flagged, nothing done, nothing said
+    strict = Supervisor(pin.Model(), SupervisorConfig(force_tolerance=0.3), 1e-3)
+    flagged = strict.supervise(np.zeros(0), pose, [], [], [], np.array([[0.0, 0.4, 0.0]]))
+    assert (flagged.scale, flagged.action, flagged.words) == (1.0, "none", "")
+    assert flagged.breach == "port force at port 1 0.400 N (tolerance 0.3 N)"
 
 
 def run_three_times_faster(acting: bool):

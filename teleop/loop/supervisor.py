@@ -223,8 +223,9 @@ class Supervisor:
         action = "none" if scale == 1.0 else "held" if scale == 0.0 else "scaled"
         offset_words = (f"target {1e3 * offset:.3f} mm, {math.degrees(angle):.2f} deg from "
                         "the operator's")
-        words = self._action_words(action, scale, wanted, error, error_words, force,
-                                   force_words, offset_words)
+        words = ("" if action == "none" and self.offsets is None  # beyond tolerance only
+                 else self._action_words(action, scale, wanted, error, error_words, force,
+                                         force_words, offset_words))
         return Supervision(error, force, scale, action, breach, words, offset, angle)
 
     @property
