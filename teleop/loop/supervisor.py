@@ -96,7 +96,8 @@ class SupervisorConfig:
         thresholds = (f"error ok <= {1e3 * self.tolerance:g} mm, scaled {1e3 * self.error_warn:g}"
                       f"-{1e3 * self.error_hold:g} mm; port force ok <= "
                       f"{self.force_tolerance:g} N, scaled {self.force_warn:g}-"
-                      f"{self.force_hold:g} N")
+                      f"{self.force_hold:g} N; the scale down in {self.fall_time:g} s, up in "
+                      f"{self.release_time:g} s")
         return f"supervisor {'on' if self.acting else 'measuring only'} ({thresholds})"
 
 
