@@ -166,9 +166,14 @@ def test_a_twist_source_integrates_its_rate_command_each_period(app):
     assert app.targets[0].translation == pytest.approx(expected, abs=1e-12)
 
 
-def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(app):
+@pytest.mark.parametrize("acceleration_limits", [False, True])
+def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(acceleration_limits):
     """A silent source: its target goes where the EE is and every loop's filtered target
-    with it, so the next command is (nearly) zero although the robot was moving."""
+    with it, so the next command is (nearly) zero although the robot was moving; with
+    acceleration limits the robot brakes at them, still within the braking time of its
+    fastest joint (docs/design.md 8.4)."""
+    app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0,
+                    acceleration_limits=acceleration_limits)
     app.add_constraint("hole", distance=0.08)
     source = InputSource("test")
     app.attach_input(source)
@@ -182,9 +187,21 @@ def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(app):
     assert app.devices[0].state == FeedbackState.HELD
     assert "silent for 200 ms" in app.devices[0].reason
     ee = app.loops["main"].ee_placements()[0]
-    app.step()
-    assert np.max(np.abs(app.loops["main"].last_qd)) < 1e-3
-    assert app.targets[0].translation == pytest.approx(ee.translation, abs=1e-4)
+    if not acceleration_limits:
+        app.step()
+        assert np.max(np.abs(app.loops["main"].last_qd)) < 1e-3
+        assert app.targets[0].translation == pytest.approx(ee.translation, abs=1e-4)
+    else:  # braked at the limits, past the held target by the braking distance, then back
+        speeds = np.abs(app.loops["main"].last_qd)
+        braking = int(np.max(np.ceil(speeds / (app.robot.acceleration_limit * 1e-3)))) + 2
+        for _ in range(braking):
+            app.step()
+        assert np.max(np.abs(app.loops["main"].last_qd)) <= 0.2 * moving
+        periods = 0
+        while np.max(np.abs(app.loops["main"].last_qd)) >= 1e-3 and periods < 500:
+            app.step()
+            periods += 1
+        assert periods < 500  # at rest within 0.5 s
     # the next stream starts where the target is: its first sample only anchors
     held = app.targets[0].translation.copy()
     source.offer(pose_sample((5.0, 5.0, 5.0), 1, arrival=time.perf_counter()))
