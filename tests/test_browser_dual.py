@@ -64,18 +64,30 @@ def look_at_tool(web, ee: int) -> None:
     set_camera(web.client, target + 0.3 * direction / np.linalg.norm(direction), target)
 
 
+def settled(app, periods: int = 200, still: float = 1e-7) -> None:
+    """Wait until no EE moves by more than ``still`` (m) over ``periods`` control periods:
+    counted in the loop's periods, not the wall clock's, so a loaded machine waits longer."""
+    def at_rest() -> bool:
+        ticks, before = app.ticks, ee_positions(app)
+        wait_until(lambda: app.ticks - ticks >= periods, WAIT, f"{periods} control periods")
+        return bool(np.max(np.abs(ee_positions(app) - before)) <= still)
+
+    wait_until(at_rest, 4 * WAIT, "the EEs at rest", interval=0.0)
+
+
 def drag_gizmo(web, ee: int, distance: float, steps: int):
     """A real mouse drag of EE ``ee``'s gizmo; the EE positions before and after, the
     target's displacement and the worst hole error the history saw meanwhile."""
     app = web.app
     look_at_tool(web, ee)
     plan = plan_drag(web, distance, steps, ee=ee)
+    settled(app)  # the EEs at rest before (with acceleration limits they take longer)
     targets0, ees0, t0 = app.targets, ee_positions(app), app.now
     drag(web, plan)
     wait_until(lambda: np.linalg.norm(app.targets[ee].translation
                                       - targets0[ee].translation) > 0.5 * distance, WAIT,
                f"EE {ee}'s target to follow the drag (did the mouse grab its gizmo?)")
-    time.sleep(1.5)  # the robot converges (or settles where the holes let it)
+    settled(app)  # the robot converges (or settles where the holes let it)
     moved = app.targets[ee].translation - targets0[ee].translation
     trace = app.snapshot()["robots"]["main"]["trace"]
     errors = trace["constraint_error"][trace["t"] >= t0]

@@ -187,9 +187,9 @@ def test_a_device_that_fails_or_falls_silent_while_deflected_stops_the_motion(th
     the source offers a zero twist; the first also says so in its problem."""
     push = struct.pack("<B3h", 1, 350, 0, 0)
     source = SpaceMouse(NAVIGATOR, device=RecordedDevice([push], then_fail))
+    started = time.monotonic()  # before the reading thread: its first report comes after
     source.start()
     try:
-        started = time.monotonic()
         while source.counts_now().get("accepted", 0) < 2:  # the push, then the stop
             assert time.monotonic() - started < 10.0, "the motion was not stopped"
             time.sleep(0.005)
