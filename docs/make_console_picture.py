@@ -31,7 +31,7 @@ RADIUS, PERIOD, RATE = 0.015, 5.0, 500.0
 MASTER = f"""
 import math, sys, time
 from teleop.inputs import MasterClient
-client = MasterClient(int(sys.argv[1]))
+client = MasterClient(int(sys.argv[1]), sys.argv[2])  # the port and the receiver's key (hex)
 start, k = time.perf_counter(), 0
 while True:
     angle = 2.0 * math.pi * k / ({RATE} * {PERIOD})
@@ -80,7 +80,8 @@ def main() -> None:
             client.camera.position = target + [-0.95, 1.0, 0.5]
             client.camera.look_at = target + [-0.3, 0.0, -0.15]
             time.sleep(2.0)  # the browser reports its view: the master moves in it
-            master_process = subprocess.Popen([sys.executable, "-c", MASTER, str(master.port)])
+            master_process = subprocess.Popen([sys.executable, "-c", MASTER, str(master.port),
+                                               master.key.hex()])
             close_notifications(page)
             page.get_by_role("tab", name="Plots", exact=True).click()
             time.sleep(9.0)  # two circles and more in the plots
