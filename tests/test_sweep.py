@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import sqlite3
 import subprocess
 import sys
+import tempfile
 import textwrap
 import time
 from pathlib import Path
@@ -387,15 +389,15 @@ def _keys(folder: Path) -> set[str]:
 
 
 @pytest.fixture(scope="module")
-def ray_instance():
-    """A local Ray instance started by the test: 2 CPUs, no dashboard (Ray is in the test
-    extra)."""
-    from teleop.experiments.sweep.ray_engine import _import_ray
+def ray_instance(tmp_path_factory):
+    """A local Ray instance started as a sweep starts one: 2 CPUs, no dashboard, on
+    loopback, its files under the test's folder (Ray is in the test extra)."""
+    from teleop.experiments.sweep.ray_engine import RayEngine
 
-    ray = _import_ray(local=True)  # on loopback only
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    engine = RayEngine(workers=2, out=tmp_path_factory.mktemp("ray"))
+    engine.connect()
     yield
-    ray.shutdown()
+    engine.shutdown()
 
 
 def test_ray_and_the_pool_give_identical_metrics_cell_by_cell(tmp_path, ray_instance):
@@ -445,3 +447,96 @@ def test_a_ray_worker_killed_mid_sweep_loses_no_cell(tmp_path, ray_instance):
     keys = [f.cell.key for f in finished]
     assert sorted(keys) == sorted(c.key for c in spec.cells())  # every cell once
     assert all(f.outcome["status"] == DONE for f in finished)
+
+
+def test_a_local_ray_instance_writes_only_under_the_sweep_folder(tmp_path):
+    """Ray's session files (sockets, logs) under ``OUT/ray``, its token in memory: nothing
+    in the home folder (Ray's ``~/.ray/auth_token``) or the temporary folder (``/tmp/ray``).
+    A fresh process: the module's instance would be reused."""
+    home, scratch = tmp_path / "home", tmp_path / "tmp"
+    home.mkdir()
+    scratch.mkdir()
+    out = Path(tempfile.mkdtemp(prefix="ts-", dir="/tmp")) / "out"  # short: a socket path
+    try:
+        script = textwrap.dedent(f"""
+            from teleop.experiments.sweep import build_spec, run_sweep
+            if __name__ == "__main__":
+                spec = build_spec({{"scenarios": ["paper-hole"], "controllers": ["cjm"],
+                                   "seeds": 1, "duration": 0.2}})
+                run = run_sweep(spec, {str(out)!r}, engine="ray", workers=1, progress=False)
+                assert (run.done, run.failed) == (1, 0), run
+        """)
+        environment = {**os.environ, "HOME": str(home), "TMPDIR": str(scratch)}
+        environment.pop("RAY_AUTH_MODE", None)
+        environment.pop("RAY_ADDRESS", None)
+        done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                              timeout=300, env=environment, cwd=REPO)
+        assert done.returncode == 0, done.stderr[-3000:]
+        assert list(home.rglob("*")) == []
+        assert list(scratch.rglob("*")) == []
+        sessions = list((out / "ray").glob("session_*"))
+        assert sessions and any((out / "ray").rglob("*.log")), list((out / "ray").rglob("*"))
+    finally:
+        shutil.rmtree(out.parent, ignore_errors=True)
+
+
+def test_a_sweep_folder_too_long_for_a_socket_gives_ray_a_temporary_folder(tmp_path):
+    from teleop.experiments.sweep.ray_engine import LONGEST_RAY_FOLDER, ray_folder
+
+    short = Path("/tmp/s")
+    assert ray_folder(short) == (short / "ray", False)
+    deep = tmp_path / ("x" * LONGEST_RAY_FOLDER)
+    folder, temporary = ray_folder(deep)
+    try:
+        assert temporary and folder.is_dir() and not folder.is_relative_to(deep)
+        assert len(os.fsencode(folder)) <= LONGEST_RAY_FOLDER
+    finally:
+        folder.rmdir()
+
+
+def _children(pid: int) -> set[int]:
+    """The processes ``pid`` started (Linux's ``/proc/PID/task/*/children``)."""
+    found: set[int] = set()
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        found |= {int(c) for c in (task / "children").read_text().split()}
+    return found
+
+
+def _cpu_s(pid: int) -> float:
+    """CPU time process ``pid`` has used (s; user and system)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"  # a zombie has ended; its parent (gone) did not reap it
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux's parent-death signal")
+def test_pool_workers_die_with_a_driver_killed_by_sigkill(tmp_path):
+    """A driver killed with SIGKILL (no ``finally`` runs) leaves no worker running its cell."""
+    command = [sys.executable, "-m", "teleop", "sweep", "--scenarios", "paper-hole",
+               "--controllers", "cjm,qp:daqp", "--seeds", "2", "--duration", "600",
+               "--workers", "2", "--reports", "0", "--out", str(tmp_path / "sweep")]
+    driver = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        workers: set[int] = set()
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and (len(workers) < 2 or min(map(_cpu_s, workers)) < 4):
+            workers = {pid for pid in _children(driver.pid)
+                       if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()}
+            time.sleep(0.1)
+        # each worker in its cell: 4 s of CPU time, past its imports (0.7 s)
+        assert len(workers) == 2 and min(map(_cpu_s, workers)) >= 4, "no two workers in cells"
+        driver.kill()
+        driver.wait(timeout=30)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(_alive(pid) for pid in workers):
+            time.sleep(0.05)
+        assert not any(_alive(pid) for pid in workers), "a worker outlived its driver"
+    finally:
+        driver.kill()

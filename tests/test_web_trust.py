@@ -76,6 +76,22 @@ def test_scenes_are_read_and_written_only_in_the_scene_folder(app, tmp_path):
     app.load_scene("mine.json")
 
 
+def test_saving_over_a_hard_link_in_the_scene_folder_leaves_the_file_outside_untouched(app,
+                                                                                      tmp_path):
+    """A hard link cannot be told from a file by its path: the save replaces the name (a new
+    file renamed over it), so the file outside keeps its content and the folder holds the
+    scene, and no scratch file is left behind."""
+    outside = tmp_path / "outside.json"
+    outside.write_text('{"mine": true}\n')
+    app.scenes.root.mkdir(parents=True, exist_ok=True)
+    os.link(outside, app.scenes.root / "linked.json")
+    saved = app.save_scene("linked.json")
+    assert outside.read_text() == '{"mine": true}\n'
+    assert os.stat(outside).st_nlink == 1 and not os.path.samefile(saved, outside)
+    assert json.loads(saved.read_text()) == json.loads(json.dumps(app.scene()))
+    assert sorted(p.name for p in app.scenes.root.iterdir()) == ["linked.json"]
+
+
 def test_a_refusal_says_nothing_about_what_is_outside(app, tmp_path):
     """A missing outside file and an outside file that is not JSON are refused alike."""
     (tmp_path / "notjson.json").write_text("{nope")

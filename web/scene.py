@@ -52,6 +52,7 @@ import numpy as np
 from constraints import Constraint
 from constraints.collision import Obstacle
 from constraints.validation import as_number, as_vector, short_repr
+from teleop.files import replace_file
 from teleop.json_text import parse_json
 from teleop.limits import MAX_DAMPING, MAX_RATE_HZ
 from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
@@ -394,12 +395,13 @@ def read_scene_file(path: str | Path) -> dict:
 
 
 def write_scene_file(path: str | Path, scene: dict) -> Path:
-    """Write ``scene`` as indented JSON (folders created); an unwritable path is a
+    """Write ``scene`` as indented JSON (folders created), replacing the name, never
+    writing through a link (:func:`teleop.files.replace_file`); an unwritable path is a
     ``ValueError`` with the reason."""
     path = Path(path).expanduser()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(scene, indent=1) + "\n", encoding="utf-8")
+        replace_file(path, json.dumps(scene, indent=1) + "\n")
     except OSError as error:
         raise ValueError(f"cannot write scene file {str(path)!r}: {error.strerror}") from None
     return path

@@ -63,9 +63,10 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def make_engine(engine: str, workers: int, retries: int, address: str | None):
+def make_engine(engine: str, workers: int, retries: int, address: str | None,
+                out: str | Path = "."):
     """The engine by name (``ValueError`` for an unknown one, Ray missing, fewer than one
-    worker, negative retries)."""
+    worker, negative retries); a local Ray instance keeps its files under ``out``."""
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
@@ -80,7 +81,7 @@ def make_engine(engine: str, workers: int, retries: int, address: str | None):
         check_ray()
         if address:
             check_address(address)
-        return RayEngine(workers, retries, address)
+        return RayEngine(workers, retries, address, out=out)
     raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
 
 
@@ -98,7 +99,7 @@ def run_sweep(spec: SweepSpec, out: str | Path, engine: str = "local",
     """
     console = console or sys.stderr
     workers = default_workers() if workers is None else workers
-    runner = make_engine(engine, workers, retries, address)
+    runner = make_engine(engine, workers, retries, address, out)
     folder = sweep_folder(out)
     cells = spec.cells()
     with ResultsDatabase(folder / DATABASE_NAME) as database:

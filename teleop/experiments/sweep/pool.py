@@ -13,10 +13,12 @@ pipes and process sentinels at once:
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
 import multiprocessing.connection
 import os
 import signal
+import sys
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -33,8 +35,25 @@ SINGLE_THREADED = {name: "1" for name in (
     "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")}
 
 
-def _serve(connection: multiprocessing.connection.Connection) -> None:
+#: ``prctl`` option: the signal the kernel sends this process when its parent dies
+PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(parent: int) -> None:
+    """Have the kernel kill this process when the process that started it dies (Linux's
+    parent-death signal), so a driver killed with SIGKILL leaves no worker running its cell
+    to the end; the parent already gone is the same. Elsewhere, nothing: a worker there ends
+    at its next read of the closed pipe."""
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:
+        os._exit(1)
+
+
+def _serve(connection: multiprocessing.connection.Connection, parent: int) -> None:
     """A worker's life: run each cell it is sent, send back its outcome; None ends it."""
+    die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
     while True:
         task = connection.recv()
@@ -79,7 +98,7 @@ class LocalPool:
         previous = {name: os.environ.get(name) for name in SINGLE_THREADED}
         os.environ.update(SINGLE_THREADED)  # inherited by the spawned interpreter
         try:
-            process = self._context.Process(target=_serve, args=(worker_end,), daemon=True,
+            process = self._context.Process(target=_serve, args=(worker_end, os.getpid()), daemon=True,
                                             name="teleop-sweep-worker")
             process.start()
         finally:

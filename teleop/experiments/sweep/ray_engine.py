@@ -12,10 +12,14 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import secrets
+import shutil
 import socket
 import sys
+import tempfile
 import time
 from collections import deque
+from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from .cell import FAILED, run_cell
@@ -27,6 +31,23 @@ from .spec import Cell
 #: off, Ray takes 127.0.0.1 as the node's address, so a local instance's servers listen on
 #: loopback only (else on this machine's network address). Not set for an existing cluster.
 LOOPBACK_ONLY = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
+
+
+#: Longest folder a local instance's session files go in: Ray makes its Unix sockets at
+#: ``FOLDER/session_<date>_<time>_<micros>_<pid>/sockets/plasma_store`` (63 more bytes),
+#: and a socket's path holds at most 107 bytes on Linux (``sun_path``).
+LONGEST_RAY_FOLDER = 107 - 63
+
+
+def ray_folder(out: Path) -> tuple[Path, bool]:
+    """Where a local instance keeps its session files (sockets, logs, spilled objects):
+    ``out/ray``, or a fresh folder under the system's temporary folder when that path is too
+    long for a Unix socket (:data:`LONGEST_RAY_FOLDER`); and whether it is such a temporary
+    folder, to be removed when the instance stops."""
+    inside = (out / "ray").absolute()
+    if len(os.fsencode(inside)) <= LONGEST_RAY_FOLDER:
+        return inside, False
+    return Path(tempfile.mkdtemp(prefix="teleop-ray-")), True
 
 
 def check_ray() -> None:
@@ -82,6 +103,12 @@ def _import_ray(local: bool):
     if local and "ray" not in sys.modules:
         for name, value in LOOPBACK_ONLY.items():
             os.environ.setdefault(name, value)
+        # token authentication (Ray's default), its token in this process's environment,
+        # inherited by Ray's processes, not in the file ~/.ray/auth_token that Ray would
+        # write; read when Ray is imported
+        if "RAY_AUTH_MODE" not in os.environ:
+            os.environ["RAY_AUTH_MODE"] = "token"
+            os.environ.setdefault("RAY_AUTH_TOKEN", secrets.token_hex(32))
     import ray
 
     return ray
@@ -97,11 +124,15 @@ class RayEngine:
     """Cells as Ray tasks, at most ``workers`` in flight."""
 
     def __init__(self, workers: int, retries: int = 2, address: str | None = None,
-                 grace: float = GRACE_S) -> None:
+                 grace: float = GRACE_S, out: str | Path = ".") -> None:
         self.workers, self.retries, self.address, self.grace = workers, retries, address, grace
+        self.out = Path(out)
         self.started_instance = False
+        self._temporary_folder: Path | None = None
 
-    def _connect(self):
+    def connect(self):
+        """Ray, connected: to the cluster at ``address``, else to a local instance started
+        here (its session files under :func:`ray_folder`, token authentication)."""
         ray = _import_ray(local=not self.address)
         if ray.is_initialized():
             return ray
@@ -111,7 +142,9 @@ class RayEngine:
             if self.address:
                 ray.init(address=self.address, **options)
             else:
-                ray.init(num_cpus=self.workers, **options)
+                folder, temporary = ray_folder(self.out)
+                self._temporary_folder = folder if temporary else None
+                ray.init(num_cpus=self.workers, _temp_dir=str(folder), **options)
                 self.started_instance = True
         except (ConnectionError, RuntimeError, ValueError) as error:
             where = f"the Ray cluster at {self.address}" if self.address else "a local Ray instance"
@@ -123,11 +156,14 @@ class RayEngine:
         if self.started_instance:
             sys.modules["ray"].shutdown()
             self.started_instance = False
+        if self._temporary_folder is not None:
+            shutil.rmtree(self._temporary_folder, ignore_errors=True)
+            self._temporary_folder = None
 
     def run(self, cells: list[Cell], time_limit: float,
             on_start: Callable[[Cell], None] | None = None) -> Iterator[Finished]:
         """Run ``cells``; yields each one's :class:`Finished` in the order they end."""
-        ray = self._connect()
+        ray = self.connect()
         task = ray.remote(num_cpus=1, max_retries=self.retries, retry_exceptions=False)(
             run_cell_task)
         queue = deque(cells)
