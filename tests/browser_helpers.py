@@ -327,6 +327,16 @@ def open_tab(web, name: str) -> None:
     expect(tab).to_have_attribute("aria-selected", "true")
 
 
+def open_status_details(web) -> None:
+    """Open the status's "Details" folder (closed by default: the status line shows a
+    few plain words), where the control rate, the controller's words and the collision
+    pairs are; a no-op when it is open."""
+    details = web.page.get_by_text("lateness p99", exact=False)
+    if not details.is_visible():
+        web.page.get_by_text("Details", exact=True).click()
+    expect(details).to_be_visible()
+
+
 def input_of(page, label: str):
     """The (first) input of the panel row labelled ``label``."""
     text = page.get_by_text(label, exact=True)
@@ -435,8 +445,12 @@ def wait_for_still_canvas(web, timeout: float) -> np.ndarray:
         previous = pixels
 
 
-def look_at_target(web, distance: float = 0.3) -> None:
-    """Camera in front of the target gizmo, from the front-right and above."""
+def look_at_target(web, distance: float | None = None) -> None:
+    """Camera in front of the target gizmo, from the front-right and above; by default
+    2.5 gizmo sizes away (the gizmo then spans the same part of the view whatever its
+    size)."""
+    if distance is None:
+        distance = 2.5 * web.ui.target_gizmo.scale
     target = web.app.target.translation.copy()
     direction = np.array([0.55, -0.65, 0.45])
     set_camera(web.client, target + distance * direction / np.linalg.norm(direction), target)

@@ -40,6 +40,7 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
     hex_rgb,
     look_at_target,
     measured_drag,
+    open_status_details,
     open_tab,
     open_web,
     png_pixels,
@@ -85,7 +86,9 @@ def test_page_loads_and_the_browser_registers_as_a_client(web):
     box = scene_canvas(web.page)
     assert camera.fov > 0 and (camera.image_width, camera.image_height) == (round(box.width),
                                                                            round(box.height))
-    # the view thread publishes the status (control rate) into the page
+    # the view thread publishes the status line, and the details (control rate) a click away
+    expect(web.page.get_by_text("on target", exact=False).first).to_be_visible()
+    open_status_details(web)
     expect(web.page.get_by_text("Hz achieved")).to_be_visible()
     expect(web.page.get_by_text("lateness p99", exact=False)).to_be_visible()
     time.sleep(3.0)  # a few seconds with the browser connected and drawing
@@ -292,8 +295,8 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
     assert main[3] >= 15, (main, found)
     expect(page.get_by_text("joint-velocity deviation", exact=False)).to_be_visible()
 
-    # the nudge buttons move the target by the step, the gizmo staying (the target drawn
-    # apart); both robots follow, and the plots show how
+    # the nudge buttons move the target by the step, the gizmo following (on the target,
+    # none drawn apart); both robots follow, and the plots show how
     open_tab(web, "Teleop")
     target0 = app.target.translation.copy()
     for label in ("+y", "+y", "+y", "-z", "-z"):
@@ -301,7 +304,10 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
         time.sleep(0.3)
     wait_until(lambda: np.linalg.norm(app.target.translation - target0 - [0, 0.015, -0.01]) < 1e-9,
                WAIT, "the target nudged by (0, 15, -10) mm")
-    assert web.ui.target_marker.visible
+    wait_until(lambda: np.linalg.norm(np.asarray(web.ui.target_gizmo.position)
+                                      - app.target.translation) < 1e-6, WAIT,
+               "the gizmo on the nudged target")
+    np.testing.assert_allclose(app.gizmo.translation, app.target.translation, atol=1e-12)
     open_tab(web, "Plots")
     time.sleep(2.0)
 

@@ -22,6 +22,7 @@ import pinocchio as pin
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
     WAIT,
+    open_status_details,
     open_tab,
     open_web,
     project,
@@ -151,5 +152,6 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     witness = np.asarray(nodes["witness"].points, dtype=float)[0]
     assert np.linalg.norm(witness[0] - witness[1]) == pytest.approx(abs(rows.minimum_distance),
                                                                      abs=1e-6)
+    open_status_details(web)
     expect(page.get_by_text(f"({pair})", exact=False)).to_be_visible()
     assert web.control.error is None and web.page_errors == [], web.page_errors

@@ -15,6 +15,7 @@ with the plant and the browser).
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
@@ -24,7 +25,9 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
     WAIT,
     click_add_hole,
     ee_position,
+    ensure_hole,
     look_at_target,
+    open_status_details,
     open_tab,
     open_web,
     plan_drag,
@@ -106,6 +109,7 @@ def paced_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
 
 def test_the_page_runs_the_plant(web):
     assert web.app.plant.physical and web.app.loops["main"].plant is not None
+    open_status_details(web)
     expect(web.page.get_by_text("MuJoCo plant at 2000 Hz", exact=False)).to_be_visible()
     expect(web.page.get_by_text("physics included", exact=False)).to_be_visible()
     time.sleep(3.0)  # a few seconds with the browser connected and drawing
@@ -155,8 +159,8 @@ def test_a_gentle_drag_pushes_on_the_wall_and_the_page_shows_how_hard(web):
                                    FORCE_ARROW_SCALE * reading.force, atol=FLOAT32)
     assert all(visible == (reading.magnitude >= MIN_DRAWN_FORCE)
                for reading, _, visible in web.arrows[drawn_before:])
-    # the status figure in newtons, and the port-force plot
-    expect(page.get_by_text(f"port force {hole_id} ", exact=False)).to_be_visible()
+    # the status line's figure in mN, and the port-force plot
+    expect(page.get_by_text(f"port force {hole_id} ", exact=False).first).to_be_visible()
     open_tab(web, "Plots")
     expect(page.get_by_text("port force, the largest (", exact=False)).to_be_visible()
     assert web.control.error is None and web.page_errors == [], web.page_errors
@@ -205,3 +209,62 @@ def test_a_force_held_on_the_wall_is_drawn_in_red_at_the_port(web, tmp_path):
     for path in (ARTIFACTS / "ui_plant.png", tmp_path / "ui_plant.png"):
         path.write_bytes(png)
     app.set_gain(100.0)
+
+
+#: the status line's port force as the page shows it (the scale follows it)
+STATUS_FORCE = r"port force {} ([0-9.]+) mN \(arrow 2 cm per 10 mN\)"
+#: the drag (m) and its mouse steps
+DRAG, DRAG_STEPS = 0.012, 6
+
+
+def status_line_force(page, hole_id: str) -> float | None:
+    """The port force (N) the page's status line shows for ``hole_id`` now, read from the
+    page's text; None while it shows none."""
+    text = page.evaluate("() => document.body.innerText")
+    found = re.search(STATUS_FORCE.format(re.escape(hole_id)), text)
+    return None if found is None else 1e-3 * float(found.group(1))
+
+
+def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
+    """A hole placed, a 12 mm drag with the real mouse in 2 mm steps: the status line (not
+    its details) names the link the hole is on, shows the port force in mN while the wall
+    pushes (seen above 1 mN, never above what the plant measured in any control period),
+    and says in a few words that the EE reached the target once it has."""
+    app, page = web.app, web.page
+    hole_id = ensure_hole(web)
+    link = app.entries[hole_id].constraint.link
+    expect(page.get_by_text(f"placed: {hole_id} on {link}", exact=False).first).to_be_visible()
+    open_tab(web, "Teleop")
+    look_at_target(web)
+    since = app.now
+    plan = plan_drag(web, DRAG, DRAG_STEPS)
+    shown = []  # (loop time, the force the status line showed)
+    mouse = page.mouse
+    target0 = app.target.translation.copy()
+    mouse.move(*plan.screen[0])
+    mouse.down()
+    try:
+        for k, (u, v) in enumerate(plan.screen[1:], start=1):
+            mouse.move(float(u), float(v))
+            wait_until(lambda: (app.target.translation - target0) @ plan.direction
+                       >= DRAG * k / DRAG_STEPS - 0.4e-3, WAIT, f"the server to get mouse step {k} "
+                       f"(the target moved {1e3 * (app.target.translation - target0)} mm, the "
+                       f"drag along {plan.direction}, {plan.pixels:.0f} px)")
+            arrived = app.now
+            while app.now < arrived + STEP_SETTLE:
+                force = status_line_force(page, hole_id)
+                if force is not None:
+                    shown.append((app.now, force))
+                time.sleep(0.05)
+    finally:
+        mouse.up()
+    wait_until(lambda: np.linalg.norm(ee_position(app) - app.target.translation) < 1e-4,
+               WAIT, "the EE to reach the dragged target")
+    measured = max(force for t, force in list(web.forces) if t >= since)
+    seen = max(force for _, force in shown)
+    print(f"\n[plant] the status line over a {1e3 * DRAG:.0f} mm drag: {len(shown)} readings, the largest "
+          f"{1e3 * seen:.2f} mN (the plant's largest over every period: {1e3 * measured:.2f} mN)")
+    assert len(shown) > 10
+    assert 1e-3 < seen <= measured + 0.005e-3  # shown to 0.01 mN
+    expect(page.get_by_text("main on target", exact=False).first).to_be_visible()
+    assert web.control.error is None and web.page_errors == [], web.page_errors

@@ -87,23 +87,27 @@ def test_a_moved_target_pushes_the_instrument_on_the_wall_and_the_view_says_how_
     assert [port.id for port in ports] == [hole_id]
     assert ports[0].magnitude < 1e-4  # at rest on the port: the wall hardly pushes
     nudge(app, [0.0, 0.02, 0.0])  # 2 cm sideways: the motion caps make it gentle
-    peak = 0.0
-    for _ in range(100):
-        run(app, 0.01)
-        snapshot = app.snapshot(history=False)
-        (port,) = snapshot["robots"]["main"]["ports"]
-        peak = max(peak, port.magnitude)
+    forces = []  # every control period's largest port force, read from the plant here
+    first = app.ticks  # ticks 0, 20, 40... take the history samples (50 Hz at 1 kHz)
+    for _ in range(1000):
+        app.step()
+        forces.append(np.linalg.norm(app.loops["main"].plant.measures().port_forces, axis=1).max())
+    peak = max(forces)
     assert 1e-3 < peak < GENTLE_FORCE, peak  # felt, and below the target
-    # the plots' port-force trace: finite, in newtons, its peak the one seen above
+    # the plots' port-force trace: finite, in newtons, each sample the peak of the 20
+    # periods since the one before (a 50 Hz sample of one period's force misses peaks)
     snapshot = app.snapshot()
     assert plots_of(snapshot) == PLOTS + PLANT_PLOTS
     t, series = plot_series(snapshot, PLANT_PLOTS[0])
     assert t.size == 55 and np.isfinite(series["main"]).all()  # 1.1 s at 50 Hz
-    assert 1e-3 < series["main"].max() <= peak * (1 + 1e-9)
-    # the status words and the arrow of the last reading
+    assert series["main"].max() == pytest.approx(peak, rel=1e-12)
+    last = (first + len(forces) - 1) // 20 * 20 - first  # the last sample's tick, in forces
+    periods = np.reshape(forces[last - 979:last + 1], (49, 20))  # each its 20 periods up to it
+    np.testing.assert_allclose(series["main"][-49:], periods.max(axis=1), rtol=1e-12)
+    # the status words (mN) and the arrow of the last reading
     (port,) = snapshot["robots"]["main"]["ports"]
-    assert port_words([port]) == (f"port force {hole_id} {port.magnitude:.3f} N "
-                                  f"(tissue {1e3 * port.displacement:.3f} mm)")
+    assert port_words([port]) == (f"port force {hole_id} {1e3 * port.magnitude:.2f} mN "
+                                  f"(tissue {1e6 * port.displacement:.1f} µm)")
     arrow = force_arrow(port, clearance=0.03)  # its tip 3 cm from the port, pushing on it
     np.testing.assert_allclose(arrow[0, 1] - arrow[0, 0], FORCE_ARROW_SCALE * port.force,
                                atol=1e-15)
@@ -244,7 +248,12 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         ring = ui.ring_radius_at(snapshot["robots"]["main"]["constraints"][hole_id])
         np.testing.assert_allclose(segments[0, 1], port.point - ring * port.force / port.magnitude,
                                    atol=float32)
-        assert f"port force {hole_id} {port.magnitude:.3f} N" in ui.status.content
+        assert f"port force {hole_id} {1e3 * port.magnitude:.2f} mN" in ui.status.content
+        # the status line: the hole's link named, the force in mN, the arrow's scale
+        assert (f"port force {hole_id} **{1e3 * port.magnitude:.2f} mN** (arrow 2 cm per "
+                "10 mN)") in ui.summary.content and FORCE_ARROW_SCALE == 0.02 / 0.01
+        assert f"placed: {hole_id} on `{app.entries[hole_id].constraint.link}`" in \
+            ui.summary.content
         assert "% of ticks on time" in ui.status.content and "physics included" in \
             ui.status.content and "**plant** MuJoCo plant at 2000 Hz" in ui.status.content
         assert ui._plots["port_force"].title.startswith("port force, the largest (")

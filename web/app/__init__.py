@@ -17,7 +17,7 @@ from .limits import (
 from .plant import PortReading
 from .robots import default_ghost_offset
 from .status import (BEHIND_FRACTION, Limitation, behind_words, describe_limitation, port_words,
-                     supervision_words)
+                     summary_words, supervision_words)
 
 __all__ = [
     "BEHIND_FRACTION",
@@ -41,5 +41,6 @@ __all__ = [
     "default_ghost_offset",
     "describe_limitation",
     "port_words",
+    "summary_words",
     "supervision_words",
 ]

@@ -30,7 +30,9 @@ from .trace import Trace
 
 def default_ghost_offset(robot: Robot) -> np.ndarray:
     """Where the ghost goes beside the main robot: sideways from the direction the arms
-    reach at home (their EEs' mean), by the robot's width in that direction plus a margin."""
+    reach at home (their EEs' mean), to the left as seen from the front (where the page's
+    first view looks from: the control panel covers the right of the view), by the
+    robot's width in that direction plus a margin."""
     model = robot.model
     data = model.createData()
     pin.framesForwardKinematics(model, data, robot.q_home)
@@ -40,7 +42,7 @@ def default_ghost_offset(robot: Robot) -> np.ndarray:
     reach[2] = 0.0
     if np.linalg.norm(reach) < 1e-6:
         reach = np.array([1.0, 0.0, 0.0])
-    side = np.cross([0.0, 0.0, 1.0], reach / np.linalg.norm(reach))
+    side = np.cross(reach / np.linalg.norm(reach), [0.0, 0.0, 1.0])
     width = float(np.ptp(points @ side))
     return (width + 0.4) * side
 

@@ -93,10 +93,21 @@ def supervision_words(supervision: Supervision | None) -> str:
 
 
 def port_words(ports: list[PortReading]) -> str:
-    """The wall's force at each port in words, ``"port force <id> 0.012 N (tissue
-    0.012 mm)"``; ``""`` without a port (docs/design.md section 17.2)."""
+    """The wall's force at each port in words, in millinewtons (a gentle drag pushes with
+    a few), ``"port force <id> 3.12 mN (tissue 3.1 µm)"``; ``""`` without a port
+    (docs/design.md section 17.2)."""
     if not ports:
         return ""
     return "port force " + ", ".join(
-        f"{port.id} {port.magnitude:.3f} N (tissue {1e3 * port.displacement:.3f} mm)"
+        f"{port.id} {1e3 * port.magnitude:.2f} mN (tissue {1e6 * port.displacement:.1f} µm)"
         for port in ports)
+
+
+def summary_words(limitation: Limitation) -> str:
+    """The few plain words of what an end effector does, for the status line: the first
+    reason :func:`describe_limitation` gives (its details stay in the full status), with
+    how far the target is when it is not reached (docs/design.md section 5.3)."""
+    first = limitation.words.split(";")[0].split(":")[0].strip()
+    if limitation.distance > ON_TARGET and "away" not in first:
+        return f"{first}, {1e3 * limitation.distance:.1f} mm from the target"
+    return first

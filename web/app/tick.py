@@ -78,6 +78,10 @@ class Tick:
             held: dict[str, CollisionRows] = {}
             pending = {which: self._advance(which, loop, targets, held)
                        for which, loop in self.loops.items()}
+            for which, loop in self.loops.items():  # every period's port force, for its peak
+                measures = None if loop.plant is None else loop.plant.measures()
+                if measures is not None:
+                    self.traces[which].feel_port_forces(measures.port_forces)
             if self.collisions_on:
                 self.collision_rows.update(held)
             history = start >= self._next_history - 0.5 * dt

@@ -33,13 +33,25 @@ class Trace:
     constraint_velocity: collections.deque = field(default_factory=_deque)
     ee_error: collections.deque = field(default_factory=_deque)
     step_time: collections.deque = field(default_factory=_deque)
-    #: the largest port force (N) of a physics plant; NaN without one
+    #: the largest port force (N) of a physics plant over the control periods since the
+    #: previous sample (its peak, not one period's: a drag's force lasts a few periods);
+    #: NaN without one
     port_force: collections.deque = field(default_factory=_deque)
     #: |qd - qd_main| (rad/s): the ghost's deviation from the main robot's command
     qd_deviation: collections.deque = field(default_factory=_deque)
     #: the closest collision pair's distance (m), at most the detection distance; NaN
     #: while collisions are off (:meth:`web.app.TeleopApp.traced_distance`)
     minimum_distance: collections.deque = field(default_factory=_deque)
+    #: the largest port force (N) of the periods since the last sample; NaN: none felt
+    _port_peak: float = math.nan
+
+    def feel_port_forces(self, forces: np.ndarray) -> None:
+        """One control period's port forces ``(ports, 3)`` (N), kept until the next sample
+        if they are the largest since the last."""
+        if forces.size:
+            largest = math.sqrt(float(np.max(np.einsum("ij,ij->i", forces, forces))))
+            if not largest <= self._port_peak:  # NaN: the first since the last sample
+                self._port_peak = largest
 
     def add(self, record: StepRecord, qd_deviation: float = 0.0,
             minimum_distance: float = math.nan) -> None:
@@ -48,7 +60,12 @@ class Trace:
         self.constraint_velocity.append(float(np.linalg.norm(record.constraint_velocity)))
         self.ee_error.append(record.ee_position_error)
         self.step_time.append(record.step_time_us)
-        self.port_force.append(math.nan if record.plant is None else record.plant.port_force)
+        if record.plant is None:
+            self.port_force.append(math.nan)
+        else:  # this sample's period and every one since the last sample
+            self.feel_port_forces(record.plant.port_forces)
+            self.port_force.append(0.0 if math.isnan(self._port_peak) else self._port_peak)
+        self._port_peak = math.nan
         self.qd_deviation.append(qd_deviation)
         self.minimum_distance.append(minimum_distance)
 

@@ -60,6 +60,13 @@ from .status_view import StatusView
 VIEW_RATE = 30.0  # Hz: robot poses, markers, status
 PLOT_RATE = 10.0  # Hz: live plots
 STATUS_RATE = 5.0  # Hz: the status text (readable, and light on the browser)
+#: what to try on a first run, at the top of the panel until "Got it"
+FIRST_RUN_HINT = (
+    "1. Drag an arrow or ring of the **gizmo** at the tool: the robot follows.\n"
+    "2. **Constraints**: add one where the robot is (the first: an instrument's port), "
+    "then drag again: the robot keeps it (the status line names its link).\n"
+    "3. **Teleop -> side by side**: a second controller's robot on the left, same target.\n"
+    "4. **Plots**: the errors, and with `--plant mujoco` the port force (mN).")
 
 
 def short_names(frames: tuple[str, ...]) -> dict[str, str]:
@@ -161,9 +168,17 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
 
     def _build_panels(self) -> None:
         gui = self.server.gui
+        # a wide panel: the plots fit with their axes' labels, the status line is a line
+        gui.configure_theme(control_width="large")
+        with gui.add_folder("Try this") as self.hint:  # what a first run might try
+            gui.add_markdown(FIRST_RUN_HINT)
+            gui.add_button("Got it", hint="hide these hints").on_click(
+                lambda _: setattr(self.hint, "visible", False))
         with gui.add_folder("Status"):
             self.banner = gui.add_html("", visible=False)  # the control loop falling behind
-            self.status = gui.add_markdown("starting...")
+            self.summary = gui.add_markdown("starting...")
+            with gui.add_folder("Details", expand_by_default=False):
+                self.status = gui.add_markdown("starting...")
         self.tabs = gui.add_tab_group()
         with self.tabs.add_tab("Teleop"):
             self._build_teleop_panel()
@@ -219,7 +234,8 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
                     self._plot_feedback(snapshot)
                     next_plot = start + 1.0 / PLOT_RATE
             except Exception as error:  # the view must never take the control loop down
-                self.status.content = f"view error: {type(error).__name__}: {error}"
+                self.summary.content = self.status.content = (
+                    f"view error: {type(error).__name__}: {error}")
             time.sleep(max(0.0, 1.0 / VIEW_RATE - (time.perf_counter() - start)))
 
     def _draw(self, snapshot: dict, status: bool = True) -> None:

@@ -77,9 +77,7 @@ class Panels:
             event, lambda: app.set_clutch(not app.clutch)))
         self.motion_scale.on_update(lambda event: self._guarded(
             event, lambda: app.set_motion_scale(self.motion_scale.value), key="motion scale"))
-        self.nudge_buttons.on_click(lambda event: self._guarded(event, lambda: app.nudge_target(
-            self.nudge_step.value * np.asarray(NUDGES[self.nudge_buttons.value], dtype=float),
-            self._active_ee())))
+        self.nudge_buttons.on_click(lambda event: self._guarded(event, self._nudge))
         self.gizmo_button.on_click(lambda event: self._guarded(event, self._gizmo_to_target))
         self.home_button.on_click(lambda event: self._guarded(event, self._home))
 
@@ -133,6 +131,14 @@ class Panels:
     def _home(self) -> None:
         self.app.home()
         self._move_gizmo_handles()
+
+    def _nudge(self) -> None:
+        """The active arm's target moved by the nudge step along the button's axis, its
+        gizmo following (on the target: the next drag starts where the nudge left it)."""
+        ee = self._active_ee()
+        self.app.nudge_target(
+            self.nudge_step.value * np.asarray(NUDGES[self.nudge_buttons.value], dtype=float), ee)
+        self._move_gizmo_handle(self.app.gizmo_to_target(ee), ee)
 
     def _gizmo_to_target(self) -> None:
         ee = self._active_ee()

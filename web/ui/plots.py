@@ -76,6 +76,13 @@ X_RANGE = (-HISTORY_SECONDS, 0.0)
 Y_RANGE = {"min": {"pad": 0.0, "soft": 0.0, "mode": 1}, "max": {"pad": 0.1, "soft": 1.0, "mode": 1}}
 
 
+def axes_labelled(unit: str) -> tuple[uplot.Axis, uplot.Axis]:
+    """The x axis labelled in seconds before now, the y axis in ``unit``, each with room
+    for its tick values (the default clips five-digit values on a narrow panel)."""
+    return (uplot.Axis(label="t - now (s)", labelSize=18.0, size=36.0),
+            uplot.Axis(label=unit, labelSize=18.0, size=56.0))
+
+
 def plot_series(snapshot: dict, spec: PlotSpec) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Time and the series of one plot, all finite and of one length: with a ghost, the
     samples since it joined (both robots measured at the same ticks)."""
@@ -140,6 +147,7 @@ class Plots:
                         *[uplot.Series(label=label, stroke=colors[which], width=1.5,
                                        **({} if which == "main" else {"dash": GHOST_DASH}))
                           for which, label in zip(series, labels)]),
-                title=f"{spec.title} ({unit})", aspect=2.2, order=order,
+                title=f"{spec.title} ({unit})", aspect=2.0, order=order,
                 scales={"x": uplot.Scale(time=False, auto=False, range=X_RANGE),
-                        "y": uplot.Scale(auto=True, range=Y_RANGE)})
+                        "y": uplot.Scale(auto=True, range=Y_RANGE)},
+                axes=axes_labelled(unit))

@@ -1,7 +1,9 @@
-"""The abdominal wall's force on each instrument, drawn at its port as an arrow scaled in
-newtons (docs/design.md sections 5.3 and 17.2), for every robot on a physics plant: it
-points the way the wall pushes the instrument, its tip on the port's ring (outside the
-instrument's meshes, which would hide it), :data:`FORCE_ARROW_SCALE` x ``|F|`` long."""
+"""The abdominal wall's force on each instrument, drawn at its port as an arrow scaled to
+be seen at the forces a drag makes (a few mN; docs/design.md sections 5.3 and 17.2), for
+every robot on a physics plant: it points the way the wall pushes the instrument, its tip
+on the port's ring (outside the instrument's meshes, which would hide it),
+:data:`FORCE_ARROW_SCALE` x ``|F|`` long (the scale is shown in the status line,
+:data:`FORCE_ARROW_WORDS`)."""
 
 from __future__ import annotations
 
@@ -14,10 +16,14 @@ from ..app.plant import PortReading
 from ..robot_view import RobotView
 from .shapes import arrow_segments
 
-#: an arrow's length per newton of wall force (m/N): 5 cm per 0.1 N
-FORCE_ARROW_SCALE = 0.5
+#: an arrow's length per newton of wall force (m/N): 2 cm per 10 mN. A 5 cm drag with
+#: the drift gain on pushes with 3 mN (6 mm) and peaks near 40 mN (8 cm); the drift gain
+#: at 0 leaves about 0.2 N held (40 cm)
+FORCE_ARROW_SCALE = 2.0
+#: the scale in words, for the status line
+FORCE_ARROW_WORDS = "arrow 2 cm per 10 mN"
 #: a force below this (N) is drawn as no arrow (its arrow would be under 0.5 mm)
-MIN_DRAWN_FORCE = 1e-3
+MIN_DRAWN_FORCE = 0.25e-3
 FORCE_COLOR = (220, 38, 38)
 #: the arrows' width on screen (pixels): seen whatever the zoom
 FORCE_ARROW_WIDTH = 5.0

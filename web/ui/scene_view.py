@@ -15,6 +15,9 @@ from ..inbox import Inbox
 from ..robot_view import RobotView
 from .shapes import wxyz_of
 
+#: the target gizmo's size (m): its handles large enough to grab from the first view
+#: (1 m away) rather than orbit the camera
+GIZMO_SCALE = 0.16
 GHOST_PLOTS_FIRST = 0.5  # s: a new ghost is drawn once the plots show it, or after this
 GHOST_RGBA = (0.45, 0.7, 1.0, 0.8)  # beside the main robot
 GHOST_OVERLAY_RGBA = (0.25, 0.5, 0.95, 0.4)  # on it: see-through
@@ -52,7 +55,8 @@ class SceneView:
         for index, target in enumerate(self.app.targets):
             suffix = "" if index == 0 else f"_{index}"
             gizmo = scene.add_transform_controls(
-                f"/gizmo{suffix}", scale=0.12, position=target.translation,
+                f"/gizmo{suffix}", scale=GIZMO_SCALE, line_width=4.0,
+                position=target.translation,
                 wxyz=wxyz_of(target.rotation))
             gizmo.on_update(self._gizmo_moved(gizmo, index))
             self.target_gizmos.append(gizmo)
@@ -65,16 +69,16 @@ class SceneView:
         self.target_gizmo, self.target_marker = self.target_gizmos[0], self.target_markers[0]
         self.reach_line = self.reach_lines[0]
         # every new browser looks at the tools from the front (where the arms reach), the
-        # ghost to the right of the main robot
+        # ghost to the left of the main robot (clear of the control panel, on the right)
         side = default_ghost_offset(self.app.robot)
         side /= np.linalg.norm(side)
-        front = np.cross(side, [0.0, 0.0, 1.0])
+        front = np.cross([0.0, 0.0, 1.0], side)
         look_at = np.mean([target.translation for target in self.app.targets], axis=0)
         distance = 1.0
         if "ghost" in self.app.loops:
             look_at += 0.5 * self.app.ghost_offset
             distance += 0.8 * float(np.linalg.norm(self.app.ghost_offset))
-        direction = 0.8 * front - 0.3 * side + np.array([0.0, 0.0, 0.5])
+        direction = 0.8 * front + 0.3 * side + np.array([0.0, 0.0, 0.5])
         self.server.initial_camera.position = look_at + distance * direction / np.linalg.norm(direction)
         self.server.initial_camera.look_at = look_at
 

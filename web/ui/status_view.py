@@ -1,7 +1,9 @@
-"""The status panel: the control loop's rate and timing, what limits each robot's end
-effectors in words, the one-sided constraints held, the force at each port (physics
-plant), the minimum distance, closest pair and collision pairs held, the console's state; a red banner
-while the control loop falls behind (docs/design.md section 5.3)."""
+"""The status panel: a line of a few plain words (what each robot's end effectors do, the
+constraints placed and the link each is on, the force at each port in mN) and, one click
+away in its "Details" folder, the control loop's rate and timing, what limits each
+robot's end effectors in the controller's words, the one-sided constraints held, the
+minimum distance, closest pair and collision pairs held, the console's state; a red
+banner while the control loop falls behind (docs/design.md section 5.3)."""
 
 from __future__ import annotations
 
@@ -11,7 +13,8 @@ import viser
 
 from constraints.collision import CollisionRows
 
-from ..app import ControlThread, port_words, supervision_words
+from ..app import ControlThread, port_words, summary_words, supervision_words
+from .port_forces import FORCE_ARROW_WORDS
 
 BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
 
@@ -39,7 +42,8 @@ class StatusView:
     ee_names: dict[str, str]
     _behind: str
     banner: viser.GuiHtmlHandle
-    status: viser.GuiMarkdownHandle
+    summary: viser.GuiMarkdownHandle  # the few plain words, always shown
+    status: viser.GuiMarkdownHandle  # the details, in a folder closed by default
 
     def _warn_behind(self) -> None:
         """A red banner above the status (and a notification when it starts) while the
@@ -55,8 +59,31 @@ class StatusView:
                                    f'{behind}</div>')
         self._behind = behind
 
+    def _summary(self, snapshot: dict) -> str:
+        """The status line: per robot what each EE does in a few words
+        (:func:`web.app.summary_words`), each constraint with the link it is on, each port's
+        force in mN; the clutch when engaged."""
+        names = [self.ee_names[frame] for frame in snapshot["ee_frames"]]
+        lines = []
+        for which, robot in snapshot["robots"].items():
+            words = "; ".join(summary_words(each) if len(names) == 1 else
+                              f"*{name}* {summary_words(each)}"
+                              for name, each in zip(names, robot["limitations"]))
+            lines.append(f"**{which}** {words}")
+        placed = [f"{entry['id']} on `{entry['link']}`" for entry in snapshot["constraints"]]
+        if placed:
+            lines.append("placed: " + ", ".join(placed))
+        ports = snapshot["robots"]["main"]["ports"]
+        if ports:
+            lines.append(", ".join(f"port force {port.id} **{1e3 * port.magnitude:.2f} mN**"
+                                   for port in ports) + f" ({FORCE_ARROW_WORDS})")
+        if snapshot["clutch"]:
+            lines.append("**clutch engaged**")
+        return "  \n".join(lines)
+
     def _draw_status(self, snapshot: dict) -> None:
         self._warn_behind()
+        self.summary.content = self._summary(snapshot)
         timing = self.control.timing()
         control = (f"**control{' BEHIND' if self._behind else ''}** "
                    f"{timing.achieved_rate:.0f} Hz achieved (target "
