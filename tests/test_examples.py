@@ -15,6 +15,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from teleop.loop import SupervisorConfig
@@ -199,3 +200,57 @@ def test_the_network_master_example_meets_its_real_time_bounds(tmp_path: Path):
     (hole,) = numbers(r"hole error max NUMBER um", out)
     (stopped,) = numbers(r"robot stopped NUMBER ms later", out)
     assert rms <= 1.0 and hole <= 1.0 and 100.0 <= stopped <= 150.0, out
+
+
+def test_the_network_master_example_drives_a_running_page(tmp_path: Path):
+    """``--drive PORT --key KEY``: the example streams its circles to a running session's
+    UDP input (the app ``teleop web`` serves, its control thread running, a master
+    attached with a key drawn as ``teleop web`` draws one): every datagram it sends is
+    received or counted lost, and the page's target follows the circle, 2 s of a 5 s
+    circle of 1 cm: a chord of 2 sin(72 deg) cm from where it started."""
+    import threading
+    import time
+
+    from teleop import load_robot
+    from teleop.inputs import UdpMaster
+    from web.app import ControlThread, TeleopApp
+
+    app = TeleopApp(load_robot("sda10f"), record_dir=tmp_path, scene_dir=tmp_path / "scenes")
+    master = UdpMaster(port=0)
+    app.attach_input(master)
+    control = ControlThread(app)
+    control.start()
+    start = app.target.translation.copy()
+    farthest = [0.0]
+    done = threading.Event()
+
+    def watch() -> None:  # the target's farthest from where it started
+        while not done.is_set():
+            farthest[0] = max(farthest[0], float(np.linalg.norm(app.target.translation - start)))
+            time.sleep(0.002)
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        script = EXAMPLES_DIR / "11_network_master.py"
+        result = subprocess.run([sys.executable, str(script), "--drive", str(master.port),
+                                 "--key", master.key.hex(), "--seconds", "2"], cwd=tmp_path,
+                                capture_output=True, text=True, timeout=TIMEOUT)
+        time.sleep(0.05)
+    finally:
+        done.set()
+        watcher.join(2.0)
+        control.stop()
+        stats = master.statistics()
+        app.close_inputs()
+    assert result.returncode == 0, result.stderr
+    (sent,) = numbers(r"sent NUMBER commands to 127\.0\.0\.1", result.stdout)
+    assert sent == 2001 and stats["received"] + stats.get("lost", 0) == sent, (result.stdout, stats)
+    assert stats["received"] >= 0.9 * sent and stats.get("unauthenticated", 0) == 0, stats
+    chord = 0.02 * np.sin(np.radians(72.0))
+    assert chord - 0.5e-3 <= farthest[0] <= chord + 1e-4, (farthest[0], chord)
+    # a key that is not one: one line, exit code 2 (argparse), no traceback
+    bad = subprocess.run([sys.executable, str(script), "--drive", str(master.port), "--key",
+                          "not-hex"], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=TIMEOUT)
+    assert bad.returncode == 2 and "hexadecimal" in bad.stderr and "Traceback" not in bad.stderr
