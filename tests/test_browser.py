@@ -319,11 +319,15 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
     pin.forwardKinematics(model, data, app.loops["main"].q)
     joints = np.array([placement.translation for placement in data.oMi[1:]])
     centre = joints.mean(axis=0) + 0.5 * offset + np.array([0.0, 0.0, -0.05])
-    side = offset / np.linalg.norm(offset)
-    front = np.cross(side, [0.0, 0.0, 1.0])
-    set_camera(web.client, centre + 1.15 * front - 0.35 * side + np.array([0.0, 0.0, 0.6]), centre)
+    side = offset / np.linalg.norm(offset)  # the ghost's side: the left, seen from the front
+    front = np.cross([0.0, 0.0, 1.0], side)
+    # the two robots left of the control panel (on the right): look right of their centre
+    look = centre - 0.3 * side
+    set_camera(web.client, look + 1.3 * front - 0.2 * side + np.array([0.0, 0.0, 0.6]), look)
     for close in page.locator(".mantine-Notification-closeButton").all():  # e.g. WebGL notice
         close.click()
+    if page.get_by_text("lateness p99", exact=False).is_visible():  # the status line alone
+        page.get_by_text("Details", exact=True).click()
     time.sleep(1.0)
     png = page.screenshot(timeout=1e3 * WAIT)
     ARTIFACTS.mkdir(exist_ok=True)
