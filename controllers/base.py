@@ -212,13 +212,17 @@ def as_constraint_list(constraints: Iterable[Constraint]) -> list[Constraint]:
 def as_twist_weight(twist_weight, task_size: int) -> np.ndarray:
     """The diagonal weight ``W`` (task_size,) of the twist error: identity for None; 6
     values apply to every EE, ``task_size`` values to each entry. ``ValueError`` for
-    negative or non-finite weights, or another size."""
+    negative or non-finite weights, all zeros (no task: each controller's task stage
+    needs a row; docs/design.md section 20), or another size."""
     if twist_weight is None:
         return np.ones(task_size)
     size = 6 if np.shape(twist_weight) == (6,) else task_size
     weight = np.tile(as_vector(twist_weight, size, "twist_weight"), task_size // size)
     if np.any(weight < 0):
         raise ValueError(f"twist_weight must be non-negative, got {weight.tolist()}")
+    if not np.any(weight > 0):
+        raise ValueError("twist_weight must be positive on some entry: all zeros asks the "
+                         "end effectors for nothing")
     return weight
 
 

@@ -46,6 +46,7 @@ from .naming import constraint_names, row_labels
 from .records import CompiledPendingStep, PendingStep, StepRecord
 from .supervisor import Supervision, Supervisor, SupervisorConfig
 from .targets import Targets, saturate_twist, target_poses
+from .task_modes import fit_target, task_modes as checked_task_modes
 from .true_kinematics import TrueKinematics
 
 @dataclass(frozen=True)
@@ -140,6 +141,12 @@ class TeleopLoop:
         calibration error, docs/design.md section 15.1); the measures take them
         (:class:`~teleop.loop.true_kinematics.TrueKinematics`), the controller and the hot
         path keep the model. None: the model is the robot.
+    task_modes : what the operator commands of each EE (docs/design.md section 20): one
+        mode for every EE or one per EE (``pose``, ``position_roll``, ``position``); each
+        target is fitted to its mode (:func:`~teleop.loop.task_modes.fit_target`) before
+        the filter. Build the controller with the modes' rows as its task weight
+        (:func:`~teleop.loop.task_modes.task_weight`): the free rows are then left to its
+        null space (a positive weight there holds the orientation softly).
 
     Targets (:data:`Targets`) are one ``pin.SE3`` per entry of ``robot.ee_frames``, in
     that order; a single-EE robot also takes the pose alone.
@@ -148,7 +155,8 @@ class TeleopLoop:
     def __init__(self, robot, controller, q0: np.ndarray | None = None,
                  config: LoopConfig | None = None, plant: Plant | None = None,
                  collisions: CollisionAvoidance | None = None,
-                 compiled_tick: bool = True, true_model: pin.Model | None = None) -> None:
+                 compiled_tick: bool = True, true_model: pin.Model | None = None,
+                 task_modes: str | Sequence[str] = "pose") -> None:
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
@@ -165,6 +173,9 @@ class TeleopLoop:
         self.ee_frame_ids: tuple[int, ...] = tuple(self.model.getFrameId(name)
                                                    for name in robot.ee_frames)
         self.ee_frame_id = self.ee_frame_ids[0]
+        #: the task mode of each EE; whether any fits its target (not the full pose)
+        self.task_modes = checked_task_modes(task_modes, len(self.ee_frame_ids))
+        self._fitting = any(mode != "pose" for mode in self.task_modes)
         self.q = as_vector(robot.q_home if q0 is None else q0, self.model.nq, "q0")
         if plant is not None:
             plant.reset(self.q)
@@ -331,6 +342,9 @@ class TeleopLoop:
         sensed = self.q if self.plant is None else self.plant.sense(self.q)
         supervision = self.supervise(sensed, self.targets(target))
         poses = self.supervisor.followed_targets
+        if self._fitting:
+            poses = [fit_target(mode, pose, placement) for mode, pose, placement
+                     in zip(self.task_modes, poses, self.ee_placements(sensed))]
         compiled = self.compiled
         if compiled is not None and compiled.ready():
             if not self._history_in_tick:

@@ -107,7 +107,11 @@ class Console:
                              f"{self.inputs[ee].frame}, more than {MAX_TARGET_DISTANCE:g} m")
 
     def _set_target(self, target: pin.SE3, ee: int = 0) -> None:
-        """EE ``ee``'s target pose (caller holds the lock); recorded when recording."""
+        """EE ``ee``'s target pose (caller holds the lock); recorded when recording. It
+        ends a way home being followed, where it is, and forgets why the last one
+        stopped short (:mod:`.homing`)."""
+        self._end_homing()
+        self.home_words = ""
         self.inputs[ee].target = target
         self._record_target(ee)
 
@@ -189,14 +193,21 @@ class Console:
             hand.gizmo = hand.target.copy()
             return hand.gizmo.copy()
 
-    def home(self, ee=None) -> None:
+    def home(self, ee=None) -> str:
         """Every target and gizmo (or only EE ``ee``'s) on its home EE pose. The
-        constraints stay (:meth:`clear_constraints` removes them), so the robots drive
-        there through their controllers, the constraints held; homing every EE with no
-        constraint placed also puts the robots back at ``q_home`` at once (a reset)."""
+        constraints stay (:meth:`clear_constraints` removes them). Every EE with
+        constraints placed: the robot goes home through them, on a joint path whose
+        steps keep their rows (:mod:`.homing`, docs/design.md section 20.3); the words
+        say why it cannot reach home (``""`` when it can). Every EE with no constraint
+        placed: the robots back at ``q_home`` at once (a reset)."""
         indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
+        if ee is None and self.entries:
+            with self._lock:
+                for index in indices:  # from where the robot is: no jump when it starts
+                    self._put_hand(index, self.loops["main"].ee_placements()[index])
+            return self._start_homing()
         with self._lock:
-            if ee is None and not self.entries:
+            if ee is None:
                 for loop in self.loops.values():
                     t = loop.t
                     loop.reset()
@@ -205,6 +216,7 @@ class Console:
             for index in indices:
                 self._put_hand(index,
                                self._view_data.oMf[self.robot.ee_frame_ids[index]].copy())
+        return ""
 
     def _put_hand(self, ee: int, pose: pin.SE3) -> None:
         """EE ``ee``'s target and gizmo both at ``pose`` (caller holds the lock)."""

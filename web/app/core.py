@@ -23,6 +23,7 @@ from pathlib import Path
 
 from controllers.base import velocity_joint_names
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.loop.task_modes import AUTO
 from teleop.plants import PlantSettings
 from teleop.robots import Robot
 
@@ -31,6 +32,7 @@ from .collisions import Collisions
 from .console import Console, EEInput
 from .devices import Devices
 from .editing import ConstraintEntry, Editing
+from .homing import Homing
 from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
 from .plant import PlantChoice, Plants
 from .recording import Recording
@@ -43,7 +45,7 @@ from .view import View
 
 
 class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings, Scenes, Recording, Tick,
-                View):
+                View, Homing):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
 
@@ -93,6 +95,11 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
         #: weight of the EE twists' angular entries (1: full poses; lower lets each
         #: instrument's orientation give way to its tip position, docs/design.md 11.2)
         self.orientation_weight = 1.0
+        #: what the operator commands of each EE (docs/design.md section 20): a mode of
+        #: ``teleop.loop.task_modes.TASK_MODES`` or ``auto``, what the ports allow
+        self.task_mode = AUTO
+        self.homing = None  # the way home followed now (:mod:`.homing`)
+        self.home_words = ""
         self.recordings = Folder(record_dir, "recording", ".jsonl")
         self.scenes = Folder(scene_dir, "scene", ".json")
         self.record_dir, self.scene_dir = self.recordings.root, self.scenes.root

@@ -2,9 +2,11 @@
 its controller; switching controllers, the ghost, and rebuilding the loops (docs/design.md
 section 5.3).
 
-A new controller, rate or orientation weight needs new loops: they are built outside the
-lock (milliseconds of work) and swapped in under it, so the control thread does not wait
-for a build.
+A new controller, rate, orientation weight or task mode needs new loops: they are built
+outside the lock (milliseconds of work) and swapped in under it, so the control thread
+does not wait for a build. A constraint placed or removed that changes what ``auto``
+resolves to (docs/design.md section 20) rebuilds them under the lock, as the controllers'
+own ``set_constraints`` rebuilds their step there.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from controllers import Controller
 from controllers.linalg import DampingPolicy
 from teleop.controller_specs import ROBOT, make_controller
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.loop.task_modes import AUTO, port_task_modes, task_modes, task_weight
 from teleop.robots import Robot
 
 from .limits import MAX_GHOST_OFFSET
@@ -56,6 +59,8 @@ class Robots:
     damping: float
     gain: float
     orientation_weight: float
+    task_mode: str
+    homing: object
     entries: dict
     specs: dict[str, str]
     loops: dict[str, TeleopLoop]
@@ -73,22 +78,41 @@ class Robots:
                    config: LoopConfig | None = None,
                    orientation_weight: float | None = None,
                    damping: float | None = None, avoidance: CollisionAvoidance | None = None,
-                   collisions_on: bool | None = None) -> TeleopLoop:
+                   collisions_on: bool | None = None, task_mode: str | None = None) -> TeleopLoop:
         """A loop of controller ``spec``: the session's constraints, period, weight,
-        damping, collision avoidance and whether the controller holds it, unless given."""
+        damping, collision avoidance, whether the controller holds it and task mode, unless
+        given. The controller's task weight is the task modes' rows (docs/design.md section
+        20) times the orientation weight on the angular entries."""
         if constraints is None:
             constraints = [e.constraint for e in self.entries.values()]
         config = config or self.config
         weight = self.orientation_weight if orientation_weight is None else orientation_weight
+        modes = self.resolved_task_modes(constraints, task_mode)
+        twist_weight = task_weight(modes) * np.tile([1.0, 1.0, 1.0, weight, weight, weight],
+                                                    len(modes))
         controller = make_controller(spec, self.robot, constraints, dt=config.dt,
-                                     twist_weight=None if weight == 1.0 else
-                                     [1.0, 1.0, 1.0, weight, weight, weight],
+                                     twist_weight=None if np.all(twist_weight == 1.0)
+                                     else twist_weight,
                                      acceleration_limit=ROBOT if self.acceleration_limits
                                      else None)
         self._apply_damping(controller, damping)
         controller.set_collisions(self._attached(avoidance, collisions_on))
         return TeleopLoop(self.robot, controller, q0=q, config=config,
-                          plant=self.plant.make(self.robot, config.dt))
+                          plant=self.plant.make(self.robot, config.dt), task_modes=modes)
+
+    def resolved_task_modes(self, constraints: list[Constraint] | None = None,
+                            task_mode: str | None = None) -> tuple[str, ...]:
+        """The task mode of each EE (docs/design.md section 20): ``task_mode`` (default:
+        the session's) for every EE, ``auto`` resolved to what the chain's constraints
+        (default: the placed ones) allow; the full pose while "Home" runs (:mod:`.homing`)."""
+        mode = self.task_mode if task_mode is None else task_mode
+        if self.homing is not None:  # the way home is followed in full pose (section 20.3)
+            mode = "pose"
+        if constraints is None:
+            constraints = [e.constraint for e in self.entries.values()]
+        if mode == AUTO:
+            return port_task_modes(self.robot, constraints)
+        return task_modes(mode, len(self.robot.ee_frames))
 
     def _apply_damping(self, controller: Controller, damping: float | None = None) -> None:
         """The operator's constant damping on a controller that damps its task
@@ -99,16 +123,32 @@ class Robots:
                                               old.threshold, old.max_damping)
 
     def _sync_constraints(self) -> None:
+        """Every loop on the placed constraints (caller holds the lock); new loops, their
+        state kept, when the task modes these resolve to changed (``auto``)."""
         constraints = [e.constraint for e in self.entries.values()]
-        for loop in self.loops.values():
-            loop.set_constraints(constraints)
+        if self.resolved_task_modes(constraints) == self.loops["main"].task_modes:
+            for loop in self.loops.values():
+                loop.set_constraints(constraints)
+            return
+        self._rebuild_in_place()
+
+    def _rebuild_in_place(self) -> None:
+        """Every loop built again from the session's settings, its state kept (caller
+        holds the lock): a ``ValueError`` changes nothing."""
+        loops = {which: self._make_loop(self.specs[which], q=loop.q.copy())
+                 for which, loop in self.loops.items()}
+        for which, loop in loops.items():
+            old = self.loops[which]
+            loop.t = old.t
+            self._continue_plant(old, loop)
+        self.loops.update(loops)
 
     def _build_inputs(self) -> tuple:
         """What a loop build reads besides its own arguments: if any of it changed while
         a build ran outside the lock, the build is redone under the lock."""
         return (tuple(id(e.constraint) for e in self.entries.values()), self.gain,
-                self.damping, self.config, self.orientation_weight, tuple(self.specs.items()),
-                id(self._attached()))
+                self.damping, self.config, self.orientation_weight, self.task_mode,
+                id(self.homing), tuple(self.specs.items()), id(self._attached()))
 
     def _rebuild(self, specs: dict[str, str], config: LoopConfig | None = None,
                  orientation_weight: float | None = None) -> None:

@@ -9,6 +9,7 @@ import threading
 from constraints import Constraint
 from constraints.validation import as_number
 from teleop.loop import LoopConfig, TeleopLoop
+from teleop.loop.task_modes import AUTO, task_mode
 
 from .limits import MAX_DAMPING, checked_rate
 
@@ -21,6 +22,7 @@ class Settings:
     gain: float
     damping: float
     orientation_weight: float
+    task_mode: str
     entries: dict
     specs: dict[str, str]
     loops: dict[str, TeleopLoop]
@@ -67,6 +69,23 @@ class Settings:
         keeps the state."""
         weight = as_number(weight, "orientation weight", 0.0, maximum=1.0)
         self._rebuild(dict(self.specs), orientation_weight=weight)
+
+    def set_task_mode(self, mode: str) -> None:
+        """What the operator commands of every EE (docs/design.md section 20): ``pose``,
+        ``position_roll`` (position and roll about the tool axis), ``position``, or
+        ``auto`` (position and roll on a chain with a port, else the full pose); the
+        rows left out go to the controllers' null space. Rebuilds the loops, keeps the
+        state; an unknown mode raises ``ValueError`` and changes nothing."""
+        if mode != AUTO:
+            task_mode(mode)  # ValueError naming the modes
+        with self._lock:
+            previous, self.task_mode = self.task_mode, mode
+        try:
+            self._rebuild(dict(self.specs))
+        except ValueError:
+            with self._lock:
+                self.task_mode = previous
+            raise
 
     def set_rate(self, rate: float) -> None:
         """Control rate (Hz), in [MIN_RATE, MAX_RATE]; rebuilds the loops (QP limits depend

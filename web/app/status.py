@@ -3,6 +3,7 @@ falling behind (docs/design.md section 5.3)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,14 +22,16 @@ BEHIND_FRACTION = 0.95
 @dataclass(frozen=True)
 class Limitation:
     """What limits a robot now: the step status (it colours the EE-target line) and why,
-    in words."""
+    in words (what part of the target is short, why and what helps, docs/design.md
+    section 20.4, the step's own words then in ``details``)."""
 
     status: str  # a StepStatus value
     words: str
     distance: float  # EE to target (m)
+    details: str = ""  # the step's own words when ``words`` says it more plainly
 
 
-def _not_following(record: StepRecord, ee: int = 0) -> bool:
+def not_following(record: StepRecord, ee: int = 0) -> bool:
     """Whether EE ``ee`` moves towards its target at less than :data:`FOLLOWING` of the
     commanded speed (or hardly at all): something keeps it from the target."""
     desired = np.asarray(record.commanded_linear_velocities[ee])
@@ -53,7 +56,7 @@ def describe_limitation(info, record: StepRecord | None, distance: float,
     if status == "constraint_degraded":
         return Limitation(status, f"constraint degraded: {info.message}", distance)
     parts = []
-    if distance > ON_TARGET and record is not None and _not_following(record, ee):
+    if distance > ON_TARGET and record is not None and not_following(record, ee):
         parts.append("target out of reach")
     if status == "least_squares" and info.message:
         parts.append(f"closest motion: {info.message}")  # it names the joints and the damping
@@ -63,7 +66,8 @@ def describe_limitation(info, record: StepRecord | None, distance: float,
     elif status == "least_squares":
         parts.append("closest motion")
     if status == "scaled":
-        parts.append(f"slowed to {100 * info.scale:.0f} % by the joint limits")
+        # floored: a scale of 0.9996 is slowed, not "slowed to 100 %"
+        parts.append(f"slowed to {math.floor(100 * info.scale)} % by the joint limits")
     if not parts:
         parts.append(f"moving to the target ({1e3 * distance:.1f} mm away)"
                      if distance > ON_TARGET else "on target")

@@ -74,6 +74,7 @@ class Tick:
                 self._steer(moving, dt)
             if self.devices:
                 self._apply_devices(dt)
+            self._follow_homing()
             targets, start = [hand.target for hand in self.inputs], self.now
             held: dict[str, CollisionRows] = {}
             pending = {which: self._advance(which, loop, targets, held)

@@ -19,7 +19,8 @@ from .collisions import ObstacleEntry
 from .console import EEInput
 from .editing import ConstraintEntry
 from .plant import PlantChoice
-from .status import Limitation, describe_limitation
+from .shortfall import asked_angle, explained, ports_on_chain, shortfall_words
+from .status import Limitation, describe_limitation, not_following
 from .trace import Trace
 
 
@@ -53,10 +54,26 @@ class View:
 
     def _limitation(self, which: str, placement: pin.SE3, ee: int) -> Limitation:
         loop = self.loops[which]
-        distance = float(np.linalg.norm(placement.translation
-                                        - self.inputs[ee].target.translation))
-        return describe_limitation(loop.controller.info, self.last_records.get(which),
-                                   distance, self.joint_names, loop.refused, ee)
+        target = self.inputs[ee].target
+        constraints = {entry.id: entry.constraint for entry in self.entries.values()}
+        return self._described(loop.controller.info, self.last_records.get(which), placement,
+                               target, loop.refused, ee, loop.task_modes[ee], constraints,
+                               self.homing_words())
+
+    def _described(self, info, record: StepRecord | None, placement: pin.SE3,
+                   target: pin.SE3, refused: str, ee: int, mode: str,
+                   constraints: dict[str, Constraint], homing: str) -> Limitation:
+        """What keeps EE ``ee`` at ``placement`` from ``target`` in task mode ``mode``:
+        the step's words (:func:`describe_limitation`) said plainly
+        (:func:`web.app.shortfall.explained`: what "Home" does, what part of the target
+        is short, why, what helps)."""
+        distance = float(np.linalg.norm(placement.translation - target.translation))
+        limitation = describe_limitation(info, record, distance, self.joint_names, refused, ee)
+        stalled = record is not None and not_following(record, ee)
+        ports = ports_on_chain(self.robot.model, self.robot.ee_frame_ids[ee], constraints)
+        shortfall = shortfall_words(mode, distance, asked_angle(mode, placement, target),
+                                    stalled, info, self.joint_names, ports)
+        return explained(limitation, shortfall, homing)
 
     def active_inequalities(self, which: str = "main") -> list[str]:
         """Ids of the one-sided constraints robot ``which``'s controller holds as
@@ -136,6 +153,7 @@ class View:
                 "links": links, "record": self.last_records.get(which),
                 "columns": self.traces[which].columns() if history else None,
                 "info": loop.controller.info, "refused": loop.refused,
+                "task_modes": loop.task_modes, "homing": self.homing_words(),
                 "active_inequalities": self.active_inequalities(which),
                 "active_pairs": self.active_pairs(which),
                 # the rows its controller computed last (immutable), or None
@@ -159,11 +177,10 @@ class View:
                 "link_placement": placement,
                 "link_axis": None if axis is None else placement.rotation @ axis}
         info, record, refused = state["info"], state["record"], state.pop("refused")
-        limitations = [
-            describe_limitation(info, record, float(np.linalg.norm(ee.translation
-                                                                   - target.translation)),
-                                self.joint_names, refused, index)
-            for index, (ee, target) in enumerate(zip(state["ees"], targets))]
+        modes, homing = state["task_modes"], state.pop("homing")
+        limitations = [self._described(info, record, ee, target, refused, index, modes[index],
+                                       constraints, homing)
+                       for index, (ee, target) in enumerate(zip(state["ees"], targets))]
         columns = state.pop("columns")
         return {**state, "ee": state["ees"][0],  # every EE, the first
                 "trace": None if columns is None else Trace.arrays_of(columns),

@@ -129,8 +129,10 @@ class Panels:
             self._move_gizmo_handle(hand.gizmo, index)
 
     def _home(self) -> None:
-        self.app.home()
+        words = self.app.home()
         self._move_gizmo_handles()
+        if words:  # home cannot be reached through the constraints: say why
+            self.notify(None, "Home not reachable", words, color="yellow")
 
     def _nudge(self) -> None:
         """The active arm's target moved by the nudge step along the button's axis, its
