@@ -134,6 +134,7 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
 
 def test_the_ee_target_line_takes_the_step_status_colour(ui):
     app = ui.app
+    app.set_task_mode("pose")  # position and roll reach this target (the default with a hole)
     app.add_constraint("hole", distance=0.08)
     draw(ui)
     assert ui.reach_line.visible is False  # on target: nothing to show
@@ -142,12 +143,13 @@ def test_the_ee_target_line_takes_the_step_status_colour(ui):
     run(app, 6.0)
     snapshot = draw(ui)
     limitation = snapshot["robots"]["main"]["limitation"]
-    assert limitation.status == "least_squares" and "target out of reach" in limitation.words
+    assert limitation.status == "least_squares" and "target out of reach" in limitation.details
+    assert "short of the target" in limitation.words  # the part, the cause, the action
     assert ui.reach_line.visible is True
     np.testing.assert_allclose(ui.reach_line.points[0, 1], app.target.translation, atol=1e-6)
     np.testing.assert_allclose(ui.reach_line.colors[0, 0], STATUS_COLORS["least_squares"])
     assert ui.target_marker.visible is True  # drawn apart from the gizmo
-    assert "target out of reach" in ui.status.content
+    assert "short of the target" in ui.status.content
 
 
 def test_plots_are_finite_with_units_and_follow_the_ghost(ui):

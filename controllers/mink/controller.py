@@ -162,10 +162,8 @@ class MinkController(GuardedController):
         self.budget = StepBudget(time_budget, self.dt)
         self.policy = DampingPolicy(0.0, as_number(singular_threshold, "singular_threshold", 0.0),
                                     as_number(max_damping, "max_damping", 0.0))
-        self.twist_weight = as_twist_weight(twist_weight, self.task_size)
-        self._twist_scale = np.sqrt(self.twist_weight)  # W^1/2: each frame task's costs
-        self._twist_rows = self._twist_scale[:, None]  # W^1/2, to scale the rows of J_e
-        self._unit_weight = bool(np.all(self.twist_weight == 1.0))
+        self.ee_tasks: list[mink.FrameTask] = []
+        self.twist_weight = twist_weight
         if solver not in qpsolvers.available_solvers:
             raise ValueError(
                 f"QP solver {solver!r} is not available to mink; installed: "
@@ -225,13 +223,30 @@ class MinkController(GuardedController):
                                         difference=self.posture_difference)
         self._tasks = [*self.ee_tasks, self.posture_task] if self.posture_cost else self.ee_tasks
         self.damping_task = DampingTask(self.task_size, self.mj_model.nv)
-        #: the task rows the damping sees: those of non-zero weight, as the CJM's
-        self._weighted_rows = np.flatnonzero(self.twist_weight > 0.0)
         self._equality_caches: list[RowsCache] = []
         self.constraint_tasks: list[ConstraintTask] = []
         self.barrier_limits: list[BarrierLimit] = []
         self._limits: list[mink.Limit] = list(self._base_limits)
         self.set_constraints(constraints)
+
+    @property
+    def twist_weight(self) -> np.ndarray:
+        """Diagonal weight ``W`` of the twist error (task_size,); assign a new one to change
+        it (a task mode, docs/design.md section 20): each frame task's costs follow."""
+        return self._twist_weight
+
+    @twist_weight.setter
+    def twist_weight(self, twist_weight) -> None:
+        weight = as_twist_weight(twist_weight, self.task_size)
+        self._twist_weight = weight
+        self._twist_scale = np.sqrt(weight)  # W^1/2: each frame task's costs
+        self._twist_rows = self._twist_scale[:, None]  # W^1/2, to scale the rows of J_e
+        self._unit_weight = bool(np.all(weight == 1.0))
+        #: the task rows the damping sees: those of non-zero weight, as the CJM's
+        self._weighted_rows = np.flatnonzero(weight > 0.0)
+        for i, task in enumerate(self.ee_tasks):
+            task.set_position_cost(self._twist_scale[6 * i:6 * i + 3])
+            task.set_orientation_cost(self._twist_scale[6 * i + 3:6 * i + 6])
 
     def _build_mujoco(self) -> None:
         """The MuJoCo model (with the avoidance's shapes, :class:`CollisionScene`), its

@@ -170,13 +170,7 @@ class QPController(GuardedController):
                          **user_settings}
         #: how close to its bound a collision row counts as held (m/s): the backend's accuracy
         self._at_bound = max(AT_BOUND, float(self.settings.get("eps_abs", 0.0)))
-        weight = as_twist_weight(twist_weight, self.task_size)
-        self.twist_weight = weight
-        self._twist_scale = np.sqrt(weight)
-        self._twist_rows = self._twist_scale[:, None]  # W^1/2, to scale the rows of J_e
-        self._unit_weight = bool(np.all(weight == 1.0))
-        #: the task rows the damping sees: those of non-zero weight, as the CJM's
-        self._weighted_rows = np.flatnonzero(weight > 0.0)
+        self.twist_weight = twist_weight
         self._assembly = TaskAssembly(self.model.nv)
         # proxqp and daqp are called directly (persistent proxqp objects; daqp.solve),
         # the other backends through qpsolvers. Settings a direct call cannot apply
@@ -198,6 +192,22 @@ class QPController(GuardedController):
             self._proxqp.reset()
 
     # -- the step ----------------------------------------------------------------------
+
+    @property
+    def twist_weight(self) -> np.ndarray:
+        """Diagonal weight ``W`` of the twist error (task_size,); assign a new one to change
+        it (a task mode, docs/design.md section 20)."""
+        return self._twist_weight
+
+    @twist_weight.setter
+    def twist_weight(self, twist_weight) -> None:
+        weight = as_twist_weight(twist_weight, self.task_size)
+        self._twist_weight = weight
+        self._twist_scale = np.sqrt(weight)
+        self._twist_rows = self._twist_scale[:, None]  # W^1/2, to scale the rows of J_e
+        self._unit_weight = bool(np.all(weight == 1.0))
+        #: the task rows the damping sees: those of non-zero weight, as the CJM's
+        self._weighted_rows = np.flatnonzero(weight > 0.0)
 
     def posture_velocity(self, q: np.ndarray) -> np.ndarray:
         """``posture_gain * (posture (-) q)`` (nv,): the CJM's posture velocity."""

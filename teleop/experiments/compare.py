@@ -149,6 +149,9 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
             constraints = changed
             plant.apply_wall(constraints)
             loop.set_constraints(constraints)
+        modes = plan.task_modes(t)
+        if modes is not None and modes != loop.task_modes:
+            loop.set_task_modes(modes)
         record = loop.tick(plan.target(t + config.dt), advance_geometry)
         records.append(record)
         drive.commands.append(loop.last_qd.copy())
@@ -265,6 +268,15 @@ class ShadowedController:
     def set_constraints(self, constraints: Sequence[Constraint]) -> None:
         for controller in (self.reference, *self.shadows.values()):
             controller.set_constraints(list(constraints))
+
+    @property
+    def twist_weight(self) -> np.ndarray:
+        return self.reference.twist_weight
+
+    @twist_weight.setter
+    def twist_weight(self, twist_weight: np.ndarray) -> None:
+        for controller in (self.reference, *self.shadows.values()):
+            controller.twist_weight = twist_weight
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         try:

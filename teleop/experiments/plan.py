@@ -38,6 +38,8 @@ class Plan:
         :meth:`make_collisions` builds a fresh one per controller and per measure.
     constraint_gain : the drift-feedback gain (1/s) every constraint is given
         (:meth:`with_constraint_gain`), None: each keeps its own.
+    task_modes : what the operator commands of each EE at time ``t`` (docs/design.md
+        section 20: one mode per EE), None: as before (the full pose at the start).
     """
 
     name: str
@@ -51,6 +53,7 @@ class Plan:
     description: str = ""
     collisions: dict | None = None
     constraint_gain: float | None = None
+    task_modes: Callable[[float], tuple[str, ...] | None] = field(default=lambda t: None)
 
     def make_collisions(self) -> CollisionAvoidance | None:
         """A fresh collision avoidance on the plan's robot with its own obstacles, or None."""

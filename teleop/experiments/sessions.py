@@ -32,6 +32,10 @@ Format (one JSON object per line, times ``t`` in seconds from the start, world f
   device's counts (received, applied, dropped by reason...) and the arrival-to-command
   latency of the commands since its previous line (docs/design.md section 19.2); a
   replay reads past it.
+* ``{"type": "task_modes", "t": 0.0, "modes": ["position_roll"]}`` - version 5: what the
+  operator commands of each EE from then on (docs/design.md section 20; one mode per
+  entry of ``ee_frames``); before the first, or without any, the full pose. A replay
+  follows them.
 * ``{"type": "end", "t": 10.0}`` - optional; the session's duration.
 """
 
@@ -55,6 +59,7 @@ from teleop.json_text import parse_json
 from teleop.limits import (MAX_DURATION_S, MAX_POSE_GAIN, MAX_POSITION_M, MAX_RATE_HZ,
                            MAX_SPEED_M_S, MAX_STEPS, MAX_TIME_CONSTANT_S)
 from teleop.loop import target_poses
+from teleop.loop.task_modes import task_mode, task_modes
 from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED, advance, steer
 from teleop.robots import Robot, load_robot
 
@@ -62,11 +67,11 @@ from .plan import Plan, home_poses
 from teleop.plants.choice import PlantChoice
 
 FORMAT = "cjm-teleop-session"
-VERSION = 4
+VERSION = 5
 #: the versions :func:`load_session` reads (1: a single EE, no root joint or locked joints;
-#: 2: no collision avoidance)
-READABLE_VERSIONS = (1, 2, 3, 4)
-EVENT_TYPES = ("target", "add", "move", "remove", "input", "end")
+#: 2: no collision avoidance; 3: no input lines; 4: no task modes, the full pose)
+READABLE_VERSIONS = (1, 2, 3, 4, 5)
+EVENT_TYPES = ("target", "add", "move", "remove", "input", "task_modes", "end")
 #: events within this of a tick's time belong to that tick (float time stamps)
 TIME_EPSILON = 1e-9
 
@@ -183,6 +188,11 @@ class SessionRecorder:
 
     def remove(self, t: float, constraint_id: str) -> None:
         self._write({"type": "remove", "t": self._stamp(t), "id": str(constraint_id)})
+
+    def task_modes(self, t: float, modes: Sequence[str]) -> None:
+        """What the operator commands of each EE from ``t`` on (one mode per EE)."""
+        self._write({"type": "task_modes", "t": self._stamp(t),
+                     "modes": list(task_modes(list(modes), len(self.ee_frames)))})
 
     def close(self, t: float | None = None) -> None:
         """Write the ``end`` line (at ``t``, default the last event) and close the file."""
@@ -405,6 +415,12 @@ def _check_event(event: dict) -> None:
             raise ValueError("'remove' needs a string 'id'")
     elif kind == "input" and not isinstance(event.get("source"), str):
         raise ValueError("'input' needs a string 'source'")
+    elif kind == "task_modes":
+        modes = event.get("modes")
+        if not isinstance(modes, list) or not modes:
+            raise ValueError(f"'task_modes' needs a list of modes, got {short_repr(modes)}")
+        for mode in modes:
+            task_mode(mode)
 
 
 def session_robot(session: Session) -> Robot:
@@ -497,7 +513,17 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
             raise SessionError(f"{session.path}:{event['_line']}: unknown EE frame "
                                f"{event['frame']!r}; the robot's: {list(robot.ee_frames)}")
     edits = [e for e in session.events if e["type"] in ("add", "move", "remove")]
+    mode_events = [e for e in session.events if e["type"] == "task_modes"]
+    for event in mode_events:
+        if len(event["modes"]) != len(robot.ee_frames):
+            raise SessionError(f"{session.path}:{event['_line']}: {len(event['modes'])} task "
+                               f"modes for {len(robot.ee_frames)} end effectors")
+    mode_times = np.array([e["t"] for e in mode_events])
     state: dict = {}
+
+    def modes_at(t: float) -> tuple[str, ...] | None:
+        index = int(np.searchsorted(mode_times, t + TIME_EPSILON, side="right")) - 1
+        return None if index < 0 else tuple(mode_events[index]["modes"])
 
     def make_constraints() -> list[Constraint]:
         state.update(cursor=0, by_id={}, goals={}, t=None,
@@ -550,4 +576,5 @@ def session_plan(session: Session, robot: Robot | None = None) -> Plan:
 
     return Plan(name=session.path.stem, robot=robot, q0=q0, duration=session.duration,
                 make_constraints=make_constraints, target=target, update=update,
-                description=f"recorded session {session.path.name}", collisions=collisions)
+                description=f"recorded session {session.path.name}", collisions=collisions,
+                task_modes=modes_at)

@@ -46,7 +46,7 @@ from .naming import constraint_names, row_labels
 from .records import CompiledPendingStep, PendingStep, StepRecord
 from .supervisor import Supervision, Supervisor, SupervisorConfig
 from .targets import Targets, saturate_twist, target_poses
-from .task_modes import fit_target, task_modes as checked_task_modes
+from .task_modes import fit_target, task_modes as checked_task_modes, task_weight
 from .true_kinematics import TrueKinematics
 
 @dataclass(frozen=True)
@@ -141,12 +141,9 @@ class TeleopLoop:
         calibration error, docs/design.md section 15.1); the measures take them
         (:class:`~teleop.loop.true_kinematics.TrueKinematics`), the controller and the hot
         path keep the model. None: the model is the robot.
-    task_modes : what the operator commands of each EE (docs/design.md section 20): one
-        mode for every EE or one per EE (``pose``, ``position_roll``, ``position``); each
-        target is fitted to its mode (:func:`~teleop.loop.task_modes.fit_target`) before
-        the filter. Build the controller with the modes' rows as its task weight
-        (:func:`~teleop.loop.task_modes.task_weight`): the free rows are then left to its
-        null space (a positive weight there holds the orientation softly).
+    task_modes : what the operator commands of each EE (docs/design.md section 20), one
+        mode or one per EE; each target is fitted to its mode before the filter. The
+        controller is built with their rows as its weight, or :meth:`set_task_modes`.
 
     Targets (:data:`Targets`) are one ``pin.SE3`` per entry of ``robot.ee_frames``, in
     that order; a single-EE robot also takes the pose alone.
@@ -226,6 +223,15 @@ class TeleopLoop:
         self.controller.set_constraints(list(constraints))
         if self.distance_meter is not None:
             self.distance_meter.set_constraints(self.constraints)
+
+    def set_task_modes(self, task_modes: str | Sequence[str],
+                       twist_weight: np.ndarray | None = None) -> None:
+        """What the operator commands of each EE from now on (docs/design.md section 20),
+        the controller's task weight with it: ``twist_weight``, or the modes' rows
+        (:func:`~teleop.loop.task_modes.task_weight`). ``ValueError`` changes nothing."""
+        modes = checked_task_modes(task_modes, len(self.ee_frame_ids))
+        self.controller.twist_weight = task_weight(modes) if twist_weight is None else twist_weight
+        self.task_modes, self._fitting = modes, any(mode != "pose" for mode in modes)
 
     def ee_placement(self, q: np.ndarray | None = None) -> pin.SE3:
         """World placement of the first EE at ``q`` (default: the current state)."""

@@ -40,7 +40,8 @@ MAX_SAMPLES = 20000
 @dataclass(frozen=True)
 class HomePath:
     """A path towards home: its configurations (samples x nq, the first where the robot
-    is), whether it ends at home, and why not in words (empty when it does)."""
+    is, the last home itself when it is ``reached``), whether it ends at home, and why
+    not in words (empty when it does)."""
 
     configurations: np.ndarray
     reached: bool
@@ -89,8 +90,8 @@ def plan_home_path(model: pin.Model, q: np.ndarray, home: np.ndarray,
         current = path[-1]
         A, b = _rows(model, data, current, constraints, frames)
         towards = pin.difference(model, current, home)
-        if np.max(np.abs(towards)) < HOME_TOLERANCE:
-            return HomePath(np.array(path), True, "")
+        if np.max(np.abs(towards)) < HOME_TOLERANCE:  # the last sample home itself
+            return HomePath(np.array(path[:-1] + [np.array(home, dtype=float)]), True, "")
         if A.shape[0]:
             _, singular, vt = np.linalg.svd(A)
             rank = int(np.sum(singular > 1e-10 * max(1.0, singular[0])))

@@ -88,15 +88,15 @@ def task_weight(names: Sequence[str]) -> np.ndarray:
 
 
 def roll_angle(rotation: np.ndarray) -> float:
-    """The angle of ``rotation``'s twist about z in its swing-twist decomposition
-    ``R = S Rz(phi)`` (``S`` about an axis perpendicular to z): ``phi = 2 atan2(q_z, q_w)``
-    of its unit quaternion; 0 where the twist is undefined (a half turn of swing,
-    ``q_w = q_z = 0``)."""
+    """The angle in [-pi, pi] of ``rotation``'s twist about z in its swing-twist
+    decomposition ``R = S Rz(phi)`` (``S`` about an axis perpendicular to z):
+    ``phi = 2 atan2(q_z, q_w)`` of its unit quaternion, wrapped; 0 where the twist is
+    undefined (a half turn of swing, ``q_w = q_z = 0``)."""
     quaternion = pin.Quaternion(rotation)
     w, z = quaternion.w, quaternion.z
     if math.hypot(w, z) < 1e-12:
         return 0.0
-    return 2.0 * math.atan2(z, w)
+    return math.remainder(2.0 * math.atan2(z, w), 2.0 * math.pi)
 
 
 def fit_target(name: str, target: pin.SE3, placement: pin.SE3) -> pin.SE3:

@@ -16,8 +16,13 @@ import numpy as np
 import pinocchio as pin
 
 from teleop.loop import LoopConfig, TeleopLoop
-from teleop.loop.homing import path_poses, path_times, plan_home_path
+from teleop.loop.homing import HOME_TOLERANCE, path_poses, path_times, plan_home_path
 from teleop.robots import Robot
+
+
+#: After its last sample, the way home ends when the main robot is there (within
+#: :data:`~teleop.loop.homing.HOME_TOLERANCE` of it), or this many seconds later (s)
+HOME_SETTLE = 2.0
 
 
 @dataclass(frozen=True)
@@ -30,6 +35,7 @@ class HomeRun:
     times: np.ndarray
     start: float
     words: str
+    end: np.ndarray  # the last configuration of the path
 
 
 class Homing:
@@ -58,16 +64,18 @@ class Homing:
             poses = path_poses(model, path.configurations, self.robot.ee_frame_ids)
             times = path_times(model, path.configurations, poses,
                                self.config.max_linear_speed, self.config.max_angular_speed)
-            self.homing = HomeRun(poses, times, self.now, path.words)
+            self.homing = HomeRun(poses, times, self.now, path.words,
+                                  path.configurations[-1])
             self.home_words = path.words
-        self._rebuild(dict(self.specs))  # the loops in full pose while it runs
-        return path.words
+            self._apply_task_modes()  # the loops in full pose while it runs
+            return path.words
 
     def _follow_homing(self) -> None:
         """The targets on the way home at the app's time (caller holds the lock, once a
         period before the loops advance; the gizmos stay, whose next motion moves the
-        targets from there); at its end, on its last sample, and the session's task mode
-        back."""
+        targets from there); once the main robot is at its last sample (or
+        :data:`HOME_SETTLE` after it is due there), the targets stay there and the
+        session's task mode returns."""
         run = self.homing
         if run is None:
             return
@@ -76,7 +84,8 @@ class Homing:
         for ee, pose in enumerate(run.poses[min(index, len(run.poses) - 1)]):
             self.inputs[ee].target = pose.copy()  # the gizmo stays: its next move is relative
             self._record_target(ee)
-        if elapsed >= run.times[-1]:
+        arrived = np.max(np.abs(self.loops["main"].q - run.end)) < HOME_TOLERANCE
+        if elapsed >= run.times[-1] and (arrived or elapsed >= run.times[-1] + HOME_SETTLE):
             self._end_homing()
 
     def _end_homing(self) -> None:
@@ -85,7 +94,7 @@ class Homing:
         if self.homing is None:
             return
         self.homing = None
-        self._rebuild_in_place()
+        self._apply_task_modes()
 
     def homing_words(self) -> str:
         """What "Home" is doing or why it stopped short, in words; ``""`` otherwise."""

@@ -49,6 +49,7 @@ class Recording:
             self._record_start = self.now
             for entry in self.entries.values():
                 self.recorder.add(0.0, entry.id, entry.constraint)
+            self.recorder.task_modes(0.0, self.loops["main"].task_modes)
             for index in range(len(self.inputs)):
                 self._record_target(index)
             return self.recorder.path

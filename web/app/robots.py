@@ -2,11 +2,10 @@
 its controller; switching controllers, the ghost, and rebuilding the loops (docs/design.md
 section 5.3).
 
-A new controller, rate, orientation weight or task mode needs new loops: they are built
-outside the lock (milliseconds of work) and swapped in under it, so the control thread
-does not wait for a build. A constraint placed or removed that changes what ``auto``
-resolves to (docs/design.md section 20) rebuilds them under the lock, as the controllers'
-own ``set_constraints`` rebuilds their step there.
+A new controller, rate or orientation weight needs new loops: they are built outside the
+lock (milliseconds of work) and swapped in under it, so the control thread does not wait
+for a build. A new task mode (docs/design.md section 20), chosen or resolved by ``auto``
+from the constraints placed, changes every loop's in place (:meth:`TeleopLoop.set_task_modes`).
 """
 
 from __future__ import annotations
@@ -88,8 +87,7 @@ class Robots:
         config = config or self.config
         weight = self.orientation_weight if orientation_weight is None else orientation_weight
         modes = self.resolved_task_modes(constraints, task_mode)
-        twist_weight = task_weight(modes) * np.tile([1.0, 1.0, 1.0, weight, weight, weight],
-                                                    len(modes))
+        twist_weight = self._twist_weight(modes, weight)
         controller = make_controller(spec, self.robot, constraints, dt=config.dt,
                                      twist_weight=None if np.all(twist_weight == 1.0)
                                      else twist_weight,
@@ -99,6 +97,25 @@ class Robots:
         controller.set_collisions(self._attached(avoidance, collisions_on))
         return TeleopLoop(self.robot, controller, q0=q, config=config,
                           plant=self.plant.make(self.robot, config.dt), task_modes=modes)
+
+    @staticmethod
+    def _twist_weight(modes: tuple[str, ...], orientation_weight: float) -> np.ndarray:
+        """The controllers' task weight: the modes' rows, the angular ones times the
+        orientation weight."""
+        angular = orientation_weight
+        return task_weight(modes) * np.tile([1.0, 1.0, 1.0, angular, angular, angular],
+                                            len(modes))
+
+    def _apply_task_modes(self) -> None:
+        """Every loop on the task modes the session resolves to now, when they changed
+        (caller holds the lock); a recording gets them."""
+        modes = self.resolved_task_modes()
+        if modes == self.loops["main"].task_modes:
+            return
+        for loop in self.loops.values():
+            loop.set_task_modes(modes, self._twist_weight(modes, self.orientation_weight))
+        if self.recorder is not None:
+            self.recorder.task_modes(self.recording_time, modes)
 
     def resolved_task_modes(self, constraints: list[Constraint] | None = None,
                             task_mode: str | None = None) -> tuple[str, ...]:
@@ -123,25 +140,12 @@ class Robots:
                                               old.threshold, old.max_damping)
 
     def _sync_constraints(self) -> None:
-        """Every loop on the placed constraints (caller holds the lock); new loops, their
-        state kept, when the task modes these resolve to changed (``auto``)."""
+        """Every loop on the placed constraints and the task modes they resolve to
+        (``auto``; caller holds the lock)."""
         constraints = [e.constraint for e in self.entries.values()]
-        if self.resolved_task_modes(constraints) == self.loops["main"].task_modes:
-            for loop in self.loops.values():
-                loop.set_constraints(constraints)
-            return
-        self._rebuild_in_place()
-
-    def _rebuild_in_place(self) -> None:
-        """Every loop built again from the session's settings, its state kept (caller
-        holds the lock): a ``ValueError`` changes nothing."""
-        loops = {which: self._make_loop(self.specs[which], q=loop.q.copy())
-                 for which, loop in self.loops.items()}
-        for which, loop in loops.items():
-            old = self.loops[which]
-            loop.t = old.t
-            self._continue_plant(old, loop)
-        self.loops.update(loops)
+        for loop in self.loops.values():
+            loop.set_constraints(constraints)
+        self._apply_task_modes()
 
     def _build_inputs(self) -> tuple:
         """What a loop build reads besides its own arguments: if any of it changed while

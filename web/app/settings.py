@@ -74,18 +74,13 @@ class Settings:
         """What the operator commands of every EE (docs/design.md section 20): ``pose``,
         ``position_roll`` (position and roll about the tool axis), ``position``, or
         ``auto`` (position and roll on a chain with a port, else the full pose); the
-        rows left out go to the controllers' null space. Rebuilds the loops, keeps the
-        state; an unknown mode raises ``ValueError`` and changes nothing."""
+        rows left out go to the controllers' null space. Every loop changes in place; an
+        unknown mode raises ``ValueError`` and changes nothing."""
         if mode != AUTO:
             task_mode(mode)  # ValueError naming the modes
         with self._lock:
-            previous, self.task_mode = self.task_mode, mode
-        try:
-            self._rebuild(dict(self.specs))
-        except ValueError:
-            with self._lock:
-                self.task_mode = previous
-            raise
+            self.task_mode = mode
+            self._apply_task_modes()
 
     def set_rate(self, rate: float) -> None:
         """Control rate (Hz), in [MIN_RATE, MAX_RATE]; rebuilds the loops (QP limits depend

@@ -47,7 +47,7 @@ def shortfall_words(mode: str, position_error: float, angle_error: float, stalle
     ``position_error`` (m) and ``angle_error`` (rad, :func:`asked_angle`) are what is left;
     ``stalled`` whether the EE no longer approaches its target; ``info`` the controller's
     :class:`controllers.SolveInfo`; ``ports`` the names of the equalities on the EE's
-    chain that take two freedoms or more (a hole)."""
+    chain that take two freedoms or more (a port)."""
     parts = []
     if position_error > ON_TARGET and stalled:
         parts.append(f"position {1e3 * position_error:.1f} mm")
@@ -79,7 +79,7 @@ def ports_on_chain(model: pin.Model, ee_frame_id: int,
                    constraints: Mapping[str, Constraint]) -> list[str]:
     """The names (keys of ``constraints``) of the equalities on the chain of the EE at
     ``ee_frame_id`` that take :data:`~teleop.loop.task_modes.PORT_DIRECTIONS` freedoms or
-    more (a hole's port)."""
+    more (a port)."""
     supports = model.supports[model.frames[ee_frame_id].parentJoint]
     return [name for name, constraint in constraints.items()
             if constraint.is_equality and constraint.dim >= PORT_DIRECTIONS

@@ -9,11 +9,15 @@ import pinocchio as pin
 import viser
 
 from teleop.controller_specs import default_specs
+from teleop.loop.task_modes import AUTO, TASK_MODES
 
 from ..app import TeleopApp
 from .shapes import wxyz_of
 
 CONTROLLER_CHOICES = default_specs("ui")  # the dropdowns (plus a spec given on the command line)
+#: the task mode menu (docs/design.md section 20): what the operator reads -> the mode
+TASK_MODE_CHOICES = {"what the ports allow (auto)": AUTO,
+                     **{mode.words: name for name, mode in TASK_MODES.items()}}
 NUDGES = {"-x": (-1, 0, 0), "+x": (1, 0, 0), "-y": (0, -1, 0), "+y": (0, 1, 0),
           "-z": (0, 0, -1), "+z": (0, 0, 1)}
 
@@ -57,8 +61,13 @@ class Panels:
                                          step=0.0005)
         self.nudge_buttons = gui.add_button_group("nudge target", tuple(NUDGES))
         self.gizmo_button = gui.add_button("Gizmo to target")
-        self.home_button = gui.add_button("Home", hint="every target to its home pose; the "
-                                          "constraints stay")
+        self.home_button = gui.add_button("Home", hint="the robot home through the "
+                                          "constraints (they stay), or why it cannot")
+        self.task_mode_menu = gui.add_dropdown(
+            "command", tuple(TASK_MODE_CHOICES), initial_value=self._task_mode_label(),
+            hint="what the target asks of each end effector; auto: position and roll "
+                 "about the tool axis with a port on the arm (what a port allows), else "
+                 "the full pose; the rest is left to the joints' free motion")
 
         self.controller_menu.on_update(lambda event: self._guarded(
             event, lambda: app.set_controller(self.controller_menu.value), key="controller",
@@ -80,6 +89,14 @@ class Panels:
         self.nudge_buttons.on_click(lambda event: self._guarded(event, self._nudge))
         self.gizmo_button.on_click(lambda event: self._guarded(event, self._gizmo_to_target))
         self.home_button.on_click(lambda event: self._guarded(event, self._home))
+        self.task_mode_menu.on_update(lambda event: self._guarded(
+            event, lambda: app.set_task_mode(TASK_MODE_CHOICES[self.task_mode_menu.value]),
+            key="task mode"))
+
+    def _task_mode_label(self) -> str:
+        """The menu's label of the session's task mode."""
+        return next(label for label, mode in TASK_MODE_CHOICES.items()
+                    if mode == self.app.task_mode)
 
     def _build_settings_panel(self) -> None:
         gui, app = self.server.gui, self.app
@@ -191,6 +208,7 @@ class Panels:
         self.gain_slider.value = app.gain
         self.damping_slider.value = app.damping
         self.orientation_slider.value = app.orientation_weight
+        self.task_mode_menu.value = self._task_mode_label()
         self.rate_number.value = app.config.rate
 
     def _toggle_recording(self) -> None:
