@@ -221,7 +221,8 @@ def test_sessions_round_trip_the_collision_avoidance(tmp_path):
     plan = load_scenario("obstacle")
     path = record_plan(plan, tmp_path / "s.jsonl", duration=0.05)
     header = json.loads(path.read_text().splitlines()[0])
-    assert header["version"] == 4  # 3 brought the collisions, 4 the input devices' lines
+    # 3 brought the collisions, 4 the input devices' lines, 5 the task modes
+    assert header["version"] == 5
     replayed = session_plan(load_session(path))
     assert replayed.collisions == plan.collisions
     obstacle = replayed.make_collisions().obstacles[0]

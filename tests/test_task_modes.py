@@ -21,6 +21,7 @@ from teleop.loop.homing import plan_home_path
 from teleop.loop.task_modes import (TASK_MODES, fit_target, port_task_modes, roll_angle,
                                     task_modes, task_weight)
 from web.app import TeleopApp
+from web.app.status import Limitation, summary_words
 
 from conftest import ee_jacobian, kinematics, near_home
 from strategies import placements, unit3
@@ -242,6 +243,7 @@ def test_a_5_cm_drag_through_a_hole_on_link_6_reaches_the_target_and_home(
     for which in ("main", "ghost"):
         reached = app.limitation(which)
         assert reached.distance < 1e-3 and "short of the target" not in reached.words, which
+    assert app.limitation().details == ""  # the step's words are not needed: nothing short
     assert app.home() == ""
     while app.homing is not None:
         app.step()
@@ -275,3 +277,12 @@ def test_a_session_replays_its_task_modes(sda10f, tmp_path):
                       config=LoopConfig())
     loop.set_task_modes(plan.task_modes(0.0))
     assert loop.controller.twist_weight.tolist() == [1, 1, 1, 0, 0, 0]
+
+
+def test_the_status_line_keeps_the_short_part_and_the_action():
+    words = ("position 30.2 mm short of the target: hole-1 takes two of the arm's freedoms and "
+             "the full pose six more, which leaves the arm none to spare here; set the task "
+             "mode to position and roll about the tool axis (what a port allows)")
+    assert summary_words(Limitation("least_squares", words, 0.0302)) == (
+        "position 30.2 mm short: set the task mode to position and roll about the tool axis "
+        "(what a port allows)")

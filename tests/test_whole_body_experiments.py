@@ -100,8 +100,8 @@ def test_a_session_with_two_targets_replays_the_plan_to_float_precision(tmp_path
     lines = [json.loads(line) for line in path.read_text().splitlines()]
     header = lines[0]
     # written at the current version (3 since the header may carry collision avoidance,
-    # 4 since input devices write their lines)
-    assert header["version"] == 4 and header["ee_frames"] == list(plan.robot.ee_frames)
+    # 4 since input devices write their lines, 5 since task modes do)
+    assert header["version"] == 5 and header["ee_frames"] == list(plan.robot.ee_frames)
     assert header["root_joint"] == "fixed" and header["locked_joints"] == {}
     targets = [line for line in lines if line["type"] == "target"]
     assert len(targets) == 600

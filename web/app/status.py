@@ -110,7 +110,11 @@ def port_words(ports: list[PortReading]) -> str:
 def summary_words(limitation: Limitation) -> str:
     """The few plain words of what an end effector does, for the status line: the first
     reason :func:`describe_limitation` gives (its details stay in the full status), with
-    how far the target is when it is not reached (docs/design.md section 5.3)."""
+    how far the target is when it is not reached (docs/design.md section 5.3); for a
+    part of the target that is short, that part and the action that helps (section 20.4)."""
+    part, short, rest = limitation.words.partition(" short of the target: ")
+    if short:  # a shortfall (docs/design.md 20.4): what is short and the action that helps
+        return f"{part} short: {rest.rpartition('; ')[2]}"
     first = limitation.words.split(";")[0].split(":")[0].strip()
     if limitation.distance > ON_TARGET and "away" not in first:
         return f"{first}, {1e3 * limitation.distance:.1f} mm from the target"
