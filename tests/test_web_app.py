@@ -517,6 +517,7 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     (lambda s: s["constraints"].append({"id": "x-1", "constraint": {"kind": "trocar"}}),
      r"constraints\[1\]: unknown constraint kind"),
     (lambda s: s.update(gain=5000.0), "unstable at 1000 Hz"),
+    (lambda s: s.update(task_mode="roll"), "unknown task mode 'roll'"),
 ])
 def test_a_bad_scene_is_refused_and_changes_nothing(app, change, message):
     app.add_constraint("hole", distance=0.08)

@@ -10,7 +10,7 @@ the control rate, the motion scale and the ghost's offset::
                "link_axis": [0, 0, -1], "package_dirs": null, "q_home": [...]},
      "controllers": {"main": "cjm", "ghost": "qp:daqp"},
      "gain": 100.0, "damping": 0.0, "rate": 1000.0, "motion_scale": 1.0,
-     "orientation_weight": 1.0,
+     "orientation_weight": 1.0, "task_mode": "auto",
      "ghost_offset": [0.0, 0.9, 0.0],
      "q": {"main": [...], "ghost": [...]},
      "target": {"position": [x, y, z], "wxyz": [w, x, y, z]},
@@ -55,6 +55,7 @@ from constraints.validation import as_number, as_vector, short_repr
 from teleop.files import replace_file
 from teleop.json_text import parse_json
 from teleop.limits import MAX_DAMPING, MAX_RATE_HZ
+from teleop.loop.task_modes import AUTO, task_mode
 from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
 
 FORMAT = "cjm-teleop-scene"
@@ -233,6 +234,9 @@ class Scene:
     targets: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
     #: weight of the EE twists' angular entries (``TeleopApp.set_orientation_weight``)
     orientation_weight: float = 1.0
+    #: what the operator commands of each EE (``TeleopApp.set_task_mode``; docs/design.md
+    #: section 20); a scene without one: ``auto``
+    task_mode: str = "auto"
     #: whether the controllers keep the pairs apart, and the avoidance's settings
     #: (``CollisionAvoidance.to_dict()`` without its obstacles); None: a version 1 scene
     collisions: dict | None = None
@@ -332,7 +336,15 @@ def parse_scene(data: Any, nq: int | None = None, ee_frames: tuple[str, ...] | N
         targets=targets,
         orientation_weight=as_number(data.get("orientation_weight", 1.0),
                                      "scene orientation_weight", 0.0, maximum=1.0),
+        task_mode=_task_mode(data.get("task_mode", AUTO)),
         collisions=collisions, obstacles=obstacles)
+
+
+def _task_mode(mode: object) -> str:
+    """A scene's task mode: ``auto`` or a mode of ``TASK_MODES``, else ``ValueError``."""
+    if mode != AUTO:
+        task_mode(mode)
+    return str(mode)
 
 
 #: the keys of a scene's ``"collisions"``: ``on`` and the avoidance's settings

@@ -89,7 +89,7 @@ class Scenes:
                 "robot": robot_to_dict(self.robot),
                 "controllers": {"main": self.specs["main"], "ghost": self.specs.get("ghost")},
                 "gain": self.gain, "damping": self.damping, "rate": self.config.rate,
-                "orientation_weight": self.orientation_weight,
+                "orientation_weight": self.orientation_weight, "task_mode": self.task_mode,
                 "motion_scale": self.motion_scale,
                 "ghost_offset": [float(x) for x in self.ghost_offset],
                 "q": {which: [float(x) for x in loop.q] for which, loop in self.loops.items()},
@@ -142,12 +142,14 @@ class Scenes:
                 loop = self._make_loop(spec, q=scene.q[which], constraints=constraints,
                                        config=config,
                                        orientation_weight=scene.orientation_weight,
+                                       task_mode=scene.task_mode,
                                        damping=scene.damping,
                                        avoidance=avoidance, collisions_on=collisions_on)
                 loop.t = t
                 loops[which] = loop
             self.config, self.gain, self.damping = config, scene.gain, scene.damping
             self.orientation_weight = scene.orientation_weight
+            self.task_mode = scene.task_mode
             self.specs, self.loops = specs, loops
             self.traces = {which: Trace() for which in loops}
             self.last_records = {which: None for which in loops}
