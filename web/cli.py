@@ -24,6 +24,7 @@ from teleop.cli.arguments import (add_damper_options, csv_list, damper_settings,
 from teleop.cli.commands import Command
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.limits import MAX_WALL_STIFFNESS
+from teleop.loop.task_modes import AUTO, TASK_MODES
 from teleop.plants import PLANT_KINDS
 from teleop.robots import BUILTIN_ROBOTS
 
@@ -85,6 +86,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "target, drawn beside the main one; a scene's own wins "
                               "(default: no second robot)")
     control.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
+    control.add_argument("--task-mode", choices=(AUTO, *TASK_MODES), default=AUTO,
+                         help="what the target asks of each end effector (docs/design.md "
+                              "section 20): the full pose, position and roll about the tool "
+                              "axis, or position only; auto: position and roll on an arm with "
+                              "a port, else the full pose; a scene's own wins (default: auto)")
     control.add_argument("--acceleration-limits", action=argparse.BooleanOptionalAction,
                          default=True,
                          help="the controllers keep the robot's joint acceleration limits "
@@ -329,6 +335,7 @@ def run(args: argparse.Namespace, prog: str) -> int:
                                                   scene_dir=args.scene_dir, scene=scene,
                                                   notes=notes, token=token, **plant,
                                                   acceleration_limits=args.acceleration_limits,
+                                                  task_mode=args.task_mode,
                                                   **collisions, inputs=inputs,
                                                   input_timeout=args.input_timeout / 1e3)
         except BaseException:

@@ -25,7 +25,7 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                wall_stiffness: float | None = None, collisions: bool = True,
                collision_settings: dict | None = None,
                inputs: Sequence[InputSource] = (), input_timeout: float | None = None,
-               acceleration_limits: bool = True
+               acceleration_limits: bool = True, task_mode: str = "auto"
                ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
     threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
@@ -36,14 +36,17 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     ``plant``, ``plant_settings``, ``wall_stiffness``: what the loops run on;
     ``collisions``, ``collision_settings``: the collision avoidance;
     ``acceleration_limits``: the robot's joint acceleration limits kept (on by default)
-    (:class:`web.app.TeleopApp`); ``inputs``: the devices that drive the EEs, each its
-    own (docs/design.md section 19), released after ``input_timeout`` s of silence
-    (default 0.1 s); the caller closes them (:meth:`TeleopApp.close_inputs`)."""
+    (:class:`web.app.TeleopApp`); ``task_mode``: what the operator commands of each EE
+    (:meth:`TeleopApp.set_task_mode`, docs/design.md section 20; a scene's own wins);
+    ``inputs``: the devices that drive the EEs, each its own (docs/design.md section 19),
+    released after ``input_timeout`` s of silence (default 0.1 s); the caller closes them
+    (:meth:`TeleopApp.close_inputs`)."""
     app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
                     scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
                     wall_stiffness=wall_stiffness, collisions=collisions,
                     collision_settings=collision_settings,
                     acceleration_limits=acceleration_limits)
+    app.set_task_mode(task_mode)
     if scene is not None:
         app.apply_scene(scene)
     if input_timeout is not None:
