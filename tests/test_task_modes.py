@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from constraints import Hole, Plane, PointLock
+from constraints import Barrier, Hole, Plane, PointLock
 from teleop.controller_specs import make_controller
 from teleop.experiments.sessions import load_session, session_plan
 from teleop.loop import LoopConfig, TeleopLoop
@@ -286,3 +286,26 @@ def test_the_status_line_keeps_the_short_part_and_the_action():
     assert summary_words(Limitation("least_squares", words, 0.0302)) == (
         "position 30.2 mm short: set the task mode to position and roll about the tool axis "
         "(what a port allows)")
+
+
+def test_home_behind_a_barrier_is_not_planned_and_says_so(sda10f):
+    hole = Hole.on_link(sda10f, sda10f.q_home, 0.08)
+    loop = TeleopLoop(sda10f, make_controller("cjm", sda10f, [hole],
+                                              twist_weight=task_weight(["position"])),
+                      task_modes="position")
+    start = loop.ee_placement()
+    for _ in range(1500):  # 3 cm down: the instrument slides in through the hole
+        loop.tick(pin.SE3(start.rotation, start.translation + [0.0, 0.0, -0.03]))
+    # a barrier 1 mm above a point of the link, the allowed side below: home is above it
+    barrier = Barrier.place(sda10f, loop.q, link=hole.link, normal=[0.0, 0.0, -1.0],
+                            distance=0.04, offset=0.001)
+    frames = [sda10f.model.getFrameId(hole.link)] * 2
+    data = sda10f.model.createData()
+    pin.framesForwardKinematics(sda10f.model, data, sda10f.q_home)
+    behind = barrier.violation(data.oMf[frames[1]])
+    path = plan_home_path(sda10f.model, loop.q, sda10f.q_home, [hole, barrier], frames)
+    assert not path.reached and len(path.configurations) == 1  # not a step taken
+    np.testing.assert_array_equal(path.configurations[0], loop.q)
+    assert path.words == (f"home is off barrier 1 (arm_link_5_r) by {1e3 * behind:.1f} mm (it "
+                          f"was placed away from the home pose): home cannot be reached while "
+                          f"it holds; remove it to go home")
