@@ -56,12 +56,13 @@ def ee_positions(app) -> np.ndarray:
 
 
 def look_at_tool(web, ee: int) -> None:
-    """From 0.3 m in front of EE ``ee``'s target, a little outwards and above: its
-    gizmo large on the canvas, the other arm's off to the side."""
+    """From 2.5 gizmo sizes in front of EE ``ee``'s target (0.3 m), a little outwards and
+    above: its gizmo large on the canvas, the other arm's off to the side."""
     target = web.app.targets[ee].translation
     outward = np.sign(target[1]) or 1.0
     direction = np.array([0.75, 0.25 * outward, 0.6])
-    set_camera(web.client, target + 0.3 * direction / np.linalg.norm(direction), target)
+    distance = 2.5 * web.ui.target_gizmos[ee].scale
+    set_camera(web.client, target + distance * direction / np.linalg.norm(direction), target)
 
 
 def settled(app, periods: int = 200, still: float = 1e-7) -> None:

@@ -252,8 +252,11 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         # the status line: the hole's link named, the force in mN, the arrow's scale
         assert (f"port force {hole_id} **{1e3 * port.magnitude:.2f} mN** (arrow 2 cm per "
                 "10 mN)") in ui.summary.content and FORCE_ARROW_SCALE == 0.02 / 0.01
-        assert f"placed: {hole_id} on `{app.entries[hole_id].constraint.link}`" in \
-            ui.summary.content
+        link = app.entries[hole_id].constraint.link
+        assert f"placed: {hole_id} on `{link}`" in ui.summary.content
+        label = ui._markers[hole_id]["label"]  # and in the scene, above the hole
+        assert label.text == f"{hole_id} on {link}"
+        np.testing.assert_allclose(label.position, port.point + [0.0, 0.0, 0.06], atol=1e-3)
         assert "% of ticks on time" in ui.status.content and "physics included" in \
             ui.status.content and "**plant** MuJoCo plant at 2000 Hz" in ui.status.content
         assert ui._plots["port_force"].title.startswith("port force, the largest (")

@@ -12,6 +12,7 @@ import viser
 import viser.uplot as uplot
 
 from ..app import HISTORY_SECONDS, TeleopApp
+from .plots import axes_labelled
 
 #: the feedback plot's lines: the force along the device's x (right), y (up), z (back)
 FEEDBACK_COLORS = ("#dc2626", "#16a34a", "#2563eb")
@@ -110,7 +111,8 @@ class DeviceView:
                         *[uplot.Series(label=axis, stroke=color, width=1.5)
                           for axis, color in zip(("x right", "y up", "z back"),
                                                  FEEDBACK_COLORS)]),
-                aspect=2.2, order=self.plot_note.order + 0.5,  # the Plots tab's first
+                aspect=2.0, order=self.plot_note.order + 0.5,  # the Plots tab's first
                 scales={"x": uplot.Scale(time=False, auto=False,
-                                                     range=(-HISTORY_SECONDS, 0.0)),
-                                    "y": uplot.Scale(auto=True)})
+                                         range=(-HISTORY_SECONDS, 0.0)),
+                        "y": uplot.Scale(auto=True)},
+                axes=axes_labelled("N"))

@@ -1,7 +1,8 @@
 """Each constraint drawn from its own geometry (:meth:`constraints.Constraint.geometry`):
 its shape (a ring around its link, a translucent square, a sphere), the constrained point
 as a collar around its link, the error as a short vector (drawn x100) when it is not zero,
-an arrow to a one-sided constraint's allowed side, and a gizmo that moves it."""
+an arrow to a one-sided constraint's allowed side, a gizmo that moves it and, on the main
+robot, a label naming it and the link it is on ("<id> on <link>")."""
 
 from __future__ import annotations
 
@@ -28,12 +29,15 @@ DRAWING_RESOLUTION = 1e-7
 ALLOWED_SIDE_ARROW = 0.08  # m
 POINT_COLOR = (20, 20, 20)
 ERROR_COLOR = (255, 0, 255)
+#: a constraint's label is this far above its anchor (m), clear of its ring and gizmo
+LABEL_HEIGHT = 0.06
 
 
 class Markers:
     """The constraint markers of :class:`web.ui.TeleopUI`, per robot: entry id -> its
     scene handles (``"shape"``, ``"point"``, ``"error"``, and ``"arrow"``, ``"gizmo"``
-    where they apply); moved only when their drawing moved by :data:`DRAWING_RESOLUTION`."""
+    where they apply, ``"label"`` on the main robot); moved only when their drawing moved
+    by :data:`DRAWING_RESOLUTION`."""
 
     server: viser.ViserServer
     app: TeleopApp
@@ -164,6 +168,10 @@ class Markers:
                               key=("constraint", entry_id))
 
             markers["gizmo"] = handle
+            markers["label"] = scene.add_label(
+                f"{name}/label", f"{entry_id} on {drawing['link']}",
+                position=geometry.anchor + np.array([0.0, 0.0, LABEL_HEIGHT]),
+                anchor="bottom-center")
         return markers
 
     @staticmethod
@@ -193,6 +201,8 @@ class Markers:
         vector = -ERROR_VECTOR_SCALE * geometry.error
         markers["error"].points = np.array([[geometry.point, geometry.point + vector]])
         markers["error"].visible = float(np.linalg.norm(geometry.error)) > 1e-6
+        if "label" in markers:
+            markers["label"].position = geometry.anchor + np.array([0.0, 0.0, LABEL_HEIGHT])
         if "arrow" in markers:
             markers["arrow"].points = arrow_segments(geometry.anchor, geometry.allowed_side,
                                                      ALLOWED_SIDE_ARROW)

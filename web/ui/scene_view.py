@@ -18,6 +18,9 @@ from .shapes import wxyz_of
 #: the target gizmo's size (m): its handles large enough to grab from the first view
 #: (1 m away) rather than orbit the camera
 GIZMO_SCALE = 0.16
+#: each gizmo's size (m) on a robot with several EEs, whose tools are close together:
+#: larger gizmos would cover each other
+GIZMO_SCALE_SEVERAL = 0.12
 GHOST_PLOTS_FIRST = 0.5  # s: a new ghost is drawn once the plots show it, or after this
 GHOST_RGBA = (0.45, 0.7, 1.0, 0.8)  # beside the main robot
 GHOST_OVERLAY_RGBA = (0.25, 0.5, 0.95, 0.4)  # on it: see-through
@@ -52,10 +55,11 @@ class SceneView:
         # per EE: its gizmo, its target (drawn where it is apart from the gizmo), the line
         # from the EE to the target; the first EE's keep the single-EE names
         self.target_gizmos, self.target_markers, self.reach_lines = [], [], []
+        size = GIZMO_SCALE if len(self.app.targets) == 1 else GIZMO_SCALE_SEVERAL
         for index, target in enumerate(self.app.targets):
             suffix = "" if index == 0 else f"_{index}"
             gizmo = scene.add_transform_controls(
-                f"/gizmo{suffix}", scale=GIZMO_SCALE, line_width=4.0,
+                f"/gizmo{suffix}", scale=size, line_width=4.0,
                 position=target.translation,
                 wxyz=wxyz_of(target.rotation))
             gizmo.on_update(self._gizmo_moved(gizmo, index))
