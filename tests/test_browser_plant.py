@@ -7,7 +7,7 @@ fast or a slow machine alike). Every control period's port force is read from th
 simulated robot (the app's own ``step``, wrapped to read the plant after each period);
 every arrow the view thread draws is read back with the reading it was drawn from. The
 force stays below the issue's target (0.2 N) for this gentle drag, the arrow is
-``FORCE_ARROW_SCALE`` x the force long and points along it, the status shows the force in
+2 cm per tenfold force above 10 uN long and points along it, the status shows the force in
 newtons, the plots a port-force trace, and the arrow's red is in the page's pixels. Every
 wait is bounded; ``-s`` prints the measured figures (the control loop's ticks on time
 with the plant and the browser).
@@ -42,7 +42,6 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
 from playwright.sync_api import expect
 
 from teleop import load_robot
-from web.ui import FORCE_ARROW_SCALE
 from web.ui.port_forces import FORCE_COLOR, MIN_DRAWN_FORCE
 
 #: the port force a gentle drag stays below (N): the issue's target
@@ -146,18 +145,21 @@ def test_a_gentle_drag_pushes_on_the_wall_and_the_page_shows_how_hard(web):
           f"{np.sqrt(np.mean(forces ** 2)):.4f} N ({forces.size} periods)")
     assert forces.size > 500 and np.isfinite(forces).all()
     assert MIN_DRAWN_FORCE < forces.max() < GENTLE_FORCE
-    # the plots' trace (50 Hz) is the same force, sampled
+    # the plots' trace (50 Hz) is the same force, each sample the peak of its periods:
+    # at most the largest of every period recorded (read after the trace: the loop runs on)
     trace = trace_since(app, since)["port_force"]
-    assert trace.size > 20 and 0.0 < trace.max() <= forces.max()
+    recorded = max(force for _, force in list(web.forces))
+    assert trace.size > 20 and 0.0 < trace.max() <= recorded
 
-    # the arrows the view drew while the wall pushed: scale x force, along the force
+    # the arrows the view drew while the wall pushed: 2 cm per decade, along the force
     shown = [(reading, points) for reading, points, visible in web.arrows[drawn_before:]
              if visible and reading.id == hole_id]
     assert shown, "no port-force arrow was shown during the drag"
     for reading, points in shown:
         np.testing.assert_allclose(points[0, 1] - points[0, 0],
-                                   FORCE_ARROW_SCALE * reading.force, atol=FLOAT32)
-    assert all(visible == (reading.magnitude >= MIN_DRAWN_FORCE)
+                                   0.02 * np.log10(reading.magnitude / 1e-5)
+                                   * reading.force / reading.magnitude, atol=FLOAT32)
+    assert all(visible == (reading.magnitude > MIN_DRAWN_FORCE)
                for reading, _, visible in web.arrows[drawn_before:])
     # the status line's figure in mN, and the port-force plot
     expect(page.get_by_text(f"port force {hole_id} ", exact=False).first).to_be_visible()
@@ -182,29 +184,40 @@ def test_a_force_held_on_the_wall_is_drawn_in_red_at_the_port(web, tmp_path):
                        and handle.visible and handle, WAIT,
                        "an arrow held at the port after the drag")
     reading = app.snapshot(history=False)["robots"]["main"]["ports"][0]
-    # close to the port, from the side (across the force), where the arrow is longest
-    across = np.cross(reading.force, [0.0, 0.0, 1.0])
-    side = across / np.linalg.norm(across) + np.array([0.0, 0.0, 0.4])
-    set_camera(web.client, reading.point + 0.12 * side / np.linalg.norm(side), reading.point)
     print(f"\n[plant] force held at the port with no drift gain: {reading.magnitude:.4f} N "
           f"({1e3 * reading.displacement:.3f} mm of tissue)")
     points = np.asarray(arrow.points, dtype=float)
-    box = scene_canvas(web.page)
-    tail, tip = project(web.client.camera, box, points[0]) - (box.x, box.y)
-    length = float(np.linalg.norm(tip - tail))
-    assert length > 10.0, f"the arrow is {length:.1f} px long on screen: too short to see"
-    rows, columns = np.mgrid[0:round(box.height), 0:round(box.width)]
-    pixel = np.stack([columns + 0.5, rows + 0.5], axis=-1)  # pixel centres
-    along = np.clip(((pixel - tail) @ (tip - tail)) / length ** 2, 0.0, 1.0)
-    near = np.linalg.norm(pixel - (tail + along[..., None] * (tip - tail)), axis=-1) < 8.0
+    # close to the port, from the side (across the force), where the arrow is longest; the
+    # robot's own links may stand between a camera and the port (its pose follows the
+    # task mode): the views are tried in turn until one shows the arrow's red
+    across = np.cross(reading.force, [0.0, 0.0, 1.0])
+    across /= np.linalg.norm(across)
+    views = [sign * across + np.array([0.0, 0.0, up]) for up in (0.4, 1.5) for sign in (1, -1)]
+    for view in views:
+        set_camera(web.client, reading.point + 0.15 * view / np.linalg.norm(view),
+                   reading.point)
+        box = scene_canvas(web.page)
+        tail, tip = project(web.client.camera, box, points[0]) - (box.x, box.y)
+        length = float(np.linalg.norm(tip - tail))
+        assert length > 10.0, f"the arrow is {length:.1f} px long on screen: too short to see"
+        rows, columns = np.mgrid[0:round(box.height), 0:round(box.width)]
+        pixel = np.stack([columns + 0.5, rows + 0.5], axis=-1)  # pixel centres
+        along = np.clip(((pixel - tail) @ (tip - tail)) / length ** 2, 0.0, 1.0)
+        near = np.linalg.norm(pixel - (tail + along[..., None] * (tip - tail)), axis=-1) < 8.0
 
-    def red_on_arrow(pixels: np.ndarray) -> int:  # the arrow's red where it projects
-        shape = min(pixels.shape[0], near.shape[0]), min(pixels.shape[1], near.shape[1])
-        hit = np.abs(pixels[:shape[0], :shape[1]] - np.array(FORCE_COLOR)).max(axis=2) < 40
-        return int(np.sum(hit & near[:shape[0], :shape[1]]))
+        def red_on_arrow(pixels: np.ndarray) -> int:  # the arrow's red where it projects
+            shape = min(pixels.shape[0], near.shape[0]), min(pixels.shape[1], near.shape[1])
+            hit = np.abs(pixels[:shape[0], :shape[1]] - np.array(FORCE_COLOR)).max(axis=2) < 40
+            return int(np.sum(hit & near[:shape[0], :shape[1]]))
 
-    after = wait_for_pixels(web, lambda p: red_on_arrow(p) > 0.5 * length, WAIT,
-                            "the arrow's red in the page where it projects")
+        try:
+            after = wait_for_pixels(web, lambda p: red_on_arrow(p) > 0.5 * length, 0.25 * WAIT,
+                                    "the arrow's red in the page where it projects")
+            break
+        except AssertionError:
+            continue
+    else:
+        raise AssertionError(f"the arrow's red is in no view of {len(views)} around the port")
     print(f"[plant] the arrow: {length:.0f} px on screen, {red_on_arrow(after)} red pixels "
           "along it")
     png = web.page.screenshot(timeout=1e3 * WAIT)
@@ -216,7 +229,7 @@ def test_a_force_held_on_the_wall_is_drawn_in_red_at_the_port(web, tmp_path):
 
 
 #: the status line's port force as the page shows it (the scale follows it)
-STATUS_FORCE = r"port force {} ([0-9.]+) mN \(arrow 2 cm per 10 mN\)"
+STATUS_FORCE = r"port force {} ([0-9.]+) mN \(arrow 2 cm at 0\.1 mN"
 #: the drag (m) and its mouse steps
 DRAG, DRAG_STEPS = 0.012, 6
 

@@ -19,11 +19,20 @@ from constraints import Hole
 from teleop.plants import MujocoPlant, PlantSettings
 from teleop.plants import PlantChoice
 from test_web_cli import serve
-from web.app import ControlThread, TeleopApp, port_words
-from web.ui import FORCE_ARROW_SCALE, PLANT_PLOTS, PLOTS, force_arrow, plot_series, plots_of
+from web.app import ControlThread, PortReading, TeleopApp, port_words
+from web.ui import PLANT_PLOTS, PLOTS, force_arrow, plot_series, plots_of
 
 #: the port force a gentle motion of the operator stays below (N): the issue's target
 GENTLE_FORCE = 0.2
+
+
+def arrow_vector(force: np.ndarray) -> np.ndarray:
+    """The port-force arrow's vector, written out here: along the force, 2 cm per tenfold
+    force above 10 uN (2 cm at 0.1 mN, 6 cm at 10 mN); none at 10 uN or less."""
+    magnitude = float(np.linalg.norm(force))
+    if magnitude <= 1e-5:
+        return np.zeros(3)
+    return 0.02 * np.log10(magnitude / 1e-5) * force / magnitude
 
 
 def run(app: TeleopApp, seconds: float) -> None:
@@ -108,9 +117,12 @@ def test_a_moved_target_pushes_the_instrument_on_the_wall_and_the_view_says_how_
     (port,) = snapshot["robots"]["main"]["ports"]
     assert port_words([port]) == (f"port force {hole_id} {1e3 * port.magnitude:.2f} mN "
                                   f"(tissue {1e6 * port.displacement:.1f} µm)")
+    for newtons, length in ((1e-4, 0.02), (1e-3, 0.04), (1e-2, 0.06), (0.1, 0.08)):
+        reading = PortReading(hole_id, port.point, np.array([0.0, 0.0, newtons]), 0.0)
+        arrow = force_arrow(reading)
+        assert arrow[0, 1, 2] - arrow[0, 0, 2] == pytest.approx(length, abs=1e-15)
     arrow = force_arrow(port, clearance=0.03)  # its tip 3 cm from the port, pushing on it
-    np.testing.assert_allclose(arrow[0, 1] - arrow[0, 0], FORCE_ARROW_SCALE * port.force,
-                               atol=1e-15)
+    np.testing.assert_allclose(arrow[0, 1] - arrow[0, 0], arrow_vector(port.force), atol=1e-15)
     np.testing.assert_allclose(arrow[0, 1] + 0.03 * port.force / port.magnitude, port.point,
                                atol=1e-15)
 
@@ -243,15 +255,15 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         # viser holds float32 points: a few float32 round-offs of coordinates under 1 m
         float32 = 4 * float(np.finfo(np.float32).eps)
         np.testing.assert_allclose(segments[0, 1] - segments[0, 0],
-                                   FORCE_ARROW_SCALE * port.force, atol=float32)
+                                   arrow_vector(port.force), atol=float32)
         # its tip on the hole's ring, on the side the wall pushes from
         ring = ui.ring_radius_at(snapshot["robots"]["main"]["constraints"][hole_id])
         np.testing.assert_allclose(segments[0, 1], port.point - ring * port.force / port.magnitude,
                                    atol=float32)
         assert f"port force {hole_id} {1e3 * port.magnitude:.2f} mN" in ui.status.content
         # the status line: the hole's link named, the force in mN, the arrow's scale
-        assert (f"port force {hole_id} **{1e3 * port.magnitude:.2f} mN** (arrow 2 cm per "
-                "10 mN)") in ui.summary.content and FORCE_ARROW_SCALE == 0.02 / 0.01
+        assert (f"port force {hole_id} **{1e3 * port.magnitude:.2f} mN** (arrow 2 cm at "
+                "0.1 mN, 2 cm more per tenfold force)") in ui.summary.content
         link = app.entries[hole_id].constraint.link
         assert f"placed: {hole_id} on `{link}`" in ui.summary.content
         label = ui._markers[hole_id]["label"]  # and in the scene, above the hole

@@ -15,14 +15,14 @@ from .plots import (
     plot_series,
     plots_of,
 )
-from .port_forces import FORCE_ARROW_SCALE, force_arrow
+from .port_forces import FORCE_ARROW_PER_DECADE, arrow_length, force_arrow
 from .scene_view import STATUS_COLORS
 from .server import run_server
 from .shapes import LinkProfile, reach_from_axis
 
 __all__ = [
     "COLLISION_PLOTS",
-    "FORCE_ARROW_SCALE",
+    "FORCE_ARROW_PER_DECADE",
     "CONTROLLER_CHOICES",
     "GHOST_COLOR",
     "LinkProfile",
@@ -39,6 +39,7 @@ __all__ = [
     "reach_from_axis",
     "plot_series",
     "plots_of",
+    "arrow_length",
     "force_arrow",
     "run_server",
 ]

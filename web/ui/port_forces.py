@@ -1,12 +1,19 @@
-"""The abdominal wall's force on each instrument, drawn at its port as an arrow scaled to
-be seen at the forces a drag makes (a few mN; docs/design.md sections 5.3 and 17.2), for
-every robot on a physics plant: it points the way the wall pushes the instrument, its tip
-on the port's ring (outside the instrument's meshes, which would hide it),
-:data:`FORCE_ARROW_SCALE` x ``|F|`` long (the scale is shown in the status line,
-:data:`FORCE_ARROW_WORDS`)."""
+"""The abdominal wall's force on each instrument, drawn at its port as an arrow whose length
+grows with the force's decade, to be seen at every force a session makes (docs/design.md
+sections 5.3 and 17.2), for every robot on a physics plant: it points the way the wall
+pushes the instrument, its tip on the port's ring (outside the instrument's meshes, which
+would hide it), :func:`arrow_length` long: :data:`FORCE_ARROW_PER_DECADE` per tenfold
+force above :data:`MIN_DRAWN_FORCE` (the scale is shown in the status line,
+:data:`FORCE_ARROW_WORDS`).
+
+The forces of a session span four decades (sda10f, a hole, a 5 cm drag, ``--payload
+0.5``: 0.2 mN median during the drag, 52 mN at its peak, 15 mN held with the drift gain
+at 0, 1.5 uN at rest): a length in proportion to the force would hide the drag's own
+forces or run to metres at its peaks."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -16,26 +23,32 @@ from ..app.plant import PortReading
 from ..robot_view import RobotView
 from .shapes import arrow_segments
 
-#: an arrow's length per newton of wall force (m/N): 2 cm per 10 mN. A 5 cm drag with
-#: the drift gain on pushes with 3 mN (6 mm) and peaks near 40 mN (8 cm); the drift gain
-#: at 0 leaves about 0.2 N held (40 cm)
-FORCE_ARROW_SCALE = 2.0
+#: the arrow's length per tenfold force (m): 2 cm
+FORCE_ARROW_PER_DECADE = 0.02
+#: a force below this (N) is drawn as no arrow (its arrow would have no length): 10 uN
+MIN_DRAWN_FORCE = 1e-5
 #: the scale in words, for the status line
-FORCE_ARROW_WORDS = "arrow 2 cm per 10 mN"
-#: a force below this (N) is drawn as no arrow (its arrow would be under 0.5 mm)
-MIN_DRAWN_FORCE = 0.25e-3
+FORCE_ARROW_WORDS = "arrow 2 cm at 0.1 mN, 2 cm more per tenfold force"
 FORCE_COLOR = (220, 38, 38)
 #: the arrows' width on screen (pixels): seen whatever the zoom
 FORCE_ARROW_WIDTH = 5.0
 
 
+def arrow_length(magnitude: float) -> float:
+    """The arrow's length (m) for a force of ``magnitude`` N: ``a log10(|F| / F0)`` with
+    ``a`` = :data:`FORCE_ARROW_PER_DECADE`, ``F0`` = :data:`MIN_DRAWN_FORCE`; 0 below F0."""
+    if not magnitude > MIN_DRAWN_FORCE:
+        return 0.0
+    return FORCE_ARROW_PER_DECADE * math.log10(magnitude / MIN_DRAWN_FORCE)
+
+
 def force_arrow(reading: PortReading, clearance: float = 0.0) -> np.ndarray:
     """Line segments (5, 2, 3) of the arrow of ``reading`` (world, m): along the force,
-    :data:`FORCE_ARROW_SCALE` x ``|F|`` long, its tip ``clearance`` m from the port on
-    the side the wall pushes from, ``tip = P - clearance u``, ``u = F / |F|``."""
+    :func:`arrow_length` long, its tip ``clearance`` m from the port on the side the wall
+    pushes from, ``tip = P - clearance u``, ``u = F / |F|``."""
     magnitude = reading.magnitude
     direction = reading.force / magnitude if magnitude > 0 else np.array([0.0, 0.0, 1.0])
-    length = FORCE_ARROW_SCALE * magnitude
+    length = arrow_length(magnitude)
     tail = reading.point - (clearance + length) * direction
     return arrow_segments(tail, direction, length)
 
@@ -65,7 +78,7 @@ class PortForces:
             drawings = robots[which]["constraints"]
             for port, reading in readings.items():
                 handle = arrows.get(port)
-                shown = reading.magnitude >= MIN_DRAWN_FORCE
+                shown = reading.magnitude > MIN_DRAWN_FORCE
                 if not shown:  # nothing to compute for an arrow not drawn
                     if handle is not None and handle.visible:
                         handle.visible = False
