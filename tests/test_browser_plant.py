@@ -248,6 +248,7 @@ def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
     pushes (seen above 1 mN, never above what the plant measured in any control period),
     and says in a few words that the EE reached the target once it has."""
     app, page = web.app, web.page
+    app.set_task_mode("auto")  # what the page starts with: what the port allows
     hole_id = ensure_hole(web)
     link = app.entries[hole_id].constraint.link
     expect(page.get_by_text(f"placed: {hole_id} on {link}", exact=False).first).to_be_visible()

@@ -6,7 +6,7 @@ would hide it), :func:`arrow_length` long: :data:`FORCE_ARROW_PER_DECADE` per te
 force above :data:`MIN_DRAWN_FORCE` (the scale is shown in the status line,
 :data:`FORCE_ARROW_WORDS`).
 
-The forces of a session span four decades (sda10f, a hole, a 5 cm drag, ``--payload
+The forces of a session span four decades (sda10f, a port on its arm, a 5 cm drag, ``--payload
 0.5``: 0.2 mN median during the drag, 52 mN at its peak, 15 mN held with the drift gain
 at 0, 1.5 uN at rest): a length in proportion to the force would hide the drag's own
 forces or run to metres at its peaks."""
