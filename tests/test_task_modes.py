@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from constraints import Barrier, Hole, Plane, PointLock
+from controllers import SolveInfo, StepStatus
 from teleop.controller_specs import make_controller
 from teleop.experiments.sessions import load_session, session_plan
 from teleop.loop import LoopConfig, TeleopLoop
@@ -21,6 +22,7 @@ from teleop.loop.homing import plan_home_path
 from teleop.loop.task_modes import (TASK_MODES, fit_target, port_task_modes, roll_angle,
                                     task_modes, task_weight)
 from web.app import TeleopApp
+from web.app.shortfall import asked_angle, shortfall_words
 from web.app.status import Limitation, summary_words
 
 from conftest import ee_jacobian, kinematics, near_home
@@ -309,3 +311,35 @@ def test_home_behind_a_barrier_is_not_planned_and_says_so(sda10f):
     assert path.words == (f"home is off barrier 1 (arm_link_5_r) by {1e3 * behind:.1f} mm (it "
                           f"was placed away from the home pose): home cannot be reached while "
                           f"it holds; remove it to go home")
+
+
+@pytest.mark.parametrize("info, ports, expected", [
+    (SolveInfo(status=StepStatus.SCALED, saturated_joints=(1,)), [],
+     "position 12.0 mm and roll 2.0 deg short of the target: joint j1 at its limit; bring "
+     "the target back the way it came, or Home"),
+    (SolveInfo(status=StepStatus.LEAST_SQUARES, damping=0.05), [],
+     "position 12.0 mm and roll 2.0 deg short of the target: the arm is near a singularity "
+     "(stretched out or folded); bring the target back the way it came, or Home"),
+    (SolveInfo(status=StepStatus.LEAST_SQUARES), [],
+     "position 12.0 mm and roll 2.0 deg short of the target: the constraints leave no motion "
+     "towards it; move the target, or the constraint, so that the link can pass"),
+])
+def test_the_shortfall_names_the_part_the_cause_and_the_action(info, ports, expected):
+    angle = math.radians(2.0)
+    assert shortfall_words("position_roll", 0.012, angle, True, info, ["j0", "j1"],
+                           ports) == expected
+    # still moving towards it, and within 1 mm and 0.5 deg: nothing is short
+    assert shortfall_words("position_roll", 0.012, 0.0, False, info, ["j0", "j1"], ports) == ""
+    assert shortfall_words("position_roll", 9e-4, math.radians(0.4), True, info, ["j0", "j1"],
+                           ports) == ""
+
+
+def test_the_angle_asked_is_what_the_mode_asks_of_the_rotation():
+    placement = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.1])), np.zeros(3))
+    swing = pin.exp3(np.array([0.2, 0.1, 0.0]))
+    target = pin.SE3(placement.rotation @ swing @ pin.exp3(np.array([0.0, 0.0, 0.4])),
+                     np.ones(3))
+    assert asked_angle("position", placement, target) == 0.0
+    assert asked_angle("position_roll", placement, target) == pytest.approx(0.4, abs=1e-12)
+    assert asked_angle("pose", placement, target) == pytest.approx(
+        np.linalg.norm(pin.log3(swing @ pin.exp3(np.array([0.0, 0.0, 0.4])))), abs=1e-12)

@@ -68,7 +68,7 @@ def shortfall_words(mode: str, position_error: float, angle_error: float, stalle
         action = "bring the target back the way it came, or Home"
     elif singular:
         cause = "the arm is near a singularity (stretched out or folded)"
-        action = "bring the target back towards the robot, or Home"
+        action = "bring the target back the way it came, or Home"
     else:
         cause = "the constraints leave no motion towards it"
         action = "move the target, or the constraint, so that the link can pass"
