@@ -348,9 +348,10 @@ class TeleopLoop:
         sensed = self.q if self.plant is None else self.plant.sense(self.q)
         supervision = self.supervise(sensed, self.targets(target))
         poses = self.supervisor.followed_targets
-        if self._fitting:
-            poses = [fit_target(mode, pose, placement) for mode, pose, placement
-                     in zip(self.task_modes, poses, self.ee_placements(sensed))]
+        if self._fitting:  # each target fitted at its EE's sensed pose (section 20.2)
+            pin.forwardKinematics(self.model, self.data, sensed)
+            poses = [fit_target(mode, pose, pin.updateFramePlacement(self.model, self.data, frame))
+                     for mode, pose, frame in zip(self.task_modes, poses, self.ee_frame_ids)]
         compiled = self.compiled
         if compiled is not None and compiled.ready():
             if not self._history_in_tick:
