@@ -9,6 +9,7 @@ says why. Any target the operator sets meanwhile ends it where it is.
 
 from __future__ import annotations
 
+import copy
 import threading
 from dataclasses import dataclass
 
@@ -55,20 +56,23 @@ class Homing:
 
     def _start_homing(self) -> str:
         """Plan the way home from where the main robot is and follow it (caller holds
-        no lock); the words of :attr:`home_words`."""
+        no lock: the plan, milliseconds to tens of them, runs outside it on copies of the
+        constraints while the robot holds its targets); the words of :attr:`home_words`."""
+        model = self.robot.model
         with self._lock:
             loop = self.loops["main"]
-            model = self.robot.model
-            path = plan_home_path(model, loop.q, self.robot.q_home, loop.constraints,
-                                  loop.controller.constraint_frames)
-            poses = path_poses(model, path.configurations, self.robot.ee_frame_ids)
-            times = path_times(model, path.configurations, poses,
-                               self.config.max_linear_speed, self.config.max_angular_speed)
-            self.homing = HomeRun(poses, times, self.now, path.words,
-                                  path.configurations[-1])
+            q = loop.q.copy()
+            constraints = [copy.copy(constraint) for constraint in loop.constraints]
+            frames = list(loop.controller.constraint_frames)
+            caps = self.config.max_linear_speed, self.config.max_angular_speed
+        path = plan_home_path(model, q, self.robot.q_home, constraints, frames)
+        poses = path_poses(model, path.configurations, self.robot.ee_frame_ids)
+        times = path_times(model, path.configurations, poses, *caps)
+        with self._lock:
+            self.homing = HomeRun(poses, times, self.now, path.words, path.configurations[-1])
             self.home_words = path.words
             self._apply_task_modes()  # the loops in full pose while it runs
-            return path.words
+        return path.words
 
     def _follow_homing(self) -> None:
         """The targets on the way home at the app's time (caller holds the lock, once a
