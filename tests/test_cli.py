@@ -17,6 +17,7 @@ import pytest
 from constraints import Hole
 from teleop.cli.commands import COMMAND_GROUP
 from teleop.cli.main import BUILT_IN, build_parser
+from teleop.cli.robot_options import robot_from_arguments
 from teleop.controller_specs import (
     CONTEXTS,
     CONTROLLER_SPECS,
@@ -146,8 +147,9 @@ def test_web_passes_the_urdf_options_to_load_robot(tmp_path):
     args = web_cli.build_parser().parse_args([
         "--robot", str(robot.urdf_path), "--ee-frame", "arm_link_5_r", "--constrained-link",
         "arm_link_4_u", "--link-axis", "0", "0", "-2", "--package-dirs", f"{tmp_path},{tmp_path}/a",
-        "--package-dirs", f"{tmp_path}/b", "--q-home=" + ",".join(map(str, robot.q_home))])
-    loaded = web_cli._load_robot(args)
+        "--package-dirs", f"{tmp_path}/b", "--q-home=" + ",".join(map(str, robot.q_home)),
+        "--locked-joints", "none"])
+    loaded = robot_from_arguments(args, "sda10f")
     assert loaded.ee_frame == "arm_link_5_r" and loaded.constrained_link == "arm_link_4_u"
     np.testing.assert_allclose(loaded.link_axis, [0.0, 0.0, -1.0])
     np.testing.assert_allclose(loaded.q_home, robot.q_home)

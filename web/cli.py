@@ -19,14 +19,14 @@ import time
 import warnings
 from typing import Sequence
 
-from teleop.cli.arguments import (add_damper_options, csv_list, damper_settings,
-                                  numbers, one_line, positive)
+from teleop.cli.arguments import (add_damper_options, damper_settings,
+                                  one_line, positive)
 from teleop.cli.commands import Command
+from teleop.cli.robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.limits import MAX_WALL_STIFFNESS
 from teleop.loop.task_modes import AUTO, TASK_MODES
 from teleop.plants import PLANT_KINDS
-from teleop.robots import BUILTIN_ROBOTS
 
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
     resolve_host
@@ -51,32 +51,11 @@ Network masters (--input udp:PORT) must tag every datagram with the key printed 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """``teleop web``'s options, added to ``parser``."""
     robot = parser.add_argument_group("robot")
-    robot.add_argument("--robot",
-                       help=f"built-in robot ({', '.join(BUILTIN_ROBOTS)}) or the path of a URDF "
-                            "(default: sda10f, or the robot of --scene)")
+    add_robot_arguments(robot, "sda10f, or the robot of --scene")
     robot.add_argument("--scene", metavar="FILE",
                        help="open a scene saved from the UI (its robot, constraints, target, "
                             "controllers, gain, damping, rate); the other robot options must "
                             "not be given with it (default: none)")
-    robot.add_argument("--ee-frame", metavar="FRAME",
-                       help="end-effector frame (default: the built-in robot's, else the URDF's "
-                            "last link)")
-    robot.add_argument("--constrained-link", metavar="LINK",
-                       help="link the constraints act on (default: the built-in robot's, else "
-                            "none: no constraint can be placed on an arm)")
-    robot.add_argument("--link-axis", nargs=3, type=float, metavar=("X", "Y", "Z"),
-                       help="long direction of the constrained link in its own coordinates "
-                            "(default: the built-in robot's, else 0 0 1)")
-    robot.add_argument("--locked-joints", type=csv_list, metavar="JOINT[,JOINT...]",
-                       help="URDF joints to freeze at their --q-home values (grippers, a "
-                            "torso): no controller sees or moves them (default: none)")
-    robot.add_argument("--package-dirs", action="append", type=csv_list, metavar="DIR[,DIR...]",
-                       help="where package:// meshes are looked up; repeatable (default: the "
-                            "URDF's folder and its ancestors)")
-    robot.add_argument("--q-home", type=numbers, metavar="Q1,Q2,...",
-                       help="home configuration, nq numbers; write --q-home=-0.5,... when the "
-                            "first is negative (default: the built-in robot's, else the neutral "
-                            "configuration clipped to the limits)")
 
     control = parser.add_argument_group("control")
     control.add_argument("--controller", default="cjm",
@@ -157,28 +136,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "an SSH tunnel (default: a random one per launch)")
 
 
-ROBOT_OPTIONS = ("robot", "ee_frame", "constrained_link", "link_axis", "package_dirs", "q_home",
-                 "locked_joints")
-
-
-def _load_robot(args: argparse.Namespace):
-    from teleop.robots import load_robot
-
-    package_dirs = None
-    if args.package_dirs is not None:  # --package-dirs a,b --package-dirs c -> [a, b, c]
-        package_dirs = [directory for group in args.package_dirs for directory in group]
-    return load_robot(args.robot or "sda10f", ee_frame=args.ee_frame,
-                      constrained_link=args.constrained_link, link_axis=args.link_axis,
-                      package_dirs=package_dirs, q_home=args.q_home,
-                      locked_joints=args.locked_joints)
-
-
 def _load(args: argparse.Namespace):
     """The robot and the scene (or None) the options ask for."""
     if args.scene is None:
-        return _load_robot(args), None
-    given = [f"--{name.replace('_', '-')}" for name in ROBOT_OPTIONS
-             if getattr(args, name) is not None]
+        return robot_from_arguments(args, "sda10f"), None
+    given = robot_options_given(args)
     if given:
         raise ValueError(f"--scene sets the robot: drop {', '.join(given)}")
     from web.scene import read_scene_file, robot_from_dict

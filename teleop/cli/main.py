@@ -37,6 +37,7 @@ from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
 from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bounded, csv_list,
                         damper_settings, one_line, sentence)
 from .commands import Command, registered_commands
+from .robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
 from .supervisor_options import add_supervisor_options, supervisor_choice
 from .sweep import add_arguments as add_sweep_arguments
 from .sweep import run as run_sweep_command
@@ -332,6 +333,7 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
                            "write metrics and plots", _compare,
                            epilog=_controllers_epilog("compare"))
     compare.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
+    _add_scenario_robot(compare)
     _add_run_options(compare, "scenario")
 
     replay = _add_command(commands, "replay", "replay a recorded session through controllers "
@@ -343,6 +345,7 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     record = _add_command(commands, "record", "write a scenario's operator input as a session "
                           "file", _record)
     record.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
+    _add_scenario_robot(record)
     record.add_argument("--rate", type=rate, default=1000.0,
                         help=f"control rate in Hz, at most {MAX_RATE_HZ:g} (one recorded "
                         "target per tick)")
@@ -355,6 +358,8 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     _add_collision_options(record, "scenario")
 
     _add_command(commands, "scenarios", "list the scripted scenarios", _scenarios)
+    _add_command(commands, "robots", "list the built-in robots and the example-robot-data "
+                 "URDFs installed (each a --robot)", _robots)
 
     bench = _add_command(commands, "bench", "time one control step of each controller on each "
                          "robot", _bench, epilog=_controllers_epilog("bench"))
@@ -395,7 +400,7 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
 
 
 #: The subcommands defined here: running one loads no registered command.
-BUILT_IN = ("compare", "replay", "record", "scenarios", "bench", "sweep")
+BUILT_IN = ("compare", "replay", "record", "scenarios", "robots", "bench", "sweep")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -472,11 +477,30 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
     return 0
 
 
+def _add_scenario_robot(parser: argparse.ArgumentParser) -> None:
+    """The robot options of a command that runs a scenario (docs/cli.md)."""
+    add_robot_arguments(parser.add_argument_group(
+        "robot", "the scenario on another robot: paper-hole, trocar-circle, fast-lateral and "
+        "joint-limits run on any single arm with a constrained link, the hole halfway along "
+        "it, the paths scaled by the arm's reach"), "the scenario's own robot")
+
+
+def scenario_plan(args: argparse.Namespace):
+    """The plan of ``--scenario`` on the robot the robot options ask for (its own robot
+    when none is given)."""
+    from teleop.experiments.scenarios import SCENARIOS, load_scenario
+
+    if not robot_options_given(args):
+        return load_scenario(args.scenario)
+    if args.scenario not in SCENARIOS:
+        return load_scenario(args.scenario)  # the error naming the scenarios
+    return load_scenario(args.scenario, robot_from_arguments(args, SCENARIOS[args.scenario][0]))
+
+
 def _compare(args: argparse.Namespace) -> int:
-    from teleop.experiments.scenarios import load_scenario
     from teleop.loop import LoopConfig
 
-    return _run(collision_choice(args, load_scenario(args.scenario)), args,
+    return _run(collision_choice(args, scenario_plan(args)), args,
                 LoopConfig(rate=args.rate or 1000.0, kp=args.kp or LoopConfig.kp,
                            supervisor=supervisor_choice(args)),
                 plant_choice(args))
@@ -497,10 +521,9 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _record(args: argparse.Namespace) -> int:
-    from teleop.experiments.scenarios import load_scenario
     from teleop.experiments.sessions import record_plan
 
-    path = record_plan(collision_choice(args, load_scenario(args.scenario)), args.file,
+    path = record_plan(collision_choice(args, scenario_plan(args)), args.file,
                        args.rate, args.duration, plant=plant_choice(args))
     print(f"wrote {path}")
     return 0
@@ -511,6 +534,26 @@ def _scenarios(args: argparse.Namespace) -> int:
 
     for name in SCENARIOS:
         print(f"{name:<17} {load_scenario(name).description}")
+    return 0
+
+
+def _robots(args: argparse.Namespace) -> int:
+    from teleop.robots import BUILTIN_ROBOTS
+    from teleop.robots.catalog import example_robot_data_share, installed_urdfs
+
+    print("built-in robots:")
+    for name, defaults in BUILTIN_ROBOTS.items():
+        frames = defaults.get("ee_frames") or (defaults["ee_frame"],)
+        links = ([link for link, _ in defaults["constrained_links"]]
+                 if "constrained_links" in defaults else [defaults["constrained_link"]])
+        print(f"  {name:<22} EE {', '.join(frames)}; constrained {', '.join(links)}")
+    share = example_robot_data_share()
+    if share is None:
+        print("example-robot-data: not installed (pip install example-robot-data)")
+        return 0
+    print(f"example-robot-data URDFs (--robot NAME or the path; under {share}):")
+    for name, path in installed_urdfs().items():
+        print(f"  {name:<22} {path.relative_to(share)}")
     return 0
 
 

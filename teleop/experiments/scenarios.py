@@ -19,17 +19,20 @@ from constraints import Barrier, Constraint, Hole, Plane
 from constraints.collision import Box, Capsule, CollisionAvoidance, Sphere
 from teleop.robots import Robot, load_robot
 
+from .placement import placement
 from .plan import Plan, home_pose, home_poses, link_placement, smoothstep
 
 
 def operator_motion(start: pin.SE3, amplitude: Sequence[float], frequencies: Sequence[float],
-                    angle_amplitude: float, ramp: float = 2.5) -> Callable[[float], pin.SE3]:
+                    angle_amplitude: float, ramp: float = 2.5,
+                    scale: float = 1.0) -> Callable[[float], pin.SE3]:
     """Smooth, operator-like 3D motion: incommensurate sinusoids in position and attitude.
 
     Position offsets (world frame) ``A_i sin(2 pi f_i t)``; attitude wobble of
-    ``angle_amplitude`` rad about a slowly turning axis; both faded in over ``ramp`` s.
+    ``angle_amplitude`` rad about a slowly turning axis; both faded in over ``ramp`` s;
+    the position amplitudes multiplied by ``scale`` (a robot's reach, :mod:`.placement`).
     """
-    amplitudes = np.asarray(amplitude, dtype=float)
+    amplitudes = scale * np.asarray(amplitude, dtype=float)
     frequencies_hz = np.asarray(frequencies, dtype=float)
 
     def target(t: float) -> pin.SE3:
@@ -54,11 +57,13 @@ PAPER_MOTION = ((0.015, 0.011, 0.011), (0.14, 0.19, 0.10), 0.03)
 def _paper_hole(robot: Robot) -> Plan:
     q0 = robot.q_home.copy()
     start = home_pose(robot, q0)
+    where = placement(robot, "sda10f", 0.08)
     return Plan(
         "paper-hole", robot, q0, 10.0,
-        lambda: [Hole.on_link(robot, q0, distance=0.08)],
-        operator_motion(start, *PAPER_MOTION),
-        description="sda10f, hole on link 6 (6 joints before, 2 after), operator-like 3D motion")
+        lambda: [Hole.on_link(robot, q0, distance=where.hole_distance)],
+        operator_motion(start, *PAPER_MOTION, scale=where.scale),
+        description="sda10f, hole on link 6 (6 joints before, 2 after), operator-like 3D motion"
+        if robot.name == "sda10f" else _elsewhere(robot, where, "operator-like 3D motion"))
 
 
 def _paper_plane(robot: Robot) -> Plan:
@@ -76,7 +81,8 @@ def _paper_plane(robot: Robot) -> Plan:
 def _trocar_circle(robot: Robot) -> Plan:
     q0 = robot.q_home.copy()
     start = home_pose(robot, q0)
-    radius, period = 0.03, 4.0
+    where = placement(robot, "ur5_instrument", 0.2)
+    radius, period = 0.03 * where.scale, 4.0
 
     def target(t: float) -> pin.SE3:
         r = radius * smoothstep(t / 1.5)  # spiral out from the home tip position
@@ -86,9 +92,11 @@ def _trocar_circle(robot: Robot) -> Plan:
 
     return Plan(
         "trocar-circle", robot, q0, 10.0,
-        lambda: [Hole.on_link(robot, q0, distance=0.2)],
+        lambda: [Hole.on_link(robot, q0, distance=where.hole_distance)],
         target,
-        description="ur5_instrument, trocar on the shaft, the tip traces a 3 cm circle")
+        description="ur5_instrument, trocar on the shaft, the tip traces a 3 cm circle"
+        if robot.name == "ur5_instrument"
+        else _elsewhere(robot, where, f"the tip traces a circle of {radius * 100:.3g} cm"))
 
 
 def _insertion(robot: Robot) -> Plan:
@@ -148,6 +156,7 @@ def _near_singular(robot: Robot) -> Plan:
 def _joint_limits(robot: Robot) -> Plan:
     q0 = robot.q_home.copy()
     start = home_pose(robot, q0)
+    where = placement(robot, "ur5_instrument", 0.2)
 
     def target(t: float) -> pin.SE3:
         angle = 1.7 * smoothstep(t / 5.0)  # the wrist pitch limit is 1.4 rad
@@ -155,9 +164,11 @@ def _joint_limits(robot: Robot) -> Plan:
 
     return Plan(
         "joint-limits", robot, q0, 10.0,
-        lambda: [Hole.on_link(robot, q0, distance=0.2)],
+        lambda: [Hole.on_link(robot, q0, distance=where.hole_distance)],
         target,
-        description="ur5_instrument, the target pitches the tip 1.7 rad: the wrist limit is 1.4")
+        description="ur5_instrument, the target pitches the tip 1.7 rad: the wrist limit is 1.4"
+        if robot.name == "ur5_instrument"
+        else _elsewhere(robot, where, "the target pitches the tip 1.7 rad"))
 
 
 def _barrier(robot: Robot) -> Plan:
@@ -323,8 +334,9 @@ def _mobile_wall(robot: Robot) -> Plan:
 FAST_LATERAL_MOVES = ((0.2, 0.1875, 0.02, 0.0), (0.4875, 0.375, -0.04, 0.0),
                       (0.9625, 0.1875, 0.02, 0.0), (1.4, 0.3, 0.0, 0.03), (2.0, 0.3, 0.0, -0.03))
 
-#: Where ``fast-lateral`` puts its hole along the constrained link of a robot (m); others 8 cm.
-FAST_LATERAL_HOLE_DISTANCE = {"ur5_instrument": 0.2}
+#: Where ``fast-lateral`` puts its hole along the constrained link of a built-in robot (m);
+#: another robot's: :func:`placement`.
+FAST_LATERAL_HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.2}
 
 
 def _fast_lateral(robot: Robot) -> Plan:
@@ -338,12 +350,15 @@ def _fast_lateral(robot: Robot) -> Plan:
     if np.linalg.norm(across) < 0.1:  # a vertical shaft: sideways is along world y
         across = np.cross(shaft, [1.0, 0.0, 0.0])
     across /= np.linalg.norm(across)
-    distance = FAST_LATERAL_HOLE_DISTANCE.get(robot.name, 0.08)
+    own = robot.name if robot.name in FAST_LATERAL_HOLE_DISTANCE else "sda10f"
+    where = placement(robot, own, FAST_LATERAL_HOLE_DISTANCE[own])
+    distance = where.hole_distance
 
     def target(t: float) -> pin.SE3:
         offset = np.zeros(3)
         for begin, length, sideways, along in FAST_LATERAL_MOVES:
-            offset += smoothstep((t - begin) / length) * (sideways * across + along * shaft)
+            offset += smoothstep((t - begin) / length) * where.scale * (
+                sideways * across + along * shaft)
         return pin.SE3(start.rotation, start.translation + offset)
 
     return Plan(
@@ -351,7 +366,15 @@ def _fast_lateral(robot: Robot) -> Plan:
         lambda: [Hole.on_link(robot, q0, distance=distance)],
         target,
         description=f"{robot.name}, hole on the constrained link: the tip sweeps 4 cm sideways "
-                    "at up to 0.2 m/s, then a quick 3 cm insertion and back")
+                    "at up to 0.2 m/s, then a quick 3 cm insertion and back"
+        if robot.name in FAST_LATERAL_HOLE_DISTANCE
+        else _elsewhere(robot, where, "the tip sweeps sideways, then a quick insertion and back"))
+
+
+def _elsewhere(robot: Robot, where, motion: str) -> str:
+    """A portable scenario's description on a robot it was not written for."""
+    return (f"{robot.name}, hole {where.hole_distance * 100:.3g} cm along {robot.constrained_link} "
+            f"(EE {robot.ee_frame}), paths x{where.scale:.2f} (reach): {motion}")
 
 
 # ------------------------------------------------------------ with collision avoidance
@@ -494,9 +517,22 @@ SCENARIOS: dict[str, tuple[str, Callable[[Robot], Plan]]] = {
 }
 
 
+#: The scenarios that run on any single arm with a constrained link (:mod:`.placement`).
+PORTABLE_SCENARIOS = ("paper-hole", "trocar-circle", "fast-lateral", "joint-limits")
+
+
 def load_scenario(name: str, robot: Robot | None = None) -> Plan:
-    """The :class:`Plan` of a named scenario; unknown names list the known ones."""
+    """The :class:`Plan` of a named scenario on its own robot or on ``robot`` (a single
+    arm for :data:`PORTABLE_SCENARIOS`; the others run on their own robot only); unknown
+    names list the known ones."""
     if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r}; scenarios: {', '.join(SCENARIOS)}")
     robot_name, build = SCENARIOS[name]
+    if robot is not None and robot.name != robot_name:
+        if name not in PORTABLE_SCENARIOS:
+            raise ValueError(f"scenario {name!r} runs on {robot_name} only; on another robot: "
+                             f"{', '.join(PORTABLE_SCENARIOS)}")
+        if robot.task_size != 6:
+            raise ValueError(f"scenario {name!r} drives one end effector; robot {robot.name!r} "
+                             f"has {len(robot.ee_frames)}")
     return build(robot or load_robot(robot_name))
