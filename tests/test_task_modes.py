@@ -156,6 +156,8 @@ def test_auto_asks_for_what_the_chain_allows(sda10f, dual):
     assert port_task_modes(sda10f, [lock]) == ("position_roll",)
     left = Hole.on_link(dual, dual.q_home, 0.08, link=dual.constrained_links[0])
     assert port_task_modes(dual, [left]) == ("position_roll", "pose")
+    # a link the robot does not have is on no chain (the controllers refuse it by name)
+    assert port_task_modes(sda10f, [Hole("abc", [0.0, 0.0, 0.0], [0.0, 0.0, 1.0])]) == ("pose",)
 
 
 @pytest.mark.parametrize("given_modes, message", [

@@ -119,10 +119,12 @@ def chain_directions(model: pin.Model, ee_frame_id: int, constraints: Sequence[C
                      frame_ids: Sequence[int]) -> int:
     """How many directions the equalities among ``constraints`` (on frames ``frame_ids``)
     remove from the chain of the EE at ``ee_frame_id``: the sum of their ``dim`` over
-    those whose link the EE's chain carries."""
+    those whose link the EE's chain carries (a frame not in the model is on no chain:
+    the controllers refuse its constraint, naming it)."""
     supports = model.supports[model.frames[ee_frame_id].parentJoint]
     return sum(constraint.dim for constraint, frame in zip(constraints, frame_ids)
-               if constraint.is_equality and model.frames[frame].parentJoint in supports)
+               if constraint.is_equality and frame < model.nframes
+               and model.frames[frame].parentJoint in supports)
 
 
 def port_task_modes(robot, constraints: Sequence[Constraint]) -> tuple[str, ...]:

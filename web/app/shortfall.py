@@ -83,6 +83,7 @@ def ports_on_chain(model: pin.Model, ee_frame_id: int,
     supports = model.supports[model.frames[ee_frame_id].parentJoint]
     return [name for name, constraint in constraints.items()
             if constraint.is_equality and constraint.dim >= PORT_DIRECTIONS
+            and model.existFrame(constraint.link)
             and model.frames[model.getFrameId(constraint.link)].parentJoint in supports]
 
 
