@@ -89,6 +89,17 @@ class CompiledTick:
             self.twist = self._tick.twist
         return True
 
+    def sense(self, q: np.ndarray) -> list[float] | None:
+        """Each constraint's violation at ``q`` (m, ``Constraint.violation`` at the
+        step's placements, the controller's order) from the step's own kinematics and
+        terms, which :meth:`run` at the same ``q`` then reuses (docs/design.md 5.1, 5.2);
+        after :meth:`ready`. None when the step is not one call (Python writes some terms)
+        or ``q`` is not a finite float64 vector of ``nq``."""
+        if not self._step.one_call:
+            return None
+        violations = self._tick.sense(q)
+        return None if violations is None else violations.tolist()
+
     def run(self, poses: Sequence[pin.SE3], q: np.ndarray, integrate: bool) -> TickResult | None:
         """One period towards ``poses`` (one ``pin.SE3`` per EE, checked by the caller) at
         ``q``, after :meth:`ready`; None when ``q`` is not a finite float64 vector of

@@ -186,6 +186,8 @@ class TeleopLoop:
         #: the hot path compiled around the controller's step, when it offers one and
         #: ``compiled_tick`` (docs/design.md 5.1); None: the Python path below
         self.compiled = (None if not compiled_tick else self._loop_tick(controller))
+        #: the supervisor reads the compiled tick's measures: its kinematics are this model's
+        self._sensed_compiled = getattr(controller, "model", None) is self.model
         self._history_in_tick = False  # the filter's state lives in self.compiled
         self.last_qd = np.zeros(self.model.nv)
         self.refused = ""  # why the controller refused the last input (ValueError), if it did
@@ -346,14 +348,17 @@ class TeleopLoop:
         (:meth:`_advance_python`), to which the filter's state is handed over."""
         tick_start = time.perf_counter_ns()
         sensed = self.q if self.plant is None else self.plant.sense(self.q)
-        supervision = self.supervise(sensed, self.targets(target))
+        compiled = self.compiled
+        ready = compiled is not None and compiled.ready()
+        supervision = self.supervise(sensed, self.targets(target),
+                                     compiled.sense(sensed) if ready and self._sensed_compiled
+                                     else None)
         poses = self.supervisor.followed_targets
         if self._fitting:  # each target fitted at its EE's sensed pose (section 20.2)
             pin.forwardKinematics(self.model, self.data, sensed)
             poses = [fit_target(mode, pose, pin.updateFramePlacement(self.model, self.data, frame))
                      for mode, pose, frame in zip(self.task_modes, poses, self.ee_frame_ids)]
-        compiled = self.compiled
-        if compiled is not None and compiled.ready():
+        if ready:
             if not self._history_in_tick:
                 compiled.set_history(self._filtered_targets, self._previous_targets)
                 self._history_in_tick = True
@@ -369,16 +374,19 @@ class TeleopLoop:
             self._history_in_tick = False
         return self._supervised(self._advance_python(poses, sensed, tick_start), supervision)
 
-    def supervise(self, sensed: np.ndarray, operator_targets: list[pin.SE3]) -> Supervision:
-        """The supervisor's measures at ``sensed`` and of the plant's port forces, and its
-        action: the operator's motion to ``operator_targets`` scaled into the targets the
-        loop follows, ``self.supervisor.followed_targets`` (docs/design.md 5.2); kept in
+    def supervise(self, sensed: np.ndarray, operator_targets: list[pin.SE3],
+                  errors: list[float] | None = None) -> Supervision:
+        """The supervisor's measures at ``sensed`` (``errors``: each constraint's
+        violation there when the compiled tick measured them, else the supervisor's own)
+        and of the plant's port forces, and its action: the operator's motion to
+        ``operator_targets`` scaled into the targets the loop follows,
+        ``self.supervisor.followed_targets`` (docs/design.md 5.2); kept in
         :attr:`supervision`."""
         measures = None if self.plant is None else self.plant.measures()
         self._row_labels()  # the constraints' names, when the set changed
         self.supervision = self.supervisor.supervise(
             sensed, operator_targets, self.constraints, self.controller.constraint_frames,
-            self._names, getattr(measures, "port_forces", None))
+            self._names, getattr(measures, "port_forces", None), errors)
         return self.supervision
 
     @staticmethod

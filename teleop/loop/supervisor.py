@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -108,9 +108,9 @@ def ramp(value: float, warn: float, hold: float) -> float:
     return max(0.0, (hold - value) / (hold - warn))
 
 
-@dataclass(frozen=True)
-class Supervision:
-    """What the supervisor measured and did in one period.
+class Supervision(NamedTuple):
+    """What the supervisor measured and did in one period (a named tuple: immutable and
+    built in one call, every period).
 
     Attributes
     ----------
@@ -191,14 +191,16 @@ class Supervisor:
 
     def supervise(self, sensed: np.ndarray, operator_targets: Sequence[pin.SE3],
                   constraints: Sequence[Constraint], frames: Sequence[int],
-                  names: Sequence[str], port_forces: np.ndarray | None) -> Supervision:
+                  names: Sequence[str], port_forces: np.ndarray | None,
+                  violations: list[float] | None = None) -> Supervision:
         """Measure at ``sensed`` (each constraint at its frame in ``frames``, named by
-        ``names``) and the ``port_forces`` (ports, 3) of the period before (None: not
-        measured), move the supervised targets by the period's share of the operator's
+        ``names``; ``violations``: their violations there when the caller computed them,
+        the compiled tick's) and the ``port_forces`` (ports, 3) of the period before (None:
+        not measured), move the supervised targets by the period's share of the operator's
         motion to ``operator_targets`` (:meth:`follow`, read them in
         :attr:`followed_targets`); the period's :class:`Supervision`."""
         config = self.config
-        errors = self._errors(sensed, constraints, frames)
+        errors = self._errors(sensed, constraints, frames, violations)
         error = max(errors, default=0.0)
         forces = ([] if port_forces is None
                   else [math.sqrt(float(force @ force)) for force in port_forces])
@@ -281,15 +283,19 @@ class Supervisor:
                                         for _, rotation in offsets), default=0.0)
 
     def _errors(self, sensed: np.ndarray, constraints: Sequence[Constraint],
-                frames: Sequence[int]) -> list[float]:
+                frames: Sequence[int], violations: list[float] | None) -> list[float]:
         """Each constraint's violation (an equality's error, a barrier's penetration, m)
-        at ``sensed`` on the model; ``inf`` where it is not finite."""
+        at ``sensed`` on the model (``violations`` when given); ``inf`` where it is not
+        finite."""
         if not constraints:
             return []
-        pin.framesForwardKinematics(self.model, self.data, sensed)
-        placements = self.data.oMf
-        errors = [constraint.violation(placements[frame])
-                  for constraint, frame in zip(constraints, frames)]
+        if violations is not None:
+            errors = violations
+        else:
+            pin.framesForwardKinematics(self.model, self.data, sensed)
+            placements = self.data.oMf
+            errors = [constraint.violation(placements[frame])
+                      for constraint, frame in zip(constraints, frames)]
         # a configuration that is not finite measures nothing: as far off as can be
         return errors if math.isfinite(sum(errors)) else [
             error if math.isfinite(error) else math.inf for error in errors]

@@ -41,9 +41,11 @@ struct CollisionSources {
     if (!target.allFinite()) throw std::invalid_argument(std::string("an obstacle's ") + what + " must be finite");
   }
 
-  //! The centres and velocities replaced since the last step, into ``collisions``.
-  void read(cjm::Collisions* collisions) {
-    if (collisions == nullptr) return;
+  //! The centres and velocities replaced since the last step, into ``collisions``; whether any
+  //! was.
+  bool read(cjm::Collisions* collisions) {
+    bool changed = false;
+    if (collisions == nullptr) return changed;
     for (size_t k = 0; k < sources.size(); ++k) {
       Source& source = sources[k];
       cjm::CollisionObstacle& obstacle = collisions->obstacles()[k];
@@ -51,13 +53,16 @@ struct CollisionSources {
       if (!center.is(source.center)) {
         copy(center, obstacle.center, "center");
         source.center = std::move(center);
+        changed = true;
       }
       py::object velocity = source.obstacle.attr(velocity_name);
       if (!velocity.is(source.velocity)) {
         copy(velocity, obstacle.velocity, "velocity");
         source.velocity = std::move(velocity);
+        changed = true;
       }
     }
+    return changed;
   }
 };
 

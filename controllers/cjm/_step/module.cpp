@@ -94,15 +94,20 @@ struct BoundPipeline : cjm::Pipeline {
     source.parameters = py::reinterpret_borrow<py::object>(parameters);
   }
 
-  //! Each declared constraint's parameters, copied when their array was replaced.
-  void read_sources() {
+  //! Each declared constraint's parameters, copied when their array was replaced (and the
+  //! obstacles' centres and velocities); whether any was.
+  bool read_sources() {
+    bool changed = false;
     for (Source& source : sources) {
       PyObject* current = PyObject_GetAttr(source.constraint.ptr(), parameters_name.ptr());
       if (current == nullptr) throw py::error_already_set();
       const py::object held = py::reinterpret_steal<py::object>(current);
-      if (current != source.parameters.ptr()) load(source, held);
+      if (current != source.parameters.ptr()) {
+        load(source, held);
+        changed = true;
+      }
     }
-    collision_sources.read(collisions());
+    return collision_sources.read(collisions()) || changed;
   }
 
   cjm_collision::CollisionSources collision_sources;  // with compiled collision rows
@@ -166,7 +171,7 @@ struct BoundTick : cjm::Tick {
         rows(i, 9 + r) = entries(r, 3);
       }
     }
-    pipeline().read_sources();
+    if (pipeline().read_sources()) forget_sensed();
     return true;
   }
 
@@ -456,6 +461,19 @@ PYBIND11_MODULE(_step, module) {
            "One period in one call (every constraint declares a compiled form): None when q is not "
            "a finite float64 vector of nq (nothing ran), else (outcome, qd, next q, period, "
            "step time in us, twist saturated, period had a previous target).")
+      .def("sense", [](BoundTick& tick, py::handle q) -> py::object {
+             if (!load_vector(q, tick.pipeline().q())) return py::none();
+             tick.pipeline().read_sources();
+             {
+               py::gil_scoped_release release;
+               tick.sense();
+             }
+             const cjm::Vector& violations = tick.pipeline().violations();
+             return copied(violations, {violations.size()});
+           }, py::arg("q"),
+           "The kinematics at q and the declared constraints' terms, which the next run() or "
+           "start() at the same q reuses: None when q is not a finite float64 vector of nq, "
+           "else each constraint's violation (m; NaN where Python writes its terms).")
       .def("start", [](BoundTick& tick, py::handle targets, py::handle q) -> py::object {
              if (!tick.load(targets, q)) return py::none();
              bool finite = false;

@@ -1,6 +1,8 @@
 // One CJM step from q; see pipeline.hpp.
 #include "pipeline.hpp"
 
+#include <algorithm>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -30,6 +32,7 @@ Pipeline::Pipeline(Kinematics kinematics, Step step, Index ee_count,
   task_twist_ = Vector::Zero(static_cast<Index>(task_entries_.size()));
   terms_ = Vector::Zero(step_.terms_size());
   posture_ = Vector::Zero(nv);
+  violations_ = Vector::Constant(n_constraints, std::numeric_limits<double>::quiet_NaN());
   ee_jacobian_ = RowMatrix::Zero(task_twist_.size(), nv);
 }
 
@@ -61,16 +64,20 @@ void Pipeline::prepare() {
 }
 
 void Pipeline::compute_kinematics() {
+  ++kinematics_count_;
   kinematics_.compute(q_);
   if (collisions_) collisions_->write_rows(kinematics_, step_);
 }
 
-void Pipeline::compute_terms() {
+void Pipeline::compute_task_rows() {
   const RowMatrix& jacobians = kinematics_.jacobians();
   for (Index r = 0; r < task_twist_.size(); ++r) {
     task_twist_(r) = task_scale_(r) * twist_(task_entries_[r]);
     ee_jacobian_.row(r) = task_scale_(r) * jacobians.row(task_entries_[r]);
   }
+}
+
+void Pipeline::compute_constraint_terms() {
   const RowMatrix& placements = kinematics_.placements();
   paper_form_ = true;
   for (Index i = 0; i < static_cast<Index>(forms_.size()); ++i) {
@@ -79,9 +86,12 @@ void Pipeline::compute_terms() {
     const double* placement = placements.row(ee_count_ + i).data();
     const Rotation rotation(placement);
     const Translation translation(placement + 9);
+    double& gap = step_.damper_gaps()(i);
+    double error_norm = 0.0;
     paper_form_ &= write_terms(form.kind, form.parameters, rotation, translation, form.paper,
-                               form.paper_min_a, terms_.data() + step_.terms_offset(i),
-                               step_.damper_gaps()(i));
+                               form.paper_min_a, terms_.data() + step_.terms_offset(i), gap,
+                               error_norm);
+    violations_(i) = step_.equality(i) ? error_norm : std::max(0.0, -gap);
     step_.damper_gains()(i) = declared_gain(form.kind, form.parameters);
   }
 }

@@ -39,8 +39,24 @@ class Pipeline {
   void prepare();
   //! Pinocchio's kinematics at q(): placements() and jacobians().
   void compute_kinematics();
+  //! How many times compute_kinematics() ran: what a caller that keeps its results
+  //! between calls compares (Tick::sense()).
+  unsigned long kinematics_count() const { return kinematics_count_; }
   //! The weighted task rows and every declared constraint's terms, after the kinematics.
-  void compute_terms();
+  void compute_terms() {
+    compute_task_rows();
+    compute_constraint_terms();
+  }
+  //! The weighted task rows from twist(), after the kinematics.
+  void compute_task_rows();
+  //! Every declared constraint's terms and violation(), after the kinematics (they do
+  //! not depend on the twist).
+  void compute_constraint_terms();
+  //! Each declared constraint's violation at the last kinematics (m):
+  //! constraints.base.Constraint.violation, ``|e|`` for an equality, the penetration
+  //! ``max(0, -e)`` for an inequality (constraints.barrier.Barrier.violation); NaN for a
+  //! constraint whose terms Python writes.
+  const Vector& violations() const { return violations_; }
   //! The step into ``qd``, after prepare() (and Python's terms); the analytical form only
   //! when ``analytical_allowed`` and paper_form().
   void finish(bool use_posture, bool analytical_allowed, VectorRef qd);
@@ -79,7 +95,8 @@ class Pipeline {
   };
   std::vector<Form> forms_;
   bool paper_form_ = true;
-  Vector q_, twist_, task_twist_, terms_, posture_;
+  unsigned long kinematics_count_ = 0;
+  Vector q_, twist_, task_twist_, terms_, posture_, violations_;
   RowMatrix ee_jacobian_;
   std::unique_ptr<Collisions> collisions_;
 };

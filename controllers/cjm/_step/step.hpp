@@ -113,6 +113,8 @@ class Step {
   Vector& previous() { return previous_; }
   Index terms_size() const { return terms_size_; }
   Index constraint_count() const { return static_cast<Index>(constraints_.size()); }
+  //! Whether constraint ``index`` is an equality (else a one-sided barrier's rows).
+  bool equality(Index index) const { return constraints_[index].equality; }
   //! Where constraint ``index``'s flat terms buffer starts in ``terms``.
   Index terms_offset(Index index) const { return terms_offset_[index]; }
 

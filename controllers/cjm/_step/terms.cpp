@@ -19,6 +19,7 @@ struct Point {
   Rows3 C, C_perp;
   Small rhs;
   double first_error = 0.0;  // the first row's error
+  double error_norm = 0.0;   // |error|: constraints.base.Constraint.violation
 };
 
 struct Field {
@@ -65,6 +66,7 @@ Point hole_point(const Parameters& parameters, const Rotation& rotation,
   point.C_perp = axis.transpose();
   const Small error = -(point.C * x);
   point.first_error = error(0);
+  point.error_norm = error.norm();
   point.rhs = -parameters(9) * error;
   const Vector3 velocity = parameters.segment<3>(3);
   if ((velocity.array() != 0.0).any()) point.rhs += point.C * (rotation.transpose() * velocity);
@@ -87,6 +89,7 @@ Point plane_point(const Parameters& parameters, const Rotation& rotation,
   point.rhs.resize(1);
   point.rhs(0) = normal.dot(parameters.segment<3>(9)) - parameters(12) * error;
   point.first_error = error;
+  point.error_norm = std::abs(error);
   return point;
 }
 
@@ -102,6 +105,7 @@ Point lock_point(const Parameters& parameters, const Rotation& rotation,
   const Vector3 error = rotation * link_point + translation - parameters.segment<3>(3);
   point.rhs = parameters.segment<3>(6) - parameters(9) * error;
   point.first_error = error(0);
+  point.error_norm = error.norm();
   return point;
 }
 
@@ -217,7 +221,7 @@ double declared_gain(TermsKind kind, const Parameters& parameters) {
 
 bool write_terms(TermsKind kind, const Parameters& parameters, const Rotation& rotation,
                  const Translation& translation, bool paper, double paper_min_a, double* terms,
-                 double& gap) {
+                 double& gap, double& error_norm) {
   Point point;
   switch (kind) {
     case TermsKind::hole: point = hole_point(parameters, rotation, translation); break;
@@ -226,6 +230,7 @@ bool write_terms(TermsKind kind, const Parameters& parameters, const Rotation& r
   }
   const Index k = point.C.rows();
   gap = point.first_error;
+  error_norm = point.error_norm;
   write_point(point, terms);
   Eigen::Map<Matrix, 0, Eigen::OuterStride<6>> S(terms + 6, 6, 6 - k, Eigen::OuterStride<6>(6));
   const double a = point.p.norm();

@@ -54,9 +54,10 @@ using Translation = Eigen::Map<const Eigen::Vector3d>;
 //! entries). ``paper``: the hole's structure matrix in the paper's parametrisation (eqs
 //! 11-13) where it is defined (``|p| >= paper_min_a``); returns false when it is not
 //! (the null-space one written instead, as controllers.cjm.compiled falls back).
-//! ``gap``: the first row's error ``e``, an inequality's damper gap (docs/design.md 12).
+//! ``gap``: the first row's error ``e``, an inequality's damper gap (docs/design.md 12);
+//! ``error_norm``: ``|e|``, an equality's violation (constraints.base.Constraint.violation).
 bool write_terms(TermsKind kind, const Parameters& parameters, const Rotation& rotation,
                  const Translation& translation, bool paper, double paper_min_a, double* terms,
-                 double& gap);
+                 double& gap, double& error_norm);
 
 }  // namespace cjm

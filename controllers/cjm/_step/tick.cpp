@@ -69,6 +69,17 @@ void Tick::attach(Pipeline& pipeline) {
   qd_ = Vector::Zero(pipeline.nv());
   next_q_ = Vector::Zero(pipeline.q().size());
   velocity_step_ = Vector::Zero(pipeline.nv());
+  sensed_q_ = Vector::Zero(pipeline.q().size());
+  sensed_ = false;
+}
+
+void Tick::sense() {
+  if (pipeline_ == nullptr) throw std::logic_error("the tick has no pipeline attached");
+  pipeline_->compute_kinematics();
+  pipeline_->compute_constraint_terms();
+  sensed_q_ = pipeline_->q();
+  sensed_count_ = pipeline_->kinematics_count();
+  sensed_ = true;
 }
 
 void Tick::set_history(bool has_filtered, bool has_previous) {
@@ -93,7 +104,10 @@ void Tick::begin() {
   }
   has_filtered_ = true;
   period_has_previous_ = has_previous_;
-  pipeline.compute_kinematics();
+  const bool sensed = sensed_ && pipeline.kinematics_count() == sensed_count_ &&
+                      pipeline.q() == sensed_q_;
+  sensed_ = false;
+  if (!sensed) pipeline.compute_kinematics();
   const RowMatrix& placements = pipeline.placements();
   Vector& twist = pipeline.twist();
   twist_saturated_ = false;
@@ -117,7 +131,8 @@ void Tick::begin() {
   }
   previous_ = filtered_;
   has_previous_ = true;
-  pipeline.compute_terms();
+  pipeline.compute_task_rows();
+  if (!sensed) pipeline.compute_constraint_terms();
 }
 
 bool Tick::finish(bool use_posture, bool analytical_allowed) {

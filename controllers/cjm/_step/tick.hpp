@@ -36,9 +36,15 @@ class Tick {
 
   //! The operator's targets of this period, one row of 12 per EE (written before begin()).
   RowMatrix& operator_targets() { return operator_targets_; }
-  //! Filter, kinematics at the pipeline's q(), twists into its twist(), the task rows and
-  //! declared terms; a constraint that declares none may then have its terms written
-  //! before finish().
+  //! The kinematics at the pipeline's q() and the declared constraints' terms and
+  //! violations (Pipeline::violations()): what the loop's supervisor measures before the
+  //! period's targets are known (docs/design.md 5.2). begin() at the same q() reuses them.
+  void sense();
+  //! What sense() computed is stale (the constraints' parameters were read anew).
+  void forget_sensed() { sensed_ = false; }
+  //! Filter, kinematics at the pipeline's q() (unless sense() computed them at this q()),
+  //! twists into its twist(), the task rows and declared terms; a constraint that declares
+  //! none may then have its terms written before finish().
   void begin();
   //! The step into qd(); false when it is not finite (then no integration either).
   bool finish(bool use_posture, bool analytical_allowed);
@@ -72,7 +78,9 @@ class Tick {
   RowMatrix operator_targets_, filtered_, previous_, period_;
   bool has_filtered_ = false, has_previous_ = false, period_has_previous_ = false;
   bool twist_saturated_ = false;
-  Vector qd_, next_q_, velocity_step_;
+  bool sensed_ = false;  // sense() ran at sensed_q_ and begin() has not used it yet
+  unsigned long sensed_count_ = 0;  // the pipeline's kinematics_count() after sense()
+  Vector qd_, next_q_, velocity_step_, sensed_q_;
   double step_time_us_ = 0.0;
 };
 
