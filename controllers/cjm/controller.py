@@ -12,7 +12,8 @@ from constraints import Constraint, Parametrisation, RobotLike
 from constraints.collision import CollisionAvoidance
 from constraints.validation import as_number, as_vector
 
-from ..base import Controller, SolverError, StepStatus, as_twist_weight, velocity_joint_names
+from ..base import (Controller, SolveInfo, SolverError, StepStatus, as_twist_weight,
+                    velocity_joint_names)
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from .analytical import ChainSplit, chain_split
@@ -306,12 +307,26 @@ class CJMController(Controller):
         return qd
 
     def take_report(self, report: StepReport) -> None:
-        """A step's report kept in :attr:`report` and worded into :attr:`info`
-        (``SolverError`` for a failed step when ``strict``)."""
+        """A step's report kept in :attr:`report`, worded into :attr:`info` when that is
+        read (``SolverError`` for a failed step when ``strict``)."""
         self.report = report
-        info = self.info = solve_info(report, self.joint_names)
-        if self.strict and info.status is StepStatus.FAILED:
-            raise SolverError(info.message)
+        self._info: SolveInfo | None = None
+        if self.strict and report.status is StepStatus.FAILED:
+            raise SolverError(self.info.message)
+
+    @property
+    def info(self) -> SolveInfo:
+        """How the last step went: :attr:`report` worded on the first read after the step
+        (:func:`~controllers.cjm.report.solve_info`; docs/design.md 16), so that a step
+        nobody asks about costs no words."""
+        info = self._info
+        if info is None:
+            info = self._info = solve_info(self.report, self.joint_names)
+        return info
+
+    @info.setter
+    def info(self, info: SolveInfo) -> None:
+        self._info = info
 
     def loop_tick(self, dt: float, kp: float, max_linear_speed: float, max_angular_speed: float,
                   target_time_constant: float, feed_forward: bool):
