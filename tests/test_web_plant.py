@@ -264,6 +264,12 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         # the status line: the hole's link named, the force in mN, the arrow's scale
         assert (f"port force {hole_id} **{1e3 * port.magnitude:.2f} mN** (arrow 2 cm at "
                 "0.1 mN, 2 cm more per tenfold force)") in ui.summary.content
+        # the largest force the plots show, in the status line once they have drawn it
+        ui._draw(snapshot)
+        largest = np.nanmax(snapshot["robots"]["main"]["trace"]["port_force"])
+        assert largest > 1e-3  # the drag's start, sampled (the last periods are not yet)
+        assert f"; the largest in the last 10 s {1e3 * largest:.2f} mN (arrow" in \
+            ui.summary.content
         link = app.entries[hole_id].constraint.link
         assert f"placed: {hole_id} on `{link}`" in ui.summary.content
         label = ui._markers[hole_id]["label"]  # and in the scene, above the hole

@@ -116,6 +116,8 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         self._plot_keys: dict[str, tuple] = {}
         self._line_colors: dict[tuple[str, int], tuple] = {}  # (robot, EE) -> its line colour
         self._plotted: set[str] = set()  # the robots the plots show
+        #: the main robot's largest port force over the plots' window (N; None: no port)
+        self._port_peak: float | None = None
         self._ghost_seen: float | None = None  # when the view first saw the ghost
         self._saved_offset = app.ghost_offset.copy()
         robot = app.robot

@@ -105,6 +105,7 @@ class Plots:
     _plots: dict[str, object]
     _plot_keys: dict[str, tuple]
     _plotted: set[str]
+    _port_peak: float | None
     _plot_tab: object  # the "Plots" tab
 
     def _plot(self, snapshot: dict) -> None:
@@ -131,6 +132,9 @@ class Plots:
                 self._plots[spec.key].data = data
             shown.update(series)
         self._plotted = shown
+        trace = robots["main"]["trace"]
+        forces = trace["port_force"][np.isfinite(trace["port_force"])]
+        self._port_peak = float(forces.max()) if forces.size else None
 
     def _replace_plot(self, spec: PlotSpec, unit: str, series: dict, labels: tuple,
                       data: tuple) -> None:
