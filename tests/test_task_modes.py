@@ -345,3 +345,14 @@ def test_the_angle_asked_is_what_the_mode_asks_of_the_rotation():
     assert asked_angle("position_roll", placement, target) == pytest.approx(0.4, abs=1e-12)
     assert asked_angle("pose", placement, target) == pytest.approx(
         np.linalg.norm(pin.log3(swing @ pin.exp3(np.array([0.0, 0.0, 0.4])))), abs=1e-12)
+
+
+def test_teleop_web_takes_a_task_mode(capsys):
+    from web import cli as web_cli
+
+    parser = web_cli.build_parser()
+    assert parser.parse_args([]).task_mode == "auto"
+    assert parser.parse_args(["--task-mode", "position_roll"]).task_mode == "position_roll"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--task-mode", "roll"])
+    assert "invalid choice: 'roll'" in capsys.readouterr().err
