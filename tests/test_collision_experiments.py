@@ -150,7 +150,7 @@ def test_compare_writes_the_collision_metrics(tmp_path):
     assert code == 0
     document = json.loads((tmp_path / "metrics.json").read_text())
     jsonschema.validate(document, SCHEMA)
-    assert document["schema_version"] == 8
+    assert document["schema_version"] == 9
     assert document["collisions"]["safety_distance"] == pytest.approx(0.008)
     assert [o["name"] for o in document["collisions"]["obstacles"]] == ["organ"]
     metrics = document["controllers"]["cjm"]

@@ -366,13 +366,16 @@ def test_multi_report_embeds_every_plot_lists_every_controller_and_marks_the_bes
     for spec in ALL_CONTROLLERS:
         assert spec in page.cells
     # the best residual: qp:proxqp holds the rows to its 1e-10 tolerance, the others to
-    # round-off; the marked ones are the smallest in metrics.json
+    # round-off; the marked ones are those within 1e-12 m/s (the measure's resolution) of
+    # the smallest in metrics.json, and not every controller
     document = json.loads((tmp_path / "metrics.json").read_text())
     residuals = {s: m["constraint_velocity_residual_max_mps"]
                  for s, m in document["controllers"].items()}
     row = {spec: page.cells.index(spec) for spec in ALL_CONTROLLERS}
     marked = {spec for spec, start in row.items() if start + 3 in page.best}
-    assert marked and all(f"{residuals[s]:.1e}" == f"{min(residuals.values()):.1e}" for s in marked)
+    smallest = min(residuals.values())
+    assert marked == {s for s, value in residuals.items() if value - smallest <= 1e-12}
+    assert 0 < len(marked) < len(residuals)
     # the constraint-velocity figure has a panel per row, the plane's among them
     from teleop.experiments.plots import write_plots
 

@@ -183,7 +183,7 @@ def test_compare_on_the_physics_plant_from_the_command_line(tmp_path):
     assert run.returncode == 0, run.stderr
     document = json.loads((out / "metrics.json").read_text())
     jsonschema.validate(document, SCHEMA)
-    assert document["schema_version"] == 8  # 8: the plant's interface and wall parts (17)
+    assert document["schema_version"] == 9  # 8: the plant's interface and wall parts (17); 9: failures
     plant = document["plant"]
     assert plant["kind"] == "mujoco" and plant["wall_stiffness_n_per_m"] == 2000.0
     assert plant["settings"]["payload_kg"] == 0.5

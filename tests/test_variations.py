@@ -199,7 +199,7 @@ def test_compare_records_the_variation_and_the_gains(tmp_path):
                      for name in ("plain", "varied"))
     for document in (plain, varied):
         jsonschema.validate(document, SCHEMA)
-        assert document["schema_version"] == 8
+        assert document["schema_version"] == 9
     assert plain["variation"] == {"trocar_shift_m": 0.0, "path_amplitude_m": 0.0, "seed": 0}
     assert (plain["kp"], plain["constraint_gain"]) == (20.0, None)
     assert varied["variation"] == {"trocar_shift_m": 0.02, "path_amplitude_m": 0.01, "seed": 3}

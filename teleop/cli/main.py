@@ -467,9 +467,9 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
         print()
         print(format_collision_table(document))
     for spec, result in results.items():
-        if result.failure_messages:
-            print(f"  {spec}: {len(result.failure_messages)}+ failed steps, "
-                  f"first {result.failure_messages[0]}")
+        for entry in result.failure_summary:
+            print(f"  {spec}: {entry['count']} failed steps, the first at step "
+                  f"{entry['first_step']} (t={entry['first_t_s']:.3f}s): {entry['message']}")
         if result.solver_messages:
             print(f"  {spec}: the solver wrote {sum(result.solver_messages.values())} lines "
                   f"({len(result.solver_messages)} distinct), kept in metrics.json")

@@ -27,7 +27,7 @@ from .variations import Variation
 from .results import BODY_METRIC_KEYS, COLLISION_METRIC_KEYS, METRIC_KEYS, RunResult
 from .solver_output import SolverOutputCapture
 
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 
 
 def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
@@ -165,6 +165,20 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
     return drive
 
 
+def summarise_failures(records: Sequence[StepRecord]) -> list[dict]:
+    """Every failed step of a run counted by its message: ``message``, ``count``,
+    ``first_step`` (its index) and ``first_t_s``, the most frequent first."""
+    summary: dict[str, dict] = {}
+    for index, record in enumerate(records):
+        if not record.failed:
+            continue
+        entry = summary.setdefault(record.message, {
+            "message": record.message, "count": 0, "first_step": index,
+            "first_t_s": float(record.t)})
+        entry["count"] += 1
+    return sorted(summary.values(), key=lambda entry: (-entry["count"], entry["first_step"]))
+
+
 def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
     """The records as columns; constraint rows by label and constraints by name, NaN where
     one did not exist; the EE errors one column per EE; the plant's measures per port
@@ -217,6 +231,7 @@ def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
                                         for r in records]).reshape(-1, count),
         constraint_errors=constraint_errors,
         failure_messages=failures,
+        failure_summary=summarise_failures(records),
         status_counts=dict(collections.Counter(r.status for r in records)),
         controller_status_counts=dict(collections.Counter(r.controller_status for r in records)),
         supervisor_first_action=next((f"t={r.t:.3f}s: {r.message}" for r in records

@@ -21,6 +21,19 @@ TABLE_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (
 )
 
 
+#: The resolution of each column's measure: two values closer than this are the same
+#: measure (double rounding on metre-scale kinematics and on the steps' integration is
+#: about 1e-15; the resolution leaves three orders above it); a count's is one.
+RESOLUTION: dict[str, float] = {
+    "constraint_error_max_m": 1e-12, "constraint_error_rms_m": 1e-12,
+    "constraint_velocity_residual_max_mps": 1e-12, "constraint_velocity_max_mps": 1e-12,
+    "ee_position_error_rms_m": 1e-12, "ee_orientation_error_rms_rad": 1e-12,
+    "joint_limit_violation_max_rad": 1e-12, "failed_steps": 1.0,
+    "step_time_median_us": 1.0, "step_time_p99_us": 1.0,
+    "joint_velocity_deviation_max_radps": 1e-12,
+}
+
+
 #: The second table's columns (docs/design.md section 17.3): the robot's body (null on the
 #: kinematic plant, shown ``-``) and the run's smoothness.
 BODY_COLUMNS: tuple[tuple[str, str, Callable[[float], str]], ...] = (

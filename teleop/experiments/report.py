@@ -20,6 +20,7 @@ from typing import Sequence
 from .metrics_table import (
     BODY_COLUMNS,
     COLLISION_COLUMNS,
+    RESOLUTION,
     TABLE_COLUMNS,
     body_cells,
     format_status_counts,
@@ -56,9 +57,10 @@ def package_versions(packages: Sequence[str] = PACKAGES) -> dict[str, str]:
 
 
 def best_rows(document: dict) -> dict[str, set[str]]:
-    """Per metrics key of :data:`TABLE_COLUMNS`, the controllers showing the smallest value
-    as printed (ties all marked); none when every controller shows the same. The deviation
-    from the reference controller is ranked without the reference (trivially 0)."""
+    """Per metrics key of :data:`TABLE_COLUMNS`, the controllers whose value is the
+    smallest: within the measure's :data:`RESOLUTION` of it or printed the same (ties all
+    marked); none when every controller is (a difference of rounding is no ranking). The
+    deviation from the reference controller is ranked without the reference (trivially 0)."""
     controllers = document["controllers"]
     reference = document.get("joint_velocity_reference")
     best: dict[str, set[str]] = {}
@@ -70,7 +72,9 @@ def best_rows(document: dict) -> dict[str, set[str]]:
             best[key] = set()
             continue
         smallest = min(value for value, _ in shown.values())
-        best[key] = {spec for spec, (_, text) in shown.items() if text == fmt(smallest)}
+        tied = {spec for spec, (value, text) in shown.items()
+                if text == fmt(smallest) or value - smallest <= RESOLUTION[key]}
+        best[key] = tied if len(tied) < len(shown) else set()
     return best
 
 
@@ -304,13 +308,35 @@ def _supervisor_table(document: dict) -> str:
     return "\n".join(rows) + f'\n<p class="note">{e(note)}</p>'
 
 
+def _failures(document: dict) -> list[str]:
+    """The failed steps of every controller, counted by message (the loop's stop each
+    time: the command nearest zero), or nothing when none failed."""
+    e = html.escape
+    lines = [(spec, entry)
+             for spec, m in document["controllers"].items() for entry in m.get("failures", [])]
+    if not lines:
+        return []
+    rows = ['<p class="note">Failed steps: no command could be computed, the robot was '
+            "given the stop (the command nearest zero). Every failed step is counted.</p>",
+            "<table>", "<tr><th>controller</th><th>failed steps</th><th>first (step, t)</th>"
+            "<th>message</th></tr>"]
+    rows += [f"<tr><td>{e(spec)}</td><td>{entry['count']}</td>"
+             f"<td>{entry['first_step']}, {entry['first_t_s']:.3f} s</td>"
+             f'<td style="text-align:left">{e(entry["message"])}</td></tr>'
+             for spec, entry in lines]
+    rows.append("</table>")
+    return rows
+
+
 def _solver_messages(document: dict) -> str:
     e = html.escape
+    failures = _failures(document)
     lines = [(spec, message, count) for spec, m in document["controllers"].items()
              for message, count in m["solver_messages"].items()]
     if not lines:
-        return "<p>Nothing: no solver printed or warned during the runs.</p>"
-    rows = [('<p class="note">Kept off the console during the runs (design 15.5): each '
+        return "\n".join(failures or [
+            "<p>Nothing: no step failed, and no solver printed or warned during the runs.</p>"])
+    rows = [*failures, ('<p class="note">Kept off the console during the runs (design 15.5): each '
              "distinct line with the number of times it came.</p>"), "<table>",
             "<tr><th>controller</th><th>times</th><th>message</th></tr>"]
     rows += [f"<tr><td>{e(spec)}</td><td>{count}</td>"

@@ -73,6 +73,8 @@ class RunResult:
         solve at the reference run's ``q`` and twist (rad/s, docs/design.md section 15.3),
         zeros for the reference itself; None when not computed.
     failure_messages : the first failures, with their time.
+    failure_summary : every failed step counted by its message (``message``, ``count``,
+        ``first_step``, ``first_t_s``), the most frequent first.
     status_counts : steps per status (the loop's, :attr:`statuses`).
     controller_status_counts : steps per the controller's own step status.
     supervisor_first_action : the first period the supervisor scaled or held the twist, in
@@ -117,6 +119,7 @@ class RunResult:
     constraint_errors: dict[str, np.ndarray] = field(default_factory=dict)
     joint_velocity_deviation: np.ndarray | None = None
     failure_messages: list[str] = field(default_factory=list)
+    failure_summary: list[dict] = field(default_factory=list)
     status_counts: dict[str, int] = field(default_factory=dict)
     controller_status_counts: dict[str, int] = field(default_factory=dict)
     supervisor_first_action: str | None = None
@@ -245,7 +248,7 @@ class RunResult:
     def steps(self) -> int:
         return len(self.columns["t"])
 
-    def metrics(self) -> dict[str, float | int | str | dict | None]:
+    def metrics(self) -> dict[str, float | int | str | dict | list | None]:
         """The summary of docs/design.md sections 7 and 15 (units in the key names): the
         ``ee_*`` keys are over the per-step worst EE; ``end_effectors`` has each EE's,
         ``constraints`` each constraint's error."""
@@ -303,6 +306,7 @@ class RunResult:
             **self.interface_metrics(),
             **self.collision_metrics(),
             "first_failure": self.failure_messages[0] if self.failure_messages else None,
+            "failures": [dict(entry) for entry in self.failure_summary],
             "status_counts": dict(self.status_counts),
             "controller_status_counts": dict(self.controller_status_counts),
             "supervisor": self.supervisor_metrics(),

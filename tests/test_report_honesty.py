@@ -1,0 +1,69 @@
+"""Item 3 of issue 38: every failed step counted in the report's solver section (a real
+QP solver given too few iterations), and "best" marked only beyond a measure's
+resolution."""
+
+from __future__ import annotations
+
+import pytest
+
+from controllers.optimization.budget import ITERATION_CAPS
+from teleop.experiments.compare import compare, metrics_document
+from teleop.experiments.metrics_table import TABLE_COLUMNS
+from teleop.experiments.report import best_rows, render_report
+from teleop.experiments.scenarios import load_scenario
+from teleop.loop import LoopConfig
+
+
+def test_a_solver_out_of_iterations_is_named_and_counted_in_the_report(monkeypatch):
+    """proxqp capped at 1 x 1 iterations (the real solver): on joint-limits, where the
+    box is active, some steps fail; the report names the message with the number of
+    failed steps the run recorded, and the first one."""
+    monkeypatch.setitem(ITERATION_CAPS, "proxqp", {"max_iter": 1, "max_iter_in": 1})
+    plan = load_scenario("joint-limits")
+    results = compare(plan, ["qp:proxqp"], duration=0.5, progress=False)
+    result = results["qp:proxqp"]
+    failed = int(result.columns["failed"].sum())  # the loop's own record of each step
+    assert failed > 0
+    summary = result.failure_summary
+    assert sum(entry["count"] for entry in summary) == failed
+    first = int(result.columns["failed"].argmax())
+    assert min(entry["first_step"] for entry in summary) == first
+    assert "proxqp stopped at its iteration limit (1 x 1 iterations)" in summary[0]["message"]
+    document = metrics_document(plan, results, LoopConfig(), 0.5)
+    assert document["controllers"]["qp:proxqp"]["failures"] == summary
+    page = render_report(document, [])
+    solvers = page[page.index("What the solvers said"):]
+    assert "Nothing" not in solvers
+    assert f"<td>qp:proxqp</td><td>{summary[0]['count']}</td><td>{first}," in solvers
+    assert "proxqp stopped at its iteration limit (1 x 1 iterations)" in solvers
+
+
+def test_no_failure_and_no_output_says_nothing():
+    plan = load_scenario("paper-hole")
+    results = compare(plan, ["cjm"], duration=0.05, progress=False)
+    assert results["cjm"].failure_summary == []
+    page = render_report(metrics_document(plan, results, LoopConfig(), 0.05), [])
+    assert "Nothing: no step failed, and no solver printed or warned" in page
+
+
+def metrics(**values: float) -> dict:
+    row: dict = {key: 0.0 for _, key, _ in TABLE_COLUMNS}
+    row.update(failed_steps=0, step_time_median_us=5.0, step_time_p99_us=9.0,
+               joint_velocity_deviation_max_radps=None)
+    row.update(values)
+    return row
+
+
+@pytest.mark.parametrize("errors, best", [
+    # 1e-16 apart: a tie, both best; the third 4 nm above them
+    ((1.0e-9, 1.0e-9 + 1e-16, 5.0e-9), {"a", "b"}),
+    # printed apart (2.0e-17, 6.1e-17) but rounding: nobody is best
+    ((2.0e-17, 6.1e-17, 4.0e-17), set()),
+    # beyond the resolution: the smallest alone
+    ((1.0e-9, 2.0e-9, 3.0e-9), {"a"}),
+])
+def test_best_is_marked_only_beyond_the_resolution(errors, best):
+    document = {"controllers": {name: metrics(constraint_error_max_m=error)
+                                for name, error in zip("abc", errors)},
+                "joint_velocity_reference": None}
+    assert best_rows(document)["constraint_error_max_m"] == best
