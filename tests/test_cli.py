@@ -283,17 +283,22 @@ def test_unknown_spec_raises_value_error(spec, message, sda10f):
 
 
 def test_compare_says_each_run_it_finishes_when_stderr_is_no_terminal(tmp_path):
-    """Output redirected: standard error still shows the runs going by, one line each, the
+    """Output redirected: standard error still shows the runs going by, inside each a line
+    at each tenth of its steps with the time left, then one line when it ends, the
     agreement run last."""
     result = run("compare", "--scenario", "paper-hole", "--duration", "0.02",
                  "--controllers", "cjm,qp:daqp", "--out", str(tmp_path), "--no-plots")
     assert result.returncode == 0, result.stderr
     lines = result.stderr.splitlines()
     runs = ["cjm", "qp:daqp", "joint velocities against cjm"]
-    assert len(lines) == len(runs), result.stderr
-    for index, (line, name) in enumerate(zip(lines, runs), start=1):
+    assert len(lines) == 10 * len(runs), result.stderr
+    for index, name in enumerate(runs, start=1):
+        own = lines[10 * (index - 1):10 * index]
+        for tenth, line in enumerate(own[:-1], start=1):
+            assert re.fullmatch(rf"paper-hole: {re.escape(name)} {10 * tenth}% \({2 * tenth}/20 "
+                                r"steps, [0-9.]+ s, about [0-9]+ s left\)", line), line
         assert re.fullmatch(rf"paper-hole: {re.escape(name)} done \({index}/3, 20 steps in "
-                            r"[0-9.]+ s\)", line), line
+                            r"[0-9.]+ s\)", own[-1]), own[-1]
 
 
 def test_compare_shows_a_bar_with_an_estimate_on_a_terminal():

@@ -400,10 +400,16 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
     return results
 
 
+#: How many lines a run prints on its way when standard error is not a terminal (one
+#: each tenth of its steps).
+PROGRESS_LINES = 10
+
+
 class RunProgress:
     """What :func:`compare` shows while it runs: on a terminal a tqdm bar over every run's
-    steps (with its estimate of the time left), else one line per finished run (a log
-    redirected to a file still shows the runs going by)."""
+    steps (with its estimate of the time left), else, inside each run, a line at each
+    tenth of its steps with the time left estimated from its pace so far, and one line
+    per finished run (a log redirected to a file still shows a long pass going by)."""
 
     def __init__(self, name: str, runs: Sequence[str], steps: int, console) -> None:
         self.name, self.runs, self.steps, self.console = name, list(runs), steps, console
@@ -424,8 +430,17 @@ class RunProgress:
             self._bar.set_postfix_str(run)
 
     def step(self, index: int) -> None:
+        """Step ``index`` (from 0) of the current run has been taken."""
         if self._bar is not None:
             self._bar.update(1)
+            return
+        done = index + 1
+        if done >= self.steps or done * PROGRESS_LINES % self.steps >= PROGRESS_LINES:
+            return  # not the step that crosses a tenth (nor the last: finish says it)
+        elapsed = time.perf_counter() - self._started
+        left = elapsed * (self.steps - done) / done
+        print(f"{self.name}: {self._run} {100 * done // self.steps}% ({done}/{self.steps} "
+              f"steps, {elapsed:.1f} s, about {left:.0f} s left)", file=self.console, flush=True)
 
     def finish(self) -> None:
         """The current run has finished: its line (not on a terminal)."""
