@@ -82,3 +82,24 @@ def test_the_step_recomputes_what_another_configuration_left(between: str) -> No
         assert np.array_equal(result[1], expected[1])
         assert np.array_equal(result[2], expected[2])
         reference.q = checked.q = expected[2]
+
+
+def test_a_refused_declaration_stops_as_the_python_path() -> None:
+    """A constraint whose declared parameters the extension refuses (here 3 entries where
+    a hole declares 10): the compiled loop measures in Python and takes the same
+    controlled stop as the loop's Python path, no exception out of ``advance``."""
+    steps = []
+    for compiled in (True, False):
+        problem = bench_problem_named("sda10f")
+        constraints = list(problem.constraints)
+        controller = make_controller("cjm", problem.robot, constraints, dt=1e-3)
+        loop = TeleopLoop(problem.robot, controller, q0=problem.base, compiled_tick=compiled)
+        target = loop.ee_placement().copy()
+        loop.advance(target)
+        object.__setattr__(constraints[0], "compiled_parameters", np.zeros(3))
+        steps.append(loop.advance(target))
+    for step in steps:
+        assert step.status == "failed"
+        assert "needs 10 entries, got 3" in step.message
+        assert not np.any(step.qd)
+    assert steps[0].supervision.error == steps[1].supervision.error

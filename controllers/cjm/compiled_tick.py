@@ -93,11 +93,16 @@ class CompiledTick:
         """Each constraint's violation at ``q`` (m, ``Constraint.violation`` at the
         step's placements, the controller's order) from the step's own kinematics and
         terms, which :meth:`run` at the same ``q`` then reuses (docs/design.md 5.1, 5.2);
-        after :meth:`ready`. None when the step is not one call (Python writes some terms)
-        or ``q`` is not a finite float64 vector of ``nq``."""
+        after :meth:`ready`. None when the step is not one call (Python writes some terms),
+        ``q`` is not a finite float64 vector of ``nq``, or a constraint's declared
+        parameters are refused (``ValueError``: :meth:`run` refuses them too, and the loop
+        takes its controlled stop)."""
         if not self._step.one_call:
             return None
-        violations = self._tick.sense(q)
+        try:
+            violations = self._tick.sense(q)
+        except ValueError:
+            return None
         return None if violations is None else violations.tolist()
 
     def run(self, poses: Sequence[pin.SE3], q: np.ndarray, integrate: bool) -> TickResult | None:
