@@ -220,7 +220,7 @@ HEADERS = [
     ("locked_joints 5", {"locked_joints": 5}, r"header 'locked_joints' must map joint names"),
     ("plant 'mujoco'", {"plant": "mujoco"}, r"header 'plant' must be an object, got 'mujoco'"),
     ("plant kind rigid", {"plant": {"kind": "rigid"}},
-     r"header 'plant': plant must be one of kinematic, mujoco, got 'rigid'"),
+     r"header 'plant': plant must be one of kinematic, mujoco, ros2, got 'rigid'"),
     ("plant payload -1", {"plant": {"kind": "mujoco", "settings": {"payload_kg": -1}}},
      r"header 'plant': payload must be >= 0"),
     ("plant unknown setting", {"plant": {"kind": "mujoco", "settings": {"mass": 1}}},

@@ -303,7 +303,7 @@ def test_the_bench_times_the_plant_and_the_kinematic_tick_in_one_run():
 
 
 @pytest.mark.parametrize("kwargs, pattern", [
-    ({"kind": "rigid"}, r"plant must be one of kinematic, mujoco, got 'rigid'"),
+    ({"kind": "rigid"}, r"plant must be one of kinematic, mujoco, ros2, got 'rigid'"),
     ({"settings": PlantSettings(payload=1.0)}, r"payload_kg need the mujoco plant"),
     ({"kind": "mujoco", "settings": {"payload": 1}}, r"plant settings must be PlantSettings"),
     ({"wall_stiffness": -1.0}, r"wall_stiffness must be >= 0"),

@@ -195,7 +195,7 @@ def test_home_resets_the_simulated_robot(app):
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    ({"plant": "bullet"}, "plant must be one of kinematic, mujoco, got 'bullet'"),
+    ({"plant": "bullet"}, "plant must be one of kinematic, mujoco, ros2, got 'bullet'"),
     ({"plant": "mujoco", "wall_stiffness": -1.0}, "wall_stiffness must be >= 0"),
     ({"plant": "mujoco", "wall_stiffness": 1e9}, "wall_stiffness must be <= 100000"),
     ({"plant": "mujoco", "wall_stiffness": float("nan")}, "wall_stiffness must be finite"),

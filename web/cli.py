@@ -178,6 +178,9 @@ def _plant(args: argparse.Namespace) -> dict:
     naming the option for a value out of range or a physics option without the plant."""
     given = [f"--{name.replace('_', '-')}" for name in ("wall_stiffness", "payload")
              if getattr(args, name) is not None]
+    if args.plant == "ros2":
+        raise ValueError("--plant ros2: the web UI does not drive a ROS 2 robot yet; "
+                         "'teleop compare --plant ros2' does (docs/ros2.md)")
     if args.plant == "kinematic":
         if given:
             raise ValueError(f"{' and '.join(given)} need{'s' * (len(given) == 1)} "

@@ -17,20 +17,13 @@ from teleop.limits import (
     MAX_CONSTRAINT_GAIN,
     MAX_DURATION_S,
     MAX_ENCODER_NOISE_RAD,
-    MAX_INTERFACE_JERK,
-    MAX_JOINT_FRICTION,
     MAX_LATENCY_PERIODS,
     MAX_LATENCY_S,
     MAX_PATH_AMPLITUDE_M,
-    MAX_PAYLOAD_KG,
-    MAX_PHYSICS_RATE_HZ,
     MAX_POSE_GAIN,
     MAX_RATE_HZ,
-    MAX_SERVO_BANDWIDTH_HZ,
     MAX_TIME_CONSTANT_S,
     MAX_TROCAR_SHIFT_M,
-    MAX_WALL_STIFFNESS,
-    MIN_PHYSICS_RATE_HZ,
 )
 from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
 
@@ -38,6 +31,9 @@ from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bound
                         damper_settings, one_line, sentence)
 from .commands import Command, registered_commands
 from .robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
+from .plant_options import add_plant_options, plant_choice
+from .sim import add_arguments as add_sim_arguments
+from .sim import run as run_sim
 from .supervisor_options import add_supervisor_options, supervisor_choice
 from .sweep import add_arguments as add_sweep_arguments
 from .sweep import run as run_sweep_command
@@ -64,12 +60,7 @@ time_constant = bounded(float, 0.0, MAX_TIME_CONSTANT_S, unit="s")
 latency = bounded(int, 0, MAX_LATENCY_PERIODS)
 count = bounded(int, 0)
 iterations = bounded(int, 1, MAX_BENCH_ITERATIONS)
-wall_stiffness = bounded(float, 0.0, MAX_WALL_STIFFNESS / 1e3, unit="N/mm")
-payload = bounded(float, 0.0, MAX_PAYLOAD_KG, unit="kg")
-friction = bounded(float, 0.0, MAX_JOINT_FRICTION)
-physics_rate = bounded(float, MIN_PHYSICS_RATE_HZ, MAX_PHYSICS_RATE_HZ, unit="Hz")
-servo_bandwidth = bounded(float, 0.0, MAX_SERVO_BANDWIDTH_HZ, inclusive_minimum=False, unit="Hz")
-interface_jerk = bounded(float, 0.0, MAX_INTERFACE_JERK, inclusive_minimum=False, unit="rad/s^3")
+
 trocar_shift = bounded(float, 0.0, MAX_TROCAR_SHIFT_M, unit="m")
 path_amplitude = bounded(float, 0.0, MAX_PATH_AMPLITUDE_M, unit="m")
 pose_gain = bounded(float, 0.0, MAX_POSE_GAIN, inclusive_minimum=False, unit="1/s")
@@ -94,14 +85,6 @@ def calibration_error(text: str) -> tuple[float, float]:
     except argparse.ArgumentTypeError as error:
         raise argparse.ArgumentTypeError(f"the rotation std {error}") from None
     return millimetres * 1e-3, milliradians * 1e-3
-
-#: The physics plant's options: (option, the PlantSettings field) (docs/cli.md).
-PLANT_OPTIONS = (("--payload", "payload"), ("--coulomb-friction", "coulomb_friction"),
-                 ("--viscous-friction", "viscous_friction"), ("--physics-rate", "physics_rate"),
-                 ("--servo-bandwidth", "servo_bandwidth"),
-                 ("--interface-limits", "interface_limits"),
-                 ("--interface-jerk-limit", "interface_jerk_limit"))
-
 
 def _controllers_epilog(context: str) -> str:
     """The known controllers, one a line; ``*`` marks those run by default."""
@@ -183,7 +166,7 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
                        help="seed of the encoder noise, the calibration error and the random "
                        "variations (each its own stream)")
     _add_variation_options(parser, source)
-    _add_plant_options(parser, "the session's plant (its header), else the defaults"
+    add_plant_options(parser, "the session's plant (its header), else the defaults"
                        if source == "session" else "its default")
     _add_collision_options(parser, source)
     add_supervisor_options(parser)
@@ -255,69 +238,6 @@ def collision_choice(args: argparse.Namespace, plan):
     return replace(plan, collisions=settings)
 
 
-def _add_plant_options(parser: argparse.ArgumentParser, base: str) -> None:
-    """``--plant`` and its knobs; ``base`` says what an option left out means."""
-    plant = parser.add_argument_group(
-        "the plant", "the robot the loop drives, the same for every controller "
-        "(docs/design.md section 17); an option left out: " + base)
-    plant.add_argument("--plant", choices=("kinematic", "mujoco"),
-                       help="kinematic: the ideal integrator q += qd dt; mujoco: the URDF "
-                       "simulated in MuJoCo, servoed drives, a wall at every hole "
-                       "(default: kinematic)")
-    plant.add_argument("--wall-stiffness", type=wall_stiffness, metavar="N_PER_MM",
-                       help="lateral stiffness of the abdominal wall at every hole, at most "
-                       f"{MAX_WALL_STIFFNESS / 1e3:g} (default: each hole's own, 1 N/mm)")
-    plant.add_argument("--payload", type=payload, metavar="KG",
-                       help="mass at each EE the plant carries and the gravity compensation "
-                       f"and the controllers do not know of, at most {MAX_PAYLOAD_KG:g} (mujoco; default: 0)")
-    plant.add_argument("--coulomb-friction", type=friction, metavar="NM",
-                       help=f"dry friction of every joint, at most {MAX_JOINT_FRICTION:g} (mujoco; "
-                       "default: 0)")
-    plant.add_argument("--viscous-friction", type=friction, metavar="NMS",
-                       help="viscous friction of every joint (N m s/rad), at most "
-                       f"{MAX_JOINT_FRICTION:g} (mujoco; default: 0)")
-    plant.add_argument("--physics-rate", type=physics_rate, metavar="HZ",
-                       help=f"physics steps per second, in [{MIN_PHYSICS_RATE_HZ:g}, "
-                       f"{MAX_PHYSICS_RATE_HZ:g}] (mujoco; default: {MIN_PHYSICS_RATE_HZ:g})")
-    plant.add_argument("--servo-bandwidth", type=servo_bandwidth, metavar="HZ",
-                       help="natural frequency of each joint's position servo, at most "
-                       f"{MAX_SERVO_BANDWIDTH_HZ:g} (mujoco; default: 20)")
-    plant.add_argument("--interface-limits", choices=("off", "count", "strict"),
-                       help="the robot's velocity interface checks each command's joint "
-                       "acceleration against the robot's limits (and the jerk against "
-                       "--interface-jerk-limit), 1%% tolerance: count counts the faults, "
-                       "strict stops the robot at the first, as a Franka's reflex does "
-                       "(mujoco; default: off)")
-    plant.add_argument("--interface-jerk-limit", type=interface_jerk, metavar="RAD_PER_S3",
-                       help="the interface's jerk limit of every joint, at most "
-                       f"{MAX_INTERFACE_JERK:g} (mujoco, with --interface-limits; default: none)")
-
-
-def plant_choice(args: argparse.Namespace, base=None):
-    """The plant the options ask for, over ``base`` (a ``PlantChoice``: a session's; None:
-    the kinematic plant): each option given replaces ``base``'s value (``--plant
-    kinematic`` drops its physics settings). ``ValueError`` for a physics option on the
-    kinematic plant."""
-    from dataclasses import replace
-
-    from teleop.plants.choice import PlantChoice
-
-    base = base or PlantChoice()
-    kind = args.plant or base.kind
-    given = [(option, name) for option, name in PLANT_OPTIONS
-             if getattr(args, name) is not None]
-    if kind == "kinematic" and given:
-        raise ValueError(f"{', '.join(option for option, _ in given)} "
-                         f"need{'s' * (len(given) == 1)} --plant mujoco (the kinematic plant "
-                         "has no body)")
-    from teleop.plants import PlantSettings
-
-    physics = base.settings if kind == "mujoco" else PlantSettings()  # none on kinematic
-    settings = replace(physics, **{name: getattr(args, name) for _, name in given})
-    stiffness = base.wall_stiffness if args.wall_stiffness is None else args.wall_stiffness * 1e3
-    return PlantChoice(kind, settings, stiffness)
-
-
 def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     """``teleop``'s parser: the built-in commands and, with ``registered``, those of the
     entry-point group (loading them imports their layers: ``web`` imports viser)."""
@@ -353,7 +273,7 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
                         help=f"seconds to record, at most {MAX_DURATION_S:g} (default: the whole "
                         "scenario)")
     record.add_argument("file", help="session file to write")
-    _add_plant_options(record, "its default; the plant is written in the session's header "
+    add_plant_options(record, "its default; the plant is written in the session's header "
                        "for 'teleop replay'")
     _add_collision_options(record, "scenario")
 
@@ -385,8 +305,12 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     bench.add_argument("--json", metavar="FILE",
                        help="also write the results, their ratios and the targets as JSON to "
                             "FILE (default: no JSON)")
-    _add_plant_options(bench, "its default; with --plant, each control period's tick is "
+    add_plant_options(bench, "its default; with --plant, each control period's tick is "
                        "timed on the kinematic plant and on this one (the built-in robots)")
+
+    sim = _add_command(commands, "sim", "serve a simulated robot on ROS 2 as ros2_control "
+                       "or CRTK would (docs/ros2.md)", run_sim)
+    add_sim_arguments(sim)
 
     sweep = _add_command(commands, "sweep", "run compare cells over a grid of scenarios, "
                          "controllers, seeds and imperfections on a process pool or Ray, "
@@ -400,7 +324,7 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
 
 
 #: The subcommands defined here: running one loads no registered command.
-BUILT_IN = ("compare", "replay", "record", "scenarios", "robots", "bench", "sweep")
+BUILT_IN = ("compare", "replay", "record", "scenarios", "robots", "bench", "sim", "sweep")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -205,7 +205,7 @@ def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
             constraint_errors[name][i] = error
     count = len(ee_frames)
     port_names = list(dict.fromkeys(name for ports in drive.ports for name in ports))
-    measured = [r.plant for r in records if r.plant is not None]
+    measured = [r.plant for r in records if r.plant is not None and r.plant.physical]
     physical = len(measured) == len(records) and len(records) > 0
     port_forces = {name: np.full((len(records), 3), np.nan) for name in port_names}
     port_displacements = {name: np.full(len(records), np.nan) for name in port_names}

@@ -1,6 +1,7 @@
 """Which robot a run's loop drives (docs/design.md section 17): the ideal integrator
-``q += qd dt`` (``kinematic``) or the MuJoCo physics plant (``mujoco``) with its settings,
-and the abdominal wall's stiffness at every hole.
+``q += qd dt`` (``kinematic``), the MuJoCo physics plant (``mujoco``) with its settings or
+a robot over ROS 2 (``ros2``, docs/ros2.md) with its topics, and the abdominal wall's
+stiffness at every hole.
 
 One :class:`PlantChoice` is the same for every controller of a comparison (and every loop
 of a UI session); each run or loop builds its own plant from it (:meth:`PlantChoice.make`)."""
@@ -16,11 +17,14 @@ from teleop.limits import MAX_WALL_STIFFNESS
 
 from .imperfect import Imperfections
 from .mujoco_plant import MujocoPlant
+from .ros2.settings import Ros2Settings
 from .settings import SETTINGS_KEYS, PlantSettings
 
 #: The plants a run can choose, by name.
-PLANT_KINDS = ("kinematic", "mujoco")
+PLANT_KINDS = ("kinematic", "mujoco", "ros2")
 
+#: The plants simulated in this process (many runs at once, each its own robot).
+SIMULATED_PLANT_KINDS = ("kinematic", "mujoco")
 
 
 @dataclass(frozen=True)
@@ -30,7 +34,8 @@ class PlantChoice:
     Attributes
     ----------
     kind : ``kinematic`` (the ideal integrator, imperfections on top when asked) or
-        ``mujoco`` (:class:`teleop.plants.MujocoPlant`, imperfections on top).
+        ``mujoco`` (:class:`teleop.plants.MujocoPlant`, imperfections on top) or ``ros2``
+        (:class:`teleop.plants.ros2.Ros2Plant`: a robot on the wire, no imperfections).
     settings : the physics plant's (:class:`PlantSettings`); the kinematic plant takes
         only the defaults (it has no body to carry a payload or feel friction).
     wall_stiffness : lateral stiffness (N/m) given to every hole's abdominal wall
@@ -40,6 +45,7 @@ class PlantChoice:
     kind: str = "kinematic"
     settings: PlantSettings = field(default_factory=PlantSettings)
     wall_stiffness: float | None = None
+    ros2: Ros2Settings | None = None
 
     def __post_init__(self) -> None:
         """``ValueError`` naming the field: an unknown kind, settings that are not
@@ -51,9 +57,13 @@ class PlantChoice:
         if not isinstance(self.settings, PlantSettings):
             raise ValueError(f"plant settings must be PlantSettings, got "
                              f"{type(self.settings).__name__}")
-        if self.kind == "kinematic" and self.settings != PlantSettings():
+        if self.kind != "mujoco" and self.settings != PlantSettings():
             raise ValueError(f"{', '.join(self.settings.changed())} need the mujoco plant "
-                             f"(plant is kinematic)")
+                             f"(plant is {self.kind})")
+        if self.ros2 is not None and (self.kind != "ros2"
+                                      or not isinstance(self.ros2, Ros2Settings)):
+            raise ValueError(f"ros2 settings need the ros2 plant and Ros2Settings (plant is "
+                             f"{self.kind}, settings {type(self.ros2).__name__})")
         if self.wall_stiffness is not None:
             object.__setattr__(self, "wall_stiffness",
                                as_number(self.wall_stiffness, "wall_stiffness", 0.0,
@@ -70,6 +80,15 @@ class PlantChoice:
         kinematic robot; the physics plant simulates the contacts of ``collisions`` (a
         ``CollisionAvoidance`` of its own, or None)."""
         imperfections = imperfections or Imperfections()
+        if self.kind == "ros2":
+            if not imperfections.perfect:
+                raise ValueError("imperfections are simulated: the ros2 plant is a real robot")
+            try:  # the DDS library only when asked for
+                from .ros2.ros2_plant import Ros2Plant
+            except ImportError as error:
+                raise ValueError(f"the ros2 plant needs the ros2 extra (pip install "
+                                 f"'.[ros2]'): {error}") from None
+            return Ros2Plant(robot, dt, self.ros2)
         if self.kind == "kinematic":
             return None if imperfections.perfect else imperfections.plant(robot.model, dt)
         imperfections.check_period(dt)
@@ -86,16 +105,19 @@ class PlantChoice:
     def to_dict(self) -> dict:
         """The ``plant`` entry of metrics.json and of a session header (units in the keys):
         the kind, the physics settings (None for the kinematic plant) and the stiffness."""
-        return {"kind": self.kind,
-                "settings": self.settings.to_dict() if self.physical else None,
-                "wall_stiffness_n_per_m": self.wall_stiffness}
+        entry = {"kind": self.kind,
+                 "settings": self.settings.to_dict() if self.physical else None,
+                 "wall_stiffness_n_per_m": self.wall_stiffness}
+        if self.kind == "ros2":
+            entry["ros2"] = (self.ros2 or Ros2Settings()).to_dict()
+        return entry
 
     @classmethod
     def from_dict(cls, data: object, where: str = "plant") -> "PlantChoice":
         """The inverse of :meth:`to_dict` (``ValueError`` naming ``where`` and the field)."""
         if not isinstance(data, dict):
             raise ValueError(f"{where} must be an object, got {short_repr(data)}")
-        unknown = sorted(set(data) - {"kind", "settings", "wall_stiffness_n_per_m"})
+        unknown = sorted(set(data) - {"kind", "settings", "wall_stiffness_n_per_m", "ros2"})
         if unknown:
             raise ValueError(f"{where} has unknown fields {unknown}")
         settings = data.get("settings")
@@ -107,9 +129,11 @@ class PlantChoice:
         if unknown:
             raise ValueError(f"{where} 'settings' has unknown fields {unknown}")
         try:
+            ros2 = data.get("ros2")
             return cls(kind=data.get("kind", "kinematic"),
                        settings=PlantSettings.from_dict(settings),
-                       wall_stiffness=data.get("wall_stiffness_n_per_m"))
+                       wall_stiffness=data.get("wall_stiffness_n_per_m"),
+                       ros2=None if ros2 is None else Ros2Settings.from_dict(ros2))
         except ValueError as error:
             raise ValueError(f"{where}: {error}") from None
 
@@ -117,6 +141,8 @@ class PlantChoice:
         """One line for humans."""
         wall = ("" if self.wall_stiffness is None
                 else f", abdominal wall {self.wall_stiffness / 1000.0:g} N/mm")
+        if self.kind == "ros2":
+            return (self.ros2 or Ros2Settings()).describe() + wall
         if not self.physical:
             return "kinematic plant (q += qd dt)" + wall
         return self.settings.describe() + wall

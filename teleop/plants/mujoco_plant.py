@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import mujoco
 import numpy as np
@@ -66,6 +67,9 @@ class PlantMeasures:
     interface_stopped : the interface has stopped the robot (``strict``, from the first
         fault on).
     """
+
+    #: measures of a simulated body (the ROS 2 plant's are not: no port force, no torque)
+    physical: ClassVar[bool] = True
 
     port_forces: np.ndarray
     port_displacements: np.ndarray

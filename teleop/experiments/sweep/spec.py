@@ -126,10 +126,13 @@ def _cell_fields() -> tuple[CellField, ...]:
 
 
 def _plant_kind(value: Any, name: str) -> str:
-    from teleop.plants.choice import PLANT_KINDS
+    from teleop.plants.choice import SIMULATED_PLANT_KINDS
 
-    if value not in PLANT_KINDS:
-        raise ValueError(f"{name} must be one of {', '.join(PLANT_KINDS)}, got "
+    if value == "ros2":
+        raise ValueError(f"{name} ros2 is one real robot and a sweep runs cells in parallel: "
+                         "run 'teleop compare --plant ros2' instead (docs/ros2.md)")
+    if value not in SIMULATED_PLANT_KINDS:
+        raise ValueError(f"{name} must be one of {', '.join(SIMULATED_PLANT_KINDS)}, got "
                          f"{short_repr(value)}")
     return value
 

@@ -1,0 +1,45 @@
+"""The ROS 2 robot's options (docs/ros2.md): where its joint states come from and its
+commands go, the domain; shared by ``teleop sim --ros2`` and every ``--plant ros2``."""
+
+from __future__ import annotations
+
+import argparse
+
+from teleop.plants.ros2.settings import Ros2Settings
+
+#: (option, attribute) of the ROS 2 options.
+ROS2_OPTIONS = (("--joint-states", "joint_states"), ("--command-topic", "command_topic"),
+                ("--command-joints", "command_joints"), ("--crtk", "crtk"),
+                ("--ros-domain", "ros_domain"))
+
+
+def add_ros2_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """The options of :data:`ROS2_OPTIONS` on ``parser``."""
+    parser.add_argument("--joint-states", metavar="TOPIC",
+                        help="the robot's sensor_msgs/JointState topic (default: /joint_states)")
+    parser.add_argument("--command-topic", metavar="TOPIC",
+                        help="the JointGroupVelocityController's Float64MultiArray topic "
+                             "(default: /forward_velocity_controller/commands)")
+    parser.add_argument("--command-joints", metavar="NAMES",
+                        help="comma-separated: the controller's 'joints' parameter, the "
+                             "commands' order (default: the robot model's joint order)")
+    parser.add_argument("--crtk", metavar="NAMESPACE",
+                        help="a CRTK robot instead: NAMESPACE/measured_js, /servo_jv, "
+                             "/operating_state (default: ros2_control)")
+    parser.add_argument("--ros-domain", type=int, metavar="N",
+                        help="ROS 2 domain id, 0-232 (default: ROS_DOMAIN_ID, else 0)")
+
+
+def given_ros2_options(args: argparse.Namespace) -> list[str]:
+    """The ROS 2 options given on the command line."""
+    return [option for option, name in ROS2_OPTIONS if getattr(args, name, None) is not None]
+
+
+def ros2_settings(args: argparse.Namespace) -> Ros2Settings:
+    """The settings the options ask for (``ValueError`` naming the one refused)."""
+    settings = {"joint_states": args.joint_states, "command_topic": args.command_topic,
+                "crtk": args.crtk, "domain": args.ros_domain,
+                "command_joints": (None if args.command_joints is None else
+                                   tuple(n.strip() for n in args.command_joints.split(",")
+                                         if n.strip()))}
+    return Ros2Settings(**{name: value for name, value in settings.items() if value is not None})

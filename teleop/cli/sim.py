@@ -1,0 +1,65 @@
+"""``teleop sim --ros2``: a simulated robot served on ROS 2 (docs/ros2.md, "A simulated
+robot") until Ctrl-C or ``--duration``."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+from teleop.limits import MAX_RATE_HZ
+
+from .arguments import bounded, csv_list
+from .ros2_options import add_ros2_options, ros2_settings
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The sim command's options."""
+    parser.add_argument("--ros2", action="store_true", required=True,
+                        help="serve the robot on ROS 2 (the one transport offered)")
+    parser.add_argument("--robot", default="ur5_instrument",
+                        help="built-in robot name or URDF path (default: ur5_instrument)")
+    parser.add_argument("--plant", choices=("kinematic", "mujoco"), default="kinematic",
+                        help="the robot's physics: q += v dt, or MuJoCo's servoed drives "
+                             "(default: kinematic)")
+    parser.add_argument("--rate", type=bounded(float, 1.0, MAX_RATE_HZ, unit="Hz"), default=500.0,
+                        help="joint states and control periods per second (default: 500)")
+    parser.add_argument("--q0", type=csv_list, metavar="RADIANS",
+                        help="comma-separated start configuration (default: the robot's home)")
+    parser.add_argument("--duration", type=bounded(float, 0.0, 1e6, unit="s"),
+                        help="seconds to run (default: until Ctrl-C)")
+    add_ros2_options(parser.add_argument_group("ROS 2 (docs/ros2.md)"))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve the robot; its node closed on any exit."""
+    import numpy as np
+
+    from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
+    from teleop.robots import load_robot
+
+    from teleop.plants import MujocoPlant
+
+    robot = load_robot(args.robot)
+    q0 = None
+    if args.q0 is not None:
+        try:
+            q0 = np.array([float(v) for v in args.q0])
+        except ValueError:
+            raise ValueError(f"--q0 must be numbers, got {','.join(args.q0)}") from None
+        if q0.shape != (robot.model.nq,) or not np.all(np.isfinite(q0)):
+            raise ValueError(f"--q0 needs {robot.model.nq} finite numbers, got {len(q0)}")
+    settings = ros2_settings(args)
+    plant = MujocoPlant(robot, 1.0 / args.rate) if args.plant == "mujoco" else None
+    sim = SimulatedRos2Robot(robot, args.rate, settings, plant, q0)
+    signal.signal(signal.SIGTERM, lambda *_: sim.stop())
+    print(f"teleop sim: {args.robot} on ROS 2 domain {sim.node.domain}: "
+          f"{settings.state_topic} at {args.rate:g} Hz, commands on {settings.commands}",
+          file=sys.stderr, flush=True)
+    try:
+        sim.run(args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sim.close()
+    return 0

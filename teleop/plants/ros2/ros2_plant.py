@@ -1,0 +1,284 @@
+"""A robot on the other end of ROS 2 as the loop's plant (docs/ros2.md; docs/design.md
+section 15.1, the :class:`teleop.loop.Plant` protocol).
+
+:meth:`Ros2Plant.sense` is the last ``sensor_msgs/JointState`` received, joints matched by
+name; :meth:`Ros2Plant.actuate` publishes the command (a ``JointGroupVelocityController``'s
+``Float64MultiArray`` in the controller's joint order, or CRTK's ``servo_jv``), waits for
+the end of the period on the wall clock (a real robot does not wait for the controller)
+and returns the mean velocity that took the loop's configuration ``q`` to the state then
+received, ``v = log(q^-1 q_measured) / dt`` (``pin.difference``), so the loop's ``q`` is
+the robot's.
+
+Safety on the wire: nothing is published before the first state; the robot is stopped
+(zeros published, then every period) when the state is older than ``stale_after`` (a
+watchdog thread checks it every period: a velocity controller holds its last command
+forever), when a state is not finite or lacks a joint, when a command is not finite, on
+:meth:`close`, at exit and on any error raised through the plant's ``with`` block; a stop
+holds until :meth:`reset` and :attr:`Ros2Measures.stopped` says why. Zeros go out once,
+too, when the loop stops actuating for ``stale_after`` (it may command again)."""
+
+from __future__ import annotations
+
+import atexit
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import ClassVar, Sequence
+
+import numpy as np
+import pinocchio as pin
+from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState, WaitSet
+from cyclonedds.util import duration
+
+from constraints import Constraint
+
+from .joint_map import indices, model_joint_names
+from .messages import Float64MultiArray, JointState, OperatingState
+from .node import Ros2Node
+from .settings import Ros2Settings
+
+
+@dataclass
+class Ros2Measures:
+    """What the plant knows of the robot over the last period.
+
+    Attributes
+    ----------
+    stopped : why the plant stopped the robot (zeros published), empty while it commands.
+    state_age : the last state's age at the period's end (s); inf before the first.
+    states : states received since :meth:`Ros2Plant.reset`.
+    command_publishers : writers on the command topic, this plant's included (more than
+        one: another node commands the same controller).
+    operating_state : CRTK's last ``operating_state.state`` (empty: none or not CRTK).
+    idle_stops : zeros published because the loop stopped actuating for ``stale_after``.
+    port_forces : (0, 3): the wall's force is not measured over ROS 2.
+    port_displacements : (0,).
+    """
+
+    stopped: str = ""
+    state_age: float = math.inf
+    states: int = 0
+    command_publishers: int = 0
+    operating_state: str = ""
+    idle_stops: int = 0
+    port_forces: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    port_displacements: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    #: not a simulated body's measures (no port force, no torque)
+    physical: ClassVar[bool] = False
+
+    @property
+    def port_force(self) -> float:
+        """No port force over ROS 2: 0."""
+        return 0.0
+
+
+class Ros2Plant:
+    """A :class:`teleop.loop.Plant` over ROS 2 (module docstring).
+
+    Parameters
+    ----------
+    robot : the ``teleop.Robot`` (its model's joint names are the robot's on the wire).
+    dt : the control period (s).
+    settings : :class:`Ros2Settings`.
+    """
+
+    def __init__(self, robot, dt: float, settings: Ros2Settings | None = None) -> None:
+        if not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0:
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        self.model: pin.Model = robot.model
+        self.dt = float(dt)
+        self.settings = settings or Ros2Settings()
+        self.names = model_joint_names(self.model)
+        command_joints = self.settings.command_joints or tuple(self.names)
+        self._command_order = indices(command_joints, self.names, "the robot model")
+        self._command_names = list(command_joints)
+        self._lock = threading.RLock()
+        self.node = Ros2Node(self.settings.domain)
+        crtk = bool(self.settings.crtk)
+        self._states = self.node.reader(self.settings.state_topic, JointState)
+        command_type = JointState if crtk else Float64MultiArray
+        self._writer = self.node.writer(self.settings.commands, command_type)
+        self._command_listener = self.node.reader(self.settings.commands, command_type)
+        self._operating = (self.node.reader(self.settings.crtk.rstrip("/") + "/operating_state",
+                                            OperatingState) if crtk else None)
+        self._waitset = WaitSet(self.node.participant)
+        self._waitset.attach(ReadCondition(self._states, SampleState.Any | ViewState.Any
+                                           | InstanceState.Any))
+        self._state_order: np.ndarray | None = None
+        self._state_names: list[str] = []
+        self._q: np.ndarray | None = None
+        self._received = -math.inf  # time.monotonic() of the last state
+        self._commanding = False
+        self._actuated = -math.inf  # time.monotonic() of the last command published
+        self._deadline = 0.0
+        self.last_measures = Ros2Measures()
+        self._running = True
+        self._closed = False
+        self._watchdog = threading.Thread(target=self._watch, name="ros2-watchdog", daemon=True)
+        self._watchdog.start()
+        atexit.register(self.close)
+
+    # --- the wire -------------------------------------------------------------------
+    def _take_states(self) -> None:
+        """Every state received since the last call; the newest is kept (caller holds the
+        lock). A state without one of the robot's joints, or with a non-finite position,
+        stops the robot."""
+        for sample in self._states.take(64):
+            if not isinstance(sample, JointState):
+                continue
+            self.last_measures.states += 1
+            if list(sample.name) != self._state_names:
+                self._state_names = list(sample.name)
+                try:
+                    self._state_order = indices(self.names, sample.name,
+                                                f"{self.settings.state_topic}")
+                except ValueError as error:
+                    self._state_order = None
+                    self._stop(str(error))
+                    continue
+            if self._state_order is None:
+                continue
+            if len(sample.position) != len(sample.name):
+                self._stop(f"{self.settings.state_topic}: {len(sample.position)} positions "
+                           f"for {len(sample.name)} names")
+                continue
+            q = np.asarray(sample.position, dtype=float)[self._state_order]
+            if not np.all(np.isfinite(q)):
+                bad = [self.names[i] for i in np.flatnonzero(~np.isfinite(q))]
+                self._stop(f"{self.settings.state_topic}: non-finite position of {bad}")
+                continue
+            self._q = q
+            self._received = time.monotonic()
+        if self._operating is not None:
+            for state in self._operating.take(16):
+                if isinstance(state, OperatingState):
+                    self.last_measures.operating_state = state.state
+
+    def _publish(self, qd: np.ndarray) -> None:
+        """``qd`` (model order) on the command topic (caller holds the lock)."""
+        values = [float(v) for v in qd[self._command_order]]
+        if self.settings.crtk:
+            self._writer.write(JointState(name=self._command_names, velocity=values))
+        else:
+            self._writer.write(Float64MultiArray(data=values))
+
+    def _stop(self, reason: str) -> None:
+        """Zeros published and the reason kept (the first reason stays) (caller holds the
+        lock); nothing published before the first command."""
+        if not self.last_measures.stopped:
+            self.last_measures.stopped = reason
+        if self._commanding:
+            self._publish(np.zeros(self.model.nv))
+
+    def _check_stale(self, now: float) -> None:
+        age = now - self._received
+        self.last_measures.state_age = age
+        if self._q is not None and age > self.settings.stale_after:
+            self._stop(f"joint states stale: none for {age * 1000:.0f} ms "
+                       f"(limit {self.settings.stale_after * 1000:.0f} ms)")
+
+    def _watch(self) -> None:
+        """The watchdog: every period, the states taken and their age checked, and zeros
+        published once when the loop has not actuated for ``stale_after`` (it paused,
+        ended or hangs: the controller would hold the last command); the loop's next
+        command goes out again."""
+        while self._running:
+            self._waitset.wait(duration(seconds=self.dt))
+            with self._lock:
+                if not self._running:
+                    return
+                self._take_states()
+                now = time.monotonic()
+                self._check_stale(now)
+                if self._commanding and now - self._actuated > self.settings.stale_after:
+                    self._publish(np.zeros(self.model.nv))
+                    self._commanding = False
+                    self.last_measures.idle_stops += 1
+
+    # --- the Plant protocol ---------------------------------------------------------
+    def wait_for_state(self, timeout: float | None = None) -> np.ndarray:
+        """The first (or last) state's configuration; ``ValueError`` saying why when none
+        comes within ``timeout`` (default ``settings.start_timeout``) or it is refused."""
+        limit = time.monotonic() + (self.settings.start_timeout if timeout is None else timeout)
+        while True:
+            with self._lock:
+                self._take_states()
+                if self._state_order is None and self._state_names:
+                    raise ValueError(self.last_measures.stopped)
+                if self._q is not None:
+                    return self._q.copy()
+                if self.last_measures.stopped:
+                    raise ValueError(self.last_measures.stopped)
+            if time.monotonic() > limit:
+                raise ValueError(f"no joint state on {self.settings.state_topic} (ROS domain "
+                                 f"{self.node.domain}) within "
+                                 f"{self.settings.start_timeout:g} s")
+            time.sleep(min(self.dt, 0.01))
+
+    def reset(self, q: np.ndarray | None = None) -> None:
+        """Zeros commanded, the stop cleared, then the first state awaited (``ValueError``
+        naming the missing joints or the silent topic). ``q`` is ignored: the robot is
+        where it is."""
+        with self._lock:
+            self._stop("reset")
+            self.last_measures = Ros2Measures(states=self.last_measures.states)
+            self._commanding = False
+            self._q = None  # a fresh state is awaited
+        self.wait_for_state()
+        self._deadline = time.monotonic() + self.dt
+
+    def sense(self, q: np.ndarray) -> np.ndarray:
+        """The robot's last state (model order); before any, ``q``."""
+        with self._lock:
+            self._take_states()
+            return q.copy() if self._q is None else self._q.copy()
+
+    def actuate(self, qd: np.ndarray, q: np.ndarray,
+                constraints: Sequence[Constraint]) -> np.ndarray:
+        """``qd`` published (zeros once stopped, nothing before the first state), the
+        period waited out on the wall clock, the mean velocity from ``q`` to the state
+        then received returned."""
+        with self._lock:
+            self._take_states()
+            self._check_stale(time.monotonic())
+            if self._q is not None:
+                if not math.isfinite(sum(qd.tolist())):
+                    self._stop("non-finite command")
+                self._commanding = True
+                self._actuated = time.monotonic()
+                self._publish(np.zeros(self.model.nv) if self.last_measures.stopped else qd)
+            self.last_measures.command_publishers = (
+                self._command_listener.get_subscription_matched_status().current_count)
+        now = time.monotonic()
+        self._deadline = max(self._deadline + self.dt, now)
+        time.sleep(max(0.0, self._deadline - now))
+        with self._lock:
+            self._take_states()
+            if self._q is None:
+                return np.zeros(self.model.nv)
+            return pin.difference(self.model, q, self._q) / self.dt
+
+    def measures(self) -> Ros2Measures:
+        """The last period's (:class:`Ros2Measures`)."""
+        return self.last_measures
+
+    # --- the end --------------------------------------------------------------------
+    def close(self) -> None:
+        """Zeros published (when a command was), the watchdog ended, the node closed."""
+        if self._closed:
+            return
+        self._closed = True
+        with self._lock:
+            self._running = False
+            self._stop("closed")
+        self._watchdog.join(timeout=1.0)
+        atexit.unregister(self.close)
+        self.node.close()
+
+    def __enter__(self) -> "Ros2Plant":
+        return self
+
+    def __exit__(self, *error: object) -> None:
+        self.close()

@@ -1,0 +1,98 @@
+"""Where a ROS 2 robot is on the wire (docs/ros2.md, "Topics"): the joint states it
+publishes and the commands it takes, a ros2_control ``JointGroupVelocityController`` or a
+CRTK namespace, the domain, and the watchdog's limits."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+from constraints.validation import short_repr
+
+from .names import dds_topic, domain_id
+
+
+@dataclass(frozen=True)
+class Ros2Settings:
+    """The ROS 2 side of a :class:`~teleop.plants.ros2.Ros2Plant`.
+
+    Attributes
+    ----------
+    joint_states : the ``sensor_msgs/JointState`` topic (``joint_state_broadcaster``'s).
+    command_topic : the ``JointGroupVelocityController``'s ``/<controller>/commands``.
+    command_joints : the controller's ``joints`` parameter, in order (the message's
+        order); empty: the robot model's joints in their order.
+    crtk : a CRTK namespace (``/PSM1``): ``<ns>/measured_js`` and ``<ns>/servo_jv``
+        replace the two topics above, ``<ns>/operating_state`` must say ``ENABLED``;
+        empty: ros2_control.
+    domain : the ROS 2 domain id (None: ``ROS_DOMAIN_ID``, else 0).
+    stale_after : a state older than this (s) stops the robot (the watchdog).
+    start_timeout : how long (s) :meth:`Ros2Plant.reset` waits for the first state.
+    """
+
+    joint_states: str = "/joint_states"
+    command_topic: str = "/forward_velocity_controller/commands"
+    command_joints: tuple[str, ...] = ()
+    crtk: str = ""
+    domain: int | None = None
+    stale_after: float = 0.05
+    start_timeout: float = 5.0
+
+    def __post_init__(self) -> None:
+        """``ValueError`` naming the field: a topic ROS 2 refuses, a domain outside
+        [0, 232], a time that is not finite and positive, joints named twice."""
+        for name in ("joint_states", "command_topic"):
+            dds_topic(getattr(self, name))
+        if self.crtk:
+            dds_topic(self.crtk)
+        if self.domain is not None:
+            object.__setattr__(self, "domain", domain_id(self.domain))
+        for name in ("stale_after", "start_timeout"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be a positive number of seconds, got {value!r}")
+        joints = tuple(self.command_joints)
+        if len(set(joints)) != len(joints):
+            raise ValueError(f"command_joints names a joint twice: {list(joints)}")
+        object.__setattr__(self, "command_joints", joints)
+
+    @property
+    def state_topic(self) -> str:
+        """Where the joint states come from."""
+        return self.crtk.rstrip("/") + "/measured_js" if self.crtk else self.joint_states
+
+    @property
+    def commands(self) -> str:
+        """Where the velocity commands go."""
+        return self.crtk.rstrip("/") + "/servo_jv" if self.crtk else self.command_topic
+
+    def to_dict(self) -> dict:
+        """The fields (a session header's or metrics.json's ``plant.ros2``)."""
+        entry = asdict(self)
+        entry["command_joints"] = list(self.command_joints)
+        return entry
+
+    @classmethod
+    def from_dict(cls, data: object) -> "Ros2Settings":
+        """The inverse of :meth:`to_dict` (``ValueError`` naming an unknown field)."""
+        if not isinstance(data, dict):
+            raise ValueError(f"ros2 must be an object, got {short_repr(data)}")
+        unknown = sorted(set(data) - {f.name for f in fields(cls)})
+        if unknown:
+            raise ValueError(f"ros2 has unknown fields {unknown}")
+        entry = dict(data)
+        if "command_joints" in entry:
+            joints = entry["command_joints"]
+            if not isinstance(joints, list) or not all(isinstance(j, str) for j in joints):
+                raise ValueError(f"ros2 command_joints must be a list of names, got "
+                                 f"{short_repr(joints)}")
+            entry["command_joints"] = tuple(joints)
+        return cls(**entry)
+
+    def describe(self) -> str:
+        """One line for humans."""
+        where = (f"CRTK {self.crtk}" if self.crtk
+                 else f"{self.joint_states} -> {self.command_topic}")
+        domain = "ROS_DOMAIN_ID" if self.domain is None else str(self.domain)
+        return (f"ROS 2 robot ({where}, domain {domain}, stopped when the state is "
+                f"{self.stale_after * 1000:g} ms old)")

@@ -1,0 +1,105 @@
+"""A simulated robot served over ROS 2 (docs/ros2.md, "A simulated robot"): the MuJoCo or
+the kinematic plant behind the topics of ros2_control's ``joint_state_broadcaster`` and a
+``JointGroupVelocityController`` (or CRTK's ``measured_js``, ``servo_jv`` and
+``operating_state``), so a ROS 2 stack, or this project's :class:`Ros2Plant` in another
+process, drives it as it would the real robot.
+
+Every period (wall clock) it publishes the joint state, takes the newest command and moves
+the robot with it, ``q <- integrate(q, v dt)`` with ``v`` the plant's mean velocity for the
+command (the command itself on the kinematic plant). Like the real controller it holds the
+last command until another arrives; a command of the wrong length is ignored, as
+ros2_control's forward controllers do."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from .joint_map import indices, model_joint_names
+from .messages import Float64MultiArray, Header, JointState, OperatingState, Time
+from .node import Ros2Node
+from .settings import Ros2Settings
+
+
+class SimulatedRos2Robot:
+    """The robot of ``plant`` (a ``teleop.loop.Plant``, None: the kinematic one) on ROS 2.
+
+    Parameters
+    ----------
+    robot : the ``teleop.Robot``.
+    rate : its joint states' and its control rate (Hz).
+    settings : the topics and the domain (:class:`Ros2Settings`).
+    plant : the physics under it, None: ``q += v dt``.
+    q0 : where it starts (default ``robot.q_home``).
+    """
+
+    def __init__(self, robot, rate: float, settings: Ros2Settings | None = None,
+                 plant=None, q0: np.ndarray | None = None) -> None:
+        if not isinstance(rate, (int, float)) or not 0 < rate <= 10000:
+            raise ValueError(f"rate must be in (0, 10000] Hz, got {rate!r}")
+        self.model: pin.Model = robot.model
+        self.dt = 1.0 / float(rate)
+        self.settings = settings or Ros2Settings()
+        self.names = model_joint_names(self.model)
+        joints = self.settings.command_joints or tuple(self.names)
+        self._to_model = indices(self.names, joints, "the controller's joints")
+        self.plant = plant
+        self.q = np.array(robot.q_home if q0 is None else q0, dtype=float)
+        if plant is not None:
+            plant.reset(self.q)
+        self.command = np.zeros(self.model.nv)  # model order, held
+        self.commands = 0
+        self.node = Ros2Node(self.settings.domain)
+        self._states = self.node.writer(self.settings.state_topic, JointState)
+        crtk = bool(self.settings.crtk)
+        self._command_type = JointState if crtk else Float64MultiArray
+        self._commands = self.node.reader(self.settings.commands, self._command_type)
+        self._operating = (self.node.writer(self.settings.crtk.rstrip("/") + "/operating_state",
+                                            OperatingState) if crtk else None)
+        self._stop = threading.Event()
+
+    def _take_command(self) -> None:
+        for sample in self._commands.take(64):
+            values = (sample.velocity if isinstance(sample, JointState)
+                      else getattr(sample, "data", None))
+            if values is None or len(values) != len(self._to_model):
+                continue
+            command = np.asarray(values, dtype=float)[self._to_model]
+            if np.all(np.isfinite(command)):
+                self.command = command
+                self.commands += 1
+
+    def step(self) -> None:
+        """One period: the state published, the newest command taken, the robot moved."""
+        stamp = Header(stamp=Time.of(time.time()))
+        self._states.write(JointState(header=stamp, name=self.names,
+                                      position=[float(v) for v in self.q],
+                                      velocity=[float(v) for v in self.command]))
+        if self._operating is not None:
+            self._operating.write(OperatingState(header=stamp, state="ENABLED", is_homed=True))
+        self._take_command()
+        moved = (self.command if self.plant is None
+                 else self.plant.actuate(self.command, self.q, []))
+        self.q = pin.integrate(self.model, self.q, moved * self.dt)
+
+    def run(self, duration: float | None = None) -> None:
+        """Periods on the wall clock until :meth:`stop` (or ``duration`` seconds)."""
+        start = time.monotonic()
+        deadline = start
+        while not self._stop.is_set():
+            if duration is not None and time.monotonic() - start >= duration:
+                return
+            self.step()
+            deadline = max(deadline + self.dt, time.monotonic())
+            self._stop.wait(max(0.0, deadline - time.monotonic()))
+
+    def stop(self) -> None:
+        """:meth:`run` returns after its period."""
+        self._stop.set()
+
+    def close(self) -> None:
+        """The node closed."""
+        self.node.close()
