@@ -113,3 +113,19 @@ def test_robots_lists_the_built_ins_and_the_installed_urdfs(capsys):
     out = capsys.readouterr().out
     assert "sda10f " in out and "ur5_instrument" in out
     assert "panda_description/urdf/panda.urdf" in out and "ur5_robot " in out
+
+
+def test_a_sweep_runs_its_cells_on_the_robot_of_its_spec():
+    from teleop.experiments.sweep import build_spec, compare_command, run_cell
+
+    robot = {"robot": str(PANDA), "ee_frame": "panda_hand_tcp", "constrained_link": "panda_link7"}
+    spec = build_spec({"scenarios": "trocar-circle", "controllers": "cjm", "duration": 0.2,
+                       "robot": robot})
+    (cell,) = spec.cells()
+    assert cell.inputs["robot"] == robot
+    outcome = run_cell(cell.inputs, 600.0)
+    assert outcome["status"] == "done" and outcome["metrics"]["failed_steps"] == 0
+    assert (f"--robot {PANDA} --ee-frame panda_hand_tcp --constrained-link panda_link7"
+            in compare_command(cell.inputs))
+    with pytest.raises(ValueError, match="robot: unknown key 'arm'"):
+        build_spec({"scenarios": "trocar-circle", "controllers": "cjm", "robot": {"arm": "x"}})

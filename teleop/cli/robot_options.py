@@ -5,20 +5,16 @@ reads them (docs/cli.md)."""
 from __future__ import annotations
 
 import argparse
-import warnings
+from typing import Any
 
-from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
-from teleop.robots.catalog import joints_off_the_path, robot_source
+from teleop.robots import BUILTIN_ROBOTS, Robot
+from teleop.robots.catalog import NO_JOINT, load_robot_choice
 
 from .arguments import csv_list, numbers
 
 #: The options' destinations, in the order they are added.
 ROBOT_OPTIONS = ("robot", "ee_frame", "constrained_link", "link_axis", "package_dirs", "q_home",
                  "locked_joints")
-
-#: ``--locked-joints`` naming no joint: every movable joint controlled, the default locks
-#: dropped.
-NO_JOINT = "none"
 
 
 def add_robot_arguments(group: argparse._ActionsContainer, default: str) -> None:
@@ -60,21 +56,17 @@ def robot_options_given(args: argparse.Namespace) -> list[str]:
 
 
 def robot_from_arguments(args: argparse.Namespace, default: str) -> Robot:
-    """The robot the options ask for (``default`` when ``--robot`` is left out). Without
-    ``--locked-joints``, a URDF's joints off the path to its end effectors and constrained
-    links are locked (:func:`joints_off_the_path`: the Panda's fingers, nq 9 -> 7)."""
+    """The robot the options ask for (``default`` when ``--robot`` is left out):
+    :func:`teleop.robots.catalog.load_robot_choice`, a gripper's joints locked by default."""
+    return load_robot_choice(args.robot, default, **robot_settings(args))
+
+
+def robot_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """The options but ``--robot`` as ``load_robot_choice``'s keywords (``--package-dirs
+    a,b --package-dirs c`` -> ``[a, b, c]``)."""
     package_dirs = None
-    if args.package_dirs is not None:  # --package-dirs a,b --package-dirs c -> [a, b, c]
+    if args.package_dirs is not None:
         package_dirs = [directory for group in args.package_dirs for directory in group]
-    source = robot_source(args.robot or default)
-    locked = args.locked_joints
-    options = dict(ee_frame=args.ee_frame, constrained_link=args.constrained_link,
-                   link_axis=args.link_axis, package_dirs=package_dirs, q_home=args.q_home)
-    if locked == [NO_JOINT]:
-        return load_robot(source, **options)
-    if locked is not None or source in BUILTIN_ROBOTS:
-        return load_robot(source, locked_joints=locked, **options)
-    with warnings.catch_warnings():  # the full model only names the joints: warn once, below
-        warnings.simplefilter("ignore")
-        whole = load_robot(source, **{**options, "q_home": None})
-    return load_robot(source, locked_joints=joints_off_the_path(whole) or None, **options)
+    return dict(ee_frame=args.ee_frame, constrained_link=args.constrained_link,
+                link_axis=args.link_axis, package_dirs=package_dirs, q_home=args.q_home,
+                locked_joints=args.locked_joints)

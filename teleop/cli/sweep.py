@@ -8,6 +8,7 @@ import sys
 from teleop.limits import MAX_CELLS_UNCONFIRMED
 
 from .arguments import csv_list, numbers
+from .robot_options import add_robot_arguments, robot_options_given, robot_settings
 
 
 def _ints(text: str) -> list[int]:
@@ -68,6 +69,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                      "list: every combination is a cell")
     for option, name, kind, metavar, text in GRID_OPTIONS:
         grid.add_argument(option, dest=name, type=kind, metavar=metavar, help=text)
+    add_robot_arguments(parser.add_argument_group(
+        "robot", "every cell on this robot (the spec's robot table): paper-hole, "
+        "trocar-circle, fast-lateral and joint-limits run on any single arm"),
+        "each scenario's own robot")
     grid.add_argument("--calibration-error", dest="calibration_error", type=_pair,
                       metavar="MM,MRAD", help="std of the calibration error of every joint "
                       "placement (default: 0,0)")
@@ -109,6 +114,12 @@ def options_document(args: argparse.Namespace) -> dict:
         given["acceleration_limits"] = args.acceleration_limits
     if args.time_limit is not None:
         given["time_limit"] = args.time_limit
+    if robot_options_given(args):
+        settings = {name: list(value) for name, value in robot_settings(args).items()
+                    if value is not None and name not in ("ee_frame", "constrained_link")}
+        given["robot"] = {**({"robot": args.robot} if args.robot else {}),
+                          **{name: getattr(args, name) for name in ("ee_frame", "constrained_link")
+                             if getattr(args, name) is not None}, **settings}
     return given
 
 

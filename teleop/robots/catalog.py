@@ -6,9 +6,11 @@ command line (docs/cli.md)."""
 from __future__ import annotations
 
 import importlib.metadata
+import warnings
 from pathlib import Path
+from typing import Any, Sequence
 
-from .robot import BUILTIN_ROBOTS, Robot
+from .robot import BUILTIN_ROBOTS, Robot, load_robot
 
 #: The distribution that installs the example robots, and where, inside its cmeel prefix,
 #: its URDFs sit (``<site-packages>/cmeel.prefix/share/example-robot-data/robots``).
@@ -61,3 +63,29 @@ def joints_off_the_path(robot: Robot) -> list[str]:
                for joint in model.supports[model.frames[model.getFrameId(name)].parentJoint]}
     return [model.names[joint] for joint in range(1, model.njoints)
             if joint not in on_path and model.nvs[joint] > 0]
+
+
+#: ``locked_joints`` naming no joint: every movable joint controlled, the default locks
+#: dropped.
+NO_JOINT = "none"
+
+
+def load_robot_choice(robot: str | None, default: str, *, ee_frame: str | None = None,
+                      constrained_link: str | None = None, link_axis: Any = None,
+                      package_dirs: Sequence[str] | None = None, q_home: Any = None,
+                      locked_joints: Sequence[str] | None = None) -> Robot:
+    """The robot a command's robot options ask for (``default`` when ``robot`` is None;
+    ``robot`` as :func:`robot_source` reads it). Without ``locked_joints``, a URDF's joints
+    off the path to its end effectors and constrained links are locked
+    (:func:`joints_off_the_path`: the Panda's fingers, nq 9 -> 7); ``[NO_JOINT]`` locks none."""
+    source = robot_source(robot or default)
+    options = dict(ee_frame=ee_frame, constrained_link=constrained_link, link_axis=link_axis,
+                   package_dirs=package_dirs, q_home=q_home)
+    if locked_joints is not None and list(locked_joints) == [NO_JOINT]:
+        return load_robot(source, **options)
+    if locked_joints is not None or source in BUILTIN_ROBOTS:
+        return load_robot(source, locked_joints=locked_joints, **options)
+    with warnings.catch_warnings():  # the full model only names the joints: warn once, below
+        warnings.simplefilter("ignore")
+        whole = load_robot(source, **{**options, "q_home": None})
+    return load_robot(source, locked_joints=joints_off_the_path(whole) or None, **options)

@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from .spec import FIELDS_BY_NAME, cell_value
+from .spec import FIELDS_BY_NAME, cell_value, scenario_robot
 
 #: A cell's outcomes.
 DONE, FAILED = "done", "failed"
@@ -53,7 +53,7 @@ def build_run(inputs: Mapping[str, Any]) -> CellRun:
         return cell_value(inputs, name)
 
     seed = value("seed")
-    plan = load_scenario(value("scenario"))
+    plan = load_scenario(value("scenario"), scenario_robot(value("scenario"), value("robot")))
     plan = Variation(value("trocar_shift"), value("path_amplitude"), seed).apply(plan)
     if value("constraint_gain") is not None:
         plan = plan.with_constraint_gain(value("constraint_gain"))
@@ -123,12 +123,29 @@ def compare_command(inputs: Mapping[str, Any], out: str = "out") -> str:
         if name == "acceleration_limits":
             words += [] if value else ["--no-acceleration-limits"]
             continue
+        if name == "robot":
+            words += _robot_words(value)
+            continue
         words += [FIELDS_BY_NAME[name].option, _shown(value)]
     if "calibration_error_mm" in inputs or "calibration_error_mrad" in inputs:
         words += ["--calibration-error", f"{_shown(cell_value(inputs, 'calibration_error_mm'))},"
                   f"{_shown(cell_value(inputs, 'calibration_error_mrad'))}"]
     words += ["--out", out]
     return shlex.join(words)
+
+
+def _robot_words(robot: Mapping[str, Any]) -> list[str]:
+    """A cell's robot table as ``teleop compare``'s robot options."""
+    words: list[str] = []
+    for key, value in robot.items():
+        option = f"--{key.replace('_', '-')}"
+        if key == "link_axis":
+            words += [option, *(_shown(v) for v in value)]
+        elif isinstance(value, list):
+            words += [f"{option}={','.join(_shown(v) for v in value)}"]
+        else:
+            words += [option, value]
+    return words
 
 
 def _shown(value: Any) -> str:

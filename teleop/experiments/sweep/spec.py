@@ -90,6 +90,11 @@ def _cell_fields() -> tuple[CellField, ...]:
     return (
         CellField("scenario", None, _text, "--scenario", help="scenario names"),
         CellField("controller", None, _text, "--controllers", help="controller specs"),
+        CellField("robot", None, _optional(_robot_choice), None,
+                  help="the robot the scenarios run on (default: each scenario's own): a "
+                       "table of robot (a built-in name, a URDF path or an example-robot-data "
+                       "name), ee_frame, constrained_link, link_axis, locked_joints, "
+                       "package_dirs, q_home, as teleop compare's options"),
         CellField("seed", 0, _integer(0, MAX_SEED), "--seed",
                   help="seeds the encoder noise, the calibration error and the random "
                        "trocar and path"),
@@ -123,6 +128,40 @@ def _cell_fields() -> tuple[CellField, ...]:
         CellField("path_amplitude", 0.0, _real(0.0, MAX_PATH_AMPLITUDE_M), "--path-amplitude", "variations",
                   "bound (m) of the smooth random motion added to each EE target"),
     )
+
+
+#: The keys of a cell's ``robot`` table: (key, a list of what, its length; None: a name).
+ROBOT_KEYS: dict[str, tuple[type, int | None] | None] = {
+    "robot": None, "ee_frame": None, "constrained_link": None,
+    "link_axis": (float, 3), "locked_joints": (str, None), "package_dirs": (str, None),
+    "q_home": (float, None)}
+
+
+def _robot_choice(value: Any, name: str) -> dict[str, Any]:
+    """A cell's ``robot`` table checked: :data:`ROBOT_KEYS` only, names as text, lists of
+    names or numbers (the options' values); keys in order."""
+    if not isinstance(value, Mapping) or not value:
+        raise ValueError(f"{name} must be a table of robot options, got {short_repr(value)}")
+    unknown = sorted(set(value) - set(ROBOT_KEYS))
+    if unknown:
+        raise ValueError(f"{name}: unknown key {unknown[0]!r}; keys: {', '.join(ROBOT_KEYS)}")
+    checked: dict[str, Any] = {}
+    for key, kind in ROBOT_KEYS.items():
+        if key not in value:
+            continue
+        item = value[key]
+        if kind is None:
+            checked[key] = _text(item, f"{name}.{key}")
+            continue
+        what, length = kind
+        if not isinstance(item, (list, tuple)) or (length is not None and len(item) != length) \
+                or not item:
+            raise ValueError(f"{name}.{key} must be a list of "
+                             f"{length or 'one or more'} {'numbers' if what is float else 'names'},"
+                             f" got {short_repr(item)}")
+        checked[key] = [as_number(v, f"{name}.{key}") if what is float else _text(v, f"{name}.{key}")
+                        for v in item]
+    return checked
 
 
 def _plant_kind(value: Any, name: str) -> str:
@@ -274,6 +313,21 @@ def _values(name: str, cell_name: str, value: Any) -> list[Any]:
     return checked
 
 
+def scenario_robot(scenario: str, robot: Mapping[str, Any] | None):
+    """The robot a cell's ``robot`` table asks for (None: None, the scenario's own), loaded
+    as ``teleop compare`` loads its robot options
+    (:func:`teleop.robots.catalog.load_robot_choice`)."""
+    if robot is None:
+        return None
+    from teleop.experiments.scenarios import SCENARIOS
+    from teleop.robots.catalog import load_robot_choice
+
+    if scenario not in SCENARIOS:
+        return None  # load_scenario names the known ones
+    options = dict(robot)
+    return load_robot_choice(options.pop("robot", None), SCENARIOS[scenario][0], **options)
+
+
 def _check_grid(grid: dict[str, list[Any]]) -> None:
     """What the cells' runs would refuse, refused before any runs: an unknown scenario or
     controller (each controller built on each scenario's robot), a payload or a
@@ -290,9 +344,9 @@ def _check_grid(grid: dict[str, list[Any]]) -> None:
     if (any(grid.get("calibration_error_mm", [0.0]))
             or any(grid.get("calibration_error_mrad", [0.0]))) and "mujoco" in plants:
         raise ValueError("calibration error needs the kinematic plant (plants lists mujoco)")
-    for scenario in grid["scenario"]:
+    for scenario, robot in itertools.product(grid["scenario"], grid.get("robot", [None])):
         try:
-            plan = load_scenario(scenario)
+            plan = load_scenario(scenario, scenario_robot(scenario, robot))
         except ValueError as error:
             raise ValueError(f"scenarios: {error}") from None
         for controller in grid["controller"]:
