@@ -67,3 +67,27 @@ def test_best_is_marked_only_beyond_the_resolution(errors, best):
                                 for name, error in zip("abc", errors)},
                 "joint_velocity_reference": None}
     assert best_rows(document)["constraint_error_max_m"] == best
+
+
+def test_a_log_axis_starts_at_the_measures_resolution_not_at_rounding():
+    """A curve of rounding down to 1e-30 under a signal of 1e-3: the axis shows 1e-12 up,
+    whatever matplotlib's autoscale chose."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from teleop.experiments.plots import LOG_FLOOR, log_floor
+
+    fig, axis = plt.subplots()
+    axis.semilogy(np.arange(4), [1e-30, 1e-17, 1e-6, 1e-3])
+    assert axis.get_ylim()[0] < 1e-29  # what the autoscale shows: rounding
+    log_floor(axis, LOG_FLOOR)
+    low, high = axis.get_ylim()
+    assert low == LOG_FLOOR and high >= 1e-3
+    axis.cla()
+    axis.semilogy(np.arange(2), [1e-30, 1e-20])  # nothing above the floor: a decade shown
+    log_floor(axis, LOG_FLOOR)
+    assert axis.get_ylim() == (LOG_FLOOR, 10 * LOG_FLOOR)
+    plt.close(fig)

@@ -117,6 +117,19 @@ def _positive(values: np.ndarray) -> np.ndarray:
     return np.where(magnitude > 0, magnitude, np.nan)
 
 
+#: The lowest value a log axis of lengths (m) or joint velocities (rad/s) shows: the
+#: measures' resolution (:data:`teleop.experiments.metrics_table.RESOLUTION`); below it a
+#: value is rounding, not signal.
+LOG_FLOOR = 1e-12
+
+
+def log_floor(axis, floor: float) -> None:
+    """``axis`` (log y) from ``floor`` up, at least a decade above it: what lies below the
+    floor (rounding, down to 1e-30) is not drawn magnified."""
+    low, high = axis.get_ylim()
+    axis.set_ylim(floor, max(high, 10.0 * floor))
+
+
 def _symmetric_limits(limits: tuple[float, float], span: float) -> tuple[float, float]:
     """``limits`` widened to at least ``[-span, span]``, so that a component staying at zero
     up to round-off is drawn flat rather than magnified to fill its axis."""
@@ -160,6 +173,10 @@ def _constraint_velocity(plt, results: dict[str, "RunResult"], out: Path,
         return []
     floor = max(float(np.max(r.columns["constraint_velocity_floor"], initial=0.0))
                 for r in results.values())  # below it, a difference is round-off
+    # the axes stop a decade under the smallest round-off the runs measured
+    positive = [float(np.min(f[f > 0])) for f in (r.columns["constraint_velocity_floor"]
+                                                  for r in results.values()) if np.any(f > 0)]
+    velocity_floor = 0.1 * min(positive) if positive else 1e-17
     figures = []
     for n, group in enumerate(overlap_groups(series, atol=floor)):
         r = results[group.members[0]]
@@ -183,6 +200,7 @@ def _constraint_velocity(plt, results: dict[str, "RunResult"], out: Path,
                           label="numerical floor: float64 round-off of C v_c and of K e")
             axis.set_title(label, fontsize=9, loc="left")
             axis.set_ylabel("m/s")
+            log_floor(axis, velocity_floor)
             axis.grid(alpha=0.3, which="both")
         axes[-1, 0].set_xlabel("time (s)")
         handles, labels = axes[0, 0].get_legend_handles_labels()
@@ -195,7 +213,8 @@ def _constraint_velocity(plt, results: dict[str, "RunResult"], out: Path,
                    "relative to the constraint's geometry, on the same log axis as the EE's "
                    "speed. It equals the drift correction -K e the constraint asks for "
                    "(design 3.4) up to the command's residual; the dotted grey curve is the "
-                   "float64 round-off of C v_c and of K e, below which a velocity is zero. "
+                   "float64 round-off of C v_c and of K e, below which a velocity is zero; "
+                   "the axis starts a decade under its smallest value. "
                    "On a robot that is not perfect (design 15.1) the controller corrects the "
                    "error it measures, so the velocity departs from K |e| at the true q. "
                    + group.overlap("m/s"))
@@ -275,13 +294,15 @@ def _constraint_error(plt, results: dict[str, "RunResult"], out: Path, title: st
         ax.semilogy(r.columns["t"], _positive(series[group.members[0]]), lw=1, label=group.name)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("constraint error (m)")
+    log_floor(ax, LOG_FLOOR)
     ax.grid(alpha=0.3, which="both")
     fig.legend(loc="outside right upper", fontsize=8)
     fig.suptitle(f"Constraint error: hole offset / plane distance / penetration ({title})",
                  fontsize=10)
     path = _save(fig, out / "constraint_error.png", plt)
     caption = ("The largest equality error (or barrier penetration) at the end of each step, "
-               "on the true configuration. " + " ".join(g.overlap("m") for g in groups))
+               f"on the true configuration; the axis starts at {LOG_FLOOR:g} m, the measure's "
+               "resolution. " + " ".join(g.overlap("m") for g in groups))
     return Figure(path, "Constraint error", caption.strip())
 
 
@@ -345,6 +366,7 @@ def _agreement(plt, results: dict[str, "RunResult"], out: Path, title: str) -> F
         ax.semilogy(r.columns["t"], _positive(r.joint_velocity_deviation), lw=0.8, label=spec)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(f"max_j |qd_j - qd_{reference},j| (rad/s)")
+    log_floor(ax, LOG_FLOOR)
     ax.grid(alpha=0.3, which="both")
     fig.legend(loc="outside right upper", fontsize=8)
     fig.suptitle(f"Joint-velocity agreement with {reference} at the same q and twist ({title})",
@@ -353,7 +375,8 @@ def _agreement(plt, results: dict[str, "RunResult"], out: Path, title: str) -> F
     caption = (f"Along {reference}'s closed-loop run, every other controller solves at the "
                f"same configuration and twist (a shadow evaluation, design 15.3); the curve "
                f"is the largest joint-velocity difference from {reference}'s command. Exact "
-               "zeros are not drawn.")
+               f"zeros are not drawn, and the axis starts at {LOG_FLOOR:g} rad/s, the "
+               "measure's resolution.")
     return Figure(path, f"Joint-velocity agreement with {reference}", caption)
 
 
