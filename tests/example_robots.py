@@ -4,19 +4,14 @@ independent measure of their conditioning (Pinocchio and SciPy only, not
 
 from __future__ import annotations
 
-import importlib.metadata
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 from scipy.linalg import null_space
 
 from teleop import Robot, load_robot
-
-
-def example_robot_data_share() -> Path:
-    return Path(importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share"))
+from teleop.robots.catalog import example_robot_data_share
 
 
 @dataclass(frozen=True)

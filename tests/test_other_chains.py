@@ -3,7 +3,6 @@ the constraint, redundancy, and URDFs from another package (example-robot-data).
 
 from __future__ import annotations
 
-import importlib.metadata
 import warnings
 
 import numpy as np
@@ -16,14 +15,11 @@ from constraints import Hole
 from controllers import CJMController, QPController
 from teleop import load_robot
 from teleop.loop.closed_loop import LoopConfig, TeleopLoop, saturate_twist
+from teleop.robots.catalog import example_robot_data_share
 
 EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)
 #: the QP carries the CJM's damping (docs/design.md 10.7): undamped where compared with EXACT
 UNDAMPED = dict(singular_threshold=0.0)
-
-
-def example_robot_data_share():
-    return importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share")
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,6 @@
 from __future__ import annotations
 
 import functools
-import importlib.metadata
 import math
 import warnings
 
@@ -39,6 +38,7 @@ from controllers import CJMController, MinkController, QPController, StepStatus
 from controllers.qp import SOLVER_SETTINGS
 from teleop import load_robot
 from teleop.robots.chains import hole_links, load_chain
+from teleop.robots.catalog import example_robot_data_share
 
 FINGERS = ["panda_finger_joint1", "panda_finger_joint2"]
 PANDA_HOME = [0.2, -0.3, 0.1, -2.0, 0.2, 1.8, 0.7, 0.02, 0.02]
@@ -53,10 +53,6 @@ CHAINS = [(dof, count) for dof in (16, 32, 64) for count in (1, 2, 4, 8) if 2 * 
 PROPERTY = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 FEW = settings(max_examples=4, deadline=None,
                suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
-
-
-def example_robot_data_share():
-    return importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share")
 
 
 @functools.cache
