@@ -18,6 +18,9 @@ from typing import Callable, Iterator
 
 import numpy as np
 import pytest
+from cyclonedds.core import Listener
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
 
 from teleop import load_robot
 from teleop.experiments.compare import run_plan
@@ -28,7 +31,8 @@ from teleop.plants.ros2.ros2_plant import Ros2Plant
 from teleop.plants.ros2.settings import Ros2Settings
 from teleop.plants.ros2.joint_map import model_joint_names
 from teleop.plants.ros2.messages import Float64MultiArray, JointState
-from teleop.plants.ros2.node import Ros2Node
+from teleop.plants.ros2.names import dds_topic
+from teleop.plants.ros2.node import Ros2Node, endpoint_qos
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -269,8 +273,9 @@ def test_an_independent_dds_peer_sees_ros2_names_types_and_qos(robot, domain, di
 
 def test_the_closed_loop_holds_the_trocar_over_dds(robot, domain):
     """trocar-circle at 500 Hz through a simulated robot in another process: the trocar's
-    error stays within 0.2 mm (the in-process kinematic plant's is below 1e-6 m; the
-    difference is the wire's latency and the wall clock, docs/ros2.md "Measured")."""
+    error stays within 0.2 mm (measured 3 um on a loaded machine, in-process 0.1 um: the
+    difference is the two processes' period jitter, docs/ros2.md "Measured"), and no step
+    failed."""
     plan = load_scenario("trocar-circle")
     process = sim(domain, "--q0", ",".join(repr(float(v)) for v in plan.q0), "--rate", "500")
     try:
@@ -282,4 +287,93 @@ def test_the_closed_loop_holds_the_trocar_over_dds(robot, domain):
         process.wait()
     metrics = result.metrics()
     assert 0 < metrics["constraint_error_max_m"] < 2e-4
-    assert metrics["failed_steps"] == 0 if "failed_steps" in metrics else True
+    assert metrics["failed_steps"] == 0
+
+
+class TimedCommands:
+    """The command topic's samples with their arrival times (a listener: no polling)."""
+
+    def __init__(self, node: Ros2Node) -> None:
+        self.arrivals: list[tuple[float, list[float]]] = []
+        topic = Topic(node.participant, dds_topic("/forward_velocity_controller/commands"),
+                      Float64MultiArray)
+        self.reader = DataReader(node.participant, topic, qos=endpoint_qos(Float64MultiArray),
+                                 listener=Listener(on_data_available=self._arrived))
+
+    def _arrived(self, reader: DataReader) -> None:
+        now = time.perf_counter()
+        self.arrivals += [(now, list(s.data)) for s in reader.take(64)
+                          if isinstance(s, Float64MultiArray)]
+
+
+@pytest.mark.timing
+def test_round_trip_state_to_command_at_500_hz(robot, domain, peer):
+    """A state's publication to the command computed from it, seen by the robot's side:
+    p99 at most 2 ms at 500 Hz (issue 35). The state carries its number in joint 0's
+    position, the command gives it back."""
+    names = model_joint_names(robot.model)
+    log = TimedCommands(peer)
+    writer = peer.writer("/joint_states", JointState)
+    published: dict[int, float] = {}
+    running = True
+
+    def publish() -> None:
+        k, next_time = 1, time.perf_counter()
+        while running:
+            published[k] = time.perf_counter()
+            writer.write(JointState(name=names, position=[k * 1e-6] + [0.0] * (len(names) - 1)))
+            k += 1
+            next_time += DT
+            time.sleep(max(0.0, next_time - time.perf_counter()))
+    thread = threading.Thread(target=publish, daemon=True)
+    thread.start()
+    try:
+        with Ros2Plant(robot, DT, Ros2Settings(domain=domain, start_timeout=30.0,
+                                               stale_after=1.0)) as plant:
+            plant.reset()
+            q = plant.sense(robot.q_home)
+            for _ in range(2000):
+                q = plant.sense(q)
+                command = np.zeros(robot.model.nv)
+                command[0] = round(q[0] * 1e6)
+                plant.actuate(command, q, [])
+    finally:
+        running = False
+        thread.join()
+    first: dict[int, float] = {}
+    for arrival, data in log.arrivals:
+        first.setdefault(int(data[0]), arrival)
+    delays = np.array([first[k] - published[k] for k in first if k in published])
+    assert len(delays) > 1000
+    p50, p99 = np.percentile(delays, [50, 99]) * 1e3
+    print(f"round trip state -> command: p50 {p50:.3f} ms, p99 {p99:.3f} ms, "
+          f"{len(delays)} commands")
+    assert p99 <= 2.0
+
+
+@pytest.mark.timing
+def test_the_watchdog_stops_within_100_ms(robot, domain, peer):
+    """The simulated robot killed while commanded: zeros on the command topic and the
+    status within 100 ms of the kill (stale_after 50 ms, the default)."""
+    process = sim(domain)
+    log = TimedCommands(peer)
+    with Ros2Plant(robot, DT, Ros2Settings(domain=domain, start_timeout=30.0)) as plant:
+        plant.reset()
+        q = plant.sense(robot.q_home)
+        command = np.full(robot.model.nv, 0.01)
+        for _ in range(100):
+            plant.actuate(command, q, [])
+        assert plant.measures().stopped == ""
+        killed = time.perf_counter()
+        process.send_signal(signal.SIGKILL)
+        stopped_at = None
+        while time.perf_counter() - killed < 1.0:
+            plant.actuate(command, q, [])
+            if stopped_at is None and plant.measures().stopped:
+                stopped_at = time.perf_counter()
+        process.wait()
+    zeros = [t for t, data in log.arrivals if t > killed and not any(data)]
+    assert stopped_at is not None and zeros
+    print(f"watchdog: status {1e3 * (stopped_at - killed):.1f} ms, zeros "
+          f"{1e3 * (zeros[0] - killed):.1f} ms after the kill")
+    assert stopped_at - killed <= 0.1 and zeros[0] - killed <= 0.1

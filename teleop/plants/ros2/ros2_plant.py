@@ -3,11 +3,12 @@ section 15.1, the :class:`teleop.loop.Plant` protocol).
 
 :meth:`Ros2Plant.sense` is the last ``sensor_msgs/JointState`` received, joints matched by
 name; :meth:`Ros2Plant.actuate` publishes the command (a ``JointGroupVelocityController``'s
-``Float64MultiArray`` in the controller's joint order, or CRTK's ``servo_jv``), waits for
-the end of the period on the wall clock (a real robot does not wait for the controller)
-and returns the mean velocity that took the loop's configuration ``q`` to the state then
-received, ``v = log(q^-1 q_measured) / dt`` (``pin.difference``), so the loop's ``q`` is
-the robot's.
+``Float64MultiArray`` in the controller's joint order, or CRTK's ``servo_jv``), ends the
+period with the robot's next state (not sooner than half a period after the last period's
+end, not later than one and a half: the robot's clock paces the loop, since a real robot
+does not wait for the controller) and returns the mean velocity that took the loop's
+configuration ``q`` to the state then received, ``v = log(q^-1 q_measured) / dt``
+(``pin.difference``), so the loop's ``q`` is the robot's.
 
 Safety on the wire: nothing is published before the first state; the robot is stopped
 (zeros published, then every period) when the state is older than ``stale_after`` (a
@@ -94,7 +95,7 @@ class Ros2Plant:
         command_joints = self.settings.command_joints or tuple(self.names)
         self._command_order = indices(command_joints, self.names, "the robot model")
         self._command_names = list(command_joints)
-        self._lock = threading.RLock()
+        self._lock = threading.Condition(threading.RLock())  # notified at each new state
         self.node = Ros2Node(self.settings.domain)
         crtk = bool(self.settings.crtk)
         self._states = self.node.reader(self.settings.state_topic, JointState)
@@ -112,7 +113,8 @@ class Ros2Plant:
         self._received = -math.inf  # time.monotonic() of the last state
         self._commanding = False
         self._actuated = -math.inf  # time.monotonic() of the last command published
-        self._deadline = 0.0
+        self._fresh = 0  # good states taken since the start
+        self._period_start = 0.0  # time.monotonic() when the last period ended
         self.last_measures = Ros2Measures()
         self._running = True
         self._closed = False
@@ -151,6 +153,8 @@ class Ros2Plant:
                 continue
             self._q = q
             self._received = time.monotonic()
+            self._fresh += 1
+            self._lock.notify_all()
         if self._operating is not None:
             for state in self._operating.take(16):
                 if isinstance(state, OperatingState):
@@ -227,7 +231,7 @@ class Ros2Plant:
             self._commanding = False
             self._q = None  # a fresh state is awaited
         self.wait_for_state()
-        self._deadline = time.monotonic() + self.dt
+        self._period_start = time.monotonic()
 
     def sense(self, q: np.ndarray) -> np.ndarray:
         """The robot's last state (model order); before any, ``q``."""
@@ -238,9 +242,11 @@ class Ros2Plant:
     def actuate(self, qd: np.ndarray, q: np.ndarray,
                 constraints: Sequence[Constraint]) -> np.ndarray:
         """``qd`` published (zeros once stopped, nothing before the first state), the
-        period waited out on the wall clock, the mean velocity from ``q`` to the state
-        then received returned."""
+        period ended by the robot's next state (but not before half a period, nor after
+        one and a half: a late robot does not hold the loop up, the watchdog judges it),
+        the mean velocity from ``q`` to the state then received returned."""
         with self._lock:
+            fresh = self._fresh
             self._take_states()
             self._check_stale(time.monotonic())
             if self._q is not None:
@@ -251,11 +257,14 @@ class Ros2Plant:
                 self._publish(np.zeros(self.model.nv) if self.last_measures.stopped else qd)
             self.last_measures.command_publishers = (
                 self._command_listener.get_subscription_matched_status().current_count)
-        now = time.monotonic()
-        self._deadline = max(self._deadline + self.dt, now)
-        time.sleep(max(0.0, self._deadline - now))
-        with self._lock:
-            self._take_states()
+            earliest = self._period_start + 0.5 * self.dt
+            latest = self._period_start + 1.5 * self.dt
+            now = time.monotonic()
+            while now < latest and (self._fresh == fresh or now < earliest):
+                self._lock.wait(timeout=(earliest if self._fresh > fresh else latest) - now)
+                self._take_states()
+                now = time.monotonic()
+            self._period_start = now
             if self._q is None:
                 return np.zeros(self.model.nv)
             return pin.difference(self.model, q, self._q) / self.dt
