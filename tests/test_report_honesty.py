@@ -4,6 +4,7 @@ resolution."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from controllers.optimization.budget import ITERATION_CAPS
@@ -76,7 +77,6 @@ def test_a_log_axis_starts_at_the_measures_resolution_not_at_rounding():
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     from teleop.experiments.plots import LOG_FLOOR, log_floor
 
@@ -91,3 +91,28 @@ def test_a_log_axis_starts_at_the_measures_resolution_not_at_rounding():
     log_floor(axis, LOG_FLOOR)
     assert axis.get_ylim() == (LOG_FLOOR, 10 * LOG_FLOOR)
     plt.close(fig)
+
+
+def test_many_distinct_failure_messages_are_all_counted_the_rest_together():
+    """25 distinct messages over 30 failed steps (and ok steps between): the 20 most
+    frequent kept, the 5 others counted in one entry; every failed step in a count."""
+    from teleop.experiments.compare import MAX_FAILURE_MESSAGES, summarise_failures
+    from teleop.loop import StepRecord
+
+    def record(t: float, failed: bool, message: str) -> StepRecord:
+        empty = np.zeros(0)
+        return StepRecord(t, 0.0, 0.0, 0.0, np.zeros(1), np.zeros(1), 0.0, failed, 0.0, 0.0,
+                          0.0, False, empty, (), empty, np.zeros((1, 3)), np.zeros((1, 3)),
+                          np.zeros((1, 3)), empty, (), message=message)
+
+    messages = [f"m{k}" for k in range(25)] + ["m0"] * 3 + ["m1"] * 2  # 30 failures
+    records = []
+    for k, message in enumerate(messages):
+        records += [record(2 * k * 1e-3, False, ""), record((2 * k + 1) * 1e-3, True, message)]
+    summary = summarise_failures(records)
+    assert len(summary) == MAX_FAILURE_MESSAGES + 1
+    assert summary[0] == {"message": "m0", "count": 4, "first_step": 1, "first_t_s": 1e-3}
+    assert summary[1]["message"] == "m1" and summary[1]["count"] == 3
+    assert sum(entry["count"] for entry in summary) == 30
+    assert summary[-1]["message"] == "5 other messages" and summary[-1]["count"] == 5
+    assert summary[-1]["first_step"] == 2 * 20 + 1  # m20, the first of the others

@@ -165,9 +165,15 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
     return drive
 
 
+#: The distinct failure messages a run keeps; the rest are counted together.
+MAX_FAILURE_MESSAGES = 20
+
+
 def summarise_failures(records: Sequence[StepRecord]) -> list[dict]:
     """Every failed step of a run counted by its message: ``message``, ``count``,
-    ``first_step`` (its index) and ``first_t_s``, the most frequent first."""
+    ``first_step`` (its index) and ``first_t_s``, the most frequent first; past
+    :data:`MAX_FAILURE_MESSAGES` messages, one more entry counts the others' steps
+    together ("N other messages")."""
     summary: dict[str, dict] = {}
     for index, record in enumerate(records):
         if not record.failed:
@@ -176,7 +182,14 @@ def summarise_failures(records: Sequence[StepRecord]) -> list[dict]:
             "message": record.message, "count": 0, "first_step": index,
             "first_t_s": float(record.t)})
         entry["count"] += 1
-    return sorted(summary.values(), key=lambda entry: (-entry["count"], entry["first_step"]))
+    ranked = sorted(summary.values(), key=lambda entry: (-entry["count"], entry["first_step"]))
+    kept, others = ranked[:MAX_FAILURE_MESSAGES], ranked[MAX_FAILURE_MESSAGES:]
+    if others:
+        first = min(others, key=lambda entry: entry["first_step"])
+        kept.append({"message": f"{len(others)} other messages", "count": sum(
+            entry["count"] for entry in others), "first_step": first["first_step"],
+            "first_t_s": first["first_t_s"]})
+    return kept
 
 
 def _collect(spec: str, drive: Drive, ee_frames: Sequence[str]) -> RunResult:
