@@ -302,7 +302,8 @@ def test_compare_says_each_run_it_finishes_when_stderr_is_no_terminal(tmp_path):
 
 
 def test_compare_shows_a_bar_with_an_estimate_on_a_terminal():
-    """On a terminal: tqdm's bar over every run's steps, with the time left (``<``)."""
+    """On a terminal: tqdm's bar over the current run's steps (each controller's pass),
+    named with the run and its place, with the run's time left (``<``)."""
     import io
 
     from teleop.experiments.compare import RunProgress
@@ -321,6 +322,7 @@ def test_compare_shows_a_bar_with_an_estimate_on_a_terminal():
     progress.finish()
     progress.close()
     shown = console.getvalue()
-    assert "paper-hole" in shown and "/100" in shown and "qp:daqp" in shown
+    assert "paper-hole: cjm 1/2: 100%" in shown and "50/50" in shown
+    assert "paper-hole: qp:daqp 2/2" in shown and "/100" not in shown
     assert re.search(r"\d\d:\d\d<\d\d:\d\d", shown), shown  # elapsed<remaining
     assert "done (" not in shown  # the lines are for consoles that are not terminals

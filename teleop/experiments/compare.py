@@ -419,10 +419,11 @@ PROGRESS_LINES = 10
 
 
 class RunProgress:
-    """What :func:`compare` shows while it runs: on a terminal a tqdm bar over every run's
-    steps (with its estimate of the time left), else, inside each run, a line at each
-    tenth of its steps with the time left estimated from its pace so far, and one line
-    per finished run (a log redirected to a file still shows a long pass going by)."""
+    """What :func:`compare` shows while it runs: on a terminal a tqdm bar over the current
+    run's steps (named ``run i/n``, with its estimate of the run's time left), else,
+    inside each run, a line at each tenth of its steps with the time left estimated from
+    its pace so far, and one line per finished run (a log redirected to a file still
+    shows a long pass going by)."""
 
     def __init__(self, name: str, runs: Sequence[str], steps: int, console) -> None:
         self.name, self.runs, self.steps, self.console = name, list(runs), steps, console
@@ -432,15 +433,18 @@ class RunProgress:
         if console.isatty():
             from tqdm import tqdm
 
-            self._bar = tqdm(total=steps * len(self.runs), unit="step", desc=name,
-                             leave=False, file=console)
+            self._bar = tqdm(total=steps, unit="step", desc=name, leave=False, file=console)
 
     def start(self, run: str) -> None:
         """``run`` begins (the one before it has finished)."""
         self.finish()
+        if self._bar is not None and self._run is not None:
+            self._bar.refresh()  # the run before it as it ended (refreshes are throttled)
         self._run, self._started = run, time.perf_counter()
         if self._bar is not None:
-            self._bar.set_postfix_str(run)
+            self._bar.reset(total=self.steps)
+            self._bar.set_description_str(
+                f"{self.name}: {run} {self.runs.index(run) + 1}/{len(self.runs)}")
 
     def step(self, index: int) -> None:
         """Step ``index`` (from 0) of the current run has been taken."""
