@@ -109,6 +109,7 @@ class Ros2Plant:
                                            | InstanceState.Any))
         self._state_order: np.ndarray | None = None
         self._state_names: list[str] = []
+        self._refused = ""  # why the joint states' names are refused
         self._q: np.ndarray | None = None
         self._received = -math.inf  # time.monotonic() of the last state
         self._commanding = False
@@ -138,7 +139,8 @@ class Ros2Plant:
                                                 f"{self.settings.state_topic}")
                 except ValueError as error:
                     self._state_order = None
-                    self._stop(str(error))
+                    self._refused = str(error)
+                    self._stop(self._refused)
                     continue
             if self._state_order is None:
                 continue
@@ -210,7 +212,7 @@ class Ros2Plant:
             with self._lock:
                 self._take_states()
                 if self._state_order is None and self._state_names:
-                    raise ValueError(self.last_measures.stopped)
+                    raise ValueError(self._refused)
                 if self._q is not None:
                     return self._q.copy()
                 if self.last_measures.stopped:
@@ -229,7 +231,8 @@ class Ros2Plant:
             self._stop("reset")
             self.last_measures = Ros2Measures(states=self.last_measures.states)
             self._commanding = False
-            self._q = None  # a fresh state is awaited
+            self._q = None  # a fresh state is awaited, its names checked again
+            self._state_names = []
         self.wait_for_state()
         self._period_start = time.monotonic()
 
