@@ -1,5 +1,5 @@
 """Where a scenario puts its hole and how large it draws its path on a robot other than
-the one it was written for (docs/design.md section 11.2): the hole halfway along the
+the one it was written for (docs/design.md section 15.4.1): the hole halfway along the
 constrained link towards what follows it on the way to the end effector, the path scaled
 by the robot's reach over the scenario's own robot's."""
 

@@ -517,7 +517,8 @@ SCENARIOS: dict[str, tuple[str, Callable[[Robot], Plan]]] = {
 }
 
 
-#: The scenarios that run on any single arm with a constrained link (:mod:`.placement`).
+#: The scenarios that run on any single arm with a constrained link (:mod:`.placement`,
+#: docs/design.md section 15.4.1).
 PORTABLE_SCENARIOS = ("paper-hole", "trocar-circle", "fast-lateral", "joint-limits")
 
 
