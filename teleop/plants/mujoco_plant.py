@@ -31,6 +31,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
+from constraints.validation import as_number
 from controllers.mujoco_model import joint_map, mujoco_spec, site_name
 
 from constraints.collision import CollisionAvoidance
@@ -40,9 +41,14 @@ from .contact_geometry import add_contact_geometry
 from .imperfect import Imperfections, ImperfectPlant
 from .interface import CommandInterface, InterfaceFault
 from .settings import PlantSettings
+from .tissue import TissueSurface
 
 #: A payload's inertia: a 5 cm solid sphere's per kilogram (kg m^2 / kg).
 _PAYLOAD_INERTIA_PER_KG = 0.4 * 0.05 ** 2
+#: The force sensor's tool body: its name prefix and mass (kg, light: the sensor reads
+#: the contact, not the tool's weight or inertia) and its sensors' name prefixes.
+_TOOL, _TOOL_MASS = "tool:", 1e-4
+_FORCE, _TORQUE = "force:", "torque:"
 
 
 @dataclass
@@ -66,6 +72,11 @@ class PlantMeasures:
         (``count``) this period, None: none (docs/design.md 17.1, "The interface").
     interface_stopped : the interface has stopped the robot (``strict``, from the first
         fault on).
+    tool_wrenches : (EEs, 6) the force/torque sensor at each EE's tool frame: the wrench
+        the environment applies to the tool (N, N m), in the tool frame, noise and bias
+        included (docs/design.md section 19.2); ``(0, 6)`` without tissue.
+    contact_forces : (EEs, 3) the tissues' true force on each tool tip, world frame (N).
+    contact_depths : (EEs,) each tip's deepest penetration into a tissue (m).
     """
 
     #: measures of a simulated body (the ROS 2 plant's are not: no port force, no torque)
@@ -80,6 +91,9 @@ class PlantMeasures:
     contact_depth: float = 0.0
     interface_fault: InterfaceFault | None = None
     interface_stopped: bool = False
+    tool_wrenches: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    contact_forces: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    contact_depths: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def port_force(self) -> float:
@@ -103,11 +117,22 @@ class MujocoPlant:
     collisions : a collision avoidance on ``robot``: its geometry, obstacles and pairs go
         into the simulation (:func:`~teleop.plants.contact_geometry.add_contact_geometry`);
         None: the robot has no collision geometry (nothing touches).
+    tissues : compliant surfaces every EE's tool tip can press (:class:`TissueSurface`);
+        with any, each EE carries a force/torque sensor (docs/design.md section 19.2).
+    sensor_noise : the force/torque sensor's white noise, standard deviation of each force
+        (N) and torque (N m) component.
+    sensor_bias : (6,) a constant offset on its reading (N, N m), tool frame.
+    seed : the sensor noise's seed.
     """
+
+    #: the plant measures the wrench at the tool (the kinematic plant does not)
+    has_force_sensor: ClassVar[bool] = True
 
     def __init__(self, robot, dt: float, settings: PlantSettings | None = None,
                  imperfections: Imperfections | None = None,
-                 collisions: CollisionAvoidance | None = None) -> None:
+                 collisions: CollisionAvoidance | None = None,
+                 tissues: Sequence[TissueSurface] = (), sensor_noise: float = 0.0,
+                 sensor_bias: Sequence[float] | None = None, seed: int = 0) -> None:
         if settings is not None and not isinstance(settings, PlantSettings):
             raise ValueError(f"settings must be PlantSettings, got {type(settings).__name__}")
         if imperfections is not None and not imperfections.calibrated:
@@ -115,6 +140,19 @@ class MujocoPlant:
                              "calibration_rotation_std) needs the kinematic plant: the mujoco "
                              "plant builds its body from the URDF, the controllers' model")
         self.settings = settings or PlantSettings()
+        if not all(isinstance(tissue, TissueSurface) for tissue in tissues):
+            raise ValueError("tissues must be TissueSurface objects")
+        self.tissues = tuple(tissues)
+        self.sensor_noise = as_number(sensor_noise, "sensor_noise", 0.0)
+        bias = np.zeros(6) if sensor_bias is None else np.asarray(sensor_bias, dtype=float)
+        if bias.shape != (6,) or not np.all(np.isfinite(bias)):
+            raise ValueError(f"sensor_bias must be 6 finite numbers (N, N m), got "
+                             f"{sensor_bias!r}")
+        self.sensor_bias = bias
+        self._sensor_rng = np.random.default_rng(seed)
+        self.ee_frames = tuple(robot.ee_frames)
+        #: (EEs, 3) an external force on each tool tip, world frame (N): :meth:`push`
+        self.pushes = np.zeros((len(self.ee_frames), 3))
         self.model: pin.Model = robot.model
         self.dt = float(dt)
         self.substeps = self.settings.substeps(self.dt)
@@ -135,6 +173,13 @@ class MujocoPlant:
                           for name in self._site_frames(robot)}
         self._site_bodies = self.mj_model.site_bodyid.tolist()
         self._jacobian = np.empty((3, self.mj_model.nv))
+        self._tools = [self.mj_model.body(_TOOL + frame).id for frame in self.ee_frames] \
+            if self.tissues else []
+        self._tool_sites = [self.mj_model.site(_TOOL + frame).id for frame in self.ee_frames] \
+            if self.tissues else []
+        self._sensor_rows = [(self.mj_model.sensor(_FORCE + frame).adr[0],
+                              self.mj_model.sensor(_TORQUE + frame).adr[0])
+                             for frame in self.ee_frames] if self.tissues else []
         self._no_torque = np.zeros(3)
         self.reset(robot.q_home)
 
@@ -188,7 +233,26 @@ class MujocoPlant:
                 payload.gravcomp = 0.0  # unknown to the drives
         if collisions is not None:
             add_contact_geometry(spec, robot, collisions)
+        if self.tissues:
+            for frame in robot.ee_frames:
+                self._add_force_sensor(spec, frame)
         return spec.compile()
+
+    @staticmethod
+    def _add_force_sensor(spec: mujoco.MjSpec, frame: str) -> None:
+        """A light tool body welded at ``frame``'s site (its centre of mass there, where
+        the tissue pushes), with MuJoCo's force and torque sensors at a site on it: the
+        force the EE's body exerts on the tool, in the site's (the tool's) frame."""
+        site = spec.site(site_name(frame))
+        tool = site.parent.add_body(name=_TOOL + frame, pos=site.pos, quat=site.quat,
+                                    mass=_TOOL_MASS)
+        tool.ipos = [0.0, 0.0, 0.0]
+        tool.inertia = [_TOOL_MASS * _PAYLOAD_INERTIA_PER_KG] * 3
+        tool.add_site(name=_TOOL + frame)
+        spec.add_sensor(name=_FORCE + frame, type=mujoco.mjtSensor.mjSENS_FORCE,
+                        objtype=mujoco.mjtObj.mjOBJ_SITE, objname=_TOOL + frame)
+        spec.add_sensor(name=_TORQUE + frame, type=mujoco.mjtSensor.mjSENS_TORQUE,
+                        objtype=mujoco.mjtObj.mjOBJ_SITE, objname=_TOOL + frame)
 
     @staticmethod
     def _urdf_efforts(model: pin.Model) -> dict[str, float]:
@@ -269,29 +333,77 @@ class MujocoPlant:
         forces, displacements = np.zeros((len(holes), 3)), np.zeros(len(holes))
         springs = np.zeros((len(holes), 3))
         data.qfrc_applied[:] = 0.0
-        if holes:  # each physics step split to apply the wall's force at its kinematics
+        contacts = np.zeros((len(self._tools), 3))
+        depths = np.zeros(len(self._tools))
+        if holes or self.tissues:  # each physics step split to apply the forces there
             for _ in range(self.substeps):
                 mujoco.mj_step1(model, data)
                 data.qfrc_applied[:] = 0.0
                 for i, hole in enumerate(holes):
                     forces[i], springs[i], displacements[i] = self._push(hole)
+                for i in range(len(self._tools)):
+                    contacts[i], depths[i] = self._press(i)
                 mujoco.mj_step2(model, data)
         else:  # one call: the physics steps without Python between them
             mujoco.mj_step(model, data, self.substeps)
         torque = np.abs(data.qfrc_actuator) / self.effort_limit
         ratio = float(np.max(torque))
         saturated = ratio >= 1.0 - 1e-12
-        depths = data.contact.dist[:data.ncon]
+        distances = data.contact.dist[:data.ncon]
         self.last = PlantMeasures(forces, displacements, ratio, saturated, springs,
                                   int(data.ncon),
-                                  float(max(0.0, -np.min(depths, initial=0.0))),
-                                  fault, self.interface.stopped)
+                                  float(max(0.0, -np.min(distances, initial=0.0))),
+                                  fault, self.interface.stopped, self._read_sensors(),
+                                  contacts, depths)
         self.joints.q_to_pinocchio(data.qpos, self._q_pin)
         return pin.difference(self.model, q, self._q_pin) / self.dt
 
     def measures(self) -> PlantMeasures:
         """The last period's :class:`PlantMeasures`."""
         return self.last
+
+    # -- the tissue and the force/torque sensor ------------------------------------------
+
+    def _press(self, ee: int) -> tuple[np.ndarray, float]:
+        """Apply the tissues' force on EE ``ee``'s tool tip (at the kinematics of
+        ``mj_step1``, on the tool body's centre of mass, the tip); the force (N, world) and
+        the deepest penetration (m)."""
+        model, data, jacobian = self.mj_model, self.mj_data, self._jacobian
+        tool = self._tools[ee]
+        tip = data.xipos[tool]
+        mujoco.mj_jac(model, data, jacobian, None, tip, tool)
+        velocity = jacobian @ data.qvel
+        force = sum((tissue.force(tip, velocity) for tissue in self.tissues), np.zeros(3))
+        data.xfrc_applied[tool, :3] = force + self.pushes[ee]
+        return force, max(tissue.penetration(tip) for tissue in self.tissues)
+
+    def push(self, ee: int, force: Sequence[float]) -> None:
+        """Push EE ``ee``'s tool tip with ``force`` (N, world frame) from the next period on
+        (a hand on the tool; the sensor reads it, ``contact_forces`` does not); needs a
+        tissue (the sensor's tool body)."""
+        value = np.asarray(force, dtype=float)
+        if value.shape != (3,) or not np.all(np.isfinite(value)):
+            raise ValueError(f"push force must be 3 finite numbers (N), got {force!r}")
+        if not self.tissues:
+            raise ValueError("push needs the tool body of a plant with a tissue (tissues=...)")
+        self.pushes[ee] = value
+
+    def _read_sensors(self) -> np.ndarray:
+        """Each tool's wrench from the environment in its tool frame: minus MuJoCo's force
+        and torque sensors (they read what the EE's body exerts on the tool, which holds
+        the light tool against the tissue; computed by ``mj_step2`` at the period's last
+        physics step), then the bias and the noise. The tool's own weight (1 mN) and
+        inertia are in the reading, as on a real sensor."""
+        wrenches = np.zeros((len(self._sensor_rows), 6))
+        if not self._sensor_rows:
+            return wrenches
+        for i, (force, torque) in enumerate(self._sensor_rows):
+            wrenches[i, :3] = -self.mj_data.sensordata[force:force + 3]
+            wrenches[i, 3:] = -self.mj_data.sensordata[torque:torque + 3]
+        wrenches += self.sensor_bias
+        if self.sensor_noise > 0.0:
+            wrenches += self._sensor_rng.normal(0.0, self.sensor_noise, wrenches.shape)
+        return wrenches
 
     # -- the abdominal wall ----------------------------------------------------------------
 
