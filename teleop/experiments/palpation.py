@@ -1,4 +1,4 @@
-"""The ``palpation`` experiment (docs/design.md section 19.4): through the trocar, the tool
+"""The ``palpation`` experiment (docs/design.md section 21.4): through the trocar, the tool
 tip presses a tissue surface at 1 N along the tool's axis and slides 2 cm across it and
 back, under the tool-frame hybrid law (:class:`teleop.loop.HybridForceMotion`) on the
 MuJoCo plant, for any controller.

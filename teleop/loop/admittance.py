@@ -1,4 +1,4 @@
-"""An admittance at the tool (docs/design.md section 19.3): a virtual mass-damper-spring
+"""An admittance at the tool (docs/design.md section 21.3): a virtual mass-damper-spring
 driven by the measured wrench,
 
     M a + D v + K x = F,

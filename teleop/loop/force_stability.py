@@ -1,4 +1,4 @@
-"""Stability of the tool-frame laws in the sampled loop (docs/design.md section 19.3).
+"""Stability of the tool-frame laws in the sampled loop (docs/design.md section 21.3).
 
 A force loop ``v = k_f (f_d - f)`` against a contact of stiffness ``k_c`` is, per control
 period ``dt``, an integrator of gain ``g = k_f k_c dt`` closed through ``d`` periods of

@@ -1,4 +1,4 @@
-"""Hybrid force/motion in the tool frame (docs/design.md section 19.3).
+"""Hybrid force/motion in the tool frame (docs/design.md section 21.3).
 
 With every twist a body twist (tool frame, the loop's ``K_p log6(T^-1 T*)``), ``S`` the
 diagonal selection of the force-controlled translation axes of the tool frame, ``f`` the
@@ -12,7 +12,7 @@ bounded by ``max_speed`` per axis), rotations the operator's. The twist goes to 
 controller as the operator's would: the CJM keeps its constraint rows first (the twist is
 tracked in their null space), so the law cannot move the instrument off the port. Where
 the twist is not feasible there, a heavy task weight on the force axes keeps their
-tracking first (docs/design.md section 19.4).
+tracking first (docs/design.md section 21.4).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The wrench at the tool the tool-frame laws take (docs/design.md section 19.2): the
+"""The wrench at the tool the tool-frame laws take (docs/design.md section 21.2): the
 plant's force/torque sensor, refused by name on a plant without one."""
 
 from __future__ import annotations

@@ -74,7 +74,7 @@ class PlantMeasures:
         fault on).
     tool_wrenches : (EEs, 6) the force/torque sensor at each EE's tool frame: the wrench
         the environment applies to the tool (N, N m), in the tool frame, noise and bias
-        included (docs/design.md section 19.2); ``(0, 6)`` without tissue.
+        included (docs/design.md section 21.2); ``(0, 6)`` without tissue.
     contact_forces : (EEs, 3) the tissues' true force on each tool tip, world frame (N).
     contact_depths : (EEs,) each tip's deepest penetration into a tissue (m).
     """
@@ -118,7 +118,7 @@ class MujocoPlant:
         into the simulation (:func:`~teleop.plants.contact_geometry.add_contact_geometry`);
         None: the robot has no collision geometry (nothing touches).
     tissues : compliant surfaces every EE's tool tip can press (:class:`TissueSurface`);
-        with any, each EE carries a force/torque sensor (docs/design.md section 19.2).
+        with any, each EE carries a force/torque sensor (docs/design.md section 21.2).
     sensor_noise : the force/torque sensor's white noise, standard deviation of each force
         (N) and torque (N m) component.
     sensor_bias : (6,) a constant offset on its reading (N, N m), tool frame.

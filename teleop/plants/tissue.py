@@ -1,5 +1,5 @@
 """Tissue the tool tip can touch: a compliant plane in the physics plant (docs/design.md
-section 19.1).
+section 21.1).
 
 The surface is the plane through ``point`` with outward unit ``normal``. A tip below it by
 the penetration ``d = max(0, (point - p) . normal)`` is pushed out along the normal with a
@@ -32,7 +32,7 @@ DEFAULT_TISSUE_DAMPING = 0.5
 
 @dataclass(frozen=True)
 class TissueSurface:
-    """A compliant plane the tool tip can press (docs/design.md section 19.1).
+    """A compliant plane the tool tip can press (docs/design.md section 21.1).
 
     Attributes
     ----------
