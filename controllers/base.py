@@ -251,6 +251,10 @@ class Controller(ABC):
         is the previous command (:attr:`reference`, zero after :meth:`reset`); the box of a
         step is then the intersection of the velocity, braking-aware position and
         acceleration bounds (docs/design.md section 8.4).
+    jerk_limit : (nv,) per joint (rad/s^3, m/s^3; ``inf`` for none), or None: the
+        command's change may differ from the previous change by at most ``j dt^2``
+        (docs/design.md section 8.5); needs ``acceleration_limit``. Where the other limits
+        leave no room within it (braking at a position limit), it gives way to them.
     """
 
     #: the damped least squares' policy (paper eq 35) of a controller that damps its task
@@ -260,7 +264,8 @@ class Controller(ABC):
     def __init__(self, robot: RobotLike, dt: float = 1e-3,
                  limit_gain: float = DEFAULT_LIMIT_GAIN, position_limits: bool = True,
                  velocity_limits: bool = True, strict: bool = False,
-                 acceleration_limit=None, collisions: CollisionAvoidance | None = None) -> None:
+                 acceleration_limit=None, collisions: CollisionAvoidance | None = None,
+                 jerk_limit=None) -> None:
         self.robot = robot
         self.model: pin.Model = robot.model
         self.data: pin.Data = self.model.createData()
@@ -273,9 +278,11 @@ class Controller(ABC):
         self.strict = bool(strict)
         self.info = SolveInfo()
         self.joint_bounds = JointBounds(self.model, dt, limit_gain, position_limits,
-                                        velocity_limits, acceleration_limit)
+                                        velocity_limits, acceleration_limit, jerk_limit)
         #: the previous command, the acceleration limits' reference (zero at rest)
         self._reference = np.zeros(self.model.nv)
+        #: the previous command minus the one before, the jerk limits' reference
+        self._reference_change = np.zeros(self.model.nv)
         self.velocity_limit = self.joint_bounds.velocity_limit
         self._box_test = BoxTest(self.joint_bounds, self.model.nq, self.model.nv)
         self.constraints: list[Constraint] = []
@@ -317,18 +324,40 @@ class Controller(ABC):
         """The command the acceleration limits count from: the previous one (a copy)."""
         return self._previous_command().copy()
 
+    @property
+    def jerk_limit(self) -> np.ndarray | None:
+        """(nv,) jerk limits (inf where none), or None."""
+        return self.joint_bounds.jerk_limit
+
     def _previous_command(self) -> np.ndarray:
         """The array holding the previous command (the CJM's lives in its step)."""
         return self._reference
 
+    def _previous_change(self) -> np.ndarray:
+        """The array holding the previous command minus the one before (the CJM's lives in
+        its step)."""
+        return self._reference_change
+
+    def _remember(self, command: np.ndarray) -> None:
+        """``command`` sent: the reference of the next step's acceleration and jerk box."""
+        previous = self._previous_command()
+        np.subtract(command, previous, out=self._previous_change())
+        previous[:] = command
+
     def reset(self) -> None:
         """Forget the previous command: the next step starts from rest."""
         self._previous_command()[:] = 0.0
+        self._previous_change()[:] = 0.0
+
+    def _jerk_reference(self) -> np.ndarray | None:
+        """:meth:`_previous_change` when there are jerk limits, else None."""
+        return None if self.joint_bounds.jerk_step is None else self._previous_change()
 
     def bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The joint box ``lower <= qd <= upper`` at ``q`` (:class:`JointBounds`), for the
-        next step (around the previous command when there are acceleration limits)."""
-        return self.joint_bounds.box(q, self._previous_command())
+        next step (around the previous command when there are acceleration limits, and its
+        change when there are jerk limits)."""
+        return self.joint_bounds.box(q, self._previous_command(), self._jerk_reference())
 
     def stop_command(self, q: np.ndarray) -> np.ndarray:
         """The fallback of a failed step: the command nearest zero inside the box
@@ -343,7 +372,7 @@ class Controller(ABC):
         controller refused): it becomes the previous command the next step's acceleration
         box counts from."""
         command = self.stop_command(q)
-        self._previous_command()[:] = command
+        self._remember(command)
         return command
 
     def loop_tick(self, dt: float, kp: float, max_linear_speed: float, max_angular_speed: float,
@@ -481,7 +510,7 @@ class GuardedController(Controller):
         q, twist = self._checked_inputs(q, twist)
         self.info = SolveInfo()
         qd = self._guarded_step(q, twist)
-        self._reference[:] = qd
+        self._remember(qd)
         return qd
 
     def _guarded_step(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
@@ -493,8 +522,9 @@ class GuardedController(Controller):
         if not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
             return self._fail(NON_FINITE_NOTE, q)
         previous = self._reference if self.joint_bounds.acceleration_step is not None else None
-        if not self._box_test.contains(q, qd, previous):
-            lower, upper = self.joint_bounds.box(q, previous)
+        change = self._jerk_reference()
+        if not self._box_test.contains(q, qd, previous, change):
+            lower, upper = self.joint_bounds.box(q, previous, change)
             try:
                 qd = self._saturate(kinematics, twist, qd, lower, upper)
             except np.linalg.LinAlgError as error:

@@ -83,6 +83,37 @@ def acceleration_box(lower: np.ndarray, upper: np.ndarray, previous: np.ndarray,
     return accel_lower, accel_upper
 
 
+def jerk_box(lower: np.ndarray, upper: np.ndarray, previous: np.ndarray,
+             previous_change: np.ndarray, step: np.ndarray,
+             velocity_limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The box ``[lower, upper]`` (the position, velocity and acceleration limits'; new
+    arrays) cut to the jerk window (docs/design.md 8.5): the command's change within
+    ``previous_change +- step`` (``step = j dt^2``), and no larger towards a velocity limit
+    than the change that can still fall to zero, by ``step`` a period, before the limit:
+    :func:`braking_speed` with the command as the position, its change per period as the
+    speed and ``step`` as the braking step. Where the window misses the box, the point of
+    the box nearest to it: the jerk limit gives way to the other limits, never they to it
+    (at a position limit the braking is the acceleration limits', without jerk)."""
+    centre = previous + previous_change
+    jerk_lower, jerk_upper = centre - step, centre + step
+    limited = np.isfinite(velocity_limit)
+    if limited.any():
+        room_up = np.maximum(velocity_limit[limited] - previous[limited], 0.0)
+        room_down = np.maximum(velocity_limit[limited] + previous[limited], 0.0)
+        jerk_upper[limited] = np.minimum(
+            jerk_upper[limited], previous[limited] + braking_speed(room_up, step[limited], 1.0, 1.0))
+        jerk_lower[limited] = np.maximum(
+            jerk_lower[limited], previous[limited] - braking_speed(room_down, step[limited], 1.0, 1.0))
+        np.minimum(jerk_lower, jerk_upper, out=jerk_lower)  # rounding: never an empty window
+    miss = (jerk_lower > upper) | (jerk_upper < lower)
+    if miss.any():
+        point = np.minimum(np.maximum(np.minimum(np.maximum(lower, jerk_lower), jerk_upper),
+                                      lower), upper)
+        jerk_lower[miss] = point[miss]
+        jerk_upper[miss] = point[miss]
+    return np.maximum(lower, jerk_lower), np.minimum(upper, jerk_upper)
+
+
 #: The share of the deceleration its joints could give a point along a damper's row, at
 #: their acceleration limits, that the braking-aware damper counts on (docs/design.md 12):
 #: the rest is left to the other rows the same joints hold (a trocar, a second barrier or

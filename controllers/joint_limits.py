@@ -7,7 +7,7 @@ import pinocchio as pin
 
 from constraints.validation import as_number
 
-from .joint_acceleration import acceleration_box, as_acceleration_limit, braking_speed
+from .joint_acceleration import acceleration_box, as_acceleration_limit, braking_speed, jerk_box
 
 #: Fraction ``g`` of the distance to a position limit a joint may cover in one period.
 DEFAULT_LIMIT_GAIN = 0.95
@@ -43,7 +43,8 @@ class JointBounds:
 
     def __init__(self, model: pin.Model, dt: float = 1e-3,
                  limit_gain: float = DEFAULT_LIMIT_GAIN, position_limits: bool = True,
-                 velocity_limits: bool = True, acceleration_limit=None) -> None:
+                 velocity_limits: bool = True, acceleration_limit=None,
+                 jerk_limit=None) -> None:
         self.dt = as_number(dt, "dt", positive=True)
         self.limit_gain = as_number(limit_gain, "limit_gain", positive=True, maximum=1.0)
         self.position_limits = bool(position_limits)
@@ -72,6 +73,12 @@ class JointBounds:
         #: (nv,) the largest change of command per period, ``a dt``, or None
         self.acceleration_step = (None if self.acceleration_limit is None
                                   else self.acceleration_limit * self.dt)
+        #: (nv,) jerk limits (inf where none), or None
+        self.jerk_limit = as_acceleration_limit(jerk_limit, nv, "jerk_limit")
+        if self.jerk_limit is not None and self.acceleration_limit is None:
+            raise ValueError("jerk_limit needs acceleration limits: give acceleration_limit too")
+        #: (nv,) the largest change of the command's change per period, ``j dt^2``, or None
+        self.jerk_step = None if self.jerk_limit is None else self.jerk_limit * self.dt ** 2
         braked = (np.zeros(0, dtype=int) if self.acceleration_step is None
                   else np.flatnonzero(np.isfinite(self.acceleration_step[self.limited_v])))
         #: indices (into ``limited_v``) of the joints whose position bound brakes
@@ -79,11 +86,13 @@ class JointBounds:
         self._braked_step = (self.acceleration_step[self.limited_v[braked]]
                              if braked.size else np.zeros(0))
 
-    def box(self, q: np.ndarray,
-            previous: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def box(self, q: np.ndarray, previous: np.ndarray | None = None,
+            previous_change: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(lower, upper)``, each (nv,), at configuration ``q`` (new arrays); with
         ``previous`` (the last command) and acceleration limits, intersected with
-        :func:`controllers.joint_acceleration.acceleration_box`."""
+        :func:`controllers.joint_acceleration.acceleration_box`; with ``previous_change``
+        (the last command minus the one before) and jerk limits, then cut by
+        :func:`controllers.joint_acceleration.jerk_box`."""
         box = self.velocity_box.copy()
         if self.position_limits and self.limited_v.size:
             distance = self.q_limits - q[self.limited_q]
@@ -101,7 +110,11 @@ class JointBounds:
         if previous is None or self.acceleration_step is None:
             return lower, upper
         accel_lower, accel_upper = acceleration_box(lower, upper, previous, self.acceleration_step)
-        return np.maximum(lower, accel_lower), np.minimum(upper, accel_upper)
+        lower, upper = np.maximum(lower, accel_lower), np.minimum(upper, accel_upper)
+        if previous_change is None or self.jerk_step is None:
+            return lower, upper
+        return jerk_box(lower, upper, previous, previous_change, self.jerk_step,
+                        self.velocity_box[1])
 
     def _brake(self, distance: np.ndarray, position: np.ndarray) -> None:
         """The braking-aware position bounds of the joints with an acceleration limit,
@@ -157,13 +170,14 @@ class BoxTest:
         self._stacked = np.ones(nv + nq + 1)  # [qd; q; 1]
         self._nv = nv
 
-    def contains(self, q: np.ndarray, qd: np.ndarray,
-                 previous: np.ndarray | None = None) -> bool:
+    def contains(self, q: np.ndarray, qd: np.ndarray, previous: np.ndarray | None = None,
+                 previous_change: np.ndarray | None = None) -> bool:
         """Whether ``qd`` (finite) is inside the box at ``q``, to the tolerance. With
         acceleration limits and ``previous`` the box is not affine in ``q`` (the braking
-        bound): the exact box is computed and compared."""
+        bound): the exact box is computed and compared (with ``previous_change``, the jerk
+        limits' too)."""
         if previous is not None and self._bounds.acceleration_step is not None:
-            lower, upper = self._bounds.box(q, previous)
+            lower, upper = self._bounds.box(q, previous, previous_change)
             return bool(((qd >= lower - self.slack) & (qd <= upper + self.slack)).all())
         if not self.matrix.shape[0]:
             return True

@@ -122,12 +122,13 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
                     dt: float = 1e-3, twist_weight=None,
                     solver_settings: Mapping | None = None,
                     time_budget: float | Literal["periods"] | None = "periods",
-                    acceleration_limit=None, collisions=None) -> Controller:
+                    acceleration_limit=None, collisions=None, jerk_limit=None) -> Controller:
     """Build a controller from its spec string; unknown specs raise ``ValueError``.
     ``twist_weight`` (the task's diagonal weight, 6 per EE or one per entry) goes to every
     family alike, as does ``acceleration_limit`` (None, the default: none, as in mink and
     pink, where limits are opt-in; ``"robot"``: the robot's own, ``robot.acceleration_limit``;
-    else nv values, docs/design.md 8.4);
+    else nv values, docs/design.md 8.4) and ``jerk_limit`` (None: none; a number for
+    every joint or nv values, rad/s^3, docs/design.md 8.5; needs an acceleration limit);
     ``solver_settings`` (a mapping of the QP backend's keyword settings) and
     ``time_budget`` (a step's CPU deadline, docs/design.md 10.6) to the ``qp`` and ``mink``
     families, which have a backend. ``collisions`` (a
@@ -151,14 +152,16 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
 
         controller: Controller = CJMController(
             robot, constraints, dt=dt, twist_weight=twist_weight,
-            acceleration_limit=acceleration_limit, **CJM_VARIANTS[option])
+            acceleration_limit=acceleration_limit, jerk_limit=jerk_limit,
+            **CJM_VARIANTS[option])
         return _with_collisions(controller, collisions)
     if family == "qp":
         from controllers import QPController
 
         controller = QPController(robot, constraints, solver=_solver(family, option), dt=dt,
                                   twist_weight=twist_weight, solver_settings=settings,
-                                  time_budget=time_budget, acceleration_limit=acceleration_limit)
+                                  time_budget=time_budget, acceleration_limit=acceleration_limit,
+                                  jerk_limit=jerk_limit)
         return _with_collisions(controller, collisions)
     if family == "mink":
         solver = _solver(family, option)  # checked before MuJoCo (heavy) is imported
@@ -166,7 +169,8 @@ def make_controller(spec: str, robot, constraints: Sequence[Constraint] = (),
 
         controller = MinkController(robot, constraints, solver=solver, dt=dt,
                                     twist_weight=twist_weight, solver_settings=settings,
-                                    time_budget=time_budget, acceleration_limit=acceleration_limit)
+                                    time_budget=time_budget, acceleration_limit=acceleration_limit,
+                                  jerk_limit=jerk_limit)
         return _with_collisions(controller, collisions)
     raise ValueError(f"unknown controller {spec!r}: known {', '.join(spec_names())}; in general "
                      f"{CONTROLLER_HELP} ({', '.join(available_solvers())})")

@@ -86,6 +86,9 @@ MAX_JOINT_FRICTION = 1e4
 #: ``kMaxJointJerk``); 1e8 is a jerk no drive could follow.
 MAX_INTERFACE_JERK = 1e8
 
+#: A controller's jerk limit (rad/s^3), the same bound as the interface's it is kept for.
+MAX_JERK = MAX_INTERFACE_JERK
+
 #: Bytes of a sweep spec file: a hand-written spec is a few hundred; read no further
 #: (``--spec /dev/zero`` ends).
 MAX_SPEC_BYTES = 1_000_000

@@ -96,7 +96,8 @@ def joint_box(setup: StepSetup) -> JointBox:
                            else bounds.acceleration_step),
         dt=bounds.dt, limit_gain=bounds.limit_gain, slack=setup.box_test.slack,
         damper_step=(np.zeros(0) if bounds.acceleration_step is None
-                     else DAMPER_BRAKING_SHARE * bounds.acceleration_step))
+                     else DAMPER_BRAKING_SHARE * bounds.acceleration_step),
+        jerk_step=np.zeros(0) if bounds.jerk_step is None else bounds.jerk_step)
 
 
 class CompiledStep:
@@ -174,6 +175,8 @@ class CompiledStep:
         self._one_call = not self._in_python and not self._posture_in_python
         #: the previous command, the acceleration limits' reference (a view of the C++ step's)
         self.previous = step.previous
+        #: the previous command minus the one before, the jerk limits' (a view, the same)
+        self.previous_change = step.previous_change
         self._check_kinematics(frames)
         #: the collision rows measured in C++ (None without collision avoidance)
         self.collision_rows = (None if self._collisions is None
@@ -271,9 +274,10 @@ class CompiledStep:
     def _grow(self, pair_capacity: int) -> None:
         """Build the C++ step again with room for ``pair_capacity`` collision rows, from
         the command last sent."""
-        previous = self.previous.copy()
+        previous, change = self.previous.copy(), self.previous_change.copy()
         CompiledStep.__init__(self, self.setup, self.data, pair_capacity)
         self.previous[:] = previous
+        self.previous_change[:] = change
 
     def _checked(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return checked_inputs(q, twist, self.setup.model.nq, self.setup.task_size)

@@ -148,10 +148,12 @@ class CJMController(Controller):
         backend: Backend = "auto",
         acceleration_limit=None,
         collisions: CollisionAvoidance | None = None,
+        jerk_limit=None,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
                          velocity_limits=velocity_limits, strict=strict,
-                         acceleration_limit=acceleration_limit, collisions=collisions)
+                         acceleration_limit=acceleration_limit, collisions=collisions,
+                         jerk_limit=jerk_limit)
         if parametrisation not in ("nullspace", "paper"):
             raise ValueError(f"unknown parametrisation {parametrisation!r}: 'nullspace' or 'paper'")
         if form not in ("auto", "general"):
@@ -266,6 +268,7 @@ class CJMController(Controller):
         previous = getattr(self, "step", None)
         if previous is not None:  # a rebuilt step goes on from the command last sent
             step.previous[:] = previous.previous
+            step.previous_change[:] = previous.previous_change
         #: everything the step needs (:class:`controllers.cjm.step_setup.StepSetup`)
         self.setup = setup
         #: the backend's step (PythonStep or CompiledStep): ``step.solve(q, twist) -> (qd, report)``
@@ -298,6 +301,10 @@ class CJMController(Controller):
     def _previous_command(self) -> np.ndarray:
         """The step's own array of the previous command (:attr:`Controller.reference`)."""
         return self.step.previous
+
+    def _previous_change(self) -> np.ndarray:
+        """The step's own array of the previous command minus the one before."""
+        return self.step.previous_change
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """:meth:`Controller.solve`, by the backend's step (docs/design.md section 16):

@@ -58,6 +58,10 @@ class PythonStep:
         self.previous = np.zeros(setup.model.nv)
         #: the box's reference when there are acceleration limits, else None
         self._reference = None if setup.bounds.acceleration_step is None else self.previous
+        #: the previous command minus the one before, the jerk limits' reference
+        self.previous_change = np.zeros(setup.model.nv)
+        #: the box's change reference when there are jerk limits, else None
+        self._change = None if setup.bounds.jerk_step is None else self.previous_change
         #: the acceleration limits the dampers brake with (None: none; docs/design.md 12)
         self._acceleration_limit = setup.bounds.acceleration_limit
 
@@ -69,6 +73,7 @@ class PythonStep:
         acceleration limits, else the command nearest zero in the box)."""
         q, twist = checked_inputs(q, twist, self._nq, self._task_size)
         qd, report = self._step(q, twist)
+        np.subtract(qd, self.previous, out=self.previous_change)
         self.previous[:] = qd
         return qd, report
 
@@ -88,8 +93,8 @@ class PythonStep:
             return self._fail(q, report, f"{type(error).__name__}: {error}")
         if not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
             return self._fail(q, report, "", Event.NON_FINITE)
-        if not setup.box_test.contains(q, qd, self._reference):
-            lower, upper = setup.bounds.box(q, self._reference)
+        if not setup.box_test.contains(q, qd, self._reference, self._change):
+            lower, upper = setup.bounds.box(q, self._reference, self._change)
             try:
                 qd = self._saturate(q, ee_jacobian, task, lower, upper, report)
             except np.linalg.LinAlgError as error:
@@ -110,7 +115,7 @@ class PythonStep:
     def stop_command(self, q: np.ndarray) -> np.ndarray:
         """The command nearest zero in the box (zero unless a joint past its limit must come
         back, or the acceleration limits cannot stop at once)."""
-        lower, upper = self.setup.bounds.box(q, self._reference)
+        lower, upper = self.setup.bounds.box(q, self._reference, self._change)
         return np.clip(0.0, lower, upper)
 
     def _kinematics(self, q: np.ndarray) -> np.ndarray:

@@ -30,16 +30,22 @@ class AccelerationLimit(JointBoxLimit):
     joints : the controller's ``JointMap``.
     nq : Pinocchio's configuration size.
     reference : the array holding the previous command (read at every step).
+    change : with jerk limits, the array holding the previous command minus the one
+        before (read at every step); the box is then the joint box cut by the acceleration
+        and jerk limits (:meth:`JointBounds.box`, docs/design.md 8.5). None: none.
     """
 
     def __init__(self, bounds: JointBounds, joints: JointMap, nq: int,
-                 reference: np.ndarray) -> None:
+                 reference: np.ndarray, change: np.ndarray | None = None) -> None:
         if bounds.acceleration_step is None:
             raise ValueError("AccelerationLimit needs a JointBounds with acceleration limits")
         super().__init__(bounds, joints, nq)
         self.reference = reference
+        self.change = change
 
     def _box(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray]:
         q = self.joints.q_to_pinocchio(configuration.q, out=self._q_pin)
+        if self.change is not None:
+            return self.bounds.box(q, self.reference, self.change)
         lower, upper = self.bounds.box(q)
         return acceleration_box(lower, upper, self.reference, self.bounds.acceleration_step)

@@ -156,9 +156,11 @@ class MinkController(GuardedController):
         strict: bool = False,
         acceleration_limit=None,
         collisions: CollisionAvoidance | None = None,
+        jerk_limit=None,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, strict=strict,
-                         acceleration_limit=acceleration_limit, collisions=collisions)
+                         acceleration_limit=acceleration_limit, collisions=collisions,
+                         jerk_limit=jerk_limit)
         self.budget = StepBudget(time_budget, self.dt)
         self.policy = DampingPolicy(0.0, as_number(singular_threshold, "singular_threshold", 0.0),
                                     as_number(max_damping, "max_damping", 0.0))
@@ -207,7 +209,7 @@ class MinkController(GuardedController):
                            if limits is None else None)
         #: the acceleration box (None without acceleration limits), whatever ``limits``
         self.acceleration_box = (AccelerationLimit(self.joint_bounds, self.joints, model.nq,
-                                                   self._reference)
+                                                   self._reference, self._jerk_reference())
                                  if self.joint_bounds.acceleration_step is not None else None)
         #: the limits that bound mink's variable directly (their 1-dof joints' part)
         self._variable_bounds = tuple(limit for limit in (self._joint_box, self.acceleration_box)

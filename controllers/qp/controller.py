@@ -143,10 +143,12 @@ class QPController(GuardedController):
         strict: bool = False,
         acceleration_limit=None,
         collisions: CollisionAvoidance | None = None,
+        jerk_limit=None,
     ) -> None:
         super().__init__(robot, dt=dt, limit_gain=limit_gain, position_limits=position_limits,
                          velocity_limits=velocity_limits, strict=strict,
-                         acceleration_limit=acceleration_limit, collisions=collisions)
+                         acceleration_limit=acceleration_limit, collisions=collisions,
+                         jerk_limit=jerk_limit)
         self.budget = StepBudget(time_budget, self.dt)
         self.policy = DampingPolicy(as_number(damping, "damping", 0.0),
                                     as_number(singular_threshold, "singular_threshold", 0.0),

@@ -17,6 +17,7 @@ from teleop.limits import (
     MAX_CONSTRAINT_GAIN,
     MAX_DURATION_S,
     MAX_ENCODER_NOISE_RAD,
+    MAX_JERK,
     MAX_LATENCY_PERIODS,
     MAX_LATENCY_S,
     MAX_PATH_AMPLITUDE_M,
@@ -60,6 +61,7 @@ time_constant = bounded(float, 0.0, MAX_TIME_CONSTANT_S, unit="s")
 latency = bounded(int, 0, MAX_LATENCY_PERIODS)
 count = bounded(int, 0)
 iterations = bounded(int, 1, MAX_BENCH_ITERATIONS)
+jerk_limit = bounded(float, 0.0, MAX_JERK, inclusive_minimum=False, unit="rad/s^3")
 
 trocar_shift = bounded(float, 0.0, MAX_TROCAR_SHIFT_M, unit="m")
 path_amplitude = bounded(float, 0.0, MAX_PATH_AMPLITUDE_M, unit="m")
@@ -143,6 +145,10 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
                         default=True,
                         help="every controller keeps the robot's joint acceleration limits "
                         "(docs/design.md section 8.4); --no-acceleration-limits: none")
+    parser.add_argument("--jerk-limit", type=jerk_limit, metavar="RAD_PER_S3",
+                        help="every controller also keeps this jerk limit on every joint "
+                        "(docs/design.md section 8.5; with the acceleration limits), at most "
+                        f"{MAX_JERK:g}; a Franka's joints refuse 3750-10000 (default: none)")
     robot = parser.add_argument_group(
         "a robot that is not perfect", "the same for every controller; off by default "
         "(docs/design.md section 15.1)")
@@ -365,13 +371,16 @@ def _run(plan, args: argparse.Namespace, config, plant) -> int:
     duration = args.duration or plan.duration
     results = compare(plan, args.controllers, config, duration, progress=not args.quiet,
                       imperfections=imperfections, plant=plant,
-                      acceleration_limits=args.acceleration_limits)
+                      acceleration_limits=args.acceleration_limits, jerk_limit=args.jerk_limit)
     paths = write_outputs(plan, results, config, duration, args.out, plots=not args.no_plots,
                           imperfections=imperfections, plant=plant,
-                          acceleration_limits=args.acceleration_limits, variation=variation)
+                          acceleration_limits=args.acceleration_limits, variation=variation,
+                          jerk_limit=args.jerk_limit)
     document = metrics_document(plan, results, config, duration, imperfections, plant,
-                                args.acceleration_limits, variation)
+                                args.acceleration_limits, variation, args.jerk_limit)
     limits = "; acceleration limits" if args.acceleration_limits else ""
+    if args.jerk_limit is not None:
+        limits += f", jerk limit {args.jerk_limit:g} rad/s^3"
     if plan.collisions is not None:
         limits += (f"; collision avoidance d_s = {1e3 * plan.collisions['safety_distance']:g} "
                    f"mm, {len(plan.collisions['obstacles'])} obstacles")

@@ -83,20 +83,22 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
              on_step: Callable[[int], None] | None = None,
              imperfections: Imperfections | None = None,
              plant: PlantChoice | None = None,
-             acceleration_limits: bool = True) -> RunResult:
+             acceleration_limits: bool = True,
+             jerk_limit: float | None = None) -> RunResult:
     """Run one controller through ``plan`` and record every tick.
 
     ``imperfections`` (docs/design.md section 15.1) puts a robot that is not perfect under
     the loop; None or the default: the perfect robot. ``plant`` chooses the robot the loop
     drives (docs/design.md section 17); None: the kinematic one. ``acceleration_limits``:
-    the controller keeps the robot's (docs/design.md 8.4; on by default, False: none).
+    the controller keeps the robot's (docs/design.md 8.4; on by default, False: none);
+    ``jerk_limit`` (rad/s^3 for every joint) a jerk limit too (8.5; None: none).
     """
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
     plant = plant or PlantChoice()
     constraints = plan.make_constraints()
     plant.apply_wall(constraints)
-    controller = _controller(spec, plan, constraints, config, acceleration_limits)
+    controller = _controller(spec, plan, constraints, config, acceleration_limits, jerk_limit)
     drive = _drive(plan, controller, constraints, config, steps, imperfections, on_step, plant)
     result = _collect(spec, drive, plan.robot.ee_frames)
     result.interface_limits = plant.settings.interface_limits if plant.physical else None
@@ -323,12 +325,13 @@ class ShadowedController:
 
 
 def _controller(spec: str, plan: Plan, constraints: list[Constraint], config: LoopConfig,
-                acceleration_limits: bool):
+                acceleration_limits: bool, jerk_limit: float | None = None):
     """A run's controller: simulated time, so iteration caps only, no deadline
-    (docs/design.md 10.6); the robot's acceleration limits when asked for."""
+    (docs/design.md 10.6); the robot's acceleration limits when asked for, and a jerk
+    limit when given."""
     return make_controller(spec, plan.robot, constraints, dt=config.dt, time_budget=None,
                            acceleration_limit=ROBOT if acceleration_limits else None,
-                           collisions=plan.make_collisions())
+                           collisions=plan.make_collisions(), jerk_limit=jerk_limit)
 
 
 def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
@@ -336,7 +339,8 @@ def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfi
                              imperfections: Imperfections | None = None,
                              on_step: Callable[[int], None] | None = None,
                              plant: PlantChoice | None = None,
-                             acceleration_limits: bool = True) -> dict[str, np.ndarray]:
+                             acceleration_limits: bool = True,
+                             jerk_limit: float | None = None) -> dict[str, np.ndarray]:
     """Per step, ``max_j |qd_spec,j - qd_ref,j|`` (rad/s) of every spec against the first,
     all solved at the same ``q`` and twist along the first spec's closed-loop run (a shadow
     evaluation, docs/design.md section 15.3); zeros for the first spec itself."""
@@ -346,8 +350,10 @@ def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfi
     plant = plant or PlantChoice()
     constraints = plan.make_constraints()
     plant.apply_wall(constraints)
-    reference = _controller(specs[0], plan, constraints, config, acceleration_limits)
-    shadows = {spec: _controller(spec, plan, constraints, config, acceleration_limits)
+    reference = _controller(specs[0], plan, constraints, config, acceleration_limits,
+                            jerk_limit)
+    shadows = {spec: _controller(spec, plan, constraints, config, acceleration_limits,
+                                 jerk_limit)
                for spec in specs[1:]}
     shadowed = ShadowedController(reference, shadows)
     _drive(plan, shadowed, constraints, config, steps, imperfections, on_step, plant)
@@ -359,10 +365,12 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
             duration: float | None = None, progress: bool = True,
             imperfections: Imperfections | None = None,
             agreement: bool = True, plant: PlantChoice | None = None,
-            acceleration_limits: bool = True) -> dict[str, RunResult]:
+            acceleration_limits: bool = True,
+            jerk_limit: float | None = None) -> dict[str, RunResult]:
     """Run every controller spec on the same plan (fresh constraints each), on the same
     ``plant`` (None: the kinematic one; each run builds its own), each controller with the
-    robot's acceleration limits when ``acceleration_limits`` and with the plan's collision
+    robot's acceleration limits when ``acceleration_limits`` (and ``jerk_limit``, rad/s^3 on
+    every joint, when given: docs/design.md 8.5) and with the plan's collision
     avoidance (``plan.collisions``, a fresh one per controller; the loop measures the
     minimum distance with one more, docs/design.md 18.6).
 
@@ -382,7 +390,9 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
     plant.make(plan.robot, config.dt, imperfections)  # fail fast: the model compiles
     for spec in specs:  # fail fast on a bad spec or damper, before minutes of simulation
         make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt,
-                        collisions=plan.make_collisions())
+                        collisions=plan.make_collisions(),
+                        acceleration_limit=ROBOT if acceleration_limits else None,
+                        jerk_limit=jerk_limit)
     agreement = agreement and len(specs) > 1
     runs = [*specs, *([f"joint velocities against {specs[0]}"] if agreement else [])]
     results = {}
@@ -394,14 +404,14 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
                 if report is not None:
                     report.start(spec)
                 results[spec] = run_plan(plan, spec, config, duration, tick, imperfections,
-                                         plant, acceleration_limits)
+                                         plant, acceleration_limits, jerk_limit)
                 results[spec].solver_messages = capture.collect()
             if agreement:
                 if report is not None:
                     report.start(runs[-1])
                 deviations = joint_velocity_agreement(plan, specs, config, duration,
                                                       imperfections, tick, plant,
-                                                      acceleration_limits)
+                                                      acceleration_limits, jerk_limit)
                 capture.collect()
                 for spec, deviation in deviations.items():
                     results[spec].joint_velocity_deviation = deviation
@@ -478,7 +488,8 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
                      duration: float, imperfections: Imperfections | None = None,
                      plant: PlantChoice | None = None,
                      acceleration_limits: bool = True,
-                     variation: Variation | None = None) -> dict:
+                     variation: Variation | None = None,
+                     jerk_limit: float | None = None) -> dict:
     """The metrics.json document (schema: ``teleop/experiments/metrics.schema.json``);
     ``variation`` is what :meth:`Variation.apply` made ``plan`` of (None: nothing), the
     constraint gain the plan's (:meth:`Plan.with_constraint_gain`)."""
@@ -497,6 +508,7 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
         "imperfections": (imperfections or Imperfections()).to_dict(),
         "plant": (plant or PlantChoice()).to_dict(),
         "acceleration_limits": bool(acceleration_limits),
+        "jerk_limit": jerk_limit,
         "variation": (variation or Variation()).to_dict(),
         "kp": config.kp,
         "supervisor": config.supervisor.to_dict(),
@@ -512,7 +524,8 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
                   imperfections: Imperfections | None = None,
                   plant: PlantChoice | None = None,
                   acceleration_limits: bool = True,
-                  variation: Variation | None = None) -> list[Path]:
+                  variation: Variation | None = None,
+                  jerk_limit: float | None = None) -> list[Path]:
     """metrics.json, metrics.csv and, with ``plots``, the PNG plots and report.html into
     ``out_dir`` (``variation``: :func:`metrics_document`); returns the paths."""
     out = output_directory(out_dir)
@@ -521,7 +534,7 @@ def write_outputs(plan: Plan, results: dict[str, RunResult], config: LoopConfig,
     except OSError as error:
         raise ValueError(f"cannot create output directory {str(out)!r}: {error.strerror}") from None
     document = metrics_document(plan, results, config, duration, imperfections, plant,
-                                acceleration_limits, variation)
+                                acceleration_limits, variation, jerk_limit)
     paths = [out / "metrics.json", out / "metrics.csv"]
     paths[0].write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     with paths[1].open("w", newline="", encoding="utf-8") as handle:

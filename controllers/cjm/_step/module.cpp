@@ -215,21 +215,22 @@ PYBIND11_MODULE(_step, module) {
                        std::vector<Index> limited_v, cjm::Vector q_min, cjm::Vector q_max,
                        double position_gain, bool position_limits, cjm::RowMatrix box_test,
                        cjm::Vector acceleration_step, double dt, double limit_gain,
-                       cjm::Vector slack, cjm::Vector damper_step) {
+                       cjm::Vector slack, cjm::Vector damper_step, cjm::Vector jerk_step) {
              return cjm::JointBox{std::move(velocity_lower), std::move(velocity_upper),
                                   std::move(velocity_limit), std::move(limited_q),
                                   std::move(limited_v), std::move(q_min), std::move(q_max),
                                   position_gain, position_limits, std::move(box_test),
                                   std::move(acceleration_step), dt, limit_gain, std::move(slack),
-                                  std::move(damper_step)};
+                                  std::move(damper_step), std::move(jerk_step)};
            }),
            py::arg("velocity_lower"), py::arg("velocity_upper"), py::arg("velocity_limit"),
            py::arg("limited_q"), py::arg("limited_v"), py::arg("q_min"), py::arg("q_max"),
            py::arg("position_gain"), py::arg("position_limits"), py::arg("box_test"),
            py::arg("acceleration_step"), py::arg("dt"), py::arg("limit_gain"), py::arg("slack"),
-           py::arg("damper_step") = cjm::Vector(),
+           py::arg("damper_step") = cjm::Vector(), py::arg("jerk_step") = cjm::Vector(),
            "``acceleration_step`` (a dt per joint) empty: no acceleration limit; "
-           "``damper_step`` its share the braking-aware dampers count on (the same size).");
+           "``damper_step`` its share the braking-aware dampers count on (the same size); "
+           "``jerk_step`` (j dt^2 per joint) empty: no jerk limit.");
 
   py::class_<cjm::Tolerances>(module, "Tolerances")
       .def(py::init([](double equality, double twist, double barrier, double rank,
@@ -288,6 +289,10 @@ PYBIND11_MODULE(_step, module) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.previous().data(), {step.previous().size()}, self);
       }, "The previous command (writable): the acceleration limits' reference.")
+      .def_property_readonly("previous_change", [](py::object self) {
+        auto& step = self.cast<cjm::Step&>();
+        return view(step.previous_change().data(), {step.previous_change().size()}, self);
+      }, "The previous command minus the one before (writable): the jerk limits' reference.")
       .def_property_readonly("pair_rows", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.pair_rows().data(), {step.pair_rows().rows(), step.pair_rows().cols()}, self);

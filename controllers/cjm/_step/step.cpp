@@ -55,13 +55,17 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
       (box_.acceleration_step.size() != 0 &&
        (box_.acceleration_step.size() != nv || box_.slack.size() != nv || !(box_.dt > 0.0) ||
         !(box_.limit_gain > 0.0))) ||
-      box_.damper_step.size() != box_.acceleration_step.size())
+      box_.damper_step.size() != box_.acceleration_step.size() ||
+      (box_.jerk_step.size() != 0 &&
+       (box_.jerk_step.size() != nv || box_.acceleration_step.size() == 0)))
     throw std::invalid_argument("joint box of the wrong size");
   if (posture_target_.size() != 0 && (posture_target_.size() != nq || nq != nv))
     throw std::invalid_argument("a posture target needs nq == nv and one entry per joint");
   posture_velocity_.resize(nv);
   accelerating_ = box_.acceleration_step.size() != 0;
   previous_ = Vector::Zero(nv);
+  previous_change_ = Vector::Zero(nv);
+  jerking_ = box_.jerk_step.size() != 0;
   damper_gaps_ = Vector::Zero(n_constraints);
   damper_gains_ = Vector::Zero(n_constraints);
   active_.reserve(n_constraints);
@@ -184,6 +188,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
     event(Event::no_convergence);
     stop(q, qd);
   }
+  previous_change_ = qd - previous_;
   previous_ = qd;
   if (status_ != Status::failed && equality_residual_ > tol_.equality) {
     report(Status::constraint_degraded);
@@ -332,11 +337,35 @@ void Step::compute_box(const ConstVectorRef& q) {
     lower_(i) = std::max(lower_(i), low);
     upper_(i) = std::min(upper_(i), high);
   }
+  if (!jerking_) return;
+  // controllers.joint_acceleration.jerk_box: the change brakes towards a velocity limit;
+  // where the window misses the box, it gives way
+  for (Index i = 0; i < nv_; ++i) {
+    const double centre = previous_(i) + previous_change_(i), step = box_.jerk_step(i);
+    double low = centre - step, high = centre + step;
+    const double limit = box_.velocity_upper(i);
+    if (std::isfinite(limit)) {
+      high = std::min(high, previous_(i) + braking_speed(std::max(limit - previous_(i), 0.0),
+                                                         step, 1.0, 1.0));
+      low = std::max(low, previous_(i) - braking_speed(std::max(limit + previous_(i), 0.0),
+                                                       step, 1.0, 1.0));
+      low = std::min(low, high);
+    }
+    if (low > upper_(i) || high < lower_(i)) {
+      low = high = std::min(std::max(std::min(std::max(lower_(i), low), high), lower_(i)), upper_(i));
+    }
+    lower_(i) = std::max(lower_(i), low);
+    upper_(i) = std::min(upper_(i), high);
+  }
 }
 
 double Step::braking_speed(double distance, double step, double gain) const {
+  return braking_speed(distance, step, gain, box_.dt);
+}
+
+double Step::braking_speed(double distance, double step, double gain, double dt) {
   const double c = 1.0 / gain;
-  const double scaled = distance / (step * box_.dt);
+  const double scaled = distance / (step * dt);
   double k = std::floor(std::max(std::sqrt(std::max(2.0 * scaled + c - c * c, 0.0)) - c, 0.0));
   const double x_0 = scaled / c;
   const double x_k = (scaled + k * (k - 1.0) / 2.0 + k * c) / (k + c);

@@ -74,6 +74,8 @@ struct JointBox {
   //! DAMPER_BRAKING_SHARE a dt per joint: the deceleration step the braking-aware dampers
   //! count on (controllers.joint_acceleration.damper_deceleration; docs/design.md 12)
   Vector damper_step;
+  //! j dt^2 per joint (inf where none); empty: no jerk limit (section 8.5)
+  Vector jerk_step;
 };
 
 //! Positions in report(): SolveInfo's numbers.
@@ -111,6 +113,8 @@ class Step {
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& saturation_joints() { return saturation_joints_; }
   //! The previous command, the acceleration limits' reference (zero at rest).
   Vector& previous() { return previous_; }
+  //! The previous command minus the one before, the jerk limits' reference.
+  Vector& previous_change() { return previous_change_; }
   Index terms_size() const { return terms_size_; }
   Index constraint_count() const { return static_cast<Index>(constraints_.size()); }
   //! Whether constraint ``index`` is an equality (else a one-sided barrier's rows).
@@ -172,6 +176,8 @@ class Step {
   void compute_box(const ConstVectorRef& q);
   //! controllers.joint_acceleration.braking_speed at ``gain``.
   double braking_speed(double distance, double step, double gain) const;
+  //! controllers.joint_acceleration.braking_speed at ``gain`` and period ``dt``.
+  static double braking_speed(double distance, double step, double gain, double dt);
   //! The fallback of a failed step: zero, or with acceleration limits the command
   //! nearest zero inside the box.
   void stop(const ConstVectorRef& q, VectorRef qd);
@@ -266,6 +272,8 @@ class Step {
   Matrix task_t_, task_null_t_, task_null_, task_rhs_, task_x_;  // (J N)^T and its solves
   bool accelerating_ = false;  // acceleration limits on
   Vector previous_;  // the acceleration limits' reference
+  Vector previous_change_;  // the jerk limits' reference
+  bool jerking_ = false;  // jerk limits on
   Vector qd0_, delta_, lower_, upper_, box_lower_, box_upper_, stacked_, scratch_rows_, rows_scratch_;
   Vector free_x_, posture_null_, rank_weights_;
   Matrix columns_, task_columns_;  // rows and J over the free joints (SNS)
