@@ -303,3 +303,20 @@ def test_a_rate_command_does_not_wind_the_target_up_ahead_of_the_robot(app):
         assert np.linalg.norm(app.targets[0].translation - ee) <= RATE_LEAD + 0.5 * 1e-3
     assert source.counts["held_back"] > 100
     assert app.limitation().distance > 0.5 * RATE_LEAD  # it was pushing all along
+
+
+def test_the_contact_force_at_the_tool_is_felt_scaled_and_bounded():
+    """The sensor's force (tool frame) turned into the world by the tool's orientation,
+    times the scale, at most ``max_contact_force`` alone, then in the device's frame."""
+    ee = pin.SE3(rotation_of((0.3, -0.2, 0.5)), np.array([0.5, 0.0, 0.8]))
+    gains = FeedbackGains(contact_scale=2.0, max_contact_force=3.0)
+    small = np.array([0.0, 0.0, -0.5, 0.0, 0.0, 0.0])  # 0.5 N against the tool's z
+    wrench = feedback_wrench(ee, ee, [], None, 0.05, DEFAULT_VIEW, gains, small)
+    expected = 2.0 * 0.5 * -ee.rotation[:, 2]
+    assert wrench[:3] == pytest.approx(DEFAULT_VIEW.T @ expected, abs=1e-12)
+    large = np.array([4.0, 0.0, 0.0, 0.0, 0.0, 0.0])  # 8 N scaled: bounded to 3 N
+    wrench = feedback_wrench(ee, ee, [], None, 0.05, DEFAULT_VIEW, gains, large)
+    assert wrench[:3] == pytest.approx(DEFAULT_VIEW.T @ (3.0 * ee.rotation[:, 0]), abs=1e-12)
+    broken = np.full(6, np.nan)  # a broken reading renders nothing
+    wrench = feedback_wrench(ee, ee, [], None, 0.05, DEFAULT_VIEW, gains, broken)
+    assert np.all(wrench[:3] == 0.0) and np.all(np.abs(wrench[3:]) < 1e-12)

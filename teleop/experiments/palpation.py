@@ -35,7 +35,7 @@ POSE_GAIN, FORCE_GAIN = 20.0, 1.0
 #: The force loop's speed bound (m/s): the tip meets the tissue at it.
 APPROACH_SPEED = 0.01
 #: The task's weight: the force axis (tool z) first where the twist is not feasible.
-TWIST_WEIGHT = (1.0, 1.0, 100.0, 0.1, 0.1, 0.1)
+TWIST_WEIGHT = (1.0, 1.0, 100.0, 0.01, 0.01, 0.01)
 
 
 @dataclass

@@ -271,13 +271,17 @@ class Devices:
                 continue
             if placements is None:
                 placements = loop.ee_placements()
-            port_forces = [] if loop.plant is None else loop.plant.measures().port_forces
+            measures = None if loop.plant is None else loop.plant.measures()
+            port_forces = [] if measures is None else measures.port_forces
+            sensed = getattr(measures, "tool_wrenches", np.zeros((0, 6)))
+            tool = sensed[device.source.ee] if device.source.ee < len(sensed) else None
             ee = placements[device.source.ee]  # no spring while the device moves alone
             device.wrench = feedback_wrench(
                 ee, self.inputs[device.source.ee].target
                 if device.state == FeedbackState.FOLLOWING else ee,
                 port_forces, self.collision_rows.get("main"),
-                self.avoidance.detection_distance, self.view_rotation, self.feedback_gains)
+                self.avoidance.detection_distance, self.view_rotation, self.feedback_gains,
+                tool)
             device.source.set_feedback(device.wrench, device.state, loop.plant is not None)
             if history:
                 device.history.append((loop.t, *device.wrench[:3]))
