@@ -171,3 +171,18 @@ def test_settings_refusals_name_the_field() -> None:
     assert settings.commands == "/PSM1/servo_jv"
     with pytest.raises(ValueError, match="unknown"):
         Ros2Settings.from_dict({"topic": 1})
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["sim", "--ros2", "--q0", "1,2"], "teleop sim: --q0 needs 8 finite numbers, got 2"),
+    (["sim", "--ros2", "--ros-domain", "999"], "ROS_DOMAIN_ID must be in [0, 232], got 999"),
+    (["sim", "--ros2", "--command-joints", "a,b"], "does not carry the joints"),
+    (["compare", "--scenario", "paper-hole", "--crtk", "/PSM1"], "--crtk needs --plant ros2"),
+])
+def test_bad_ros2_options_are_one_line(argv: list[str], message: str,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    from teleop.cli.main import main
+
+    assert main(argv) == 2
+    error = capsys.readouterr().err
+    assert message in error and error.count("\n") == 1

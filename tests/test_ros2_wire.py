@@ -42,6 +42,11 @@ LOOPBACK = ("<General><Interfaces><NetworkInterface name='lo'/></Interfaces></Ge
             "<MaxAutoParticipantIndex>40</MaxAutoParticipantIndex>"
             "<Peers><Peer address='127.0.0.1'/></Peers></Discovery>")
 
+#: this run's topics: two runs at once on one machine (a domain id drawn twice) never mix
+RUN = f"/run{os.getpid()}"
+STATES = RUN + "/joint_states"
+COMMANDS = RUN + "/forward_velocity_controller/commands"
+
 DT = 0.002  # 500 Hz
 #: the longest wait for anything on the wire (periods): a loaded machine's worst seconds
 PATIENCE = 2500
@@ -64,6 +69,11 @@ def robot():
     return load_robot("ur5_instrument")
 
 
+def settings_for(domain: int, **fields) -> Ros2Settings:
+    """This run's topics on ``domain``."""
+    return Ros2Settings(domain=domain, joint_states=STATES, command_topic=COMMANDS, **fields)
+
+
 def wait_for(condition: Callable[[], bool], periods: int = PATIENCE) -> bool:
     """``condition`` polled every period up to ``periods`` periods."""
     for _ in range(periods):
@@ -75,14 +85,15 @@ def wait_for(condition: Callable[[], bool], periods: int = PATIENCE) -> bool:
 
 def sim(domain: int, *options: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "teleop", "sim", "--ros2", "--ros-domain",
-                             str(domain), *options], cwd=ROOT, env=dict(os.environ),
+                             str(domain), "--joint-states", STATES, "--command-topic", COMMANDS,
+                             *options], cwd=ROOT, env=dict(os.environ),
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
 
 
 class CommandLog:
     """Every command on the controller's topic, as an independent subscriber sees it."""
 
-    def __init__(self, node: Ros2Node, topic: str = "/forward_velocity_controller/commands"):
+    def __init__(self, node: Ros2Node, topic: str = COMMANDS):
         self.reader = node.reader(topic, Float64MultiArray)
         self.received: list[list[float]] = []
 
@@ -106,7 +117,7 @@ def test_commands_drive_the_simulated_robot_and_its_loss_stops_them(robot, domai
     names = model_joint_names(robot.model)
     order = ",".join(reversed(names))
     process = sim(domain, "--command-joints", order)
-    settings = Ros2Settings(domain=domain, command_joints=tuple(reversed(names)),
+    settings = settings_for(domain, command_joints=tuple(reversed(names)),
                             stale_after=0.25, start_timeout=30.0)
     log = CommandLog(peer)
     with Ros2Plant(robot, DT, settings) as plant:
@@ -138,12 +149,37 @@ def test_commands_drive_the_simulated_robot_and_its_loss_stops_them(robot, domai
         assert all(c == [0.0] * robot.model.nv for c in log.poll()[sent:])
 
 
+def test_a_crtk_robot_is_driven_on_servo_jv(robot, domain):
+    """``teleop sim --ros2 --crtk /PSM1``: the plant reads ``measured_js``, publishes
+    ``servo_jv`` (a JointState's velocities, by name) and keeps ``operating_state``."""
+    process = sim(domain, "--crtk", RUN + "/PSM1")
+    try:
+        settings = settings_for(domain, crtk=RUN + "/PSM1", start_timeout=30.0, stale_after=0.25)
+        with Ros2Plant(robot, DT, settings) as plant:
+            plant.reset()
+            q_start = plant.sense(robot.q_home)
+            command = np.zeros(robot.model.nv)
+            command[1] = 0.1
+            q = q_start
+            for _ in range(50):
+                q = q + plant.actuate(command, q, []) * DT
+            for _ in range(20):
+                q = q + plant.actuate(np.zeros(robot.model.nv), q, []) * DT
+            moved = plant.sense(q) - q_start
+            assert plant.measures().operating_state == "ENABLED"
+    finally:
+        process.terminate()
+        process.wait()
+    assert moved[1] > 0
+    np.testing.assert_array_equal(np.delete(moved, 1), 0.0)
+
+
 class FakeRobot:
-    """A robot played by the test's participant: ``values`` on /joint_states every period
+    """A robot played by the test's participant: ``values`` on :data:`STATES` every period
     (a thread) under ``names``, until :meth:`close`."""
 
     def __init__(self, node: Ros2Node, names: list[str], values: list[float]) -> None:
-        self.writer = node.writer("/joint_states", JointState)
+        self.writer = node.writer(STATES, JointState)
         self.names, self.values = names, values
         self._running = True
         self._thread = threading.Thread(target=self._publish, daemon=True)
@@ -175,7 +211,7 @@ def test_joints_are_matched_by_name(robot, domain, fake):
     names = model_joint_names(robot.model)
     values = [0.1 * (i + 1) for i in range(len(names))]
     fake(names[::-1], values[::-1])
-    with Ros2Plant(robot, DT, Ros2Settings(domain=domain, start_timeout=30.0)) as plant:
+    with Ros2Plant(robot, DT, settings_for(domain, start_timeout=30.0)) as plant:
         plant.reset()
         np.testing.assert_array_equal(plant.sense(robot.q_home), values)
 
@@ -183,15 +219,15 @@ def test_joints_are_matched_by_name(robot, domain, fake):
 def test_a_missing_joint_is_refused_at_start_by_name(robot, domain, fake):
     names = model_joint_names(robot.model)
     fake(names[1:], [0.0] * (len(names) - 1))
-    with Ros2Plant(robot, DT, Ros2Settings(domain=domain, start_timeout=30.0)) as plant:
+    with Ros2Plant(robot, DT, settings_for(domain, start_timeout=30.0)) as plant:
         with pytest.raises(ValueError, match=f"does not carry the joints \\['{names[0]}'\\]"):
             plant.reset()
 
 
 def test_nothing_is_commanded_before_a_state(robot, domain, peer):
     log = CommandLog(peer)
-    with Ros2Plant(robot, DT, Ros2Settings(domain=domain, start_timeout=0.2)) as plant:
-        with pytest.raises(ValueError, match="no joint state on /joint_states"):
+    with Ros2Plant(robot, DT, settings_for(domain, start_timeout=0.2)) as plant:
+        with pytest.raises(ValueError, match=f"no joint state on {STATES}"):
             plant.reset()
         q = robot.q_home.copy()
         for _ in range(50):
@@ -205,7 +241,7 @@ def test_a_non_finite_state_stops_the_robot_with_its_name(robot, domain, peer, f
     names = model_joint_names(robot.model)
     played = fake(names, [0.0] * len(names))
     log = CommandLog(peer)
-    settings = Ros2Settings(domain=domain, stale_after=10.0, start_timeout=30.0)
+    settings = settings_for(domain, stale_after=10.0, start_timeout=30.0)
     with Ros2Plant(robot, DT, settings) as plant:
         plant.reset()
         q = plant.sense(robot.q_home)
@@ -229,13 +265,13 @@ def test_a_non_finite_state_stops_the_robot_with_its_name(robot, domain, peer, f
 def test_a_second_publisher_on_the_command_topic_is_reported(robot, domain, peer, fake):
     names = model_joint_names(robot.model)
     fake(names, [0.0] * len(names))
-    with Ros2Plant(robot, DT, Ros2Settings(domain=domain, stale_after=10.0,
+    with Ros2Plant(robot, DT, settings_for(domain, stale_after=10.0,
                                            start_timeout=30.0)) as plant:
         plant.reset()
         q = plant.sense(robot.q_home)
         plant.actuate(np.zeros(robot.model.nv), q, [])
         assert plant.measures().command_publishers == 1
-        other = peer.writer("/forward_velocity_controller/commands", Float64MultiArray)
+        other = peer.writer(COMMANDS, Float64MultiArray)
         assert wait_for(lambda: (plant.actuate(np.zeros(robot.model.nv), q, []),
                                  plant.measures().command_publishers == 2)[1])
         other.write(Float64MultiArray(data=[0.0] * robot.model.nv))
@@ -254,7 +290,7 @@ def discovery_peer(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_an_independent_dds_peer_sees_ros2_names_types_and_qos(robot, domain, discovery_peer):
     process = sim(domain)
     try:
-        settings = Ros2Settings(domain=domain, start_timeout=30.0, stale_after=10.0)
+        settings = settings_for(domain, start_timeout=30.0, stale_after=10.0)
         with Ros2Plant(robot, DT, settings) as plant:
             plant.reset()
             found = subprocess.run([str(discovery_peer), str(domain), "3"], capture_output=True,
@@ -263,10 +299,10 @@ def test_an_independent_dds_peer_sees_ros2_names_types_and_qos(robot, domain, di
         process.terminate()
         process.wait()
     writers = {line.split("\t")[0]: line.split("\t")[1:] for line in found.splitlines()}
-    assert writers["rt/forward_velocity_controller/commands"] == [
+    assert writers[dds_topic(COMMANDS)] == [
         "std_msgs::msg::dds_::Float64MultiArray_", "reliable", "keep_last", "10", "volatile",
         "typehash=RIHS01_1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f;"]
-    assert writers["rt/joint_states"] == [
+    assert writers[dds_topic(STATES)] == [
         "sensor_msgs::msg::dds_::JointState_", "reliable", "keep_last", "10", "volatile",
         "typehash=RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e;"]
 
@@ -279,7 +315,7 @@ def test_the_closed_loop_holds_the_trocar_over_dds(robot, domain):
     plan = load_scenario("trocar-circle")
     process = sim(domain, "--q0", ",".join(repr(float(v)) for v in plan.q0), "--rate", "500")
     try:
-        settings = Ros2Settings(domain=domain, start_timeout=30.0, stale_after=1.0)
+        settings = settings_for(domain, start_timeout=30.0, stale_after=1.0)
         result = run_plan(plan, "cjm", LoopConfig(rate=500), 2.0,
                           plant=PlantChoice("ros2", ros2=settings))
     finally:
@@ -295,7 +331,7 @@ class TimedCommands:
 
     def __init__(self, node: Ros2Node) -> None:
         self.arrivals: list[tuple[float, list[float]]] = []
-        topic = Topic(node.participant, dds_topic("/forward_velocity_controller/commands"),
+        topic = Topic(node.participant, dds_topic(COMMANDS),
                       Float64MultiArray)
         self.reader = DataReader(node.participant, topic, qos=endpoint_qos(Float64MultiArray),
                                  listener=Listener(on_data_available=self._arrived))
@@ -313,7 +349,7 @@ def test_round_trip_state_to_command_at_500_hz(robot, domain, peer):
     position, the command gives it back."""
     names = model_joint_names(robot.model)
     log = TimedCommands(peer)
-    writer = peer.writer("/joint_states", JointState)
+    writer = peer.writer(STATES, JointState)
     published: dict[int, float] = {}
     running = True
 
@@ -328,7 +364,7 @@ def test_round_trip_state_to_command_at_500_hz(robot, domain, peer):
     thread = threading.Thread(target=publish, daemon=True)
     thread.start()
     try:
-        with Ros2Plant(robot, DT, Ros2Settings(domain=domain, start_timeout=30.0,
+        with Ros2Plant(robot, DT, settings_for(domain, start_timeout=30.0,
                                                stale_after=1.0)) as plant:
             plant.reset()
             q = plant.sense(robot.q_home)
@@ -357,7 +393,7 @@ def test_the_watchdog_stops_within_100_ms(robot, domain, peer):
     status within 100 ms of the kill (stale_after 50 ms, the default)."""
     process = sim(domain)
     log = TimedCommands(peer)
-    with Ros2Plant(robot, DT, Ros2Settings(domain=domain, start_timeout=30.0)) as plant:
+    with Ros2Plant(robot, DT, settings_for(domain, start_timeout=30.0)) as plant:
         plant.reset()
         q = plant.sense(robot.q_home)
         command = np.full(robot.model.nv, 0.01)

@@ -23,8 +23,8 @@ class Ros2Settings:
     command_joints : the controller's ``joints`` parameter, in order (the message's
         order); empty: the robot model's joints in their order.
     crtk : a CRTK namespace (``/PSM1``): ``<ns>/measured_js`` and ``<ns>/servo_jv``
-        replace the two topics above, ``<ns>/operating_state`` must say ``ENABLED``;
-        empty: ros2_control.
+        replace the two topics above, ``<ns>/operating_state``'s state is kept in the
+        plant's measures; empty: ros2_control.
     domain : the ROS 2 domain id (None: ``ROS_DOMAIN_ID``, else 0).
     stale_after : a state older than this (s) stops the robot (the watchdog).
     start_timeout : how long (s) :meth:`Ros2Plant.reset` waits for the first state.
