@@ -205,3 +205,13 @@ def test_palpation_with_the_cjm_meets_the_force_and_hole_targets():
 def test_the_default_tissue_stiffness_is_sneddons_punch():
     # 2 a E / (1 - nu^2), a = 2.5 mm, E = 10 kPa, nu = 0.5
     assert DEFAULT_TISSUE_STIFFNESS == pytest.approx(66.666, rel=1e-4)
+
+
+def test_a_sensor_bias_offsets_the_held_force_by_itself():
+    """The law regulates the reading: with a bias ``b`` on the tool's z the sensed force
+    is the true one minus ``b``, so the tissue is pressed with ``1 N + b`` (-0.1 N: 0.9 N
+    throughout the slide), an error no gain removes (a tare would)."""
+    measures = run_palpation("cjm", sensor_bias=[0.0, 0.0, -0.1, 0.0, 0.0, 0.0])
+    assert measures.force_error_rms == pytest.approx(0.1, abs=2e-3)
+    assert measures.force_error_max == pytest.approx(0.1, abs=2e-3)
+    assert measures.contact_lost == 0

@@ -15,6 +15,7 @@ slides along the tool's x at the start, ``s(t) = 2 cm (1 - cos(2 pi (t - 2.5) / 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,9 +75,12 @@ def slide(t: float) -> float:
     return SLIDE * 0.5 * (1.0 - math.cos(2.0 * math.pi * (t - SETTLE) / SLIDE_TIME))
 
 
-def run_palpation(spec: str, dt: float = 1e-3,
-                  duration: float = SETTLE + SLIDE_TIME + 0.5) -> PalpationMeasures:
-    """Run the experiment with controller ``spec`` (``cjm``, ``qp:daqp``, ``mink:daqp``...)."""
+def run_palpation(spec: str, dt: float = 1e-3, duration: float = SETTLE + SLIDE_TIME + 0.5,
+                  sensor_noise: float = 0.0, sensor_bias: Sequence[float] | None = None,
+                  seed: int = 0) -> PalpationMeasures:
+    """Run the experiment with controller ``spec`` (``cjm``, ``qp:daqp``, ``mink:daqp``...),
+    the force/torque sensor's noise, bias and seed as :class:`~teleop.plants.MujocoPlant`
+    takes them."""
     robot = load_robot("sda10f")
     model, data = robot.model, robot.model.createData()
     q = robot.q_home.copy()
@@ -86,7 +90,8 @@ def run_palpation(spec: str, dt: float = 1e-3,
     start = data.oMf[frame].copy()
     tissue = TissueSurface(start.translation + 2e-3 * start.rotation[:, 2],
                            -start.rotation[:, 2])
-    plant = MujocoPlant(robot, dt, tissues=[tissue])
+    plant = MujocoPlant(robot, dt, tissues=[tissue], sensor_noise=sensor_noise,
+                        sensor_bias=sensor_bias, seed=seed)
     controller = make_controller(spec, robot, [hole], dt=dt, twist_weight=TWIST_WEIGHT)
     law = HybridForceMotion((False, False, True), (0.0, 0.0, SETPOINT), FORCE_GAIN,
                             tissue.stiffness, dt, max_speed=APPROACH_SPEED)
