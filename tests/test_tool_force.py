@@ -18,6 +18,7 @@ from teleop.experiments.palpation import SETPOINT, run_palpation
 from teleop.loop.admittance import Admittance
 from teleop.loop.force_stability import GAIN_MARGIN, force_loop_bound
 from teleop.loop.hybrid_force_motion import HybridForceMotion
+from teleop.loop.sensor_tare import SensorTare
 from teleop.loop.tool_wrench import tool_wrench
 from teleop.plants import Imperfections, MujocoPlant
 from teleop.plants.tissue import DEFAULT_TISSUE_STIFFNESS, TissueSurface
@@ -215,3 +216,25 @@ def test_a_sensor_bias_offsets_the_held_force_by_itself():
     assert measures.force_error_rms == pytest.approx(0.1, abs=2e-3)
     assert measures.force_error_max == pytest.approx(0.1, abs=2e-3)
     assert measures.contact_lost == 0
+
+
+def test_a_tare_out_of_contact_removes_the_bias():
+    """Tared over 200 periods before the approach (the tool held at the start, 2 mm from
+    the tissue), the same bias leaves the force error of the unbiased run."""
+    bias = [0.02, -0.03, -0.1, 0.001, 0.0, 0.002]
+    tared = run_palpation("cjm", sensor_bias=bias, tare_samples=200)
+    assert tared.force_error_rms <= 2e-3 and tared.force_error_max <= 5e-3
+    assert tared.contact_lost == 0
+
+
+def test_the_tare_is_the_mean_of_its_window_and_refuses_bad_readings():
+    readings = np.arange(18, dtype=float).reshape(3, 6)
+    tare = SensorTare(2)
+    tare(readings[0])
+    np.testing.assert_allclose(tare(readings[1]), readings[1] - readings[:2].mean(axis=0))
+    assert tare.done
+    np.testing.assert_allclose(tare(readings[2]), readings[2] - readings[:2].mean(axis=0))
+    with pytest.raises(ValueError, match="tare samples"):
+        SensorTare(0)
+    with pytest.raises(ValueError, match="wrench to tare"):
+        tare(np.full(6, np.inf))

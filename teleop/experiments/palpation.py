@@ -24,6 +24,7 @@ import pinocchio as pin
 from constraints import Hole
 from teleop.controller_specs import make_controller
 from teleop.loop.hybrid_force_motion import HybridForceMotion
+from teleop.loop.sensor_tare import SensorTare
 from teleop.loop.tool_wrench import tool_wrench
 from teleop.plants import MujocoPlant
 from teleop.plants.tissue import TissueSurface
@@ -77,10 +78,11 @@ def slide(t: float) -> float:
 
 def run_palpation(spec: str, dt: float = 1e-3, duration: float = SETTLE + SLIDE_TIME + 0.5,
                   sensor_noise: float = 0.0, sensor_bias: Sequence[float] | None = None,
-                  seed: int = 0) -> PalpationMeasures:
+                  seed: int = 0, tare_samples: int = 0) -> PalpationMeasures:
     """Run the experiment with controller ``spec`` (``cjm``, ``qp:daqp``, ``mink:daqp``...),
     the force/torque sensor's noise, bias and seed as :class:`~teleop.plants.MujocoPlant`
-    takes them."""
+    takes them; ``tare_samples`` > 0: the reading is tared over that many periods first,
+    the tool held out of contact meanwhile (:class:`~teleop.loop.sensor_tare.SensorTare`)."""
     robot = load_robot("sda10f")
     model, data = robot.model, robot.model.createData()
     q = robot.q_home.copy()
@@ -101,6 +103,7 @@ def run_palpation(spec: str, dt: float = 1e-3, duration: float = SETTLE + SLIDE_
     port, hole_error, ee_error, sensed_error = 0.0, 0.0, 0.0, 0.0
     commands = np.zeros((steps, model.nv))
     wrench = np.zeros(6)
+    tare = SensorTare(tare_samples) if tare_samples > 0 else None
     for n in range(steps):
         t = n * dt
         pin.framesForwardKinematics(model, data, q)
@@ -111,11 +114,12 @@ def run_palpation(spec: str, dt: float = 1e-3, duration: float = SETTLE + SLIDE_
         across -= (across @ tool.rotation[:, 2]) * tool.rotation[:, 2]
         if t >= SETTLE:
             ee_error = max(ee_error, float(np.linalg.norm(across)))
-        qd = controller.solve(q, law.twist(operator, wrench))
+        held = tare is not None and not tare.done  # out of contact while taring
+        qd = controller.solve(q, operator if held else law.twist(operator, wrench))
         commands[n] = qd
         q = pin.integrate(model, q, plant.actuate(qd, q, [hole]) * dt)
         measures = plant.measures()
-        wrench = tool_wrench(plant, 0)
+        wrench = tool_wrench(plant, 0) if tare is None else tare(tool_wrench(plant, 0))
         forces[n] = float(np.linalg.norm(measures.contact_forces[0]))
         pin.framesForwardKinematics(model, data, q)
         rotation = data.oMf[frame].rotation
