@@ -186,3 +186,20 @@ def test_bad_ros2_options_are_one_line(argv: list[str], message: str,
     assert main(argv) == 2
     error = capsys.readouterr().err
     assert message in error and error.count("\n") == 1
+
+
+def test_compare_runs_one_controller_on_a_ros2_robot() -> None:
+    from teleop.experiments.compare import compare
+    from teleop.experiments.scenarios import load_scenario
+    from teleop.plants.choice import PlantChoice
+
+    with pytest.raises(ValueError, match="one robot: run one controller on it .* got 2: cjm, qp"):
+        compare(load_scenario("trocar-circle"), ["cjm", "qp"], plant=PlantChoice("ros2"))
+
+
+def test_the_bench_refuses_a_ros2_robot() -> None:
+    from teleop.experiments.bench import run_bench
+    from teleop.plants.choice import PlantChoice
+
+    with pytest.raises(ValueError, match="not on a ROS 2 robot"):
+        run_bench(["ur5_instrument"], ["cjm"], iterations=5, plant=PlantChoice("ros2"))

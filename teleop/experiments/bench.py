@@ -248,6 +248,9 @@ def run_bench(robots: Sequence[str] = ("sda10f", "ur5_instrument"),
     count outside [1, :data:`~teleop.limits.MAX_BENCH_ITERATIONS`] raises ``ValueError``
     before any run."""
     check_iterations(iterations)
+    if plant is not None and plant.kind == "ros2":
+        raise ValueError("the bench commands random configurations' steps: not on a ROS 2 "
+                         "robot (--plant kinematic or mujoco)")
     if isinstance(robots, str):
         raise ValueError(f"robots must be a list of built-in robot names, got {robots!r}")
     known = known_problems()

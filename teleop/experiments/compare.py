@@ -387,7 +387,11 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
     (imperfections or Imperfections()).check_period(config.dt)
     check_constraint_gain(plan, config.dt)
     plant = plant or PlantChoice()
-    plant.make(plan.robot, config.dt, imperfections)  # fail fast: the model compiles
+    if plant.kind == "ros2" and len(specs) > 1:  # one robot: a second run starts elsewhere
+        raise ValueError(f"the ros2 plant is one robot: run one controller on it "
+                         f"(--controllers NAME), got {len(specs)}: {', '.join(specs)}")
+    if plant.kind != "ros2":  # a ROS 2 robot is joined once (no idle writer on its topic)
+        plant.make(plan.robot, config.dt, imperfections)  # fail fast: the model compiles
     for spec in specs:  # fail fast on a bad spec or damper, before minutes of simulation
         make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt,
                         collisions=plan.make_collisions(),

@@ -17,6 +17,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Sequence
 
+from teleop.plants.ros2.settings import Ros2Settings
+
 from .metrics_table import (
     BODY_COLUMNS,
     COLLISION_COLUMNS,
@@ -168,6 +170,8 @@ def _plant_line(plant: dict | None) -> str:
     """The plant of the runs in words (a document before schema 4: the kinematic one)."""
     if plant is None or plant["kind"] == "kinematic":
         text = "kinematic (q += qd dt)"
+    elif plant["kind"] == "ros2":
+        text = Ros2Settings.from_dict(plant["ros2"]).describe()
     else:
         s = plant["settings"]
         text = (f"MuJoCo physics at {s['physics_rate_hz']:g} Hz, {s['servo_bandwidth_hz']:g} Hz "
