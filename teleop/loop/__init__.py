@@ -2,7 +2,6 @@
 
 from .closed_loop import (
     LoopConfig,
-    Plant,
     Targets,
     TeleopLoop,
     saturate_twist,
@@ -10,6 +9,7 @@ from .closed_loop import (
 )
 from .distance_meter import SAFETY_TOLERANCE, DistanceMeasure, DistanceMeter
 from .naming import constraint_names, row_labels
+from .plant import Plant
 from .records import RECORD_FIELDS, CompiledPendingStep, PendingStep, StepRecord
 from .supervisor import Supervision, Supervisor, SupervisorConfig
 

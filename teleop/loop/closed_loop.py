@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -43,6 +43,7 @@ from teleop.limits import MAX_POSE_GAIN, MAX_RATE_HZ, MAX_TIME_CONSTANT_S
 
 from .distance_meter import DistanceMeter
 from .naming import constraint_names, row_labels
+from .plant import Plant
 from .records import CompiledPendingStep, PendingStep, StepRecord
 from .supervisor import Supervision, Supervisor, SupervisorConfig
 from .targets import Targets, saturate_twist, target_poses
@@ -97,26 +98,6 @@ class LoopConfig:
     @property
     def dt(self) -> float:
         return 1.0 / self.rate
-
-
-class Plant(Protocol):
-    """What stands between the controller and the robot's true joints (docs/design.md
-    sections 15.1, 17): the loop reads the configuration through :meth:`sense` and moves
-    the robot with what :meth:`actuate` returns."""
-
-    def sense(self, q: np.ndarray) -> np.ndarray:
-        """The configuration the loop measures when the robot's true one is ``q``."""
-
-    def actuate(self, qd: np.ndarray, q: np.ndarray,
-                constraints: Sequence[Constraint]) -> np.ndarray:
-        """The mean joint velocity over the coming period, given this period's command,
-        the true configuration ``q`` and the constraints in the scene."""
-
-    def reset(self, q: np.ndarray | None = None) -> None:
-        """Back to rest (at ``q``, when the plant keeps a configuration of its own)."""
-
-    def measures(self) -> object | None:
-        """What the plant measured over the last period (its own type), or None."""
 
 
 class TeleopLoop:

@@ -1,0 +1,30 @@
+"""The plant protocol: what stands between the controller and the robot's true joints."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol
+
+import numpy as np
+
+from constraints import Constraint
+
+
+class Plant(Protocol):
+    """What stands between the controller and the robot's true joints (docs/design.md
+    sections 15.1, 17): the loop reads the configuration through :meth:`sense` and moves
+    the robot with what :meth:`actuate` returns."""
+
+    def sense(self, q: np.ndarray) -> np.ndarray:
+        """The configuration the loop measures when the robot's true one is ``q``."""
+
+    def actuate(self, qd: np.ndarray, q: np.ndarray,
+                constraints: Sequence[Constraint]) -> np.ndarray:
+        """The mean joint velocity over the coming period, given this period's command,
+        the true configuration ``q`` and the constraints in the scene."""
+
+    def reset(self, q: np.ndarray | None = None) -> None:
+        """Back to rest (at ``q``, when the plant keeps a configuration of its own)."""
+
+    def measures(self) -> object | None:
+        """What the plant measured over the last period (its own type), or None."""
