@@ -174,6 +174,7 @@ def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(accel
     fastest joint (docs/design.md 8.4)."""
     app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0,
                     acceleration_limits=acceleration_limits)
+    app.set_task_mode("pose")  # the full pose: no null space left to settle in
     app.add_constraint("hole", distance=0.08)
     source = InputSource("test")
     app.attach_input(source)
@@ -320,3 +321,33 @@ def test_the_contact_force_at_the_tool_is_felt_scaled_and_bounded():
     broken = np.full(6, np.nan)  # a broken reading renders nothing
     wrench = feedback_wrench(ee, ee, [], None, 0.05, DEFAULT_VIEW, gains, broken)
     assert np.all(wrench[:3] == 0.0) and np.all(np.abs(wrench[3:]) < 1e-12)
+
+
+def test_with_position_and_roll_the_tip_stops_at_once_and_the_arm_settles_around_it():
+    """The page's default with a port (position and roll, docs/design.md 20): when the
+    watchdog holds a silent source, the tip stops at once (its linear velocity J_v qd, from
+    Pinocchio, below 1 um/s) while the joints' null-space motion towards the posture goes on
+    slowly (a few mrad/s), the port held."""
+    app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0,
+                    acceleration_limits=False)
+    app.add_constraint("hole", distance=0.08)
+    source = InputSource("test")
+    app.attach_input(source)
+    for k in range(1, 301):  # 3 cm/s along the device's x
+        source.offer(pose_sample((3e-5 * k, 0.0, 0.0), k, arrival=time.perf_counter()))
+        app.step()
+    loop = app.loops["main"]
+    assert loop.task_modes != ("pose",)
+    source.last_arrival = time.perf_counter() - 0.2  # silent for 200 ms
+    app.step()
+    app.step()
+    model = app.robot.model
+    data = model.createData()
+    pin.computeJointJacobians(model, data, loop.q)
+    jacobian = pin.getFrameJacobian(model, data, model.getFrameId(app.robot.ee_frame),
+                                    pin.LOCAL_WORLD_ALIGNED)
+    assert np.linalg.norm(jacobian[:3] @ loop.last_qd) < 1e-6
+    assert 0.0 < np.max(np.abs(loop.last_qd)) < 1e-2  # settling in the null space, slowly
+    hole = loop.constraints[0]
+    pin.updateFramePlacements(model, data)
+    assert hole.violation(data.oMf[loop.controller.constraint_frames[0]]) < 1e-6
