@@ -65,7 +65,7 @@ def test_version_is_the_installed_version():
 
 def test_the_subcommands_are_the_documented_ones():
     assert set(subcommand_parsers()) == {"compare", "replay", "record", "scenarios", "robots",
-                                         "bench", "sweep", "web"}
+                                         "bench", "sim", "sweep", "web"}
     (built_in,) = [a for a in build_parser(registered=False)._actions
                    if isinstance(a, argparse._SubParsersAction)]
     assert set(built_in.choices) == set(BUILT_IN)

@@ -23,7 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the robot's physics: q += v dt, or MuJoCo's servoed drives "
                              "(default: kinematic)")
     parser.add_argument("--rate", type=bounded(float, 1.0, MAX_RATE_HZ, unit="Hz"), default=500.0,
-                        help="joint states and control periods per second (default: 500)")
+                        help="joint states and control periods per second (default: 500.0)")
     parser.add_argument("--q0", type=csv_list, metavar="RADIANS",
                         help="comma-separated start configuration (default: the robot's home)")
     parser.add_argument("--duration", type=bounded(float, 0.0, 1e6, unit="s"),
