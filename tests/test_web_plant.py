@@ -309,6 +309,7 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
     (["--plant", "mujoco", "--payload", "-1"], "--payload must be >= 0, got -1"),
     (["--plant", "mujoco", "--payload", "nan"], "--payload must be finite"),
     (["--plant", "mujoco", "--payload", "1e9"], "--payload must be <= 100"),
+    (["--plant", "ros2"], "--plant ros2: the web UI does not drive a ROS 2 robot yet"),
 ])
 def test_bad_plant_options_are_one_line_and_exit_2(args, message, capsys):
     from web import cli as web_cli
