@@ -68,18 +68,26 @@ def braking_speed(distance: np.ndarray, step: np.ndarray, dt: float, gain: float
     return bound
 
 
+def give_way(lower: np.ndarray, upper: np.ndarray, window_lower: np.ndarray,
+             window_upper: np.ndarray) -> None:
+    """Where the window ``[window_lower, window_upper]`` (changed in place) misses the box
+    ``[lower, upper]``, the window becomes the point of the box nearest to it: the limit
+    the window stands for gives way to the box's."""
+    miss = (window_lower > upper) | (window_upper < lower)
+    if miss.any():
+        point = np.minimum(np.maximum(np.minimum(np.maximum(lower, window_lower), window_upper),
+                                      lower), upper)
+        window_lower[miss] = point[miss]
+        window_upper[miss] = point[miss]
+
+
 def acceleration_box(lower: np.ndarray, upper: np.ndarray, previous: np.ndarray,
                      step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``[previous - a dt, previous + a dt]`` (new arrays); where it misses the box
     ``[lower, upper]`` of the position and velocity limits, the point of that box nearest
     to it: the acceleration limit gives way, never the position or velocity limits."""
     accel_lower, accel_upper = previous - step, previous + step
-    miss = (accel_lower > upper) | (accel_upper < lower)
-    if miss.any():
-        point = np.minimum(np.maximum(np.minimum(np.maximum(lower, accel_lower), accel_upper),
-                                      lower), upper)
-        accel_lower[miss] = point[miss]
-        accel_upper[miss] = point[miss]
+    give_way(lower, upper, accel_lower, accel_upper)
     return accel_lower, accel_upper
 
 
@@ -105,12 +113,7 @@ def jerk_box(lower: np.ndarray, upper: np.ndarray, previous: np.ndarray,
         jerk_lower[limited] = np.maximum(
             jerk_lower[limited], previous[limited] - braking_speed(room_down, step[limited], 1.0, 1.0))
         np.minimum(jerk_lower, jerk_upper, out=jerk_lower)  # rounding: never an empty window
-    miss = (jerk_lower > upper) | (jerk_upper < lower)
-    if miss.any():
-        point = np.minimum(np.maximum(np.minimum(np.maximum(lower, jerk_lower), jerk_upper),
-                                      lower), upper)
-        jerk_lower[miss] = point[miss]
-        jerk_upper[miss] = point[miss]
+    give_way(lower, upper, jerk_lower, jerk_upper)
     return np.maximum(lower, jerk_lower), np.minimum(upper, jerk_upper)
 
 

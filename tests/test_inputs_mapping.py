@@ -166,21 +166,29 @@ def test_a_twist_source_integrates_its_rate_command_each_period(app):
     assert app.targets[0].translation == pytest.approx(expected, abs=1e-12)
 
 
+
+def streaming_through_a_hole(acceleration_limits: bool, task_mode: str | None = None):
+    """sda10f with a hole and a source streaming 3 cm/s along the device's x for 0.3 s:
+    the app (in ``task_mode``, else its default) and the source."""
+    app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0,
+                    acceleration_limits=acceleration_limits)
+    if task_mode is not None:
+        app.set_task_mode(task_mode)
+    app.add_constraint("hole", distance=0.08)
+    source = InputSource("test")
+    app.attach_input(source)
+    for k in range(1, 301):
+        source.offer(pose_sample((3e-5 * k, 0.0, 0.0), k, arrival=time.perf_counter()))
+        app.step()
+    return app, source
+
 @pytest.mark.parametrize("acceleration_limits", [False, True])
 def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(acceleration_limits):
     """A silent source: its target goes where the EE is and every loop's filtered target
     with it, so the next command is (nearly) zero although the robot was moving; with
     acceleration limits the robot brakes at them, still within the braking time of its
     fastest joint (docs/design.md 8.4)."""
-    app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0,
-                    acceleration_limits=acceleration_limits)
-    app.set_task_mode("pose")  # the full pose: no null space left to settle in
-    app.add_constraint("hole", distance=0.08)
-    source = InputSource("test")
-    app.attach_input(source)
-    for k in range(1, 301):  # 3 cm/s along the device's x
-        source.offer(pose_sample((3e-5 * k, 0.0, 0.0), k, arrival=time.perf_counter()))
-        app.step()
+    app, source = streaming_through_a_hole(acceleration_limits, "pose")  # no null space left
     moving = float(np.max(np.abs(app.loops["main"].last_qd)))
     assert moving > 1e-2
     source.last_arrival = time.perf_counter() - 0.2  # silent for 200 ms
@@ -328,14 +336,7 @@ def test_with_position_and_roll_the_tip_stops_at_once_and_the_arm_settles_around
     watchdog holds a silent source, the tip stops at once (its linear velocity J_v qd, from
     Pinocchio, below 1 um/s) while the joints' null-space motion towards the posture goes on
     slowly (a few mrad/s), the port held."""
-    app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0,
-                    acceleration_limits=False)
-    app.add_constraint("hole", distance=0.08)
-    source = InputSource("test")
-    app.attach_input(source)
-    for k in range(1, 301):  # 3 cm/s along the device's x
-        source.offer(pose_sample((3e-5 * k, 0.0, 0.0), k, arrival=time.perf_counter()))
-        app.step()
+    app, source = streaming_through_a_hole(False)
     loop = app.loops["main"]
     assert loop.task_modes != ("pose",)
     source.last_arrival = time.perf_counter() - 0.2  # silent for 200 ms
