@@ -43,10 +43,6 @@ class BudgetExceeded(SolverError):
     """A solve ran out of its iteration or time budget."""
 
 
-class DeadlinePassed(BudgetExceeded):
-    """The step's time budget is spent: no further solve may start."""
-
-
 class StepBudget:
     """The deadline of one step: :meth:`start` it, then ask :meth:`remaining` before each
     solve.
@@ -71,7 +67,7 @@ class StepBudget:
         :class:`BudgetExceeded` naming ``solver``."""
         left = self._deadline - time.thread_time()
         if left <= 0.0:
-            raise DeadlinePassed(f"{solver}: the step's time budget "
+            raise BudgetExceeded(f"{solver}: the step's time budget "
                                  f"({self.time_budget * 1e3:.3g} ms of CPU) is spent")
         return left
 

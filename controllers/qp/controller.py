@@ -31,7 +31,7 @@ from ..joint_acceleration import braked_lower, braked_pairs
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from ..numerics import INFINITE_BOUND, SOLVER_SETTINGS
-from ..optimization.budget import ITERATION_CAPS, DeadlinePassed, StepBudget, TimeBudget
+from ..optimization.budget import ITERATION_CAPS, BudgetExceeded, StepBudget, TimeBudget
 from ..optimization.collision_report import (AT_BOUND, pair_list, pair_names, record_distances,
                                              report_conflict, report_held_back, rows_at_bound)
 from ..optimization.least_residual import HeldRows, held_note, held_rows, least_residual_problem
@@ -248,15 +248,15 @@ class QPController(GuardedController):
                     report_conflict(self.info, collisions,
                                     rows_at_bound(collisions, held.qd, self._at_bound))
             # else the rows fit the limits, but the solver missed them: daqp's "infeasible"
-            # or its iteration cap (cycling) where collision rows meet the box beside the
-            # trocars' rows in a sliver. Held at the least-residual command's values, the
-            # rows are consistent by construction, and the stages run again under them (a
-            # step out of time still fails: the budget is checked before each solve)
+            # where collision rows meet the box beside the trocars' rows in a sliver. Held
+            # at the least-residual command's values, the rows are consistent by
+            # construction, and the stages run again under them (a stage out of iterations
+            # or time still fails the step)
             try:
                 qd = self._prioritised(kinematics.q, weighted_jacobian, twist, damping.rows,
                                        held.rows, held.rhs, barrier_rows, held.barrier_bound,
                                        lower, upper)
-            except DeadlinePassed:
+            except BudgetExceeded:
                 raise
             except SolverError as task_error:
                 qd = held.qd
