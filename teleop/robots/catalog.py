@@ -48,6 +48,8 @@ def robot_source(name_or_path: str) -> str | Path:
     installed = installed_urdfs()
     if name_or_path in installed:
         return installed[name_or_path]
+    if name_or_path.endswith(".urdf") or "/" in name_or_path:  # meant as a file
+        raise ValueError(f"no URDF file at {name_or_path!r}")
     raise ValueError(f"no robot {name_or_path!r}: not a built-in robot ({', '.join(BUILTIN_ROBOTS)}), "
                      "not a URDF file and not an installed example-robot-data URDF "
                      "('teleop robots' lists them)")
