@@ -96,6 +96,9 @@ class CachedBuildExt(build_ext):
             print(f"warning: {ext.name} not built ({error}); the CJM runs its Python step "
                   "(docs/design.md section 16)")
             return
+        if self.build_hash(ext) != kept.name.partition("-")[2].partition(".")[0]:
+            print("warning: the sources changed during the build; it is not kept")
+            return
         try:  # keep this build, alone: the older ones are of other sources
             BUILD_CACHE.mkdir(parents=True, exist_ok=True)
             for old in BUILD_CACHE.glob(f"{kept.name.partition('-')[0]}-*"):
