@@ -31,6 +31,7 @@ from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
 from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bounded, csv_list,
                         damper_settings, one_line, sentence)
 from .commands import Command, registered_commands
+from .contact_options import add_contact_options, run_contact_compare
 from .robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
 from .plant_options import add_plant_options, plant_choice
 from .sim import add_arguments as add_sim_arguments
@@ -261,6 +262,7 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     compare.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
     _add_scenario_robot(compare)
     _add_run_options(compare, "scenario")
+    add_contact_options(compare)
 
     replay = _add_command(commands, "replay", "replay a recorded session through controllers "
                           "and write metrics and plots", _replay,
@@ -431,8 +433,13 @@ def scenario_plan(args: argparse.Namespace):
 
 
 def _compare(args: argparse.Namespace) -> int:
+    from teleop.experiments.contact_compare import CONTACT_SCENARIOS
     from teleop.loop import LoopConfig
 
+    if args.scenario in CONTACT_SCENARIOS:  # a force law in the loop: its own runner
+        defaults = build_parser(registered=False).parse_args(["compare", "--scenario",
+                                                              args.scenario])
+        return run_contact_compare(args, defaults)
     return _run(collision_choice(args, scenario_plan(args)), args,
                 LoopConfig(rate=args.rate or 1000.0, kp=args.kp or LoopConfig.kp,
                            supervisor=supervisor_choice(args)),
@@ -463,10 +470,13 @@ def _record(args: argparse.Namespace) -> int:
 
 
 def _scenarios(args: argparse.Namespace) -> int:
+    from teleop.experiments.contact_compare import CONTACT_SCENARIOS
     from teleop.experiments.scenarios import SCENARIOS, load_scenario
 
     for name in SCENARIOS:
         print(f"{name:<17} {load_scenario(name).description}")
+    for name, scenario in CONTACT_SCENARIOS.items():
+        print(f"{name:<17} {scenario.description}")
     return 0
 
 

@@ -22,14 +22,18 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Hole
-from teleop.controller_specs import make_controller
+from teleop.controller_specs import ROBOT, make_controller
 from teleop.loop.hybrid_force_motion import HybridForceMotion
 from teleop.loop.sensor_tare import SensorTare
 from teleop.loop.tool_wrench import tool_wrench
 from teleop.plants import MujocoPlant
+from teleop.plants.choice import PlantChoice
 from teleop.plants.tissue import TissueSurface
 from teleop.robots import load_robot
 
+#: One line for humans (``teleop scenarios``).
+DESCRIPTION = ("through the trocar, the tip presses tissue at 1 N along the tool and slides 2 cm "
+               "across it and back (hybrid force/motion; the mujoco plant)")
 #: The force the tool exerts along its z (N), the slide (m), the phases (s).
 SETPOINT, SLIDE, SETTLE, SLIDE_TIME = 1.0, 0.02, 2.5, 4.0
 #: The pose feedback's gain (1/s) and the force loop's ((m/s)/N).
@@ -78,25 +82,43 @@ def slide(t: float) -> float:
 
 def run_palpation(spec: str, dt: float = 1e-3, duration: float = SETTLE + SLIDE_TIME + 0.5,
                   sensor_noise: float = 0.0, sensor_bias: Sequence[float] | None = None,
-                  seed: int = 0, tare_samples: int = 0) -> PalpationMeasures:
+                  seed: int = 0, tare_samples: int = 0, plant: PlantChoice | None = None,
+                  acceleration_limits: bool = False,
+                  jerk_limit: float | None = None,
+                  force_filter: float | None = None) -> PalpationMeasures:
     """Run the experiment with controller ``spec`` (``cjm``, ``qp:daqp``, ``mink:daqp``...),
     the force/torque sensor's noise, bias and seed as :class:`~teleop.plants.MujocoPlant`
     takes them; ``tare_samples`` > 0: the reading is tared over that many periods first,
-    the tool held out of contact meanwhile (:class:`~teleop.loop.sensor_tare.SensorTare`)."""
+    the tool held out of contact meanwhile (:class:`~teleop.loop.sensor_tare.SensorTare`).
+    ``plant``: the physics settings and the abdominal wall's stiffness (None: the
+    defaults; it must be the mujoco plant, the only one with a force/torque sensor);
+    ``acceleration_limits``: the controller keeps the robot's, ``jerk_limit`` (rad/s^3)
+    one on every joint (docs/design.md 8.4, 8.5); ``force_filter``: the cut-off (Hz) of the
+    law's two-section low-pass filter on the sensed wrench (None: none; docs/design.md
+    21.3)."""
     robot = load_robot("sda10f")
     model, data = robot.model, robot.model.createData()
     q = robot.q_home.copy()
     hole = Hole.on_link(robot, q, distance=0.08)
+    plant_choice = plant or PlantChoice("mujoco")
+    if plant_choice.kind != "mujoco":
+        raise ValueError(f"palpation needs the mujoco plant: the {plant_choice.kind} plant has "
+                         f"no force/torque sensor at the tool (docs/design.md 21.2)")
+    plant_choice.apply_wall([hole])
     frame = robot.ee_frame_id
     pin.framesForwardKinematics(model, data, q)
     start = data.oMf[frame].copy()
     tissue = TissueSurface(start.translation + 2e-3 * start.rotation[:, 2],
                            -start.rotation[:, 2])
-    plant = MujocoPlant(robot, dt, tissues=[tissue], sensor_noise=sensor_noise,
-                        sensor_bias=sensor_bias, seed=seed)
-    controller = make_controller(spec, robot, [hole], dt=dt, twist_weight=TWIST_WEIGHT)
+    physics = MujocoPlant(robot, dt, plant_choice.settings, tissues=[tissue],
+                          sensor_noise=sensor_noise, sensor_bias=sensor_bias, seed=seed)
+    controller = make_controller(spec, robot, [hole], dt=dt, twist_weight=TWIST_WEIGHT,
+                                 time_budget=None,
+                                 acceleration_limit=ROBOT if acceleration_limits else None,
+                                 jerk_limit=jerk_limit)
     law = HybridForceMotion((False, False, True), (0.0, 0.0, SETPOINT), FORCE_GAIN,
-                            tissue.stiffness, dt, max_speed=APPROACH_SPEED)
+                            tissue.stiffness, dt, max_speed=APPROACH_SPEED,
+                            filter_cutoff=force_filter)
     steps = int(round(duration / dt))
     times = np.arange(1, steps + 1) * dt
     forces, lost = np.zeros(steps), 0
@@ -117,9 +139,9 @@ def run_palpation(spec: str, dt: float = 1e-3, duration: float = SETTLE + SLIDE_
         held = tare is not None and not tare.done  # out of contact while taring
         qd = controller.solve(q, operator if held else law.twist(operator, wrench))
         commands[n] = qd
-        q = pin.integrate(model, q, plant.actuate(qd, q, [hole]) * dt)
-        measures = plant.measures()
-        wrench = tool_wrench(plant, 0) if tare is None else tare(tool_wrench(plant, 0))
+        q = pin.integrate(model, q, physics.actuate(qd, q, [hole]) * dt)
+        measures = physics.measures()
+        wrench = tool_wrench(physics, 0) if tare is None else tare(tool_wrench(physics, 0))
         forces[n] = float(np.linalg.norm(measures.contact_forces[0]))
         pin.framesForwardKinematics(model, data, q)
         rotation = data.oMf[frame].rotation

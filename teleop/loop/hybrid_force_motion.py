@@ -13,6 +13,9 @@ controller as the operator's would: the CJM keeps its constraint rows first (the
 tracked in their null space), so the law cannot move the instrument off the port. Where
 the twist is not feasible there, a heavy task weight on the force axes keeps their
 tracking first (docs/design.md section 21.4).
+
+With ``filter_cutoff`` the sensed wrench passes a low-pass filter first
+(:class:`~teleop.loop.wrench_filter.WrenchLowPass`), and the stability check takes its lag.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import numpy as np
 from constraints.validation import as_number
 
 from .force_stability import check_force_gain
+from .wrench_filter import WrenchLowPass
 
 
 class HybridForceMotion:
@@ -38,11 +42,15 @@ class HybridForceMotion:
     dt : the control period (s).
     delay_periods : the periods of delay in the force loop (sensor, servo), at least 1.
     max_speed : the force loop's velocity bound (m/s).
+    filter_cutoff : the cut-off (Hz) of the low-pass filter on the sensed wrench, None:
+        none.
+    filter_order : its first-order sections (1 or 2).
     """
 
     def __init__(self, force_axes: Sequence[bool], setpoint: Sequence[float],
                  force_gain: float, contact_stiffness: float, dt: float,
-                 delay_periods: int = 2, max_speed: float = 0.05) -> None:
+                 delay_periods: int = 2, max_speed: float = 0.05,
+                 filter_cutoff: float | None = None, filter_order: int = 2) -> None:
         axes = np.asarray(force_axes)
         if axes.shape != (3,) or axes.dtype != bool or not axes.any():
             raise ValueError(f"force_axes must be 3 booleans, at least one true, got "
@@ -55,7 +63,10 @@ class HybridForceMotion:
         stiffness = as_number(contact_stiffness, "contact_stiffness", positive=True)
         if not isinstance(delay_periods, int) or delay_periods < 1:
             raise ValueError(f"delay_periods must be an integer >= 1, got {delay_periods!r}")
-        check_force_gain(self.force_gain, stiffness, self.dt, delay_periods)
+        self.filter = (None if filter_cutoff is None
+                       else WrenchLowPass(filter_cutoff, self.dt, filter_order))
+        pole, order = (0.0, 0) if self.filter is None else (self.filter.pole, self.filter.order)
+        check_force_gain(self.force_gain, stiffness, self.dt, delay_periods, pole, order)
         self.max_speed = as_number(max_speed, "max_speed", positive=True)
         self.selection = axes.astype(float)
         self.setpoint = target * self.selection
@@ -66,6 +77,8 @@ class HybridForceMotion:
         wrench that is not finite."""
         if not np.all(np.isfinite(wrench)):
             raise ValueError("the force/torque sensor's wrench is not finite")
+        if self.filter is not None:
+            wrench = self.filter(wrench)
         exerted = -np.asarray(wrench[:3], dtype=float)
         force_velocity = self.force_gain * (self.setpoint - exerted)
         force_velocity = np.clip(force_velocity, -self.max_speed, self.max_speed)
