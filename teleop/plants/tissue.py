@@ -9,11 +9,12 @@ one-sided Kelvin-Voigt force
 
 (no pull: the damper cannot hold the tip in the tissue), and no friction: sliding along
 the surface meets no resistance. The default stiffness is a flat 5 mm instrument's
-(radius ``a = 2.5 mm``) on an elastic half-space (Sneddon's punch, ``k = 2 a E / (1 -
-nu^2)``) of soft organ tissue, ``E = 10 kPa``, ``nu = 0.5`` (in-vivo porcine liver
-indentation is of that order: Samur et al., Medical Image Analysis 11(4), 2007), so
-``k = 66.7 N/m``; the damping is a chosen value (tissue's viscous time ``c / k`` of 7.5 ms),
-not a measured one.
+(radius ``a = 2.5 mm``) on an elastic half-space (the rigid flat punch of Harding and
+Sneddon 1945, ``k = 2 a E / (1 - nu^2)``) of soft organ tissue, ``E = 10 kPa``,
+``nu = 0.5``, so ``k = 66.7 N/m``: about twice healthy liver's quasi-static
+``E = 3 G = 5.4 kPa`` (``G = 1.8 kPa``), well below diseased liver's 60 kPa (the sources
+in docs/design.md section 21.1); the damping is a chosen value (tissue's viscous time
+``c / k`` of 7.5 ms), not a measured one.
 """
 
 from __future__ import annotations
