@@ -4,17 +4,17 @@ Each constraint computes, at a configuration, its structure matrix ``S`` (the pa
 reparametrisation of the twist of ``F_a``), its joint-space rows ``A qd = b`` with drift
 feedback, and its position error. See ``base.Constraint``. Each also describes itself
 (``kind``, ``to_dict`` / ``Constraint.from_dict``, ``position`` / ``move_to``,
-``geometry``, ``placement`` / ``place``); ``registry.CONSTRAINT_TYPES`` lists the kinds.
+``placement`` / ``place``); ``registry.CONSTRAINT_TYPES`` lists the kinds. What each other
+layer does with a type (drawing it, the plant's wall, sliding it, its compiled form) is a
+piece that layer registers by type.
 """
 
 from .barrier import DEFAULT_BARRIER_GAIN, Barrier
 from .base import (
     DEFAULT_GAIN,
     Constraint,
-    ConstraintGeometry,
     ConstraintPoint,
     Parametrisation,
-    SHAPES,
     RobotLike,
     structure_nullspace,
     structure_of,
@@ -37,7 +37,6 @@ __all__ = [
     "Barrier",
     "CONSTRAINT_TYPES",
     "Constraint",
-    "ConstraintGeometry",
     "ConstraintPoint",
     "Parametrisation",
     "PlacementField",
@@ -47,7 +46,6 @@ __all__ = [
     "Plane",
     "PointLock",
     "RobotLike",
-    "SHAPES",
     "register",
     "structure_nullspace",
     "structure_of",

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import numpy as np
 import pinocchio as pin
 
 from .placement import PlacementField
@@ -32,7 +31,6 @@ class Barrier(Plane):
     is_equality = False
     default_gain = DEFAULT_BARRIER_GAIN
     kind = "barrier"
-    color = (230, 40, 40)
     label = "barrier"
     placement: ClassVar[tuple[PlacementField, ...]] = (
         *Plane.placement,
@@ -61,7 +59,3 @@ class Barrier(Plane):
     def violation(self, placement: pin.SE3) -> float:
         """The :meth:`penetration`: a barrier is satisfied anywhere on its allowed side."""
         return self.penetration(placement)
-
-    def error_world(self, placement: pin.SE3) -> np.ndarray:
-        """``min(d, 0) n``: zero on the allowed side, behind it back to the plane."""
-        return min(0.0, self.signed_distance(placement)) * self.normal

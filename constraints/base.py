@@ -38,11 +38,6 @@ DEFAULT_GAIN = 100.0
 
 Parametrisation = Literal["nullspace", "paper"]
 
-#: how a view draws a constraint's geometry (:attr:`ConstraintGeometry.shape`): a ring
-#: around an axis, a flat square through a point with a normal, a point
-SHAPES = ("ring", "plane", "point")
-
-
 class RobotLike(Protocol):
     """What a constraint needs from a robot (``teleop.Robot`` satisfies it); read only."""
 
@@ -82,39 +77,6 @@ class ConstraintPoint:
     C_perp: np.ndarray
     error: np.ndarray
     rhs: np.ndarray
-
-
-@dataclass(frozen=True)
-class ConstraintGeometry:
-    """What a view draws of one constraint at a configuration, all in the world frame (m).
-
-    Attributes
-    ----------
-    kind : the constraint's ``kind`` ("hole", "plane", ...).
-    shape : how to draw the geometry: ``"ring"`` (around ``axis`` at ``anchor``),
-        ``"plane"`` (through ``anchor``, normal ``axis``) or ``"point"`` (at ``anchor``).
-    anchor : (3,) the geometry's reference point (hole centre, plane point, lock target):
-        :attr:`Constraint.position`.
-    point : (3,) the constrained point on the link.
-    axis : (3,) unit world axis (a hole's link axis, a plane's normal), or None.
-    error : (3,) from where the point should be to where it is (``point - error``
-        satisfies the constraint); zero when satisfied, so zero for a barrier on its
-        allowed side.
-    color : display colour, RGB 0-255.
-    label : human-readable name of the kind.
-    allowed_side : (3,) unit world direction a one-sided constraint lets the point go
-        (a barrier's normal), or None for an equality.
-    """
-
-    kind: str
-    shape: str
-    anchor: np.ndarray
-    point: np.ndarray
-    axis: np.ndarray | None
-    error: np.ndarray
-    color: tuple[int, int, int]
-    label: str
-    allowed_side: np.ndarray | None = None
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -277,13 +239,9 @@ class Constraint(CompiledForm, ABC):
     #: the constructor fields holding world directions (velocities, normals), which
     #: :meth:`moved` rotates; the world point it moves is :attr:`position`
     world_directions: ClassVar[tuple[str, ...]] = ("velocity",)
-    #: whether a physics plant puts a wall where it is (a hole's port: ``wall_force``)
-    has_wall: ClassVar[bool] = False
     #: constructor fields :meth:`to_dict` leaves out while they hold their defaults
     omitted_at_default: ClassVar[tuple[str, ...]] = ()
-    #: how :meth:`geometry` says to draw it ("ring", "plane" or "point"), colour, label
-    shape: ClassVar[str] = "point"
-    color: ClassVar[tuple[int, int, int]] = (128, 128, 128)
+    #: what the operator reads of the type ("point lock"): names and messages
     label: ClassVar[str] = "constraint"
     #: what :meth:`place` takes, one field per keyword (:mod:`constraints.placement`);
     #: empty: the type is not placed from a user interface
@@ -432,56 +390,9 @@ class Constraint(CompiledForm, ABC):
                 data[name] = (motion.rotation @ np.asarray(data[name], dtype=float)).tolist()
         return type(self).from_dict(data)
 
-    # -- what a view draws -----------------------------------------------------------------
-
     def violation(self, placement: pin.SE3) -> float:
         """How far (m) the point is from satisfying the constraint (0 when it does)."""
         return float(np.linalg.norm(self.error(placement)))
-
-    def error_world(self, placement: pin.SE3) -> np.ndarray:
-        """World vector (3,) from where the point should be to where it is, ``R_a C^T e``;
-        its norm is :meth:`violation`."""
-        return placement.rotation @ (self.directions(placement).T @ self.error(placement))
-
-    def axis_world(self, placement: pin.SE3) -> np.ndarray | None:
-        """The geometry's world axis (a hole's link axis, a plane's normal), or None."""
-        return None
-
-    def geometry(self, placement: pin.SE3) -> ConstraintGeometry:
-        """Everything a view draws, in the world frame, at the link's ``placement``; a
-        one-sided constraint allows the side its axis points to."""
-        axis = self.axis_world(placement)
-        return ConstraintGeometry(
-            kind=self.kind, shape=self.shape, anchor=self.position,
-            point=self.point_world(placement), axis=axis,
-            error=self.error_world(placement), color=self.color, label=self.label,
-            allowed_side=None if self.is_equality else axis)
-
-    # -- sliding along its link (random trocar placements, docs/design.md 15.1.1) ----------
-
-    def sliding_axis(self, robot: RobotLike, q: np.ndarray) -> np.ndarray | None:
-        """Unit world axis ``a`` (at ``q``) along which the geometry may slide with its link,
-        the constraint's error unchanged; None (the default): no such axis."""
-        return None
-
-    def slid_along_link(self, robot: RobotLike, q: np.ndarray, offset: float) -> "Constraint":
-        """A new constraint like this one slid ``offset`` m along :meth:`sliding_axis`: its
-        world reference point moves by ``d = offset a``, a point fixed on the link by
-        ``R_a^T d`` (:meth:`slid_link_fields`), so the error at ``q`` stays what it was;
-        ``self`` when there is no sliding axis."""
-        axis = self.sliding_axis(robot, q)
-        if axis is None:
-            return self
-        world_shift = as_number(offset, "offset") * axis
-        link_shift = frame_placement(robot.model, q, self.link).rotation.T @ world_shift
-        return type(self).from_dict({
-            **self.to_dict(), self.position_attribute: (self.position + world_shift).tolist(),
-            **self.slid_link_fields(link_shift)})
-
-    def slid_link_fields(self, link_shift: np.ndarray) -> dict:
-        """The constructor fields in link coordinates that :meth:`slid_along_link` moves by
-        ``link_shift`` (a point fixed on the link); none by default."""
-        return {}
 
     # -- placing it on a robot as the robot is now -------------------------------------------
 

@@ -53,19 +53,17 @@ class Hole(Constraint):
     gain : drift-feedback gain K (1/s).
     velocity : (3,) world velocity of the hole centre (m/s), fed forward.
     tissue_stiffness, tissue_damping : the abdominal wall around the port, for a physics
-        plant (:meth:`wall_force`; N/m, N s/m); left out of :meth:`to_dict` at the defaults.
+        plant (``teleop.plants.walls``; N/m, N s/m); left out of :meth:`to_dict` at the
+        defaults.
     """
 
     dim = 2
     has_paper_form = True
     kind = "hole"
     position_attribute = "center"
-    shape = "ring"
-    color = (255, 170, 0)
     label = "hole"
     placement: ClassVar[tuple[PlacementField, ...]] = (ON_ARM, ALONG_LINK)
     omitted_at_default = ("tissue_stiffness", "tissue_damping")
-    has_wall = True
     compiled_kind = "hole"
     compiled_fields = ("_anchor", "_link_axis", "_gain")
 
@@ -186,14 +184,6 @@ class Hole(Constraint):
         """``[center, velocity, link_axis, gain]`` (10,), world frame but the axis."""
         return np.concatenate([self._anchor, self._link_axis, [self._gain]])
 
-    def axis_world(self, placement: pin.SE3) -> np.ndarray:
-        """The link axis in the world frame (the hole's ring is drawn around it)."""
-        return placement.rotation @ self.link_axis
-
-    def sliding_axis(self, robot: RobotLike, q: np.ndarray) -> np.ndarray:
-        """The link axis in the world at ``q``: the centre slides along it, still on it."""
-        return self.axis_world(frame_placement(robot.model, q, self.link))
-
     def _center_local(self, placement: pin.SE3) -> np.ndarray:
         return placement.actInv(self.center)
 
@@ -227,23 +217,3 @@ class Hole(Constraint):
 
     def feed_forward(self, placement: pin.SE3) -> np.ndarray:
         return self._C @ (placement.rotation.T @ self.velocity)
-
-    def port(self, rotation: np.ndarray, translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where the instrument crosses the wall, for a link frame at ``(rotation,
-        translation)`` (world): the point of the link axis nearest the centre,
-        ``P = o + ((c - o) . a) a``, and the world axis ``a`` (docs/design.md 17.2)."""
-        axis = rotation @ self.link_axis
-        return translation + float(axis @ (self.center - translation)) * axis, axis
-
-    def wall_force(self, point: np.ndarray, axis: np.ndarray,
-                   point_velocity: np.ndarray) -> np.ndarray:
-        """World force (N) of the abdominal wall on the instrument at the port (:meth:`port`),
-        ``F = -k (P - c) - c_d (v - v_c)_perp`` (docs/design.md 17.2): ``P - c`` is the
-        lateral offset of the link axis from the centre (:meth:`error_world`), ``v`` the
-        world velocity of the instrument's material point at ``P``, ``v_c`` the centre's,
-        ``perp`` across the axis. A spring-damper, not a rigid constraint: the
-        controller's error shows."""
-        relative = point_velocity - self.velocity
-        lateral_velocity = relative - float(axis @ relative) * axis
-        return (-self.tissue_stiffness * (point - self.center)
-                - self.tissue_damping * lateral_velocity)

@@ -13,8 +13,6 @@ from .base import (
     RobotLike,
     as_unit_vector,
     as_vector,
-    frame_placement,
-    link_axis_of,
     link_point_at,
     perpendicular_basis,
 )
@@ -50,8 +48,6 @@ class Plane(Constraint):
     world_directions = ("normal", "velocity")
     compiled_kind = "plane"
     compiled_fields = ("link_point", "plane_point", "normal", "velocity", "_gain")
-    shape = "plane"
-    color = (60, 140, 255)
     label = "plane"
     placement: ClassVar[tuple[PlacementField, ...]] = (
         ON_ANY_LINK, ALONG_LINK, ON_LINK_POINT,
@@ -131,19 +127,6 @@ class Plane(Constraint):
 
     # ``plane.move_to(plane_point, velocity)`` (inherited) moves the plane (a world point
     # on it, m) and sets its velocity (m/s).
-
-    def axis_world(self, placement: pin.SE3) -> np.ndarray:
-        """The plane's world normal."""
-        return self.normal.copy()
-
-    def sliding_axis(self, robot: RobotLike, q: np.ndarray) -> np.ndarray:
-        """The link's long axis (``link_axis_of``) in the world at ``q``: the link point and
-        the plane slide along it together."""
-        return frame_placement(robot.model, q, self.link).rotation @ link_axis_of(robot, self.link)
-
-    def slid_link_fields(self, link_shift: np.ndarray) -> dict:
-        """The link point, moved with the plane."""
-        return {"link_point": (self.link_point + link_shift).tolist()}
 
     def point(self, placement: pin.SE3) -> np.ndarray:
         return self.link_point

@@ -12,8 +12,6 @@ from .base import (
     Constraint,
     RobotLike,
     as_vector,
-    frame_placement,
-    link_axis_of,
     link_point_at,
 )
 from .limits import MAX_POSITION_M, MAX_SPEED_M_S
@@ -40,8 +38,6 @@ class PointLock(Constraint):
     position_attribute = "target"
     compiled_kind = "point_lock"
     compiled_fields = ("link_point", "target", "velocity", "_gain")
-    shape = "point"
-    color = (40, 170, 90)
     label = "point lock"
     placement: ClassVar[tuple[PlacementField, ...]] = (ON_ARM, ALONG_LINK)
 
@@ -72,15 +68,6 @@ class PointLock(Constraint):
 
     # ``lock.move_to(target, velocity)`` (inherited) moves the lock point (world, m) and
     # sets its velocity (m/s).
-
-    def sliding_axis(self, robot: RobotLike, q: np.ndarray) -> np.ndarray:
-        """The link's long axis (``link_axis_of``) in the world at ``q``: the link point and
-        the target slide along it together."""
-        return frame_placement(robot.model, q, self.link).rotation @ link_axis_of(robot, self.link)
-
-    def slid_link_fields(self, link_shift: np.ndarray) -> dict:
-        """The link point, moved with the target."""
-        return {"link_point": (self.link_point + link_shift).tolist()}
 
     def point(self, placement: pin.SE3) -> np.ndarray:
         return self.link_point

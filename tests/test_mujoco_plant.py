@@ -16,8 +16,11 @@ from hypothesis import strategies as st
 from constraints import Hole
 from example_robots import EXAMPLE_ARMS
 from teleop.plants import Imperfections, MujocoPlant, PlantSettings
+from teleop.plants.walls import PortWall
 
 DT = 1e-3
+#: the wall the plant puts at a hole
+WALL = PortWall()
 
 
 def run(plant: MujocoPlant, robot, q: np.ndarray, commands, holes=()) -> np.ndarray:
@@ -128,24 +131,24 @@ def test_the_wall_force_reaches_the_joints_as_the_point_jacobian_transpose(sda10
     # the applied force of the last physics step, at the configuration it was computed at
     mujoco.mj_step1(plant.mj_model, plant.mj_data)
     plant.mj_data.qfrc_applied[:] = 0.0
-    plant._push(hole)
+    plant._push(hole, WALL)
     pin.computeJointJacobians(model, data, q_mj)
     pin.updateFramePlacements(model, data)
     placement = data.oMf[frame]
-    point, _ = hole.port(placement.rotation, placement.translation)
+    point, _ = WALL.port(hole, placement.rotation, placement.translation)
     jacobian = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
     linear = jacobian[:3] - pin.skew(point - placement.translation) @ jacobian[3:]
     force = plant.mj_data.qfrc_applied.copy()
-    expected = linear.T @ hole.wall_force(point, hole.port(placement.rotation,
+    expected = linear.T @ WALL.force(hole, point, WALL.port(hole, placement.rotation,
                                                             placement.translation)[1],
                                           linear @ plant.mj_data.qvel)
     np.testing.assert_allclose(force, expected, atol=1e-9 * np.max(np.abs(expected)))
     # a compliant servo lets the wall move the instrument toward the centre
     soft = MujocoPlant(sda10f, DT, PlantSettings(servo_bandwidth=1.0))
-    start = hole.port(placement.rotation, placement.translation)[0]
+    start = WALL.port(hole, placement.rotation, placement.translation)[0]
     q_after = run(soft, sda10f, q, [np.zeros(8)] * 300, [hole])
     pin.framesForwardKinematics(model, data, q_after)
-    moved = hole.port(data.oMf[frame].rotation, data.oMf[frame].translation)[0] - start
+    moved = WALL.port(hole, data.oMf[frame].rotation, data.oMf[frame].translation)[0] - start
     assert moved @ across > 1e-5
 
 

@@ -28,6 +28,7 @@ from teleop.experiments.sessions import load_session, session_plant
 from teleop.experiments.smoothness import joint_jerk_rms, power_fraction_above
 from teleop.loop import LoopConfig
 from teleop.plants import PlantSettings
+from teleop.plants.walls import has_wall
 
 SCHEMA = json.loads(files("teleop.experiments").joinpath("metrics.schema.json").read_text())
 ALL_CONTROLLERS = ["cjm", "qp:proxqp", "qp:daqp", "qp:osqp", "mink:daqp"]
@@ -43,7 +44,7 @@ def test_every_scenario_runs_on_the_physics_plant_for_every_controller(scenario)
     document = metrics_document(plan, results, LoopConfig(), duration, plant=MUJOCO)
     jsonschema.validate(document, SCHEMA)
     assert document["plant"]["kind"] == "mujoco"
-    holes = [c for c in plan.make_constraints() if c.has_wall]
+    holes = [c for c in plan.make_constraints() if has_wall(c)]
     for spec, result in results.items():
         metrics = result.metrics()
         assert result.steps == 200

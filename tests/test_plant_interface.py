@@ -15,10 +15,13 @@ from teleop.plants import Imperfections, MujocoPlant, PlantSettings
 from teleop.plants.armature import urdf_armatures
 from teleop.plants.interface import INTERFACE_TOLERANCE, CommandInterface
 from teleop.robots.robot import load_robot
+from teleop.plants.walls import PortWall
 
 from test_mujoco_plant import _hole_through_link
 
 DT = 1e-3
+#: the wall the plant puts at a hole
+WALL = PortWall()
 JOINT = 2  # the velocity coordinate the scripted commands move
 
 
@@ -140,14 +143,14 @@ def test_the_spring_part_is_k_times_the_displacement_and_the_rest_the_damper(sda
         hole.tissue_stiffness * m.port_displacements[0], rel=1e-12)
     # the last step again, the parts from Pinocchio
     mujoco.mj_step1(plant.mj_model, plant.mj_data)
-    force, spring, _ = plant._push(hole)
+    force, spring, _ = plant._push(hole, WALL)
     model, data = sda10f.model, sda10f.model.createData()
     q_mj, v_mj = plant.mj_data.qpos.copy(), plant.mj_data.qvel.copy()
     frame = model.getFrameId(hole.link)
     pin.forwardKinematics(model, data, q_mj, v_mj)
     pin.updateFramePlacements(model, data)
     placement = data.oMf[frame]
-    point, axis = hole.port(placement.rotation, placement.translation)
+    point, axis = WALL.port(hole, placement.rotation, placement.translation)
     twist = pin.getFrameVelocity(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
     velocity = twist.linear + np.cross(twist.angular, point - placement.translation)
     lateral = velocity - (axis @ velocity) * axis

@@ -39,7 +39,7 @@ def jumped_hole_loop(robot, spec: str) -> tuple[TeleopLoop, pin.SE3]:
     target = loop.ee_placement()
     placement = loop.ee_placement()  # (refreshes loop.data)
     link = loop.data.oMf[robot.model.getFrameId(hole.link)]
-    across = np.cross(hole.axis_world(link), [0.0, 0.0, 1.0])
+    across = np.cross(link.rotation @ hole.link_axis, [0.0, 0.0, 1.0])
     hole.center = hole.center + JUMP * across / np.linalg.norm(across)
     assert placement is not None
     return loop, target

@@ -21,11 +21,12 @@ from browser_helpers import free_port
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from constraints import CONSTRAINT_TYPES, SHAPES, Constraint, PlacementField
+from constraints import CONSTRAINT_TYPES, Constraint, PlacementField
 from constraints.base import DEFAULT_GAIN, link_point_at, perpendicular_basis
 from constraints.placement import ALONG_LINK, ON_ARM
 from constraints.validation import as_unit_vector, as_vector
 from web.app import ControlThread, TeleopApp
+from web.constraint_drawing import DRAWINGS, SHAPES, ConstraintDrawing
 from web.ui import TeleopUI
 
 WEB = Path(__file__).resolve().parent.parent / "web"
@@ -49,8 +50,6 @@ class PointOnLine(Constraint):
     dim = 2
     kind = "point_on_line"
     position_attribute = "line_point"
-    shape = "point"
-    color = (200, 0, 200)
     label = "point on line"
     placement = (ON_ARM, ALONG_LINK,
                  PlacementField("direction", "direction", "direction (world)",
@@ -86,8 +85,10 @@ class PointOnLine(Constraint):
 
 @pytest.fixture()
 def registered(monkeypatch):
-    """PointOnLine in the registry for one test (removed after it)."""
+    """PointOnLine in the registry for one test, drawn as a magenta point (both removed
+    after it)."""
     monkeypatch.setitem(CONSTRAINT_TYPES, PointOnLine.kind, PointOnLine)
+    monkeypatch.setitem(DRAWINGS, PointOnLine, ConstraintDrawing("point", (200, 0, 200)))
 
 
 # -- no kind named under web/ --------------------------------------------------------------
@@ -119,7 +120,7 @@ def named_kind(text: str, words: set[tuple[str, ...]]) -> str | None:
 def kind_names_in(source: str, words: set[tuple[str, ...]]) -> list[tuple[int, str, str]]:
     """``(line, text, kind)`` for each string constant (docstrings included) and
     identifier of ``source`` that names a kind. Allowed: a drawing shape of
-    :data:`constraints.SHAPES` as a dict key (the shape vocabulary, not a kind), and the
+    :data:`web.constraint_drawing.SHAPES` as a dict key (the shape vocabulary, not a kind), and the
     :data:`LOWER_LAYER_FIELDS` read as attributes."""
     tree = ast.parse(source)
     shape_keys = {id(key) for node in ast.walk(tree) if isinstance(node, ast.Dict)
@@ -165,13 +166,27 @@ def test_the_scan_finds_a_kind_named_in_code_or_prose():
                      (6, "barrier"), (7, "plane")}, found
 
 
+#: the files under web/ that register the per-type pieces of the built-in kinds (their
+#: drawing): the one place web names them
+REGISTRATIONS = {WEB / "constraint_drawing.py"}
+
+
 def test_no_file_under_web_names_a_constraint_kind():
     words = kind_words()
     assert {"hole", "plane", "barrier", "point lock"} <= {" ".join(w) for w in words}
     found = [f"{path.relative_to(WEB.parent)}:{line}: {text!r} names {kind!r}"
-             for path in sorted(WEB.rglob("*.py"))
+             for path in sorted(WEB.rglob("*.py")) if path not in REGISTRATIONS
              for line, text, kind in kind_names_in(path.read_text(), words)]
     assert not found, "\n".join(found)
+
+
+def test_every_built_in_kind_registers_its_own_drawing():
+    """Each kind has a drawing registered for its own type (not only its base's), with a
+    shape the markers draw; a subclass without one draws as its nearest base."""
+    for kind_type in CONSTRAINT_TYPES.values():
+        assert DRAWINGS[kind_type].shape in SHAPES, kind_type
+    assert len({DRAWINGS[kind_type].color for kind_type in CONSTRAINT_TYPES.values()}) == \
+        len(CONSTRAINT_TYPES)
 
 
 # -- a kind defined here, through the UI core ----------------------------------------------

@@ -24,6 +24,7 @@ from ..validation import as_number, short_repr
 from .geometry import (bounding_segment, capsule_geometry, check_links, link_of, link_pairs,
                        segment_distances, self_collision_pairs, shape_distance)
 from .obstacles import Obstacle
+from .ports import is_port
 from .primitives import CollisionPrimitives, primitive
 from .rows import CollisionRows
 
@@ -182,14 +183,14 @@ class CollisionAvoidance:
         self.set_obstacles([item for item in self.obstacles if item is not obstacle])
 
     def set_ports(self, constraints: Iterable[Any]) -> None:
-        """Leave the instrument inside each port alone: for every constraint with a wall
-        (a hole, ``has_wall``), the geometries on its link and the links after it are not
+        """Leave the instrument inside each port alone: for every constraint that is a port
+        (a hole, :func:`.ports.is_port`), the geometries on its link and the links after it are not
         paired with an obstacle within the detection distance of its position (the body
         the port goes through)."""
         exempt = set()
         robot_count = self._robot_geometry.ngeoms
         for constraint in constraints:
-            if not getattr(constraint, "has_wall", False):
+            if not is_port(constraint):
                 continue
             joint = self.model.frames[resolve_frame(self.model, constraint.link)].parentJoint
             inside = set(self.model.subtrees[joint])

@@ -20,6 +20,7 @@ from teleop.limits import MAX_DURATION_S, MAX_STEPS
 from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
 
 from teleop.plants.imperfect import Imperfections
+from teleop.plants.walls import has_wall
 
 from .plan import Plan
 from teleop.plants.choice import PlantChoice
@@ -159,7 +160,7 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
         drive.commands.append(loop.last_qd.copy())
         drive.ports.append(tuple(name for name, constraint
                                  in zip(record.constraint_names, loop.constraints)
-                                 if constraint.has_wall))
+                                 if has_wall(constraint)))
         if record.failed and len(failures) < 10:
             failures.append(f"t={record.t:.3f}s: {record.message}")
         if on_step is not None:

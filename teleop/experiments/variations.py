@@ -25,6 +25,7 @@ from teleop.robots import Robot
 from teleop.seeds import stream
 
 from .plan import Plan, smoothstep
+from .sliding import slid_along_link, sliding_axis
 
 #: The draws' streams of the seed (:func:`teleop.seeds.stream`): the encoder noise draws
 #: from ``default_rng(seed)``, so the three streams are independent.
@@ -82,8 +83,8 @@ class SlidConstraints:
         for original in originals:
             if id(original) not in self._copies:
                 offset = float(self.rng.uniform(-self.shift, self.shift))
-                copy = original.slid_along_link(self.robot, q, offset)
-                axis = original.sliding_axis(self.robot, q)
+                copy = slid_along_link(original, self.robot, q, offset)
+                axis = sliding_axis(original, self.robot, q)
                 shift = np.zeros(3) if axis is None else offset * axis
                 self._copies[id(original)] = (original, copy, shift)
                 self._originals[id(copy)] = original

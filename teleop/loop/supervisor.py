@@ -36,6 +36,7 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.validation import as_number
+from teleop.plants.walls import has_wall
 
 #: the supervisor's actions, from none to the strongest (docs/design.md 5.2)
 ACTIONS = ("none", "scaled", "held")
@@ -303,7 +304,7 @@ class Supervisor:
     def _port_name(self, port: int, constraints: Sequence[Constraint],
                    names: Sequence[str]) -> str:
         """The name of the ``port``-th constraint with a wall (the plant's order)."""
-        walls = [name for name, constraint in zip(names, constraints) if constraint.has_wall]
+        walls = [name for name, constraint in zip(names, constraints) if has_wall(constraint)]
         return walls[port] if 0 <= port < len(walls) else f"port {port + 1}"
 
     def _action_words(self, action: str, scale: float, wanted: float, error: float,

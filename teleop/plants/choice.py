@@ -19,6 +19,7 @@ from .imperfect import Imperfections
 from .mujoco_plant import MujocoPlant
 from .ros2.settings import Ros2Settings
 from .settings import SETTINGS_KEYS, PlantSettings
+from .walls import wall_of
 
 #: The plants a run can choose, by name.
 PLANT_KINDS = ("kinematic", "mujoco", "ros2")
@@ -99,8 +100,9 @@ class PlantChoice:
         if self.wall_stiffness is None:
             return
         for constraint in constraints:
-            if constraint.has_wall:
-                constraint.tissue_stiffness = self.wall_stiffness
+            wall = wall_of(constraint)
+            if wall is not None:
+                wall.set_stiffness(constraint, self.wall_stiffness)
 
     def to_dict(self) -> dict:
         """The ``plant`` entry of metrics.json and of a session header (units in the keys):

@@ -12,7 +12,7 @@ clipped to the joint's effort limit, at ``h = dt / substeps`` (2 kHz or faster u
 interface's check of the robot's acceleration and jerk limits
 (:mod:`teleop.plants.interface`), then the joint lag. Every hole puts a port into the scene: the
 abdominal wall pushes on the
-instrument with the hole's own spring-damper (:meth:`constraints.Hole.wall_force`),
+instrument with the hole's own spring-damper (:mod:`teleop.plants.walls`),
 applied at the instrument's point nearest the port centre. With a collision avoidance,
 the robot's collision geometry and the obstacles are in the scene, in contact in the
 avoidance's pairs (:mod:`teleop.plants.contact_geometry`), and each period counts the
@@ -21,7 +21,6 @@ contacts (docs/design.md section 18.6).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -42,6 +41,7 @@ from .imperfect import Imperfections, ImperfectPlant
 from .interface import CommandInterface, InterfaceFault
 from .settings import PlantSettings
 from .tissue import TissueSurface
+from .walls import Wall, wall_of
 
 #: A payload's inertia: a 5 cm solid sphere's per kilogram (kg m^2 / kg).
 _PAYLOAD_INERTIA_PER_KG = 0.4 * 0.05 ** 2
@@ -329,7 +329,7 @@ class MujocoPlant:
         shaped = accepted if self.shaping is None else self.shaping.respond(accepted)
         command = self.joints.v_to_mujoco(shaped, data.qpos)
         data.ctrl[:] = command[self._actuator_dofs]
-        holes = [c for c in constraints if c.has_wall]
+        holes = [(c, wall) for c in constraints if (wall := wall_of(c)) is not None]
         forces, displacements = np.zeros((len(holes), 3)), np.zeros(len(holes))
         springs = np.zeros((len(holes), 3))
         data.qfrc_applied[:] = 0.0
@@ -339,8 +339,8 @@ class MujocoPlant:
             for _ in range(self.substeps):
                 mujoco.mj_step1(model, data)
                 data.qfrc_applied[:] = 0.0
-                for i, hole in enumerate(holes):
-                    forces[i], springs[i], displacements[i] = self._push(hole)
+                for i, (hole, wall) in enumerate(holes):
+                    forces[i], springs[i], displacements[i] = self._push(hole, wall)
                 for i in range(len(self._tools)):
                     contacts[i], depths[i] = self._press(i)
                 mujoco.mj_step2(model, data)
@@ -407,16 +407,15 @@ class MujocoPlant:
 
     # -- the abdominal wall ----------------------------------------------------------------
 
-    def _push(self, hole: Constraint) -> tuple[np.ndarray, np.ndarray, float]:
-        """Apply the wall's force at ``hole`` to the instrument (at the kinematics of
-        ``mj_step1``); the force (N), its spring part ``-k (P - c)`` (the first term of
-        :meth:`constraints.Hole.wall_force`) and the tissue's displacement (m)."""
+    def _push(self, hole: Constraint, wall: Wall) -> tuple[np.ndarray, np.ndarray, float]:
+        """Apply the force of ``wall`` at ``hole`` to the instrument (at the kinematics of
+        ``mj_step1``); the force (N), its spring part (``-k (P - c)`` at a port,
+        :mod:`teleop.plants.walls`) and the tissue's displacement (m)."""
         model, data, jacobian = self.mj_model, self.mj_data, self._jacobian
         site = self._site_ids[hole.link]
-        point, axis = hole.port(data.site_xmat[site].reshape(3, 3), data.site_xpos[site])
+        point, axis = wall.port(hole, data.site_xmat[site].reshape(3, 3), data.site_xpos[site])
         body = self._site_bodies[site]
         mujoco.mj_jac(model, data, jacobian, None, point, body)
-        force = hole.wall_force(point, axis, jacobian @ data.qvel)
+        force = wall.force(hole, point, axis, jacobian @ data.qvel)
         mujoco.mj_applyFT(model, data, force, self._no_torque, point, body, data.qfrc_applied)
-        spring = -hole.tissue_stiffness * (point - hole.center)
-        return force, spring, math.dist(point, hole.center)
+        return force, wall.spring(hole, point), wall.displacement(hole, point)

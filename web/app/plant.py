@@ -13,6 +13,7 @@ import pinocchio as pin
 from constraints import Constraint
 from teleop.loop import TeleopLoop
 from teleop.plants import PlantChoice
+from teleop.plants.walls import wall_of
 from teleop.robots import Robot
 
 
@@ -50,9 +51,10 @@ class Plants:
 
     def _apply_wall(self, constraint: Constraint) -> None:
         """The session's wall stiffness on a constraint that puts a wall into the scene
-        (``has_wall``), when the session sets one."""
-        if constraint.has_wall and self.plant.wall_stiffness is not None:
-            constraint.tissue_stiffness = self.plant.wall_stiffness
+        (:func:`teleop.plants.walls.wall_of`), when the session sets one."""
+        wall = wall_of(constraint)
+        if wall is not None and self.plant.wall_stiffness is not None:
+            wall.set_stiffness(constraint, self.plant.wall_stiffness)
 
     def _continue_plant(self, old: TeleopLoop | None, new: TeleopLoop) -> None:
         """``new`` takes over from ``old`` (the same robot, or None for a new one) at
@@ -73,15 +75,15 @@ class Plants:
         if loop.plant is None:
             return []
         ids = {id(entry.constraint): entry.id for entry in self.entries.values()}
-        walls = [c for c in loop.constraints if c.has_wall]
+        walls = [(c, wall) for c in loop.constraints if (wall := wall_of(c)) is not None]
         measures = loop.plant.measures()
         if len(walls) != len(measures.port_forces):  # constraints changed since the step
             return []
         readings = []
-        for wall, force, displacement in zip(walls, measures.port_forces,
-                                             measures.port_displacements):
-            link = placements[self.robot.model.getFrameId(wall.link)]
-            point, _ = wall.port(link.rotation, link.translation)
-            readings.append(PortReading(ids.get(id(wall), wall.link), point,
+        for (port, wall), force, displacement in zip(walls, measures.port_forces,
+                                                     measures.port_displacements):
+            link = placements[self.robot.model.getFrameId(port.link)]
+            point, _ = wall.port(port, link.rotation, link.translation)
+            readings.append(PortReading(ids.get(id(port), port.link), point,
                                         np.array(force, dtype=float), float(displacement)))
         return readings

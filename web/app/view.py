@@ -15,6 +15,7 @@ from constraints.kinematics import frame_placement
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.robots import Robot
 
+from ..constraint_drawing import constraint_geometry
 from .collisions import ObstacleEntry
 from .console import EEInput
 from .editing import ConstraintEntry
@@ -173,7 +174,7 @@ class View:
             constraint = constraints[entry_id]
             axis = self.robot.link_axes.get(constraint.link)
             drawings[entry_id] = {
-                "geometry": constraint.geometry(placement), "link": constraint.link,
+                "geometry": constraint_geometry(constraint, placement), "link": constraint.link,
                 "link_placement": placement,
                 "link_axis": None if axis is None else placement.rotation @ axis}
         info, record, refused = state["info"], state["record"], state.pop("refused")

@@ -1,4 +1,4 @@
-"""Each constraint drawn from its own geometry (:meth:`constraints.Constraint.geometry`):
+"""Each constraint drawn from its geometry (:func:`web.constraint_drawing.constraint_geometry`):
 its shape (a ring around its link, a translucent square, a sphere), the constrained point
 as a collar around its link, the error as a short vector (drawn x100) when it is not zero,
 an arrow to a one-sided constraint's allowed side, a gizmo that moves it and, on the main
@@ -10,7 +10,7 @@ import numpy as np
 import pinocchio as pin
 import viser
 
-from constraints import ConstraintGeometry
+from ..constraint_drawing import ConstraintGeometry
 from ..app import TeleopApp
 from .shapes import (
     MIN_RING_RADIUS,
@@ -79,7 +79,7 @@ class Markers:
 
     def _add_shape(self, name: str, drawing: dict):
         """The scene node of a constraint's geometry, drawn as its ``shape`` says
-        (:data:`constraints.SHAPES`; an unknown shape as a sphere at its anchor)."""
+        (:data:`web.constraint_drawing.SHAPES`; an unknown shape as a sphere at its anchor)."""
         shape = drawing["geometry"].shape
         add = {"ring": self._add_ring, "plane": self._add_square}.get(shape, self._add_sphere)
         return add(name, drawing)
