@@ -164,11 +164,10 @@ def test_the_view_takes_only_copies_under_the_lock(app, server, monkeypatch):
     import web.app.view as view
 
     free: dict[str, list[bool]] = {"geometry": [], "words": [], "arrays": [], "draw": []}
-    constraint = next(iter(app.entries.values())).constraint
-    geometry = type(constraint).geometry
-    monkeypatch.setattr(type(constraint), "geometry",
-                        lambda self, placement: free["geometry"].append(lock_free(app))
-                        or geometry(self, placement))
+    geometry = view.constraint_geometry
+    monkeypatch.setattr(view, "constraint_geometry",
+                        lambda constraint, placement: free["geometry"].append(lock_free(app))
+                        or geometry(constraint, placement))
     describe = view.describe_limitation
     monkeypatch.setattr(view, "describe_limitation",
                         lambda *args: free["words"].append(lock_free(app)) or describe(*args))
