@@ -71,6 +71,13 @@ PROXQP_PRIMAL_INFEASIBILITY = 1e-8
 #: few iterations (docs/design.md 10.2).
 DAQP_PROXIMAL_WEIGHT = 1e-8
 
+#: daqp's ``zero_tol`` in a proximal stage, relative to its ``eta_prox``: at daqp's default
+#: (1e-11, above the ``eta_prox`` of most stages) the proximal iterations of a stage whose
+#: collision rows and trocar rows meet the box in a sliver ran to the iteration cap (297 of
+#: 40,000 steps of the collision fuzz); below ``eta_prox`` they converge in tens of
+#: iterations to the optimum (docs/design.md 18.7).
+DAQP_ZERO_FRACTION = 1e-3
+
 #: The tightest ``eta_prox`` the curvature may set for daqp: tighter moves ``qd`` nearer
 #: the CJM's at the price of many more outer iterations (docs/design.md 10.2).
 DAQP_PROXIMAL_FLOOR = 1e-13

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..base import SolverError
-from ..numerics import DAQP_PROXIMAL_FLOOR, DAQP_PROXIMAL_WEIGHT, TASK_ACCURACY, TOLERANCE_RANGE
+from ..numerics import (DAQP_PROXIMAL_FLOOR, DAQP_PROXIMAL_WEIGHT, DAQP_ZERO_FRACTION,
+                        TASK_ACCURACY, TOLERANCE_RANGE)
 from ..optimization.budget import DAQP_OUT_OF_BUDGET, StepBudget
 from ..optimization.problem import QPSolution, QuadraticProgram
 
@@ -18,9 +19,9 @@ class DirectDAQP:
 
     Rows: the joint bounds first (daqp's simple bounds), then the inequality rows, then
     the equalities (``sense`` 5). A semidefinite problem is solved by daqp's proximal-point
-    iterations (``DAQP_PROXIMAL_WEIGHT``, ``eta_prox`` from the curvature) unless the user
-    set those settings. A persistent ``daqp.Model`` (which keeps the active set) is no
-    faster per step here (docs/design.md 10.2).
+    iterations (``DAQP_PROXIMAL_WEIGHT``, ``eta_prox`` from the curvature, ``zero_tol``
+    below ``eta_prox``) unless the user set those settings. A persistent ``daqp.Model``
+    (which keeps the active set) is no faster per step here (docs/design.md 10.2).
 
     ``settings`` is the controller's own dict (read at every solve); ``user_settings`` the
     keys the user gave.
@@ -32,7 +33,7 @@ class DirectDAQP:
         self._daqp = daqp
         self.settings = settings
         #: the proximal settings of a semidefinite stage the user did not set
-        self.proximal_keys = {"eps_prox", "eta_prox"} - set(user_settings)
+        self.proximal_keys = {"eps_prox", "eta_prox", "zero_tol"} - set(user_settings)
         self._buffers: dict[tuple[int, int, int], tuple[np.ndarray, ...]] = {}
 
     @staticmethod
@@ -68,9 +69,10 @@ class DirectDAQP:
         budget.remaining("daqp")
         settings = self.settings
         if problem.semidefinite and self.proximal_keys:
-            proximal = {"eps_prox": DAQP_PROXIMAL_WEIGHT,
-                        "eta_prox": min(max(TASK_ACCURACY * problem.curvature, DAQP_PROXIMAL_FLOOR),
-                                        TOLERANCE_RANGE[1])}
+            eta = min(max(TASK_ACCURACY * problem.curvature, DAQP_PROXIMAL_FLOOR),
+                      TOLERANCE_RANGE[1])
+            proximal = {"eps_prox": DAQP_PROXIMAL_WEIGHT, "eta_prox": eta,
+                        "zero_tol": DAQP_ZERO_FRACTION * eta}
             settings = {**settings, **{k: proximal[k] for k in self.proximal_keys}}
         try:
             x, _, exitflag, info = self._daqp.solve(problem.hessian, problem.gradient, rows, upper,
