@@ -51,13 +51,7 @@ class HybridForceMotion:
                  force_gain: float, contact_stiffness: float, dt: float,
                  delay_periods: int = 2, max_speed: float = 0.05,
                  filter_cutoff: float | None = None, filter_order: int = 2) -> None:
-        axes = np.asarray(force_axes)
-        if axes.shape != (3,) or axes.dtype != bool or not axes.any():
-            raise ValueError(f"force_axes must be 3 booleans, at least one true, got "
-                             f"{force_axes!r}")
-        target = np.asarray(setpoint, dtype=float)
-        if target.shape != (3,) or not np.all(np.isfinite(target)):
-            raise ValueError(f"setpoint must be 3 finite forces (N), got {setpoint!r}")
+        self.set_target(force_axes, setpoint)
         self.force_gain = as_number(force_gain, "force_gain", positive=True)
         self.dt = as_number(dt, "dt", positive=True)
         stiffness = as_number(contact_stiffness, "contact_stiffness", positive=True)
@@ -68,6 +62,17 @@ class HybridForceMotion:
         pole, order = (0.0, 0) if self.filter is None else (self.filter.pole, self.filter.order)
         check_force_gain(self.force_gain, stiffness, self.dt, delay_periods, pole, order)
         self.max_speed = as_number(max_speed, "max_speed", positive=True)
+
+    def set_target(self, force_axes: Sequence[bool], setpoint: Sequence[float]) -> None:
+        """The force-controlled axes and the setpoint from now on (``ValueError`` naming
+        them; the gain's check does not depend on them)."""
+        axes = np.asarray(force_axes)
+        if axes.shape != (3,) or axes.dtype != bool or not axes.any():
+            raise ValueError(f"force_axes must be 3 booleans, at least one true, got "
+                             f"{force_axes!r}")
+        target = np.asarray(setpoint, dtype=float)
+        if target.shape != (3,) or not np.all(np.isfinite(target)):
+            raise ValueError(f"setpoint must be 3 finite forces (N), got {setpoint!r}")
         self.selection = axes.astype(float)
         self.setpoint = target * self.selection
 

@@ -32,6 +32,7 @@ from .collisions import Collisions
 from .console import Console, EEInput
 from .devices import Devices
 from .editing import ConstraintEntry, Editing
+from .force_control import ForceControl
 from .homing import Homing
 from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
 from .plant import PlantChoice, Plants
@@ -106,6 +107,7 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
         self.entries: dict[str, ConstraintEntry] = {}
         self._ids = itertools.count(1)
         self._init_collisions(collisions, dict(collision_settings or {}))
+        self.force = ForceControl(self)  # before the first loop: it makes their plants
         self.specs = {"main": controller}
         self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(controller)}
         self.traces: dict[str, Trace] = {"main": Trace()}

@@ -25,6 +25,7 @@ from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.task_modes import AUTO, port_task_modes, task_modes, task_weight
 from teleop.robots import Robot
 
+from .force_control import ForceControl
 from .limits import MAX_GHOST_OFFSET
 from .plant import PlantChoice
 from .trace import Trace
@@ -68,6 +69,7 @@ class Robots:
     collision_rows: dict
     ghost_offset: np.ndarray
     plant: PlantChoice
+    force: ForceControl
     acceleration_limits: bool
     _lock: threading.RLock
     _build_lock: threading.Lock
@@ -95,8 +97,8 @@ class Robots:
                                      else None)
         self._apply_damping(controller, damping)
         controller.set_collisions(self._attached(avoidance, collisions_on))
-        return TeleopLoop(self.robot, controller, q0=q, config=config,
-                          plant=self.plant.make(self.robot, config.dt), task_modes=modes)
+        return TeleopLoop(self.robot, self.force.wrapped(controller, config.dt), q0=q,
+                          config=config, plant=self.force.plant(config.dt), task_modes=modes)
 
     @staticmethod
     def _twist_weight(modes: tuple[str, ...], orientation_weight: float) -> np.ndarray:

@@ -21,6 +21,7 @@ from teleop.loop.moving_geometry import advance, steer
 from .collisions import ObstacleEntry
 from .console import EEInput
 from .editing import ConstraintEntry
+from .force_control import ForceControl
 from .limits import HISTORY_RATE
 from .trace import Trace
 
@@ -44,6 +45,7 @@ class Tick:
     avoidance: CollisionAvoidance
     collisions_on: bool
     collision_rows: dict[str, CollisionRows | None]
+    force: ForceControl
     ticks: int
     #: the loops' hot path in the last tick (us): every robot's ``TeleopLoop.advance``,
     #: the controllers' steps included (the control thread's status splits the tick by it)
@@ -76,6 +78,7 @@ class Tick:
                 self._apply_devices(dt)
             self._follow_homing()
             targets, start = [hand.target for hand in self.inputs], self.now
+            self.force.feed(self.loops)  # each force law's sensor reading
             held: dict[str, CollisionRows] = {}
             pending = {which: self._advance(which, loop, targets, held)
                        for which, loop in self.loops.items()}
@@ -148,3 +151,4 @@ class Tick:
             self.last_records[which] = record
             deviation = 0.0 if which == "main" else float(np.linalg.norm(loop.last_qd - main_qd))
             self.traces[which].add(record, deviation, self.traced_distance(which))
+        self.force.measure(self.loops["main"])

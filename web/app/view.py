@@ -19,6 +19,7 @@ from ..constraint_drawing import constraint_geometry
 from .collisions import ObstacleEntry
 from .console import EEInput
 from .editing import ConstraintEntry
+from .force_control import ForceControl
 from .plant import PlantChoice
 from .shortfall import asked_angle, explained, ports_on_chain, shortfall_words
 from .status import Limitation, describe_limitation, not_following
@@ -40,6 +41,7 @@ class View:
     inputs: list[EEInput]
     joint_names: list[str]
     plant: PlantChoice
+    force: ForceControl
     _lock: threading.RLock
     _view_data: pin.Data
 
@@ -110,7 +112,8 @@ class View:
                         "config": self.config, "gain": self.gain, "damping": self.damping,
                         "plant": self.plant, "collisions": self._collisions_snapshot(),
                         "devices": self.devices_snapshot(),
-                        "absolute_orientation": self.absolute_orientation}
+                        "absolute_orientation": self.absolute_orientation,
+                        "force": self.force.snapshot(self.loops["main"])}
         robots = {which: self._robot_snapshot(state, constraints, targets)
                   for which, state in states.items()}
         entries = [{"id": entry_id, "kind": kind, "goal": goal,

@@ -10,7 +10,8 @@
   closer than the detection distance highlighted with their witness segments
   (:mod:`.collision_view`);
 * on a physics plant, the wall's force on the instrument at each port, an arrow scaled in
-  newtons (:mod:`.port_forces`);
+  newtons (:mod:`.port_forces`); a tissue under the tool, force control on it and the
+  contact force's arrow and plot (the Force tab, :mod:`.force_panel`);
 * the input devices (:mod:`.device_view`): they move in the frame of the view of the
   browser whose camera moved last; their state in the status; the feedback force plotted;
 * panels: a status (:mod:`.status_view`: rate, lateness, what limits each robot's EEs in
@@ -49,6 +50,7 @@ from .collision_panel import CollisionPanel
 from .collision_view import CollisionView
 from .constraint_panel import ConstraintPanel
 from .device_view import DeviceView
+from .force_panel import ForcePanel
 from .markers import Markers
 from .panels import Panels
 from .plots import Plots
@@ -191,6 +193,10 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
             self._build_collision_panel()
         with self.tabs.add_tab("Settings"):
             self._build_settings_panel()
+        force_tab = self.tabs.add_tab("Force")
+        with force_tab:
+            self.force_panel = ForcePanel(self.server, force_tab, self.app.force, self._guarded,
+                                          self._sync)
         self._plot_tab = self.tabs.add_tab("Plots")
         with self._plot_tab:
             self.plot_note = gui.add_markdown("the last 10 s, measured at 50 Hz; with a ghost, "
@@ -234,6 +240,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
                 if plot:
                     self._plot(snapshot)
                     self._plot_feedback(snapshot)
+                    self.force_panel.draw_plot(snapshot["force"], snapshot["robots"]["main"]["t"])
                     next_plot = start + 1.0 / PLOT_RATE
             except Exception as error:  # the view must never take the control loop down
                 self.summary.content = self.status.content = (
@@ -260,6 +267,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         self._draw_constraints(snapshot["constraints"],
                                None if ghost is None else ghost["constraints"])
         self._draw_ports(robots)
+        self.force_panel.draw(snapshot["force"])
         self._draw_obstacles(snapshot["collisions"]["obstacles"])
         self._draw_pairs(robots["main"]["collision_rows"], robots["main"]["q"],
                          snapshot["collisions"])

@@ -1,0 +1,80 @@
+"""Force control in the page's app (issue 36 item 5, docs/design.md 21.6), without a
+browser: the tissue placed under the tool, the hybrid law on the chosen axes, the contact
+force against stiffness x penetration from Pinocchio's kinematics of the simulated robot
+(an independent reference), the setpoint and axes taken at once, the refusals by name,
+and the compiled hot path back when force control is off."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from teleop.loop.force_controlled import ForceControlled
+from web.app import TeleopApp
+from web.app.force_control import TISSUE_GAP
+
+
+@pytest.fixture
+def app(sda10f, tmp_path):
+    return TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path, scene_dir=tmp_path / "scenes")
+
+
+def _true_contact(app) -> tuple[float, float]:
+    """The tissue's force from stiffness x penetration at the simulated robot's tip
+    (Pinocchio's kinematics of MuJoCo's qpos), and the plant's reported force."""
+    loop, tissue = app.loops["main"], app.force.tissue
+    q = loop.plant.mj_data.qpos.copy()
+    data = app.robot.model.createData()
+    pin.framesForwardKinematics(app.robot.model, data, q)
+    tip = data.oMf[app.robot.ee_frame_id].translation
+    depth = max(0.0, float((tissue.point - tip) @ tissue.normal))
+    return tissue.stiffness * depth, float(np.linalg.norm(loop.plant.measures().contact_forces[0]))
+
+
+def test_force_control_presses_the_tissue_at_the_setpoint(app):
+    for _ in range(50):
+        app.step()
+    tip = app.loops["main"].ee_placements()[0]
+    app.force.place_tissue()
+    tissue = app.force.tissue
+    np.testing.assert_allclose(tissue.point, tip.translation + TISSUE_GAP * tip.rotation[:, 2])
+    np.testing.assert_allclose(tissue.normal, -tip.rotation[:, 2])
+    app.force.set_enabled(True)
+    assert isinstance(app.loops["main"].controller, ForceControlled)
+    assert app.loops["main"].compiled is None  # the law needs the Python path
+    for _ in range(3000):  # 2 mm at 1 cm/s, then the force loop settles (g = 0.067)
+        app.step()
+    expected, reported = _true_contact(app)
+    assert expected == pytest.approx(1.0, abs=0.01) and reported == pytest.approx(expected,
+                                                                                  rel=1e-3)
+    state = app.snapshot()["force"]
+    assert state["enabled"] and state["history"].shape[0] > 100
+    np.testing.assert_allclose(np.linalg.norm(state["contact"]), reported, rtol=1e-9)
+    # the setpoint is taken at once by the running law
+    app.force.set_setpoint([0.0, 0.0, 2.0])
+    for _ in range(3000):
+        app.step()
+    expected, _ = _true_contact(app)
+    assert expected == pytest.approx(2.0, abs=0.02)
+    assert app.last_records["main"].status != "failed"
+    # off: the plain controller and the compiled hot path again
+    app.force.set_enabled(False)
+    assert not isinstance(app.loops["main"].controller, ForceControlled)
+    assert app.loops["main"].compiled is not None
+
+
+def test_force_control_refuses_what_it_cannot_do_by_name(app, sda10f, tmp_path):
+    with pytest.raises(ValueError, match="place the tissue first"):
+        app.force.set_enabled(True)
+    with pytest.raises(ValueError, match="within 5 N"):
+        app.force.set_setpoint([0.0, 0.0, 6.0])
+    with pytest.raises(ValueError, match="force setpoint"):
+        app.force.set_setpoint([0.0, np.nan, 1.0])
+    with pytest.raises(ValueError, match="at least one force axis"):
+        app.force.set_axes([False, False, False])
+    kinematic = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path / "scenes")
+    with pytest.raises(ValueError, match="kinematic plant has no body"):
+        kinematic.force.place_tissue()
+    assert app.force.setpoint.tolist() == [0.0, 0.0, 1.0] and app.force.axes == (False, False,
+                                                                                   True)

@@ -1,0 +1,201 @@
+"""Force control in the page (docs/design.md section 21.6): a tissue under the tool, the
+tool-frame hybrid law on chosen axes towards a setpoint, and the contact force the view
+draws (an arrow at the tip) and plots.
+
+A component of :class:`web.app.TeleopApp` (``app.force``), holding its own state:
+
+* :meth:`ForceControl.place_tissue` puts a :class:`~teleop.plants.tissue.TissueSurface`
+  (the default organ tissue, 21.1) :data:`TISSUE_GAP` beyond the main robot's tool tip,
+  its normal against the tool's z, into every loop's physics plant (each gets a fresh
+  MuJoCo plant with the tool's force/torque sensor, at rest where its robot is); only on
+  the mujoco plant (the kinematic one has no sensor: refused by name).
+* :meth:`ForceControl.set_enabled` wraps every loop's controller in
+  :class:`~teleop.loop.force_controlled.ForceControlled` (the loops are rebuilt: the law
+  needs the Python path), the law :class:`~teleop.loop.hybrid_force_motion.HybridForceMotion`
+  on the first EE, with palpation's settings (21.4): a loop gain ``k_f k_c dt`` of
+  :data:`LOOP_GAIN` whatever the rate, the approach at :data:`APPROACH_SPEED`, the 20 Hz
+  force filter (21.3); its stability check refuses, by name, a rate it does not hold at.
+* Every period :meth:`ForceControl.feed` hands each wrapped controller its plant's sensor
+  reading; on the history ticks :meth:`ForceControl.measure` keeps the main robot's true
+  contact force for the plot.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import weakref
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from constraints.validation import as_vector
+from teleop.loop import TeleopLoop
+from teleop.loop.force_controlled import ForceControlled
+from teleop.loop.hybrid_force_motion import HybridForceMotion
+from teleop.loop.tool_wrench import tool_wrench
+from teleop.plants import MujocoPlant
+from teleop.plants.tissue import TissueSurface
+
+from .limits import HISTORY_RATE, HISTORY_SECONDS
+
+#: how far beyond the tool tip the tissue is placed (m): the law closes the gap
+TISSUE_GAP = 2e-3
+#: the force loop's gain per period ``k_f k_c dt`` (palpation's at 1 kHz: 1 (m/s)/N on
+#: 66.7 N/m), so ``k_f`` scales with the rate
+LOOP_GAIN = 1.0 * 66.7 * 1e-3
+#: the force loop's speed bound (m/s): the tip meets the tissue at it
+APPROACH_SPEED = 0.01
+#: the cut-off of the law's filter on the sensed wrench (Hz)
+FILTER_CUTOFF = 20.0
+#: a setpoint's largest component (N)
+MAX_SETPOINT = 5.0
+
+
+class ForceControl:
+    """The page's force control (the app's ``force``); every method takes the app's lock."""
+
+    def __init__(self, app: Any) -> None:
+        self._app = app
+        self._lock: threading.RLock = app._lock
+        #: the tissue placed (None: none)
+        self.tissue: TissueSurface | None = None
+        self.enabled = False
+        #: the force to exert along each tool axis (N), and which axes are force-controlled
+        self.setpoint = np.array([0.0, 0.0, 1.0])
+        self.axes: tuple[bool, bool, bool] = (False, False, True)
+        #: the main robot's true contact force at the history ticks: (t, fx, fy, fz) world
+        self.history: collections.deque = collections.deque(
+            maxlen=int(HISTORY_SECONDS * HISTORY_RATE))
+        #: the wrapped controllers this component made (the loops' while force control is on)
+        self._wrappers: weakref.WeakSet[ForceControlled] = weakref.WeakSet()
+
+    # -- the operator's actions -----------------------------------------------------------
+
+    def place_tissue(self) -> None:
+        """The tissue :data:`TISSUE_GAP` beyond the main robot's tool tip, against its z,
+        in every loop's plant (a fresh plant with the sensor, at rest where its robot is)."""
+        app = self._app
+        if not app.plant.physical:
+            raise ValueError(f"a tissue needs the mujoco plant (teleop web --plant mujoco): "
+                             f"the {app.plant.kind} plant has no body to press it nor a "
+                             f"force/torque sensor")
+        with self._lock:
+            tip = app.loops["main"].ee_placements()[0]
+            self.tissue = TissueSurface(tip.translation + TISSUE_GAP * tip.rotation[:, 2],
+                                        -tip.rotation[:, 2])
+            for loop in app.loops.values():
+                loop.plant = self.plant(loop.config.dt)
+                loop.plant.reset(loop.q)
+            self.history.clear()
+
+    def set_enabled(self, enabled: bool) -> None:
+        """Force control on (every loop's controller through the law) or off; on needs a
+        tissue (its sensor). The loops are rebuilt, keeping their state."""
+        if not isinstance(enabled, (bool, np.bool_)):
+            raise ValueError(f"force control is True or False, got {enabled!r}")
+        if enabled and self.tissue is None:
+            raise ValueError("place the tissue first: force control reads the tool's "
+                             "force/torque sensor, which comes with it")
+        with self._lock:
+            previous, self.enabled = self.enabled, bool(enabled)
+        try:
+            self._app.set_controller(self._app.specs["main"])  # new loops, state kept
+            if "ghost" in self._app.specs:
+                self._app.set_ghost(self._app.specs["ghost"])
+        except ValueError:
+            with self._lock:
+                self.enabled = previous
+            raise
+
+    def set_setpoint(self, setpoint: Sequence[float]) -> None:
+        """The force to exert along the tool's x, y, z (N, each within
+        :data:`MAX_SETPOINT`); the running laws take it at once."""
+        value = as_vector(setpoint, 3, "force setpoint")
+        if np.max(np.abs(value)) > MAX_SETPOINT:
+            raise ValueError(f"force setpoint components must be within {MAX_SETPOINT:g} N, "
+                             f"got {value.tolist()}")
+        with self._lock:
+            self.setpoint = value
+            self._update_laws()
+
+    def set_axes(self, axes: Sequence[bool]) -> None:
+        """Which tool axes are force-controlled (at least one); the running laws take it."""
+        chosen = tuple(bool(axis) for axis in axes)
+        if len(chosen) != 3 or not all(isinstance(a, (bool, np.bool_)) for a in axes):
+            raise ValueError(f"force axes must be 3 booleans, got {axes!r}")
+        if not any(chosen):
+            raise ValueError("force control needs at least one force axis (x, y or z)")
+        with self._lock:
+            self.axes = (chosen[0], chosen[1], chosen[2])
+            self._update_laws()
+
+    # -- the hooks of the app's loops and tick --------------------------------------------
+
+    def plant(self, dt: float) -> Any:
+        """A fresh plant for a loop of period ``dt``: the session's, with the tissue and
+        the tool's sensor once one is placed."""
+        app = self._app
+        if self.tissue is None:
+            return app.plant.make(app.robot, dt)
+        return MujocoPlant(app.robot, dt, app.plant.settings, tissues=[self.tissue])
+
+    def wrapped(self, controller: Any, dt: float) -> Any:
+        """``controller`` through the law when force control is on, else itself."""
+        if not self.enabled or self.tissue is None:
+            return controller
+        wrapper = ForceControlled(controller, self._law(dt))
+        self._wrappers.add(wrapper)
+        return wrapper
+
+    def feed(self, loops: dict[str, TeleopLoop]) -> None:
+        """Each wrapped controller gets its plant's sensor reading of the last period (none
+        yet after a reset: it keeps the one it has, zero at first; caller holds the
+        lock)."""
+        if not self.enabled:
+            return
+        for loop in loops.values():
+            if (loop.controller in self._wrappers and loop.plant is not None
+                    and len(loop.plant.measures().tool_wrenches)):
+                loop.controller.sense(tool_wrench(loop.plant, 0))
+
+    def measure(self, loop: TeleopLoop) -> None:
+        """The main robot's true contact force now, for the plot (caller holds the lock)."""
+        if self.tissue is None or loop.plant is None:
+            return
+        contact = loop.plant.measures().contact_forces
+        if len(contact):
+            self.history.append((loop.t, *np.asarray(contact[0], dtype=float)))
+
+    def snapshot(self, loop: TeleopLoop) -> dict:
+        """What the view draws (caller holds the lock): the settings, the tissue, the tip
+        and the true contact force on it (world), the sensed one (tool frame), the plot's
+        columns."""
+        contact, sensed = np.zeros(3), np.zeros(6)
+        if self.tissue is not None and loop.plant is not None:
+            measures = loop.plant.measures()
+            if len(measures.contact_forces):
+                contact = np.array(measures.contact_forces[0], dtype=float)
+                sensed = np.array(measures.tool_wrenches[0], dtype=float)
+        tip: pin.SE3 = loop.ee_placements()[0]
+        history = np.array(self.history, dtype=float).reshape(-1, 4)
+        return {"available": bool(self._app.plant.physical), "enabled": self.enabled,
+                "setpoint": self.setpoint.copy(), "axes": self.axes,
+                "tissue": None if self.tissue is None else (self.tissue.point.copy(),
+                                                            self.tissue.normal.copy()),
+                "tip": tip.translation.copy(), "contact": contact, "sensed": sensed,
+                "history": history}
+
+    def _law(self, dt: float) -> HybridForceMotion:
+        assert self.tissue is not None
+        stiffness = self.tissue.stiffness
+        return HybridForceMotion(self.axes, self.setpoint, LOOP_GAIN / (stiffness * dt),
+                                 stiffness, dt, max_speed=APPROACH_SPEED,
+                                 filter_cutoff=FILTER_CUTOFF)
+
+    def _update_laws(self) -> None:
+        """The running laws take the settings (caller holds the lock)."""
+        for wrapper in self._wrappers:
+            wrapper.law.set_target(self.axes, self.setpoint)
