@@ -1,7 +1,11 @@
-// Damped least squares with the rising damping of paper eq 35, through one thin SVD: the
-// C++ twin of controllers/linalg.py's DampingPolicy and damped_least_squares
-// (docs/design.md sections 4.2 and 16).
+// Damped least squares with the rising damping of paper eq 35: the C++ twin of
+// controllers/linalg.py's DampingPolicy and damped_least_squares (docs/design.md sections
+// 4.2 and 16). The decomposition is chosen by the problem (section 16, "the decomposition
+// chosen by the problem"): the QR of the matrix's tall orientation solves it when a
+// certified bound shows it well conditioned, the thin SVD only otherwise.
 #pragma once
+
+#include <Eigen/Eigenvalues>
 
 #include "dense.hpp"
 
@@ -27,19 +31,41 @@ struct DampingPolicy {
 //! ``x = J^T (J J^T + lambda^2 I)^-1 r`` for one or more right-hand sides, with what
 //! controllers.linalg.DampedSolution reports: sigma_min, lambda, the rank (singular
 //! values kept), the row space and whether the solution is exact.
+//!
+//! Every factorisation starts with the QR of the tall orientation, ``T = Q [R; 0]``
+//! (``T = J`` when J has at least as many rows as columns, else ``J^T``). When
+//! ``1 / ||R^-1||_F`` (a lower bound on sigma_min) is at least the policy's threshold and
+//! clears the rank cut, with no constant damping and ``||R||_F ||R^-1||_F <=``
+//! kMaxConditionBound, the SVD's decisions are known without it: full rank and
+//! ``lambda = 0``, so ``x = R^-1 (Q^T r)_head`` (tall J: its least squares) or
+//! ``x = Q [R^-T r; 0]`` (wide J: its minimum norm), and sigma_min, which the report
+//! carries, is ``1 / sqrt(lambda_max(R^-T R^-1))`` (a symmetric eigenvalue problem of
+//! size ``min(p, q)``). Otherwise the Jacobi SVD of R finishes the thin SVD and decides.
 class DampedLeastSquares {
  public:
+  //! Largest ``min(p, q)`` the QR path takes (its eigenvalue storage is fixed-size).
+  static constexpr int kMaxQrSize = 16;
+  //! Largest ``||R||_F ||R^-1||_F`` (>= the condition number) the QR path takes: its
+  //! sigma_min, from the computed ``R^-1``, is then within about ``t eps kappa`` (< 1e-11)
+  //! relative of the SVD's, far inside the 1e-9 the two backends are held to.
+  static constexpr double kMaxConditionBound = 1e4;
+
   //! Singular values at or below ``rank_tolerance`` times ``max(1, sigma_max)`` count
   //! as zero (controllers.linalg's rank_tolerance).
   DampedLeastSquares(Index max_rows, Index max_cols, double rank_tolerance)
       : rank_tolerance_(rank_tolerance), svd_(max_rows, max_cols), gains_(std::max<Index>(1, std::min(max_rows, max_cols))),
-        projected_(std::max<Index>(1, std::min(max_rows, max_cols)), 2),
+        projected_(std::max<Index>(1, std::max(max_rows, max_cols)), 2),
         row_space_(std::max<Index>(1, max_cols), std::max<Index>(1, std::min(max_rows, max_cols))) {}
 
   //! Factor ``matrix`` (p x q) and set the gains of the policy.
   void factor(const ConstMatrixRef& matrix, const DampingPolicy& policy) {
-    svd_.compute(matrix);
     rows_ = matrix.rows();
+    cols_ = matrix.cols();
+    svd_.factor_qr(matrix);
+    by_qr_ = policy.damping == 0.0 && well_conditioned(policy);
+    row_space_ready_ = !by_qr_;
+    if (by_qr_) return;
+    svd_.finish();
     const auto s = svd_.s();
     const double tolerance = rank_tolerance_ * std::max(1.0, svd_.max_value());
     // sigma_min: the smallest value kept (a direction not seen at all is not damped)
@@ -53,14 +79,31 @@ class DampedLeastSquares {
     for (Index j = 0; j < s.size(); ++j) {
       const bool keep = s(j) > tolerance;
       gains_(j) = keep ? s(j) / (s(j) * s(j) + lam2) : 0.0;
-      if (keep) row_space_.col(rank_++).head(matrix.cols()) = svd_.v().col(j);
+      if (keep) row_space_.col(rank_++).head(cols_) = svd_.v().col(j);
     }
     exact_ = lam2 == 0.0 && rank_ == rows_;
   }
 
-  //! ``x = V diag(gains) U^T rhs`` for each column of ``rhs`` (at most 2).
+  //! ``x`` for each column of ``rhs`` (at most 2): ``V diag(gains) U^T rhs`` after the
+  //! SVD, the class's triangular solves after the QR alone.
   void solve(const ConstMatrixRef& rhs, MatrixRef x) {
     const Index t = svd_.size();
+    if (by_qr_) {
+      const auto r = svd_.qr().topRows(t).triangularView<Eigen::Upper>();
+      if (svd_.tall()) {  // J = Q [R; 0]: x = R^-1 (Q^T r)_head
+        auto projected = projected_.topLeftCorner(rows_, rhs.cols());
+        projected = rhs;
+        apply_qt(svd_.qr(), svd_.tau(), projected);
+        x = projected.topRows(t);
+        r.solveInPlace(x);
+      } else {  // J^T = Q [R; 0]: x = Q [R^-T r; 0]
+        x.topRows(t) = rhs;
+        r.transpose().solveInPlace(x.topRows(t));
+        x.bottomRows(cols_ - t).setZero();
+        apply_q(svd_.qr(), svd_.tau(), x);
+      }
+      return;
+    }
     auto projected = projected_.topLeftCorner(t, rhs.cols());
     projected.noalias() = svd_.u().transpose() * rhs;
     projected = gains_.head(t).asDiagonal() * projected;
@@ -71,17 +114,59 @@ class DampedLeastSquares {
   double damping() const { return damping_; }
   Index rank() const { return rank_; }
   bool exact() const { return exact_; }
-  //! Right singular vectors with a kept singular value (as columns).
-  auto row_space() const { return row_space_.topLeftCorner(svd_.v().rows(), rank_); }
+  //! Whether the last factorisation was solved by the QR alone (no SVD).
+  bool by_qr() const { return by_qr_; }
+  //! An orthonormal basis of the row space (as columns): the right singular vectors with
+  //! a kept singular value, or after the QR alone ``I`` (tall J) or Q's first ``p``
+  //! columns (wide J), formed at the first call.
+  auto row_space() {
+    if (!row_space_ready_) {
+      auto basis = row_space_.topLeftCorner(cols_, rank_);
+      basis.setZero();
+      basis.topRows(rank_).setIdentity();
+      if (!svd_.tall()) apply_q(svd_.qr(), svd_.tau(), basis);
+      row_space_ready_ = true;
+    }
+    return row_space_.topLeftCorner(cols_, rank_);
+  }
 
  private:
+  using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxQrSize, kMaxQrSize>;
+
+  //! The class's test on the R of the QR; when it holds, the solution's figures are set.
+  bool well_conditioned(const DampingPolicy& policy) {
+    const Index t = svd_.size();
+    if (t == 0 || t > kMaxQrSize) return false;
+    const auto r = svd_.qr().topRows(t).triangularView<Eigen::Upper>();
+    inverse_.setIdentity(t, t);
+    r.solveInPlace(inverse_);
+    const double inverse_norm = inverse_.norm();
+    double largest2 = 0.0;  // ||R||_F^2 (>= sigma_max^2)
+    for (Index j = 0; j < t; ++j) largest2 += svd_.qr().col(j).head(j + 1).squaredNorm();
+    const double largest = std::sqrt(largest2);
+    const double bound = 1.0 / inverse_norm;  // <= sigma_min
+    if (!(std::isfinite(bound) && bound >= policy.threshold &&
+          bound > rank_tolerance_ * std::max(1.0, largest) &&
+          largest * inverse_norm <= kMaxConditionBound))
+      return false;
+    gram_.noalias() = inverse_.transpose() * inverse_;  // R^-T R^-1: eigenvalues 1 / sigma_i^2
+    eigen_.compute(gram_, Eigen::EigenvaluesOnly);
+    sigma_min_ = 1.0 / std::sqrt(eigen_.eigenvalues()(t - 1));
+    damping_ = 0.0;
+    rank_ = t;
+    exact_ = rank_ == rows_;
+    return true;
+  }
+
   double rank_tolerance_;
   ThinSvd svd_;
   Vector gains_;
   Matrix projected_, row_space_;
-  Index rows_ = 0, rank_ = 0;
+  SmallMatrix inverse_, gram_;
+  Eigen::SelfAdjointEigenSolver<SmallMatrix> eigen_{kMaxQrSize};
+  Index rows_ = 0, cols_ = 0, rank_ = 0;
   double sigma_min_ = 0.0, damping_ = 0.0;
-  bool exact_ = false;
+  bool exact_ = false, by_qr_ = false, row_space_ready_ = true;
 };
 
 }  // namespace cjm

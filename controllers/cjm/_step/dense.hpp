@@ -142,15 +142,29 @@ class ThinSvd {
   //! ``m = U diag(s) V^T`` with ``t = min(p, q)`` singular values (unsorted), ``U``
   //! (p x t) and ``V`` (q x t): QR of the tall orientation, then Jacobi on its R.
   void compute(const ConstMatrixRef& m) {
+    factor_qr(m);
+    finish();
+  }
+
+  //! The first half of :func:`compute`: the Householder QR of the tall orientation of
+  //! ``m`` (``m`` itself when ``p >= q``, else ``m^T``), read through :func:`qr` and
+  //! :func:`tau`; :func:`finish` then completes the SVD from it.
+  void factor_qr(const ConstMatrixRef& m) {
     rows_ = m.rows();
     cols_ = m.cols();
-    const bool tall = rows_ >= cols_;
-    const Index p = tall ? rows_ : cols_, t = tall ? cols_ : rows_;
+    const Index p = tall() ? rows_ : cols_, t = size();
     auto tall_copy = work_.topLeftCorner(p, t);
-    if (tall) tall_copy = m;
+    if (tall()) tall_copy = m;
     else tall_copy = m.transpose();
+    householder_qr(tall_copy, tau_.head(t));
+  }
+
+  //! The second half of :func:`compute`: Jacobi on the R of :func:`factor_qr`.
+  void finish() {
+    const bool tall = this->tall();
+    const Index p = tall ? rows_ : cols_, t = size();
+    auto tall_copy = work_.topLeftCorner(p, t);
     auto tau = tau_.head(t);
-    householder_qr(tall_copy, tau);
     auto r = square_.topLeftCorner(t, t);
     r = tall_copy.topRows(t).triangularView<Eigen::Upper>();
     auto rotations = rotations_.topLeftCorner(t, t);
@@ -169,6 +183,11 @@ class ThinSvd {
   }
 
   Index size() const { return std::min(rows_, cols_); }
+  //! Whether the factored matrix has at least as many rows as columns (its QR is its own).
+  bool tall() const { return rows_ >= cols_; }
+  //! The QR of :func:`factor_qr` in dgeqr2's layout (``max(p, q) x min(p, q)``).
+  auto qr() const { return work_.topLeftCorner(std::max(rows_, cols_), size()); }
+  auto tau() const { return tau_.head(size()); }
   auto u() const { return u_.topLeftCorner(rows_, size()); }
   auto v() const { return v_.topLeftCorner(cols_, size()); }
   auto s() const { return s_.head(size()); }

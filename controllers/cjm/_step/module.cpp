@@ -12,6 +12,7 @@
 #include <cstdint>
 
 #include "collision_bindings.hpp"
+#include "damped.hpp"
 #include "pipeline.hpp"
 #include "tick.hpp"
 
@@ -200,6 +201,25 @@ struct BoundTick : cjm::Tick {
 
 PYBIND11_MODULE(_step, module) {
   module.doc() = "The compiled CJM step (docs/design.md section 16).";
+
+  module.def(
+      "damped_least_squares",
+      [](const cjm::Matrix& matrix, const cjm::Matrix& rhs, double damping, double threshold,
+         double max_damping, double rank_tolerance) {
+        if (rhs.rows() != matrix.rows() || rhs.cols() < 1 || rhs.cols() > 2)
+          throw py::value_error("rhs must have the matrix's rows and 1 or 2 columns");
+        cjm::DampedLeastSquares dls(matrix.rows(), matrix.cols(), rank_tolerance);
+        dls.factor(matrix, cjm::DampingPolicy{damping, threshold, max_damping});
+        cjm::Matrix x(matrix.cols(), rhs.cols());
+        dls.solve(rhs, x);
+        const cjm::Matrix row_space = dls.row_space();
+        return py::make_tuple(x, dls.sigma_min(), dls.damping(), dls.rank(), dls.exact(),
+                              row_space, dls.by_qr());
+      },
+      py::arg("matrix"), py::arg("rhs"), py::arg("damping"), py::arg("threshold"),
+      py::arg("max_damping"), py::arg("rank_tolerance"),
+      "The step's damped least squares of one matrix (tests): (x, sigma_min, damping, rank, "
+      "exact, row space as columns, whether the QR alone solved it).");
 
   py::class_<cjm::ConstraintPlan>(module, "ConstraintPlan")
       .def(py::init([](Index rows, bool equality, bool analytical, std::vector<Index> pre,
