@@ -56,6 +56,13 @@ TOLERANCE_RANGE = (1e-12, 1e-11)
 #: crawl to its iteration cap (docs/design.md 10.2).
 PROXQP_RHO = 1e-4
 
+#: proxqp's ``rho`` relative to ``lambda_min`` for a second solve of a stage that ran to its
+#: caps with :data:`PROXQP_RHO`: where collision rows and trocar rows meet the box in a
+#: sliver, the task stage ran to its caps in a third of the collision fuzz's steps and
+#: converges at this one. Not the first choice: on the least-residual stage of a lock
+#: against a collision pair it stops 1e-5 m/s from the optimum (docs/design.md 18.7).
+PROXQP_CAPPED_RHO = 1e-8
+
 #: proxqp's threshold for certifying primal infeasibility (its ``eps_primal_inf``, a
 #: field of the persistent objects' settings, which ``proxqp.dense.solve`` through
 #: qpsolvers does not take). With the small ``rho`` of a redundant robot

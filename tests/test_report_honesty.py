@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from controllers.numerics import PROXQP_RHO
+from controllers.optimization import proxqp as proxqp_backend
 from controllers.optimization.budget import ITERATION_CAPS
 from teleop.experiments.compare import compare, metrics_document
 from teleop.experiments.metrics_table import TABLE_COLUMNS
@@ -20,6 +22,9 @@ def test_a_solver_out_of_iterations_is_named_and_counted_in_the_report(monkeypat
     box is active, some steps fail; the report names the message with the number of
     failed steps the run recorded, and the first one."""
     monkeypatch.setitem(ITERATION_CAPS, "proxqp", {"max_iter": 1, "max_iter_in": 1})
+    # a capped solve is solved again with PROXQP_CAPPED_RHO, which finishes these stages in
+    # one iteration; with the first rho again it runs out a second time
+    monkeypatch.setattr(proxqp_backend, "PROXQP_CAPPED_RHO", PROXQP_RHO)
     plan = load_scenario("joint-limits")
     results = compare(plan, ["qp:proxqp"], duration=0.5, progress=False)
     result = results["qp:proxqp"]

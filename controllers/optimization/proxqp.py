@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..base import SolverError
-from ..numerics import PROXQP_PRIMAL_INFEASIBILITY, PROXQP_RHO
+from ..numerics import PROXQP_CAPPED_RHO, PROXQP_PRIMAL_INFEASIBILITY, PROXQP_RHO
 from .budget import StepBudget
 from .problem import QPSolution, QuadraticProgram
 
@@ -42,7 +42,8 @@ class ProxQPSolver:
     previous result now and then stopped at a spurious ``PROXQP_PRIMAL_INFEASIBLE`` on
     independent configurations. With a warm start chosen, a step that does not reach
     ``PROXQP_SOLVED`` is solved again from the equality-constrained guess before it is
-    reported as a failure.
+    reported as a failure. A solve that runs to its caps with ``rho`` set from the
+    curvature is solved once more with ``PROXQP_CAPPED_RHO`` in its place.
     """
 
     def __init__(self, settings: dict, tuned: frozenset[str]) -> None:
@@ -61,6 +62,7 @@ class ProxQPSolver:
         self.initial_guess = guess
         self.fallback_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
         self.solved = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
+        self.capped = proxsuite.proxqp.QPSolverOutput.PROXQP_MAX_ITER_REACHED
         self.tuned = tuned  # of "eps_abs", "rho": set from the curvature, per solve
         self.solvers: dict[tuple[int, int, int, bool], Any] = {}  # proxsuite's dense QPs
 
@@ -74,6 +76,11 @@ class ProxQPSolver:
 
     def reset(self) -> None:
         self.solvers.clear()
+
+    def penalties(self, qp: Any) -> dict[str, float]:
+        """The initial ``mu_eq``, ``mu_in`` of ``qp`` (the user's, else proxqp's)."""
+        return {"mu_eq": self.init_arguments.get("mu_eq", qp.settings.default_mu_eq),
+                "mu_in": self.init_arguments.get("mu_in", qp.settings.default_mu_in)}
 
     def solve(self, problem: QuadraticProgram, budget: StepBudget) -> QPSolution:
         budget.remaining("proxqp")
@@ -97,9 +104,7 @@ class ProxQPSolver:
         else:
             if "eps_abs" in self.tuned:
                 qp.settings.eps_abs = problem.tolerance()
-            penalties = {"mu_eq": self.init_arguments.get("mu_eq", qp.settings.default_mu_eq),
-                         "mu_in": self.init_arguments.get("mu_in", qp.settings.default_mu_in)}
-            qp.update(*arguments, **proximal, **penalties)
+            qp.update(*arguments, **proximal, **self.penalties(qp))
         qp.solve()
         status = qp.results.info.status
         if status != self.solved and self.initial_guess != self.fallback_guess:
@@ -107,9 +112,13 @@ class ProxQPSolver:
             qp.solve()
             qp.settings.initial_guess = self.initial_guess
             status = qp.results.info.status
+        if status == self.capped and "rho" in self.tuned:
+            qp.update(rho=min(1e-6, PROXQP_CAPPED_RHO * problem.curvature), **self.penalties(qp))
+            qp.solve()
+            status = qp.results.info.status
         if status != self.solved:
             self.reset()
-            if status == self._proxqp.QPSolverOutput.PROXQP_MAX_ITER_REACHED:
+            if status == self.capped:
                 raise budget.exceeded("proxqp", f"iteration limit ({qp.settings.max_iter} "
                                       f"x {qp.settings.max_iter_in} iterations)")
             raise SolverError(f"proxqp found no solution ({status.name})")

@@ -11,7 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..base import EQUALITY_TOLERANCE
+from ..base import EQUALITY_TOLERANCE, SolverError
 from ..linalg import nullspace
 from ..numerics import INFINITE_BOUND, RANK_TOLERANCE
 from ..optimization.problem import QPSolution, QuadraticProgram
@@ -44,7 +44,10 @@ def posture_stage(stage_1: QPSolution, null_basis: np.ndarray, posture_velocity:
     the identity as Hessian: ``min 1/2 |z - N^T (qd_posture - qd_1)|^2`` under the
     other inequalities, whose bounds are widened to hold ``z = 0`` (``qd_1`` may sit
     outside by the task solve's tolerance; the base class clips that back). Where the
-    unconstrained minimiser already fits, it is the answer without a solve.
+    unconstrained minimiser already fits, it is the answer without a solve. Where the
+    posture QP fails (its rows leave a sliver or the point ``z = 0`` alone, on which
+    daqp stops as infeasible and proxqp at its caps), ``z = 0`` is the answer: it holds
+    every row and the task stage's optimum; only the posture is not optimised.
     """
     qd_1 = stage_1.x
     active = max(ACTIVE_MULTIPLIER, eps_abs)
@@ -80,7 +83,10 @@ def posture_stage(stage_1: QPSolution, null_basis: np.ndarray, posture_velocity:
         return qd_1 + move
     posture = QuadraticProgram(np.eye(target.size), -target, rows=rows,
                                rows_lower=rows_lower, rows_upper=rows_upper)
-    return qd_1 + null_basis @ solve(posture).x
+    try:
+        return qd_1 + null_basis @ solve(posture).x
+    except SolverError:  # a sliver or a point around z = 0, which holds every row
+        return qd_1
 
 
 def polish_on_face(stage_1: QPSolution, held_joints: np.ndarray, held_rows: np.ndarray,
