@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,7 +21,8 @@ import numpy as np
 from teleop.plants.choice import PlantChoice
 
 from .compare import output_directory
-from .palpation import DESCRIPTION, SETPOINT, SETTLE, SLIDE_TIME, PalpationMeasures, run_palpation
+from . import palpation, retraction
+from .contact_run import ContactMeasures, ContactTask, run_contact
 
 #: The version of ``contact_metrics.json``'s layout.
 CONTACT_SCHEMA_VERSION = 1
@@ -36,18 +37,17 @@ CONTACT_MEASURES = (
 
 @dataclass(frozen=True)
 class ContactScenario:
-    """A contact scenario: one line for humans, its duration (s) and the function running
-    one controller through it (``run(spec, dt=, duration=, sensor_noise=, seed=,
-    plant=, acceleration_limits=, jerk_limit=, force_filter=)``)."""
+    """A contact scenario: one line for humans and its task
+    (:func:`~teleop.experiments.contact_run.run_contact` runs it)."""
 
     description: str
-    duration: float
-    run: Callable[..., PalpationMeasures]
+    task: ContactTask
 
 
 #: The contact scenarios by name (``teleop compare --scenario NAME --plant mujoco``).
 CONTACT_SCENARIOS: dict[str, ContactScenario] = {
-    "palpation": ContactScenario(DESCRIPTION, SETTLE + SLIDE_TIME + 0.5, run_palpation),
+    "palpation": ContactScenario(palpation.DESCRIPTION, palpation.PALPATION),
+    "retraction": ContactScenario(retraction.DESCRIPTION, retraction.RETRACTION),
 }
 
 
@@ -55,7 +55,7 @@ def compare_contact(name: str, specs: Sequence[str], plant: PlantChoice, rate: f
                     duration: float | None = None, sensor_noise: float = 0.0, seed: int = 0,
                     acceleration_limits: bool = True, jerk_limit: float | None = None,
                     force_filter: float | None = None,
-                    progress: bool = True) -> tuple[dict, dict[str, PalpationMeasures]]:
+                    progress: bool = True) -> tuple[dict, dict[str, ContactMeasures]]:
     """Run every controller of ``specs`` through contact scenario ``name`` on ``plant``
     (the mujoco plant: ``ValueError`` naming the plant otherwise), the same sensor noise
     and seed for each; returns the ``contact_metrics.json`` document and the measures."""
@@ -70,21 +70,21 @@ def compare_contact(name: str, specs: Sequence[str], plant: PlantChoice, rate: f
     if not specs or len(set(specs)) != len(specs):
         raise ValueError(f"controllers must be at least one, none twice, got {specs!r}")
     dt = 1.0 / rate
-    duration = scenario.duration if duration is None else duration
+    duration = scenario.task.duration if duration is None else duration
     results = {}
     for spec in specs:
         started = time.perf_counter()
-        results[spec] = scenario.run(spec, dt=dt, duration=duration, sensor_noise=sensor_noise,
-                                     seed=seed, plant=plant,
-                                     acceleration_limits=acceleration_limits,
-                                     jerk_limit=jerk_limit, force_filter=force_filter)
+        results[spec] = run_contact(scenario.task, spec, dt=dt, duration=duration,
+                                    sensor_noise=sensor_noise, seed=seed, plant=plant,
+                                    acceleration_limits=acceleration_limits,
+                                    jerk_limit=jerk_limit, force_filter=force_filter)
         if progress:
             print(f"{name}: {spec} done ({time.perf_counter() - started:.1f} s)",
                   file=sys.stderr, flush=True)
     document = {
         "schema_version": CONTACT_SCHEMA_VERSION, "scenario": name,
         "description": scenario.description, "rate_hz": rate, "duration_s": duration,
-        "setpoint_n": SETPOINT, "sensor_noise_n": sensor_noise, "seed": seed,
+        "setpoint_n": scenario.task.setpoint, "sensor_noise_n": sensor_noise, "seed": seed,
         "force_filter_hz": force_filter, "plant": plant.to_dict(),
         "acceleration_limits": acceleration_limits, "jerk_limit": jerk_limit,
         "units": {key: unit for key, unit, _ in CONTACT_MEASURES},
@@ -116,7 +116,7 @@ def format_contact_table(document: dict) -> str:
                      for line in (headings, *rows))
 
 
-def write_contact_outputs(document: dict, results: dict[str, PalpationMeasures],
+def write_contact_outputs(document: dict, results: dict[str, ContactMeasures],
                           out_dir: str | Path, plots: bool = True) -> list[Path]:
     """``contact_metrics.json`` and, with ``plots``, ``contact_force.png`` (every
     controller's true contact force over time, the setpoint dashed) into ``out_dir``."""
