@@ -11,8 +11,11 @@ import pinocchio as pin
 import pytest
 
 from teleop.loop.force_controlled import ForceControlled
+from teleop.loop.hybrid_force_motion import HybridForceMotion
+from teleop.plants.tissue import DEFAULT_TISSUE_STIFFNESS
 from web.app import TeleopApp
-from web.app.force_control import TISSUE_GAP
+from web.app.force_control import FILTER_CUTOFF, TISSUE_GAP, force_gain_at
+from web.app.limits import MAX_RATE, MIN_RATE
 
 
 @pytest.fixture
@@ -78,3 +81,30 @@ def test_force_control_refuses_what_it_cannot_do_by_name(app, sda10f, tmp_path):
         kinematic.force.place_tissue()
     assert app.force.setpoint.tolist() == [0.0, 0.0, 1.0] and app.force.axes == (False, False,
                                                                                    True)
+
+
+@pytest.mark.parametrize("rate", [250.0, 2000.0])
+def test_force_control_presses_at_the_setpoint_at_other_rates(sda10f, tmp_path, rate):
+    """The gain is palpation's (1 (m/s)/N) where the check accepts it, else 0.9 of the
+    largest it accepts (250 Hz: 0.69); the tissue is pressed at 1 N either way."""
+    app = TeleopApp(sda10f, plant="mujoco", rate=rate, record_dir=tmp_path,
+                    scene_dir=tmp_path / "scenes")
+    app.force.place_tissue()
+    app.force.set_enabled(True)
+    for _ in range(int(4.0 * rate)):
+        app.step()
+    expected, reported = _true_contact(app)
+    assert expected == pytest.approx(1.0, abs=0.01) and reported == pytest.approx(expected,
+                                                                                  rel=1e-3)
+
+
+@pytest.mark.parametrize("rate", [MIN_RATE, 100.0, 250.0, 500.0, 1000.0, 2000.0, MAX_RATE])
+def test_the_page_law_is_inside_its_stability_check_at_every_rate(rate):
+    dt = 1.0 / rate
+    gain = force_gain_at(DEFAULT_TISSUE_STIFFNESS, dt)
+    assert 0.0 < gain <= 1.0
+    HybridForceMotion((False, False, True), (0, 0, 1), gain, DEFAULT_TISSUE_STIFFNESS, dt,
+                      filter_cutoff=FILTER_CUTOFF)  # accepted: no ValueError
+    with pytest.raises(ValueError, match="force_gain"):  # the share is near the bound
+        HybridForceMotion((False, False, True), (0, 0, 1), 1.2 * gain / 0.9 if gain < 1.0
+                          else 1e3, DEFAULT_TISSUE_STIFFNESS, dt, filter_cutoff=FILTER_CUTOFF)

@@ -12,9 +12,10 @@ A component of :class:`web.app.TeleopApp` (``app.force``), holding its own state
 * :meth:`ForceControl.set_enabled` wraps every loop's controller in
   :class:`~teleop.loop.force_controlled.ForceControlled` (the loops are rebuilt: the law
   needs the Python path), the law :class:`~teleop.loop.hybrid_force_motion.HybridForceMotion`
-  on the first EE, with palpation's settings (21.4): a loop gain ``k_f k_c dt`` of
-  :data:`LOOP_GAIN` whatever the rate, the approach at :data:`APPROACH_SPEED`, the 20 Hz
-  force filter (21.3); its stability check refuses, by name, a rate it does not hold at.
+  on the first EE, with palpation's settings (21.4) where the rate allows them: the
+  force gain :data:`FORCE_GAIN`, lowered to :data:`GAIN_SHARE` of the largest the
+  stability check accepts at the rate when that is less (:func:`force_gain_at`), the
+  approach at :data:`APPROACH_SPEED`, the 20 Hz force filter (21.3).
 * Every period :meth:`ForceControl.feed` hands each wrapped controller its plant's sensor
   reading; on the history ticks :meth:`ForceControl.measure` keeps the main robot's true
   contact force for the plot.
@@ -23,6 +24,7 @@ A component of :class:`web.app.TeleopApp` (``app.force``), holding its own state
 from __future__ import annotations
 
 import collections
+import math
 import threading
 import weakref
 from collections.abc import Sequence
@@ -34,6 +36,7 @@ import pinocchio as pin
 from constraints.validation import as_vector
 from teleop.loop import TeleopLoop
 from teleop.loop.force_controlled import ForceControlled
+from teleop.loop.force_stability import GAIN_MARGIN, force_loop_bound
 from teleop.loop.hybrid_force_motion import HybridForceMotion
 from teleop.loop.tool_wrench import tool_wrench
 from teleop.plants import MujocoPlant
@@ -43,9 +46,13 @@ from .limits import HISTORY_RATE, HISTORY_SECONDS
 
 #: how far beyond the tool tip the tissue is placed (m): the law closes the gap
 TISSUE_GAP = 2e-3
-#: the force loop's gain per period ``k_f k_c dt`` (palpation's at 1 kHz: 1 (m/s)/N on
-#: 66.7 N/m), so ``k_f`` scales with the rate
-LOOP_GAIN = 1.0 * 66.7 * 1e-3
+#: the force gain ``k_f`` ((m/s)/N): palpation's
+FORCE_GAIN = 1.0
+#: the share of the largest gain the stability check accepts that a rate too slow or too
+#: fast for :data:`FORCE_GAIN` gets
+GAIN_SHARE = 0.9
+#: the periods of delay the law's stability check assumes (the law's default)
+DELAY_PERIODS = 2
 #: the force loop's speed bound (m/s): the tip meets the tissue at it
 APPROACH_SPEED = 0.01
 #: the cut-off of the law's filter on the sensed wrench (Hz)
@@ -191,11 +198,21 @@ class ForceControl:
     def _law(self, dt: float) -> HybridForceMotion:
         assert self.tissue is not None
         stiffness = self.tissue.stiffness
-        return HybridForceMotion(self.axes, self.setpoint, LOOP_GAIN / (stiffness * dt),
-                                 stiffness, dt, max_speed=APPROACH_SPEED,
-                                 filter_cutoff=FILTER_CUTOFF)
+        return HybridForceMotion(self.axes, self.setpoint, force_gain_at(stiffness, dt),
+                                 stiffness, dt, delay_periods=DELAY_PERIODS,
+                                 max_speed=APPROACH_SPEED, filter_cutoff=FILTER_CUTOFF)
 
     def _update_laws(self) -> None:
         """The running laws take the settings (caller holds the lock)."""
         for wrapper in self._wrappers:
             wrapper.law.set_target(self.axes, self.setpoint)
+
+
+def force_gain_at(stiffness: float, dt: float) -> float:
+    """:data:`FORCE_GAIN`, or :data:`GAIN_SHARE` of the largest gain the law's check
+    accepts against ``stiffness`` at period ``dt`` with the force filter's lag when that
+    is less (the bound of :func:`teleop.loop.force_stability.force_loop_bound` over
+    its margin, divided by ``k_c dt``)."""
+    pole = math.exp(-2.0 * math.pi * FILTER_CUTOFF * dt)
+    allowed = force_loop_bound(DELAY_PERIODS, pole, 2) / GAIN_MARGIN / (stiffness * dt)
+    return min(FORCE_GAIN, GAIN_SHARE * allowed)
