@@ -4,7 +4,7 @@ holding its viser handles, over :class:`web.app.force_control.ForceControl`.
 * the tab: "Place tissue under the tool", "Force control" on/off, the setpoint (N, tool
   frame) and the force-controlled axes (x, y, z of the tool), the contact force in words
   and its plot (the last 10 s at 50 Hz, the setpoint's magnitude dashed);
-* in the scene: the tissue as a thin plate (6 cm square, 1 mm thick) in its plane, and
+* in the scene: the tissue as a thin plate (6 cm square, 1 mm thick) on its undeformed surface, and
   the tissue's force on the tool tip as a green arrow along the force, its head on the
   tip, :data:`CONTACT_ARROW_PER_NEWTON` long per newton (hidden below
   :data:`MIN_DRAWN_CONTACT`).
