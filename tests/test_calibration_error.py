@@ -336,7 +336,7 @@ def test_the_mujoco_plant_refuses_a_calibration_error_before_simulating(sda10f):
 
 @pytest.mark.parametrize("value, message", [
     ("1", "expected MM,MRAD"), ("1,2,3", "expected MM,MRAD"),
-    ("x,2", "position std expected a number"), ("-1,2", "position std must be in [0, 50] mm"),
+    ("x,2", "position std must be a number"), ("-1,2", "position std must be in [0, 50] mm"),
     ("1,201", "rotation std must be in [0, 200] mrad"), ("1,nan", "rotation std must be"),
 ])
 @pytest.mark.parametrize("command", [["compare", "--scenario", "paper-hole"],

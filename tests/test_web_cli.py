@@ -118,7 +118,8 @@ def test_a_scene_file_that_is_not_a_scene_is_one_line(tmp_path, capsys):
     (["--host", "8.8.8.8"], "cannot listen on 8.8.8.8 port"),
     (["--host", "0.0.0.0"], "--host 0.0.0.0 serves the UI beyond this machine: give --token"),
     (["--host", "127.0.0.1", "--token", "short"], "token must be at least 16 characters"),
-    (["--rate", "1e12"], "rate must be between 50 and 5000 Hz"),
+    (["--rate", "1e12"], "argument --rate: must be in (0, 10000] Hz, got 1e+12"),
+    (["--rate", "8000"], "rate must be between 50 and 5000 Hz"),
 ])
 def test_an_address_or_rate_that_cannot_be_served_is_one_line_and_exit_2(args, message):
     """Run as a user would (a subprocess, bounded): one line, exit code 2, no hang."""

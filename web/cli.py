@@ -24,8 +24,8 @@ from teleop.cli.arguments import (add_damper_options, damper_settings,
 from teleop.cli.commands import Command
 from teleop.cli.robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
 from teleop.controller_specs import CONTROLLER_HELP
-from teleop.limits import MAX_WALL_STIFFNESS
 from teleop.loop.task_modes import AUTO, TASK_MODES
+from teleop.options import ACCELERATION_LIMITS_HELP, PAYLOAD, RATE, WALL_STIFFNESS
 from teleop.plants import PLANT_KINDS
 
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
@@ -64,30 +64,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                          help="controller of a second robot (the ghost) driven from the same "
                               "target, drawn beside the main one; a scene's own wins "
                               "(default: no second robot)")
-    control.add_argument("--rate", type=positive, default=1000.0, help="control rate in Hz")
+    RATE.add_to(control, 1000.0)
     control.add_argument("--task-mode", choices=(AUTO, *TASK_MODES), default=AUTO,
                          help="what the target asks of each end effector (docs/design.md "
                               "section 20): the full pose, position and roll about the tool "
                               "axis, or position only; auto: position and roll on an arm with "
                               "a port, else the full pose; a scene's own wins (default: auto)")
     control.add_argument("--acceleration-limits", action=argparse.BooleanOptionalAction,
-                         default=True,
-                         help="the controllers keep the robot's joint acceleration limits "
-                              "(docs/design.md section 8.4); --no-acceleration-limits: none")
+                         default=True, help=ACCELERATION_LIMITS_HELP)
 
     plant = parser.add_argument_group("plant (docs/design.md section 17)")
     plant.add_argument("--plant", choices=PLANT_KINDS, default="kinematic",
                        help="what the loops run on: the ideal integrator (q += qd dt) or the "
                             "robot simulated in MuJoCo, the abdominal wall at each port "
                             "(default: kinematic)")
-    plant.add_argument("--wall-stiffness", type=positive, metavar="N_PER_MM",
-                       help="lateral stiffness of the abdominal wall at every port, N/mm, at "
-                            f"most {MAX_WALL_STIFFNESS / 1e3:g} (default: each port's own, "
-                            "1 N/mm); needs --plant mujoco")
-    plant.add_argument("--payload", type=float, metavar="KG",
-                       help="mass carried at each end effector, unknown to the gravity "
-                            "compensation and the controllers (default: 0); needs --plant "
-                            "mujoco")
+    WALL_STIFFNESS.add_to(plant, left_out="each port's own, 1 N/mm")
+    PAYLOAD.add_to(plant, left_out="0")
 
     collisions = parser.add_argument_group("collision avoidance (docs/design.md section 18)")
     collisions.add_argument("--collisions", action=argparse.BooleanOptionalAction, default=None,
@@ -174,8 +166,9 @@ def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
 
 
 def _plant(args: argparse.Namespace) -> dict:
-    """The plant keywords of :func:`web.ui.run_server` the options ask for; ``ValueError``
-    naming the option for a value out of range or a physics option without the plant."""
+    """The plant keywords of :func:`web.ui.run_server` the options ask for (each value
+    checked as it is parsed, :mod:`teleop.options`); ``ValueError`` naming the option for
+    a physics option without the plant."""
     given = [f"--{name.replace('_', '-')}" for name in ("wall_stiffness", "payload")
              if getattr(args, name) is not None]
     if args.plant == "ros2":
@@ -188,16 +181,8 @@ def _plant(args: argparse.Namespace) -> dict:
         return {}
     from teleop.plants import PlantSettings
 
-    stiffness = None
-    if args.wall_stiffness is not None:
-        stiffness = 1e3 * args.wall_stiffness  # N/mm -> N/m
-        if stiffness > MAX_WALL_STIFFNESS:
-            raise ValueError(f"--wall-stiffness must be at most {MAX_WALL_STIFFNESS / 1e3:g} "
-                             f"N/mm, got {args.wall_stiffness:g}")
-    try:
-        settings = PlantSettings(payload=0.0 if args.payload is None else args.payload)
-    except ValueError as error:
-        raise ValueError(f"--{error}") from None
+    stiffness = None if args.wall_stiffness is None else 1e3 * args.wall_stiffness  # N/m
+    settings = PlantSettings(payload=0.0 if args.payload is None else args.payload)
     return {"plant": args.plant, "plant_settings": settings, "wall_stiffness": stiffness}
 
 

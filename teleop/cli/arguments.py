@@ -5,10 +5,10 @@ help formatter that shows each default, and the option types (docs/cli.md)."""
 from __future__ import annotations
 
 import argparse
-import math
 from typing import Callable, NoReturn
 
 from teleop.limits import MAX_COLLISION_DISTANCE_M, MAX_SPEED_M_S
+from teleop.options import NumberRange
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
@@ -76,34 +76,13 @@ def numbers(text: str) -> list[float]:
             f"expected comma-separated numbers, got {text!r}") from None
 
 
-def _shown(bound: float) -> str:
-    return f"{bound:g}" if isinstance(bound, float) else str(bound)
-
-
 def bounded(kind: type[float] | type[int], minimum: float, maximum: float | None = None, *,
             inclusive_minimum: bool = True, unit: str = "") -> Callable[[str], float]:
     """An argparse type: a finite ``kind`` (``float`` or ``int``) in ``[minimum, maximum]``
     (``(minimum, ...`` unless ``inclusive_minimum``; no maximum when None), its range named
-    in the message with its ``unit``."""
-    noun = "an integer" if kind is int else "a number"
-    if maximum is None:
-        bounds = (f"{'' if kind is int else 'a finite number '}"
-                  f"{'>=' if inclusive_minimum else '>'} {_shown(minimum)}")
-    else:
-        bounds = f"in {'[' if inclusive_minimum else '('}{_shown(minimum)}, {_shown(maximum)}]"
-    bounds += f" {unit}" if unit else ""
-
-    def parse(text: str) -> float:
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {noun}, got {text!r}") from None
-        above = minimum <= value if inclusive_minimum else minimum < value
-        if not (math.isfinite(value) and above and (maximum is None or value <= maximum)):
-            raise argparse.ArgumentTypeError(f"must be {bounds}, got {text}")  # NaN included
-        return value
-
-    return parse
+    in the message with its ``unit`` (:class:`teleop.options.NumberRange`, the words every
+    front end uses)."""
+    return NumberRange(kind, minimum, maximum, inclusive_minimum, unit).parse
 
 
 #: A finite number > 0.

@@ -14,19 +14,12 @@ from teleop.limits import (
     MAX_BENCH_ITERATIONS,
     MAX_CALIBRATION_POSITION_STD_M,
     MAX_CALIBRATION_ROTATION_STD_RAD,
-    MAX_CONSTRAINT_GAIN,
-    MAX_DURATION_S,
-    MAX_ENCODER_NOISE_RAD,
-    MAX_JERK,
-    MAX_LATENCY_PERIODS,
-    MAX_LATENCY_S,
-    MAX_PATH_AMPLITUDE_M,
-    MAX_POSE_GAIN,
-    MAX_RATE_HZ,
-    MAX_TIME_CONSTANT_S,
-    MAX_TROCAR_SHIFT_M,
 )
 from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
+from teleop.options import (ACCELERATION_LIMITS_HELP, CALIBRATION_POSITION,
+                            CALIBRATION_ROTATION, CONSTRAINT_GAIN, DURATION, ENCODER_NOISE,
+                            JERK_LIMIT, JOINT_TIME_CONSTANT, KP, LATENCY, PATH_AMPLITUDE, RATE,
+                            SEED, TROCAR_SHIFT)
 
 from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bounded, csv_list,
                         damper_settings, one_line, sentence)
@@ -54,22 +47,8 @@ def package_version() -> str:
         return "unknown (not installed)"
 
 
-#: The option types, bounded by the maxima of :mod:`teleop.limits`.
-rate = bounded(float, 0.0, MAX_RATE_HZ, inclusive_minimum=False, unit="Hz")
-duration = bounded(float, 0.0, MAX_DURATION_S, inclusive_minimum=False, unit="s")
-encoder_noise = bounded(float, 0.0, MAX_ENCODER_NOISE_RAD, unit="rad")
-time_constant = bounded(float, 0.0, MAX_TIME_CONSTANT_S, unit="s")
-latency = bounded(int, 0, MAX_LATENCY_PERIODS)
-count = bounded(int, 0)
+#: The bench's own option type (the shared ones: :mod:`teleop.options`).
 iterations = bounded(int, 1, MAX_BENCH_ITERATIONS)
-jerk_limit = bounded(float, 0.0, MAX_JERK, inclusive_minimum=False, unit="rad/s^3")
-
-trocar_shift = bounded(float, 0.0, MAX_TROCAR_SHIFT_M, unit="m")
-path_amplitude = bounded(float, 0.0, MAX_PATH_AMPLITUDE_M, unit="m")
-pose_gain = bounded(float, 0.0, MAX_POSE_GAIN, inclusive_minimum=False, unit="1/s")
-drift_gain = bounded(float, 0.0, MAX_CONSTRAINT_GAIN, unit="1/s")
-calibration_mm = bounded(float, 0.0, MAX_CALIBRATION_POSITION_STD_M * 1e3, unit="mm")
-calibration_mrad = bounded(float, 0.0, MAX_CALIBRATION_ROTATION_STD_RAD * 1e3, unit="mrad")
 
 
 def calibration_error(text: str) -> tuple[float, float]:
@@ -80,11 +59,11 @@ def calibration_error(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(f"expected MM,MRAD (two numbers), got {text!r}")
     position, rotation = parts
     try:
-        millimetres = calibration_mm(position.strip())
+        millimetres = CALIBRATION_POSITION.parse(position.strip())
     except argparse.ArgumentTypeError as error:
         raise argparse.ArgumentTypeError(f"the position std {error}") from None
     try:
-        milliradians = calibration_mrad(rotation.strip())
+        milliradians = CALIBRATION_ROTATION.parse(rotation.strip())
     except argparse.ArgumentTypeError as error:
         raise argparse.ArgumentTypeError(f"the rotation std {error}") from None
     return millimetres * 1e-3, milliradians * 1e-3
@@ -130,38 +109,23 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
     parser.add_argument("--controllers", type=csv_list, default=DEFAULT_CONTROLLERS,
                         help="comma-separated controllers, see the list below")
     if source == "session":
-        parser.add_argument("--rate", type=rate, help="control rate in Hz, at most "
-                            f"{MAX_RATE_HZ:g} (default: the session's rate, else 1000)")
+        RATE.add_to(parser, left_out="the session's rate, else 1000")
     else:
-        parser.add_argument("--rate", type=rate, default=1000.0,
-                            help=f"control rate in Hz, at most {MAX_RATE_HZ:g}")
-    parser.add_argument("--duration", type=duration,
-                        help=f"seconds to run, at most {MAX_DURATION_S:g} (default: the whole "
-                        f"{source})")
+        RATE.add_to(parser, 1000.0)
+    DURATION.add_to(parser, left_out=f"the whole {source}")
     parser.add_argument("--out", default="out", help="output directory")
     parser.add_argument("--no-plots", action="store_true",
                         help="write the metrics only, no plots and no report.html")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--acceleration-limits", action=argparse.BooleanOptionalAction,
-                        default=True,
-                        help="every controller keeps the robot's joint acceleration limits "
-                        "(docs/design.md section 8.4); --no-acceleration-limits: none")
-    parser.add_argument("--jerk-limit", type=jerk_limit, metavar="RAD_PER_S3",
-                        help="every controller also keeps this jerk limit on every joint "
-                        "(docs/design.md section 8.5; with the acceleration limits), at most "
-                        f"{MAX_JERK:g}; a Franka's joints refuse 3750-10000 (default: none)")
+                        default=True, help=ACCELERATION_LIMITS_HELP)
+    JERK_LIMIT.add_to(parser, left_out="none")
     robot = parser.add_argument_group(
         "a robot that is not perfect", "the same for every controller; off by default "
         "(docs/design.md section 15.1)")
-    robot.add_argument("--encoder-noise", type=encoder_noise, default=0.0, metavar="RAD",
-                       help="std of the Gaussian noise on each measured joint, every period, "
-                       f"at most {MAX_ENCODER_NOISE_RAD:g}")
-    robot.add_argument("--latency", type=latency, default=0, metavar="PERIODS",
-                       help="control periods between a command and the joints, at most "
-                       f"{MAX_LATENCY_S:g} s")
-    robot.add_argument("--joint-time-constant", type=time_constant, default=0.0, metavar="S",
-                       help="first-order response of the joint velocities to their command, "
-                       f"at most {MAX_TIME_CONSTANT_S:g}")
+    ENCODER_NOISE.add_to(robot, 0.0)
+    LATENCY.add_to(robot, 0)
+    JOINT_TIME_CONSTANT.add_to(robot, 0.0)
     robot.add_argument("--calibration-error", type=calibration_error, metavar="MM,MRAD",
                        help="std of the translation (mm) and rotation (mrad) error, per axis, "
                        "of every joint placement of the true robot; the controllers keep the "
@@ -169,9 +133,7 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
                        f"{MAX_CALIBRATION_POSITION_STD_M * 1e3:g},"
                        f"{MAX_CALIBRATION_ROTATION_STD_RAD * 1e3:g}; the kinematic plant only "
                        "(default: 0,0)")
-    robot.add_argument("--seed", type=count, default=0,
-                       help="seed of the encoder noise, the calibration error and the random "
-                       "variations (each its own stream)")
+    SEED.add_to(robot, 0)
     _add_variation_options(parser, source)
     add_plant_options(parser, "the session's plant (its header), else the defaults"
                        if source == "session" else "its default")
@@ -184,20 +146,11 @@ def _add_variation_options(parser: argparse.ArgumentParser, source: str) -> None
     group = parser.add_argument_group(
         "random variations", f"the {source}'s trocars and operator paths drawn from --seed, "
         "the same for every controller; off by default (docs/design.md section 15.1.1)")
-    group.add_argument("--trocar-shift", type=trocar_shift, default=0.0, metavar="M",
-                       help="slide each constraint along its link by U(-M, M) m, still holding "
-                       f"where it starts, at most {MAX_TROCAR_SHIFT_M:g}")
-    group.add_argument("--path-amplitude", type=path_amplitude, default=0.0, metavar="M",
-                       help="add to each EE target a smooth random path (three sinusoids, "
-                       f"0.05-0.5 Hz, from rest) of at most M m, at most {MAX_PATH_AMPLITUDE_M:g}")
+    TROCAR_SHIFT.add_to(group, 0.0)
+    PATH_AMPLITUDE.add_to(group, 0.0)
     gains = parser.add_argument_group("gains", "the loop's and the constraints' feedback gains")
-    gains.add_argument("--kp", type=pose_gain, metavar="K",
-                       help=f"pose-error gain K_p (1/s) of the loop, in (0, {MAX_POSE_GAIN:g}] (default: "
-                       + ("the session's, else 20)" if source == "session" else "20)"))
-    gains.add_argument("--constraint-gain", type=drift_gain, metavar="K",
-                       help=f"drift-feedback gain (1/s) of every constraint, in [0, "
-                       f"{MAX_CONSTRAINT_GAIN:g}], K dt < 2 (1 for a barrier) (default: each "
-                       "constraint's own)")
+    KP.add_to(gains, left_out="the session's, else 20" if source == "session" else "20")
+    CONSTRAINT_GAIN.add_to(gains, left_out="each constraint's own")
 
 
 def _add_collision_options(parser: argparse.ArgumentParser, source: str) -> None:
@@ -274,12 +227,8 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
                           "file", _record)
     record.add_argument("--scenario", required=True, help="scenario name (see 'teleop scenarios')")
     _add_scenario_robot(record)
-    record.add_argument("--rate", type=rate, default=1000.0,
-                        help=f"control rate in Hz, at most {MAX_RATE_HZ:g} (one recorded "
-                        "target per tick)")
-    record.add_argument("--duration", type=duration,
-                        help=f"seconds to record, at most {MAX_DURATION_S:g} (default: the whole "
-                        "scenario)")
+    RATE.add_to(record, 1000.0)
+    DURATION.add_to(record, left_out="the whole scenario")
     record.add_argument("file", help="session file to write")
     add_plant_options(record, "its default; the plant is written in the session's header "
                        "for 'teleop replay'")

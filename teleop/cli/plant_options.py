@@ -9,18 +9,15 @@ import argparse
 from teleop.limits import (
     MAX_INTERFACE_JERK,
     MAX_JOINT_FRICTION,
-    MAX_PAYLOAD_KG,
     MAX_PHYSICS_RATE_HZ,
     MAX_SERVO_BANDWIDTH_HZ,
-    MAX_WALL_STIFFNESS,
     MIN_PHYSICS_RATE_HZ,
 )
+from teleop.options import PAYLOAD, WALL_STIFFNESS
 
 from .arguments import bounded
 from .ros2_options import add_ros2_options, given_ros2_options, ros2_settings
 
-wall_stiffness = bounded(float, 0.0, MAX_WALL_STIFFNESS / 1e3, unit="N/mm")
-payload = bounded(float, 0.0, MAX_PAYLOAD_KG, unit="kg")
 friction = bounded(float, 0.0, MAX_JOINT_FRICTION)
 physics_rate = bounded(float, MIN_PHYSICS_RATE_HZ, MAX_PHYSICS_RATE_HZ, unit="Hz")
 servo_bandwidth = bounded(float, 0.0, MAX_SERVO_BANDWIDTH_HZ, inclusive_minimum=False, unit="Hz")
@@ -45,12 +42,8 @@ def add_plant_options(parser: argparse.ArgumentParser, base: str) -> None:
                        "robot over ROS 2, its options below (docs/ros2.md) "
                        "(default: kinematic)")
     add_ros2_options(plant)
-    plant.add_argument("--wall-stiffness", type=wall_stiffness, metavar="N_PER_MM",
-                       help="lateral stiffness of the abdominal wall at every hole, at most "
-                       f"{MAX_WALL_STIFFNESS / 1e3:g} (default: each hole's own, 1 N/mm)")
-    plant.add_argument("--payload", type=payload, metavar="KG",
-                       help="mass at each EE the plant carries and the gravity compensation "
-                       f"and the controllers do not know of, at most {MAX_PAYLOAD_KG:g} (mujoco; default: 0)")
+    WALL_STIFFNESS.add_to(plant, left_out="each hole's own, 1 N/mm")
+    PAYLOAD.add_to(plant, left_out="0")
     plant.add_argument("--coulomb-friction", type=friction, metavar="NM",
                        help=f"dry friction of every joint, at most {MAX_JOINT_FRICTION:g} (mujoco; "
                        "default: 0)")

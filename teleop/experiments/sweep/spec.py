@@ -21,12 +21,13 @@ from typing import Any, Callable, Mapping
 from constraints.validation import as_number, short_repr
 from teleop.json_text import parse_json
 from teleop.limits import MAX_CELLS, MAX_SPEC_BYTES
+from teleop.options import (ACCELERATION_LIMITS_HELP, CALIBRATION_POSITION,
+                            CALIBRATION_ROTATION, CONSTRAINT_GAIN, DURATION, ENCODER_NOISE, KP,
+                            JOINT_TIME_CONSTANT, LATENCY, PATH_AMPLITUDE, PAYLOAD, RATE, SEED,
+                            TROCAR_SHIFT)
 
 #: Hex digits of a cell's key (80 bits: no collision in any sweep of this world).
 KEY_DIGITS = 20
-
-#: The largest seed: SQLite's and NumPy's 64-bit integers.
-MAX_SEED = 2**63 - 1
 
 #: Default wall-clock limit of one cell (s).
 DEFAULT_TIME_LIMIT_S = 600.0
@@ -43,17 +44,6 @@ def _real(minimum: float | None = None, maximum: float | None = None,
     """A checker of a finite float in range (``1`` and ``1.0`` are one value)."""
     return lambda value, name: as_number(value, name, minimum, positive=positive,
                                          maximum=maximum)
-
-
-def _integer(minimum: int = 0, maximum: int | None = None) -> Callable[[Any, str], int]:
-    def check(value: Any, name: str) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"{name} must be an integer, got {short_repr(value)}")
-        if value < minimum or (maximum is not None and value > maximum):
-            bound = f"in [{minimum}, {maximum}]" if maximum is not None else f">= {minimum}"
-            raise ValueError(f"{name} must be an integer {bound}, got {value}")
-        return value
-    return check
 
 
 def _boolean(value: Any, name: str) -> bool:
@@ -81,12 +71,8 @@ class CellField:
 
 
 def _cell_fields() -> tuple[CellField, ...]:
-    from teleop.limits import (MAX_CALIBRATION_POSITION_STD_M,
-                               MAX_CALIBRATION_ROTATION_STD_RAD, MAX_CONSTRAINT_GAIN,
-                               MAX_DURATION_S, MAX_ENCODER_NOISE_RAD, MAX_LATENCY_PERIODS,
-                               MAX_PATH_AMPLITUDE_M, MAX_PAYLOAD_KG, MAX_POSE_GAIN, MAX_RATE_HZ,
-                               MAX_TIME_CONSTANT_S, MAX_TROCAR_SHIFT_M)
-
+    """The fields; those ``teleop compare`` shares with the other front ends checked by
+    their :class:`teleop.options.SharedOption` (the same words as the command lines)."""
     return (
         CellField("scenario", None, _text, "--scenario", help="scenario names"),
         CellField("controller", None, _text, "--controllers", help="controller specs"),
@@ -95,38 +81,32 @@ def _cell_fields() -> tuple[CellField, ...]:
                        "table of robot (a built-in name, a URDF path or an example-robot-data "
                        "name), ee_frame, constrained_link, link_axis, locked_joints, "
                        "package_dirs, q_home, as teleop compare's options"),
-        CellField("seed", 0, _integer(0, MAX_SEED), "--seed",
+        CellField("seed", 0, SEED.check, "--seed",
                   help="seeds the encoder noise, the calibration error and the random "
                        "trocar and path"),
-        CellField("duration", None, _optional(_real(positive=True, maximum=MAX_DURATION_S)),
+        CellField("duration", None, _optional(DURATION.check),
                   "--duration", help="seconds (default: each scenario's)"),
-        CellField("rate", 1000.0, _real(positive=True, maximum=MAX_RATE_HZ), "--rate",
-                  help="control rate (Hz)"),
+        CellField("rate", 1000.0, RATE.check, "--rate", help="control rate (Hz)"),
         CellField("plant", "kinematic", _plant_kind, "--plant", help="kinematic or mujoco"),
-        CellField("acceleration_limits", True, _boolean, None,
-                  help="the robot's joint acceleration limits kept (docs/design.md 8.4)"),
-        CellField("payload", 0.0, _real(0.0, MAX_PAYLOAD_KG), "--payload",
-                  help="kg at each EE (mujoco)"),
-        CellField("kp", 20.0, _real(positive=True, maximum=MAX_POSE_GAIN), "--kp",
-                  help="pose-error gain (1/s)"),
-        CellField("constraint_gain", None, _optional(_real(0.0, MAX_CONSTRAINT_GAIN)),
+        CellField("acceleration_limits", True, _boolean, None, help=ACCELERATION_LIMITS_HELP),
+        CellField("payload", 0.0, PAYLOAD.check, "--payload", help="kg at each EE (mujoco)"),
+        CellField("kp", 20.0, KP.check, "--kp", help="pose-error gain (1/s)"),
+        CellField("constraint_gain", None, _optional(CONSTRAINT_GAIN.check),
                   "--constraint-gain",
                   help="every constraint's drift gain (default: their own)"),
-        CellField("encoder_noise", 0.0, _real(0.0, MAX_ENCODER_NOISE_RAD), "--encoder-noise",
+        CellField("encoder_noise", 0.0, ENCODER_NOISE.check, "--encoder-noise",
                   "imperfections", "rad"),
-        CellField("latency", 0, _integer(0, MAX_LATENCY_PERIODS), "--latency",
-                  "imperfections", "control periods"),
-        CellField("joint_time_constant", 0.0, _real(0.0, MAX_TIME_CONSTANT_S),
+        CellField("latency", 0, LATENCY.check, "--latency", "imperfections", "control periods"),
+        CellField("joint_time_constant", 0.0, JOINT_TIME_CONSTANT.check,
                   "--joint-time-constant", "imperfections", "s"),
-        CellField("calibration_error_mm", 0.0, _real(0.0, MAX_CALIBRATION_POSITION_STD_M * 1e3),
-                  None, "imperfections", "std of each joint placement's translation error (mm)"),
-        CellField("calibration_error_mrad", 0.0,
-                  _real(0.0, MAX_CALIBRATION_ROTATION_STD_RAD * 1e3), None, "imperfections",
-                  "std of each joint placement's rotation error (mrad)"),
-        CellField("trocar_shift", 0.0, _real(0.0, MAX_TROCAR_SHIFT_M), "--trocar-shift", "variations",
+        CellField("calibration_error_mm", 0.0, CALIBRATION_POSITION.check, None,
+                  "imperfections", "std of each joint placement's translation error (mm)"),
+        CellField("calibration_error_mrad", 0.0, CALIBRATION_ROTATION.check, None,
+                  "imperfections", "std of each joint placement's rotation error (mrad)"),
+        CellField("trocar_shift", 0.0, TROCAR_SHIFT.check, "--trocar-shift", "variations",
                   "half-width (m) of each trocar's uniform slide along its link"),
-        CellField("path_amplitude", 0.0, _real(0.0, MAX_PATH_AMPLITUDE_M), "--path-amplitude", "variations",
-                  "bound (m) of the smooth random motion added to each EE target"),
+        CellField("path_amplitude", 0.0, PATH_AMPLITUDE.check, "--path-amplitude",
+                  "variations", "bound (m) of the smooth random motion added to each EE target"),
     )
 
 
