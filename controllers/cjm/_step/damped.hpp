@@ -39,11 +39,13 @@ struct DampingPolicy {
 //! kMaxConditionBound, the SVD's decisions are known without it: full rank and
 //! ``lambda = 0``, so ``x = R^-1 (Q^T r)_head`` (tall J: its least squares) or
 //! ``x = Q [R^-T r; 0]`` (wide J: its minimum norm), and sigma_min, which the report
-//! carries, is ``1 / sqrt(lambda_max(R^-T R^-1))`` (a symmetric eigenvalue problem of
-//! size ``min(p, q)``). Otherwise the Jacobi SVD of R finishes the thin SVD and decides.
+//! carries, is ``1 / sqrt(lambda_max(R^-T R^-1))``: a certified power iteration, or where
+//! it would not certify soon (close smallest singular values) the symmetric eigenvalue
+//! problem of size ``min(p, q)`` (Eigen's, fixed-size storage). When the bound fails the
+//! Jacobi SVD of R finishes the thin SVD and decides, as before.
 class DampedLeastSquares {
  public:
-  //! Largest ``min(p, q)`` the QR path takes (its eigenvalue storage is fixed-size).
+  //! Largest ``min(p, q)`` the QR path takes (its ``R^-1`` and Gram are fixed-size).
   static constexpr int kMaxQrSize = 16;
   //! Largest ``||R||_F ||R^-1||_F`` (>= the condition number) the QR path takes: its
   //! sigma_min, from the computed ``R^-1``, is then within about ``t eps kappa`` (< 1e-11)
@@ -150,13 +152,58 @@ class DampedLeastSquares {
           largest * inverse_norm <= kMaxConditionBound))
       return false;
     gram_.noalias() = inverse_.transpose() * inverse_;  // R^-T R^-1: eigenvalues 1 / sigma_i^2
-    eigen_.compute(gram_, Eigen::EigenvaluesOnly);
-    sigma_min_ = 1.0 / std::sqrt(eigen_.eigenvalues()(t - 1));
+    double largest_eigenvalue = power_iteration(inverse_norm * inverse_norm);
+    if (!(largest_eigenvalue > 0.0)) {  // not certified: the symmetric eigenvalue problem
+      eigen_.compute(gram_, Eigen::EigenvaluesOnly);
+      largest_eigenvalue = eigen_.eigenvalues()(t - 1);
+    }
+    sigma_min_ = 1.0 / std::sqrt(largest_eigenvalue);
     damping_ = 0.0;
     rank_ = t;
     exact_ = rank_ == rows_;
     return true;
   }
+
+  //! The largest eigenvalue of ``gram_`` (symmetric positive definite, ``trace`` its
+  //! trace) by power iteration, certified by Kato and Temple's bound: for a unit ``v``,
+  //! ``rho = v^T G v`` and ``e = |G v - rho v|``, every other eigenvalue is at most
+  //! ``trace - lambda_max <= trace - rho``, so when ``2 rho > trace``
+  //! ``rho <= lambda_max <= rho + e^2 / (2 rho - trace)``. It stops when that width is
+  //! below kPowerWidth relative, and gives up (0) when the residual's contraction
+  //! would not get there within kMaxPowerSteps.
+  double power_iteration(double trace) {
+    const Index t = gram_.rows();
+    Index start = 0;
+    gram_.diagonal().maxCoeff(&start);
+    auto v = power_vector_.head(t);
+    auto w = power_product_.head(t);
+    v = gram_.col(start) / gram_.col(start).norm();
+    double previous = 0.0;
+    for (int step = 0; step < kMaxPowerSteps; ++step) {
+      w.noalias() = gram_ * v;
+      const double rho = v.dot(w);
+      const double gap = 2.0 * rho - trace;
+      v = w - rho * v;  // the residual, in place
+      const double residual2 = v.squaredNorm();
+      const double target = kPowerWidth * rho * std::max(gap, 0.0);
+      if (gap > 0.0 && residual2 <= target) return rho;
+      if (step >= 3 && residual2 > 0.0 && previous > 0.0) {  // steps left at this contraction
+        const double contraction = residual2 / previous;
+        if (!(contraction < 1.0) ||
+            (gap > 0.0 && step + std::log(target / residual2) / std::log(contraction) > kMaxPowerSteps))
+          return 0.0;
+      }
+      previous = residual2;
+      v = w / w.norm();
+    }
+    return 0.0;
+  }
+
+  //! Relative width of the certified interval at which the power iteration stops, 100
+  //! ulps (sigma_min's relative error is half of it; the step's own tolerances come from
+  //! controllers/cjm/tolerances.py, this is the algorithm's accuracy).
+  static constexpr double kPowerWidth = 100.0 * std::numeric_limits<double>::epsilon();
+  static constexpr int kMaxPowerSteps = 40;
 
   double rank_tolerance_;
   ThinSvd svd_;
@@ -164,6 +211,8 @@ class DampedLeastSquares {
   Matrix projected_, row_space_;
   SmallMatrix inverse_, gram_;
   Eigen::SelfAdjointEigenSolver<SmallMatrix> eigen_{kMaxQrSize};
+  Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxQrSize, 1> power_vector_{kMaxQrSize},
+      power_product_{kMaxQrSize};
   Index rows_ = 0, cols_ = 0, rank_ = 0;
   double sigma_min_ = 0.0, damping_ = 0.0;
   bool exact_ = false, by_qr_ = false, row_space_ready_ = true;
