@@ -41,6 +41,7 @@ from .imperfect import Imperfections, ImperfectPlant
 from .interface import CommandInterface, InterfaceFault
 from .settings import PlantSettings
 from .tissue import TissueSurface
+from .compiled_wall import compiled_ports
 from .walls import Wall, wall_of
 
 #: A payload's inertia: a 5 cm solid sphere's per kilogram (kg m^2 / kg).
@@ -123,6 +124,10 @@ class MujocoPlant:
         (N) and torque (N m) component.
     sensor_bias : (6,) a constant offset on its reading (N, N m), tool frame.
     seed : the sensor noise's seed.
+    compiled_walls : apply the ports' walls inside ``mj_step`` by the compiled callback
+        where it is available (:mod:`teleop.plants.compiled_wall`; without tissues): a
+        period is then one call. False: from Python, each physics step split (the
+        reference the compiled walls are tested against).
     """
 
     #: the plant measures the wrench at the tool (the kinematic plant does not)
@@ -132,7 +137,8 @@ class MujocoPlant:
                  imperfections: Imperfections | None = None,
                  collisions: CollisionAvoidance | None = None,
                  tissues: Sequence[TissueSurface] = (), sensor_noise: float = 0.0,
-                 sensor_bias: Sequence[float] | None = None, seed: int = 0) -> None:
+                 sensor_bias: Sequence[float] | None = None, seed: int = 0,
+                 compiled_walls: bool = True) -> None:
         if settings is not None and not isinstance(settings, PlantSettings):
             raise ValueError(f"settings must be PlantSettings, got {type(settings).__name__}")
         if imperfections is not None and not imperfections.calibrated:
@@ -181,6 +187,8 @@ class MujocoPlant:
                               self.mj_model.sensor(_TORQUE + frame).adr[0])
                              for frame in self.ee_frames] if self.tissues else []
         self._no_torque = np.zeros(3)
+        #: the walls applied inside mj_step (None: from Python, each step split)
+        self._compiled_walls = compiled_ports(self.mj_data) if compiled_walls else None
         self.reset(robot.q_home)
 
     # -- the model -----------------------------------------------------------------------
@@ -335,7 +343,13 @@ class MujocoPlant:
         data.qfrc_applied[:] = 0.0
         contacts = np.zeros((len(self._tools), 3))
         depths = np.zeros(len(self._tools))
-        if holes or self.tissues:  # each physics step split to apply the forces there
+        ports = None if self.tissues or not holes else self._compiled_ports(holes)
+        if ports is not None and self._compiled_walls is not None:  # one call, walls in C
+            self._compiled_walls.step(model, ports, self.substeps)
+            forces = self._compiled_walls.forces
+            springs = self._compiled_walls.springs
+            displacements = self._compiled_walls.displacements
+        elif holes or self.tissues:  # each physics step split to apply the forces there
             for _ in range(self.substeps):
                 mujoco.mj_step1(model, data)
                 data.qfrc_applied[:] = 0.0
@@ -406,6 +420,19 @@ class MujocoPlant:
         return wrenches
 
     # -- the abdominal wall ----------------------------------------------------------------
+
+    def _compiled_ports(self, holes: Sequence[tuple[Constraint, Wall]]) -> np.ndarray | None:
+        """One row per hole for :class:`~teleop.plants.compiled_wall.CompiledPorts`: its
+        link's MuJoCo body and site, then its wall's compiled parameters; None when a wall
+        has none."""
+        rows = np.empty((len(holes), 13))
+        for row, (hole, wall) in zip(rows, holes):
+            parameters = wall.compiled_parameters(hole)
+            if parameters is None:
+                return None
+            site = self._site_ids[hole.link]
+            row[0], row[1], row[2:] = self._site_bodies[site], site, parameters
+        return rows
 
     def _push(self, hole: Constraint, wall: Wall) -> tuple[np.ndarray, np.ndarray, float]:
         """Apply the force of ``wall`` at ``hole`` to the instrument (at the kinematics of

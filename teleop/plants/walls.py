@@ -46,6 +46,13 @@ class Wall(Protocol[C]):
         """Give the tissue at ``constraint`` the lateral ``stiffness`` (N/m)."""
         ...
 
+    def compiled_parameters(self, constraint: C) -> np.ndarray | None:
+        """The 11 numbers ``port_wall.c`` applies the wall from inside MuJoCo's step
+        (:mod:`teleop.plants.compiled_wall`): the link axis (link frame), the centre and its
+        velocity (world), the lateral stiffness (N/m) and damping (N s/m); None for a wall
+        with no compiled form (the plant then applies it from Python)."""
+        ...
+
 
 class PortWall:
     """The abdominal wall around a hole's port, a lateral spring-damper (docs/design.md
@@ -79,6 +86,11 @@ class PortWall:
     def set_stiffness(self, hole: Hole, stiffness: float) -> None:
         """The hole's ``tissue_stiffness``."""
         hole.tissue_stiffness = stiffness
+
+    def compiled_parameters(self, hole: Hole) -> np.ndarray:
+        """``a_link``, ``c``, ``v_c``, ``k``, ``c_d``: the math above, in ``port_wall.c``."""
+        return np.concatenate([hole.link_axis, hole.center, hole.velocity,
+                               [hole.tissue_stiffness, hole.tissue_damping]])
 
 
 #: constraint type -> its wall; a type not here (nor any of its bases) has none

@@ -1,0 +1,123 @@
+"""The ports' walls applied by compiled code inside ``mj_step`` (docs/design.md section 17.5).
+
+``port_wall.c`` is MuJoCo's passive-force callback (``mjcb_passive``) with the math of
+:class:`teleop.plants.walls.PortWall`. It is compiled once with the machine's C compiler
+against the ``mujoco`` wheel's headers and library, kept under the user's cache directory
+(``$XDG_CACHE_HOME/cjm-teleop``, as the bench's allocation counter) by a hash of its
+source, the compiler (``sysconfig``'s ``CC``) and MuJoCo's version, loaded by ctypes and installed
+as the process's callback (a C function pointer: MuJoCo calls it without the GIL). A
+plant attaches its MjData and its ports' parameters for one ``mj_step(m, d, nstep)`` call
+(:meth:`CompiledPorts.step`), so a period with holes is one call, as one without.
+
+Where it cannot be built or loaded (no compiler, not Linux, another callback already
+installed) :func:`compiled_ports` is None and the plant applies the walls from Python,
+splitting each physics step (``mj_step1``, the forces, ``mj_step2``): the same forces.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import hashlib
+import os
+import shlex
+import subprocess
+import sys
+import sysconfig
+import tempfile
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+SOURCE = Path(__file__).with_name("port_wall.c")
+#: one port's block of doubles (port_wall.c's enum): body and site ids, then
+#: PortWall.compiled_parameters (link axis, centre, centre velocity, stiffness, damping),
+#: then what the callback writes (force, spring part, displacement)
+PORT_FIELDS = 2 + 11 + 7
+_FORCE, _SPRING, _DISPLACEMENT = 13, 16, 19
+
+
+class CompiledPorts:
+    """The compiled walls of one plant's MjData (the ports' parameters given every period)."""
+
+    def __init__(self, library: ctypes.CDLL, data: mujoco.MjData) -> None:
+        self._library = library
+        self._data = data
+        self._address = ctypes.c_void_p(data._address)
+        self.ports = np.zeros((0, PORT_FIELDS))
+
+    def step(self, model: mujoco.MjModel, ports: np.ndarray, nstep: int) -> None:
+        """``nstep`` physics steps with the walls of ``ports``: one row per port, its
+        MuJoCo body and site ids then its wall's ``compiled_parameters``."""
+        if self.ports.shape[0] != ports.shape[0]:
+            self.ports = np.zeros((ports.shape[0], PORT_FIELDS))
+        self.ports[:, :_FORCE] = ports
+        pointer = self.ports.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        if self._library.cjm_wall_attach(self._address, pointer, len(self.ports)) != 0:
+            raise RuntimeError("too many MuJoCo plants stepping at once for the compiled walls")
+        try:
+            mujoco.mj_step(model, self._data, nstep)
+        finally:
+            self._library.cjm_wall_detach(self._address)
+
+    @property
+    def forces(self) -> np.ndarray:
+        """Each port's force at the last physics step (N, world)."""
+        return self.ports[:, _FORCE:_FORCE + 3].copy()
+
+    @property
+    def springs(self) -> np.ndarray:
+        """Each force's spring part ``-k (P - c)`` (N)."""
+        return self.ports[:, _SPRING:_SPRING + 3].copy()
+
+    @property
+    def displacements(self) -> np.ndarray:
+        """Each port's ``|P - c|`` (m)."""
+        return self.ports[:, _DISPLACEMENT].copy()
+
+
+@functools.cache
+def wall_library() -> ctypes.CDLL | None:
+    """``port_wall.c`` built (once, kept in the cache), loaded and installed as MuJoCo's
+    passive callback; None where that is not possible."""
+    if not sys.platform.startswith("linux") or mujoco.get_mjcb_passive() is not None:
+        return None
+    package = Path(mujoco.__file__).resolve().parent
+    libraries = sorted(package.glob("libmujoco.so*"))
+    if not libraries or not (package / "include" / "mujoco" / "mujoco.h").is_file():
+        return None
+    compiler = shlex.split(sysconfig.get_config_var("CC") or "cc")
+    digest = hashlib.sha256(SOURCE.read_bytes() + "\0".join(compiler).encode()
+                            + mujoco.__version__.encode())
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "cjm-teleop"
+    target = cache / f"port_wall-{digest.hexdigest()[:16]}.so"
+    if not target.is_file():
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
+                built = Path(scratch) / target.name
+                subprocess.run([*compiler, "-shared", "-fPIC", "-O2", "-o", str(built), str(SOURCE),
+                                f"-I{package / 'include'}", str(libraries[0]),
+                                f"-Wl,-rpath,{package}", "-lm", "-lpthread"],
+                               check=True, capture_output=True, timeout=120)
+                built.replace(target)
+        except (OSError, subprocess.SubprocessError):
+            return None
+    try:
+        library = ctypes.CDLL(str(target))
+    except OSError:
+        return None
+    library.cjm_wall_attach.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_double), ctypes.c_int]
+    library.cjm_wall_attach.restype = ctypes.c_int
+    library.cjm_wall_detach.argtypes = [ctypes.c_void_p]
+    library.cjm_wall_detach.restype = None
+    mujoco.set_mjcb_passive(library.cjm_wall_passive)
+    return library
+
+
+def compiled_ports(data: mujoco.MjData) -> CompiledPorts | None:
+    """The compiled walls for ``data``'s ports, or None where the library is not
+    available."""
+    library = wall_library()
+    return None if library is None else CompiledPorts(library, data)
