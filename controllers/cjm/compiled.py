@@ -36,6 +36,7 @@ from ._step import ConstraintPlan as CompiledPlan
 from .analytical import TermsWriter, terms_size
 from .compiled_collisions import CompiledCollisions
 from .python_step import paper_form_defined
+from .pose_rows import row_views
 from .report import EVENT_BY_CODE, METHODS, Event, StepReport
 from .step_setup import StepSetup
 from .tolerances import PAPER_FORM_MIN_A
@@ -171,7 +172,7 @@ class CompiledStep:
                 row = placements[len(setup.ee_frame_ids) + i]
                 writer = TermsWriter(constraint, "paper" if self._paper else "nullspace")
                 self._in_python.append((i, writer, terms[offsets[i]:offsets[i + 1]],
-                                        row[:9].reshape(3, 3), row[9:]))
+                                        *row_views(row)))
         self._one_call = not self._in_python and not self._posture_in_python
         #: the previous command, the acceleration limits' reference (a view of the C++ step's)
         self.previous = step.previous

@@ -20,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from ._step import TICK_REFUSED, Tick
+from .pose_rows import pose_rows, row_pose
 
 if TYPE_CHECKING:
     from .compiled import CompiledStep
@@ -27,24 +28,10 @@ if TYPE_CHECKING:
 #: What :meth:`CompiledTick.run` gives back: the outcome (``_step.TICK_STEPPED``,
 #: ``TICK_REFUSED``: the twist was not finite and no step ran, ``TICK_NOT_FINITE``: the
 #: command is not finite), the command (None when refused), the next configuration
-#: (None unless the tick integrated it), the period (per EE: the filtered target, the
-#: previous target, the EE placement, rows of 12, and the commanded twist, 6), the
+#: (None unless the tick integrated it), the period (per EE: :mod:`.pose_rows`), the
 #: step's time (us, timed in C++), whether the speed caps scaled a twist, and whether
 #: the period had a previous target.
 TickResult = tuple[int, "np.ndarray | None", "np.ndarray | None", np.ndarray, float, bool, bool]
-
-
-def pose_rows(poses: Sequence[pin.SE3] | None, count: int) -> np.ndarray:
-    """``poses`` as the tick's rows of 12 (rotation row-major, translation); zeros for None."""
-    rows = np.zeros((count, 12))
-    for row, pose in zip(rows, poses or ()):
-        row[:9], row[9:] = pose.rotation.ravel(), pose.translation
-    return rows
-
-
-def row_pose(row: np.ndarray) -> pin.SE3:
-    """The pose in a row of 12 (rotation row-major, translation)."""
-    return pin.SE3(row[:9].reshape(3, 3), row[9:12])
 
 
 class CompiledTick:

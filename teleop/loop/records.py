@@ -11,6 +11,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from controllers.cjm.pose_rows import (PERIOD_PLACEMENT, PERIOD_PREVIOUS, PERIOD_TARGET,
+                                       PERIOD_TWIST, row_pose)
+
 from .supervisor import Supervision
 
 #: Columns of the per-step record, in order (see :class:`StepRecord`).
@@ -145,7 +148,7 @@ NO_VECTORS.flags.writeable = False
 class CompiledPendingStep(PendingStep):
     """A period the compiled tick ran (docs/design.md 5.1). Its poses and twists are in
     ``period``, the tick's copy (per EE: the filtered target, the previous target, the
-    EE placement, rows of 12, and the commanded twist); they become ``pin.SE3`` objects
+    EE placement and the commanded twist, :mod:`controllers.cjm.pose_rows`); they become ``pin.SE3`` objects
     and arrays only when a measure reads them, so the periods nobody measures build
     none. The measures' fields start empty, as :class:`PendingStep`'s."""
 
@@ -164,21 +167,17 @@ class CompiledPendingStep(PendingStep):
 
     @functools.cached_property
     def targets(self) -> list[pin.SE3]:
-        return [pose_of_row(row[:12]) for row in self.period]
+        return [row_pose(row[PERIOD_TARGET]) for row in self.period]
 
     @functools.cached_property
     def previous_targets(self) -> list[pin.SE3] | None:
-        return [pose_of_row(row[12:24]) for row in self.period] if self.has_previous else None
+        return [row_pose(row[PERIOD_PREVIOUS]) for row in self.period] if self.has_previous else None
 
     @functools.cached_property
     def placements(self) -> list[pin.SE3]:
-        return [pose_of_row(row[24:36]) for row in self.period]
+        return [row_pose(row[PERIOD_PLACEMENT]) for row in self.period]
 
     @functools.cached_property
     def twists(self) -> list[np.ndarray]:
-        return list(self.period[:, 36:42])
+        return list(self.period[:, PERIOD_TWIST])
 
-
-def pose_of_row(row: np.ndarray) -> pin.SE3:
-    """The pose in a row of 12: the rotation row-major, then the translation."""
-    return pin.SE3(row[:9].reshape(3, 3), row[9:12])
