@@ -36,6 +36,14 @@ from teleop.limits import (
     MAX_WALL_STIFFNESS,
 )
 
+#: The plants a run can choose, by name (``--plant``; built by
+#: :class:`teleop.plants.PlantChoice`).
+PLANT_KINDS = ("kinematic", "mujoco", "ros2")
+
+#: The plants simulated in this process (many runs at once, each its own robot: a sweep's
+#: cells, ``teleop sim``).
+SIMULATED_PLANT_KINDS = ("kinematic", "mujoco")
+
 #: The largest seed: SQLite's and NumPy's 64-bit integers.
 MAX_SEED = 2**63 - 1
 

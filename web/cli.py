@@ -25,8 +25,8 @@ from teleop.cli.commands import Command
 from teleop.cli.robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.loop.task_modes import AUTO, TASK_MODES
-from teleop.options import ACCELERATION_LIMITS_HELP, PAYLOAD, RATE, WALL_STIFFNESS
-from teleop.plants import PLANT_KINDS
+from teleop.options import (ACCELERATION_LIMITS_HELP, PAYLOAD, PLANT_KINDS, RATE,
+                            WALL_STIFFNESS)
 
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
     resolve_host

@@ -13,7 +13,7 @@ from teleop.limits import (
     MAX_SERVO_BANDWIDTH_HZ,
     MIN_PHYSICS_RATE_HZ,
 )
-from teleop.options import PAYLOAD, WALL_STIFFNESS
+from teleop.options import PAYLOAD, PLANT_KINDS, WALL_STIFFNESS
 
 from .arguments import bounded
 from .ros2_options import add_ros2_options, given_ros2_options, ros2_settings
@@ -36,7 +36,7 @@ def add_plant_options(parser: argparse.ArgumentParser, base: str) -> None:
     plant = parser.add_argument_group(
         "the plant", "the robot the loop drives, the same for every controller "
         "(docs/design.md section 17); an option left out: " + base)
-    plant.add_argument("--plant", choices=("kinematic", "mujoco", "ros2"),
+    plant.add_argument("--plant", choices=PLANT_KINDS,
                        help="kinematic: the ideal integrator q += qd dt; mujoco: the URDF "
                        "simulated in MuJoCo, servoed drives, a wall at every hole; ros2: a "
                        "robot over ROS 2, its options below (docs/ros2.md) "

@@ -8,6 +8,7 @@ import signal
 import sys
 
 from teleop.limits import MAX_RATE_HZ
+from teleop.options import SIMULATED_PLANT_KINDS
 
 from .arguments import bounded, csv_list
 from .ros2_options import add_ros2_options, ros2_settings
@@ -19,7 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="serve the robot on ROS 2 (the one transport offered)")
     parser.add_argument("--robot", default="ur5_instrument",
                         help="built-in robot name or URDF path (default: ur5_instrument)")
-    parser.add_argument("--plant", choices=("kinematic", "mujoco"), default="kinematic",
+    parser.add_argument("--plant", choices=SIMULATED_PLANT_KINDS, default="kinematic",
                         help="the robot's physics: q += v dt, or MuJoCo's servoed drives "
                              "(default: kinematic)")
     parser.add_argument("--rate", type=bounded(float, 1.0, MAX_RATE_HZ, unit="Hz"), default=500.0,

@@ -14,6 +14,7 @@ from typing import Sequence
 from constraints import Constraint
 from constraints.validation import as_number, short_repr
 from teleop.limits import MAX_WALL_STIFFNESS
+from teleop.options import PLANT_KINDS
 
 from .imperfect import Imperfections
 from .mujoco_plant import MujocoPlant
@@ -21,11 +22,6 @@ from .ros2.settings import Ros2Settings
 from .settings import SETTINGS_KEYS, PlantSettings
 from .walls import wall_of
 
-#: The plants a run can choose, by name.
-PLANT_KINDS = ("kinematic", "mujoco", "ros2")
-
-#: The plants simulated in this process (many runs at once, each its own robot).
-SIMULATED_PLANT_KINDS = ("kinematic", "mujoco")
 
 
 @dataclass(frozen=True)

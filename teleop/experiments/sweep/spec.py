@@ -24,7 +24,7 @@ from teleop.limits import MAX_CELLS, MAX_SPEC_BYTES
 from teleop.options import (ACCELERATION_LIMITS_HELP, CALIBRATION_POSITION,
                             CALIBRATION_ROTATION, CONSTRAINT_GAIN, DURATION, ENCODER_NOISE, KP,
                             JOINT_TIME_CONSTANT, LATENCY, PATH_AMPLITUDE, PAYLOAD, RATE, SEED,
-                            TROCAR_SHIFT)
+                            SIMULATED_PLANT_KINDS, TROCAR_SHIFT)
 
 #: Hex digits of a cell's key (80 bits: no collision in any sweep of this world).
 KEY_DIGITS = 20
@@ -145,7 +145,6 @@ def _robot_choice(value: Any, name: str) -> dict[str, Any]:
 
 
 def _plant_kind(value: Any, name: str) -> str:
-    from teleop.plants.choice import SIMULATED_PLANT_KINDS
 
     if value == "ros2":
         raise ValueError(f"{name} ros2 is one real robot and a sweep runs cells in parallel: "
