@@ -461,35 +461,6 @@ class Constraint(CompiledForm, ABC):
         """Structure matrix ``S`` (6 x (6-k)) with ``V_a = S [free variables]``."""
         return structure_of(self.evaluate(placement), parametrisation)
 
-    # -- an affine form, for the analytical CJM's precomputed terms ----------------------
-
-    def affine_anchor(self) -> np.ndarray | None:
-        """``[x_w; f_w]`` (6,): a world point and its world velocity, when :meth:`evaluate`
-        is affine in ``x = T_a^-1 x_w`` and ``f = R_a^T f_w``; else None.
-
-        A constraint returns an anchor here when, for fixed gain, its ``p``, ``error`` and
-        ``rhs`` are affine functions of ``(x, f)`` and ``C``, ``C_perp`` are constant;
-        :meth:`evaluate_affine` then gives the evaluation. The analytical CJM
-        precomputes its per-step terms as one matrix product of ``(x, f)``. The array is
-        read-only and replaced whenever the geometry changes; the compiled CJM step reads
-        it at every step.
-        """
-        return None
-
-    def affine_inputs(self, placement: pin.SE3) -> tuple[np.ndarray, np.ndarray | None] | None:
-        """``(x, f)`` of :meth:`affine_anchor` in ``F_a`` coordinates (``f`` None at
-        rest), or None without an affine form."""
-        anchor = self.affine_anchor()
-        if anchor is None:
-            return None
-        velocity = anchor[3:]
-        return (placement.actInv(anchor[:3]),
-                placement.rotation.T @ velocity if velocity.any() else None)
-
-    def evaluate_affine(self, x: np.ndarray, f: np.ndarray | None) -> ConstraintPoint:
-        """:meth:`evaluate` as a function of the inputs of :meth:`affine_inputs`."""
-        raise NotImplementedError(f"{type(self).__name__} has no affine form")
-
     def rows(
         self, model: pin.Model, data: pin.Data, frame_id: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:

@@ -199,12 +199,16 @@ class Hole(Constraint):
     def error(self, placement: pin.SE3) -> np.ndarray:
         return -self._C @ self._center_local(placement)
 
-    def affine_anchor(self) -> np.ndarray:
-        """The hole centre and its velocity."""
+    @property
+    def anchor(self) -> np.ndarray:
+        """``[center; velocity]`` (6,), world frame: read-only, a new array whenever either
+        changes."""
         return self._anchor
 
-    def evaluate_affine(self, x: np.ndarray, f: np.ndarray | None) -> ConstraintPoint:
-        """``p = (e . x) e``, ``error = -C x``, ``rhs = K C x + C f``: affine in ``(x, f)``."""
+    def evaluate_local(self, x: np.ndarray, f: np.ndarray | None) -> ConstraintPoint:
+        """The evaluation from the centre ``x`` and its velocity ``f`` in ``F_a``
+        coordinates (``f`` None at rest): ``p = (e . x) e``, ``error = -C x``,
+        ``rhs = K C x + C f``, affine in ``(x, f)``."""
         error = -self._C @ x
         rhs = -self.gain * error
         if f is not None:
@@ -213,7 +217,9 @@ class Hole(Constraint):
                                C=self._C, C_perp=self._C_perp, error=error, rhs=rhs)
 
     def evaluate(self, placement: pin.SE3) -> ConstraintPoint:
-        return self.evaluate_affine(*self.affine_inputs(placement))
+        velocity = self._anchor[3:]
+        return self.evaluate_local(placement.actInv(self._anchor[:3]),
+                                   placement.rotation.T @ velocity if velocity.any() else None)
 
     def feed_forward(self, placement: pin.SE3) -> np.ndarray:
         return self._C @ (placement.rotation.T @ self.velocity)

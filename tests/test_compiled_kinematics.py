@@ -220,14 +220,14 @@ def test_a_hole_moves_only_through_its_setters():
     """The compiled step copies a hole's anchor when the array changes: in-place edits of
     the centre or velocity are refused, assignments give a new anchor."""
     hole = Hole("link", [0.1, 0.2, 0.3])
-    anchor = hole.affine_anchor()
+    anchor = hole.anchor
     with pytest.raises(ValueError, match="read-only"):
         hole.center[0] += 1.0
     with pytest.raises(ValueError, match="read-only"):
         hole.velocity[:] = 1.0
     hole.center = [0.1, 0.2, 0.4]
-    assert hole.affine_anchor() is not anchor
-    np.testing.assert_array_equal(hole.affine_anchor(), [0.1, 0.2, 0.4, 0.0, 0.0, 0.0])
+    assert hole.anchor is not anchor
+    np.testing.assert_array_equal(hole.anchor, [0.1, 0.2, 0.4, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="hole velocity"):
         hole.velocity = [0.0, float("nan"), 0.0]
 

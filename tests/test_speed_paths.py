@@ -22,6 +22,7 @@ import controllers.cjm.analytical as analytical_module
 from constraints import Barrier, Hole, Plane, PointLock
 from controllers import CJMController, QPController, damped_least_squares, nullspace
 from controllers.base import Kinematics
+from controllers.cjm.affine_forms import affine_form_of, affine_inputs
 from controllers.cjm.analytical import AffineTerms, terms_size, terms_views, write_terms
 from controllers.linalg import DampingPolicy
 
@@ -42,7 +43,8 @@ def test_hole_affine_terms_equal_the_generic_terms(center, axis, velocity, gain,
     hole = Hole("link", center, link_axis=axis, gain=gain,
                 velocity=velocity if moving else (0.0, 0.0, 0.0))
     fast, generic = np.empty(terms_size(2)), np.empty(terms_size(2))
-    AffineTerms(hole).write(*hole.affine_inputs(placement), fast)
+    form = affine_form_of(hole)
+    AffineTerms(hole, form).write(*affine_inputs(form, hole, placement), fast)
     state = hole.evaluate(placement)
     write_terms(state, hole.structure(placement), generic)  # evaluate + structure
     np.testing.assert_allclose(fast, generic, atol=1e-12)

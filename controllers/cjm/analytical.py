@@ -25,6 +25,7 @@ from constraints import Constraint, ConstraintPoint, Parametrisation, structure_
 
 from ..base import TWIST_TOLERANCE, StepStatus
 from ..linalg import DampedSolution, DampingPolicy, damped_least_squares, nullspace
+from .affine_forms import AffineForm, affine_form_of, affine_inputs
 from .report import Event, ReportBuilder
 from .tolerances import (
     FAST_PATH_MIN_SIGMA,
@@ -95,8 +96,9 @@ class AffineTerms:
     """The terms of a constraint with an affine form, as
     ``t_0 + T_x x + T_f f + K (t_K + T_K x)`` at its gain ``K``.
 
-    When :meth:`Constraint.affine_inputs` gives ``(x, f)`` and the evaluation is affine
-    in them with constant ``C`` (a hole: ``x`` its centre, ``f`` its velocity in ``F_a``),
+    When the constraint's type has an affine form (:mod:`.affine_forms`: ``(x, f)`` its
+    anchor in ``F_a`` coordinates, the evaluation affine in them with constant ``C``; a
+    hole: ``x`` its centre, ``f`` its velocity),
     the null-space structure matrix ``[[C_perp^T, C^T C hat(p)], [0, I]]`` is affine
     too (``hat`` is linear), so the whole buffer is; ``rhs = C v - K e`` (with ``e``
     affine in ``x``) is affine in the gain as well. The maps are found by evaluating at
@@ -104,13 +106,14 @@ class AffineTerms:
     step is then a few matrix products with the gain it reads (docs/design.md section 16).
     """
 
-    def __init__(self, constraint: Constraint) -> None:
+    def __init__(self, constraint: Constraint, form: AffineForm) -> None:
         self.constraint = constraint
+        self.form = form
         k = constraint.dim
         zero = np.zeros(3)
 
         def terms_at(x: np.ndarray, f: np.ndarray, gain: float) -> np.ndarray:
-            state = constraint.evaluate_affine(x, f)
+            state = form.evaluate(constraint, x, f)
             # rhs = C v - K e at the constraint's gain K: the same point at ``gain``
             state = dataclasses.replace(state, rhs=state.rhs + (constraint.gain - gain) * state.error)
             terms = np.empty(terms_size(k))
@@ -146,15 +149,16 @@ class TermsWriter:
         self.constraint = constraint
         self.parametrisation = parametrisation
         #: the affine form, or None: the terms come from evaluating the constraint
-        self.affine_terms = (AffineTerms(constraint) if parametrisation == "nullspace"
-                             and constraint.affine_anchor() is not None else None)
+        form = affine_form_of(constraint) if parametrisation == "nullspace" else None
+        self.affine_terms = None if form is None else AffineTerms(constraint, form)
 
     def write(self, placement: pin.SE3, terms: np.ndarray) -> None:
         if self.affine_terms is None:
             state = self.constraint.evaluate(placement)
             write_terms(state, structure_of(state, self.parametrisation), terms)
             return
-        self.affine_terms.write(*self.constraint.affine_inputs(placement), terms)
+        affine = self.affine_terms
+        affine.write(*affine_inputs(affine.form, self.constraint, placement), terms)
 
 
 class SquarePreChain:
