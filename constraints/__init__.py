@@ -5,8 +5,8 @@ reparametrisation of the twist of ``F_a``), its joint-space rows ``A qd = b`` wi
 feedback, and its position error. See ``base.Constraint``. Each also describes itself
 (``kind``, ``to_dict`` / ``Constraint.from_dict``, ``position`` / ``move_to``,
 ``placement`` / ``place``); ``registry.CONSTRAINT_TYPES`` lists the kinds. What each other
-layer does with a type (drawing it, the plant's wall, sliding it, its compiled form) is a
-piece that layer registers by type.
+layer does with a type (drawing it, the plant's wall, sliding it, the CJM's affine form) is
+a piece that layer registers by type.
 """
 
 from .barrier import DEFAULT_BARRIER_GAIN, Barrier

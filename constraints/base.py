@@ -211,13 +211,20 @@ class Constraint(CompiledForm, ABC):
     class turns that into the structure matrix ``S`` (for the analytical CJM) and the
     joint-space rows ``A qd = b`` (for the general CJM and the QP).
 
-    A constraint also describes itself, so no other layer branches on its type: its
-    ``kind`` name, :meth:`to_dict` / :meth:`from_dict` (the constructor's arguments; the
-    kinds are listed in :mod:`constraints.registry`), the world reference point of its
-    geometry (:attr:`position`, moved by :meth:`move_to`) and what a view draws
-    (:meth:`geometry`), and what placing it on a robot as the robot is now takes
-    (:attr:`placement`, :meth:`place`). A new type sets the class attributes below and
-    is registered (:func:`constraints.registry.register`).
+    A constraint also describes itself: its ``kind`` name and ``label``, :meth:`to_dict` /
+    :meth:`from_dict` (the constructor's arguments; the kinds are listed in
+    :mod:`constraints.registry`), the world reference point of its geometry
+    (:attr:`position`, moved by :meth:`move_to`), and what placing it on a robot as the
+    robot is now takes (:attr:`placement`, :meth:`place`). A new type sets the class
+    attributes below and is registered (:func:`constraints.registry.register`). What the
+    other layers do with a type is a piece each registers by type, looked up along the
+    type's bases (no layer branches on a type): the page's drawing
+    (``web/constraint_drawing.py``), a physics plant's wall (``teleop/plants/walls.py``),
+    a port the collision avoidance leaves alone (:mod:`constraints.collision.ports`),
+    sliding along its link (``teleop/experiments/sliding.py``), the analytical CJM's
+    affine form (``controllers/cjm/affine_forms.py``). The compiled CJM step's declaration
+    (:class:`~constraints.compiled_form.CompiledForm`) stays here: the extension reads it
+    off the constraint.
 
     Parameters
     ----------

@@ -5,7 +5,7 @@ The table sits below every constraint module (it imports none of them), so
 :mod:`constraints.base` reads it without an import circle; :mod:`constraints` fills it
 with the built-in kinds. Adding a constraint type is one new module (a
 :class:`~constraints.base.Constraint` subclass that sets ``kind``, ``dim``,
-``position_attribute``, the drawing attributes and its ``placement`` declaration, and keeps
+``position_attribute``, ``label`` and its ``placement`` declaration, and keeps
 each constructor argument as an attribute of the same name) plus :func:`register`.
 """
 
