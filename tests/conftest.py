@@ -35,7 +35,7 @@ FILE_MARKERS = {
              "test_collision_experiments.py", "test_session_cli.py", "test_web_cli.py",
              "test_experiments.py", "test_sweep_summary.py", "test_results_doc.py",
              "test_bench.py", "test_web_trust.py", "test_scenarios_any_robot.py",
-             "test_ros2_wire.py"),
+             "test_ros2_wire.py", "test_plant_encoder_noise.py"),
 }
 
 

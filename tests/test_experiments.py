@@ -31,7 +31,7 @@ from teleop.experiments.plan import Plan, home_pose
 from teleop.experiments.plots import overlap_groups
 from teleop.experiments.scenarios import load_scenario
 from teleop.experiments.solver_output import SolverOutputCapture
-from teleop.loop import LoopConfig, TeleopLoop, row_labels
+from teleop.loop import LoopConfig, StateObserverConfig, TeleopLoop, row_labels
 
 SCHEMA = json.loads(files("teleop.experiments").joinpath("metrics.schema.json").read_text())
 ALL_CONTROLLERS = ["cjm", "qp:proxqp", "qp:daqp", "qp:osqp", "mink:daqp"]
@@ -160,7 +160,8 @@ def test_the_controller_sees_the_noisy_q_and_the_robot_moves_with_the_late_comma
     hole = Hole.on_link(robot, robot.q_home, distance=0.2)
     spy = Spy(CJMController(robot, [hole]))
     imperfections = Imperfections(encoder_noise=1e-4, latency=2, seed=3)
-    loop = TeleopLoop(robot, spy, plant=imperfections.plant(robot.model, 1e-3))
+    raw = LoopConfig(state_observer=StateObserverConfig(enabled=False))  # the encoders raw
+    loop = TeleopLoop(robot, spy, plant=imperfections.plant(robot.model, 1e-3), config=raw)
     start = loop.ee_placement()
     target = start * pin.exp6(np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0]))
     true_q, errors = [loop.q.copy()], []

@@ -11,9 +11,11 @@ from .distance_meter import SAFETY_TOLERANCE, DistanceMeasure, DistanceMeter
 from .naming import constraint_names, row_labels
 from .plant import Plant
 from .records import RECORD_FIELDS, CompiledPendingStep, PendingStep, StepRecord
+from .state_observer import StateObserver, StateObserverConfig
 from .supervisor import Supervision, Supervisor, SupervisorConfig
 
 __all__ = ["RECORD_FIELDS", "SAFETY_TOLERANCE", "CompiledPendingStep", "DistanceMeasure",
-           "DistanceMeter", "LoopConfig", "PendingStep", "Plant", "StepRecord", "Supervision",
+           "DistanceMeter", "LoopConfig", "PendingStep", "Plant", "StateObserver",
+           "StateObserverConfig", "StepRecord", "Supervision",
            "Supervisor", "SupervisorConfig", "Targets", "TeleopLoop", "constraint_names",
            "row_labels", "saturate_twist", "target_poses"]

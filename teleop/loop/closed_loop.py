@@ -45,6 +45,7 @@ from .distance_meter import DistanceMeter
 from .naming import constraint_names, row_labels
 from .plant import Plant
 from .records import CompiledPendingStep, PendingStep, StepRecord
+from .state_observer import StateObserver, StateObserverConfig
 from .supervisor import Supervision, Supervisor, SupervisorConfig
 from .targets import Targets, saturate_twist, target_poses
 from .task_modes import fit_target, task_modes as checked_task_modes, task_weight
@@ -63,6 +64,8 @@ class LoopConfig:
     target_time_constant : first-order smoothing of the operator target (s); 0 = none.
     feed_forward : add the target's own twist to the command.
     supervisor : the measured status's and the supervisor's thresholds (docs/design.md 5.2).
+    state_observer : the joint-state observer between the encoders and the controller and
+        supervisor (docs/design.md 5.6).
     """
 
     rate: float = 1000.0
@@ -72,6 +75,7 @@ class LoopConfig:
     target_time_constant: float = 0.0
     feed_forward: bool = True
     supervisor: SupervisorConfig = SupervisorConfig()
+    state_observer: StateObserverConfig = StateObserverConfig()
 
     def __post_init__(self) -> None:
         """Every field a real number in its range (``ValueError`` naming it); the rate,
@@ -92,6 +96,9 @@ class LoopConfig:
         if not isinstance(self.supervisor, SupervisorConfig):
             raise ValueError(f"supervisor must be a SupervisorConfig, got "
                              f"{type(self.supervisor).__name__}")
+        if not isinstance(self.state_observer, StateObserverConfig):
+            raise ValueError(f"state_observer must be a StateObserverConfig, got "
+                             f"{type(self.state_observer).__name__}")
         for name, value in checked.items():
             object.__setattr__(self, name, value)
 
@@ -161,6 +168,10 @@ class TeleopLoop:
         #: loop follows; what it did last (docs/design.md 5.2)
         self.supervisor = Supervisor(self.model, self.config.supervisor, self.config.dt)
         self.supervision: Supervision | None = None
+        #: the configuration the loop takes from the encoders (docs/design.md 5.6); the
+        #: plant's declared encoder noise sets its gain
+        self.observer: StateObserver = self.config.state_observer.observer(
+            self.model, float(getattr(plant, "encoder_noise", 0.0)), self.config.dt)
         self.t = 0.0
         self._filtered_targets: list[pin.SE3] | None = None
         self._previous_targets: list[pin.SE3] | None = None
@@ -239,6 +250,7 @@ class TeleopLoop:
         self.last_qd = np.zeros(self.model.nv)
         self.supervisor.reset()
         self.supervision = None
+        self.observer.reset()
         if self.plant is not None:
             self.plant.reset(self.q)
         if self.distance_meter is not None:
@@ -328,7 +340,8 @@ class TeleopLoop:
         configuration the C++ side does not take, the Python reference
         (:meth:`_advance_python`), to which the filter's state is handed over."""
         tick_start = time.perf_counter_ns()
-        sensed = self.q if self.plant is None else self.plant.sense(self.q)
+        sensed = (self.q if self.plant is None
+                  else self.observer.estimate(self.plant.sense(self.q), self.last_qd))
         compiled = self.compiled
         ready = compiled is not None and compiled.ready()
         supervision = self.supervise(sensed, self.targets(target),

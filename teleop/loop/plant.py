@@ -13,7 +13,9 @@ from constraints import Constraint
 class Plant(Protocol):
     """What stands between the controller and the robot's true joints (docs/design.md
     sections 15.1, 17): the loop reads the configuration through :meth:`sense` and moves
-    the robot with what :meth:`actuate` returns."""
+    the robot with what :meth:`actuate` returns. A plant whose encoders are noisy also
+    says so in ``encoder_noise`` (rad, its std; the loop's state observer, docs/design.md
+    5.6, takes 0 from a plant without it)."""
 
     def sense(self, q: np.ndarray) -> np.ndarray:
         """The configuration the loop measures when the robot's true one is ``q``."""

@@ -171,6 +171,12 @@ class ImperfectPlant:
         self._queue = collections.deque(np.zeros(nv) for _ in range(self.imperfections.latency))
         self._velocity = np.zeros(nv)
 
+    @property
+    def encoder_noise(self) -> float:
+        """The encoders' declared noise std (rad), which the loop's state observer reads
+        (docs/design.md 5.6)."""
+        return self.imperfections.encoder_noise
+
     def sense(self, q: np.ndarray) -> np.ndarray:
         """``q`` with Gaussian encoder noise on every joint."""
         sigma = self.imperfections.encoder_noise

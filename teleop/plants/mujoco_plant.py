@@ -321,6 +321,12 @@ class MujocoPlant:
         self.interface.reset()
         self.last = PlantMeasures(np.zeros((0, 3)), np.zeros(0), 0.0, False)
 
+    @property
+    def encoder_noise(self) -> float:
+        """The encoders' declared noise std (rad), which the loop's state observer reads
+        (docs/design.md 5.6)."""
+        return 0.0 if self.shaping is None else self.shaping.encoder_noise
+
     def sense(self, q: np.ndarray) -> np.ndarray:
         """The simulated configuration ``q`` with the encoder noise on top."""
         return q if self.shaping is None else self.shaping.sense(q)
