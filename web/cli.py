@@ -25,8 +25,8 @@ from teleop.cli.commands import Command
 from teleop.cli.robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.loop.task_modes import AUTO, TASK_MODES
-from teleop.options import (ACCELERATION_LIMITS_HELP, PAYLOAD, PLANT_KINDS, RATE,
-                            WALL_STIFFNESS)
+from teleop.options import (ACCELERATION_LIMITS_HELP, JERK_LIMIT, PAYLOAD, PLANT_KINDS,
+                            RATE, WALL_STIFFNESS)
 
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
     resolve_host
@@ -72,6 +72,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "a port, else the full pose; a scene's own wins (default: auto)")
     control.add_argument("--acceleration-limits", action=argparse.BooleanOptionalAction,
                          default=True, help=ACCELERATION_LIMITS_HELP)
+    JERK_LIMIT.add_to(control, left_out="none")
 
     plant = parser.add_argument_group("plant (docs/design.md section 17)")
     plant.add_argument("--plant", choices=PLANT_KINDS, default="kinematic",
@@ -285,6 +286,7 @@ def run(args: argparse.Namespace, prog: str) -> int:
                                                   scene_dir=args.scene_dir, scene=scene,
                                                   notes=notes, token=token, **plant,
                                                   acceleration_limits=args.acceleration_limits,
+                                                  jerk_limit=args.jerk_limit,
                                                   task_mode=args.task_mode,
                                                   **collisions, inputs=inputs,
                                                   input_timeout=args.input_timeout / 1e3)

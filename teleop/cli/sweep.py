@@ -51,6 +51,8 @@ GRID_OPTIONS = (
      "half-width in m of each trocar's random slide along its link (default: 0)"),
     ("--path-amplitude", "path_amplitude", numbers, "M",
      "bound in m of the random motion added to each EE target (default: 0)"),
+    ("--jerk-limit", "jerk_limit", numbers, "RAD_PER_S3",
+     "jerk limits in rad/s^3 on every joint (default: none; with the acceleration limits)"),
 )
 
 
@@ -105,7 +107,8 @@ def options_document(args: argparse.Namespace) -> dict:
     given = {name: getattr(args, name) for _, name, *_ in GRID_OPTIONS
              if getattr(args, name) is not None}
     for name in ("duration", "rate", "payload", "kp", "constraint_gain", "encoder_noise",
-                 "latency", "joint_time_constant", "trocar_shift", "path_amplitude"):
+                 "latency", "joint_time_constant", "trocar_shift", "path_amplitude",
+                 "jerk_limit"):
         if name in given and len(given[name]) == 1:
             given[name] = given[name][0]
     if args.calibration_error is not None:

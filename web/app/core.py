@@ -24,6 +24,7 @@ from pathlib import Path
 from controllers.base import velocity_joint_names
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.task_modes import AUTO
+from teleop.options import JERK_LIMIT
 from teleop.plants import PlantSettings
 from teleop.robots import Robot
 
@@ -71,6 +72,8 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
         ``safety_distance``, ``detection_distance``, ``approach_speed``.
     acceleration_limits : whether the controllers keep the robot's joint acceleration
         limits (docs/design.md section 8.4; on by default).
+    jerk_limit : a jerk limit (rad/s^3) every controller keeps on every joint
+        (docs/design.md section 8.5), or None; it needs the acceleration limits.
     """
 
     def __init__(self, robot: Robot, controller: str = "cjm", ghost: str | None = None,
@@ -79,9 +82,12 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
                  plant_settings: PlantSettings | None = None,
                  wall_stiffness: float | None = None, collisions: bool = True,
                  collision_settings: dict | None = None,
-                 acceleration_limits: bool = True) -> None:
+                 acceleration_limits: bool = True, jerk_limit: float | None = None) -> None:
         rate = checked_rate(rate)
+        if jerk_limit is not None and not acceleration_limits:
+            raise ValueError("a jerk limit needs the acceleration limits (docs/design.md 8.5)")
         self.acceleration_limits = acceleration_limits
+        self.jerk_limit = None if jerk_limit is None else JERK_LIMIT.check(jerk_limit)
         self.plant = PlantChoice(plant, plant_settings or PlantSettings(), wall_stiffness)
         self.robot = robot
         self._lock = threading.RLock()

@@ -71,6 +71,7 @@ class Robots:
     plant: PlantChoice
     force: ForceControl
     acceleration_limits: bool
+    jerk_limit: float | None
     _lock: threading.RLock
     _build_lock: threading.Lock
 
@@ -94,7 +95,7 @@ class Robots:
                                      twist_weight=None if np.all(twist_weight == 1.0)
                                      else twist_weight,
                                      acceleration_limit=ROBOT if self.acceleration_limits
-                                     else None)
+                                     else None, jerk_limit=self.jerk_limit)
         self._apply_damping(controller, damping)
         controller.set_collisions(self._attached(avoidance, collisions_on))
         return TeleopLoop(self.robot, self.force.wrapped(controller, config.dt), q0=q,

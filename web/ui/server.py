@@ -25,8 +25,8 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                wall_stiffness: float | None = None, collisions: bool = True,
                collision_settings: dict | None = None,
                inputs: Sequence[InputSource] = (), input_timeout: float | None = None,
-               acceleration_limits: bool = True, task_mode: str = "auto"
-               ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
+               acceleration_limits: bool = True, jerk_limit: float | None = None,
+               task_mode: str = "auto") -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
     threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
     The page reads and writes files in ``scene_dir`` and ``record_dir`` only; a websocket
@@ -35,7 +35,8 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     (:mod:`web.access`).
     ``plant``, ``plant_settings``, ``wall_stiffness``: what the loops run on;
     ``collisions``, ``collision_settings``: the collision avoidance;
-    ``acceleration_limits``: the robot's joint acceleration limits kept (on by default)
+    ``acceleration_limits``: the robot's joint acceleration limits kept (on by default),
+    ``jerk_limit``: a jerk limit on every joint (rad/s^3; needs the acceleration limits)
     (:class:`web.app.TeleopApp`); ``task_mode``: what the operator commands of each EE
     (:meth:`TeleopApp.set_task_mode`, docs/design.md section 20; a scene's own wins);
     ``inputs``: the devices that drive the EEs, each its own (docs/design.md section 19),
@@ -45,7 +46,7 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                     scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
                     wall_stiffness=wall_stiffness, collisions=collisions,
                     collision_settings=collision_settings,
-                    acceleration_limits=acceleration_limits)
+                    acceleration_limits=acceleration_limits, jerk_limit=jerk_limit)
     app.set_task_mode(task_mode)
     if scene is not None:
         app.apply_scene(scene)

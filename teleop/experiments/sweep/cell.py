@@ -30,7 +30,8 @@ class TimeLimitExceeded(Exception):
 @dataclass(frozen=True)
 class CellRun:
     """What a cell's inputs build: the plan (scenario and variation), the loop settings,
-    the imperfections, the plant, the duration, whether the acceleration limits are kept."""
+    the imperfections, the plant, the duration, whether the acceleration limits are kept,
+    the jerk limit (rad/s^3, or None)."""
 
     plan: Any
     config: Any
@@ -38,6 +39,7 @@ class CellRun:
     plant: Any
     duration: float
     acceleration_limits: bool
+    jerk_limit: float | None
 
 
 def build_run(inputs: Mapping[str, Any]) -> CellRun:
@@ -66,7 +68,10 @@ def build_run(inputs: Mapping[str, Any]) -> CellRun:
                else PlantSettings())
     plant = PlantChoice(value("plant"), physics)
     duration = value("duration") or plan.duration
-    return CellRun(plan, config, imperfections, plant, duration, value("acceleration_limits"))
+    if value("jerk_limit") is not None and not value("acceleration_limits"):
+        raise ValueError("jerk_limit needs the acceleration limits (docs/design.md 8.5)")
+    return CellRun(plan, config, imperfections, plant, duration, value("acceleration_limits"),
+                   value("jerk_limit"))
 
 
 def run_cell(inputs: Mapping[str, Any], time_limit: float) -> dict[str, Any]:
@@ -93,7 +98,8 @@ def run_cell(inputs: Mapping[str, Any], time_limit: float) -> dict[str, Any]:
 
         with SolverOutputCapture() as capture:
             result = run_plan(run.plan, inputs["controller"], run.config, run.duration,
-                              check_time, run.imperfections, run.plant, run.acceleration_limits)
+                              check_time, run.imperfections, run.plant, run.acceleration_limits,
+                              run.jerk_limit)
             result.solver_messages = capture.collect()
         outcome.update(status=DONE, metrics=result.metrics())
     except TimeLimitExceeded as error:

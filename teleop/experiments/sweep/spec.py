@@ -21,9 +21,9 @@ from typing import Any, Callable, Mapping
 from constraints.validation import as_number, short_repr
 from teleop.json_text import parse_json
 from teleop.limits import MAX_CELLS, MAX_SPEC_BYTES
-from teleop.options import (ACCELERATION_LIMITS_HELP, CALIBRATION_POSITION,
-                            CALIBRATION_ROTATION, CONSTRAINT_GAIN, DURATION, ENCODER_NOISE, KP,
-                            JOINT_TIME_CONSTANT, LATENCY, PATH_AMPLITUDE, PAYLOAD, RATE, SEED,
+from teleop.options import (ACCELERATION_LIMITS_HELP, CALIBRATION_POSITION, CALIBRATION_ROTATION,
+                            CONSTRAINT_GAIN, DURATION, ENCODER_NOISE, JERK_LIMIT,
+                            JOINT_TIME_CONSTANT, KP, LATENCY, PATH_AMPLITUDE, PAYLOAD, RATE, SEED,
                             SIMULATED_PLANT_KINDS, TROCAR_SHIFT)
 
 #: Hex digits of a cell's key (80 bits: no collision in any sweep of this world).
@@ -89,6 +89,9 @@ def _cell_fields() -> tuple[CellField, ...]:
         CellField("rate", 1000.0, RATE.check, "--rate", help="control rate (Hz)"),
         CellField("plant", "kinematic", _plant_kind, "--plant", help="kinematic or mujoco"),
         CellField("acceleration_limits", True, _boolean, None, help=ACCELERATION_LIMITS_HELP),
+        CellField("jerk_limit", None, _optional(JERK_LIMIT.check), "--jerk-limit",
+                  help="rad/s^3 on every joint of every controller (default: none; with the "
+                       "acceleration limits, docs/design.md 8.5)"),
         CellField("payload", 0.0, PAYLOAD.check, "--payload", help="kg at each EE (mujoco)"),
         CellField("kp", 20.0, KP.check, "--kp", help="pose-error gain (1/s)"),
         CellField("constraint_gain", None, _optional(CONSTRAINT_GAIN.check),
