@@ -29,6 +29,7 @@ from .robot_options import add_robot_arguments, robot_from_arguments, robot_opti
 from .plant_options import add_plant_options, plant_choice
 from .sim import add_arguments as add_sim_arguments
 from .sim import run as run_sim
+from .state_observer_options import add_state_observer_option
 from .supervisor_options import add_supervisor_options, supervisor_choice
 from .sweep import add_arguments as add_sweep_arguments
 from .sweep import run as run_sweep_command
@@ -139,6 +140,7 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
                        if source == "session" else "its default")
     _add_collision_options(parser, source)
     add_supervisor_options(parser)
+    add_state_observer_option(parser)
 
 
 def _add_variation_options(parser: argparse.ArgumentParser, source: str) -> None:
@@ -391,7 +393,8 @@ def _compare(args: argparse.Namespace) -> int:
         return run_contact_compare(args, defaults)
     return _run(collision_choice(args, scenario_plan(args)), args,
                 LoopConfig(rate=args.rate or 1000.0, kp=args.kp or LoopConfig.kp,
-                           supervisor=supervisor_choice(args)),
+                           supervisor=supervisor_choice(args),
+                           state_observer=args.state_filter),
                 plant_choice(args))
 
 
@@ -404,7 +407,8 @@ def _replay(args: argparse.Namespace) -> int:
     config = LoopConfig(rate=args.rate or header.get("rate_hz", 1000.0),
                         kp=args.kp or header.get("kp", LoopConfig.kp),
                         target_time_constant=header.get("target_time_constant_s", 0.0),
-                        supervisor=supervisor_choice(args))
+                        supervisor=supervisor_choice(args),
+                        state_observer=args.state_filter)
     return _run(collision_choice(args, session_plan(session)), args, config,
                 plant_choice(args, session_plant(session)))
 
