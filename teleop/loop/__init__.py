@@ -1,13 +1,13 @@
 """The closed teleoperation loop: operator target -> EE twist -> controller -> integrate."""
 
 from .closed_loop import (
-    LoopConfig,
     Targets,
     TeleopLoop,
     saturate_twist,
     target_poses,
 )
 from .distance_meter import SAFETY_TOLERANCE, DistanceMeasure, DistanceMeter
+from .loop_config import LoopConfig
 from .naming import constraint_names, row_labels
 from .plant import Plant
 from .records import RECORD_FIELDS, CompiledPendingStep, PendingStep, StepRecord

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
@@ -38,74 +37,18 @@ import pinocchio as pin
 from constraints import Constraint
 from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
-from constraints.validation import as_number, as_vector
-from teleop.limits import MAX_POSE_GAIN, MAX_RATE_HZ, MAX_TIME_CONSTANT_S
+from constraints.validation import as_vector
 
 from .distance_meter import DistanceMeter
+from .loop_config import LoopConfig
 from .naming import constraint_names, row_labels
 from .plant import Plant
 from .records import CompiledPendingStep, PendingStep, StepRecord
-from .state_observer import StateObserver, StateObserverConfig
-from .supervisor import Supervision, Supervisor, SupervisorConfig
+from .state_observer import StateObserver
+from .supervisor import Supervision, Supervisor
 from .targets import Targets, saturate_twist, target_poses
 from .task_modes import fit_target, task_modes as checked_task_modes, task_weight
 from .true_kinematics import TrueKinematics
-
-@dataclass(frozen=True)
-class LoopConfig:
-    """Closed-loop settings.
-
-    Attributes
-    ----------
-    rate : control rate (Hz); ``dt = 1 / rate``.
-    kp : pose-error gain (1/s) of ``V_e = K_p log6(T_e^-1 T*)``.
-    max_linear_speed, max_angular_speed : saturation of the commanded twist (m/s, rad/s);
-        the twist is scaled uniformly so its direction is kept.
-    target_time_constant : first-order smoothing of the operator target (s); 0 = none.
-    feed_forward : add the target's own twist to the command.
-    supervisor : the measured status's and the supervisor's thresholds (docs/design.md 5.2).
-    state_observer : the joint-state observer between the encoders and the controller and
-        supervisor (docs/design.md 5.6).
-    """
-
-    rate: float = 1000.0
-    kp: float = 20.0
-    max_linear_speed: float = 0.25
-    max_angular_speed: float = 1.5
-    target_time_constant: float = 0.0
-    feed_forward: bool = True
-    supervisor: SupervisorConfig = SupervisorConfig()
-    state_observer: StateObserverConfig = StateObserverConfig()
-
-    def __post_init__(self) -> None:
-        """Every field a real number in its range (``ValueError`` naming it); the rate,
-        kp and the smoothing at most :data:`~teleop.limits.MAX_RATE_HZ`,
-        :data:`~teleop.limits.MAX_POSE_GAIN` and :data:`~teleop.limits.MAX_TIME_CONSTANT_S`."""
-        checked = {
-            "rate": as_number(self.rate, "rate", positive=True, maximum=MAX_RATE_HZ),
-            "kp": as_number(self.kp, "kp", positive=True, maximum=MAX_POSE_GAIN),
-            "max_linear_speed": as_number(self.max_linear_speed, "max_linear_speed",
-                                          positive=True),
-            "max_angular_speed": as_number(self.max_angular_speed, "max_angular_speed",
-                                           positive=True),
-            "target_time_constant": as_number(self.target_time_constant, "target_time_constant",
-                                              0.0, maximum=MAX_TIME_CONSTANT_S),
-        }
-        if not isinstance(self.feed_forward, (bool, np.bool_)):
-            raise ValueError(f"feed_forward must be True or False, got {self.feed_forward!r}")
-        if not isinstance(self.supervisor, SupervisorConfig):
-            raise ValueError(f"supervisor must be a SupervisorConfig, got "
-                             f"{type(self.supervisor).__name__}")
-        if not isinstance(self.state_observer, StateObserverConfig):
-            raise ValueError(f"state_observer must be a StateObserverConfig, got "
-                             f"{type(self.state_observer).__name__}")
-        for name, value in checked.items():
-            object.__setattr__(self, name, value)
-
-    @property
-    def dt(self) -> float:
-        return 1.0 / self.rate
-
 
 class TeleopLoop:
     """State and one-tick logic of the closed loop; no threads, no I/O.
