@@ -22,7 +22,7 @@ def _mode(text: str) -> StateObserverConfig:
 
 def add_state_observer_option(parser: argparse.ArgumentParser) -> None:
     """``--state-filter kalman|off|GAIN`` (default: kalman)."""
-    parser.add_argument("--state-filter", type=_mode, default=StateObserverConfig(),
+    parser.add_argument("--state-filter", type=_mode, default="kalman",  # argparse parses it
                         metavar="kalman|off|GAIN",
                         help="the joint-state observer between the encoders and the "
                         "controller and supervisor (docs/design.md section 5.6): kalman, the "
