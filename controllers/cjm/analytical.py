@@ -26,7 +26,7 @@ from constraints import Constraint, ConstraintPoint, Parametrisation, structure_
 from ..base import TWIST_TOLERANCE, StepStatus
 from ..linalg import DampedSolution, DampingPolicy, damped_least_squares, nullspace
 from .affine_forms import AffineForm, affine_form_of, affine_inputs
-from .report import Event, ReportBuilder
+from .report import Event, StepReport
 from .tolerances import (
     FAST_PATH_MIN_SIGMA,
     LEAST_SQUARES_RCOND,
@@ -199,7 +199,7 @@ class SquarePreChain:
         self.lu_cjm = eigenpy.PartialPivLU(6)
 
     def solve(self, model: pin.Model, data: pin.Data, ee_jacobian: np.ndarray,
-              twist: np.ndarray, policy: DampingPolicy, report: ReportBuilder,
+              twist: np.ndarray, policy: DampingPolicy, report: StepReport,
               posture_velocity: np.ndarray | None = None) -> np.ndarray | None:
         """``qd`` for ``twist``, or None when ``J_a`` is near singular (general form then).
 
@@ -243,7 +243,7 @@ class SquarePreChain:
         step, *_ = np.linalg.lstsq(self.joint_map[:, 1:] @ null_basis, goal, rcond=LEAST_SQUARES_RCOND)
         self.free_with_one[1:] += null_basis @ step
 
-    def _solve_by_lu(self, cjm: np.ndarray, policy: DampingPolicy, report: ReportBuilder) -> bool:
+    def _solve_by_lu(self, cjm: np.ndarray, policy: DampingPolicy, report: StepReport) -> bool:
         """Solve a square, well-conditioned ``Jbar`` by its LU, where damping cannot act.
 
         ``||Jbar^-1||_2 <= ||Jbar^-1||_F``, so ``1 / ||Jbar^-1||_F`` is a lower bound on
@@ -264,7 +264,7 @@ class SquarePreChain:
 
 
 def report_task_solution(solution: DampedSolution, matrix: np.ndarray, rhs: np.ndarray,
-                         report: ReportBuilder) -> None:
+                         report: StepReport) -> None:
     """Record a DLS solution of the task in ``report``; a task not met is ``least_squares``."""
     report.sigma_min = solution.sigma_min
     report.damping = solution.damping
@@ -279,7 +279,7 @@ def solve_redundant_pre_chain(model: pin.Model, data: pin.Data, ee_jacobian: np.
                               ee_placement: pin.SE3, constraint: Constraint, frame_id: int,
                               split: ChainSplit, twist: np.ndarray, policy: DampingPolicy,
                               parametrisation: Parametrisation, posture_velocity: np.ndarray | None,
-                              report: ReportBuilder) -> np.ndarray | None:
+                              report: StepReport) -> np.ndarray | None:
     """More than 6 joints move ``F_a``: SVD of ``J_a``, posture in its null space."""
     placement = data.oMf[frame_id]
     pre_jacobian = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL)[:, split.pre]

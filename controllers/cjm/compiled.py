@@ -251,8 +251,10 @@ class CompiledStep:
                            pairs: CollisionRows) -> StepReport:
         """:meth:`_step_report` with the step's collision rows and the pairs it held."""
         count = self._step.active_pair_count
-        return self._step_report(report, paper_form)._replace(
-            collision=pairs, active_pairs=tuple(self._active_pairs[:count].tolist()))
+        step_report = self._step_report(report, paper_form)
+        step_report.collision = pairs
+        step_report.active_pairs = tuple(self._active_pairs[:count].tolist())
+        return step_report
 
     def _write_python_pairs(self, q: np.ndarray) -> CollisionRows:
         """The collision rows at ``q`` measured by Python on ``data`` and written into the

@@ -28,13 +28,13 @@ import numpy as np
 from ..base import StepStatus
 from ..linalg import DampingPolicy, damped_least_squares, nullspace
 from .analytical import report_task_solution
-from .report import Event, ReportBuilder
+from .report import Event, StepReport
 from .tolerances import CONFLICT_RESIDUAL
 
 
 def solve_general(rows: np.ndarray, rows_rhs: np.ndarray, ee_jacobian: np.ndarray,
                   twist: np.ndarray, policy: DampingPolicy,
-                  posture_velocity: np.ndarray | None, report: ReportBuilder,
+                  posture_velocity: np.ndarray | None, report: StepReport,
                   pairs: Sequence[int] = ()) -> np.ndarray:
     """``qd`` holding ``rows qd = rows_rhs`` first, then the twist, then the posture.
 
@@ -69,7 +69,7 @@ def solve_general(rows: np.ndarray, rows_rhs: np.ndarray, ee_jacobian: np.ndarra
 
 
 def hold_pairs_below(rows: np.ndarray, rows_rhs: np.ndarray, pairs: Sequence[int],
-                     report: ReportBuilder) -> None:
+                     report: StepReport) -> None:
     """The second level of the module docstring: ``rows_rhs``'s last ``len(pairs)``
     entries (the collision rows') set to ``A_2 qd_1``; a pair left short of its bound
     is ``PAIR_CONFLICT`` (constraint_degraded), a conflict among the rows before them

@@ -21,7 +21,7 @@ from ..base import StepStatus, checked_inputs
 from ..joint_acceleration import braked_lower, braked_pairs
 from .analytical import SquarePreChain, solve_redundant_pre_chain
 from .general import solve_general
-from .report import Event, ReportBuilder, StepReport
+from .report import Event, StepReport
 from .saturation import saturate_in_null_space
 from .saturation_walk import saturate_around_previous
 from .step_setup import StepSetup
@@ -79,7 +79,7 @@ class PythonStep:
 
     def _step(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         setup = self.setup
-        report = ReportBuilder()
+        report = StepReport()
         ee_jacobian = self._kinematics(q)
         if setup.collisions is not None:
             self._pairs = report.collision = braked_pairs(
@@ -105,12 +105,12 @@ class PythonStep:
         if report.equality_residual > EQUALITY_TOLERANCE:
             report.event(Event.RESIDUAL, StepStatus.CONSTRAINT_DEGRADED, report.equality_residual)
         report.active_pairs = tuple(self._active_pairs)
-        return qd, report.freeze()
+        return qd, report
 
-    def _fail(self, q: np.ndarray, report: ReportBuilder, error: str,
+    def _fail(self, q: np.ndarray, report: StepReport, error: str,
               event: Event = Event.LINEAR_ALGEBRA_ERROR) -> tuple[np.ndarray, StepReport]:
         report.fail(event, error)
-        return self.stop_command(q), report.freeze()
+        return self.stop_command(q), report
 
     def stop_command(self, q: np.ndarray) -> np.ndarray:
         """The command nearest zero in the box (zero unless a joint past its limit must come
@@ -140,7 +140,7 @@ class PythonStep:
         return twist if setup.task_entries is None else setup.task_scale * twist[setup.task_entries]
 
     def _clip(self, qd: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-              report: ReportBuilder) -> np.ndarray:
+              report: StepReport) -> np.ndarray:
         """The last guard: clip to the box; a change beyond rounding degrades the step."""
         clipped = np.clip(qd, lower, upper)
         change = float(np.max(np.abs(clipped - qd), initial=0.0))
@@ -178,7 +178,7 @@ class PythonStep:
     # -- the forms and the barriers (docs/design.md sections 4-7) ------------------------
 
     def _solve(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
-               report: ReportBuilder) -> np.ndarray:
+               report: StepReport) -> np.ndarray:
         self._active = list(self._equalities)
         self._active_pairs = []
         qd = self._solve_rows(q, ee_jacobian, twist, self._active, report)
@@ -187,7 +187,7 @@ class PythonStep:
         return qd
 
     def _activate(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
-                  qd: np.ndarray, report: ReportBuilder) -> np.ndarray:
+                  qd: np.ndarray, report: StepReport) -> np.ndarray:
         """Active set over the barriers, then the collision rows: hold the most violated
         one as an equality, again (a barrier before any collision row)."""
         while self._activate_worst(qd):
@@ -229,7 +229,7 @@ class PythonStep:
                 np.concatenate([rhs, self._pair_rhs[pairs]]))
 
     def _solve_rows(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
-                    active: list[int], report: ReportBuilder) -> np.ndarray:
+                    active: list[int], report: StepReport) -> np.ndarray:
         """The analytical form where it applies, else the general form, for these rows."""
         setup = self.setup
         pairs = self._active_pairs
@@ -247,7 +247,7 @@ class PythonStep:
         return qd
 
     def _solve_analytical(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
-                          index: int, report: ReportBuilder) -> np.ndarray | None:
+                          index: int, report: StepReport) -> np.ndarray | None:
         """The analytical form of constraint ``index``, or None where it does not apply;
         the joints off the path to the EE take the posture velocity, as they do in the
         general form, where they lie in ``null(A)`` and ``null(J_e N)``."""
@@ -258,7 +258,7 @@ class PythonStep:
         return qd
 
     def _solve_analytical_path(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
-                               index: int, report: ReportBuilder) -> np.ndarray | None:
+                               index: int, report: StepReport) -> np.ndarray | None:
         """The analytical form over the joints on the path to the EE (zero elsewhere)."""
         setup, data = self.setup, self.data
         plan = setup.plans[index]
@@ -288,7 +288,7 @@ class PythonStep:
     # -- joint limits (docs/design.md section 9) -----------------------------------------
 
     def _saturate(self, q: np.ndarray, ee_jacobian: np.ndarray, twist: np.ndarray,
-                  lower: np.ndarray, upper: np.ndarray, report: ReportBuilder) -> np.ndarray:
+                  lower: np.ndarray, upper: np.ndarray, report: StepReport) -> np.ndarray:
         """Saturation in the null space (module :mod:`controllers.cjm.saturation`), the
         barriers and the collision rows activated again against the saturated command."""
         setup = self.setup

@@ -10,7 +10,8 @@ written there and nowhere else.
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import NamedTuple, Sequence
+from dataclasses import dataclass
+from typing import Sequence
 
 from constraints.collision import CollisionRows
 
@@ -51,35 +52,18 @@ PAPER_FORM_NOTE = "a = 0, where the paper's 1/a form is singular: null-space for
 NO_CONVERGENCE_NOTE = "LinAlgError: SVD did not converge (Jacobi sweeps)"
 
 
-class StepReport(NamedTuple):
+@dataclass(slots=True)
+class StepReport:
     """One step of either backend: its status, figures and events (in order).
 
-    ``saturation_joints``: the joints a saturated step held at a limit when it missed
-    the task (the ``TASK_MISSED`` event names them); ``error``: the text of a
-    ``LINEAR_ALGEBRA_ERROR``. With collision avoidance, ``collision`` holds the step's
-    :class:`~constraints.collision.CollisionRows` and ``active_pairs`` the indices of its
-    rows held at their bound (else None and ()). (A named tuple: immutable and built in
-    one call, every step.)
+    The compiled step builds it in one call from the C++ report; the Python step fills
+    it as it runs (:meth:`event`, :meth:`fail`), starting from the defaults below, which
+    are an ``ok`` step's. ``saturation_joints``: the joints a saturated step held at a
+    limit when it missed the task (the ``TASK_MISSED`` event names them); ``error``: the
+    text of a ``LINEAR_ALGEBRA_ERROR``. With collision avoidance, ``collision`` holds the
+    step's :class:`~constraints.collision.CollisionRows` and ``active_pairs`` the indices
+    of its rows held at their bound (else None and ()).
     """
-
-    status: StepStatus = StepStatus.OK
-    method: str = ""
-    sigma_min: float = float("nan")
-    damping: float = 0.0
-    scale: float = 1.0
-    equality_residual: float = 0.0
-    saturated_joints: tuple[int, ...] = ()
-    active_barriers: tuple[int, ...] = ()
-    events: tuple[tuple[Event, float, float, float], ...] = ()
-    saturation_joints: tuple[int, ...] = ()
-    error: str = ""
-    collision: CollisionRows | None = None
-    active_pairs: tuple[int, ...] = ()
-
-
-class ReportBuilder:
-    """The Python step's report while it runs (frozen into a :class:`StepReport`); the
-    class attributes are the defaults (an empty report costs no assignment)."""
 
     status: StepStatus = StepStatus.OK
     method: str = ""
@@ -107,20 +91,15 @@ class ReportBuilder:
         self.status, self.error = StepStatus.FAILED, error
         self.events += ((event, 0.0, 0.0, 0.0),)
 
-    def freeze(self) -> StepReport:
-        return StepReport(self.status, self.method, self.sigma_min, self.damping, self.scale,
-                          self.equality_residual, self.saturated_joints, self.active_barriers,
-                          self.events, self.saturation_joints, self.error, self.collision,
-                          self.active_pairs)
-
 
 def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
     """The :class:`SolveInfo` of a step: its figures, and its events worded in order
     (``joint_names``: the joint's name per velocity index)."""
-    (status, method, sigma_min, damping, scale, equality_residual, saturated_joints,
-     active_barriers, events, saturation_joints, error, collision, active_pairs) = report
-    info = SolveInfo(status, method, "", sigma_min, damping, scale, saturated_joints,
-                     active_barriers, equality_residual)  # the notes below leave the status
+    status, events, collision = report.status, report.events, report.collision
+    saturated_joints, active_pairs = report.saturated_joints, report.active_pairs
+    info = SolveInfo(status, report.method, "", report.sigma_min, report.damping, report.scale,
+                     saturated_joints, report.active_barriers,
+                     report.equality_residual)  # the notes below leave the status
     if collision is not None:
         info.minimum_distance, info.closest_pair = collision.minimum_distance, collision.closest_pair
         info.active_pairs = tuple(collision.pairs[i] for i in active_pairs)
@@ -135,7 +114,7 @@ def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
             if index == last_residual:
                 info.report(StepStatus.OK, task_residual_note(a, b))
         elif event is Event.TASK_MISSED:
-            info.report(StepStatus.OK, task_missed_note(joint_names, saturation_joints, a, b))
+            info.report(StepStatus.OK, task_missed_note(joint_names, report.saturation_joints, a, b))
         elif event is Event.TASK_SCALED:
             info.report(StepStatus.OK, task_scaled_note(joint_names, int(a), b))
         elif event is Event.CLIPPED:
@@ -159,7 +138,7 @@ def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
         elif event is Event.NON_FINITE:
             info.message = NON_FINITE_NOTE
         elif event is Event.LINEAR_ALGEBRA_ERROR:
-            info.message = error
+            info.message = report.error
     if active_pairs and status in (StepStatus.LEAST_SQUARES, StepStatus.SCALED):
         info.report(StepStatus.OK, held_back_note(collision, active_pairs))
     return info
