@@ -1,0 +1,223 @@
+"""The control loop's rate under floods, in one run (issue 33 item 6, docs/inputs.md
+"Floods"): the page's server with its control loop at 1 kHz, a hole on link 6, and a
+network master streaming from another process at 500 Hz; then, each from a process of
+its own,
+
+* ``gui``: one browser connection (the right Origin and token) sending 10,000 gizmo-drag
+  messages as fast as its socket takes them;
+* ``udp``: 300,000 datagrams at the master's port, a third each malformed (random bytes),
+  forged (a command with a random tag) and of another rig (tagged with another key);
+* ``both`` at once.
+
+Each phase's loop rate is measured from the control thread's tick count, sampled every
+50 ms: the mean over the flood and the worst 1 s window, as fractions of the baseline's
+mean (the loop's first quiet seconds in the same run). Also printed: the master's
+releases (the watchdog, 100 ms), what the receiver counted, what the inbox coalesced.
+
+Run:  OPENBLAS_NUM_THREADS=1 python docs/measure_floods.py [--events 10000]
+      [--datagrams 300000] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from teleop import load_robot  # noqa: E402
+from teleop.inputs import UdpMaster  # noqa: E402
+from web.ui.server import run_server  # noqa: E402
+
+KEY = bytes(range(32))
+#: the real master, another process: holds still, streaming at 500 Hz until killed
+MASTER = """
+import sys, time
+from teleop.inputs import MasterClient
+client = MasterClient(int(sys.argv[1]), key=bytes.fromhex(sys.argv[2]))
+print("streaming", flush=True)
+due = time.perf_counter()
+while True:  # late (the machine is busy), it skips what it missed rather than burst
+    client.send_pose((0.0, 0.0, 0.0))
+    client.feedback()
+    due = max(due + 1 / 500.0, time.perf_counter())
+    time.sleep(max(0.0, due - time.perf_counter()))
+"""
+#: the GUI flood: one connection with the page's Origin and token, gizmo drags
+GUI_FLOOD = """
+import math, sys, time, msgspec, viser
+from viser._messages import TransformControlsUpdateMessage, ViewerCameraMessage
+from websockets.sync.client import connect
+url, origin, count = sys.argv[1], sys.argv[2], int(sys.argv[3])
+x, y, z, *wxyz = (float(v) for v in sys.argv[4:11])
+with connect(url, origin=origin, subprotocols=[f"viser-v{viser.__version__}"],
+             open_timeout=30, max_size=None) as socket:
+    camera = ViewerCameraMessage((1.0, 0.0, 0.0, 0.0), (2.0, 0.0, 1.0), 1.0, 0.01, 100.0, 600,
+                                 800, (0.0, 0.0, 0.5), (0.0, 0.0, 1.0))
+    socket.send(msgspec.msgpack.encode(camera.as_serializable_dict()))  # a browser says where
+    time.sleep(1.0)  # it looks first: viser counts it as connected from then on
+    start = time.perf_counter()
+    for k in range(count):
+        message = TransformControlsUpdateMessage(
+            "/gizmo", tuple(wxyz), (x + 0.01 * math.sin(k / 300), y, z))
+        socket.send(msgspec.msgpack.encode(message.as_serializable_dict()))
+    print("sent", count, "in", round(time.perf_counter() - start, 2), "s", flush=True)
+    sys.stdin.read()  # connected until told: the server may still be reading them
+"""
+#: the UDP flood: malformed, forged and another rig's datagrams in turn, from two sockets
+UDP_FLOOD = """
+import os, socket, sys, time
+from teleop.inputs.protocol import COMMAND_FORMAT, TAG_SIZE, encode_command
+port, count = int(sys.argv[1]), int(sys.argv[2])
+forged = COMMAND_FORMAT.pack(b"CJMI", 2, 1, 0, 0, 5, 0.0, 0.05, 0, 0, 1, 0, 0, 0, 7) \\
+    + os.urandom(TAG_SIZE)
+junk = [os.urandom(100) for _ in range(64)]
+foreign = [encode_command("pose", (0.05, 0, 0, 1, 0, 0, 0), s, 0.0, key=bytes(32), stream=99)
+           for s in range(1, 65)]
+kinds = (lambda k: junk[k % 64], lambda k: forged, lambda k: foreign[k % 64])
+sockets = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2)]
+start = time.perf_counter()
+for k in range(count):
+    sockets[k % 2].sendto(kinds[k % 3](k), ("127.0.0.1", port))
+print("sent", count, "in", round(time.perf_counter() - start, 2), "s", flush=True)
+"""
+
+
+class TickSampler:
+    """The control thread's tick count every 50 ms, from a thread of its own."""
+
+    def __init__(self, app) -> None:
+        self.app = app
+        self.samples: list[tuple[float, int]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.samples.append((time.perf_counter(), self.app.ticks))
+            time.sleep(0.05)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def rates(self, start: float, end: float) -> tuple[float, float]:
+        """The mean rate over [start, end] and the worst over its 1 s windows (Hz)."""
+        times, ticks = (np.array(column, dtype=float) for column in zip(*self.samples))
+        inside = (times >= start) & (times <= end)
+        t, n = times[inside], ticks[inside]
+        mean = (n[-1] - n[0]) / (t[-1] - t[0])
+        worst = mean
+        for i in range(len(t)):
+            j = np.searchsorted(t, t[i] + 1.0)
+            if j < len(t):
+                worst = min(worst, (n[j] - n[i]) / (t[j] - t[i]))
+        return float(mean), float(worst)
+
+
+def child(script: str, *args: object) -> subprocess.Popen:
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+         os.environ.get("PYTHONPATH", "")])}
+    return subprocess.Popen([sys.executable, "-c", script, *map(str, args)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=environment)
+
+
+def finish(process: subprocess.Popen, what: str) -> None:
+    """Tell ``process`` to end (its stdin closed) and wait for it."""
+    process.stdin.close()
+    err = process.stderr.read()
+    if process.wait(timeout=600) != 0:
+        raise SystemExit(f"the {what} failed: {err.strip()[-2000:]}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--events", type=int, default=10_000)
+    parser.add_argument("--datagrams", type=int, default=300_000)
+    parser.add_argument("--baseline", type=float, default=5.0, help="quiet seconds measured")
+    parser.add_argument("--json", help="also write the figures to this file")
+    args = parser.parse_args()
+    master = UdpMaster(port=0, key=KEY)
+    server, app, control, ui = run_server(load_robot("sda10f"), port=8765, token="auto",
+                                          inputs=[master], input_timeout=0.1,
+                                          record_dir="/tmp/floods/sessions",
+                                          scene_dir="/tmp/floods/scenes")
+    app.add_constraint("hole", distance=0.08)
+    port, token = server.get_port(), ui.access.token
+    url = f"ws://127.0.0.1:{port}/?token={token}"
+    origin = f"http://127.0.0.1:{port}"
+    streamer = child(MASTER, master.port, KEY.hex())
+    assert streamer.stdout is not None and "streaming" in streamer.stdout.readline()
+    time.sleep(2.0)  # the loop settles, the master binds
+    sampler = TickSampler(app)
+    results: dict[str, dict] = {}
+    try:
+        time.sleep(args.baseline)
+        baseline, baseline_worst = sampler.rates(time.perf_counter() - args.baseline,
+                                                 time.perf_counter())
+        results["baseline"] = {"mean_hz": baseline, "worst_1s_hz": baseline_worst}
+        gizmo = ui.target_gizmo
+        goal = [*gizmo.position, *gizmo.wxyz]
+        floods = {
+            "gui": lambda: [child(GUI_FLOOD, url, origin, args.events, *goal)],
+            "udp": lambda: [child(UDP_FLOOD, master.port, args.datagrams)],
+            "both": lambda: [child(GUI_FLOOD, url, origin, args.events, *goal),
+                             child(UDP_FLOOD, master.port, args.datagrams)]}
+        last = np.array(goal[:3]) + [0.01 * np.sin((args.events - 1) / 300), 0.0, 0.0]
+        for name, start_flood in floods.items():
+            before = master.counts_now()
+            coalesced, applied = ui.inbox.coalesced, ui.inbox.applied
+            start = time.perf_counter()
+            processes = start_flood()
+            said = [process.stdout.readline().strip() for process in processes]
+            if name != "udp":  # until the server has applied the last drag
+                wait = time.monotonic() + 300.0
+                while np.linalg.norm(app.inputs[0].gizmo.translation - last) > 1e-9:
+                    if time.monotonic() > wait:
+                        raise SystemExit("the last drag never reached the app")
+                    time.sleep(0.01)
+            end = time.perf_counter()
+            for process in processes:
+                finish(process, f"{name} flood")
+            mean, worst = sampler.rates(start, end)
+            counts = master.counts_now()
+            delta = {key: counts.get(key, 0) - before.get(key, 0) for key in counts
+                     if counts.get(key, 0) != before.get(key, 0)}
+            results[name] = {
+                "seconds": end - start, "mean_hz": mean, "worst_1s_hz": worst,
+                "mean_fraction": mean / baseline, "worst_fraction": worst / baseline,
+                "flooder": said, "udp_counts": delta,
+                "inbox_coalesced": ui.inbox.coalesced - coalesced,
+                "inbox_applied": ui.inbox.applied - applied}
+            print(f"{name}: {end - start:.1f} s, mean {mean:.0f} Hz ({mean / baseline:.3f} of "
+                  f"baseline), worst 1 s {worst:.0f} Hz ({worst / baseline:.3f}); "
+                  f"{'; '.join(said)}; releases {delta.get('releases', 0)}; "
+                  f"counts {delta}; inbox coalesced {results[name]['inbox_coalesced']}, "
+                  f"applied {results[name]['inbox_applied']}", flush=True)
+            time.sleep(2.0)  # quiet between floods
+        print(f"baseline: mean {baseline:.0f} Hz, worst 1 s {baseline_worst:.0f} Hz")
+    finally:
+        sampler.stop()
+        streamer.kill()
+        streamer.wait()
+        ui.stop()
+        control.stop()
+        app.close_inputs()
+        server.stop()
+    if args.json:
+        with open(args.json, "w") as file:
+            json.dump(results, file, indent=1)
+
+
+if __name__ == "__main__":
+    main()
