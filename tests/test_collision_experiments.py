@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from constraints import Hole
 from constraints.collision import CollisionAvoidance, Sphere
 from teleop.cli.main import main
 from teleop.controller_specs import make_controller
@@ -284,6 +285,45 @@ def test_the_plant_counts_mujocos_contacts():
                          robot.q_home)
     assert exact < 0.0
     assert measures.contact_depth == pytest.approx(-exact, abs=2e-3)
+
+
+def test_a_port_placed_on_the_plant_switches_off_the_instruments_contacts():
+    """An organ around a trocar, placed after the plant is built: the instrument inside it
+    stops touching the organ in the simulation as it stops being kept away from it by
+    the avoidance. The contacts left are those of the pairs a fresh avoidance with the port
+    checks (the reference), and the contacts come back when the port goes."""
+    robot = load_robot("sda10f")
+    model = robot.model
+    hole = Hole.on_link(robot, robot.q_home, distance=0.08)
+    organ = Sphere(hole.position, 0.03, name="organ")
+    plant = MujocoPlant(robot, 1e-3, collisions=CollisionAvoidance(robot, [organ]))
+    links = {item.name: model.frames[item.parentFrame].name
+             for item in robot.collision_model.geometryObjects}
+    mj_model = plant.mj_model
+
+    def owners(contact) -> frozenset[str]:
+        names = [mj_model.geom(g).name for g in (contact.geom1, contact.geom2)]
+        return frozenset(name[len(OBSTACLE_GEOM):] if name.startswith(OBSTACLE_GEOM)
+                         else links[name[len(ROBOT_GEOM):]] for name in names)
+
+    def touching(constraints) -> set[frozenset[str]]:
+        plant.reset(robot.q_home)
+        plant.actuate(np.zeros(model.nv), robot.q_home, constraints)
+        data = plant.mj_data
+        assert plant.measures().contacts == data.ncon
+        return {owners(contact) for contact in data.contact[:data.ncon]}
+
+    reference = CollisionAvoidance(robot, [organ])
+    before = {frozenset(pair) for pair in reference.pairs}
+    reference.set_ports([hole])
+    exempt = before - {frozenset(pair) for pair in reference.pairs}
+    without_port = touching([])
+    assert without_port & exempt  # the instrument is inside the organ
+    with_port = touching([hole])
+    assert not with_port & exempt
+    assert with_port == without_port - exempt
+    assert {frozenset(pair) for pair in plant.contact_pairs.switched_off} == exempt
+    assert touching([]) == without_port
 
 
 def test_the_plant_without_collision_avoidance_has_no_geometry():

@@ -5,8 +5,8 @@ the avoidance's pairs.
 Every geom has ``contype = conaffinity = 0`` and each pair of the avoidance (robot-robot
 between non-adjacent links, robot-obstacle) is an explicit MuJoCo contact pair, so
 ``data.contact`` holds the simulated robot's contacts in those pairs and no other. The
-pairs are those of the avoidance when the plant is built: a port added later does not
-exempt its instrument from the obstacle it goes through.
+pairs are compiled with the avoidance's pairs when the plant is built; a port added later
+switches off the pairs it exempts (:mod:`teleop.plants.contact_pairs`).
 """
 
 from __future__ import annotations
@@ -23,6 +23,13 @@ from controllers.mujoco_model.builder import PLANAR_SUFFIXES
 
 #: Prefixes of the geoms' names: the robot's (then the geometry's name) and the obstacles'.
 ROBOT_GEOM, OBSTACLE_GEOM = "collision:", "obstacle:"
+
+#: Two small spheres a metre apart, far below the world, in no pair of their own (every
+#: other geom has ``conaffinity = 0``): a contact pair switched off points at them
+#: (:mod:`teleop.plants.contact_pairs`).
+PARKING_GEOMS = ("parking:first", "parking:second")
+PARKING_HEIGHTS = (-100.0, -101.0)
+PARKING_RADIUS = 1e-3
 
 
 def _quaternion(rotation: np.ndarray) -> list[float]:
@@ -62,9 +69,13 @@ def _body(spec: mujoco.MjSpec, model: pin.Model, joint: int) -> mujoco.MjsBody:
     return found.parent
 
 
-def add_contact_geometry(spec: mujoco.MjSpec, robot, collisions: CollisionAvoidance) -> None:
-    """Add the robot's collision geometry, ``collisions``' obstacles (world geoms) and the
-    avoidance's pairs as explicit contact pairs to ``spec`` (before it compiles)."""
+def add_contact_geometry(spec: mujoco.MjSpec, robot, collisions: CollisionAvoidance
+                         ) -> dict[frozenset[str], tuple[str, str]]:
+    """Add the robot's collision geometry, ``collisions``' obstacles (world geoms), the
+    avoidance's pairs as explicit contact pairs and the two :data:`PARKING_GEOMS` to
+    ``spec`` (before it compiles); returns the avoidance's pair (the names of its links or
+    obstacles, as ``CollisionAvoidance.pairs`` gives them) by its contact pair's geom
+    names."""
     model = robot.model
     geoms: dict[str, list[str]] = {}  # link or obstacle name -> its geoms
     for item in capsule_geometry(robot.collision_model).geometryObjects:
@@ -77,10 +88,15 @@ def add_contact_geometry(spec: mujoco.MjSpec, robot, collisions: CollisionAvoida
     for obstacle in collisions.obstacles:
         add_obstacle(spec, obstacle)
         geoms[obstacle.name] = [OBSTACLE_GEOM + obstacle.name]
-    pairs = {(first, second) for a, b in collisions.pairs
+    pairs = {(first, second): (a, b) for a, b in collisions.pairs
              for first in geoms[a] for second in geoms[b]}
     for first, second in sorted(pairs):
         spec.add_pair(geomname1=first, geomname2=second)
+    for name, height in zip(PARKING_GEOMS, PARKING_HEIGHTS):
+        spec.worldbody.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                                size=[PARKING_RADIUS, 0.0, 0.0], pos=[0.0, 0.0, height],
+                                contype=1, conaffinity=0)  # kept (not visual), in no pair
+    return {frozenset(key): names for key, names in pairs.items()}
 
 
 def add_obstacle(spec: mujoco.MjSpec, obstacle: Obstacle) -> None:

@@ -37,6 +37,7 @@ from constraints.collision import CollisionAvoidance
 
 from .armature import urdf_armatures
 from .contact_geometry import add_contact_geometry
+from .contact_pairs import ContactPairs
 from .imperfect import Imperfections, ImperfectPlant
 from .interface import CommandInterface, InterfaceFault
 from .settings import PlantSettings
@@ -116,8 +117,10 @@ class MujocoPlant:
         the lag filters the velocity the drives receive after it. A calibration error is
         refused (``ValueError``): the body is the URDF's.
     collisions : a collision avoidance on ``robot``: its geometry, obstacles and pairs go
-        into the simulation (:func:`~teleop.plants.contact_geometry.add_contact_geometry`);
-        None: the robot has no collision geometry (nothing touches).
+        into the simulation (:func:`~teleop.plants.contact_geometry.add_contact_geometry`),
+        the pairs following the ports among the constraints :meth:`actuate` is given
+        (:class:`~teleop.plants.contact_pairs.ContactPairs`); None: the robot has no
+        collision geometry (nothing touches).
     tissues : compliant surfaces every EE's tool tip can press (:class:`TissueSurface`);
         with any, each EE carries a force/torque sensor (docs/design.md section 21.2).
     sensor_noise : the force/torque sensor's white noise, standard deviation of each force
@@ -169,6 +172,7 @@ class MujocoPlant:
         self.interface = CommandInterface(self.settings.interface_limits, robot.model, dt,
                                           robot.acceleration_limit,
                                           self.settings.interface_jerk_limit)
+        self.contact_pairs: ContactPairs | None = None  # with collisions, set by _compile
         self.mj_model = self._compile(robot, collisions)
         self.mj_data = mujoco.MjData(self.mj_model)
         self.joints = joint_map(self.model, self.mj_model)
@@ -239,12 +243,15 @@ class MujocoPlant:
                 payload.ipos = [0.0, 0.0, 0.0]  # its mass at the EE (not MuJoCo's default)
                 payload.inertia = [settings.payload * _PAYLOAD_INERTIA_PER_KG] * 3
                 payload.gravcomp = 0.0  # unknown to the drives
-        if collisions is not None:
-            add_contact_geometry(spec, robot, collisions)
+        pairs_by_geoms = (None if collisions is None
+                          else add_contact_geometry(spec, robot, collisions))
         if self.tissues:
             for frame in robot.ee_frames:
                 self._add_force_sensor(spec, frame)
-        return spec.compile()
+        model = spec.compile()
+        if collisions is not None and pairs_by_geoms is not None:
+            self.contact_pairs = ContactPairs(collisions, pairs_by_geoms, model)
+        return model
 
     @staticmethod
     def _add_force_sensor(spec: mujoco.MjSpec, frame: str) -> None:
@@ -343,6 +350,8 @@ class MujocoPlant:
         shaped = accepted if self.shaping is None else self.shaping.respond(accepted)
         command = self.joints.v_to_mujoco(shaped, data.qpos)
         data.ctrl[:] = command[self._actuator_dofs]
+        if self.contact_pairs is not None:
+            self.contact_pairs.follow(model, constraints)
         holes = [(c, wall) for c in constraints if (wall := wall_of(c)) is not None]
         forces, displacements = np.zeros((len(holes), 3)), np.zeros(len(holes))
         springs = np.zeros((len(holes), 3))
