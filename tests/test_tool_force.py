@@ -6,10 +6,12 @@ here, the admittance's rest against M a + D v + K x = F solved by hand, and the
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from constraints import Hole
@@ -155,6 +157,56 @@ def test_an_accepted_admittance_is_stable_and_a_refused_one_is_past_the_margin(m
         assert a > 1.0 or 2.0 * a + b > 2.0
         return
     assert radius < 1.0
+
+
+def filtered_admittance_radius(mass: float, damping: float, stiffness: float, contact: float,
+                               cutoff: float, order: int) -> float:
+    """The spectral radius of one period of the admittance against a contact spring, its
+    force through the filter, written out here on the state (x, v, the filter's sections)
+    and linearised column by column (the step is linear)."""
+    pole = math.exp(-2.0 * math.pi * cutoff * DT)
+
+    def step(state: np.ndarray) -> np.ndarray:
+        x, v, sections = state[0], state[1], state[2:].copy()
+        reading = -contact * x  # the contact's force on the tool where it is
+        for i in range(order):
+            sections[i] = pole * sections[i] + (1.0 - pole) * reading
+            reading = sections[i]
+        v = v + DT * (reading - damping * v - stiffness * x) / mass
+        return np.concatenate([[x + DT * v, v], sections])
+
+    matrix = np.column_stack([step(column) for column in np.eye(2 + order)])
+    return float(np.max(np.abs(np.linalg.eigvals(matrix))))
+
+
+@given(st.floats(0.05, 5.0), st.floats(1.0, 200.0), st.floats(10.0, 2000.0),
+       st.floats(0.0, 5000.0), st.floats(2.0, 200.0), st.sampled_from([1, 2]))
+def test_a_filtered_admittance_is_accepted_when_stable_at_half_its_mass(
+        mass, damping, stiffness, contact, cutoff, order):
+    """The check's margin (docs/design.md 21.3): the loop written out in the test is stable
+    at half the mass exactly when the law is accepted; accepted, it is stable as given."""
+    margin = filtered_admittance_radius(0.5 * mass, damping, stiffness, contact, cutoff, order)
+    assume(abs(margin - 1.0) > 1e-9)  # on the boundary, rounding decides
+    try:
+        Admittance(mass, damping, stiffness, contact, DT, filter_cutoff=cutoff,
+                   filter_order=order)
+    except ValueError as error:
+        assert "admittance mass" in str(error) and "force filter" in str(error)
+        assert margin > 1.0
+        return
+    assert margin < 1.0
+    assert filtered_admittance_radius(mass, damping, stiffness, contact, cutoff, order) < 1.0
+
+
+def test_the_filter_is_what_makes_a_stiff_contact_unstable():
+    """A law the unfiltered check accepts against 5,000 N/m is refused with a 10 Hz filter
+    (its lag), and the written-out loop agrees on both (a filter at 1 MHz is none)."""
+    law = (1.0, 40.0, 200.0, 5000.0)
+    Admittance(*law, DT)
+    assert filtered_admittance_radius(0.5, 40.0, 200.0, 5000.0, 1e6, 1) < 1.0
+    with pytest.raises(ValueError, match="2-section force filter"):
+        Admittance(*law, DT, filter_cutoff=10.0)
+    assert filtered_admittance_radius(0.5, 40.0, 200.0, 5000.0, 10.0, 2) > 1.0
 
 
 @settings(deadline=None)  # up to 0.2 s of Python steps per example on a loaded machine

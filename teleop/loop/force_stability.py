@@ -20,7 +20,14 @@ Without a filter (``m = 0`` or ``beta = 0``) it is the closed form above.
 The admittance ``M a + D v + K x = F`` integrated with semi-implicit Euler at ``dt`` has
 the characteristic polynomial ``z^2 - (2 - a - b) z + (1 - a)`` with ``a = D dt / M`` and
 ``b = K dt^2 / M`` (``K`` its spring plus the contact's); its roots are inside the unit
-circle if and only if ``0 < a < 2`` and ``2 a + b < 4``.
+circle if and only if ``0 < a < 2`` and ``2 a + b < 4``. The margin asks that of ``2 a``
+and ``2 b`` (half the mass). With the contact's force ``F = -k_c x`` through the
+filter, the polynomial becomes (``b_K = K dt^2 / M``, ``b_c = k_c dt^2 / M``)::
+
+    ((z - 1 + a) (z - 1) + b_K z) (z - beta)^m + b_c alpha^m z^(m + 1),
+
+and the margin asks its roots inside the unit circle at ``2 a``, ``2 b_K`` and ``2 b_c``.
+Without a filter that is the closed form above.
 """
 
 from __future__ import annotations
@@ -84,15 +91,40 @@ def check_force_gain(force_gain: float, contact_stiffness: float, dt: float,
             f"{allowed / (contact_stiffness * dt):.3g} (m/s)/N)")
 
 
+def admittance_polynomial(a: float, spring: float, contact: float, pole: float = 0.0,
+                          order: int = 0) -> np.ndarray:
+    """The admittance's characteristic polynomial (module docstring) with ``a = D dt / M``,
+    ``spring = K dt^2 / M``, ``contact = k_c dt^2 / M`` and ``order`` filter sections of
+    pole ``pole`` on the contact's force (highest power first)."""
+    own = np.polyadd(np.polymul([1.0, a - 1.0], [1.0, -1.0]), [spring, 0.0])
+    polynomial = np.polymul(own, np.poly([pole] * order))
+    polynomial[len(polynomial) - 2 - order] += contact * (1.0 - pole) ** order
+    return polynomial
+
+
 def check_admittance(mass: float, damping: float, stiffness: float,
-                     contact_stiffness: float, dt: float) -> None:
+                     contact_stiffness: float, dt: float, filter_pole: float = 0.0,
+                     filter_order: int = 0) -> None:
     """``ValueError`` naming the admittance's parameters when its semi-implicit Euler
-    step is not stable with the margin (``a`` and ``2 a + b`` at most half their bounds)."""
+    step is not stable with the margin (without a filter: ``a`` and ``2 a + b`` at most half
+    their bounds; with ``filter_order`` sections of pole ``filter_pole`` on the sensed
+    force, the roots of :func:`admittance_polynomial` at twice ``a`` and ``b``)."""
     a = damping * dt / mass
-    b = (stiffness + contact_stiffness) * dt * dt / mass
-    if not (a <= 2.0 / GAIN_MARGIN and 2.0 * a + b <= 4.0 / GAIN_MARGIN):
+    spring, contact = stiffness * dt * dt / mass, contact_stiffness * dt * dt / mass
+    b = spring + contact
+    if filter_order == 0 or filter_pole == 0.0:
+        stable = a <= 2.0 / GAIN_MARGIN and 2.0 * a + b <= 4.0 / GAIN_MARGIN
+        bounds = (f"D dt / M = {a:.3g} (at most {2.0 / GAIN_MARGIN:.3g}), 2 D dt / M + "
+                  f"K dt^2 / M = {2.0 * a + b:.3g} (at most {4.0 / GAIN_MARGIN:.3g})")
+    else:
+        polynomial = admittance_polynomial(GAIN_MARGIN * a, GAIN_MARGIN * spring,
+                                           GAIN_MARGIN * contact, filter_pole, filter_order)
+        radius = float(np.max(np.abs(np.roots(polynomial))))
+        stable = radius < 1.0
+        bounds = (f"with a {filter_order}-section force filter of pole {filter_pole:.4g}, "
+                  f"its roots at half the mass reach {radius:.4g} (below 1 needed)")
+    if not stable:
         raise ValueError(
             f"admittance mass {mass} kg, damping {damping} N s/m, stiffness {stiffness} N/m "
             f"is unstable at dt = {dt} s against {contact_stiffness} N/m of contact: "
-            f"D dt / M = {a:.3g} (at most {2.0 / GAIN_MARGIN:.3g}), 2 D dt / M + "
-            f"K dt^2 / M = {2.0 * a + b:.3g} (at most {4.0 / GAIN_MARGIN:.3g}); raise the mass")
+            f"{bounds}; raise the mass")

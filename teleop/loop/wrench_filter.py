@@ -37,6 +37,10 @@ class WrenchLowPass:
         self.pole = math.exp(-2.0 * math.pi * self.cutoff * self.dt)
         self._sections: np.ndarray | None = None
 
+    def reset(self) -> None:
+        """Forget the readings: the next one starts the sections."""
+        self._sections = None
+
     def __call__(self, wrench: np.ndarray) -> np.ndarray:
         """The filtered wrench after the reading ``wrench`` (6,); ``ValueError`` when it is
         not finite (the state is left as it was)."""
