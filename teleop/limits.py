@@ -23,6 +23,10 @@ from constraints.limits import (  # noqa: F401 (listed here: the one table)
     MAX_TISSUE_STIFFNESS,
 )
 
+#: A force setpoint's largest component (N): five times the 1 N of palpation
+#: (docs/design.md 21.4), a firm press on soft tissue.
+MAX_FORCE_SETPOINT_N = 5.0
+
 #: Control rate (Hz). Robot joint interfaces run at 1-8 kHz; at 1e12 Hz a simulated second
 #: would never finish.
 MAX_RATE_HZ = 10_000.0

@@ -222,7 +222,7 @@ def test_a_scene_keeps_the_obstacles_and_the_settings(dual_app, dual, tmp_path):
     app.set_collisions_on(False)
     path = app.save_scene("obstacles.json")
     saved = json.loads(path.read_text())
-    assert saved["version"] == 2 and saved["collisions"]["on"] is False
+    assert saved["version"] == 3 and saved["collisions"]["on"] is False
     assert [o["id"] for o in saved["obstacles"]] == ["sphere-1", "capsule-2", "halfspace-3"]
 
     other = TeleopApp(dual, record_dir=tmp_path / "s2", scene_dir=tmp_path / "scenes")

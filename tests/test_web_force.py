@@ -108,3 +108,73 @@ def test_the_page_law_is_inside_its_stability_check_at_every_rate(rate):
     with pytest.raises(ValueError, match="force_gain"):  # the share is near the bound
         HybridForceMotion((False, False, True), (0, 0, 1), 1.2 * gain / 0.9 if gain < 1.0
                           else 1e3, DEFAULT_TISSUE_STIFFNESS, dt, filter_cutoff=FILTER_CUTOFF)
+
+
+def test_a_scene_keeps_the_tissue_and_the_law_settings(app, sda10f, tmp_path):
+    """Saved and opened in a fresh page: the same tissue (every field) and settings, the
+    plants pressing it again (the contact force against stiffness x penetration), force
+    control off until the operator turns it on; a scene without a tissue takes it away."""
+    app.force.place_tissue()
+    app.force.set_setpoint([0.5, 0.0, 1.5])
+    app.force.set_axes([True, False, True])
+    path = app.save_scene("pressed.json")
+    saved = app.force.tissue
+    other = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path,
+                      scene_dir=tmp_path / "scenes")
+    other.load_scene(path.name)
+    tissue = other.force.tissue
+    assert tissue is not None and tissue.to_dict() == saved.to_dict()
+    np.testing.assert_array_equal(tissue.point, saved.point)
+    assert other.force.setpoint.tolist() == [0.5, 0.0, 1.5]
+    assert other.force.axes == (True, False, True) and not other.force.enabled
+    assert other.loops["main"].plant.tissues == (tissue,)
+    other.force.set_enabled(True)
+    other.force.set_axes([False, False, True])
+    other.force.set_setpoint([0.0, 0.0, 1.0])
+    for _ in range(3000):
+        other.step()
+    expected, reported = _true_contact(other)
+    assert expected == pytest.approx(1.0, abs=0.01) and reported == pytest.approx(expected,
+                                                                                  rel=1e-3)
+    # a scene saved before a tissue was placed takes it away, and force control with it
+    bare = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path,
+                     scene_dir=tmp_path / "scenes")
+    other.apply_scene(bare.scene())
+    assert other.force.tissue is None and not other.force.enabled
+    assert other.loops["main"].plant.tissues == ()
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda f: f["tissue"].update(stiffness=1e9), r"force\.tissue\.stiffness must be <= 100000"),
+    (lambda f: f["tissue"].update(damping=-1.0), r"force\.tissue\.damping must be >= 0"),
+    (lambda f: f["tissue"].update(normal=[0, 0, 0]), "normal must be 3 finite numbers, not zero"),
+    (lambda f: f["tissue"].update(colour=1), "unknown scene force.tissue field 'colour'"),
+    (lambda f: f.update(setpoint=[0, 0, 9]), r"force\.setpoint must have every component"),
+    (lambda f: f.update(axes=[False, False, False]), "force.axes must be 3 booleans"),
+    (lambda f: f.update(axes="z"), "force.axes must be 3 booleans"),
+    (lambda f: f.pop("axes"), "'force' must be null or an object"),
+])
+def test_a_bad_force_entry_in_a_scene_is_refused_by_name_and_changes_nothing(app, change,
+                                                                             message):
+    app.force.place_tissue()
+    scene = app.scene()
+    change(scene["force"])
+    before = app.force.tissue
+    with pytest.raises(ValueError, match=message):
+        app.apply_scene(scene)
+    assert app.force.tissue is before
+
+
+def test_a_tissue_in_a_scene_needs_the_physics_plant(app, sda10f, tmp_path):
+    app.force.place_tissue()
+    kinematic = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path / "scenes")
+    with pytest.raises(ValueError, match="a tissue needs the mujoco plant"):
+        kinematic.apply_scene(app.scene())
+    assert kinematic.force.tissue is None
+    old = app.scene()
+    old["version"] = 2
+    with pytest.raises(ValueError, match="scene 'force' needs version 3"):
+        app.apply_scene(old)
+    del old["force"]
+    app.apply_scene(old)  # a version 2 scene leaves the page's force control as it is
+    assert app.force.tissue is not None

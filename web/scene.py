@@ -27,6 +27,18 @@ Version 2 added ``"collisions"`` (whether the controllers keep the pairs apart, 
 A version 1 scene still loads: it has no obstacles and keeps the session's collision
 settings.
 
+Version 3 added ``"force"``: the page's force control (docs/design.md section 21.6), the
+tissue placed under the tool and the force law's settings, or null when no tissue is
+placed::
+
+     "force": {"tissue": {"point": [x, y, z], "normal": [x, y, z], "stiffness": 250.0,
+                          "damping": 0.5},
+               "setpoint": [0.0, 0.0, 1.0], "axes": [false, false, true]}
+
+Loading it places the tissue and takes the settings; force control itself stays as the
+page has it (off unless the operator turned it on), so opening a scene never starts a
+force law on its own. A version 1 or 2 scene keeps the page's force control as it is.
+
 A robot with several end effectors (docs/design.md section 11) adds ``"targets"``, one
 ``{"frame", "position", "wxyz"}`` per entry of ``robot.ee_frames`` in that order
 (``"target"`` is the first), and its robot entry names them all: ``"ee_frames"``,
@@ -54,14 +66,15 @@ from constraints.collision import Obstacle
 from constraints.validation import as_number, as_vector, short_repr
 from teleop.files import replace_file
 from teleop.json_text import parse_json
-from teleop.limits import MAX_DAMPING, MAX_RATE_HZ
+from teleop.limits import MAX_DAMPING, MAX_FORCE_SETPOINT_N, MAX_RATE_HZ
 from teleop.loop.task_modes import AUTO, task_mode
+from teleop.plants.tissue import TissueSurface
 from teleop.robots import BUILTIN_ROBOTS, Robot, load_robot
 
 FORMAT = "cjm-teleop-scene"
-VERSION = 2
+VERSION = 3
 #: the versions this program reads
-VERSIONS = (1, 2)
+VERSIONS = (1, 2, 3)
 
 
 def robot_source(robot: Robot) -> str:
@@ -215,6 +228,16 @@ class PlacedObstacle:
 
 
 @dataclass(frozen=True)
+class ForceSetup:
+    """A scene's force control: the tissue, the setpoint along the tool's x, y, z (N) and
+    which of those axes the force law holds."""
+
+    tissue: TissueSurface
+    setpoint: np.ndarray
+    axes: tuple[bool, bool, bool]
+
+
+@dataclass(frozen=True)
 class Scene:
     """A checked scene (see the module docstring for the file format)."""
 
@@ -241,6 +264,10 @@ class Scene:
     #: (``CollisionAvoidance.to_dict()`` without its obstacles); None: a version 1 scene
     collisions: dict | None = None
     obstacles: tuple[PlacedObstacle, ...] = ()
+    #: the force control's tissue and settings (None: no tissue placed); ``keep``: a
+    #: version 1 or 2 scene, which leaves the page's force control as it is
+    force: ForceSetup | None = None
+    keep_force: bool = False
 
 
 def _spec(value: Any, name: str, optional: bool = False) -> str | None:
@@ -337,7 +364,32 @@ def parse_scene(data: Any, nq: int | None = None, ee_frames: tuple[str, ...] | N
         orientation_weight=as_number(data.get("orientation_weight", 1.0),
                                      "scene orientation_weight", 0.0, maximum=1.0),
         task_mode=_task_mode(data.get("task_mode", AUTO)),
-        collisions=collisions, obstacles=obstacles)
+        collisions=collisions, obstacles=obstacles, force=_force(data),
+        keep_force=data["version"] < 3)
+
+
+def _force(data: Mapping) -> ForceSetup | None:
+    """A scene's force control (None: no tissue, or a scene before version 3)."""
+    if data["version"] < 3:
+        if "force" in data:
+            raise ValueError(f"scene 'force' needs version 3, the file says version "
+                             f"{data['version']}")
+        return None
+    entry = data.get("force")
+    if entry is None:
+        return None
+    if not isinstance(entry, Mapping) or set(entry) != {"tissue", "setpoint", "axes"}:
+        raise ValueError("scene 'force' must be null or an object with 'tissue', 'setpoint' "
+                         "and 'axes'")
+    tissue = TissueSurface.from_dict(entry["tissue"], "scene force.tissue")
+    setpoint = as_vector(entry["setpoint"], 3, "scene force.setpoint",
+                         maximum=MAX_FORCE_SETPOINT_N)
+    axes = entry["axes"]
+    if not (isinstance(axes, list) and len(axes) == 3
+            and all(isinstance(axis, bool) for axis in axes) and any(axes)):
+        raise ValueError(f"scene force.axes must be 3 booleans, at least one true, got "
+                         f"{short_repr(axes)}")
+    return ForceSetup(tissue, setpoint, (axes[0], axes[1], axes[2]))
 
 
 def _task_mode(mode: object) -> str:

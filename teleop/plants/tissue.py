@@ -19,11 +19,13 @@ in docs/design.md section 21.1); the damping is a chosen value (tissue's viscous
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from constraints.validation import as_number
+from constraints.limits import MAX_POSITION_M, MAX_TISSUE_DAMPING, MAX_TISSUE_STIFFNESS
+from constraints.validation import as_number, as_vector, short_repr
 
 #: Sneddon's flat punch of radius 2.5 mm on E = 10 kPa, nu = 0.5 (N/m): the module's note.
 DEFAULT_TISSUE_STIFFNESS = 2.0 * 2.5e-3 * 10e3 / (1.0 - 0.5 ** 2)
@@ -83,3 +85,31 @@ class TissueSurface:
             return np.zeros(3)
         magnitude = self.stiffness * depth - self.damping * float(velocity @ self.normal)
         return max(0.0, magnitude) * self.normal
+
+    def to_dict(self) -> dict:
+        """The surface as a JSON-ready dict (:meth:`from_dict` reads it back)."""
+        return {"point": [float(x) for x in self.point],
+                "normal": [float(x) for x in self.normal],
+                "stiffness": float(self.stiffness), "damping": float(self.damping)}
+
+    @classmethod
+    def from_dict(cls, data: object, where: str = "tissue") -> "TissueSurface":
+        """A surface from :meth:`to_dict`'s fields, each checked against the one table of
+        limits (``teleop.limits``); ``ValueError`` naming the field (``where``) otherwise."""
+        if not isinstance(data, Mapping):
+            raise ValueError(f"{where} must be an object with point, normal, stiffness and "
+                             f"damping, got {short_repr(data)}")
+        unknown = sorted(set(data) - TISSUE_FIELDS)
+        if unknown:
+            raise ValueError(f"unknown {where} field {unknown[0]!r} (its fields: "
+                             f"{', '.join(sorted(TISSUE_FIELDS))})")
+        point = as_vector(data.get("point"), 3, f"{where}.point", maximum=MAX_POSITION_M)
+        return cls(point, as_vector(data.get("normal"), 3, f"{where}.normal"),
+                   as_number(data.get("stiffness", DEFAULT_TISSUE_STIFFNESS),
+                             f"{where}.stiffness", positive=True, maximum=MAX_TISSUE_STIFFNESS),
+                   as_number(data.get("damping", DEFAULT_TISSUE_DAMPING), f"{where}.damping",
+                             0.0, maximum=MAX_TISSUE_DAMPING))
+
+
+#: the keys of :meth:`TissueSurface.to_dict`
+TISSUE_FIELDS = frozenset({"point", "normal", "stiffness", "damping"})

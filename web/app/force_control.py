@@ -34,6 +34,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints.validation import as_vector
+from teleop.limits import MAX_FORCE_SETPOINT_N
 from teleop.loop import TeleopLoop
 from teleop.loop.force_controlled import ForceControlled
 from teleop.loop.force_stability import GAIN_MARGIN, force_loop_bound
@@ -57,8 +58,6 @@ DELAY_PERIODS = 2
 APPROACH_SPEED = 0.01
 #: the cut-off of the law's filter on the sensed wrench (Hz)
 FILTER_CUTOFF = 20.0
-#: a setpoint's largest component (N)
-MAX_SETPOINT = 5.0
 
 
 class ForceControl:
@@ -85,10 +84,7 @@ class ForceControl:
         """The tissue :data:`TISSUE_GAP` beyond the main robot's tool tip, against its z,
         in every loop's plant (a fresh plant with the sensor, at rest where its robot is)."""
         app = self._app
-        if not app.plant.physical:
-            raise ValueError(f"a tissue needs the mujoco plant (teleop web --plant mujoco): "
-                             f"the {app.plant.kind} plant has no body to press it nor a "
-                             f"force/torque sensor")
+        self.check_tissue()
         with self._lock:
             tip = app.loops["main"].ee_placements()[0]
             self.tissue = TissueSurface(tip.translation + TISSUE_GAP * tip.rotation[:, 2],
@@ -97,6 +93,33 @@ class ForceControl:
                 loop.plant = self.plant(loop.config.dt)
                 loop.plant.reset(loop.q)
             self.history.clear()
+
+    def check_tissue(self) -> None:
+        """``ValueError`` unless the session's plant can carry a tissue (the mujoco one)."""
+        plant = self._app.plant
+        if not plant.physical:
+            raise ValueError(f"a tissue needs the mujoco plant (teleop web --plant mujoco): "
+                             f"the {plant.kind} plant has no body to press it nor a "
+                             f"force/torque sensor")
+
+    def setup(self) -> dict | None:
+        """The tissue and the law's settings as a scene's ``"force"`` (None: no tissue;
+        :mod:`web.scene`)."""
+        with self._lock:
+            if self.tissue is None:
+                return None
+            return {"tissue": self.tissue.to_dict(),
+                    "setpoint": [float(x) for x in self.setpoint], "axes": list(self.axes)}
+
+    def take_setup(self, tissue: TissueSurface | None, setpoint: np.ndarray,
+                   axes: tuple[bool, bool, bool]) -> None:
+        """A scene's tissue and settings, before its loops are built (their plants take the
+        tissue); without a tissue force control turns off (caller holds the lock and has
+        checked the plant with :meth:`check_tissue`)."""
+        self.tissue = tissue
+        self.setpoint, self.axes = np.array(setpoint, dtype=float), axes
+        self.enabled = self.enabled and tissue is not None
+        self.history.clear()
 
     def set_enabled(self, enabled: bool) -> None:
         """Force control on (every loop's controller through the law) or off; on needs a
@@ -119,10 +142,11 @@ class ForceControl:
 
     def set_setpoint(self, setpoint: Sequence[float]) -> None:
         """The force to exert along the tool's x, y, z (N, each within
-        :data:`MAX_SETPOINT`); the running laws take it at once."""
+        :data:`MAX_FORCE_SETPOINT_N`); the running laws take it at once."""
         value = as_vector(setpoint, 3, "force setpoint")
-        if np.max(np.abs(value)) > MAX_SETPOINT:
-            raise ValueError(f"force setpoint components must be within {MAX_SETPOINT:g} N, "
+        if np.max(np.abs(value)) > MAX_FORCE_SETPOINT_N:
+            raise ValueError(f"force setpoint components must be within "
+                             f"{MAX_FORCE_SETPOINT_N:g} N, "
                              f"got {value.tolist()}")
         with self._lock:
             self.setpoint = value

@@ -101,6 +101,7 @@ class Scenes:
                 "obstacles": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                "obstacle": e.obstacle.to_dict()}
                               for e in self.obstacles.values()],
+                "force": self.force.setup(),
             }
 
     def save_scene(self, name: str | None = None) -> Path:
@@ -119,15 +120,18 @@ class Scenes:
         """Put the app in the state a scene describes: robots' configurations, constraints,
         target, controllers, gain, damping, rate, motion scale, ghost offset, collision
         avoidance and obstacles (a version 1 scene: no obstacles, the session's collision
-        settings). All or nothing: a scene that cannot be applied raises ``ValueError``
-        and changes nothing. The scene must be for this robot (another robot needs
-        ``teleop web --scene``)."""
+        settings), the force control's tissue and settings (version 3; force control
+        itself stays as it is, off without a tissue). All or nothing: a scene that cannot
+        be applied raises ``ValueError`` and changes nothing. The scene must be for this
+        robot (another robot needs ``teleop web --scene``)."""
         scene = parse_scene(data, self.robot.model.nq, self.robot.ee_frames)
         if not same_robot(self.robot, scene.robot):
             raise ValueError(f"this scene is for robot {scene.robot.get('source')!r}, this UI "
                              f"runs {robot_source(self.robot)!r}: start "
                              "`teleop web --scene FILE` to open it with its robot")
         self._check_scene(scene)
+        if scene.force is not None:
+            self.force.check_tissue()
         constraints = [placed.constraint for placed in scene.constraints]
         for constraint in constraints:
             constraint.gain = scene.gain
@@ -138,15 +142,26 @@ class Scenes:
             t = self.now
             specs = {"main": scene.main, **({"ghost": scene.ghost} if scene.ghost else {})}
             loops = {}
-            for which, spec in specs.items():  # raises ValueError: nothing changed yet
-                loop = self._make_loop(spec, q=scene.q[which], constraints=constraints,
-                                       config=config,
-                                       orientation_weight=scene.orientation_weight,
-                                       task_mode=scene.task_mode,
-                                       damping=scene.damping,
-                                       avoidance=avoidance, collisions_on=collisions_on)
-                loop.t = t
-                loops[which] = loop
+            force = self.force
+            kept = (force.tissue, force.setpoint, force.axes, force.enabled)
+            if not scene.keep_force:  # the loops' plants and laws take the scene's
+                setup = scene.force
+                force.take_setup(None if setup is None else setup.tissue,
+                                 force.setpoint if setup is None else setup.setpoint,
+                                 force.axes if setup is None else setup.axes)
+            try:
+                for which, spec in specs.items():  # raises ValueError: nothing changed yet
+                    loop = self._make_loop(spec, q=scene.q[which], constraints=constraints,
+                                           config=config,
+                                           orientation_weight=scene.orientation_weight,
+                                           task_mode=scene.task_mode,
+                                           damping=scene.damping,
+                                           avoidance=avoidance, collisions_on=collisions_on)
+                    loop.t = t
+                    loops[which] = loop
+            except ValueError:
+                force.tissue, force.setpoint, force.axes, force.enabled = kept
+                raise
             self.config, self.gain, self.damping = config, scene.gain, scene.damping
             self.orientation_weight = scene.orientation_weight
             self.task_mode = scene.task_mode
