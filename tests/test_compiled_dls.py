@@ -64,13 +64,10 @@ def problems(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, np.ndarray, Dampi
     return matrix, rhs, s, DampingPolicy(damping=damping)
 
 
-@settings(max_examples=600, deadline=None)
-@given(problem=problems())
-def test_compiled_dls_decides_and_solves_as_lapack(problem):
-    matrix, rhs, _, policy = problem
-    x, sigma_min, damping, rank, exact, row_space, by_qr = _step.damped_least_squares(
-        matrix, rhs, policy.damping, policy.threshold, policy.max_damping, RANK_TOLERANCE)
-    reference = damped_least_squares(matrix, rhs, policy)
+def assert_figures_are_lapacks(matrix: np.ndarray, figures: tuple, reference) -> None:
+    """The compiled DLS's rank, sigma_min, damping, exactness and row space (``figures``,
+    the binding's tuple after x) against NumPy's SVD and the Python reference."""
+    sigma_min, damping, rank, exact, row_space = figures[:5]
     singular_values = np.linalg.svd(matrix, compute_uv=False)
     cut = RANK_TOLERANCE * max(1.0, float(singular_values[0]))
     assert rank == np.linalg.matrix_rank(matrix, tol=cut) == reference.rank
@@ -83,6 +80,31 @@ def test_compiled_dls_decides_and_solves_as_lapack(problem):
     subspace = 2.0 * p * q * EPS * (float(kept[0] / kept[-1]) if rank else 1.0)
     np.testing.assert_allclose(row_space @ row_space.T, reference.row_space.T @ reference.row_space,
                                rtol=0.0, atol=subspace)
+
+
+def certified(s: np.ndarray) -> bool:
+    """Whether the QR's certificate holds for singular values ``s`` whatever the
+    matrix's vectors: 1/||R^-1||_F >= sigma_min / sqrt(t) clears the rank cut (taken at
+    ||R||_F <= sqrt(t) sigma_max) and ||R||_F ||R^-1||_F <= t kappa stays under the bound,
+    with a margin for the rounding of R."""
+    t = s.size
+    sigma_min, sigma_max = float(np.min(s)), float(np.max(s))
+    return (sigma_min / np.sqrt(t) > RANK_TOLERANCE * max(1.0, np.sqrt(t) * sigma_max) * (1.0 + 1e-6)
+            and t * sigma_max / sigma_min < MAX_CONDITION_BOUND * (1.0 - 1e-6))
+
+
+@settings(max_examples=600, deadline=None)
+@given(problem=problems())
+def test_compiled_dls_decides_and_solves_as_lapack(problem):
+    matrix, rhs, _, policy = problem
+    x, *figures = _step.damped_least_squares(
+        matrix, rhs, policy.damping, policy.threshold, policy.max_damping, RANK_TOLERANCE)
+    reference = damped_least_squares(matrix, rhs, policy)
+    assert_figures_are_lapacks(matrix, tuple(figures), reference)
+    damping, rank = figures[1], figures[2]
+    singular_values = np.linalg.svd(matrix, compute_uv=False)
+    p, q = matrix.shape
+    kept = singular_values[:rank]
     kappa = max(1.0, float(kept[0]) / max(float(kept[-1]), damping)) if rank else 1.0
     if rank and kept[-1] < policy.threshold:  # lambda(sigma_min) moves with sigma_min's rounding
         kappa *= 1.0 + 2.0 * (policy.max_damping / policy.threshold) ** 2
@@ -105,6 +127,27 @@ def test_the_qr_path_is_taken_where_the_certificate_holds(problem):
     if policy.damping > 0.0 or t > MAX_QR_SIZE or sigma_min < policy.threshold * (1.0 - 1e-6):
         assert not by_qr
     elif certain:
+        assert by_qr
+
+
+@settings(max_examples=400, deadline=None)
+@given(problem=problems())
+def test_the_figures_before_a_solve_need_no_svd_where_the_certificate_holds(problem):
+    """sigma_min, lambda, the rank and the row space asked for without a solve (the
+    damping rows of the saturation around the previous command, docs/design.md 9.1): LAPACK's
+    figures, from the QR's certificate and the certified sigma_min alone wherever the
+    certificate holds, below the damping threshold too."""
+    matrix, rhs, s, policy = problem
+    x, *figures = _step.damped_least_squares(
+        matrix, rhs, policy.damping, policy.threshold, policy.max_damping, RANK_TOLERANCE,
+        solve=False)
+    assert x is None
+    assert_figures_are_lapacks(matrix, tuple(figures), damped_least_squares(matrix, rhs, policy))
+    by_qr = figures[-1]
+    rank_lost = np.min(s) <= RANK_TOLERANCE * max(1.0, float(np.max(s)))
+    if policy.damping > 0.0 or min(matrix.shape) > MAX_QR_SIZE or rank_lost:
+        assert not by_qr
+    elif certified(s):
         assert by_qr
 
 

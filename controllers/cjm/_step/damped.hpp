@@ -34,15 +34,19 @@ struct DampingPolicy {
 //!
 //! Every factorisation starts with the QR of the tall orientation, ``T = Q [R; 0]``
 //! (``T = J`` when J has at least as many rows as columns, else ``J^T``). When
-//! ``1 / ||R^-1||_F`` (a lower bound on sigma_min) is at least the policy's threshold and
-//! clears the rank cut, with no constant damping and ``||R||_F ||R^-1||_F <=``
-//! kMaxConditionBound, the SVD's decisions are known without it: full rank and
-//! ``lambda = 0``, so ``x = R^-1 (Q^T r)_head`` (tall J: its least squares) or
-//! ``x = Q [R^-T r; 0]`` (wide J: its minimum norm), and sigma_min, which the report
-//! carries, is ``1 / sqrt(lambda_max(R^-T R^-1))``: a certified power iteration, or where
-//! it would not certify soon (close smallest singular values) the symmetric eigenvalue
-//! problem of size ``min(p, q)`` (Eigen's, fixed-size storage). When the bound fails the
-//! Jacobi SVD of R finishes the thin SVD and decides, as before.
+//! ``1 / ||R^-1||_F`` (a lower bound on sigma_min) clears the rank cut, with no constant
+//! damping and ``||R||_F ||R^-1||_F <=`` kMaxConditionBound, the SVD's rank decision is
+//! known without it: full rank, the row space ``I`` (tall J) or Q's first ``p`` columns
+//! (wide J). sigma_min is then ``1 / sqrt(lambda_max(R^-T R^-1))``: a certified power
+//! iteration, or where it would not certify soon (close smallest singular values) the
+//! symmetric eigenvalue problem of size ``min(p, q)`` (Eigen's, fixed-size storage),
+//! computed when asked for. If the bound is also at least the policy's threshold,
+//! ``lambda = 0`` whatever sigma_min: ``x = R^-1 (Q^T r)_head`` (tall J: its least
+//! squares) or ``x = Q [R^-T r; 0]`` (wide J: its minimum norm). Below the threshold
+//! lambda follows sigma_min (eq 35): asked for first (the damping rows of the saturation
+//! around the previous command, docs/design.md 9.1), it comes from that sigma_min and a
+//! later solve finishes the SVD for its gains; a solve first decides on the SVD, as when
+//! the bound fails: the Jacobi SVD of R finishes the thin SVD and decides everything.
 class DampedLeastSquares {
  public:
   //! Largest ``min(p, q)`` the QR path takes (its ``R^-1`` and Gram are fixed-size).
@@ -59,38 +63,36 @@ class DampedLeastSquares {
         projected_(std::max<Index>(1, std::max(max_rows, max_cols)), 2),
         row_space_(std::max<Index>(1, max_cols), std::max<Index>(1, std::min(max_rows, max_cols))) {}
 
-  //! Factor ``matrix`` (p x q) and set the gains of the policy.
+  //! Factor ``matrix`` (p x q) for the policy: its QR, and its SVD unless the QR's
+  //! certificate decides the rank (class comment).
   void factor(const ConstMatrixRef& matrix, const DampingPolicy& policy) {
     rows_ = matrix.rows();
     cols_ = matrix.cols();
+    policy_ = policy;
     svd_.factor_qr(matrix);
-    by_qr_ = policy.damping == 0.0 && well_conditioned(policy);
-    row_space_ready_ = !by_qr_;
-    if (by_qr_) return;
-    svd_.finish();
-    const auto s = svd_.s();
-    const double tolerance = rank_tolerance_ * std::max(1.0, svd_.max_value());
-    // sigma_min: the smallest value kept (a direction not seen at all is not damped)
-    sigma_min_ = 0.0;
-    for (Index j = 0; j < s.size(); ++j) {
-      if (s(j) > tolerance) sigma_min_ = sigma_min_ == 0.0 ? s(j) : std::min(sigma_min_, s(j));
+    svd_ready_ = false;
+    if (policy.damping == 0.0 && certified_full_rank()) {
+      row_space_ready_ = false;
+      rank_ = svd_.size();
+      if (bound_ >= policy.threshold) {  // lambda = 0 whatever sigma_min
+        decision_ = Decision::undamped;
+        sigma_known_ = false;
+        damping_ = 0.0;
+        exact_ = rank_ == rows_;
+      } else {
+        decision_ = Decision::open;
+      }
+      return;
     }
-    const double lam2 = policy.lambda_squared(sigma_min_);
-    damping_ = std::sqrt(lam2);
-    rank_ = 0;
-    for (Index j = 0; j < s.size(); ++j) {
-      const bool keep = s(j) > tolerance;
-      gains_(j) = keep ? s(j) / (s(j) * s(j) + lam2) : 0.0;
-      if (keep) row_space_.col(rank_++).head(cols_) = svd_.v().col(j);
-    }
-    exact_ = lam2 == 0.0 && rank_ == rows_;
+    finish_svd();
   }
 
-  //! ``x`` for each column of ``rhs`` (at most 2): ``V diag(gains) U^T rhs`` after the
-  //! SVD, the class's triangular solves after the QR alone.
+  //! ``x`` for each column of ``rhs`` (at most 2): the class's triangular solves when
+  //! lambda is 0 after the QR alone, else ``V diag(gains) U^T rhs`` after the SVD.
   void solve(const ConstMatrixRef& rhs, MatrixRef x) {
     const Index t = svd_.size();
-    if (by_qr_) {
+    if (decision_ == Decision::open) finish_svd();  // decided on the SVD, as without the QR
+    if (decision_ == Decision::undamped) {
       const auto r = svd_.qr().topRows(t).triangularView<Eigen::Upper>();
       if (svd_.tall()) {  // J = Q [R; 0]: x = R^-1 (Q^T r)_head
         auto projected = projected_.topLeftCorner(rows_, rhs.cols());
@@ -106,21 +108,42 @@ class DampedLeastSquares {
       }
       return;
     }
+    if (!svd_ready_) {  // damped by the certified sigma_min: every value kept
+      svd_.finish();
+      svd_ready_ = true;
+      const double lam2 = damping_ * damping_;
+      for (Index j = 0; j < t; ++j) gains_(j) = svd_.s()(j) / (svd_.s()(j) * svd_.s()(j) + lam2);
+    }
     auto projected = projected_.topLeftCorner(t, rhs.cols());
     projected.noalias() = svd_.u().transpose() * rhs;
     projected = gains_.head(t).asDiagonal() * projected;
     x.noalias() = svd_.v() * projected;
   }
 
-  double sigma_min() const { return sigma_min_; }
-  double damping() const { return damping_; }
+  //! The smallest singular value kept.
+  double sigma_min() {
+    decide();
+    if (!sigma_known_) {
+      sigma_min_ = certified_sigma_min();
+      sigma_known_ = true;
+    }
+    return sigma_min_;
+  }
+  //! lambda (0 when the solution is the plain least squares / minimum norm).
+  double damping() {
+    decide();
+    return damping_;
+  }
   Index rank() const { return rank_; }
-  bool exact() const { return exact_; }
-  //! Whether the last factorisation was solved by the QR alone (no SVD).
-  bool by_qr() const { return by_qr_; }
+  bool exact() {
+    decide();
+    return exact_;
+  }
+  //! Whether the last factorisation has needed no SVD so far.
+  bool by_qr() const { return !svd_ready_; }
   //! An orthonormal basis of the row space (as columns): the right singular vectors with
-  //! a kept singular value, or after the QR alone ``I`` (tall J) or Q's first ``p``
-  //! columns (wide J), formed at the first call.
+  //! a kept singular value after the SVD's decision, else ``I`` (tall J) or Q's first
+  //! ``p`` columns (wide J), formed at the first call.
   auto row_space() {
     if (!row_space_ready_) {
       auto basis = row_space_.topLeftCorner(cols_, rank_);
@@ -135,33 +158,71 @@ class DampedLeastSquares {
  private:
   using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxQrSize, kMaxQrSize>;
 
-  //! The class's test on the R of the QR; when it holds, the solution's figures are set.
-  bool well_conditioned(const DampingPolicy& policy) {
+  //! What decided the figures: the SVD; the QR with lambda = 0; the QR with lambda still
+  //! to come from sigma_min (open) or come from it and positive (damped).
+  enum class Decision { svd, undamped, open, damped };
+
+  //! The class's test on the R of the QR (``R^-1`` and its norm kept for sigma_min).
+  bool certified_full_rank() {
     const Index t = svd_.size();
     if (t == 0 || t > kMaxQrSize) return false;
     const auto r = svd_.qr().topRows(t).triangularView<Eigen::Upper>();
     inverse_.setIdentity(t, t);
     r.solveInPlace(inverse_);
-    const double inverse_norm = inverse_.norm();
+    inverse_norm_ = inverse_.norm();
     double largest2 = 0.0;  // ||R||_F^2 (>= sigma_max^2)
     for (Index j = 0; j < t; ++j) largest2 += svd_.qr().col(j).head(j + 1).squaredNorm();
     const double largest = std::sqrt(largest2);
-    const double bound = 1.0 / inverse_norm;  // <= sigma_min
-    if (!(std::isfinite(bound) && bound >= policy.threshold &&
-          bound > rank_tolerance_ * std::max(1.0, largest) &&
-          largest * inverse_norm <= kMaxConditionBound))
-      return false;
+    bound_ = 1.0 / inverse_norm_;  // <= sigma_min
+    return std::isfinite(bound_) && bound_ > rank_tolerance_ * std::max(1.0, largest) &&
+           largest * inverse_norm_ <= kMaxConditionBound;
+  }
+
+  //! An open decision taken on the certified sigma_min: eq 35's lambda.
+  void decide() {
+    if (decision_ != Decision::open) return;
+    sigma_min_ = certified_sigma_min();
+    sigma_known_ = true;
+    const double lam2 = policy_.lambda_squared(sigma_min_);
+    damping_ = std::sqrt(lam2);
+    exact_ = lam2 == 0.0 && rank_ == rows_;
+    decision_ = lam2 == 0.0 ? Decision::undamped : Decision::damped;
+  }
+
+  //! The Jacobi SVD of R finishes the thin SVD and decides every figure.
+  void finish_svd() {
+    svd_.finish();
+    svd_ready_ = true;
+    decision_ = Decision::svd;
+    sigma_known_ = true;
+    row_space_ready_ = true;
+    const auto s = svd_.s();
+    const double tolerance = rank_tolerance_ * std::max(1.0, svd_.max_value());
+    // sigma_min: the smallest value kept (a direction not seen at all is not damped)
+    sigma_min_ = 0.0;
+    for (Index j = 0; j < s.size(); ++j) {
+      if (s(j) > tolerance) sigma_min_ = sigma_min_ == 0.0 ? s(j) : std::min(sigma_min_, s(j));
+    }
+    const double lam2 = policy_.lambda_squared(sigma_min_);
+    damping_ = std::sqrt(lam2);
+    rank_ = 0;
+    for (Index j = 0; j < s.size(); ++j) {
+      const bool keep = s(j) > tolerance;
+      gains_(j) = keep ? s(j) / (s(j) * s(j) + lam2) : 0.0;
+      if (keep) row_space_.col(rank_++).head(cols_) = svd_.v().col(j);
+    }
+    exact_ = lam2 == 0.0 && rank_ == rows_;
+  }
+
+  //! ``1 / sqrt(lambda_max(R^-T R^-1))`` from the ``R^-1`` of :func:`certified_full_rank`.
+  double certified_sigma_min() {
     gram_.noalias() = inverse_.transpose() * inverse_;  // R^-T R^-1: eigenvalues 1 / sigma_i^2
-    double largest_eigenvalue = power_iteration(inverse_norm * inverse_norm);
+    double largest_eigenvalue = power_iteration(inverse_norm_ * inverse_norm_);
     if (!(largest_eigenvalue > 0.0)) {  // not certified: the symmetric eigenvalue problem
       eigen_.compute(gram_, Eigen::EigenvaluesOnly);
-      largest_eigenvalue = eigen_.eigenvalues()(t - 1);
+      largest_eigenvalue = eigen_.eigenvalues()(gram_.rows() - 1);
     }
-    sigma_min_ = 1.0 / std::sqrt(largest_eigenvalue);
-    damping_ = 0.0;
-    rank_ = t;
-    exact_ = rank_ == rows_;
-    return true;
+    return 1.0 / std::sqrt(largest_eigenvalue);
   }
 
   //! The largest eigenvalue of ``gram_`` (symmetric positive definite, ``trace`` its
@@ -206,6 +267,7 @@ class DampedLeastSquares {
   static constexpr int kMaxPowerSteps = 40;
 
   double rank_tolerance_;
+  DampingPolicy policy_;
   ThinSvd svd_;
   Vector gains_;
   Matrix projected_, row_space_;
@@ -215,7 +277,9 @@ class DampedLeastSquares {
       power_product_{kMaxQrSize};
   Index rows_ = 0, cols_ = 0, rank_ = 0;
   double sigma_min_ = 0.0, damping_ = 0.0;
-  bool exact_ = false, by_qr_ = false, row_space_ready_ = true;
+  double inverse_norm_ = 0.0, bound_ = 0.0;  // ||R^-1||_F and 1 / ||R^-1||_F
+  Decision decision_ = Decision::svd;
+  bool exact_ = false, svd_ready_ = false, row_space_ready_ = true, sigma_known_ = true;
 };
 
 }  // namespace cjm

@@ -175,8 +175,7 @@ Step::Split Step::solve_over_free(const ConstVectorRef& rows_rhs,
     for (Index j = 0, f = 0; j < nv_; ++j)
       if (free_(j)) direction_(j) = delta(f++);
     split.task_rank = dls_.rank();
-    split.sigma_min = dls_.sigma_min();
-    split.damping = dls_.damping();
+    split.task_solved = true;
   } else {
     for (Index j = 0, f = 0; j < nv_; ++j)
       if (free_(j)) base_(j) = x0(f++);

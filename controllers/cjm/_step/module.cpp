@@ -205,21 +205,29 @@ PYBIND11_MODULE(_step, module) {
   module.def(
       "damped_least_squares",
       [](const cjm::Matrix& matrix, const cjm::Matrix& rhs, double damping, double threshold,
-         double max_damping, double rank_tolerance) {
+         double max_damping, double rank_tolerance, bool solve) {
         if (rhs.rows() != matrix.rows() || rhs.cols() < 1 || rhs.cols() > 2)
           throw py::value_error("rhs must have the matrix's rows and 1 or 2 columns");
         cjm::DampedLeastSquares dls(matrix.rows(), matrix.cols(), rank_tolerance);
         dls.factor(matrix, cjm::DampingPolicy{damping, threshold, max_damping});
-        cjm::Matrix x(matrix.cols(), rhs.cols());
-        dls.solve(rhs, x);
+        py::object solution = py::none();
+        if (solve) {
+          cjm::Matrix x(matrix.cols(), rhs.cols());
+          dls.solve(rhs, x);
+          solution = py::cast(x);
+        }
+        const double sigma_min = dls.sigma_min(), damped = dls.damping();
+        const bool exact = dls.exact();
         const cjm::Matrix row_space = dls.row_space();
-        return py::make_tuple(x, dls.sigma_min(), dls.damping(), dls.rank(), dls.exact(),
-                              row_space, dls.by_qr());
+        return py::make_tuple(solution, sigma_min, damped, dls.rank(), exact, row_space,
+                              dls.by_qr());
       },
       py::arg("matrix"), py::arg("rhs"), py::arg("damping"), py::arg("threshold"),
-      py::arg("max_damping"), py::arg("rank_tolerance"),
+      py::arg("max_damping"), py::arg("rank_tolerance"), py::arg("solve") = true,
       "The step's damped least squares of one matrix (tests): (x, sigma_min, damping, rank, "
-      "exact, row space as columns, whether the QR alone solved it).");
+      "exact, row space as columns, whether no SVD was needed). ``solve=False``: the "
+      "figures alone, asked for before any solve (x is None), as the saturation around "
+      "the previous command asks for its damping rows.");
 
   py::class_<cjm::ConstraintPlan>(module, "ConstraintPlan")
       .def(py::init([](Index rows, bool equality, bool analytical, std::vector<Index> pre,

@@ -160,8 +160,9 @@ double Step::task_scale_limit(const ConstVectorRef& base, const ConstVectorRef& 
 
 void Step::saturation_result(const Inputs& in, double task_scale, double rows_scale,
                              Index limiting_joint, const Split& split) {
-  sns_sigma_min_ = split.sigma_min;
-  sns_damping_ = split.damping;
+  // the split is the last one solved: dls_ holds its task's DLS
+  sns_sigma_min_ = split.task_solved ? dls_.sigma_min() : std::numeric_limits<double>::quiet_NaN();
+  sns_damping_ = split.task_solved ? dls_.damping() : 0.0;
   auto achieved = scratch_rows_.head(task_rows_);
   achieved.noalias() = in.ee_jacobian * sns_qd_;
   achieved -= task_scale * in.twist;

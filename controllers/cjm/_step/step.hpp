@@ -158,7 +158,7 @@ class Step {
   struct Split {
     double rows_residual = 0.0;
     Index task_rank = 0;
-    double sigma_min = std::numeric_limits<double>::quiet_NaN(), damping = 0.0;  // the task's DLS
+    bool task_solved = false;  // the free joints left the task a null space: dls_ holds its DLS
   };
 
   // step.cpp: the driver, the barriers' active set, the box and the clip
