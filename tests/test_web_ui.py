@@ -329,3 +329,36 @@ def test_every_kind_is_added_from_its_inputs_as_they_start(ui):
         point = link.act(inputs["distance"].value * np.asarray(app.robot.link_axis))
         np.testing.assert_allclose(constraint.point_world(link), point, atol=1e-12)
         assert constraint.violation(link) <= 1e-12
+
+
+def test_every_drawn_robot_has_its_contact_arrow_and_tissue(sda10f, server, tmp_path):
+    """With a ghost beside the main robot, each presses the tissue in its own plant: each
+    gets its plate and its arrow (the ghost's under /ghost, drawn at the offset), the
+    arrow the one of its own tip and contact force; the ghost's go with the ghost."""
+    from web.ui.force_panel import contact_arrow
+
+    app = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path / "sessions",
+                    scene_dir=tmp_path / "scenes")
+    ui = TeleopUI(server, app, ControlThread(app))
+    app.set_ghost("qp:daqp")
+    app.force.place_tissue()
+    app.force.set_enabled(True)
+    run(app, 3.0)  # 2 mm at 1 cm/s, then the force loop settles
+    draw(ui, plot=True)
+    snapshot = draw(ui)
+    assert set(ui._views) == {"main", "ghost"}
+    contacts = snapshot["force"]["contacts"]
+    panel = ui.force_panel
+    assert set(panel.arrows) == set(panel.tissues) == {"main", "ghost"}
+    for which, prefix in (("main", "/force"), ("ghost", "/ghost/force")):
+        force = contacts[which]["contact"]
+        assert np.linalg.norm(force) == pytest.approx(1.0, abs=0.05)  # each presses 1 N
+        arrow = panel.arrows[which]
+        assert arrow.name == f"{prefix}/contact" and arrow.visible
+        np.testing.assert_allclose(arrow.points, contact_arrow(contacts[which]["tip"], force),
+                                   atol=1e-6)  # float32 on the wire
+        assert panel.tissues[which].name == f"{prefix}/tissue"
+    assert panel.arrow is panel.arrows["main"]
+    app.set_ghost(None)
+    draw(ui)
+    assert set(panel.arrows) == set(panel.tissues) == {"main"}

@@ -200,10 +200,22 @@ class ForceControl:
         if len(contact):
             self.history.append((loop.t, *np.asarray(contact[0], dtype=float)))
 
-    def snapshot(self, loop: TeleopLoop) -> dict:
-        """What the view draws (caller holds the lock): the settings, the tissue, the tip
-        and the true contact force on it (world), the sensed one (tool frame), the plot's
-        columns."""
+    def snapshot(self, loops: dict[str, TeleopLoop]) -> dict:
+        """What the view draws (caller holds the lock): the settings, the tissue, per robot
+        (``contacts``, by loop name) its tool tip and the true contact force on it (world)
+        and the sensed one (tool frame), the main robot's also at the top level, and the
+        plot's columns (the main robot's)."""
+        contacts = {which: self._contact(loop) for which, loop in loops.items()}
+        history = np.array(self.history, dtype=float).reshape(-1, 4)
+        return {"available": bool(self._app.plant.physical), "enabled": self.enabled,
+                "setpoint": self.setpoint.copy(), "axes": self.axes,
+                "tissue": None if self.tissue is None else (self.tissue.point.copy(),
+                                                            self.tissue.normal.copy()),
+                **contacts["main"], "contacts": contacts, "history": history}
+
+    def _contact(self, loop: TeleopLoop) -> dict:
+        """A loop's tool tip, the true contact force on it (world) and the sensed wrench
+        (tool frame); zeros without a tissue."""
         contact, sensed = np.zeros(3), np.zeros(6)
         if self.tissue is not None and loop.plant is not None:
             measures = loop.plant.measures()
@@ -211,13 +223,7 @@ class ForceControl:
                 contact = np.array(measures.contact_forces[0], dtype=float)
                 sensed = np.array(measures.tool_wrenches[0], dtype=float)
         tip: pin.SE3 = loop.ee_placements()[0]
-        history = np.array(self.history, dtype=float).reshape(-1, 4)
-        return {"available": bool(self._app.plant.physical), "enabled": self.enabled,
-                "setpoint": self.setpoint.copy(), "axes": self.axes,
-                "tissue": None if self.tissue is None else (self.tissue.point.copy(),
-                                                            self.tissue.normal.copy()),
-                "tip": tip.translation.copy(), "contact": contact, "sensed": sensed,
-                "history": history}
+        return {"tip": tip.translation.copy(), "contact": contact, "sensed": sensed}
 
     def _law(self, dt: float) -> HybridForceMotion:
         assert self.tissue is not None

@@ -113,7 +113,7 @@ class View:
                         "plant": self.plant, "collisions": self._collisions_snapshot(),
                         "devices": self.devices_snapshot(),
                         "absolute_orientation": self.absolute_orientation,
-                        "force": self.force.snapshot(self.loops["main"])}
+                        "force": self.force.snapshot(self.loops)}
         robots = {which: self._robot_snapshot(state, constraints, targets)
                   for which, state in states.items()}
         entries = [{"id": entry_id, "kind": kind, "goal": goal,

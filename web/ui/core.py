@@ -267,7 +267,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         self._draw_constraints(snapshot["constraints"],
                                None if ghost is None else ghost["constraints"])
         self._draw_ports(robots)
-        self.force_panel.draw(snapshot["force"])
+        self.force_panel.draw(snapshot["force"], self._views)
         self._draw_obstacles(snapshot["collisions"]["obstacles"])
         self._draw_pairs(robots["main"]["collision_rows"], robots["main"]["q"],
                          snapshot["collisions"])

@@ -7,12 +7,13 @@ holding its viser handles, over :class:`web.app.force_control.ForceControl`.
 * in the scene: the tissue as a thin plate (6 cm square, 1 mm thick) on its undeformed surface, and
   the tissue's force on the tool tip as a green arrow along the force, its head on the
   tip, :data:`CONTACT_ARROW_PER_NEWTON` long per newton (hidden below
-  :data:`MIN_DRAWN_CONTACT`).
+  :data:`MIN_DRAWN_CONTACT`); for every robot drawn, the ghost's (its own plant presses
+  the same tissue) under ``/ghost``, beside the main robot with it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from functools import partial
 
 import numpy as np
@@ -67,8 +68,9 @@ class ForcePanel:
                      for name in "xyz"]
         self.reading = gui.add_markdown("no tissue")
         self.plot: viser.GuiUplotHandle | None = None
-        self.tissue: viser.BoxHandle | None = None
-        self.arrow: viser.LineSegmentsHandle | None = None
+        #: per robot drawn (``main``, ``ghost``): its tissue plate and its contact arrow
+        self.tissues: dict[str, viser.BoxHandle] = {}
+        self.arrows: dict[str, viser.LineSegmentsHandle] = {}
         self.place.on_click(lambda event: self.post(event, force.place_tissue, "force-place"))
         self.enabled.on_update(lambda event: self.post(
             event, partial(force.set_enabled, self.enabled.value), "force-enabled"))
@@ -90,45 +92,70 @@ class ForcePanel:
 
         self._post(event, run, key=key)
 
-    def draw(self, state: dict) -> None:
-        """The tissue, the arrow and the words from ``snapshot["force"]``; the widgets
-        follow the app (a refused change springs back)."""
+    @property
+    def arrow(self) -> viser.LineSegmentsHandle | None:
+        """The main robot's contact arrow (None before one was drawn)."""
+        return self.arrows.get("main")
+
+    def draw(self, state: dict, drawn: Collection[str] = ("main",)) -> None:
+        """The tissue, the arrows and the words from ``snapshot["force"]``, for each robot
+        of ``drawn`` (the ghost's under ``/ghost``, its root; its handles are forgotten
+        when it goes, with the root); the widgets follow the app (a refused change springs
+        back)."""
         settings = (state["enabled"], tuple(state["setpoint"]), tuple(state["axes"]))
         if settings != self._seen:
             self._seen = settings
             self.sync(lambda: self._widgets_from(state))
+        for handles in (self.tissues, self.arrows):
+            for which in [which for which in handles if which not in drawn]:
+                handles.pop(which)
         tissue = state["tissue"]
-        if tissue is not None:
-            point, normal = tissue
-            rotation = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), normal)
-            wxyz = (rotation.w, rotation.x, rotation.y, rotation.z)
-            centre = point - 0.5 * TISSUE_THICKNESS * normal
-            if self.tissue is None:
-                self.tissue = self.server.scene.add_box(
-                    "/force/tissue", TISSUE_COLOR, (TISSUE_SIDE, TISSUE_SIDE, TISSUE_THICKNESS),
-                    opacity=0.6, wxyz=wxyz, position=centre)
-            else:
-                self.tissue.wxyz, self.tissue.position = wxyz, centre
-        contact = state["contact"]
-        magnitude = float(np.linalg.norm(contact))
-        shown = magnitude >= MIN_DRAWN_CONTACT
-        if shown:
-            segments = contact_arrow(state["tip"], contact)
-            if self.arrow is None:
-                self.arrow = self.server.scene.add_line_segments(
-                    "/force/contact", segments, CONTACT_COLOR, thickness=CONTACT_ARROW_WIDTH,
-                    thickness_units="screen")
-            else:
-                self.arrow.points = segments
-                self.arrow.visible = True
-        elif self.arrow is not None and self.arrow.visible:
-            self.arrow.visible = False
+        for which, contact in state["contacts"].items():
+            if which not in drawn:
+                continue
+            prefix = "/force" if which == "main" else f"/{which}/force"
+            if tissue is not None:
+                self._draw_tissue(which, prefix, *tissue)
+            self._draw_arrow(which, prefix, contact["tip"], contact["contact"])
+        magnitude = float(np.linalg.norm(state["contact"]))
         sensed = -state["sensed"][:3]
         self.reading.content = (
             "no tissue (mujoco plant only)" if tissue is None else
             f"contact force {magnitude:.3f} N (tool pressing: x {sensed[0]:.3f}, "
             f"y {sensed[1]:.3f}, z {sensed[2]:.3f} N sensed); force control "
             f"{'on' if state['enabled'] else 'off'}")
+
+    def _draw_tissue(self, which: str, prefix: str, point: np.ndarray,
+                     normal: np.ndarray) -> None:
+        """Robot ``which``'s tissue plate (under ``prefix``) on the undeformed surface."""
+        rotation = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), normal)
+        wxyz = (rotation.w, rotation.x, rotation.y, rotation.z)
+        centre = point - 0.5 * TISSUE_THICKNESS * normal
+        plate = self.tissues.get(which)
+        if plate is None:
+            self.tissues[which] = self.server.scene.add_box(
+                f"{prefix}/tissue", TISSUE_COLOR, (TISSUE_SIDE, TISSUE_SIDE, TISSUE_THICKNESS),
+                opacity=0.6, wxyz=wxyz, position=centre)
+        else:
+            plate.wxyz, plate.position = wxyz, centre
+
+    def _draw_arrow(self, which: str, prefix: str, tip: np.ndarray,
+                    contact: np.ndarray) -> None:
+        """Robot ``which``'s contact arrow (under ``prefix``), hidden below
+        :data:`MIN_DRAWN_CONTACT`."""
+        arrow = self.arrows.get(which)
+        if float(np.linalg.norm(contact)) < MIN_DRAWN_CONTACT:
+            if arrow is not None and arrow.visible:
+                arrow.visible = False
+            return
+        segments = contact_arrow(tip, contact)
+        if arrow is None:
+            self.arrows[which] = self.server.scene.add_line_segments(
+                f"{prefix}/contact", segments, CONTACT_COLOR, thickness=CONTACT_ARROW_WIDTH,
+                thickness_units="screen")
+        else:
+            arrow.points = segments
+            arrow.visible = True
 
     def draw_plot(self, state: dict, now: float) -> None:
         """The contact force's magnitude over the last 10 s, the setpoint's dashed."""
