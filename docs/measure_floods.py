@@ -7,7 +7,9 @@ its own,
   messages as fast as its socket takes them;
 * ``udp``: 300,000 datagrams at the master's port, a third each malformed (random bytes),
   forged (a command with a random tag) and of another rig (tagged with another key);
-* ``both`` at once.
+* ``both`` at once;
+* ``cpu``, the control: a process that only computes for 2 s, what the UDP flood's sender
+  takes of the machine's two cores, sending nothing.
 
 Each phase's loop rate is measured from the control thread's tick count, sampled every
 50 ms: the mean over the flood and the worst 1 s window, as fractions of the baseline's
@@ -15,7 +17,8 @@ mean (the loop's first quiet seconds in the same run). Also printed: the master'
 releases (the watchdog, 100 ms), what the receiver counted, what the inbox coalesced.
 
 Run:  OPENBLAS_NUM_THREADS=1 python docs/measure_floods.py [--events 10000]
-      [--datagrams 300000] [--json FILE]
+      [--datagrams 300000] [--repeat 1] [--json FILE]
+(the machine's other work moves these figures: ``cpu`` shows by how much)
 """
 
 from __future__ import annotations
@@ -58,7 +61,7 @@ from websockets.sync.client import connect
 url, origin, count = sys.argv[1], sys.argv[2], int(sys.argv[3])
 x, y, z, *wxyz = (float(v) for v in sys.argv[4:11])
 with connect(url, origin=origin, subprotocols=[f"viser-v{viser.__version__}"],
-             open_timeout=30, max_size=None) as socket:
+             open_timeout=30, max_size=None, max_queue=None) as socket:  # it reads nothing
     camera = ViewerCameraMessage((1.0, 0.0, 0.0, 0.0), (2.0, 0.0, 1.0), 1.0, 0.01, 100.0, 600,
                                  800, (0.0, 0.0, 0.5), (0.0, 0.0, 1.0))
     socket.send(msgspec.msgpack.encode(camera.as_serializable_dict()))  # a browser says where
@@ -87,6 +90,17 @@ start = time.perf_counter()
 for k in range(count):
     sockets[k % 2].sendto(kinds[k % 3](k), ("127.0.0.1", port))
 print("sent", count, "in", round(time.perf_counter() - start, 2), "s", flush=True)
+"""
+
+
+#: the control: a process that computes and sends nothing
+CPU_HOG = """
+import sys, time
+end = time.perf_counter() + float(sys.argv[1])
+print("computing", flush=True)
+while time.perf_counter() < end:
+    pass
+sys.stdin.read()
 """
 
 
@@ -145,6 +159,7 @@ def main() -> None:
     parser.add_argument("--events", type=int, default=10_000)
     parser.add_argument("--datagrams", type=int, default=300_000)
     parser.add_argument("--baseline", type=float, default=5.0, help="quiet seconds measured")
+    parser.add_argument("--repeat", type=int, default=1, help="run the floods this many times")
     parser.add_argument("--json", help="also write the figures to this file")
     args = parser.parse_args()
     master = UdpMaster(port=0, key=KEY)
@@ -172,15 +187,20 @@ def main() -> None:
             "gui": lambda: [child(GUI_FLOOD, url, origin, args.events, *goal)],
             "udp": lambda: [child(UDP_FLOOD, master.port, args.datagrams)],
             "both": lambda: [child(GUI_FLOOD, url, origin, args.events, *goal),
-                             child(UDP_FLOOD, master.port, args.datagrams)]}
+                             child(UDP_FLOOD, master.port, args.datagrams)],
+            "cpu": lambda: [child(CPU_HOG, 2.0)]}
         last = np.array(goal[:3]) + [0.01 * np.sin((args.events - 1) / 300), 0.0, 0.0]
-        for name, start_flood in floods.items():
+        for run, (name, start_flood) in ((run, flood) for run in range(args.repeat)
+                                         for flood in floods.items()):
             before = master.counts_now()
             coalesced, applied = ui.inbox.coalesced, ui.inbox.applied
+            paced = (ui.pacing.read, ui.pacing.coalesced, ui.pacing.delivered)
             start = time.perf_counter()
             processes = start_flood()
             said = [process.stdout.readline().strip() for process in processes]
-            if name != "udp":  # until the server has applied the last drag
+            if name == "cpu":
+                time.sleep(2.0)
+            if name in ("gui", "both"):  # until the server has applied the last drag
                 wait = time.monotonic() + 300.0
                 while np.linalg.norm(app.inputs[0].gizmo.translation - last) > 1e-9:
                     if time.monotonic() > wait:
@@ -193,19 +213,28 @@ def main() -> None:
             counts = master.counts_now()
             delta = {key: counts.get(key, 0) - before.get(key, 0) for key in counts
                      if counts.get(key, 0) != before.get(key, 0)}
-            results[name] = {
+            result = results[f"{name} {run + 1}"] = {
                 "seconds": end - start, "mean_hz": mean, "worst_1s_hz": worst,
                 "mean_fraction": mean / baseline, "worst_fraction": worst / baseline,
                 "flooder": said, "udp_counts": delta,
                 "inbox_coalesced": ui.inbox.coalesced - coalesced,
-                "inbox_applied": ui.inbox.applied - applied}
-            print(f"{name}: {end - start:.1f} s, mean {mean:.0f} Hz ({mean / baseline:.3f} of "
+                "inbox_applied": ui.inbox.applied - applied,
+                "paced_read_coalesced_delivered": [
+                    now - then for now, then in zip((ui.pacing.read, ui.pacing.coalesced,
+                                                     ui.pacing.delivered), paced)]}
+            print(f"{name} ({run + 1}): {end - start:.1f} s, mean {mean:.0f} Hz ({mean / baseline:.3f} of "
                   f"baseline), worst 1 s {worst:.0f} Hz ({worst / baseline:.3f}); "
                   f"{'; '.join(said)}; releases {delta.get('releases', 0)}; "
-                  f"counts {delta}; inbox coalesced {results[name]['inbox_coalesced']}, "
-                  f"applied {results[name]['inbox_applied']}", flush=True)
+                  f"counts {delta}; inbox coalesced {result['inbox_coalesced']}, "
+                  f"applied {result['inbox_applied']}; messages read, coalesced, "
+                  f"handed to viser {result['paced_read_coalesced_delivered']}",
+                  flush=True)
             time.sleep(2.0)  # quiet between floods
         print(f"baseline: mean {baseline:.0f} Hz, worst 1 s {baseline_worst:.0f} Hz")
+        for name in floods:
+            runs = [results[f"{name} {run + 1}"] for run in range(args.repeat)]
+            print(f"{name}: mean " + ", ".join(f"{r['mean_fraction']:.3f}" for r in runs)
+                  + "; worst 1 s " + ", ".join(f"{r['worst_fraction']:.3f}" for r in runs))
     finally:
         sampler.stop()
         streamer.kill()

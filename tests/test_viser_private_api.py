@@ -1,12 +1,15 @@
 """The parts of viser that are not its public API and that the UI's token check
-(web/access.py, :func:`web.access.require_access`) reads, on the installed viser: if an
+(web/access.py, :func:`web.access.require_access`) and the pacing of a page's messages
+(web/pacing.py) read, on the installed viser: if an
 update renames or reshapes one, this file fails naming it (pyproject pins viser to the
 minor series they were read on; moving the pin means running this file first).
 
 Read: ``ViserServer._websock_server``; on it ``_client_connect_cb`` (a list of async
 callbacks the gate puts itself first in) and ``_live_connections`` (client id -> the
 websocket, whose ``request`` has the ``path`` and ``headers`` of the handshake); the
-websockets server found by its port, whose ``process_request`` the gate wraps.
+websockets server found by its port, whose ``process_request`` the gate wraps; viser
+reading a connection's messages through the websocket's ``recv`` attribute, looked up
+after the connect callbacks ran (the pacing replaces it there).
 """
 
 from __future__ import annotations
@@ -60,3 +63,29 @@ def test_a_connect_callback_first_in_the_list_sees_the_request_of_the_new_connec
     with connect(url, subprotocols=[f"viser-v{viser.__version__}"], open_timeout=30):
         assert called.wait(30), "the connect callback was not called"
     assert seen == {"path": "/?token=abc", "has_headers": True}
+
+
+def test_viser_reads_a_connection_s_messages_through_its_recv_looked_up_after_connecting(server):
+    """What the pacing does: a connect callback replaces the websocket's ``recv``; viser's
+    reader then takes every message through it."""
+    websock_server = server._websock_server
+    taken: list[bytes] = []
+    done = threading.Event()
+
+    async def wrap(connection) -> None:
+        websocket = websock_server._live_connections.get(connection.client_id)
+        receive = websocket.recv
+
+        async def recv(decode=None):
+            message = await receive()
+            taken.append(message)
+            done.set()
+            return message
+        websocket.recv = recv
+
+    websock_server._client_connect_cb.insert(0, wrap)
+    url = f"ws://127.0.0.1:{server.get_port()}/"
+    with connect(url, subprotocols=[f"viser-v{viser.__version__}"], open_timeout=30) as ws:
+        ws.send(b"\x81\xa4type\xa9NotViser!")  # read (then refused by viser's decoder)
+        assert done.wait(30), "viser did not read through the replaced recv"
+    assert taken == [b"\x81\xa4type\xa9NotViser!"]

@@ -71,9 +71,9 @@ INTRUSIONS = ("foreign", "unauthenticated", "replayed", "version")
 #: and :data:`MASTER_BATCH` from the master's own per :data:`SLICE` seconds (8,000 and
 #: 16,000 a second: a master streams at 1 kHz); the rest waits in the socket's queue, and
 #: what overflows it is counted ``overflow``
-SLICE = 1e-3
-BATCH = 8
-MASTER_BATCH = 16
+SLICE = 5e-3
+BATCH = 20
+MASTER_BATCH = 40
 #: Linux's socket option that attaches the socket's count of dropped datagrams to each
 #: datagram read (``SO_RXQ_OVFL``; Python names it on no platform)
 SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)

@@ -12,6 +12,7 @@ from teleop.plants import PlantSettings
 from teleop.robots import Robot
 
 from ..access import make_token, require_access
+from ..pacing import pace_messages
 from ..app import ControlThread, TeleopApp
 from .core import TeleopUI
 
@@ -56,12 +57,13 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
         app.attach_input(source)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     access = require_access(server, None if token is None else make_token(token), host)
+    pacing = pace_messages(server)  # what one page's messages may cost (web/pacing.py)
     # a page that connected before the check was in place (nothing is served yet)
     # reconnects, and is checked
     server._websock_server.disconnect_all_clients()
     control = ControlThread(app)
     ui = TeleopUI(server, app, control, notes=notes)
-    ui.access = access
+    ui.access, ui.pacing = access, pacing
     control.start()
     ui.start()
     return server, app, control, ui
