@@ -105,13 +105,12 @@ def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
         info.active_pairs = tuple(collision.pairs[i] for i in active_pairs)
     if not events:
         return info
-    # an active set solves again after each row it adds: the last solve's residual is the
-    # command's (the earlier ones keep the status they lowered, never their wording)
-    last_residual = max((i for i, (event, *_) in enumerate(events)
-                         if event is Event.TASK_RESIDUAL), default=-1)
     for index, (event, a, b, c) in enumerate(events):  # the frequent events first
         if event is Event.TASK_RESIDUAL:
-            if index == last_residual:
+            # an active set solves again after each row it adds: the last solve's residual
+            # is the command's (the earlier ones keep the status they lowered, never their
+            # wording)
+            if all(later[0] is not Event.TASK_RESIDUAL for later in events[index + 1:]):
                 info.report(StepStatus.OK, task_residual_note(a, b))
         elif event is Event.TASK_MISSED:
             info.report(StepStatus.OK, task_missed_note(joint_names, report.saturation_joints, a, b))
@@ -178,14 +177,16 @@ def task_missed_note(joint_names: Sequence[str], saturated: Sequence[int], sigma
                      damping: float) -> str:
     """What keeps a saturated step from the task: the joints held at a limit, the
     damping near a singularity (eq 35), else a least-squares task (rank lost)."""
-    causes = [f"{joint_list(joint_names, saturated)} at a limit"] if saturated else []
+    limit = f"{joint_list(joint_names, saturated)} at a limit" if saturated else ""
+    if saturated and not damping > 0.0:  # the common case: words only for the joints
+        return f"{limit}: task not fully achievable"
     # below the rank cut sigma_min is rounding: 0 (the two backends round differently)
     sigma = f"sigma_min {sigma_min if sigma_min > RANK_TOLERANCE else 0.0:.2g}"
     if damping > 0.0:
-        causes.append(f"near a singularity ({sigma}, damping {damping:.2g})")
-    if not causes:
-        causes.append(f"least squares ({sigma})")
-    return f"{'; '.join(causes)}: task not fully achievable"
+        near = f"near a singularity ({sigma}, damping {damping:.2g})"
+        return f"{limit}; {near}: task not fully achievable" if saturated else (
+            f"{near}: task not fully achievable")
+    return f"least squares ({sigma}): task not fully achievable"
 
 
 def task_scaled_note(joint_names: Sequence[str], joint: int, scale: float) -> str:
@@ -196,5 +197,7 @@ def task_scaled_note(joint_names: Sequence[str], joint: int, scale: float) -> st
 def joint_list(joint_names: Sequence[str], velocity_indices: Sequence[int]) -> str:
     """``joint arm_joint_4`` / ``joints a, b`` for velocity indices (a multi-dof joint
     named once)."""
+    if len(velocity_indices) == 1:
+        return f"joint {joint_names[velocity_indices[0]]}"
     names = list(dict.fromkeys(joint_names[i] for i in velocity_indices))
     return f"joint{'s' if len(names) > 1 else ''} {', '.join(names)}"
