@@ -178,3 +178,24 @@ def test_a_tissue_in_a_scene_needs_the_physics_plant(app, sda10f, tmp_path):
     del old["force"]
     app.apply_scene(old)  # a version 2 scene leaves the page's force control as it is
     assert app.force.tissue is not None
+
+
+def test_the_status_leaves_the_force_axes_to_the_law(app):
+    """Pressing 1 N, the tip sits 17 mm beyond its target along the tool's z (the tissue
+    decides, not the target): the page does not call that a position short of the
+    target; it counts the other axes (here the tool's x and y, within a millimetre)."""
+    app.force.place_tissue()
+    app.force.set_enabled(True)
+    for _ in range(4000):
+        app.step()
+    placement = app.loops["main"].ee_placements()[0]
+    error = app.inputs[0].target.translation - placement.translation
+    along_tool = placement.rotation.T @ error
+    assert abs(along_tool[2]) > 0.01  # the tissue holds the tip off its target
+    limitation = app.limitation("main")
+    assert "short of the target" not in limitation.words
+    assert limitation.distance == pytest.approx(float(np.linalg.norm(along_tool[:2])),
+                                                abs=1e-12)
+    app.force.set_enabled(False)  # the target owns every axis again
+    assert app.limitation("main").distance == pytest.approx(float(np.linalg.norm(error)),
+                                                            abs=1e-3)

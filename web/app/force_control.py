@@ -181,6 +181,18 @@ class ForceControl:
         self._wrappers.add(wrapper)
         return wrapper
 
+    def motion_distance(self, placement: pin.SE3, target: pin.SE3, ee: int) -> float:
+        """How far EE ``ee`` at ``placement`` is from ``target`` along what the operator
+        commands (m): with force control on, the law owns the force axes of the first EE's
+        tool frame (the tissue, not the target, decides where the tip is along them), so
+        the distance counts the other axes only."""
+        error = target.translation - placement.translation
+        if self.enabled and self.tissue is not None and ee == 0:
+            along_tool = placement.rotation.T @ error
+            along_tool[list(self.axes)] = 0.0
+            return float(np.linalg.norm(along_tool))
+        return float(np.linalg.norm(error))
+
     def feed(self, loops: dict[str, TeleopLoop]) -> None:
         """Each wrapped controller gets its plant's sensor reading of the last period (none
         yet after a reset: it keeps the one it has, zero at first; caller holds the

@@ -6,7 +6,6 @@ from __future__ import annotations
 import copy
 import threading
 
-import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
@@ -70,7 +69,7 @@ class View:
         the step's words (:func:`describe_limitation`) said plainly
         (:func:`web.app.shortfall.explained`: what "Home" does, what part of the target
         is short, why, what helps)."""
-        distance = float(np.linalg.norm(placement.translation - target.translation))
+        distance = self.force.motion_distance(placement, target, ee)
         limitation = describe_limitation(info, record, distance, self.joint_names, refused, ee)
         stalled = record is not None and not_following(record, ee)
         ports = ports_on_chain(self.robot.model, self.robot.ee_frame_ids[ee], constraints)
