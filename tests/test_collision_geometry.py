@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from constraints import Hole
 from constraints.collision import (Box, Capsule, CollisionAvoidance, HalfSpace, Obstacle,
                                    Sphere)
+from constraints.collision.avoidance import GJK_TOLERANCE
 from constraints.collision.geometry import capsule_geometry, segment_distances
 from teleop import load_robot
 
@@ -124,6 +125,28 @@ def test_rows_distances_and_witnesses_equal_coal(dual, seed):
             np.testing.assert_allclose(on_second, points[1], atol=1e-7)
             assert np.linalg.norm(on_first - on_second) == pytest.approx(distance, abs=1e-7)
     assert rows.minimum_distance <= float(np.min(rows.distances))
+
+
+@settings(max_examples=20, deadline=None)
+@given(seeds, st.lists(st.floats(-0.05, 0.05), min_size=3, max_size=3))
+def test_an_obstacle_moved_between_two_steps_is_measured_where_it_went(dual, seed, shift):
+    """An avoidance that measured the obstacles once, then has them moved (``move_to``),
+    gives the rows a fresh avoidance built at the new places gives: the pose it keeps
+    for an obstacle not moved is not kept for a moved one."""
+    q = dual.random_configuration(np.random.default_rng(seed))
+    obstacles = obstacles_near(dual, q)
+    avoidance = CollisionAvoidance(dual, obstacles)
+    model, data = dual.model, dual.model.createData()
+    pin.computeJointJacobians(model, data, q)
+    avoidance.rows(model, data)
+    for obstacle in obstacles[::2]:
+        obstacle.move_to(obstacle.position + np.asarray(shift))
+    moved = avoidance.rows(model, data)
+    fresh = CollisionAvoidance(dual, obstacles).rows(model, data)
+    assert moved.pairs == fresh.pairs
+    # coal starts each pair's GJK where it ended the step before: equal to its tolerance
+    np.testing.assert_allclose(moved.distances, fresh.distances, rtol=0, atol=GJK_TOLERANCE)
+    np.testing.assert_allclose(moved.rows, fresh.rows, rtol=0, atol=1e-6)
 
 
 def coal_distance(first, first_pose, second, second_pose):

@@ -244,6 +244,12 @@ class CollisionAvoidance:
                                + [bounding_segment(o.shape(), pin.SE3.Identity())[2]
                                   for o in self.obstacles])
         self._moving_joints = np.unique(self._joints).tolist()
+        #: each obstacle's ``center`` array when its bounding segment below was computed
+        #: (``move_to`` replaces the array: an obstacle not moved keeps its pose), and the
+        #: segments' world ends
+        self._placed_centers: list[np.ndarray | None] = [None] * len(self.obstacles)
+        self._obstacle_starts = np.zeros((len(self.obstacles), 3))
+        self._obstacle_ends = np.zeros((len(self.obstacles), 3))
         self.revision += 1
 
     def primitives(self) -> CollisionPrimitives:
@@ -274,9 +280,14 @@ class CollisionAvoidance:
         world ends ``(starts, ends)`` of the bounding capsules, robot geometries then
         obstacles."""
         geometry, geometry_data = self._geometry, self._geometry_data
-        obstacle_poses = [obstacle.pose() for obstacle in self.obstacles]
-        for k, pose in enumerate(obstacle_poses):
-            geometry.geometryObjects[self._robot_count + k].placement = pose
+        placed = self._placed_centers
+        for k, obstacle in enumerate(self.obstacles):
+            if obstacle.center is not placed[k]:  # moved (or new): pose it again
+                pose = obstacle.pose()
+                geometry.geometryObjects[self._robot_count + k].placement = pose
+                start, end, _ = bounding_segment(obstacle.shape(), pose)
+                self._obstacle_starts[k], self._obstacle_ends[k] = start, end
+                placed[k] = obstacle.center
         pin.updateGeometryPlacements(model, data, geometry, geometry_data)
         placements = np.empty((model.njoints, 4, 4))
         for joint in self._moving_joints:
@@ -285,13 +296,8 @@ class CollisionAvoidance:
         ends = (np.einsum("kij,kj->ki", placements[joints, :3, :3], self._local_ends)
                 + placements[joints, :3, 3])
         robot_count = self._robot_count
-        starts, finishes = ends[:robot_count], ends[robot_count:]
-        if obstacle_poses:
-            obstacle_ends = [bounding_segment(obstacle.shape(), pose)
-                             for obstacle, pose in zip(self.obstacles, obstacle_poses)]
-            starts = np.vstack([starts, [start for start, _, _ in obstacle_ends]])
-            finishes = np.vstack([finishes, [end for _, end, _ in obstacle_ends]])
-        return starts, finishes
+        return (np.vstack([ends[:robot_count], self._obstacle_starts]),
+                np.vstack([ends[robot_count:], self._obstacle_ends]))
 
     def _near_pairs(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
         """The pair indices whose bounding capsules come within the detection distance (a
