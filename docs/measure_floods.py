@@ -77,9 +77,9 @@ with connect(url, origin=origin, subprotocols=[f"viser-v{viser.__version__}"],
 #: the UDP flood: malformed, forged and another rig's datagrams in turn, from two sockets
 UDP_FLOOD = """
 import os, socket, sys, time
-from teleop.inputs.protocol import COMMAND_FORMAT, TAG_SIZE, encode_command
+from teleop.inputs.protocol import COMMAND_FORMAT, TAG_SIZE, VERSION, encode_command
 port, count = int(sys.argv[1]), int(sys.argv[2])
-forged = COMMAND_FORMAT.pack(b"CJMI", 2, 1, 0, 0, 5, 0.0, 0.05, 0, 0, 1, 0, 0, 0, 7) \\
+forged = COMMAND_FORMAT.pack(b"CJMI", VERSION, 1, 0, 0, 5, 0.0, 0.05, 0, 0, 1, 0, 0, 0, 7, 9) \\
     + os.urandom(TAG_SIZE)
 junk = [os.urandom(100) for _ in range(64)]
 foreign = [encode_command("pose", (0.05, 0, 0, 1, 0, 0, 0), s, 0.0, key=bytes(32), stream=99)

@@ -99,7 +99,8 @@ client.close()
 
 print(f"sent {client.sequence} commands, received {stats['received']}, applied "
       f"{stats['applied']}, superseded {stats.get('superseded', 0)}, dropped {stats['dropped']}, "
-      f"lost {stats.get('lost', 0)}")
+      f"lost {stats.get('lost', 0)}, hello {stats.get('hello', 0)} (sent before the launch "
+      "was heard: answered, not applied)")
 print(f"feedback received: {len(client.received)}, force max {max(forces):.3f} N")
 print(f"latency arrival-to-command p50 {stats['latency_p50_ms']:.3f} ms, "
       f"p99 {stats['latency_p99_ms']:.3f} ms")

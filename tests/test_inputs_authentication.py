@@ -1,11 +1,12 @@
-"""The network master is paired and authenticated (protocol version 2): datagrams from
-anyone else - unauthenticated, forged, replayed, an old-protocol master, a flood - while
-the real master streams, or while it pauses, move the EE 0 mm, never release or replace
-the master, and are counted; counters stay bounded against forged numbers."""
+"""The network master is paired and authenticated (protocol version 3): datagrams from
+anyone else - unauthenticated, forged, replayed, recorded at an earlier launch, an
+old-protocol master, a flood - while the real master streams, or while it pauses, move the
+EE 0 mm, never release or replace the master, and are counted; counters stay bounded
+against forged numbers."""
 
 from __future__ import annotations
 
-import math
+import hmac
 import socket
 import struct
 import subprocess
@@ -17,7 +18,9 @@ import numpy as np
 import pytest
 
 from teleop import load_robot
-from teleop.inputs import FeedbackState, MasterClient, UdpMaster, encode_command, read_key_file
+from teleop.inputs import (Feedback, FeedbackState, MasterClient, PacketError, UdpMaster,
+                           decode_command, decode_feedback, encode_command, encode_feedback,
+                           read_key_file)
 from teleop.inputs.protocol import COMMAND_FORMAT, TAG_SIZE
 from web.app import ControlThread, TeleopApp
 from web.ui.device_view import device_words
@@ -30,13 +33,14 @@ HOME = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
 #: the master's own stream replayed (as recorded: the right tag), version-1 commands
 ATTACKER = """
 import os, socket, struct, sys
-from teleop.inputs.protocol import COMMAND_FORMAT, TAG_SIZE, encode_command
+from teleop.inputs.protocol import COMMAND_FORMAT, TAG_SIZE, VERSION, encode_command
 port, count, stream, key = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), bytes.fromhex(sys.argv[4])
+launch = int(sys.argv[5])
 def forged(sequence, device_time, stream):
-    return COMMAND_FORMAT.pack(b"CJMI", 2, 1, 0, 0, sequence, device_time,
-                               0.05, 0.05, 0.05, 1, 0, 0, 0, stream) + os.urandom(TAG_SIZE)
-recorded = [encode_command("pose", (0.05, 0, 0, 1, 0, 0, 0), s, 0.0, key=key, stream=stream)
-            for s in range(1, 101)]
+    return COMMAND_FORMAT.pack(b"CJMI", VERSION, 1, 0, 0, sequence, device_time,
+                               0.05, 0.05, 0.05, 1, 0, 0, 0, stream, launch) + os.urandom(TAG_SIZE)
+recorded = [encode_command("pose", (0.05, 0, 0, 1, 0, 0, 0), s, 0.0, key=key, stream=stream,
+                           launch=launch) for s in range(1, 101)]
 kinds = [lambda k: forged(k, 0.0, 7), lambda k: forged(2**32 - 1, 1e300, stream),
          lambda k: recorded[k % 100],
          lambda k: struct.pack("<4sBBBBId7d", b"CJMI", 1, 1, 0, 0, k, 0.0, 0.05, 0, 0, 1, 0, 0, 0)]
@@ -86,7 +90,8 @@ def attack(master: UdpMaster, stream: int, count: int) -> None:
     """Run the attacker process to its end, and until the master has read everything."""
     before = master.counts_now().get("received", 0)
     done = subprocess.run([sys.executable, "-c", ATTACKER, str(master.port), str(count),
-                           str(stream), KEY.hex()], capture_output=True, text=True, timeout=300)
+                           str(stream), KEY.hex(), str(master.launch)], capture_output=True,
+                          text=True, timeout=300)
     assert done.returncode == 0 and f"sent {count}" in done.stdout, done.stderr
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         # a probe datagram behind the flood, sent again until the queue has room for it:
@@ -180,8 +185,11 @@ def test_senders_in_a_pause_of_the_master_cannot_take_it_and_it_resumes(console)
 
 
 def pose_from(master: UdpMaster, sequence: int, device_time: float, arrival: float,
-              sender=("127.0.0.1", 5000), key: bytes = KEY, stream: int = 1) -> None:
-    master.handle(encode_command("pose", HOME, sequence, device_time, key=key, stream=stream),
+              sender=("127.0.0.1", 5000), key: bytes = KEY, stream: int = 1,
+              launch: int | None = None) -> None:
+    """A command from ``sender`` for ``launch`` (by default the master's own)."""
+    master.handle(encode_command("pose", HOME, sequence, device_time, key=key, stream=stream,
+                                 launch=master.launch if launch is None else launch),
                   sender, arrival)
 
 
@@ -194,7 +202,8 @@ def test_forged_numbers_from_the_master_s_own_address_change_no_counter():
         forged_key = bytes(32)
         pose_from(master, 2**32 - 1, 0.0, 10.001, key=forged_key)  # forged sequence
         pose_from(master, 2, -1e300, 10.002, key=forged_key)  # forged device time
-        spoilt = bytearray(encode_command("pose", HOME, 3, 0.003, key=KEY, stream=1))
+        spoilt = bytearray(encode_command("pose", HOME, 3, 0.003, key=KEY, stream=1,
+                                          launch=master.launch))
         spoilt[8:12] = struct.pack("<I", 2**32 - 1)  # the master's datagram, its number changed
         master.handle(bytes(spoilt), ("127.0.0.1", 5000), 10.003)
         pose_from(master, 2, 0.002, 10.004)  # the master goes on: taken
@@ -218,10 +227,89 @@ def test_an_old_protocol_master_is_refused_by_name():
     try:
         old = struct.pack("<4sBBBBId7d", b"CJMI", 1, 1, 0, 0, 1, 0.0, 0, 0, 0, 1, 0, 0, 0)
         master.handle(old, ("127.0.0.1", 5000), 1.0)
-        assert master.counts_now()["version"] == 1 and master.take() is None
+        body = struct.pack("<4sBBBBId7dQ", b"CJMI", 2, 1, 0, 0, 1, 0.0, 0, 0, 0, 1, 0, 0, 0, 1)
+        version_2 = body + hmac.digest(KEY, body, "sha256")[:TAG_SIZE]  # a v2 master's, keyed
+        master.handle(version_2, ("127.0.0.1", 5000), 1.0)
+        assert master.counts_now()["version"] == 2 and master.take() is None
+        assert master.master is None
         assert "old-protocol master is refused" in master.intrusions()
+        with pytest.raises(PacketError, match="protocol version 2 master: this is version 3"):
+            decode_command(version_2, 0, KEY)
     finally:
         master.close()
+
+
+# -- a recording from another launch (a key file kept across launches) ------------------------
+
+
+def test_a_recording_from_an_earlier_launch_is_refused_at_the_next_and_counted():
+    """Launch A accepts a master's commands; the same key in launch B (a key file kept):
+    the recording of them, replayed first, binds nothing and moves nothing, each counted
+    ``other_launch`` and answered with B's launch (useless without the key); then the real
+    master, learning B's launch from that answer, is taken."""
+    recording = [encode_command("pose", HOME, s, 0.001 * s, key=KEY, stream=11, launch=0)
+                 for s in range(1, 3)]
+    launch_a = UdpMaster(port=0, key=KEY)
+    try:
+        recording += [encode_command("pose", HOME, s, 0.001 * s, key=KEY, stream=11,
+                                     launch=launch_a.launch) for s in range(3, 203)]
+        for k, datagram in enumerate(recording):
+            launch_a.handle(datagram, ("127.0.0.1", 5000), 10.0 + 0.001 * k)
+        counts = launch_a.counts_now()
+        assert (counts["hello"], counts["accepted"]) == (2, 200)  # what launch A took
+    finally:
+        launch_a.close()
+    launch_b = UdpMaster(port=0, key=KEY)
+    assert launch_b.launch != launch_a.launch
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # the replayer's address:
+    listener.bind(("127.0.0.1", 0))  # what it is answered
+    try:
+        for k, datagram in enumerate(recording):
+            launch_b.handle(datagram, listener.getsockname(), 20.0 + 0.001 * k)
+        counts = launch_b.counts_now()
+        assert (counts.get("accepted", 0), counts["other_launch"], counts["hello"]) == (0, 200, 2)
+        assert launch_b.master is None and launch_b.take() is None
+        assert "200 other_launch" in launch_b.intrusions()
+        answer = decode_feedback(listener.recv(200), KEY)
+        assert answer.launch == launch_b.launch and answer.state == FeedbackState.HELD
+        # the real master: its first command is a hello, answered; then it is taken
+        launch_b.start()
+        with MasterClient(launch_b.port, key=KEY) as client:
+            wait_for(lambda: (client.send_pose((0.0, 0.0, 0.0)), client.feedback(),
+                              launch_b.counts_now().get("accepted", 0))[-1] > 0, "the master")
+            assert client.launch == launch_b.launch and launch_b.master is not None
+    finally:
+        listener.close()
+        launch_b.close()
+
+
+def test_a_master_that_outlives_a_launch_carries_on_with_the_next_and_no_older_feedback_moves_it():
+    first = UdpMaster(port=0, key=KEY)
+    first.start()
+    port = first.port
+    client = MasterClient(port, key=KEY)
+    try:
+        wait_for(lambda: (client.send_pose((0.0, 0.0, 0.0)), client.feedback(),
+                          first.counts_now().get("accepted", 0))[-1] > 0, "launch A")
+        old_feedback = encode_feedback(Feedback(FeedbackState.FOLLOWING, 0, 1, 0, 0.0,
+                                                (0.0,) * 6, 0.0, launch=first.launch), KEY)
+        first.close()
+        second = UdpMaster(port=port, key=KEY)  # the page restarted, the same key file
+        second.start()
+        try:
+            wait_for(lambda: (client.send_pose((0.0, 0.0, 0.0)), client.feedback(),
+                              second.counts_now().get("accepted", 0))[-1] > 0, "launch B")
+            assert client.launch == second.launch
+            assert 1 <= second.counts_now()["other_launch"] <= 20  # a round trip's worth
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as replayer:
+                replayer.sendto(old_feedback, client._socket.getsockname())
+            time.sleep(0.05)
+            client.feedback()
+            assert client.launch == second.launch  # an answer to a command sent long ago
+        finally:
+            second.close()
+    finally:
+        client.close()
 
 
 def test_beyond_loopback_a_key_is_required_and_key_files_are_checked(tmp_path):
@@ -261,4 +349,4 @@ def test_the_tag_is_hmac_sha256_of_the_rest_truncated():
     datagram = encode_command("pose", HOME, 1, 0.0, key=KEY, stream=3)
     body = datagram[:COMMAND_FORMAT.size]
     assert datagram[COMMAND_FORMAT.size:] == hmac.digest(KEY, body, "sha256")[:TAG_SIZE]
-    assert math.isclose(len(datagram), 100)
+    assert len(datagram) == 108

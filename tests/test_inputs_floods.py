@@ -41,6 +41,15 @@ def drain(master: UdpMaster, sock=None) -> int:
     return total
 
 
+def join(master: UdpMaster, client: MasterClient) -> None:
+    """The client's hello, answered with the launch; then its first command, taken."""
+    client.send_pose((0.0, 0.0, 0.0))
+    assert drain(master) == 1 and master.counts_now()["hello"] == 1
+    client.feedback()
+    client.send_pose((0.0, 0.0, 0.0))
+    assert drain(master) == 1 and master.master is not None
+
+
 def test_datagrams_are_read_in_batches_of_at_most_the_budget(master):
     with flood(master.port, 100):
         assert [master.receive_batch(budget=BATCH) for _ in range(3)] == [BATCH] * 3
@@ -69,8 +78,7 @@ def test_what_overflows_the_queue_is_counted_with_the_next_datagram_read(master)
 
 def test_a_flood_fills_the_shared_queue_never_the_master_s(master):
     with MasterClient(master.port, key=KEY) as client:
-        client.send_pose((0.0, 0.0, 0.0))
-        assert drain(master) == 1 and master.master is not None  # bound: its own socket
+        join(master, client)  # bound: its own socket
         assert master.master_socket is not None
         with flood(master.port, 30_000):  # the shared queue overflows
             sent = [client.send_pose((0.0, 0.0, 0.0)) for _ in range(MASTER_BATCH)]
@@ -90,8 +98,7 @@ def test_no_other_socket_can_bind_the_port_before_or_after_the_master_binds(mast
         with other, pytest.raises(OSError):
             other.bind(("127.0.0.1", master.port))
     with MasterClient(master.port, key=KEY) as client:
-        client.send_pose((0.0, 0.0, 0.0))
-        drain(master)
+        join(master, client)
         assert master.master_socket is not None
         for reuse in (0, 1):
             other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

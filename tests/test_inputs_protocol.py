@@ -35,7 +35,7 @@ def test_a_pose_command_decodes_to_what_was_sent(position, quaternion, sequence,
                                                  buttons):
     datagram = encode_command("pose", [*position, *quaternion], sequence, device_time, 1,
                               buttons, key=KEY)
-    assert len(datagram) == COMMAND_SIZE == 100
+    assert len(datagram) == COMMAND_SIZE == 108
     command = decode_command(datagram, ee=1, key=KEY)
     norm = math.sqrt(sum(v * v for v in quaternion))
     assert command.kind == "pose" and command.sequence == sequence
@@ -53,20 +53,29 @@ def test_a_twist_command_decodes_to_what_was_sent(twist):
 @given(wrench=st.tuples(*[st.floats(-10.0, 10.0)] * 6), sequence=st.integers(0, 2**32 - 1),
        state=st.sampled_from(list(FeedbackState)), measured=st.booleans())
 def test_a_feedback_decodes_to_what_was_sent(wrench, sequence, state, measured):
-    sent = Feedback(state, 0, sequence, sequence // 2, 3.25, wrench, 4e-4, measured)
+    sent = Feedback(state, 0, sequence, sequence // 2, 3.25, wrench, 4e-4, measured,
+                    launch=sequence * 7919)
     datagram = encode_feedback(sent, KEY)
-    assert len(datagram) == FEEDBACK_SIZE == 96
+    assert len(datagram) == FEEDBACK_SIZE == 104
     assert decode_feedback(datagram, KEY) == sent
     with pytest.raises(PacketError, match="tag"):
         decode_feedback(datagram, bytes(32))  # a forged feedback: never rendered
 
 
 def _valid(sequence: int = 1, device_time: float = 0.0) -> list:
-    """The fields of a valid pose command, to spoil one by one."""
-    return [b"CJMI", 2, 1, 0, 0, sequence, device_time, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1]
+    """The fields of a valid pose command (a hello: launch 0), to spoil one by one."""
+    return [b"CJMI", 3, 1, 0, 0, sequence, device_time, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1,
+            0]
 
 
 def tagged(body: bytes) -> bytes:
+    return body + tag(KEY, body)
+
+
+def encode_v2(rng: np.random.Generator) -> bytes:
+    """A version-2 command (100 bytes, no launch), tagged with the right key."""
+    body = struct.pack("<4sBBBBId7dQ", b"CJMI", 2, 1, 0, 0, int(rng.integers(1, 1000)), 0.0,
+                       0, 0, 0, 1, 0, 0, 0, 1)
     return body + tag(KEY, body)
 
 
@@ -83,9 +92,11 @@ def hostile_datagrams(rng: np.random.Generator, count: int) -> list[tuple[bytes,
     spoilers.append(lambda: (valid[:rng.integers(0, COMMAND_SIZE)], "malformed"))  # truncated
     spoilers.append(lambda: (valid + bytes(rng.integers(1, 1500)), "malformed"))  # too long
     spoilers.append(lambda: (rng.bytes(COMMAND_SIZE), "malformed"))  # noise, bad magic
-    spoilers.append(lambda: (field(1, int(rng.choice([0, 1, 3, 255]))), "version"))
+    spoilers.append(lambda: (field(1, int(rng.choice([0, 1, 2, 4, 255]))), "version"))
     spoilers.append(lambda: (struct.pack("<4sBBBBId7d", b"CJMI", 1, 1, 0, 0, 1, 0.0, 0, 0, 0,
                                          1, 0, 0, 0), "version"))  # a version-1 master
+    spoilers.append(lambda: (encode_v2(rng), "version"))  # a version-2 master, well tagged
+    spoilers.append(lambda: (field(15, int(rng.integers(1, 2**63))), "other_launch"))
     spoilers.append(lambda: (COMMAND_FORMAT.pack(*_valid()) + rng.bytes(TAG_SIZE),
                              "unauthenticated"))  # a forged tag
     spoilers.append(lambda: (COMMAND_FORMAT.pack(*_valid()) + tag(bytes(32), COMMAND_FORMAT.pack(
@@ -100,7 +111,7 @@ def hostile_datagrams(rng: np.random.Generator, count: int) -> list[tuple[bytes,
                                          * MAX_DEVICE_POSITION)), "out_of_range"))
     spoilers.append(lambda: (field(10, 0.0), "out_of_range"))  # a zero quaternion
     spoilers.append(lambda: (field(10, 1e10), "out_of_range"))  # a huge one
-    twist = [b"CJMI", 2, 2, 0, 0, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1]
+    twist = [b"CJMI", 3, 2, 0, 0, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1, 0]
 
     def fast_twist() -> tuple[bytes, str]:
         fields = list(twist)
@@ -120,7 +131,8 @@ def test_ten_thousand_hostile_datagrams_are_dropped_and_counted():
     master.start()
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        first = encode_command("pose", [0, 0, 0, 1, 0, 0, 0], 1, time.perf_counter(), key=KEY)
+        first = encode_command("pose", [0, 0, 0, 1, 0, 0, 0], 1, time.perf_counter(), key=KEY,
+                               launch=master.launch)
         sender.sendto(first, ("127.0.0.1", master.port))
         _wait_for(lambda: master.counts["accepted"] == 1)
         assert master.take().sequence == 1
@@ -136,7 +148,7 @@ def test_ten_thousand_hostile_datagrams_are_dropped_and_counted():
         assert master.dropped() == 10_000
         # still alive: a valid command after all that is taken
         sender.sendto(encode_command("pose", [0, 0, 0, 1, 0, 0, 0], 2, time.perf_counter(),
-                                     key=KEY), ("127.0.0.1", master.port))
+                                     key=KEY, launch=master.launch), ("127.0.0.1", master.port))
         _wait_for(lambda: master.counts["accepted"] == 2)
         assert master.take().sequence == 2
     finally:
@@ -161,7 +173,8 @@ def test_replayed_reordered_stale_and_foreign_commands_are_dropped_and_counted()
 
         def send(sequence, device_time, arrival, sender=here, buttons=0, stream=1):
             master.handle(encode_command("pose", pose, sequence, device_time, 0, buttons,
-                                         key=KEY, stream=stream), sender, arrival)
+                                         key=KEY, stream=stream, launch=master.launch),
+                          sender, arrival)
 
         send(10, 0.000, 50.001)  # transit 50.001: the clock offset
         send(11, 0.001, 50.002)
@@ -220,12 +233,15 @@ def test_any_bytes_decode_or_raise_a_packet_error(datagram):
 def test_the_command_layout_is_the_documented_one():
     """The byte offsets docs/inputs.md gives, read back with plain struct calls."""
     datagram = encode_command("pose", [1, 2, 3, 1, 0, 0, 0], 0x01020304, 2.5, 1, CLUTCH,
-                              key=KEY, stream=0x0102030405060708)
-    assert datagram[:4] == b"CJMI" and datagram[4:8] == bytes([2, 1, 1, 1])
+                              key=KEY, stream=0x0102030405060708, launch=0x1112131415161718)
+    assert datagram[:4] == b"CJMI" and datagram[4:8] == bytes([3, 1, 1, 1])
     assert struct.unpack_from("<I", datagram, 8) == (0x01020304,)
     assert struct.unpack_from("<d", datagram, 12) == (2.5,)
     assert struct.unpack_from("<7d", datagram, 20) == (1, 2, 3, 1, 0, 0, 0)
     assert struct.unpack_from("<Q", datagram, 76) == (0x0102030405060708,)
-    assert datagram[84:] == hmac.digest(KEY, datagram[:84], "sha256")[:16]
-    feedback = encode_feedback(Feedback(FeedbackState.HELD, 1, 5, 4, 2.5, (0.0,) * 6, 0.0), KEY)
-    assert feedback[80:] == hmac.digest(KEY, feedback[:80], "sha256")[:16]
+    assert struct.unpack_from("<Q", datagram, 84) == (0x1112131415161718,)
+    assert datagram[92:] == hmac.digest(KEY, datagram[:92], "sha256")[:16]
+    feedback = encode_feedback(Feedback(FeedbackState.HELD, 1, 5, 4, 2.5, (0.0,) * 6, 0.0,
+                                        launch=0x2122232425262728), KEY)
+    assert feedback[4] == 3 and struct.unpack_from("<Q", feedback, 80) == (0x2122232425262728,)
+    assert feedback[88:] == hmac.digest(KEY, feedback[:88], "sha256")[:16]

@@ -18,9 +18,11 @@ class MasterClient:
         text); every command is tagged with it, and a feedback not tagged with it is
         ignored (counted in :attr:`refused`).
 
-    Each command gets the next sequence number, the time of ``clock`` (s) and the
-    client's :attr:`stream` (drawn at random: a new client is a new stream); the feedback
-    answering it arrives on the same socket (:meth:`feedback`).
+    Each command gets the next sequence number, the time of ``clock`` (s), the client's
+    :attr:`stream` (drawn at random: a new client is a new stream) and the receiver's
+    :attr:`launch` as its feedback announced it; the feedback answering it arrives on the
+    same socket (:meth:`feedback`). Until a feedback has announced the launch, the
+    commands are hellos: answered, never applied (one round trip).
     """
 
     def __init__(self, port: int, key: bytes | str, host: str = "127.0.0.1", ee: int = 0,
@@ -31,6 +33,9 @@ class MasterClient:
         self.clock = clock
         self.sequence = 0
         self.stream = new_stream()
+        #: the receiver's launch, from its feedback (0 before one arrived)
+        self.launch = 0
+        self._launch_since = 1  # the first sequence number sent with :attr:`launch`
         self._socket = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET,
                                      socket.SOCK_DGRAM)
         self._socket.setblocking(False)
@@ -52,8 +57,8 @@ class MasterClient:
         returns its sequence number."""
         self.sequence += 1
         self._socket.sendto(encode_command(kind, values, self.sequence, self.clock(), self.ee,
-                                           buttons, key=self.key, stream=self.stream),
-                            self.address)
+                                           buttons, key=self.key, stream=self.stream,
+                                           launch=self.launch), self.address)
         return self.sequence
 
     def send_pose(self, position, wxyz=(1.0, 0.0, 0.0, 0.0), buttons: int = 0) -> int:
@@ -63,7 +68,10 @@ class MasterClient:
         return self.send("twist", [*linear, *angular], buttons)
 
     def feedback(self) -> Feedback | None:
-        """Reads every feedback waiting (kept in :attr:`received`); the newest, or None."""
+        """Reads every feedback waiting (kept in :attr:`received`); the newest, or None.
+        A feedback that answers a command sent since the launch last changed and
+        announces another launch (the receiver restarted, or the first answer) gives the
+        commands from now on that launch; an older one (replayed) does not."""
         newest = None
         while True:
             try:
@@ -78,3 +86,5 @@ class MasterClient:
                 self.refused += 1
                 continue
             self.received.append(newest)
+            if newest.launch != self.launch and newest.sequence >= self._launch_since:
+                self.launch, self._launch_since = newest.launch, self.sequence + 1

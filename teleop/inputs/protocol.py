@@ -1,31 +1,36 @@
-"""The network master's protocol, version 2: fixed-size little-endian UDP datagrams, each
-authenticated with a shared key (docs/design.md section 19.2; the field tables are in
-docs/inputs.md).
+"""The network master's protocol, version 3: fixed-size little-endian UDP datagrams, each
+authenticated with a shared key and bound to one launch of the receiver (docs/design.md
+section 19.2; the field tables are in docs/inputs.md).
 
 A **command** (master -> teleop, :data:`COMMAND_SIZE` bytes)::
 
     magic "CJMI" | version u8 | kind u8 | ee u8 | buttons u8 | sequence u32 |
-    device_time f64 | values 7 x f64 | stream u64 | tag 16 bytes
+    device_time f64 | values 7 x f64 | stream u64 | launch u64 | tag 16 bytes
 
 ``kind`` 1 (pose: position x y z in m, quaternion w x y z) or 2 (twist: v x y z in m/s,
 w x y z in rad/s, the seventh value 0), in the device's frame (x right, y up, z towards
 the operator); ``buttons`` bit 0 the clutch (held: the master moves alone), bit 1 the
 mode; ``sequence`` increases by one per packet; ``device_time`` the master's clock (s);
 ``stream`` a random number the master draws when it starts (a restarted master is a new
-stream); ``tag`` the first 16 bytes of HMAC-SHA256(key, every byte before it).
+stream); ``launch`` the receiver's launch number, as its feedback announced it (0 before
+the master has heard one: a **hello**, answered, never applied); ``tag`` the first 16
+bytes of HMAC-SHA256(key, every byte before it). A command tagged for another launch (a
+recording from an earlier one, with a key file kept across launches) is refused.
 
 A **feedback** (teleop -> master, :data:`FEEDBACK_SIZE` bytes), one per command
 accepted::
 
     magic "CJMF" | version u8 | state u8 | ee u8 | flags u8 | sequence u32 |
-    applied u32 | device_time f64 | wrench 6 x f64 | latency f64 | tag 16 bytes
+    applied u32 | device_time f64 | wrench 6 x f64 | latency f64 | launch u64 |
+    tag 16 bytes
 
 ``sequence`` and ``device_time`` echo the command answered (the master measures its
 round trip from them); ``applied`` the newest command a robot command has used;
 ``wrench`` the force (N) and torque (N m) to render, in the device's frame; ``latency``
 that command's arrival-to-command time (s); ``state`` :class:`FeedbackState`; ``flags``
-bit 0: the wrench includes a measured port force (a physics plant); ``tag`` as a
-command's, with the same key.
+bit 0: the wrench includes a measured port force (a physics plant); ``launch`` the
+receiver's launch number (drawn at random when it starts); ``tag`` as a command's, with
+the same key.
 
 The **key**: 16 to 64 random bytes both sides hold (``teleop web`` draws 32 and prints
 them in hex, or reads them from ``--input-key FILE``); :func:`as_key` reads one.
@@ -44,11 +49,11 @@ from dataclasses import dataclass
 
 MAGIC_COMMAND = b"CJMI"
 MAGIC_FEEDBACK = b"CJMF"
-VERSION = 2
+VERSION = 3
 #: a command without its tag (the tag follows)
-COMMAND_FORMAT = struct.Struct("<4sBBBBId7dQ")
+COMMAND_FORMAT = struct.Struct("<4sBBBBId7dQQ")
 #: a feedback without its tag
-FEEDBACK_FORMAT = struct.Struct("<4sBBBBIId6dd")
+FEEDBACK_FORMAT = struct.Struct("<4sBBBBIId6ddQ")
 #: bytes of HMAC-SHA256 kept as a datagram's tag
 TAG_SIZE = 16
 COMMAND_SIZE = COMMAND_FORMAT.size + TAG_SIZE
@@ -148,6 +153,11 @@ def new_stream() -> int:
     return secrets.randbits(64) or 1
 
 
+def new_launch() -> int:
+    """A random non-zero launch number (a receiver draws one when it starts)."""
+    return secrets.randbits(64) or 1
+
+
 @dataclass(frozen=True)
 class Command:
     """One decoded command (:func:`decode_command`)."""
@@ -159,12 +169,13 @@ class Command:
     device_time: float
     values: tuple[float, ...]  # 7 numbers: a pose's x y z qw qx qy qz, a twist's v w and 0
     stream: int = 0
+    launch: int = 0  # the receiver's launch the master means (0: a hello)
 
 
 def encode_command(kind: str, values, sequence: int, device_time: float, ee: int = 0,
-                   buttons: int = 0, *, key: bytes, stream: int = 1) -> bytes:
-    """A command datagram (what a master sends), tagged with ``key``; a twist takes 6
-    values."""
+                   buttons: int = 0, *, key: bytes, stream: int = 1, launch: int = 0) -> bytes:
+    """A command datagram (what a master sends) for the receiver's ``launch`` (0: a hello,
+    before the master has heard it), tagged with ``key``; a twist takes 6 values."""
     codes = {name: code for code, name in KINDS.items()}
     if kind not in codes:
         raise ValueError(f"a command's kind is 'pose' or 'twist', got {kind!r}")
@@ -176,7 +187,7 @@ def encode_command(kind: str, values, sequence: int, device_time: float, ee: int
                          f"got {len(values)}")
     body = COMMAND_FORMAT.pack(MAGIC_COMMAND, VERSION, codes[kind], ee, buttons,
                                sequence & 0xFFFFFFFF, float(device_time), *values,
-                               stream & 0xFFFFFFFFFFFFFFFF)
+                               stream & 0xFFFFFFFFFFFFFFFF, launch & 0xFFFFFFFFFFFFFFFF)
     return body + tag(key, body)
 
 
@@ -194,7 +205,7 @@ def decode_command(datagram: bytes, ee: int, key: bytes) -> Command:
         raise PacketError("malformed", f"magic {datagram[:4]!r}, expected {MAGIC_COMMAND!r}")
     if not _authenticated(datagram, key):
         raise PacketError("unauthenticated", "its tag is not this key's")
-    _, _, kind, packet_ee, buttons, sequence, device_time, *values, stream = \
+    _, _, kind, packet_ee, buttons, sequence, device_time, *values, stream, launch = \
         COMMAND_FORMAT.unpack(datagram[:-TAG_SIZE])
     if kind not in KINDS or buttons & ~BUTTON_MASK:
         raise PacketError("malformed", f"kind {kind}, buttons {buttons:#x}")
@@ -213,7 +224,8 @@ def decode_command(datagram: bytes, ee: int, key: bytes) -> Command:
           or math.hypot(*values[3:6]) > MAX_DEVICE_SPEED[1] or values[6] != 0.0):
         raise PacketError("out_of_range", "twist faster than "
                           f"{MAX_DEVICE_SPEED[0]:g} m/s or {MAX_DEVICE_SPEED[1]:g} rad/s")
-    return Command(KINDS[kind], ee, buttons, sequence, device_time, tuple(values), stream)
+    return Command(KINDS[kind], ee, buttons, sequence, device_time, tuple(values), stream,
+                   launch)
 
 
 @dataclass(frozen=True)
@@ -228,13 +240,15 @@ class Feedback:
     wrench: tuple[float, ...]  # force (N), torque (N m), device frame
     latency: float  # s
     port_force_measured: bool = False
+    launch: int = 0  # the receiver's launch
 
 
 def encode_feedback(feedback: Feedback, key: bytes) -> bytes:
     body = FEEDBACK_FORMAT.pack(MAGIC_FEEDBACK, VERSION, int(feedback.state), feedback.ee,
                                 PORT_FORCE_MEASURED if feedback.port_force_measured else 0,
                                 feedback.sequence & 0xFFFFFFFF, feedback.applied & 0xFFFFFFFF,
-                                feedback.device_time, *feedback.wrench, feedback.latency)
+                                feedback.device_time, *feedback.wrench, feedback.latency,
+                                feedback.launch & 0xFFFFFFFFFFFFFFFF)
     return body + tag(key, body)
 
 
@@ -252,4 +266,4 @@ def decode_feedback(datagram: bytes, key: bytes) -> Feedback:
     if state not in FeedbackState._value2member_map_:
         raise PacketError("malformed", f"state {state}")
     return Feedback(FeedbackState(state), ee, sequence, applied, device_time, tuple(rest[:6]),
-                    rest[6], bool(flags & PORT_FORCE_MEASURED))
+                    rest[6], bool(flags & PORT_FORCE_MEASURED), rest[7])

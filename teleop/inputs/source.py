@@ -22,8 +22,8 @@ from .protocol import CLUTCH, FeedbackState
 #: latencies kept per source (65 s at 1 kHz)
 LATENCY_WINDOW = 1 << 16
 #: the reasons a sample is dropped, in the order the status lists them
-DROP_REASONS = ("malformed", "version", "unauthenticated", "wrong_ee", "not_finite",
-                "out_of_range", "out_of_order", "replayed", "stale", "foreign")
+DROP_REASONS = ("malformed", "version", "unauthenticated", "other_launch", "wrong_ee",
+                "not_finite", "out_of_range", "out_of_order", "replayed", "stale", "foreign")
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,12 @@ authenticates (its address and its stream number); from then on:
   address with the bound stream;
 * a bad datagram (:func:`~teleop.inputs.protocol.decode_command`): ``version`` (another
   protocol version), ``malformed``, ``unauthenticated`` (its tag is not the key's), ...;
+* the **launch**: every command carries the receiver's launch number (:attr:`launch`,
+  drawn when it starts, announced in every feedback) inside what the tag covers. One with
+  0 is a master's ``hello`` (it has not heard the number yet), one with another number
+  ``other_launch`` (a recording from an earlier launch with the same key, or a master that
+  outlived one): neither is applied, both are answered with a feedback that announces the
+  number, so a live master carries on after one round trip, and a recording never binds;
 * ``out_of_order``: a sequence number not above the newest accepted (a replay, a
   reordered datagram), or more than :data:`SEQUENCE_WINDOW` above it while the master is
   live; a gap in the numbers counts the ones that never arrived as ``lost``;
@@ -46,8 +52,8 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .protocol import (Feedback, FeedbackState, PacketError, as_key, decode_command,
-                       encode_feedback, new_key)
+from .protocol import (Command, Feedback, FeedbackState, PacketError, as_key, decode_command,
+                       encode_feedback, new_key, new_launch)
 from .source import InputSample, InputSource
 
 #: the largest datagram read: a longer one is read whole and refused as malformed
@@ -66,7 +72,7 @@ SEQUENCE_WINDOW = 1 << 20
 #: streams a master has left, remembered so that a recording of them is refused
 RETIRED_STREAMS = 4096
 #: reasons that mean someone other than the master is sending (the page warns of them)
-INTRUSIONS = ("foreign", "unauthenticated", "replayed", "version")
+INTRUSIONS = ("foreign", "unauthenticated", "replayed", "version", "other_launch")
 #: the receiving thread's budget: at most :data:`BATCH` datagrams from the shared socket
 #: and :data:`MASTER_BATCH` from the master's own per :data:`SLICE` seconds (8,000 and
 #: 16,000 a second: a master streams at 1 kHz); the rest waits in the socket's queue, and
@@ -108,6 +114,9 @@ class UdpMaster(InputSource):
                              "give the key file the master holds")
         #: the shared key (give it to the master)
         self.key = new_key() if key is None else as_key(key)
+        #: this receiver's launch number, drawn now: its feedback announces it, and a command
+        #: must carry it (a recording from another launch cannot)
+        self.launch = new_launch()
         self.host = host
         self.max_age = float(max_age)
         self._family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -133,7 +142,8 @@ class UdpMaster(InputSource):
         self._offset_time = 0.0  # when the offset was last updated
         #: the address the newest intruding datagram came from, and what it was
         self.intruder: tuple | None = None
-        self._feedback = Feedback(FeedbackState.HELD, ee, 0, 0, 0.0, (0.0,) * 6, float("nan"))
+        self._feedback = Feedback(FeedbackState.HELD, ee, 0, 0, 0.0, (0.0,) * 6, float("nan"),
+                                  launch=self.launch)
 
     def start(self) -> None:
         self._thread.start()
@@ -186,7 +196,7 @@ class UdpMaster(InputSource):
                      port_force_measured: bool) -> None:
         self._feedback = Feedback(state, self.ee, 0, self.applied_sequence, 0.0,
                                   tuple(float(w) for w in wrench), self.last_latency,
-                                  port_force_measured)
+                                  port_force_measured, self.launch)
 
     def intrusions(self) -> str:
         """What the operator should know about datagrams from someone other than the
@@ -274,6 +284,16 @@ class UdpMaster(InputSource):
                 else:
                     self.counts[error.reason] += 1
             return
+        if command.launch != self.launch:  # a hello, or another launch's: never applied
+            with self._lock:
+                if command.launch == 0:
+                    self.counts["hello"] += 1
+                else:
+                    self._intrusion("other_launch", sender)
+            self._answer(command, Feedback(FeedbackState.HELD, self.ee, command.sequence, 0,
+                                           command.device_time, (0.0,) * 6, float("nan"),
+                                           launch=self.launch), sender)
+            return
         with self._lock:
             reason = self._refusal(command.stream, command.sequence, command.device_time,
                                    sender, arrival)
@@ -285,10 +305,13 @@ class UdpMaster(InputSource):
                 return
         self.offer(InputSample(command.kind, command.values, command.buttons,
                                command.sequence, arrival))
-        feedback = self._feedback
+        self._answer(command, self._feedback, sender)
+
+    def _answer(self, command: Command, feedback: Feedback, sender: tuple) -> None:
+        """Send ``feedback`` to ``sender`` as the answer to ``command``, tagged."""
         reply = Feedback(feedback.state, self.ee, command.sequence, feedback.applied,
                          command.device_time, feedback.wrench, feedback.latency,
-                         feedback.port_force_measured)
+                         feedback.port_force_measured, self.launch)
         try:
             self._socket.sendto(encode_feedback(reply, self.key), sender)
         except OSError:
