@@ -413,3 +413,74 @@ def test_the_watchdog_stops_within_100_ms(robot, domain, peer):
     print(f"watchdog: status {1e3 * (stopped_at - killed):.1f} ms, zeros "
           f"{1e3 * (zeros[0] - killed):.1f} ms after the kill")
     assert stopped_at - killed <= 0.1 and zeros[0] - killed <= 0.1
+
+
+def test_the_simulated_robot_publishes_its_port_force(robot, domain, peer):
+    """``teleop sim --ros2 --plant mujoco --scenario trocar-circle``: the MuJoCo wall acts
+    at the scenario's hole and its force is published on ``/port_forces/port0``; pushed
+    sideways and then held, the robot's published force is the wall's spring
+    ``-k (P - c)`` (docs/design.md 17.2) at the port of the published joint state,
+    computed here with Pinocchio (measured: equal to the last digit; the damper's share, the
+    creep of a held drive, is allowed 1%)."""
+    import pinocchio as pin
+
+    from teleop.plants.ros2.messages import WrenchStamped
+    from teleop.plants.walls import wall_of
+
+    plan = load_scenario("trocar-circle")
+    forces_topic = RUN + "/port_forces"
+    process = sim(domain, "--plant", "mujoco", "--scenario", "trocar-circle", "--rate", "500",
+                  "--port-forces", forces_topic)
+    try:
+        states = peer.reader(STATES, JointState)
+        forces = peer.reader(forces_topic + "/port0", WrenchStamped)
+        commands = peer.writer(COMMANDS, Float64MultiArray)
+        latest: dict[str, object] = {}
+
+        def newest() -> bool:
+            for reader, key, kind in ((states, "q", JointState), (forces, "f", WrenchStamped)):
+                for sample in reader.take(256):
+                    if isinstance(sample, kind):
+                        latest[key] = sample
+            return "q" in latest and "f" in latest
+
+        assert wait_for(newest)
+        at_rest = latest["f"].wrench.force  # type: ignore[attr-defined]
+        assert np.linalg.norm([at_rest.x, at_rest.y, at_rest.z]) < 0.05
+        push = np.zeros(robot.model.nv)
+        push[0] = 0.05  # the base turns: the shaft leaves the hole sideways
+        commands.write(Float64MultiArray(data=list(push)))
+        time.sleep(0.3)
+        commands.write(Float64MultiArray(data=[0.0] * robot.model.nv))
+        time.sleep(0.5)
+        latest.clear()
+        assert wait_for(newest)
+    finally:
+        process.terminate()
+        process.wait()
+    q = np.array(latest["q"].position)  # type: ignore[attr-defined]
+    message = latest["f"].wrench.force  # type: ignore[attr-defined]
+    published = np.array([message.x, message.y, message.z])
+    hole = plan.make_constraints()[0]
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    link = data.oMf[robot.model.getFrameId(hole.link)]
+    wall = wall_of(hole)
+    point, _ = wall.port(hole, link.rotation, link.translation)
+    spring = wall.spring(hole, point)
+    assert np.linalg.norm(spring) > 1.0  # N: the push moved the shaft millimetres
+    np.testing.assert_allclose(published, spring, rtol=0.0, atol=0.01 * np.linalg.norm(spring))
+
+
+@pytest.mark.parametrize("options, message", [
+    (("--scenario", "trocar-circle"), "constraints need the physics plant"),
+    (("--scenario", "trocar-circle", "--scene", "a.json"), "--scenario and --scene both"),
+    (("--plant", "mujoco", "--scene", "/no/such/scene.json"), "cannot read scene file"),
+    (("--plant", "mujoco", "--port-forces", "/a//b"), "is not a ROS 2 topic name"),
+])
+def test_the_sims_ports_refuse_bad_options_by_name(domain, options, message):
+    done = subprocess.run([sys.executable, "-m", "teleop", "sim", "--ros2", "--ros-domain",
+                           str(domain), "--duration", "0", *options], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert message in done.stderr and "Traceback" not in done.stderr

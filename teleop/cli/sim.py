@@ -12,14 +12,16 @@ from teleop.options import SIMULATED_PLANT_KINDS
 
 from .arguments import bounded, csv_list
 from .ros2_options import add_ros2_options, ros2_settings
+from .sim_ports import DEFAULT_ROBOT, add_port_options, sim_ports
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The sim command's options."""
     parser.add_argument("--ros2", action="store_true", required=True,
                         help="serve the robot on ROS 2 (the one transport offered)")
-    parser.add_argument("--robot", default="ur5_instrument",
-                        help="built-in robot name or URDF path (default: ur5_instrument)")
+    parser.add_argument("--robot",
+                        help="built-in robot name or URDF path (default: the scenario's, "
+                             f"else {DEFAULT_ROBOT})")
     parser.add_argument("--plant", choices=SIMULATED_PLANT_KINDS, default="kinematic",
                         help="the robot's physics: q += v dt, or MuJoCo's servoed drives "
                              "(default: kinematic)")
@@ -29,6 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated start configuration (default: the robot's home)")
     parser.add_argument("--duration", type=bounded(float, 0.0, 1e6, unit="s"),
                         help="seconds to run (default: until Ctrl-C)")
+    add_port_options(parser.add_argument_group("ports"))
     add_ros2_options(parser.add_argument_group("ROS 2 (docs/ros2.md)"))
 
 
@@ -36,13 +39,10 @@ def run(args: argparse.Namespace) -> int:
     """Serve the robot; its node closed on any exit."""
     import numpy as np
 
-    from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
-    from teleop.robots import load_robot
-
     from teleop.plants import MujocoPlant
+    from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
 
-    robot = load_robot(args.robot)
-    q0 = None
+    robot, constraints, q0 = sim_ports(args)
     if args.q0 is not None:
         try:
             q0 = np.array([float(v) for v in args.q0])
@@ -52,11 +52,14 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--q0 needs {robot.model.nq} finite numbers, got {len(q0)}")
     settings = ros2_settings(args)
     plant = MujocoPlant(robot, 1.0 / args.rate) if args.plant == "mujoco" else None
-    sim = SimulatedRos2Robot(robot, args.rate, settings, plant, q0)
+    sim = SimulatedRos2Robot(robot, args.rate, settings, plant, q0, constraints,
+                             args.port_forces)
     signal.signal(signal.SIGTERM, lambda *_: sim.stop())
-    print(f"teleop sim: {args.robot} on ROS 2 domain {sim.node.domain}: "
-          f"{settings.state_topic} at {args.rate:g} Hz, commands on {settings.commands}",
-          file=sys.stderr, flush=True)
+    ports = (f", {len(sim.port_force_writers)} port forces on {args.port_forces}/port<i>"
+             if sim.port_force_writers else "")
+    print(f"teleop sim: {robot.name} on ROS 2 domain {sim.node.domain}: "
+          f"{settings.state_topic} at {args.rate:g} Hz, commands on {settings.commands}"
+          f"{ports}", file=sys.stderr, flush=True)
     try:
         sim.run(args.duration)
     except KeyboardInterrupt:

@@ -8,7 +8,13 @@ Every period (wall clock) it publishes the joint state, takes the newest command
 the robot with it, ``q <- integrate(q, v dt)`` with ``v`` the plant's mean velocity for the
 command (the command itself on the kinematic plant). Like the real controller it holds the
 last command until another arrives; a command of the wrong length is ignored, as
-ros2_control's forward controllers do."""
+ros2_control's forward controllers do.
+
+With constraints (the holes of a scene or a scenario) the physics plant's walls act at
+their ports, and each port's wall force on the instrument (world frame, N, at the port:
+``PlantMeasures.port_forces``, docs/design.md 17.2) is published every period as a
+``geometry_msgs/WrenchStamped`` on ``<port_forces>/port<i>`` (``i`` the port's index in
+the constraints' order, frame ``world``, torque zero)."""
 
 from __future__ import annotations
 
@@ -18,10 +24,19 @@ import time
 import numpy as np
 import pinocchio as pin
 
+from teleop.plants.walls import wall_of
+
 from .joint_map import indices, model_joint_names
-from .messages import Float64MultiArray, Header, JointState, OperatingState, Time
+from .messages import (Float64MultiArray, Header, JointState, OperatingState, Time, Vector3,
+                       Wrench, WrenchStamped)
 from .node import Ros2Node
+from .names import dds_topic
 from .settings import Ros2Settings
+
+
+def port_force_topic(base: str, index: int) -> str:
+    """The topic of port ``index``'s wall force under ``base`` (``/port_forces/port0``)."""
+    return f"{base.rstrip('/')}/port{index}"
 
 
 class SimulatedRos2Robot:
@@ -34,12 +49,21 @@ class SimulatedRos2Robot:
     settings : the topics and the domain (:class:`Ros2Settings`).
     plant : the physics under it, None: ``q += v dt``.
     q0 : where it starts (default ``robot.q_home``).
+    constraints : what the plant's walls act on (its holes' ports); the physics plant's
+        port forces are published (None or empty: no port).
+    port_forces : the ROS 2 namespace of the port force topics.
     """
 
     def __init__(self, robot, rate: float, settings: Ros2Settings | None = None,
-                 plant=None, q0: np.ndarray | None = None) -> None:
+                 plant=None, q0: np.ndarray | None = None, constraints=None,
+                 port_forces: str = "/port_forces") -> None:
         if not isinstance(rate, (int, float)) or not 0 < rate <= 10000:
             raise ValueError(f"rate must be in (0, 10000] Hz, got {rate!r}")
+        self.constraints = list(constraints or ())
+        if self.constraints and plant is None:
+            raise ValueError("the kinematic robot has no wall at its ports: constraints need "
+                             "the physics plant (--plant mujoco)")
+        dds_topic(port_forces)
         self.model: pin.Model = robot.model
         self.dt = 1.0 / float(rate)
         self.settings = settings or Ros2Settings()
@@ -59,6 +83,9 @@ class SimulatedRos2Robot:
         self._commands = self.node.reader(self.settings.commands, self._command_type)
         self._operating = (self.node.writer(self.settings.crtk.rstrip("/") + "/operating_state",
                                             OperatingState) if crtk else None)
+        ports = sum(wall_of(c) is not None for c in self.constraints)
+        self.port_force_writers = [self.node.writer(port_force_topic(port_forces, i),
+                                                    WrenchStamped) for i in range(ports)]
         self._stop = threading.Event()
 
     def _take_command(self) -> None:
@@ -82,8 +109,14 @@ class SimulatedRos2Robot:
             self._operating.write(OperatingState(header=stamp, state="ENABLED", is_homed=True))
         self._take_command()
         moved = (self.command if self.plant is None
-                 else self.plant.actuate(self.command, self.q, []))
+                 else self.plant.actuate(self.command, self.q, self.constraints))
         self.q = pin.integrate(self.model, self.q, moved * self.dt)
+        if self.port_force_writers:
+            world = Header(stamp=stamp.stamp, frame_id="world")
+            forces = self.plant.measures().port_forces
+            for writer, force in zip(self.port_force_writers, forces):
+                writer.write(WrenchStamped(header=world, wrench=Wrench(
+                    force=Vector3(*(float(f) for f in force)), torque=Vector3())))
 
     def run(self, duration: float | None = None) -> None:
         """Periods on the wall clock until :meth:`stop` (or ``duration`` seconds)."""

@@ -1,0 +1,81 @@
+"""Where ``teleop sim --ros2``'s walls are (docs/ros2.md, "A simulated robot"): the holes
+of a named scenario (``--scenario``, the ones ``teleop compare`` runs) or of a scene saved
+from the page (``--scene``, its ``constraints``), and the start they come with."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from constraints import Constraint
+from teleop.json_text import parse_json
+from teleop.robots import Robot, load_robot
+
+#: the robot served when neither --robot nor --scenario names one
+DEFAULT_ROBOT = "ur5_instrument"
+
+
+def add_port_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--scenario``, ``--scene`` and ``--port-forces`` on ``parser``."""
+    parser.add_argument("--scenario", metavar="NAME",
+                        help="place the holes of this teleop compare scenario and start at "
+                             "its q0, on its robot (default: no port)")
+    parser.add_argument("--scene", metavar="FILE",
+                        help="place the constraints of a scene saved from teleop web and "
+                             "start at its main robot's q (default: no port)")
+    parser.add_argument("--port-forces", default="/port_forces", metavar="NAMESPACE",
+                        help="each port's wall force (geometry_msgs/WrenchStamped, world "
+                             "frame) on NAMESPACE/port<i> (default: /port_forces)")
+
+
+def _scene_constraints(path: str, robot_name: str, nq: int
+                       ) -> tuple[list[Constraint], np.ndarray | None]:
+    """The constraints and the main robot's ``q`` of the scene file at ``path``;
+    ``ValueError`` naming the file for one that cannot be read, another robot, or a
+    constraint or configuration that does not parse."""
+    where = f"scene file {path!r}"
+    try:
+        text = Path(path).expanduser().read_text(encoding="utf-8")
+    except OSError as error:
+        raise ValueError(f"cannot read {where}: {error.strerror}") from None
+    scene = parse_json(text, where)
+    if not isinstance(scene, dict):
+        raise ValueError(f"{where} does not hold a JSON object")
+    robot = scene.get("robot")
+    source = robot.get("source") if isinstance(robot, dict) else None
+    if source != robot_name:
+        raise ValueError(f"{where} is a scene of robot {source!r}: give --robot {source}")
+    placed = scene.get("constraints", [])
+    if not isinstance(placed, list) or not all(isinstance(p, dict) for p in placed):
+        raise ValueError(f"{where}: constraints must be a list of objects")
+    constraints = [Constraint.from_dict(p.get("constraint")) for p in placed]
+    q = scene.get("q", {}).get("main") if isinstance(scene.get("q"), dict) else None
+    if q is None:
+        return constraints, None
+    q0 = np.asarray(q, dtype=float) if isinstance(q, list) else np.zeros(0)
+    if q0.shape != (nq,) or not np.all(np.isfinite(q0)):
+        raise ValueError(f"{where}: q.main must be {nq} finite numbers")
+    return constraints, q0
+
+
+def sim_ports(args: argparse.Namespace) -> tuple[Robot, list[Constraint], np.ndarray | None]:
+    """The robot, the constraints and the start (None: ``--q0``'s or the robot's home)
+    the options ask for; ``ValueError`` for both ``--scenario`` and ``--scene``."""
+    if args.scenario is not None and args.scene is not None:
+        raise ValueError("--scenario and --scene both place the ports: give one")
+    if args.scenario is not None:
+        from teleop.experiments.scenarios import load_scenario
+
+        plan = load_scenario(args.scenario, None if args.robot is None else load_robot(args.robot))
+        return plan.robot, plan.make_constraints(), plan.q0.copy()
+    robot = load_robot(args.robot or DEFAULT_ROBOT)
+    if args.scene is None:
+        return robot, [], None
+    return (robot, *_scene_constraints(args.scene, robot_name(args), robot.model.nq))
+
+
+def robot_name(args: argparse.Namespace) -> str:
+    """The robot the options name."""
+    return args.robot or DEFAULT_ROBOT
