@@ -111,3 +111,16 @@ MAX_TROCAR_SHIFT_M = 1.0
 #: The largest excursion (m) of a random operator path from the scripted target: a metre is
 #: beyond the reach of a surgical arm around its home pose.
 MAX_PATH_AMPLITUDE_M = 1.0
+
+#: The supervisor's levels: a constraint error (m) beyond a metre is no longer a drift of
+#: the constraint, a port force beyond 1 kN would tear any tissue; a ramp of the operator's
+#: scale longer than a minute leaves the operator without control for it.
+MAX_SUPERVISOR_ERROR_M = 1.0
+MAX_SUPERVISOR_FORCE_N = 1_000.0
+MAX_SUPERVISOR_RAMP_S = 60.0
+
+#: A network master's watchdog timeout (s): below 5 ms one late datagram of a 1 kHz master
+#: releases it; beyond 5 s a master that died leaves the robot following its last command
+#: for longer than anyone would wait.
+MIN_INPUT_TIMEOUT_S = 0.005
+MAX_INPUT_TIMEOUT_S = 5.0

@@ -1,7 +1,9 @@
-"""Fuzz of the files: every bad number, list, link or count a session, a scene or a sweep
-spec carries is refused with one ``ValueError`` line naming the field (a session's with
-its file and line), never another exception, and every input that could run without end
-is bounded (docs/sessions.md, "Limits"; the one table: :mod:`teleop.limits`).
+"""Fuzz of the files and command lines: every bad number, list, link or count a session, a
+scene or a sweep spec carries, and every bad number given to any numeric option of any
+command, is refused with one line naming the field or option (a session's with its file and
+line), never another exception nor a run, and every input that could run without end is
+bounded (docs/sessions.md, "Limits"; the one table: :mod:`teleop.limits`). 2,807 bad
+inputs: 658 sessions, 453 scenes, 192 sweep specs, 1,504 command lines.
 
 The table is generated: each field of each constraint kind, obstacle kind, collision
 setting, session header and spec, crossed with the bad values of its type (wrong types,
@@ -367,8 +369,77 @@ def test_a_bad_spec_number_is_one_line_naming_the_field(document, field, tmp_pat
     assert_names(error.value, field, f"{path}: ")
 
 
-def test_the_tables_hold_over_a_thousand_bad_inputs():
-    assert len(SESSION_CASES) + len(SCENE_CASES) + len(SPEC_CASES) > 1000
+# ----------------------------------------------------------------------------- command lines
+
+#: Not a number the command line could take, for any option that takes numbers (``-inf``
+#: and the like reach argparse as options: refused too, as missing values).
+CLI_NOT_NUMBERS = ["abc", "", "nan", "inf", "-inf", "1e400", "-1e400", "1e308", "-1e308",
+                   "0x10", "nan,nan", "1e308,1e308", "1,abc"]
+#: What each command needs besides the option (a run that slipped through would be short:
+#: a hundredth of a second of paper-hole, or a sweep of one such cell).
+CLI_REQUIRED = {"compare": ["--scenario", "paper-hole", "--duration", "0.01"],
+                "record": ["--scenario", "paper-hole", "--duration", "0.01", "session.jsonl"],
+                "replay": ["missing.jsonl"], "bench": ["--quick"], "sim": [],
+                "sweep": ["--scenarios", "paper-hole", "--controllers", CONTROLLER,
+                          "--duration", "0.01"],
+                "web": []}
+
+
+def cli_options() -> list[tuple[str, str, int]]:
+    """(command, option, values it takes) for every option of every command that takes
+    numbers: its type is neither free text nor names, and it has no choices."""
+    import argparse
+
+    from teleop.cli.arguments import csv_list
+    from teleop.cli.main import build_parser
+
+    commands = next(action for action in build_parser()._actions
+                    if isinstance(action, argparse._SubParsersAction)).choices
+    return [(command, action.option_strings[0],
+             action.nargs if isinstance(action.nargs, int) else 1)
+            for command in CLI_REQUIRED for action in commands[command]._actions
+            if action.option_strings and action.nargs != 0 and not action.choices
+            and action.type not in (None, str, csv_list)]
+
+
+#: a robot's link axis is a direction of any length: 1e308 1e308 1e308 is (1, 1, 1) (it
+#: overflowed to a zero axis, served: tests/test_robots.py)
+CLI_VALID = {("--link-axis", "1e308")}
+CLI_CASES = [(command, option, [value] * count) for command, option, count in cli_options()
+             for value in CLI_NOT_NUMBERS if (option, value) not in CLI_VALID]
+
+
+@pytest.mark.parametrize("command, option, values", [
+    pytest.param(command, option, values, id=f"{command} {option}={values[0]!r}")
+    for command, option, values in CLI_CASES])
+def test_a_bad_command_line_number_is_one_line_naming_the_option(command, option, values,
+                                                                  tmp_path, monkeypatch, capsys):
+    """Refused while parsing (the option's type), or by the command before it runs anything
+    (the value checked with the file's: ``teleop COMMAND: FIELD ...``); never a run."""
+    import web.ui
+
+    def never(*args, **kwargs):
+        raise AssertionError("the page was served")
+
+    monkeypatch.setattr(web.ui, "run_server", never)
+    monkeypatch.chdir(tmp_path)
+    fixed = CLI_REQUIRED[command]
+    if option in fixed:  # the fuzzed option replaces its fixed value
+        at = fixed.index(option)
+        fixed = fixed[:at] + fixed[at + 2:]
+    extra = ["--out", str(tmp_path / "out")] if command in ("compare", "sweep") else []
+    code, err = cli([command, *fixed, *extra, option, *values], capsys)
+    assert code == 2, (code, err)
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    field = option.lstrip("-").replace("-", "_")
+    assert option in err or re.search(field.replace("_", "[_ ]"), err, re.IGNORECASE), err
+
+
+def test_the_tables_hold_over_two_thousand_bad_inputs():
+    counts = {"session": len(SESSION_CASES), "scene": len(SCENE_CASES),
+              "sweep spec": len(SPEC_CASES), "command line": len(CLI_CASES)}
+    print(f"\n[bad inputs] {sum(counts.values())}: {counts}")
+    assert sum(counts.values()) >= 2000
 
 
 # ----------------------------------------------------------------------------- no end

@@ -209,6 +209,15 @@ def test_builtin_overrides() -> None:
     assert robot.constrained_link == "instrument_shaft"
 
 
+@pytest.mark.parametrize("axis, direction", [((1e308, 1e308, 1e308), (1, 1, 1)),
+                                             ((-1e308, 0, 3e307), (-10, 0, 3))])
+def test_a_link_axis_is_normalised_whatever_its_length(axis, direction) -> None:
+    """Its norm overflowed to infinity: a huge axis became (0, 0, 0), taken as valid."""
+    robot = load_robot("ur5_instrument", link_axis=axis)
+    np.testing.assert_allclose(robot.link_axis, np.array(direction) / np.linalg.norm(direction),
+                               rtol=1e-15)
+
+
 # ---------------------------------------------------------------- errors
 
 def test_missing_file(tmp_path) -> None:

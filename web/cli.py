@@ -19,10 +19,10 @@ import time
 import warnings
 from typing import Sequence
 
-from teleop.cli.arguments import (add_damper_options, damper_settings,
-                                  one_line, positive)
+from teleop.cli.arguments import add_damper_options, bounded, damper_settings, one_line
 from teleop.cli.commands import Command
 from teleop.cli.robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
+from teleop.limits import MAX_INPUT_TIMEOUT_S, MIN_INPUT_TIMEOUT_S
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.loop.task_modes import AUTO, TASK_MODES
 from teleop.options import (ACCELERATION_LIMITS_HELP, JERK_LIMIT, PAYLOAD, PLANT_KINDS,
@@ -46,6 +46,10 @@ From another machine, prefer an SSH tunnel to the loopback server, same port bot
   ssh -L 8080:127.0.0.1:8080 robot-pc   then open the printed address there
 Network masters (--input udp:PORT) must tag every datagram with the key printed at start
 (or --input-key FILE)."""
+
+
+#: ``--input-timeout``: milliseconds within the table's bounds
+INPUT_TIMEOUT_MS = bounded(float, 1e3 * MIN_INPUT_TIMEOUT_S, 1e3 * MAX_INPUT_TIMEOUT_S, unit="ms")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -112,7 +116,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "16-64 bytes; e.g. `python -c \"import secrets; "
                               "print(secrets.token_hex(32))\" > key`): every datagram must "
                               "carry its HMAC (default: a key drawn at start and printed)")
-    devices.add_argument("--input-timeout", type=positive, default="100", metavar="MS",
+    devices.add_argument("--input-timeout", type=INPUT_TIMEOUT_MS, default="100", metavar="MS",
                          help="a network master silent this long (ms, 5-5000) is released: "
                               "its target holds and the robot stops (default: 100)")
     server = parser.add_argument_group("server")

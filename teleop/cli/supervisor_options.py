@@ -6,29 +6,45 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
+from teleop.limits import MAX_SUPERVISOR_ERROR_M, MAX_SUPERVISOR_FORCE_N, MAX_SUPERVISOR_RAMP_S
 from teleop.loop.supervisor import SupervisorConfig
 
-from .arguments import bounded, positive
+from .arguments import bounded
 
 #: the defaults, shown in the options' help
 DEFAULT = SupervisorConfig()
 
 
-#: a time of the scale's ramp: a finite number of seconds >= 0 (0: at once)
-seconds = bounded(float, 0.0, unit="s")
+#: a time of the scale's ramp: seconds in [0, MAX_SUPERVISOR_RAMP_S] (0: at once)
+seconds = bounded(float, 0.0, MAX_SUPERVISOR_RAMP_S, unit="s")
+#: a constraint error (mm) and a port force (N) the supervisor compares with: > 0, bounded
+millimetres = bounded(float, 0.0, 1e3 * MAX_SUPERVISOR_ERROR_M, inclusive_minimum=False,
+                      unit="mm")
+newtons = bounded(float, 0.0, MAX_SUPERVISOR_FORCE_N, inclusive_minimum=False, unit="N")
 
 
-def _pair(text: str, number: Callable[[str], float] = positive) -> tuple[float, float]:
-    """``"A,B"`` -> two finite numbers, each parsed by ``number`` (> 0 by default;
-    argparse type)."""
+def _pair(text: str, first: Callable[[str], float] = millimetres,
+          second: Callable[[str], float] | None = None) -> tuple[float, float]:
+    """``"A,B"`` -> two finite numbers, parsed by ``first`` and ``second`` (by default the
+    same; argparse type)."""
     parts = text.split(",")
     if len(parts) != 2:
         raise argparse.ArgumentTypeError(f"expected two numbers A,B, got {text!r}")
-    return number(parts[0].strip()), number(parts[1].strip())
+    return first(parts[0].strip()), (second or first)(parts[1].strip())
+
+
+def _tolerances(text: str) -> tuple[float, float]:
+    """``"MM,N"``: a constraint error and a port force (argparse type)."""
+    return _pair(text, millimetres, newtons)
+
+
+def _forces(text: str) -> tuple[float, float]:
+    """``"WARN_N,HOLD_N"`` (argparse type)."""
+    return _pair(text, newtons)
 
 
 def _times(text: str) -> tuple[float, float]:
-    """``"A,B"`` -> two finite numbers of seconds >= 0 (argparse type)."""
+    """``"FALL_S,RELEASE_S"`` (argparse type)."""
     return _pair(text, seconds)
 
 
@@ -41,7 +57,7 @@ def add_supervisor_options(parser: argparse.ArgumentParser) -> None:
         "the port force on the mujoco plant) every period: a step is ok only within tolerance; "
         "it scales the operator's motion from 1 at the warning level to 0 at the hold level, "
         "where the target is held (docs/design.md section 5.2)")
-    group.add_argument("--measured-tolerance", type=_pair, metavar="MM,N",
+    group.add_argument("--measured-tolerance", type=_tolerances, metavar="MM,N",
                        help="a measured constraint error (mm) or port force (N) above these: "
                        f"the step is not ok (default: {1e3 * DEFAULT.tolerance:g},"
                        f"{DEFAULT.force_tolerance:g})")
@@ -50,7 +66,7 @@ def add_supervisor_options(parser: argparse.ArgumentParser) -> None:
                        f"be scaled down, and where the target is held (default: "
                        f"{1e3 * DEFAULT.error_warn:g},"
                        f"{1e3 * DEFAULT.error_hold:g})")
-    group.add_argument("--supervisor-force", type=_pair, metavar="WARN_N,HOLD_N",
+    group.add_argument("--supervisor-force", type=_forces, metavar="WARN_N,HOLD_N",
                        help="the same for the measured port force (default: "
                        f"{DEFAULT.force_warn:g},{DEFAULT.force_hold:g})")
     group.add_argument("--supervisor-ramp", type=_times, metavar="FALL_S,RELEASE_S",

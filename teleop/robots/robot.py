@@ -199,10 +199,11 @@ def _check_frame(model: pin.Model, name: str, what: str) -> str:
 def _check_axis(link_axis: Any) -> np.ndarray:
     """A link axis of any non-zero length, normalised (a direction, not a unit vector)."""
     axis = as_vector(link_axis, 3, "link_axis")
-    norm = float(np.linalg.norm(axis))
-    if norm < 1e-12:
+    scale = float(np.max(np.abs(axis)))  # the norm of axis / scale cannot overflow
+    if scale < 1e-12:
         raise ValueError(f"link_axis must be non-zero, got {link_axis!r}")
-    return axis / norm
+    axis = axis / scale
+    return axis / float(np.linalg.norm(axis))
 
 
 def _check_q_home(model: pin.Model, q_home: Any, what: str = "q_home",

@@ -29,6 +29,7 @@ from teleop.experiments.sessions import SessionRecorder
 from teleop.inputs import (DEFAULT_VIEW, FeedbackGains, FeedbackState, InputSample, InputSource,
                            device_pose, feedback_wrench, followed_pose, integrated_twist,
                            view_rotation)
+from teleop.limits import MAX_INPUT_TIMEOUT_S, MIN_INPUT_TIMEOUT_S
 from teleop.loop import TeleopLoop
 
 from .console import EEInput
@@ -37,7 +38,7 @@ from .limits import HISTORY_RATE, HISTORY_SECONDS, MAX_TARGET_DISTANCE
 #: a streaming source silent longer than this is released (s)
 DEFAULT_INPUT_TIMEOUT = 0.1
 #: the watchdog's timeout is within these (s)
-INPUT_TIMEOUT_RANGE = (0.005, 5.0)
+INPUT_TIMEOUT_RANGE = (MIN_INPUT_TIMEOUT_S, MAX_INPUT_TIMEOUT_S)
 #: a device's moving target is written to a recording at most once per this many ticks
 #: (its last move at most this many ticks late)
 RECORD_TARGET_EVERY = 10
