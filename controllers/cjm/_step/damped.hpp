@@ -99,7 +99,7 @@ class DampedLeastSquares {
         projected = rhs;
         apply_qt(svd_.qr(), svd_.tau(), projected);
         x = projected.topRows(t);
-        r.solveInPlace(x);
+        upper_solve(svd_.qr(), x);
       } else {  // J^T = Q [R; 0]: x = Q [R^-T r; 0]
         x.topRows(t) = rhs;
         r.transpose().solveInPlace(x.topRows(t));
@@ -166,9 +166,8 @@ class DampedLeastSquares {
   bool certified_full_rank() {
     const Index t = svd_.size();
     if (t == 0 || t > kMaxQrSize) return false;
-    const auto r = svd_.qr().topRows(t).triangularView<Eigen::Upper>();
-    inverse_.setIdentity(t, t);
-    r.solveInPlace(inverse_);
+    inverse_.resize(t, t);  // fixed-size storage: no heap
+    upper_inverse(svd_.qr(), inverse_);
     inverse_norm_ = inverse_.norm();
     double largest2 = 0.0;  // ||R||_F^2 (>= sigma_max^2)
     for (Index j = 0; j < t; ++j) largest2 += svd_.qr().col(j).head(j + 1).squaredNorm();

@@ -52,6 +52,39 @@ inline void householder_qr(MatrixRef a, VectorRef tau) {
   }
 }
 
+//! ``b <- U^-1 b`` for the upper triangle ``U`` of the leading ``t x t`` block of
+//! ``factored`` (``t = b.rows()``), every column of ``b``, by back substitution. The
+//! triangles here are at most a few rows: Eigen's blocked kernel for a matrix right-hand
+//! side costs more than the arithmetic.
+template <typename Factored, typename Rhs>
+inline void upper_solve(const Factored& factored, Rhs&& b) {
+  const Index t = b.rows();
+  for (Index k = 0; k < b.cols(); ++k) {
+    for (Index i = t - 1; i >= 0; --i) {
+      double sum = b(i, k);
+      for (Index j = i + 1; j < t; ++j) sum -= factored(i, j) * b(j, k);
+      b(i, k) = sum / factored(i, i);
+    }
+  }
+}
+
+//! ``inverse <- U^-1`` (upper triangular, ``t x t``, ``t = inverse.rows()``) for the
+//! upper triangle ``U`` of the leading ``t x t`` block of ``factored``: column ``k`` by
+//! back substitution on ``e_k`` over its first ``k + 1`` rows.
+template <typename Factored, typename Inverse>
+inline void upper_inverse(const Factored& factored, Inverse&& inverse) {
+  const Index t = inverse.rows();
+  inverse.setZero();
+  for (Index k = 0; k < t; ++k) {
+    inverse(k, k) = 1.0 / factored(k, k);
+    for (Index i = k - 1; i >= 0; --i) {
+      double sum = 0.0;
+      for (Index j = i + 1; j <= k; ++j) sum -= factored(i, j) * inverse(j, k);
+      inverse(i, k) = sum / factored(i, i);
+    }
+  }
+}
+
 //! One reflector ``H_j`` of a factored ``qr`` applied to every column of ``b``.
 inline void apply_reflector(const ConstMatrixRef& qr, double tau, Index j, MatrixRef b) {
   if (tau == 0.0) return;

@@ -112,10 +112,8 @@ class NullSpace {
   //! ``1 / ||R1^-1||_F`` (a lower bound on sigma_min) above the rank tolerance with
   //! ``||R1||_F`` (an upper bound on sigma_max): full rank for the Python's rule too.
   bool certified_full_rank() {
-    const auto r1 = factored_.topLeftCorner(m_, m_).triangularView<Eigen::Upper>();
     auto inverse = inverse_.topLeftCorner(m_, m_);
-    inverse.setIdentity();
-    r1.solveInPlace(inverse);
+    upper_inverse(factored_, inverse);
     const double bound = 1.0 / inverse.norm();
     double largest2 = 0.0;  // ||R1||_F^2
     for (Index j = 0; j < m_; ++j) largest2 += factored_.col(j).head(j + 1).squaredNorm();

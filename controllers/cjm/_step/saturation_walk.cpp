@@ -43,7 +43,7 @@ void Step::saturate_around_previous(const Inputs& in) {
           continue;
         }
       }
-      const Index joint = task_wrong_side(task, task_rhs);
+      const Index joint = task_wrong_side(task, task_rhs);  // null_: the free columns' factor
       if (joint < 0) break;  // the box's optimum
       free_(joint) = true;
     }
@@ -92,7 +92,6 @@ Index Step::task_wrong_side(const Eigen::Ref<const RowMatrix>& task,
     gradient_free_(n_free++) = gradient_(j);
   }
   if (m > 0 && n_free > 0) {  // g_i + a_i^T mu = g_i - (A_F^+ a_i)^T g_F
-    null_.factor(columns_.topLeftCorner(m, n_free));
     auto weights = free_x_.head(n_free);
     for (Index j = 0; j < nv_; ++j) {
       if (free_(j)) continue;

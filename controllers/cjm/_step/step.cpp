@@ -174,7 +174,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
       event(Event::non_finite);
       stop(q, qd);
     } else if (!box_contains(q, qd)) {
-      compute_box(q);
+      if (!accelerating_) compute_box(q);  // with acceleration limits box_contains computed it
       saturate(in, qd);
       clip(qd);
       if (!qd.allFinite()) {  // clipping passes a NaN through

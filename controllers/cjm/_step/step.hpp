@@ -223,7 +223,9 @@ class Step {
   //! controllers.optimization.task_damping: the damping rows D of the whole problem in
   //! damping_rows_ (their count), walk_sigma_min_ and walk_damping_.
   Index task_damping_rows(const Inputs& in);
-  //! The held joint whose release reduces the damped task's error under the rows (-1: none).
+  //! The held joint whose release reduces the damped task's error under the rows (-1:
+  //! none). ``null_`` holds the factor of the free joints' rows: solve_over_free's, the
+  //! walk having reached its goal over the same free joints.
   Index task_wrong_side(const Eigen::Ref<const RowMatrix>& task, const ConstVectorRef& task_rhs);
   //! The held joint at a bound whose -gradient points into its box most, beyond tolerance.
   Index inward(const ConstVectorRef& gradient, double tolerance) const;
