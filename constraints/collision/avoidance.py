@@ -21,6 +21,7 @@ from ..base import cross
 from ..kinematics import resolve_frame
 from ..limits import MAX_COLLISION_DISTANCE_M, MAX_OBSTACLES, MAX_SPEED_M_S
 from ..validation import as_number, short_repr
+from .broadphase import ObstacleBoxes, capsule_boxes
 from .geometry import (bounding_segment, capsule_geometry, check_links, link_of, link_pairs,
                        segment_distances, self_collision_pairs, shape_distance)
 from .obstacles import Obstacle
@@ -231,6 +232,10 @@ class CollisionAvoidance:
         for request in self._geometry_data.distanceRequests:
             request.gjk_tolerance = request.epa_tolerance = GJK_TOLERANCE
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+        #: per pair, its obstacle's index (-1: a pair of two robot geometries)
+        self._pair_obstacle = np.where(self._pairs[:, 1] >= robot_count,
+                                       self._pairs[:, 1] - robot_count, -1)
+        self._boxes: ObstacleBoxes | None = None  # sorted again when obstacles move
         self._names = [*self._links, *(obstacle.name for obstacle in self.obstacles)]
         self._robot_count = robot_count
         robot_objects = self._robot_geometry.geometryObjects
@@ -288,6 +293,7 @@ class CollisionAvoidance:
                 start, end, _ = bounding_segment(obstacle.shape(), pose)
                 self._obstacle_starts[k], self._obstacle_ends[k] = start, end
                 placed[k] = obstacle.center
+                self._boxes = None
         pin.updateGeometryPlacements(model, data, geometry, geometry_data)
         placements = np.empty((model.njoints, 4, 4))
         for joint in self._moving_joints:
@@ -301,8 +307,29 @@ class CollisionAvoidance:
 
     def _near_pairs(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
         """The pair indices whose bounding capsules come within the detection distance (a
-        half-space's pair: the capsule within that distance of its plane)."""
-        first, second = self._pairs[:, 0], self._pairs[:, 1]
+        half-space's pair: the capsule within that distance of its plane). The
+        broadphase (:mod:`.broadphase`) first keeps the obstacles whose boxes meet the
+        robot's, then the pairs whose two boxes come within the distance; only those are
+        measured."""
+        robot_count, reach = self._robot_count, self.detection_distance
+        if self._boxes is None:
+            self._boxes = ObstacleBoxes(starts[robot_count:], ends[robot_count:],
+                                        self._radii[robot_count:])
+        boxes = self._boxes
+        lower, upper = capsule_boxes(starts[:robot_count], ends[:robot_count],
+                                     self._radii[:robot_count])
+        obstacle = self._pair_obstacle
+        kept = obstacle < 0
+        if boxes.count:
+            near = boxes.near(lower.min(axis=0) - reach, upper.max(axis=0) + reach)
+            kept |= near[np.maximum(obstacle, 0)] & ~kept
+        candidates = np.flatnonzero(kept)
+        first, second = self._pairs[candidates, 0], self._pairs[candidates, 1]
+        all_lower = np.vstack([lower, boxes.lower])
+        all_upper = np.vstack([upper, boxes.upper])
+        meets = np.all((all_lower[first] - reach <= all_upper[second])
+                       & (all_upper[first] + reach >= all_lower[second]), axis=1)
+        candidates, first, second = candidates[meets], first[meets], second[meets]
         gaps = (segment_distances(starts[first], ends[first], starts[second], ends[second])
                 - self._radii[first] - self._radii[second])
         infinite = ~np.isfinite(gaps)
@@ -313,7 +340,7 @@ class CollisionAvoidance:
                 heights = [float(plane.normal @ (point - plane.center))
                            for point in (starts[body], ends[body])]
                 gaps[index] = min(heights) - self._radii[body]
-        return np.flatnonzero(gaps < self.detection_distance)
+        return candidates[gaps < reach]
 
     def rows(self, model: pin.Model, data: pin.Data) -> CollisionRows:
         """The damper rows at the kinematics in ``data`` (``pin.computeJointJacobians`` run
