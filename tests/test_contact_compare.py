@@ -1,4 +1,4 @@
-"""``teleop compare --scenario palpation|retraction --plant mujoco`` (issue 36,
+"""``teleop compare --scenario palpation|retraction|retraction-y --plant mujoco`` (issue 36,
 docs/design.md 21.4): every controller through the experiment in one run, the issue's targets met by each, the
 QP and mink against the CJM (the other controller as the reference), the table against
 the file, and the options a contact scenario would ignore refused by name."""
@@ -15,7 +15,8 @@ from teleop.cli.main import main
 SPECS = ("cjm", "qp:daqp", "mink:daqp")
 
 
-@pytest.mark.parametrize("scenario, setpoint", [("palpation", 1.0), ("retraction", 0.5)])
+@pytest.mark.parametrize("scenario, setpoint", [("palpation", 1.0), ("retraction", 0.5),
+                                                 ("retraction-y", 0.5)])
 def test_a_contact_scenario_compares_every_controller_and_meets_the_targets(tmp_path, capsys,
                                                                             scenario, setpoint):
     code = main(["compare", "--scenario", scenario, "--plant", "mujoco", "--controllers",
@@ -70,6 +71,6 @@ def test_palpation_refuses_what_it_cannot_do_by_name(tmp_path, capsys, options, 
 def test_the_scenarios_list_names_palpation(capsys):
     assert main(["scenarios"]) == 0
     listed = capsys.readouterr().out.splitlines()
-    for name in ("palpation", "retraction"):
+    for name in ("palpation", "retraction", "retraction-y"):
         assert any(line.startswith(f"{name} ") for line in listed)
 

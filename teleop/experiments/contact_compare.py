@@ -48,6 +48,7 @@ class ContactScenario:
 CONTACT_SCENARIOS: dict[str, ContactScenario] = {
     "palpation": ContactScenario(palpation.DESCRIPTION, palpation.PALPATION),
     "retraction": ContactScenario(retraction.DESCRIPTION, retraction.RETRACTION),
+    "retraction-y": ContactScenario(retraction.DESCRIPTION_Y, retraction.RETRACTION_Y),
 }
 
 

@@ -16,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Hole
+from controllers.linalg import DampingPolicy
 from teleop.controller_specs import ROBOT, make_controller
 from teleop.loop.hybrid_force_motion import HybridForceMotion
 from teleop.loop.sensor_tare import SensorTare
@@ -29,6 +30,13 @@ from teleop.robots import load_robot
 POSE_GAIN, FORCE_GAIN = 20.0, 1.0
 #: The force loop's speed bound (m/s): the tip meets the tissue at it.
 APPROACH_SPEED = 0.01
+#: The controllers' damped least squares in a contact task: a constant ``lambda`` (paper
+#: eq 35), no rising part. The task's weights (rotations 0.01) scale the weighted rows'
+#: smallest singular value to about the rising damping's threshold (0.01), so that damping
+#: switched on and off along the path; where it switched off, the orientation error it had
+#: let grow came back at once (retraction across the tool's y: 3.5 rad/s, port force 0.23 N;
+#: docs/design.md 21.4).
+CONTACT_DAMPING = 0.02
 
 
 @dataclass(frozen=True)
@@ -46,6 +54,8 @@ class ContactTask:
     duration : the default run (s).
     twist_weight : the controllers' task weight (the force axis first).
     gap : the tissue's distance beyond the tip at the start (m).
+    damping : the controllers' constant DLS damping (:data:`CONTACT_DAMPING`); None: each
+        controller's own (its rising damping near singularity).
     """
 
     name: str
@@ -56,6 +66,7 @@ class ContactTask:
     duration: float
     twist_weight: tuple[float, ...]
     gap: float = 2e-3
+    damping: float | None = CONTACT_DAMPING
 
 
 @dataclass
@@ -127,6 +138,8 @@ def run_contact(task: ContactTask, spec: str, dt: float = 1e-3,
                                  time_budget=None,
                                  acceleration_limit=ROBOT if acceleration_limits else None,
                                  jerk_limit=jerk_limit)
+    if task.damping is not None:
+        controller.policy = DampingPolicy(task.damping, 0.0, 0.0)
     selection = tuple(i == axis for i in range(3))
     law = HybridForceMotion(selection, [task.setpoint if chosen else 0.0 for chosen in selection],
                             FORCE_GAIN,
