@@ -313,7 +313,8 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
      "argument --payload: must be in [0, 100] kg, got nan"),
     (["--plant", "mujoco", "--payload", "1e9"],
      "argument --payload: must be in [0, 100] kg, got 1e+09"),
-    (["--plant", "ros2"], "--plant ros2: the web UI does not drive a ROS 2 robot yet"),
+    (["--plant", "ros2", "--wall-stiffness", "1", "--payload", "1"],
+     "--payload needs --plant mujoco"),
 ])
 def test_bad_plant_options_are_one_line_and_exit_2(args, message, capsys):
     from web import cli as web_cli

@@ -21,6 +21,7 @@ from typing import Sequence
 
 from teleop.cli.arguments import add_damper_options, bounded, damper_settings, one_line
 from teleop.cli.commands import Command
+from teleop.cli.ros2_options import add_ros2_options, given_ros2_options, ros2_settings
 from teleop.cli.robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
 from teleop.limits import MAX_INPUT_TIMEOUT_S, MIN_INPUT_TIMEOUT_S
 from teleop.controller_specs import CONTROLLER_HELP
@@ -81,8 +82,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     plant = parser.add_argument_group("plant (docs/design.md section 17)")
     plant.add_argument("--plant", choices=PLANT_KINDS, default="kinematic",
                        help="what the loops run on: the ideal integrator (q += qd dt) or the "
-                            "robot simulated in MuJoCo, the abdominal wall at each port "
-                            "(default: kinematic)")
+                            "robot simulated in MuJoCo, the abdominal wall at each port, or "
+                            "one robot over ROS 2, the main one (no ghost), its options "
+                            "below (docs/ros2.md) (default: kinematic)")
+    add_ros2_options(plant)
     WALL_STIFFNESS.add_to(plant, left_out="each port's own, 1 N/mm")
     PAYLOAD.add_to(plant, left_out="0")
 
@@ -176,9 +179,16 @@ def _plant(args: argparse.Namespace) -> dict:
     a physics option without the plant."""
     given = [f"--{name.replace('_', '-')}" for name in ("wall_stiffness", "payload")
              if getattr(args, name) is not None]
+    ros2_given = given_ros2_options(args)
+    if args.plant != "ros2" and ros2_given:
+        raise ValueError(f"{', '.join(ros2_given)} need{'s' * (len(ros2_given) == 1)} "
+                         "--plant ros2")
     if args.plant == "ros2":
-        raise ValueError("--plant ros2: the web UI does not drive a ROS 2 robot yet; "
-                         "'teleop compare --plant ros2' does (docs/ros2.md)")
+        if args.payload is not None:
+            raise ValueError("--payload needs --plant mujoco (the ros2 robot carries its own)")
+        stiffness = None if args.wall_stiffness is None else 1e3 * args.wall_stiffness  # N/m
+        return {"plant": "ros2", "ros2_settings": ros2_settings(args),
+                "wall_stiffness": stiffness}
     if args.plant == "kinematic":
         if given:
             raise ValueError(f"{' and '.join(given)} need{'s' * (len(given) == 1)} "
@@ -307,7 +317,7 @@ def run(args: argparse.Namespace, prog: str) -> int:
         ghost = app.specs.get("ghost")
         print(f"{prog}: {robot.name} on {page_url(args.host, server.get_port(), token)} "
               f"(controller {app.specs['main']}{', ghost ' + ghost if ghost else ''})"
-              f"{', on the ' + app.plant.describe() if app.plant.physical else ''}"
+              f"{', on the ' + app.plant.describe() if app.plant.kind != 'kinematic' else ''}"
               + "".join(f", input {device.source.name} on {robot.ee_frames[device.source.ee]}"
                         for device in app.devices) + "; Ctrl-C stops", flush=True)
         while True:
@@ -318,6 +328,8 @@ def run(args: argparse.Namespace, prog: str) -> int:
         ui.stop()
         control.stop()
         app.close_inputs()
+        if app.ros2 is not None:
+            app.ros2.close()  # zeros on the wire
         server.stop()
     return 0
 

@@ -26,6 +26,7 @@ from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.task_modes import AUTO
 from teleop.options import JERK_LIMIT
 from teleop.plants import PlantSettings
+from teleop.plants.ros2.settings import Ros2Settings
 from teleop.robots import Robot
 
 from ..folders import Folder
@@ -39,6 +40,7 @@ from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, chec
 from .plant import PlantChoice, Plants
 from .recording import Recording
 from .robots import Robots, default_ghost_offset
+from .ros2_robot import Ros2Robot
 from .scenes import Scenes
 from .settings import Settings
 from .tick import Tick
@@ -64,6 +66,8 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
     plant : what every loop runs on, ``"kinematic"`` (the ideal integrator) or
         ``"mujoco"`` (a :class:`teleop.plants.MujocoPlant` per loop, docs/design.md
         section 17); ``plant_settings`` its body and servos (payload...).
+        ``"ros2"``: the main loop drives one robot over ROS 2 (:mod:`.ros2_robot`,
+        docs/ros2.md), ``ros2_settings`` its topics and domain; no ghost.
     wall_stiffness : the abdominal wall's stiffness (N/m) at every port of the session;
         None: each port's own.
     collisions : whether the controllers keep the robot's link pairs and the obstacles
@@ -82,13 +86,18 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
                  plant_settings: PlantSettings | None = None,
                  wall_stiffness: float | None = None, collisions: bool = True,
                  collision_settings: dict | None = None,
-                 acceleration_limits: bool = True, jerk_limit: float | None = None) -> None:
+                 acceleration_limits: bool = True, jerk_limit: float | None = None,
+                 ros2_settings: Ros2Settings | None = None) -> None:
         rate = checked_rate(rate)
         if jerk_limit is not None and not acceleration_limits:
             raise ValueError("a jerk limit needs the acceleration limits (docs/design.md 8.5)")
         self.acceleration_limits = acceleration_limits
         self.jerk_limit = None if jerk_limit is None else JERK_LIMIT.check(jerk_limit)
-        self.plant = PlantChoice(plant, plant_settings or PlantSettings(), wall_stiffness)
+        self.plant = PlantChoice(plant, plant_settings or PlantSettings(), wall_stiffness,
+                                 (ros2_settings or Ros2Settings()) if plant == "ros2" else None)
+        self.ros2 = Ros2Robot(robot, self.plant) if plant == "ros2" else None
+        if self.ros2 is not None:
+            self.ros2.refuse_ghost(ghost)
         self.robot = robot
         self._lock = threading.RLock()
         self._build_lock = threading.Lock()  # one loop build at a time (outside _lock)
@@ -115,7 +124,8 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
         self._init_collisions(collisions, dict(collision_settings or {}))
         self.force = ForceControl(self)  # before the first loop: it makes their plants
         self.specs = {"main": controller}
-        self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(controller)}
+        self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(
+            controller, q=None if self.ros2 is None else self.ros2.state(self.config.dt))}
         self.traces: dict[str, Trace] = {"main": Trace()}
         self.last_records: dict[str, StepRecord | None] = {"main": None}
         self.ghost_offset = default_ghost_offset(robot)

@@ -170,7 +170,7 @@ class ForceControl:
         the tool's sensor once one is placed."""
         app = self._app
         if self.tissue is None:
-            return app.plant.make(app.robot, dt)
+            return app.make_plant(dt)
         return MujocoPlant(app.robot, dt, app.plant.settings, tissues=[self.tissue])
 
     def wrapped(self, controller: Any, dt: float) -> Any:

@@ -16,6 +16,8 @@ from teleop.plants import PlantChoice
 from teleop.plants.walls import wall_of
 from teleop.robots import Robot
 
+from .ros2_robot import Ros2Robot
+
 
 @dataclass(frozen=True)
 class PortReading:
@@ -47,7 +49,15 @@ class Plants:
     plant: PlantChoice
     entries: dict
     loops: dict[str, TeleopLoop]
+    ros2: Ros2Robot | None
     _lock: threading.RLock
+
+    def make_plant(self, dt: float):
+        """A plant for a loop of period ``dt``: the session's one robot over ROS 2, else a
+        fresh one of the session's choice (None: the ideal integrator)."""
+        if self.ros2 is not None:
+            return self.ros2.plant(dt)
+        return self.plant.make(self.robot, dt)
 
     def _apply_wall(self, constraint: Constraint) -> None:
         """The session's wall stiffness on a constraint that puts a wall into the scene

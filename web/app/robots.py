@@ -28,6 +28,7 @@ from teleop.robots import Robot
 from .force_control import ForceControl
 from .limits import MAX_GHOST_OFFSET
 from .plant import PlantChoice
+from .ros2_robot import Ros2Robot
 from .trace import Trace
 
 
@@ -72,6 +73,7 @@ class Robots:
     force: ForceControl
     acceleration_limits: bool
     jerk_limit: float | None
+    ros2: Ros2Robot | None
     _lock: threading.RLock
     _build_lock: threading.Lock
 
@@ -213,6 +215,8 @@ class Robots:
 
         It starts where the main robot is, at the same time, so the two histories line up.
         """
+        if self.ros2 is not None:
+            self.ros2.refuse_ghost(spec)
         if not spec:
             with self._lock:
                 for store in (self.loops, self.specs, self.traces, self.last_records,

@@ -41,6 +41,7 @@ from .limits import (
     checked_rate,
 )
 from .trace import Trace
+from .ros2_robot import Ros2Robot
 
 
 def pose_to_dict(pose: pin.SE3) -> dict:
@@ -73,6 +74,7 @@ class Scenes:
     scenes: Folder
     _ids: itertools.count
     _next_history: float
+    ros2: Ros2Robot | None
     _lock: threading.RLock
 
     def scene(self) -> dict:
@@ -130,6 +132,8 @@ class Scenes:
                              f"runs {robot_source(self.robot)!r}: start "
                              "`teleop web --scene FILE` to open it with its robot")
         self._check_scene(scene)
+        if self.ros2 is not None:
+            self.ros2.refuse_ghost(scene.ghost)
         if scene.force is not None:
             self.force.check_tissue()
         constraints = [placed.constraint for placed in scene.constraints]

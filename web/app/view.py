@@ -21,6 +21,7 @@ from .editing import ConstraintEntry
 from .force_control import ForceControl
 from .plant import PlantChoice
 from .shortfall import asked_angle, explained, ports_on_chain, shortfall_words
+from .ros2_robot import Ros2Robot
 from .status import Limitation, describe_limitation, not_following
 from .trace import Trace
 
@@ -40,6 +41,7 @@ class View:
     inputs: list[EEInput]
     joint_names: list[str]
     plant: PlantChoice
+    ros2: Ros2Robot | None
     force: ForceControl
     _lock: threading.RLock
     _view_data: pin.Data
@@ -59,8 +61,12 @@ class View:
         target = self.inputs[ee].target
         constraints = {entry.id: entry.constraint for entry in self.entries.values()}
         return self._described(loop.controller.info, self.last_records.get(which), placement,
-                               target, loop.refused, ee, loop.task_modes[ee], constraints,
+                               target, loop.refused or self._stopped(), ee, loop.task_modes[ee], constraints,
                                self.homing_words())
+
+    def _stopped(self) -> str:
+        """Why the robot on the wire is stopped (:meth:`.ros2_robot.Ros2Robot.stopped`)."""
+        return "" if self.ros2 is None else self.ros2.stopped()
 
     def _described(self, info, record: StepRecord | None, placement: pin.SE3,
                    target: pin.SE3, refused: str, ee: int, mode: str,

@@ -9,6 +9,7 @@ import viser
 
 from teleop.inputs import InputSource
 from teleop.plants import PlantSettings
+from teleop.plants.ros2.settings import Ros2Settings
 from teleop.robots import Robot
 
 from ..access import make_token, require_access
@@ -27,14 +28,16 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                collision_settings: dict | None = None,
                inputs: Sequence[InputSource] = (), input_timeout: float | None = None,
                acceleration_limits: bool = True, jerk_limit: float | None = None,
-               task_mode: str = "auto") -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
+               task_mode: str = "auto", ros2_settings: Ros2Settings | None = None
+               ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
     threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
     The page reads and writes files in ``scene_dir`` and ``record_dir`` only; a websocket
     whose Origin is not the page's own gets nothing, nor, with a ``token`` ("auto": a
     random one, then ``ui.access.token``), one that does not present it
     (:mod:`web.access`).
-    ``plant``, ``plant_settings``, ``wall_stiffness``: what the loops run on;
+    ``plant``, ``plant_settings``, ``wall_stiffness``, ``ros2_settings``: what the loops
+    run on;
     ``collisions``, ``collision_settings``: the collision avoidance;
     ``acceleration_limits``: the robot's joint acceleration limits kept (on by default),
     ``jerk_limit``: a jerk limit on every joint (rad/s^3; needs the acceleration limits)
@@ -47,7 +50,8 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                     scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
                     wall_stiffness=wall_stiffness, collisions=collisions,
                     collision_settings=collision_settings,
-                    acceleration_limits=acceleration_limits, jerk_limit=jerk_limit)
+                    acceleration_limits=acceleration_limits, jerk_limit=jerk_limit,
+                    ros2_settings=ros2_settings)
     app.set_task_mode(task_mode)
     if scene is not None:
         app.apply_scene(scene)

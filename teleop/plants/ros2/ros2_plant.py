@@ -272,6 +272,15 @@ class Ros2Plant:
                 return np.zeros(self.model.nv)
             return pin.difference(self.model, q, self._q) / self.dt
 
+    def set_period(self, dt: float) -> None:
+        """The loop's new period ``dt`` (s): the pacing and the watchdog's wait follow it
+        (one robot on the wire keeps one plant, ``ValueError`` for a period that is not
+        finite and positive)."""
+        if not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0:
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        with self._lock:
+            self.dt = float(dt)
+
     def measures(self) -> Ros2Measures:
         """The last period's (:class:`Ros2Measures`)."""
         return self.last_measures
