@@ -102,6 +102,31 @@ def test_the_pump_stops_reading_when_enough_messages_wait():
     assert read == 65 and then == 66  # one more read per one handed on
 
 
+def test_connections_sharing_the_server_s_bucket_cannot_multiply_it():
+    """Three connections, each free on its own, drawing on one server bucket of 5 tokens
+    that refills once in 1e6 s: 5 messages handed on in all, then none."""
+    shared = (Bucket(1e9, 10_000), Bucket(1e-6, 5))
+    connections = [PacedMessages(scripted([f"{k} {i}".encode() for i in range(10)]),
+                                 read_rate=1e9, read_burst=10_000, deliver_rate=1e9,
+                                 deliver_burst=10_000, shared=shared) for k in range(3)]
+
+    async def race() -> list[bytes]:
+        handed: list[bytes] = []
+
+        async def drain(paced: PacedMessages) -> None:
+            while True:
+                handed.append(await paced.recv())
+
+        tasks = [asyncio.ensure_future(drain(paced)) for paced in connections]
+        await asyncio.sleep(0.3)  # the 6th token is a million seconds away
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        return handed
+
+    assert len(asyncio.run(race())) == 5
+
+
 def test_a_bucket_gives_its_burst_then_one_token_per_period():
     now = [0.0]
     bucket = Bucket(rate=100.0, burst=3, clock=lambda: now[0])

@@ -18,6 +18,10 @@ or a script holding the token, sending drags as fast as its socket takes them (1
 * viser is handed them at most :data:`DELIVER_RATE` a second (bursts of
   :data:`DELIVER_BURST`); at most :data:`MAX_WAITING` wait, then the pump waits too.
 
+The server's connections together are held to :data:`SERVER_SHARE` times those rates (a
+page opened in many tabs, or a script opening many connections with the token, cannot
+multiply them).
+
 A browser dragging a gizmo sends one drag per frame (60-240 a second) and a camera report
 per frame while the view moves: below the rates, so an operator's drags pass untouched
 and at once. (The inbox, web/inbox.py, coalesces again what reaches the app.)
@@ -41,6 +45,8 @@ DELIVER_RATE = 150.0
 DELIVER_BURST = 50
 #: messages read and waiting for viser, per connection; the pump waits beyond
 MAX_WAITING = 64
+#: every connection of a server together: this many times one connection's rates
+SERVER_SHARE = 4
 
 
 class _Head(msgspec.Struct):
@@ -105,11 +111,14 @@ class PacedMessages:
     def __init__(self, receive: Callable[[], Awaitable[bytes | str]], tally: Tally | None = None,
                  read_rate: float = READ_RATE, read_burst: int = READ_BURST,
                  deliver_rate: float = DELIVER_RATE, deliver_burst: int = DELIVER_BURST,
-                 max_waiting: int = MAX_WAITING) -> None:
+                 max_waiting: int = MAX_WAITING, shared: tuple[Bucket, Bucket] | None = None
+                 ) -> None:
         self._receive = receive
         self.tally = Tally() if tally is None else tally
         self.reading = Bucket(read_rate, read_burst)
         self.delivering = Bucket(deliver_rate, deliver_burst)
+        #: the buckets every connection of the server draws from too (reading, delivering)
+        self.shared = shared
         self.max_waiting = max_waiting
         self._waiting: deque[tuple[tuple | None, bytes | str]] = deque()
         self._arrived = asyncio.Event()  # the pump queued a message, or stopped
@@ -129,6 +138,8 @@ class PacedMessages:
             self._arrived.clear()
             await self._arrived.wait()
         await self.delivering.take()  # meanwhile a newer drag may replace the first
+        if self.shared is not None:
+            await self.shared[1].take()
         _, message = self._waiting.popleft()
         self.tally.delivered += 1
         self._room.set()
@@ -138,6 +149,8 @@ class PacedMessages:
         try:
             while True:
                 await self.reading.take()
+                if self.shared is not None:
+                    await self.shared[0].take()
                 while len(self._waiting) >= self.max_waiting:
                     self._room.clear()
                     await self._room.wait()
@@ -159,11 +172,13 @@ def pace_messages(server: viser.ViserServer) -> Tally:
     message on; what they did, together, is counted in the :class:`Tally` returned."""
     websocket_server = server._websock_server
     tally = Tally()
+    shared = (Bucket(SERVER_SHARE * READ_RATE, SERVER_SHARE * READ_BURST),
+              Bucket(SERVER_SHARE * DELIVER_RATE, SERVER_SHARE * DELIVER_BURST))
 
     async def pace(connection) -> None:
         websocket = websocket_server._live_connections.get(connection.client_id)
         if websocket is not None:
-            websocket.recv = PacedMessages(websocket.recv, tally).recv
+            websocket.recv = PacedMessages(websocket.recv, tally, shared=shared).recv
 
     websocket_server._client_connect_cb.insert(0, pace)
     return tally
