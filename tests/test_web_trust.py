@@ -109,7 +109,7 @@ def test_recordings_go_only_to_the_recording_folder(app, tmp_path):
     for name in outside_names(tmp_path):
         with pytest.raises(ValueError, match="recording name .* refused"):
             app.start_recording(name) if name.strip() else app.recordings.writable(name)
-        assert app.recorder is None
+        assert not app.recorder.active
     path = app.start_recording("take-1.jsonl")
     assert path == tmp_path / "recordings" / "take-1.jsonl"
     run(app, 0.01)
@@ -130,7 +130,7 @@ def test_a_recording_never_replaces_another(app, tmp_path):
     assert first.read_bytes() == kept
     with pytest.raises(ValueError, match=f"{first.name!r} is already in the recording folder"):
         app.start_recording(first.name)
-    assert app.recorder is None and first.read_bytes() == kept
+    assert not app.recorder.active and first.read_bytes() == kept
 
 
 def test_a_symlink_loop_is_refused_like_any_name_leading_out(app, tmp_path):

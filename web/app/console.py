@@ -113,7 +113,7 @@ class Console:
         self._end_homing()
         self.home_words = ""
         self.inputs[ee].target = target
-        self._record_target(ee)
+        self.recorder.target(ee, target)
 
     def set_target(self, position, wxyz, ee=0) -> None:
         """The operator's target pose of EE ``ee`` directly (world position, quaternion

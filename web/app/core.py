@@ -38,7 +38,7 @@ from .force_control import ForceControl
 from .homing import Homing
 from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
 from .plant import PlantChoice, Plants
-from .recording import Recording
+from .recording import SessionRecording
 from .robots import Robots, default_ghost_offset
 from .ros2_robot import Ros2Robot
 from .scenes import Scenes
@@ -48,7 +48,7 @@ from .trace import Trace
 from .view import View
 
 
-class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings, Scenes, Recording, Tick,
+class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings, Scenes, Tick,
                 View, Homing):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
@@ -137,8 +137,22 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
         self.motion_scale = 1.0
         self.clutch = False
         self._init_devices()
-        self.recorder = None
-        self._record_start = 0.0
+        self.recorder = SessionRecording(self.recordings, lambda: self.now, robot.ee_frames)
         self._next_history = 0.0
         self.ticks = 0
         self.advance_us = 0.0
+
+    def start_recording(self, name: str | None = None) -> Path:
+        """Record the session to file ``name`` of the recording folder (default: a new
+        name, by date); its path (:class:`.recording.SessionRecording`). A name already in
+        the folder is refused: a recording never replaces another."""
+        with self._lock:
+            return self.recorder.start(
+                name, self.robot, self.loops["main"].q, self.config,
+                [(entry.id, entry.constraint) for entry in self.entries.values()],
+                self.loops["main"].task_modes, [hand.target for hand in self.inputs])
+
+    def stop_recording(self) -> Path:
+        """Close the recording; its path."""
+        with self._lock:
+            return self.recorder.stop()

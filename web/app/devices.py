@@ -25,7 +25,6 @@ import pinocchio as pin
 
 from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.validation import as_number
-from teleop.experiments.sessions import SessionRecorder
 from teleop.inputs import (DEFAULT_VIEW, FeedbackGains, FeedbackState, InputSample, InputSource,
                            device_pose, feedback_wrench, followed_pose, integrated_twist,
                            view_rotation)
@@ -34,6 +33,7 @@ from teleop.loop import TeleopLoop
 
 from .console import EEInput
 from .limits import HISTORY_RATE, HISTORY_SECONDS, MAX_TARGET_DISTANCE
+from .recording import SessionRecording
 
 #: a streaming source silent longer than this is released (s)
 DEFAULT_INPUT_TIMEOUT = 0.1
@@ -82,7 +82,7 @@ class Devices:
     clutch: bool
     motion_scale: float
     ticks: int
-    recorder: SessionRecorder | None
+    recorder: SessionRecording
     avoidance: CollisionAvoidance
     collision_rows: dict[str, CollisionRows | None]
     devices: list[DeviceBinding]
@@ -249,7 +249,7 @@ class Devices:
             release()
         pose = self.loops["main"].ee_placements()[ee]
         self.inputs[ee].target = pose.copy()
-        self._record_target(ee)
+        self.recorder.target(ee, pose)
         for loop in self.loops.values():
             loop.hold(ee, pose)
 
@@ -264,9 +264,9 @@ class Devices:
         for device in self.devices:
             if device.used is not None:
                 device.source.used(device.used, command_time)
-            if (device.unrecorded and self.recorder is not None
+            if (device.unrecorded and self.recorder.active
                     and self.ticks - device.recorded_tick >= RECORD_TARGET_EVERY):
-                self._record_target(device.source.ee)
+                self.recorder.target(device.source.ee, self.inputs[device.source.ee].target)
                 device.unrecorded, device.recorded_tick = False, self.ticks
             if not device.source.renders_feedback and not history:
                 continue
@@ -287,7 +287,7 @@ class Devices:
             if history:
                 device.history.append((loop.t, *device.wrench[:3]))
                 del device.history[:-int(HISTORY_SECONDS * HISTORY_RATE)]
-        if self.recorder is not None and loop.t >= self._next_input_record:
+        if self.recorder.active and loop.t >= self._next_input_record:
             self._record_inputs()
             self._next_input_record = loop.t + RECORD_INPUT_EVERY
 
@@ -300,7 +300,7 @@ class Devices:
             fresh = min(counts.get("applied", 0) - device.recorded_applied, 4096)
             device.recorded_applied = counts.get("applied", 0)
             latencies = source.latencies.values()[-fresh:] if fresh else np.zeros(0)
-            self.recorder.input(self.recording_time, source.name, source.ee,
+            self.recorder.input(source.name, source.ee,
                                 {key: int(value) for key, value in counts.items()},
                                 latencies)
 

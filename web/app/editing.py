@@ -108,8 +108,7 @@ class Editing:
                 del self.entries[entry_id]
                 self._sync_constraints()
                 raise
-            if self.recorder is not None:
-                self.recorder.add(self.recording_time, entry_id, constraint)
+            self.recorder.add(entry_id, constraint)
             return entry_id
 
     def move_constraint(self, entry_id: str, position) -> None:
@@ -131,8 +130,7 @@ class Editing:
             if self.entries.pop(entry_id, None) is None:
                 raise ValueError(f"no constraint {entry_id!r}")
             self._sync_constraints()
-            if self.recorder is not None:
-                self.recorder.remove(self.recording_time, entry_id)
+            self.recorder.remove(entry_id)
 
     def clear_constraints(self) -> int:
         """Remove every constraint; how many there were."""

@@ -87,7 +87,7 @@ class Homing:
         index = int(np.searchsorted(run.times, elapsed, side="right")) - 1
         for ee, pose in enumerate(run.poses[min(index, len(run.poses) - 1)]):
             self.inputs[ee].target = pose.copy()  # the gizmo stays: its next move is relative
-            self._record_target(ee)
+            self.recorder.target(ee, pose)
         arrived = np.max(np.abs(self.loops["main"].q - run.end)) < HOME_TOLERANCE
         if elapsed >= run.times[-1] and (arrived or elapsed >= run.times[-1] + HOME_SETTLE):
             self._end_homing()

@@ -3,72 +3,113 @@
 
 from __future__ import annotations
 
-import threading
+from collections.abc import Callable, Iterable, Sequence
 from datetime import datetime
 from pathlib import Path
 
+import numpy as np
+import pinocchio as pin
+
+from constraints import Constraint
 from teleop.experiments.sessions import SessionRecorder
-from teleop.loop import LoopConfig, TeleopLoop
+from teleop.loop import LoopConfig
 from teleop.robots import Robot
 
 from ..folders import Folder
 
 
-class Recording:
-    """The recorder of :class:`web.app.TeleopApp` (its state: ``recorder`` and the app
-    time it started at)."""
+class SessionRecording:
+    """The session's recorder, a component of :class:`web.app.TeleopApp`: it owns the
+    open session file (or none) and the app time it started at, and writes each event the
+    app hands it while recording (every event method does nothing otherwise). The app
+    calls it under its lock.
 
-    robot: Robot
-    config: LoopConfig
-    loops: dict[str, TeleopLoop]
-    recordings: Folder
-    entries: dict
-    inputs: list
-    recorder: SessionRecorder | None
-    _record_start: float
-    _lock: threading.RLock
+    Parameters
+    ----------
+    folder : the folder recordings go to, and no other.
+    clock : the app's time (s), read at each event.
+    ee_frames : the robot's EE frames (``robot.ee_frames``): the target events of a robot
+        with several name their frame, a single EE's name none.
+    """
+
+    def __init__(self, folder: Folder, clock: Callable[[], float],
+                 ee_frames: Sequence[str]) -> None:
+        self.folder = folder
+        self._clock = clock
+        self._ee_frames = list(ee_frames)
+        self._recorder: SessionRecorder | None = None
+        self._start = 0.0
 
     @property
-    def recording_time(self) -> float:
+    def active(self) -> bool:
+        """Whether a session file is open."""
+        return self._recorder is not None
+
+    @property
+    def time(self) -> float:
         """Seconds since the recording started (app time)."""
-        return self.now - self._record_start
+        return self._clock() - self._start
 
-    def start_recording(self, name: str | None = None) -> Path:
-        """Record the session to file ``name`` of the recording folder (default: a new
-        name, by date); its path. A name already in the folder is refused: a recording
-        never replaces another."""
-        with self._lock:
-            if self.recorder is not None:
-                raise ValueError(f"already recording to {self.recorder.path.name}")
-            if name is None:
-                name = self.recordings.unused_name(f"session-{datetime.now():%Y%m%d-%H%M%S}")
-            path = self.recordings.new(name)
-            self.recorder = SessionRecorder(path, self.robot, self.loops["main"].q,
-                                            rate_hz=self.config.rate, kp=self.config.kp,
-                                            target_time_constant_s=self.config.target_time_constant)
-            self._record_start = self.now
-            for entry in self.entries.values():
-                self.recorder.add(0.0, entry.id, entry.constraint)
-            self.recorder.task_modes(0.0, self.loops["main"].task_modes)
-            for index in range(len(self.inputs)):
-                self._record_target(index)
-            return self.recorder.path
+    def start(self, name: str | None, robot: Robot, q: np.ndarray, config: LoopConfig,
+              constraints: Iterable[tuple[str, Constraint]], task_modes: tuple[str, ...],
+              targets: Sequence[pin.SE3]) -> Path:
+        """Open file ``name`` of the folder (default: a new name, by date) and write the
+        session's start: the robot at ``q``, the loop's settings, the placed ``constraints``
+        (id, constraint), the ``task_modes`` and each EE's target; its path.
+        A name already in the folder is refused: a recording never replaces another."""
+        if self._recorder is not None:
+            raise ValueError(f"already recording to {self._recorder.path.name}")
+        if name is None:
+            name = self.folder.unused_name(f"session-{datetime.now():%Y%m%d-%H%M%S}")
+        path = self.folder.new(name)
+        self._recorder = SessionRecorder(path, robot, q, rate_hz=config.rate, kp=config.kp,
+                                         target_time_constant_s=config.target_time_constant)
+        self._start = self._clock()
+        for entry_id, constraint in constraints:
+            self._recorder.add(0.0, entry_id, constraint)
+        self._recorder.task_modes(0.0, task_modes)
+        for ee, pose in enumerate(targets):
+            self.target(ee, pose)
+        return self._recorder.path
 
-    def stop_recording(self) -> Path:
-        with self._lock:
-            if self.recorder is None:
-                raise ValueError("not recording")
-            recorder, self.recorder = self.recorder, None
-            recorder.close(self.recording_time)
-            return recorder.path
+    def stop(self) -> Path:
+        """Close the session file; its path."""
+        if self._recorder is None:
+            raise ValueError("not recording")
+        recorder, self._recorder = self._recorder, None
+        recorder.close(self.time)
+        return recorder.path
 
-    def _record_target(self, ee: int) -> None:
-        """Write EE ``ee``'s target to the session when recording (a single-EE robot's
-        events name no frame)."""
-        if self.recorder is None:
+    def target(self, ee: int, pose: pin.SE3) -> None:
+        """EE ``ee``'s target (a single-EE robot's events name no frame)."""
+        if self._recorder is None:
             return
-        hand = self.inputs[ee]
-        if len(self.inputs) == 1:
-            self.recorder.target(self.recording_time, hand.target)
+        if len(self._ee_frames) == 1:
+            self._recorder.target(self.time, pose)
         else:
-            self.recorder.target(self.recording_time, hand.target, frame=hand.frame)
+            self._recorder.target(self.time, pose, frame=self._ee_frames[ee])
+
+    def add(self, entry_id: str, constraint: Constraint) -> None:
+        """A constraint placed."""
+        if self._recorder is not None:
+            self._recorder.add(self.time, entry_id, constraint)
+
+    def remove(self, entry_id: str) -> None:
+        """A constraint removed."""
+        if self._recorder is not None:
+            self._recorder.remove(self.time, entry_id)
+
+    def move(self, entry_id: str, position: np.ndarray, velocity: np.ndarray) -> None:
+        """A constraint's point moving."""
+        if self._recorder is not None:
+            self._recorder.move(self.time, entry_id, position, velocity)
+
+    def task_modes(self, modes: tuple[str, ...]) -> None:
+        """The task modes the loops run in now."""
+        if self._recorder is not None:
+            self._recorder.task_modes(self.time, modes)
+
+    def input(self, name: str, ee: int, counts: dict[str, int], latencies: np.ndarray) -> None:
+        """An input device's counts and latencies."""
+        if self._recorder is not None:
+            self._recorder.input(self.time, name, ee, counts, latencies)

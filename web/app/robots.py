@@ -119,8 +119,7 @@ class Robots:
             return
         for loop in self.loops.values():
             loop.set_task_modes(modes, self._twist_weight(modes, self.orientation_weight))
-        if self.recorder is not None:
-            self.recorder.task_modes(self.recording_time, modes)
+        self.recorder.task_modes(modes)
 
     def resolved_task_modes(self, constraints: list[Constraint] | None = None,
                             task_mode: str | None = None) -> tuple[str, ...]:

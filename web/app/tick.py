@@ -13,7 +13,6 @@ import numpy as np
 import pinocchio as pin
 
 from constraints.collision import CollisionAvoidance, CollisionRows
-from teleop.experiments.sessions import SessionRecorder
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop import PendingStep
 from teleop.loop.moving_geometry import advance, steer
@@ -23,6 +22,7 @@ from .console import EEInput
 from .editing import ConstraintEntry
 from .force_control import ForceControl
 from .limits import HISTORY_RATE
+from .recording import SessionRecording
 from .trace import Trace
 
 #: moved geometry is written to a recording every this many ticks while it moves
@@ -41,7 +41,7 @@ class Tick:
     obstacles: dict[str, ObstacleEntry]
     inputs: list[EEInput]
     devices: list
-    recorder: SessionRecorder | None
+    recorder: SessionRecording
     avoidance: CollisionAvoidance
     collisions_on: bool
     collision_rows: dict[str, CollisionRows | None]
@@ -126,9 +126,9 @@ class Tick:
                 entry.settled = True
                 continue
             steer(geometry, entry.goal, dt, smoothing=alpha)
-            if (self.recorder is not None and isinstance(entry, ConstraintEntry)
+            if (self.recorder.active and isinstance(entry, ConstraintEntry)
                     and self.ticks % RECORD_MOVES_EVERY == 0 and np.any(geometry.velocity)):
-                self.recorder.move(self.recording_time, entry.id,
+                self.recorder.move(entry.id,
                                    geometry.position, geometry.velocity)
 
     def _measure(self, pending: dict[str, PendingStep],

@@ -113,7 +113,7 @@ class View:
                         "target": targets[0].copy(), "gizmo": self.gizmo.copy(),
                         "clutch": self.clutch, "motion_scale": self.motion_scale,
                         "ghost_offset": self.ghost_offset.copy(),
-                        "recording": self.recorder is not None,
+                        "recording": self.recorder.active,
                         "config": self.config, "gain": self.gain, "damping": self.damping,
                         "plant": self.plant, "collisions": self._collisions_snapshot(),
                         "devices": self.devices_snapshot(),

@@ -212,7 +212,7 @@ class Panels:
         self.rate_number.value = app.config.rate
 
     def _toggle_recording(self) -> None:
-        if self.app.recorder is None:
+        if not self.app.recorder.active:
             path = self.app.start_recording()
             self.record_button.label = "Stop recording"
             self.record_status.content = f"recording to `{path.name}`"
