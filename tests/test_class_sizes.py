@@ -12,8 +12,8 @@ import pkgutil
 import web
 
 #: The largest class's methods now (``TeleopApp``: 100 with 12 mixins before the
-#: recording left it as a component); the closing target is 30.
-MOST_METHODS = 98
+#: recording and the way home left it as components); the closing target is 30.
+MOST_METHODS = 95
 
 #: Functions, properties and static or class methods are methods here.
 METHOD_KINDS = (property, staticmethod, classmethod)

@@ -224,7 +224,7 @@ def test_home_says_why_it_cannot_be_reached(sda10f, tmp_path):
     assert words.endswith("remove it to go home")
     for _ in range(200):
         app.step()
-    assert app.homing is None and app.limitation().words == f"home not reached: {words}"
+    assert not app.homing.active and app.limitation().words == f"home not reached: {words}"
 
 
 @pytest.mark.parametrize("direction", [(-1.0, -1.0, 0.0), (0.0, 1.0, 1.0), (1.0, 1.0, 0.0)])
@@ -249,7 +249,7 @@ def test_a_5_cm_drag_through_a_hole_on_link_6_reaches_the_target_and_home(
         assert reached.distance < 1e-3 and "short of the target" not in reached.words, which
     assert app.limitation().details == ""  # the step's words are not needed: nothing short
     assert app.home() == ""
-    while app.homing is not None:
+    while app.homing.active:
         app.step()
     for _ in range(1000):
         app.step()

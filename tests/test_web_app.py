@@ -176,14 +176,14 @@ def test_home_keeps_the_constraints_and_clear_removes_them(app):
     start = ee_position(app).copy()
     # with a constraint: a joint path home that keeps it, its EE poses followed in full pose
     assert app.home() == ""
-    assert list(app.entries) == [hole_id] and app.homing is not None
+    assert list(app.entries) == [hole_id] and app.homing.active
     assert app.loops["main"].task_modes == ("pose",)
     assert app.limitation().words.startswith("going home through the constraints")
     np.testing.assert_allclose(app.target.translation, start, atol=1e-12)  # from where it is
     np.testing.assert_allclose(app.gizmo.translation, start, atol=1e-12)
     home = app.loops["main"].ee_placement(app.robot.q_home)
-    run(app, app.homing.times[-1] + 0.6)
-    assert app.homing is None and app.loops["main"].task_modes == ("position_roll",)
+    run(app, app.homing.run.times[-1] + 0.6)
+    assert not app.homing.active and app.loops["main"].task_modes == ("position_roll",)
     np.testing.assert_allclose(app.target.translation, home.translation, atol=1e-9)
     assert np.linalg.norm(ee_position(app) - home.translation) < 1e-4
     assert np.max(np.abs(app.loops["main"].q - app.robot.q_home)) < 1e-3

@@ -169,8 +169,8 @@ def test_nudges_home_and_gizmo_to_target_act_on_one_ee(app, dual):
     np.testing.assert_allclose(app.inputs[1].target.translation,
                                home[1].translation + [0, 0, 0.01], atol=1e-12)
     # every EE, the constraint stays: the robot goes home on a path that keeps it
-    assert app.home() == "" and app.homing is not None
-    while app.homing is not None:
+    assert app.home() == "" and app.homing.active
+    while app.homing.active:
         app.step()
     assert all(app.inputs[k].target.isApprox(home[k], 1e-12) for k in (0, 1))
     assert len(app.entries) == 1

@@ -15,6 +15,7 @@ gizmo moves its own target.
 
 from __future__ import annotations
 
+import copy
 import math
 import threading
 from dataclasses import dataclass
@@ -110,8 +111,9 @@ class Console:
         """EE ``ee``'s target pose (caller holds the lock); recorded when recording. It
         ends a way home being followed, where it is, and forgets why the last one
         stopped short (:mod:`.homing`)."""
-        self._end_homing()
-        self.home_words = ""
+        if self.homing.end():
+            self._apply_task_modes()
+        self.homing.forget()
         self.inputs[ee].target = target
         self.recorder.target(ee, target)
 
@@ -203,9 +205,18 @@ class Console:
         indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
         if ee is None and self.entries:
             with self._lock:
+                loop = self.loops["main"]
                 for index in indices:  # from where the robot is: no jump when it starts
-                    self._put_hand(index, self.loops["main"].ee_placements()[index])
-            return self._start_homing()
+                    self._put_hand(index, loop.ee_placements()[index])
+                q, frames = loop.q.copy(), list(loop.controller.constraint_frames)
+                constraints = [copy.copy(constraint) for constraint in loop.constraints]
+                caps = self.config.max_linear_speed, self.config.max_angular_speed
+            # outside the lock (milliseconds to tens of them) while the robot holds its targets
+            run = self.homing.plan(q, constraints, frames, caps)
+            with self._lock:
+                words = self.homing.follow(run, self.now)
+                self._apply_task_modes()  # the loops in full pose while it runs
+            return words
         with self._lock:
             if ee is None:
                 for loop in self.loops.values():

@@ -35,7 +35,7 @@ from .console import Console, EEInput
 from .devices import Devices
 from .editing import ConstraintEntry, Editing
 from .force_control import ForceControl
-from .homing import Homing
+from .homing import WayHome
 from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
 from .plant import PlantChoice, Plants
 from .recording import SessionRecording
@@ -49,7 +49,7 @@ from .view import View
 
 
 class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings, Scenes, Tick,
-                View, Homing):
+                View):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
 
@@ -114,8 +114,7 @@ class TeleopApp(Console, Devices, Editing, Collisions, Robots, Plants, Settings,
         #: what the operator commands of each EE (docs/design.md section 20): a mode of
         #: ``teleop.loop.task_modes.TASK_MODES`` or ``auto``, what the ports allow
         self.task_mode = AUTO
-        self.homing = None  # the way home followed now (:mod:`.homing`)
-        self.home_words = ""
+        self.homing = WayHome(robot)  # the way home followed now (:mod:`.homing`)
         self.recordings = Folder(record_dir, "recording", ".jsonl")
         self.scenes = Folder(scene_dir, "scene", ".json")
         self.record_dir, self.scene_dir = self.recordings.root, self.scenes.root

@@ -9,14 +9,12 @@ says why. Any target the operator sets meanwhile ends it where it is.
 
 from __future__ import annotations
 
-import copy
-import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
 
-from teleop.loop import LoopConfig, TeleopLoop
+from constraints import Constraint
 from teleop.loop.homing import HOME_TOLERANCE, path_poses, path_times, plan_home_path
 from teleop.robots import Robot
 
@@ -39,73 +37,75 @@ class HomeRun:
     end: np.ndarray  # the last configuration of the path
 
 
-class Homing:
-    """Home through the constraints for :class:`web.app.TeleopApp` (its state:
-    :attr:`homing`, the run followed now or None; :attr:`home_words`, why the last one
-    could not reach home, empty when it could)."""
+class WayHome:
+    """Home through the constraints, a component of :class:`web.app.TeleopApp`: it owns
+    the run followed now (:attr:`run`, or None) and why the last one could not reach home
+    (:attr:`words`, empty when it could). The app calls it under its lock, but
+    :meth:`plan`, which runs outside it on copies of the constraints.
 
-    robot: Robot
-    config: LoopConfig
-    entries: dict
-    inputs: list
-    specs: dict[str, str]
-    loops: dict[str, TeleopLoop]
-    homing: HomeRun | None
-    home_words: str
-    _lock: threading.RLock
+    Parameters
+    ----------
+    robot : the robot (its model, home configuration and EE frames).
+    """
 
-    def _start_homing(self) -> str:
-        """Plan the way home from where the main robot is and follow it (caller holds
-        no lock: the plan, milliseconds to tens of them, runs outside it on copies of the
-        constraints while the robot holds its targets); the words of :attr:`home_words`."""
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        self.run: HomeRun | None = None
+        self.words = ""
+
+    @property
+    def active(self) -> bool:
+        """Whether a way home is being followed."""
+        return self.run is not None
+
+    def plan(self, q: np.ndarray, constraints: list[Constraint], frames: list[int],
+             caps: tuple[float, float]) -> HomeRun:
+        """The way home from ``q`` whose steps keep the ``constraints`` (at their
+        ``frames``), its samples timed at the speed ``caps`` (linear, angular) from 0 (no
+        lock needed: it reads only its arguments and the robot)."""
         model = self.robot.model
-        with self._lock:
-            loop = self.loops["main"]
-            q = loop.q.copy()
-            constraints = [copy.copy(constraint) for constraint in loop.constraints]
-            frames = list(loop.controller.constraint_frames)
-            caps = self.config.max_linear_speed, self.config.max_angular_speed
         path = plan_home_path(model, q, self.robot.q_home, constraints, frames)
         poses = path_poses(model, path.configurations, self.robot.ee_frame_ids)
         times = path_times(model, path.configurations, poses, *caps)
-        with self._lock:
-            self.homing = HomeRun(poses, times, self.now, path.words, path.configurations[-1])
-            self.home_words = path.words
-            self._apply_task_modes()  # the loops in full pose while it runs
-        return path.words
+        return HomeRun(poses, times, 0.0, path.words, path.configurations[-1])
 
-    def _follow_homing(self) -> None:
-        """The targets on the way home at the app's time (caller holds the lock, once a
-        period before the loops advance; the gizmos stay, whose next motion moves the
-        targets from there); once the main robot is at its last sample (or
-        :data:`HOME_SETTLE` after it is due there), the targets stay there and the
-        session's task mode returns."""
-        run = self.homing
-        if run is None:
-            return
-        elapsed = self.now - run.start
+    def follow(self, run: HomeRun, now: float) -> str:
+        """Follow a way :meth:`plan` made, from app time ``now``; the words of
+        :attr:`words`."""
+        self.run = replace(run, start=now)
+        self.words = run.words
+        return run.words
+
+    def targets(self, now: float, q: np.ndarray) -> tuple[list[pin.SE3], bool]:
+        """The targets on the way home at app time ``now`` with the main robot at ``q``,
+        and whether the run is over: the main robot is at its last sample (or
+        :data:`HOME_SETTLE` after it is due there). Called once a period while
+        :attr:`active`; the run ends (:meth:`end`) when the caller is done with it."""
+        run = self.run
+        assert run is not None
+        elapsed = now - run.start
         index = int(np.searchsorted(run.times, elapsed, side="right")) - 1
-        for ee, pose in enumerate(run.poses[min(index, len(run.poses) - 1)]):
-            self.inputs[ee].target = pose.copy()  # the gizmo stays: its next move is relative
-            self.recorder.target(ee, pose)
-        arrived = np.max(np.abs(self.loops["main"].q - run.end)) < HOME_TOLERANCE
-        if elapsed >= run.times[-1] and (arrived or elapsed >= run.times[-1] + HOME_SETTLE):
-            self._end_homing()
+        poses = [pose.copy() for pose in run.poses[min(index, len(run.poses) - 1)]]
+        arrived = np.max(np.abs(q - run.end)) < HOME_TOLERANCE
+        over = elapsed >= run.times[-1] and (arrived or elapsed >= run.times[-1] + HOME_SETTLE)
+        return poses, bool(over)
 
-    def _end_homing(self) -> None:
-        """The run over (caller holds the lock): the targets stay where they are, the
-        loops return to the session's task mode."""
-        if self.homing is None:
-            return
-        self.homing = None
-        self._apply_task_modes()
+    def end(self) -> bool:
+        """The run over, the targets staying where they are; whether one was followed."""
+        followed, self.run = self.run is not None, None
+        return followed
 
-    def homing_words(self) -> str:
-        """What "Home" is doing or why it stopped short, in words; ``""`` otherwise."""
-        with self._lock:
-            run = self.homing
-            if run is not None:
-                share = min(1.0, (self.now - run.start) / max(run.times[-1], 1e-9))
-                return (f"going home through the constraints ({100 * share:.0f} %)"
-                        + (f"; it will stop short: {run.words}" if run.words else ""))
-            return f"home not reached: {self.home_words}" if self.home_words else ""
+    def forget(self) -> None:
+        """The operator moved a target: any run ends where it is, and why the last one
+        stopped short no longer applies."""
+        self.words = ""
+
+    def words_at(self, now: float) -> str:
+        """What "Home" is doing at app time ``now`` or why it stopped short, in words;
+        ``""`` otherwise."""
+        run = self.run
+        if run is not None:
+            share = min(1.0, (now - run.start) / max(run.times[-1], 1e-9))
+            return (f"going home through the constraints ({100 * share:.0f} %)"
+                    + (f"; it will stop short: {run.words}" if run.words else ""))
+        return f"home not reached: {self.words}" if self.words else ""

@@ -26,6 +26,7 @@ from teleop.loop.task_modes import AUTO, port_task_modes, task_modes, task_weigh
 from teleop.robots import Robot
 
 from .force_control import ForceControl
+from .homing import WayHome
 from .limits import MAX_GHOST_OFFSET
 from .plant import PlantChoice
 from .ros2_robot import Ros2Robot
@@ -61,7 +62,7 @@ class Robots:
     gain: float
     orientation_weight: float
     task_mode: str
-    homing: object
+    homing: WayHome
     entries: dict
     specs: dict[str, str]
     loops: dict[str, TeleopLoop]
@@ -127,7 +128,7 @@ class Robots:
         the session's) for every EE, ``auto`` resolved to what the chain's constraints
         (default: the placed ones) allow; the full pose while "Home" runs (:mod:`.homing`)."""
         mode = self.task_mode if task_mode is None else task_mode
-        if self.homing is not None:  # the way home is followed in full pose (section 20.3)
+        if self.homing.active:  # the way home is followed in full pose (section 20.3)
             mode = "pose"
         if constraints is None:
             constraints = [e.constraint for e in self.entries.values()]
@@ -156,7 +157,7 @@ class Robots:
         a build ran outside the lock, the build is redone under the lock."""
         return (tuple(id(e.constraint) for e in self.entries.values()), self.gain,
                 self.damping, self.config, self.orientation_weight, self.task_mode,
-                id(self.homing), tuple(self.specs.items()), id(self._attached()))
+                id(self.homing.run), tuple(self.specs.items()), id(self._attached()))
 
     def _rebuild(self, specs: dict[str, str], config: LoopConfig | None = None,
                  orientation_weight: float | None = None) -> None:

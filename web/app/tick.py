@@ -22,6 +22,7 @@ from .console import EEInput
 from .editing import ConstraintEntry
 from .force_control import ForceControl
 from .limits import HISTORY_RATE
+from .homing import WayHome
 from .recording import SessionRecording
 from .trace import Trace
 
@@ -42,6 +43,7 @@ class Tick:
     inputs: list[EEInput]
     devices: list
     recorder: SessionRecording
+    homing: WayHome
     avoidance: CollisionAvoidance
     collisions_on: bool
     collision_rows: dict[str, CollisionRows | None]
@@ -76,7 +78,8 @@ class Tick:
                 self._steer(moving, dt)
             if self.devices:
                 self._apply_devices(dt)
-            self._follow_homing()
+            if self.homing.active:
+                self._follow_homing()
             targets, start = [hand.target for hand in self.inputs], self.now
             self.force.feed(self.loops)  # each force law's sensor reading
             held: dict[str, CollisionRows] = {}
@@ -100,6 +103,19 @@ class Tick:
             self.ticks += 1
             self.advance_us = sum(step.tick_time_us for step in pending.values())
             return sum(step.step_time_us for step in pending.values())
+
+    def _follow_homing(self) -> None:
+        """The targets on the way home at the app's time (caller holds the lock, once a
+        period before the loops advance, while :attr:`homing` is active; the gizmos stay,
+        whose next motion moves the targets from there); once the run is over, the
+        targets stay there and the session's task mode returns (:mod:`.homing`)."""
+        poses, over = self.homing.targets(self.now, self.loops["main"].q)
+        for ee, pose in enumerate(poses):
+            self.inputs[ee].target = pose
+            self.recorder.target(ee, pose)
+        if over:
+            self.homing.end()
+            self._apply_task_modes()
 
     def _advance(self, which: str, loop: TeleopLoop, targets: list[pin.SE3],
                  held: dict[str, CollisionRows]) -> PendingStep:

@@ -61,8 +61,8 @@ class View:
         target = self.inputs[ee].target
         constraints = {entry.id: entry.constraint for entry in self.entries.values()}
         return self._described(loop.controller.info, self.last_records.get(which), placement,
-                               target, loop.refused or self._stopped(), ee, loop.task_modes[ee], constraints,
-                               self.homing_words())
+                               target, loop.refused or self._stopped(), ee, loop.task_modes[ee],
+                               constraints, self.homing.words_at(self.now))
 
     def _stopped(self) -> str:
         """Why the robot on the wire is stopped (:meth:`.ros2_robot.Ros2Robot.stopped`)."""
@@ -162,7 +162,7 @@ class View:
                 "links": links, "record": self.last_records.get(which),
                 "columns": self.traces[which].columns() if history else None,
                 "info": loop.controller.info, "refused": loop.refused,
-                "task_modes": loop.task_modes, "homing": self.homing_words(),
+                "task_modes": loop.task_modes, "homing": self.homing.words_at(self.now),
                 "active_inequalities": self.active_inequalities(which),
                 "active_pairs": self.active_pairs(which),
                 # the rows its controller computed last (immutable), or None
