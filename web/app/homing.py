@@ -3,7 +3,7 @@
 (:func:`teleop.loop.homing.plan_home_path`), and the targets follow its EE poses in full
 pose (the loops' task mode for the while), paced at 0.8 of the loop's caps; then every
 target rests on its home pose and the session's task mode returns. When home cannot be
-reached through the constraints, the path goes as far as it can and :attr:`home_words`
+reached through the constraints, the path goes as far as it can and :attr:`WayHome.words`
 says why. Any target the operator sets meanwhile ends it where it is.
 """
 
