@@ -78,7 +78,7 @@ def test_spacemouse_without_a_device_is_one_warning_line_and_the_ui_runs():
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--input", "serial:/dev/ttyS0"], "expected udp:PORT or spacemouse"),
+    (["--input", "serial:/dev/ttyS0"], "expected udp:PORT, ros2:NAMESPACE or spacemouse"),
     (["--input", "udp:0"], "port"),
     (["--input", "udp:9870@nowhere"], "no end effector nowhere"),
     (["--input", "udp:9870", "--input", "udp:9871@0"], "already driven by udp:9870"),

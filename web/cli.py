@@ -111,7 +111,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     devices = parser.add_argument_group("input devices (docs/inputs.md)")
     devices.add_argument("--input", action="append", metavar="SOURCE",
                          help="what drives an end effector besides the gizmo: udp:PORT (a "
-                              "network master, bound to --host) or spacemouse; each takes the "
+                              "network master, bound to --host), ros2:NAMESPACE (a CRTK master "
+                              "on ROS 2: servo_cp in, servo_cf out, docs/ros2.md) or "
+                              "spacemouse; each takes the "
                               "next EE, or the one named after @ (udp:9870@right); repeatable "
                               "(default: the gizmo only)")
     devices.add_argument("--input-key", metavar="FILE",
@@ -243,6 +245,18 @@ def _input_key(args: argparse.Namespace, prog: str) -> bytes | None:
     return key
 
 
+def _ros2_master(namespace: str, ee: int, domain: int | None, spec: str):
+    """A CRTK master on ROS 2 (``--input ros2:/MTMR``): its ``servo_cp`` drives EE ``ee``,
+    the feedback goes out on its ``servo_cf`` (docs/ros2.md); ``ValueError`` without the
+    ros2 extra or for a namespace ROS 2 refuses."""
+    try:
+        from teleop.inputs.ros2_master import Ros2Master
+    except ImportError as error:
+        raise ValueError(f"--input {spec} needs the ros2 extra (pip install '.[ros2]'): "
+                         f"{error}") from None
+    return Ros2Master(namespace, ee=ee, domain=domain)
+
+
 def _inputs(args: argparse.Namespace, robot, prog: str) -> list:
     """The input sources ``--input`` asks for, each on its EE; ``ValueError`` for a bad
     one or a port that cannot be bound. A SpaceMouse that is not there is one warning
@@ -268,8 +282,11 @@ def _inputs(args: argparse.Namespace, robot, prog: str) -> list:
             elif kind.startswith("udp:"):
                 sources.append(UdpMaster(check_port(kind[4:]), host=args.host, ee=ee,
                                          max_age=args.input_timeout / 1e3, key=key))
+            elif kind.startswith("ros2:"):
+                sources.append(_ros2_master(kind[5:], ee, args.ros_domain, spec))
             else:
-                raise ValueError(f"--input {spec}: expected udp:PORT or spacemouse")
+                raise ValueError(f"--input {spec}: expected udp:PORT, ros2:NAMESPACE or "
+                                 "spacemouse")
     except ValueError:
         for source in sources:
             source.close()
