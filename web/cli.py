@@ -261,10 +261,10 @@ def _inputs(args: argparse.Namespace, robot, prog: str) -> list:
     """The input sources ``--input`` asks for, each on its EE; ``ValueError`` for a bad
     one or a port that cannot be bound. A SpaceMouse that is not there is one warning
     line: the UI runs without it."""
-    from teleop.inputs import UdpMaster
+    from teleop.inputs import InputSource, UdpMaster
 
     key = _input_key(args, prog)
-    sources = []
+    sources: list[InputSource] = []
     try:
         for index, spec in enumerate(args.input or ()):
             kind, _, name = spec.partition("@")

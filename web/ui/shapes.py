@@ -109,7 +109,7 @@ class LinkProfile:
         axis = np.asarray(robot.link_axes.get(link, (0.0, 0.0, 1.0)) if axis is None else axis,
                           dtype=float)
         axis = axis / np.linalg.norm(axis)
-        points = []
+        pieces = []
         for geometry_model in (robot.visual_model, robot.collision_model):
             for geometry_object in getattr(geometry_model, "geometryObjects", ()):
                 if geometry_object.parentFrame != frame_id:
@@ -117,10 +117,10 @@ class LinkProfile:
                 in_link = frame.placement.actInv(geometry_object.placement)
                 local = _geometry_points(geometry_object.geometry)
                 if len(local):
-                    points.append(local @ in_link.rotation.T + in_link.translation)
-        if not points:
+                    pieces.append(local @ in_link.rotation.T + in_link.translation)
+        if not pieces:
             return empty
-        points = np.concatenate(points)
+        points = np.concatenate(pieces)
         along = points @ axis
         radial = np.linalg.norm(points - np.outer(along, axis), axis=1)
         return cls(along, radial)
