@@ -74,3 +74,23 @@ def test_the_scenarios_list_names_palpation(capsys):
     for name in ("palpation", "retraction", "retraction-y"):
         assert any(line.startswith(f"{name} ") for line in listed)
 
+
+
+@pytest.mark.parametrize("command", [
+    ["record", "--scenario", "retraction-y", "--plant", "mujoco", "{out}/run.npz"],
+    ["sweep", "--out", "{out}/sweep", "--scenarios", "paper-hole,retraction-y",
+     "--controllers", "cjm", "--plants", "mujoco"],
+])
+def test_record_and_sweep_send_a_contact_scenario_to_compare_by_name(tmp_path, capsys,
+                                                                     command):
+    """They run plans; a contact scenario's force law reads the plant's sensor every
+    period, which only ``teleop compare`` runs."""
+    code = main([word.format(out=tmp_path) for word in command])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert re.search(f"retraction-y is a contact scenario .*: teleop {command[0]} runs the "
+                     f"plan scenarios only; run it with teleop compare --scenario "
+                     f"retraction-y --plant mujoco", err), err
+    assert not (tmp_path / "run.npz").exists()
+    assert not (tmp_path / "sweep" / "results.sqlite").exists()

@@ -414,8 +414,10 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _record(args: argparse.Namespace) -> int:
+    from teleop.experiments.contact_compare import refuse_contact_scenario
     from teleop.experiments.sessions import record_plan
 
+    refuse_contact_scenario(args.scenario, "teleop record")
     path = record_plan(collision_choice(args, scenario_plan(args)), args.file,
                        args.rate, args.duration, plant=plant_choice(args))
     print(f"wrote {path}")

@@ -52,6 +52,17 @@ CONTACT_SCENARIOS: dict[str, ContactScenario] = {
 }
 
 
+def refuse_contact_scenario(name: str, command: str) -> None:
+    """``ValueError`` when ``name`` is a contact scenario and ``command`` (``teleop record``,
+    ``teleop sweep``) runs plans: a contact run's force law reads the plant's sensor every
+    period, which neither a recording's targets nor a sweep's cells carry, so only
+    ``teleop compare`` runs it."""
+    if name in CONTACT_SCENARIOS:
+        raise ValueError(f"{name} is a contact scenario (a force law between the operator and "
+                         f"the controller): {command} runs the plan scenarios only; run it with "
+                         f"teleop compare --scenario {name} --plant mujoco")
+
+
 def compare_contact(name: str, specs: Sequence[str], plant: PlantChoice, rate: float = 1000.0,
                     duration: float | None = None, sensor_noise: float = 0.0, seed: int = 0,
                     acceleration_limits: bool = True, jerk_limit: float | None = None,

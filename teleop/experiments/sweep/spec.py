@@ -317,6 +317,7 @@ def _check_grid(grid: dict[str, list[Any]]) -> None:
     too many, a constraint gain unstable at a rate (docs/design.md 3.4)."""
     from teleop.controller_specs import make_controller
     from teleop.experiments.compare import check_constraint_gain
+    from teleop.experiments.contact_compare import refuse_contact_scenario
     from teleop.experiments.scenarios import load_scenario
     from teleop.limits import MAX_STEPS
 
@@ -328,6 +329,7 @@ def _check_grid(grid: dict[str, list[Any]]) -> None:
         raise ValueError("calibration error needs the kinematic plant (plants lists mujoco)")
     for scenario, robot in itertools.product(grid["scenario"], grid.get("robot", [None])):
         try:
+            refuse_contact_scenario(scenario, "teleop sweep")
             plan = load_scenario(scenario, scenario_robot(scenario, robot))
         except ValueError as error:
             raise ValueError(f"scenarios: {error}") from None
