@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from cyclonedds.core import Listener
 from cyclonedds.sub import DataReader
@@ -422,7 +423,6 @@ def test_the_simulated_robot_publishes_its_port_force(robot, domain, peer):
     ``-k (P - c)`` (docs/design.md 17.2) at the port of the published joint state,
     computed here with Pinocchio (measured: equal to the last digit; the damper's share, the
     creep of a held drive, is allowed 1%)."""
-    import pinocchio as pin
 
     from teleop.plants.ros2.messages import WrenchStamped
     from teleop.plants.walls import wall_of
@@ -484,3 +484,57 @@ def test_the_sims_ports_refuse_bad_options_by_name(domain, options, message):
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 2
     assert message in done.stderr and "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("latency", [0, 1, 2])
+def test_the_state_is_moved_on_by_the_commands_in_flight(robot, domain, fake, latency):
+    """``sense`` is the last state moved on by the last ``command_latency`` commands
+    published (the robot applies them after the state it sent): written out here with
+    Pinocchio's integration; 0: the state as received."""
+    names = model_joint_names(robot.model)
+    state = [0.1 * (i + 1) for i in range(len(names))]
+    fake(names, state)
+    settings = settings_for(domain, start_timeout=30.0, stale_after=10.0,
+                            command_latency=latency)
+    commands = [np.linspace(0.1, 0.3, robot.model.nv), np.linspace(-0.2, 0.4, robot.model.nv)]
+    with Ros2Plant(robot, DT, settings) as plant:
+        plant.reset()
+        q = plant.sense(robot.q_home)
+        np.testing.assert_array_equal(q, state)
+        for command in commands:
+            plant.actuate(command, q, [])
+        in_flight = sum(commands[len(commands) - latency:], np.zeros(robot.model.nv))
+        expected = pin.integrate(robot.model, np.array(state), in_flight * DT)
+        np.testing.assert_allclose(plant.sense(q), expected, rtol=0.0, atol=1e-15)
+        plant.reset()  # nothing in flight after a reset
+        np.testing.assert_array_equal(plant.sense(q), state)
+
+
+@pytest.mark.parametrize("latency", [-1, 11, 1.0, True, "1"])
+def test_a_command_latency_out_of_range_is_refused_by_name(latency):
+    with pytest.raises(ValueError, match="command_latency must be a whole number of periods"):
+        Ros2Settings(command_latency=latency)
+
+
+def test_the_simulated_robot_counts_the_wires_jitter(robot, domain, peer):
+    """Two commands in one period: the newest acts, one superseded; a period with none:
+    the last held; the counts as the sim reports them."""
+    from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
+
+    sim = SimulatedRos2Robot(robot, 500.0, settings_for(domain))
+    try:
+        writer = peer.writer(COMMANDS, Float64MultiArray)
+        assert wait_for(lambda: writer.get_publication_matched_status().current_count == 1)
+        first, second = np.full(robot.model.nv, 0.1), np.full(robot.model.nv, 0.2)
+        for command in (first, second):
+            writer.write(Float64MultiArray(data=list(command)))
+        assert wait_for(lambda: len(sim._commands.read(64)) == 2)
+        q = sim.q.copy()
+        sim.step()
+        sim.step()
+        assert (sim.periods, sim.commands, sim.superseded, sim.held) == (2, 2, 1, 1)
+        np.testing.assert_allclose(sim.q, pin.integrate(robot.model, q, 2 * second / 500.0),
+                                   rtol=0.0, atol=1e-15)
+        assert sim.jitter_words().startswith("2 periods, 2 commands: 1 periods held")
+    finally:
+        sim.close()

@@ -66,4 +66,5 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         sim.close()
+        print(f"teleop sim: {sim.jitter_words()}", file=sys.stderr, flush=True)
     return 0

@@ -21,6 +21,7 @@ too, when the loop stops actuating for ``stale_after`` (it may command again).""
 from __future__ import annotations
 
 import atexit
+from collections import deque
 import math
 import threading
 import time
@@ -108,6 +109,9 @@ class Ros2Plant:
         self._waitset.attach(ReadCondition(self._states, SampleState.Any | ViewState.Any
                                            | InstanceState.Any))
         self._state_order: np.ndarray | None = None
+        #: the last ``settings.command_latency`` commands published, oldest first: the
+        #: robot applies them after the state it last sent (:meth:`sense`)
+        self._in_flight: deque[np.ndarray] = deque(maxlen=self.settings.command_latency)
         self._state_names: list[str] = []
         self._refused = ""  # why the joint states' names are refused
         self._q: np.ndarray | None = None
@@ -163,7 +167,9 @@ class Ros2Plant:
                     self.last_measures.operating_state = state.state
 
     def _publish(self, qd: np.ndarray) -> None:
-        """``qd`` (model order) on the command topic (caller holds the lock)."""
+        """``qd`` (model order) on the command topic, and among the commands in flight
+        (caller holds the lock)."""
+        self._in_flight.append(qd.copy())
         values = [float(v) for v in qd[self._command_order]]
         if self.settings.crtk:
             self._writer.write(JointState(name=self._command_names, velocity=values))
@@ -232,15 +238,24 @@ class Ros2Plant:
             self.last_measures = Ros2Measures(states=self.last_measures.states)
             self._commanding = False
             self._q = None  # a fresh state is awaited, its names checked again
+            self._in_flight.clear()
             self._state_names = []
         self.wait_for_state()
         self._period_start = time.monotonic()
 
     def sense(self, q: np.ndarray) -> np.ndarray:
-        """The robot's last state (model order); before any, ``q``."""
+        """Where the robot is when the next command acts (model order; before any state,
+        ``q``): its last state moved on by the commands in flight, ``q_s + sum(c_i) dt``
+        over the last ``settings.command_latency`` commands (a velocity controller applies
+        a command at its first update after receiving it, while the state it last sent
+        already went out: one period; docs/ros2.md "Measured"). 0: the last state."""
         with self._lock:
             self._take_states()
-            return q.copy() if self._q is None else self._q.copy()
+            if self._q is None:
+                return q.copy()
+            if not self._in_flight:
+                return self._q.copy()
+            return pin.integrate(self.model, self._q, sum(self._in_flight) * self.dt)
 
     def actuate(self, qd: np.ndarray, q: np.ndarray,
                 constraints: Sequence[Constraint]) -> np.ndarray:

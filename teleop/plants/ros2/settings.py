@@ -11,6 +11,9 @@ from constraints.validation import short_repr
 
 from .names import dds_topic, domain_id
 
+#: the most control periods :attr:`Ros2Settings.command_latency` predicts over
+MAX_COMMAND_LATENCY = 10
+
 
 @dataclass(frozen=True)
 class Ros2Settings:
@@ -28,6 +31,10 @@ class Ros2Settings:
     domain : the ROS 2 domain id (None: ``ROS_DOMAIN_ID``, else 0).
     stale_after : a state older than this (s) stops the robot (the watchdog).
     start_timeout : how long (s) :meth:`Ros2Plant.reset` waits for the first state.
+    command_latency : control periods between a state the robot sends and the update
+        that applies the command computed from it (ros2_control: 1, the command waits
+        for the controller's next update); :meth:`Ros2Plant.sense` moves the state on by
+        the commands in flight (0: the state as received).
     """
 
     joint_states: str = "/joint_states"
@@ -37,6 +44,7 @@ class Ros2Settings:
     domain: int | None = None
     stale_after: float = 0.05
     start_timeout: float = 5.0
+    command_latency: int = 1
 
     def __post_init__(self) -> None:
         """``ValueError`` naming the field: a topic ROS 2 refuses, a domain outside
@@ -51,6 +59,10 @@ class Ros2Settings:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ValueError(f"{name} must be a positive number of seconds, got {value!r}")
+        if (isinstance(self.command_latency, bool) or not isinstance(self.command_latency, int)
+                or not 0 <= self.command_latency <= MAX_COMMAND_LATENCY):
+            raise ValueError(f"command_latency must be a whole number of periods in [0, "
+                             f"{MAX_COMMAND_LATENCY}], got {self.command_latency!r}")
         joints = tuple(self.command_joints)
         if len(set(joints)) != len(joints):
             raise ValueError(f"command_joints names a joint twice: {list(joints)}")

@@ -76,6 +76,14 @@ class SimulatedRos2Robot:
             plant.reset(self.q)
         self.command = np.zeros(self.model.nv)  # model order, held
         self.commands = 0
+        #: the wire's jitter as the robot sees it (docs/ros2.md "Measured"): periods run;
+        #: periods after the first command with no new one (the last held, acting twice);
+        #: commands another arrived after within the same period (never acting); periods
+        #: that started more than half a period late on the robot's own clock
+        self.periods = 0
+        self.held = 0
+        self.superseded = 0
+        self.late = 0
         self.node = Ros2Node(self.settings.domain)
         self._states = self.node.writer(self.settings.state_topic, JointState)
         crtk = bool(self.settings.crtk)
@@ -89,6 +97,8 @@ class SimulatedRos2Robot:
         self._stop = threading.Event()
 
     def _take_command(self) -> None:
+        """The newest good command held; the jitter counts of the period."""
+        taken = 0
         for sample in self._commands.take(64):
             values = (sample.velocity if isinstance(sample, JointState)
                       else getattr(sample, "data", None))
@@ -98,6 +108,9 @@ class SimulatedRos2Robot:
             if np.all(np.isfinite(command)):
                 self.command = command
                 self.commands += 1
+                taken += 1
+        self.superseded += max(0, taken - 1)
+        self.held += taken == 0 and self.commands > 0
 
     def step(self) -> None:
         """One period: the state published, the newest command taken, the robot moved."""
@@ -108,6 +121,7 @@ class SimulatedRos2Robot:
         if self._operating is not None:
             self._operating.write(OperatingState(header=stamp, state="ENABLED", is_homed=True))
         self._take_command()
+        self.periods += 1
         moved = (self.command if self.plant is None
                  else self.plant.actuate(self.command, self.q, self.constraints))
         self.q = pin.integrate(self.model, self.q, moved * self.dt)
@@ -125,9 +139,16 @@ class SimulatedRos2Robot:
         while not self._stop.is_set():
             if duration is not None and time.monotonic() - start >= duration:
                 return
+            self.late += time.monotonic() - deadline > 0.5 * self.dt
             self.step()
             deadline = max(deadline + self.dt, time.monotonic())
             self._stop.wait(max(0.0, deadline - time.monotonic()))
+
+    def jitter_words(self) -> str:
+        """The jitter counts in one line."""
+        return (f"{self.periods} periods, {self.commands} commands: {self.held} periods held "
+                f"the last command (none new), {self.superseded} commands superseded in "
+                f"their period, {self.late} periods started over half a period late")
 
     def stop(self) -> None:
         """:meth:`run` returns after its period."""
