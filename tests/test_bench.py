@@ -281,3 +281,20 @@ def test_the_loop_bench_times_every_period_of_both_paths():
     for timing in (compiled, python):  # a sum over the ticks: half of them >= the median
         assert timing.loop_time_s >= timing.ticks / 2 * timing.tick_median_us * 1e-6
         assert timing.tick_median_us <= timing.tick_p99_us
+
+
+def test_the_measured_period_line_times_compare_s_periods():
+    """``teleop bench``'s compare line: every period timed around ``tick`` (so at least its
+    compiled tick), the ratio the medians', the target marked when missed."""
+    from teleop.experiments.bench_loop import (MeasuredPeriod, format_measured_period_line,
+                                               time_measured_period)
+
+    period = time_measured_period("paper-hole", duration=0.1)
+    assert period.ticks == 100
+    assert period.period_median_us >= period.tick_median_us > 0.0
+    assert period.period_median_us <= period.period_p99_us
+    assert period.ratio == period.period_median_us / period.tick_median_us
+    assert "3.00x (target" in format_measured_period_line(
+        MeasuredPeriod("paper-hole", 10, 30.0, 40.0, 10.0))
+    assert "3.10x* (target" in format_measured_period_line(
+        MeasuredPeriod("paper-hole", 10, 31.0, 40.0, 10.0))

@@ -459,7 +459,9 @@ def _bench(args: argparse.Namespace) -> int:
     from teleop.experiments.bench import (check_json_path, format_table, run_bench, run_scaling,
                                           write_json)
     from teleop.experiments.bench_loop import (format_acceleration_line, format_loop_table,
-                                               run_acceleration_bench, run_loop_bench)
+                                               format_measured_period_line,
+                                               run_acceleration_bench, run_loop_bench,
+                                               time_measured_period)
 
     iterations = 20 if args.quick else args.iterations
     plant = plant_choice(args)  # checked even when --plant is left out
@@ -479,6 +481,8 @@ def _bench(args: argparse.Namespace) -> int:
         print()
         print(format_loop_table(loop_timings, step_us))
         print(format_acceleration_line(*run_acceleration_bench(
+            duration=1.0 if args.quick else None)))
+        print(format_measured_period_line(time_measured_period(
             duration=1.0 if args.quick else None)))
     for r in results:
         if r.solver_messages:

@@ -6,7 +6,10 @@ compiled tick and once on the loop's Python path; beside them the controller's s
 (``solve`` from Python at the same configurations and twists), so that the tick's cost
 beyond the step reads against the issue's targets: at most 0.5x the step, and a 10 s run
 in at most 0.15 s of loop time where the hole step takes 4.5 us (scaled by the step's
-median here: absolute times differ 3x between machines of one class).
+median here: absolute times differ 3x between machines of one class). Then ``teleop
+compare``'s period, :meth:`teleop.loop.TeleopLoop.tick` (the hot path and the measures of
+docs/design.md section 7), against the compiled tick of the same periods (issue 37: at
+most 3x).
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ BEYOND_STEP_TARGET = 0.5
 ACCELERATION_SCENARIO = "fast-lateral"
 #: the compiled tick with acceleration limits, at most this times the tick without
 ACCELERATION_COST_TARGET = 1.5
+#: ``teleop compare``'s period (the tick and its measures), at most this times the tick
+MEASURED_PERIOD_TARGET = 3.0
 
 
 @dataclass(frozen=True)
@@ -134,3 +139,45 @@ def format_acceleration_line(without: LoopTiming, limited: LoopTiming) -> str:
             f"{without.tick_median_us:.1f} us (p99 {without.tick_p99_us:.1f}) without: "
             f"{ratio:.2f}x{'*' if ratio > ACCELERATION_COST_TARGET else ''} "
             f"(target at most {ACCELERATION_COST_TARGET}x)")
+
+
+@dataclass(frozen=True)
+class MeasuredPeriod:
+    """``teleop compare``'s periods: :meth:`TeleopLoop.tick` (the compiled tick and the
+    measures) timed around the call, and the compiled tick alone in the same periods (us)."""
+
+    scenario: str
+    ticks: int
+    period_median_us: float
+    period_p99_us: float
+    tick_median_us: float
+
+    @property
+    def ratio(self) -> float:
+        """The period's median over the tick's."""
+        return self.period_median_us / self.tick_median_us
+
+
+def time_measured_period(scenario: str = "paper-hole",
+                         duration: float | None = None) -> MeasuredPeriod:
+    """``scenario`` through :meth:`TeleopLoop.tick` as ``teleop compare`` runs it (the
+    compiled tick, then the measures), each period timed around the call."""
+    loop, targets = scenario_loop(scenario, True, duration)
+    clock = time.perf_counter_ns
+    periods, ticks = np.empty(len(targets)), np.empty(len(targets))
+    for i, target in enumerate(targets):
+        start = clock()
+        record = loop.tick(target)
+        periods[i] = (clock() - start) * 1e-3
+        ticks[i] = record.tick_time_us
+    return MeasuredPeriod(scenario, len(targets), float(np.median(periods)),
+                          float(np.percentile(periods, 99)), float(np.median(ticks)))
+
+
+def format_measured_period_line(period: MeasuredPeriod) -> str:
+    """compare's period's median and p99 against the tick's median and the target."""
+    missed = "*" if period.ratio > MEASURED_PERIOD_TARGET else ""
+    return (f"compare's period: {period.scenario}, tick and measures {period.period_median_us:.1f} "
+            f"us median (p99 {period.period_p99_us:.1f}), the compiled tick "
+            f"{period.tick_median_us:.1f} us: {period.ratio:.2f}x{missed} "
+            f"(target at most {MEASURED_PERIOD_TARGET}x)")

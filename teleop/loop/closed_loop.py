@@ -50,6 +50,9 @@ from .targets import Targets, saturate_twist, target_poses
 from .task_modes import fit_target, task_modes as checked_task_modes, task_weight
 from .true_kinematics import TrueKinematics
 
+#: float64's machine epsilon (the round-off floor's unit, :meth:`TeleopLoop._constraint_velocity`)
+EPSILON = float(np.finfo(float).eps)
+
 class TeleopLoop:
     """State and one-tick logic of the closed loop; no threads, no I/O.
 
@@ -418,18 +421,16 @@ class TeleopLoop:
         they differ (:meth:`_measured_kinematics`); the operator's and the commanded EE
         velocities (world)."""
         model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, step.sensed)
-        pin.updateFramePlacements(model, data)
+        pin.computeJointJacobians(model, data, step.sensed)  # the frames: where they are read
         step.residual, step.constraint_velocity, step.drift_velocity, step.floor = \
             self._constraint_velocity(step.qd, model, data, self.constraints)
         if self.plant is not None or self.true_kinematics is not None:
             model, data, constraints = self._measured_kinematics(step.q_before)
             pin.computeJointJacobians(model, data, step.q_before)
-            pin.updateFramePlacements(model, data)
             _, step.constraint_velocity, step.drift_velocity, step.floor = \
                 self._constraint_velocity(step.moved, model, data, constraints)
         step.actual_linear_velocities = np.array([
-            data.oMf[frame].rotation
+            pin.updateFramePlacement(model, data, frame).rotation
             @ (pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:3] @ step.moved)
             for frame in self.ee_frame_ids])
         step.commanded_linear_velocities = np.array(
@@ -445,8 +446,9 @@ class TeleopLoop:
         """The end of the period's measures (after :meth:`measure_command`), at the true
         configuration with the true kinematics (:meth:`_measured_kinematics`)."""
         model, data, constraints = self._measured_kinematics(self.q)
+        pin.forwardKinematics(model, data, self.q)  # the frames read below, not every frame
+        placements = [pin.updateFramePlacement(model, data, frame) for frame in self.ee_frame_ids]
         errors, error, penetration = self._constraint_errors(model, data, constraints)
-        placements = [data.oMf[frame] for frame in self.ee_frame_ids]
         position_errors = np.array([np.linalg.norm(ee.translation - target.translation)
                                     for ee, target in zip(placements, step.targets)])
         orientation_errors = np.array([np.linalg.norm(pin.log3(ee.rotation.T @ target.rotation))
@@ -512,30 +514,33 @@ class TeleopLoop:
         for constraint, frame in zip(constraints, self.controller.constraint_frames):
             if not constraint.is_equality:
                 continue
-            A, b = constraint.rows(model, data, frame)
+            # Constraint.rows from one evaluation, which also gives the error and the point
+            placement = pin.updateFramePlacement(model, data, frame)
+            state = constraint.evaluate(placement)
+            jacobian = pin.getFrameJacobian(model, data, frame, pin.LOCAL)
+            A = state.C @ (jacobian[:3] - pin.skew(state.p) @ jacobian[3:])
             achieved = A @ qd
-            residual = max(residual, float(np.max(np.abs(achieved - b))))
-            placement = data.oMf[frame]  # rows() updated it
-            correction = -constraint.gain * constraint.error(placement)
-            velocity.append(achieved - (b - correction))
+            residual = max(residual, *map(abs, (achieved - state.rhs).tolist()))
+            correction = -constraint.gain * state.error
+            velocity.append(achieved - (state.rhs - correction))
             drift.append(correction)
-            position = float(np.linalg.norm(constraint.point_world(placement)))
-            floor = max(floor, float(np.max(np.abs(A) @ np.abs(qd))) + constraint.gain * position)
+            point = placement.act(state.p)
+            floor = max(floor, max((np.abs(A) @ np.abs(qd)).tolist())
+                        + constraint.gain * math.sqrt(point @ point))
         if not velocity:
             return 0.0, np.zeros(0), np.zeros(0), 0.0
         return (residual, np.concatenate(velocity), np.concatenate(drift),
-                floor * np.finfo(float).eps)
+                floor * EPSILON)
 
     def _constraint_errors(self, model: pin.Model, data: pin.Data,
                            constraints: Sequence[Constraint]) -> tuple[np.ndarray, float, float]:
-        """After integration, at ``self.q`` on ``model``: each constraint's own
-        ``violation``, then the max |e| over equalities and the max inequality (barrier)
-        penetration."""
-        pin.framesForwardKinematics(model, data, self.q)  # every frame at once
+        """After integration, at ``self.q`` on ``model`` (its joints' placements in
+        ``data``): each constraint's own ``violation``, then the max |e| over equalities and
+        the max inequality (barrier) penetration."""
         error, penetration = 0.0, 0.0
         violations = []
         for constraint, frame in zip(constraints, self.controller.constraint_frames):
-            violation = constraint.violation(data.oMf[frame])
+            violation = constraint.violation(pin.updateFramePlacement(model, data, frame))
             violations.append(violation)
             if constraint.is_equality:
                 error = max(error, violation)

@@ -1,0 +1,66 @@
+"""The loop's measures (docs/design.md section 7) against the reference formulas written
+here: each equality's rows from :meth:`Constraint.rows` on Pinocchio's full kinematics
+(``computeJointJacobians`` and every frame's placement), the end-of-period errors from
+``framesForwardKinematics``. The loop evaluates each constraint once and only the frames it
+reads; the numbers must be the same to the last bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from teleop.experiments.bench_loop import scenario_loop
+
+
+def reference_command_measures(loop, step) -> tuple[float, np.ndarray, np.ndarray, float]:
+    """``max |A qd - b|``, ``A qd - (b + K e)``, ``-K e`` and the round-off floor at the
+    sensed configuration, from :meth:`Constraint.rows`."""
+    model, data = loop.model, loop.model.createData()
+    pin.computeJointJacobians(model, data, step.sensed)
+    pin.updateFramePlacements(model, data)
+    residual, floor, velocity, drift = 0.0, 0.0, [], []
+    for constraint, frame in zip(loop.constraints, loop.controller.constraint_frames):
+        if not constraint.is_equality:
+            continue
+        A, b = constraint.rows(model, data, frame)
+        placement = data.oMf[frame]
+        correction = -constraint.gain * constraint.error(placement)
+        residual = max(residual, float(np.max(np.abs(A @ step.qd - b))))
+        velocity.append(A @ step.qd - (b - correction))
+        drift.append(correction)
+        position = float(np.linalg.norm(constraint.point_world(placement)))
+        floor = max(floor, float(np.max(np.abs(A) @ np.abs(step.qd))) + constraint.gain * position)
+    return residual, np.concatenate(velocity), np.concatenate(drift), floor * np.finfo(float).eps
+
+
+@pytest.mark.parametrize("scenario", ["paper-hole", "multi", "moving-trocar", "barrier"])
+def test_the_measures_equal_the_reference_formulas(scenario):
+    """Every period of a short run: the command's measures and the end-of-period errors
+    equal the reference computed independently, bit for bit."""
+    loop, targets = scenario_loop(scenario, True, 0.1)
+    model = loop.model
+    data = model.createData()
+    for target in targets:
+        step = loop.advance(target)
+        loop.measure_command(step)
+        residual, velocity, drift, floor = reference_command_measures(loop, step)
+        assert step.residual == residual and step.floor == floor
+        np.testing.assert_array_equal(step.constraint_velocity, velocity)
+        np.testing.assert_array_equal(step.drift_velocity, drift)
+        pin.computeJointJacobians(model, data, step.sensed)
+        pin.updateFramePlacements(model, data)
+        actual = [data.oMf[frame].rotation
+                  @ (pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:3] @ step.moved)
+                  for frame in loop.ee_frame_ids]
+        np.testing.assert_array_equal(step.actual_linear_velocities, np.array(actual))
+        record = loop.measure(step)
+        pin.framesForwardKinematics(model, data, loop.q)
+        violations = [constraint.violation(data.oMf[frame])
+                      for constraint, frame in zip(loop.constraints,
+                                                   loop.controller.constraint_frames)]
+        np.testing.assert_array_equal(record.constraint_errors, violations)
+        positions = [np.linalg.norm(data.oMf[frame].translation - target.translation)
+                     for frame, target in zip(loop.ee_frame_ids, step.targets)]
+        np.testing.assert_array_equal(record.ee_position_errors, positions)
+    assert len(velocity) > 0  # the scenario has equality rows
