@@ -94,3 +94,29 @@ def test_record_and_sweep_send_a_contact_scenario_to_compare_by_name(tmp_path, c
                      f"retraction-y --plant mujoco", err), err
     assert not (tmp_path / "run.npz").exists()
     assert not (tmp_path / "sweep" / "results.sqlite").exists()
+
+
+@pytest.mark.parametrize("options, faults", [
+    ([], None),  # the interface checks nothing: not measured
+    (["--interface-limits", "count"], 0),  # the controller keeps the limits it checks
+    (["--interface-limits", "count", "--no-acceleration-limits"], 1),  # the step from rest
+    (["--interface-limits", "strict", "--no-acceleration-limits"], 1),
+])
+def test_a_contact_run_reports_the_interfaces_faults(tmp_path, capsys, options, faults):
+    code = main(["compare", "--scenario", "palpation", "--plant", "mujoco", "--controllers",
+                 "cjm", "--duration", "2.6", "--out", str(tmp_path), "--no-plots", *options])
+    assert code == 0
+    measures = json.loads((tmp_path / "contact_metrics.json").read_text())["controllers"]["cjm"]
+    assert measures["interface_faults"] == faults
+    row = capsys.readouterr().out.splitlines()[2].split()
+    assert row[0] == "cjm" and row[-1] == ("-" if faults is None else str(faults))
+    if "strict" in options:  # stopped at the approach's first command: it never touches
+        assert measures["contact_lost"] > 0 and measures["force_error_max"] == 1.0
+
+
+def test_a_contact_run_shorter_than_its_window_is_refused_by_name(tmp_path, capsys):
+    code = main(["compare", "--scenario", "palpation", "--plant", "mujoco", "--controllers",
+                 "cjm", "--duration", "0.5", "--out", str(tmp_path)])
+    assert code == 2
+    assert ("palpation: duration 0.5 s ends before its measures' window starts at 2.5 s"
+            in capsys.readouterr().err)

@@ -25,14 +25,15 @@ from . import palpation, retraction
 from .contact_run import ContactMeasures, ContactTask, run_contact
 
 #: The version of ``contact_metrics.json``'s layout.
-CONTACT_SCHEMA_VERSION = 1
+CONTACT_SCHEMA_VERSION = 2
 
 #: The measures of a contact run, with their units and the table's headings.
 CONTACT_MEASURES = (
     ("force_error_rms", "N", "force err RMS"), ("force_error_max", "N", "force err max"),
     ("contact_lost", "periods", "contact lost"), ("port_force_max", "N", "port force max"),
     ("hole_error_max", "m", "hole err max"), ("ee_error_max", "m", "EE err max"),
-    ("jerk_max", "rad/s^3", "jerk max"), ("sensed_vs_true_max", "N", "sensed-true max"))
+    ("jerk_max", "rad/s^3", "jerk max"), ("sensed_vs_true_max", "N", "sensed-true max"),
+    ("interface_faults", "periods", "interface faults"))
 
 
 @dataclass(frozen=True)
@@ -107,19 +108,23 @@ def compare_contact(name: str, specs: Sequence[str], plant: PlantChoice, rate: f
     return document, results
 
 
-def _number(value: float | int) -> float | int:
+def _number(value: float | int | None) -> float | int | None:
+    if value is None:  # not measured (the interface's faults with its check off)
+        return None
     return int(value) if isinstance(value, (int, np.integer)) else float(value)
 
 
 def format_contact_table(document: dict) -> str:
-    """The measures of every controller, one row each (forces in N, errors in mm)."""
+    """The measures of every controller, one row each (forces in N, errors in mm; ``-``:
+    not measured)."""
     headings = ["controller", *(heading for _, _, heading in CONTACT_MEASURES)]
     rows = []
     for spec, measures in document["controllers"].items():
         row = [spec]
         for key, unit, _ in CONTACT_MEASURES:
             value = measures[key]
-            row.append(f"{value:d}" if unit == "periods" else f"{1e3 * value:.3f} mm"
+            row.append("-" if value is None else f"{value:d}" if unit == "periods"
+                       else f"{1e3 * value:.3f} mm"
                        if unit == "m" else f"{value:.3g}" if unit == "rad/s^3"
                        else f"{value:.4f}")
         rows.append(row)

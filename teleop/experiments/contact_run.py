@@ -85,6 +85,9 @@ class ContactMeasures:
     jerk_max : the largest joint jerk of the commands (rad/s^3), finite differences.
     sensed_vs_true_max : the largest difference between the sensor's force (world) and the
         true contact force (N), the tool's weight included.
+    interface_faults : the periods whose command the plant's interface refused
+        (``strict``: at most one, the robot stopped there) or counted (``count``); None:
+        the interface checks nothing (``off``, docs/design.md 17.1).
     """
 
     force_error_rms: float
@@ -97,6 +100,7 @@ class ContactMeasures:
     sensed_vs_true_max: float
     forces: np.ndarray
     times: np.ndarray
+    interface_faults: int | None = None
 
 
 def run_contact(task: ContactTask, spec: str, dt: float = 1e-3,
@@ -145,10 +149,14 @@ def run_contact(task: ContactTask, spec: str, dt: float = 1e-3,
                             FORCE_GAIN,
                             tissue.stiffness, dt, max_speed=APPROACH_SPEED,
                             filter_cutoff=force_filter)
+    if duration < task.window[0] + dt:
+        raise ValueError(f"{task.name}: duration {duration:g} s ends before its measures' "
+                         f"window starts at {task.window[0]:g} s")
     steps = int(round(duration / dt))
     times = np.arange(1, steps + 1) * dt
     forces, lost = np.zeros(steps), 0
     port, hole_error, ee_error, sensed_error = 0.0, 0.0, 0.0, 0.0
+    faults = 0
     commands = np.zeros((steps, model.nv))
     wrench = np.zeros(6)
     tare = SensorTare(tare_samples) if tare_samples > 0 else None
@@ -175,6 +183,7 @@ def run_contact(task: ContactTask, spec: str, dt: float = 1e-3,
         sensed_error = max(sensed_error, float(np.linalg.norm(
             rotation @ wrench[:3] - measures.contact_forces[0])))
         port = max(port, measures.port_force)
+        faults += measures.interface_fault is not None
         hole_error = max(hole_error, float(np.linalg.norm(
             hole.error(data.oMf[model.getFrameId(hole.link)]))))
         if begin <= t <= end and measures.contact_depths[0] <= 0.0:
@@ -182,6 +191,7 @@ def run_contact(task: ContactTask, spec: str, dt: float = 1e-3,
     window = (times >= begin) & (times <= end)
     error = np.abs(forces[window] - task.setpoint)
     jerk = np.diff(commands, n=2, axis=0) / dt ** 2
+    checked = plant_choice.settings.interface_limits != "off"
     return ContactMeasures(float(np.sqrt(np.mean(error ** 2))), float(np.max(error)), lost,
                            port, hole_error, ee_error, float(np.max(np.abs(jerk))),
-                           sensed_error, forces, times)
+                           sensed_error, forces, times, faults if checked else None)
