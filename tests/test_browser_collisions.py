@@ -87,10 +87,10 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     open_tab(web, "Collisions")
     page.get_by_text("sphere obstacle", exact=True).click()  # its folder opens
     page.get_by_role("button", name="Add sphere", exact=True).click()
-    (sphere_id,) = wait_until(lambda: list(app.obstacles), WAIT, "the app to get the sphere")
+    (sphere_id,) = wait_until(lambda: list(app.collisions.obstacles), WAIT, "the app to get the sphere")
     wait_until(lambda: sphere_id in ui._obstacle_nodes, WAIT, "the sphere drawn")
     since = len(web.configurations)
-    avoidance = CollisionAvoidance.from_dict(app.robot, app.avoidance.to_dict())
+    avoidance = CollisionAvoidance.from_dict(app.robot, app.collisions.avoidance.to_dict())
     safety = avoidance.safety_distance
 
     plan = z_arrow_drag(web, DRAG, STEPS)
@@ -141,7 +141,7 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     assert np.linalg.norm(app.target.translation - app.loops["main"].ee_placements()[0].translation) > 0.01
 
     # the pair highlighted: its witness segment and its link named after it
-    rows = wait_until(lambda: app.collision_rows.get("main"), WAIT, "measured rows")
+    rows = wait_until(lambda: app.collisions.rows.get("main"), WAIT, "measured rows")
     pair = rows.closest_pair
     link = pair.split(" | ")[0]
     assert pair.endswith(f"| {sphere_id}")

@@ -12,9 +12,10 @@ import pkgutil
 import web
 
 #: The largest class's methods now (``TeleopApp``: 100 with 12 mixins before the
-#: recording and the way home left it as components, 97 with the ROS 2 robot's two);
+#: recording, the way home and the collision scene left it as components; the ROS 2
+#: robot added two);
 #: the closing target is 30.
-MOST_METHODS = 97
+MOST_METHODS = 89
 
 #: Functions, properties and static or class methods are methods here.
 METHOD_KINDS = (property, staticmethod, classmethod)

@@ -285,7 +285,7 @@ def scene(constraints=(), collision_changes=None, obstacles=()) -> dict:
 def test_the_valid_scene_and_session_of_the_tables_are_taken(app, tmp_path):
     app.apply_scene(scene(list(constraint_dicts().values())[:1], {"self_collision": True},
                           list(OBSTACLES.values())))
-    assert len(app.obstacles) == len(OBSTACLES)
+    assert len(app.collisions.obstacles) == len(OBSTACLES)
     path = tmp_path / "session.jsonl"
     events = [session_header(collisions=collisions({}, list(OBSTACLES.values())),
                              plant={"kind": "mujoco", "wall_stiffness_n_per_m": 2000.0}),

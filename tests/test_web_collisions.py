@@ -72,7 +72,7 @@ def tip(app, ee: int = 0) -> pin.SE3:
 def independent_rows(app, which: str = "main", q: np.ndarray | None = None):
     """The rows of a new avoidance with the app's settings and copies of its obstacles, at
     ``q`` (default: robot ``which``'s q now), on a fresh ``pin.Data``."""
-    settings = app.avoidance.to_dict()
+    settings = app.collisions.avoidance.to_dict()
     avoidance = CollisionAvoidance.from_dict(app.robot, settings)
     avoidance.set_ports([entry.constraint for entry in app.entries.values()])
     model = app.robot.model
@@ -99,7 +99,7 @@ def test_an_obstacle_goes_its_gap_in_front_of_the_tip(app, kind, radius, length,
                                                         "axis": axis},
               "box": {"size": edges, "rpy": turn}}[kind]
     entry_id = app.add_obstacle(kind, **fields)
-    obstacle = app.obstacles[entry_id].obstacle
+    obstacle = app.collisions.obstacles[entry_id].obstacle
     pose = tip(app)
     approach = pose.rotation[:, 2]
     for gap, expected in ((FRONT_GAP, 0.0), (FRONT_GAP - 1e-3, 1e-3)):
@@ -111,7 +111,7 @@ def test_an_obstacle_goes_its_gap_in_front_of_the_tip(app, kind, radius, length,
 
 def test_a_half_space_is_its_gap_from_the_tip_facing_it(app):
     entry_id = app.add_obstacle("halfspace", normal=(0.0, 0.0, 1.0))
-    obstacle = app.obstacles[entry_id].obstacle
+    obstacle = app.collisions.obstacles[entry_id].obstacle
     distance = shape_distance(coal.Sphere(1e-9), pin.SE3(np.eye(3), tip(app).translation),
                               obstacle.shape(), obstacle.pose())
     assert distance == pytest.approx(FRONT_GAP, abs=1e-9)
@@ -122,18 +122,18 @@ def test_obstacles_are_added_moved_with_feed_forward_and_removed(app):
     second = app.add_obstacle("box", center=tip(app).translation + [0.0, 0.0, -0.3],
                               size=(0.1, 0.2, 0.05))
     assert (first, second) == ("sphere-1", "box-2")
-    assert [o.name for o in app.avoidance.obstacles] == [first, second]
-    assert {pair[1] for pair in app.avoidance.pairs} == {first, second}
+    assert [o.name for o in app.collisions.avoidance.obstacles] == [first, second]
+    assert {pair[1] for pair in app.collisions.avoidance.pairs} == {first, second}
     # every controller holds the session's avoidance
-    assert app.loops["main"].controller.collisions is app.avoidance
+    assert app.loops["main"].controller.collisions is app.collisions.avoidance
 
-    start = app.obstacles[first].obstacle.position
+    start = app.collisions.obstacles[first].obstacle.position
     goal = start + np.array([0.0, 0.0, 0.01])
     app.move_obstacle(first, goal)
     speeds, positions = [], []
     for _ in range(200):
         app.step()
-        obstacle = app.obstacles[first].obstacle
+        obstacle = app.collisions.obstacles[first].obstacle
         speeds.append(float(np.linalg.norm(obstacle.velocity)))
         positions.append(obstacle.position)
     # it glides (no jump), at most the geometry speed cap, along the move
@@ -141,12 +141,14 @@ def test_obstacles_are_added_moved_with_feed_forward_and_removed(app):
     assert max(speeds) <= MAX_GEOMETRY_SPEED * (1 + 1e-12) and max(speeds) > 0.5 * MAX_GEOMETRY_SPEED
     assert steps.max() <= MAX_GEOMETRY_SPEED * app.config.dt * (1 + 1e-9)
     run(app, 2.0)  # the first-order glide (time constant 0.05 s) has converged
-    np.testing.assert_allclose(app.obstacles[first].obstacle.position, goal, atol=1e-12)
-    assert not np.any(app.obstacles[first].obstacle.velocity) and app.obstacles[first].settled
+    np.testing.assert_allclose(app.collisions.obstacles[first].obstacle.position, goal, atol=1e-12)
+    placed = app.collisions.obstacles[first]
+    assert not np.any(placed.obstacle.velocity) and placed.settled
 
     app.remove_obstacle(first)
-    assert [o.name for o in app.avoidance.obstacles] == [second]
-    assert app.clear_obstacles() == 1 and app.avoidance.obstacles == [] and not app.obstacles
+    assert [o.name for o in app.collisions.avoidance.obstacles] == [second]
+    assert app.clear_obstacles() == 1
+    assert app.collisions.avoidance.obstacles == [] and not app.collisions.obstacles
 
 
 @pytest.mark.parametrize("call, pattern", [
@@ -168,26 +170,27 @@ def test_obstacles_are_added_moved_with_feed_forward_and_removed(app):
 def test_what_cannot_be_done_is_a_value_error_and_changes_nothing(app, call, pattern):
     app.add_obstacle("sphere")
     before = app.scene()
-    avoidance = app.avoidance
+    avoidance = app.collisions.avoidance
     with pytest.raises(ValueError, match=pattern):
         call(app)
     after = app.scene()
     assert {**after, "created": None} == {**before, "created": None}
-    assert app.avoidance is avoidance and app.loops["main"].controller.collisions is avoidance
+    assert app.collisions.avoidance is avoidance and app.loops["main"].controller.collisions is avoidance
 
 
 def test_settings_and_the_switch_reach_every_controller(dual_app):
     app = dual_app
-    assert app.avoidance.self_collision  # two arms: self-collision on by default
+    assert app.collisions.avoidance.self_collision  # two arms: self-collision on by default
     app.set_ghost("qp:daqp")
     app.add_obstacle("sphere")
     app.set_collision_settings(safety_distance=0.01, detection_distance=0.08)
     for loop in app.loops.values():
-        assert loop.controller.collisions is app.avoidance
-    assert (app.avoidance.safety_distance, app.avoidance.detection_distance) == (0.01, 0.08)
-    assert [o.name for o in app.avoidance.obstacles] == ["sphere-1"]
+        assert loop.controller.collisions is app.collisions.avoidance
+    avoidance = app.collisions.avoidance
+    assert (avoidance.safety_distance, avoidance.detection_distance) == (0.01, 0.08)
+    assert [o.name for o in app.collisions.avoidance.obstacles] == ["sphere-1"]
     app.set_controller("qp:proxqp")
-    assert app.loops["main"].controller.collisions is app.avoidance
+    assert app.loops["main"].controller.collisions is app.collisions.avoidance
     app.set_collisions_on(False)
     assert all(loop.controller.collisions is None for loop in app.loops.values())
     run(app, 0.05)
@@ -195,13 +198,13 @@ def test_settings_and_the_switch_reach_every_controller(dual_app):
     assert snapshot["robots"]["main"]["collision_rows"] is None and not snapshot["collisions"]["checking"]
     assert np.isnan(snapshot["robots"]["main"]["trace"]["minimum_distance"]).all()
     app.set_collisions_on(True)
-    assert app.loops["ghost"].controller.collisions is app.avoidance
+    assert app.loops["ghost"].controller.collisions is app.collisions.avoidance
     app.set_collision_settings(self_collision=False)
-    assert all(second == "sphere-1" for _, second in app.avoidance.pairs)
+    assert all(second == "sphere-1" for _, second in app.collisions.avoidance.pairs)
 
 
 def test_a_single_arm_checks_no_pair_without_an_obstacle(app):
-    assert not app.avoidance.self_collision and app.avoidance.pairs == []
+    assert not app.collisions.avoidance.self_collision and app.collisions.avoidance.pairs == []
     run(app, 0.05)
     snapshot = app.snapshot()
     assert plots_of(snapshot) == PLOTS
@@ -216,7 +219,7 @@ def test_a_scene_keeps_the_obstacles_and_the_settings(dual_app, dual, tmp_path):
     app.add_obstacle("sphere", radius=0.03)
     app.add_obstacle("capsule", ee=1, radius=0.02, length=0.1, axis=(1.0, 0.0, 0.0))
     moving = app.add_obstacle("halfspace", normal=(0.0, 0.0, 1.0))
-    app.move_obstacle(moving, app.obstacles[moving].goal + [0.0, 0.0, -0.02])
+    app.move_obstacle(moving, app.collisions.obstacles[moving].goal + [0.0, 0.0, -0.02])
     run(app, 0.1)  # mid-move: a velocity to keep
     app.set_collision_settings(safety_distance=0.008, approach_speed=0.3)
     app.set_collisions_on(False)
@@ -229,14 +232,14 @@ def test_a_scene_keeps_the_obstacles_and_the_settings(dual_app, dual, tmp_path):
     other.load_scene("obstacles.json")
     for key in ("collisions", "obstacles", "constraints", "q"):
         assert other.scene()[key] == app.scene()[key]
-    assert other.avoidance.to_dict() == app.avoidance.to_dict()
+    assert other.collisions.avoidance.to_dict() == app.collisions.avoidance.to_dict()
     assert all(loop.controller.collisions is None for loop in other.loops.values())
-    assert not other.obstacles[moving].settled
-    np.testing.assert_array_equal(other.obstacles[moving].obstacle.velocity,
-                                  app.obstacles[moving].obstacle.velocity)
+    assert not other.collisions.obstacles[moving].settled
+    np.testing.assert_array_equal(other.collisions.obstacles[moving].obstacle.velocity,
+                                  app.collisions.obstacles[moving].obstacle.velocity)
     assert other.add_obstacle("sphere") == "sphere-4"  # ids go on after the scene's
     other.set_collisions_on(True)
-    assert other.loops["main"].controller.collisions is other.avoidance
+    assert other.loops["main"].controller.collisions is other.collisions.avoidance
 
 
 def test_a_version_1_scene_still_loads_without_obstacles(sda10f, tmp_path):
@@ -246,8 +249,8 @@ def test_a_version_1_scene_still_loads_without_obstacles(sda10f, tmp_path):
     app.add_obstacle("sphere")
     app.set_collision_settings(safety_distance=0.007)
     app.apply_scene(old)
-    assert app.obstacles == {} and app.avoidance.obstacles == []
-    assert app.avoidance.safety_distance == 0.007 and app.collisions_on  # the session's
+    assert app.collisions.obstacles == {} and app.collisions.avoidance.obstacles == []
+    assert app.collisions.avoidance.safety_distance == 0.007 and app.collisions.on  # the session's
     np.testing.assert_array_equal(app.loops["main"].q, old["q"]["main"])
 
 
@@ -299,7 +302,7 @@ def test_the_status_and_highlights_are_the_controllers_rows(app, server):
     assert shown.closest_pair == expected.closest_pair
     # each is one of coal's distances of its pair (a link has several geometries)
     links = {pair.split(" | ")[0] for pair in expected.pairs}
-    every = app.avoidance.distances(app.robot.model, pin_data(app, q))
+    every = app.collisions.avoidance.distances(app.robot.model, pin_data(app, q))
     for pair, distance in zip(shown.pairs, shown.distances):
         assert min(abs(d - distance) for name, d in every if name == pair) < SAME
     # the status's words and the plotted trace
@@ -311,7 +314,7 @@ def test_the_status_and_highlights_are_the_controllers_rows(app, server):
     assert collision_words(None, []) == ""
     trace = snapshot["robots"]["main"]["trace"]["minimum_distance"]
     assert trace[-1] == pytest.approx(min(expected.minimum_distance,
-                                          app.avoidance.detection_distance), abs=SAME)
+                                          app.collisions.avoidance.detection_distance), abs=SAME)
 
     # the view: a node per pair named after it, its witness segment, each link highlighted
     ui = TeleopUI(server, app, ControlThread(app))
@@ -324,8 +327,8 @@ def test_the_status_and_highlights_are_the_controllers_rows(app, server):
         assert node_name(pair) in nodes["witness"].name
         np.testing.assert_allclose(np.asarray(nodes["witness"].points)[0],
                                    expected.witnesses[index], atol=1e-6)  # float32
-        colour = distance_color(expected.distances[index], app.avoidance.safety_distance,
-                                app.avoidance.detection_distance)
+        colour = distance_color(expected.distances[index], app.collisions.avoidance.safety_distance,
+                                app.collisions.avoidance.detection_distance)
         assert tuple(np.asarray(nodes["witness"].colors)[0, 0]) == colour
     assert set(ui._link_nodes) == links
 
@@ -358,7 +361,7 @@ def test_the_dual_arms_pairs_are_the_controllers_rows(dual_app):
     assert shown.pairs == expected.pairs
     np.testing.assert_allclose(shown.distances, expected.distances, atol=SAME)
     assert shown.closest_pair == expected.closest_pair
-    minimum, pair = app.avoidance.minimum_distance(q)
+    minimum, pair = app.collisions.avoidance.minimum_distance(q)
     if expected.size:
         assert minimum == pytest.approx(expected.minimum_distance, abs=SAME)
 
@@ -376,12 +379,12 @@ def test_the_collisions_tab_adds_an_obstacle_from_its_inputs(app, server):
     assert set(inputs) == {"radius"}
     inputs["radius"].value = 0.025
     entry_id = ui._add_obstacle_from_inputs("sphere")
-    assert app.obstacles[entry_id].obstacle.radius == 0.025
+    assert app.collisions.obstacles[entry_id].obstacle.radius == 0.025
     ui._draw(app.snapshot())
     assert entry_id in ui._obstacle_nodes and "gizmo" in ui._obstacle_nodes[entry_id]
     ui.safety_number.value = 8.0
     ui._apply_collision_settings()
-    assert app.avoidance.safety_distance == pytest.approx(0.008)
+    assert app.collisions.avoidance.safety_distance == pytest.approx(0.008)
     app.remove_obstacle(entry_id)
     ui._draw(app.snapshot())
     assert entry_id not in ui._obstacle_nodes

@@ -62,7 +62,7 @@ def lock_free(app) -> bool:
 
 def independent_rows(app, q: np.ndarray):
     """The rows of a new avoidance with the app's settings and obstacles at ``q``."""
-    avoidance = CollisionAvoidance.from_dict(app.robot, app.avoidance.to_dict())
+    avoidance = CollisionAvoidance.from_dict(app.robot, app.collisions.avoidance.to_dict())
     avoidance.set_ports([entry.constraint for entry in app.entries.values()])
     data = app.robot.model.createData()
     pin.computeJointJacobians(app.robot.model, data, q)
@@ -73,13 +73,13 @@ def counted_rows(app, monkeypatch) -> dict[str, int]:
     """Count the avoidance's ``rows`` calls: inside a controller's step, and elsewhere."""
     calls = {"controllers": 0, "elsewhere": 0}
     stepping = threading.local()
-    rows = app.avoidance.rows
+    rows = app.collisions.avoidance.rows
 
     def counting(model, data):
         calls["controllers" if getattr(stepping, "on", False) else "elsewhere"] += 1
         return rows(model, data)
 
-    monkeypatch.setattr(app.avoidance, "rows", counting)
+    monkeypatch.setattr(app.collisions.avoidance, "rows", counting)
     for loop in app.loops.values():
         solve = loop.controller.solve
 
@@ -109,7 +109,7 @@ def test_the_control_thread_computes_no_collision_rows_for_the_view(app, monkeyp
         expected = independent_rows(app, q[which])
         assert expected.size >= 1 and shown.pairs == expected.pairs
         np.testing.assert_allclose(shown.distances, expected.distances, atol=SAME)
-    assert shown is app.avoidance.last_rows  # the ghost stepped last: its own rows, no copy
+    assert shown is app.collisions.avoidance.last_rows  # the ghost stepped last: its own rows, no copy
 
 
 def test_rows_a_controller_did_not_compute_are_measured_on_history_ticks_only(app, monkeypatch):
@@ -120,11 +120,11 @@ def test_rows_a_controller_did_not_compute_are_measured_on_history_ticks_only(ap
     solve = ghost.solve
 
     def rows_elsewhere(q, twist):
-        kept = app.avoidance.last_rows
+        kept = app.collisions.avoidance.last_rows
         try:
             return solve(q, twist)
         finally:
-            app.avoidance.last_rows = kept
+            app.collisions.avoidance.last_rows = kept
 
     monkeypatch.setattr(ghost, "solve", rows_elsewhere)
     calls = counted_rows(app, monkeypatch)

@@ -17,15 +17,16 @@ from __future__ import annotations
 import inspect
 import itertools
 import math
-import threading
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from constraints.collision import OBSTACLE_TYPES, CollisionAvoidance, CollisionRows, Obstacle
-from constraints.validation import as_vector, short_repr
-from teleop.loop import LoopConfig, TeleopLoop
+from constraints.validation import short_repr
+from constraints import Constraint
+from controllers.base import Controller
 from teleop.robots import Robot
 
 from .limits import MAX_TARGET_DISTANCE
@@ -77,8 +78,9 @@ def in_front(obstacle: Obstacle, tip: pin.SE3) -> np.ndarray:
     if "edges" in dimensions:
         reach = 0.5 * float(np.abs(obstacle.rotation().T @ approach) @ np.asarray(dimensions["edges"]))
     elif "radius" in dimensions:
-        reach = float(dimensions["radius"]) + 0.5 * float(dimensions.get("length", 0.0)) * abs(
-            float(obstacle.rotation()[:, 2] @ approach))
+        radius, length = (np.asarray(dimensions.get(name, 0.0), dtype=float)
+                          for name in ("radius", "length"))
+        reach = float(radius) + 0.5 * float(length) * abs(float(obstacle.rotation()[:, 2] @ approach))
     return tip.translation + (FRONT_GAP + reach) * approach
 
 
@@ -102,193 +104,155 @@ class ObstacleEntry:
         return self.obstacle
 
 
-class Collisions:
-    """The collision avoidance of :class:`web.app.TeleopApp` (its state: ``avoidance``,
-    whether the controllers hold it, ``collisions_on``, the placed ``obstacles`` by id,
-    and the rows last measured for each robot, ``collision_rows``)."""
+def check_reach(position: np.ndarray, origin: np.ndarray, what: str) -> None:
+    """``ValueError`` when ``position`` is more than :data:`MAX_TARGET_DISTANCE` from
+    ``origin`` (world, m)."""
+    distance = math.hypot(*(np.asarray(position, dtype=float) - origin))
+    if not distance <= MAX_TARGET_DISTANCE:
+        raise ValueError(f"{what} position refused: {distance:.3g} m away, more than "
+                         f"{MAX_TARGET_DISTANCE:g} m")
 
-    robot: Robot
-    config: LoopConfig
-    loops: dict[str, TeleopLoop]
-    entries: dict
-    avoidance: CollisionAvoidance
-    collisions_on: bool
-    obstacles: dict[str, ObstacleEntry]
-    collision_rows: dict[str, CollisionRows | None]
-    _obstacle_ids: itertools.count
-    _collision_data: pin.Data
-    _lock: threading.RLock
-    _view_data: pin.Data
 
-    def _init_collisions(self, on: bool, settings: dict) -> None:
-        """The session's avoidance: ``settings`` (keywords of :data:`SETTINGS`; the others
-        their defaults, self-collision on a robot with several arms), held by the
-        controllers when ``on``."""
+class CollisionScene:
+    """The collision avoidance of :class:`web.app.TeleopApp`, a component it holds and
+    calls under its lock: the session's :attr:`avoidance`, whether the controllers hold it
+    (:attr:`on`), the placed :attr:`obstacles` by id and the rows last measured for each
+    robot (:attr:`rows`). The controllers and the placed constraints are handed to the
+    methods that need them.
+
+    Parameters
+    ----------
+    robot : the session's robot.
+    dt : the control period (s), the avoidance's dampers checked at it.
+    on : whether the controllers keep the pairs apart.
+    settings : keywords of :data:`SETTINGS` (the others their defaults, self-collision on
+        a robot with several arms).
+    """
+
+    def __init__(self, robot: Robot, dt: float, on: bool, settings: dict) -> None:
         unknown = sorted(set(settings) - set(SETTINGS))
         if unknown:
             raise ValueError(f"unknown collision setting {unknown[0]!r} ({', '.join(SETTINGS)})")
         if not isinstance(on, (bool, np.bool_)):
             raise ValueError(f"collisions are on (True) or off (False), got {on!r}")
-        settings = {"self_collision": default_self_collision(self.robot), **settings}
-        self.avoidance = CollisionAvoidance(self.robot, **settings)
-        self.avoidance.check(self.robot.model, self.config.dt)
-        self.collisions_on = bool(on)
-        self.obstacles = {}
-        self._obstacle_ids = itertools.count(1)
-        self.collision_rows = {}
-        self._collision_data = self.robot.model.createData()  # the control thread's
+        self.robot = robot
+        settings = {"self_collision": default_self_collision(robot), **settings}
+        self.avoidance = CollisionAvoidance(robot, **settings)
+        self.avoidance.check(robot.model, dt)
+        self.on = bool(on)
+        self.obstacles: dict[str, ObstacleEntry] = {}
+        self._ids = itertools.count(1)
+        self.rows: dict[str, CollisionRows | None] = {}
+        self._data = robot.model.createData()  # the control thread's
 
-    def _attached(self, avoidance: CollisionAvoidance | None = None,
-                  on: bool | None = None) -> CollisionAvoidance | None:
+    def attached(self, avoidance: CollisionAvoidance | None = None,
+                 on: bool | None = None) -> CollisionAvoidance | None:
         """What the controllers hold: the avoidance when collisions are on, else None."""
-        on = self.collisions_on if on is None else on
+        on = self.on if on is None else on
         return (avoidance or self.avoidance) if on else None
 
-    def _attach(self, avoidance: CollisionAvoidance, on: bool) -> None:
-        """Every controller holds ``avoidance`` (or none when not ``on``); all or nothing:
-        one that refuses it (``ValueError``) leaves every controller as it was."""
+    def attach(self, controllers: Iterable[Controller], avoidance: CollisionAvoidance,
+               on: bool) -> None:
+        """Every one of ``controllers`` holds ``avoidance`` (or none when not ``on``); all
+        or nothing: one that refuses it (``ValueError``) leaves every controller as it
+        was."""
         attached = avoidance if on else None
         done = []
         try:
-            for loop in self.loops.values():
-                previous = loop.controller.collisions
-                loop.controller.set_collisions(attached)
-                done.append((loop.controller, previous))
+            for controller in controllers:
+                previous = controller.collisions
+                controller.set_collisions(attached)
+                done.append((controller, previous))
         except ValueError:
             for controller, previous in done:
                 controller.set_collisions(previous)
             raise
-        self.avoidance, self.collisions_on = avoidance, bool(on)
-        self.collision_rows = {}
+        self.avoidance, self.on = avoidance, bool(on)
+        self.rows = {}
 
-    def set_collisions_on(self, on: bool) -> None:
-        """Whether the controllers keep the pairs apart (the obstacles stay either way)."""
-        if not isinstance(on, (bool, np.bool_)):
-            raise ValueError(f"collisions are on (True) or off (False), got {on!r}")
-        with self._lock:
-            self._attach(self.avoidance, bool(on))
+    def settings(self) -> dict:
+        """``on`` and the values of :data:`SETTINGS` now."""
+        return {"on": self.on, **{name: getattr(self.avoidance, name) for name in SETTINGS}}
 
-    def set_collision_settings(self, **settings) -> None:
-        """Change some of :data:`SETTINGS` (``self_collision``, ``safety_distance`` d_s,
-        ``detection_distance`` d_i, ``approach_speed`` xi); the obstacles stay. A bad
-        value, or a damper unstable at the control rate, raises ``ValueError`` naming it
-        and changes nothing."""
+    def rebuilt(self, current: dict, settings: dict, dt: float) -> CollisionAvoidance:
+        """A new avoidance with ``settings`` over the ``current`` ones (:meth:`settings`)
+        and this one's pairs, checked at ``dt``, without the obstacles (tens of ms with
+        self-collision: called outside the lock); ``ValueError`` naming a bad setting."""
         unknown = sorted(set(settings) - set(SETTINGS))
         if unknown:
             raise ValueError(f"unknown collision setting {unknown[0]!r} ({', '.join(SETTINGS)})")
-        with self._lock:
-            old = self.avoidance
-            current = {name: getattr(old, name) for name in SETTINGS}
-        # built outside the lock (tens of ms with self-collision: the control thread runs on)
+        old = self.avoidance
+        current = {name: value for name, value in current.items() if name in SETTINGS}
         avoidance = CollisionAvoidance(self.robot, **{**current, **settings},
                                        disabled_pairs=old.disabled_pairs,
                                        extra_pairs=old.extra_pairs)
-        avoidance.check(self.robot.model, self.config.dt)
-        with self._lock:
-            avoidance.set_obstacles([entry.obstacle for entry in self.obstacles.values()])
-            self._attach(avoidance, self.collisions_on)
+        avoidance.check(self.robot.model, dt)
+        return avoidance
 
-    def collision_settings(self) -> dict:
-        """``on`` and the values of :data:`SETTINGS` now."""
-        with self._lock:
-            return {"on": self.collisions_on,
-                    **{name: getattr(self.avoidance, name) for name in SETTINGS}}
+    def new_id(self, kind: str) -> str:
+        """The id of the next obstacle of ``kind``."""
+        return f"{kind}-{next(self._ids)}"
 
-    # -- obstacles ---------------------------------------------------------------------------
-
-    def add_obstacle(self, kind: str, center=None, ee=0, **fields) -> str:
-        """Place an obstacle of ``kind`` (:data:`OBSTACLE_TYPES`) with its constructor's
-        ``fields`` (those not given: :func:`obstacle_fields`); ``center`` (world, m) or,
-        by default, in front of EE ``ee``'s tip (:func:`in_front`). Its id; a bad value
-        raises ``ValueError`` naming the field and places nothing."""
-        defaults = obstacle_fields(kind)
-        unknown = sorted(set(fields) - set(defaults))
-        if unknown:
-            raise ValueError(f"unknown field {unknown[0]!r} for a {kind} obstacle (its "
-                             f"fields: {', '.join(defaults)})")
-        ee = self.ee_index(ee)
-        with self._lock:
-            entry_id = f"{kind}-{next(self._obstacle_ids)}"
-            tip = self.loops["main"].ee_placements()[ee]
-            values = {**defaults, **fields}
-            try:
-                obstacle = OBSTACLE_TYPES[kind](center=tip.translation if center is None
-                                                else center, name=entry_id, **values)
-            except TypeError as error:
-                raise ValueError(f"bad {kind} obstacle: {error}") from None
-            if center is None:
-                obstacle.move_to(in_front(obstacle, tip))
-            self._check_reach(obstacle.position, tip.translation, "obstacle")
-            self._place_obstacle(ObstacleEntry(entry_id, obstacle, obstacle.position))
-            return entry_id
-
-    def _check_reach(self, position: np.ndarray, origin: np.ndarray, what: str) -> None:
-        distance = math.hypot(*(np.asarray(position, dtype=float) - origin))
-        if not distance <= MAX_TARGET_DISTANCE:
-            raise ValueError(f"{what} position refused: {distance:.3g} m away, more than "
-                             f"{MAX_TARGET_DISTANCE:g} m")
-
-    def _place_obstacle(self, entry: ObstacleEntry) -> None:
-        """Add ``entry`` to the avoidance (caller holds the lock)."""
+    def place(self, entry: ObstacleEntry, constraints: list[Constraint]) -> None:
+        """Add ``entry`` to the avoidance (the placed ``constraints``: its ports)."""
         if entry.id in self.obstacles:
             raise ValueError(f"an obstacle {entry.id!r} is already placed")
         self.avoidance.add_obstacle(entry.obstacle)
         self.obstacles[entry.id] = entry
-        self._refresh_ports()
+        self.refresh_ports(constraints)
 
-    def _refresh_ports(self) -> None:
-        """The avoidance learns which links go through a port (after an obstacle change)."""
-        self.avoidance.set_ports([entry.constraint for entry in self.entries.values()])
-        self.collision_rows = {}
+    def refresh_ports(self, constraints: list[Constraint]) -> None:
+        """The avoidance learns which links go through a port of the placed
+        ``constraints`` (after an obstacle or constraint change)."""
+        self.avoidance.set_ports(constraints)
+        self.rows = {}
 
-    def move_obstacle(self, entry_id: str, position) -> None:
-        """Move an obstacle (its world centre): it glides there, its velocity fed forward."""
-        position = as_vector(position, 3, "obstacle position")
-        with self._lock:
-            entry = self._obstacle(entry_id)
-            self._check_reach(position, entry.obstacle.position, "obstacle")
-            entry.goal = position.copy()
-            entry.settled = False
-
-    def remove_obstacle(self, entry_id: str) -> None:
-        with self._lock:
-            entry = self._obstacle(entry_id)
-            self.avoidance.remove_obstacle(entry.obstacle)
-            del self.obstacles[entry_id]
-            self._refresh_ports()
-
-    def clear_obstacles(self) -> int:
-        """Remove every obstacle; how many there were."""
-        with self._lock:
-            ids = list(self.obstacles)
-            for entry_id in ids:
-                self.remove_obstacle(entry_id)
-            return len(ids)
-
-    def _obstacle(self, entry_id: str) -> ObstacleEntry:
+    def obstacle(self, entry_id: str) -> ObstacleEntry:
+        """The placed obstacle ``entry_id``; ``ValueError`` when there is none."""
         if not isinstance(entry_id, str) or entry_id not in self.obstacles:
             raise ValueError(f"no obstacle {short_repr(entry_id)}")
         return self.obstacles[entry_id]
 
-    # -- the rows the view shows ---------------------------------------------------------------
+    def remove(self, entry_id: str, constraints: list[Constraint]) -> None:
+        """Remove the obstacle ``entry_id`` (the placed ``constraints``: its ports)."""
+        entry = self.obstacle(entry_id)
+        self.avoidance.remove_obstacle(entry.obstacle)
+        del self.obstacles[entry_id]
+        self.refresh_ports(constraints)
 
-    def _measure_collisions(self, configurations: dict[str, np.ndarray]) -> None:
+    def restore(self, avoidance: CollisionAvoidance, on: bool,
+                obstacles: dict[str, ObstacleEntry]) -> None:
+        """A scene's avoidance, held when ``on``, with its ``obstacles`` (already in the
+        avoidance); the next obstacle ids follow theirs."""
+        self.avoidance, self.on, self.rows = avoidance, bool(on), {}
+        self.obstacles = obstacles
+        numbers = [int(entry_id.rsplit("-", 1)[1]) for entry_id in obstacles
+                   if entry_id.rsplit("-", 1)[-1].isdigit()]
+        self._ids = itertools.count(max(numbers, default=0) + 1)
+
+    def keep(self, held: dict[str, CollisionRows]) -> None:
+        """The rows each controller computed in its step this tick, kept for the view
+        while collisions are on."""
+        if self.on:
+            self.rows.update(held)
+
+    def measure(self, configurations: dict[str, np.ndarray]) -> None:
         """The avoidance's rows at each given robot's configuration, for the view (the
-        control thread, caller holds the lock): for a robot whose controller computed none
-        in its step (:meth:`Tick._advance`); none while collisions are off."""
-        if not self.collisions_on:
-            self.collision_rows = {}
+        control thread): for a robot whose controller computed none in its step
+        (:meth:`Tick._advance`); none while collisions are off."""
+        if not self.on:
+            self.rows = {}
             return
-        model, data = self.robot.model, self._collision_data
+        model, data = self.robot.model, self._data
         for which, q in configurations.items():
             pin.computeJointJacobians(model, data, q)
-            self.collision_rows[which] = self.avoidance.rows(model, data)
+            self.rows[which] = self.avoidance.rows(model, data)
 
     def traced_distance(self, which: str) -> float:
         """The minimum distance the plots show for robot ``which`` (m): the closest pair
         measured, at most the detection distance (NaN while collisions are off or before a
         measure)."""
-        rows = self.collision_rows.get(which)
+        rows = self.rows.get(which)
         if rows is None:
             return math.nan
         return min(rows.minimum_distance, self.avoidance.detection_distance)

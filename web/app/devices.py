@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.validation import as_number
 from teleop.inputs import (DEFAULT_VIEW, FeedbackGains, FeedbackState, InputSample, InputSource,
                            device_pose, feedback_wrench, followed_pose, integrated_twist,
@@ -31,6 +30,7 @@ from teleop.inputs import (DEFAULT_VIEW, FeedbackGains, FeedbackState, InputSamp
 from teleop.limits import MAX_INPUT_TIMEOUT_S, MIN_INPUT_TIMEOUT_S
 from teleop.loop import TeleopLoop
 
+from .collisions import CollisionScene
 from .console import EEInput
 from .limits import HISTORY_RATE, HISTORY_SECONDS, MAX_TARGET_DISTANCE
 from .recording import SessionRecording
@@ -83,8 +83,7 @@ class Devices:
     motion_scale: float
     ticks: int
     recorder: SessionRecording
-    avoidance: CollisionAvoidance
-    collision_rows: dict[str, CollisionRows | None]
+    collisions: CollisionScene
     devices: list[DeviceBinding]
     view_rotation: np.ndarray
     absolute_orientation: bool
@@ -280,8 +279,8 @@ class Devices:
             device.wrench = feedback_wrench(
                 ee, self.inputs[device.source.ee].target
                 if device.state == FeedbackState.FOLLOWING else ee,
-                port_forces, self.collision_rows.get("main"),
-                self.avoidance.detection_distance, self.view_rotation, self.feedback_gains,
+                port_forces, self.collisions.rows.get("main"),
+                self.collisions.avoidance.detection_distance, self.view_rotation, self.feedback_gains,
                 tool)
             device.source.set_feedback(device.wrench, device.state, loop.plant is not None)
             if history:

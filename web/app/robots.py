@@ -25,6 +25,7 @@ from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.task_modes import AUTO, port_task_modes, task_modes, task_weight
 from teleop.robots import Robot
 
+from .collisions import CollisionScene
 from .force_control import ForceControl
 from .homing import WayHome
 from .limits import MAX_GHOST_OFFSET
@@ -68,7 +69,7 @@ class Robots:
     loops: dict[str, TeleopLoop]
     traces: dict[str, Trace]
     last_records: dict[str, StepRecord | None]
-    collision_rows: dict
+    collisions: CollisionScene
     ghost_offset: np.ndarray
     plant: PlantChoice
     force: ForceControl
@@ -100,7 +101,7 @@ class Robots:
                                      acceleration_limit=ROBOT if self.acceleration_limits
                                      else None, jerk_limit=self.jerk_limit)
         self._apply_damping(controller, damping)
-        controller.set_collisions(self._attached(avoidance, collisions_on))
+        controller.set_collisions(self.collisions.attached(avoidance, collisions_on))
         return TeleopLoop(self.robot, self.force.wrapped(controller, config.dt), q0=q,
                           config=config, plant=self.force.plant(config.dt), task_modes=modes)
 
@@ -157,7 +158,7 @@ class Robots:
         a build ran outside the lock, the build is redone under the lock."""
         return (tuple(id(e.constraint) for e in self.entries.values()), self.gain,
                 self.damping, self.config, self.orientation_weight, self.task_mode,
-                id(self.homing.run), tuple(self.specs.items()), id(self._attached()))
+                id(self.homing.run), tuple(self.specs.items()), id(self.collisions.attached()))
 
     def _rebuild(self, specs: dict[str, str], config: LoopConfig | None = None,
                  orientation_weight: float | None = None) -> None:
@@ -220,7 +221,7 @@ class Robots:
         if not spec:
             with self._lock:
                 for store in (self.loops, self.specs, self.traces, self.last_records,
-                              self.collision_rows):
+                              self.collisions.rows):
                     store.pop("ghost", None)
             return
         self._rebuild({"ghost": spec})

@@ -30,7 +30,7 @@ from ..scene import (
     same_robot,
     write_scene_file,
 )
-from .collisions import ObstacleEntry
+from .collisions import CollisionScene, ObstacleEntry
 from .console import EEInput, pose_from
 from .editing import ConstraintEntry
 from .limits import (
@@ -66,9 +66,7 @@ class Scenes:
     loops: dict[str, TeleopLoop]
     traces: dict[str, Trace]
     entries: dict[str, ConstraintEntry]
-    obstacles: dict[str, ObstacleEntry]
-    avoidance: CollisionAvoidance
-    collisions_on: bool
+    collisions: CollisionScene
     inputs: list[EEInput]
     joint_names: list[str]
     scenes: Folder
@@ -83,7 +81,7 @@ class Scenes:
             targets = [pose_to_dict(hand.target) for hand in self.inputs]
             several = {} if len(targets) == 1 else {"targets": [
                 {"frame": hand.frame, **pose} for hand, pose in zip(self.inputs, targets)]}
-            settings = self.avoidance.to_dict()
+            settings = self.collisions.avoidance.to_dict()
             del settings["obstacles"]  # with their ids and goals, below
             return {
                 "format": SCENE_FORMAT, "version": SCENE_VERSION,
@@ -99,10 +97,10 @@ class Scenes:
                 "constraints": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                  "constraint": e.constraint.to_dict()}
                                 for e in self.entries.values()],
-                "collisions": {"on": self.collisions_on, **settings},
+                "collisions": {"on": self.collisions.on, **settings},
                 "obstacles": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                "obstacle": e.obstacle.to_dict()}
-                              for e in self.obstacles.values()],
+                              for e in self.collisions.obstacles.values()],
                 "force": self.force.setup(),
             }
 
@@ -180,14 +178,10 @@ class Scenes:
             numbers = [int(p.id.rsplit("-", 1)[1]) for p in scene.constraints
                        if p.id.rsplit("-", 1)[-1].isdigit()]
             self._ids = itertools.count(max(numbers, default=0) + 1)
-            self.avoidance, self.collisions_on, self.collision_rows = avoidance, collisions_on, {}
-            self.obstacles = {placed.id: ObstacleEntry(
+            self.collisions.restore(avoidance, collisions_on, {placed.id: ObstacleEntry(
                 placed.id, placed.obstacle, placed.goal.copy(),
                 settled=bool(np.array_equal(placed.goal, placed.obstacle.position)))
-                for placed in scene.obstacles}
-            numbers = [int(p.id.rsplit("-", 1)[1]) for p in scene.obstacles
-                       if p.id.rsplit("-", 1)[-1].isdigit()]
-            self._obstacle_ids = itertools.count(max(numbers, default=0) + 1)
+                for placed in scene.obstacles})
             self.ghost_offset = scene.ghost_offset.copy()
             self.motion_scale = scene.motion_scale
             self.clutch = False
@@ -202,7 +196,7 @@ class Scenes:
         whether the controllers hold it (a version 1 scene: the session's settings, no
         obstacle); ``ValueError`` naming the field for settings it cannot take."""
         if scene.collisions is None:
-            settings, on = self.avoidance.to_dict(), self.collisions_on
+            settings, on = self.collisions.avoidance.to_dict(), self.collisions.on
         else:
             settings = {key: value for key, value in scene.collisions.items() if key != "on"}
             on = scene.collisions["on"]

@@ -12,12 +12,12 @@ import threading
 import numpy as np
 import pinocchio as pin
 
-from constraints.collision import CollisionAvoidance, CollisionRows
+from constraints.collision import CollisionRows
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop import PendingStep
 from teleop.loop.moving_geometry import advance, steer
 
-from .collisions import ObstacleEntry
+from .collisions import CollisionScene, ObstacleEntry
 from .console import EEInput
 from .editing import ConstraintEntry
 from .force_control import ForceControl
@@ -39,14 +39,11 @@ class Tick:
     traces: dict[str, Trace]
     last_records: dict[str, StepRecord | None]
     entries: dict[str, ConstraintEntry]
-    obstacles: dict[str, ObstacleEntry]
     inputs: list[EEInput]
     devices: list
     recorder: SessionRecording
     homing: WayHome
-    avoidance: CollisionAvoidance
-    collisions_on: bool
-    collision_rows: dict[str, CollisionRows | None]
+    collisions: CollisionScene
     force: ForceControl
     ticks: int
     #: the loops' hot path in the last tick (us): every robot's ``TeleopLoop.advance``,
@@ -72,7 +69,7 @@ class Tick:
         """
         with self._lock:
             dt = self.config.dt
-            moving = [entry for entry in (*self.entries.values(), *self.obstacles.values())
+            moving = [entry for entry in (*self.entries.values(), *self.collisions.obstacles.values())
                       if not entry.settled]
             if moving:
                 self._steer(moving, dt)
@@ -89,8 +86,7 @@ class Tick:
                 measures = None if loop.plant is None else loop.plant.measures()
                 if measures is not None:
                     self.traces[which].feel_port_forces(measures.port_forces)
-            if self.collisions_on:
-                self.collision_rows.update(held)
+            self.collisions.keep(held)
             history = start >= self._next_history - 0.5 * dt
             if self.devices:
                 self._devices_commanded(history)
@@ -124,9 +120,9 @@ class Tick:
         configuration the command was computed from) go into ``held``: the view reads
         them (:attr:`collision_rows`, immutable) instead of the control thread computing
         them again."""
-        before = self.avoidance.last_rows
+        before = self.collisions.avoidance.last_rows
         step = loop.advance(targets)
-        rows = self.avoidance.last_rows
+        rows = self.collisions.avoidance.last_rows
         if rows is not before and rows is not None:
             held[which] = rows
         return step
@@ -154,10 +150,10 @@ class Tick:
         the command's, then, once the geometry has moved on, the end of the period's. The
         collision rows of a robot whose controller computed none this tick (not in
         ``held``) are measured here, where its command was computed from
-        (:meth:`Collisions._measure_collisions`)."""
+        (:meth:`.collisions.CollisionScene.measure`)."""
         for which, loop in self.loops.items():  # before the geometry moves on
             loop.measure_command(pending[which])
-        self._measure_collisions({which: step.sensed for which, step in pending.items()
+        self.collisions.measure({which: step.sensed for which, step in pending.items()
                                   if which not in held})
         for entry in moving:
             advance(entry.moved, dt)
@@ -166,5 +162,5 @@ class Tick:
             record = loop.measure(pending[which])
             self.last_records[which] = record
             deviation = 0.0 if which == "main" else float(np.linalg.norm(loop.last_qd - main_qd))
-            self.traces[which].add(record, deviation, self.traced_distance(which))
+            self.traces[which].add(record, deviation, self.collisions.traced_distance(which))
         self.force.measure(self.loops["main"])

@@ -40,7 +40,7 @@ class Trace:
     #: |qd - qd_main| (rad/s): the ghost's deviation from the main robot's command
     qd_deviation: collections.deque = field(default_factory=_deque)
     #: the closest collision pair's distance (m), at most the detection distance; NaN
-    #: while collisions are off (:meth:`web.app.TeleopApp.traced_distance`)
+    #: while collisions are off (:meth:`web.app.collisions.CollisionScene.traced_distance`)
     minimum_distance: collections.deque = field(default_factory=_deque)
     #: the largest port force (N) of the periods since the last sample; NaN: none felt
     _port_peak: float = math.nan

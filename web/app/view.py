@@ -9,13 +9,12 @@ import threading
 import pinocchio as pin
 
 from constraints import Constraint
-from constraints.collision import CollisionRows
 from constraints.kinematics import frame_placement
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.robots import Robot
 
 from ..constraint_drawing import constraint_geometry
-from .collisions import ObstacleEntry
+from .collisions import CollisionScene
 from .console import EEInput
 from .editing import ConstraintEntry
 from .force_control import ForceControl
@@ -36,8 +35,7 @@ class View:
     traces: dict[str, Trace]
     last_records: dict[str, StepRecord | None]
     entries: dict[str, ConstraintEntry]
-    obstacles: dict[str, ObstacleEntry]
-    collision_rows: dict[str, CollisionRows | None]
+    collisions: CollisionScene
     inputs: list[EEInput]
     joint_names: list[str]
     plant: PlantChoice
@@ -134,10 +132,10 @@ class View:
         :class:`constraints.collision.ObstacleGeometry`)."""
         settings = self.collision_settings()
         return {**settings,
-                "checking": settings["on"] and bool(settings["self_collision"] or self.obstacles),
+                "checking": settings["on"] and bool(settings["self_collision"] or self.collisions.obstacles),
                 "obstacles": [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),
                                "geometry": entry.obstacle.geometry()}
-                              for entry in self.obstacles.values()]}
+                              for entry in self.collisions.obstacles.values()]}
 
     def active_pairs(self, which: str = "main") -> list[str]:
         """The collision pairs robot ``which``'s controller holds at their bound now (from
@@ -166,7 +164,7 @@ class View:
                 "active_inequalities": self.active_inequalities(which),
                 "active_pairs": self.active_pairs(which),
                 # the rows its controller computed last (immutable), or None
-                "collision_rows": self.collision_rows.get(which),
+                "collision_rows": self.collisions.rows.get(which),
                 "ports": self._ports(loop, placements),
                 # what the supervisor measured and did in the last period (immutable)
                 "supervision": loop.supervision}
