@@ -88,6 +88,15 @@ def hold_the_hole(app: TeleopApp) -> tuple[float, float]:
     return max(errors), distance
 
 
+def in_process(robot, tmp_path: Path) -> float:
+    """:func:`hold_the_hole`'s hole error on the page's in-process kinematic robot, from
+    the sim's start."""
+    app = TeleopApp(robot, rate=RATE, record_dir=tmp_path, scene_dir=tmp_path)
+    app.loops["main"].q = Q0.copy()
+    app.inputs[0].target = app.loops["main"].ee_placements()[0]
+    return hold_the_hole(app)[0]
+
+
 def test_the_page_drives_the_simulated_robot_and_holds_the_hole(robot, domain, robot_process,
                                                                 tmp_path):
     """The page starts where the robot is (the sim's q0, not home), one command writer
@@ -115,11 +124,8 @@ def test_the_page_drives_the_simulated_robot_and_holds_the_hole(robot, domain, r
         assert app.limitation().words.find("stopped") < 0
     finally:
         (app.ros2 or pytest.fail("no ROS 2 robot")).close()
-    kinematic = TeleopApp(robot, rate=RATE, record_dir=tmp_path, scene_dir=tmp_path)
-    kinematic.loops["main"].q = Q0.copy()
-    kinematic.inputs[0].target = kinematic.loops["main"].ee_placements()[0]
-    reference, _ = hold_the_hole(kinematic)
-    print(f"hole error over DDS {error * 1e6:.2f} um, in process {reference * 1e6:.2f} um "
+    reference = in_process(robot, tmp_path)
+    print(f"hole error over DDS {error * 1e6:.3f} um; in process {reference * 1e6:.3f} um "
           f"({error / reference:.2f}x); tip {distance * 1e3:.2f} mm from the target")
     assert 0 < error < 2e-4
     assert distance < 1e-3
@@ -147,6 +153,24 @@ def test_the_status_says_why_the_robot_stopped(robot, domain, robot_process, tmp
     finally:
         (app.ros2 or pytest.fail("no ROS 2 robot")).close()
         peer.close()
+
+
+@pytest.mark.timing
+def test_the_hole_over_dds_within_2x_of_in_process(robot, domain, robot_process, tmp_path):
+    """The issue's target (docs/ros2.md "Measured"): the page over DDS holds the hole within
+    2x of the page on the in-process kinematic robot, no latency (the plant moves the state
+    on by the command in flight, ``command_latency`` 1). Timing: the two processes' period
+    jitter adds to the error on a loaded machine (an idle one needed)."""
+    app = TeleopApp(robot, rate=RATE, plant="ros2", ros2_settings=settings_for(domain),
+                    record_dir=tmp_path, scene_dir=tmp_path)
+    try:
+        error, _ = hold_the_hole(app)
+    finally:
+        (app.ros2 or pytest.fail("no ROS 2 robot")).close()
+    reference = in_process(robot, tmp_path)
+    print(f"hole error over DDS {error * 1e6:.3f} um, in process {reference * 1e6:.3f} um: "
+          f"{error / reference:.2f}x")
+    assert error <= 2.0 * reference
 
 
 @pytest.mark.parametrize(("args", "message"), [
