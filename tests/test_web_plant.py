@@ -246,7 +246,7 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         run(app, 0.02)  # setting off: the wall pushes
         snapshot = app.snapshot()
         ui._draw(snapshot)
-        ui._plot(snapshot)
+        ui.plots.draw(snapshot)
         (port,) = snapshot["robots"]["main"]["ports"]
         assert port.magnitude > 1e-2
         arrow = ui._port_arrows["main"][hole_id]
@@ -277,8 +277,8 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         np.testing.assert_allclose(label.position, port.point + [0.0, 0.0, 0.06], atol=1e-3)
         assert "% of ticks on time" in ui.status.content and "physics included" in \
             ui.status.content and "**plant** MuJoCo plant at 2000 Hz" in ui.status.content
-        assert ui._plots["port_force"].title.startswith("port force, the largest (")
-        assert np.isfinite(ui._plots["port_force"].data[1]).all()
+        assert ui.plots.handles["port_force"].title.startswith("port force, the largest (")
+        assert np.isfinite(ui.plots.handles["port_force"].data[1]).all()
         # a ghost gets its own arrows, under its own root; without it they go
         app.set_ghost("qp:daqp")
         run(app, 0.05)

@@ -1,7 +1,7 @@
 """The viser view on a real viser server, without a browser: what it draws and where.
 
 The view thread is not started: each test takes a snapshot of the app and draws it
-(``ui._draw``, ``ui._plot``) itself, then reads the scene nodes' and GUI handles' state.
+(``ui._draw``, ``ui.plots.draw``) itself, then reads the scene nodes' and GUI handles' state.
 What a browser makes of it is tests/test_browser.py's.
 """
 
@@ -44,7 +44,7 @@ def draw(ui, plot=False):
     snapshot = ui.app.snapshot()
     ui._draw(snapshot)
     if plot:
-        ui._plot(snapshot)
+        ui.plots.draw(snapshot)
     return snapshot
 
 
@@ -158,30 +158,30 @@ def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
     nudge(app, [0.004, 0.0, 0.0])
     run(app, 0.3)
     draw(ui, plot=True)
-    assert set(ui._plots) == {spec.key for spec in PLOTS if not spec.ghost_only}
-    for plot in ui._plots.values():
+    assert set(ui.plots.handles) == {spec.key for spec in PLOTS if not spec.ghost_only}
+    for plot in ui.plots.handles.values():
         assert len(plot.series) == 2 == len(plot.data)
         assert all(np.isfinite(column).all() and column.size == 15 for column in plot.data)
-    t = ui._plots["ee_error"].data[0]  # seconds before now, on a fixed 10 s axis
+    t = ui.plots.handles["ee_error"].data[0]  # seconds before now, on a fixed 10 s axis
     assert -0.02 <= t[-1] <= 0.0 and t[-1] - t[0] == pytest.approx(0.28)  # 15 samples, 50 Hz
     assert np.all(np.diff(t) > 0)
-    assert ui._plots["ee_error"].scales["x"]["range"] == (-10.0, 0.0)
-    title = ui._plots["ee_error"].title
+    assert ui.plots.handles["ee_error"].scales["x"]["range"] == (-10.0, 0.0)
+    title = ui.plots.handles["ee_error"].title
     assert title.startswith("EE position error (") and title.endswith("m)")
-    ee = ui._plots["ee_error"].data[1]
+    ee = ui.plots.handles["ee_error"].data[1]
     assert 1.0 <= ee.max() < 2000.0  # readable numbers in the unit of the title
     app.set_ghost("qp:daqp")
     run(app, 0.2)
     draw(ui, plot=True)
-    assert set(ui._plots) == {spec.key for spec in PLOTS}
-    for plot in ui._plots.values():
+    assert set(ui.plots.handles) == {spec.key for spec in PLOTS}
+    for plot in ui.plots.handles.values():
         assert all(np.isfinite(column).all() and column.size == 10 for column in plot.data)
-    assert [s["label"] for s in ui._plots["constraint_error"].series] == [
+    assert [s["label"] for s in ui.plots.handles["constraint_error"].series] == [
         "t - now (s)", "main (cjm)", "ghost (qp:daqp)"]
     app.set_ghost(None)
     draw(ui, plot=True)
-    assert "qd_deviation" not in ui._plots
-    assert len(ui._plots["constraint_error"].series) == 2
+    assert "qd_deviation" not in ui.plots.handles
+    assert len(ui.plots.handles["constraint_error"].series) == 2
 
 
 def test_loading_a_scene_sets_the_widgets(ui, tmp_path):

@@ -53,7 +53,7 @@ from .device_view import DeviceView
 from .force_panel import ForcePanel
 from .markers import Markers
 from .panels import Panels
-from .plots import Plots
+from .plots import LivePlots
 from .port_forces import PortForces
 from .scene_view import SceneView
 from .shapes import LinkProfile, square_size
@@ -86,7 +86,7 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
 
 
 class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, CollisionView,
-               PortForces, StatusView, Plots, DeviceView):
+               PortForces, StatusView, DeviceView):
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -114,12 +114,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         #: synchronously for those assignments do nothing (a thread-local flag, so that an
         #: operator's click, handled on viser's threads meanwhile, is never dropped)
         self._syncing = threading.local()
-        self._plots: dict[str, object] = {}
-        self._plot_keys: dict[str, tuple] = {}
         self._line_colors: dict[tuple[str, int], tuple] = {}  # (robot, EE) -> its line colour
-        self._plotted: set[str] = set()  # the robots the plots show
-        #: the main robot's largest port force over the plots' window (N; None: no port)
-        self._port_peak: float | None = None
         self._ghost_seen: float | None = None  # when the view first saw the ghost
         self._saved_offset = app.ghost_offset.copy()
         robot = app.robot
@@ -201,6 +196,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         with self._plot_tab:
             self.plot_note = gui.add_markdown("the last 10 s, measured at 50 Hz; with a ghost, "
                                               "since it joined")
+        self.plots = LivePlots(self.server, self._plot_tab)
         if self.notes:
             with self.tabs.add_tab("Robot"):
                 gui.add_markdown("**Loaded with fallbacks:**\n\n" +
@@ -238,7 +234,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
                 if status:
                     next_status = start + 1.0 / STATUS_RATE
                 if plot:
-                    self._plot(snapshot)
+                    self.plots.draw(snapshot)
                     self._plot_feedback(snapshot)
                     self.force_panel.draw_plot(snapshot["force"], snapshot["robots"]["main"]["t"])
                     next_plot = start + 1.0 / PLOT_RATE

@@ -97,55 +97,67 @@ def plot_series(snapshot: dict, spec: PlotSpec) -> tuple[np.ndarray, dict[str, n
     return t, series
 
 
-class Plots:
-    """The plots of :class:`web.ui.TeleopUI` (its state: a uPlot per measure and the unit
-    and series it shows)."""
+class LivePlots:
+    """The live plots of :class:`web.ui.TeleopUI`, a component owning its uPlot handles
+    (:attr:`handles`, by measure) and the unit and series each shows; the view thread
+    calls :meth:`draw`.
 
-    server: viser.ViserServer
-    _plots: dict[str, object]
-    _plot_keys: dict[str, tuple]
-    _plotted: set[str]
-    _port_peak: float | None
-    _plot_tab: object  # the "Plots" tab
+    Parameters
+    ----------
+    server : the viser server the plots are added to.
+    tab : the "Plots" tab they go in.
+    """
 
-    def _plot(self, snapshot: dict) -> None:
+    def __init__(self, server: viser.ViserServer, tab: viser.GuiTabHandle) -> None:
+        self.server = server
+        self.tab = tab
+        self.handles: dict[str, viser.GuiUplotHandle] = {}
+        self._keys: dict[str, tuple] = {}  # measure -> (unit, series labels) shown
+        #: the robots the plots show
+        self.plotted: set[str] = set()
+        #: the main robot's largest port force over the plots' window (N; None: no port)
+        self.port_peak: float | None = None
+
+    def draw(self, snapshot: dict) -> None:
+        """The plots of the session ``snapshot`` (:func:`plots_of`), each on its last
+        seconds; a plot whose unit or series changed is replaced."""
         robots = snapshot["robots"]
         shown: set[str] = set()
         for spec in plots_of(snapshot):
             t, series = plot_series(snapshot, spec)
             if t.size < 2:
-                if spec.ghost_only and spec.key in self._plots and "ghost" not in robots:
-                    self._plots.pop(spec.key).remove()
-                    self._plot_keys.pop(spec.key, None)
+                if spec.ghost_only and spec.key in self.handles and "ghost" not in robots:
+                    self.handles.pop(spec.key).remove()
+                    self._keys.pop(spec.key, None)
                 continue
             values = np.concatenate(list(series.values()))
-            current = self._plot_keys.get(spec.key, (None,))[0]
+            current = self._keys.get(spec.key, (None,))[0]
             unit, size = display_unit(values, spec.quantity, current)
             labels = tuple(f"{which} ({robots[which]['spec']})" for which in series)
             key = (unit, labels)
             data = (t - snapshot["robots"]["main"]["t"],  # seconds before now: a fixed x axis
                     *[column / size for column in series.values()])
-            if self._plot_keys.get(spec.key) != key:
-                self._replace_plot(spec, unit, series, labels, data)
-                self._plot_keys[spec.key] = key
+            if self._keys.get(spec.key) != key:
+                self._replace(spec, unit, series, labels, data)
+                self._keys[spec.key] = key
             else:
-                self._plots[spec.key].data = data
+                self.handles[spec.key].data = data
             shown.update(series)
-        self._plotted = shown
+        self.plotted = shown
         trace = robots["main"]["trace"]
         forces = trace["port_force"][np.isfinite(trace["port_force"])]
-        self._port_peak = float(forces.max()) if forces.size else None
+        self.port_peak = float(forces.max()) if forces.size else None
 
-    def _replace_plot(self, spec: PlotSpec, unit: str, series: dict, labels: tuple,
-                      data: tuple) -> None:
+    def _replace(self, spec: PlotSpec, unit: str, series: dict, labels: tuple,
+                 data: tuple) -> None:
         """A new uPlot for a new unit or set of series, where the old one was."""
-        old = self._plots.pop(spec.key, None)
+        old = self.handles.pop(spec.key, None)
         order = old.order if old is not None else None
         if old is not None:
             old.remove()
         colors = {"main": MAIN_COLOR, "ghost": GHOST_COLOR}
-        with self._plot_tab:
-            self._plots[spec.key] = self.server.gui.add_uplot(
+        with self.tab:
+            self.handles[spec.key] = self.server.gui.add_uplot(
                 data=data,
                 series=(uplot.Series(label="t - now (s)"),
                         *[uplot.Series(label=label, stroke=colors[which], width=1.5,

@@ -13,6 +13,7 @@ import viser
 from ..app import TeleopApp, default_ghost_offset
 from ..inbox import Inbox
 from ..robot_view import RobotView
+from .plots import LivePlots
 from .shapes import wxyz_of
 
 #: the target gizmo's size (m): its handles large enough to grab from the first view
@@ -45,7 +46,7 @@ class SceneView:
     _port_arrows: dict[str, dict]
     _drawn: dict[tuple[str, str], object]
     _gone: set[int]
-    _plotted: set[str]
+    plots: LivePlots
 
     def _build_scene(self) -> None:
         scene = self.server.scene
@@ -153,7 +154,7 @@ class SceneView:
         now = time.perf_counter()
         if self._ghost_seen is None:
             self._ghost_seen = now
-        return ("ghost" in self._plotted or now - self._ghost_seen > GHOST_PLOTS_FIRST)
+        return ("ghost" in self.plots.plotted or now - self._ghost_seen > GHOST_PLOTS_FIRST)
 
     def _draw_target(self, snapshot: dict) -> None:
         """Per EE: its target (where apart from its gizmo, or clutched) and, per robot, the

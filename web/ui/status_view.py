@@ -14,6 +14,7 @@ import viser
 from constraints.collision import CollisionRows
 
 from ..app import HISTORY_SECONDS, ControlThread, port_words, summary_words, supervision_words
+from .plots import LivePlots
 from .port_forces import FORCE_ARROW_WORDS
 
 BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
@@ -41,7 +42,7 @@ class StatusView:
     control: ControlThread
     ee_names: dict[str, str]
     _behind: str
-    _port_peak: float | None  # the plots' largest port force (N), :class:`.plots.Plots`
+    plots: LivePlots
     banner: viser.GuiHtmlHandle
     summary: viser.GuiMarkdownHandle  # the few plain words, always shown
     status: viser.GuiMarkdownHandle  # the details, in a folder closed by default
@@ -76,8 +77,8 @@ class StatusView:
             lines.append("placed: " + ", ".join(placed))
         ports = snapshot["robots"]["main"]["ports"]
         if ports:
-            peak = "" if self._port_peak is None else \
-                f"; the largest in the last {HISTORY_SECONDS:g} s {1e3 * self._port_peak:.2f} mN"
+            peak = "" if self.plots.port_peak is None else \
+                f"; the largest in the last {HISTORY_SECONDS:g} s {1e3 * self.plots.port_peak:.2f} mN"
             lines.append(", ".join(f"port force {port.id} **{1e3 * port.magnitude:.2f} mN**"
                                    for port in ports) + f"{peak} ({FORCE_ARROW_WORDS})")
         if snapshot["clutch"]:
