@@ -46,20 +46,29 @@ class CompiledPorts:
         self._data = data
         self._address = ctypes.c_void_p(data._address)
         self.ports = np.zeros((0, PORT_FIELDS))
+        #: :attr:`ports`' buffer as the C callback reads it (made again when it is reallocated)
+        self._pointer = self.ports.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
     def step(self, model: mujoco.MjModel, ports: np.ndarray, nstep: int) -> None:
         """``nstep`` physics steps with the walls of ``ports``: one row per port, its
         MuJoCo body and site ids then its wall's ``compiled_parameters``."""
         if self.ports.shape[0] != ports.shape[0]:
             self.ports = np.zeros((ports.shape[0], PORT_FIELDS))
+            self._pointer = self.ports.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
         self.ports[:, :_FORCE] = ports
-        pointer = self.ports.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        if self._library.cjm_wall_attach(self._address, pointer, len(self.ports)) != 0:
+        if self._library.cjm_wall_attach(self._address, self._pointer, len(self.ports)) != 0:
             raise RuntimeError("too many MuJoCo plants stepping at once for the compiled walls")
         try:
             mujoco.mj_step(model, self._data, nstep)
         finally:
             self._library.cjm_wall_detach(self._address)
+
+    def results(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:attr:`forces`, :attr:`springs` and :attr:`displacements` from one copy of the
+        ports' results (views of it)."""
+        written = self.ports[:, _FORCE:].copy()
+        return (written[:, :_SPRING - _FORCE], written[:, _SPRING - _FORCE:_DISPLACEMENT - _FORCE],
+                written[:, _DISPLACEMENT - _FORCE])
 
     @property
     def forces(self) -> np.ndarray:

@@ -21,6 +21,7 @@ contacts (docs/design.md section 18.6).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -179,6 +180,7 @@ class MujocoPlant:
         self._q_pin = np.empty(self.model.nq)
         self._qpos_of_dof = self.mj_model.jnt_qposadr[self.mj_model.dof_jntid]
         self.effort_limit = self._effort_limits()
+        self._effort_limit_list: list[float] = self.effort_limit.tolist()
         self._site_ids = {name: self.mj_model.site(site_name(name)).id
                           for name in self._site_frames(robot)}
         self._site_bodies = self.mj_model.site_bodyid.tolist()
@@ -353,18 +355,16 @@ class MujocoPlant:
         if self.contact_pairs is not None:
             self.contact_pairs.follow(model, constraints)
         holes = [(c, wall) for c in constraints if (wall := wall_of(c)) is not None]
-        forces, displacements = np.zeros((len(holes), 3)), np.zeros(len(holes))
-        springs = np.zeros((len(holes), 3))
         data.qfrc_applied[:] = 0.0
         contacts = np.zeros((len(self._tools), 3))
         depths = np.zeros(len(self._tools))
         ports = None if self.tissues or not holes else self._compiled_ports(holes)
         if ports is not None and self._compiled_walls is not None:  # one call, walls in C
             self._compiled_walls.step(model, ports, self.substeps)
-            forces = self._compiled_walls.forces
-            springs = self._compiled_walls.springs
-            displacements = self._compiled_walls.displacements
+            forces, springs, displacements = self._compiled_walls.results()
         elif holes or self.tissues:  # each physics step split to apply the forces there
+            forces, displacements = np.zeros((len(holes), 3)), np.zeros(len(holes))
+            springs = np.zeros((len(holes), 3))
             for _ in range(self.substeps):
                 mujoco.mj_step1(model, data)
                 data.qfrc_applied[:] = 0.0
@@ -374,14 +374,19 @@ class MujocoPlant:
                     contacts[i], depths[i] = self._press(i)
                 mujoco.mj_step2(model, data)
         else:  # one call: the physics steps without Python between them
+            forces, displacements, springs = np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
             mujoco.mj_step(model, data, self.substeps)
-        torque = np.abs(data.qfrc_actuator) / self.effort_limit
-        ratio = float(np.max(torque))
+        # |tau| / limit per dof in Python floats (numpy's per-call cost exceeds the sum on a
+        # few dofs; the same IEEE divisions), a NaN torque kept as np.max would
+        torques = [abs(tau) / limit
+                   for tau, limit in zip(data.qfrc_actuator.tolist(), self._effort_limit_list)]
+        ratio = max(torques) if not math.isnan(sum(torques)) else math.nan
         saturated = ratio >= 1.0 - 1e-12
-        distances = data.contact.dist[:data.ncon]
+        contact_count = int(data.ncon)
+        penetration = 0.0 if contact_count == 0 else float(
+            max(0.0, -np.min(data.contact.dist[:contact_count], initial=0.0)))
         self.last = PlantMeasures(forces, displacements, ratio, saturated, springs,
-                                  int(data.ncon),
-                                  float(max(0.0, -np.min(distances, initial=0.0))),
+                                  contact_count, penetration,
                                   fault, self.interface.stopped, self._read_sensors(),
                                   contacts, depths)
         self.joints.q_to_pinocchio(data.qpos, self._q_pin)
