@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Iterator
 
@@ -17,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from browser_helpers import free_port
+from test_web_cli import serve
 from test_ros2_wire import COMMANDS, LOOPBACK, STATES, CommandLog, sim
 
 from teleop import load_robot
@@ -103,7 +105,10 @@ def test_the_page_drives_the_simulated_robot_and_holds_the_hole(robot, domain, r
     whatever the operator rebuilds, the hole held as the target moves (within 0.2 mm;
     measured against the in-process kinematic plant in docs/ros2.md), the tip reaching
     the target."""
-    app = TeleopApp(robot, rate=RATE, plant="ros2", ros2_settings=settings_for(domain),
+    # the watchdog at 1 s (as test_ros2_wire's closed loop): a loaded machine's 50 ms
+    # pause would stop the robot, which the next test checks
+    app = TeleopApp(robot, rate=RATE, plant="ros2",
+                    ros2_settings=settings_for(domain, stale_after=1.0),
                     record_dir=tmp_path, scene_dir=tmp_path)
     try:
         np.testing.assert_array_equal(app.loops["main"].q, Q0)  # float64 on the wire
@@ -190,6 +195,30 @@ def test_bad_ros2_options_are_one_line_and_exit_2(args, message, capsys):
     assert code == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and message in err, err
+
+
+def test_teleop_web_plant_ros2_serves_the_robot_and_stops_it_at_exit(domain, robot_process):
+    """``python -m web --plant ros2`` against ``teleop sim --ros2``, two processes: its
+    start line names the ROS 2 robot, its control thread commands the robot, Ctrl-C ends
+    it with exit code 0 and zeros last on the command topic."""
+    peer = Ros2Node(domain)
+    log = CommandLog(peer)
+    try:
+        out, err, code = serve("--robot", "ur5_instrument", "--rate", str(RATE), "--plant",
+                               "ros2", "--ros-domain", str(domain), "--joint-states", STATES,
+                               "--command-topic", COMMANDS)
+        assert code == 0, err
+        assert (f"(controller cjm), on the ROS 2 robot ({STATES} -> {COMMANDS}, domain "
+                f"{domain}, stopped when the state is 50 ms old); Ctrl-C stops") in out, out
+        assert "Traceback" not in err, err
+        for _ in range(500):
+            if log.poll() and not any(log.poll()[-1]):
+                break
+            time.sleep(1.0 / RATE)  # a wait counted in periods, not asserted
+        commands = log.poll()
+        assert len(commands) > 1 and not any(commands[-1])
+    finally:
+        peer.close()
 
 
 def test_teleop_web_plant_ros2_refuses_a_ghost_and_a_silent_robot(domain):
