@@ -82,7 +82,7 @@ def view_of(web, position, look_at) -> np.ndarray:
     return the screen's right computed here."""
     right = screen_right(position, look_at)
     set_camera(web.client, position, look_at)
-    wait_until(lambda: np.allclose(web.app.view_rotation[:, 0], right, atol=1e-3), WAIT,
+    wait_until(lambda: np.allclose(web.app.devices.view_rotation[:, 0], right, atol=1e-3), WAIT,
                f"the app's view to take the browser's camera (right {right})")
     return right
 
@@ -90,7 +90,7 @@ def view_of(web, position, look_at) -> np.ndarray:
 def test_device_x_moves_the_tool_along_the_views_right_and_turns_with_the_view(console):
     web, master, streamer = console
     wait_until(lambda: master.counts["applied"] > 10, WAIT, "the master's first commands")
-    assert not np.allclose(web.app.view_rotation, DEFAULT_VIEW)  # a browser has reported
+    assert not np.allclose(web.app.devices.view_rotation, DEFAULT_VIEW)  # a browser has reported
     look_at = web.app.targets[0].translation.copy()
     eye = look_at + np.array([1.2, -0.8, 0.5])
     right = view_of(web, eye, look_at)

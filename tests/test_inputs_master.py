@@ -121,7 +121,7 @@ def session() -> Session:
         held = app.targets[0].translation.copy()
         time.sleep(0.2)  # held: the target stays and the robot with it
         return Session(snapshots, errors, holes, sent, feedback, releases_streaming, stopped,
-                       app.input_timeout, app.devices[0].reason,
+                       app.devices.input_timeout, app.devices[0].reason,
                        float(np.max(np.abs(app.targets[0].translation - held))),
                        float(np.max(np.abs(app.loops["main"].last_qd))), master.statistics())
     finally:

@@ -26,6 +26,7 @@ import numpy as np
 from constraints.collision import OBSTACLE_TYPES
 from constraints.validation import as_vector
 from controllers.base import velocity_joint_names
+from teleop.inputs import InputSource
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.task_modes import AUTO
 from teleop.options import JERK_LIMIT
@@ -37,7 +38,7 @@ from ..folders import Folder
 from .collisions import (CollisionScene, ObstacleEntry, check_reach, in_front,
                          obstacle_fields)
 from .console import Console, EEInput
-from .devices import Devices
+from .devices import InputDevices
 from .editing import ConstraintEntry, Editing
 from .force_control import ForceControl
 from .homing import WayHome
@@ -53,7 +54,7 @@ from .trace import Trace
 from .view import View
 
 
-class TeleopApp(Console, Devices, Editing, Robots, Plants, Settings, Scenes, Tick,
+class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
                 View):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
@@ -141,8 +142,8 @@ class TeleopApp(Console, Devices, Editing, Robots, Plants, Settings, Scenes, Tic
                        zip(robot.ee_frames, self.loops["main"].ee_placements())]
         self.motion_scale = 1.0
         self.clutch = False
-        self._init_devices()
         self.recorder = SessionRecording(self.recordings, lambda: self.now, robot.ee_frames)
+        self.devices = InputDevices(self.recorder)
         self._next_history = 0.0
         self.ticks = 0
         self.advance_us = 0.0
@@ -242,3 +243,33 @@ class TeleopApp(Console, Devices, Editing, Robots, Plants, Settings, Scenes, Tic
             for entry_id in ids:
                 self.collisions.remove(entry_id, self._constraints())
             return len(ids)
+
+    def attach_input(self, source: InputSource) -> None:
+        """``source`` drives EE ``source.ee`` from the next tick (one source per EE,
+        :class:`.devices.InputDevices`); the app starts it, and closes it on
+        :meth:`close_inputs`."""
+        with self._lock:
+            self.devices.attach(source, len(self.inputs))
+        source.start()
+
+    def close_inputs(self) -> None:
+        with self._lock:
+            sources = self.devices.detach_all()
+        for source in sources:
+            source.close()
+
+    def set_input_timeout(self, seconds: float) -> None:
+        """The watchdog's timeout (s): a streaming source silent longer is released."""
+        with self._lock:
+            self.devices.set_input_timeout(seconds)
+
+    def set_view(self, camera_wxyz) -> None:
+        """The operator's view: the browser camera's orientation (viser's ``wxyz``); the
+        devices' motion is mapped into it from now on (no target jumps)."""
+        with self._lock:
+            self.devices.set_view(camera_wxyz)
+
+    def set_orientation_mode(self, absolute: bool) -> None:
+        """Orientation relative (through the clutch) or absolute with respect to the view."""
+        with self._lock:
+            self.devices.set_orientation_mode(absolute)

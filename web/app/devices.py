@@ -2,10 +2,10 @@
 effector's target through the same clutch, motion scale and view mapping as the gizmo.
 
 The control tick, before the robots' step, takes each source's newest sample
-(:meth:`Devices._apply_devices`): a pose moves the target by the device's motion since
+(:meth:`InputDevices.apply`): a pose moves the target by the device's motion since
 its previous sample, a twist integrates over the period (:mod:`teleop.inputs.mapping`),
-both in the frame of the operator's view (:meth:`Devices.set_view`). After the step
-(:meth:`Devices._devices_commanded`) each sample a command used gets its latency, and
+both in the frame of the operator's view (:meth:`InputDevices.set_view`). After the step
+(:meth:`InputDevices.commanded`) each sample a command used gets its latency, and
 each source that renders feedback the wrench to render (:mod:`teleop.inputs.feedback`).
 
 The **watchdog**: a streaming source silent longer than :attr:`input_timeout` is
@@ -16,13 +16,14 @@ next sample starts a new stream, from where the target is (no jump).
 
 from __future__ import annotations
 
-import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 
+from constraints.collision import CollisionRows
 from constraints.validation import as_number
 from teleop.inputs import (DEFAULT_VIEW, FeedbackGains, FeedbackState, InputSample, InputSource,
                            device_pose, feedback_wrench, followed_pose, integrated_twist,
@@ -30,7 +31,6 @@ from teleop.inputs import (DEFAULT_VIEW, FeedbackGains, FeedbackState, InputSamp
 from teleop.limits import MAX_INPUT_TIMEOUT_S, MIN_INPUT_TIMEOUT_S
 from teleop.loop import TeleopLoop
 
-from .collisions import CollisionScene
 from .console import EEInput
 from .limits import HISTORY_RATE, HISTORY_SECONDS, MAX_TARGET_DISTANCE
 from .recording import SessionRecording
@@ -73,60 +73,61 @@ class DeviceBinding:
     rate_control: bool = False  # its last sample was a twist
 
 
-class Devices:
-    """The input devices of :class:`web.app.TeleopApp` (its state: ``devices``,
-    ``view_rotation``, ``absolute_orientation``, ``input_timeout``, ``feedback_gains``)."""
+class InputDevices:
+    """The input devices of :class:`web.app.TeleopApp`, a component it holds and calls
+    under its lock: the bound sources (iterating over it gives each
+    :class:`DeviceBinding`), the operator's :attr:`view_rotation`, whether orientation is
+    :attr:`absolute_orientation`, the watchdog's :attr:`input_timeout` and the
+    :attr:`feedback_gains`. The targets, the loops, the clutch and the motion scale are
+    handed to the tick's methods; the recording is given at construction.
 
-    inputs: list[EEInput]
-    loops: dict[str, TeleopLoop]
-    clutch: bool
-    motion_scale: float
-    ticks: int
-    recorder: SessionRecording
-    collisions: CollisionScene
-    devices: list[DeviceBinding]
-    view_rotation: np.ndarray
-    absolute_orientation: bool
-    input_timeout: float
-    feedback_gains: FeedbackGains
-    _lock: threading.RLock
+    Parameters
+    ----------
+    recorder : the session's recording (the devices' targets and statistics go there).
+    """
 
-    def _init_devices(self) -> None:
-        self.devices = []
+    def __init__(self, recorder: SessionRecording) -> None:
+        self._recorder = recorder
+        self._bindings: list[DeviceBinding] = []
         self.view_rotation = DEFAULT_VIEW.copy()
         self.absolute_orientation = False
         self.input_timeout = DEFAULT_INPUT_TIMEOUT
         self.feedback_gains = FeedbackGains()
         self._next_input_record = 0.0
 
-    def attach_input(self, source: InputSource) -> None:
-        """``source`` drives EE ``source.ee`` from the next tick (one source per EE); the
-        app starts it, and closes it on :meth:`close_inputs`."""
-        if not 0 <= source.ee < len(self.inputs):
-            raise ValueError(f"{source.name}: no end effector {source.ee} (this robot has "
-                             f"{len(self.inputs)})")
-        with self._lock:
-            taken = [d.source.name for d in self.devices if d.source.ee == source.ee]
-            if taken:
-                raise ValueError(f"{source.name}: EE {source.ee} is already driven by "
-                                 f"{taken[0]}")
-            self.devices.append(DeviceBinding(source))
-        source.start()
+    def __iter__(self) -> Iterator[DeviceBinding]:
+        return iter(self._bindings)
 
-    def close_inputs(self) -> None:
-        with self._lock:
-            devices, self.devices = self.devices, []
-        for device in devices:
-            device.source.close()
+    def __len__(self) -> int:
+        return len(self._bindings)
+
+    def __getitem__(self, index: int) -> DeviceBinding:
+        return self._bindings[index]
+
+    def attach(self, source: InputSource, ee_count: int) -> None:
+        """``source`` drives EE ``source.ee`` of the ``ee_count`` from the next tick (one
+        source per EE); the caller starts it."""
+        if not 0 <= source.ee < ee_count:
+            raise ValueError(f"{source.name}: no end effector {source.ee} (this robot has "
+                             f"{ee_count})")
+        taken = [d.source.name for d in self._bindings if d.source.ee == source.ee]
+        if taken:
+            raise ValueError(f"{source.name}: EE {source.ee} is already driven by {taken[0]}")
+        self._bindings.append(DeviceBinding(source))
+
+    def detach_all(self) -> list[InputSource]:
+        """Every source unbound; they are the caller's to close."""
+        bindings, self._bindings = self._bindings, []
+        return [binding.source for binding in bindings]
 
     def set_input_timeout(self, seconds: float) -> None:
+        """The watchdog's timeout (s), within :data:`INPUT_TIMEOUT_RANGE`."""
         seconds = as_number(seconds, "input timeout")
         low, high = INPUT_TIMEOUT_RANGE
         if not low <= seconds <= high:
             raise ValueError(f"input timeout must be between {1e3 * low:g} and "
                              f"{1e3 * high:g} ms, got {1e3 * seconds:g} ms")
-        with self._lock:
-            self.input_timeout = seconds
+        self.input_timeout = seconds
 
     def set_view(self, camera_wxyz) -> None:
         """The operator's view: the browser camera's orientation (viser's ``wxyz``); the
@@ -134,53 +135,54 @@ class Devices:
         rotation = view_rotation(camera_wxyz)
         if not np.all(np.isfinite(rotation)):
             raise ValueError("the camera orientation must be finite")
-        with self._lock:
-            if not np.allclose(rotation, self.view_rotation, atol=1e-9):
-                self._unalign()
-            self.view_rotation = rotation
+        if not np.allclose(rotation, self.view_rotation, atol=1e-9):
+            self._unalign()
+        self.view_rotation = rotation
 
     def set_orientation_mode(self, absolute: bool) -> None:
         """Orientation relative (through the clutch: the device's rotation since it was
         last coupled) or absolute with respect to the view."""
         if not isinstance(absolute, (bool, np.bool_)):
             raise ValueError(f"absolute orientation is True or False, got {absolute!r}")
-        with self._lock:
-            self.absolute_orientation = bool(absolute)
-            self._unalign()
+        self.absolute_orientation = bool(absolute)
+        self._unalign()
 
     def _unalign(self) -> None:
         """In absolute orientation, every device must agree with its tool again before
-        it moves it (caller holds the lock)."""
-        for device in self.devices:
+        it moves it."""
+        for device in self._bindings:
             device.aligned = False
 
     # -- the control tick -----------------------------------------------------------------
 
-    def _apply_devices(self, dt: float) -> None:
-        """Each source's newest sample onto its EE's target (caller holds the lock)."""
+    def apply(self, dt: float, inputs: list[EEInput], loops: dict[str, TeleopLoop],
+              clutch: bool, motion_scale: float) -> None:
+        """Each source's newest sample onto its EE's target (of ``inputs``), through the
+        ``clutch`` and the ``motion_scale``; a silent source released, every one of the
+        ``loops`` holding its EE."""
         now = time.perf_counter()
-        for device in self.devices:
+        for device in self._bindings:
             source = device.source
             sample = device.used = source.take()
             if sample is None:
                 silent = (source.last_arrival is not None
                           and now - source.last_arrival > self.input_timeout)
                 if source.watchdog and device.state != FeedbackState.HELD and silent:
-                    self._release(device, 1e3 * (now - source.last_arrival))
-                elif device.state == FeedbackState.FOLLOWING and not self.clutch \
+                    self._release(device, 1e3 * (now - source.last_arrival), inputs, loops)
+                elif device.state == FeedbackState.FOLLOWING and not clutch \
                         and np.any(device.twist):
                     self._move_target(device, integrated_twist(
-                        self.inputs[source.ee].target, device.twist, self.view_rotation,
-                        self.motion_scale, dt))
+                        inputs[source.ee].target, device.twist, self.view_rotation,
+                        motion_scale, dt), inputs, loops["main"])
                 continue
             if device.state == FeedbackState.HELD:  # a new stream: from where the target is
                 device.previous = None
-            coupled = not self.clutch and not sample.clutched
+            coupled = not clutch and not sample.clutched
             if not coupled:
                 device.aligned = False
             device.state = FeedbackState.FOLLOWING if coupled else FeedbackState.CLUTCHED
             device.reason = "following" if coupled else "clutched: the device moves alone"
-            hand = self.inputs[source.ee]
+            hand = inputs[source.ee]
             device.rate_control = sample.kind == "twist"
             if sample.kind == "pose":
                 pose, previous = device_pose(sample.values), device.previous
@@ -189,13 +191,14 @@ class Devices:
                     self._align(device, hand.target, pose)
                 elif coupled and previous is not None:
                     self._move_target(device, followed_pose(
-                        hand.target, previous, pose, self.view_rotation, self.motion_scale,
-                        self.absolute_orientation))
+                        hand.target, previous, pose, self.view_rotation, motion_scale,
+                        self.absolute_orientation), inputs, loops["main"])
             else:
                 device.twist = np.array(sample.values[:6]) if coupled else np.zeros(6)
                 if coupled:
                     self._move_target(device, integrated_twist(
-                        hand.target, device.twist, self.view_rotation, self.motion_scale, dt))
+                        hand.target, device.twist, self.view_rotation, motion_scale, dt),
+                        inputs, loops["main"])
 
     def _align(self, device: DeviceBinding, target: pin.SE3, pose: pin.SE3) -> None:
         """Absolute orientation: the device follows only once its orientation in the view
@@ -210,20 +213,22 @@ class Devices:
                              f"apart (absolute orientation follows within "
                              f"{np.degrees(ALIGNMENT):.0f} deg)")
 
-    def _move_target(self, device: DeviceBinding, target: pin.SE3) -> None:
-        """EE ``device.source.ee``'s target from its device; one farther than
+    def _move_target(self, device: DeviceBinding, target: pin.SE3, inputs: list[EEInput],
+                     main: TeleopLoop) -> None:
+        """EE ``device.source.ee``'s target (of ``inputs``) from its device, the ``main`` robot's EE
+        there; one farther than
         :data:`MAX_TARGET_DISTANCE` from the EE is refused (counted ``refused``); a rate
         command does not take the target farther than :data:`RATE_LEAD` (or turned more
         than :data:`RATE_TURN_LEAD`) from the EE than it is: held against a constraint, a
         limit or the speed caps, it does not wind up (counted ``held_back``)."""
         ee = device.source.ee
-        now = self.loops["main"].ee_placements()[ee]
+        now = main.ee_placements()[ee]
         ahead = float(np.linalg.norm(target.translation - now.translation))
         if not ahead <= MAX_TARGET_DISTANCE:
             device.source.count("refused")
             return
         if device.rate_control:
-            current = self.inputs[ee].target
+            current = inputs[ee].target
             was = float(np.linalg.norm(current.translation - now.translation))
             turned = float(np.linalg.norm(pin.log3(target.rotation @ now.rotation.T)))
             turned_was = float(np.linalg.norm(pin.log3(current.rotation @ now.rotation.T)))
@@ -231,12 +236,13 @@ class Devices:
                                                        and turned > turned_was):
                 device.source.count("held_back")
                 return
-        self.inputs[ee].target = target
+        inputs[ee].target = target
         device.unrecorded = True
 
-    def _release(self, device: DeviceBinding, silent_ms: float) -> None:
+    def _release(self, device: DeviceBinding, silent_ms: float, inputs: list[EEInput],
+                 loops: dict[str, TeleopLoop]) -> None:
         """The watchdog: the source is released, its target holds where the robot's EE is
-        and every loop's filtered target with it (caller holds the lock)."""
+        and every loop's filtered target with it ."""
         ee = device.source.ee
         device.state = FeedbackState.HELD
         device.reason = (f"silent for {silent_ms:.0f} ms (timeout "
@@ -246,66 +252,67 @@ class Devices:
         release = getattr(device.source, "release", None)
         if release is not None:
             release()
-        pose = self.loops["main"].ee_placements()[ee]
-        self.inputs[ee].target = pose.copy()
-        self.recorder.target(ee, pose)
-        for loop in self.loops.values():
+        pose = loops["main"].ee_placements()[ee]
+        inputs[ee].target = pose.copy()
+        self._recorder.target(ee, pose)
+        for loop in loops.values():
             loop.hold(ee, pose)
 
-    def _devices_commanded(self, history: bool) -> None:
-        """After the robots' step (caller holds the lock): each used sample's latency, each
-        feedback (``history``: a history tick, the feedback force is kept for the plot)."""
-        if not self.devices:
-            return
+    def commanded(self, history: bool, ticks: int, inputs: list[EEInput], main: TeleopLoop,
+                  rows: CollisionRows | None, detection_distance: float) -> None:
+        """After the robots' step at tick ``ticks``: each used sample's latency, each
+        feedback (``history``: a history tick, the feedback force is kept for the plot),
+        from the ``main`` robot, its targets (``inputs``) and its collision ``rows``
+        (their detection distance)."""
         command_time = time.perf_counter()
-        loop = self.loops["main"]
+        loop = main
         placements = None
-        for device in self.devices:
+        for device in self._bindings:
             if device.used is not None:
                 device.source.used(device.used, command_time)
-            if (device.unrecorded and self.recorder.active
-                    and self.ticks - device.recorded_tick >= RECORD_TARGET_EVERY):
-                self.recorder.target(device.source.ee, self.inputs[device.source.ee].target)
-                device.unrecorded, device.recorded_tick = False, self.ticks
+            if (device.unrecorded and self._recorder.active
+                    and ticks - device.recorded_tick >= RECORD_TARGET_EVERY):
+                self._recorder.target(device.source.ee, inputs[device.source.ee].target)
+                device.unrecorded, device.recorded_tick = False, ticks
             if not device.source.renders_feedback and not history:
                 continue
             if placements is None:
                 placements = loop.ee_placements()
             measures = None if loop.plant is None else loop.plant.measures()
-            port_forces = [] if measures is None else measures.port_forces
+            port_forces = getattr(measures, "port_forces", [])  # a plant's own measures
             sensed = getattr(measures, "tool_wrenches", np.zeros((0, 6)))
             tool = sensed[device.source.ee] if device.source.ee < len(sensed) else None
             ee = placements[device.source.ee]  # no spring while the device moves alone
             device.wrench = feedback_wrench(
-                ee, self.inputs[device.source.ee].target
+                ee, inputs[device.source.ee].target
                 if device.state == FeedbackState.FOLLOWING else ee,
-                port_forces, self.collisions.rows.get("main"),
-                self.collisions.avoidance.detection_distance, self.view_rotation, self.feedback_gains,
+                port_forces, rows,
+                detection_distance, self.view_rotation, self.feedback_gains,
                 tool)
             device.source.set_feedback(device.wrench, device.state, loop.plant is not None)
             if history:
                 device.history.append((loop.t, *device.wrench[:3]))
                 del device.history[:-int(HISTORY_SECONDS * HISTORY_RATE)]
-        if self.recorder.active and loop.t >= self._next_input_record:
+        if self._recorder.active and loop.t >= self._next_input_record:
             self._record_inputs()
             self._next_input_record = loop.t + RECORD_INPUT_EVERY
 
     def _record_inputs(self) -> None:
         """Each source's counts and its latencies since the last such line, to the
-        recording (caller holds the lock)."""
-        for device in self.devices:
+        recording."""
+        for device in self._bindings:
             source = device.source
             counts = source.counts_now()
             fresh = min(counts.get("applied", 0) - device.recorded_applied, 4096)
             device.recorded_applied = counts.get("applied", 0)
             latencies = source.latencies.values()[-fresh:] if fresh else np.zeros(0)
-            self.recorder.input(source.name, source.ee,
+            self._recorder.input(source.name, source.ee,
                                 {key: int(value) for key, value in counts.items()},
                                 latencies)
 
-    def devices_snapshot(self) -> list[dict]:
-        """What the status and the plot show of each device (caller holds the lock)."""
+    def snapshot(self) -> list[dict]:
+        """What the status and the plot show of each device."""
         return [{"name": d.source.name, "ee": d.source.ee, "state": d.state,
                  "reason": d.reason, "wrench": d.wrench.copy(),
                  "history": list(d.history), "source": d.source}
-                for d in self.devices]
+                for d in self._bindings]

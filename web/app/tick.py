@@ -19,6 +19,7 @@ from teleop.loop.moving_geometry import advance, steer
 
 from .collisions import CollisionScene, ObstacleEntry
 from .console import EEInput
+from .devices import InputDevices
 from .editing import ConstraintEntry
 from .force_control import ForceControl
 from .limits import HISTORY_RATE
@@ -40,7 +41,7 @@ class Tick:
     last_records: dict[str, StepRecord | None]
     entries: dict[str, ConstraintEntry]
     inputs: list[EEInput]
-    devices: list
+    devices: InputDevices
     recorder: SessionRecording
     homing: WayHome
     collisions: CollisionScene
@@ -74,7 +75,7 @@ class Tick:
             if moving:
                 self._steer(moving, dt)
             if self.devices:
-                self._apply_devices(dt)
+                self.devices.apply(dt, self.inputs, self.loops, self.clutch, self.motion_scale)
             if self.homing.active:
                 self._follow_homing()
             targets, start = [hand.target for hand in self.inputs], self.now
@@ -89,7 +90,9 @@ class Tick:
             self.collisions.keep(held)
             history = start >= self._next_history - 0.5 * dt
             if self.devices:
-                self._devices_commanded(history)
+                self.devices.commanded(history, self.ticks, self.inputs, self.loops["main"],
+                                       self.collisions.rows.get("main"),
+                                       self.collisions.avoidance.detection_distance)
             if history:
                 self._measure(pending, moving, dt, held)
                 self._next_history = start + 1.0 / HISTORY_RATE

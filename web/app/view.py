@@ -114,8 +114,8 @@ class View:
                         "recording": self.recorder.active,
                         "config": self.config, "gain": self.gain, "damping": self.damping,
                         "plant": self.plant, "collisions": self._collisions_snapshot(),
-                        "devices": self.devices_snapshot(),
-                        "absolute_orientation": self.absolute_orientation,
+                        "devices": self.devices.snapshot(),
+                        "absolute_orientation": self.devices.absolute_orientation,
                         "force": self.force.snapshot(self.loops)}
         robots = {which: self._robot_snapshot(state, constraints, targets)
                   for which, state in states.items()}
