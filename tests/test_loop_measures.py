@@ -34,11 +34,14 @@ def reference_command_measures(loop, step) -> tuple[float, np.ndarray, np.ndarra
     return residual, np.concatenate(velocity), np.concatenate(drift), floor * np.finfo(float).eps
 
 
-@pytest.mark.parametrize("scenario", ["paper-hole", "multi", "moving-trocar", "barrier"])
-def test_the_measures_equal_the_reference_formulas(scenario):
-    """Every period of a short run: the command's measures and the end-of-period errors
-    equal the reference computed independently, bit for bit."""
-    loop, targets = scenario_loop(scenario, True, 0.1)
+@pytest.mark.parametrize("scenario", ["paper-hole", "multi", "moving-trocar", "barrier",
+                                      "bimanual-trocars", "joint-limits"])
+@pytest.mark.parametrize("compiled_tick", [True, False])
+def test_the_measures_equal_the_reference_formulas(scenario, compiled_tick):
+    """Every period of a short run, on the compiled tick and on the Python path: the
+    command's measures and the end-of-period errors equal the reference computed
+    independently, bit for bit."""
+    loop, targets = scenario_loop(scenario, compiled_tick, 0.1)
     model = loop.model
     data = model.createData()
     for target in targets:
@@ -54,6 +57,13 @@ def test_the_measures_equal_the_reference_formulas(scenario):
                   @ (pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:3] @ step.moved)
                   for frame in loop.ee_frame_ids]
         np.testing.assert_array_equal(step.actual_linear_velocities, np.array(actual))
+        commanded = [placement.rotation @ twist[:3]  # the poses as pin.SE3
+                     for placement, twist in zip(step.placements, step.twists)]
+        np.testing.assert_array_equal(step.commanded_linear_velocities, np.array(commanded))
+        previous = step.previous_targets or step.targets
+        operator = [(now.translation - before.translation) / loop.config.dt
+                    for now, before in zip(step.targets, previous)]
+        np.testing.assert_array_equal(step.operator_linear_velocities, np.array(operator))
         record = loop.measure(step)
         pin.framesForwardKinematics(model, data, loop.q)
         violations = [constraint.violation(data.oMf[frame])
@@ -63,4 +73,10 @@ def test_the_measures_equal_the_reference_formulas(scenario):
         positions = [np.linalg.norm(data.oMf[frame].translation - target.translation)
                      for frame, target in zip(loop.ee_frame_ids, step.targets)]
         np.testing.assert_array_equal(record.ee_position_errors, positions)
+        angles = [np.linalg.norm(pin.log3(data.oMf[frame].rotation.T @ target.rotation))
+                  for frame, target in zip(loop.ee_frame_ids, step.targets)]
+        np.testing.assert_array_equal(record.ee_orientation_errors, angles)
+        assert record.joint_limit_violation == float(max(
+            0.0, np.max(loop.q - model.upperPositionLimit),
+            np.max(model.lowerPositionLimit - loop.q)))
     assert len(velocity) > 0  # the scenario has equality rows

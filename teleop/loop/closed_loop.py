@@ -53,6 +53,12 @@ from .true_kinematics import TrueKinematics
 #: float64's machine epsilon (the round-off floor's unit, :meth:`TeleopLoop._constraint_velocity`)
 EPSILON = float(np.finfo(float).eps)
 
+
+def norm(vector: np.ndarray) -> float:
+    """The Euclidean norm of a short vector, as ``np.linalg.norm`` computes it
+    (``sqrt(x . x)``) without its checks, which cost more than the sum on 3 entries."""
+    return math.sqrt(vector @ vector)
+
 class TeleopLoop:
     """State and one-tick logic of the closed loop; no threads, no I/O.
 
@@ -435,11 +441,11 @@ class TeleopLoop:
             for frame in self.ee_frame_ids])
         step.commanded_linear_velocities = np.array(
             [ee.rotation @ twist[:3] for ee, twist in zip(step.placements, step.twists)])
-        dt = self.config.dt
-        step.operator_linear_velocities = np.array([
-            np.zeros(3) if step.previous_targets is None
-            else (now.translation - before.translation) / dt
-            for now, before in zip(step.targets, step.previous_targets or step.targets)])
+        dt, now = self.config.dt, step.target_translations
+        before = step.previous_translations
+        step.operator_linear_velocities = (np.zeros((len(now), 3)) if before is None
+                                           else np.array([(position - previous) / dt
+                                                          for position, previous in zip(now, before)]))
         step.labels = self._row_labels()
 
     def measure(self, step: PendingStep) -> StepRecord:
@@ -449,12 +455,12 @@ class TeleopLoop:
         pin.forwardKinematics(model, data, self.q)  # the frames read below, not every frame
         placements = [pin.updateFramePlacement(model, data, frame) for frame in self.ee_frame_ids]
         errors, error, penetration = self._constraint_errors(model, data, constraints)
-        position_errors = np.array([np.linalg.norm(ee.translation - target.translation)
+        position_errors = np.array([norm(ee.translation - target.translation)
                                     for ee, target in zip(placements, step.targets)])
-        orientation_errors = np.array([np.linalg.norm(pin.log3(ee.rotation.T @ target.rotation))
+        orientation_errors = np.array([norm(pin.log3(ee.rotation.T @ target.rotation))
                                        for ee, target in zip(placements, step.targets)])
-        violation = float(max(0.0, np.max(self.q - model.upperPositionLimit),
-                              np.max(model.lowerPositionLimit - self.q)))
+        violation = max(0.0, *(self.q - model.upperPositionLimit).tolist(),
+                        *(model.lowerPositionLimit - self.q).tolist())
         distance = (None if self.distance_meter is None
                     else self.distance_meter.measure(model, data, self.q))
         return StepRecord(
@@ -526,7 +532,7 @@ class TeleopLoop:
             drift.append(correction)
             point = placement.act(state.p)
             floor = max(floor, max((np.abs(A) @ np.abs(qd)).tolist())
-                        + constraint.gain * math.sqrt(point @ point))
+                        + constraint.gain * norm(point))
         if not velocity:
             return 0.0, np.zeros(0), np.zeros(0), 0.0
         return (residual, np.concatenate(velocity), np.concatenate(drift),

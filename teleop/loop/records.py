@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from controllers.cjm.pose_rows import (PERIOD_PLACEMENT, PERIOD_PREVIOUS, PERIOD_TARGET,
-                                       PERIOD_TWIST, row_pose)
+                                       PERIOD_TWIST, row_pose, row_views)
 
 from .supervisor import Supervision
 
@@ -137,6 +137,17 @@ class PendingStep:
     commanded_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     actual_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
+    @property
+    def target_translations(self) -> list[np.ndarray]:
+        """Each EE's filtered target position (world)."""
+        return [target.translation for target in self.targets]
+
+    @property
+    def previous_translations(self) -> list[np.ndarray] | None:
+        """Each EE's filtered target position of the period before, None at the start."""
+        previous = self.previous_targets
+        return None if previous is None else [target.translation for target in previous]
+
 
 #: the measures' defaults of a compiled period (replaced, never written in place)
 NO_ROWS = np.zeros(0)
@@ -180,4 +191,15 @@ class CompiledPendingStep(PendingStep):
     @functools.cached_property
     def twists(self) -> list[np.ndarray]:
         return list(self.period[:, PERIOD_TWIST])
+
+    # the targets' positions read from the rows, no pin.SE3 built for them
+
+    @property
+    def target_translations(self) -> list[np.ndarray]:
+        return [row_views(row[PERIOD_TARGET])[1] for row in self.period]
+
+    @property
+    def previous_translations(self) -> list[np.ndarray] | None:
+        return ([row_views(row[PERIOD_PREVIOUS])[1] for row in self.period]
+                if self.has_previous else None)
 
