@@ -176,6 +176,11 @@ class MujocoPlant:
         self.contact_pairs: ContactPairs | None = None  # with collisions, set by _compile
         self.mj_model = self._compile(robot, collisions)
         self.mj_data = mujoco.MjData(self.mj_model)
+        # the arrays each period reads and writes, as views of the MjData's own memory
+        # (fixed for its life; each ``mj_data.<field>`` access builds a new view)
+        self._qpos, self._ctrl = self.mj_data.qpos, self.mj_data.ctrl
+        self._qfrc_applied = self.mj_data.qfrc_applied
+        self._qfrc_actuator = self.mj_data.qfrc_actuator
         self.joints = joint_map(self.model, self.mj_model)
         self._q_pin = np.empty(self.model.nq)
         self._qpos_of_dof = self.mj_model.jnt_qposadr[self.mj_model.dof_jntid]
@@ -350,12 +355,12 @@ class MujocoPlant:
         arrived = qd if self.shaping is None else self.shaping.delay(qd)
         accepted, fault = self.interface.receive(arrived)
         shaped = accepted if self.shaping is None else self.shaping.respond(accepted)
-        command = self.joints.v_to_mujoco(shaped, data.qpos)
-        data.ctrl[:] = command[self._actuator_dofs]
+        command = self.joints.v_to_mujoco(shaped, self._qpos)
+        np.take(command, self._actuator_dofs, out=self._ctrl)
         if self.contact_pairs is not None:
             self.contact_pairs.follow(model, constraints)
         holes = [(c, wall) for c in constraints if (wall := wall_of(c)) is not None]
-        data.qfrc_applied[:] = 0.0
+        self._qfrc_applied.fill(0.0)
         contacts = np.zeros((len(self._tools), 3))
         depths = np.zeros(len(self._tools))
         ports = None if self.tissues or not holes else self._compiled_ports(holes)
@@ -379,7 +384,7 @@ class MujocoPlant:
         # |tau| / limit per dof in Python floats (numpy's per-call cost exceeds the sum on a
         # few dofs; the same IEEE divisions), a NaN torque kept as np.max would
         torques = [abs(tau) / limit
-                   for tau, limit in zip(data.qfrc_actuator.tolist(), self._effort_limit_list)]
+                   for tau, limit in zip(self._qfrc_actuator.tolist(), self._effort_limit_list)]
         ratio = max(torques) if not math.isnan(sum(torques)) else math.nan
         saturated = ratio >= 1.0 - 1e-12
         contact_count = int(data.ncon)
@@ -389,7 +394,7 @@ class MujocoPlant:
                                   contact_count, penetration,
                                   fault, self.interface.stopped, self._read_sensors(),
                                   contacts, depths)
-        self.joints.q_to_pinocchio(data.qpos, self._q_pin)
+        self.joints.q_to_pinocchio(self._qpos, self._q_pin)
         return pin.difference(self.model, q, self._q_pin) / self.dt
 
     def measures(self) -> PlantMeasures:
