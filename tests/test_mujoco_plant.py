@@ -117,6 +117,31 @@ def test_the_port_force_is_the_stiffness_times_the_lateral_offset(sda10f, latera
     assert plant.measures().port_displacements[0] == pytest.approx(lateral, rel=0.01)
 
 
+def test_the_torque_ratio_is_the_largest_drive_torque_over_its_effort_limit(sda10f):
+    """Every period, slow to saturating commands with a port: the measured ratio and the
+    saturation equal numpy's ``max |qfrc_actuator| / actfrcrange`` of the MjData, read
+    from MuJoCo's model here, bit for bit; no contact in a scene without geometry."""
+    q = sda10f.q_home.copy()
+    hole, _ = _hole_through_link(sda10f, q, 1e-3)
+    plant = MujocoPlant(sda10f, DT)
+    model = plant.mj_model
+    limits = np.full(model.nv, np.inf)
+    limited = model.jnt_actfrclimited.astype(bool)
+    limits[model.jnt_dofadr[limited]] = model.jnt_actfrcrange[limited, 1]
+    ratios = []
+    for size in [0.0, 0.1, 1.0, 3.0, 10.0, 30.0]:
+        for _ in range(20):
+            qd = np.full(8, size) * np.array([1, -1] * 4)
+            q = pin.integrate(sda10f.model, q, plant.actuate(qd, q, [hole]) * DT)
+            expected = float(np.max(np.abs(plant.mj_data.qfrc_actuator) / limits))
+            measures = plant.measures()
+            assert measures.torque_ratio == expected
+            assert measures.saturated == (expected >= 1.0 - 1e-12)
+            assert measures.contacts == 0 and measures.contact_depth == 0.0
+            ratios.append(expected)
+    assert min(ratios) < 0.5 and max(ratios) >= 1.0 - 1e-12  # held and saturated both seen
+
+
 def test_the_wall_force_reaches_the_joints_as_the_point_jacobian_transpose(sda10f):
     """The generalized force MuJoCo applies equals Pinocchio's ``J_P^T F`` at the port
     point (an independent Jacobian), and the instrument then moves toward the centre."""
