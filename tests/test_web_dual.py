@@ -324,7 +324,8 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
     np.testing.assert_allclose(ui.reach_lines[1].points[0],
                                [ee_positions(app)[1], app.inputs[1].target.translation], atol=1e-9)
     np.testing.assert_allclose(ui.reach_lines[1].colors[0, 0], STATUS_COLORS["ok"])
-    assert "*left* on target" in ui.status.content and "*right* moving to the target" in ui.status.content
+    details = ui.status_panel.details.content
+    assert "*left* on target" in details and "*right* moving to the target" in details
     ui.active_arm.value = "right"  # the nudges act on the active arm
     ui.nudge_buttons.value = "+z"
     before = app.targets

@@ -260,23 +260,24 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         ring = ui.ring_radius_at(snapshot["robots"]["main"]["constraints"][hole_id])
         np.testing.assert_allclose(segments[0, 1], port.point - ring * port.force / port.magnitude,
                                    atol=float32)
-        assert f"port force {hole_id} {1e3 * port.magnitude:.2f} mN" in ui.status.content
+        assert f"port force {hole_id} {1e3 * port.magnitude:.2f} mN" in ui.status_panel.details.content
         # the status line: the hole's link named, the force in mN, the arrow's scale
         assert (f"port force {hole_id} **{1e3 * port.magnitude:.2f} mN** (arrow 2 cm at "
-                "0.1 mN, 2 cm more per tenfold force)") in ui.summary.content
+                "0.1 mN, 2 cm more per tenfold force)") in ui.status_panel.summary.content
         # the largest force the plots show, in the status line once they have drawn it
         ui._draw(snapshot)
         largest = np.nanmax(snapshot["robots"]["main"]["trace"]["port_force"])
         assert largest > 1e-3  # the drag's start, sampled (the last periods are not yet)
         assert f"; the largest in the last 10 s {1e3 * largest:.2f} mN (arrow" in \
-            ui.summary.content
+            ui.status_panel.summary.content
         link = app.entries[hole_id].constraint.link
-        assert f"placed: {hole_id} on `{link}`" in ui.summary.content
+        assert f"placed: {hole_id} on `{link}`" in ui.status_panel.summary.content
         label = ui._markers[hole_id]["label"]  # and in the scene, above the hole
         assert label.text == f"{hole_id} on {link}"
         np.testing.assert_allclose(label.position, port.point + [0.0, 0.0, 0.06], atol=1e-3)
-        assert "% of ticks on time" in ui.status.content and "physics included" in \
-            ui.status.content and "**plant** MuJoCo plant at 2000 Hz" in ui.status.content
+        details = ui.status_panel.details.content
+        assert "% of ticks on time" in details and "physics included" in details \
+            and "**plant** MuJoCo plant at 2000 Hz" in details
         assert ui.plots.handles["port_force"].title.startswith("port force, the largest (")
         assert np.isfinite(ui.plots.handles["port_force"].data[1]).all()
         # a ghost gets its own arrows, under its own root; without it they go

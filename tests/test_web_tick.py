@@ -188,7 +188,8 @@ def test_the_view_takes_only_copies_under_the_lock(app, server, monkeypatch):
             time.sleep(0.05)
     finally:
         ui.stop()
-    assert ui.status.content.startswith("**control"), ui.status.content  # no view error
+    details = ui.status_panel.details.content
+    assert details.startswith("**control"), details  # no view error
     assert all(len(seen) >= 2 for seen in free.values()), free  # both robots, the view's frames
     assert all(all(seen) for seen in free.values()), free
 

@@ -149,7 +149,7 @@ def test_the_ee_target_line_takes_the_step_status_colour(ui):
     np.testing.assert_allclose(ui.reach_line.points[0, 1], app.target.translation, atol=1e-6)
     np.testing.assert_allclose(ui.reach_line.colors[0, 0], STATUS_COLORS["least_squares"])
     assert ui.target_marker.visible is True  # drawn apart from the gizmo
-    assert "short of the target" in ui.status.content
+    assert "short of the target" in ui.status_panel.details.content
 
 
 def test_plots_are_finite_with_units_and_follow_the_ghost(ui):

@@ -57,7 +57,7 @@ from .plots import LivePlots
 from .port_forces import PortForces
 from .scene_view import SceneView
 from .shapes import LinkProfile, square_size
-from .status_view import StatusView
+from .status_view import StatusPanel
 
 VIEW_RATE = 30.0  # Hz: robot poses, markers, status
 PLOT_RATE = 10.0  # Hz: live plots
@@ -86,7 +86,7 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
 
 
 class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, CollisionView,
-               PortForces, StatusView, DeviceView):
+               PortForces, DeviceView):
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -102,7 +102,6 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         #: every operator action goes through it (web/inbox.py), never straight to the app
         self.inbox = Inbox(self._failed)
         self._gone: set[int] = set()  # browsers that disconnected mid-drag
-        self._behind = ""  # the warning shown while the control loop falls behind
         self._markers: dict[str, dict] = {}  # main robot: entry id -> handles
         self._ghost_markers: dict[str, dict] = {}
         self._views: dict[str, RobotView] = {}
@@ -174,10 +173,9 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
             gui.add_button("Got it", hint="hide these hints").on_click(
                 lambda _: setattr(self.hint, "visible", False))
         with gui.add_folder("Status"):
-            self.banner = gui.add_html("", visible=False)  # the control loop falling behind
-            self.summary = gui.add_markdown("starting...")
-            with gui.add_folder("Details", expand_by_default=False):
-                self.status = gui.add_markdown("starting...")
+            self.status_panel = StatusPanel(gui, self.control, self.ee_names,
+                                            lambda: self.plots.port_peak, self._device_lines,
+                                            self.notify)
         self.tabs = gui.add_tab_group()
         with self.tabs.add_tab("Teleop"):
             self._build_teleop_panel()
@@ -239,8 +237,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
                     self.force_panel.draw_plot(snapshot["force"], snapshot["robots"]["main"]["t"])
                     next_plot = start + 1.0 / PLOT_RATE
             except Exception as error:  # the view must never take the control loop down
-                self.summary.content = self.status.content = (
-                    f"view error: {type(error).__name__}: {error}")
+                self.status_panel.show_error(f"view error: {type(error).__name__}: {error}")
             time.sleep(max(0.0, 1.0 / VIEW_RATE - (time.perf_counter() - start)))
 
     def _draw(self, snapshot: dict, status: bool = True) -> None:
@@ -268,4 +265,7 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         self._draw_pairs(robots["main"]["collision_rows"], robots["main"]["q"],
                          snapshot["collisions"])
         if status:
-            self._draw_status(snapshot)
+            self.status_panel.draw(snapshot)
+            label = "Release clutch" if snapshot["clutch"] else "Clutch"
+            if self.clutch_button.label != label:
+                self.clutch_button.label = label

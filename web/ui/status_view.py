@@ -8,13 +8,13 @@ banner while the control loop falls behind (docs/design.md section 5.3)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import viser
 
 from constraints.collision import CollisionRows
 
 from ..app import HISTORY_SECONDS, ControlThread, port_words, summary_words, supervision_words
-from .plots import LivePlots
 from .port_forces import FORCE_ARROW_WORDS
 
 BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
@@ -36,16 +36,39 @@ def collision_words(rows: CollisionRows | None, active_pairs: list[str]) -> str:
     return words
 
 
-class StatusView:
-    """The status panel of :class:`web.ui.TeleopUI`."""
+class StatusPanel:
+    """The status panel of :class:`web.ui.TeleopUI`, a component owning its handles: the
+    banner of a control loop falling behind, the few plain words always shown
+    (:attr:`summary`) and the details in a folder closed by default (:attr:`details`).
+    Built where the caller's GUI context puts it; the view thread calls :meth:`draw`.
 
-    control: ControlThread
-    ee_names: dict[str, str]
-    _behind: str
-    plots: LivePlots
-    banner: viser.GuiHtmlHandle
-    summary: viser.GuiMarkdownHandle  # the few plain words, always shown
-    status: viser.GuiMarkdownHandle  # the details, in a folder closed by default
+    Parameters
+    ----------
+    gui : the server's GUI.
+    control : the control thread (its timing, whether it falls behind, its error).
+    ee_names : what the operator reads per EE frame.
+    port_peak : the plots' largest port force over their window (N; None: no port).
+    device_lines : each input device's status line, from a snapshot.
+    notify : tells every browser (``notify(None, title, body, color=...)``).
+    """
+
+    def __init__(self, gui: viser.GuiApi, control: ControlThread, ee_names: dict[str, str],
+                 port_peak: Callable[[], float | None],
+                 device_lines: Callable[[dict], list[str]], notify: Callable[..., None]) -> None:
+        self.control = control
+        self.ee_names = ee_names
+        self._port_peak = port_peak
+        self._device_lines = device_lines
+        self._notify = notify
+        self._behind = ""  # the warning shown while the control loop falls behind
+        self.banner = gui.add_html("", visible=False)
+        self.summary = gui.add_markdown("starting...")
+        with gui.add_folder("Details", expand_by_default=False):
+            self.details = gui.add_markdown("starting...")
+
+    def show_error(self, words: str) -> None:
+        """``words`` in both the summary and the details (the view failed)."""
+        self.summary.content = self.details.content = words
 
     def _warn_behind(self) -> None:
         """A red banner above the status (and a notification when it starts) while the
@@ -53,7 +76,7 @@ class StatusView:
         behind = self.control.behind()
         if bool(behind) != bool(self._behind):
             if behind:
-                self.notify(None, "Control loop behind", behind, color="red")
+                self._notify(None, "Control loop behind", behind, color="red")
             self.banner.visible = bool(behind)
         if behind and behind != self._behind:
             self.banner.content = (f'<div style="background:{BEHIND_COLOR};color:white;'
@@ -77,15 +100,17 @@ class StatusView:
             lines.append("placed: " + ", ".join(placed))
         ports = snapshot["robots"]["main"]["ports"]
         if ports:
-            peak = "" if self.plots.port_peak is None else \
-                f"; the largest in the last {HISTORY_SECONDS:g} s {1e3 * self.plots.port_peak:.2f} mN"
+            port_peak = self._port_peak()
+            peak = "" if port_peak is None else \
+                f"; the largest in the last {HISTORY_SECONDS:g} s {1e3 * port_peak:.2f} mN"
             lines.append(", ".join(f"port force {port.id} **{1e3 * port.magnitude:.2f} mN**"
                                    for port in ports) + f"{peak} ({FORCE_ARROW_WORDS})")
         if snapshot["clutch"]:
             lines.append("**clutch engaged**")
         return "  \n".join(lines)
 
-    def _draw_status(self, snapshot: dict) -> None:
+    def draw(self, snapshot: dict) -> None:
+        """The banner, the summary and the details of ``snapshot``."""
         self._warn_behind()
         self.summary.content = self._summary(snapshot)
         timing = self.control.timing()
@@ -137,7 +162,4 @@ class StatusView:
                            else "**clutch engaged**: the gizmos move alone")
         lines.append(", ".join(console))
         lines += self._device_lines(snapshot)
-        self.status.content = "  \n".join(lines)
-        label = "Release clutch" if snapshot["clutch"] else "Clutch"
-        if self.clutch_button.label != label:
-            self.clutch_button.label = label
+        self.details.content = "  \n".join(lines)
