@@ -11,7 +11,7 @@ run took and the sim's jitter counts (periods that held the last command, comman
 superseded in their period, late periods).
 
 Run:  OPENBLAS_NUM_THREADS=1 python docs/measure_ros2_jitter.py [--plant kinematic|mujoco]
-      [--runs 3] [--duration 3] [--command-latency 1] [--domain 150]
+      [--runs 3] [--duration 3] [--command-latency 1] [--lockstep MS] [--domain 150]
 (the machine's other work moves these figures: the jitter counts say by how much)
 """
 
@@ -43,6 +43,8 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=3.0)
     parser.add_argument("--command-latency", type=int, default=1)
     parser.add_argument("--domain", type=int, default=150)
+    parser.add_argument("--lockstep", type=float, default=0.0,
+                        help="teleop sim --lockstep MS (0: the robot does not wait)")
     args = parser.parse_args()
     os.environ.setdefault("CYCLONEDDS_URI", LOOPBACK)
 
@@ -66,7 +68,8 @@ def main() -> None:
     for run in range(args.runs):
         domain = (args.domain + run) % 233
         sim = subprocess.Popen([sys.executable, "-m", "teleop", "sim", "--ros2", "--rate",
-                                str(RATE), "--ros-domain", str(domain), *where],
+                                str(RATE), "--ros-domain", str(domain), "--lockstep",
+                                str(args.lockstep), *where],
                                cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
                                stderr=subprocess.PIPE, text=True)
         try:
@@ -80,7 +83,8 @@ def main() -> None:
             sim.terminate()
             _, err = sim.communicate()
         counts = err.strip().splitlines()[-1] if err.strip() else "(the sim printed nothing)"
-        print(f"over DDS {args.plant}, command_latency {args.command_latency}, run {run}: "
+        print(f"over DDS {args.plant}, command_latency {args.command_latency}, lockstep "
+              f"{args.lockstep:g} ms, run {run}: "
               f"{result.metrics()['constraint_error_max_m'] * 1e6:.3f} um in {wall:.2f} s; "
               f"{counts}", flush=True)
 

@@ -538,3 +538,44 @@ def test_the_simulated_robot_counts_the_wires_jitter(robot, domain, peer):
         assert sim.jitter_words().startswith("2 periods, 2 commands: 1 periods held")
     finally:
         sim.close()
+
+
+def test_a_lockstep_robot_applies_the_answer_to_each_state_in_its_period(robot, domain, peer):
+    """``lockstep``: each period waits for the command answering its state, so a peer
+    answering every state with ``c = f(q)`` moves the robot as ``q <- integrate(q, f(q)
+    dt)`` written out here (no period held, none superseded), whatever the two threads'
+    scheduling."""
+    from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
+
+    def answer_to(q: np.ndarray) -> np.ndarray:
+        return 0.5 * np.sin(3.0 * q[:robot.model.nv]) + 0.1
+
+    sim = SimulatedRos2Robot(robot, 500.0, settings_for(domain), lockstep=1.0)
+    states = peer.reader(STATES, JointState)
+    writer = peer.writer(COMMANDS, Float64MultiArray)
+    running = True
+
+    def answer() -> None:
+        while running:
+            for state in states.take(8):
+                if isinstance(state, JointState):
+                    command = answer_to(np.array(state.position))
+                    writer.write(Float64MultiArray(data=[float(v) for v in command]))
+            time.sleep(DT / 4)
+
+    try:
+        assert wait_for(lambda: writer.get_publication_matched_status().current_count == 1
+                        and states.get_subscription_matched_status().current_count == 1)
+        thread = threading.Thread(target=answer, daemon=True)
+        thread.start()
+        q = sim.q.copy()
+        for _ in range(50):
+            sim.step()
+            q = pin.integrate(robot.model, q, answer_to(q) / 500.0)
+        running = False
+        thread.join()
+        np.testing.assert_allclose(sim.q, q, rtol=0.0, atol=1e-12)
+        assert (sim.periods, sim.commands, sim.held, sim.superseded) == (50, 50, 0, 0)
+    finally:
+        running = False
+        sim.close()

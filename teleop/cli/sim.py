@@ -29,6 +29,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="joint states and control periods per second (default: 500.0)")
     parser.add_argument("--q0", type=csv_list, metavar="RADIANS",
                         help="comma-separated start configuration (default: the robot's home)")
+    parser.add_argument("--lockstep", type=bounded(float, 0.0, 1000.0, unit="ms"), default=0.0,
+                        metavar="MS",
+                        help="each period waits up to MS, once its state is out, for the "
+                             "command answering it: the two processes' scheduling out of the "
+                             "loop, what the transport alone costs (docs/ros2.md); the loop "
+                             "then needs command_latency 0 (default: 0, a real robot's "
+                             "behaviour)")
     parser.add_argument("--duration", type=bounded(float, 0.0, 1e6, unit="s"),
                         help="seconds to run (default: until Ctrl-C)")
     add_port_options(parser.add_argument_group("ports"))
@@ -53,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     settings = ros2_settings(args)
     plant = MujocoPlant(robot, 1.0 / args.rate) if args.plant == "mujoco" else None
     sim = SimulatedRos2Robot(robot, args.rate, settings, plant, q0, constraints,
-                             args.port_forces)
+                             args.port_forces, args.lockstep / 1e3)
     signal.signal(signal.SIGTERM, lambda *_: sim.stop())
     ports = (f", {len(sim.port_force_writers)} port forces on {args.port_forces}/port<i>"
              if sim.port_force_writers else "")

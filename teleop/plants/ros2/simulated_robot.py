@@ -23,6 +23,8 @@ import time
 
 import numpy as np
 import pinocchio as pin
+from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+from cyclonedds.util import duration
 
 from teleop.plants.walls import wall_of
 
@@ -52,11 +54,15 @@ class SimulatedRos2Robot:
     constraints : what the plant's walls act on (its holes' ports); the physics plant's
         port forces are published (None or empty: no port).
     port_forces : the ROS 2 namespace of the port force topics.
+    lockstep : seconds each period waits, once the state is out, for a command (none
+        already there): the command computed from that state acts in the same period,
+        the two processes' scheduling taken out of the loop (what the transport alone
+        costs, docs/ros2.md "Jitter"); 0: a real robot's behaviour, no wait.
     """
 
     def __init__(self, robot, rate: float, settings: Ros2Settings | None = None,
                  plant=None, q0: np.ndarray | None = None, constraints=None,
-                 port_forces: str = "/port_forces") -> None:
+                 port_forces: str = "/port_forces", lockstep: float = 0.0) -> None:
         if not isinstance(rate, (int, float)) or not 0 < rate <= 10000:
             raise ValueError(f"rate must be in (0, 10000] Hz, got {rate!r}")
         self.constraints = list(constraints or ())
@@ -64,6 +70,9 @@ class SimulatedRos2Robot:
             raise ValueError("the kinematic robot has no wall at its ports: constraints need "
                              "the physics plant (--plant mujoco)")
         dds_topic(port_forces)
+        if not isinstance(lockstep, (int, float)) or not 0.0 <= lockstep <= 1.0:
+            raise ValueError(f"lockstep must be in [0, 1] s, got {lockstep!r}")
+        self.lockstep = float(lockstep)
         self.model: pin.Model = robot.model
         self.dt = 1.0 / float(rate)
         self.settings = settings or Ros2Settings()
@@ -89,6 +98,9 @@ class SimulatedRos2Robot:
         crtk = bool(self.settings.crtk)
         self._command_type = JointState if crtk else Float64MultiArray
         self._commands = self.node.reader(self.settings.commands, self._command_type)
+        self._command_arrived = WaitSet(self.node.participant)
+        self._command_arrived.attach(ReadCondition(self._commands, SampleState.Any
+                                                   | ViewState.Any | InstanceState.Any))
         self._operating = (self.node.writer(self.settings.crtk.rstrip("/") + "/operating_state",
                                             OperatingState) if crtk else None)
         ports = sum(wall_of(c) is not None for c in self.constraints)
@@ -120,6 +132,8 @@ class SimulatedRos2Robot:
                                       velocity=[float(v) for v in self.command]))
         if self._operating is not None:
             self._operating.write(OperatingState(header=stamp, state="ENABLED", is_homed=True))
+        if self.lockstep:
+            self._command_arrived.wait(duration(seconds=self.lockstep))
         self._take_command()
         self.periods += 1
         moved = (self.command if self.plant is None
