@@ -34,8 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="each period waits up to MS, once its state is out, for the "
                              "command answering it: the two processes' scheduling out of the "
                              "loop, what the transport alone costs (docs/ros2.md); the loop "
-                             "then needs command_latency 0 (default: 0, a real robot's "
-                             "behaviour)")
+                             "then needs command_latency 0; 0: no wait, a real robot's "
+                             "behaviour (default: 0.0)")
     parser.add_argument("--duration", type=bounded(float, 0.0, 1e6, unit="s"),
                         help="seconds to run (default: until Ctrl-C)")
     add_port_options(parser.add_argument_group("ports"))
