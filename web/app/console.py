@@ -29,6 +29,7 @@ from teleop.loop import TeleopLoop
 from teleop.robots import Robot
 
 from .limits import MAX_MOTION_SCALE, MAX_TARGET_DISTANCE
+from .ros2_robot import Ros2Robot
 
 #: a nudge moves a target by at most this much (m)
 MAX_NUDGE = 0.1
@@ -69,6 +70,7 @@ class Console:
     clutch: bool
     motion_scale: float
     entries: dict
+    ros2: Ros2Robot | None
     _lock: threading.RLock
     _view_data: pin.Data
 
@@ -201,9 +203,17 @@ class Console:
         constraints placed: the robot goes home through them, on a joint path whose
         steps keep their rows (:mod:`.homing`, docs/design.md section 20.3); the words
         say why it cannot reach home (``""`` when it can). Every EE with no constraint
-        placed: the robots back at ``q_home`` at once (a reset)."""
+        placed: the robots back at ``q_home`` at once (a reset). A real robot (the ros2
+        plant) cannot jump: its loop is reset where it is (a stop cleared, its state read
+        again), then it goes home on the joint path as with constraints."""
         indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
-        if ee is None and self.entries:
+        if ee is None and self.ros2 is not None:
+            with self._lock:
+                loop = self.loops["main"]
+                t = loop.t
+                loop.reset()  # zeros, the watchdog's stop cleared, a fresh state awaited
+                loop.t, loop.q = t, self.ros2.state(loop.config.dt)
+        if ee is None and (self.entries or self.ros2 is not None):
             with self._lock:
                 loop = self.loops["main"]
                 for index in indices:  # from where the robot is: no jump when it starts

@@ -47,3 +47,8 @@ def checked_rate(rate: float, what: str = "rate") -> float:
         raise ValueError(f"{what} must be between {MIN_RATE:g} and {MAX_RATE:g} Hz, "
                          f"got {rate:g}")
     return rate
+
+#: How far (rad, every joint) a scene's configuration may lie from where a real robot (the
+#: ros2 plant) is for the page to open it: its constraints were placed there, and the robot
+#: cannot jump (encoder noise and a settled servo are far below it).
+ROS2_SCENE_TOLERANCE = 0.01

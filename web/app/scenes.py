@@ -23,6 +23,7 @@ from ..folders import Folder
 from ..scene import FORMAT as SCENE_FORMAT
 from ..scene import VERSION as SCENE_VERSION
 from ..scene import (
+    Scene,
     parse_scene,
     read_scene_file,
     robot_source,
@@ -38,6 +39,7 @@ from .limits import (
     MAX_GHOST_OFFSET,
     MAX_MOTION_SCALE,
     MAX_TARGET_DISTANCE,
+    ROS2_SCENE_TOLERANCE,
     checked_rate,
 )
 from .trace import Trace
@@ -132,6 +134,7 @@ class Scenes:
         self._check_scene(scene)
         if self.ros2 is not None:
             self.ros2.refuse_ghost(scene.ghost)
+            scene = self._scene_where_the_robot_is(scene)
         if scene.force is not None:
             self.force.check_tissue()
         constraints = [placed.constraint for placed in scene.constraints]
@@ -189,6 +192,26 @@ class Scenes:
                 self._set_target(pose_from(position, wxyz, "target"), index)
                 self.inputs[index].gizmo = self.inputs[index].target.copy()
             self._next_history = t
+
+    def _scene_where_the_robot_is(self, scene: Scene) -> Scene:
+        """A scene for the real robot (the ros2 plant), which cannot jump: refused unless
+        the robot is at the scene's configuration (within :data:`ROS2_SCENE_TOLERANCE` on
+        every joint: its constraints were placed there), then taken from where the robot
+        is, every target on its end effector (opening a scene never moves the robot)."""
+        with self._lock:
+            q = self.loops["main"].q.copy()
+        gap = np.abs(scene.q["main"] - q)
+        if float(gap.max()) > ROS2_SCENE_TOLERANCE:
+            joint = self.joint_names[int(np.argmax(gap))]
+            raise ValueError(
+                f"this scene puts the robot {float(gap.max()):.3g} rad from where the ROS 2 "
+                f"robot is (joint {joint}; at most {ROS2_SCENE_TOLERANCE:g} rad): a real "
+                "robot cannot jump there, move it to the scene's configuration first")
+        poses = [frame_placement(self.robot.model, q, frame) for frame in self.robot.ee_frame_ids]
+        targets = tuple((pose.translation.copy(), np.array(pose_to_dict(pose)["wxyz"]))
+                        for pose in poses)
+        return dataclasses.replace(scene, q={"main": q}, targets=targets,
+                                   target_position=targets[0][0], target_wxyz=targets[0][1])
 
     def _scene_avoidance(self, scene, constraints: list, dt: float
                          ) -> tuple[CollisionAvoidance, bool]:
