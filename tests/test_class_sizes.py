@@ -11,11 +11,11 @@ import pkgutil
 
 import web
 
-#: The largest class's methods now: ``TeleopApp`` 80 (100 with 12 mixins before the
+#: The largest classes' methods now: ``TeleopApp`` 79 (100 with 12 mixins before the
 #: recording, the way home, the collision scene and the input devices left it as
 #: components); ``TeleopUI`` 79 (84 before the live plots and the status panel left it).
 #: The closing target is 30.
-MOST_METHODS = 80
+MOST_METHODS = 79
 
 #: Functions, properties and static or class methods are methods here.
 METHOD_KINDS = (property, staticmethod, classmethod)

@@ -42,6 +42,19 @@ class PortReading:
         return float(np.linalg.norm(self.force))
 
 
+def continue_plant(old: TeleopLoop | None, new: TeleopLoop) -> None:
+    """``new`` takes over from ``old`` (the same robot, or None for a new one) at
+    ``new.q``: at the same period it drives the same simulated robot, whose physics
+    goes on (a controller switch does not stop a moving arm); else its own plant
+    rests at ``new.q``."""
+    if new.plant is None:
+        return
+    if old is not None and old.plant is not None and old.plant.dt == new.plant.dt:
+        new.plant = old.plant
+    else:
+        new.plant.reset(new.q)
+
+
 class Plants:
     """The plants of :class:`web.app.TeleopApp`'s loops (its state: ``plant``)."""
 
@@ -65,18 +78,6 @@ class Plants:
         wall = wall_of(constraint)
         if wall is not None and self.plant.wall_stiffness is not None:
             wall.set_stiffness(constraint, self.plant.wall_stiffness)
-
-    def _continue_plant(self, old: TeleopLoop | None, new: TeleopLoop) -> None:
-        """``new`` takes over from ``old`` (the same robot, or None for a new one) at
-        ``new.q``: at the same period it drives the same simulated robot, whose physics
-        goes on (a controller switch does not stop a moving arm); else its own plant
-        rests at ``new.q``."""
-        if new.plant is None:
-            return
-        if old is not None and old.plant is not None and old.plant.dt == new.plant.dt:
-            new.plant = old.plant
-        else:
-            new.plant.reset(new.q)
 
     def _ports(self, loop: TeleopLoop, placements: list[pin.SE3]) -> list[PortReading]:
         """The wall at each port of ``loop``'s plant over its last period (caller holds

@@ -29,8 +29,9 @@ from .collisions import CollisionScene
 from .force_control import ForceControl
 from .homing import WayHome
 from .limits import MAX_GHOST_OFFSET
-from .plant import PlantChoice
+from .plant import PlantChoice, continue_plant
 from .ros2_robot import Ros2Robot
+from .recording import SessionRecording
 from .trace import Trace
 
 
@@ -70,6 +71,7 @@ class Robots:
     traces: dict[str, Trace]
     last_records: dict[str, StepRecord | None]
     collisions: CollisionScene
+    recorder: SessionRecording
     ghost_offset: np.ndarray
     plant: PlantChoice
     force: ForceControl
@@ -189,7 +191,7 @@ class Robots:
                     old = self.loops.get(which, self.loops["main"])
                     loop.q = old.q.copy()
                     loop.t = old.t
-                    self._continue_plant(self.loops.get(which), loop)
+                    continue_plant(self.loops.get(which), loop)
                 if config is not self.config:  # every other loop follows the new period
                     others = {which: self._make_loop(self.specs[which], q=loop.q.copy(),
                                                      constraints=constraints, config=config,
@@ -197,7 +199,7 @@ class Robots:
                               for which, loop in self.loops.items() if which not in loops}
                     for which, loop in others.items():
                         loop.t = self.loops[which].t
-                        self._continue_plant(self.loops[which], loop)
+                        continue_plant(self.loops[which], loop)
                     loops.update(others)
                 for which in loops:
                     if which not in self.traces:

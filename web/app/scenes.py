@@ -16,7 +16,7 @@ import pinocchio as pin
 
 from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
-from teleop.loop import LoopConfig, TeleopLoop
+from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.robots import Robot
 
 from ..folders import Folder
@@ -67,6 +67,7 @@ class Scenes:
     specs: dict[str, str]
     loops: dict[str, TeleopLoop]
     traces: dict[str, Trace]
+    last_records: dict[str, StepRecord | None]
     entries: dict[str, ConstraintEntry]
     collisions: CollisionScene
     inputs: list[EEInput]
