@@ -163,10 +163,6 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
         with self._lock:
             return self.recorder.stop()
 
-    def _constraints(self) -> list:
-        """The placed constraints (caller holds the lock)."""
-        return [entry.constraint for entry in self.entries.values()]
-
     def set_collisions_on(self, on: bool) -> None:
         """Whether the controllers keep the pairs apart (the obstacles stay either way)."""
         if not isinstance(on, (bool, np.bool_)):
@@ -220,7 +216,7 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
                 obstacle.move_to(in_front(obstacle, tip))
             check_reach(obstacle.position, tip.translation, "obstacle")
             self.collisions.place(ObstacleEntry(entry_id, obstacle, obstacle.position),
-                                  self._constraints())
+                                  [entry.constraint for entry in self.entries.values()])
             return entry_id
 
     def move_obstacle(self, entry_id: str, position) -> None:
@@ -234,14 +230,16 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
 
     def remove_obstacle(self, entry_id: str) -> None:
         with self._lock:
-            self.collisions.remove(entry_id, self._constraints())
+            constraints = [entry.constraint for entry in self.entries.values()]
+            self.collisions.remove(entry_id, constraints)
 
     def clear_obstacles(self) -> int:
         """Remove every obstacle; how many there were."""
         with self._lock:
             ids = list(self.collisions.obstacles)
+            constraints = [entry.constraint for entry in self.entries.values()]
             for entry_id in ids:
-                self.collisions.remove(entry_id, self._constraints())
+                self.collisions.remove(entry_id, constraints)
             return len(ids)
 
     def attach_input(self, source: InputSource) -> None:
