@@ -7,6 +7,7 @@ by the ``timing`` tests at the end)."""
 from __future__ import annotations
 
 import itertools
+import json
 import os
 import signal
 import subprocess
@@ -483,6 +484,28 @@ def test_the_sims_ports_refuse_bad_options_by_name(domain, options, message):
                            str(domain), "--duration", "0", *options], cwd=ROOT,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 2
+    assert message in done.stderr and "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("scene, message", [
+    ({"robot": {"source": "ur5_instrument"}, "q": {"main": [{}] * 8}},
+     "q.main must be an array of 8 numbers"),
+    ({"robot": {"source": "ur5_instrument"}, "q": {"main": ["a", 1]}},
+     "q.main must be an array of 8 numbers"),
+    ({"robot": {"source": "ur5_instrument"}, "q": {"main": [9.0] * 8}},
+     "q.main is outside the joint limits of ['shoulder_pan_joint'"),
+    ({"constraints": []}, "names no robot"),
+    (None, "palpation is a contact scenario"),
+])
+def test_the_sims_scene_and_scenario_refuse_bad_values_by_name(domain, tmp_path, scene,
+                                                               message):
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(scene))
+    options = (("--scene", str(path)) if scene is not None else ("--scenario", "palpation"))
+    done = subprocess.run([sys.executable, "-m", "teleop", "sim", "--ros2", "--ros-domain",
+                           str(domain), "--plant", "mujoco", "--duration", "0", *options],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stderr
     assert message in done.stderr and "Traceback" not in done.stderr
 
 

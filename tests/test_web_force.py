@@ -147,8 +147,9 @@ def test_a_scene_keeps_the_tissue_and_the_law_settings(app, sda10f, tmp_path):
 @pytest.mark.parametrize("change, message", [
     (lambda f: f["tissue"].update(stiffness=1e9), r"force\.tissue\.stiffness must be <= 100000"),
     (lambda f: f["tissue"].update(damping=-1.0), r"force\.tissue\.damping must be >= 0"),
-    (lambda f: f["tissue"].update(normal=[0, 0, 0]), "normal must be 3 finite numbers, not zero"),
+    (lambda f: f["tissue"].update(normal=[0, 0, 0]), r"force\.tissue\.normal must be a direction"),
     (lambda f: f["tissue"].update(colour=1), "unknown scene force.tissue field 'colour'"),
+    (lambda f: f["tissue"].update(normal=[0, 0, "up"]), r"force\.tissue\.normal must be"),
     (lambda f: f.update(setpoint=[0, 0, 9]), r"force\.setpoint must have every component"),
     (lambda f: f.update(axes=[False, False, False]), "force.axes must be 3 booleans"),
     (lambda f: f.update(axes="z"), "force.axes must be 3 booleans"),
@@ -199,3 +200,36 @@ def test_the_status_leaves_the_force_axes_to_the_law(app):
     app.force.set_enabled(False)  # the target owns every axis again
     assert app.limitation("main").distance == pytest.approx(float(np.linalg.norm(error)),
                                                             abs=1e-3)
+
+
+def test_a_scene_whose_loops_cannot_be_built_leaves_the_force_control_as_it_was(app):
+    """The scene's tissue and settings are taken before its loops are built (their plants
+    need the tissue); a loop that cannot be built (a controller spec only the build
+    refuses) puts back the page's tissue, settings, state and plot, and its loops."""
+    app.force.place_tissue()
+    app.force.set_enabled(True)
+    for _ in range(200):
+        app.step()
+    kept = (app.force.tissue, app.force.setpoint.copy(), app.force.axes, app.force.enabled,
+            len(app.force.history), app.loops["main"])
+    scene = app.scene()
+    scene["force"]["tissue"]["point"][2] += 0.01
+    scene["force"]["setpoint"] = [0.0, 0.0, 2.0]
+    scene["controllers"]["main"] = "qp:no-such-solver"
+    with pytest.raises(ValueError, match="no-such-solver"):
+        app.apply_scene(scene)
+    assert app.force.tissue is kept[0] and app.force.setpoint.tolist() == kept[1].tolist()
+    assert (app.force.axes, app.force.enabled, len(app.force.history),
+            app.loops["main"]) == kept[2:]
+
+
+def test_a_huge_normal_is_a_direction_like_any_other():
+    """A normal of 1e308 along z is the direction z (its norm would overflow: the tissue
+    scales it by its largest component first)."""
+    from web.scene import _force
+
+    setup = _force({"version": 3, "force": {
+        "tissue": {"point": [0, 0, 0], "normal": [0.0, 1e308, 1e308]},
+        "setpoint": [0, 0, 1], "axes": [False, False, True]}})
+    assert setup is not None
+    np.testing.assert_allclose(setup.tissue.normal, [0.0, 2 ** -0.5, 2 ** -0.5], rtol=1e-15)

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from constraints import Constraint
+from constraints.validation import as_vector
 from teleop.json_text import parse_json
 from teleop.robots import Robot, load_robot
 
@@ -30,11 +31,11 @@ def add_port_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup) 
                              "frame) on NAMESPACE/port<i> (default: /port_forces)")
 
 
-def _scene_constraints(path: str, robot_name: str, nq: int
+def _scene_constraints(path: str, robot_name: str, robot: Robot
                        ) -> tuple[list[Constraint], np.ndarray | None]:
     """The constraints and the main robot's ``q`` of the scene file at ``path``;
     ``ValueError`` naming the file for one that cannot be read, another robot, or a
-    constraint or configuration that does not parse."""
+    constraint or configuration that does not parse or lies outside the joint limits."""
     where = f"scene file {path!r}"
     try:
         text = Path(path).expanduser().read_text(encoding="utf-8")
@@ -43,8 +44,10 @@ def _scene_constraints(path: str, robot_name: str, nq: int
     scene = parse_json(text, where)
     if not isinstance(scene, dict):
         raise ValueError(f"{where} does not hold a JSON object")
-    robot = scene.get("robot")
-    source = robot.get("source") if isinstance(robot, dict) else None
+    entry = scene.get("robot")
+    source = entry.get("source") if isinstance(entry, dict) else None
+    if not isinstance(source, str):
+        raise ValueError(f"{where} names no robot (its robot.source)")
     if source != robot_name:
         raise ValueError(f"{where} is a scene of robot {source!r}: give --robot {source}")
     placed = scene.get("constraints", [])
@@ -54,9 +57,15 @@ def _scene_constraints(path: str, robot_name: str, nq: int
     q = scene.get("q", {}).get("main") if isinstance(scene.get("q"), dict) else None
     if q is None:
         return constraints, None
-    q0 = np.asarray(q, dtype=float) if isinstance(q, list) else np.zeros(0)
-    if q0.shape != (nq,) or not np.all(np.isfinite(q0)):
-        raise ValueError(f"{where}: q.main must be {nq} finite numbers")
+    model = robot.model
+    q0 = as_vector(q, model.nq, f"{where}: q.main")
+    outside = np.flatnonzero((q0 < model.lowerPositionLimit - 1e-9)
+                             | (q0 > model.upperPositionLimit + 1e-9))
+    if outside.size:
+        joints = [name for joint, name in enumerate(model.names) if joint > 0
+                  and any(model.idx_qs[joint] <= i < model.idx_qs[joint] + model.nqs[joint]
+                          for i in outside.tolist())]
+        raise ValueError(f"{where}: q.main is outside the joint limits of {joints}")
     return constraints, q0
 
 
@@ -66,14 +75,16 @@ def sim_ports(args: argparse.Namespace) -> tuple[Robot, list[Constraint], np.nda
     if args.scenario is not None and args.scene is not None:
         raise ValueError("--scenario and --scene both place the ports: give one")
     if args.scenario is not None:
+        from teleop.experiments.contact_compare import refuse_contact_scenario
         from teleop.experiments.scenarios import load_scenario
 
+        refuse_contact_scenario(args.scenario, "teleop sim")
         plan = load_scenario(args.scenario, None if args.robot is None else load_robot(args.robot))
         return plan.robot, plan.make_constraints(), plan.q0.copy()
     robot = load_robot(args.robot or DEFAULT_ROBOT)
     if args.scene is None:
         return robot, [], None
-    return (robot, *_scene_constraints(args.scene, robot_name(args), robot.model.nq))
+    return (robot, *_scene_constraints(args.scene, robot_name(args), robot))
 
 
 def robot_name(args: argparse.Namespace) -> str:

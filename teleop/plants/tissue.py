@@ -57,10 +57,13 @@ class TissueSurface:
         if point.shape != (3,) or not np.all(np.isfinite(point)):
             raise ValueError(f"tissue {self.name!r}: point must be 3 finite numbers, got "
                              f"{self.point!r}")
-        length = float(np.linalg.norm(normal)) if normal.shape == (3,) else float("nan")
-        if not np.isfinite(length) or length < 1e-9:
+        # scaled by its largest component first: the norm of a finite normal cannot overflow
+        scale = (float(np.max(np.abs(normal))) if normal.shape == (3,) else float("nan"))
+        if not np.isfinite(scale) or scale < 1e-9:
             raise ValueError(f"tissue {self.name!r}: normal must be 3 finite numbers, not "
                              f"zero, got {self.normal!r}")
+        normal = normal / scale
+        length = float(np.linalg.norm(normal))
         stiffness = as_number(self.stiffness, f"tissue {self.name!r} stiffness")
         damping = as_number(self.damping, f"tissue {self.name!r} damping")
         if not stiffness > 0.0:
@@ -104,7 +107,11 @@ class TissueSurface:
             raise ValueError(f"unknown {where} field {unknown[0]!r} (its fields: "
                              f"{', '.join(sorted(TISSUE_FIELDS))})")
         point = as_vector(data.get("point"), 3, f"{where}.point", maximum=MAX_POSITION_M)
-        return cls(point, as_vector(data.get("normal"), 3, f"{where}.normal"),
+        normal = as_vector(data.get("normal"), 3, f"{where}.normal")
+        if float(np.max(np.abs(normal))) < 1e-9:
+            raise ValueError(f"{where}.normal must be a direction, not zero, got "
+                             f"{normal.tolist()}")
+        return cls(point, normal,
                    as_number(data.get("stiffness", DEFAULT_TISSUE_STIFFNESS),
                              f"{where}.stiffness", positive=True, maximum=MAX_TISSUE_STIFFNESS),
                    as_number(data.get("damping", DEFAULT_TISSUE_DAMPING), f"{where}.damping",

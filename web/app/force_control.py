@@ -112,14 +112,20 @@ class ForceControl:
                     "setpoint": [float(x) for x in self.setpoint], "axes": list(self.axes)}
 
     def take_setup(self, tissue: TissueSurface | None, setpoint: np.ndarray,
-                   axes: tuple[bool, bool, bool]) -> None:
+                   axes: tuple[bool, bool, bool]) -> tuple:
         """A scene's tissue and settings, before its loops are built (their plants take the
-        tissue); without a tissue force control turns off (caller holds the lock and has
+        tissue); without a tissue force control turns off. Returns what it replaced, for
+        :meth:`restore_setup` should the loops not build (caller holds the lock and has
         checked the plant with :meth:`check_tissue`)."""
+        previous = (self.tissue, self.setpoint, self.axes, self.enabled)
         self.tissue = tissue
         self.setpoint, self.axes = np.array(setpoint, dtype=float), axes
         self.enabled = self.enabled and tissue is not None
-        self.history.clear()
+        return previous
+
+    def restore_setup(self, previous: tuple) -> None:
+        """The tissue and settings :meth:`take_setup` replaced (caller holds the lock)."""
+        self.tissue, self.setpoint, self.axes, self.enabled = previous
 
     def set_enabled(self, enabled: bool) -> None:
         """Force control on (every loop's controller through the law) or off; on needs a

@@ -149,12 +149,12 @@ class Scenes:
             specs = {"main": scene.main, **({"ghost": scene.ghost} if scene.ghost else {})}
             loops = {}
             force = self.force
-            kept = (force.tissue, force.setpoint, force.axes, force.enabled)
+            previous = None
             if not scene.keep_force:  # the loops' plants and laws take the scene's
                 setup = scene.force
-                force.take_setup(None if setup is None else setup.tissue,
-                                 force.setpoint if setup is None else setup.setpoint,
-                                 force.axes if setup is None else setup.axes)
+                previous = force.take_setup(None if setup is None else setup.tissue,
+                                            force.setpoint if setup is None else setup.setpoint,
+                                            force.axes if setup is None else setup.axes)
             try:
                 for which, spec in specs.items():  # raises ValueError: nothing changed yet
                     loop = self._make_loop(spec, q=scene.q[which], constraints=constraints,
@@ -165,9 +165,12 @@ class Scenes:
                                            avoidance=avoidance, collisions_on=collisions_on)
                     loop.t = t
                     loops[which] = loop
-            except ValueError:
-                force.tissue, force.setpoint, force.axes, force.enabled = kept
+            except BaseException:  # all or nothing: the force settings back too
+                if previous is not None:
+                    force.restore_setup(previous)
                 raise
+            if previous is not None:
+                force.history.clear()  # the plot starts with the scene's tissue
             self.config, self.gain, self.damping = config, scene.gain, scene.damping
             self.orientation_weight = scene.orientation_weight
             self.task_mode = scene.task_mode
