@@ -128,7 +128,9 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
         self._ids = itertools.count(1)
         self.collisions = CollisionScene(robot, self.config.dt, collisions,
                                          dict(collision_settings or {}))
-        self.force = ForceControl(self)  # before the first loop: it makes their plants
+        # before the first loop: it makes their plants
+        self.force = ForceControl(robot, self.plant, self._lock, lambda: self.loops,
+                                  self.make_plant, lambda: self._rebuild(dict(self.specs)))
         self.specs = {"main": controller}
         self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(
             controller, q=None if self.ros2 is None else self.ros2.state(self.config.dt))}

@@ -27,7 +27,7 @@ import collections
 import math
 import threading
 import weakref
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -42,8 +42,10 @@ from teleop.loop.hybrid_force_motion import HybridForceMotion
 from teleop.loop.tool_wrench import tool_wrench
 from teleop.plants import MujocoPlant
 from teleop.plants.tissue import TissueSurface
+from teleop.robots import Robot
 
 from .limits import HISTORY_RATE, HISTORY_SECONDS
+from .plant import PlantChoice
 
 #: how far beyond the tool tip the tissue is placed (m): the law closes the gap
 TISSUE_GAP = 2e-3
@@ -61,11 +63,30 @@ FILTER_CUTOFF = 20.0
 
 
 class ForceControl:
-    """The page's force control (the app's ``force``); every method takes the app's lock."""
+    """The page's force control (the app's ``force``), a component of
+    :class:`web.app.TeleopApp`; every method takes the app's lock.
 
-    def __init__(self, app: Any) -> None:
-        self._app = app
-        self._lock: threading.RLock = app._lock
+    Parameters
+    ----------
+    robot : the session's robot.
+    plant : the session's plant choice (a tissue needs the mujoco one).
+    lock : the app's lock.
+    loops : the robots' loops now, by name (the app replaces them as it rebuilds them).
+    make_plant : a fresh plant of the session for a loop of period ``dt`` (None: the ideal
+        integrator).
+    rebuild : every loop built again, keeping its state (all or nothing: ``ValueError``
+        changes nothing); the loops' controllers go through :meth:`wrapped`.
+    """
+
+    def __init__(self, robot: Robot, plant: PlantChoice, lock: threading.RLock,
+                 loops: Callable[[], dict[str, TeleopLoop]], make_plant: Callable[[float], Any],
+                 rebuild: Callable[[], None]) -> None:
+        self._robot = robot
+        self._plant_choice = plant
+        self._lock = lock
+        self._loops = loops
+        self._make_plant = make_plant
+        self._rebuild = rebuild
         #: the tissue placed (None: none)
         self.tissue: TissueSurface | None = None
         self.enabled = False
@@ -83,20 +104,20 @@ class ForceControl:
     def place_tissue(self) -> None:
         """The tissue :data:`TISSUE_GAP` beyond the main robot's tool tip, against its z,
         in every loop's plant (a fresh plant with the sensor, at rest where its robot is)."""
-        app = self._app
         self.check_tissue()
         with self._lock:
-            tip = app.loops["main"].ee_placements()[0]
+            loops = self._loops()
+            tip = loops["main"].ee_placements()[0]
             self.tissue = TissueSurface(tip.translation + TISSUE_GAP * tip.rotation[:, 2],
                                         -tip.rotation[:, 2])
-            for loop in app.loops.values():
+            for loop in loops.values():
                 loop.plant = self.plant(loop.config.dt)
                 loop.plant.reset(loop.q)
             self.history.clear()
 
     def check_tissue(self) -> None:
         """``ValueError`` unless the session's plant can carry a tissue (the mujoco one)."""
-        plant = self._app.plant
+        plant = self._plant_choice
         if not plant.physical:
             raise ValueError(f"a tissue needs the mujoco plant (teleop web --plant mujoco): "
                              f"the {plant.kind} plant has no body to press it nor a "
@@ -138,9 +159,7 @@ class ForceControl:
         with self._lock:
             previous, self.enabled = self.enabled, bool(enabled)
         try:
-            self._app.set_controller(self._app.specs["main"])  # new loops, state kept
-            if "ghost" in self._app.specs:
-                self._app.set_ghost(self._app.specs["ghost"])
+            self._rebuild()  # new loops, state kept
         except ValueError:
             with self._lock:
                 self.enabled = previous
@@ -174,10 +193,9 @@ class ForceControl:
     def plant(self, dt: float) -> Any:
         """A fresh plant for a loop of period ``dt``: the session's, with the tissue and
         the tool's sensor once one is placed."""
-        app = self._app
         if self.tissue is None:
-            return app.make_plant(dt)
-        return MujocoPlant(app.robot, dt, app.plant.settings, tissues=[self.tissue])
+            return self._make_plant(dt)
+        return MujocoPlant(self._robot, dt, self._plant_choice.settings, tissues=[self.tissue])
 
     def wrapped(self, controller: Any, dt: float) -> Any:
         """``controller`` through the law when force control is on, else itself."""
@@ -225,7 +243,7 @@ class ForceControl:
         plot's columns (the main robot's)."""
         contacts = {which: self._contact(loop) for which, loop in loops.items()}
         history = np.array(self.history, dtype=float).reshape(-1, 4)
-        return {"available": bool(self._app.plant.physical), "enabled": self.enabled,
+        return {"available": bool(self._plant_choice.physical), "enabled": self.enabled,
                 "setpoint": self.setpoint.copy(), "axes": self.axes,
                 "tissue": None if self.tissue is None else (self.tissue.point.copy(),
                                                             self.tissue.normal.copy()),
