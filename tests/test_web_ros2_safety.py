@@ -16,7 +16,10 @@ __all__ = ["domain", "loopback", "robot", "robot_process"]  # the fixtures used 
 
 
 def page(robot, domain: int, tmp_path) -> TeleopApp:
-    return TeleopApp(robot, rate=RATE, plant="ros2", ros2_settings=settings_for(domain),
+    """The page on the sim, its watchdog at 1 s (not under test here: a loaded machine
+    pauses the sim beyond the default 50 ms now and then)."""
+    return TeleopApp(robot, rate=RATE, plant="ros2",
+                     ros2_settings=settings_for(domain, stale_after=1.0),
                      record_dir=tmp_path, scene_dir=tmp_path)
 
 
