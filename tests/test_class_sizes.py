@@ -13,7 +13,8 @@ import web
 
 #: The largest classes' methods now: ``TeleopApp`` 79 (100 with 12 mixins before the
 #: recording, the way home, the collision scene and the input devices left it as
-#: components); ``TeleopUI`` 79 (84 before the live plots and the status panel left it).
+#: components); ``TeleopUI`` 75 (84 before the live plots, the status panel and the
+#: device panel left it).
 #: The closing target is 30.
 MOST_METHODS = 79
 

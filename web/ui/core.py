@@ -49,7 +49,7 @@ from ..robot_view import RobotView, floor_height
 from .collision_panel import CollisionPanel
 from .collision_view import CollisionView
 from .constraint_panel import ConstraintPanel
-from .device_view import DeviceView
+from .device_view import DevicePanel
 from .force_panel import ForcePanel
 from .markers import Markers
 from .panels import Panels
@@ -86,7 +86,7 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
 
 
 class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, CollisionView,
-               PortForces, DeviceView):
+               PortForces):
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -174,12 +174,13 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
                 lambda _: setattr(self.hint, "visible", False))
         with gui.add_folder("Status"):
             self.status_panel = StatusPanel(gui, self.control, self.ee_names,
-                                            lambda: self.plots.port_peak, self._device_lines,
+                                            lambda: self.plots.port_peak,
+                                            lambda snapshot: self.device_panel.lines(snapshot),
                                             self.notify)
         self.tabs = gui.add_tab_group()
         with self.tabs.add_tab("Teleop"):
             self._build_teleop_panel()
-            self._build_device_panel()
+            self.device_panel = DevicePanel(self.server, self.app, self.ee_names, self._guarded)
         with self.tabs.add_tab("Constraints"):
             self._build_constraint_panel()
         with self.tabs.add_tab("Collisions"):
@@ -233,7 +234,8 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
                     next_status = start + 1.0 / STATUS_RATE
                 if plot:
                     self.plots.draw(snapshot)
-                    self._plot_feedback(snapshot)
+                    self.device_panel.draw_plot(snapshot, self._plot_tab,
+                                                self.plot_note.order + 0.5)  # the tab's first
                     self.force_panel.draw_plot(snapshot["force"], snapshot["robots"]["main"]["t"])
                     next_plot = start + 1.0 / PLOT_RATE
             except Exception as error:  # the view must never take the control loop down

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 import viser
@@ -45,21 +46,29 @@ def device_words(device: dict, ee_name: str, rate: float | None) -> str:
     return words
 
 
-class DeviceView:
-    """The devices' part of :class:`web.ui.TeleopUI`."""
+class DevicePanel:
+    """The devices' part of :class:`web.ui.TeleopUI`, a component owning its handles: the
+    orientation mapping menu (built where the caller's GUI context puts it; the gizmo's
+    mapping is always relative), the feedback force plot, each browser camera's reports
+    handed to the app as the operator's view, and the devices' status lines.
 
-    server: viser.ViserServer
-    app: TeleopApp
-    ee_names: dict[str, str]
-    _plot_tab: object
-    plot_note: viser.GuiMarkdownHandle  # the Plots tab's first line
-    _feedback_plot: object | None
-    _received: dict[str, tuple[float, int]]
+    Parameters
+    ----------
+    server : the viser server.
+    app : the session (its ``set_orientation_mode`` and ``set_view``).
+    ee_names : what the operator reads per EE frame.
+    guarded : posts an operator action (``guarded(event, action, key=...)``,
+        :meth:`web.ui.TeleopUI._guarded`).
+    """
 
-    def _build_device_panel(self) -> None:
-        """The orientation mapping of the devices (the gizmo's is always relative)."""
-        self._feedback_plot = None
-        self._received = {}
+    def __init__(self, server: viser.ViserServer, app: TeleopApp, ee_names: dict[str, str],
+                 guarded: Callable[..., None]) -> None:
+        self.server = server
+        self.app = app
+        self.ee_names = ee_names
+        self._guarded = guarded
+        self._feedback_plot: viser.GuiUplotHandle | None = None
+        self._received: dict[str, tuple[float, int]] = {}
         self.orientation_menu = self.server.gui.add_dropdown(
             "device orientation", ORIENTATIONS, initial_value=ORIENTATIONS[0],
             hint="relative: the tool turns by the device's rotation since it was coupled; "
@@ -78,7 +87,7 @@ class DeviceView:
         self._guarded(None, lambda wxyz=np.array(camera.wxyz): self.app.set_view(wxyz),
                       key="view")
 
-    def _device_lines(self, snapshot: dict) -> list[str]:
+    def lines(self, snapshot: dict) -> list[str]:
         """Each device's status line; its rate of commands received since the previous
         line, over the wall clock (the loop's time lags it when the loop falls behind)."""
         frames = snapshot["ee_frames"]
@@ -93,8 +102,9 @@ class DeviceView:
             lines.append(device_words(device, self.ee_names[frames[device["ee"]]], rate))
         return lines
 
-    def _plot_feedback(self, snapshot: dict) -> None:
-        """The force the first feedback-rendering device renders, in its frame."""
+    def draw_plot(self, snapshot: dict, tab: viser.GuiTabHandle, order: float) -> None:
+        """The force the first feedback-rendering device renders, in its frame, in the
+        plots' ``tab`` at ``order`` (added there the first time)."""
         shown = [d for d in snapshot["devices"] if d["source"].renders_feedback]
         if not shown or len(shown[0]["history"]) < 2:
             return
@@ -104,14 +114,14 @@ class DeviceView:
         if self._feedback_plot is not None:
             self._feedback_plot.data = data
             return
-        with self._plot_tab:
+        with tab:
             self._feedback_plot = self.server.gui.add_uplot(
                 data=data, title=f"feedback force, {shown[0]['name']} (N, device frame)",
                 series=(uplot.Series(label="t - now (s)"),
                         *[uplot.Series(label=axis, stroke=color, width=1.5)
                           for axis, color in zip(("x right", "y up", "z back"),
                                                  FEEDBACK_COLORS)]),
-                aspect=2.0, order=self.plot_note.order + 0.5,  # the Plots tab's first
+                aspect=2.0, order=order,
                 scales={"x": uplot.Scale(time=False, auto=False,
                                          range=(-HISTORY_SECONDS, 0.0)),
                         "y": uplot.Scale(auto=True)},
