@@ -5,7 +5,6 @@ real DDS on the loopback interface, a domain id per test."""
 
 from __future__ import annotations
 
-import itertools
 import json
 import os
 import subprocess
@@ -15,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_ros2_wire import LOOPBACK
+from test_ros2_wire import domain, loopback
 
 from teleop import load_robot
 from teleop.inputs import FeedbackState
@@ -26,17 +25,8 @@ from web.app import TeleopApp
 ROOT = Path(__file__).resolve().parents[1]
 RATE = 500.0
 NAMESPACE = f"/run{os.getpid()}/MTMR"
-_domains = itertools.count(201 + os.getpid() % 14 * 2)
-
-
-@pytest.fixture(autouse=True)
-def loopback(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
-
-
-@pytest.fixture
-def domain() -> int:
-    return next(_domains) % 232 + 1
+#: the fixtures of test_ros2_wire used here (one domain counter for every ROS 2 test file)
+__all__ = ["domain", "loopback"]
 
 
 def test_the_page_follows_a_ros2_master_and_sends_it_the_feedback(domain, tmp_path):

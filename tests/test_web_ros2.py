@@ -5,7 +5,6 @@ Waits are counted in control periods; no wall-clock figure is asserted here."""
 
 from __future__ import annotations
 
-import itertools
 import os
 import signal
 import subprocess
@@ -19,7 +18,7 @@ import pinocchio as pin
 import pytest
 from browser_helpers import free_port
 from test_web_cli import serve
-from test_ros2_wire import COMMANDS, LOOPBACK, STATES, CommandLog, sim
+from test_ros2_wire import COMMANDS, LOOPBACK, STATES, CommandLog, domain, loopback, robot, sim
 
 from teleop import load_robot
 from teleop.plants.ros2.node import Ros2Node
@@ -32,22 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 #: the sim's start, away from home (the page must start where the robot is)
 Q0 = load_robot("ur5_instrument").q_home + [0.1, -0.05, 0.1, 0.05, 0.05, 0.1, 0.0, 0.0]
 
-_domains = itertools.count(171 + os.getpid() % 30 * 2)
-
-
-@pytest.fixture(autouse=True)
-def loopback(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
-
-
-@pytest.fixture
-def domain() -> int:
-    return next(_domains) % 232 + 1
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("ur5_instrument")
+#: the fixtures of test_ros2_wire used here (one domain counter for every ROS 2 test file)
+__all__ = ["domain", "loopback", "robot"]
 
 
 def settings_for(domain: int, **fields) -> Ros2Settings:
