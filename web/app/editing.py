@@ -20,6 +20,7 @@ from teleop.robots import Robot
 
 from .limits import MAX_TARGET_DISTANCE
 from .placing import Placement, moving_links
+from .plant import PlantChoice, apply_wall
 
 
 @dataclass
@@ -52,6 +53,7 @@ class Editing:
     and the counter of new ids)."""
 
     robot: Robot
+    plant: PlantChoice
     loops: dict[str, TeleopLoop]
     entries: dict[str, ConstraintEntry]
     gain: float
@@ -97,7 +99,7 @@ class Editing:
         """Add ``constraint`` at its position with the app's gain; its new id."""
         with self._lock:
             constraint.gain = self.gain
-            self._apply_wall(constraint)
+            apply_wall(constraint, self.plant.wall_stiffness)
             entry_id = f"{constraint.kind}-{next(self._ids)}"
             if entry_id in self.entries:
                 raise ValueError(f"a constraint {entry_id!r} is already placed")

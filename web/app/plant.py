@@ -42,6 +42,36 @@ class PortReading:
         return float(np.linalg.norm(self.force))
 
 
+def apply_wall(constraint: Constraint, stiffness: float | None) -> None:
+    """The session's wall ``stiffness`` (N/m; None: the port's own) on a constraint that
+    puts a wall into the scene (:func:`teleop.plants.walls.wall_of`)."""
+    wall = wall_of(constraint)
+    if wall is not None and stiffness is not None:
+        wall.set_stiffness(constraint, stiffness)
+
+
+def port_readings(loop: TeleopLoop, placements: list[pin.SE3], ids: dict[int, str],
+                  model: pin.Model) -> list[PortReading]:
+    """The wall at each port of ``loop``'s plant over its last period (``placements``
+    every frame's at ``loop.q``; ``ids`` the placed constraints' ids by ``id()``, a port
+    without one named by its link). Empty without a physics plant, or until the plant has
+    stepped with the current constraints."""
+    if loop.plant is None:
+        return []
+    walls = [(c, wall) for c in loop.constraints if (wall := wall_of(c)) is not None]
+    measures = loop.plant.measures()
+    if len(walls) != len(measures.port_forces):  # constraints changed since the step
+        return []
+    readings = []
+    for (port, wall), force, displacement in zip(walls, measures.port_forces,
+                                                 measures.port_displacements):
+        link = placements[model.getFrameId(port.link)]
+        point, _ = wall.port(port, link.rotation, link.translation)
+        readings.append(PortReading(ids.get(id(port), port.link), point,
+                                    np.array(force, dtype=float), float(displacement)))
+    return readings
+
+
 def continue_plant(old: TeleopLoop | None, new: TeleopLoop) -> None:
     """``new`` takes over from ``old`` (the same robot, or None for a new one) at
     ``new.q``: at the same period it drives the same simulated robot, whose physics
@@ -71,30 +101,3 @@ class Plants:
         if self.ros2 is not None:
             return self.ros2.plant(dt)
         return self.plant.make(self.robot, dt)
-
-    def _apply_wall(self, constraint: Constraint) -> None:
-        """The session's wall stiffness on a constraint that puts a wall into the scene
-        (:func:`teleop.plants.walls.wall_of`), when the session sets one."""
-        wall = wall_of(constraint)
-        if wall is not None and self.plant.wall_stiffness is not None:
-            wall.set_stiffness(constraint, self.plant.wall_stiffness)
-
-    def _ports(self, loop: TeleopLoop, placements: list[pin.SE3]) -> list[PortReading]:
-        """The wall at each port of ``loop``'s plant over its last period (caller holds
-        the lock; ``placements`` every frame's at ``loop.q``). Empty without a physics
-        plant, or until the plant has stepped with the current constraints."""
-        if loop.plant is None:
-            return []
-        ids = {id(entry.constraint): entry.id for entry in self.entries.values()}
-        walls = [(c, wall) for c in loop.constraints if (wall := wall_of(c)) is not None]
-        measures = loop.plant.measures()
-        if len(walls) != len(measures.port_forces):  # constraints changed since the step
-            return []
-        readings = []
-        for (port, wall), force, displacement in zip(walls, measures.port_forces,
-                                                     measures.port_displacements):
-            link = placements[self.robot.model.getFrameId(port.link)]
-            point, _ = wall.port(port, link.rotation, link.translation)
-            readings.append(PortReading(ids.get(id(port), port.link), point,
-                                        np.array(force, dtype=float), float(displacement)))
-        return readings

@@ -42,6 +42,7 @@ from .limits import (
     ROS2_SCENE_TOLERANCE,
     checked_rate,
 )
+from .plant import PlantChoice, apply_wall
 from .trace import Trace
 from .ros2_robot import Ros2Robot
 
@@ -57,6 +58,7 @@ class Scenes:
     """Saving and loading the scene of :class:`web.app.TeleopApp`."""
 
     robot: Robot
+    plant: PlantChoice
     config: LoopConfig
     gain: float
     damping: float
@@ -141,7 +143,7 @@ class Scenes:
         constraints = [placed.constraint for placed in scene.constraints]
         for constraint in constraints:
             constraint.gain = scene.gain
-            self._apply_wall(constraint)
+            apply_wall(constraint, self.plant.wall_stiffness)
         config = dataclasses.replace(self.config, rate=scene.rate)
         avoidance, collisions_on = self._scene_avoidance(scene, constraints, config.dt)
         with self._lock:

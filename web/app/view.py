@@ -18,7 +18,7 @@ from .collisions import CollisionScene
 from .console import EEInput
 from .editing import ConstraintEntry
 from .force_control import ForceControl
-from .plant import PlantChoice
+from .plant import PlantChoice, port_readings
 from .shortfall import asked_angle, explained, ports_on_chain, shortfall_words
 from .ros2_robot import Ros2Robot
 from .status import Limitation, describe_limitation, not_following
@@ -155,6 +155,7 @@ class View:
         placements = self._view_data.oMf
         links = {entry.id: placements[model.getFrameId(entry.constraint.link)].copy()
                  for entry in self.entries.values()}
+        ids = {id(entry.constraint): entry.id for entry in self.entries.values()}
         return {"spec": self.specs[which], "q": q, "t": loop.t,
                 "ees": [placements[frame].copy() for frame in self.robot.ee_frame_ids],
                 "links": links, "record": self.last_records.get(which),
@@ -165,7 +166,7 @@ class View:
                 "active_pairs": self.active_pairs(which),
                 # the rows its controller computed last (immutable), or None
                 "collision_rows": self.collisions.rows.get(which),
-                "ports": self._ports(loop, placements),
+                "ports": port_readings(loop, placements, ids, model),
                 # what the supervisor measured and did in the last period (immutable)
                 "supervision": loop.supervision}
 
