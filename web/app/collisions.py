@@ -230,6 +230,28 @@ class CollisionScene:
                    if entry_id.rsplit("-", 1)[-1].isdigit()]
         self._ids = itertools.count(max(numbers, default=0) + 1)
 
+    def for_scene(self, collisions: dict | None, obstacles: list[Obstacle],
+                  constraints: list[Constraint], dt: float) -> tuple[CollisionAvoidance, bool]:
+        """The avoidance a scene asks for (its ``collisions`` settings and ``on``; None, a
+        version 1 scene: this one's settings, no obstacle), with its ``obstacles`` and the
+        ports of its ``constraints``, checked at ``dt``, and whether the controllers hold
+        it; ``ValueError`` naming the field for settings it cannot take. Nothing of this
+        one changes (:meth:`restore` takes it)."""
+        if collisions is None:
+            settings, on = self.avoidance.to_dict(), self.on
+        else:
+            settings = {key: value for key, value in collisions.items() if key != "on"}
+            on = collisions["on"]
+        settings["obstacles"] = []
+        try:
+            avoidance = CollisionAvoidance.from_dict(self.robot, settings)
+            avoidance.check(self.robot.model, dt)
+        except ValueError as error:
+            raise ValueError(f"scene collisions: {error}") from None
+        avoidance.set_obstacles(obstacles)
+        avoidance.set_ports(constraints)
+        return avoidance, on
+
     def keep(self, held: dict[str, CollisionRows]) -> None:
         """The rows each controller computed in its step this tick, kept for the view
         while collisions are on."""

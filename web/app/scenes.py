@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.robots import Robot
@@ -145,7 +144,9 @@ class Scenes:
             constraint.gain = scene.gain
             apply_wall(constraint, self.plant.wall_stiffness)
         config = dataclasses.replace(self.config, rate=scene.rate)
-        avoidance, collisions_on = self._scene_avoidance(scene, constraints, config.dt)
+        avoidance, collisions_on = self.collisions.for_scene(
+            scene.collisions, [placed.obstacle for placed in scene.obstacles], constraints,
+            config.dt)
         with self._lock:
             t = self.now
             specs = {"main": scene.main, **({"ghost": scene.ghost} if scene.ghost else {})}
@@ -218,26 +219,6 @@ class Scenes:
                         for pose in poses)
         return dataclasses.replace(scene, q={"main": q}, targets=targets,
                                    target_position=targets[0][0], target_wxyz=targets[0][1])
-
-    def _scene_avoidance(self, scene, constraints: list, dt: float
-                         ) -> tuple[CollisionAvoidance, bool]:
-        """The collision avoidance a scene asks for, with its obstacles and ports, and
-        whether the controllers hold it (a version 1 scene: the session's settings, no
-        obstacle); ``ValueError`` naming the field for settings it cannot take."""
-        if scene.collisions is None:
-            settings, on = self.collisions.avoidance.to_dict(), self.collisions.on
-        else:
-            settings = {key: value for key, value in scene.collisions.items() if key != "on"}
-            on = scene.collisions["on"]
-        settings["obstacles"] = []
-        try:
-            avoidance = CollisionAvoidance.from_dict(self.robot, settings)
-            avoidance.check(self.robot.model, dt)
-        except ValueError as error:
-            raise ValueError(f"scene collisions: {error}") from None
-        avoidance.set_obstacles([placed.obstacle for placed in scene.obstacles])
-        avoidance.set_ports(constraints)
-        return avoidance, on
 
     def _check_scene(self, scene) -> None:
         """``ValueError`` for a parsed scene this app cannot take: a configuration outside
