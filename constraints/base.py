@@ -479,11 +479,20 @@ class Constraint(CompiledForm, ABC):
         """
         if frame_id is None:
             frame_id = resolve_frame(model, self.link)
-        placement = pin.updateFramePlacement(model, data, frame_id)  # cheaper than data.oMf[i]
-        state = self.evaluate(placement)
-        jacobian = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL)
-        point_jacobian = jacobian[:3] - pin.skew(state.p) @ jacobian[3:]
-        return state.C @ point_jacobian, state.rhs
+        rows, state, _ = evaluated_rows(self, model, data, frame_id)
+        return rows, state.rhs
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(link={self.link!r}, gain={self._gain})"
+
+
+def evaluated_rows(constraint: Constraint, model: pin.Model, data: pin.Data,
+                   frame_id: int) -> tuple[np.ndarray, ConstraintPoint, pin.SE3]:
+    """:meth:`Constraint.rows`' ``A = C [I, -hat(p)] J_a`` with the evaluation it comes
+    from (error, point, right-hand side) and the link's placement, for a caller that reads
+    them too (the loop's measures) without evaluating the constraint again."""
+    placement = pin.updateFramePlacement(model, data, frame_id)  # cheaper than data.oMf[i]
+    state = constraint.evaluate(placement)
+    jacobian = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL)
+    point_jacobian = jacobian[:3] - pin.skew(state.p) @ jacobian[3:]
+    return state.C @ point_jacobian, state, placement

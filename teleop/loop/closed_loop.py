@@ -35,6 +35,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
+from constraints.base import evaluated_rows
 from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from constraints.validation import as_vector
@@ -520,11 +521,7 @@ class TeleopLoop:
         for constraint, frame in zip(constraints, self.controller.constraint_frames):
             if not constraint.is_equality:
                 continue
-            # Constraint.rows from one evaluation, which also gives the error and the point
-            placement = pin.updateFramePlacement(model, data, frame)
-            state = constraint.evaluate(placement)
-            jacobian = pin.getFrameJacobian(model, data, frame, pin.LOCAL)
-            A = state.C @ (jacobian[:3] - pin.skew(state.p) @ jacobian[3:])
+            A, state, placement = evaluated_rows(constraint, model, data, frame)
             achieved = A @ qd
             residual = max(residual, *map(abs, (achieved - state.rhs).tolist()))
             correction = -constraint.gain * state.error
