@@ -18,6 +18,7 @@ from constraints.validation import as_vector
 
 from .joint_limits import DEFAULT_LIMIT_GAIN, BoxTest, JointBounds
 from .linalg import DampingPolicy
+from .step_message import StepMessage
 
 #: An equality row is held when ``|A qd - b|`` is at most this (m/s); above it the step
 #: reports ``constraint_degraded``.
@@ -31,6 +32,13 @@ TWIST_TOLERANCE = 1e-6
 
 def residual_note(residual: float) -> str:
     return f"constraint residual {residual:.2e} m/s"
+
+
+def with_note(message: str, note: str) -> str:
+    """``message`` with ``note`` added after a ``"; "`` (not again when it holds it)."""
+    if not note or note in message:
+        return message
+    return f"{message}; {note}" if message else note
 
 
 def clipped_note(joints: list[int], change: float) -> str:
@@ -144,8 +152,7 @@ class SolveInfo:
         """Lower the status to ``status`` if it is worse, and add ``note`` to the message."""
         if status.severity > self.status.severity:
             self.status = status
-        if note and note not in self.message:
-            self.message = f"{self.message}; {note}" if self.message else note
+        self.message = with_note(self.message, note)
 
 
 class Kinematics:
@@ -450,6 +457,13 @@ class Controller(ABC):
         when the controller is ``strict``): never a non-finite command, never one
         outside the joint box.
         """
+
+    def step_outcome(self) -> tuple[StepStatus, StepMessage]:
+        """The last step's status and its message, the message's text worded when read
+        (:class:`~controllers.step_message.StepMessage`): ``info.status`` and
+        ``info.message``, the same words (docs/design.md section 8.3)."""
+        info = self.info
+        return info.status, StepMessage.worded(info.message)
 
     def _checked_inputs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:func:`checked_inputs` for this controller's model and task."""

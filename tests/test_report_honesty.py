@@ -101,6 +101,7 @@ def test_a_log_axis_starts_at_the_measures_resolution_not_at_rounding():
 def test_many_distinct_failure_messages_are_all_counted_the_rest_together():
     """25 distinct messages over 30 failed steps (and ok steps between): the 20 most
     frequent kept, the 5 others counted in one entry; every failed step in a count."""
+    from controllers.step_message import StepMessage
     from teleop.experiments.compare import MAX_FAILURE_MESSAGES, summarise_failures
     from teleop.loop import StepRecord
 
@@ -108,7 +109,7 @@ def test_many_distinct_failure_messages_are_all_counted_the_rest_together():
         empty = np.zeros(0)
         return StepRecord(t, 0.0, 0.0, 0.0, np.zeros(1), np.zeros(1), 0.0, failed, 0.0, 0.0,
                           0.0, False, empty, (), empty, np.zeros((1, 3)), np.zeros((1, 3)),
-                          np.zeros((1, 3)), empty, (), message=message)
+                          np.zeros((1, 3)), empty, (), step_message=StepMessage.worded(message))
 
     messages = [f"m{k}" for k in range(25)] + ["m0"] * 3 + ["m1"] * 2  # 30 failures
     records = []

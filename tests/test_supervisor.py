@@ -17,6 +17,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from controllers.step_message import StepMessage
 from teleop.controller_specs import make_controller
 from teleop.experiments.compare import run_plan
 from teleop.experiments.plan import Plan
@@ -329,7 +330,8 @@ def test_the_ui_status_line_says_what_the_supervisor_measured_and_did():
         "measured: hole 1 (link_6) 2.300 mm off (tolerance 0.1 mm); supervisor: target "
         "held, the operator's motion not followed (hole 1 (link_6) 2.300 mm off; warn 0.5 "
         "mm, hold 2 mm); target 3.100 mm, 1.20 deg from the operator's")
-    assert held.status_of("least_squares", "joint 3 at its limit") == (
+    status, message = held.status_of("least_squares", StepMessage.worded("joint 3 at its limit"))
+    assert (status, message.text) == (
         "constraint_degraded", f"measured: {held.breach}; {held.words}; controller: "
         "least_squares, joint 3 at its limit")
-    assert held.status_of("failed", "no command")[0] == "failed"
+    assert held.status_of("failed", StepMessage.worded("no command"))[0] == "failed"

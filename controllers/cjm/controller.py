@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from functools import partial
 from typing import TYPE_CHECKING, Iterable, Literal
 
 import numpy as np
@@ -16,9 +17,10 @@ from ..base import (Controller, SolveInfo, SolverError, StepStatus, as_twist_wei
                     velocity_joint_names)
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
+from ..step_message import StepMessage
 from .analytical import ChainSplit, chain_split
 from .python_step import PythonStep
-from .report import StepReport, solve_info
+from .report import StepReport, report_message, solve_info
 from .step_setup import ConstraintPlan, Form, StepSetup
 from .tolerances import StepTolerances
 
@@ -334,6 +336,17 @@ class CJMController(Controller):
     @info.setter
     def info(self, info: SolveInfo) -> None:
         self._info = info
+
+    def step_outcome(self) -> tuple[StepStatus, StepMessage]:
+        """:meth:`Controller.step_outcome` from :attr:`report`: its status, and its
+        message worded on the first read of its text
+        (:func:`~controllers.cjm.report.report_message`, the words of ``info.message``),
+        so that a period whose message nobody reads costs no words (docs/design.md 16).
+        ``info``'s own once it was read or set."""
+        if self._info is not None:
+            return super().step_outcome()
+        return self.report.status, StepMessage(partial(report_message, self.report,
+                                                       self.joint_names))
 
     def loop_tick(self, dt: float, kp: float, max_linear_speed: float, max_angular_speed: float,
                   target_time_constant: float, feed_forward: bool):

@@ -3,8 +3,8 @@
 Both backends end a step with a :class:`StepReport`: the status, the figures
 (``sigma_min``, damping, scale, residual, the joints and barriers involved) and the
 events that explain it, in the order they happened. :func:`solve_info` turns it into
-the :class:`controllers.base.SolveInfo` every controller exposes; the messages are
-written there and nowhere else.
+the :class:`controllers.base.SolveInfo` every controller exposes, its message worded by
+:func:`report_message`, where the messages are written and nowhere else.
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ from typing import Sequence
 
 from constraints.collision import CollisionRows
 
-from ..base import NON_FINITE_NOTE, SolveInfo, StepStatus, clipped_note, residual_note
+from ..base import (NON_FINITE_NOTE, SolveInfo, StepStatus, clipped_note, residual_note,
+                    with_note)
 from ..linalg import RANK_TOLERANCE
 
 
@@ -94,53 +95,64 @@ class StepReport:
 
 def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:
     """The :class:`SolveInfo` of a step: its figures, and its events worded in order
-    (``joint_names``: the joint's name per velocity index)."""
-    status, events, collision = report.status, report.events, report.collision
-    saturated_joints, active_pairs = report.saturated_joints, report.active_pairs
-    info = SolveInfo(status, report.method, "", report.sigma_min, report.damping, report.scale,
-                     saturated_joints, report.active_barriers,
-                     report.equality_residual)  # the notes below leave the status
+    (:func:`report_message`; ``joint_names``: the joint's name per velocity index)."""
+    collision = report.collision
+    info = SolveInfo(report.status, report.method, report_message(report, joint_names),
+                     report.sigma_min, report.damping, report.scale, report.saturated_joints,
+                     report.active_barriers, report.equality_residual)
     if collision is not None:
         info.minimum_distance, info.closest_pair = collision.minimum_distance, collision.closest_pair
-        info.active_pairs = tuple(collision.pairs[i] for i in active_pairs)
+        info.active_pairs = tuple(collision.pairs[i] for i in report.active_pairs)
+    return info
+
+
+def report_message(report: StepReport, joint_names: Sequence[str]) -> str:
+    """A step's message: its events worded in order, each note added once
+    (:func:`~controllers.base.with_note`; a failure's or the hand-over's replaces the
+    notes before it), then the collision pairs a step that misses its twist holds back by
+    (none without an event; ``joint_names``: the joint's name per velocity index). The status is the report's:
+    the words never change it."""
+    events, collision, active_pairs = report.events, report.collision, report.active_pairs
     if not events:
-        return info
+        return ""
+    message = ""
     for index, (event, a, b, c) in enumerate(events):  # the frequent events first
         if event is Event.TASK_RESIDUAL:
             # an active set solves again after each row it adds: the last solve's residual
             # is the command's (the earlier ones keep the status they lowered, never their
             # wording)
             if all(later[0] is not Event.TASK_RESIDUAL for later in events[index + 1:]):
-                info.report(StepStatus.OK, task_residual_note(a, b))
+                message = with_note(message, task_residual_note(a, b))
         elif event is Event.TASK_MISSED:
-            info.report(StepStatus.OK, task_missed_note(joint_names, report.saturation_joints, a, b))
+            message = with_note(message, task_missed_note(joint_names, report.saturation_joints,
+                                                          a, b))
         elif event is Event.TASK_SCALED:
-            info.report(StepStatus.OK, task_scaled_note(joint_names, int(a), b))
+            message = with_note(message, task_scaled_note(joint_names, int(a), b))
         elif event is Event.CLIPPED:
-            info.report(StepStatus.OK, clipped_note(list(saturated_joints), a))
+            message = with_note(message, clipped_note(list(report.saturated_joints), a))
         elif event is Event.RESIDUAL:
-            info.report(StepStatus.OK, residual_note(a))
+            message = with_note(message, residual_note(a))
         elif event is Event.CONFLICT:
-            info.report(StepStatus.OK, conflict_note(int(a), int(b), c))
+            message = with_note(message, conflict_note(int(a), int(b), c))
         elif event is Event.PAIR_CONFLICT:
-            info.report(StepStatus.OK, pair_conflict_note(collision.describe(int(a)), b))
+            message = with_note(message, pair_conflict_note(collision.describe(int(a)), b))
         elif event is Event.ROWS_SCALED:
-            info.report(StepStatus.OK, rows_scaled_note(a))
+            message = with_note(message, rows_scaled_note(a))
         elif event is Event.NO_FREE_JOINT:
-            info.report(StepStatus.OK, NO_FREE_JOINT_NOTE)
+            message = with_note(message, NO_FREE_JOINT_NOTE)
         elif event is Event.PRE_CHAIN_SINGULAR:
-            info.message = PRE_CHAIN_SINGULAR_NOTE  # the note replaces the message
+            message = PRE_CHAIN_SINGULAR_NOTE  # the note replaces the message
         elif event is Event.PAPER_FORM_UNDEFINED:
-            info.report(StepStatus.OK, PAPER_FORM_NOTE)
+            message = with_note(message, PAPER_FORM_NOTE)
         elif event is Event.NO_CONVERGENCE:
-            info.message = NO_CONVERGENCE_NOTE
+            message = NO_CONVERGENCE_NOTE
         elif event is Event.NON_FINITE:
-            info.message = NON_FINITE_NOTE
+            message = NON_FINITE_NOTE
         elif event is Event.LINEAR_ALGEBRA_ERROR:
-            info.message = report.error
-    if active_pairs and status in (StepStatus.LEAST_SQUARES, StepStatus.SCALED):
-        info.report(StepStatus.OK, held_back_note(collision, active_pairs))
-    return info
+            message = report.error
+    if active_pairs and report.status in (StepStatus.LEAST_SQUARES, StepStatus.SCALED):
+        message = with_note(message, held_back_note(collision, active_pairs))
+    return message
 
 
 def pair_conflict_note(pair: str, shortfall: float) -> str:

@@ -15,6 +15,8 @@ import numpy as np
 
 from constraints import Constraint
 from constraints.validation import as_number
+from controllers import StepStatus
+from controllers.step_message import StepMessage
 from teleop.controller_specs import ROBOT, make_controller
 from teleop.limits import MAX_DURATION_S, MAX_STEPS
 from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
@@ -287,6 +289,9 @@ class ShadowedController:
     @property
     def info(self):
         return self.reference.info
+
+    def step_outcome(self) -> tuple[StepStatus, StepMessage]:
+        return self.reference.step_outcome()
 
     @property
     def constraints(self) -> list[Constraint]:

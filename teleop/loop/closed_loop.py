@@ -39,6 +39,7 @@ from constraints.base import evaluated_rows
 from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from constraints.validation import as_vector
+from controllers.step_message import StepMessage
 
 from .distance_meter import DistanceMeter
 from .loop_config import LoopConfig
@@ -50,6 +51,9 @@ from .supervisor import Supervision, Supervisor
 from .targets import Targets, saturate_twist, target_poses
 from .task_modes import fit_target, task_modes as checked_task_modes, task_weight
 from .true_kinematics import TrueKinematics
+
+#: the message of a period whose command came out non-finite (the loop stops instead)
+NON_FINITE_STOP = StepMessage.worded("non-finite command replaced by a stop")
 
 #: float64's machine epsilon (the round-off floor's unit, :meth:`TeleopLoop._constraint_velocity`)
 EPSILON = float(np.finfo(float).eps)
@@ -66,7 +70,8 @@ class TeleopLoop:
     Parameters
     ----------
     robot : a ``teleop.Robot``.
-    controller : any controller with ``solve(q, twist)``, ``info`` and ``set_constraints``.
+    controller : any controller with ``solve(q, twist)``, ``step_outcome()``, ``info`` and
+        ``set_constraints``.
     q0 : initial configuration (default ``robot.q_home``).
     config : :class:`LoopConfig`.
     plant : what stands between the loop and the true joints (:class:`Plant`,
@@ -340,7 +345,7 @@ class TeleopLoop:
     def _supervised(step: PendingStep, supervision: Supervision) -> PendingStep:
         """``step`` with the loop's status (:meth:`Supervision.status_of`)."""
         step.controller_status, step.supervision = step.status, supervision
-        step.status, step.message = supervision.status_of(step.status, step.message)
+        step.status, step.step_message = supervision.status_of(step.status, step.step_message)
         return step
 
     def _advance_python(self, poses: list[pin.SE3], sensed: np.ndarray,
@@ -363,7 +368,7 @@ class TeleopLoop:
             targets=targets, previous_targets=previous, placements=placements, twists=twists,
             sensed=sensed, q_before=q_before, qd=qd, moved=moved,
             tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3, step_time_us=step_time,
-            status=status, message=message, twist_saturated=saturated)
+            status=status, step_message=message, twist_saturated=saturated)
 
     def _advance_compiled(self, result: tuple, sensed: np.ndarray,
                           tick_start: int) -> PendingStep:
@@ -375,8 +380,8 @@ class TeleopLoop:
         if qd is None:  # a twist that is not finite: the controller refuses it, says why
             qd, status, message, step_time = self._solve(sensed, self.compiled.twist.copy())
         else:
-            info = self.controller.info
-            status, message = info.status.value, info.message
+            outcome, message = self.controller.step_outcome()
+            status = outcome.value
             self.refused = ""
         if next_q is None:  # a plant, or a command to check
             q_before, qd, moved, status, message = self._move(sensed, qd, status, message)
@@ -387,26 +392,30 @@ class TeleopLoop:
                                    (time.perf_counter_ns() - tick_start) * 1e-3, step_time,
                                    status, message, saturated)
 
-    def _solve(self, sensed: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, str, str, float]:
-        """``controller.solve``: the command, its status and message, its time (us); a
-        refused input (``ValueError``) gives the controlled stop, ``failed`` and why."""
+    def _solve(self, sensed: np.ndarray,
+               twist: np.ndarray) -> tuple[np.ndarray, str, StepMessage, float]:
+        """``controller.solve``: the command, its status and message (worded when read,
+        ``controller.step_outcome``), its time (us); a refused input (``ValueError``)
+        gives the controlled stop, ``failed`` and why."""
         solve_start = time.perf_counter_ns()
         try:
             qd = self.controller.solve(sensed, twist)
-            status, message = self.controller.info.status.value, self.controller.info.message
+            outcome, message = self.controller.step_outcome()
+            status = outcome.value
             self.refused = ""
         except ValueError as error:  # refused input: a controlled stop, say why
-            qd, status, message = self._stop(sensed), "failed", str(error)
-            self.refused = message
+            qd, status, self.refused = self._stop(sensed), "failed", str(error)
+            message = StepMessage.worded(self.refused)
         return qd, status, message, (time.perf_counter_ns() - solve_start) * 1e-3
 
     def _move(self, sensed: np.ndarray, qd: np.ndarray, status: str,
-              message: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, str, str]:
+              message: StepMessage,
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, str, StepMessage]:
         """Never a non-finite command (a stop instead); the plant moves the robot, or the
         command itself; ``q <- integrate(q, moved dt)``. Returns the configuration
         before, the command, the velocity moved with, the status and the message."""
         if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
-            qd, status, message = self._stop(sensed), "failed", "non-finite command replaced by a stop"
+            qd, status, message = self._stop(sensed), "failed", NON_FINITE_STOP
         moved = qd if self.plant is None else self.plant.actuate(qd, self.q, self.constraints)
         q_before = self.q
         self.q = pin.integrate(self.model, q_before, moved * self.config.dt)
@@ -477,7 +486,7 @@ class TeleopLoop:
             commanded_linear_velocities=step.commanded_linear_velocities,
             actual_linear_velocities=step.actual_linear_velocities,
             constraint_errors=errors, constraint_names=self._names,
-            status=step.status, message=step.message,
+            status=step.status, step_message=step.step_message,
             controller_status=step.controller_status,
             measured_constraint_error=step.supervision.error,
             measured_port_force=step.supervision.port_force,

@@ -13,6 +13,7 @@ import pinocchio as pin
 
 from controllers.cjm.pose_rows import (PERIOD_PLACEMENT, PERIOD_PREVIOUS, PERIOD_TARGET,
                                        PERIOD_TWIST, row_pose, row_views)
+from controllers.step_message import NO_MESSAGE, StepMessage
 
 from .supervisor import Supervision
 
@@ -66,7 +67,8 @@ class StepRecord:
     #: the loop's status: the controller's, or ``constraint_degraded`` when a measure at
     #: the sensed configuration is beyond the supervisor's tolerance (docs/design.md 5.2)
     status: str = "ok"
-    message: str = ""
+    #: why the status is not ``ok``, worded when read (:attr:`message`)
+    step_message: StepMessage = NO_MESSAGE
     controller_status: str = "ok"  # the controller's own step status (controllers.StepStatus)
     #: the largest constraint error measured at the sensed configuration (m)
     measured_constraint_error: float = 0.0
@@ -81,6 +83,11 @@ class StepRecord:
     #: collision avoidance or no pair measured; exact below d_i, teleop.loop.distance_meter)
     minimum_distance: float = math.inf
     closest_pair: str = ""  # the pair of minimum_distance ("first | second"), "" when none
+
+    @property
+    def message(self) -> str:
+        """The loop's message in words (the controller's, and the supervisor's)."""
+        return self.step_message.text
 
     @property
     def ee_position_error(self) -> float:
@@ -124,7 +131,7 @@ class PendingStep:
     tick_time_us: float  # the hot path: filter, kinematics, command, solve, integration
     step_time_us: float
     status: str  # the controller's, then the loop's (TeleopLoop._supervised)
-    message: str
+    step_message: StepMessage  # its message, worded when read (:attr:`message`)
     twist_saturated: bool
     controller_status: str = "ok"
     supervision: Supervision | None = None  # what the supervisor measured and did
@@ -136,6 +143,11 @@ class PendingStep:
     operator_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     commanded_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     actual_linear_velocities: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    @property
+    def message(self) -> str:
+        """The status's message in words."""
+        return self.step_message.text
 
     @property
     def target_translations(self) -> list[np.ndarray]:
@@ -169,12 +181,13 @@ class CompiledPendingStep(PendingStep):
 
     def __init__(self, period: np.ndarray, has_previous: bool, sensed: np.ndarray,
                  q_before: np.ndarray, qd: np.ndarray, moved: np.ndarray, tick_time_us: float,
-                 step_time_us: float, status: str, message: str,
+                 step_time_us: float, status: str, step_message: StepMessage,
                  twist_saturated: bool) -> None:
         self.period, self.has_previous = period, has_previous
         self.sensed, self.q_before, self.qd, self.moved = sensed, q_before, qd, moved
         self.tick_time_us, self.step_time_us = tick_time_us, step_time_us
-        self.status, self.message, self.twist_saturated = status, message, twist_saturated
+        self.status, self.step_message = status, step_message
+        self.twist_saturated = twist_saturated
 
     @functools.cached_property
     def targets(self) -> list[pin.SE3]:

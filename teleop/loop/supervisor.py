@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -36,6 +37,7 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.validation import as_number
+from controllers.step_message import StepMessage
 from teleop.plants.walls import has_wall
 
 #: the supervisor's actions, from none to the strongest (docs/design.md 5.2)
@@ -137,20 +139,31 @@ class Supervision(NamedTuple):
     target_offset: float = 0.0
     target_offset_angle: float = 0.0
 
-    def status_of(self, status: str, message: str) -> tuple[str, str]:
+    def status_of(self, status: str, message: StepMessage) -> tuple[str, StepMessage]:
         """The loop's status and message for a step whose controller said ``status`` and
         ``message``: ``constraint_degraded`` (``failed`` kept) beyond tolerance; the
-        message says what the supervisor measured beyond tolerance and what it did."""
+        message says what the supervisor measured beyond tolerance and what it did
+        (:meth:`message_of`), worded when read. Within tolerance and without words, the
+        controller's own."""
         if not self.breach:
             return status, (message if not self.words
-                             else f"{message}; {self.words}" if message else self.words)
+                            else StepMessage(partial(self.message_of, status, message)))
         loop_status = "failed" if status == "failed" else "constraint_degraded"
+        return loop_status, StepMessage(partial(self.message_of, status, message))
+
+    def message_of(self, status: str, message: StepMessage) -> str:
+        """The words of :meth:`status_of`'s message: the controller's message and the
+        supervisor's words within tolerance; beyond it, what was measured, what the
+        supervisor did and what the controller said (its status unless ``ok``)."""
+        text = message.text
+        if not self.breach:
+            return f"{text}; {self.words}" if text else self.words
         words = f"measured: {self.breach}"
         if self.words:
             words += f"; {self.words}"
         if status != "ok":
-            words += f"; controller: {status}" + (f", {message}" if message else "")
-        return loop_status, words
+            words += f"; controller: {status}" + (f", {text}" if text else "")
+        return words
 
 
 class Supervisor:
