@@ -98,7 +98,7 @@ def main() -> None:
             master_process.wait(10)
         ui.stop()
         control.stop()
-        app.close_inputs()
+        app.devices.close()
         server.stop()
 
 

@@ -241,7 +241,7 @@ def main() -> None:
         streamer.wait()
         ui.stop()
         control.stop()
-        app.close_inputs()
+        app.devices.close()
         server.stop()
     if args.json:
         with open(args.json, "w") as file:

@@ -67,7 +67,7 @@ if args.drive is not None:  # a running page: stream the circles to it, read its
 app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0)
 app.add_constraint("hole", distance=0.08)
 master = UdpMaster(port=0)  # any free port on 127.0.0.1, a key drawn at random
-app.attach_input(master)
+app.devices.attach(master)
 control = ControlThread(app)
 control.start()
 
@@ -94,7 +94,7 @@ stopped_ms = 1e3 * (time.perf_counter() - silent_from)
 control.stop()
 client.feedback()
 stats, reason = master.statistics(), app.devices[0].reason
-app.close_inputs()
+app.devices.close()
 client.close()
 
 print(f"sent {client.sequence} commands, received {stats['received']}, applied "

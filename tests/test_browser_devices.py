@@ -60,7 +60,7 @@ def console(tmp_path_factory):
             yield served, master, streamer
         finally:
             streamer.close()
-            served.app.close_inputs()
+            served.app.devices.close()
 
 
 def move_device_x(console, to: float) -> np.ndarray:

@@ -219,7 +219,7 @@ def test_the_network_master_example_drives_a_running_page(tmp_path: Path):
 
     app = TeleopApp(load_robot("sda10f"), record_dir=tmp_path, scene_dir=tmp_path / "scenes")
     master = UdpMaster(port=0)
-    app.attach_input(master)
+    app.devices.attach(master)
     control = ControlThread(app)
     control.start()
     start = app.target.translation.copy()
@@ -244,7 +244,7 @@ def test_the_network_master_example_drives_a_running_page(tmp_path: Path):
         watcher.join(2.0)
         control.stop()
         stats = master.statistics()
-        app.close_inputs()
+        app.devices.close()
     assert result.returncode == 0, result.stderr
     (sent,) = numbers(r"sent NUMBER commands to 127\.0\.0\.1", result.stdout)
     assert sent == 2001 and stats["received"] + stats.get("lost", 0) == sent, (result.stdout, stats)

@@ -113,8 +113,8 @@ def console():
     app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=500.0)
     app.add_constraint("hole", distance=0.08)
     master = UdpMaster(port=0, key=KEY)
-    app.attach_input(master)
-    app.set_input_timeout(0.5)  # a stall of the shared machine is not what is tested here
+    app.devices.attach(master)
+    app.devices.set_input_timeout(0.5)  # a stall of the shared machine is not what is tested here
     control = ControlThread(app)
     control.start()
     streamer = Streamer(master.port)
@@ -124,7 +124,7 @@ def console():
     finally:
         streamer.close()
         control.stop()
-        app.close_inputs()
+        app.devices.close()
 
 
 def test_a_flood_while_the_master_streams_moves_nothing_and_releases_nothing(console):

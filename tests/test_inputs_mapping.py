@@ -127,7 +127,7 @@ def pose_sample(position, sequence, buttons=0, arrival=None) -> InputSample:
 
 def test_a_pose_source_moves_its_target_through_the_clutch_and_a_new_scale_without_jumps(app):
     source = InputSource("test")
-    app.attach_input(source)
+    app.devices.attach(source)
     start = app.targets[0].translation.copy()
     source.offer(pose_sample((0.3, 0.2, 0.1), 1))  # the first sample only anchors
     app.step()
@@ -154,7 +154,7 @@ def test_a_pose_source_moves_its_target_through_the_clutch_and_a_new_scale_witho
 def test_a_twist_source_integrates_its_rate_command_each_period(app):
     source = InputSource("rate")
     source.watchdog = False
-    app.attach_input(source)
+    app.devices.attach(source)
     start = app.targets[0].translation.copy()
     source.offer(InputSample("twist", (0.02, 0.0, -0.01, 0.0, 0.0, 0.0), 0, 1, 0.0))
     for _ in range(100):
@@ -176,7 +176,7 @@ def streaming_through_a_hole(acceleration_limits: bool, task_mode: str | None = 
         app.set_task_mode(task_mode)
     app.add_constraint("hole", distance=0.08)
     source = InputSource("test")
-    app.attach_input(source)
+    app.devices.attach(source)
     for k in range(1, 301):
         source.offer(pose_sample((3e-5 * k, 0.0, 0.0), k, arrival=time.perf_counter()))
         app.step()
@@ -222,7 +222,7 @@ def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(accel
 def test_a_recording_gets_each_sources_counts_and_latencies(tmp_path):
     app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0, record_dir=tmp_path)
     source = InputSource("test")
-    app.attach_input(source)
+    app.devices.attach(source)
     path = app.start_recording("devices.jsonl")
     for k in range(1, 1501):
         source.offer(pose_sample((1e-5 * k, 0.0, 0.0), k, arrival=0.0))
@@ -241,20 +241,20 @@ def test_a_recording_gets_each_sources_counts_and_latencies(tmp_path):
 
 
 def test_a_second_source_on_the_same_ee_or_one_on_no_ee_is_refused(app):
-    app.attach_input(InputSource("first"))
+    app.devices.attach(InputSource("first"))
     with pytest.raises(ValueError, match="already driven by first"):
-        app.attach_input(InputSource("second"))
+        app.devices.attach(InputSource("second"))
     with pytest.raises(ValueError, match="no end effector 3"):
-        app.attach_input(InputSource("third", ee=3))
+        app.devices.attach(InputSource("third", ee=3))
     with pytest.raises(ValueError, match="input timeout"):
-        app.set_input_timeout(0.0)
+        app.devices.set_input_timeout(0.0)
 
 
 def test_a_gizmo_drag_after_a_release_moves_the_target_by_the_drag_only(app):
     """The watchdog puts the target on the EE; the gizmo's handle stays where it was, and
     a drag from there moves the target by the drag, not by the gap."""
     source = InputSource("test")
-    app.attach_input(source)
+    app.devices.attach(source)
     for k in range(1, 41):  # the device takes the target 4 cm along its x
         source.offer(pose_sample((1e-3 * k, 0.0, 0.0), k, arrival=time.perf_counter()))
         app.step()
@@ -269,8 +269,8 @@ def test_a_gizmo_drag_after_a_release_moves_the_target_by_the_drag_only(app):
 
 def test_absolute_orientation_follows_only_once_the_device_agrees_with_the_tool(app):
     source = InputSource("test")
-    app.attach_input(source)
-    app.set_orientation_mode(True)
+    app.devices.attach(source)
+    app.devices.set_orientation_mode(True)
     target = app.targets[0].copy()
     turned = pin.exp3(np.array([0.0, 0.0, math.pi / 2])) @ DEFAULT_VIEW.T @ target.rotation
     quaternion = pin.Quaternion(turned)
@@ -288,7 +288,7 @@ def test_absolute_orientation_follows_only_once_the_device_agrees_with_the_tool(
     assert app.devices[0].state == FeedbackState.FOLLOWING
     assert app.targets[0].translation == pytest.approx(
         target.translation + DEFAULT_VIEW @ [0.01, 0.0, 0.0], abs=1e-9)
-    app.set_view((1.0, 0.0, 0.0, 0.0))  # another view: align again before moving
+    app.devices.set_view((1.0, 0.0, 0.0, 0.0))  # another view: align again before moving
     source.offer(InputSample("pose", (0.02, 0.0, 0.0, aligned.w, aligned.x, aligned.y,
                                       aligned.z), 0, 4, time.perf_counter()))
     app.step()
@@ -303,7 +303,7 @@ def test_a_rate_command_does_not_wind_the_target_up_ahead_of_the_robot(app):
 
     source = InputSource("rate")
     source.watchdog = False
-    app.attach_input(source)
+    app.devices.attach(source)
     app.set_motion_scale(10.0)
     source.offer(InputSample("twist", (0.05, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 1, 0.0))
     for _ in range(500):

@@ -83,7 +83,7 @@ def session() -> Session:
     app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=RATE)
     app.add_constraint("hole", distance=0.08)
     master = UdpMaster(port=0)
-    app.attach_input(master)
+    app.devices.attach(master)
     control = ControlThread(app)
     control.start()
     process = subprocess.Popen([sys.executable, "-c", MASTER, str(master.port), str(RATE),
@@ -128,7 +128,7 @@ def session() -> Session:
         process.kill()
         process.wait(10)
         control.stop()
-        app.close_inputs()
+        app.devices.close()
 
 
 def test_a_master_process_is_followed_with_the_hole_held_and_its_death_stops_the_robot(

@@ -42,7 +42,7 @@ def test_the_page_follows_a_ros2_master_and_sends_it_the_feedback(domain, tmp_pa
     source = Ros2Master(NAMESPACE, domain=domain)
     start = app.target.translation.copy()
     try:
-        app.attach_input(source)
+        app.devices.attach(source)
         for _ in range(int(10 * RATE)):  # until the master's samples come (discovery)
             app.step()
             time.sleep(1.0 / RATE)
@@ -55,7 +55,7 @@ def test_the_page_follows_a_ros2_master_and_sends_it_the_feedback(domain, tmp_pa
         sent = device.wrench.copy()
         assert device.state == FeedbackState.FOLLOWING
     finally:
-        app.close_inputs()
+        app.devices.close()
         output, _ = master.communicate(timeout=60)
     report = json.loads(output)
     moved = float(np.linalg.norm(app.target.translation - start))

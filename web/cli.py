@@ -344,7 +344,7 @@ def run(args: argparse.Namespace, prog: str) -> int:
     finally:
         ui.stop()
         control.stop()
-        app.close_inputs()
+        app.devices.close()
         if app.ros2 is not None:
             app.ros2.close()  # zeros on the wire
         server.stop()

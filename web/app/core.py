@@ -26,7 +26,6 @@ import numpy as np
 from constraints.collision import OBSTACLE_TYPES
 from constraints.validation import as_vector
 from controllers.base import velocity_joint_names
-from teleop.inputs import InputSource
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.task_modes import AUTO
 from teleop.options import JERK_LIMIT
@@ -145,7 +144,7 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
         self.motion_scale = 1.0
         self.clutch = False
         self.recorder = SessionRecording(self.recordings, lambda: self.now, robot.ee_frames)
-        self.devices = InputDevices(self.recorder)
+        self.devices = InputDevices(self.recorder, self._lock, len(robot.ee_frames))
         self._next_history = 0.0
         self.ticks = 0
         self.advance_us = 0.0
@@ -243,33 +242,3 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
             for entry_id in ids:
                 self.collisions.remove(entry_id, constraints)
             return len(ids)
-
-    def attach_input(self, source: InputSource) -> None:
-        """``source`` drives EE ``source.ee`` from the next tick (one source per EE,
-        :class:`.devices.InputDevices`); the app starts it, and closes it on
-        :meth:`close_inputs`."""
-        with self._lock:
-            self.devices.attach(source, len(self.inputs))
-        source.start()
-
-    def close_inputs(self) -> None:
-        with self._lock:
-            sources = self.devices.detach_all()
-        for source in sources:
-            source.close()
-
-    def set_input_timeout(self, seconds: float) -> None:
-        """The watchdog's timeout (s): a streaming source silent longer is released."""
-        with self._lock:
-            self.devices.set_input_timeout(seconds)
-
-    def set_view(self, camera_wxyz) -> None:
-        """The operator's view: the browser camera's orientation (viser's ``wxyz``); the
-        devices' motion is mapped into it from now on (no target jumps)."""
-        with self._lock:
-            self.devices.set_view(camera_wxyz)
-
-    def set_orientation_mode(self, absolute: bool) -> None:
-        """Orientation relative (through the clutch) or absolute with respect to the view."""
-        with self._lock:
-            self.devices.set_orientation_mode(absolute)

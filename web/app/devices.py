@@ -16,6 +16,7 @@ next sample starts a new stream, from where the target is (no jump).
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -74,20 +75,26 @@ class DeviceBinding:
 
 
 class InputDevices:
-    """The input devices of :class:`web.app.TeleopApp`, a component it holds and calls
-    under its lock: the bound sources (iterating over it gives each
-    :class:`DeviceBinding`), the operator's :attr:`view_rotation`, whether orientation is
-    :attr:`absolute_orientation`, the watchdog's :attr:`input_timeout` and the
-    :attr:`feedback_gains`. The targets, the loops, the clutch and the motion scale are
-    handed to the tick's methods; the recording is given at construction.
+    """The input devices of :class:`web.app.TeleopApp`, a component that owns them: the
+    bound sources (iterating over it gives each :class:`DeviceBinding`), the operator's
+    :attr:`view_rotation`, whether orientation is :attr:`absolute_orientation`, the
+    watchdog's :attr:`input_timeout` and the :attr:`feedback_gains`. Its operator's
+    actions take the session's lock; the control tick calls :meth:`apply` and
+    :meth:`commanded` holding it, with the targets, the loops, the clutch and the motion
+    scale.
 
     Parameters
     ----------
     recorder : the session's recording (the devices' targets and statistics go there).
+    lock : the session's lock.
+    ee_count : how many end effectors the robot has (a source drives one of them).
     """
 
-    def __init__(self, recorder: SessionRecording) -> None:
+    def __init__(self, recorder: SessionRecording, lock: threading.RLock,
+                 ee_count: int) -> None:
         self._recorder = recorder
+        self._lock = lock
+        self._ee_count = ee_count
         self._bindings: list[DeviceBinding] = []
         self.view_rotation = DEFAULT_VIEW.copy()
         self.absolute_orientation = False
@@ -104,30 +111,38 @@ class InputDevices:
     def __getitem__(self, index: int) -> DeviceBinding:
         return self._bindings[index]
 
-    def attach(self, source: InputSource, ee_count: int) -> None:
-        """``source`` drives EE ``source.ee`` of the ``ee_count`` from the next tick (one
-        source per EE); the caller starts it."""
-        if not 0 <= source.ee < ee_count:
-            raise ValueError(f"{source.name}: no end effector {source.ee} (this robot has "
-                             f"{ee_count})")
-        taken = [d.source.name for d in self._bindings if d.source.ee == source.ee]
-        if taken:
-            raise ValueError(f"{source.name}: EE {source.ee} is already driven by {taken[0]}")
-        self._bindings.append(DeviceBinding(source))
+    def attach(self, source: InputSource) -> None:
+        """``source`` drives EE ``source.ee`` from the next tick (one source per EE); it
+        is started here, and closed by :meth:`close`."""
+        with self._lock:
+            if not 0 <= source.ee < self._ee_count:
+                raise ValueError(f"{source.name}: no end effector {source.ee} (this robot "
+                                 f"has {self._ee_count})")
+            taken = [d.source.name for d in self._bindings if d.source.ee == source.ee]
+            if taken:
+                raise ValueError(f"{source.name}: EE {source.ee} is already driven by "
+                                 f"{taken[0]}")
+            self._bindings.append(DeviceBinding(source))
+        source.start()
 
-    def detach_all(self) -> list[InputSource]:
-        """Every source unbound; they are the caller's to close."""
-        bindings, self._bindings = self._bindings, []
-        return [binding.source for binding in bindings]
+    def close(self) -> None:
+        """Every source unbound and closed (outside the lock: a source's thread may be
+        waiting for it)."""
+        with self._lock:
+            bindings, self._bindings = self._bindings, []
+        for binding in bindings:
+            binding.source.close()
 
     def set_input_timeout(self, seconds: float) -> None:
-        """The watchdog's timeout (s), within :data:`INPUT_TIMEOUT_RANGE`."""
+        """The watchdog's timeout (s), within :data:`INPUT_TIMEOUT_RANGE`: a streaming
+        source silent longer is released."""
         seconds = as_number(seconds, "input timeout")
         low, high = INPUT_TIMEOUT_RANGE
         if not low <= seconds <= high:
             raise ValueError(f"input timeout must be between {1e3 * low:g} and "
                              f"{1e3 * high:g} ms, got {1e3 * seconds:g} ms")
-        self.input_timeout = seconds
+        with self._lock:
+            self.input_timeout = seconds
 
     def set_view(self, camera_wxyz) -> None:
         """The operator's view: the browser camera's orientation (viser's ``wxyz``); the
@@ -135,17 +150,19 @@ class InputDevices:
         rotation = view_rotation(camera_wxyz)
         if not np.all(np.isfinite(rotation)):
             raise ValueError("the camera orientation must be finite")
-        if not np.allclose(rotation, self.view_rotation, atol=1e-9):
-            self._unalign()
-        self.view_rotation = rotation
+        with self._lock:
+            if not np.allclose(rotation, self.view_rotation, atol=1e-9):
+                self._unalign()
+            self.view_rotation = rotation
 
     def set_orientation_mode(self, absolute: bool) -> None:
         """Orientation relative (through the clutch: the device's rotation since it was
         last coupled) or absolute with respect to the view."""
         if not isinstance(absolute, (bool, np.bool_)):
             raise ValueError(f"absolute orientation is True or False, got {absolute!r}")
-        self.absolute_orientation = bool(absolute)
-        self._unalign()
+        with self._lock:
+            self.absolute_orientation = bool(absolute)
+            self._unalign()
 
     def _unalign(self) -> None:
         """In absolute orientation, every device must agree with its tool again before

@@ -55,7 +55,7 @@ class DevicePanel:
     Parameters
     ----------
     server : the viser server.
-    app : the session (its ``set_orientation_mode`` and ``set_view``).
+    app : the session (its devices' ``set_orientation_mode`` and ``set_view``).
     ee_names : what the operator reads per EE frame.
     guarded : posts an operator action (``guarded(event, action, key=...)``,
         :meth:`web.ui.TeleopUI._guarded`).
@@ -74,7 +74,7 @@ class DevicePanel:
             hint="relative: the tool turns by the device's rotation since it was coupled; "
                  "absolute: the tool's orientation in the view is the device's")
         self.orientation_menu.on_update(lambda event: self._guarded(
-            event, lambda: self.app.set_orientation_mode(
+            event, lambda: self.app.devices.set_orientation_mode(
                 self.orientation_menu.value == "absolute"), key="orientation"))
         self.server.on_client_connect(self._watch_view)
 
@@ -83,8 +83,8 @@ class DevicePanel:
         browser's view counts from its first camera report."""
         camera = client.camera
         camera.on_update(lambda _: self._guarded(
-            None, lambda wxyz=np.array(camera.wxyz): self.app.set_view(wxyz), key="view"))
-        self._guarded(None, lambda wxyz=np.array(camera.wxyz): self.app.set_view(wxyz),
+            None, lambda wxyz=np.array(camera.wxyz): self.app.devices.set_view(wxyz), key="view"))
+        self._guarded(None, lambda wxyz=np.array(camera.wxyz): self.app.devices.set_view(wxyz),
                       key="view")
 
     def lines(self, snapshot: dict) -> list[str]:

@@ -45,7 +45,7 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     (:meth:`TeleopApp.set_task_mode`, docs/design.md section 20; a scene's own wins);
     ``inputs``: the devices that drive the EEs, each its own (docs/design.md section 19),
     released after ``input_timeout`` s of silence (default 0.1 s); the caller closes them
-    (:meth:`TeleopApp.close_inputs`)."""
+    (:meth:`web.app.devices.InputDevices.close`)."""
     app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
                     scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
                     wall_stiffness=wall_stiffness, collisions=collisions,
@@ -56,9 +56,9 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     if scene is not None:
         app.apply_scene(scene)
     if input_timeout is not None:
-        app.set_input_timeout(input_timeout)
+        app.devices.set_input_timeout(input_timeout)
     for source in inputs:
-        app.attach_input(source)
+        app.devices.attach(source)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     access = require_access(server, None if token is None else make_token(token), host)
     pacing = pace_messages(server)  # what one page's messages may cost (web/pacing.py)
