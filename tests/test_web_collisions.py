@@ -98,7 +98,7 @@ def test_an_obstacle_goes_its_gap_in_front_of_the_tip(app, kind, radius, length,
     fields = {"sphere": {"radius": radius}, "capsule": {"radius": radius, "length": length,
                                                         "axis": axis},
               "box": {"size": edges, "rpy": turn}}[kind]
-    entry_id = app.add_obstacle(kind, **fields)
+    entry_id = app.collisions.add(kind, **fields)
     obstacle = app.collisions.obstacles[entry_id].obstacle
     pose = tip(app)
     approach = pose.rotation[:, 2]
@@ -106,11 +106,11 @@ def test_an_obstacle_goes_its_gap_in_front_of_the_tip(app, kind, radius, length,
         behind = coal.Halfspace(approach, float(approach @ pose.translation) + gap)
         distance = shape_distance(obstacle.shape(), obstacle.pose(), behind, pin.SE3.Identity())
         assert distance == pytest.approx(expected, abs=1e-9)
-    app.remove_obstacle(entry_id)
+    app.collisions.remove(entry_id)
 
 
 def test_a_half_space_is_its_gap_from_the_tip_facing_it(app):
-    entry_id = app.add_obstacle("halfspace", normal=(0.0, 0.0, 1.0))
+    entry_id = app.collisions.add("halfspace", normal=(0.0, 0.0, 1.0))
     obstacle = app.collisions.obstacles[entry_id].obstacle
     distance = shape_distance(coal.Sphere(1e-9), pin.SE3(np.eye(3), tip(app).translation),
                               obstacle.shape(), obstacle.pose())
@@ -118,8 +118,8 @@ def test_a_half_space_is_its_gap_from_the_tip_facing_it(app):
 
 
 def test_obstacles_are_added_moved_with_feed_forward_and_removed(app):
-    first = app.add_obstacle("sphere", radius=0.03)
-    second = app.add_obstacle("box", center=tip(app).translation + [0.0, 0.0, -0.3],
+    first = app.collisions.add("sphere", radius=0.03)
+    second = app.collisions.add("box", center=tip(app).translation + [0.0, 0.0, -0.3],
                               size=(0.1, 0.2, 0.05))
     assert (first, second) == ("sphere-1", "box-2")
     assert [o.name for o in app.collisions.avoidance.obstacles] == [first, second]
@@ -129,7 +129,7 @@ def test_obstacles_are_added_moved_with_feed_forward_and_removed(app):
 
     start = app.collisions.obstacles[first].obstacle.position
     goal = start + np.array([0.0, 0.0, 0.01])
-    app.move_obstacle(first, goal)
+    app.collisions.move(first, goal)
     speeds, positions = [], []
     for _ in range(200):
         app.step()
@@ -145,30 +145,30 @@ def test_obstacles_are_added_moved_with_feed_forward_and_removed(app):
     placed = app.collisions.obstacles[first]
     assert not np.any(placed.obstacle.velocity) and placed.settled
 
-    app.remove_obstacle(first)
+    app.collisions.remove(first)
     assert [o.name for o in app.collisions.avoidance.obstacles] == [second]
-    assert app.clear_obstacles() == 1
+    assert app.collisions.clear() == 1
     assert app.collisions.avoidance.obstacles == [] and not app.collisions.obstacles
 
 
 @pytest.mark.parametrize("call, pattern", [
-    (lambda app: app.add_obstacle("cone"), r"unknown obstacle kind 'cone'"),
-    (lambda app: app.add_obstacle("sphere", radius=-1.0), r"radius"),
-    (lambda app: app.add_obstacle("sphere", height=1.0), r"unknown field 'height' for a sphere"),
-    (lambda app: app.add_obstacle("box", size=(0.1, 0.0, 0.1)), r"size"),
-    (lambda app: app.add_obstacle("sphere", center=(1e300, 0, 0)),
+    (lambda app: app.collisions.add("cone"), r"unknown obstacle kind 'cone'"),
+    (lambda app: app.collisions.add("sphere", radius=-1.0), r"radius"),
+    (lambda app: app.collisions.add("sphere", height=1.0), r"unknown field 'height' for a sphere"),
+    (lambda app: app.collisions.add("box", size=(0.1, 0.0, 0.1)), r"size"),
+    (lambda app: app.collisions.add("sphere", center=(1e300, 0, 0)),
      r"center must have every component in \[-100, 100\]"),
-    (lambda app: app.move_obstacle("sphere-9", (0, 0, 0)), r"no obstacle 'sphere-9'"),
-    (lambda app: app.remove_obstacle("sphere-9"), r"no obstacle 'sphere-9'"),
-    (lambda app: app.set_collision_settings(safety_distance=0.06), r"detection_distance"),
-    (lambda app: app.set_collision_settings(approach_speed=10.0, detection_distance=0.01),
+    (lambda app: app.collisions.move("sphere-9", (0, 0, 0)), r"no obstacle 'sphere-9'"),
+    (lambda app: app.collisions.remove("sphere-9"), r"no obstacle 'sphere-9'"),
+    (lambda app: app.collisions.configure(safety_distance=0.06), r"detection_distance"),
+    (lambda app: app.collisions.configure(approach_speed=10.0, detection_distance=0.01),
      r"unstable"),
-    (lambda app: app.set_collision_settings(approach_speed=1e3), r"approach_speed must be <= 10"),
-    (lambda app: app.set_collision_settings(margin=1.0), r"unknown collision setting 'margin'"),
-    (lambda app: app.set_collisions_on("yes"), r"on \(True\) or off"),
+    (lambda app: app.collisions.configure(approach_speed=1e3), r"approach_speed must be <= 10"),
+    (lambda app: app.collisions.configure(margin=1.0), r"unknown collision setting 'margin'"),
+    (lambda app: app.collisions.set_on("yes"), r"on \(True\) or off"),
 ])
 def test_what_cannot_be_done_is_a_value_error_and_changes_nothing(app, call, pattern):
-    app.add_obstacle("sphere")
+    app.collisions.add("sphere")
     before = app.scene()
     avoidance = app.collisions.avoidance
     with pytest.raises(ValueError, match=pattern):
@@ -182,8 +182,8 @@ def test_settings_and_the_switch_reach_every_controller(dual_app):
     app = dual_app
     assert app.collisions.avoidance.self_collision  # two arms: self-collision on by default
     app.set_ghost("qp:daqp")
-    app.add_obstacle("sphere")
-    app.set_collision_settings(safety_distance=0.01, detection_distance=0.08)
+    app.collisions.add("sphere")
+    app.collisions.configure(safety_distance=0.01, detection_distance=0.08)
     for loop in app.loops.values():
         assert loop.controller.collisions is app.collisions.avoidance
     avoidance = app.collisions.avoidance
@@ -191,15 +191,15 @@ def test_settings_and_the_switch_reach_every_controller(dual_app):
     assert [o.name for o in app.collisions.avoidance.obstacles] == ["sphere-1"]
     app.set_controller("qp:proxqp")
     assert app.loops["main"].controller.collisions is app.collisions.avoidance
-    app.set_collisions_on(False)
+    app.collisions.set_on(False)
     assert all(loop.controller.collisions is None for loop in app.loops.values())
     run(app, 0.05)
     snapshot = app.snapshot()
     assert snapshot["robots"]["main"]["collision_rows"] is None and not snapshot["collisions"]["checking"]
     assert np.isnan(snapshot["robots"]["main"]["trace"]["minimum_distance"]).all()
-    app.set_collisions_on(True)
+    app.collisions.set_on(True)
     assert app.loops["ghost"].controller.collisions is app.collisions.avoidance
-    app.set_collision_settings(self_collision=False)
+    app.collisions.configure(self_collision=False)
     assert all(second == "sphere-1" for _, second in app.collisions.avoidance.pairs)
 
 
@@ -208,7 +208,7 @@ def test_a_single_arm_checks_no_pair_without_an_obstacle(app):
     run(app, 0.05)
     snapshot = app.snapshot()
     assert plots_of(snapshot) == PLOTS
-    app.add_obstacle("sphere")
+    app.collisions.add("sphere")
     assert plots_of(app.snapshot()) == PLOTS + COLLISION_PLOTS
 
 
@@ -216,13 +216,13 @@ def test_a_single_arm_checks_no_pair_without_an_obstacle(app):
 
 def test_a_scene_keeps_the_obstacles_and_the_settings(dual_app, dual, tmp_path):
     app = dual_app
-    app.add_obstacle("sphere", radius=0.03)
-    app.add_obstacle("capsule", ee=1, radius=0.02, length=0.1, axis=(1.0, 0.0, 0.0))
-    moving = app.add_obstacle("halfspace", normal=(0.0, 0.0, 1.0))
-    app.move_obstacle(moving, app.collisions.obstacles[moving].goal + [0.0, 0.0, -0.02])
+    app.collisions.add("sphere", radius=0.03)
+    app.collisions.add("capsule", ee=1, radius=0.02, length=0.1, axis=(1.0, 0.0, 0.0))
+    moving = app.collisions.add("halfspace", normal=(0.0, 0.0, 1.0))
+    app.collisions.move(moving, app.collisions.obstacles[moving].goal + [0.0, 0.0, -0.02])
     run(app, 0.1)  # mid-move: a velocity to keep
-    app.set_collision_settings(safety_distance=0.008, approach_speed=0.3)
-    app.set_collisions_on(False)
+    app.collisions.configure(safety_distance=0.008, approach_speed=0.3)
+    app.collisions.set_on(False)
     path = app.save_scene("obstacles.json")
     saved = json.loads(path.read_text())
     assert saved["version"] == 3 and saved["collisions"]["on"] is False
@@ -237,8 +237,8 @@ def test_a_scene_keeps_the_obstacles_and_the_settings(dual_app, dual, tmp_path):
     assert not other.collisions.obstacles[moving].settled
     np.testing.assert_array_equal(other.collisions.obstacles[moving].obstacle.velocity,
                                   app.collisions.obstacles[moving].obstacle.velocity)
-    assert other.add_obstacle("sphere") == "sphere-4"  # ids go on after the scene's
-    other.set_collisions_on(True)
+    assert other.collisions.add("sphere") == "sphere-4"  # ids go on after the scene's
+    other.collisions.set_on(True)
     assert other.loops["main"].controller.collisions is other.collisions.avoidance
 
 
@@ -246,8 +246,8 @@ def test_a_version_1_scene_still_loads_without_obstacles(sda10f, tmp_path):
     old = json.loads((DATA / "least_squares_scene.json").read_text())
     assert old["version"] == 1 and "obstacles" not in old
     app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path)
-    app.add_obstacle("sphere")
-    app.set_collision_settings(safety_distance=0.007)
+    app.collisions.add("sphere")
+    app.collisions.configure(safety_distance=0.007)
     app.apply_scene(old)
     assert app.collisions.obstacles == {} and app.collisions.avoidance.obstacles == []
     assert app.collisions.avoidance.safety_distance == 0.007 and app.collisions.on  # the session's
@@ -266,7 +266,7 @@ def test_a_version_1_scene_still_loads_without_obstacles(sda10f, tmp_path):
     ({"version": 1}, r"^scene 'collisions' needs version 2"),
 ])
 def test_a_bad_scene_names_the_collision_field_and_changes_nothing(app, change, pattern):
-    app.add_obstacle("sphere")
+    app.collisions.add("sphere")
     scene = {**app.scene(), **change}
     before = app.scene()
     with pytest.raises(ValueError, match=pattern):
@@ -280,7 +280,7 @@ def near_obstacle(app) -> str:
     """A sphere whose surface is 2 cm from the tip, along the tool's z axis: inside the
     detection distance."""
     pose = tip(app)
-    return app.add_obstacle("sphere", radius=0.03,
+    return app.collisions.add("sphere", radius=0.03,
                             center=pose.translation + 0.05 * pose.rotation[:, 2])
 
 
@@ -385,7 +385,7 @@ def test_the_collisions_tab_adds_an_obstacle_from_its_inputs(app, server):
     ui.safety_number.value = 8.0
     ui._apply_collision_settings()
     assert app.collisions.avoidance.safety_distance == pytest.approx(0.008)
-    app.remove_obstacle(entry_id)
+    app.collisions.remove(entry_id)
     ui._draw(app.snapshot())
     assert entry_id not in ui._obstacle_nodes
 

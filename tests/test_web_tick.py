@@ -34,7 +34,7 @@ def app(sda10f, tmp_path):
                     ghost="qp:daqp")
     app.add_constraint("hole", distance=0.08)
     tip = app.loops["main"].ee_placements()[0]  # a sphere 2 cm in front of the tip
-    app.add_obstacle("sphere", radius=0.03, center=tip.translation + 0.05 * tip.rotation[:, 2])
+    app.collisions.add("sphere", radius=0.03, center=tip.translation + 0.05 * tip.rotation[:, 2])
     return app
 
 

@@ -17,18 +17,20 @@ from __future__ import annotations
 import inspect
 import itertools
 import math
-from collections.abc import Iterable
+import threading
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from constraints.collision import OBSTACLE_TYPES, CollisionAvoidance, CollisionRows, Obstacle
-from constraints.validation import short_repr
+from constraints.validation import as_vector, short_repr
 from constraints import Constraint
 from controllers.base import Controller
 from teleop.robots import Robot
 
+from .console import ee_index
 from .limits import MAX_TARGET_DISTANCE
 
 #: a new obstacle's surface is this far (m) in front of the tip it is placed at
@@ -113,37 +115,77 @@ def check_reach(position: np.ndarray, origin: np.ndarray, what: str) -> None:
                          f"{MAX_TARGET_DISTANCE:g} m")
 
 
+@dataclass(frozen=True)
+class CollisionSession:
+    """What :class:`CollisionScene` reads of the rest of the session (under its lock)."""
+
+    #: every robot's controller (each holds the avoidance while it is on)
+    controllers: Callable[[], list[Controller]]
+    #: the placed constraints (their ports: the links that go through the wall)
+    constraints: Callable[[], list[Constraint]]
+    #: the main robot's EE placements now (a new obstacle goes in front of one)
+    tips: Callable[[], list[pin.SE3]]
+    #: the control period (s): the avoidance's dampers are checked at it
+    period: Callable[[], float]
+
+
 class CollisionScene:
-    """The collision avoidance of :class:`web.app.TeleopApp`, a component it holds and
-    calls under its lock: the session's :attr:`avoidance`, whether the controllers hold it
-    (:attr:`on`), the placed :attr:`obstacles` by id and the rows last measured for each
-    robot (:attr:`rows`). The controllers and the placed constraints are handed to the
-    methods that need them.
+    """The collision avoidance of :class:`web.app.TeleopApp`, a component that owns it:
+    the session's :attr:`avoidance`, whether the controllers hold it (:attr:`on`), the
+    placed :attr:`obstacles` by id and the rows last measured for each robot
+    (:attr:`rows`). Its operator's actions (:meth:`add`, :meth:`move`, :meth:`remove`,
+    :meth:`clear`, :meth:`set_on`, :meth:`configure`, :meth:`settings`) take the session's
+    lock; the control tick calls :meth:`keep`, :meth:`measure` and
+    :meth:`traced_distance` holding it.
 
     Parameters
     ----------
     robot : the session's robot.
-    dt : the control period (s), the avoidance's dampers checked at it.
     on : whether the controllers keep the pairs apart.
     settings : keywords of :data:`SETTINGS` (the others their defaults, self-collision on
         a robot with several arms).
+    lock : the session's lock.
+    session : what it reads of the rest of the session (:class:`CollisionSession`).
     """
 
-    def __init__(self, robot: Robot, dt: float, on: bool, settings: dict) -> None:
+    def __init__(self, robot: Robot, on: bool, settings: dict, lock: threading.RLock,
+                 session: CollisionSession) -> None:
         unknown = sorted(set(settings) - set(SETTINGS))
         if unknown:
             raise ValueError(f"unknown collision setting {unknown[0]!r} ({', '.join(SETTINGS)})")
         if not isinstance(on, (bool, np.bool_)):
             raise ValueError(f"collisions are on (True) or off (False), got {on!r}")
         self.robot = robot
+        self._lock = lock
+        self._session = session
         settings = {"self_collision": default_self_collision(robot), **settings}
         self.avoidance = CollisionAvoidance(robot, **settings)
-        self.avoidance.check(robot.model, dt)
+        self.avoidance.check(robot.model, session.period())
         self.on = bool(on)
         self.obstacles: dict[str, ObstacleEntry] = {}
         self._ids = itertools.count(1)
         self.rows: dict[str, CollisionRows | None] = {}
         self._data = robot.model.createData()  # the control thread's
+
+    def set_on(self, on: bool) -> None:
+        """Whether the controllers keep the pairs apart (the obstacles stay either way)."""
+        if not isinstance(on, (bool, np.bool_)):
+            raise ValueError(f"collisions are on (True) or off (False), got {on!r}")
+        with self._lock:
+            self.attach(self._session.controllers(), self.avoidance, bool(on))
+
+    def configure(self, **settings) -> None:
+        """Change some of :data:`SETTINGS` (``self_collision``, ``safety_distance`` d_s,
+        ``detection_distance`` d_i, ``approach_speed`` xi); the obstacles stay. A bad
+        value, or a damper unstable at the control rate, raises ``ValueError`` naming it
+        and changes nothing."""
+        with self._lock:
+            current, dt = self.settings(), self._session.period()
+        # built outside the lock (tens of ms with self-collision: the control thread runs on)
+        avoidance = self.rebuilt(current, settings, dt)
+        with self._lock:
+            avoidance.set_obstacles([entry.obstacle for entry in self.obstacles.values()])
+            self.attach(self._session.controllers(), avoidance, self.on)
 
     def attached(self, avoidance: CollisionAvoidance | None = None,
                  on: bool | None = None) -> CollisionAvoidance | None:
@@ -172,7 +214,9 @@ class CollisionScene:
 
     def settings(self) -> dict:
         """``on`` and the values of :data:`SETTINGS` now."""
-        return {"on": self.on, **{name: getattr(self.avoidance, name) for name in SETTINGS}}
+        with self._lock:
+            return {"on": self.on,
+                    **{name: getattr(self.avoidance, name) for name in SETTINGS}}
 
     def rebuilt(self, current: dict, settings: dict, dt: float) -> CollisionAvoidance:
         """A new avoidance with ``settings`` over the ``current`` ones (:meth:`settings`)
@@ -189,17 +233,45 @@ class CollisionScene:
         avoidance.check(self.robot.model, dt)
         return avoidance
 
-    def new_id(self, kind: str) -> str:
-        """The id of the next obstacle of ``kind``."""
-        return f"{kind}-{next(self._ids)}"
+    def add(self, kind: str, center=None, ee=0, **fields) -> str:
+        """Place an obstacle of ``kind`` (:data:`constraints.collision.OBSTACLE_TYPES`)
+        with its constructor's ``fields`` (those not given: :func:`obstacle_fields`);
+        ``center`` (world, m) or, by default, in front of EE ``ee``'s tip
+        (:func:`in_front`). Its id; a bad value raises ``ValueError`` naming the field and
+        places nothing."""
+        defaults = obstacle_fields(kind)
+        unknown = sorted(set(fields) - set(defaults))
+        if unknown:
+            raise ValueError(f"unknown field {unknown[0]!r} for a {kind} obstacle (its "
+                             f"fields: {', '.join(defaults)})")
+        ee = ee_index(self.robot, ee)
+        with self._lock:
+            entry_id = f"{kind}-{next(self._ids)}"
+            tip = self._session.tips()[ee]
+            try:
+                obstacle = OBSTACLE_TYPES[kind](center=tip.translation if center is None
+                                                else center, name=entry_id,
+                                                **{**defaults, **fields})
+            except TypeError as error:
+                raise ValueError(f"bad {kind} obstacle: {error}") from None
+            if center is None:
+                obstacle.move_to(in_front(obstacle, tip))
+            check_reach(obstacle.position, tip.translation, "obstacle")
+            if entry_id in self.obstacles:
+                raise ValueError(f"an obstacle {entry_id!r} is already placed")
+            self.avoidance.add_obstacle(obstacle)
+            self.obstacles[entry_id] = ObstacleEntry(entry_id, obstacle, obstacle.position)
+            self.refresh_ports(self._session.constraints())
+            return entry_id
 
-    def place(self, entry: ObstacleEntry, constraints: list[Constraint]) -> None:
-        """Add ``entry`` to the avoidance (the placed ``constraints``: its ports)."""
-        if entry.id in self.obstacles:
-            raise ValueError(f"an obstacle {entry.id!r} is already placed")
-        self.avoidance.add_obstacle(entry.obstacle)
-        self.obstacles[entry.id] = entry
-        self.refresh_ports(constraints)
+    def move(self, entry_id: str, position) -> None:
+        """Move an obstacle (its world centre): it glides there, its velocity fed forward."""
+        position = as_vector(position, 3, "obstacle position")
+        with self._lock:
+            entry = self.obstacle(entry_id)
+            check_reach(position, entry.obstacle.position, "obstacle")
+            entry.goal = position.copy()
+            entry.settled = False
 
     def refresh_ports(self, constraints: list[Constraint]) -> None:
         """The avoidance learns which links go through a port of the placed
@@ -213,12 +285,21 @@ class CollisionScene:
             raise ValueError(f"no obstacle {short_repr(entry_id)}")
         return self.obstacles[entry_id]
 
-    def remove(self, entry_id: str, constraints: list[Constraint]) -> None:
-        """Remove the obstacle ``entry_id`` (the placed ``constraints``: its ports)."""
-        entry = self.obstacle(entry_id)
-        self.avoidance.remove_obstacle(entry.obstacle)
-        del self.obstacles[entry_id]
-        self.refresh_ports(constraints)
+    def remove(self, entry_id: str) -> None:
+        """Remove the obstacle ``entry_id``."""
+        with self._lock:
+            entry = self.obstacle(entry_id)
+            self.avoidance.remove_obstacle(entry.obstacle)
+            del self.obstacles[entry_id]
+            self.refresh_ports(self._session.constraints())
+
+    def clear(self) -> int:
+        """Remove every obstacle; how many there were."""
+        with self._lock:
+            ids = list(self.obstacles)
+            for entry_id in ids:
+                self.remove(entry_id)
+            return len(ids)
 
     def restore(self, avoidance: CollisionAvoidance, on: bool,
                 obstacles: dict[str, ObstacleEntry]) -> None:

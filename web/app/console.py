@@ -60,6 +60,17 @@ def pose_from(position, wxyz, what: str) -> pin.SE3:
     return pin.SE3(rotation, position)
 
 
+def ee_index(robot: Robot, ee) -> int:
+    """``ee`` (an index or a name of ``robot.ee_frames``) as an index; else ``ValueError``."""
+    frames = robot.ee_frames
+    if isinstance(ee, str) and ee in frames:
+        return frames.index(ee)
+    if isinstance(ee, (int, np.integer)) and not isinstance(ee, bool) and 0 <= ee < len(frames):
+        return int(ee)
+    raise ValueError(f"no end effector {ee!r}: this robot's are {list(frames)} "
+                     f"(or their indices 0-{len(frames) - 1})")
+
+
 class Console:
     """The operator's console of :class:`web.app.TeleopApp` (its state: ``inputs``,
     ``clutch``, ``motion_scale``; it reads the main robot's loop)."""
@@ -92,13 +103,7 @@ class Console:
 
     def ee_index(self, ee) -> int:
         """``ee`` (an index or a name of ``robot.ee_frames``) as an index; else ``ValueError``."""
-        frames = self.robot.ee_frames
-        if isinstance(ee, str) and ee in frames:
-            return frames.index(ee)
-        if isinstance(ee, (int, np.integer)) and not isinstance(ee, bool) and 0 <= ee < len(frames):
-            return int(ee)
-        raise ValueError(f"no end effector {ee!r}: this robot's are {list(frames)} "
-                         f"(or their indices 0-{len(frames) - 1})")
+        return ee_index(self.robot, ee)
 
     def _check_target(self, target: pin.SE3, ee: int, what: str = "target") -> None:
         """``ValueError`` when ``target`` is farther than :data:`MAX_TARGET_DISTANCE` from

@@ -21,10 +21,7 @@ import itertools
 import threading
 from pathlib import Path
 
-import numpy as np
 
-from constraints.collision import OBSTACLE_TYPES
-from constraints.validation import as_vector
 from controllers.base import velocity_joint_names
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.task_modes import AUTO
@@ -34,8 +31,7 @@ from teleop.plants.ros2.settings import Ros2Settings
 from teleop.robots import Robot
 
 from ..folders import Folder
-from .collisions import (CollisionScene, ObstacleEntry, check_reach, in_front,
-                         obstacle_fields)
+from .collisions import CollisionScene, CollisionSession
 from .console import Console, EEInput
 from .devices import InputDevices
 from .editing import ConstraintEntry, Editing
@@ -125,8 +121,11 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
         self.record_dir, self.scene_dir = self.recordings.root, self.scenes.root
         self.entries: dict[str, ConstraintEntry] = {}
         self._ids = itertools.count(1)
-        self.collisions = CollisionScene(robot, self.config.dt, collisions,
-                                         dict(collision_settings or {}))
+        self.collisions = CollisionScene(robot, collisions, dict(collision_settings or {}),
+                                         self._lock, CollisionSession(
+            controllers=lambda: [loop.controller for loop in self.loops.values()],
+            constraints=lambda: [entry.constraint for entry in self.entries.values()],
+            tips=lambda: self.loops["main"].ee_placements(), period=lambda: self.config.dt))
         # before the first loop: it makes their plants
         self.force = ForceControl(robot, self.plant, self._lock, lambda: self.loops,
                                   self.make_plant, lambda: self._rebuild(dict(self.specs)))
@@ -163,82 +162,3 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
         """Close the recording; its path."""
         with self._lock:
             return self.recorder.stop()
-
-    def set_collisions_on(self, on: bool) -> None:
-        """Whether the controllers keep the pairs apart (the obstacles stay either way)."""
-        if not isinstance(on, (bool, np.bool_)):
-            raise ValueError(f"collisions are on (True) or off (False), got {on!r}")
-        with self._lock:
-            controllers = [loop.controller for loop in self.loops.values()]
-            self.collisions.attach(controllers, self.collisions.avoidance, bool(on))
-
-    def set_collision_settings(self, **settings) -> None:
-        """Change some of :data:`.collisions.SETTINGS` (``self_collision``,
-        ``safety_distance`` d_s, ``detection_distance`` d_i, ``approach_speed`` xi); the
-        obstacles stay. A bad value, or a damper unstable at the control rate, raises
-        ``ValueError`` naming it and changes nothing."""
-        with self._lock:
-            current, dt = self.collisions.settings(), self.config.dt
-        # built outside the lock (tens of ms with self-collision: the control thread runs on)
-        avoidance = self.collisions.rebuilt(current, settings, dt)
-        with self._lock:
-            avoidance.set_obstacles([entry.obstacle
-                                     for entry in self.collisions.obstacles.values()])
-            controllers = [loop.controller for loop in self.loops.values()]
-            self.collisions.attach(controllers, avoidance, self.collisions.on)
-
-    def collision_settings(self) -> dict:
-        """``on`` and the values of :data:`.collisions.SETTINGS` now."""
-        with self._lock:
-            return self.collisions.settings()
-
-    def add_obstacle(self, kind: str, center=None, ee=0, **fields) -> str:
-        """Place an obstacle of ``kind`` (:data:`constraints.collision.OBSTACLE_TYPES`)
-        with its constructor's ``fields`` (those not given:
-        :func:`.collisions.obstacle_fields`); ``center`` (world, m) or, by default, in
-        front of EE ``ee``'s tip (:func:`.collisions.in_front`). Its id; a bad value raises
-        ``ValueError`` naming the field and places nothing."""
-        defaults = obstacle_fields(kind)
-        unknown = sorted(set(fields) - set(defaults))
-        if unknown:
-            raise ValueError(f"unknown field {unknown[0]!r} for a {kind} obstacle (its "
-                             f"fields: {', '.join(defaults)})")
-        ee = self.ee_index(ee)
-        with self._lock:
-            entry_id = self.collisions.new_id(kind)
-            tip = self.loops["main"].ee_placements()[ee]
-            try:
-                obstacle = OBSTACLE_TYPES[kind](center=tip.translation if center is None
-                                                else center, name=entry_id,
-                                                **{**defaults, **fields})
-            except TypeError as error:
-                raise ValueError(f"bad {kind} obstacle: {error}") from None
-            if center is None:
-                obstacle.move_to(in_front(obstacle, tip))
-            check_reach(obstacle.position, tip.translation, "obstacle")
-            self.collisions.place(ObstacleEntry(entry_id, obstacle, obstacle.position),
-                                  [entry.constraint for entry in self.entries.values()])
-            return entry_id
-
-    def move_obstacle(self, entry_id: str, position) -> None:
-        """Move an obstacle (its world centre): it glides there, its velocity fed forward."""
-        position = as_vector(position, 3, "obstacle position")
-        with self._lock:
-            entry = self.collisions.obstacle(entry_id)
-            check_reach(position, entry.obstacle.position, "obstacle")
-            entry.goal = position.copy()
-            entry.settled = False
-
-    def remove_obstacle(self, entry_id: str) -> None:
-        with self._lock:
-            constraints = [entry.constraint for entry in self.entries.values()]
-            self.collisions.remove(entry_id, constraints)
-
-    def clear_obstacles(self) -> int:
-        """Remove every obstacle; how many there were."""
-        with self._lock:
-            ids = list(self.collisions.obstacles)
-            constraints = [entry.constraint for entry in self.entries.values()]
-            for entry_id in ids:
-                self.collisions.remove(entry_id, constraints)
-            return len(ids)

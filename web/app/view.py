@@ -130,7 +130,7 @@ class View:
         ``approach_speed``), ``checking`` (on, with pairs to check: self-collision or an
         obstacle) and each obstacle's drawing (``id``, ``goal``, ``geometry``:
         :class:`constraints.collision.ObstacleGeometry`)."""
-        settings = self.collision_settings()
+        settings = self.collisions.settings()
         return {**settings,
                 "checking": settings["on"] and bool(settings["self_collision"] or self.collisions.obstacles),
                 "obstacles": [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),

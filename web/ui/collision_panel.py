@@ -28,7 +28,7 @@ class CollisionPanel:
 
     def _build_collision_panel(self) -> None:
         gui, app = self.server.gui, self.app
-        settings = app.collision_settings()
+        settings = app.collisions.settings()
         self.collisions_box = gui.add_checkbox(
             "avoid collisions", settings["on"],
             hint="the controllers keep every pair (link-link, link-obstacle) at least d_s apart")
@@ -45,7 +45,7 @@ class CollisionPanel:
             "xi approach speed (m/s)", settings["approach_speed"], min=0.01, max=5.0,
             step=0.01, hint="how fast a pair may close at d_i (0 at d_s)")
         self.collisions_box.on_update(lambda event: self._guarded(
-            event, lambda: app.set_collisions_on(self.collisions_box.value), key="collisions"))
+            event, lambda: app.collisions.set_on(self.collisions_box.value), key="collisions"))
         for widget in (self.self_collision_box, self.safety_number, self.detection_number,
                        self.approach_number):
             widget.on_update(lambda event: self._guarded(
@@ -65,8 +65,8 @@ class CollisionPanel:
         remove = gui.add_button("Remove obstacle")
         clear = gui.add_button("Clear obstacles")
         remove.on_click(lambda event: self._guarded(
-            event, lambda: app.remove_obstacle(self.obstacle_menu.value)))
-        clear.on_click(lambda event: self._guarded(event, app.clear_obstacles))
+            event, lambda: app.collisions.remove(self.obstacle_menu.value)))
+        clear.on_click(lambda event: self._guarded(event, app.collisions.clear))
 
     def _add_obstacle_input(self, label: str, name: str, default):
         """The input of one constructor field, labelled "<kind label> <field>"."""
@@ -79,10 +79,10 @@ class CollisionPanel:
         values = {name: np.asarray(widget.value, dtype=float) if np.ndim(widget.value)
                   else float(widget.value)
                   for name, widget in self.obstacle_inputs[kind].items()}
-        return self.app.add_obstacle(kind, ee=self._active_ee(), **values)
+        return self.app.collisions.add(kind, ee=self._active_ee(), **values)
 
     def _apply_collision_settings(self) -> None:
-        self.app.set_collision_settings(
+        self.app.collisions.configure(
             self_collision=bool(self.self_collision_box.value),
             safety_distance=1e-3 * float(self.safety_number.value),
             detection_distance=1e-3 * float(self.detection_number.value),
@@ -90,7 +90,7 @@ class CollisionPanel:
 
     def _collision_widgets_from_app(self) -> None:
         """The tab's settings as the app has them (after loading a scene)."""
-        settings = self.app.collision_settings()
+        settings = self.app.collisions.settings()
         self.collisions_box.value = settings["on"]
         self.self_collision_box.value = settings["self_collision"]
         self.safety_number.value = 1e3 * settings["safety_distance"]

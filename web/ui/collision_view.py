@@ -127,7 +127,7 @@ class CollisionView:
         @handle.on_update
         def _(event) -> None:
             position = np.array(handle.position)
-            self._guarded(event, lambda: self.app.move_obstacle(entry_id, position),
+            self._guarded(event, lambda: self.app.collisions.move(entry_id, position),
                           key=("obstacle", entry_id))
 
         nodes["gizmo"] = handle
