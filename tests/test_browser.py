@@ -258,7 +258,7 @@ def test_impossible_action_shows_a_notification(web):
     inputs = row.locator("input")
     expect(inputs).to_have_count(3)
     inputs.nth(1).fill("0")  # (0, 1, 0) -> (0, 0, 0)
-    normal = ui.constraint_inputs["plane"]["normal"]
+    normal = ui.constraint_panel.inputs["plane"]["normal"]
     wait_until(lambda: tuple(normal.value) == (0.0, 0.0, 0.0), WAIT,
                "the plane normal (0, 0, 0) to reach the server")
     page.get_by_role("button", name="Add plane").click()

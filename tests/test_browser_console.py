@@ -206,7 +206,7 @@ def test_an_out_of_range_hole_distance_shows_a_notification(web):
     open_tab(web, "Constraints")
     before = list(app.entries)
     input_of(page, "hole at (m)").fill("5")
-    distance = web.ui.constraint_inputs["hole"]["distance"]
+    distance = web.ui.constraint_panel.inputs["hole"]["distance"]
     wait_until(lambda: distance.value == 5.0, WAIT, "the distance 5 m")
     page.get_by_role("button", name="Add hole").click()
     expect(page.get_by_text("hole distance must be between 0 and", exact=False).first

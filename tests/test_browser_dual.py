@@ -121,7 +121,7 @@ def add_hole_on(web, link: str) -> str:
     open_tab(web, "Constraints")
     page.get_by_label("hole arm", exact=True).click()
     page.get_by_role("option", name=link, exact=True).click()
-    menu = web.ui.constraint_inputs["hole"]["link"]
+    menu = web.ui.constraint_panel.inputs["hole"]["link"]
     wait_until(lambda: menu.value == link, WAIT, f"the arm menu to read {link}")
     before = set(holes(web.app))
     page.get_by_role("button", name="Add hole").click()

@@ -375,15 +375,15 @@ def server():
 
 def test_the_collisions_tab_adds_an_obstacle_from_its_inputs(app, server):
     ui = TeleopUI(server, app, ControlThread(app))
-    inputs = ui.obstacle_inputs["sphere"]
+    inputs = ui.obstacle_panel.inputs["sphere"]
     assert set(inputs) == {"radius"}
     inputs["radius"].value = 0.025
-    entry_id = ui._add_obstacle_from_inputs("sphere")
+    entry_id = ui.obstacle_panel.add("sphere")
     assert app.collisions.obstacles[entry_id].obstacle.radius == 0.025
     ui._draw(app.snapshot())
     assert entry_id in ui._obstacle_nodes and "gizmo" in ui._obstacle_nodes[entry_id]
-    ui.safety_number.value = 8.0
-    ui._apply_collision_settings()
+    ui.collision_settings.safety_number.value = 8.0
+    ui.collision_settings.apply()
     assert app.collisions.avoidance.safety_distance == pytest.approx(0.008)
     app.collisions.remove(entry_id)
     ui._draw(app.snapshot())

@@ -303,7 +303,7 @@ def test_a_registered_kind_gets_its_inputs_and_is_drawn_from_its_geometry(regist
     server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
     try:
         ui = TeleopUI(server, app, ControlThread(app))
-        inputs = ui.constraint_inputs["point_on_line"]
+        inputs = ui.constraint_panel.inputs["point_on_line"]
         assert {name: handle.label for name, handle in inputs.items()} == {
             "link": "point on line arm", "distance": "point on line at (m)",
             "direction": "point on line direction (world)"}
@@ -311,7 +311,7 @@ def test_a_registered_kind_gets_its_inputs_and_is_drawn_from_its_geometry(regist
         assert inputs["distance"].value == ALONG_LINK.default
         inputs["distance"].value = 0.05
         inputs["direction"].value = (0.0, 1.0, 0.0)
-        entry_id = ui._add_constraint("point_on_line")  # what its "Add" button does
+        entry_id = ui.constraint_panel.add("point_on_line")  # what its "Add" button does
         line = app.entries[entry_id].constraint
         np.testing.assert_allclose(line.direction, [0.0, 1.0, 0.0])
         np.testing.assert_allclose(line.link_point, 0.05 * np.asarray(sda10f.link_axis),
@@ -321,6 +321,6 @@ def test_a_registered_kind_gets_its_inputs_and_is_drawn_from_its_geometry(regist
         assert markers["shape"].name == f"/constraints/{entry_id}/anchor"
         np.testing.assert_allclose(markers["shape"].position, line.line_point, atol=1e-6)
         assert "arrow" not in markers  # an equality: no allowed side
-        assert tuple(ui.constraint_menu.options) == (entry_id,)
+        assert tuple(ui.constraint_panel.menu.options) == (entry_id,)
     finally:
         server.stop()

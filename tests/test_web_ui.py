@@ -109,8 +109,8 @@ def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_sid
     anchor = app.entries[barrier_id].position
     np.testing.assert_allclose(arrow[0, 0], anchor, atol=1e-6)  # viser keeps float32
     np.testing.assert_allclose(arrow[0, 1] - anchor, [0.0, 0.0, 0.08], atol=1e-6)  # +n, 8 cm
-    assert ui.constraint_inputs["plane"]["normal"].label == "plane normal (world)"
-    assert "world coordinates" in ui.constraint_inputs["plane"]["normal"].hint
+    assert ui.constraint_panel.inputs["plane"]["normal"].label == "plane normal (world)"
+    assert "world coordinates" in ui.constraint_panel.inputs["plane"]["normal"].hint
 
 
 def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
@@ -318,14 +318,14 @@ def test_every_kind_is_added_from_its_inputs_as_they_start(ui):
     """Each type's "Add" button with its inputs untouched places it where the link point is
     (before the declarations, "Add plane" took the barrier's offset and was refused)."""
     app = ui.app
-    added = {kind: ui._add_constraint(kind) for kind in ui.constraint_inputs}
+    added = {kind: ui.constraint_panel.add(kind) for kind in ui.constraint_panel.inputs}
     assert set(added) == set(CONSTRAINT_TYPES) and len(app.entries) == len(CONSTRAINT_TYPES)
     data = app.robot.model.createData()
     pin.framesForwardKinematics(app.robot.model, data, app.loops["main"].q)
     link = data.oMf[app.robot.model.getFrameId(app.robot.constrained_link)]
     for kind, entry_id in added.items():
         constraint = app.entries[entry_id].constraint
-        inputs = ui.constraint_inputs[kind]
+        inputs = ui.constraint_panel.inputs[kind]
         point = link.act(inputs["distance"].value * np.asarray(app.robot.link_axis))
         np.testing.assert_allclose(constraint.point_world(link), point, atol=1e-12)
         assert constraint.violation(link) <= 1e-12

@@ -103,7 +103,7 @@ class CollisionView:
                 if "arrow" in nodes:
                     nodes["arrow"].points = self._halfspace_arrow(geometry)
                 self._obstacle_drawn[entry_id] = state
-        self._list_obstacles(tuple(drawn))
+        self.obstacle_panel.show_placed(tuple(drawn))
 
     def _forget_obstacles(self) -> None:
         """Remove every obstacle's nodes (a loaded scene's are drawn afresh)."""

@@ -18,8 +18,9 @@
   words, the one-sided constraints held), then tabs: Teleop (controllers, side by side,
   clutch, motion scale, the active arm's nudges, home) and Settings (gain, damping, rate,
   scenes, recording) (:mod:`.panels`), Constraints, built from the registry's
-  declarations (:mod:`.constraint_panel`), Collisions (the avoidance's settings and the
-  obstacles, from the obstacle registry, :mod:`.collision_panel`), Plots (:mod:`.plots`,
+  declarations (:mod:`.constraint_form`), Collisions (the avoidance's settings,
+  :mod:`.collision_panel`, and the obstacles, from the obstacle registry,
+  :mod:`.obstacle_form`): both placed items, one panel (:mod:`.placed_panel`), Plots (:mod:`.plots`,
   uPlot).
 
 A robot with several end effectors (docs/design.md section 11) gets a gizmo on each: each
@@ -43,16 +44,21 @@ import time
 
 import viser
 
+from constraints import CONSTRAINT_TYPES
+from constraints.collision import OBSTACLE_TYPES
+
 from ..app import ControlThread, TeleopApp
 from ..inbox import Inbox
 from ..robot_view import RobotView, floor_height
-from .collision_panel import CollisionPanel
+from .collision_panel import CollisionSettingsPanel
 from .collision_view import CollisionView
-from .constraint_panel import ConstraintPanel
+from .constraint_form import ConstraintForm
 from .device_view import DevicePanel
 from .force_panel import ForcePanel
 from .markers import Markers
+from .obstacle_form import ObstacleForm
 from .panels import Panels
+from .placed_panel import PlacedActions, PlacedPanel, PlacedWords
 from .plots import LivePlots
 from .port_forces import PortForces
 from .scene_view import SceneView
@@ -85,8 +91,7 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
     return names
 
 
-class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, CollisionView,
-               PortForces):
+class TeleopUI(SceneView, Panels, Markers, CollisionView, PortForces):
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -181,10 +186,22 @@ class TeleopUI(SceneView, Panels, ConstraintPanel, CollisionPanel, Markers, Coll
         with self.tabs.add_tab("Teleop"):
             self._build_teleop_panel()
             self.device_panel = DevicePanel(self.server, self.app, self.ee_names, self._guarded)
+        app = self.app
         with self.tabs.add_tab("Constraints"):
-            self._build_constraint_panel()
+            self.constraint_panel = PlacedPanel(
+                gui, {kind: ConstraintForm(kind_type, app.robot)
+                      for kind, kind_type in CONSTRAINT_TYPES.items() if kind_type.placement},
+                PlacedActions(lambda kind, values: app.add_constraint(kind, **values),
+                              app.remove_constraint, app.clear_constraints),
+                PlacedWords("placed", "Remove", "Clear constraints"), self._guarded)
         with self.tabs.add_tab("Collisions"):
-            self._build_collision_panel()
+            self.collision_settings = CollisionSettingsPanel(gui, app.collisions, self._guarded)
+            self.obstacle_panel = PlacedPanel(
+                gui, {kind: ObstacleForm(kind) for kind in OBSTACLE_TYPES},
+                PlacedActions(lambda kind, values: app.collisions.add(
+                    kind, ee=self._active_ee(), **values),
+                    app.collisions.remove, app.collisions.clear),
+                PlacedWords("obstacles", "Remove obstacle", "Clear obstacles"), self._guarded)
         with self.tabs.add_tab("Settings"):
             self._build_settings_panel()
         force_tab = self.tabs.add_tab("Force")

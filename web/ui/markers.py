@@ -75,7 +75,7 @@ class Markers:
                         float(np.max(np.abs(state - last))) >= DRAWING_RESOLUTION:
                     self._update_markers(markers, drawing)
                     self._drawn[(prefix, entry_id)] = state
-        self._list_placed(tuple(main))
+        self.constraint_panel.show_placed(tuple(main))
 
     def _add_shape(self, name: str, drawing: dict):
         """The scene node of a constraint's geometry, drawn as its ``shape`` says
