@@ -1,11 +1,12 @@
 """The step's message worded when read (issue 37 item 2; docs/design.md 8.3 and 16).
 
 The loop keeps every period's message as a :class:`~controllers.step_message.StepMessage`
-and words it only when a reader asks. The reference is the eager text: the controller's
-``info.message`` (or the loop's refusal) read at once after the period, then the
-supervisor's composition of the loop's message written out in this file as the loop
-wrote it before (the status, the measured breach, the supervisor's words, the
-controller's). Read only after the whole run, every record's text must equal it, on
+and words it only when a reader asks, the supervisor's words too. The reference is the
+eager text of a first run read at once: the controller's ``info.message`` (or the loop's
+refusal) and the supervisor's words read right after each period, composed into the
+loop's message as the loop wrote it before (written out in this file: the status, the
+measured breach, the supervisor's words, the controller's). A second run of the same
+periods is read only after it ended: every record's text must equal the first's, on
 scenarios covering every status: ``ok``, ``scaled``, ``least_squares`` (with the
 analytical form's hand-over to the general form), ``constraint_degraded``, ``failed`` and
 the supervisor scaling and holding the target.
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import collections
 import math
+from typing import Callable
 
 import numpy as np
 import pinocchio as pin
@@ -54,33 +56,41 @@ def loop_message(supervision: Supervision, status: str, message: str) -> str:
     return text
 
 
-def run_and_read_late(loop: TeleopLoop, targets: list) -> tuple[list[StepRecord], list[str],
-                                                                    list[str]]:
-    """The loop over ``targets``; per period its record, the controller's status and the
-    loop's message worded at once (:func:`loop_message` of the message read right after
-    the period). The records' texts are read by the caller, after the run."""
-    records, statuses, eager = [], [], []
+def run_and_read_late(make_loop: Callable[[], TeleopLoop],
+                      targets: list) -> tuple[list[StepRecord], list[str], list[str]]:
+    """Two loops from ``make_loop`` over ``targets`` (deterministic: the same periods).
+    The first is read at once: per period the controller's status and the loop's message
+    worded then (:func:`loop_message` of the controller's and the supervisor's words read
+    right after the period; the record's own text too). The second's records, returned
+    with those statuses and texts, are read by the caller after the whole run."""
+    eager_loop, statuses, eager = make_loop(), [], []
     for target in targets:
-        record = loop.tick(target)
-        info = loop.controller.info
+        record = eager_loop.tick(target)
+        info = eager_loop.controller.info
         status, message = info.status.value, info.message
-        if loop.refused:  # the controller refused the input: the loop's stop says why
-            status, message = "failed", loop.refused
-        records.append(record)
+        if eager_loop.refused:  # the controller refused the input: the loop's stop says why
+            status, message = "failed", eager_loop.refused
         statuses.append(status)
-        eager.append(loop_message(loop.supervision, status, message))
-    return records, statuses, eager
+        eager.append(loop_message(eager_loop.supervision, status, message))
+        assert record.message == eager[-1]
+    late_loop = make_loop()
+    return [late_loop.tick(target) for target in targets], statuses, eager
 
 
 def scenario_run(name: str, spec: str, acceleration_limits: bool, compiled_tick: bool,
                  config: LoopConfig, periods: int) -> tuple[list[StepRecord], list[str],
                                                           list[str]]:
+    """:func:`run_and_read_late` on scenario ``name`` with controller ``spec``."""
     plan = load_scenario(name)
-    controller = make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt,
-                                 acceleration_limit=ROBOT if acceleration_limits else None)
-    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config,
-                      compiled_tick=compiled_tick)
-    return run_and_read_late(loop, [plan.target((i + 1) * config.dt) for i in range(periods)])
+
+    def make_loop() -> TeleopLoop:
+        controller = make_controller(spec, plan.robot, plan.make_constraints(), dt=config.dt,
+                                     acceleration_limit=ROBOT if acceleration_limits else None)
+        return TeleopLoop(plan.robot, controller, q0=plan.q0, config=config,
+                          compiled_tick=compiled_tick)
+
+    return run_and_read_late(make_loop,
+                             [plan.target((i + 1) * config.dt) for i in range(periods)])
 
 
 def check_late_equals_eager(records: list[StepRecord], statuses: list[str],
@@ -129,13 +139,16 @@ def test_the_supervisor_scaling_holding_and_releasing_words_the_same_when_read_l
     controller's)."""
     plan = load_scenario("fast-lateral")
     config = LoopConfig(supervisor=TIGHT)
-    controller = make_controller("cjm", plan.robot, plan.make_constraints(), dt=config.dt,
-                                 acceleration_limit=ROBOT)
-    plant = PlantChoice().make(plan.robot, config.dt, Imperfections(encoder_noise=1e-3))
-    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config, plant=plant,
-                      compiled_tick=compiled_tick)
+
+    def make_loop() -> TeleopLoop:  # the noise seeded: the same run each time
+        controller = make_controller("cjm", plan.robot, plan.make_constraints(), dt=config.dt,
+                                     acceleration_limit=ROBOT)
+        plant = PlantChoice().make(plan.robot, config.dt, Imperfections(encoder_noise=1e-3))
+        return TeleopLoop(plan.robot, controller, q0=plan.q0, config=config, plant=plant,
+                          compiled_tick=compiled_tick)
+
     records, statuses, eager = run_and_read_late(
-        loop, [plan.target((i + 1) * config.dt) for i in range(1000)])
+        make_loop, [plan.target((i + 1) * config.dt) for i in range(1000)])
     counts = check_late_equals_eager(records, statuses, eager)
     actions = collections.Counter(record.supervisor_action for record in records)
     assert min(actions["none"], actions["scaled"], actions["held"]) > 20, actions
@@ -156,12 +169,16 @@ def test_degraded_and_failed_steps_word_the_same_when_read_late(spec: str) -> No
     q = robot.q_home.copy()
     hole = Hole.on_link(robot, q, distance=0.05)
     hole.center = hole.center + np.array([0.0, 0.02, 0.0])
-    controller = make_controller(spec, robot, [hole], acceleration_limit=np.full(robot.nv, 1e-3))
-    loop = TeleopLoop(robot, controller, q0=q)
-    home = loop.ee_placement()
+
+    def make_loop() -> TeleopLoop:
+        controller = make_controller(spec, robot, [hole],
+                                     acceleration_limit=np.full(robot.nv, 1e-3))
+        return TeleopLoop(robot, controller, q0=q)
+
+    home = make_loop().ee_placement()
     broken = pin.SE3(home.rotation, np.full(3, math.nan))
     targets = [broken if i % 7 == 6 else home for i in range(60)]
-    records, statuses, eager = run_and_read_late(loop, targets)
+    records, statuses, eager = run_and_read_late(make_loop, targets)
     check_late_equals_eager(records, statuses, eager)
     controller_counts = collections.Counter(statuses)
     assert controller_counts["constraint_degraded"] > 30, controller_counts

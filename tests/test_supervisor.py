@@ -320,12 +320,14 @@ def test_the_command_line_sets_the_thresholds_into_metrics_json(tmp_path):
 def test_the_ui_status_line_says_what_the_supervisor_measured_and_did():
     from web.app import supervision_words
 
-    calm = Supervision(2e-5, 0.01, 1.0, "none", "", "")
+    calm = Supervision(2e-5, 0.01, 1.0, "none")
     assert supervision_words(None) == "" and supervision_words(calm) == ""
-    held = Supervision(2.3e-3, 2.4, 0.0, "held", "hole 1 (link_6) 2.300 mm off (tolerance 0.1 mm)",
-                       "supervisor: target held, the operator's motion not followed (hole 1 "
-                       "(link_6) 2.300 mm off; warn 0.5 mm, hold 2 mm); target 3.100 mm, "
-                       "1.20 deg from the operator's", 3.1e-3, np.radians(1.2))
+    held = Supervision(2.3e-3, 2.4, 0.0, "held",
+                       StepMessage.worded("hole 1 (link_6) 2.300 mm off (tolerance 0.1 mm)"),
+                       StepMessage.worded(
+                           "supervisor: target held, the operator's motion not followed (hole "
+                           "1 (link_6) 2.300 mm off; warn 0.5 mm, hold 2 mm); target 3.100 mm, "
+                           "1.20 deg from the operator's"), 3.1e-3, np.radians(1.2), True, True)
     assert supervision_words(held) == (
         "measured: hole 1 (link_6) 2.300 mm off (tolerance 0.1 mm); supervisor: target "
         "held, the operator's motion not followed (hole 1 (link_6) 2.300 mm off; warn 0.5 "

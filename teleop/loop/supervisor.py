@@ -37,8 +37,9 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.validation import as_number
-from controllers.step_message import StepMessage
-from teleop.plants.walls import has_wall
+from controllers.step_message import NO_MESSAGE, StepMessage
+
+from .supervision_words import SupervisionWords
 
 #: the supervisor's actions, from none to the strongest (docs/design.md 5.2)
 ACTIONS = ("none", "scaled", "held")
@@ -113,7 +114,8 @@ def ramp(value: float, warn: float, hold: float) -> float:
 
 class Supervision(NamedTuple):
     """What the supervisor measured and did in one period (a named tuple: immutable and
-    built in one call, every period).
+    built in one call, every period), its words written when read
+    (:class:`~teleop.loop.supervision_words.SupervisionWords`).
 
     Attributes
     ----------
@@ -122,22 +124,37 @@ class Supervision(NamedTuple):
         when not measured.
     scale : what the operator's motion of the period was multiplied by.
     action : one of :data:`ACTIONS`.
-    breach : why the step is not ``ok`` in words (the measure beyond its tolerance), ``""``
-        within tolerance.
-    words : what the supervisor did and why, ``""`` when it did nothing.
+    breach_message : why the step is not ``ok`` (the measure beyond its tolerance), read
+        as :attr:`breach`.
+    words_message : what the supervisor did and why, read as :attr:`words`.
     target_offset : the largest distance between an EE's supervised target and the
         operator's (m): what the scaled motion left behind, kept as a clutch's.
     target_offset_angle : the largest angle between their orientations (rad).
+    beyond : a measure is beyond its tolerance (the breach says which).
+    acted : the supervisor has something to say (it scales or holds the motion, or keeps
+        an offset).
     """
 
     error: float
     port_force: float
     scale: float
     action: str
-    breach: str
-    words: str
+    breach_message: StepMessage = NO_MESSAGE
+    words_message: StepMessage = NO_MESSAGE
     target_offset: float = 0.0
     target_offset_angle: float = 0.0
+    beyond: bool = False
+    acted: bool = False
+
+    @property
+    def breach(self) -> str:
+        """Why the step is not ``ok`` in words, ``""`` within tolerance."""
+        return self.breach_message.text
+
+    @property
+    def words(self) -> str:
+        """What the supervisor did and why, ``""`` when it did nothing."""
+        return self.words_message.text
 
     def status_of(self, status: str, message: StepMessage) -> tuple[str, StepMessage]:
         """The loop's status and message for a step whose controller said ``status`` and
@@ -145,8 +162,8 @@ class Supervision(NamedTuple):
         message says what the supervisor measured beyond tolerance and what it did
         (:meth:`message_of`), worded when read. Within tolerance and without words, the
         controller's own."""
-        if not self.breach:
-            return status, (message if not self.words
+        if not self.beyond:
+            return status, (message if not self.acted
                             else StepMessage(partial(self.message_of, status, message)))
         loop_status = "failed" if status == "failed" else "constraint_degraded"
         return loop_status, StepMessage(partial(self.message_of, status, message))
@@ -156,10 +173,10 @@ class Supervision(NamedTuple):
         supervisor's words within tolerance; beyond it, what was measured, what the
         supervisor did and what the controller said (its status unless ``ok``)."""
         text = message.text
-        if not self.breach:
+        if not self.beyond:
             return f"{text}; {self.words}" if text else self.words
         words = f"measured: {self.breach}"
-        if self.words:
+        if self.acted:
             words += f"; {self.words}"
         if status != "ok":
             words += f"; controller: {status}" + (f", {text}" if text else "")
@@ -219,31 +236,24 @@ class Supervisor:
         forces = ([] if port_forces is None
                   else [math.sqrt(float(force @ force)) for force in port_forces])
         force = max(forces, default=math.nan)
-        wanted = min(ramp(error, config.error_warn, config.error_hold),
-                     ramp(force, config.force_warn, config.force_hold)) if config.acting else 1.0
+        error_ramp = ramp(error, config.error_warn, config.error_hold)
+        force_ramp = ramp(force, config.force_warn, config.force_hold)
+        wanted = min(error_ramp, force_ramp) if config.acting else 1.0
         self.scale = scale = min(max(wanted, self.scale - self.fall), self.scale + self.rise)
         offset, angle = self.follow(operator_targets, scale)
-        if (error <= config.tolerance and not force > config.force_tolerance and scale == 1.0
-                and self.offsets is None):
-            return Supervision(error, force, 1.0, "none", "", "")  # the common case, no words
-        worst = errors.index(error) if errors else -1
-        port = forces.index(force) if forces else -1
-        error_words = (f"{names[worst]} {1e3 * error:.3f} mm off" if worst >= 0 else "")
-        port_name = self._port_name(port, constraints, names)
-        force_words = f"port force at {port_name} {force:.3f} N" if port >= 0 else ""
-        breaches = []
-        if error > config.tolerance:
-            breaches.append(f"{error_words} (tolerance {1e3 * config.tolerance:g} mm)")
-        if force > config.force_tolerance:
-            breaches.append(f"{force_words} (tolerance {config.force_tolerance:g} N)")
-        breach = "; ".join(breaches)
+        beyond = error > config.tolerance or force > config.force_tolerance
+        if not beyond and scale == 1.0 and self.offsets is None:
+            return Supervision(error, force, 1.0, "none")  # the common case, no words
         action = "none" if scale == 1.0 else "held" if scale == 0.0 else "scaled"
-        offset_words = (f"target {1e3 * offset:.3f} mm, {math.degrees(angle):.2f} deg from "
-                        "the operator's")
-        words = ("" if action == "none" and self.offsets is None  # beyond tolerance only
-                 else self._action_words(action, scale, wanted, error, error_words, force,
-                                         force_words, offset_words))
-        return Supervision(error, force, scale, action, breach, words, offset, angle)
+        acted = not (action == "none" and self.offsets is None)  # else beyond tolerance only
+        words = SupervisionWords(config, action, scale, wanted, force_ramp < error_ramp, error,
+                                 errors.index(error) if errors else -1, force,
+                                 forces.index(force) if forces else -1, names, constraints,
+                                 offset, angle)
+        return Supervision(error, force, scale, action,
+                           StepMessage(words.breach) if beyond else NO_MESSAGE,
+                           StepMessage(words.action_words) if acted else NO_MESSAGE,
+                           offset, angle, beyond, acted)
 
     @property
     def followed_targets(self) -> list[pin.SE3]:
@@ -313,35 +323,3 @@ class Supervisor:
         # a configuration that is not finite measures nothing: as far off as can be
         return errors if math.isfinite(sum(errors)) else [
             error if math.isfinite(error) else math.inf for error in errors]
-
-    def _port_name(self, port: int, constraints: Sequence[Constraint],
-                   names: Sequence[str]) -> str:
-        """The name of the ``port``-th constraint with a wall (the plant's order)."""
-        walls = [name for name, constraint in zip(names, constraints) if has_wall(constraint)]
-        return walls[port] if 0 <= port < len(walls) else f"port {port + 1}"
-
-    def _action_words(self, action: str, scale: float, wanted: float, error: float,
-                      error_words: str, force: float, force_words: str,
-                      offset_words: str) -> str:
-        """``"supervisor scaled the operator's motion to 79 % (hole 1 (link_6) 0.812 mm
-        off; warn 0.5 mm, hold 2 mm); target 0.310 mm, 0.00 deg from the operator's"``:
-        the action, the measure that set it (the ``error`` or the ``force``, whichever asks
-        the smaller scale) and the offset the scaled motion left, which stays when the
-        scale is back at 1 (a clutch's)."""
-        if action == "none":
-            return f"supervisor: {offset_words} (kept, as a clutch)"
-        if wanted == 1.0:
-            return (f"supervisor releasing: the operator's motion scaled to {100 * scale:.3g} %; "
-                    f"{offset_words}")
-        config = self.config
-        by_force = ramp(force, config.force_warn, config.force_hold) < ramp(
-            error, config.error_warn, config.error_hold)
-        cause = (f"{force_words}; warn {config.force_warn:g} N, hold {config.force_hold:g} N"
-                 if by_force else f"{error_words}; warn {1e3 * config.error_warn:g} mm, "
-                 f"hold {1e3 * config.error_hold:g} mm")
-        if action == "held":
-            return f"supervisor: target held, the operator's motion not followed ({cause}); " \
-                   f"{offset_words}"
-        direction = "falling" if scale > wanted else "rising" if scale < wanted else ""
-        return (f"supervisor scaled the operator's motion to {100 * scale:.3g} % ({cause}"
-                f"{', ' + direction if direction else ''}); {offset_words}")
