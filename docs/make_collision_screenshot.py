@@ -89,7 +89,7 @@ def main() -> None:
 
             wait_until(held, "the arms to be held apart")
             rows = app.collision_rows["main"]
-            wait_until(lambda: rows.closest_pair in ui._pair_nodes, "the pair highlighted")
+            wait_until(lambda: rows.closest_pair in ui.pair_highlights.pair_nodes, "the pair highlighted")
             for handle in (*ui.target_gizmos, *ui.target_markers, *ui.reach_lines):
                 handle.visible = False
             for button in page.locator("[class*='Notification'] button").all():

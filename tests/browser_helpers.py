@@ -470,7 +470,7 @@ def plan_drag(web, distance: float, steps: int, prefer_sign: float = 1.0, ee: in
     panel_left = panel["x"] - 40.0 if panel else box.x + 0.7 * box.width
     right = pin.Quaternion(*camera.wxyz).normalized().matrix()[:, 0]  # camera x, in the world
     avoid = []  # the constraints' own gizmos: circles on screen
-    others = [markers["gizmo"] for markers in list(web.ui._markers.values())]
+    others = [markers["gizmo"] for markers in list(web.ui.constraint_markers.nodes.values())]
     others += [handle for k, handle in enumerate(web.ui.target_gizmos) if k != ee]
     for handle in others:
         position, scale = np.asarray(handle.position), handle.scale

@@ -179,13 +179,13 @@ def test_add_hole_button_creates_a_hole_and_its_ring(web):
     entry = app.entries[hole_id]
     assert entry.kind == "hole"
     assert np.linalg.norm(entry.goal - centre) < 1e-6  # "hole at (m)" = 0.08 on the link axis
-    markers = wait_until(lambda: web.ui._markers.get(hole_id), WAIT, "the hole's markers")
+    markers = wait_until(lambda: web.ui.constraint_markers.nodes.get(hole_id), WAIT, "the hole's markers")
     assert markers["shape"].name == f"/constraints/{hole_id}/ring"
     ring = np.asarray(markers["shape"].points)
     assert ring.shape[1:] == (2, 3)
     radius = np.linalg.norm(ring.reshape(-1, 3) - entry.goal, axis=1)
     drawing = app.snapshot()["robots"]["main"]["constraints"][hole_id]
-    assert np.allclose(radius, web.ui.ring_radius_at(drawing), atol=1e-6)
+    assert np.allclose(radius, web.ui.constraint_drawer.ring_radius_at(drawing), atol=1e-6)
     # around the link, not hidden inside it
     link_radius = max(g.geometry.radius for g in robot.visual_model.geometryObjects
                       if g.parentFrame == robot.model.getFrameId(robot.constrained_link)

@@ -88,7 +88,7 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     page.get_by_text("sphere obstacle", exact=True).click()  # its folder opens
     page.get_by_role("button", name="Add sphere", exact=True).click()
     (sphere_id,) = wait_until(lambda: list(app.collisions.obstacles), WAIT, "the app to get the sphere")
-    wait_until(lambda: sphere_id in ui._obstacle_nodes, WAIT, "the sphere drawn")
+    wait_until(lambda: sphere_id in ui.obstacle_markers.nodes, WAIT, "the sphere drawn")
     since = len(web.configurations)
     avoidance = CollisionAvoidance.from_dict(app.robot, app.collisions.avoidance.to_dict())
     safety = avoidance.safety_distance
@@ -145,10 +145,10 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     pair = rows.closest_pair
     link = pair.split(" | ")[0]
     assert pair.endswith(f"| {sphere_id}")
-    nodes = wait_until(lambda: ui._pair_nodes.get(pair), WAIT, f"the highlight of {pair}")
+    nodes = wait_until(lambda: ui.pair_highlights.pair_nodes.get(pair), WAIT, f"the highlight of {pair}")
     assert node_name(pair) in nodes["witness"].name and nodes["witness"].visible
-    assert link in ui._link_nodes
-    assert all(node_name(link) in handle.name for handle in ui._link_nodes[link])
+    assert link in ui.pair_highlights.link_nodes
+    assert all(node_name(link) in handle.name for handle in ui.pair_highlights.link_nodes[link])
     witness = np.asarray(nodes["witness"].points, dtype=float)[0]
     assert np.linalg.norm(witness[0] - witness[1]) == pytest.approx(abs(rows.minimum_distance),
                                                                      abs=1e-6)

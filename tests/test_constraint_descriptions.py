@@ -373,17 +373,17 @@ def test_the_ui_draws_every_kind_from_its_geometry(app):
     server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
     try:
         ui = TeleopUI(server, app, ControlThread(app))
-        ui._draw_constraints(app.snapshot()["constraints"])
-        names = {kind: ui._markers[entry_id]["shape"].name for kind, entry_id in ids.items()}
+        ui._draw(app.snapshot())
+        names = {kind: ui.constraint_markers.nodes[entry_id]["shape"].name for kind, entry_id in ids.items()}
         assert names == {"hole": f"/constraints/{ids['hole']}/ring",
                          "plane": f"/constraints/{ids['plane']}/plane",
                          "barrier": f"/constraints/{ids['barrier']}/plane",
                          "point_lock": f"/constraints/{ids['point_lock']}/anchor"}
-        assert not ui._markers[ids["barrier"]]["error"].visible  # allowed side: no 1 m line
-        assert ui._markers[ids["point_lock"]]["error"].visible
+        assert not ui.constraint_markers.nodes[ids["barrier"]]["error"].visible  # allowed side: no 1 m line
+        assert ui.constraint_markers.nodes[ids["point_lock"]]["error"].visible
         app.remove_constraint(ids["hole"])
-        ui._draw_constraints(app.snapshot()["constraints"])
-        assert ids["hole"] not in ui._markers
+        ui._draw(app.snapshot())
+        assert ids["hole"] not in ui.constraint_markers.nodes
     finally:
         server.stop()
 

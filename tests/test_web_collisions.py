@@ -319,18 +319,18 @@ def test_the_status_and_highlights_are_the_controllers_rows(app, server):
     # the view: a node per pair named after it, its witness segment, each link highlighted
     ui = TeleopUI(server, app, ControlThread(app))
     ui._draw(snapshot)
-    assert set(ui._pair_nodes) == set(expected.pairs)
+    assert set(ui.pair_highlights.pair_nodes) == set(expected.pairs)
     for pair in set(expected.pairs):  # its closest geometries' witness segment
         index = min((i for i, name in enumerate(expected.pairs) if name == pair),
                     key=lambda i: expected.distances[i])
-        nodes = ui._pair_nodes[pair]
+        nodes = ui.pair_highlights.pair_nodes[pair]
         assert node_name(pair) in nodes["witness"].name
         np.testing.assert_allclose(np.asarray(nodes["witness"].points)[0],
                                    expected.witnesses[index], atol=1e-6)  # float32
         colour = distance_color(expected.distances[index], app.collisions.avoidance.safety_distance,
                                 app.collisions.avoidance.detection_distance)
         assert tuple(np.asarray(nodes["witness"].colors)[0, 0]) == colour
-    assert set(ui._link_nodes) == links
+    assert set(ui.pair_highlights.link_nodes) == links
 
 
 def pin_data(app, q: np.ndarray) -> pin.Data:
@@ -381,13 +381,13 @@ def test_the_collisions_tab_adds_an_obstacle_from_its_inputs(app, server):
     entry_id = ui.obstacle_panel.add("sphere")
     assert app.collisions.obstacles[entry_id].obstacle.radius == 0.025
     ui._draw(app.snapshot())
-    assert entry_id in ui._obstacle_nodes and "gizmo" in ui._obstacle_nodes[entry_id]
+    assert entry_id in ui.obstacle_markers.nodes and "gizmo" in ui.obstacle_markers.nodes[entry_id]
     ui.collision_settings.safety_number.value = 8.0
     ui.collision_settings.apply()
     assert app.collisions.avoidance.safety_distance == pytest.approx(0.008)
     app.collisions.remove(entry_id)
     ui._draw(app.snapshot())
-    assert entry_id not in ui._obstacle_nodes
+    assert entry_id not in ui.obstacle_markers.nodes
 
 
 # -- the command line --------------------------------------------------------------------------

@@ -343,15 +343,16 @@ def test_each_arms_hole_is_drawn_around_its_own_link(server, app, dual):
     snapshot = app.snapshot()
     ui._draw(snapshot)
     for hole_id, link in zip(ids, dual.constrained_links):
-        ring = ui._markers[hole_id]["shape"].points
+        ring = ui.constraint_markers.nodes[hole_id]["shape"].points
         centre = app.entries[hole_id].position
         radii = np.linalg.norm(ring.reshape(-1, 3) - centre, axis=1)
-        radius = ui.ring_radius_at(snapshot["robots"]["main"]["constraints"][hole_id])
+        radius = ui.constraint_drawer.ring_radius_at(
+            snapshot["robots"]["main"]["constraints"][hole_id])
         np.testing.assert_allclose(radii, radius, atol=1e-6)  # float32
         frame = dual.model.getFrameId(link)
         assert radius > max(g.geometry.radius for g in dual.visual_model.geometryObjects
                             if g.parentFrame == frame and type(g.geometry).__name__ == "Cylinder")
-        collar = ui._markers[hole_id]["point"].points.reshape(-1, 3)
+        collar = ui.constraint_markers.nodes[hole_id]["point"].points.reshape(-1, 3)
         assert np.linalg.norm(collar.mean(axis=0) - centre) < 1e-3  # around the link at the hole
 
 
@@ -378,7 +379,7 @@ def test_the_mobile_base_is_drawn_where_the_planar_joint_puts_it_and_a_wall_span
     wall_id = app.add_constraint("barrier", link_point=[0.4, 0.0, 0.15],
                                  normal=[-1.0, 0.0, 0.0], offset=0.05, link="mobile_base")
     ui._draw(app.snapshot())
-    plane = ui._markers[wall_id]["shape"]
+    plane = ui.constraint_markers.nodes[wall_id]["shape"]
     assert plane.dimensions[0] == pytest.approx(1.6)  # twice the base's 0.8 m length
     np.testing.assert_allclose(plane.position, app.entries[wall_id].position, atol=1e-9)
 

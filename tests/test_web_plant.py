@@ -257,7 +257,8 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         np.testing.assert_allclose(segments[0, 1] - segments[0, 0],
                                    arrow_vector(port.force), atol=float32)
         # its tip on the hole's ring, on the side the wall pushes from
-        ring = ui.ring_radius_at(snapshot["robots"]["main"]["constraints"][hole_id])
+        ring = ui.constraint_drawer.ring_radius_at(
+            snapshot["robots"]["main"]["constraints"][hole_id])
         np.testing.assert_allclose(segments[0, 1], port.point - ring * port.force / port.magnitude,
                                    atol=float32)
         assert f"port force {hole_id} {1e3 * port.magnitude:.2f} mN" in ui.status_panel.details.content
@@ -272,7 +273,7 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
             ui.status_panel.summary.content
         link = app.entries[hole_id].constraint.link
         assert f"placed: {hole_id} on `{link}`" in ui.status_panel.summary.content
-        label = ui._markers[hole_id]["label"]  # and in the scene, above the hole
+        label = ui.constraint_markers.nodes[hole_id]["label"]  # and in the scene, above the hole
         assert label.text == f"{hole_id} on {link}"
         np.testing.assert_allclose(label.position, port.point + [0.0, 0.0, 0.06], atol=1e-3)
         details = ui.status_panel.details.content

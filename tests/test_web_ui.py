@@ -81,10 +81,10 @@ def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
     assert all(f"/ghost/robot/visual/{name}" in ghost.frames for name in names)
     assert ui._ghost_style == (0.45, 0.7, 1.0, 0.8)  # beside: nearly opaque
     # its own hole drawing, under the offset node, at its own link
-    markers = ui._ghost_markers[hole_id]
+    markers = ui.ghost_markers.nodes[hole_id]
     assert markers["shape"].name == f"/ghost/constraints/{hole_id}/ring"
     assert "gizmo" not in markers  # one gizmo per hole: the main robot's
-    assert ui._markers[hole_id]["gizmo"].name == f"/constraints/{hole_id}/gizmo"
+    assert ui.constraint_markers.nodes[hole_id]["gizmo"].name == f"/constraints/{hole_id}/gizmo"
     # moved the ghost: the whole subtree goes with it
     app.set_ghost_offset([0.0, -1.0, 0.0])
     draw(ui)
@@ -95,7 +95,7 @@ def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
     np.testing.assert_allclose(ui._ghost_root.position, [0.0, 0.0, 0.0])
     app.set_ghost(None)
     draw(ui)
-    assert "ghost" not in ui._views and not ui._ghost_markers
+    assert "ghost" not in ui._views and not ui.ghost_markers.nodes
 
 
 def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_side(ui):
@@ -103,7 +103,7 @@ def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_sid
     barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     run(app, 0.05)
     draw(ui)
-    markers = ui._markers[barrier_id]
+    markers = ui.constraint_markers.nodes[barrier_id]
     assert markers["error"].visible is False  # was a 1 m magenta line
     arrow = np.asarray(markers["arrow"].points)
     anchor = app.entries[barrier_id].position
@@ -124,7 +124,7 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
     assert link_radius == pytest.approx(0.04)  # arm_link_5_r's cylinder
     assert reach_from_axis(app.robot, app.robot.constrained_link) >= link_radius
     for entry_id in (hole_id, lock_id):
-        markers = ui._markers[entry_id]
+        markers = ui.constraint_markers.nodes[entry_id]
         collar = np.asarray(markers["point"].points).reshape(-1, 3)
         point = app.snapshot()["robots"]["main"]["constraints"][entry_id]["geometry"].point
         radii = np.linalg.norm(collar - point, axis=1)
@@ -288,7 +288,7 @@ def test_the_pandas_hole_ring_is_outside_its_link_mesh(server, tmp_path):
     ui = TeleopUI(server, app, ControlThread(app))
     hole_id = app.add_constraint("hole", distance=0.08)
     snapshot = draw(ui)
-    ring = np.asarray(ui._markers[hole_id]["shape"].points).reshape(-1, 3)
+    ring = np.asarray(ui.constraint_markers.nodes[hole_id]["shape"].points).reshape(-1, 3)
     geometry = snapshot["robots"]["main"]["constraints"][hole_id]["geometry"]
     centre, axis = geometry.anchor, geometry.axis / np.linalg.norm(geometry.axis)
     ring_radius = np.linalg.norm(ring - centre, axis=1).min()

@@ -3,7 +3,8 @@ that runs both (:func:`run_server`); one module per part (:mod:`web.ui.core`).""
 
 from .core import TeleopUI
 from .panels import CONTROLLER_CHOICES, NUDGES
-from .collision_view import distance_color, node_name
+from .collision_view import distance_color
+from .placed_markers import node_name
 from .plots import (
     COLLISION_PLOTS,
     GHOST_COLOR,

@@ -46,8 +46,8 @@ class ConstraintForm:
             return gui.add_dropdown(label, choices, initial_value=choices[0],
                                     visible=self._link_menu_shown(field, choices), hint=hint)
         if field.type in ("link_point", "direction"):
-            return gui.add_vector3(label, np.asarray(field.default, dtype=float), step=field.step or 0.05,
-                                   hint=hint)
+            return gui.add_vector3(label, np.asarray(field.default, dtype=float),
+                                   step=field.step or 0.05, hint=hint)
         return gui.add_number(label, field.default, min=field.minimum, max=field.maximum,
                               step=field.step or 0.001, hint=hint)
 

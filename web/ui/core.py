@@ -51,13 +51,15 @@ from ..app import ControlThread, TeleopApp
 from ..inbox import Inbox
 from ..robot_view import RobotView, floor_height
 from .collision_panel import CollisionSettingsPanel
-from .collision_view import CollisionView
+from .collision_view import PairHighlights
 from .constraint_form import ConstraintForm
 from .device_view import DevicePanel
 from .force_panel import ForcePanel
-from .markers import Markers
+from .markers import ConstraintDrawer
+from .obstacle_drawer import ObstacleDrawer
 from .obstacle_form import ObstacleForm
 from .panels import Panels
+from .placed_markers import PlacedMarkers
 from .placed_panel import PlacedActions, PlacedPanel, PlacedWords
 from .plots import LivePlots
 from .port_forces import PortForces
@@ -91,7 +93,7 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
     return names
 
 
-class TeleopUI(SceneView, Panels, Markers, CollisionView, PortForces):
+class TeleopUI(SceneView, Panels, PortForces):
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -107,11 +109,8 @@ class TeleopUI(SceneView, Panels, Markers, CollisionView, PortForces):
         #: every operator action goes through it (web/inbox.py), never straight to the app
         self.inbox = Inbox(self._failed)
         self._gone: set[int] = set()  # browsers that disconnected mid-drag
-        self._markers: dict[str, dict] = {}  # main robot: entry id -> handles
-        self._ghost_markers: dict[str, dict] = {}
         self._views: dict[str, RobotView] = {}
         self._port_arrows: dict[str, dict] = {}  # robot -> port id -> its force arrow
-        self._drawn: dict[tuple[str, str], object] = {}  # markers' last drawing (.markers)
         self._ghost_root = None
         self._ghost_style: tuple | None = None
         #: ``active`` while this thread sets widgets from the app: the callbacks viser runs
@@ -129,7 +128,17 @@ class TeleopUI(SceneView, Panels, Markers, CollisionView, PortForces):
         self.floor = floor_height(app.robot)
         self.notes = list(notes)
         self._build_scene()
-        self._build_collision_view()
+        #: the placed items' nodes (constraints: the main robot's, the ghost's; obstacles)
+        self.constraint_drawer = ConstraintDrawer(server, robot, self.profiles,
+                                                  self.square_sizes, labelled=True)
+        self.constraint_markers = PlacedMarkers(server, "/constraints", self.constraint_drawer,
+                                                app.move_constraint, self._guarded, "constraint")
+        self.ghost_markers = PlacedMarkers(server, "/ghost/constraints", ConstraintDrawer(
+            server, robot, self.profiles, self.square_sizes, labelled=False))
+        self.obstacle_markers = PlacedMarkers(server, "/obstacles", ObstacleDrawer(server),
+                                              app.collisions.move, self._guarded, "obstacle",
+                                              scale=0.08)
+        self.pair_highlights = PairHighlights(server, robot)
         self.notes += self._views["main"].problems
         self._build_panels()
         server.on_client_connect(self._greet)
@@ -275,14 +284,20 @@ class TeleopUI(SceneView, Panels, Markers, CollisionView, PortForces):
         for which, view in self._views.items():
             view.display(robots[which]["q"])
         self._draw_target(snapshot)
-        ghost = snapshot["robots"].get("ghost") if "ghost" in self._views else None
-        self._draw_constraints(snapshot["constraints"],
-                               None if ghost is None else ghost["constraints"])
+        placed = {entry["id"]: entry for entry in snapshot["constraints"]}
+        goals = {entry_id: entry["goal"] for entry_id, entry in placed.items()}
+        self.constraint_markers.draw(placed, goals)
+        if "ghost" in self._views:
+            self.ghost_markers.draw(robots["ghost"]["constraints"], goals)
+        self.constraint_panel.show_placed(tuple(placed))
         self._draw_ports(robots)
         self.force_panel.draw(snapshot["force"], self._views)
-        self._draw_obstacles(snapshot["collisions"]["obstacles"])
-        self._draw_pairs(robots["main"]["collision_rows"], robots["main"]["q"],
-                         snapshot["collisions"])
+        obstacles = {entry["id"]: entry for entry in snapshot["collisions"]["obstacles"]}
+        self.obstacle_markers.draw(obstacles, {entry_id: entry["goal"]
+                                               for entry_id, entry in obstacles.items()})
+        self.obstacle_panel.show_placed(tuple(obstacles))
+        self.pair_highlights.draw(robots["main"]["collision_rows"], robots["main"]["q"],
+                                  snapshot["collisions"])
         if status:
             self.status_panel.draw(snapshot)
             label = "Release clutch" if snapshot["clutch"] else "Clutch"

@@ -1,17 +1,21 @@
 """Each constraint drawn from its geometry (:func:`web.constraint_drawing.constraint_geometry`):
 its shape (a ring around its link, a translucent square, a sphere), the constrained point
 as a collar around its link, the error as a short vector (drawn x100) when it is not zero,
-an arrow to a one-sided constraint's allowed side, a gizmo that moves it and, on the main
-robot, a label naming it and the link it is on ("<id> on <link>")."""
+an arrow to a one-sided constraint's allowed side and, on the main robot, a label naming
+it and the link it is on ("<id> on <link>"). A constraint is a placed item: its gizmo, its
+redrawing and its removal are :class:`web.ui.placed_markers.PlacedMarkers`'."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 import viser
 
+from teleop.robots import Robot
+
 from ..constraint_drawing import ConstraintGeometry
-from ..app import TeleopApp
 from .shapes import (
     MIN_RING_RADIUS,
     SQUARE_SIZE,
@@ -23,9 +27,6 @@ from .shapes import (
 )
 
 ERROR_VECTOR_SCALE = 100.0
-#: a constraint's drawing that moved less than this (m) since it was last drawn is not
-#: drawn again (the view thread shares the interpreter with the 1 kHz control loop)
-DRAWING_RESOLUTION = 1e-7
 ALLOWED_SIDE_ARROW = 0.08  # m
 POINT_COLOR = (20, 20, 20)
 ERROR_COLOR = (255, 0, 255)
@@ -33,65 +34,75 @@ ERROR_COLOR = (255, 0, 255)
 LABEL_HEIGHT = 0.06
 
 
-class Markers:
-    """The constraint markers of :class:`web.ui.TeleopUI`, per robot: entry id -> its
-    scene handles (``"shape"``, ``"point"``, ``"error"``, and ``"arrow"``, ``"gizmo"``
-    where they apply, ``"label"`` on the main robot); moved only when their drawing moved
-    by :data:`DRAWING_RESOLUTION`."""
+class ConstraintDrawer:
+    """The scene nodes of a constraint (an :class:`web.ui.placed_markers.ItemDrawer`) from
+    its drawing (a snapshot's constraint: its geometry, link, link placement and axis):
+    ``"shape"``, ``"point"``, ``"error"``, and ``"arrow"`` where it applies, ``"label"``
+    when ``labelled`` (the main robot's). Rings and collars go outside the link's geometry
+    (``profiles``, :class:`web.ui.shapes.LinkProfile`), squares as wide as the link
+    (``square_sizes``, m)."""
 
-    server: viser.ViserServer
-    app: TeleopApp
-    profiles: dict[str, LinkProfile]
-    square_sizes: dict[str, float]
-    _markers: dict[str, dict]
-    _ghost_markers: dict[str, dict]
-    #: (marker prefix, entry id) -> what its markers were last drawn from
-    _drawn: dict[tuple[str, str], np.ndarray]
+    def __init__(self, server: viser.ViserServer, robot: Robot,
+                 profiles: dict[str, LinkProfile], square_sizes: dict[str, float],
+                 labelled: bool) -> None:
+        self.server = server
+        self.robot = robot
+        self.profiles = profiles
+        self.square_sizes = square_sizes
+        self.labelled = labelled
 
-    def _draw_constraints(self, entries: list[dict], ghost: dict | None = None) -> None:
-        """The main robot's constraint markers (``snapshot["constraints"]``) and, given the
-        ghost's drawings (``snapshot["robots"]["ghost"]["constraints"]``), the ghost's."""
-        goals = {e["id"]: e["goal"] for e in entries}
-        main = {e["id"]: e for e in entries}
-        for drawn, markers_of, prefix in ((main, self._markers, "/constraints"),
-                                          (ghost, self._ghost_markers, "/ghost/constraints")):
-            if drawn is None:
-                continue
-            for entry_id in list(markers_of):
-                if entry_id not in drawn:
-                    for handle in markers_of.pop(entry_id).values():
-                        handle.remove()
-                    self._drawn.pop((prefix, entry_id), None)
-            for entry_id, drawing in drawn.items():
-                markers = markers_of.get(entry_id)
-                if markers is None:
-                    markers = markers_of[entry_id] = self._create_markers(
-                        f"{prefix}/{entry_id}", entry_id, drawing, goals[entry_id],
-                        gizmo=markers_of is self._markers)
-                    self._drawn.pop((prefix, entry_id), None)
-                state = self._drawn_state(drawing)
-                last = self._drawn.get((prefix, entry_id))
-                if last is None or last.shape != state.shape or \
-                        float(np.max(np.abs(state - last))) >= DRAWING_RESOLUTION:
-                    self._update_markers(markers, drawing)
-                    self._drawn[(prefix, entry_id)] = state
-        self.constraint_panel.show_placed(tuple(main))
+    def create(self, name: str, entry_id: str, drawing: dict) -> dict[str, Any]:
+        """The constraint's nodes under ``name``."""
+        scene = self.server.scene
+        geometry: ConstraintGeometry = drawing["geometry"]
+        markers: dict[str, Any] = {"shape": self._add_shape(name, drawing)}
+        collar = self._point_marker(drawing)
+        if collar is not None:  # outside the link cylinder: visible, unlike a point inside
+            markers["point"] = scene.add_line_segments(f"{name}/point", collar, POINT_COLOR,
+                                                       thickness=0.004)
+        else:
+            markers["point"] = scene.add_icosphere(f"{name}/point", 0.008, POINT_COLOR,
+                                                   position=geometry.point)
+        markers["error"] = scene.add_line_segments(f"{name}/error", np.zeros((1, 2, 3)),
+                                                   ERROR_COLOR, thickness=0.003)
+        if geometry.allowed_side is not None:
+            markers["arrow"] = scene.add_line_segments(
+                f"{name}/arrow", arrow_segments(geometry.anchor, geometry.allowed_side,
+                                                ALLOWED_SIDE_ARROW),
+                geometry.color, thickness=0.004)
+        if self.labelled:
+            markers["label"] = scene.add_label(
+                f"{name}/label", f"{entry_id} on {drawing['link']}",
+                position=geometry.anchor + np.array([0.0, 0.0, LABEL_HEIGHT]),
+                anchor="bottom-center")
+        return markers
 
-    def _add_shape(self, name: str, drawing: dict):
+    @staticmethod
+    def state(drawing: dict) -> np.ndarray:
+        """What a constraint's markers are drawn from, as one vector: its geometry's
+        points and directions, its link's pose."""
+        geometry: ConstraintGeometry = drawing["geometry"]
+        placement = drawing["link_placement"]
+        parts = [geometry.anchor, geometry.point, geometry.error, placement.translation,
+                 placement.rotation]
+        parts += [v for v in (geometry.axis, geometry.allowed_side) if v is not None]
+        return np.concatenate([np.asarray(part, dtype=float).ravel() for part in parts])
+
+    def _add_shape(self, name: str, drawing: dict) -> Any:
         """The scene node of a constraint's geometry, drawn as its ``shape`` says
         (:data:`web.constraint_drawing.SHAPES`; an unknown shape as a sphere at its anchor)."""
         shape = drawing["geometry"].shape
         add = {"ring": self._add_ring, "plane": self._add_square}.get(shape, self._add_sphere)
         return add(name, drawing)
 
-    def _add_ring(self, name: str, drawing: dict):
+    def _add_ring(self, name: str, drawing: dict) -> Any:
         """A ring around the link's axis at the anchor, outside the link's meshes."""
         geometry: ConstraintGeometry = drawing["geometry"]
         ring = ring_segments(geometry.anchor, geometry.axis, self.ring_radius_at(drawing))
         return self.server.scene.add_line_segments(f"{name}/{geometry.shape}", ring,
                                                    geometry.color, thickness=0.004)
 
-    def _add_square(self, name: str, drawing: dict):
+    def _add_square(self, name: str, drawing: dict) -> Any:
         """A translucent square through the anchor, across the axis, as wide as its link."""
         geometry: ConstraintGeometry = drawing["geometry"]
         size = self.square_sizes.get(drawing["link"], SQUARE_SIZE)
@@ -100,7 +111,7 @@ class Markers:
                                          wxyz=wxyz_from_z(geometry.axis),
                                          position=geometry.anchor)
 
-    def _add_sphere(self, name: str, drawing: dict):
+    def _add_sphere(self, name: str, drawing: dict) -> Any:
         """A translucent sphere at the anchor."""
         geometry: ConstraintGeometry = drawing["geometry"]
         return self.server.scene.add_icosphere(f"{name}/anchor", 0.012, geometry.color,
@@ -108,7 +119,7 @@ class Markers:
 
     def _along(self, link: str, placement: pin.SE3, point: np.ndarray) -> float:
         """Where the world ``point`` is along ``link``'s axis (link frame, m)."""
-        axis = np.asarray(self.app.robot.link_axes.get(link, (0.0, 0.0, 1.0)), dtype=float)
+        axis = np.asarray(self.robot.link_axes.get(link, (0.0, 0.0, 1.0)), dtype=float)
         return float(placement.actInv(np.asarray(point, dtype=float)) @ axis
                      / np.linalg.norm(axis))
 
@@ -138,54 +149,8 @@ class Markers:
             return None
         return ring_segments(drawing["geometry"].point, axis, radius, n=24)
 
-    def _create_markers(self, name: str, entry_id: str, drawing: dict, goal: np.ndarray,
-                        gizmo: bool) -> dict:
-        scene = self.server.scene
-        geometry: ConstraintGeometry = drawing["geometry"]
-        markers = {"shape": self._add_shape(name, drawing)}
-        collar = self._point_marker(drawing)
-        if collar is not None:  # outside the link cylinder: visible, unlike a point inside
-            markers["point"] = scene.add_line_segments(f"{name}/point", collar, POINT_COLOR,
-                                                       thickness=0.004)
-        else:
-            markers["point"] = scene.add_icosphere(f"{name}/point", 0.008, POINT_COLOR,
-                                                   position=geometry.point)
-        markers["error"] = scene.add_line_segments(f"{name}/error", np.zeros((1, 2, 3)),
-                                                   ERROR_COLOR, thickness=0.003)
-        if geometry.allowed_side is not None:
-            markers["arrow"] = scene.add_line_segments(
-                f"{name}/arrow", arrow_segments(geometry.anchor, geometry.allowed_side,
-                                                ALLOWED_SIDE_ARROW),
-                geometry.color, thickness=0.004)
-        if gizmo:  # drawn over the links (depth_test off): never hidden inside one
-            handle = scene.add_transform_controls(f"{name}/gizmo", scale=0.07, position=goal,
-                                                  disable_rotations=True, depth_test=False)
-
-            @handle.on_update
-            def _(event) -> None:
-                position = np.array(handle.position)
-                self._guarded(event, lambda: self.app.move_constraint(entry_id, position),
-                              key=("constraint", entry_id))
-
-            markers["gizmo"] = handle
-            markers["label"] = scene.add_label(
-                f"{name}/label", f"{entry_id} on {drawing['link']}",
-                position=geometry.anchor + np.array([0.0, 0.0, LABEL_HEIGHT]),
-                anchor="bottom-center")
-        return markers
-
-    @staticmethod
-    def _drawn_state(drawing: dict) -> np.ndarray:
-        """What a constraint's markers are drawn from, as one vector: its geometry's
-        points and directions, its link's pose."""
-        geometry: ConstraintGeometry = drawing["geometry"]
-        placement = drawing["link_placement"]
-        parts = [geometry.anchor, geometry.point, geometry.error, placement.translation,
-                 placement.rotation]
-        parts += [v for v in (geometry.axis, geometry.allowed_side) if v is not None]
-        return np.concatenate([np.asarray(part, dtype=float).ravel() for part in parts])
-
-    def _update_markers(self, markers: dict, drawing: dict) -> None:
+    def update(self, markers: dict[str, Any], drawing: dict) -> None:
+        """The constraint's nodes moved to ``drawing``."""
         geometry: ConstraintGeometry = drawing["geometry"]
         if geometry.shape == "ring":  # around the link axis, which turns with the link
             markers["shape"].points = ring_segments(geometry.anchor, geometry.axis,

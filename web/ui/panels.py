@@ -184,7 +184,7 @@ class Panels:
         self.app.load_scene(name)
         self._sync(self._widgets_from_app)
         self._sync(self.collision_settings.from_app)
-        self._forget_obstacles()
+        self.obstacle_markers.remove()
         self._move_gizmo_handles()
         self.scene_status.content = f"loaded `{self.app.scenes.name_of(name)}`"
 

@@ -14,13 +14,13 @@ forces or run to metres at its peaks."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 import viser
 
 from ..app.plant import PortReading
 from ..robot_view import RobotView
+from .markers import ConstraintDrawer
 from .shapes import arrow_segments
 
 #: the arrow's length per tenfold force (m): 2 cm
@@ -59,7 +59,7 @@ class PortForces:
 
     server: viser.ViserServer
     _views: dict[str, RobotView]
-    ring_radius_at: Callable[[dict], float]
+    constraint_drawer: ConstraintDrawer
     _port_arrows: dict[str, dict[str, viser.LineSegmentsHandle]]
 
     def _draw_ports(self, robots: dict) -> None:
@@ -83,7 +83,8 @@ class PortForces:
                     if handle is not None and handle.visible:
                         handle.visible = False
                     continue
-                segments = force_arrow(reading, self.ring_radius_at(drawings[port]))
+                clearance = self.constraint_drawer.ring_radius_at(drawings[port])
+                segments = force_arrow(reading, clearance)
                 if handle is None:
                     arrows[port] = self.server.scene.add_line_segments(
                         f"{prefix}/{port}", segments, FORCE_COLOR,

@@ -13,6 +13,7 @@ import viser
 from ..app import TeleopApp, default_ghost_offset
 from ..inbox import Inbox
 from ..robot_view import RobotView
+from .placed_markers import PlacedMarkers
 from .plots import LivePlots
 from .shapes import wxyz_of
 
@@ -41,10 +42,9 @@ class SceneView:
     _ghost_root: object
     _ghost_style: tuple | None
     _ghost_seen: float | None
-    _ghost_markers: dict[str, dict]
+    ghost_markers: PlacedMarkers
     _line_colors: dict[tuple[str, int], tuple]
     _port_arrows: dict[str, dict]
-    _drawn: dict[tuple[str, str], object]
     _gone: set[int]
     plots: LivePlots
 
@@ -142,9 +142,7 @@ class SceneView:
             self._ghost_root.remove()  # and every node under /ghost
         self._ghost_root = None
         self._views.pop("ghost", None)
-        self._ghost_markers.clear()
-        for key in [key for key in self._drawn if key[0].startswith("/ghost/")]:
-            self._drawn.pop(key)
+        self.ghost_markers.forget()  # its nodes removed with the root
         self._port_arrows.pop("ghost", None)  # removed with the root
 
     def _ghost_due(self) -> bool:
