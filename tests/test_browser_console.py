@@ -174,7 +174,7 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
     path = web.app.scenes.root / "my scene.json"
     open_tab(web, "Settings")
     input_of(page, "scene name").fill(path.name)
-    wait_until(lambda: web.ui.scene_path.value == path.name, WAIT, "the scene name")
+    wait_until(lambda: web.ui.settings_panel.scene_path.value == path.name, WAIT, "the scene name")
     page.get_by_role("button", name="Save scene").click()
     wait_until(path.exists, WAIT, "the scene file")
     expect(page.get_by_text("saved", exact=False).first).to_be_visible()

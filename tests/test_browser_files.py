@@ -67,7 +67,7 @@ def test_scene_names_leading_out_of_the_scene_folder_are_refused(web):
     names = ["../x.json", str(outside / "x.json"), "linked/x.json", "linked.json"]
     for name in names:
         input_of(page, "scene name").fill(name)
-        wait_until(lambda: web.ui.scene_path.value == name, WAIT, f"the scene name {name}")
+        wait_until(lambda: web.ui.settings_panel.scene_path.value == name, WAIT, f"the scene name {name}")
         page.get_by_role("button", name="Save scene").click()
         expect(page.get_by_text(f"scene name {name!r} refused", exact=False).first).to_be_visible()
         for close in page.locator(".mantine-Notification-closeButton").all():
@@ -79,7 +79,7 @@ def test_scene_names_leading_out_of_the_scene_folder_are_refused(web):
     assert files_under(root) == before, files_under(root) - before  # nothing written anywhere
     assert "Traceback" not in page.inner_text("body")
     input_of(page, "scene name").fill("inside.json")  # and a plain name is saved inside
-    wait_until(lambda: web.ui.scene_path.value == "inside.json", WAIT, "the scene name")
+    wait_until(lambda: web.ui.settings_panel.scene_path.value == "inside.json", WAIT, "the scene name")
     page.get_by_role("button", name="Save scene").click()
     wait_until((app.scenes.root / "inside.json").is_file, WAIT, "the scene file")
     assert files_under(root) - before == {"scenes/inside.json"}

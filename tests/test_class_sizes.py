@@ -11,12 +11,13 @@ import pkgutil
 
 import web
 
-#: The largest classes' methods now: ``TeleopUI`` 36 (84 before the live plots, the
+#: The largest classes' methods now: ``TeleopUI`` 24 (84 before the live plots, the
 #: status panel, the device panel, the placed items' panels and markers, the collision
-#: settings and the pairs' highlights left it); ``TeleopApp`` 64 (100 with 12 mixins before
-#: the recording, the way home, the collision scene and the input devices left it as
-#: components; 76 before the devices' actions went to :class:`web.app.devices.InputDevices`
-#: and the obstacles' and collision settings' to :class:`web.app.collisions.CollisionScene`).
+#: settings, the pairs' highlights, the Teleop and the Settings tabs left it);
+#: ``TeleopApp`` 64 (100 with 12 mixins before the recording, the way home, the collision
+#: scene and the input devices left it as components; 76 before the devices' actions went
+#: to :class:`web.app.devices.InputDevices` and the obstacles' and collision settings' to
+#: :class:`web.app.collisions.CollisionScene`).
 #: The closing target is 30.
 MOST_METHODS = 64
 

@@ -303,7 +303,7 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
     ui = make_ui(server, app)
     assert len(ui.target_gizmos) == 2 and ui.ee_names == {"arm_left_link_tool0": "left",
                                                           "arm_right_link_tool0": "right"}
-    assert ui.active_arm.visible and ui.active_arm.options == ("left", "right")
+    assert ui.teleop_panel.active_arm.visible and ui.teleop_panel.active_arm.options == ("left", "right")
     for gizmo, target in zip(ui.target_gizmos, app.targets):
         np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
     right = ui.target_gizmos[1]  # what the right gizmo's drag does: the right target only
@@ -326,13 +326,13 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
     np.testing.assert_allclose(ui.reach_lines[1].colors[0, 0], STATUS_COLORS["ok"])
     details = ui.status_panel.details.content
     assert "*left* on target" in details and "*right* moving to the target" in details
-    ui.active_arm.value = "right"  # the nudges act on the active arm
-    ui.nudge_buttons.value = "+z"
+    ui.teleop_panel.active_arm.value = "right"  # the nudges act on the active arm
+    ui.teleop_panel.nudge_buttons.value = "+z"
     before = app.targets
-    app.nudge_target(0.005 * np.array([0.0, 0.0, 1.0]), ui._active_ee())
+    app.nudge_target(0.005 * np.array([0.0, 0.0, 1.0]), ui.teleop_panel.active_ee())
     np.testing.assert_allclose(app.inputs[1].target.translation - before[1].translation,
                                [0, 0, 0.005], atol=1e-15)
-    ui._home()
+    ui.teleop_panel.home()
     for gizmo, target in zip(ui.target_gizmos, app.targets):
         np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
 

@@ -191,22 +191,24 @@ def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app.set_motion_scale(0.5)
     app.set_ghost("qp:daqp")
     app.set_task_mode("position")
-    ui.scene_path.value = "s.json"
-    ui._save_scene()
-    assert ui.scene_status.content == "saved `s.json`"
+    ui.settings_panel.scene_path.value = "s.json"
+    ui.settings_panel.save_scene()
+    assert ui.settings_panel.scene_status.content == "saved `s.json`"
     assert (tmp_path / "scenes" / "s.json").is_file()
     app.set_gain(100.0)
     app.set_motion_scale(1.0)
     app.set_ghost(None)
     app.set_task_mode("auto")
     app.clear_constraints()
-    ui._load_scene()
+    ui.settings_panel.load_scene()
     assert list(app.entries) == ["hole-1"] and app.gain == 60.0
-    assert app.task_mode == "position" and ui.task_mode_menu.value == "position only"
+    assert app.task_mode == "position" and ui.teleop_panel.task_mode_menu.value == "position only"
     assert app.loops["main"].task_modes == app.loops["ghost"].task_modes == ("position",)
-    assert ui.gain_slider.value == 60.0 and ui.motion_scale.value == 0.5
-    assert ui.side_by_side.value is True and ui.ghost_menu.value == "qp:daqp"
-    np.testing.assert_allclose(ui.ghost_offset.value, app.ghost_offset)
+    assert ui.settings_panel.gain_slider.value == 60.0
+    assert ui.teleop_panel.motion_scale.value == 0.5
+    panel = ui.teleop_panel
+    assert panel.side_by_side.value is True and panel.ghost_menu.value == "qp:daqp"
+    np.testing.assert_allclose(panel.ghost_offset.value, app.ghost_offset)
 
 
 def test_the_panda_draws_its_meshes(server):

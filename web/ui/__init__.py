@@ -2,7 +2,7 @@
 that runs both (:func:`run_server`); one module per part (:mod:`web.ui.core`)."""
 
 from .core import TeleopUI
-from .panels import CONTROLLER_CHOICES, NUDGES
+from .teleop_panel import CONTROLLER_CHOICES, NUDGES
 from .collision_view import distance_color
 from .placed_markers import node_name
 from .plots import (

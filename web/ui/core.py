@@ -58,14 +58,15 @@ from .force_panel import ForcePanel
 from .markers import ConstraintDrawer
 from .obstacle_drawer import ObstacleDrawer
 from .obstacle_form import ObstacleForm
-from .panels import Panels
 from .placed_markers import PlacedMarkers
 from .placed_panel import PlacedActions, PlacedPanel, PlacedWords
 from .plots import LivePlots
 from .port_forces import PortForces
 from .scene_view import SceneView
+from .settings_panel import SettingsPanel
 from .shapes import LinkProfile, square_size
 from .status_view import StatusPanel
+from .teleop_panel import TeleopPanel
 
 VIEW_RATE = 30.0  # Hz: robot poses, markers, status
 PLOT_RATE = 10.0  # Hz: live plots
@@ -93,7 +94,7 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
     return names
 
 
-class TeleopUI(SceneView, Panels, PortForces):
+class TeleopUI(SceneView, PortForces):
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -119,7 +120,6 @@ class TeleopUI(SceneView, Panels, PortForces):
         self._syncing = threading.local()
         self._line_colors: dict[tuple[str, int], tuple] = {}  # (robot, EE) -> its line colour
         self._ghost_seen: float | None = None  # when the view first saw the ghost
-        self._saved_offset = app.ghost_offset.copy()
         robot = app.robot
         #: where each link's geometry is around its axis: rings and collars go outside it
         self.profiles = {link: LinkProfile.of(robot, link) for link in app.moving_links}
@@ -193,7 +193,9 @@ class TeleopUI(SceneView, Panels, PortForces):
                                             self.notify)
         self.tabs = gui.add_tab_group()
         with self.tabs.add_tab("Teleop"):
-            self._build_teleop_panel()
+            self.teleop_panel = TeleopPanel(gui, self.app, self.ee_names, self._guarded,
+                                            self._sync, self._move_gizmo_handle,
+                                            self._move_gizmo_handles, self.notify)
             self.device_panel = DevicePanel(self.server, self.app, self.ee_names, self._guarded)
         app = self.app
         with self.tabs.add_tab("Constraints"):
@@ -208,11 +210,11 @@ class TeleopUI(SceneView, Panels, PortForces):
             self.obstacle_panel = PlacedPanel(
                 gui, {kind: ObstacleForm(kind) for kind in OBSTACLE_TYPES},
                 PlacedActions(lambda kind, values: app.collisions.add(
-                    kind, ee=self._active_ee(), **values),
+                    kind, ee=self.teleop_panel.active_ee(), **values),
                     app.collisions.remove, app.collisions.clear),
                 PlacedWords("obstacles", "Remove obstacle", "Clear obstacles"), self._guarded)
         with self.tabs.add_tab("Settings"):
-            self._build_settings_panel()
+            self.settings_panel = SettingsPanel(gui, app, self._guarded, self._scene_loaded)
         force_tab = self.tabs.add_tab("Force")
         with force_tab:
             self.force_panel = ForcePanel(self.server, force_tab, self.app.force, self._guarded,
@@ -226,6 +228,15 @@ class TeleopUI(SceneView, Panels, PortForces):
             with self.tabs.add_tab("Robot"):
                 gui.add_markdown("**Loaded with fallbacks:**\n\n" +
                                  "\n".join(f"* {note}" for note in self.notes))
+
+    def _scene_loaded(self) -> None:
+        """Every input and gizmo handle as the app has them after loading a scene, the
+        obstacles drawn afresh."""
+        self._sync(self.teleop_panel.from_app)
+        self._sync(self.settings_panel.from_app)
+        self._sync(self.collision_settings.from_app)
+        self.obstacle_markers.remove()
+        self._move_gizmo_handles()
 
     def _sync(self, action) -> None:
         """Set widgets from the app without their callbacks acting."""
@@ -300,6 +311,4 @@ class TeleopUI(SceneView, Panels, PortForces):
                                   snapshot["collisions"])
         if status:
             self.status_panel.draw(snapshot)
-            label = "Release clutch" if snapshot["clutch"] else "Clutch"
-            if self.clutch_button.label != label:
-                self.clutch_button.label = label
+            self.teleop_panel.show_clutch(snapshot["clutch"])

@@ -114,6 +114,16 @@ class SceneView:
 
         self.inbox.post(hold, key=("hold", index))
 
+    def _move_gizmo_handle(self, pose: pin.SE3, ee: int = 0) -> None:
+        """EE ``ee``'s gizmo handle put at ``pose`` (for every browser)."""
+        self.target_gizmos[ee].position = pose.translation
+        self.target_gizmos[ee].wxyz = wxyz_of(pose.rotation)
+
+    def _move_gizmo_handles(self) -> None:
+        """Every gizmo handle where the app's gizmo is."""
+        for index, hand in enumerate(self.app.inputs):
+            self._move_gizmo_handle(hand.gizmo, index)
+
     def _ghost_rgba(self) -> tuple[float, float, float, float]:
         overlay = float(np.linalg.norm(self.app.ghost_offset)) < 1e-9
         return GHOST_OVERLAY_RGBA if overlay else GHOST_RGBA
