@@ -12,6 +12,7 @@ superseded in their period, late periods).
 
 Run:  OPENBLAS_NUM_THREADS=1 python docs/measure_ros2_jitter.py [--plant kinematic|mujoco]
       [--runs 3] [--duration 3] [--command-latency 1] [--lockstep MS] [--domain 150]
+      [--realtime-priority 50]  (0: both processes' threads ordinary)
 (the machine's other work moves these figures: the jitter counts say by how much)
 """
 
@@ -45,6 +46,8 @@ def main() -> None:
     parser.add_argument("--domain", type=int, default=150)
     parser.add_argument("--lockstep", type=float, default=0.0,
                         help="teleop sim --lockstep MS (0: the robot does not wait)")
+    parser.add_argument("--realtime-priority", type=int, default=50,
+                        help="SCHED_FIFO priority of both sides' threads (0: ordinary)")
     args = parser.parse_args()
     os.environ.setdefault("CYCLONEDDS_URI", LOOPBACK)
 
@@ -69,13 +72,15 @@ def main() -> None:
         domain = (args.domain + run) % 233
         sim = subprocess.Popen([sys.executable, "-m", "teleop", "sim", "--ros2", "--rate",
                                 str(RATE), "--ros-domain", str(domain), "--lockstep",
-                                str(args.lockstep), *where],
+                                str(args.lockstep), "--realtime-priority",
+                                str(args.realtime_priority), *where],
                                cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
                                stderr=subprocess.PIPE, text=True)
         try:
             start = time.monotonic()
             settings = Ros2Settings(domain=domain, start_timeout=60.0, stale_after=1.0,
-                                    command_latency=args.command_latency)
+                                    command_latency=args.command_latency,
+                                    realtime_priority=args.realtime_priority)
             result = run_plan(plan, "cjm", config, args.duration,
                               plant=PlantChoice("ros2", ros2=settings))
             wall = time.monotonic() - start
@@ -84,7 +89,7 @@ def main() -> None:
             _, err = sim.communicate()
         counts = err.strip().splitlines()[-1] if err.strip() else "(the sim printed nothing)"
         print(f"over DDS {args.plant}, command_latency {args.command_latency}, lockstep "
-              f"{args.lockstep:g} ms, run {run}: "
+              f"{args.lockstep:g} ms, realtime priority {args.realtime_priority}, run {run}: "
               f"{result.metrics()['constraint_error_max_m'] * 1e6:.3f} um in {wall:.2f} s; "
               f"{counts}", flush=True)
 

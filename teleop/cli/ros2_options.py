@@ -10,7 +10,7 @@ from teleop.plants.ros2.settings import Ros2Settings
 #: (option, attribute) of the ROS 2 options.
 ROS2_OPTIONS = (("--joint-states", "joint_states"), ("--command-topic", "command_topic"),
                 ("--command-joints", "command_joints"), ("--crtk", "crtk"),
-                ("--ros-domain", "ros_domain"))
+                ("--ros-domain", "ros_domain"), ("--realtime-priority", "realtime_priority"))
 
 
 def add_ros2_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
@@ -28,6 +28,11 @@ def add_ros2_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup) 
                              "/operating_state (default: ros2_control)")
     parser.add_argument("--ros-domain", type=int, metavar="N",
                         help="ROS 2 domain id, 0-232 (default: ROS_DOMAIN_ID, else 0)")
+    parser.add_argument("--realtime-priority", type=int, metavar="N",
+                        help="SCHED_FIFO priority 1-99 of the threads on the wire, as "
+                             "ros2_control's controller_manager runs; 0: ordinary scheduling "
+                             "(default: 50; without the privilege they stay ordinary and the "
+                             "measures say so)")
 
 
 def given_ros2_options(args: argparse.Namespace) -> list[str]:
@@ -39,6 +44,7 @@ def ros2_settings(args: argparse.Namespace) -> Ros2Settings:
     """The settings the options ask for (``ValueError`` naming the one refused)."""
     settings = {"joint_states": args.joint_states, "command_topic": args.command_topic,
                 "crtk": args.crtk, "domain": args.ros_domain,
+                "realtime_priority": args.realtime_priority,
                 "command_joints": (None if args.command_joints is None else
                                    tuple(n.strip() for n in args.command_joints.split(",")
                                          if n.strip()))}

@@ -16,7 +16,14 @@ watchdog thread checks it every period: a velocity controller holds its last com
 forever), when a state is not finite or lacks a joint, when a command is not finite, on
 :meth:`close`, at exit and on any error raised through the plant's ``with`` block; a stop
 holds until :meth:`reset` and :attr:`Ros2Measures.stopped` says why. Zeros go out once,
-too, when the loop stops actuating for ``stale_after`` (it may command again)."""
+too, when the loop stops actuating for ``stale_after`` (it may command again).
+
+The threads on the wire run real-time (``Ros2Settings.realtime_priority``, SCHED_FIFO 50
+by default, :mod:`teleop.plants.ros2.realtime`): DDS's threads and the watchdog, started
+real-time, and the thread that calls :meth:`Ros2Plant.actuate` (the loop's), made
+real-time at its first call, so a command is not late for the robot's update because the
+machine is busy (docs/ros2.md "Real-time threads"); :attr:`Ros2Measures.realtime` says
+how they run."""
 
 from __future__ import annotations
 
@@ -38,6 +45,7 @@ from constraints import Constraint
 from .joint_map import indices, model_joint_names
 from .messages import Float64MultiArray, JointState, OperatingState
 from .node import Ros2Node
+from .realtime import make_realtime, started_realtime
 from .settings import Ros2Settings
 
 
@@ -54,6 +62,8 @@ class Ros2Measures:
         one: another node commands the same controller).
     operating_state : CRTK's last ``operating_state.state`` (empty: none or not CRTK).
     idle_stops : zeros published because the loop stopped actuating for ``stale_after``.
+    realtime : how the threads on the wire are scheduled (``DDS and watchdog: SCHED_FIFO
+        50; actuating: SCHED_FIFO 50``), with the reason when the system refused.
     port_forces : (0, 3): the wall's force is not measured over ROS 2.
     port_displacements : (0,).
     """
@@ -64,6 +74,7 @@ class Ros2Measures:
     command_publishers: int = 0
     operating_state: str = ""
     idle_stops: int = 0
+    realtime: str = ""
     port_forces: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     port_displacements: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -97,7 +108,8 @@ class Ros2Plant:
         self._command_order = indices(command_joints, self.names, "the robot model")
         self._command_names = list(command_joints)
         self._lock = threading.Condition(threading.RLock())  # notified at each new state
-        self.node = Ros2Node(self.settings.domain)
+        self.node, dds_threads = started_realtime(self.settings.realtime_priority,
+                                                  lambda: Ros2Node(self.settings.domain))
         crtk = bool(self.settings.crtk)
         self._states = self.node.reader(self.settings.state_topic, JointState)
         command_type = JointState if crtk else Float64MultiArray
@@ -120,11 +132,16 @@ class Ros2Plant:
         self._actuated = -math.inf  # time.monotonic() of the last command published
         self._fresh = 0  # good states taken since the start
         self._period_start = 0.0  # time.monotonic() when the last period ended
+        #: how the threads on the wire run; the actuating thread's added at its first call
+        self._scheduling = f"DDS: {dds_threads}; watchdog: "
+        self._actuating_thread = 0  # threading.get_ident() of the thread made real-time
         self.last_measures = Ros2Measures()
         self._running = True
         self._closed = False
         self._watchdog = threading.Thread(target=self._watch, name="ros2-watchdog", daemon=True)
-        self._watchdog.start()
+        _, watchdog = started_realtime(self.settings.realtime_priority, self._watchdog.start)
+        self._scheduling += watchdog
+        self.last_measures.realtime = self._scheduling
         atexit.register(self.close)
 
     # --- the wire -------------------------------------------------------------------
@@ -235,7 +252,8 @@ class Ros2Plant:
         where it is."""
         with self._lock:
             self._stop("reset")
-            self.last_measures = Ros2Measures(states=self.last_measures.states)
+            self.last_measures = Ros2Measures(states=self.last_measures.states,
+                                              realtime=self.last_measures.realtime)
             self._commanding = False
             self._q = None  # a fresh state is awaited, its names checked again
             self._in_flight.clear()
@@ -262,7 +280,12 @@ class Ros2Plant:
         """``qd`` published (zeros once stopped, nothing before the first state), the
         period ended by the robot's next state (but not before half a period, nor after
         one and a half: a late robot does not hold the loop up, the watchdog judges it),
-        the mean velocity from ``q`` to the state then received returned."""
+        the mean velocity from ``q`` to the state then received returned. The calling
+        thread is made real-time at its first call (``settings.realtime_priority``)."""
+        if threading.get_ident() != self._actuating_thread:
+            self._actuating_thread = threading.get_ident()
+            self.last_measures.realtime = (f"{self._scheduling}; actuating: "
+                                           f"{make_realtime(self.settings.realtime_priority)}")
         with self._lock:
             fresh = self._fresh
             self._take_states()

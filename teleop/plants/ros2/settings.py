@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, fields
 from constraints.validation import short_repr
 
 from .names import dds_topic, domain_id
+from .realtime import check_priority
 
 #: the most control periods :attr:`Ros2Settings.command_latency` predicts over
 MAX_COMMAND_LATENCY = 10
@@ -35,6 +36,10 @@ class Ros2Settings:
         that applies the command computed from it (ros2_control: 1, the command waits
         for the controller's next update); :meth:`Ros2Plant.sense` moves the state on by
         the commands in flight (0: the state as received).
+    realtime_priority : the ``SCHED_FIFO`` priority (1-99) of the threads on the wire
+        (the thread that actuates, the watchdog, DDS's own), as ros2_control's
+        ``controller_manager`` runs its update thread at 50; 0: ordinary scheduling
+        (:mod:`teleop.plants.ros2.realtime`).
     """
 
     joint_states: str = "/joint_states"
@@ -45,6 +50,7 @@ class Ros2Settings:
     stale_after: float = 0.05
     start_timeout: float = 5.0
     command_latency: int = 1
+    realtime_priority: int = 50
 
     def __post_init__(self) -> None:
         """``ValueError`` naming the field: a topic ROS 2 refuses, a domain outside
@@ -63,6 +69,7 @@ class Ros2Settings:
                 or not 0 <= self.command_latency <= MAX_COMMAND_LATENCY):
             raise ValueError(f"command_latency must be a whole number of periods in [0, "
                              f"{MAX_COMMAND_LATENCY}], got {self.command_latency!r}")
+        check_priority(self.realtime_priority)
         joints = tuple(self.command_joints)
         if len(set(joints)) != len(joints):
             raise ValueError(f"command_joints names a joint twice: {list(joints)}")

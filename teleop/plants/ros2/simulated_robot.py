@@ -14,7 +14,11 @@ With constraints (the holes of a scene or a scenario) the physics plant's walls 
 their ports, and each port's wall force on the instrument (world frame, N, at the port:
 ``PlantMeasures.port_forces``, docs/design.md 17.2) is published every period as a
 ``geometry_msgs/WrenchStamped`` on ``<port_forces>/port<i>`` (``i`` the port's index in
-the constraints' order, frame ``world``, torque zero)."""
+the constraints' order, frame ``world``, torque zero).
+
+Its threads run real-time as a ros2_control ``controller_manager``'s update thread does
+(``Ros2Settings.realtime_priority``, SCHED_FIFO 50 by default): DDS's threads, started so,
+and the thread that runs :meth:`SimulatedRos2Robot.run` (:mod:`teleop.plants.ros2.realtime`)."""
 
 from __future__ import annotations
 
@@ -32,6 +36,7 @@ from .joint_map import indices, model_joint_names
 from .messages import (Float64MultiArray, Header, JointState, OperatingState, Time, Vector3,
                        Wrench, WrenchStamped)
 from .node import Ros2Node
+from .realtime import make_realtime, started_realtime
 from .names import dds_topic
 from .settings import Ros2Settings
 
@@ -93,7 +98,10 @@ class SimulatedRos2Robot:
         self.held = 0
         self.superseded = 0
         self.late = 0
-        self.node = Ros2Node(self.settings.domain)
+        self.node, self._dds_scheduling = started_realtime(
+            self.settings.realtime_priority, lambda: Ros2Node(self.settings.domain))
+        #: how its threads run (the periods' thread's added by :meth:`run`)
+        self.realtime = f"DDS: {self._dds_scheduling}"
         self._states = self.node.writer(self.settings.state_topic, JointState)
         crtk = bool(self.settings.crtk)
         self._command_type = JointState if crtk else Float64MultiArray
@@ -147,7 +155,10 @@ class SimulatedRos2Robot:
                     force=Vector3(*(float(f) for f in force)), torque=Vector3())))
 
     def run(self, duration: float | None = None) -> None:
-        """Periods on the wall clock until :meth:`stop` (or ``duration`` seconds)."""
+        """Periods on the wall clock until :meth:`stop` (or ``duration`` seconds), the
+        calling thread made real-time (``settings.realtime_priority``)."""
+        self.realtime = (f"DDS: {self._dds_scheduling}; periods: "
+                         f"{make_realtime(self.settings.realtime_priority)}")
         start = time.monotonic()
         deadline = start
         while not self._stop.is_set():
@@ -162,7 +173,8 @@ class SimulatedRos2Robot:
         """The jitter counts in one line."""
         return (f"{self.periods} periods, {self.commands} commands: {self.held} periods held "
                 f"the last command (none new), {self.superseded} commands superseded in "
-                f"their period, {self.late} periods started over half a period late")
+                f"their period, {self.late} periods started over half a period late "
+                f"(threads {self.realtime})")
 
     def stop(self) -> None:
         """:meth:`run` returns after its period."""

@@ -1,0 +1,78 @@
+"""Real-time scheduling of the threads on the wire (docs/ros2.md, "Real-time threads"), as
+ros2_control's ``controller_manager`` asks for its update thread (``SCHED_FIFO``,
+``thread_priority`` 50).
+
+Over DDS the loop and the robot run on two clocks: the robot applies at each update the
+newest command it has, so a command that misses its update (the loop's process not
+scheduled in time) is replaced by the last one held, and the next two arrive in one
+period (one never acts). On a loaded machine the ordinary scheduler lets a process wait
+for milliseconds, the length of a period at 500 Hz; a ``SCHED_FIFO`` thread runs as soon
+as it is woken, ahead of every ordinary one. :func:`make_realtime` puts the calling thread
+there; :func:`started_realtime` does it while a function starts threads (DDS's receive
+and delivery threads, a watchdog), which inherit it, and gives the calling thread its own
+scheduling back afterwards (a participant joining a domain whose threads another one of
+the process started earlier starts none: they stay as they were, and the words say so).
+Without the privilege (``CAP_SYS_NICE`` or an ``RLIMIT_RTPRIO`` of at least the priority)
+the threads stay as they were and the words say so: they are what the plant's measures
+and the simulated robot report."""
+
+from __future__ import annotations
+
+import os
+from typing import Callable, TypeVar
+
+T = TypeVar("T")
+
+#: SCHED_FIFO's highest priority on Linux (the lowest is 1)
+MAX_PRIORITY = 99
+
+
+def check_priority(priority: object) -> int:
+    """``priority`` as a whole number in [0, 99] (0: ordinary scheduling), else
+    ``ValueError`` naming it."""
+    if (isinstance(priority, bool) or not isinstance(priority, int)
+            or not 0 <= priority <= MAX_PRIORITY):
+        raise ValueError(f"realtime_priority must be a whole number in [0, {MAX_PRIORITY}] "
+                         f"(0: not real-time), got {priority!r}")
+    return priority
+
+
+def scheduling_words() -> str:
+    """How the calling thread is scheduled, in words (``SCHED_FIFO 50``)."""
+    policy = os.sched_getscheduler(0)
+    name = {os.SCHED_FIFO: "SCHED_FIFO", os.SCHED_RR: "SCHED_RR"}.get(policy)
+    if name is None:
+        return "ordinary scheduling"
+    return f"{name} {os.sched_getparam(0).sched_priority}"
+
+
+def make_realtime(priority: int) -> str:
+    """The calling thread scheduled ``SCHED_FIFO`` at ``priority`` (1-99; 0: left as it
+    is). Returns how it is scheduled then, with the reason when the system refused
+    (``ValueError`` for a priority outside [0, 99])."""
+    if check_priority(priority) == 0:
+        return scheduling_words()
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as error:
+        return (f"{scheduling_words()} (SCHED_FIFO {priority} refused: "
+                f"{error.strerror or error})")
+    return scheduling_words()
+
+
+def started_realtime(priority: int, start: Callable[[], T]) -> tuple[T, str]:
+    """``start()`` called with the calling thread ``SCHED_FIFO`` at ``priority``, so the
+    threads it starts inherit it; after it, the calling thread is scheduled as before.
+    Returns what ``start`` returned and the words: the scheduling and how many threads
+    started (``SCHED_FIFO 50, 5 threads started``)."""
+    policy, parameters = os.sched_getscheduler(0), os.sched_getparam(0)
+    before = set(os.listdir("/proc/self/task"))
+    words = make_realtime(priority)
+    try:
+        result = start()
+    finally:
+        if (os.sched_getscheduler(0), os.sched_getparam(0)) != (policy, parameters):
+            os.sched_setscheduler(0, policy, parameters)
+    started = len(set(os.listdir("/proc/self/task")) - before)
+    return result, (f"{words}, {started} thread{'s' * (started != 1)} started" if started
+                    else "no thread started (those already running unchanged)")

@@ -1,0 +1,141 @@
+"""The threads on the wire run real-time (teleop/plants/ros2/realtime.py, docs/ros2.md
+"Real-time threads"): each thread's scheduling is read back from the kernel
+(``sched_getscheduler`` of its id) and compared with what the words say; whether the system
+grants ``SCHED_FIFO`` is read independently, from the process's capabilities and limits."""
+
+from __future__ import annotations
+
+import os
+import resource
+import threading
+from typing import Callable
+
+import numpy as np
+import pytest
+
+from teleop import load_robot
+from teleop.plants.ros2.realtime import make_realtime, started_realtime
+from teleop.plants.ros2.ros2_plant import Ros2Plant
+from teleop.plants.ros2.settings import Ros2Settings
+
+PRIORITY = 20
+DT = 0.002
+CAP_SYS_NICE = 23  # linux/capability.h
+
+#: Cyclone on the loopback interface only (as tests/test_ros2_wire.py)
+LOOPBACK = ("<General><Interfaces><NetworkInterface name='lo'/></Interfaces></General>"
+            "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+            "<MaxAutoParticipantIndex>40</MaxAutoParticipantIndex>"
+            "<Peers><Peer address='127.0.0.1'/></Peers></Discovery>")
+
+
+def granted(priority: int) -> bool:
+    """Whether this process may make a thread SCHED_FIFO at ``priority``: CAP_SYS_NICE in
+    its effective capabilities, or an RLIMIT_RTPRIO at least ``priority``."""
+    with open("/proc/self/status") as status:
+        effective = next(int(line.split()[1], 16) for line in status
+                         if line.startswith("CapEff:"))
+    soft, _ = resource.getrlimit(resource.RLIMIT_RTPRIO)
+    return bool(effective >> CAP_SYS_NICE & 1) or soft == resource.RLIM_INFINITY or soft >= priority
+
+
+def scheduling_of(thread_id: int) -> tuple[int, int]:
+    """The kernel's policy and priority of the thread ``thread_id``."""
+    return os.sched_getscheduler(thread_id), os.sched_getparam(thread_id).sched_priority
+
+
+def in_new_thread(function: Callable[[], object]) -> tuple[object, tuple[int, int]]:
+    """``function()`` in a new ordinary thread; its result and the thread's scheduling
+    read by the kernel once it returned (the thread still alive)."""
+    out: dict[str, object] = {}
+    done, read = threading.Event(), threading.Event()
+
+    def body() -> None:
+        out["result"] = function()
+        done.set()
+        read.wait()
+    thread = threading.Thread(target=body)
+    thread.start()
+    done.wait()
+    assert thread.native_id is not None
+    scheduling = scheduling_of(thread.native_id)
+    read.set()
+    thread.join()
+    return out["result"], scheduling
+
+
+def expected_words(priority: int) -> str:
+    if priority and granted(priority):
+        return f"SCHED_FIFO {priority}"
+    if priority:
+        return f"ordinary scheduling (SCHED_FIFO {priority} refused: Operation not permitted)"
+    return "ordinary scheduling"
+
+
+@pytest.mark.parametrize("priority", [0, PRIORITY])
+def test_a_thread_is_made_real_time_as_its_words_say(priority):
+    words, (policy, level) = in_new_thread(lambda: make_realtime(priority))
+    assert words == expected_words(priority)
+    fifo = priority > 0 and granted(priority)
+    assert (policy, level) == ((os.SCHED_FIFO, priority) if fifo else (os.SCHED_OTHER, 0))
+
+
+def test_threads_started_real_time_inherit_it_and_the_caller_is_restored():
+    started: list[threading.Thread] = []
+    release = threading.Event()
+
+    def start_two() -> str:
+        for _ in range(2):
+            started.append(threading.Thread(target=release.wait))
+            started[-1].start()
+        return "started"
+
+    (result, words), caller = in_new_thread(lambda: started_realtime(PRIORITY, start_two))
+    try:
+        assert result == "started"
+        assert words == f"{expected_words(PRIORITY)}, 2 threads started"
+        assert caller == (os.SCHED_OTHER, 0)
+        fifo = (os.SCHED_FIFO, PRIORITY) if granted(PRIORITY) else (os.SCHED_OTHER, 0)
+        assert [scheduling_of(t.native_id or 0) for t in started] == [fifo, fifo]
+    finally:
+        release.set()
+        for thread in started:
+            thread.join()
+    (_, words), _ = in_new_thread(lambda: started_realtime(PRIORITY, lambda: None))
+    assert words == "no thread started (those already running unchanged)"
+
+
+@pytest.mark.parametrize("priority", [-1, 100, 1.5, True, "50"])
+def test_a_priority_out_of_range_is_refused_by_name(priority):
+    with pytest.raises(ValueError, match="realtime_priority must be a whole number in"):
+        Ros2Settings(realtime_priority=priority)
+    with pytest.raises(ValueError, match="realtime_priority must be a whole number in"):
+        make_realtime(priority)
+
+
+@pytest.mark.parametrize("priority", [0, PRIORITY])
+def test_the_plants_threads_run_as_its_measures_say(monkeypatch, priority):
+    """The plant's DDS threads and watchdog (started with it, the first participant of its
+    domain in this process) and the thread that actuates (at its first call) are
+    SCHED_FIFO at the settings' priority; the constructing thread is left as it was."""
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+    robot = load_robot("ur5_instrument")
+    domain = 170 + os.getpid() % 30 + priority
+    before = set(os.listdir("/proc/self/task"))
+    caller = scheduling_of(threading.get_native_id())
+    settings = Ros2Settings(domain=domain, realtime_priority=priority, stale_after=10.0)
+    with Ros2Plant(robot, DT, settings) as plant:
+        started = sorted(set(os.listdir("/proc/self/task")) - before)
+        assert scheduling_of(threading.get_native_id()) == caller
+        fifo = (os.SCHED_FIFO, priority) if priority and granted(priority) else (
+            os.SCHED_OTHER, 0)
+        assert len(started) >= 2  # DDS's threads and the watchdog
+        assert [scheduling_of(int(t)) for t in started] == [fifo] * len(started)
+        words = expected_words(priority)
+        assert plant.measures().realtime == (f"DDS: {words}, {len(started) - 1} threads "
+                                             f"started; watchdog: {words}, 1 thread started")
+        zeros = np.zeros(robot.model.nv)
+        moved, actuating = in_new_thread(lambda: plant.actuate(zeros, robot.q_home, []))
+        np.testing.assert_array_equal(moved, zeros)  # no state yet: nothing moved
+        assert actuating == fifo
+        assert plant.measures().realtime.endswith(f"; actuating: {words}")
