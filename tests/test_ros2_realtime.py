@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import resource
 import threading
+import time
 from typing import Callable
 
 import numpy as np
@@ -116,26 +117,56 @@ def test_a_priority_out_of_range_is_refused_by_name(priority):
 @pytest.mark.parametrize("priority", [0, PRIORITY])
 def test_the_plants_threads_run_as_its_measures_say(monkeypatch, priority):
     """The plant's DDS threads and watchdog (started with it, the first participant of its
-    domain in this process) and the thread that actuates (at its first call) are
-    SCHED_FIFO at the settings' priority; the constructing thread is left as it was."""
+    domain in this process) are SCHED_FIFO at the settings' priority; the thread that
+    actuates is from its first call until it stops calling for ``stale_after``, and again
+    at its next call until the plant closes; the constructing thread is left as it was."""
     monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
     robot = load_robot("ur5_instrument")
     domain = 170 + os.getpid() % 30 + priority
     before = set(os.listdir("/proc/self/task"))
     caller = scheduling_of(threading.get_native_id())
-    settings = Ros2Settings(domain=domain, realtime_priority=priority, stale_after=10.0)
+    settings = Ros2Settings(domain=domain, realtime_priority=priority, stale_after=0.5)
+    fifo = (os.SCHED_FIFO, priority) if priority and granted(priority) else (os.SCHED_OTHER, 0)
+    words = expected_words(priority)
+    zeros = np.zeros(robot.model.nv)
+    actuate, done, seen = threading.Event(), threading.Event(), []
+
+    def loop() -> None:  # a loop's thread: actuates when told, until told to end
+        while actuate.wait() and not done.is_set():
+            actuate.clear()
+            seen.append(plant.actuate(zeros, robot.q_home, []))
+
     with Ros2Plant(robot, DT, settings) as plant:
         started = sorted(set(os.listdir("/proc/self/task")) - before)
         assert scheduling_of(threading.get_native_id()) == caller
-        fifo = (os.SCHED_FIFO, priority) if priority and granted(priority) else (
-            os.SCHED_OTHER, 0)
         assert len(started) >= 2  # DDS's threads and the watchdog
         assert [scheduling_of(int(t)) for t in started] == [fifo] * len(started)
-        words = expected_words(priority)
-        assert plant.measures().realtime == (f"DDS: {words}, {len(started) - 1} threads "
-                                             f"started; watchdog: {words}, 1 thread started")
-        zeros = np.zeros(robot.model.nv)
-        moved, actuating = in_new_thread(lambda: plant.actuate(zeros, robot.q_home, []))
-        np.testing.assert_array_equal(moved, zeros)  # no state yet: nothing moved
-        assert actuating == fifo
-        assert plant.measures().realtime.endswith(f"; actuating: {words}")
+        threads = (f"DDS: {words}, {len(started) - 1} threads started; watchdog: {words}, "
+                   f"1 thread started")
+        assert plant.measures().realtime == threads
+        thread = threading.Thread(target=loop, daemon=True)  # a failure leaves it waiting
+        thread.start()
+        assert thread.native_id is not None
+        actuate.set()
+        assert wait_until(lambda: len(seen) == 1)
+        np.testing.assert_array_equal(seen[0], zeros)  # no state yet: nothing moved
+        assert scheduling_of(thread.native_id) == fifo
+        assert plant.measures().realtime == f"{threads}; actuating: {words}"
+        assert wait_until(lambda: plant.measures().realtime == threads)  # idle: given back
+        assert scheduling_of(thread.native_id) == (os.SCHED_OTHER, 0)
+        actuate.set()
+        assert wait_until(lambda: len(seen) == 2)
+        assert scheduling_of(thread.native_id) == fifo
+    assert scheduling_of(thread.native_id) == (os.SCHED_OTHER, 0)  # closed: given back
+    done.set()
+    actuate.set()
+    thread.join()
+
+
+def wait_until(condition: Callable[[], bool], periods: int = 2500) -> bool:
+    """``condition`` polled every period, up to ``periods`` periods."""
+    for _ in range(periods):
+        if condition():
+            return True
+        time.sleep(DT)
+    return condition()

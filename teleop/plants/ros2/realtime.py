@@ -19,6 +19,8 @@ and the simulated robot report."""
 from __future__ import annotations
 
 import os
+import threading
+from dataclasses import dataclass
 from typing import Callable, TypeVar
 
 T = TypeVar("T")
@@ -60,19 +62,41 @@ def make_realtime(priority: int) -> str:
     return scheduling_words()
 
 
+@dataclass(frozen=True)
+class ThreadScheduling:
+    """A thread's scheduling as it was, to give it back (:meth:`restore`, from any
+    thread)."""
+
+    thread_id: int
+    policy: int
+    priority: int
+
+    @classmethod
+    def of_calling_thread(cls) -> "ThreadScheduling":
+        """The calling thread's scheduling now."""
+        return cls(threading.get_native_id(), os.sched_getscheduler(0),
+                   os.sched_getparam(0).sched_priority)
+
+    def restore(self) -> None:
+        """The thread scheduled as it was (nothing when it has ended)."""
+        try:
+            os.sched_setscheduler(self.thread_id, self.policy, os.sched_param(self.priority))
+        except ProcessLookupError:
+            pass
+
+
 def started_realtime(priority: int, start: Callable[[], T]) -> tuple[T, str]:
     """``start()`` called with the calling thread ``SCHED_FIFO`` at ``priority``, so the
     threads it starts inherit it; after it, the calling thread is scheduled as before.
     Returns what ``start`` returned and the words: the scheduling and how many threads
     started (``SCHED_FIFO 50, 5 threads started``)."""
-    policy, parameters = os.sched_getscheduler(0), os.sched_getparam(0)
+    caller = ThreadScheduling.of_calling_thread()
     before = set(os.listdir("/proc/self/task"))
     words = make_realtime(priority)
     try:
         result = start()
     finally:
-        if (os.sched_getscheduler(0), os.sched_getparam(0)) != (policy, parameters):
-            os.sched_setscheduler(0, policy, parameters)
+        caller.restore()
     started = len(set(os.listdir("/proc/self/task")) - before)
     return result, (f"{words}, {started} thread{'s' * (started != 1)} started" if started
                     else "no thread started (those already running unchanged)")

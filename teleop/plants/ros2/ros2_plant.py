@@ -21,9 +21,10 @@ too, when the loop stops actuating for ``stale_after`` (it may command again).
 The threads on the wire run real-time (``Ros2Settings.realtime_priority``, SCHED_FIFO 50
 by default, :mod:`teleop.plants.ros2.realtime`): DDS's threads and the watchdog, started
 real-time, and the thread that calls :meth:`Ros2Plant.actuate` (the loop's), made
-real-time at its first call, so a command is not late for the robot's update because the
-machine is busy (docs/ros2.md "Real-time threads"); :attr:`Ros2Measures.realtime` says
-how they run."""
+real-time at its first call and given its own scheduling back when it stops actuating
+for ``stale_after`` (with the idle stop) or the plant closes, so a command is not late for
+the robot's update because the machine is busy (docs/ros2.md "Real-time threads");
+:attr:`Ros2Measures.realtime` says how they run."""
 
 from __future__ import annotations
 
@@ -45,7 +46,7 @@ from constraints import Constraint
 from .joint_map import indices, model_joint_names
 from .messages import Float64MultiArray, JointState, OperatingState
 from .node import Ros2Node
-from .realtime import make_realtime, started_realtime
+from .realtime import ThreadScheduling, make_realtime, started_realtime
 from .settings import Ros2Settings
 
 
@@ -134,7 +135,9 @@ class Ros2Plant:
         self._period_start = 0.0  # time.monotonic() when the last period ended
         #: how the threads on the wire run; the actuating thread's added at its first call
         self._scheduling = f"DDS: {dds_threads}; watchdog: "
-        self._actuating_thread = 0  # threading.get_ident() of the thread made real-time
+        #: the thread made real-time while it actuates, as it was before
+        self._actuating: ThreadScheduling | None = None
+        self._called = -math.inf  # time.monotonic() of the last call to actuate
         self.last_measures = Ros2Measures()
         self._running = True
         self._closed = False
@@ -225,6 +228,16 @@ class Ros2Plant:
                     self._publish(np.zeros(self.model.nv))
                     self._commanding = False
                     self.last_measures.idle_stops += 1
+                if now - self._called > self.settings.stale_after:
+                    self._release_actuating()
+
+    def _release_actuating(self) -> None:
+        """The thread made real-time by :meth:`actuate` given its scheduling back (caller
+        holds the lock); its next call makes it real-time again."""
+        if self._actuating is not None:
+            self._actuating.restore()
+            self._actuating = None
+            self.last_measures.realtime = self._scheduling
 
     # --- the Plant protocol ---------------------------------------------------------
     def wait_for_state(self, timeout: float | None = None) -> np.ndarray:
@@ -281,12 +294,16 @@ class Ros2Plant:
         period ended by the robot's next state (but not before half a period, nor after
         one and a half: a late robot does not hold the loop up, the watchdog judges it),
         the mean velocity from ``q`` to the state then received returned. The calling
-        thread is made real-time at its first call (``settings.realtime_priority``)."""
-        if threading.get_ident() != self._actuating_thread:
-            self._actuating_thread = threading.get_ident()
-            self.last_measures.realtime = (f"{self._scheduling}; actuating: "
-                                           f"{make_realtime(self.settings.realtime_priority)}")
+        thread is made real-time at its first call (``settings.realtime_priority``) until
+        it stops actuating for ``stale_after`` or the plant closes."""
         with self._lock:
+            if self._actuating is None or self._actuating.thread_id != threading.get_native_id():
+                self._release_actuating()
+                self._actuating = ThreadScheduling.of_calling_thread()
+                self.last_measures.realtime = (
+                    f"{self._scheduling}; actuating: "
+                    f"{make_realtime(self.settings.realtime_priority)}")
+            self._called = time.monotonic()
             fresh = self._fresh
             self._take_states()
             self._check_stale(time.monotonic())
@@ -332,6 +349,7 @@ class Ros2Plant:
         with self._lock:
             self._running = False
             self._stop("closed")
+            self._release_actuating()
         self._watchdog.join(timeout=1.0)
         atexit.unregister(self.close)
         self.node.close()
