@@ -36,6 +36,10 @@ MAX_TISSUE_DAMPING = 1e3
 #: clearance kept around an arm.
 MAX_COLLISION_DISTANCE_M = 1.0
 
+#: The robot's response time a collision damper counts on (s): a minute, beyond any servo
+#: (a 20 Hz servo's is 8 ms); a longer one only slows the damper further.
+MAX_RESPONSE_TIME_S = 60.0
+
 #: Obstacles in one collision avoidance. A step's cost hardly grows with them (the
 #: broadphase: 0.08 ms of Python rows at 100 on sda10f, 0.17 ms at 1,200); the compiled
 #: step's workspace does, with the square of the pairs (52 MB at 100, 748 MB at 400,

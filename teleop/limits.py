@@ -18,6 +18,7 @@ from constraints.limits import (  # noqa: F401 (listed here: the one table)
     MAX_OBSTACLE_SIZE_M,
     MAX_OBSTACLES,
     MAX_POSITION_M,
+    MAX_RESPONSE_TIME_S,
     MAX_SPEED_M_S,
     MAX_TISSUE_DAMPING,
     MAX_TISSUE_STIFFNESS,

@@ -36,7 +36,8 @@ from teleop.experiments.sweep.ray_engine import CONNECT_TIMEOUT_S, check_address
 from teleop.experiments.sweep.spec import load_spec
 from teleop.limits import (MAX_CELLS_UNCONFIRMED, MAX_COLLISION_DISTANCE_M, MAX_CONSTRAINT_GAIN,
                            MAX_OBSTACLE_SIZE_M, MAX_OBSTACLES, MAX_POSE_GAIN, MAX_POSITION_M,
-                           MAX_SPEC_BYTES, MAX_SPEED_M_S, MAX_TISSUE_DAMPING,
+                           MAX_RESPONSE_TIME_S, MAX_SPEC_BYTES, MAX_SPEED_M_S,
+                           MAX_TISSUE_DAMPING,
                            MAX_TISSUE_STIFFNESS)
 from web.app import TeleopApp
 
@@ -109,6 +110,7 @@ COLLISION_FIELDS = {
     "approach_speed": NOT_NUMBERS + [0.0, -1.0, 1.01 * MAX_SPEED_M_S, 1e308],
     "self_collision": ["yes", 1, None, [True], 10**400],
     "disabled_pairs": NOT_PAIRS, "extra_pairs": NOT_PAIRS,
+    "response_time": NOT_NUMBERS + [-1.0, 1.01 * MAX_RESPONSE_TIME_S, 1e308],
 }
 #: Not a list of obstacles, or too many of them.
 BAD_OBSTACLE_LISTS = [5, "abc", {"kind": "sphere"}, None, [5], [{"kind": "nope"}],

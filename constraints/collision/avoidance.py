@@ -19,7 +19,8 @@ import pinocchio as pin
 
 from ..base import cross
 from ..kinematics import resolve_frame
-from ..limits import MAX_COLLISION_DISTANCE_M, MAX_OBSTACLES, MAX_SPEED_M_S
+from ..limits import (MAX_COLLISION_DISTANCE_M, MAX_OBSTACLES, MAX_RESPONSE_TIME_S,
+                      MAX_SPEED_M_S)
 from ..validation import as_number, short_repr
 from .broadphase import ObstacleBoxes, capsule_boxes
 from .geometry import (bounding_segment, capsule_geometry, check_links, link_of, link_pairs,
@@ -56,9 +57,11 @@ class CollisionAvoidance:
     """The pairs of bodies kept at least ``safety_distance`` apart (docs/design.md 18).
 
     Each pair closer than ``detection_distance`` gets the velocity damper of Faverjon and
-    Tournassoud, ``d_dot >= -xi (d - d_s) / (d_i - d_s)`` (the obstacle's velocity fed
-    forward), a row of :class:`CollisionRows`. In discrete time at period ``dt`` the
-    damper is stable for ``xi dt / (d_i - d_s) < 1``, which :meth:`check` tests.
+    Tournassoud, ``d_dot >= -K (d - d_s)`` (the obstacle's velocity fed forward), a row of
+    :class:`CollisionRows`, at the rate ``K = xi / (d_i - d_s)``, or with a robot that
+    follows its command ``response_time`` late ``1 / K = (d_i - d_s) / xi + response_time``
+    (:attr:`gain`, docs/design.md 18.3). In discrete time at period ``dt`` the damper is
+    stable for ``K dt < 1``, which :meth:`check` tests.
 
     Parameters
     ----------
@@ -71,6 +74,9 @@ class CollisionAvoidance:
     self_collision : check the robot's links against each other (else obstacles only).
     disabled_pairs : link pairs added to the robot's disable list.
     extra_pairs : link pairs checked whatever the rules say (adjacent ones included).
+    response_time : ``tau`` (s), >= 0: how late the robot follows a command (its servos'
+        time constant, :attr:`teleop.plants.PlantChoice.response_time`); the damper takes
+        the gap ``tau`` ahead along the command. 0: the robot moves as commanded.
     """
 
     def __init__(self, robot: CollisionRobot, obstacles: Iterable[Obstacle] = (), *,
@@ -78,7 +84,8 @@ class CollisionAvoidance:
                  detection_distance: float = DEFAULT_DETECTION_DISTANCE,
                  approach_speed: float = DEFAULT_APPROACH_SPEED, self_collision: bool = True,
                  disabled_pairs: Iterable[Sequence[str]] = (),
-                 extra_pairs: Iterable[Sequence[str]] = ()) -> None:
+                 extra_pairs: Iterable[Sequence[str]] = (),
+                 response_time: float = 0.0) -> None:
         self._safety_distance = as_number(safety_distance, "safety_distance", 0.0,
                                           maximum=MAX_COLLISION_DISTANCE_M)
         self._detection_distance = as_number(detection_distance, "detection_distance",
@@ -88,6 +95,8 @@ class CollisionAvoidance:
                              f"safety_distance ({self.safety_distance:g} m)")
         self._approach_speed = as_number(approach_speed, "approach_speed", positive=True,
                                          maximum=MAX_SPEED_M_S)
+        self._response_time = as_number(response_time, "response_time", 0.0,
+                                        maximum=MAX_RESPONSE_TIME_S)
         if not isinstance(self_collision, (bool, np.bool_)):
             raise ValueError(f"self_collision must be true or false, got {short_repr(self_collision)}")
         self.self_collision = bool(self_collision)
@@ -137,9 +146,21 @@ class CollisionAvoidance:
         return self._approach_speed
 
     @property
+    def response_time(self) -> float:
+        """``tau`` (s): how late the robot follows a command (0: as commanded)."""
+        return self._response_time
+
+    @property
     def gain(self) -> float:
-        """``xi / (d_i - d_s)`` (1/s): the rate the gap above ``d_s`` may close at."""
-        return self.approach_speed / (self.detection_distance - self.safety_distance)
+        """``K`` (1/s): the rate the gap ``g = d - d_s`` may close at, ``d_dot >= -K g``.
+
+        The damper alone closes at ``xi / (d_i - d_s)``. A robot ``tau`` late
+        (:attr:`response_time`) goes on by ``tau d_dot`` after the command's gap, so the
+        damper holds the gap ahead, ``d_dot >= -(xi / (d_i - d_s)) (g + tau d_dot)``:
+        ``1 / K = (d_i - d_s) / xi + tau``, the two time constants in series, never
+        faster than the robot follows (docs/design.md 18.3)."""
+        return self.approach_speed / (self.detection_distance - self.safety_distance
+                                      + self.approach_speed * self.response_time)
 
     def check(self, model: pin.Model, dt: float) -> None:
         """Refuse (``ValueError``) a controller whose model is not this robot's, or a
@@ -424,13 +445,18 @@ class CollisionAvoidance:
     # -- description ---------------------------------------------------------------------------
 
     def to_dict(self) -> dict:
-        """The settings and the obstacles, JSON-ready (:meth:`from_dict` rebuilds it)."""
-        return {"safety_distance": self.safety_distance,
-                "detection_distance": self.detection_distance,
-                "approach_speed": self.approach_speed, "self_collision": self.self_collision,
-                "disabled_pairs": [list(pair) for pair in self.disabled_pairs],
-                "extra_pairs": [list(pair) for pair in self.extra_pairs],
-                "obstacles": [obstacle.to_dict() for obstacle in self.obstacles]}
+        """The settings and the obstacles, JSON-ready (:meth:`from_dict` rebuilds it); the
+        response time only when not 0 (a scene or session of a robot moving as commanded
+        reads as before)."""
+        settings = {"safety_distance": self.safety_distance,
+                    "detection_distance": self.detection_distance,
+                    "approach_speed": self.approach_speed, "self_collision": self.self_collision,
+                    "disabled_pairs": [list(pair) for pair in self.disabled_pairs],
+                    "extra_pairs": [list(pair) for pair in self.extra_pairs],
+                    "obstacles": [obstacle.to_dict() for obstacle in self.obstacles]}
+        if self.response_time:
+            settings["response_time"] = self.response_time
+        return settings
 
     @classmethod
     def from_dict(cls, robot: CollisionRobot, data: Mapping) -> "CollisionAvoidance":
@@ -439,7 +465,7 @@ class CollisionAvoidance:
         if not isinstance(data, Mapping):
             raise ValueError(f"collision settings must be an object, got {short_repr(data)}")
         known = {"safety_distance", "detection_distance", "approach_speed", "self_collision",
-                 "disabled_pairs", "extra_pairs", "obstacles"}
+                 "disabled_pairs", "extra_pairs", "obstacles", "response_time"}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"unknown collision field {unknown[0]!r} (its fields: "

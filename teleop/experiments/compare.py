@@ -92,13 +92,15 @@ def run_plan(plan: Plan, spec: str, config: LoopConfig | None = None,
 
     ``imperfections`` (docs/design.md section 15.1) puts a robot that is not perfect under
     the loop; None or the default: the perfect robot. ``plant`` chooses the robot the loop
-    drives (docs/design.md section 17); None: the kinematic one. ``acceleration_limits``:
+    drives (docs/design.md section 17); None: the kinematic one; the collision damper counts
+    on its response time (:meth:`Plan.with_response_time`). ``acceleration_limits``:
     the controller keeps the robot's (docs/design.md 8.4; on by default, False: none);
     ``jerk_limit`` (rad/s^3 for every joint) a jerk limit too (8.5; None: none).
     """
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
     plant = plant or PlantChoice()
+    plan = plan.with_response_time(plant.response_time)
     constraints = plan.make_constraints()
     plant.apply_wall(constraints)
     controller = _controller(spec, plan, constraints, config, acceleration_limits, jerk_limit)
@@ -354,6 +356,7 @@ def joint_velocity_agreement(plan: Plan, specs: Sequence[str], config: LoopConfi
     config = config or LoopConfig()
     steps = _steps(plan, config, duration)
     plant = plant or PlantChoice()
+    plan = plan.with_response_time(plant.response_time)
     constraints = plan.make_constraints()
     plant.apply_wall(constraints)
     reference = _controller(specs[0], plan, constraints, config, acceleration_limits,
@@ -393,6 +396,7 @@ def compare(plan: Plan, specs: Sequence[str], config: LoopConfig | None = None,
     (imperfections or Imperfections()).check_period(config.dt)
     check_constraint_gain(plan, config.dt)
     plant = plant or PlantChoice()
+    plan = plan.with_response_time(plant.response_time)
     if plant.kind == "ros2" and len(specs) > 1:  # one robot: a second run starts elsewhere
         raise ValueError(f"the ros2 plant is one robot: run one controller on it "
                          f"(--controllers NAME), got {len(specs)}: {', '.join(specs)}")
@@ -523,7 +527,8 @@ def metrics_document(plan: Plan, results: dict[str, RunResult], config: LoopConf
         "kp": config.kp,
         "supervisor": config.supervisor.to_dict(),
         "constraint_gain": plan.constraint_gain,
-        "collisions": plan.collisions,
+        "collisions": plan.with_response_time(
+            (plant or PlantChoice()).response_time).collisions,
         "joint_velocity_reference": reference,
         "controllers": {spec: result.metrics() for spec, result in results.items()},
     }

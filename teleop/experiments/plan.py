@@ -86,6 +86,15 @@ class Plan:
         return replace(self, make_constraints=make_constraints, update=update_with_gain,
                        constraint_gain=gain)
 
+    def with_response_time(self, response_time: float) -> "Plan":
+        """The plan whose collision damper counts on a robot ``response_time`` (s) late
+        (``CollisionAvoidance``'s ``response_time``: the damper's rate ``1 / K = (d_i -
+        d_s) / xi + tau``, docs/design.md 18.3); the plan itself without collision
+        avoidance or with a response time of 0 (a robot moving as commanded)."""
+        if self.collisions is None or not response_time:
+            return self
+        return replace(self, collisions={**self.collisions, "response_time": response_time})
+
 
 def smoothstep(x: float) -> float:
     """0 -> 1 with zero slope and curvature at both ends (quintic)."""

@@ -71,6 +71,14 @@ class PlantChoice:
         """A plant with a body: port forces, torques and saturation are measured."""
         return self.kind == "mujoco"
 
+    @property
+    def response_time(self) -> float:
+        """How late the robot follows a command (s), what the collision damper counts on
+        (docs/design.md 18.6): the physics plant's servos' time constant
+        (:attr:`PlantSettings.response_time`); 0 for the kinematic plant (as commanded,
+        its imperfections aside) and a robot over ROS 2 (unknown)."""
+        return self.settings.response_time if self.physical else 0.0
+
     def make(self, robot, dt: float, imperfections: Imperfections | None = None,
              collisions=None):
         """A fresh plant for one run (a ``teleop.loop.Plant``), or None for the perfect

@@ -87,6 +87,12 @@ class PlantSettings:
                 raise ValueError("interface_jerk_limit needs interface_limits count or strict "
                                  "(interface_limits is off)")
 
+    @property
+    def response_time(self) -> float:
+        """How late the servos follow a command (s): their time constant ``1 / w``, ``w = 2
+        pi servo_bandwidth`` (what the collision damper counts on, docs/design.md 18.6)."""
+        return 1.0 / (2.0 * math.pi * self.servo_bandwidth)
+
     def substeps(self, dt: float) -> int:
         """Physics steps per control period ``dt``: at least two."""
         return max(2, math.ceil(self.physics_rate * dt - 1e-9))
