@@ -30,12 +30,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-SOURCE = Path(__file__).with_name("port_wall.c")
+#: the library's sources: the walls' callback, and the plant's period around ``mj_step``
+#: (``plant_period.c``, :mod:`teleop.plants.compiled_period`)
+SOURCES = (Path(__file__).with_name("port_wall.c"), Path(__file__).with_name("plant_period.c"))
 #: one port's block of doubles (port_wall.c's enum): body and site ids, then
 #: PortWall.compiled_parameters (link axis, centre, centre velocity, stiffness, damping),
 #: then what the callback writes (force, spring part, displacement)
 PORT_FIELDS = 2 + 11 + 7
-_FORCE, _SPRING, _DISPLACEMENT = 13, 16, 19
+FORCE, SPRING, DISPLACEMENT = 13, 16, 19
 
 
 class CompiledPorts:
@@ -55,7 +57,7 @@ class CompiledPorts:
         if self.ports.shape[0] != ports.shape[0]:
             self.ports = np.zeros((ports.shape[0], PORT_FIELDS))
             self._pointer = self.ports.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        self.ports[:, :_FORCE] = ports
+        self.ports[:, :FORCE] = ports
         if self._library.cjm_wall_attach(self._address, self._pointer, len(self.ports)) != 0:
             raise RuntimeError("too many MuJoCo plants stepping at once for the compiled walls")
         try:
@@ -66,24 +68,24 @@ class CompiledPorts:
     def results(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:attr:`forces`, :attr:`springs` and :attr:`displacements` from one copy of the
         ports' results (views of it)."""
-        written = self.ports[:, _FORCE:].copy()
-        return (written[:, :_SPRING - _FORCE], written[:, _SPRING - _FORCE:_DISPLACEMENT - _FORCE],
-                written[:, _DISPLACEMENT - _FORCE])
+        written = self.ports[:, FORCE:].copy()
+        return (written[:, :SPRING - FORCE], written[:, SPRING - FORCE:DISPLACEMENT - FORCE],
+                written[:, DISPLACEMENT - FORCE])
 
     @property
     def forces(self) -> np.ndarray:
         """Each port's force at the last physics step (N, world)."""
-        return self.ports[:, _FORCE:_FORCE + 3].copy()
+        return self.ports[:, FORCE:FORCE + 3].copy()
 
     @property
     def springs(self) -> np.ndarray:
         """Each force's spring part ``-k (P - c)`` (N)."""
-        return self.ports[:, _SPRING:_SPRING + 3].copy()
+        return self.ports[:, SPRING:SPRING + 3].copy()
 
     @property
     def displacements(self) -> np.ndarray:
         """Each port's ``|P - c|`` (m)."""
-        return self.ports[:, _DISPLACEMENT].copy()
+        return self.ports[:, DISPLACEMENT].copy()
 
 
 @functools.cache
@@ -97,7 +99,8 @@ def wall_library() -> ctypes.CDLL | None:
     if not libraries or not (package / "include" / "mujoco" / "mujoco.h").is_file():
         return None
     compiler = shlex.split(sysconfig.get_config_var("CC") or "cc")
-    digest = hashlib.sha256(SOURCE.read_bytes() + "\0".join(compiler).encode()
+    digest = hashlib.sha256(b"\0".join(source.read_bytes() for source in SOURCES)
+                            + "\0".join(compiler).encode()
                             + mujoco.__version__.encode())
     cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "cjm-teleop"
     target = cache / f"port_wall-{digest.hexdigest()[:16]}.so"
@@ -106,7 +109,8 @@ def wall_library() -> ctypes.CDLL | None:
             target.parent.mkdir(parents=True, exist_ok=True)
             with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
                 built = Path(scratch) / target.name
-                subprocess.run([*compiler, "-shared", "-fPIC", "-O2", "-o", str(built), str(SOURCE),
+                subprocess.run([*compiler, "-shared", "-fPIC", "-O2", "-o", str(built),
+                                *(str(source) for source in SOURCES),
                                 f"-I{package / 'include'}", str(libraries[0]),
                                 f"-Wl,-rpath,{package}", "-lm", "-lpthread"],
                                check=True, capture_output=True, timeout=120)
@@ -121,6 +125,8 @@ def wall_library() -> ctypes.CDLL | None:
     library.cjm_wall_attach.restype = ctypes.c_int
     library.cjm_wall_detach.argtypes = [ctypes.c_void_p]
     library.cjm_wall_detach.restype = None
+    library.cjm_plant_period.argtypes = [ctypes.c_void_p]
+    library.cjm_plant_period.restype = ctypes.c_int
     mujoco.set_mjcb_passive(library.cjm_wall_passive)
     return library
 

@@ -43,7 +43,8 @@ from .imperfect import Imperfections, ImperfectPlant
 from .interface import CommandInterface, InterfaceFault
 from .settings import PlantSettings
 from .tissue import TissueSurface
-from .compiled_wall import compiled_ports
+from .compiled_period import CONTACTS, PENETRATION, RATIO, CompiledPeriod, compiled_period
+from .compiled_wall import DISPLACEMENT, FORCE, SPRING, compiled_ports
 from .walls import Wall, wall_of
 
 #: A payload's inertia: a 5 cm solid sphere's per kilogram (kg m^2 / kg).
@@ -201,6 +202,19 @@ class MujocoPlant:
         #: the walls applied inside mj_step (None: from Python, each step split)
         self._compiled_walls = compiled_ports(self.mj_data) if compiled_walls else None
         self.reset(robot.q_home)
+        #: the whole period in one compiled call, where nothing between the loop and
+        #: MuJoCo needs Python (a perfect interface, no tissue, no contact pairs to follow,
+        #: the same coordinates in both models); None: :meth:`actuate` in Python
+        self._period: CompiledPeriod | None = (
+            compiled_period(self.mj_model, self.mj_data, self._actuator_dofs,
+                            self.effort_limit, self.dt, self.substeps)
+            if self._compiled_walls is not None and self.shaping is None
+            and self.interface.mode == "off" and not self.tissues
+            and self.contact_pairs is None and self.joints.identity else None)
+        #: the walls and versions of the constraints last given to the compiled period
+        #: (:meth:`_follow_ports`), and whether every wall there has a compiled form
+        self._port_versions: list[tuple[Constraint, tuple[object, ...]]] = []
+        self._ports_compiled = True
 
     # -- the model -----------------------------------------------------------------------
 
@@ -333,7 +347,9 @@ class MujocoPlant:
         if self.shaping is not None:
             self.shaping.reset()
         self.interface.reset()
-        self.last = PlantMeasures(np.zeros((0, 3)), np.zeros(0), 0.0, False)
+        #: the last period's measures (None: the compiled period's, made when read)
+        self._last: PlantMeasures | None = PlantMeasures(np.zeros((0, 3)), np.zeros(0), 0.0,
+                                                         False)
 
     @property
     def encoder_noise(self) -> float:
@@ -350,7 +366,14 @@ class MujocoPlant:
         """Run the physics for one control period under the command ``qd`` (delayed by
         the imperfections' latency, checked by the interface, filtered by the joint lag);
         the mean velocity that takes the loop's true configuration ``q`` to the simulated
-        one."""
+        one. With the compiled period (:mod:`teleop.plants.compiled_period`) the
+        physics, the torque ratio, the contacts and the returned velocity are one C call
+        with the same arithmetic, the measures made when read (:meth:`measures`)."""
+        period = self._period
+        if period is not None and self._follow_ports(constraints):
+            self.interface.receive(qd)  # counts the period; "off" passes the command on
+            self._last = None
+            return period.run(qd, q)
         model, data = self.mj_model, self.mj_data
         arrived = qd if self.shaping is None else self.shaping.delay(qd)
         accepted, fault = self.interface.receive(arrived)
@@ -390,7 +413,7 @@ class MujocoPlant:
         contact_count = int(data.ncon)
         penetration = 0.0 if contact_count == 0 else float(
             max(0.0, -np.min(data.contact.dist[:contact_count], initial=0.0)))
-        self.last = PlantMeasures(forces, displacements, ratio, saturated, springs,
+        self._last = PlantMeasures(forces, displacements, ratio, saturated, springs,
                                   contact_count, penetration,
                                   fault, self.interface.stopped, self._read_sensors(),
                                   contacts, depths)
@@ -399,7 +422,39 @@ class MujocoPlant:
 
     def measures(self) -> PlantMeasures:
         """The last period's :class:`PlantMeasures`."""
-        return self.last
+        if self._last is None:
+            self._last = self._period_measures()
+        return self._last
+
+    def _period_measures(self) -> PlantMeasures:
+        """The compiled period's :class:`PlantMeasures`: its ports' results, its summary
+        (what the Python path measures at the period's last physics step)."""
+        assert self._period is not None  # only set to None by a compiled period
+        ports, summary = self._period.ports, self._period.summary.tolist()
+        ratio = summary[RATIO]
+        return PlantMeasures(ports[:, FORCE:FORCE + 3].copy(),
+                             ports[:, DISPLACEMENT].copy(), ratio, ratio >= 1.0 - 1e-12,
+                             ports[:, SPRING:SPRING + 3].copy(), int(summary[CONTACTS]),
+                             summary[PENETRATION], None, self.interface.stopped,
+                             self._read_sensors(), np.zeros((0, 3)), np.zeros(0))
+
+    def _follow_ports(self, constraints: Sequence[Constraint]) -> bool:
+        """Give the compiled period the walls of ``constraints`` (read again when a
+        constraint or one of its walls' :meth:`~teleop.plants.walls.Wall.compiled_version`
+        objects is not the last period's); whether every wall has a compiled form."""
+        versions = [(constraint, wall.compiled_version(constraint)) for constraint in constraints
+                    if (wall := wall_of(constraint)) is not None]
+        cached = self._port_versions
+        if len(versions) != len(cached) or not all(
+                constraint is old and all(a is b for a, b in zip(version, old_version))
+                for (constraint, version), (old, old_version) in zip(versions, cached)):
+            rows = self._compiled_ports([(constraint, wall) for constraint in constraints
+                                         if (wall := wall_of(constraint)) is not None])
+            self._ports_compiled = rows is not None
+            if rows is not None and self._period is not None:
+                self._period.set_ports(rows)
+            self._port_versions = versions
+        return self._ports_compiled
 
     # -- the tissue and the force/torque sensor ------------------------------------------
 

@@ -53,6 +53,11 @@ class Wall(Protocol[C]):
         with no compiled form (the plant then applies it from Python)."""
         ...
 
+    def compiled_version(self, constraint: C) -> tuple[object, ...]:
+        """Objects that stay the same (``is``) as long as :meth:`compiled_parameters` gives
+        the same numbers: the plant reads the parameters again when one is replaced."""
+        ...
+
 
 class PortWall:
     """The abdominal wall around a hole's port, a lateral spring-damper (docs/design.md
@@ -91,6 +96,11 @@ class PortWall:
         """``a_link``, ``c``, ``v_c``, ``k``, ``c_d``: the math above, in ``port_wall.c``."""
         return np.concatenate([hole.link_axis, hole.center, hole.velocity,
                                [hole.tissue_stiffness, hole.tissue_damping]])
+
+    def compiled_version(self, hole: Hole) -> tuple[object, ...]:
+        """The hole's declared parameters (replaced whenever the axis, the centre or its
+        velocity is assigned, :mod:`constraints.compiled_form`), ``k`` and ``c_d``."""
+        return hole.compiled_parameters, hole.tissue_stiffness, hole.tissue_damping
 
 
 #: constraint type -> its wall; a type not here (nor any of its bases) has none

@@ -1,0 +1,99 @@
+"""A control period of the MuJoCo plant in one compiled call (docs/design.md section 17.5).
+
+``plant_period.c``, in the library of the ports' walls (:mod:`teleop.plants.compiled_wall`),
+does what :meth:`teleop.plants.MujocoPlant.actuate` does around ``mj_step`` with the same
+arithmetic: each actuator's control from the command, the physics steps with the ports'
+walls attached, the torque ratio, the contacts, and the velocity that takes the loop's
+configuration to the simulated one, ``(qpos - q) / dt`` (``pin.difference`` of 1-dof
+joints). It serves a robot whose Pinocchio and MuJoCo coordinates are the same
+(``JointMap.identity``); the buffers it reads and writes are arrays made once, their
+addresses given to the C side in one block (:class:`PeriodBlock`), so a period is two
+copies in, one call and one copy out.
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import mujoco
+import numpy as np
+
+from .compiled_wall import PORT_FIELDS, wall_library
+
+_POINTER = ctypes.c_void_p
+#: the summary's entries (plant_period.c's enum)
+RATIO, CONTACTS, PENETRATION = 0, 1, 2
+
+
+class PeriodBlock(ctypes.Structure):
+    """plant_period.c's ``Period``: the model, the data and the buffers' addresses."""
+
+    _fields_ = [("model", _POINTER), ("data", _POINTER), ("command", _POINTER), ("q", _POINTER),
+                ("actuator_dofs", _POINTER), ("effort_limit", _POINTER), ("ports", _POINTER),
+                ("moved", _POINTER), ("summary", _POINTER), ("dt", ctypes.c_double),
+                ("nstep", ctypes.c_int), ("port_count", ctypes.c_int)]
+
+
+def _address(array: np.ndarray) -> int:
+    """The address of ``array``'s first element."""
+    return int(array.ctypes.data)
+
+
+class CompiledPeriod:
+    """One plant's period in C: its model and data, the command's buffers, the ports.
+
+    Parameters
+    ----------
+    library : :func:`~teleop.plants.compiled_wall.wall_library`'s.
+    model, data : the plant's MuJoCo model and data (kept alive here).
+    actuator_dofs : (nu,) each actuator's degree of freedom.
+    effort_limit : (nv,) each dof's effort limit (``inf``: none).
+    dt : the control period (s); ``nstep`` physics steps of it.
+    """
+
+    def __init__(self, library: ctypes.CDLL, model: mujoco.MjModel, data: mujoco.MjData,
+                 actuator_dofs: np.ndarray, effort_limit: np.ndarray, dt: float,
+                 nstep: int) -> None:
+        self._run = library.cjm_plant_period
+        self._model, self._data = model, data
+        #: the command and the configuration the period starts from, copied in
+        self.command, self.q = np.zeros(model.nv), np.zeros(model.nq)
+        self._actuator_dofs = np.ascontiguousarray(actuator_dofs, dtype=np.intc)
+        self._effort_limit = np.ascontiguousarray(effort_limit, dtype=float)
+        #: the velocity ``(qpos - q) / dt`` (rad/s), written by each period
+        self.moved = np.zeros(model.nv)
+        #: the torque ratio, the contact count and the deepest penetration (m)
+        self.summary = np.zeros(3)
+        #: the ports' blocks (port_wall.c's layout), their results written by the callback
+        self.ports = np.zeros((0, PORT_FIELDS))
+        self._block = PeriodBlock(model._address, data._address, _address(self.command),
+                                  _address(self.q), _address(self._actuator_dofs),
+                                  _address(self._effort_limit), _address(self.ports),
+                                  _address(self.moved), _address(self.summary), float(dt),
+                                  int(nstep), 0)
+        self._pointer = ctypes.c_void_p(ctypes.addressof(self._block))
+
+    def set_ports(self, ports: np.ndarray) -> None:
+        """The ports of the next periods: one row per port, its MuJoCo body and site ids then
+        its wall's ``compiled_parameters`` (the results' columns are left to the callback)."""
+        if self.ports.shape[0] != ports.shape[0]:
+            self.ports = np.zeros((ports.shape[0], PORT_FIELDS))
+            self._block.ports = _address(self.ports)
+            self._block.port_count = ports.shape[0]
+        self.ports[:, :ports.shape[1]] = ports
+
+    def run(self, command: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """One period under ``command`` from ``q``; the velocity moved (a new array)."""
+        np.copyto(self.command, command)
+        np.copyto(self.q, q)
+        if self._run(self._pointer) != 0:
+            raise RuntimeError("too many MuJoCo plants stepping at once for the compiled walls")
+        return self.moved.copy()
+
+
+def compiled_period(model: mujoco.MjModel, data: mujoco.MjData, actuator_dofs: np.ndarray,
+                    effort_limit: np.ndarray, dt: float, nstep: int) -> CompiledPeriod | None:
+    """The compiled period of a plant, or None where the library is not available."""
+    library = wall_library()
+    return (None if library is None else
+            CompiledPeriod(library, model, data, actuator_dofs, effort_limit, dt, nstep))

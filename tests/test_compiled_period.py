@@ -1,0 +1,113 @@
+"""The plant's period in one compiled call (``teleop/plants/plant_period.c``,
+docs/design.md section 17.5) against the same plant's period in Python around one
+``mj_step(m, d, nstep)`` call with the compiled walls (the reference
+tests/test_compiled_wall.py holds to the Python walls): the same arithmetic in the same
+order, so every number is equal bit for bit, over runs where the holes move, their walls
+stiffen, the set of holes changes and the drives saturate.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from constraints import Hole
+from teleop.plants import Imperfections, MujocoPlant, PlantSettings
+from teleop.plants.compiled_period import CompiledPeriod
+
+DT = 1e-3
+
+
+def commands(nv: int, periods: int, amplitude: float) -> list[np.ndarray]:
+    """A joint-velocity command sweeping every joint (rad/s)."""
+    phases = np.arange(nv)
+    return [amplitude * np.sin(2.0 * np.pi * (k * DT) * (1.0 + 0.3 * phases) + phases)
+            for k in range(periods)]
+
+
+def moving_hole(robot, link: str | None = None) -> Hole:
+    """A hole 8 cm along ``link``, 1 mm off the axis, moving at 5 mm/s, a stiff damped wall."""
+    hole = Hole.on_link(robot, robot.q_home, distance=0.08, **({"link": link} if link else {}))
+    hole.move_to(hole.center + np.array([0.0, 1e-3, 0.0]), velocity=np.array([0.0, 5e-3, 0.0]))
+    hole.tissue_stiffness = 3000.0
+    hole.tissue_damping = 25.0
+    return hole
+
+
+def run(plant: MujocoPlant, robot, holes: list[Hole], amplitude: float) -> list[tuple]:
+    """Each period's returned velocity, simulated joints and measures, while the holes
+    change: from period 100 each centre moves 0.2 mm, from 200 each wall stiffens, from 300
+    the last hole is gone."""
+    q = robot.q_home.copy()
+    out = []
+    given = list(holes)
+    for k, qd in enumerate(commands(robot.model.nv, 400, amplitude)):
+        if k == 100:
+            for hole in holes:
+                hole.move_to(hole.center + np.array([2e-4, 0.0, 0.0]), velocity=hole.velocity)
+        if k == 200:
+            for hole in holes:
+                hole.tissue_stiffness = 4500.0
+        if k == 300:
+            given = given[:-1]
+        moved = plant.actuate(qd, q, given)
+        q = pin.integrate(robot.model, q, moved * DT)
+        m = plant.measures()
+        out.append((moved, plant.mj_data.qpos.copy(), m.port_forces, m.port_spring_forces,
+                    m.port_displacements, m.torque_ratio, m.saturated, m.contacts,
+                    m.contact_depth, m.interface_fault, m.interface_stopped,
+                    m.tool_wrenches.shape, m.contact_forces.shape, m.contact_depths.shape))
+    return out
+
+
+def plants(robot, settings: PlantSettings) -> tuple[MujocoPlant, MujocoPlant]:
+    """A plant with the compiled period, and one without (its Python around mj_step)."""
+    compiled, reference = MujocoPlant(robot, DT, settings), MujocoPlant(robot, DT, settings)
+    assert isinstance(compiled._period, CompiledPeriod)
+    reference._period = None
+    return compiled, reference
+
+
+def assert_same(compiled: list[tuple], reference: list[tuple]) -> None:
+    assert len(compiled) == len(reference)
+    for k, (ours, theirs) in enumerate(zip(compiled, reference)):
+        for a, b in zip(ours, theirs):
+            if isinstance(a, np.ndarray):
+                assert a.shape == b.shape and np.array_equal(a, b), (k, a, b)
+            else:
+                assert type(a) is type(b) and a == b, (k, a, b)
+
+
+@pytest.mark.parametrize("robot_name", ["sda10f", "ur5_instrument"])
+def test_one_hole_moving_stiffening_then_gone(robot_name, request):
+    robot = request.getfixturevalue(robot_name)
+    compiled, reference = plants(robot, PlantSettings())
+    runs = [run(plant, robot, [moving_hole(robot)], 0.2) for plant in (compiled, reference)]
+    assert max(np.max(np.abs(r[2]), initial=0.0) for r in runs[1]) > 1.0  # the wall pushes (N)
+    assert any(r[2].shape == (0, 3) for r in runs[1])  # and is gone at the end
+    assert_same(*runs)
+
+
+def test_two_holes_on_the_dual_robot(dual):
+    compiled, reference = plants(dual, PlantSettings())
+    runs = [run(plant, dual, [moving_hole(dual, link) for link in dual.constrained_links], 0.2)
+            for plant in (compiled, reference)]
+    assert runs[1][0][2].shape == (2, 3) and runs[1][-1][2].shape == (1, 3)
+    assert_same(*runs)
+
+
+def test_saturated_drives_under_a_payload(sda10f):
+    """A fast sweep with 3 kg at the EE and weak drives: the torque ratio reaches 1."""
+    settings = PlantSettings(payload=3.0, servo_bandwidth=40.0)
+    compiled, reference = plants(sda10f, settings)
+    runs = [run(plant, sda10f, [moving_hole(sda10f)], 2.0) for plant in (compiled, reference)]
+    assert any(r[6] for r in runs[1])
+    assert_same(*runs)
+
+
+def test_no_compiled_period_where_python_stands_between(sda10f):
+    """An interface that checks, or imperfections: the period stays in Python."""
+    assert MujocoPlant(sda10f, DT, PlantSettings(interface_limits="count"))._period is None
+    assert MujocoPlant(sda10f, DT, imperfections=Imperfections(latency=1))._period is None
+    assert MujocoPlant(sda10f, DT, compiled_walls=False)._period is None
