@@ -211,9 +211,11 @@ class MujocoPlant:
             if self._compiled_walls is not None and self.shaping is None
             and self.interface.mode == "off" and not self.tissues
             and self.contact_pairs is None and self.joints.identity else None)
-        #: the walls and versions of the constraints last given to the compiled period
-        #: (:meth:`_follow_ports`), and whether every wall there has a compiled form
-        self._port_versions: list[tuple[Constraint, tuple[object, ...]]] = []
+        #: the constraints with walls and their walls' versions last given to the compiled
+        #: period, their ids (:meth:`_follow_ports`), whether every wall there has a
+        #: compiled form
+        self._port_objects: list[object] = []
+        self._port_identities: list[int] = []
         self._ports_compiled = True
 
     # -- the model -----------------------------------------------------------------------
@@ -439,21 +441,25 @@ class MujocoPlant:
                              self._read_sensors(), np.zeros((0, 3)), np.zeros(0))
 
     def _follow_ports(self, constraints: Sequence[Constraint]) -> bool:
-        """Give the compiled period the walls of ``constraints`` (read again when a
-        constraint or one of its walls' :meth:`~teleop.plants.walls.Wall.compiled_version`
-        objects is not the last period's); whether every wall has a compiled form."""
-        versions = [(constraint, wall.compiled_version(constraint)) for constraint in constraints
-                    if (wall := wall_of(constraint)) is not None]
-        cached = self._port_versions
-        if len(versions) != len(cached) or not all(
-                constraint is old and all(a is b for a, b in zip(version, old_version))
-                for (constraint, version), (old, old_version) in zip(versions, cached)):
+        """Give the compiled period the walls of ``constraints``, read again when a
+        constraint or an object of its wall's
+        :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's (by
+        identity: the objects are kept, so no other can take their ids); whether every
+        wall has a compiled form."""
+        objects: list[object] = []
+        for constraint in constraints:
+            wall = wall_of(constraint)
+            if wall is not None:
+                objects.append(constraint)
+                objects += wall.compiled_version(constraint)
+        identities = list(map(id, objects))
+        if identities != self._port_identities:
             rows = self._compiled_ports([(constraint, wall) for constraint in constraints
                                          if (wall := wall_of(constraint)) is not None])
             self._ports_compiled = rows is not None
             if rows is not None and self._period is not None:
                 self._period.set_ports(rows)
-            self._port_versions = versions
+            self._port_objects, self._port_identities = objects, identities
         return self._ports_compiled
 
     # -- the tissue and the force/torque sensor ------------------------------------------
