@@ -17,6 +17,7 @@ import io
 import math
 import os
 import shutil
+import signal
 import socket
 import threading
 import time
@@ -57,6 +58,13 @@ def chromium_executable() -> str:
 #: example-robot-data's Panda, installed beside Pinocchio by the ``example-robot-data`` wheel
 PANDA = Path(pin.__file__).resolve().parents[4] / "share/example-robot-data/robots/" \
     "panda_description/urdf/panda.urdf"
+
+
+def answer_ctrl_c() -> None:
+    """A child's ``preexec_fn``: SIGINT at its default, so the child's Python turns it into
+    ``KeyboardInterrupt`` even when this test run was started with SIGINT ignored (a
+    background job of a shell without job control, which its children inherit)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def free_port() -> int:

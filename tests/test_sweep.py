@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from browser_helpers import answer_ctrl_c
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -363,7 +364,7 @@ def test_interrupt_and_resume_run_no_cell_twice_and_lose_none(tmp_path):
                "--encoder-noise", "1e-5", "--workers", "2", "--reports", "0", "--out", str(out)]
     first = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                              start_new_session=True,
-                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                             preexec_fn=answer_ctrl_c)
     deadline = time.monotonic() + 600
     while time.monotonic() < deadline and first.poll() is None:
         if (out / DATABASE_NAME).exists() and len(_keys(out)) >= 4:

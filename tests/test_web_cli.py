@@ -9,16 +9,19 @@ import sys
 import time
 
 import pytest
-from browser_helpers import PANDA, free_port
+from browser_helpers import PANDA, answer_ctrl_c, free_port
 
 from web import cli as web_cli
 from web.app import TeleopApp
 
 
-def serve(*args: str, timeout: float = 90.0) -> tuple[str, str, int]:
-    """Start ``python -m web ARGS``, wait for its "on http://" line, Ctrl-C it."""
+def serve(*args: str, timeout: float = 90.0,
+          stop: signal.Signals = signal.SIGINT) -> tuple[str, str, int]:
+    """Start ``python -m web ARGS``, wait for its "on http://" line, send it ``stop``
+    (Ctrl-C's SIGINT, or a service manager's SIGTERM)."""
     process = subprocess.Popen([sys.executable, "-m", "web", "--port", str(free_port()), *args],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=answer_ctrl_c)
     lines = []
     deadline = time.monotonic() + timeout
     try:
@@ -29,7 +32,7 @@ def serve(*args: str, timeout: float = 90.0) -> tuple[str, str, int]:
             lines.append(line)
             if "Ctrl-C stops" in line:
                 break
-        process.send_signal(signal.SIGINT)
+        process.send_signal(stop)
         out, err = process.communicate(timeout=30)
     finally:
         if process.poll() is None:

@@ -10,7 +10,7 @@ import sys
 import time
 
 import pytest
-from browser_helpers import free_port
+from browser_helpers import answer_ctrl_c, free_port
 
 from teleop.inputs import FeedbackState, MasterClient, UdpMaster
 from web import cli as web_cli
@@ -19,7 +19,8 @@ from web import cli as web_cli
 def start(*args: str) -> tuple[subprocess.Popen, str]:
     """``python -m web ARGS`` started, and its lines up to the "Ctrl-C stops" one."""
     process = subprocess.Popen([sys.executable, "-m", "web", "--port", str(free_port()), *args],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=answer_ctrl_c)
     deadline = time.monotonic() + 90.0
     lines = ""
     while time.monotonic() < deadline:

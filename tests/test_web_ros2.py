@@ -186,16 +186,20 @@ def test_bad_ros2_options_are_one_line_and_exit_2(args, message, capsys):
     assert len(err.strip().splitlines()) == 1 and message in err, err
 
 
-def test_teleop_web_plant_ros2_serves_the_robot_and_stops_it_at_exit(domain, robot_process):
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP],
+                         ids=lambda stop: stop.name)
+def test_teleop_web_plant_ros2_serves_the_robot_and_stops_it_at_exit(domain, robot_process,
+                                                                      stop):
     """``python -m web --plant ros2`` against ``teleop sim --ros2``, two processes: its
-    start line names the ROS 2 robot, its control thread commands the robot, Ctrl-C ends
-    it with exit code 0 and zeros last on the command topic."""
+    start line names the ROS 2 robot, its control thread commands the robot; Ctrl-C, a
+    service manager's SIGTERM or a closed terminal's SIGHUP ends it with exit code 0 and
+    zeros last on the command topic (a velocity controller holds the last command)."""
     peer = Ros2Node(domain)
     log = CommandLog(peer)
     try:
         out, err, code = serve("--robot", "ur5_instrument", "--rate", str(RATE), "--plant",
                                "ros2", "--ros-domain", str(domain), "--joint-states", STATES,
-                               "--command-topic", COMMANDS)
+                               "--command-topic", COMMANDS, stop=stop)
         assert code == 0, err
         assert (f"(controller cjm), on the ROS 2 robot ({STATES} -> {COMMANDS}, domain "
                 f"{domain}, stopped when the state is 50 ms old); Ctrl-C stops") in out, out

@@ -23,6 +23,7 @@ from teleop.cli.arguments import add_damper_options, bounded, damper_settings, o
 from teleop.cli.commands import Command
 from teleop.cli.ros2_options import add_ros2_options, given_ros2_options, ros2_settings
 from teleop.cli.robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
+from teleop.cli.termination import terminations_interrupt
 from teleop.limits import MAX_INPUT_TIMEOUT_S, MIN_INPUT_TIMEOUT_S
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.loop.task_modes import AUTO, TASK_MODES
@@ -361,7 +362,8 @@ def build_parser(prog: str = "teleop web") -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None, prog: str = "teleop web") -> int:
     """``prog ARGV``: parse the options and :func:`run`."""
-    return run(build_parser(prog).parse_args(argv), prog)
+    with terminations_interrupt():  # SIGTERM unwinds as Ctrl-C: a robot gets its zeros
+        return run(build_parser(prog).parse_args(argv), prog)
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ from .state_observer_options import add_state_observer_option
 from .supervisor_options import add_supervisor_options, supervisor_choice
 from .sweep import add_arguments as add_sweep_arguments
 from .sweep import run as run_sweep_command
+from .termination import terminations_interrupt
 
 PACKAGE = "cjm-teleop"
 DEFAULT_CONTROLLERS = ", ".join(default_specs("compare"))
@@ -290,10 +291,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser(registered=not argv or argv[0] not in BUILT_IN).parse_args(argv)
     try:
-        return args.run_command(args)
+        with terminations_interrupt():  # SIGTERM unwinds as Ctrl-C: a robot gets its zeros
+            return args.run_command(args)
     except ValueError as error:  # bad scenario, controller, file: one clear line
         print(f"teleop {args.command}: {one_line(error)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as interrupt:  # Ctrl-C, SIGTERM or SIGHUP: stopped, cleaned up
+        print(f"teleop {args.command}: stopped ({str(interrupt) or 'SIGINT'})", file=sys.stderr)
+        return 130
 
 
 def _run(plan, args: argparse.Namespace, config, plant) -> int:
