@@ -16,6 +16,7 @@ position error in metres along ``C`` (drift feedback, docs/design.md section 3).
 from __future__ import annotations
 
 import inspect
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -398,8 +399,10 @@ class Constraint(CompiledForm, ABC):
         return type(self).from_dict(data)
 
     def violation(self, placement: pin.SE3) -> float:
-        """How far (m) the point is from satisfying the constraint (0 when it does)."""
-        return float(np.linalg.norm(self.error(placement)))
+        """How far (m) the point is from satisfying the constraint (0 when it does):
+        ``|error|``, as ``np.linalg.norm`` computes it (``sqrt(e . e)``) without its checks."""
+        error = self.error(placement)
+        return math.sqrt(error @ error)
 
     # -- placing it on a robot as the robot is now -------------------------------------------
 

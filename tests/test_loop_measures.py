@@ -6,11 +6,16 @@ reads; the numbers must be the same to the last bit."""
 
 from __future__ import annotations
 
+import dataclasses
+import math
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from teleop.experiments.bench_loop import scenario_loop
+from teleop.experiments.scenarios import load_scenario
+from teleop.loop import StepRecord
 
 
 def reference_command_measures(loop, step) -> tuple[float, np.ndarray, np.ndarray, float]:
@@ -80,3 +85,46 @@ def test_the_measures_equal_the_reference_formulas(scenario, compiled_tick):
             0.0, np.max(loop.q - model.upperPositionLimit),
             np.max(model.lowerPositionLimit - loop.q)))
     assert len(velocity) > 0  # the scenario has equality rows
+
+
+def records_equal(record: StepRecord, expected: StepRecord) -> None:
+    """Every field of ``record`` equal to ``expected``'s, bit for bit (NaN equal to NaN),
+    but the times measured."""
+    for name in (field.name for field in dataclasses.fields(StepRecord)
+                 if not field.name.endswith("_time_us")):
+        value, wanted = getattr(record, name), getattr(expected, name)
+        if name == "step_message":
+            assert value.text == wanted.text
+        elif isinstance(wanted, np.ndarray):
+            np.testing.assert_array_equal(value, wanted, err_msg=name)
+        elif isinstance(wanted, float) and math.isnan(wanted):
+            assert math.isnan(value), name
+        else:
+            assert value == wanted, name
+
+
+@pytest.mark.parametrize("scenario", ["paper-hole", "moving-trocar", "barrier",
+                                      "bimanual-trocars", "joint-limits"])
+@pytest.mark.parametrize("compiled_tick", [True, False])
+def test_the_measures_taken_after_the_run_are_those_taken_at_once(scenario, compiled_tick):
+    """A run through ``tick_measured_later`` measured after it gives the records of the
+    same run through ``tick``, bit for bit: the geometry the measures read is the one of
+    each period (the moving trocar moves at every period's end, and every constraint moves
+    away again before the measures are taken)."""
+    plan = load_scenario(scenario)
+    runs = [scenario_loop(scenario, compiled_tick, 0.15) for _ in range(2)]
+    (at_once, targets), (later, _) = runs
+    assert later.measures_later
+    expected = [at_once.tick(target, lambda now: plan.update(now, at_once.constraints, at_once.q))
+                for target in targets]
+    periods = [later.tick_measured_later(target,
+                                         lambda now: plan.update(now, later.constraints, later.q))
+               for target in targets]
+    for constraint in later.constraints:
+        constraint.move_to(constraint.position + 0.01, constraint.velocity + 0.1)
+    assert [period.failed for period in periods] == [record.failed for record in expected]
+    assert [period.message for period in periods] == [record.message for record in expected]
+    for period, record in zip(periods, expected):
+        records_equal(later.measure_later(period), record)
+    moved = [period.end.constraints[0].position for period in periods]
+    assert (len({tuple(position) for position in moved}) > 1) == (scenario == "moving-trocar")

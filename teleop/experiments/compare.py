@@ -19,7 +19,7 @@ from controllers import StepStatus
 from controllers.step_message import StepMessage
 from teleop.controller_specs import ROBOT, make_controller
 from teleop.limits import MAX_DURATION_S, MAX_STEPS
-from teleop.loop import RECORD_FIELDS, LoopConfig, StepRecord, TeleopLoop
+from teleop.loop import RECORD_FIELDS, LoopConfig, MeasuredLater, StepRecord, TeleopLoop
 
 from teleop.plants.imperfect import Imperfections
 from teleop.plants.walls import has_wall
@@ -129,7 +129,8 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
     """Tick ``controller`` (holding ``constraints``) through ``steps`` periods of ``plan``
     on the ``plant`` (every hole added on the way gets its wall), the measures on the true
     robot's kinematics (``imperfections.true_model``: with a calibration error, the same
-    draw for every run)."""
+    draw for every run), taken after the run where they can wait
+    (:meth:`TeleopLoop.tick_measured_later`: the same records)."""
     imperfections = imperfections or Imperfections()
     loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config,
                       plant=plant.make(plan.robot, config.dt, imperfections,
@@ -138,6 +139,7 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
                       true_model=imperfections.true_model(plan.robot.model))
     drive = Drive()
     records, failures = drive.records, drive.failures
+    periods: list[MeasuredLater] = []  # measured after the run (docs/design.md 5.1)
     edits_at_measure: list[list[Constraint]] = []
 
     def advance_geometry(now: float) -> None:
@@ -159,16 +161,17 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
         modes = plan.task_modes(t)
         if modes is not None and modes != loop.task_modes:
             loop.set_task_modes(modes)
-        record = loop.tick(plan.target(t + config.dt), advance_geometry)
-        records.append(record)
+        period = loop.tick_measured_later(plan.target(t + config.dt), advance_geometry)
+        periods.append(period)
         drive.commands.append(loop.last_qd.copy())
-        drive.ports.append(tuple(name for name, constraint
-                                 in zip(record.constraint_names, loop.constraints)
+        end = period.end
+        drive.ports.append(tuple(name for name, constraint in zip(end.names, end.constraints)
                                  if has_wall(constraint)))
-        if record.failed and len(failures) < 10:
-            failures.append(f"t={record.t:.3f}s: {record.message}")
+        if period.failed and len(failures) < 10:
+            failures.append(f"t={period.t:.3f}s: {period.message}")
         if on_step is not None:
             on_step(i)
+    records.extend(map(loop.measure_later, periods))
     return drive
 
 

@@ -8,6 +8,7 @@ from .closed_loop import (
 )
 from .distance_meter import SAFETY_TOLERANCE, DistanceMeasure, DistanceMeter
 from .loop_config import LoopConfig
+from .measured_later import Geometry, MeasuredLater
 from .naming import constraint_names, row_labels
 from .plant import Plant
 from .records import RECORD_FIELDS, CompiledPendingStep, PendingStep, StepRecord
@@ -15,7 +16,7 @@ from .state_observer import StateObserver, StateObserverConfig
 from .supervisor import Supervision, Supervisor, SupervisorConfig
 
 __all__ = ["RECORD_FIELDS", "SAFETY_TOLERANCE", "CompiledPendingStep", "DistanceMeasure",
-           "DistanceMeter", "LoopConfig", "PendingStep", "Plant", "StateObserver",
-           "StateObserverConfig", "StepRecord", "Supervision",
+           "DistanceMeter", "Geometry", "LoopConfig", "MeasuredLater", "PendingStep", "Plant",
+           "StateObserver", "StateObserverConfig", "StepRecord", "Supervision",
            "Supervisor", "SupervisorConfig", "Targets", "TeleopLoop", "constraint_names",
            "row_labels", "saturate_twist", "target_poses"]

@@ -43,6 +43,7 @@ from controllers.step_message import StepMessage
 
 from .distance_meter import DistanceMeter
 from .loop_config import LoopConfig
+from .measured_later import Geometry, MeasuredLater, geometry_copy
 from .naming import constraint_names, row_labels
 from .plant import Plant
 from .records import CompiledPendingStep, PendingStep, StepRecord
@@ -288,6 +289,52 @@ class TeleopLoop:
             advance_geometry(self.t)
         return self.measure(step)
 
+    @property
+    def measures_later(self) -> bool:
+        """Whether :meth:`tick_measured_later` leaves the measures for later: not with a
+        calibration error (the true kinematics register each constraint object where it is
+        first met) nor with a distance meter (its counts and ports follow the run)."""
+        return self.true_kinematics is None and self.distance_meter is None
+
+    def tick_measured_later(self, target: Targets,
+                            advance_geometry: Callable[[float], None] | None = None,
+                            ) -> MeasuredLater:
+        """:meth:`tick`'s period with its measures left for :meth:`measure_later`, which
+        gives the same record (docs/design.md 5.1, :mod:`teleop.loop.measured_later`):
+        the hot path, then what the measures read, kept: the geometry at the command and,
+        once ``advance_geometry(t)`` has moved it, at the end. Where the measures cannot
+        wait (:attr:`measures_later`), they are taken now and kept."""
+        step = self.advance(target)
+        if not self.measures_later:
+            self.measure_command(step)
+            if advance_geometry is not None:
+                advance_geometry(self.t)
+            record = self.measure(step)
+            geometry = self._geometry()
+            return MeasuredLater(step, geometry, geometry, self.q, self.t, record.plant, record)
+        command = self._geometry()
+        if advance_geometry is not None:
+            advance_geometry(self.t)
+        return MeasuredLater(step, command, self._geometry(), self.q, self.t,
+                             None if self.plant is None else self.plant.measures())
+
+    def measure_later(self, period: MeasuredLater) -> StepRecord:
+        """The record of a period of :meth:`tick_measured_later`: its measures, by
+        :meth:`measure_command` and :meth:`measure`'s code at what the period kept (the
+        one taken then, where they could not wait)."""
+        if period.record is not None:
+            return period.record
+        step, command, end = period.step, period.command, period.end
+        self._measure_command(step, command.constraints, command.frames, command.labels)
+        return self._measure_end(step, period.q, period.t, end.constraints, end.frames,
+                                 end.names, period.plant)
+
+    def _geometry(self) -> Geometry:
+        """The constraints as they are now (:class:`Geometry`)."""
+        labels = self._row_labels()
+        return Geometry(tuple(map(geometry_copy, self.constraints)),
+                        self.controller.constraint_frames, self._names, labels)
+
     def advance(self, target: Targets) -> PendingStep:
         """The hot path of a period: the supervisor (:meth:`supervise`: its measures, the
         supervised targets), filter the targets, the EE poses, the command, the
@@ -436,15 +483,23 @@ class TeleopLoop:
         its geometry, the drift ``-K e``, the EE velocities), with the true kinematics when
         they differ (:meth:`_measured_kinematics`); the operator's and the commanded EE
         velocities (world)."""
+        self._measure_command(step, self.constraints, self.controller.constraint_frames,
+                              self._row_labels())
+
+    def _measure_command(self, step: PendingStep, constraints: Sequence[Constraint],
+                         frames: Sequence[int], labels: tuple[str, ...]) -> None:
+        """:meth:`measure_command` against ``constraints`` on ``frames``, whose rows are
+        ``labels``."""
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, step.sensed)  # the frames: where they are read
         step.residual, step.constraint_velocity, step.drift_velocity, step.floor = \
-            self._constraint_velocity(step.qd, model, data, self.constraints)
+            self._constraint_velocity(step.qd, model, data, constraints, frames)
         if self.plant is not None or self.true_kinematics is not None:
-            model, data, constraints = self._measured_kinematics(step.q_before)
+            model, data, constraints = self._measured_kinematics(step.q_before, constraints,
+                                                                 frames)
             pin.computeJointJacobians(model, data, step.q_before)
             _, step.constraint_velocity, step.drift_velocity, step.floor = \
-                self._constraint_velocity(step.moved, model, data, constraints)
+                self._constraint_velocity(step.moved, model, data, constraints, frames)
         step.actual_linear_velocities = np.array([
             pin.updateFramePlacement(model, data, frame).rotation
             @ (pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:3] @ step.moved)
@@ -456,25 +511,35 @@ class TeleopLoop:
         step.operator_linear_velocities = (np.zeros((len(now), 3)) if before is None
                                            else np.array([(position - previous) / dt
                                                           for position, previous in zip(now, before)]))
-        step.labels = self._row_labels()
+        step.labels = labels
 
     def measure(self, step: PendingStep) -> StepRecord:
         """The end of the period's measures (after :meth:`measure_command`), at the true
         configuration with the true kinematics (:meth:`_measured_kinematics`)."""
-        model, data, constraints = self._measured_kinematics(self.q)
-        pin.forwardKinematics(model, data, self.q)  # the frames read below, not every frame
+        self._row_labels()  # the names, when the set changed
+        return self._measure_end(step, self.q, self.t, self.constraints,
+                                 self.controller.constraint_frames, self._names,
+                                 None if self.plant is None else self.plant.measures())
+
+    def _measure_end(self, step: PendingStep, q: np.ndarray, t: float,
+                     constraints: Sequence[Constraint], frames: Sequence[int],
+                     names: tuple[str, ...], plant: object | None) -> StepRecord:
+        """:meth:`measure` at the true configuration ``q`` of time ``t``, against
+        ``constraints`` on ``frames`` named ``names``, with the plant's measures ``plant``."""
+        model, data, constraints = self._measured_kinematics(q, constraints, frames)
+        pin.forwardKinematics(model, data, q)  # the frames read below, not every frame
         placements = [pin.updateFramePlacement(model, data, frame) for frame in self.ee_frame_ids]
-        errors, error, penetration = self._constraint_errors(model, data, constraints)
-        position_errors = np.array([norm(ee.translation - target.translation)
-                                    for ee, target in zip(placements, step.targets)])
-        orientation_errors = np.array([norm(pin.log3(ee.rotation.T @ target.rotation))
-                                       for ee, target in zip(placements, step.targets)])
-        violation = max(0.0, *(self.q - model.upperPositionLimit).tolist(),
-                        *(model.lowerPositionLimit - self.q).tolist())
+        errors, error, penetration = self._constraint_errors(model, data, constraints, frames)
+        position_errors = np.array([norm(ee.translation - target)
+                                    for ee, target in zip(placements, step.target_translations)])
+        orientation_errors = np.array([norm(pin.log3(ee.rotation.T @ target))
+                                       for ee, target in zip(placements, step.target_rotations)])
+        violation = max(0.0, *(q - model.upperPositionLimit).tolist(),
+                        *(model.lowerPositionLimit - q).tolist())
         distance = (None if self.distance_meter is None
-                    else self.distance_meter.measure(model, data, self.q))
+                    else self.distance_meter.measure(model, data, q))
         return StepRecord(
-            t=self.t, constraint_error=error, constraint_velocity_residual=step.residual,
+            t=t, constraint_error=error, constraint_velocity_residual=step.residual,
             barrier_penetration=penetration, ee_position_errors=position_errors,
             ee_orientation_errors=orientation_errors, joint_limit_violation=violation,
             failed=step.status == "failed", step_time_us=step.step_time_us,
@@ -485,7 +550,7 @@ class TeleopLoop:
             operator_linear_velocities=step.operator_linear_velocities,
             commanded_linear_velocities=step.commanded_linear_velocities,
             actual_linear_velocities=step.actual_linear_velocities,
-            constraint_errors=errors, constraint_names=self._names,
+            constraint_errors=errors, constraint_names=names,
             status=step.status, step_message=step.step_message,
             controller_status=step.controller_status,
             measured_constraint_error=step.supervision.error,
@@ -493,7 +558,7 @@ class TeleopLoop:
             supervisor_scale=step.supervision.scale, supervisor_action=step.supervision.action,
             supervisor_target_offset=step.supervision.target_offset,
             supervisor_target_offset_angle=step.supervision.target_offset_angle,
-            plant=None if self.plant is None else self.plant.measures(),
+            plant=plant,
             minimum_distance=math.inf if distance is None else distance.minimum_distance,
             closest_pair="" if distance is None else distance.closest_pair,
         )
@@ -506,19 +571,20 @@ class TeleopLoop:
             self._names = constraint_names(self.constraints)
         return self._labels
 
-    def _measured_kinematics(self, q: np.ndarray) -> tuple[pin.Model, pin.Data, list[Constraint]]:
-        """The model, data and constraints the measures at the true configuration ``q``
-        take: the loop's own, or with a calibration error the true model's and each
-        constraint moved to where the real link met it
+    def _measured_kinematics(self, q: np.ndarray, constraints: Sequence[Constraint],
+                             frames: Sequence[int],
+                             ) -> tuple[pin.Model, pin.Data, Sequence[Constraint]]:
+        """The model, data and ``constraints`` (on ``frames``) the measures at the true
+        configuration ``q`` take: the loop's own, or with a calibration error the true
+        model's and each constraint moved to where the real link met it
         (:meth:`TrueKinematics.constraints`, registered at ``q`` when first met)."""
         true = self.true_kinematics
         if true is None:
-            return self.model, self.data, self.constraints
-        return (true.model, true.data,
-                true.constraints(self.constraints, self.controller.constraint_frames, q))
+            return self.model, self.data, constraints
+        return true.model, true.data, true.constraints(constraints, frames, q)
 
     def _constraint_velocity(self, qd: np.ndarray, model: pin.Model, data: pin.Data,
-                             constraints: Sequence[Constraint],
+                             constraints: Sequence[Constraint], frames: Sequence[int],
                              ) -> tuple[float, np.ndarray, np.ndarray, float]:
         """At the kinematics in ``data``: ``max |A qd - b|`` over the equalities, every
         equality row's ``C v_c - C v_geom`` (the point's velocity relative to its moving
@@ -527,7 +593,8 @@ class TeleopLoop:
         position, from which ``e`` is computed (m/s; docs/design.md section 15.2)."""
         residual, floor = 0.0, 0.0
         velocity, drift = [], []
-        for constraint, frame in zip(constraints, self.controller.constraint_frames):
+        speeds = np.abs(qd)
+        for constraint, frame in zip(constraints, frames):
             if not constraint.is_equality:
                 continue
             A, state, placement = evaluated_rows(constraint, model, data, frame)
@@ -537,7 +604,7 @@ class TeleopLoop:
             velocity.append(achieved - (state.rhs - correction))
             drift.append(correction)
             point = placement.act(state.p)
-            floor = max(floor, max((np.abs(A) @ np.abs(qd)).tolist())
+            floor = max(floor, max((np.abs(A) @ speeds).tolist())
                         + constraint.gain * norm(point))
         if not velocity:
             return 0.0, np.zeros(0), np.zeros(0), 0.0
@@ -545,13 +612,14 @@ class TeleopLoop:
                 floor * EPSILON)
 
     def _constraint_errors(self, model: pin.Model, data: pin.Data,
-                           constraints: Sequence[Constraint]) -> tuple[np.ndarray, float, float]:
-        """After integration, at ``self.q`` on ``model`` (its joints' placements in
-        ``data``): each constraint's own ``violation``, then the max |e| over equalities and
-        the max inequality (barrier) penetration."""
+                           constraints: Sequence[Constraint], frames: Sequence[int],
+                           ) -> tuple[np.ndarray, float, float]:
+        """After integration, at the true configuration on ``model`` (its joints' placements
+        in ``data``), ``constraints`` on ``frames``: each constraint's own ``violation``,
+        then the max |e| over equalities and the max inequality (barrier) penetration."""
         error, penetration = 0.0, 0.0
         violations = []
-        for constraint, frame in zip(constraints, self.controller.constraint_frames):
+        for constraint, frame in zip(constraints, frames):
             violation = constraint.violation(pin.updateFramePlacement(model, data, frame))
             violations.append(violation)
             if constraint.is_equality:

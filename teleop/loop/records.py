@@ -160,6 +160,11 @@ class PendingStep:
         previous = self.previous_targets
         return None if previous is None else [target.translation for target in previous]
 
+    @property
+    def target_rotations(self) -> list[np.ndarray]:
+        """Each EE's filtered target orientation (world, 3 x 3)."""
+        return [target.rotation for target in self.targets]
+
 
 #: the measures' defaults of a compiled period (replaced, never written in place)
 NO_ROWS = np.zeros(0)
@@ -205,7 +210,7 @@ class CompiledPendingStep(PendingStep):
     def twists(self) -> list[np.ndarray]:
         return list(self.period[:, PERIOD_TWIST])
 
-    # the targets' positions read from the rows, no pin.SE3 built for them
+    # the poses' parts the measures read, from the rows: no pin.SE3 built for them
 
     @property
     def target_translations(self) -> list[np.ndarray]:
@@ -216,3 +221,6 @@ class CompiledPendingStep(PendingStep):
         return ([row_views(row[PERIOD_PREVIOUS])[1] for row in self.period]
                 if self.has_previous else None)
 
+    @property
+    def target_rotations(self) -> list[np.ndarray]:
+        return [row_views(row[PERIOD_TARGET])[0] for row in self.period]
