@@ -19,7 +19,7 @@ import itertools
 import math
 import threading
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -32,6 +32,7 @@ from teleop.robots import Robot
 
 from .console import ee_index
 from .limits import MAX_TARGET_DISTANCE
+from .placed import PlacedEntry
 
 #: a new obstacle's surface is this far (m) in front of the tip it is placed at
 FRONT_GAP = 0.1
@@ -87,18 +88,11 @@ def in_front(obstacle: Obstacle, tip: pin.SE3) -> np.ndarray:
 
 
 @dataclass
-class ObstacleEntry:
+class ObstacleEntry(PlacedEntry):
     """An obstacle placed by the operator (its ``name`` is its id), with where its gizmo
     put it."""
 
-    id: str
-    obstacle: Obstacle
-    goal: np.ndarray  # where the operator put it (the control loop moves it there)
-    settled: bool = True  # at its goal and at rest: the tick leaves it alone
-
-    @property
-    def kind(self) -> str:
-        return self.obstacle.kind
+    obstacle: Obstacle = field(kw_only=True)
 
     @property
     def moved(self) -> Obstacle:
@@ -260,7 +254,7 @@ class CollisionScene:
             if entry_id in self.obstacles:
                 raise ValueError(f"an obstacle {entry_id!r} is already placed")
             self.avoidance.add_obstacle(obstacle)
-            self.obstacles[entry_id] = ObstacleEntry(entry_id, obstacle, obstacle.position)
+            self.obstacles[entry_id] = ObstacleEntry(entry_id, obstacle.position, obstacle=obstacle)
             self.refresh_ports(self._session.constraints())
             return entry_id
 

@@ -6,9 +6,8 @@ from __future__ import annotations
 import itertools
 import math
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-import numpy as np
 import pinocchio as pin
 
 from constraints import CONSTRAINT_TYPES, Constraint
@@ -19,28 +18,16 @@ from teleop.loop import TeleopLoop
 from teleop.robots import Robot
 
 from .limits import MAX_TARGET_DISTANCE
+from .placed import PlacedEntry
 from .placing import Placement, moving_links
 from .plant import PlantChoice, apply_wall
 
 
 @dataclass
-class ConstraintEntry:
+class ConstraintEntry(PlacedEntry):
     """A constraint placed by the operator, with the geometry its gizmo drives."""
 
-    id: str
-    constraint: Constraint
-    goal: np.ndarray  # where the operator put it (the control loop moves towards it)
-    settled: bool = True  # at its goal and at rest: the tick leaves it alone
-
-    @property
-    def kind(self) -> str:
-        """The constraint's ``kind`` name."""
-        return self.constraint.kind
-
-    @property
-    def position(self) -> np.ndarray:
-        """Where the geometry is now (world reference point, a copy)."""
-        return self.constraint.position
+    constraint: Constraint = field(kw_only=True)
 
     @property
     def moved(self) -> Constraint:
@@ -103,7 +90,8 @@ class Editing:
             entry_id = f"{constraint.kind}-{next(self._ids)}"
             if entry_id in self.entries:
                 raise ValueError(f"a constraint {entry_id!r} is already placed")
-            self.entries[entry_id] = ConstraintEntry(entry_id, constraint, constraint.position)
+            self.entries[entry_id] = ConstraintEntry(entry_id, constraint.position,
+                                                     constraint=constraint)
             try:
                 self._sync_constraints()
             except ValueError:

@@ -183,14 +183,12 @@ class Scenes:
             self.entries = {}
             for placed in scene.constraints:
                 self.entries[placed.id] = ConstraintEntry(
-                    placed.id, placed.constraint, placed.goal.copy(),
-                    settled=bool(np.array_equal(placed.goal, placed.constraint.position)))
+                    placed.id, placed.goal.copy(), constraint=placed.constraint).restored()
             numbers = [int(p.id.rsplit("-", 1)[1]) for p in scene.constraints
                        if p.id.rsplit("-", 1)[-1].isdigit()]
             self._ids = itertools.count(max(numbers, default=0) + 1)
             self.collisions.restore(avoidance, collisions_on, {placed.id: ObstacleEntry(
-                placed.id, placed.obstacle, placed.goal.copy(),
-                settled=bool(np.array_equal(placed.goal, placed.obstacle.position)))
+                placed.id, placed.goal.copy(), obstacle=placed.obstacle).restored()
                 for placed in scene.obstacles})
             self.ghost_offset = scene.ghost_offset.copy()
             self.motion_scale = scene.motion_scale
