@@ -58,7 +58,7 @@ from .force_panel import ForcePanel
 from .markers import ConstraintDrawer
 from .obstacle_drawer import ObstacleDrawer
 from .obstacle_form import ObstacleForm
-from .placed_markers import PlacedMarkers
+from .placed_markers import Gizmos, PlacedMarkers
 from .placed_panel import PlacedActions, PlacedPanel, PlacedWords
 from .plots import LivePlots
 from .port_forces import PortForces
@@ -131,13 +131,14 @@ class TeleopUI(SceneView, PortForces):
         #: the placed items' nodes (constraints: the main robot's, the ghost's; obstacles)
         self.constraint_drawer = ConstraintDrawer(server, robot, self.profiles,
                                                   self.square_sizes, labelled=True)
-        self.constraint_markers = PlacedMarkers(server, "/constraints", self.constraint_drawer,
-                                                app.move_constraint, self._guarded, "constraint")
+        self.constraint_markers = PlacedMarkers(
+            server, "/constraints", self.constraint_drawer,
+            Gizmos(app.move_constraint, self._guarded, "constraint"))
         self.ghost_markers = PlacedMarkers(server, "/ghost/constraints", ConstraintDrawer(
             server, robot, self.profiles, self.square_sizes, labelled=False))
-        self.obstacle_markers = PlacedMarkers(server, "/obstacles", ObstacleDrawer(server),
-                                              app.collisions.move, self._guarded, "obstacle",
-                                              scale=0.08)
+        self.obstacle_markers = PlacedMarkers(
+            server, "/obstacles", ObstacleDrawer(server),
+            Gizmos(app.collisions.move, self._guarded, "obstacle", scale=0.08))
         self.pair_highlights = PairHighlights(server, robot)
         self.notes += self._views["main"].problems
         self._build_panels()
@@ -194,8 +195,7 @@ class TeleopUI(SceneView, PortForces):
         self.tabs = gui.add_tab_group()
         with self.tabs.add_tab("Teleop"):
             self.teleop_panel = TeleopPanel(gui, self.app, self.ee_names, self._guarded,
-                                            self._sync, self._move_gizmo_handle,
-                                            self._move_gizmo_handles, self.notify)
+                                            self._sync, self._move_gizmo_handle, self.notify)
             self.device_panel = DevicePanel(self.server, self.app, self.ee_names, self._guarded)
         app = self.app
         with self.tabs.add_tab("Constraints"):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -34,24 +35,28 @@ class ItemDrawer(Protocol):
         """The nodes moved to ``drawing``."""
 
 
+@dataclass(frozen=True)
+class Gizmos:
+    """Each placed item's gizmo (drawn over the links, ``scale`` m): its drags go through
+    ``guarded`` (:meth:`web.ui.TeleopUI._guarded`) as ``move(id, position)``, the latest
+    per item winning (the inbox key ``(key, id)``)."""
+
+    move: Callable[[str, np.ndarray], object]
+    guarded: Callable[..., None]
+    key: str
+    scale: float = 0.07
+
+
 class PlacedMarkers:
     """The placed items of one kind drawn under ``prefix`` by ``drawer``: :attr:`nodes`
-    maps an item's id to its scene nodes. Given ``move``, each item has a gizmo (drawn
-    over the links, ``scale`` m) whose drags go through ``guarded``
-    (:meth:`web.ui.TeleopUI._guarded`) as ``move(id, position)``, the latest per item
-    winning (the inbox key ``(key, id)``)."""
+    maps an item's id to its scene nodes; given ``gizmos``, each has its gizmo."""
 
     def __init__(self, server: viser.ViserServer, prefix: str, drawer: ItemDrawer,
-                 move: Callable[[str, np.ndarray], object] | None = None,
-                 guarded: Callable[..., None] | None = None, key: str = "",
-                 scale: float = 0.07) -> None:
+                 gizmos: Gizmos | None = None) -> None:
         self.server = server
         self.prefix = prefix
         self.drawer = drawer
-        self._move = move
-        self._guarded = guarded
-        self._key = key
-        self._scale = scale
+        self.gizmos = gizmos
         self.nodes: dict[str, dict[str, Any]] = {}
         self._drawn: dict[str, np.ndarray] = {}
 
@@ -75,21 +80,21 @@ class PlacedMarkers:
                 self._drawn[entry_id] = state
 
     def _create(self, entry_id: str, drawing: Any, goal: np.ndarray) -> dict[str, Any]:
-        """An item's nodes and, given ``move``, its gizmo at ``goal``."""
+        """An item's nodes and, given gizmos, its gizmo at ``goal``."""
         name = f"{self.prefix}/{node_name(entry_id)}"
         nodes = self.drawer.create(name, entry_id, drawing)
-        move, guarded = self._move, self._guarded
-        if move is None or guarded is None:
+        gizmos = self.gizmos
+        if gizmos is None:
             return nodes
         handle = self.server.scene.add_transform_controls(
-            f"{name}/gizmo", scale=self._scale, position=goal, disable_rotations=True,
+            f"{name}/gizmo", scale=gizmos.scale, position=goal, disable_rotations=True,
             depth_test=False)
-        key = (self._key, entry_id)
+        key = (gizmos.key, entry_id)
 
         @handle.on_update
         def _(event: viser.TransformControlsEvent) -> None:
             position = np.array(handle.position)
-            guarded(event, lambda: move(entry_id, position), key=key)
+            gizmos.guarded(event, lambda: gizmos.move(entry_id, position), key=key)
 
         nodes["gizmo"] = handle
         return nodes

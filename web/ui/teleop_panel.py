@@ -33,19 +33,17 @@ class TeleopPanel:
     """The Teleop tab of :class:`web.ui.TeleopUI`, a component owning its inputs, built
     where the caller's GUI context puts them. Each action goes through ``guarded``
     (:meth:`web.ui.TeleopUI._guarded`); ``sync(action)`` sets inputs without their
-    callbacks acting; ``move_gizmo(pose, ee)`` puts EE ``ee``'s gizmo handle at ``pose``
-    and ``move_gizmos()`` every handle where the app's gizmos are; ``notify`` tells the
-    browsers (``notify(None, title, body, color=...)``)."""
+    callbacks acting; ``move_gizmo(pose, ee)`` puts EE ``ee``'s gizmo handle at ``pose``;
+    ``notify`` tells the browsers (``notify(None, title, body, color=...)``)."""
 
     def __init__(self, gui: viser.GuiApi, app: TeleopApp, ee_names: dict[str, str],
                  guarded: Callable[..., None], sync: Callable[[Callable[[], None]], None],
-                 move_gizmo: Callable[[pin.SE3, int], None], move_gizmos: Callable[[], None],
+                 move_gizmo: Callable[[pin.SE3, int], None],
                  notify: Callable[..., None]) -> None:
         self.app = app
         self.ee_names = ee_names
         self._sync = sync
         self._move_gizmo = move_gizmo
-        self._move_gizmos = move_gizmos
         self._notify = notify
         #: the ghost's offset before "overlay" put it at zero (where unticking puts it back)
         self._saved_offset = app.ghost_offset.copy()
@@ -115,7 +113,8 @@ class TeleopPanel:
     def home(self) -> None:
         """Every EE home through the constraints, the gizmos following; why not, if not."""
         words = self.app.home()
-        self._move_gizmos()
+        for index, hand in enumerate(self.app.inputs):
+            self._move_gizmo(hand.gizmo, index)
         if words:  # home cannot be reached through the constraints: say why
             self._notify(None, "Home not reachable", words, color="yellow")
 
