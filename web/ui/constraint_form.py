@@ -21,8 +21,8 @@ class ConstraintForm:
     """The inputs of ``kind_type``'s placement fields on ``robot`` (a
     :class:`web.ui.placed_panel.KindForm`), labelled "<type label> <field label>"."""
 
-    expanded = True
-    hint = None
+    expanded: bool = True
+    hint: str | None = None
 
     def __init__(self, kind_type: type[Constraint], robot: Robot) -> None:
         self.type = kind_type

@@ -21,6 +21,7 @@ import pinocchio as pin
 import viser
 import viser.uplot as uplot
 
+from .inputs import assign
 from .plots import X_RANGE, Y_RANGE, axes_labelled
 from .shapes import arrow_segments
 
@@ -187,10 +188,10 @@ class ForcePanel:
 
     def _widgets_from(self, state: dict) -> None:
         if self.enabled.value != state["enabled"]:
-            self.enabled.value = state["enabled"]
-        setpoint = tuple(float(x) for x in state["setpoint"])
-        if tuple(self.setpoint.value) != setpoint:
-            self.setpoint.value = setpoint
+            assign(self.enabled, state["enabled"])
+        x, y, z = (float(value) for value in state["setpoint"])
+        if tuple(self.setpoint.value) != (x, y, z):
+            assign(self.setpoint, (x, y, z))
         for box, axis in zip(self.axes, state["axes"]):
             if box.value != axis:
-                box.value = axis
+                assign(box, axis)

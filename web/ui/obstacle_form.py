@@ -20,8 +20,8 @@ class ObstacleForm:
     :class:`web.ui.placed_panel.KindForm`), labelled "<kind label> <field>"; one is placed
     in front of the active arm's tip."""
 
-    expanded = False
-    hint = "placed in front of the active arm's tip; drag its gizmo to move it"
+    expanded: bool = False
+    hint: str | None = "placed in front of the active arm's tip; drag its gizmo to move it"
 
     def __init__(self, kind: str) -> None:
         self.kind = kind
