@@ -140,6 +140,8 @@ class ControlThread:
             if self.app.config.dt != period:  # a new rate: a new measuring window
                 period = self.app.config.dt
                 window_start, window_ticks = clock(), 0
+            if self.app.ros2 is not None:  # the robot's clock paces the ticks: its next
+                self.app.ros2.pace()        # state awaited here, outside the app's lock
             start = clock()
             solve_us = advance_us = 0.0
             try:
@@ -163,7 +165,7 @@ class ControlThread:
                 window_start, window_ticks = end, 0
             next_tick += period
             delay = next_tick - clock()
-            if delay > 0:
+            if delay > 0 and self.app.ros2 is None:
                 time.sleep(delay)
             elif delay < -period:
                 self.deadline_misses += 1

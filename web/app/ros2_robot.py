@@ -8,7 +8,8 @@ second writer on the command topic. The main robot is the only loop on it: a gho
 command the same robot, so :class:`Ros2Robot` refuses one (:meth:`refuse_ghost`). The
 session starts where the robot is (:meth:`state`: the first joint state), and the status
 says why the robot stopped (:meth:`stopped`: the watchdog's stale state, a refused joint
-state, a non-finite command)."""
+state, a non-finite command). The robot's clock paces the control thread (:meth:`pace`,
+outside the app's lock)."""
 
 from __future__ import annotations
 
@@ -47,6 +48,13 @@ class Ros2Robot:
         """The robot's configuration now: the first joint state received (``ValueError``
         naming the silent topic or a joint it does not carry)."""
         return self.plant(dt).wait_for_state()
+
+    def pace(self) -> None:
+        """The robot's next state awaited (:meth:`Ros2Plant.pace`): the control thread
+        calls it before each tick, outside the app's lock, so a drag does not wait while
+        the tick waits for the robot (nothing before the plant is made)."""
+        if self._plant is not None:
+            self._plant.pace()
 
     def stopped(self) -> str:
         """Why the robot is stopped, in words (empty while it is commanded)."""

@@ -133,6 +133,8 @@ class Ros2Plant:
         self._actuated = -math.inf  # time.monotonic() of the last command published
         self._fresh = 0  # good states taken since the start
         self._period_start = 0.0  # time.monotonic() when the last period ended
+        self._period_fresh = 0  # self._fresh when the last period ended
+        self._paced = False  # :meth:`pace` ended the period: the next actuate does not wait
         #: how the threads on the wire run; the actuating thread's added at its first call
         self._scheduling = f"DDS: {dds_threads}; watchdog: "
         #: the thread made real-time while it actuates, as it was before
@@ -315,17 +317,39 @@ class Ros2Plant:
                 self._publish(np.zeros(self.model.nv) if self.last_measures.stopped else qd)
             self.last_measures.command_publishers = (
                 self._command_listener.get_subscription_matched_status().current_count)
-            earliest = self._period_start + 0.5 * self.dt
-            latest = self._period_start + 1.5 * self.dt
-            now = time.monotonic()
-            while now < latest and (self._fresh == fresh or now < earliest):
-                self._lock.wait(timeout=(earliest if self._fresh > fresh else latest) - now)
-                self._take_states()
-                now = time.monotonic()
-            self._period_start = now
+            if self._paced:
+                self._paced = False
+            else:
+                self._end_period(fresh)
             if self._q is None:
                 return np.zeros(self.model.nv)
             return pin.difference(self.model, q, self._q) / self.dt
+
+    def _end_period(self, fresh: int) -> None:
+        """Waits for a state newer than the ``fresh``-th, not ending the period sooner
+        than half a period after the last one ended nor later than one and a half (caller
+        holds the lock; the wait releases it)."""
+        earliest = self._period_start + 0.5 * self.dt
+        latest = self._period_start + 1.5 * self.dt
+        now = time.monotonic()
+        while now < latest and (self._fresh == fresh or now < earliest):
+            self._lock.wait(timeout=(earliest if self._fresh > fresh else latest) - now)
+            self._take_states()
+            now = time.monotonic()
+        self._period_start = now
+        self._period_fresh = self._fresh
+
+    def pace(self) -> None:
+        """The period ended here rather than in :meth:`actuate`: the robot's next state
+        awaited as :meth:`actuate` would (a state newer than the last period's end, within
+        half to one and a half periods), and the next :meth:`actuate` publishes and
+        returns at once. The page calls it between its ticks, outside its lock, so the
+        operator's input is not held up while the robot's clock paces the loop
+        (docs/ros2.md "The page over ROS 2")."""
+        with self._lock:
+            self._take_states()
+            self._end_period(self._period_fresh)
+            self._paced = True
 
     def set_period(self, dt: float) -> None:
         """The loop's new period ``dt`` (s): the pacing and the watchdog's wait follow it
