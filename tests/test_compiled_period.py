@@ -111,3 +111,20 @@ def test_no_compiled_period_where_python_stands_between(sda10f):
     assert MujocoPlant(sda10f, DT, PlantSettings(interface_limits="count"))._period is None
     assert MujocoPlant(sda10f, DT, imperfections=Imperfections(latency=1))._period is None
     assert MujocoPlant(sda10f, DT, compiled_walls=False)._period is None
+
+
+def test_commands_of_any_layout_or_dtype_are_copied_in(sda10f):
+    """A strided view and an integer array reach the C side as the float64 vector they
+    hold: the same periods as a contiguous command."""
+    nv = sda10f.model.nv
+    plants_ = [MujocoPlant(sda10f, DT) for _ in range(3)]
+    wide = np.zeros((nv, 2))
+    q = sda10f.q_home.copy()
+    for k in range(50):
+        command = np.full(nv, (k % 3) - 1, dtype=np.int64)  # -1, 0, 1 rad/s
+        wide[:, 0] = command
+        moved = [plant.actuate(given, q, []) for plant, given in
+                 zip(plants_, (command.astype(float), wide[:, 0], command))]
+        assert all(np.array_equal(m, moved[0]) for m in moved[1:])
+        q = pin.integrate(sda10f.model, q, moved[0] * DT)
+    assert np.max(np.abs(moved[0])) > 0.1

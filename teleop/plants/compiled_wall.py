@@ -4,10 +4,13 @@
 :class:`teleop.plants.walls.PortWall`. It is compiled once with the machine's C compiler
 against the ``mujoco`` wheel's headers and library, kept under the user's cache directory
 (``$XDG_CACHE_HOME/cjm-teleop``, as the bench's allocation counter) by a hash of its
-source, the compiler (``sysconfig``'s ``CC``) and MuJoCo's version, loaded by ctypes and installed
+sources, the compiler (``sysconfig``'s ``CC``) and MuJoCo's version, loaded by ctypes and installed
 as the process's callback (a C function pointer: MuJoCo calls it without the GIL). A
 plant attaches its MjData and its ports' parameters for one ``mj_step(m, d, nstep)`` call
-(:meth:`CompiledPorts.step`), so a period with holes is one call, as one without.
+(:meth:`CompiledPorts.step`), so a period with holes is one call, as one without. The
+attachment is the stepping thread's own (MuJoCo calls the callback in the thread that
+called ``mj_step``): plants in several threads each step with their own ports. The same
+library holds the plant's whole period (``plant_period.c``, :mod:`.compiled_period`).
 
 Where it cannot be built or loaded (no compiler, not Linux, another callback already
 installed) :func:`compiled_ports` is None and the plant applies the walls from Python,
@@ -58,8 +61,7 @@ class CompiledPorts:
             self.ports = np.zeros((ports.shape[0], PORT_FIELDS))
             self._pointer = self.ports.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
         self.ports[:, :FORCE] = ports
-        if self._library.cjm_wall_attach(self._address, self._pointer, len(self.ports)) != 0:
-            raise RuntimeError("too many MuJoCo plants stepping at once for the compiled walls")
+        self._library.cjm_wall_attach(self._address, self._pointer, len(self.ports))
         try:
             mujoco.mj_step(model, self._data, nstep)
         finally:
@@ -112,7 +114,7 @@ def wall_library() -> ctypes.CDLL | None:
                 subprocess.run([*compiler, "-shared", "-fPIC", "-O2", "-o", str(built),
                                 *(str(source) for source in SOURCES),
                                 f"-I{package / 'include'}", str(libraries[0]),
-                                f"-Wl,-rpath,{package}", "-lm", "-lpthread"],
+                                f"-Wl,-rpath,{package}", "-lm"],
                                check=True, capture_output=True, timeout=120)
                 built.replace(target)
         except (OSError, subprocess.SubprocessError):
@@ -122,11 +124,11 @@ def wall_library() -> ctypes.CDLL | None:
     except OSError:
         return None
     library.cjm_wall_attach.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_double), ctypes.c_int]
-    library.cjm_wall_attach.restype = ctypes.c_int
+    library.cjm_wall_attach.restype = None
     library.cjm_wall_detach.argtypes = [ctypes.c_void_p]
     library.cjm_wall_detach.restype = None
     library.cjm_plant_period.argtypes = [ctypes.c_void_p]
-    library.cjm_plant_period.restype = ctypes.c_int
+    library.cjm_plant_period.restype = None
     mujoco.set_mjcb_passive(library.cjm_wall_passive)
     return library
 

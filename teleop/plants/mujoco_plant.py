@@ -373,7 +373,7 @@ class MujocoPlant:
         with the same arithmetic, the measures made when read (:meth:`measures`)."""
         period = self._period
         if period is not None and self._follow_ports(constraints):
-            self.interface.receive(qd)  # counts the period; "off" passes the command on
+            # (the interface is off: it passes the command on, checks and counts nothing)
             self._last = None
             return period.run(qd, q)
         model, data = self.mj_model, self.mj_data

@@ -14,7 +14,7 @@
 #include <mujoco/mujoco.h>
 #include <math.h>
 
-int cjm_wall_attach(const mjData* data, double* ports, int count);
+void cjm_wall_attach(const mjData* data, double* ports, int count);
 void cjm_wall_detach(const mjData* data);
 
 // what one period reads and writes (teleop/plants/compiled_period.py's PeriodBlock)
@@ -35,13 +35,12 @@ typedef struct {
 
 enum { kRatio, kContacts, kPenetration };
 
-//! Run ``period``: 0, or -1 when its ports cannot be attached (nothing stepped).
-int cjm_plant_period(const Period* period) {
+//! Run ``period``.
+void cjm_plant_period(const Period* period) {
   const mjModel* m = period->model;
   mjData* d = period->data;
   for (int a = 0; a < m->nu; ++a) d->ctrl[a] = period->command[period->actuator_dofs[a]];
-  if (period->port_count > 0 && cjm_wall_attach(d, period->ports, period->port_count) != 0)
-    return -1;
+  if (period->port_count > 0) cjm_wall_attach(d, period->ports, period->port_count);
   for (int step = 0; step < period->nstep; ++step) mj_step(m, d);
   if (period->port_count > 0) cjm_wall_detach(d);
   double ratio = 0.0;
@@ -62,5 +61,4 @@ int cjm_plant_period(const Period* period) {
   period->summary[kContacts] = d->ncon;
   period->summary[kPenetration] = penetration > 0.0 ? penetration : 0.0;
   for (int i = 0; i < m->nq; ++i) period->moved[i] = (d->qpos[i] - period->q[i]) / period->dt;
-  return 0;
 }

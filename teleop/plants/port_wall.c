@@ -2,9 +2,12 @@
 // applying teleop/plants/walls.py's PortWall inside mj_step (docs/design.md section 17.5).
 //
 // The plant attaches an MjData and its ports (cjm_wall_attach) for one mj_step call and
-// detaches it after; the callback, installed once for the process, does nothing for an
-// MjData not attached. Per port, at the kinematics of the physics step (the callback runs
-// in mj_fwdVelocity, where mj_step1 ends), with o, R the link site's position and rotation:
+// detaches it after, in the thread that steps it: MuJoCo calls the callback in the thread
+// that called mj_step (no thread pool is bound to a plant's MjData), so the attachment is
+// that thread's own (thread-local: no table, no lock) and the callback, installed once
+// for the process, does nothing for any other MjData. Per port, at the kinematics of the
+// physics step (the callback runs in mj_fwdVelocity, where mj_step1 ends), with o, R the
+// link site's position and rotation:
 //
 //     a = R a_link,  P = o + ((c - o) . a) a,  v = J_P qd,
 //     F = -k (P - c) - c_d ((v - v_c) - ((v - v_c) . a) a),  qfrc_passive += J_P^T F,
@@ -13,7 +16,6 @@
 // written back for the plant's measures (the period's last physics step's stay).
 #include <mujoco/mujoco.h>
 #include <math.h>
-#include <pthread.h>
 #include <stddef.h>
 
 // one port's block of doubles, the layout of teleop/plants/compiled_wall.py's PORT_FIELDS
@@ -22,41 +24,26 @@ enum {
   kDamping, kForce, kSpring = kForce + 3, kDisplacement = kSpring + 3, kPortSize
 };
 
-enum { kMaxAttached = 256 };
-
 typedef struct {
   const mjData* data;
   double* ports;
   int count;
 } Attached;
 
-static Attached attached[kMaxAttached];
-static pthread_mutex_t attached_lock = PTHREAD_MUTEX_INITIALIZER;
+// the MjData this thread is stepping with ports, and its ports (data NULL: none)
+static _Thread_local Attached attached;
 
 //! Apply ``count`` ports (``ports``: count blocks of kPortSize doubles) to ``data``'s
-//! physics steps until cjm_wall_detach; 0, or -1 when kMaxAttached are attached.
-int cjm_wall_attach(const mjData* data, double* ports, int count) {
-  int result = -1;
-  pthread_mutex_lock(&attached_lock);
-  for (int i = 0; i < kMaxAttached; ++i) {
-    if (attached[i].data == NULL || attached[i].data == data) {
-      attached[i].data = data;
-      attached[i].ports = ports;
-      attached[i].count = count;
-      result = 0;
-      break;
-    }
-  }
-  pthread_mutex_unlock(&attached_lock);
-  return result;
+//! physics steps in this thread until cjm_wall_detach.
+void cjm_wall_attach(const mjData* data, double* ports, int count) {
+  attached.data = data;
+  attached.ports = ports;
+  attached.count = count;
 }
 
 //! Stop applying ports to ``data``.
 void cjm_wall_detach(const mjData* data) {
-  pthread_mutex_lock(&attached_lock);
-  for (int i = 0; i < kMaxAttached; ++i)
-    if (attached[i].data == data) attached[i].data = NULL;
-  pthread_mutex_unlock(&attached_lock);
+  if (attached.data == data) attached.data = NULL;
 }
 
 static void apply_port(const mjModel* m, mjData* d, double* port, mjtNum* jacobian) {
@@ -94,16 +81,12 @@ static void apply_port(const mjModel* m, mjData* d, double* port, mjtNum* jacobi
                           jacobian[2 * m->nv + j] * force[2];
 }
 
-//! The callback (mjfGeneric): the attached ports of ``d``, if any.
+//! The callback (mjfGeneric): the ports attached to ``d`` in this thread, if any.
 void cjm_wall_passive(const mjModel* m, mjData* d) {
-  pthread_mutex_lock(&attached_lock);
-  Attached entry = {NULL, NULL, 0};
-  for (int i = 0; i < kMaxAttached; ++i)
-    if (attached[i].data == d) entry = attached[i];
-  pthread_mutex_unlock(&attached_lock);
-  if (entry.data == NULL) return;
+  if (attached.data != d) return;
   mj_markStack(d);
   mjtNum* jacobian = mj_stackAllocNum(d, 3 * m->nv);
-  for (int k = 0; k < entry.count; ++k) apply_port(m, d, entry.ports + k * kPortSize, jacobian);
+  for (int k = 0; k < attached.count; ++k)
+    apply_port(m, d, attached.ports + k * kPortSize, jacobian);
   mj_freeStack(d);
 }
