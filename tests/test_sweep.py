@@ -483,6 +483,35 @@ def test_a_local_ray_instance_writes_only_under_the_sweep_folder(tmp_path):
         shutil.rmtree(out.parent, ignore_errors=True)
 
 
+def test_ctrl_c_stops_a_ray_sweep_and_every_process_of_its_instance(tmp_path):
+    """SIGINT to the sweep's process group (Ctrl-C) with cells in flight on a local Ray
+    instance: exit 130 and the resume note, and no process naming the instance's session
+    folder (under the sweep's: its GCS, raylet, monitor and agents) left running."""
+    out = Path(tempfile.mkdtemp(prefix="tc-", dir="/tmp")) / "out"  # short: a socket path
+    command = [sys.executable, "-m", "teleop", "sweep", "--scenarios", "paper-hole,trocar-circle",
+               "--controllers", "cjm,qp:daqp,cjm:general", "--seeds", "2", "--duration", "1.0",
+               "--encoder-noise", "1e-5", "--workers", "2", "--reports", "0",
+               "--engine", "ray", "--out", str(out)]
+    try:
+        sweep = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                 text=True, start_new_session=True, cwd=REPO,
+                                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        deadline = time.monotonic() + 600
+        while time.monotonic() < deadline and sweep.poll() is None:
+            if (out / DATABASE_NAME).exists() and len(_keys(out)) >= 2:
+                break
+            time.sleep(0.2)
+        assert sweep.poll() is None, sweep.communicate()
+        assert ray_task_pids(str(out / "ray")), "no process of the Ray instance was found"
+        os.killpg(sweep.pid, signal.SIGINT)
+        _, error = sweep.communicate(timeout=120)
+        assert sweep.returncode == 130, error
+        assert "the same command resumes" in error
+        assert ray_task_pids(str(out / "ray")) == []
+    finally:
+        shutil.rmtree(out.parent, ignore_errors=True)
+
+
 def test_a_sweep_folder_too_long_for_a_socket_gives_ray_a_temporary_folder(tmp_path):
     from teleop.experiments.sweep.ray_engine import LONGEST_RAY_FOLDER, ray_folder
 

@@ -15,6 +15,7 @@ import os
 import secrets
 import shutil
 import socket
+import subprocess
 import sys
 import tempfile
 import time
@@ -120,6 +121,37 @@ def run_cell_task(key: str, inputs: dict[str, Any], time_limit: float) -> tuple[
     return key, run_cell(inputs, time_limit), started
 
 
+#: Ray's processes left running by :func:`_terminate_together`: the GCS (``ray.shutdown``
+#: disconnects from it first, and waits 5 s for a dead one) and the reaper (last, by Ray).
+KEPT_UNTIL_SHUTDOWN = ("gcs_server", "reaper")
+
+
+def _terminate_together(ray) -> None:
+    """Stop every process of the local instance but :data:`KEPT_UNTIL_SHUTDOWN` at once:
+    SIGTERM to all, a wait of at most :data:`TERMINATE_WAIT_S` for them together, SIGKILL to
+    those left (Ray's monitor outlives a SIGTERM by more than 1 s). ``ray.shutdown`` then
+    finds them gone, where it sends each its SIGTERM and waits up to 1 s for it in turn."""
+    node = getattr(ray._private.worker, "_global_node", None)
+    if node is None:
+        return
+    processes = [info.process for kind, infos in node.all_processes.items()
+                 if kind not in KEPT_UNTIL_SHUTDOWN for info in infos]
+    for process in processes:
+        if process.poll() is None:
+            process.terminate()
+    deadline = time.monotonic() + TERMINATE_WAIT_S
+    for process in processes:
+        try:
+            process.wait(max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+#: How long :func:`_terminate_together` waits for Ray's processes to end on SIGTERM (s).
+TERMINATE_WAIT_S = 0.2
+
+
 class RayEngine:
     """Cells as Ray tasks, at most ``workers`` in flight."""
 
@@ -154,6 +186,7 @@ class RayEngine:
     def shutdown(self) -> None:
         """Stop the local instance this engine started (an existing cluster stays up)."""
         if self.started_instance:
+            _terminate_together(sys.modules["ray"])
             sys.modules["ray"].shutdown()
             self.started_instance = False
         if self._temporary_folder is not None:
