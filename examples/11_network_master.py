@@ -78,7 +78,7 @@ for k in range(int(RATE * SECONDS) + 1):
     client.send_pose(circle(k))
     if k % 10 == 0 and k > 500:  # after the first half second, every 10 ms
         errors.append(app.limitation().distance)
-        record = app.last_records["main"]
+        record = app.robots.last_records["main"]
         holes.append(record.constraint_error if record is not None else 0.0)
     feedback = client.feedback()
     if feedback is not None:
@@ -86,7 +86,7 @@ for k in range(int(RATE * SECONDS) + 1):
     time.sleep(max(0.0, start + (k + 1) / RATE - time.perf_counter()))
 
 silent_from = time.perf_counter()  # the master goes silent: the watchdog releases it
-while app.devices[0].state.name != "HELD" or np.max(np.abs(app.loops["main"].last_qd)) >= 1e-3:
+while app.devices[0].state.name != "HELD" or np.max(np.abs(app.robots.loops["main"].last_qd)) >= 1e-3:
     if time.perf_counter() - silent_from > 10.0:
         raise SystemExit("the robot did not stop within 10 s of the master's silence")
     time.sleep(0.001)

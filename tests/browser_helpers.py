@@ -190,7 +190,7 @@ def ee_position(app) -> np.ndarray:
     """World position of the main robot's EE frame, by forward kinematics of its q."""
     robot = app.robot
     with app._lock:  # a consistent q: a controller switch replaces the loop
-        q = app.loops["main"].q.copy()
+        q = app.robots.loops["main"].q.copy()
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, q)
     return data.oMf[robot.model.getFrameId(robot.ee_frame)].translation.copy()
@@ -226,7 +226,7 @@ class Sampler:
     def _run(self) -> None:
         app = self.app
         while not self._stop.is_set():
-            record = app.last_records.get("main")
+            record = app.robots.last_records.get("main")
             error = math.nan if record is None else max(record.constraint_error,
                                                         record.barrier_penetration)
             self.samples.append(Sample(time.perf_counter(), app.target.translation.copy(),
@@ -580,4 +580,4 @@ def report_drag(label: str, result, control) -> None:
     print(f"[{label}] max hole error while dragging: {result.max_sampled_error:.2e} m "
           f"({len(result.samples)} samples)")
     print(f"[{label}] control rate {control.achieved_rate:.0f} Hz achieved (target "
-          f"{1.0 / control.app.config.dt:.0f} Hz), {control.deadline_misses} deadline misses")
+          f"{1.0 / control.app.robots.config.dt:.0f} Hz), {control.deadline_misses} deadline misses")

@@ -94,7 +94,7 @@ def test_page_loads_and_the_browser_registers_as_a_client(web):
     time.sleep(3.0)  # a few seconds with the browser connected and drawing
     timing = web.control.timing()
     print(f"\n[browser] control with the browser connected: {timing.achieved_rate:.0f} Hz "
-          f"(target {1.0 / web.app.config.dt:.0f} Hz), lateness p50 "
+          f"(target {1.0 / web.app.robots.config.dt:.0f} Hz), lateness p50 "
           f"{timing.lateness_p50_ms:.3f} ms, p99 {timing.lateness_p99_ms:.3f} ms, tick p50 "
           f"{timing.tick_p50_us:.0f} us ({timing.overhead_p50_us:.0f} us beyond the "
           f"controller), {timing.deadline_misses} deadline misses")
@@ -160,7 +160,7 @@ def test_add_hole_button_creates_a_hole_and_its_ring(web):
     # look at the constrained link, where the hole will be, to see the ring appear
     robot = web.robot
     data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, app.loops["main"].q)
+    pin.framesForwardKinematics(robot.model, data, app.robots.loops["main"].q)
     link = data.oMf[robot.model.getFrameId(robot.constrained_link)]
     centre = link.act(0.08 * np.asarray(robot.link_axis))
     set_camera(web.client, centre + np.array([0.25, -0.3, 0.2]), centre)
@@ -226,15 +226,15 @@ def test_real_mouse_drag_moves_the_ee_while_the_hole_holds(web):
 def test_switching_controller_in_the_page_keeps_the_hole(web):
     app, page = web.app, web.page
     ensure_hole(web)
-    assert app.specs["main"] == "cjm"
+    assert app.robots.specs["main"] == "cjm"
     open_tab(web, "Teleop")
     menu = page.get_by_label("main", exact=True)
     menu.click()
     page.get_by_role("option", name="qp:daqp", exact=True).click()
-    wait_until(lambda: app.specs["main"] == "qp:daqp", WAIT, "the app to switch to qp:daqp")
+    wait_until(lambda: app.robots.specs["main"] == "qp:daqp", WAIT, "the app to switch to qp:daqp")
     expect(menu).to_have_value("qp:daqp")
     switched = app.now
-    assert "qp" in type(app.loops["main"].controller).__name__.lower()
+    assert "qp" in type(app.robots.loops["main"].controller).__name__.lower()
     # held still, then dragged back: the QP holds the hole too
     time.sleep(0.5)
     look_at_target(web)
@@ -246,7 +246,7 @@ def test_switching_controller_in_the_page_keeps_the_hole(web):
     assert result.max_sampled_error <= HOLE_TOLERANCE
     trace = trace_since(app, switched)
     assert trace["constraint_error"].max() <= HOLE_TOLERANCE, trace["constraint_error"].max()
-    assert app.last_records["main"] is not None and not app.last_records["main"].failed
+    assert app.robots.last_records["main"] is not None and not app.robots.last_records["main"].failed
 
 
 def test_impossible_action_shows_a_notification(web):
@@ -277,19 +277,19 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
     ensure_hole(web)
     open_tab(web, "Teleop")
     menu = page.get_by_label("main", exact=True)
-    if app.specs["main"] != "cjm":  # CJM beside the QP
+    if app.robots.specs["main"] != "cjm":  # CJM beside the QP
         menu.click()
         page.get_by_role("option", name="cjm", exact=True).click()
-        wait_until(lambda: app.specs["main"] == "cjm", WAIT, "the app to switch to cjm")
+        wait_until(lambda: app.robots.specs["main"] == "cjm", WAIT, "the app to switch to cjm")
     checkbox = page.get_by_label("side by side")
     started = time.perf_counter()
     checkbox.check()
     open_tab(web, "Plots")
-    wait_until(lambda: "ghost" in app.loops, WAIT, "the ghost robot")
+    wait_until(lambda: "ghost" in app.robots.loops, WAIT, "the ghost robot")
     # a line per plot, however short (the ghost's history starts now, on a 10 s axis)
     found = wait_for_plot_lines(web, {"ghost": hex_rgb(GHOST_COLOR)}, count=5, since=started,
                                 minimum=15)
-    assert app.specs["ghost"] == "qp:daqp"
+    assert app.robots.specs["ghost"] == "qp:daqp"
     # the ghost draws over the main robot's line where they agree; the step times differ
     main = uplot_line_pixels(page, hex_rgb(MAIN_COLOR))
     assert main[3] >= 15, (main, found)
@@ -313,10 +313,10 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
 
     # the README's screenshot: the hole, CJM and QP as two robots side by side, the plots
     wait_until(lambda: "ghost" in ui._views, WAIT, "the ghost drawn")
-    offset = app.ghost_offset
+    offset = app.robots.ghost_offset
     model = app.robot.model
     data = model.createData()
-    pin.forwardKinematics(model, data, app.loops["main"].q)
+    pin.forwardKinematics(model, data, app.robots.loops["main"].q)
     joints = np.array([placement.translation for placement in data.oMi[1:]])
     centre = joints.mean(axis=0) + 0.5 * offset + np.array([0.0, 0.0, -0.05])
     side = offset / np.linalg.norm(offset)  # the ghost's side: the left, seen from the front

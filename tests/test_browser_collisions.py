@@ -54,7 +54,7 @@ def web(tmp_path_factory):
 
         def step_and_record() -> float:
             solve_us = step()
-            served.configurations.append((app.now, app.loops["main"].q.copy()))
+            served.configurations.append((app.now, app.robots.loops["main"].q.copy()))
             return solve_us
 
         app.step = step_and_record
@@ -111,7 +111,7 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     model, data = app.robot.model, app.robot.model.createData()
 
     def distance_now() -> float:
-        pin.forwardKinematics(model, data, app.loops["main"].q)
+        pin.forwardKinematics(model, data, app.robots.loops["main"].q)
         return min(d for _, d in avoidance.distances(model, data))
 
     # held: the distance stops changing (0.5 s of loop time apart)
@@ -138,7 +138,8 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     assert distances.min() >= safety - MARGIN
     assert safety - MARGIN <= final <= safety + 1e-3, "the link is not held at d_s"
     # the target is inside the sphere: the robot did not reach it
-    assert np.linalg.norm(app.target.translation - app.loops["main"].ee_placements()[0].translation) > 0.01
+    tip = app.robots.loops["main"].ee_placements()[0]
+    assert np.linalg.norm(app.target.translation - tip.translation) > 0.01
 
     # the pair highlighted: its witness segment and its link named after it
     rows = wait_until(lambda: app.collisions.rows.get("main"), WAIT, "measured rows")

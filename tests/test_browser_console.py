@@ -77,15 +77,15 @@ def robot_points(app, which: str) -> np.ndarray:
     model = app.robot.model
     data = model.createData()
     with app._lock:
-        q = app.loops[which].q.copy()
+        q = app.robots.loops[which].q.copy()
     pin.forwardKinematics(model, data, q)
     points = np.array([placement.translation for placement in data.oMi[1:]])
-    return points + (app.ghost_offset if which == "ghost" else 0.0)
+    return points + (app.robots.ghost_offset if which == "ghost" else 0.0)
 
 
 def test_the_ghost_is_drawn_beside_the_robot_at_its_offset(web):
     app, ui = web.app, web.ui
-    offset = app.ghost_offset
+    offset = app.robots.ghost_offset
     assert np.linalg.norm(offset) > 0.5 and abs(offset[2]) < 1e-12
     main, ghost = robot_points(app, "main"), robot_points(app, "ghost")
     centre = 0.5 * (main.mean(axis=0) + ghost.mean(axis=0))
@@ -180,7 +180,7 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
     expect(page.get_by_text("saved", exact=False).first).to_be_visible()
     # change things from the page: the rate, the motion scale, the constraints
     input_of(page, "rate (Hz)").fill("500")
-    wait_until(lambda: app.config.rate == 500.0, WAIT, "the rate to change")
+    wait_until(lambda: app.robots.config.rate == 500.0, WAIT, "the rate to change")
     open_tab(web, "Teleop")
     input_of(page, "motion scale").fill("0.2")
     wait_until(lambda: app.motion_scale == 0.2, WAIT, "the motion scale to change")
@@ -191,13 +191,13 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
     page.get_by_role("button", name="Load scene").click()
     wait_until(lambda: hole_id in app.entries, WAIT, "the scene's hole")
     np.testing.assert_allclose(app.entries[hole_id].goal, goal, atol=1e-12)
-    assert app.config.rate == 1000.0 and app.motion_scale == 1.0
-    assert app.specs == {"main": "cjm", "ghost": "qp:daqp"}
+    assert app.robots.config.rate == 1000.0 and app.motion_scale == 1.0
+    assert app.robots.specs == {"main": "cjm", "ghost": "qp:daqp"}
     expect(input_of(page, "rate (Hz)")).to_have_value("1000")
     open_tab(web, "Constraints")
     expect(page.get_by_label("placed")).to_have_value(hole_id)
     time.sleep(0.5)
-    assert app.last_records["main"].constraint_error < 1e-6
+    assert app.robots.last_records["main"].constraint_error < 1e-6
     assert web.page_errors == [], web.page_errors
 
 

@@ -49,7 +49,7 @@ def ee_positions(app) -> np.ndarray:
     """Each EE's world position, by forward kinematics of the robot's q."""
     robot = app.robot
     with app._lock:
-        q = app.loops["main"].q.copy()
+        q = app.robots.loops["main"].q.copy()
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, q)
     return np.array([data.oMf[frame].translation for frame in robot.ee_frame_ids])
@@ -139,7 +139,7 @@ def test_two_trocars_hold_while_each_gizmo_is_dragged_and_the_readme_screenshot(
     # the settings' only slider that ends at 1 (gain: 500, damping: 0.2)
     web.page.locator('[role="slider"][aria-valuemax="1"]').focus()
     web.page.keyboard.press("Home")  # the keyboard's way to a slider's minimum
-    wait_until(lambda: app.orientation_weight == 0.0, WAIT, "the orientation weight to be 0")
+    wait_until(lambda: app.robots.orientation_weight == 0.0, WAIT, "the orientation weight to be 0")
     open_tab(web, "Teleop")
     for ee in (0, 1):
         _, ees0, ees1, moved, worst = drag_gizmo(web, ee, distance=0.01, steps=10)
@@ -150,7 +150,7 @@ def test_two_trocars_hold_while_each_gizmo_is_dragged_and_the_readme_screenshot(
               f"{1e6 * other:.2f} um; worst hole error {worst:.2e} m")
         assert worst <= HOLE_TOLERANCE
         assert along > 0.95 and other < 1e-5
-    assert app.last_records["main"].constraint_error <= HOLE_TOLERANCE
+    assert app.robots.last_records["main"].constraint_error <= HOLE_TOLERANCE
 
     # the README's screenshot: the robot, both instruments, both rings
     rings = np.array([app.entries[i].position for i in ids])

@@ -41,7 +41,7 @@ FLOAT32 = 4 * float(np.finfo(np.float32).eps)
 def _pressed(app) -> float:
     """The tissue's force on the simulated tip: stiffness x penetration (Pinocchio's
     kinematics of MuJoCo's configuration)."""
-    tissue, loop = app.force.tissue, app.loops["main"]
+    tissue, loop = app.force.tissue, app.robots.loops["main"]
     data = app.robot.model.createData()
     pin.framesForwardKinematics(app.robot.model, data, loop.plant.mj_data.qpos.copy())
     tip = data.oMf[app.robot.ee_frame_id].translation

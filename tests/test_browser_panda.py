@@ -49,5 +49,5 @@ def test_the_panda_opens_with_its_meshes(tmp_path):
         hole_id = click_add_hole(web)  # and a hole on its forearm holds
         time.sleep(0.5)
         assert web.app.entries[hole_id].kind == "hole"
-        assert web.app.last_records["main"].constraint_error < 1e-6
+        assert web.app.robots.last_records["main"].constraint_error < 1e-6
         assert web.page_errors == [], web.page_errors

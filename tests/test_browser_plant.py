@@ -63,7 +63,7 @@ def web(tmp_path_factory):
 
         def step_and_read() -> float:
             solve_us = step()
-            measures = app.loops["main"].plant.measures()
+            measures = app.robots.loops["main"].plant.measures()
             served.forces.append((app.now, measures.port_force))
             return solve_us
 
@@ -107,14 +107,14 @@ def paced_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
 
 
 def test_the_page_runs_the_plant(web):
-    assert web.app.plant.physical and web.app.loops["main"].plant is not None
+    assert web.app.plant.physical and web.app.robots.loops["main"].plant is not None
     open_status_details(web)
     expect(web.page.get_by_text("MuJoCo plant at 2000 Hz", exact=False)).to_be_visible()
     expect(web.page.get_by_text("physics included", exact=False)).to_be_visible()
     time.sleep(3.0)  # a few seconds with the browser connected and drawing
     timing = web.control.timing()
     print(f"\n[plant] control with the MuJoCo plant and the browser: "
-          f"{timing.achieved_rate:.0f} Hz (target {1.0 / web.app.config.dt:.0f} Hz), "
+          f"{timing.achieved_rate:.0f} Hz (target {1.0 / web.app.robots.config.dt:.0f} Hz), "
           f"{100 * timing.on_time:.2f} % of ticks on time, lateness p50 "
           f"{timing.lateness_p50_ms:.3f} ms, p99 {timing.lateness_p99_ms:.3f} ms, tick p50 "
           f"{timing.tick_p50_us:.0f} us, p99 {timing.tick_p99_us:.0f} us "
@@ -173,10 +173,10 @@ def test_a_force_held_on_the_wall_is_drawn_in_red_at_the_port(web, tmp_path):
     at the port stays, and so does the wall's force: its arrow is in the page's pixels."""
     app, ui = web.app, web.ui
     hole_id = next(entry_id for entry_id, entry in app.entries.items() if entry.kind == "hole")
-    app.set_gain(0.0)
+    app.robots.set_gain(0.0)
     # the full pose: the default with a hole (position and roll) leaves the port 100 times
     # less offset after this drag (1.7 mN held, an arrow too short to find in pixels)
-    app.set_task_mode("pose")
+    app.robots.set_task_mode("pose")
     look_at_target(web)
 
     paced_drag(web, distance=0.012, steps=12, prefer_sign=-1.0)
@@ -224,8 +224,8 @@ def test_a_force_held_on_the_wall_is_drawn_in_red_at_the_port(web, tmp_path):
     ARTIFACTS.mkdir(exist_ok=True)
     for path in (ARTIFACTS / "ui_plant.png", tmp_path / "ui_plant.png"):
         path.write_bytes(png)
-    app.set_gain(100.0)
-    app.set_task_mode("auto")
+    app.robots.set_gain(100.0)
+    app.robots.set_task_mode("auto")
 
 
 #: the status line's port force as the page shows it (the scale follows it)
@@ -253,7 +253,7 @@ def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
     pushes (seen above 1 mN, never above what the plant measured in any control period),
     and says in a few words that the EE reached the target once it has."""
     app, page = web.app, web.page
-    app.set_task_mode("auto")  # what the page starts with: what the port allows
+    app.robots.set_task_mode("auto")  # what the page starts with: what the port allows
     hole_id = ensure_hole(web)
     link = app.entries[hole_id].constraint.link
     expect(page.get_by_text(f"placed: {hole_id} on {link}", exact=False).first).to_be_visible()

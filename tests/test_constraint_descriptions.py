@@ -297,7 +297,7 @@ def app(tmp_path):
 
 
 def run(app, seconds):
-    for _ in range(int(seconds * app.config.rate)):
+    for _ in range(int(seconds * app.robots.config.rate)):
         app.step()
 
 
@@ -316,11 +316,11 @@ def test_a_point_lock_is_added_moved_and_recorded_through_the_app(app):
     app.move_constraint(lock_id, start + [0.0, 0.0, 0.003])
     run(app, 0.5)
     np.testing.assert_allclose(entry.position, start + [0.0, 0.0, 0.003], atol=1e-5)
-    record = app.last_records["main"]
+    record = app.robots.last_records["main"]
     assert not record.failed and record.constraint_error < 1e-5
     geometry = app.snapshot()["constraints"][0]["geometry"]
     assert np.linalg.norm(geometry.error) < 1e-5
-    app.set_gain(50.0)
+    app.robots.set_gain(50.0)
     assert entry.constraint.gain == 50.0
     app.remove_constraint(lock_id)
     app.stop_recording()
@@ -332,19 +332,19 @@ def test_a_point_lock_is_added_moved_and_recorded_through_the_app(app):
 
 
 def test_a_gain_a_barrier_cannot_take_is_refused_and_changes_nothing(app):
-    app.set_gain(150.0)
+    app.robots.set_gain(150.0)
     barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     assert app.entries[barrier_id].constraint.gain == 150.0  # no special case for barriers
-    app.set_gain(100.0)
+    app.robots.set_gain(100.0)
     assert app.entries[barrier_id].constraint.gain == 100.0
     hole_id = app.add_constraint("hole", distance=0.08)
     with pytest.raises(ValueError, match="Barrier gain 1500"):
-        app.set_gain(1500.0)  # K dt = 1.5: stable drift feedback, a barrier could be crossed
-    assert app.gain == 100.0
+        app.robots.set_gain(1500.0)  # K dt = 1.5: stable drift feedback, a barrier could be crossed
+    assert app.robots.gain == 100.0
     for entry_id in (hole_id, barrier_id):
         assert app.entries[entry_id].constraint.gain == 100.0
     run(app, 0.02)
-    assert not app.last_records["main"].failed
+    assert not app.robots.last_records["main"].failed
 
 
 def test_a_constraint_the_controllers_refuse_is_not_placed(app):

@@ -83,7 +83,7 @@ def wait_for(condition, what: str, timeout: float = 60.0) -> None:
 
 
 def ee_position(app) -> np.ndarray:
-    return app.loops["main"].ee_placements()[0].translation.copy()
+    return app.robots.loops["main"].ee_placements()[0].translation.copy()
 
 
 def attack(master: UdpMaster, stream: int, count: int) -> None:

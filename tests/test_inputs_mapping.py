@@ -173,7 +173,7 @@ def streaming_through_a_hole(acceleration_limits: bool, task_mode: str | None = 
     app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0,
                     acceleration_limits=acceleration_limits)
     if task_mode is not None:
-        app.set_task_mode(task_mode)
+        app.robots.set_task_mode(task_mode)
     app.add_constraint("hole", distance=0.08)
     source = InputSource("test")
     app.devices.attach(source)
@@ -189,25 +189,25 @@ def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(accel
     acceleration limits the robot brakes at them, still within the braking time of its
     fastest joint (docs/design.md 8.4)."""
     app, source = streaming_through_a_hole(acceleration_limits, "pose")  # no null space left
-    moving = float(np.max(np.abs(app.loops["main"].last_qd)))
+    moving = float(np.max(np.abs(app.robots.loops["main"].last_qd)))
     assert moving > 1e-2
     source.last_arrival = time.perf_counter() - 0.2  # silent for 200 ms
     app.step()
     assert app.devices[0].state == FeedbackState.HELD
     assert "silent for 200 ms" in app.devices[0].reason
-    ee = app.loops["main"].ee_placements()[0]
+    ee = app.robots.loops["main"].ee_placements()[0]
     if not acceleration_limits:
         app.step()
-        assert np.max(np.abs(app.loops["main"].last_qd)) < 1e-3
+        assert np.max(np.abs(app.robots.loops["main"].last_qd)) < 1e-3
         assert app.targets[0].translation == pytest.approx(ee.translation, abs=1e-4)
     else:  # braked at the limits, past the held target by the braking distance, then back
-        speeds = np.abs(app.loops["main"].last_qd)
+        speeds = np.abs(app.robots.loops["main"].last_qd)
         braking = int(np.max(np.ceil(speeds / (app.robot.acceleration_limit * 1e-3)))) + 2
         for _ in range(braking):
             app.step()
-        assert np.max(np.abs(app.loops["main"].last_qd)) <= 0.2 * moving
+        assert np.max(np.abs(app.robots.loops["main"].last_qd)) <= 0.2 * moving
         periods = 0
-        while np.max(np.abs(app.loops["main"].last_qd)) >= 1e-3 and periods < 500:
+        while np.max(np.abs(app.robots.loops["main"].last_qd)) >= 1e-3 and periods < 500:
             app.step()
             periods += 1
         assert periods < 500  # at rest within 0.5 s
@@ -308,7 +308,7 @@ def test_a_rate_command_does_not_wind_the_target_up_ahead_of_the_robot(app):
     source.offer(InputSample("twist", (0.05, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 1, 0.0))
     for _ in range(500):
         app.step()
-        ee = app.loops["main"].ee_placements()[0].translation
+        ee = app.robots.loops["main"].ee_placements()[0].translation
         assert np.linalg.norm(app.targets[0].translation - ee) <= RATE_LEAD + 0.5 * 1e-3
     assert source.counts["held_back"] > 100
     assert app.limitation().distance > 0.5 * RATE_LEAD  # it was pushing all along
@@ -337,7 +337,7 @@ def test_with_position_and_roll_the_tip_stops_at_once_and_the_arm_settles_around
     Pinocchio, below 1 um/s) while the joints' null-space motion towards the posture goes on
     slowly (a few mrad/s), the port held."""
     app, source = streaming_through_a_hole(False)
-    loop = app.loops["main"]
+    loop = app.robots.loops["main"]
     assert loop.task_modes != ("pose",)
     source.last_arrival = time.perf_counter() - 0.2  # silent for 200 ms
     app.step()

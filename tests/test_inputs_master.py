@@ -105,7 +105,7 @@ def session() -> Session:
                                   decoupled(master)))
             if time.monotonic() - began > 0.5:  # past the start of the motion
                 errors.append(app.limitation().distance)
-                holes.append(app.last_records["main"].constraint_error)
+                holes.append(app.robots.last_records["main"].constraint_error)
         sent, feedback = (int(word) for word in process.stdout.readline().split()[1::2])
         releases_streaming = master.counts_now().get("releases", 0)
 
@@ -114,7 +114,7 @@ def session() -> Session:
         last = master.last_arrival
         deadline = time.monotonic() + 10.0
         while not (app.devices[0].state == FeedbackState.HELD
-                   and np.max(np.abs(app.loops["main"].last_qd)) < 1e-3):
+                   and np.max(np.abs(app.robots.loops["main"].last_qd)) < 1e-3):
             assert time.monotonic() < deadline, "the robot did not stop within 10 s"
             time.sleep(0.0005)
         stopped = time.perf_counter() - last
@@ -123,7 +123,7 @@ def session() -> Session:
         return Session(snapshots, errors, holes, sent, feedback, releases_streaming, stopped,
                        app.devices.input_timeout, app.devices[0].reason,
                        float(np.max(np.abs(app.targets[0].translation - held))),
-                       float(np.max(np.abs(app.loops["main"].last_qd))), master.statistics())
+                       float(np.max(np.abs(app.robots.loops["main"].last_qd))), master.statistics())
     finally:
         process.kill()
         process.wait(10)

@@ -65,7 +65,7 @@ def test_the_page_follows_a_ros2_master_and_sends_it_the_feedback(domain, tmp_pa
     assert source.counts_now().get("releases", 0) == 0
     moved = float(np.linalg.norm(app.target.translation - start))
     assert moved == pytest.approx(0.02, abs=1e-7)  # the target's smoothing: e^-(1 s / tau)
-    ee = app.loops["main"].ee_placements()[0].translation
+    ee = app.robots.loops["main"].ee_placements()[0].translation
     assert float(np.linalg.norm(ee - app.target.translation)) < 1e-3
     assert report["received"] > 100 and report["largest"] > 0.0
     # the last two wrenches the master got: the page's last tick's, then close's zeros

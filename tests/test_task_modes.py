@@ -234,7 +234,7 @@ def test_a_5_cm_drag_through_a_hole_on_link_6_reaches_the_target_and_home(
     first two with the damped singularity's words) and Home 18 mm from home."""
     app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path / "scenes", ghost="qp:daqp")
     app.add_constraint("hole")
-    assert app.loops["main"].task_modes == app.loops["ghost"].task_modes == ("position_roll",)
+    assert app.robots.loops["main"].task_modes == app.robots.loops["ghost"].task_modes == ("position_roll",)
     offset = 0.05 * np.asarray(direction) / np.linalg.norm(direction)
     gizmo = app.gizmo.copy()
     wxyz = pin.Quaternion(gizmo.rotation).coeffs()[[3, 0, 1, 2]]
@@ -253,22 +253,22 @@ def test_a_5_cm_drag_through_a_hole_on_link_6_reaches_the_target_and_home(
         app.step()
     for _ in range(1000):
         app.step()
-    home = app.loops["main"].ee_placement(sda10f.q_home)
+    home = app.robots.loops["main"].ee_placement(sda10f.q_home)
     for which in ("main", "ghost"):
-        loop = app.loops[which]
+        loop = app.robots.loops[which]
         assert np.linalg.norm(loop.ee_placement().translation - home.translation) < 1e-3
         assert np.max(np.abs(loop.q - sda10f.q_home)) < 1e-3
-    assert max(app.traces["main"].constraint_error) < 1e-6
+    assert max(app.robots.traces["main"].constraint_error) < 1e-6
 
 
 def test_a_session_replays_its_task_modes(sda10f, tmp_path):
     app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path / "scenes")
     app.add_constraint("hole")
     path = app.start_recording()
-    app.set_task_mode("position")
+    app.robots.set_task_mode("position")
     for _ in range(100):
         app.step()
-    app.set_task_mode("auto")
+    app.robots.set_task_mode("auto")
     app.stop_recording()
     session = load_session(path)
     modes = [(event["t"], event["modes"]) for event in session.events

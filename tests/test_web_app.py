@@ -22,12 +22,12 @@ def app(sda10f, tmp_path):
 
 
 def ee_position(app, which="main"):
-    loop = app.loops[which]
+    loop = app.robots.loops[which]
     return loop.ee_placement().translation
 
 
 def run(app, seconds):
-    for _ in range(int(seconds * app.config.rate)):
+    for _ in range(int(seconds * app.robots.config.rate)):
         app.step()
 
 
@@ -44,20 +44,20 @@ def test_target_moves_the_robot_and_the_hole_holds(app):
     nudge(app, [0.01, 0.0, -0.005])
     run(app, 0.5)
     assert np.linalg.norm(ee_position(app) - (start + [0.01, 0.0, -0.005])) < 1e-4
-    errors = np.array(app.traces["main"].constraint_error)
+    errors = np.array(app.robots.traces["main"].constraint_error)
     assert errors.size > 10 and errors.max() <= 1e-6
 
 
 def test_side_by_side_robots_follow_the_same_target(app):
     app.add_constraint("hole", distance=0.08)
-    app.set_ghost("qp:daqp")
+    app.robots.set_ghost("qp:daqp")
     nudge(app, [0.0, 0.01, 0.0])
     run(app, 0.3)
     np.testing.assert_allclose(ee_position(app, "ghost"), ee_position(app, "main"), atol=1e-6)
     snapshot = app.snapshot()
     assert set(snapshot["robots"]) == {"main", "ghost"}
     assert snapshot["robots"]["ghost"]["spec"] == "qp:daqp"
-    app.set_ghost(None)
+    app.robots.set_ghost(None)
     assert set(app.snapshot()["robots"]) == {"main"}
 
 
@@ -65,15 +65,15 @@ def test_switching_controller_keeps_the_state(app):
     app.add_constraint("hole", distance=0.08)
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.1)
-    q = app.loops["main"].q.copy()
-    app.set_controller("qp:proxqp")
-    assert app.specs["main"] == "qp:proxqp"
-    np.testing.assert_array_equal(app.loops["main"].q, q)
+    q = app.robots.loops["main"].q.copy()
+    app.robots.set_controller("qp:proxqp")
+    assert app.robots.specs["main"] == "qp:proxqp"
+    np.testing.assert_array_equal(app.robots.loops["main"].q, q)
     run(app, 0.2)
-    assert app.last_records["main"].constraint_error <= 1e-6
+    assert app.robots.last_records["main"].constraint_error <= 1e-6
     with pytest.raises(ValueError, match="unknown controller"):
-        app.set_controller("pid")
-    assert app.specs["main"] == "qp:proxqp"
+        app.robots.set_controller("pid")
+    assert app.robots.specs["main"] == "qp:proxqp"
 
 
 def test_a_moving_hole_is_followed(app):
@@ -82,7 +82,7 @@ def test_a_moving_hole_is_followed(app):
     app.move_constraint(hole_id, center + [0.0, 0.0, 0.003])
     run(app, 0.5)
     assert np.linalg.norm(app.entries[hole_id].position - (center + [0, 0, 0.003])) < 1e-5
-    assert app.last_records["main"].constraint_error < 1e-5
+    assert app.robots.last_records["main"].constraint_error < 1e-5
 
 
 @pytest.mark.parametrize("robot_name, move", [("sda10f", 0.05), ("sda10f", 0.20),
@@ -98,22 +98,22 @@ def test_a_hole_moved_far_glides_inside_the_joint_limits(robot_name, move, tmp_p
     hole_id = app.add_constraint("hole", distance=0.08 if robot_name == "sda10f" else 0.2)
     goal = app.entries[hole_id].position + [0.0, move, 0.0]
     app.move_constraint(hole_id, goal)
-    controller = app.loops["main"].controller
-    dt = app.config.dt
+    controller = app.robots.loops["main"].controller
+    dt = app.robots.config.dt
     glide_ticks = int(move / MAX_GEOMETRY_SPEED / dt) + int(0.5 / dt)  # + the filter's tail
     previous = app.entries[hole_id].position
     for tick in range(glide_ticks + int(2.0 / dt)):
         app.step()
-        qd = app.loops["main"].last_qd
+        qd = app.robots.loops["main"].last_qd
         assert np.all(np.abs(qd) <= controller.velocity_limit * (1 + 1e-9)), tick
-        new_q = app.loops["main"].q
+        new_q = app.robots.loops["main"].q
         assert np.all(new_q <= robot.model.upperPositionLimit + 1e-12), tick
         assert np.all(new_q >= robot.model.lowerPositionLimit - 1e-12), tick
         position = app.entries[hole_id].position
         assert np.linalg.norm(position - previous) <= MAX_GEOMETRY_SPEED * dt * (1 + 1e-9)
         previous = position
     np.testing.assert_allclose(app.entries[hole_id].position, goal, atol=1e-9)
-    record = app.last_records["main"]
+    record = app.robots.last_records["main"]
     print(f"{robot_name} hole moved {move} m: error {record.constraint_error:.2e} m, "
           f"status {record.status}, EE error {record.ee_position_error:.3g} m")
     assert record.constraint_error < 1e-6
@@ -121,16 +121,16 @@ def test_a_hole_moved_far_glides_inside_the_joint_limits(robot_name, move, tmp_p
 
 def test_a_rate_too_low_for_the_gain_is_refused_and_nothing_changes(app):
     app.add_constraint("hole", distance=0.08)
-    app.set_gain(500.0)
+    app.robots.set_gain(500.0)
     with pytest.raises(ValueError, match=r"unstable at 50 Hz \(K dt = 10"):
-        app.set_rate(50.0)
-    assert app.config.rate == 1000.0
-    assert all(loop.controller.dt == 1e-3 for loop in app.loops.values())
-    app.set_gain(80.0)
-    app.set_rate(50.0)  # K dt = 1.6 < 2: fine
-    assert all(loop.controller.dt == 0.02 for loop in app.loops.values())
+        app.robots.set_rate(50.0)
+    assert app.robots.config.rate == 1000.0
+    assert all(loop.controller.dt == 1e-3 for loop in app.robots.loops.values())
+    app.robots.set_gain(80.0)
+    app.robots.set_rate(50.0)  # K dt = 1.6 < 2: fine
+    assert all(loop.controller.dt == 0.02 for loop in app.robots.loops.values())
     run(app, 0.1)
-    assert app.last_records["main"].constraint_error < 1e-6
+    assert app.robots.last_records["main"].constraint_error < 1e-6
 
 
 def test_planes_and_barriers_and_removal(app):
@@ -153,12 +153,12 @@ def test_planes_and_barriers_and_removal(app):
     (lambda app: app.add_constraint("barrier", distance=0.08, normal=[0.0, 0.0, 1.0],
                                     offset=-0.05), "wrong side"),
     (lambda app: app.set_target([np.nan, 0, 0], [1, 0, 0, 0]), "finite"),
-    (lambda app: app.set_rate(10.0), "between 50 and 5000"),
-    (lambda app: app.set_gain(5000.0), "gain must be in"),
+    (lambda app: app.robots.set_rate(10.0), "between 50 and 5000"),
+    (lambda app: app.robots.set_gain(5000.0), "gain must be in"),
     (lambda app: app.add_constraint("hole", distance=1e6), "hole distance must be between 0 and"),
     (lambda app: app.add_constraint("hole", distance=-19.0), "hole distance must be between 0 and"),
     (lambda app: app.add_constraint("hole", distance=None), "hole distance must be a number"),
-    (lambda app: app.set_damping(-1.0), "damping must be"),
+    (lambda app: app.robots.set_damping(-1.0), "damping must be"),
     (lambda app: app.move_constraint("hole-9", [0, 0, 0]), "no constraint"),
     (lambda app: app.stop_recording(), "not recording"),
 ])
@@ -166,7 +166,7 @@ def test_impossible_actions_raise_a_message_for_the_operator(app, action, messag
     with pytest.raises(ValueError, match=message):
         action(app)
     run(app, 0.01)  # and the app keeps running
-    assert np.isfinite(app.loops["main"].q).all()
+    assert np.isfinite(app.robots.loops["main"].q).all()
 
 
 def test_home_keeps_the_constraints_and_clear_removes_them(app):
@@ -177,22 +177,22 @@ def test_home_keeps_the_constraints_and_clear_removes_them(app):
     # with a constraint: a joint path home that keeps it, its EE poses followed in full pose
     assert app.home() == ""
     assert list(app.entries) == [hole_id] and app.homing.active
-    assert app.loops["main"].task_modes == ("pose",)
+    assert app.robots.loops["main"].task_modes == ("pose",)
     assert app.limitation().words.startswith("going home through the constraints")
     np.testing.assert_allclose(app.target.translation, start, atol=1e-12)  # from where it is
     np.testing.assert_allclose(app.gizmo.translation, start, atol=1e-12)
-    home = app.loops["main"].ee_placement(app.robot.q_home)
+    home = app.robots.loops["main"].ee_placement(app.robot.q_home)
     run(app, app.homing.run.times[-1] + 0.6)
-    assert not app.homing.active and app.loops["main"].task_modes == ("position_roll",)
+    assert not app.homing.active and app.robots.loops["main"].task_modes == ("position_roll",)
     np.testing.assert_allclose(app.target.translation, home.translation, atol=1e-9)
     assert np.linalg.norm(ee_position(app) - home.translation) < 1e-4
-    assert np.max(np.abs(app.loops["main"].q - app.robot.q_home)) < 1e-3
-    assert max(app.traces["main"].constraint_error) < 1e-6  # held on the way
+    assert np.max(np.abs(app.robots.loops["main"].q - app.robot.q_home)) < 1e-3
+    assert max(app.robots.traces["main"].constraint_error) < 1e-6  # held on the way
     assert app.clear_constraints() == 1 and not app.entries
     nudge(app, [0.01, 0.0, 0.0])
     run(app, 0.1)
     app.home()  # without constraints: a reset, at once
-    np.testing.assert_array_equal(app.loops["main"].q, app.robot.q_home)
+    np.testing.assert_array_equal(app.robots.loops["main"].q, app.robot.q_home)
     np.testing.assert_allclose(app.target.translation, ee_position(app))
 
 
@@ -200,7 +200,7 @@ def test_recording_writes_a_session_that_replay_accepts(app, tmp_path):
     # the full pose: with a hole the default (position and roll) leaves two joint
     # directions to the posture, which the app (acceleration limits) and the replay below
     # (none) spend differently: the plane would be added 39 um off the replay's link
-    app.set_task_mode("pose")
+    app.robots.set_task_mode("pose")
     app.add_constraint("hole", distance=0.08)
     path = app.start_recording()
     assert path.parent == tmp_path
@@ -256,8 +256,8 @@ def test_plot_history_is_finite_and_the_ghost_turned_on_later_fills_its_own(app)
             continue
         assert t.size == 25 and list(series) == ["main"]  # 0.5 s at 50 Hz
         assert np.isfinite(t).all() and np.isfinite(series["main"]).all()
-    app.set_ghost("qp:daqp")  # as the checkbox does, 0.5 s into the session
-    assert app.loops["ghost"].t == app.now
+    app.robots.set_ghost("qp:daqp")  # as the checkbox does, 0.5 s into the session
+    assert app.robots.loops["ghost"].t == app.now
     nudge(app, [0.0, 0.005, 0.0])
     run(app, 0.3)
     snapshot = app.snapshot()
@@ -296,15 +296,15 @@ def test_plot_units_make_small_values_readable(values, quantity, unit):
 
 
 def test_ghost_offset_is_beside_the_robot_and_checked(app):
-    offset = app.ghost_offset
+    offset = app.robots.ghost_offset
     assert abs(offset[2]) < 1e-12 and 0.5 < np.linalg.norm(offset) < 2.0  # beside, on the floor
-    app.set_ghost_offset([0.0, 0.0, 0.0])  # overlay
-    np.testing.assert_array_equal(app.ghost_offset, np.zeros(3))
+    app.robots.set_ghost_offset([0.0, 0.0, 0.0])  # overlay
+    np.testing.assert_array_equal(app.robots.ghost_offset, np.zeros(3))
     for bad, message in (([0.0, 9.0, 0.0], "at most 5 m"), ([np.nan, 0, 0], "finite"),
                          ([1.0, 2.0], "shape")):
         with pytest.raises(ValueError, match=message):
-            app.set_ghost_offset(bad)
-    np.testing.assert_array_equal(app.ghost_offset, np.zeros(3))
+            app.robots.set_ghost_offset(bad)
+    np.testing.assert_array_equal(app.robots.ghost_offset, np.zeros(3))
 
 
 # -- the operator's console: clutch, motion scaling, nudges ----------------------------------
@@ -376,7 +376,7 @@ def test_nudges_and_gizmo_to_target(app):
 
 
 def test_an_unreachable_target_is_said_in_words(app):
-    app.set_task_mode("pose")  # position and roll reach this target (the default with a hole)
+    app.robots.set_task_mode("pose")  # position and roll reach this target (the default with a hole)
     app.add_constraint("hole", distance=0.08)
     assert app.limitation().words == "on target" and app.limitation().status == "ok"
     nudge(app, [0.5, 0.0, 0.0])  # half a metre ahead, through a hole: not reachable
@@ -395,7 +395,7 @@ def test_an_unreachable_target_is_said_in_words(app):
     assert stuck.words.endswith("set the task mode to position and roll about the tool axis "
                                 "(what a port allows)")
     assert stuck.status in ("least_squares", "scaled", "ok")
-    assert app.last_records["main"].constraint_error < 1e-6  # the hole held all along
+    assert app.robots.last_records["main"].constraint_error < 1e-6  # the hole held all along
 
 
 def test_a_joint_at_its_limit_is_named():
@@ -432,7 +432,7 @@ def test_active_barriers_are_listed(app):
     nudge(app, [0.0, 0.0, -0.05])  # down, into the barrier
     run(app, 1.0)
     assert app.active_inequalities() == [barrier_id]
-    assert app.last_records["main"].barrier_penetration < 1e-6
+    assert app.robots.last_records["main"].barrier_penetration < 1e-6
     geometry = app.snapshot()["constraints"][0]["geometry"]
     assert np.linalg.norm(geometry.error) < 1e-9  # held on the plane: no error to draw
 
@@ -442,7 +442,7 @@ def test_a_satisfied_barrier_has_no_error_to_draw(app):
     run(app, 0.05)
     (entry,) = app.snapshot()["constraints"]
     assert entry["kind"] == "barrier" and np.linalg.norm(entry["geometry"].error) == 0.0
-    assert app.last_records["main"].barrier_penetration == 0.0
+    assert app.robots.last_records["main"].barrier_penetration == 0.0
 
 
 def test_a_robot_without_a_constrained_link_says_how_to_get_one(tmp_path):
@@ -465,11 +465,11 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
                     acceleration_limits=False)
     hole_id = app.add_constraint("hole", distance=0.08)
     barrier_id = app.add_constraint("barrier", distance=0.04, normal=[0.0, 0.0, 1.0], offset=0.01)
-    app.set_ghost("qp:daqp")
-    app.set_ghost_offset([0.0, -0.7, 0.0])
-    app.set_gain(80.0)
-    app.set_damping(0.01)
-    app.set_rate(500.0)
+    app.robots.set_ghost("qp:daqp")
+    app.robots.set_ghost_offset([0.0, -0.7, 0.0])
+    app.robots.set_gain(80.0)
+    app.robots.set_damping(0.01)
+    app.robots.set_rate(500.0)
     app.set_motion_scale(0.2)
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.3)
@@ -479,15 +479,15 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     scene = json.loads(saved.read_text())
     assert scene["format"] == "cjm-teleop-scene" and scene["robot"]["source"] == "sda10f"
     assert [c["id"] for c in scene["constraints"]] == [hole_id, barrier_id]
-    q_saved = app.loops["main"].q.copy()
+    q_saved = app.robots.loops["main"].q.copy()
     goals = {i: e.goal.copy() for i, e in app.entries.items()}
     target = app.target.copy()
 
     # change everything, then load
     app.clear_constraints()
-    app.set_ghost(None)
-    app.set_rate(1000.0)
-    app.set_gain(100.0)
+    app.robots.set_ghost(None)
+    app.robots.set_rate(1000.0)
+    app.robots.set_gain(100.0)
     app.set_motion_scale(1.0)
     app.home()
     run(app, 0.1)
@@ -496,15 +496,16 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     assert [e.kind for e in app.entries.values()] == ["hole", "barrier"]
     for entry_id, goal in goals.items():
         np.testing.assert_allclose(app.entries[entry_id].goal, goal, atol=1e-12)
-    assert app.specs == {"main": "cjm", "ghost": "qp:daqp"}
-    assert (app.gain, app.damping, app.config.rate, app.motion_scale) == (80.0, 0.01, 500.0, 0.2)
-    np.testing.assert_allclose(app.ghost_offset, [0.0, -0.7, 0.0])
-    np.testing.assert_allclose(app.loops["main"].q, q_saved, atol=1e-12)
+    assert app.robots.specs == {"main": "cjm", "ghost": "qp:daqp"}
+    assert (app.robots.gain, app.robots.damping, app.robots.config.rate,
+            app.motion_scale) == (80.0, 0.01, 500.0, 0.2)
+    np.testing.assert_allclose(app.robots.ghost_offset, [0.0, -0.7, 0.0])
+    np.testing.assert_allclose(app.robots.loops["main"].q, q_saved, atol=1e-12)
     assert app.target.isApprox(target, 1e-9)
     assert all(e.constraint.gain == 80.0 for e in app.entries.values())
     assert app.add_constraint("hole", distance=0.1) == "hole-3"  # new ids after the loaded ones
     run(app, 0.3)
-    assert app.last_records["main"].constraint_error < 1e-6
+    assert app.robots.last_records["main"].constraint_error < 1e-6
 
 
 @pytest.mark.parametrize("change, message", [
@@ -524,10 +525,10 @@ def test_a_bad_scene_is_refused_and_changes_nothing(app, change, message):
     scene = app.scene()
     change(scene)
     app.clear_constraints()
-    app.set_gain(50.0)
+    app.robots.set_gain(50.0)
     with pytest.raises(ValueError, match=message):
         app.apply_scene(scene)
-    assert not app.entries and app.gain == 50.0 and app.specs == {"main": "cjm"}
+    assert not app.entries and app.robots.gain == 50.0 and app.robots.specs == {"main": "cjm"}
     run(app, 0.01)
 
 
@@ -549,18 +550,18 @@ def test_scene_files_that_cannot_be_read(app, tmp_path):
 
 def test_measures_are_taken_at_the_history_rate_only(app, monkeypatch):
     app.add_constraint("hole", distance=0.08)
-    app.set_ghost("qp:daqp")
+    app.robots.set_ghost("qp:daqp")
     measured = []
-    for loop in app.loops.values():
+    for loop in app.robots.loops.values():
         original = loop.measure
         monkeypatch.setattr(loop, "measure", lambda step, f=original: measured.append(1) or f(step))
     nudge(app, [0.002, 0.0, 0.0])
     run(app, 1.0)  # 1000 ticks, 2 robots
     assert len(measured) == 2 * 50
-    qd = app.loops["main"].last_qd
+    qd = app.robots.loops["main"].last_qd
     assert np.all(np.isfinite(qd)) and np.any(qd != 0.0)  # every tick commands the robot
     # what a light tick costs beyond the controllers (printed; the status shows it live)
-    app.set_ghost(None)
+    app.robots.set_ghost(None)
     costs = []
     for _ in range(2000):
         start = time.perf_counter()

@@ -46,7 +46,7 @@ def dual_app(dual, tmp_path):
 
 
 def run(app, seconds: float) -> None:
-    for _ in range(int(round(seconds * app.config.rate))):
+    for _ in range(int(round(seconds * app.robots.config.rate))):
         app.step()
 
 
@@ -54,9 +54,9 @@ def run_to_measure(app, which: str = "main") -> np.ndarray:
     """Step until the next measured (history) tick; robot ``which``'s configuration its
     command was computed from on that tick (the kinematic plant senses the true q), where
     its controller computed the rows the view reads."""
-    record = app.last_records[which]
-    while app.last_records[which] is record:
-        q = app.loops[which].q.copy()
+    record = app.robots.last_records[which]
+    while app.robots.last_records[which] is record:
+        q = app.robots.loops[which].q.copy()
         app.step()
     return q
 
@@ -65,7 +65,7 @@ def tip(app, ee: int = 0) -> pin.SE3:
     """EE ``ee``'s world pose by forward kinematics of the main robot's q."""
     robot = app.robot
     data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, app.loops["main"].q)
+    pin.framesForwardKinematics(robot.model, data, app.robots.loops["main"].q)
     return data.oMf[robot.ee_frame_ids[ee]].copy()
 
 
@@ -77,7 +77,7 @@ def independent_rows(app, which: str = "main", q: np.ndarray | None = None):
     avoidance.set_ports([entry.constraint for entry in app.entries.values()])
     model = app.robot.model
     data = model.createData()
-    pin.computeJointJacobians(model, data, app.loops[which].q if q is None else q)
+    pin.computeJointJacobians(model, data, app.robots.loops[which].q if q is None else q)
     return avoidance.rows(model, data)
 
 
@@ -125,7 +125,7 @@ def test_obstacles_are_added_moved_with_feed_forward_and_removed(app):
     assert [o.name for o in app.collisions.avoidance.obstacles] == [first, second]
     assert {pair[1] for pair in app.collisions.avoidance.pairs} == {first, second}
     # every controller holds the session's avoidance
-    assert app.loops["main"].controller.collisions is app.collisions.avoidance
+    assert app.robots.loops["main"].controller.collisions is app.collisions.avoidance
 
     start = app.collisions.obstacles[first].obstacle.position
     goal = start + np.array([0.0, 0.0, 0.01])
@@ -139,7 +139,7 @@ def test_obstacles_are_added_moved_with_feed_forward_and_removed(app):
     # it glides (no jump), at most the geometry speed cap, along the move
     steps = np.linalg.norm(np.diff([start, *positions], axis=0), axis=1)
     assert max(speeds) <= MAX_GEOMETRY_SPEED * (1 + 1e-12) and max(speeds) > 0.5 * MAX_GEOMETRY_SPEED
-    assert steps.max() <= MAX_GEOMETRY_SPEED * app.config.dt * (1 + 1e-9)
+    assert steps.max() <= MAX_GEOMETRY_SPEED * app.robots.config.dt * (1 + 1e-9)
     run(app, 2.0)  # the first-order glide (time constant 0.05 s) has converged
     np.testing.assert_allclose(app.collisions.obstacles[first].obstacle.position, goal, atol=1e-12)
     placed = app.collisions.obstacles[first]
@@ -175,30 +175,31 @@ def test_what_cannot_be_done_is_a_value_error_and_changes_nothing(app, call, pat
         call(app)
     after = app.scene()
     assert {**after, "created": None} == {**before, "created": None}
-    assert app.collisions.avoidance is avoidance and app.loops["main"].controller.collisions is avoidance
+    assert app.collisions.avoidance is avoidance
+    assert app.robots.loops["main"].controller.collisions is avoidance
 
 
 def test_settings_and_the_switch_reach_every_controller(dual_app):
     app = dual_app
     assert app.collisions.avoidance.self_collision  # two arms: self-collision on by default
-    app.set_ghost("qp:daqp")
+    app.robots.set_ghost("qp:daqp")
     app.collisions.add("sphere")
     app.collisions.configure(safety_distance=0.01, detection_distance=0.08)
-    for loop in app.loops.values():
+    for loop in app.robots.loops.values():
         assert loop.controller.collisions is app.collisions.avoidance
     avoidance = app.collisions.avoidance
     assert (avoidance.safety_distance, avoidance.detection_distance) == (0.01, 0.08)
     assert [o.name for o in app.collisions.avoidance.obstacles] == ["sphere-1"]
-    app.set_controller("qp:proxqp")
-    assert app.loops["main"].controller.collisions is app.collisions.avoidance
+    app.robots.set_controller("qp:proxqp")
+    assert app.robots.loops["main"].controller.collisions is app.collisions.avoidance
     app.collisions.set_on(False)
-    assert all(loop.controller.collisions is None for loop in app.loops.values())
+    assert all(loop.controller.collisions is None for loop in app.robots.loops.values())
     run(app, 0.05)
     snapshot = app.snapshot()
     assert snapshot["robots"]["main"]["collision_rows"] is None and not snapshot["collisions"]["checking"]
     assert np.isnan(snapshot["robots"]["main"]["trace"]["minimum_distance"]).all()
     app.collisions.set_on(True)
-    assert app.loops["ghost"].controller.collisions is app.collisions.avoidance
+    assert app.robots.loops["ghost"].controller.collisions is app.collisions.avoidance
     app.collisions.configure(self_collision=False)
     assert all(second == "sphere-1" for _, second in app.collisions.avoidance.pairs)
 
@@ -233,13 +234,13 @@ def test_a_scene_keeps_the_obstacles_and_the_settings(dual_app, dual, tmp_path):
     for key in ("collisions", "obstacles", "constraints", "q"):
         assert other.scene()[key] == app.scene()[key]
     assert other.collisions.avoidance.to_dict() == app.collisions.avoidance.to_dict()
-    assert all(loop.controller.collisions is None for loop in other.loops.values())
+    assert all(loop.controller.collisions is None for loop in other.robots.loops.values())
     assert not other.collisions.obstacles[moving].settled
     np.testing.assert_array_equal(other.collisions.obstacles[moving].obstacle.velocity,
                                   app.collisions.obstacles[moving].obstacle.velocity)
     assert other.collisions.add("sphere") == "sphere-4"  # ids go on after the scene's
     other.collisions.set_on(True)
-    assert other.loops["main"].controller.collisions is other.collisions.avoidance
+    assert other.robots.loops["main"].controller.collisions is other.collisions.avoidance
 
 
 def test_a_version_1_scene_still_loads_without_obstacles(sda10f, tmp_path):
@@ -251,7 +252,7 @@ def test_a_version_1_scene_still_loads_without_obstacles(sda10f, tmp_path):
     app.apply_scene(old)
     assert app.collisions.obstacles == {} and app.collisions.avoidance.obstacles == []
     assert app.collisions.avoidance.safety_distance == 0.007 and app.collisions.on  # the session's
-    np.testing.assert_array_equal(app.loops["main"].q, old["q"]["main"])
+    np.testing.assert_array_equal(app.robots.loops["main"].q, old["q"]["main"])
 
 
 @pytest.mark.parametrize("change, pattern", [

@@ -31,7 +31,7 @@ def ee_positions(app, which="main") -> np.ndarray:
     """Each EE's world position, by forward kinematics of the robot's q."""
     robot = app.robot
     data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, app.loops[which].q)
+    pin.framesForwardKinematics(robot.model, data, app.robots.loops[which].q)
     return np.array([data.oMf[frame].translation for frame in robot.ee_frame_ids])
 
 
@@ -53,7 +53,7 @@ def drag(app, ee: int, displacement, steps: int, ticks_per_step: int, check=None
 
 
 def run(app, seconds: float) -> None:
-    for _ in range(int(round(seconds * app.config.rate))):
+    for _ in range(int(round(seconds * app.robots.config.rate))):
         app.step()
 
 
@@ -80,7 +80,7 @@ def test_each_gizmo_moves_its_own_ee_only(app):
 def test_holes_on_both_arms_hold_while_both_gizmos_move(app, dual):
     """A hole on each arm's link 6, each on that link's own axis, held to 1 um over 2240
     ticks of both gizmos moving; no joint past a position or velocity limit at any tick."""
-    q = app.loops["main"].q.copy()
+    q = app.robots.loops["main"].q.copy()
     data = dual.model.createData()
     pin.framesForwardKinematics(dual.model, data, q)
     ids = [app.add_constraint("hole", distance=0.08, link=link) for link in dual.constrained_links]
@@ -90,11 +90,11 @@ def test_holes_on_both_arms_hold_while_both_gizmos_move(app, dual):
         expected = data.oMf[dual.model.getFrameId(link)].act(0.08 * dual.link_axes[link])
         np.testing.assert_allclose(hole.position, expected, atol=1e-12)  # on that arm's axis
     model = dual.model
-    controller = app.loops["main"].controller
+    controller = app.robots.loops["main"].controller
     worst = {"hole": 0.0, "velocity": 0.0}
 
     def check() -> None:
-        loop = app.loops["main"]
+        loop = app.robots.loops["main"]
         assert np.all(loop.q <= model.upperPositionLimit + 1e-12)
         assert np.all(loop.q >= model.lowerPositionLimit - 1e-12)
         assert np.all(np.abs(loop.last_qd) <= controller.velocity_limit * (1 + 1e-9))
@@ -112,7 +112,7 @@ def test_holes_on_both_arms_hold_while_both_gizmos_move(app, dual):
     print(f"\ntwo holes, both gizmos dragged 14 mm: worst hole error {worst['hole']:.2e} m; "
           f"left EE moved {1e3 * np.linalg.norm(end[0] - start[0]):.1f} mm, right "
           f"{1e3 * np.linalg.norm(end[1] - start[1]):.1f} mm; status "
-          f"{app.last_records['main'].status}")
+          f"{app.robots.last_records['main'].status}")
     assert worst["hole"] <= HOLE_TOLERANCE
     # each EE went the way its own gizmo did (11 joints left for 12 task entries: the
     # least-squares command, section 11.2, so not all the way)
@@ -210,9 +210,9 @@ def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path)
         assert other.inputs[k].target.isApprox(app.inputs[k].target, 1e-12)
         assert other.inputs[k].gizmo.isApprox(app.inputs[k].target, 1e-12)
     assert [e.constraint.link for e in other.entries.values()] == list(dual.constrained_links)
-    np.testing.assert_array_equal(other.loops["main"].q, app.loops["main"].q)
+    np.testing.assert_array_equal(other.robots.loops["main"].q, app.robots.loops["main"].q)
     run(other, 0.2)
-    assert other.last_records["main"].constraint_error <= HOLE_TOLERANCE
+    assert other.robots.last_records["main"].constraint_error <= HOLE_TOLERANCE
     # a two-EE robot needs both targets, named in order
     for targets, message in ((None, "one target per end effector"),
                              (list(reversed(data["targets"])), "in order")):
@@ -265,10 +265,10 @@ def test_the_mobile_base_drives_and_a_wall_on_it_holds(mobile, tmp_path):
             app.nudge_target([0.005, 0.0, 0.0], ee)
         for _ in range(50):
             app.step()
-            pin.framesForwardKinematics(mobile.model, data, app.loops["main"].q)
+            pin.framesForwardKinematics(mobile.model, data, app.robots.loops["main"].q)
             penetration = max(penetration, wall.violation(data.oMf[base]))
     run(app, 1.0)
-    q = app.loops["main"].q
+    q = app.robots.loops["main"].q
     pin.framesForwardKinematics(mobile.model, data, q)
     edge = data.oMf[base].act(np.array(front))[0]
     print(f"\nmobile base: x {q[0]:.4f} m, front edge at {edge:.5f} m (wall at 0.45 m), "
@@ -361,9 +361,9 @@ def test_the_mobile_base_is_drawn_where_the_planar_joint_puts_it_and_a_wall_span
     app = TeleopApp(mobile, record_dir=tmp_path)
     ui = make_ui(server, app)
     assert ui.floor == pytest.approx(0.0)  # the base's box stands on the floor
-    q = app.loops["main"].q.copy()
+    q = app.robots.loops["main"].q.copy()
     q[:4] = [0.3, -0.2, np.cos(0.5), np.sin(0.5)]  # x, y, heading 0.5 rad
-    app.loops["main"].q = q
+    app.robots.loops["main"].q = q
     ui._draw(app.snapshot())
     view = ui._views["main"]
     geometry = pin.GeometryData(mobile.visual_model)
@@ -416,11 +416,11 @@ def test_a_lower_orientation_weight_lets_the_dragged_tip_reach_its_target(dual, 
                         scene_dir=tmp_path / "scenes")
         # the full poses: with the holes the default asks for position and roll, which
         # both tips meet at either weight (7.2e-11 m measured)
-        app.set_task_mode("pose")
+        app.robots.set_task_mode("pose")
         ids = [app.add_constraint("hole", distance=0.08, link=link)
                for link in dual.constrained_links]
-        app.set_orientation_weight(weight)
-        assert app.orientation_weight == weight
+        app.robots.set_orientation_weight(weight)
+        assert app.robots.orientation_weight == weight
         start = ee_positions(app)
         displacement = np.array([0.0, 0.01, 0.01])
         drag(app, 0, displacement, steps=20, ticks_per_step=40)
@@ -428,7 +428,7 @@ def test_a_lower_orientation_weight_lets_the_dragged_tip_reach_its_target(dual, 
         end = ee_positions(app)
         reached[weight] = float(np.linalg.norm(end[0] - (start[0] + displacement)))
         model, data = dual.model, dual.model.createData()
-        pin.framesForwardKinematics(model, data, app.loops["main"].q)
+        pin.framesForwardKinematics(model, data, app.robots.loops["main"].q)
         for hole_id in ids:
             hole = app.entries[hole_id].constraint
             assert hole.violation(data.oMf[model.getFrameId(hole.link)]) <= HOLE_TOLERANCE
@@ -441,12 +441,12 @@ def test_a_lower_orientation_weight_lets_the_dragged_tip_reach_its_target(dual, 
 def test_orientation_weight_is_checked_and_kept_in_scenes(app, tmp_path):
     for bad in (-0.1, 1.5, float("nan"), "x"):
         with pytest.raises(ValueError, match="orientation weight"):
-            app.set_orientation_weight(bad)
-    assert app.orientation_weight == 1.0
-    app.set_orientation_weight(0.25)
+            app.robots.set_orientation_weight(bad)
+    assert app.robots.orientation_weight == 1.0
+    app.robots.set_orientation_weight(0.25)
     path = app.save_scene("scene.json")
     assert json.loads(path.read_text())["orientation_weight"] == 0.25
-    app.set_orientation_weight(1.0)
+    app.robots.set_orientation_weight(1.0)
     app.load_scene("scene.json")
-    assert app.orientation_weight == 0.25
-    assert np.allclose(app.loops["main"].controller.twist_weight, [1, 1, 1, 0.25, 0.25, 0.25] * 2)
+    assert app.robots.orientation_weight == 0.25
+    assert np.allclose(app.robots.loops["main"].controller.twist_weight, [1, 1, 1, 0.25, 0.25, 0.25] * 2)

@@ -26,7 +26,7 @@ def app(sda10f, tmp_path):
 def _true_contact(app) -> tuple[float, float]:
     """The tissue's force from stiffness x penetration at the simulated robot's tip
     (Pinocchio's kinematics of MuJoCo's qpos), and the plant's reported force."""
-    loop, tissue = app.loops["main"], app.force.tissue
+    loop, tissue = app.robots.loops["main"], app.force.tissue
     q = loop.plant.mj_data.qpos.copy()
     data = app.robot.model.createData()
     pin.framesForwardKinematics(app.robot.model, data, q)
@@ -38,14 +38,14 @@ def _true_contact(app) -> tuple[float, float]:
 def test_force_control_presses_the_tissue_at_the_setpoint(app):
     for _ in range(50):
         app.step()
-    tip = app.loops["main"].ee_placements()[0]
+    tip = app.robots.loops["main"].ee_placements()[0]
     app.force.place_tissue()
     tissue = app.force.tissue
     np.testing.assert_allclose(tissue.point, tip.translation + TISSUE_GAP * tip.rotation[:, 2])
     np.testing.assert_allclose(tissue.normal, -tip.rotation[:, 2])
     app.force.set_enabled(True)
-    assert isinstance(app.loops["main"].controller, ForceControlled)
-    assert app.loops["main"].compiled is None  # the law needs the Python path
+    assert isinstance(app.robots.loops["main"].controller, ForceControlled)
+    assert app.robots.loops["main"].compiled is None  # the law needs the Python path
     for _ in range(3000):  # 2 mm at 1 cm/s, then the force loop settles (g = 0.067)
         app.step()
     expected, reported = _true_contact(app)
@@ -60,11 +60,11 @@ def test_force_control_presses_the_tissue_at_the_setpoint(app):
         app.step()
     expected, _ = _true_contact(app)
     assert expected == pytest.approx(2.0, abs=0.02)
-    assert app.last_records["main"].status != "failed"
+    assert app.robots.last_records["main"].status != "failed"
     # off: the plain controller and the compiled hot path again
     app.force.set_enabled(False)
-    assert not isinstance(app.loops["main"].controller, ForceControlled)
-    assert app.loops["main"].compiled is not None
+    assert not isinstance(app.robots.loops["main"].controller, ForceControlled)
+    assert app.robots.loops["main"].compiled is not None
 
 
 def test_force_control_refuses_what_it_cannot_do_by_name(app, sda10f, tmp_path):
@@ -127,7 +127,7 @@ def test_a_scene_keeps_the_tissue_and_the_law_settings(app, sda10f, tmp_path):
     np.testing.assert_array_equal(tissue.point, saved.point)
     assert other.force.setpoint.tolist() == [0.5, 0.0, 1.5]
     assert other.force.axes == (True, False, True) and not other.force.enabled
-    assert other.loops["main"].plant.tissues == (tissue,)
+    assert other.robots.loops["main"].plant.tissues == (tissue,)
     other.force.set_enabled(True)
     other.force.set_axes([False, False, True])
     other.force.set_setpoint([0.0, 0.0, 1.0])
@@ -141,7 +141,7 @@ def test_a_scene_keeps_the_tissue_and_the_law_settings(app, sda10f, tmp_path):
                      scene_dir=tmp_path / "scenes")
     other.apply_scene(bare.scene())
     assert other.force.tissue is None and not other.force.enabled
-    assert other.loops["main"].plant.tissues == ()
+    assert other.robots.loops["main"].plant.tissues == ()
 
 
 @pytest.mark.parametrize("change, message", [
@@ -189,7 +189,7 @@ def test_the_status_leaves_the_force_axes_to_the_law(app):
     app.force.set_enabled(True)
     for _ in range(4000):
         app.step()
-    placement = app.loops["main"].ee_placements()[0]
+    placement = app.robots.loops["main"].ee_placements()[0]
     error = app.inputs[0].target.translation - placement.translation
     along_tool = placement.rotation.T @ error
     assert abs(along_tool[2]) > 0.01  # the tissue holds the tip off its target
@@ -211,7 +211,7 @@ def test_a_scene_whose_loops_cannot_be_built_leaves_the_force_control_as_it_was(
     for _ in range(200):
         app.step()
     kept = (app.force.tissue, app.force.setpoint.copy(), app.force.axes, app.force.enabled,
-            len(app.force.history), app.loops["main"])
+            len(app.force.history), app.robots.loops["main"])
     scene = app.scene()
     scene["force"]["tissue"]["point"][2] += 0.01
     scene["force"]["setpoint"] = [0.0, 0.0, 2.0]
@@ -220,7 +220,7 @@ def test_a_scene_whose_loops_cannot_be_built_leaves_the_force_control_as_it_was(
         app.apply_scene(scene)
     assert app.force.tissue is kept[0] and app.force.setpoint.tolist() == kept[1].tolist()
     assert (app.force.axes, app.force.enabled, len(app.force.history),
-            app.loops["main"]) == kept[2:]
+            app.robots.loops["main"]) == kept[2:]
 
 
 def test_a_huge_normal_is_a_direction_like_any_other():

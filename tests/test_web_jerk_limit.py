@@ -23,11 +23,11 @@ def commanded_jerk(app: TeleopApp, seconds: float, offset: np.ndarray) -> float:
     app.set_target(target.translation + offset,
                    [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
     commands = []
-    for _ in range(int(seconds * app.config.rate)):
+    for _ in range(int(seconds * app.robots.config.rate)):
         app.step()
-        commands.append(app.loops["main"].last_qd.copy())
+        commands.append(app.robots.loops["main"].last_qd.copy())
     second_differences = np.diff(np.array(commands), n=2, axis=0)
-    return float(np.abs(second_differences).max()) / app.config.dt**2
+    return float(np.abs(second_differences).max()) / app.robots.config.dt**2
 
 
 def test_every_command_of_the_page_keeps_the_jerk_limit(sda10f, tmp_path):
@@ -42,10 +42,10 @@ def test_every_command_of_the_page_keeps_the_jerk_limit(sda10f, tmp_path):
 def test_the_jerk_limit_reaches_the_ghost_and_a_switched_controller(sda10f, tmp_path):
     app = TeleopApp(sda10f, ghost="qp:daqp", record_dir=tmp_path,
                     scene_dir=tmp_path / "scenes", jerk_limit=LIMIT)
-    for loop in app.loops.values():
+    for loop in app.robots.loops.values():
         np.testing.assert_array_equal(loop.controller.jerk_limit, LIMIT)
-    app.set_controller("qp:proxqp")
-    np.testing.assert_array_equal(app.loops["main"].controller.jerk_limit, LIMIT)
+    app.robots.set_controller("qp:proxqp")
+    np.testing.assert_array_equal(app.robots.loops["main"].controller.jerk_limit, LIMIT)
 
 
 def test_a_jerk_limit_without_acceleration_limits_or_out_of_range_is_refused(sda10f, tmp_path):

@@ -36,7 +36,7 @@ def arrow_vector(force: np.ndarray) -> np.ndarray:
 
 
 def run(app: TeleopApp, seconds: float) -> None:
-    for _ in range(int(round(seconds * app.config.rate))):
+    for _ in range(int(round(seconds * app.robots.config.rate))):
         app.step()
 
 
@@ -65,26 +65,26 @@ def app(sda10f, tmp_path):
 
 
 def test_each_loop_runs_its_own_simulated_robot(app):
-    main = app.loops["main"]
-    assert isinstance(main.plant, MujocoPlant) and main.plant.dt == app.config.dt
-    app.set_ghost("qp:daqp")
-    ghost = app.loops["ghost"]
+    main = app.robots.loops["main"]
+    assert isinstance(main.plant, MujocoPlant) and main.plant.dt == app.robots.config.dt
+    app.robots.set_ghost("qp:daqp")
+    ghost = app.robots.loops["ghost"]
     assert isinstance(ghost.plant, MujocoPlant) and ghost.plant is not main.plant
     plant = main.plant
-    app.set_controller("qp:proxqp")  # same rate: the same simulated robot goes on
-    assert app.loops["main"].plant is plant and app.loops["main"].q is not main.q
-    app.set_rate(500.0)  # a new period: new physics for every loop, at rest where it was
-    assert {id(loop.plant) for loop in app.loops.values()}.isdisjoint({id(plant), id(ghost.plant)})
-    assert all(loop.plant.dt == pytest.approx(2e-3) for loop in app.loops.values())
+    app.robots.set_controller("qp:proxqp")  # same rate: the same simulated robot goes on
+    assert app.robots.loops["main"].plant is plant and app.robots.loops["main"].q is not main.q
+    app.robots.set_rate(500.0)  # a new period: new physics for every loop, at rest where it was
+    assert {id(loop.plant) for loop in app.robots.loops.values()}.isdisjoint({id(plant), id(ghost.plant)})
+    assert all(loop.plant.dt == pytest.approx(2e-3) for loop in app.robots.loops.values())
     # the simulated robot is where the loop says it is
-    loop = app.loops["main"]
+    loop = app.robots.loops["main"]
     run(app, 0.05)
     q_sim = np.empty(app.robot.model.nq)
     loop.plant.joints.q_to_pinocchio(loop.plant.mj_data.qpos, q_sim)
     np.testing.assert_allclose(q_sim, loop.q, atol=1e-12)
     # the kinematic app has no plant
     kinematic = TeleopApp(app.robot, record_dir=app.record_dir, scene_dir=app.scene_dir)
-    assert kinematic.loops["main"].plant is None
+    assert kinematic.robots.loops["main"].plant is None
     snapshot = kinematic.snapshot()
     assert snapshot["robots"]["main"]["ports"] == [] and plots_of(snapshot) == PLOTS
 
@@ -100,7 +100,7 @@ def test_a_moved_target_pushes_the_instrument_on_the_wall_and_the_view_says_how_
     first = app.ticks  # ticks 0, 20, 40... take the history samples (50 Hz at 1 kHz)
     for _ in range(1000):
         app.step()
-        forces.append(np.linalg.norm(app.loops["main"].plant.measures().port_forces, axis=1).max())
+        forces.append(np.linalg.norm(app.robots.loops["main"].plant.measures().port_forces, axis=1).max())
     peak = max(forces)
     assert 1e-3 < peak < GENTLE_FORCE, peak  # felt, and below the target
     # the plots' port-force trace: finite, in newtons, each sample the peak of the 20
@@ -139,8 +139,8 @@ def test_the_port_force_is_the_wall_stiffness_times_the_offset(sda10f, tmp_path,
     towards the centre, and ``|F| = k`` x the reported displacement."""
     app = TeleopApp(sda10f, plant="mujoco", wall_stiffness=wall_stiffness, record_dir=tmp_path,
                     scene_dir=tmp_path / "scenes")
-    app.set_gain(0.0)
-    q = app.loops["main"].q.copy()
+    app.robots.set_gain(0.0)
+    q = app.robots.loops["main"].q.copy()
     hole = Hole.on_link(sda10f, q, distance=0.1)
     offset = port_offset(sda10f, q, hole)
     assert np.linalg.norm(offset) < 1e-9
@@ -156,7 +156,7 @@ def test_the_port_force_is_the_wall_stiffness_times_the_offset(sda10f, tmp_path,
     assert hole.tissue_stiffness == stiffness
     run(app, 1.0)  # the arm gives a little under the push, then rests
     (port,) = app.snapshot()["robots"]["main"]["ports"]
-    offset = port_offset(sda10f, app.loops["main"].q, hole)
+    offset = port_offset(sda10f, app.robots.loops["main"].q, hole)
     assert 0.9 * lateral < np.linalg.norm(offset) < 1.1 * lateral
     expected = -stiffness * offset
     assert port.id == hole_id
@@ -186,7 +186,7 @@ def test_home_resets_the_simulated_robot(app):
     nudge(app, [0.0, 0.0, 0.02])
     run(app, 0.3)
     app.home()  # no constraint: a reset
-    loop = app.loops["main"]
+    loop = app.robots.loops["main"]
     np.testing.assert_allclose(loop.q, app.robot.q_home)
     q_sim = np.empty(app.robot.model.nq)
     loop.plant.joints.q_to_pinocchio(loop.plant.mj_data.qpos, q_sim)
@@ -218,7 +218,7 @@ def test_the_control_thread_runs_the_plant(app):
         control.stop()
     timing = control.timing()
     assert control.error is None and timing.ticks > 200
-    assert app.now == pytest.approx(timing.ticks * app.config.dt)
+    assert app.now == pytest.approx(timing.ticks * app.robots.config.dt)
     assert 0.0 < timing.on_time <= 1.0
 
 
@@ -282,12 +282,12 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         assert ui.plots.handles["port_force"].title.startswith("port force, the largest (")
         assert np.isfinite(ui.plots.handles["port_force"].data[1]).all()
         # a ghost gets its own arrows, under its own root; without it they go
-        app.set_ghost("qp:daqp")
+        app.robots.set_ghost("qp:daqp")
         run(app, 0.05)
         ui._ghost_seen = -1e9  # drawn at once (no plots to wait for here)
         ui._draw(app.snapshot())
         assert ui._port_arrows["ghost"][hole_id].name == f"/ghost/ports/{hole_id}"
-        app.set_ghost(None)
+        app.robots.set_ghost(None)
         ui._draw(app.snapshot())
         assert "ghost" not in ui._port_arrows
         app.remove_constraint(hole_id)

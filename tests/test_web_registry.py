@@ -222,7 +222,7 @@ def held_along_a_drag(robot, tmp_path, distance: float, direction, nudge) -> Non
     line = app.entries[entry_id].constraint
     np.testing.assert_allclose(line.direction, np.asarray(direction) / np.linalg.norm(direction),
                                atol=1e-15)
-    q0 = app.loops["main"].q.copy()
+    q0 = app.robots.loops["main"].q.copy()
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, q0)
     link = data.oMf[robot.model.getFrameId(robot.constrained_link)]
@@ -231,13 +231,13 @@ def held_along_a_drag(robot, tmp_path, distance: float, direction, nudge) -> Non
     across = perpendicular_basis(line.direction)
 
     app.nudge_target(nudge)
-    dt, gain, h = app.config.dt, app.gain, 1e-6
+    dt, gain, h = app.robots.config.dt, app.robots.gain, 1e-6
     eps = np.finfo(float).eps
     lever = lever_bound(robot, line.link, line.link_point)
     error = np.zeros(2)  # where the point starts: on the line
     bound = 0.0
-    for _ in range(int(0.3 * app.config.rate)):
-        loop = app.loops["main"]
+    for _ in range(int(0.3 * app.robots.config.rate)):
+        loop = app.robots.loops["main"]
         q = loop.q.copy()
         app.step()
         info = loop.controller.info
@@ -258,9 +258,9 @@ def held_along_a_drag(robot, tmp_path, distance: float, direction, nudge) -> Non
         # 0.5 lever (|qd|_1 dt)^2; drift feedback shrinks the error by (1 - K dt) a step
         remainder = 0.5 * lever * (np.abs(qd).sum() * dt) ** 2 + dt * rounding
         bound = (1.0 - gain * dt) * bound + remainder
-    final = across @ (point_world(robot, app.loops["main"].q, line) - line.line_point)
+    final = across @ (point_world(robot, app.robots.loops["main"].q, line) - line.line_point)
     assert np.linalg.norm(final) <= bound, (np.linalg.norm(final), bound)
-    assert np.linalg.norm(app.loops["main"].q - q0) > 1e-3  # the robot moved
+    assert np.linalg.norm(app.robots.loops["main"].q - q0) > 1e-3  # the robot moved
 
 
 def test_a_kind_registered_here_is_placed_and_held_through_the_ui_core(registered, sda10f,

@@ -53,7 +53,7 @@ def robot_process(domain: int) -> Iterator[subprocess.Popen]:
 def hole_error(app: TeleopApp) -> float:
     """The placed constraints' largest violation at the main robot's configuration,
     computed here from Pinocchio's frames."""
-    loop = app.loops["main"]
+    loop = app.robots.loops["main"]
     model, data = app.robot.model, app.robot.model.createData()
     pin.framesForwardKinematics(model, data, loop.q)
     return max(c.violation(data.oMf[f])
@@ -71,7 +71,7 @@ def hold_the_hole(app: TeleopApp) -> tuple[float, float]:
         for _ in range(int(RATE)):  # one second each
             app.step()
             errors.append(hole_error(app))
-    distance = float(np.linalg.norm(app.loops["main"].ee_placements()[0].translation
+    distance = float(np.linalg.norm(app.robots.loops["main"].ee_placements()[0].translation
                                     - app.target.translation))
     return max(errors), distance
 
@@ -80,8 +80,8 @@ def in_process(robot, tmp_path: Path) -> float:
     """:func:`hold_the_hole`'s hole error on the page's in-process kinematic robot, from
     the sim's start."""
     app = TeleopApp(robot, rate=RATE, record_dir=tmp_path, scene_dir=tmp_path)
-    app.loops["main"].q = Q0.copy()
-    app.inputs[0].target = app.loops["main"].ee_placements()[0]
+    app.robots.loops["main"].q = Q0.copy()
+    app.inputs[0].target = app.robots.loops["main"].ee_placements()[0]
     return hold_the_hole(app)[0]
 
 
@@ -97,18 +97,18 @@ def test_the_page_drives_the_simulated_robot_and_holds_the_hole(robot, domain, r
                     ros2_settings=settings_for(domain, stale_after=1.0),
                     record_dir=tmp_path, scene_dir=tmp_path)
     try:
-        np.testing.assert_array_equal(app.loops["main"].q, Q0)  # float64 on the wire
-        plant = app.loops["main"].plant
+        np.testing.assert_array_equal(app.robots.loops["main"].q, Q0)  # float64 on the wire
+        plant = app.robots.loops["main"].plant
         assert isinstance(plant, Ros2Plant)
-        app.set_controller("qp:daqp")
-        app.set_rate(250.0)
-        assert app.loops["main"].plant is plant and plant.dt == pytest.approx(4e-3)
-        app.set_rate(RATE)
+        app.robots.set_controller("qp:daqp")
+        app.robots.set_rate(250.0)
+        assert app.robots.loops["main"].plant is plant and plant.dt == pytest.approx(4e-3)
+        app.robots.set_rate(RATE)
         assert plant.dt == pytest.approx(1.0 / RATE)
         with pytest.raises(ValueError, match="no ghost .* one robot over ROS 2"):
-            app.set_ghost("cjm")
-        assert list(app.loops) == ["main"]
-        app.set_controller("cjm")
+            app.robots.set_ghost("cjm")
+        assert list(app.robots.loops) == ["main"]
+        app.robots.set_controller("cjm")
         error, distance = hold_the_hole(app)
         measures = plant.measures()
         assert measures.stopped == "" and measures.command_publishers == 1
@@ -337,7 +337,7 @@ def test_the_page_holds_a_hole_on_the_mujoco_robot_as_in_process(robot, domain, 
         try:
             app.apply_scene(scene)
             over_dds = nudged_hole_error(app, 1.0)
-            assert app.loops["main"].plant.measures().stopped == ""
+            assert app.robots.loops["main"].plant.measures().stopped == ""
         finally:
             (app.ros2 or pytest.fail("no ROS 2 robot")).close()
     finally:

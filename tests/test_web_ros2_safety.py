@@ -24,7 +24,7 @@ def page(robot, domain: int, tmp_path) -> TeleopApp:
 
 
 def tip(app: TeleopApp) -> np.ndarray:
-    return app.loops["main"].ee_placements()[0].translation.copy()
+    return app.robots.loops["main"].ee_placements()[0].translation.copy()
 
 
 def test_a_scene_from_elsewhere_is_refused_and_one_from_here_moves_nothing(
@@ -37,10 +37,10 @@ def test_a_scene_from_elsewhere_is_refused_and_one_from_here_moves_nothing(
         start = tip(app)
         elsewhere = app.scene()
         elsewhere["q"]["main"] = [float(x) for x in robot.q_home]
-        before = app.loops["main"]
+        before = app.robots.loops["main"]
         with pytest.raises(ValueError, match="a real robot cannot jump there"):
             app.apply_scene(elsewhere)
-        assert app.loops["main"] is before
+        assert app.robots.loops["main"] is before
         here = app.scene()
         here["target"]["position"] = [float(x) for x in start + [0.0, 0.05, 0.0]]
         app.apply_scene(here)
@@ -59,11 +59,11 @@ def test_home_takes_the_robot_home_on_a_path_and_never_jumps(robot, domain, robo
     the linear cap: the states arrive in bursts), and its tool gets home."""
     app = page(robot, domain, tmp_path)
     try:
-        assert np.max(np.abs(app.loops["main"].q - Q0)) < 1e-3  # it starts where it is
+        assert np.max(np.abs(app.robots.loops["main"].q - Q0)) < 1e-3  # it starts where it is
         start = tip(app)
         assert app.home() == ""
         np.testing.assert_allclose(app.target.translation, start, atol=1e-6)
-        cap = app.config.max_linear_speed
+        cap = app.robots.config.max_linear_speed
         window = int(RATE / 10)  # states arrive in bursts: the speed over 0.1 s
         previous = start
         for step in range(int(20 * RATE)):

@@ -33,7 +33,7 @@ def app(sda10f, tmp_path):
     app = TeleopApp(sda10f, record_dir=tmp_path / "sessions", scene_dir=tmp_path / "scenes",
                     ghost="qp:daqp")
     app.add_constraint("hole", distance=0.08)
-    tip = app.loops["main"].ee_placements()[0]  # a sphere 2 cm in front of the tip
+    tip = app.robots.loops["main"].ee_placements()[0]  # a sphere 2 cm in front of the tip
     app.collisions.add("sphere", radius=0.03, center=tip.translation + 0.05 * tip.rotation[:, 2])
     return app
 
@@ -80,7 +80,7 @@ def counted_rows(app, monkeypatch) -> dict[str, int]:
         return rows(model, data)
 
     monkeypatch.setattr(app.collisions.avoidance, "rows", counting)
-    for loop in app.loops.values():
+    for loop in app.robots.loops.values():
         solve = loop.controller.solve
 
         def stepped(q, twist, solve=solve):
@@ -98,13 +98,13 @@ def test_the_control_thread_computes_no_collision_rows_for_the_view(app, monkeyp
     calls = counted_rows(app, monkeypatch)
     ticks = 200  # 10 history ticks at 1 kHz
     for _ in range(ticks):
-        q = {which: loop.q.copy() for which, loop in app.loops.items()}
+        q = {which: loop.q.copy() for which, loop in app.robots.loops.items()}
         app.step()
     # the ghost (qp:daqp) calls rows once a step; the CJM's compiled step measures its
     # own in C++ (docs/design.md 18.4), no rows call: none elsewhere either way
     assert calls == {"controllers": ticks, "elsewhere": 0}
     # the rows the view reads are the last the controllers held, at the q they were given
-    for which in app.loops:
+    for which in app.robots.loops:
         shown = app.snapshot()["robots"][which]["collision_rows"]
         expected = independent_rows(app, q[which])
         assert expected.size >= 1 and shown.pairs == expected.pairs
@@ -116,7 +116,7 @@ def test_rows_a_controller_did_not_compute_are_measured_on_history_ticks_only(ap
     """A controller that keeps its pairs apart without the avoidance's ``rows`` (the
     avoidance's ``last_rows`` left as it was): the tick measures them for the view, at
     the history rate, where that controller's command was computed from."""
-    ghost = app.loops["ghost"].controller
+    ghost = app.robots.loops["ghost"].controller
     solve = ghost.solve
 
     def rows_elsewhere(q, twist):
@@ -130,12 +130,12 @@ def test_rows_a_controller_did_not_compute_are_measured_on_history_ticks_only(ap
     calls = counted_rows(app, monkeypatch)
     ticks = 200
     for _ in range(ticks):
-        record = app.last_records["ghost"]
-        q = app.loops["ghost"].q.copy()
+        record = app.robots.last_records["ghost"]
+        q = app.robots.loops["ghost"].q.copy()
         app.step()
-        if app.last_records["ghost"] is not record:
+        if app.robots.last_records["ghost"] is not record:
             measured_at = q
-    history = round(ticks * HISTORY_RATE * app.config.dt)
+    history = round(ticks * HISTORY_RATE * app.robots.config.dt)
     assert calls == {"controllers": ticks, "elsewhere": history}  # the CJM's rows: in C++
     shown = app.snapshot()["robots"]["ghost"]["collision_rows"]
     expected = independent_rows(app, measured_at)
@@ -145,7 +145,7 @@ def test_rows_a_controller_did_not_compute_are_measured_on_history_ticks_only(ap
 
 def test_the_measures_are_taken_at_the_history_rate(app, monkeypatch):
     counts = {"measure_command": 0, "measure": 0}
-    for loop in app.loops.values():
+    for loop in app.robots.loops.values():
         for name in counts:
             original = getattr(loop, name)
             monkeypatch.setattr(loop, name, lambda step, f=original, name=name:
@@ -153,9 +153,9 @@ def test_the_measures_are_taken_at_the_history_rate(app, monkeypatch):
     ticks = 1000
     for _ in range(ticks):
         app.step()
-    history = round(ticks * HISTORY_RATE * app.config.dt)
+    history = round(ticks * HISTORY_RATE * app.robots.config.dt)
     assert counts == {"measure_command": 2 * history, "measure": 2 * history}
-    assert len(app.traces["main"].t) == len(app.traces["ghost"].t) == history
+    assert len(app.robots.traces["main"].t) == len(app.robots.traces["ghost"].t) == history
 
 
 def test_the_view_takes_only_copies_under_the_lock(app, server, monkeypatch):

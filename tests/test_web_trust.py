@@ -30,7 +30,7 @@ def app(sda10f, tmp_path):
 
 
 def run(app, seconds):
-    for _ in range(int(seconds * app.config.rate)):
+    for _ in range(int(seconds * app.robots.config.rate)):
         app.step()
 
 
@@ -153,33 +153,33 @@ def test_a_symlink_loop_is_refused_like_any_name_leading_out(app, tmp_path):
      "target refused"),
     (lambda app: app.move_gizmo([0, 1e300, 0], [1, 0, 0, 0]), "gizmo's target refused"),
     (lambda app: app.move_gizmo([0, np.inf, 0], [1, 0, 0, 0]), "gizmo position must be finite"),
-    (lambda app: app.set_damping(1e300), "damping must be <= 1"),
-    (lambda app: app.set_damping(np.nan), "damping must be finite"),
-    (lambda app: app.set_gain(1e300), "gain must be in"),
-    (lambda app: app.set_gain("abc"), "gain must be a number"),
-    (lambda app: app.set_rate(1e12), "rate must be between 50 and 5000 Hz"),
-    (lambda app: app.set_rate(True), "rate must be a number"),
+    (lambda app: app.robots.set_damping(1e300), "damping must be <= 1"),
+    (lambda app: app.robots.set_damping(np.nan), "damping must be finite"),
+    (lambda app: app.robots.set_gain(1e300), "gain must be in"),
+    (lambda app: app.robots.set_gain("abc"), "gain must be a number"),
+    (lambda app: app.robots.set_rate(1e12), "rate must be between 50 and 5000 Hz"),
+    (lambda app: app.robots.set_rate(True), "rate must be a number"),
     (lambda app: app.move_constraint(app.add_constraint("hole", distance=0.08), [1e300, 0, 0]),
      "constraint position refused"),
 ])
 def test_a_target_or_setting_out_of_range_is_refused_naming_it(app, action, message):
     target, gizmo = app.target.copy(), app.gizmo.copy()
-    settings = (app.gain, app.damping, app.config.rate)
+    settings = (app.robots.gain, app.robots.damping, app.robots.config.rate)
     with pytest.raises(ValueError, match=message):
         action(app)
     assert app.target.isApprox(target, 0.0) and app.gizmo.isApprox(gizmo, 0.0)
-    assert (app.gain, app.damping, app.config.rate) == settings
+    assert (app.robots.gain, app.robots.damping, app.robots.config.rate) == settings
     run(app, 0.01)
-    assert np.isfinite(app.loops["main"].q).all()
+    assert np.isfinite(app.robots.loops["main"].q).all()
 
 
 def test_targets_within_the_maximum_distance_are_taken(app):
-    ee = app.loops["main"].ee_placement()
+    ee = app.robots.loops["main"].ee_placement()
     inside = ee.translation + [0.0, 0.0, 0.99 * MAX_TARGET_DISTANCE]
     app.set_target(inside, [1, 0, 0, 0])
     np.testing.assert_array_equal(app.target.translation, inside)
-    app.set_damping(MAX_DAMPING)
-    assert app.damping == MAX_DAMPING
+    app.robots.set_damping(MAX_DAMPING)
+    assert app.robots.damping == MAX_DAMPING
 
 
 def test_the_app_refuses_a_rate_out_of_range_at_construction(sda10f, tmp_path):
@@ -244,21 +244,21 @@ def test_a_flood_of_10000_events_in_5_s_does_not_starve_the_control_loop(app):
     control.start()
     inbox.start()
     rebuilds = []
-    original = app._make_loop
+    original = app.robots.make_loop
 
     def counted(*args, **kwargs):
         rebuilds.append(time.monotonic())
         return original(*args, **kwargs)
 
-    app._make_loop = counted
+    app.robots.make_loop = counted
     try:
         time.sleep(1.0)
         ticks0, start = app.ticks, time.monotonic()
-        ee = app.loops["main"].ee_placement()
+        ee = app.robots.loops["main"].ee_placement()
         wxyz = pin.Quaternion(ee.rotation)
         for k in range(10_000):
             if k % 2:
-                inbox.post(lambda k=k: app.set_rate(990.0 if k % 4 == 1 else 1000.0),
+                inbox.post(lambda k=k: app.robots.set_rate(990.0 if k % 4 == 1 else 1000.0),
                            key="rate", throttled=True)
             else:
                 position = ee.translation + 0.01 * np.array([np.sin(k / 300), 0.0, 0.0])
@@ -269,14 +269,14 @@ def test_a_flood_of_10000_events_in_5_s_does_not_starve_the_control_loop(app):
         ticks = app.ticks - ticks0
         assert inbox.drain(10.0)
     finally:
-        app._make_loop = original
+        app.robots.make_loop = original
         inbox.stop()
         control.stop()
     rate = ticks / flood
     print(f"\n[flood] 10000 events in {flood:.2f} s: {ticks} ticks, {rate:.0f} Hz achieved "
           f"(target 990-1000 Hz as the rate flips), {len(rebuilds)} loop builds, "
           f"{inbox.coalesced} events coalesced, {control.deadline_misses} deadline misses")
-    assert control.error is None and np.isfinite(app.loops["main"].q).all()
+    assert control.error is None and np.isfinite(app.robots.loops["main"].q).all()
     assert rate >= 100.0, f"the control loop starved: {rate:.0f} Hz during the flood"
     # at most one rebuild per 100 ms (the drain included)
     assert len(rebuilds) <= (flood + 10.0) / THROTTLE
@@ -289,34 +289,34 @@ def test_a_target_held_where_the_robot_is_lets_it_settle(app):
     """A drag past the joint limits, then the browser lost: held where the EE is, the robot
     stops; left at the drag's end (the old behaviour), it creeps on along the limits."""
     robot = app.robot
-    ee = app.loops["main"].ee_placement()
+    ee = app.robots.loops["main"].ee_placement()
     wxyz = pin.Quaternion(ee.rotation)
     far = ee.translation + [0.6, 0.3, -0.4]  # out of reach: the joints run to their limits
     app.set_target(far, [wxyz.w, wxyz.x, wxyz.y, wxyz.z])
     run(app, 3.0)
     left = TeleopApp(robot, record_dir=app.record_dir, scene_dir=app.scene_dir)
     with left._lock, app._lock:
-        left.loops["main"].q = app.loops["main"].q.copy()
+        left.robots.loops["main"].q = app.robots.loops["main"].q.copy()
         left.inputs[0].target = app.target.copy()
     app.hold_where_the_robot_is(0)
-    held_at = app.loops["main"].ee_placement().translation
+    held_at = app.robots.loops["main"].ee_placement().translation
     np.testing.assert_allclose(app.target.translation, held_at, atol=1e-12)
     np.testing.assert_allclose(app.gizmo.translation, held_at, atol=1e-12)
     run(app, 1.0)
     run(left, 1.0)
-    q_held, q_left = app.loops["main"].q.copy(), left.loops["main"].q.copy()
+    q_held, q_left = app.robots.loops["main"].q.copy(), left.robots.loops["main"].q.copy()
     run(app, 1.0)
     run(left, 1.0)
-    held_speed = np.abs(app.loops["main"].q - q_held).max()  # rad in the last second
-    left_speed = np.abs(left.loops["main"].q - q_left).max()
+    held_speed = np.abs(app.robots.loops["main"].q - q_held).max()  # rad in the last second
+    left_speed = np.abs(left.robots.loops["main"].q - q_left).max()
     print(f"\n[lost client] joint motion in the second second: held {held_speed:.2e} rad/s, "
           f"left at the drag's end {left_speed:.2e} rad/s")
-    assert np.linalg.norm(app.loops["main"].ee_placement().translation - held_at) < 5e-3
+    assert np.linalg.norm(app.robots.loops["main"].ee_placement().translation - held_at) < 5e-3
     # settling, at least a hundred times slower than the creep it replaces, and slowing
     assert held_speed < 1e-2 * left_speed, (held_speed, left_speed)
-    q_later = app.loops["main"].q.copy()
+    q_later = app.robots.loops["main"].q.copy()
     run(app, 1.0)
-    assert np.abs(app.loops["main"].q - q_later).max() < held_speed
+    assert np.abs(app.robots.loops["main"].q - q_later).max() < held_speed
 
 
 # -- the loop falling behind ---------------------------------------------------------------------

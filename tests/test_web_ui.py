@@ -36,7 +36,7 @@ def ui(sda10f, server, tmp_path):
 
 
 def run(app, seconds):
-    for _ in range(int(seconds * app.config.rate)):
+    for _ in range(int(seconds * app.robots.config.rate)):
         app.step()
 
 
@@ -66,14 +66,14 @@ def test_the_grid_is_at_the_robots_base(ui, ur5_instrument):
 def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
     app = ui.app
     hole_id = app.add_constraint("hole", distance=0.08)
-    app.set_ghost("qp:daqp")
+    app.robots.set_ghost("qp:daqp")
     nudge(app, [0.0, 0.01, 0.0])
     run(app, 0.1)
     draw(ui)
     assert "ghost" not in ui._views  # the plots show a new ghost first (then its meshes)
     draw(ui, plot=True)
     draw(ui)
-    offset = app.ghost_offset
+    offset = app.robots.ghost_offset
     np.testing.assert_allclose(ui._ghost_root.position, offset)
     assert ui._ghost_root.name == "/ghost"
     ghost = ui._views["ghost"]
@@ -86,14 +86,14 @@ def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
     assert "gizmo" not in markers  # one gizmo per hole: the main robot's
     assert ui.constraint_markers.nodes[hole_id]["gizmo"].name == f"/constraints/{hole_id}/gizmo"
     # moved the ghost: the whole subtree goes with it
-    app.set_ghost_offset([0.0, -1.0, 0.0])
+    app.robots.set_ghost_offset([0.0, -1.0, 0.0])
     draw(ui)
     np.testing.assert_allclose(ui._ghost_root.position, [0.0, -1.0, 0.0])
-    app.set_ghost_offset([0.0, 0.0, 0.0])  # overlay: redrawn see-through
+    app.robots.set_ghost_offset([0.0, 0.0, 0.0])  # overlay: redrawn see-through
     draw(ui)
     assert ui._ghost_style[3] < 0.5
     np.testing.assert_allclose(ui._ghost_root.position, [0.0, 0.0, 0.0])
-    app.set_ghost(None)
+    app.robots.set_ghost(None)
     draw(ui)
     assert "ghost" not in ui._views and not ui.ghost_markers.nodes
 
@@ -134,7 +134,7 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
 
 def test_the_ee_target_line_takes_the_step_status_colour(ui):
     app = ui.app
-    app.set_task_mode("pose")  # position and roll reach this target (the default with a hole)
+    app.robots.set_task_mode("pose")  # position and roll reach this target (the default with a hole)
     app.add_constraint("hole", distance=0.08)
     draw(ui)
     assert ui.reach_line.visible is False  # on target: nothing to show
@@ -170,7 +170,7 @@ def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
     assert title.startswith("EE position error (") and title.endswith("m)")
     ee = ui.plots.handles["ee_error"].data[1]
     assert 1.0 <= ee.max() < 2000.0  # readable numbers in the unit of the title
-    app.set_ghost("qp:daqp")
+    app.robots.set_ghost("qp:daqp")
     run(app, 0.2)
     draw(ui, plot=True)
     assert set(ui.plots.handles) == {spec.key for spec in PLOTS}
@@ -178,7 +178,7 @@ def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
         assert all(np.isfinite(column).all() and column.size == 10 for column in plot.data)
     assert [s["label"] for s in ui.plots.handles["constraint_error"].series] == [
         "t - now (s)", "main (cjm)", "ghost (qp:daqp)"]
-    app.set_ghost(None)
+    app.robots.set_ghost(None)
     draw(ui, plot=True)
     assert "qd_deviation" not in ui.plots.handles
     assert len(ui.plots.handles["constraint_error"].series) == 2
@@ -187,28 +187,28 @@ def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
 def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app = ui.app
     app.add_constraint("hole", distance=0.08)
-    app.set_gain(60.0)
+    app.robots.set_gain(60.0)
     app.set_motion_scale(0.5)
-    app.set_ghost("qp:daqp")
-    app.set_task_mode("position")
+    app.robots.set_ghost("qp:daqp")
+    app.robots.set_task_mode("position")
     ui.settings_panel.scene_path.value = "s.json"
     ui.settings_panel.save_scene()
     assert ui.settings_panel.scene_status.content == "saved `s.json`"
     assert (tmp_path / "scenes" / "s.json").is_file()
-    app.set_gain(100.0)
+    app.robots.set_gain(100.0)
     app.set_motion_scale(1.0)
-    app.set_ghost(None)
-    app.set_task_mode("auto")
+    app.robots.set_ghost(None)
+    app.robots.set_task_mode("auto")
     app.clear_constraints()
     ui.settings_panel.load_scene()
-    assert list(app.entries) == ["hole-1"] and app.gain == 60.0
-    assert app.task_mode == "position" and ui.teleop_panel.task_mode_menu.value == "position only"
-    assert app.loops["main"].task_modes == app.loops["ghost"].task_modes == ("position",)
+    assert list(app.entries) == ["hole-1"] and app.robots.gain == 60.0
+    assert app.robots.task_mode == "position" and ui.teleop_panel.task_mode_menu.value == "position only"
+    assert app.robots.loops["main"].task_modes == app.robots.loops["ghost"].task_modes == ("position",)
     assert ui.settings_panel.gain_slider.value == 60.0
     assert ui.teleop_panel.motion_scale.value == 0.5
     panel = ui.teleop_panel
     assert panel.side_by_side.value is True and panel.ghost_menu.value == "qp:daqp"
-    np.testing.assert_allclose(panel.ghost_offset.value, app.ghost_offset)
+    np.testing.assert_allclose(panel.ghost_offset.value, app.robots.ghost_offset)
 
 
 def test_the_panda_draws_its_meshes(server):
@@ -275,7 +275,7 @@ def test_a_drag_ended_by_a_lost_browser_holds_the_target_where_the_ee_is(ui):
         assert ui.inbox.drain(10.0)
     finally:
         ui.inbox.stop()
-    ee = app.loops["main"].ee_placement()
+    ee = app.robots.loops["main"].ee_placement()
     np.testing.assert_allclose(app.target.translation, ee.translation, atol=1e-12)
     np.testing.assert_allclose(gizmo.position, ee.translation, atol=1e-6)  # float32
 
@@ -295,7 +295,7 @@ def test_the_pandas_hole_ring_is_outside_its_link_mesh(server, tmp_path):
     centre, axis = geometry.anchor, geometry.axis / np.linalg.norm(geometry.axis)
     ring_radius = np.linalg.norm(ring - centre, axis=1).min()
     frame = panda.model.getFrameId("panda_link4")
-    q = app.loops["main"].q
+    q = app.robots.loops["main"].q
     nearest = 0.0
     for model in (panda.visual_model, panda.collision_model):
         data = pin.GeometryData(model)
@@ -323,7 +323,7 @@ def test_every_kind_is_added_from_its_inputs_as_they_start(ui):
     added = {kind: ui.constraint_panel.add(kind) for kind in ui.constraint_panel.inputs}
     assert set(added) == set(CONSTRAINT_TYPES) and len(app.entries) == len(CONSTRAINT_TYPES)
     data = app.robot.model.createData()
-    pin.framesForwardKinematics(app.robot.model, data, app.loops["main"].q)
+    pin.framesForwardKinematics(app.robot.model, data, app.robots.loops["main"].q)
     link = data.oMf[app.robot.model.getFrameId(app.robot.constrained_link)]
     for kind, entry_id in added.items():
         constraint = app.entries[entry_id].constraint
@@ -342,7 +342,7 @@ def test_every_drawn_robot_has_its_contact_arrow_and_tissue(sda10f, server, tmp_
     app = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path / "sessions",
                     scene_dir=tmp_path / "scenes")
     ui = TeleopUI(server, app, ControlThread(app))
-    app.set_ghost("qp:daqp")
+    app.robots.set_ghost("qp:daqp")
     app.force.place_tissue()
     app.force.set_enabled(True)
     run(app, 3.0)  # 2 mm at 1 cm/s, then the force loop settles
@@ -361,6 +361,6 @@ def test_every_drawn_robot_has_its_contact_arrow_and_tissue(sda10f, server, tmp_
                                    atol=1e-6)  # float32 on the wire
         assert panel.tissues[which].name == f"{prefix}/tissue"
     assert panel.arrow is panel.arrows["main"]
-    app.set_ghost(None)
+    app.robots.set_ghost(None)
     draw(ui)
     assert set(panel.arrows) == set(panel.tissues) == {"main"}

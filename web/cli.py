@@ -332,9 +332,9 @@ def run(args: argparse.Namespace, prog: str) -> int:
     except KeyboardInterrupt:  # Ctrl-C while loading
         return 130
     try:
-        ghost = app.specs.get("ghost")
+        ghost = app.robots.specs.get("ghost")
         print(f"{prog}: {robot.name} on {page_url(args.host, server.get_port(), token)} "
-              f"(controller {app.specs['main']}{', ghost ' + ghost if ghost else ''})"
+              f"(controller {app.robots.specs['main']}{', ghost ' + ghost if ghost else ''})"
               f"{', on the ' + app.plant.describe() if app.plant.kind != 'kinematic' else ''}"
               + "".join(f", input {device.source.name} on {robot.ee_frames[device.source.ee]}"
                         for device in app.devices) + "; Ctrl-C stops", flush=True)

@@ -30,7 +30,7 @@ from constraints import Constraint
 from controllers.base import Controller
 from teleop.robots import Robot
 
-from .console import ee_index
+from .end_effectors import ee_index
 from .limits import MAX_TARGET_DISTANCE
 from .placed import PlacedEntry
 
@@ -135,6 +135,7 @@ class CollisionScene:
     Parameters
     ----------
     robot : the session's robot.
+    dt : the control period (s), the avoidance's dampers checked at it.
     on : whether the controllers keep the pairs apart.
     settings : keywords of :data:`SETTINGS` (the others their defaults, self-collision on
         a robot with several arms).
@@ -142,8 +143,8 @@ class CollisionScene:
     session : what it reads of the rest of the session (:class:`CollisionSession`).
     """
 
-    def __init__(self, robot: Robot, on: bool, settings: dict, lock: threading.RLock,
-                 session: CollisionSession) -> None:
+    def __init__(self, robot: Robot, dt: float, on: bool, settings: dict,
+                 lock: threading.RLock, session: CollisionSession) -> None:
         unknown = sorted(set(settings) - set(SETTINGS))
         if unknown:
             raise ValueError(f"unknown collision setting {unknown[0]!r} ({', '.join(SETTINGS)})")
@@ -154,7 +155,7 @@ class CollisionScene:
         self._session = session
         settings = {"self_collision": default_self_collision(robot), **settings}
         self.avoidance = CollisionAvoidance(robot, **settings)
-        self.avoidance.check(robot.model, session.period())
+        self.avoidance.check(robot.model, dt)
         self.on = bool(on)
         self.obstacles: dict[str, ObstacleEntry] = {}
         self._ids = itertools.count(1)

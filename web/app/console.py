@@ -25,9 +25,10 @@ import pinocchio as pin
 
 from constraints.validation import as_number, as_vector
 from teleop.inputs import followed_pose
-from teleop.loop import TeleopLoop
 from teleop.robots import Robot
 
+from .robots import Robots
+from .end_effectors import ee_index
 from .limits import MAX_MOTION_SCALE, MAX_TARGET_DISTANCE
 from .ros2_robot import Ros2Robot
 
@@ -60,23 +61,12 @@ def pose_from(position, wxyz, what: str) -> pin.SE3:
     return pin.SE3(rotation, position)
 
 
-def ee_index(robot: Robot, ee) -> int:
-    """``ee`` (an index or a name of ``robot.ee_frames``) as an index; else ``ValueError``."""
-    frames = robot.ee_frames
-    if isinstance(ee, str) and ee in frames:
-        return frames.index(ee)
-    if isinstance(ee, (int, np.integer)) and not isinstance(ee, bool) and 0 <= ee < len(frames):
-        return int(ee)
-    raise ValueError(f"no end effector {ee!r}: this robot's are {list(frames)} "
-                     f"(or their indices 0-{len(frames) - 1})")
-
-
 class Console:
     """The operator's console of :class:`web.app.TeleopApp` (its state: ``inputs``,
     ``clutch``, ``motion_scale``; it reads the main robot's loop)."""
 
+    robots: Robots
     robot: Robot
-    loops: dict[str, TeleopLoop]
     inputs: list[EEInput]
     clutch: bool
     motion_scale: float
@@ -108,7 +98,7 @@ class Console:
     def _check_target(self, target: pin.SE3, ee: int, what: str = "target") -> None:
         """``ValueError`` when ``target`` is farther than :data:`MAX_TARGET_DISTANCE` from
         where EE ``ee`` of the main robot is now (caller holds the lock)."""
-        ee_now = self.loops["main"].ee_placements()[ee].translation
+        ee_now = self.robots.loops["main"].ee_placements()[ee].translation
         distance = math.hypot(*(target.translation - ee_now))  # no overflow at 1e300
         if not distance <= MAX_TARGET_DISTANCE:
             raise ValueError(f"{what} refused: {distance:.3g} m from the end effector "
@@ -119,7 +109,7 @@ class Console:
         ends a way home being followed, where it is, and forgets why the last one
         stopped short (:mod:`.homing`)."""
         if self.homing.end():
-            self._apply_task_modes()
+            self.robots.apply_task_modes()
         self.homing.forget()
         self.inputs[ee].target = target
         self.recorder.target(ee, target)
@@ -189,7 +179,7 @@ class Console:
         which may lie past a joint limit."""
         indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
         with self._lock:
-            placements = self.loops["main"].ee_placements()
+            placements = self.robots.loops["main"].ee_placements()
             for index in indices:
                 self._put_hand(index, placements[index].copy())
 
@@ -214,27 +204,27 @@ class Console:
         indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
         if ee is None and self.ros2 is not None:
             with self._lock:
-                loop = self.loops["main"]
+                loop = self.robots.loops["main"]
                 t = loop.t
                 loop.reset()  # zeros, the watchdog's stop cleared, a fresh state awaited
                 loop.t, loop.q = t, self.ros2.state(loop.config.dt)
         if ee is None and (self.entries or self.ros2 is not None):
             with self._lock:
-                loop = self.loops["main"]
+                loop = self.robots.loops["main"]
                 for index in indices:  # from where the robot is: no jump when it starts
                     self._put_hand(index, loop.ee_placements()[index])
                 q, frames = loop.q.copy(), list(loop.controller.constraint_frames)
                 constraints = [copy.copy(constraint) for constraint in loop.constraints]
-                caps = self.config.max_linear_speed, self.config.max_angular_speed
+                caps = self.robots.config.max_linear_speed, self.robots.config.max_angular_speed
             # outside the lock (milliseconds to tens of them) while the robot holds its targets
             run = self.homing.plan(q, constraints, frames, caps)
             with self._lock:
                 words = self.homing.follow(run, self.now)
-                self._apply_task_modes()  # the loops in full pose while it runs
+                self.robots.apply_task_modes()  # the loops in full pose while it runs
             return words
         with self._lock:
             if ee is None:
-                for loop in self.loops.values():
+                for loop in self.robots.loops.values():
                     t = loop.t
                     loop.reset()
                     loop.t = t

@@ -104,7 +104,7 @@ class ControlThread:
     def behind(self) -> str:
         """:func:`behind_words` for the last full second at the current rate (``""``
         before one has been measured)."""
-        rate = 1.0 / self.app.config.dt
+        rate = 1.0 / self.app.robots.config.dt
         if self._measured_rate is None or self._measured_rate != rate:
             return ""
         return behind_words(self.achieved_rate, rate)
@@ -117,7 +117,7 @@ class ControlThread:
                           math.nan, self.deadline_misses, 0)
         lateness, tick = self._lateness[:n].copy(), 1e6 * self._tick[:n]
         solve, advance = self._solve[:n].copy(), self._advance[:n].copy()
-        period = self.app.config.dt
+        period = self.app.robots.config.dt
         starts = self._start[:n].copy()
         due = max(n, round((float(starts.max() - starts.min()) + period) / period))
         columns = np.stack([1e3 * lateness, tick, tick - solve, solve, advance - solve,
@@ -135,10 +135,10 @@ class ControlThread:
         clock = time.perf_counter
         next_tick = clock()
         window_start, window_ticks = clock(), 0
-        period = self.app.config.dt
+        period = self.app.robots.config.dt
         while not self._stop.is_set():
-            if self.app.config.dt != period:  # a new rate: a new measuring window
-                period = self.app.config.dt
+            if self.app.robots.config.dt != period:  # a new rate: a new measuring window
+                period = self.app.robots.config.dt
                 window_start, window_ticks = clock(), 0
             if self.app.ros2 is not None:  # the robot's clock paces the ticks: its next
                 self.app.ros2.pace()        # state awaited here, outside the app's lock

@@ -18,13 +18,13 @@ Threading (docs/design.md section 5.3): :class:`web.app.ControlThread` calls
 from __future__ import annotations
 
 import itertools
+from functools import partial
 import threading
 from pathlib import Path
 
 
 from controllers.base import velocity_joint_names
-from teleop.loop import LoopConfig, StepRecord, TeleopLoop
-from teleop.loop.task_modes import AUTO
+from teleop.loop import LoopConfig
 from teleop.options import JERK_LIMIT
 from teleop.plants import PlantSettings
 from teleop.plants.ros2.settings import Ros2Settings
@@ -38,19 +38,16 @@ from .editing import ConstraintEntry, Editing
 from .force_control import ForceControl
 from .homing import WayHome
 from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
-from .plant import PlantChoice, Plants
+from .plant import PlantChoice, session_plant
 from .recording import SessionRecording
-from .robots import Robots, default_ghost_offset
+from .robots import Robots
 from .ros2_robot import Ros2Robot
 from .scenes import Scenes
-from .settings import Settings
 from .tick import Tick
-from .trace import Trace
 from .view import View
 
 
-class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
-                View):
+class TeleopApp(Console, Editing, Scenes, Tick, View):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
 
@@ -92,8 +89,6 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
         rate = checked_rate(rate)
         if jerk_limit is not None and not acceleration_limits:
             raise ValueError("a jerk limit needs the acceleration limits (docs/design.md 8.5)")
-        self.acceleration_limits = acceleration_limits
-        self.jerk_limit = None if jerk_limit is None else JERK_LIMIT.check(jerk_limit)
         self.plant = PlantChoice(plant, plant_settings or PlantSettings(), wall_stiffness,
                                  (ros2_settings or Ros2Settings()) if plant == "ros2" else None)
         self.ros2 = Ros2Robot(robot, self.plant) if plant == "ros2" else None
@@ -101,48 +96,39 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
             self.ros2.refuse_ghost(ghost)
         self.robot = robot
         self._lock = threading.RLock()
-        self._build_lock = threading.Lock()  # one loop build at a time (outside _lock)
         self._view_data = robot.model.createData()  # for geometry queries, under the lock
         self.joint_names = list(velocity_joint_names(robot.model))
-        self.config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING,
-                                 max_linear_speed=MAX_LINEAR_SPEED,
-                                 max_angular_speed=MAX_ANGULAR_SPEED)
-        self.gain = 100.0
-        self.damping = 0.0
-        #: weight of the EE twists' angular entries (1: full poses; lower lets each
-        #: instrument's orientation give way to its tip position, docs/design.md 11.2)
-        self.orientation_weight = 1.0
-        #: what the operator commands of each EE (docs/design.md section 20): a mode of
-        #: ``teleop.loop.task_modes.TASK_MODES`` or ``auto``, what the ports allow
-        self.task_mode = AUTO
+        config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING,
+                            max_linear_speed=MAX_LINEAR_SPEED, max_angular_speed=MAX_ANGULAR_SPEED)
         self.homing = WayHome(robot)  # the way home followed now (:mod:`.homing`)
         self.recordings = Folder(record_dir, "recording", ".jsonl")
         self.scenes = Folder(scene_dir, "scene", ".json")
         self.record_dir, self.scene_dir = self.recordings.root, self.scenes.root
         self.entries: dict[str, ConstraintEntry] = {}
         self._ids = itertools.count(1)
-        self.collisions = CollisionScene(robot, collisions, dict(collision_settings or {}),
-                                         self._lock, CollisionSession(
-            controllers=lambda: [loop.controller for loop in self.loops.values()],
-            constraints=lambda: [entry.constraint for entry in self.entries.values()],
-            tips=lambda: self.loops["main"].ee_placements(), period=lambda: self.config.dt))
+        self.collisions = CollisionScene(
+            robot, config.dt, collisions, dict(collision_settings or {}), self._lock,
+            CollisionSession(
+                controllers=lambda: [loop.controller for loop in self.robots.loops.values()],
+                constraints=self._placed, tips=lambda: self.robots.loops["main"].ee_placements(),
+                period=lambda: self.robots.config.dt))
         # before the first loop: it makes their plants
-        self.force = ForceControl(robot, self.plant, self._lock, lambda: self.loops,
-                                  self.make_plant, lambda: self._rebuild(dict(self.specs)))
-        self.specs = {"main": controller}
-        self.loops: dict[str, TeleopLoop] = {"main": self._make_loop(
-            controller, q=None if self.ros2 is None else self.ros2.state(self.config.dt))}
-        self.traces: dict[str, Trace] = {"main": Trace()}
-        self.last_records: dict[str, StepRecord | None] = {"main": None}
-        self.ghost_offset = default_ghost_offset(robot)
+        self.force = ForceControl(robot, self.plant, self._lock, lambda: self.robots.loops,
+                                  partial(session_plant, self.plant, robot, self.ros2),
+                                  lambda: self.robots.rebuild(dict(self.robots.specs)))
+        self.recorder = SessionRecording(self.recordings, lambda: self.now, robot.ee_frames)
+        self.robots = Robots(robot, self._lock, config, controller,
+                             None if self.ros2 is None else self.ros2.state(config.dt),
+                             self._placed, self.collisions, self.force, self.homing,
+                             self.recorder, self.ros2, acceleration_limits,
+                             None if jerk_limit is None else JERK_LIMIT.check(jerk_limit))
         if ghost:
-            self.set_ghost(ghost)
+            self.robots.set_ghost(ghost)
         # the input mapping, per EE: gizmo -> target (clutch, motion scale)
         self.inputs = [EEInput.at(frame, pose) for frame, pose in
-                       zip(robot.ee_frames, self.loops["main"].ee_placements())]
+                       zip(robot.ee_frames, self.robots.loops["main"].ee_placements())]
         self.motion_scale = 1.0
         self.clutch = False
-        self.recorder = SessionRecording(self.recordings, lambda: self.now, robot.ee_frames)
         self.devices = InputDevices(self.recorder, self._lock, len(robot.ee_frames))
         self._next_history = 0.0
         self.ticks = 0
@@ -154,9 +140,9 @@ class TeleopApp(Console, Editing, Robots, Plants, Settings, Scenes, Tick,
         the folder is refused: a recording never replaces another."""
         with self._lock:
             return self.recorder.start(
-                name, self.robot, self.loops["main"].q, self.config,
+                name, self.robot, self.robots.loops["main"].q, self.robots.config,
                 [(entry.id, entry.constraint) for entry in self.entries.values()],
-                self.loops["main"].task_modes, [hand.target for hand in self.inputs])
+                self.robots.loops["main"].task_modes, [hand.target for hand in self.inputs])
 
     def stop_recording(self) -> Path:
         """Close the recording; its path."""

@@ -14,9 +14,9 @@ from constraints import CONSTRAINT_TYPES, Constraint
 from constraints.kinematics import frame_placement
 from constraints.registry import constraint_type
 from constraints.validation import as_vector, short_repr
-from teleop.loop import TeleopLoop
 from teleop.robots import Robot
 
+from .robots import Robots
 from .limits import MAX_TARGET_DISTANCE
 from .placed import PlacedEntry
 from .placing import Placement, moving_links
@@ -39,18 +39,21 @@ class Editing:
     """The constraint editing of :class:`web.app.TeleopApp` (its state: ``entries`` by id
     and the counter of new ids)."""
 
+    robots: Robots
     robot: Robot
     plant: PlantChoice
-    loops: dict[str, TeleopLoop]
     entries: dict[str, ConstraintEntry]
-    gain: float
     _ids: itertools.count
     _lock: threading.RLock
     _view_data: pin.Data
 
+    def _placed(self) -> list[Constraint]:
+        """The placed constraints (caller holds the lock)."""
+        return [entry.constraint for entry in self.entries.values()]
+
     def _link_placement(self, link: str, which: str = "main") -> pin.SE3:
         """World placement of ``link`` on robot ``which`` now (caller holds the lock)."""
-        return frame_placement(self.robot.model, self.loops[which].q, link, self._view_data)
+        return frame_placement(self.robot.model, self.robots.loops[which].q, link, self._view_data)
 
     @property
     def moving_links(self) -> tuple[str, ...]:
@@ -73,7 +76,7 @@ class Editing:
             kind_type = constraint_type(constraint)
             with self._lock:
                 values = Placement(kind_type, self.robot, self._link_placement).values(fields)
-                return self._place(kind_type.place(self.robot, self.loops["main"].q, **values))
+                return self._place(kind_type.place(self.robot, self.robots.loops["main"].q, **values))
         if not isinstance(constraint, Constraint):
             raise ValueError(f"expected a constraint or a constraint kind "
                              f"({', '.join(CONSTRAINT_TYPES)}), got {short_repr(constraint)}")
@@ -85,7 +88,7 @@ class Editing:
     def _place(self, constraint: Constraint) -> str:
         """Add ``constraint`` at its position with the app's gain; its new id."""
         with self._lock:
-            constraint.gain = self.gain
+            constraint.gain = self.robots.gain
             apply_wall(constraint, self.plant.wall_stiffness)
             entry_id = f"{constraint.kind}-{next(self._ids)}"
             if entry_id in self.entries:
@@ -93,10 +96,10 @@ class Editing:
             self.entries[entry_id] = ConstraintEntry(entry_id, constraint.position,
                                                      constraint=constraint)
             try:
-                self._sync_constraints()
+                self.robots.sync_constraints()
             except ValueError:
                 del self.entries[entry_id]
-                self._sync_constraints()
+                self.robots.sync_constraints()
                 raise
             self.recorder.add(entry_id, constraint)
             return entry_id
@@ -119,7 +122,7 @@ class Editing:
         with self._lock:
             if self.entries.pop(entry_id, None) is None:
                 raise ValueError(f"no constraint {entry_id!r}")
-            self._sync_constraints()
+            self.robots.sync_constraints()
             self.recorder.remove(entry_id)
 
     def clear_constraints(self) -> int:

@@ -4,7 +4,6 @@ force on the instrument at each port (docs/design.md section 5.3)."""
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,19 +84,9 @@ def continue_plant(old: TeleopLoop | None, new: TeleopLoop) -> None:
         new.plant.reset(new.q)
 
 
-class Plants:
-    """The plants of :class:`web.app.TeleopApp`'s loops (its state: ``plant``)."""
-
-    robot: Robot
-    plant: PlantChoice
-    entries: dict
-    loops: dict[str, TeleopLoop]
-    ros2: Ros2Robot | None
-    _lock: threading.RLock
-
-    def make_plant(self, dt: float):
-        """A plant for a loop of period ``dt``: the session's one robot over ROS 2, else a
-        fresh one of the session's choice (None: the ideal integrator)."""
-        if self.ros2 is not None:
-            return self.ros2.plant(dt)
-        return self.plant.make(self.robot, dt)
+def session_plant(choice: PlantChoice, robot: Robot, ros2: Ros2Robot | None, dt: float):
+    """A plant for a loop of period ``dt``: the session's one robot over ROS 2 (``ros2``),
+    else a fresh one of the session's ``choice`` (None: the ideal integrator)."""
+    if ros2 is not None:
+        return ros2.plant(dt)
+    return choice.make(robot, dt)

@@ -15,9 +15,9 @@ import numpy as np
 import pinocchio as pin
 
 from constraints.kinematics import frame_placement
-from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.robots import Robot
 
+from .robots import Robots
 from ..folders import Folder
 from ..scene import FORMAT as SCENE_FORMAT
 from ..scene import VERSION as SCENE_VERSION
@@ -42,7 +42,6 @@ from .limits import (
     checked_rate,
 )
 from .plant import PlantChoice, apply_wall
-from .trace import Trace
 from .ros2_robot import Ros2Robot
 
 
@@ -56,19 +55,11 @@ def pose_to_dict(pose: pin.SE3) -> dict:
 class Scenes:
     """Saving and loading the scene of :class:`web.app.TeleopApp`."""
 
+    robots: Robots
     robot: Robot
     plant: PlantChoice
-    config: LoopConfig
-    gain: float
-    damping: float
-    orientation_weight: float
     motion_scale: float
     clutch: bool
-    ghost_offset: np.ndarray
-    specs: dict[str, str]
-    loops: dict[str, TeleopLoop]
-    traces: dict[str, Trace]
-    last_records: dict[str, StepRecord | None]
     entries: dict[str, ConstraintEntry]
     collisions: CollisionScene
     inputs: list[EEInput]
@@ -91,12 +82,14 @@ class Scenes:
                 "format": SCENE_FORMAT, "version": SCENE_VERSION,
                 "created": datetime.now().isoformat(timespec="seconds"),
                 "robot": robot_to_dict(self.robot),
-                "controllers": {"main": self.specs["main"], "ghost": self.specs.get("ghost")},
-                "gain": self.gain, "damping": self.damping, "rate": self.config.rate,
-                "orientation_weight": self.orientation_weight, "task_mode": self.task_mode,
+                "controllers": {"main": self.robots.specs["main"], "ghost": self.robots.specs.get("ghost")},
+                "gain": self.robots.gain, "damping": self.robots.damping,
+                "rate": self.robots.config.rate,
+                "orientation_weight": self.robots.orientation_weight,
+                "task_mode": self.robots.task_mode,
                 "motion_scale": self.motion_scale,
-                "ghost_offset": [float(x) for x in self.ghost_offset],
-                "q": {which: [float(x) for x in loop.q] for which, loop in self.loops.items()},
+                "ghost_offset": [float(x) for x in self.robots.ghost_offset],
+                "q": {which: [float(x) for x in loop.q] for which, loop in self.robots.loops.items()},
                 "target": targets[0], **several,
                 "constraints": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                  "constraint": e.constraint.to_dict()}
@@ -143,7 +136,7 @@ class Scenes:
         for constraint in constraints:
             constraint.gain = scene.gain
             apply_wall(constraint, self.plant.wall_stiffness)
-        config = dataclasses.replace(self.config, rate=scene.rate)
+        config = dataclasses.replace(self.robots.config, rate=scene.rate)
         avoidance, collisions_on = self.collisions.for_scene(
             scene.collisions, [placed.obstacle for placed in scene.obstacles], constraints,
             config.dt)
@@ -160,7 +153,7 @@ class Scenes:
                                             force.axes if setup is None else setup.axes)
             try:
                 for which, spec in specs.items():  # raises ValueError: nothing changed yet
-                    loop = self._make_loop(spec, q=scene.q[which], constraints=constraints,
+                    loop = self.robots.make_loop(spec, q=scene.q[which], constraints=constraints,
                                            config=config,
                                            orientation_weight=scene.orientation_weight,
                                            task_mode=scene.task_mode,
@@ -174,12 +167,8 @@ class Scenes:
                 raise
             if previous is not None:
                 force.history.clear()  # the plot starts with the scene's tissue
-            self.config, self.gain, self.damping = config, scene.gain, scene.damping
-            self.orientation_weight = scene.orientation_weight
-            self.task_mode = scene.task_mode
-            self.specs, self.loops = specs, loops
-            self.traces = {which: Trace() for which in loops}
-            self.last_records = {which: None for which in loops}
+            self.robots.restore(loops, specs, config, scene.gain, scene.damping,
+                                scene.orientation_weight, scene.task_mode)
             self.entries = {}
             for placed in scene.constraints:
                 self.entries[placed.id] = ConstraintEntry(
@@ -190,7 +179,7 @@ class Scenes:
             self.collisions.restore(avoidance, collisions_on, {placed.id: ObstacleEntry(
                 placed.id, placed.goal.copy(), obstacle=placed.obstacle).restored()
                 for placed in scene.obstacles})
-            self.ghost_offset = scene.ghost_offset.copy()
+            self.robots.set_ghost_offset(scene.ghost_offset.copy())
             self.motion_scale = scene.motion_scale
             self.clutch = False
             for index, (position, wxyz) in enumerate(scene.targets):
@@ -204,7 +193,7 @@ class Scenes:
         every joint: its constraints were placed there), then taken from where the robot
         is, every target on its end effector (opening a scene never moves the robot)."""
         with self._lock:
-            q = self.loops["main"].q.copy()
+            q = self.robots.loops["main"].q.copy()
         gap = np.abs(scene.q["main"] - q)
         if float(gap.max()) > ROS2_SCENE_TOLERANCE:
             joint = self.joint_names[int(np.argmax(gap))]

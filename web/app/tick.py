@@ -13,10 +13,11 @@ import numpy as np
 import pinocchio as pin
 
 from constraints.collision import CollisionRows
-from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.loop import TeleopLoop
 from teleop.loop import PendingStep
 from teleop.loop.moving_geometry import advance, steer
 
+from .robots import Robots
 from .collisions import CollisionScene, ObstacleEntry
 from .console import EEInput
 from .devices import InputDevices
@@ -25,7 +26,6 @@ from .force_control import ForceControl
 from .limits import HISTORY_RATE
 from .homing import WayHome
 from .recording import SessionRecording
-from .trace import Trace
 
 #: moved geometry is written to a recording every this many ticks while it moves
 RECORD_MOVES_EVERY = 10
@@ -35,10 +35,7 @@ class Tick:
     """The control tick of :class:`web.app.TeleopApp` (its state: ``ticks`` and when the
     next history sample is due)."""
 
-    config: LoopConfig
-    loops: dict[str, TeleopLoop]
-    traces: dict[str, Trace]
-    last_records: dict[str, StepRecord | None]
+    robots: Robots
     entries: dict[str, ConstraintEntry]
     inputs: list[EEInput]
     devices: InputDevices
@@ -56,7 +53,7 @@ class Tick:
     @property
     def now(self) -> float:
         """The app's time (s): the main robot's loop time."""
-        return self.loops["main"].t
+        return self.robots.loops["main"].t
 
     def step(self) -> float:
         """One control period for every robot (called by the control thread), the input
@@ -69,28 +66,29 @@ class Tick:
         (:data:`HISTORY_RATE`).
         """
         with self._lock:
-            dt = self.config.dt
+            dt = self.robots.config.dt
             moving = [entry for entry in (*self.entries.values(), *self.collisions.obstacles.values())
                       if not entry.settled]
             if moving:
                 self._steer(moving, dt)
             if self.devices:
-                self.devices.apply(dt, self.inputs, self.loops, self.clutch, self.motion_scale)
+                self.devices.apply(dt, self.inputs, self.robots.loops, self.clutch,
+                                   self.motion_scale)
             if self.homing.active:
                 self._follow_homing()
             targets, start = [hand.target for hand in self.inputs], self.now
-            self.force.feed(self.loops)  # each force law's sensor reading
+            self.force.feed(self.robots.loops)  # each force law's sensor reading
             held: dict[str, CollisionRows] = {}
             pending = {which: self._advance(which, loop, targets, held)
-                       for which, loop in self.loops.items()}
-            for which, loop in self.loops.items():  # every period's port force, for its peak
+                       for which, loop in self.robots.loops.items()}
+            for which, loop in self.robots.loops.items():  # every period's port force, for its peak
                 measures = None if loop.plant is None else loop.plant.measures()
                 if measures is not None:
-                    self.traces[which].feel_port_forces(measures.port_forces)
+                    self.robots.traces[which].feel_port_forces(measures.port_forces)
             self.collisions.keep(held)
             history = start >= self._next_history - 0.5 * dt
             if self.devices:
-                self.devices.commanded(history, self.ticks, self.inputs, self.loops["main"],
+                self.devices.commanded(history, self.ticks, self.inputs, self.robots.loops["main"],
                                        self.collisions.rows.get("main"),
                                        self.collisions.avoidance.detection_distance)
             if history:
@@ -108,13 +106,13 @@ class Tick:
         period before the loops advance, while :attr:`homing` is active; the gizmos stay,
         whose next motion moves the targets from there); once the run is over, the
         targets stay there and the session's task mode returns (:mod:`.homing`)."""
-        poses, over = self.homing.targets(self.now, self.loops["main"].q)
+        poses, over = self.homing.targets(self.now, self.robots.loops["main"].q)
         for ee, pose in enumerate(poses):
             self.inputs[ee].target = pose
             self.recorder.target(ee, pose)
         if over:
             self.homing.end()
-            self._apply_task_modes()
+            self.robots.apply_task_modes()
 
     def _advance(self, which: str, loop: TeleopLoop, targets: list[pin.SE3],
                  held: dict[str, CollisionRows]) -> PendingStep:
@@ -133,7 +131,7 @@ class Tick:
     def _steer(self, moving: list[ConstraintEntry | ObstacleEntry], dt: float) -> None:
         """Moved geometry (a constraint's, an obstacle) glides towards its goal, with
         feed-forward; settles there. A recording gets the constraints' moves."""
-        alpha = 1.0 - math.exp(-dt / self.config.target_time_constant)
+        alpha = 1.0 - math.exp(-dt / self.robots.config.target_time_constant)
         for entry in moving:
             geometry = entry.moved
             if float(np.linalg.norm(entry.goal - geometry.position)) < 1e-12:
@@ -154,16 +152,16 @@ class Tick:
         collision rows of a robot whose controller computed none this tick (not in
         ``held``) are measured here, where its command was computed from
         (:meth:`.collisions.CollisionScene.measure`)."""
-        for which, loop in self.loops.items():  # before the geometry moves on
+        for which, loop in self.robots.loops.items():  # before the geometry moves on
             loop.measure_command(pending[which])
         self.collisions.measure({which: step.sensed for which, step in pending.items()
                                   if which not in held})
         for entry in moving:
             advance(entry.moved, dt)
-        main_qd = self.loops["main"].last_qd
-        for which, loop in self.loops.items():
+        main_qd = self.robots.loops["main"].last_qd
+        for which, loop in self.robots.loops.items():
             record = loop.measure(pending[which])
-            self.last_records[which] = record
+            self.robots.last_records[which] = record
             deviation = 0.0 if which == "main" else float(np.linalg.norm(loop.last_qd - main_qd))
-            self.traces[which].add(record, deviation, self.collisions.traced_distance(which))
-        self.force.measure(self.loops["main"])
+            self.robots.traces[which].add(record, deviation, self.collisions.traced_distance(which))
+        self.force.measure(self.robots.loops["main"])

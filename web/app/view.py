@@ -10,9 +10,10 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.kinematics import frame_placement
-from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.loop import StepRecord, TeleopLoop
 from teleop.robots import Robot
 
+from .robots import Robots
 from ..constraint_drawing import constraint_geometry
 from .collisions import CollisionScene
 from .console import EEInput
@@ -28,12 +29,8 @@ from .trace import Trace
 class View:
     """The view's reading of :class:`web.app.TeleopApp`."""
 
+    robots: Robots
     robot: Robot
-    config: LoopConfig
-    specs: dict[str, str]
-    loops: dict[str, TeleopLoop]
-    traces: dict[str, Trace]
-    last_records: dict[str, StepRecord | None]
     entries: dict[str, ConstraintEntry]
     collisions: CollisionScene
     inputs: list[EEInput]
@@ -49,16 +46,16 @@ class View:
         (:func:`web.app.status.describe_limitation`)."""
         ee = self.ee_index(ee)
         with self._lock:
-            loop = self.loops[which]
+            loop = self.robots.loops[which]
             placement = frame_placement(self.robot.model, loop.q, self.robot.ee_frame_ids[ee],
                                         self._view_data)
             return self._limitation(which, placement, ee)
 
     def _limitation(self, which: str, placement: pin.SE3, ee: int) -> Limitation:
-        loop = self.loops[which]
+        loop = self.robots.loops[which]
         target = self.inputs[ee].target
         constraints = {entry.id: entry.constraint for entry in self.entries.values()}
-        return self._described(loop.controller.info, self.last_records.get(which), placement,
+        return self._described(loop.controller.info, self.robots.last_records.get(which), placement,
                                target, loop.refused or self._stopped(), ee, loop.task_modes[ee],
                                constraints, self.homing.words_at(self.now))
 
@@ -85,7 +82,7 @@ class View:
         """Ids of the one-sided constraints robot ``which``'s controller holds as
         equalities now (from its step's :class:`controllers.SolveInfo`)."""
         with self._lock:
-            controller = self.loops[which].controller
+            controller = self.robots.loops[which].controller
             ids = {id(e.constraint): e.id for e in self.entries.values()}
             constraints = controller.constraints
             return [ids.get(id(constraints[i]), f"#{i}") for i in controller.info.active_barriers
@@ -103,20 +100,21 @@ class View:
             constraints = {entry.id: copy.copy(entry.constraint)
                            for entry in self.entries.values()}
             states = {which: self._robot_state(which, loop, history)
-                      for which, loop in self.loops.items()}
+                      for which, loop in self.robots.loops.items()}
             goals = {entry.id: (entry.kind, entry.goal.copy()) for entry in self.entries.values()}
             targets = [hand.target.copy() for hand in self.inputs]
             snapshot = {"ee_frames": self.robot.ee_frames, "targets": targets,
                         "gizmos": [hand.gizmo.copy() for hand in self.inputs],
                         "target": targets[0].copy(), "gizmo": self.gizmo.copy(),
                         "clutch": self.clutch, "motion_scale": self.motion_scale,
-                        "ghost_offset": self.ghost_offset.copy(),
+                        "ghost_offset": self.robots.ghost_offset.copy(),
                         "recording": self.recorder.active,
-                        "config": self.config, "gain": self.gain, "damping": self.damping,
+                        "config": self.robots.config, "gain": self.robots.gain,
+                        "damping": self.robots.damping,
                         "plant": self.plant, "collisions": self._collisions_snapshot(),
                         "devices": self.devices.snapshot(),
                         "absolute_orientation": self.devices.absolute_orientation,
-                        "force": self.force.snapshot(self.loops)}
+                        "force": self.force.snapshot(self.robots.loops)}
         robots = {which: self._robot_snapshot(state, constraints, targets)
                   for which, state in states.items()}
         entries = [{"id": entry_id, "kind": kind, "goal": goal,
@@ -141,7 +139,7 @@ class View:
         """The collision pairs robot ``which``'s controller holds at their bound now (from
         its step's :class:`controllers.SolveInfo`)."""
         with self._lock:
-            return list(self.loops[which].controller.info.active_pairs)
+            return list(self.robots.loops[which].controller.info.active_pairs)
 
     def _robot_state(self, which: str, loop: TeleopLoop, history: bool) -> dict:
         """What :meth:`_robot_snapshot` makes robot ``which``'s part of :meth:`snapshot`
@@ -156,10 +154,10 @@ class View:
         links = {entry.id: placements[model.getFrameId(entry.constraint.link)].copy()
                  for entry in self.entries.values()}
         ids = {id(entry.constraint): entry.id for entry in self.entries.values()}
-        return {"spec": self.specs[which], "q": q, "t": loop.t,
+        return {"spec": self.robots.specs[which], "q": q, "t": loop.t,
                 "ees": [placements[frame].copy() for frame in self.robot.ee_frame_ids],
-                "links": links, "record": self.last_records.get(which),
-                "columns": self.traces[which].columns() if history else None,
+                "links": links, "record": self.robots.last_records.get(which),
+                "columns": self.robots.traces[which].columns() if history else None,
                 "info": loop.controller.info, "refused": loop.refused,
                 "task_modes": loop.task_modes, "homing": self.homing.words_at(self.now),
                 "active_inequalities": self.active_inequalities(which),

@@ -80,9 +80,9 @@ class SceneView:
         front = np.cross([0.0, 0.0, 1.0], side)
         look_at = np.mean([target.translation for target in self.app.targets], axis=0)
         distance = 1.0
-        if "ghost" in self.app.loops:
-            look_at += 0.5 * self.app.ghost_offset
-            distance += 0.8 * float(np.linalg.norm(self.app.ghost_offset))
+        if "ghost" in self.app.robots.loops:
+            look_at += 0.5 * self.app.robots.ghost_offset
+            distance += 0.8 * float(np.linalg.norm(self.app.robots.ghost_offset))
         direction = 0.8 * front + 0.3 * side + np.array([0.0, 0.0, 0.5])
         self.server.initial_camera.position = look_at + distance * direction / np.linalg.norm(direction)
         self.server.initial_camera.look_at = look_at
@@ -125,7 +125,7 @@ class SceneView:
             self._move_gizmo_handle(hand.gizmo, index)
 
     def _ghost_rgba(self) -> tuple[float, float, float, float]:
-        overlay = float(np.linalg.norm(self.app.ghost_offset)) < 1e-9
+        overlay = float(np.linalg.norm(self.app.robots.ghost_offset)) < 1e-9
         return GHOST_OVERLAY_RGBA if overlay else GHOST_RGBA
 
     def _add_ghost(self, offset: np.ndarray) -> None:

@@ -52,7 +52,7 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                     collision_settings=collision_settings,
                     acceleration_limits=acceleration_limits, jerk_limit=jerk_limit,
                     ros2_settings=ros2_settings)
-    app.set_task_mode(task_mode)
+    app.robots.set_task_mode(task_mode)
     if scene is not None:
         app.apply_scene(scene)
     if input_timeout is not None:

@@ -21,13 +21,13 @@ class SettingsPanel:
                  loaded: Callable[[], None]) -> None:
         self.app = app
         self._loaded = loaded
-        self.gain_slider = gui.add_slider("drift gain K (1/s)", 0.0, 500.0, 5.0, app.gain)
-        self.damping_slider = gui.add_slider("damping lambda", 0.0, 0.2, 0.001, app.damping)
+        self.gain_slider = gui.add_slider("drift gain K (1/s)", 0.0, 500.0, 5.0, app.robots.gain)
+        self.damping_slider = gui.add_slider("damping lambda", 0.0, 0.2, 0.001, app.robots.damping)
         self.orientation_slider = gui.add_slider(
-            "orientation weight", 0.0, 1.0, 0.05, app.orientation_weight,
+            "orientation weight", 0.0, 1.0, 0.05, app.robots.orientation_weight,
             hint="weight of the tools' orientations against their tip positions: lower it "
                  "when two trocars on one torso leave too few joints for both full poses")
-        self.rate_number = gui.add_number("rate (Hz)", app.config.rate, min=50, max=5000, step=50)
+        self.rate_number = gui.add_number("rate (Hz)", app.robots.config.rate, min=50, max=5000, step=50)
         self.scene_path = gui.add_text(
             "scene name", "scene.json",
             hint=f"a file name in the scene folder ({app.scenes.root.name}/, set by `teleop "
@@ -39,14 +39,14 @@ class SettingsPanel:
         self.record_status = gui.add_markdown("not recording")
 
         self.gain_slider.on_update(lambda event: guarded(
-            event, lambda: app.set_gain(self.gain_slider.value), key="gain", throttled=True))
+            event, lambda: app.robots.set_gain(self.gain_slider.value), key="gain", throttled=True))
         self.damping_slider.on_update(lambda event: guarded(
-            event, lambda: app.set_damping(self.damping_slider.value), key="damping"))
+            event, lambda: app.robots.set_damping(self.damping_slider.value), key="damping"))
         self.orientation_slider.on_update(lambda event: guarded(
-            event, lambda: app.set_orientation_weight(self.orientation_slider.value),
+            event, lambda: app.robots.set_orientation_weight(self.orientation_slider.value),
             key="orientation weight", throttled=True))
         self.rate_number.on_update(lambda event: guarded(
-            event, lambda: app.set_rate(self.rate_number.value), key="rate", throttled=True))
+            event, lambda: app.robots.set_rate(self.rate_number.value), key="rate", throttled=True))
         self.save_scene_button.on_click(lambda event: guarded(
             event, self.save_scene, throttled=True))
         self.load_scene_button.on_click(lambda event: guarded(
@@ -68,10 +68,10 @@ class SettingsPanel:
     def from_app(self) -> None:
         """The inputs as the app has them (after loading a scene)."""
         app = self.app
-        assign(self.gain_slider, app.gain)
-        assign(self.damping_slider, app.damping)
-        assign(self.orientation_slider, app.orientation_weight)
-        assign(self.rate_number, app.config.rate)
+        assign(self.gain_slider, app.robots.gain)
+        assign(self.damping_slider, app.robots.damping)
+        assign(self.orientation_slider, app.robots.orientation_weight)
+        assign(self.rate_number, app.robots.config.rate)
 
     def toggle_recording(self) -> None:
         """Start recording, or stop and say where it was written."""

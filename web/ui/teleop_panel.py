@@ -46,18 +46,18 @@ class TeleopPanel:
         self._move_gizmo = move_gizmo
         self._notify = notify
         #: the ghost's offset before "overlay" put it at zero (where unticking puts it back)
-        self._saved_offset = app.ghost_offset.copy()
-        ghost_spec = app.specs.get("ghost", "qp:daqp")
-        choices = tuple(dict.fromkeys((*CONTROLLER_CHOICES, app.specs["main"], ghost_spec)))
-        self.controller_menu = gui.add_dropdown("main", choices, initial_value=app.specs["main"])
-        self.side_by_side = gui.add_checkbox("side by side", "ghost" in app.loops,
+        self._saved_offset = app.robots.ghost_offset.copy()
+        ghost_spec = app.robots.specs.get("ghost", "qp:daqp")
+        choices = tuple(dict.fromkeys((*CONTROLLER_CHOICES, app.robots.specs["main"], ghost_spec)))
+        self.controller_menu = gui.add_dropdown("main", choices, initial_value=app.robots.specs["main"])
+        self.side_by_side = gui.add_checkbox("side by side", "ghost" in app.robots.loops,
                                              hint="a second robot, driven by the ghost "
                                                   "controller from the same target")
         self.ghost_menu = gui.add_dropdown("ghost", choices, initial_value=ghost_spec)
-        self.ghost_offset = gui.add_vector3("ghost offset (m)", app.ghost_offset, step=0.05,
+        self.ghost_offset = gui.add_vector3("ghost offset (m)", app.robots.ghost_offset, step=0.05,
                                             hint="where the ghost is drawn from the main robot, "
                                                  "world coordinates")
-        self.overlay = gui.add_checkbox("overlay", bool(np.linalg.norm(app.ghost_offset) < 1e-9),
+        self.overlay = gui.add_checkbox("overlay", bool(np.linalg.norm(app.robots.ghost_offset) < 1e-9),
                                         hint="draw the ghost on the main robot (offset 0)")
         self.clutch_button = gui.add_button("Clutch", hint="engaged: moving the gizmo does not "
                                             "move the target; released: the target continues "
@@ -77,19 +77,19 @@ class TeleopPanel:
         self.home_button = gui.add_button("Home", hint="the robot home through the "
                                           "constraints (they stay), or why it cannot")
         self.task_mode_menu = gui.add_dropdown(
-            "command", tuple(TASK_MODE_CHOICES), initial_value=task_mode_label(app.task_mode),
+            "command", tuple(TASK_MODE_CHOICES), initial_value=task_mode_label(app.robots.task_mode),
             hint="what the target asks of each end effector; auto: position and roll "
                  "about the tool axis with a port on the arm (what a port allows), else "
                  "the full pose; the rest is left to the joints' free motion")
 
         self.controller_menu.on_update(lambda event: guarded(
-            event, lambda: app.set_controller(self.controller_menu.value), key="controller",
+            event, lambda: app.robots.set_controller(self.controller_menu.value), key="controller",
             throttled=True))
-        self.side_by_side.on_update(lambda event: guarded(event, lambda: app.set_ghost(
+        self.side_by_side.on_update(lambda event: guarded(event, lambda: app.robots.set_ghost(
             self.ghost_menu.value if self.side_by_side.value else None), key="ghost",
             throttled=True))
         self.ghost_menu.on_update(lambda event: guarded(event, lambda: (
-            app.set_ghost(self.ghost_menu.value) if self.side_by_side.value else None),
+            app.robots.set_ghost(self.ghost_menu.value) if self.side_by_side.value else None),
             key="ghost", throttled=True))
         self.ghost_offset.on_update(lambda event: guarded(event, self._offset_changed,
                                                           key="ghost offset"))
@@ -103,7 +103,7 @@ class TeleopPanel:
         self.gizmo_button.on_click(lambda event: guarded(event, self.gizmo_to_target))
         self.home_button.on_click(lambda event: guarded(event, self.home))
         self.task_mode_menu.on_update(lambda event: guarded(
-            event, lambda: app.set_task_mode(TASK_MODE_CHOICES[self.task_mode_menu.value]),
+            event, lambda: app.robots.set_task_mode(TASK_MODE_CHOICES[self.task_mode_menu.value]),
             key="task mode"))
 
     def active_ee(self) -> int:
@@ -132,15 +132,15 @@ class TeleopPanel:
         self._move_gizmo(self.app.gizmo_to_target(ee), ee)
 
     def _offset_changed(self) -> None:
-        self.app.set_ghost_offset(np.asarray(self.ghost_offset.value, dtype=float))
-        overlay = float(np.linalg.norm(self.app.ghost_offset)) < 1e-9
+        self.app.robots.set_ghost_offset(np.asarray(self.ghost_offset.value, dtype=float))
+        overlay = float(np.linalg.norm(self.app.robots.ghost_offset)) < 1e-9
         if not overlay:
-            self._saved_offset = self.app.ghost_offset.copy()
+            self._saved_offset = self.app.robots.ghost_offset.copy()
         self._sync(lambda: assign(self.overlay, overlay))
 
     def _overlay_changed(self) -> None:
         offset = np.zeros(3) if self.overlay.value else self._saved_offset
-        self.app.set_ghost_offset(offset)
+        self.app.robots.set_ghost_offset(offset)
         self._sync(lambda: assign(self.ghost_offset, (float(offset[0]), float(offset[1]),
                                                       float(offset[2]))))
 
@@ -155,19 +155,19 @@ class TeleopPanel:
         among the menus' choices added to them."""
         app = self.app
         choices = tuple(self.controller_menu.options)
-        for menu, spec in ((self.controller_menu, app.specs["main"]),
-                           (self.ghost_menu, app.specs.get("ghost"))):
+        for menu, spec in ((self.controller_menu, app.robots.specs["main"]),
+                           (self.ghost_menu, app.robots.specs.get("ghost"))):
             if spec is None:
                 continue
             if spec not in choices:
                 choices = (*choices, spec)
                 self.controller_menu.options = self.ghost_menu.options = choices
             assign(menu, spec)
-        assign(self.side_by_side, "ghost" in app.loops)
-        offset = app.ghost_offset
+        assign(self.side_by_side, "ghost" in app.robots.loops)
+        offset = app.robots.ghost_offset
         assign(self.ghost_offset, (float(offset[0]), float(offset[1]), float(offset[2])))
         assign(self.overlay, bool(np.linalg.norm(offset) < 1e-9))
         if not self.overlay.value:
             self._saved_offset = offset.copy()
         assign(self.motion_scale, app.motion_scale)
-        assign(self.task_mode_menu, task_mode_label(app.task_mode))
+        assign(self.task_mode_menu, task_mode_label(app.robots.task_mode))
