@@ -69,7 +69,7 @@ def main() -> None:
                                           record_dir=scratch / "sessions",
                                           scene_dir=scratch / "scenes", inputs=[master])
     server.scene.configure_default_lights(cast_shadow=False)
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     master_process = None
     try:
         with sync_playwright() as playwright:

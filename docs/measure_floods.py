@@ -167,7 +167,7 @@ def main() -> None:
                                           inputs=[master], input_timeout=0.1,
                                           record_dir="/tmp/floods/sessions",
                                           scene_dir="/tmp/floods/scenes")
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     port, token = server.get_port(), ui.access.token
     url = f"ws://127.0.0.1:{port}/?token={token}"
     origin = f"http://127.0.0.1:{port}"

@@ -29,7 +29,7 @@ robot = load_robot("sda10f")
 server, app, control, ui = run_server(robot, host="127.0.0.1", port=args.port,
                                       controller="cjm", ghost="qp:daqp",
                                       record_dir=tempfile.mkdtemp(prefix="cjm-sessions-"))
-hole_id = app.add_constraint("hole", distance=0.08)  # the same as the "Add hole" button
+hole_id = app.constraints.add("hole", distance=0.08)  # the same as the "Add hole" button
 print(f"UI on http://127.0.0.1:{server.get_port()} ({robot.name}, cjm + ghost qp:daqp), "
       f"added {hole_id}", flush=True)
 

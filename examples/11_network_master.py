@@ -65,7 +65,7 @@ if args.drive is not None:  # a running page: stream the circles to it, read its
     raise SystemExit(0)
 
 app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=1000.0)
-app.add_constraint("hole", distance=0.08)
+app.constraints.add("hole", distance=0.08)
 master = UdpMaster(port=0)  # any free port on 127.0.0.1, a key drawn at random
 app.devices.attach(master)
 control = ControlThread(app)

@@ -396,7 +396,7 @@ def wait_for_steady_frames(page, timeout: float = 3.0 * WAIT) -> None:
 
 
 def holes(app) -> list[str]:
-    return [entry_id for entry_id, entry in list(app.entries.items()) if entry.kind == "hole"]
+    return [entry_id for entry_id, entry in list(app.constraints.entries.items()) if entry.kind == "hole"]
 
 
 def click_add_hole(web) -> str:

@@ -176,7 +176,7 @@ def test_add_hole_button_creates_a_hole_and_its_ring(web):
 
     before = orange(canvas_pixels(web))
     hole_id = click_add_hole(web)
-    entry = app.entries[hole_id]
+    entry = app.constraints.entries[hole_id]
     assert entry.kind == "hole"
     assert np.linalg.norm(entry.goal - centre) < 1e-6  # "hole at (m)" = 0.08 on the link axis
     markers = wait_until(lambda: web.ui.constraint_markers.nodes.get(hole_id), WAIT, "the hole's markers")
@@ -251,7 +251,7 @@ def test_switching_controller_in_the_page_keeps_the_hole(web):
 
 def test_impossible_action_shows_a_notification(web):
     app, page, ui = web.app, web.page, web.ui
-    planes_before = [e for e in app.entries.values() if e.kind != "hole"]
+    planes_before = [e for e in app.constraints.entries.values() if e.kind != "hole"]
     open_tab(web, "Constraints")
     label = page.get_by_text("plane normal (world)", exact=True)
     row = page.locator("div").filter(has=label).filter(has=page.locator("input")).last
@@ -265,7 +265,7 @@ def test_impossible_action_shows_a_notification(web):
     expect(page.get_by_text("the plane normal must be a non-zero 3-vector").first).to_be_visible()
     expect(page.get_by_text("Not possible", exact=True).first).to_be_visible()
     assert "Traceback" not in page.inner_text("body")
-    assert [e for e in app.entries.values() if e.kind != "hole"] == planes_before
+    assert [e for e in app.constraints.entries.values() if e.kind != "hole"] == planes_before
     assert web.control.error is None and web.control.alive
     inputs.nth(1).fill("1")
     wait_until(lambda: tuple(normal.value) == (0.0, 1.0, 0.0), WAIT,

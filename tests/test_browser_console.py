@@ -170,7 +170,7 @@ def test_clutch_engaged_a_real_drag_does_not_move_the_robot_and_release_does_not
 def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(web, tmp_path):
     app, page = web.app, web.page
     hole_id = click_add_hole(web)
-    goal = app.entries[hole_id].goal.copy()
+    goal = app.constraints.entries[hole_id].goal.copy()
     path = web.app.scenes.root / "my scene.json"
     open_tab(web, "Settings")
     input_of(page, "scene name").fill(path.name)
@@ -186,11 +186,11 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
     wait_until(lambda: app.motion_scale == 0.2, WAIT, "the motion scale to change")
     open_tab(web, "Constraints")
     page.get_by_role("button", name="Clear constraints").click()
-    wait_until(lambda: not app.entries, WAIT, "the constraints to be cleared")
+    wait_until(lambda: not app.constraints.entries, WAIT, "the constraints to be cleared")
     open_tab(web, "Settings")
     page.get_by_role("button", name="Load scene").click()
-    wait_until(lambda: hole_id in app.entries, WAIT, "the scene's hole")
-    np.testing.assert_allclose(app.entries[hole_id].goal, goal, atol=1e-12)
+    wait_until(lambda: hole_id in app.constraints.entries, WAIT, "the scene's hole")
+    np.testing.assert_allclose(app.constraints.entries[hole_id].goal, goal, atol=1e-12)
     assert app.robots.config.rate == 1000.0 and app.motion_scale == 1.0
     assert app.robots.specs == {"main": "cjm", "ghost": "qp:daqp"}
     expect(input_of(page, "rate (Hz)")).to_have_value("1000")
@@ -204,7 +204,7 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
 def test_an_out_of_range_hole_distance_shows_a_notification(web):
     app, page = web.app, web.page
     open_tab(web, "Constraints")
-    before = list(app.entries)
+    before = list(app.constraints.entries)
     input_of(page, "hole at (m)").fill("5")
     distance = web.ui.constraint_panel.inputs["hole"]["distance"]
     wait_until(lambda: distance.value == 5.0, WAIT, "the distance 5 m")
@@ -212,5 +212,5 @@ def test_an_out_of_range_hole_distance_shows_a_notification(web):
     expect(page.get_by_text("hole distance must be between 0 and", exact=False).first
            ).to_be_visible()
     assert "Traceback" not in page.inner_text("body")
-    assert list(app.entries) == before
+    assert list(app.constraints.entries) == before
     input_of(page, "hole at (m)").fill("0.08")

@@ -132,7 +132,7 @@ def add_hole_on(web, link: str) -> str:
 def test_two_trocars_hold_while_each_gizmo_is_dragged_and_the_readme_screenshot(web):
     app, robot = web.app, web.robot
     ids = [add_hole_on(web, link) for link in robot.constrained_links]
-    assert [app.entries[i].constraint.link for i in ids] == list(robot.constrained_links)
+    assert [app.constraints.entries[i].constraint.link for i in ids] == list(robot.constrained_links)
     # two trocars leave 11 joint directions for two full poses: the tips' positions only
     # (orientation weight 0, README), so each dragged tip can go all the way
     open_tab(web, "Settings")
@@ -153,7 +153,7 @@ def test_two_trocars_hold_while_each_gizmo_is_dragged_and_the_readme_screenshot(
     assert app.robots.last_records["main"].constraint_error <= HOLE_TOLERANCE
 
     # the README's screenshot: the robot, both instruments, both rings
-    rings = np.array([app.entries[i].position for i in ids])
+    rings = np.array([app.constraints.entries[i].position for i in ids])
     centre = 0.5 * (rings.mean(axis=0) + ee_positions(app).mean(axis=0)) + [-0.05, 0.0, 0.05]
     set_camera(web.client, centre + np.array([0.8, -0.45, 0.5]), centre)
     for close in web.page.locator(".mantine-Notification-closeButton").all():

@@ -48,6 +48,6 @@ def test_the_panda_opens_with_its_meshes(tmp_path):
               f"the canvas")
         hole_id = click_add_hole(web)  # and a hole on its forearm holds
         time.sleep(0.5)
-        assert web.app.entries[hole_id].kind == "hole"
+        assert web.app.constraints.entries[hole_id].kind == "hole"
         assert web.app.robots.last_records["main"].constraint_error < 1e-6
         assert web.page_errors == [], web.page_errors

@@ -172,7 +172,7 @@ def test_a_force_held_on_the_wall_is_drawn_in_red_at_the_port(web, tmp_path):
     """With the drift gain at 0 (what the Settings slider sets) the offset a drag leaves
     at the port stays, and so does the wall's force: its arrow is in the page's pixels."""
     app, ui = web.app, web.ui
-    hole_id = next(entry_id for entry_id, entry in app.entries.items() if entry.kind == "hole")
+    hole_id = next(entry_id for entry_id, entry in app.constraints.entries.items() if entry.kind == "hole")
     app.robots.set_gain(0.0)
     # the full pose: the default with a hole (position and roll) leaves the port 100 times
     # less offset after this drag (1.7 mN held, an arrow too short to find in pixels)
@@ -255,7 +255,7 @@ def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
     app, page = web.app, web.page
     app.robots.set_task_mode("auto")  # what the page starts with: what the port allows
     hole_id = ensure_hole(web)
-    link = app.entries[hole_id].constraint.link
+    link = app.constraints.entries[hole_id].constraint.link
     expect(page.get_by_text(f"placed: {hole_id} on {link}", exact=False).first).to_be_visible()
     open_tab(web, "Teleop")
     look_at_target(web)

@@ -306,14 +306,14 @@ def test_a_point_lock_is_added_moved_and_recorded_through_the_app(app):
     from teleop.experiments.sessions import load_session, session_plan
 
     path = app.start_recording()
-    lock_id = app.add_constraint("point_lock", distance=0.08)
-    entry = app.entries[lock_id]
+    lock_id = app.constraints.add("point_lock", distance=0.08)
+    entry = app.constraints.entries[lock_id]
     assert lock_id.startswith("point_lock-") and entry.kind == "point_lock"
     start = entry.position
     snapshot = app.snapshot()["constraints"]
     assert [e["geometry"].shape for e in snapshot] == ["point"]
     np.testing.assert_allclose(snapshot[0]["geometry"].anchor, start)
-    app.move_constraint(lock_id, start + [0.0, 0.0, 0.003])
+    app.constraints.move(lock_id, start + [0.0, 0.0, 0.003])
     run(app, 0.5)
     np.testing.assert_allclose(entry.position, start + [0.0, 0.0, 0.003], atol=1e-5)
     record = app.robots.last_records["main"]
@@ -322,7 +322,7 @@ def test_a_point_lock_is_added_moved_and_recorded_through_the_app(app):
     assert np.linalg.norm(geometry.error) < 1e-5
     app.robots.set_gain(50.0)
     assert entry.constraint.gain == 50.0
-    app.remove_constraint(lock_id)
+    app.constraints.remove(lock_id)
     app.stop_recording()
     session = load_session(path)
     added = [e for e in session.events if e["type"] == "add"]
@@ -333,27 +333,27 @@ def test_a_point_lock_is_added_moved_and_recorded_through_the_app(app):
 
 def test_a_gain_a_barrier_cannot_take_is_refused_and_changes_nothing(app):
     app.robots.set_gain(150.0)
-    barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
-    assert app.entries[barrier_id].constraint.gain == 150.0  # no special case for barriers
+    barrier_id = app.constraints.add("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
+    assert app.constraints.entries[barrier_id].constraint.gain == 150.0  # no special case for barriers
     app.robots.set_gain(100.0)
-    assert app.entries[barrier_id].constraint.gain == 100.0
-    hole_id = app.add_constraint("hole", distance=0.08)
+    assert app.constraints.entries[barrier_id].constraint.gain == 100.0
+    hole_id = app.constraints.add("hole", distance=0.08)
     with pytest.raises(ValueError, match="Barrier gain 1500"):
         app.robots.set_gain(1500.0)  # K dt = 1.5: stable drift feedback, a barrier could be crossed
     assert app.robots.gain == 100.0
     for entry_id in (hole_id, barrier_id):
-        assert app.entries[entry_id].constraint.gain == 100.0
+        assert app.constraints.entries[entry_id].constraint.gain == 100.0
     run(app, 0.02)
     assert not app.robots.last_records["main"].failed
 
 
 def test_a_constraint_the_controllers_refuse_is_not_placed(app):
     with pytest.raises(ValueError, match="unknown link"):
-        app.add_constraint(PointLock("no_such_link", [0, 0, 0], [0, 0, 0]))
-    assert not app.entries
+        app.constraints.add(PointLock("no_such_link", [0, 0, 0], [0, 0, 0]))
+    assert not app.constraints.entries
     run(app, 0.01)
     with pytest.raises(ValueError, match="expected a constraint"):
-        app.add_constraint({"kind": "hole"})
+        app.constraints.add({"kind": "hole"})
 
 
 def test_the_ui_draws_every_kind_from_its_geometry(app):
@@ -363,12 +363,12 @@ def test_the_ui_draws_every_kind_from_its_geometry(app):
     from web.app import ControlThread
     from web.ui import TeleopUI
 
-    ids = {"hole": app.add_constraint("hole", distance=0.08),
-           "plane": app.add_constraint("plane", distance=0.08, normal=[0.0, 1.0, 0.0]),
-           "barrier": app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0],
+    ids = {"hole": app.constraints.add("hole", distance=0.08),
+           "plane": app.constraints.add("plane", distance=0.08, normal=[0.0, 1.0, 0.0]),
+           "barrier": app.constraints.add("barrier", distance=0.05, normal=[0.0, 0.0, 1.0],
                                          offset=0.01),
-           "point_lock": app.add_constraint("point_lock", distance=0.04)}
-    app.move_constraint(ids["point_lock"], app.entries[ids["point_lock"]].position + 0.01)
+           "point_lock": app.constraints.add("point_lock", distance=0.04)}
+    app.constraints.move(ids["point_lock"], app.constraints.entries[ids["point_lock"]].position + 0.01)
     run(app, 0.01)  # the lock lags its goal: a visible error vector
     server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
     try:
@@ -381,7 +381,7 @@ def test_the_ui_draws_every_kind_from_its_geometry(app):
                          "point_lock": f"/constraints/{ids['point_lock']}/anchor"}
         assert not ui.constraint_markers.nodes[ids["barrier"]]["error"].visible  # allowed side: no 1 m line
         assert ui.constraint_markers.nodes[ids["point_lock"]]["error"].visible
-        app.remove_constraint(ids["hole"])
+        app.constraints.remove(ids["hole"])
         ui._draw(app.snapshot())
         assert ids["hole"] not in ui.constraint_markers.nodes
     finally:

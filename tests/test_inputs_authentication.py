@@ -111,7 +111,7 @@ def attack(master: UdpMaster, stream: int, count: int) -> None:
 @pytest.fixture
 def console():
     app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=500.0)
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     master = UdpMaster(port=0, key=KEY)
     app.devices.attach(master)
     app.devices.set_input_timeout(0.5)  # a stall of the shared machine is not what is tested here

@@ -174,7 +174,7 @@ def streaming_through_a_hole(acceleration_limits: bool, task_mode: str | None = 
                     acceleration_limits=acceleration_limits)
     if task_mode is not None:
         app.robots.set_task_mode(task_mode)
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     source = InputSource("test")
     app.devices.attach(source)
     for k in range(1, 301):

@@ -81,7 +81,7 @@ def decoupled(master: UdpMaster) -> int:
 @pytest.fixture(scope="module")
 def session() -> Session:
     app = TeleopApp(load_robot("sda10f"), controller="cjm", rate=RATE)
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     master = UdpMaster(port=0)
     app.devices.attach(master)
     control = ControlThread(app)

@@ -218,7 +218,7 @@ def test_home_says_why_it_cannot_be_reached(sda10f, tmp_path):
     app.set_target(nudge_to, pin.Quaternion(app.target.rotation).coeffs()[[3, 0, 1, 2]])
     for _ in range(1500):
         app.step()
-    app.add_constraint("hole", distance=0.08)  # placed where the link is, not at home
+    app.constraints.add("hole", distance=0.08)  # placed where the link is, not at home
     words = app.home()
     assert words.startswith("home is off hole 1 (arm_link_5_r) by ")
     assert words.endswith("remove it to go home")
@@ -233,7 +233,7 @@ def test_a_5_cm_drag_through_a_hole_on_link_6_reaches_the_target_and_home(
     """The issue's case: with the full pose, these drags ended 30, 14 and 5 mm off (the
     first two with the damped singularity's words) and Home 18 mm from home."""
     app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path / "scenes", ghost="qp:daqp")
-    app.add_constraint("hole")
+    app.constraints.add("hole")
     assert app.robots.loops["main"].task_modes == app.robots.loops["ghost"].task_modes == ("position_roll",)
     offset = 0.05 * np.asarray(direction) / np.linalg.norm(direction)
     gizmo = app.gizmo.copy()
@@ -263,7 +263,7 @@ def test_a_5_cm_drag_through_a_hole_on_link_6_reaches_the_target_and_home(
 
 def test_a_session_replays_its_task_modes(sda10f, tmp_path):
     app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path / "scenes")
-    app.add_constraint("hole")
+    app.constraints.add("hole")
     path = app.start_recording()
     app.robots.set_task_mode("position")
     for _ in range(100):

@@ -38,8 +38,8 @@ def nudge(app, offset):
 
 
 def test_target_moves_the_robot_and_the_hole_holds(app):
-    hole_id = app.add_constraint("hole", distance=0.08)
-    assert app.entries[hole_id].kind == "hole"
+    hole_id = app.constraints.add("hole", distance=0.08)
+    assert app.constraints.entries[hole_id].kind == "hole"
     start = ee_position(app)
     nudge(app, [0.01, 0.0, -0.005])
     run(app, 0.5)
@@ -49,7 +49,7 @@ def test_target_moves_the_robot_and_the_hole_holds(app):
 
 
 def test_side_by_side_robots_follow_the_same_target(app):
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     app.robots.set_ghost("qp:daqp")
     nudge(app, [0.0, 0.01, 0.0])
     run(app, 0.3)
@@ -62,7 +62,7 @@ def test_side_by_side_robots_follow_the_same_target(app):
 
 
 def test_switching_controller_keeps_the_state(app):
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.1)
     q = app.robots.loops["main"].q.copy()
@@ -77,11 +77,11 @@ def test_switching_controller_keeps_the_state(app):
 
 
 def test_a_moving_hole_is_followed(app):
-    hole_id = app.add_constraint("hole", distance=0.08)
-    center = app.entries[hole_id].position.copy()
-    app.move_constraint(hole_id, center + [0.0, 0.0, 0.003])
+    hole_id = app.constraints.add("hole", distance=0.08)
+    center = app.constraints.entries[hole_id].position.copy()
+    app.constraints.move(hole_id, center + [0.0, 0.0, 0.003])
     run(app, 0.5)
-    assert np.linalg.norm(app.entries[hole_id].position - (center + [0, 0, 0.003])) < 1e-5
+    assert np.linalg.norm(app.constraints.entries[hole_id].position - (center + [0, 0, 0.003])) < 1e-5
     assert app.robots.last_records["main"].constraint_error < 1e-5
 
 
@@ -95,13 +95,13 @@ def test_a_hole_moved_far_glides_inside_the_joint_limits(robot_name, move, tmp_p
 
     robot = load_robot(robot_name)
     app = TeleopApp(robot, controller="cjm", record_dir=tmp_path)
-    hole_id = app.add_constraint("hole", distance=0.08 if robot_name == "sda10f" else 0.2)
-    goal = app.entries[hole_id].position + [0.0, move, 0.0]
-    app.move_constraint(hole_id, goal)
+    hole_id = app.constraints.add("hole", distance=0.08 if robot_name == "sda10f" else 0.2)
+    goal = app.constraints.entries[hole_id].position + [0.0, move, 0.0]
+    app.constraints.move(hole_id, goal)
     controller = app.robots.loops["main"].controller
     dt = app.robots.config.dt
     glide_ticks = int(move / MAX_GEOMETRY_SPEED / dt) + int(0.5 / dt)  # + the filter's tail
-    previous = app.entries[hole_id].position
+    previous = app.constraints.entries[hole_id].position
     for tick in range(glide_ticks + int(2.0 / dt)):
         app.step()
         qd = app.robots.loops["main"].last_qd
@@ -109,10 +109,10 @@ def test_a_hole_moved_far_glides_inside_the_joint_limits(robot_name, move, tmp_p
         new_q = app.robots.loops["main"].q
         assert np.all(new_q <= robot.model.upperPositionLimit + 1e-12), tick
         assert np.all(new_q >= robot.model.lowerPositionLimit - 1e-12), tick
-        position = app.entries[hole_id].position
+        position = app.constraints.entries[hole_id].position
         assert np.linalg.norm(position - previous) <= MAX_GEOMETRY_SPEED * dt * (1 + 1e-9)
         previous = position
-    np.testing.assert_allclose(app.entries[hole_id].position, goal, atol=1e-9)
+    np.testing.assert_allclose(app.constraints.entries[hole_id].position, goal, atol=1e-9)
     record = app.robots.last_records["main"]
     print(f"{robot_name} hole moved {move} m: error {record.constraint_error:.2e} m, "
           f"status {record.status}, EE error {record.ee_position_error:.3g} m")
@@ -120,7 +120,7 @@ def test_a_hole_moved_far_glides_inside_the_joint_limits(robot_name, move, tmp_p
 
 
 def test_a_rate_too_low_for_the_gain_is_refused_and_nothing_changes(app):
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     app.robots.set_gain(500.0)
     with pytest.raises(ValueError, match=r"unstable at 50 Hz \(K dt = 10"):
         app.robots.set_rate(50.0)
@@ -135,31 +135,31 @@ def test_a_rate_too_low_for_the_gain_is_refused_and_nothing_changes(app):
 
 def test_planes_and_barriers_and_removal(app):
     # any non-zero normal, normalised
-    plane_id = app.add_constraint("plane", distance=0.08, normal=[0.0, 2.0, 0.0])
-    barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
-    assert app.entries[plane_id].constraint.normal.tolist() == [0.0, 1.0, 0.0]
-    assert app.entries[barrier_id].kind == "barrier"
+    plane_id = app.constraints.add("plane", distance=0.08, normal=[0.0, 2.0, 0.0])
+    barrier_id = app.constraints.add("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
+    assert app.constraints.entries[plane_id].constraint.normal.tolist() == [0.0, 1.0, 0.0]
+    assert app.constraints.entries[barrier_id].kind == "barrier"
     run(app, 0.05)
     kinds = {e["kind"] for e in app.snapshot()["constraints"]}
     assert kinds == {"plane", "barrier"}
-    app.remove_constraint(plane_id)
-    assert list(app.entries) == [barrier_id]
+    app.constraints.remove(plane_id)
+    assert list(app.constraints.entries) == [barrier_id]
     with pytest.raises(ValueError, match="no constraint 'plane-1'"):
-        app.remove_constraint(plane_id)
+        app.constraints.remove(plane_id)
 
 
 @pytest.mark.parametrize("action, message", [
-    (lambda app: app.add_constraint("plane", distance=0.08, normal=[0.0, 0.0, 0.0]), "non-zero"),
-    (lambda app: app.add_constraint("barrier", distance=0.08, normal=[0.0, 0.0, 1.0],
+    (lambda app: app.constraints.add("plane", distance=0.08, normal=[0.0, 0.0, 0.0]), "non-zero"),
+    (lambda app: app.constraints.add("barrier", distance=0.08, normal=[0.0, 0.0, 1.0],
                                     offset=-0.05), "wrong side"),
     (lambda app: app.set_target([np.nan, 0, 0], [1, 0, 0, 0]), "finite"),
     (lambda app: app.robots.set_rate(10.0), "between 50 and 5000"),
     (lambda app: app.robots.set_gain(5000.0), "gain must be in"),
-    (lambda app: app.add_constraint("hole", distance=1e6), "hole distance must be between 0 and"),
-    (lambda app: app.add_constraint("hole", distance=-19.0), "hole distance must be between 0 and"),
-    (lambda app: app.add_constraint("hole", distance=None), "hole distance must be a number"),
+    (lambda app: app.constraints.add("hole", distance=1e6), "hole distance must be between 0 and"),
+    (lambda app: app.constraints.add("hole", distance=-19.0), "hole distance must be between 0 and"),
+    (lambda app: app.constraints.add("hole", distance=None), "hole distance must be a number"),
     (lambda app: app.robots.set_damping(-1.0), "damping must be"),
-    (lambda app: app.move_constraint("hole-9", [0, 0, 0]), "no constraint"),
+    (lambda app: app.constraints.move("hole-9", [0, 0, 0]), "no constraint"),
     (lambda app: app.stop_recording(), "not recording"),
 ])
 def test_impossible_actions_raise_a_message_for_the_operator(app, action, message):
@@ -170,13 +170,13 @@ def test_impossible_actions_raise_a_message_for_the_operator(app, action, messag
 
 
 def test_home_keeps_the_constraints_and_clear_removes_them(app):
-    hole_id = app.add_constraint("hole", distance=0.08)
+    hole_id = app.constraints.add("hole", distance=0.08)
     nudge(app, [0.01, 0.0, 0.0])
     run(app, 0.2)
     start = ee_position(app).copy()
     # with a constraint: a joint path home that keeps it, its EE poses followed in full pose
     assert app.home() == ""
-    assert list(app.entries) == [hole_id] and app.homing.active
+    assert list(app.constraints.entries) == [hole_id] and app.homing.active
     assert app.robots.loops["main"].task_modes == ("pose",)
     assert app.limitation().words.startswith("going home through the constraints")
     np.testing.assert_allclose(app.target.translation, start, atol=1e-12)  # from where it is
@@ -188,7 +188,7 @@ def test_home_keeps_the_constraints_and_clear_removes_them(app):
     assert np.linalg.norm(ee_position(app) - home.translation) < 1e-4
     assert np.max(np.abs(app.robots.loops["main"].q - app.robot.q_home)) < 1e-3
     assert max(app.robots.traces["main"].constraint_error) < 1e-6  # held on the way
-    assert app.clear_constraints() == 1 and not app.entries
+    assert app.constraints.clear() == 1 and not app.constraints.entries
     nudge(app, [0.01, 0.0, 0.0])
     run(app, 0.1)
     app.home()  # without constraints: a reset, at once
@@ -201,14 +201,14 @@ def test_recording_writes_a_session_that_replay_accepts(app, tmp_path):
     # directions to the posture, which the app (acceleration limits) and the replay below
     # (none) spend differently: the plane would be added 39 um off the replay's link
     app.robots.set_task_mode("pose")
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     path = app.start_recording()
     assert path.parent == tmp_path
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.2)
-    plane_id = app.add_constraint("plane", distance=0.04, normal=[1.0, 0.0, 0.0])
+    plane_id = app.constraints.add("plane", distance=0.04, normal=[1.0, 0.0, 0.0])
     run(app, 0.1)
-    app.remove_constraint(plane_id)
+    app.constraints.remove(plane_id)
     run(app, 0.1)
     assert app.stop_recording() == path
     session = load_session(path)
@@ -245,7 +245,7 @@ def test_control_thread_runs_and_reports_its_rate(app):
 def test_plot_history_is_finite_and_the_ghost_turned_on_later_fills_its_own(app):
     from web.ui import PLOTS, plot_series
 
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.5)
     snapshot = app.snapshot()
@@ -377,7 +377,7 @@ def test_nudges_and_gizmo_to_target(app):
 
 def test_an_unreachable_target_is_said_in_words(app):
     app.robots.set_task_mode("pose")  # position and roll reach this target (the default with a hole)
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     assert app.limitation().words == "on target" and app.limitation().status == "ok"
     nudge(app, [0.5, 0.0, 0.0])  # half a metre ahead, through a hole: not reachable
     run(app, 0.2)
@@ -427,7 +427,7 @@ def test_a_joint_at_its_limit_is_named():
 
 
 def test_active_barriers_are_listed(app):
-    barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.002)
+    barrier_id = app.constraints.add("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.002)
     assert app.active_inequalities() == []
     nudge(app, [0.0, 0.0, -0.05])  # down, into the barrier
     run(app, 1.0)
@@ -438,7 +438,7 @@ def test_active_barriers_are_listed(app):
 
 
 def test_a_satisfied_barrier_has_no_error_to_draw(app):
-    app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
+    app.constraints.add("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     run(app, 0.05)
     (entry,) = app.snapshot()["constraints"]
     assert entry["kind"] == "barrier" and np.linalg.norm(entry["geometry"].error) == 0.0
@@ -452,7 +452,7 @@ def test_a_robot_without_a_constrained_link_says_how_to_get_one(tmp_path):
     app = TeleopApp(robot, record_dir=tmp_path)
     with pytest.raises(ValueError, match="no constrained link: start `teleop web` with "
                                          "--constrained-link"):
-        app.add_constraint("hole", distance=0.08)
+        app.constraints.add("hole", distance=0.08)
 
 
 # -- scenes ---------------------------------------------------------------------------------
@@ -463,8 +463,8 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     # drift feedback overshoots (docs/design.md 8.4)
     app = TeleopApp(sda10f, controller="cjm", record_dir=tmp_path, scene_dir=tmp_path / "scenes",
                     acceleration_limits=False)
-    hole_id = app.add_constraint("hole", distance=0.08)
-    barrier_id = app.add_constraint("barrier", distance=0.04, normal=[0.0, 0.0, 1.0], offset=0.01)
+    hole_id = app.constraints.add("hole", distance=0.08)
+    barrier_id = app.constraints.add("barrier", distance=0.04, normal=[0.0, 0.0, 1.0], offset=0.01)
     app.robots.set_ghost("qp:daqp")
     app.robots.set_ghost_offset([0.0, -0.7, 0.0])
     app.robots.set_gain(80.0)
@@ -473,18 +473,18 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     app.set_motion_scale(0.2)
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.3)
-    app.move_constraint(hole_id, app.entries[hole_id].goal + [0.0, 0.0, 0.002])
+    app.constraints.move(hole_id, app.constraints.entries[hole_id].goal + [0.0, 0.0, 0.002])
     saved = app.save_scene("a.json")
     assert saved == tmp_path / "scenes" / "a.json"
     scene = json.loads(saved.read_text())
     assert scene["format"] == "cjm-teleop-scene" and scene["robot"]["source"] == "sda10f"
     assert [c["id"] for c in scene["constraints"]] == [hole_id, barrier_id]
     q_saved = app.robots.loops["main"].q.copy()
-    goals = {i: e.goal.copy() for i, e in app.entries.items()}
+    goals = {i: e.goal.copy() for i, e in app.constraints.entries.items()}
     target = app.target.copy()
 
     # change everything, then load
-    app.clear_constraints()
+    app.constraints.clear()
     app.robots.set_ghost(None)
     app.robots.set_rate(1000.0)
     app.robots.set_gain(100.0)
@@ -492,18 +492,18 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     app.home()
     run(app, 0.1)
     app.load_scene("a.json")
-    assert list(app.entries) == [hole_id, barrier_id]
-    assert [e.kind for e in app.entries.values()] == ["hole", "barrier"]
+    assert list(app.constraints.entries) == [hole_id, barrier_id]
+    assert [e.kind for e in app.constraints.entries.values()] == ["hole", "barrier"]
     for entry_id, goal in goals.items():
-        np.testing.assert_allclose(app.entries[entry_id].goal, goal, atol=1e-12)
+        np.testing.assert_allclose(app.constraints.entries[entry_id].goal, goal, atol=1e-12)
     assert app.robots.specs == {"main": "cjm", "ghost": "qp:daqp"}
     assert (app.robots.gain, app.robots.damping, app.robots.config.rate,
             app.motion_scale) == (80.0, 0.01, 500.0, 0.2)
     np.testing.assert_allclose(app.robots.ghost_offset, [0.0, -0.7, 0.0])
     np.testing.assert_allclose(app.robots.loops["main"].q, q_saved, atol=1e-12)
     assert app.target.isApprox(target, 1e-9)
-    assert all(e.constraint.gain == 80.0 for e in app.entries.values())
-    assert app.add_constraint("hole", distance=0.1) == "hole-3"  # new ids after the loaded ones
+    assert all(e.constraint.gain == 80.0 for e in app.constraints.entries.values())
+    assert app.constraints.add("hole", distance=0.1) == "hole-3"  # new ids after the loaded ones
     run(app, 0.3)
     assert app.robots.last_records["main"].constraint_error < 1e-6
 
@@ -521,14 +521,14 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     (lambda s: s.update(task_mode="roll"), "unknown task mode 'roll'"),
 ])
 def test_a_bad_scene_is_refused_and_changes_nothing(app, change, message):
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     scene = app.scene()
     change(scene)
-    app.clear_constraints()
+    app.constraints.clear()
     app.robots.set_gain(50.0)
     with pytest.raises(ValueError, match=message):
         app.apply_scene(scene)
-    assert not app.entries and app.robots.gain == 50.0 and app.robots.specs == {"main": "cjm"}
+    assert not app.constraints.entries and app.robots.gain == 50.0 and app.robots.specs == {"main": "cjm"}
     run(app, 0.01)
 
 
@@ -549,7 +549,7 @@ def test_scene_files_that_cannot_be_read(app, tmp_path):
 
 
 def test_measures_are_taken_at_the_history_rate_only(app, monkeypatch):
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     app.robots.set_ghost("qp:daqp")
     measured = []
     for loop in app.robots.loops.values():

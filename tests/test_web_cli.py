@@ -61,7 +61,7 @@ def test_a_urdf_whose_meshes_are_missing_opens_with_a_warning_line_each(tmp_path
 
 def test_a_scene_opens_with_its_robot(sda10f, tmp_path):
     app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path)
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     app.robots.set_ghost("qp:daqp")
     path = app.save_scene("scene.json")
     args = web_cli.build_parser().parse_args(["--scene", str(path)])

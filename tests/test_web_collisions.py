@@ -74,7 +74,7 @@ def independent_rows(app, which: str = "main", q: np.ndarray | None = None):
     ``q`` (default: robot ``which``'s q now), on a fresh ``pin.Data``."""
     settings = app.collisions.avoidance.to_dict()
     avoidance = CollisionAvoidance.from_dict(app.robot, settings)
-    avoidance.set_ports([entry.constraint for entry in app.entries.values()])
+    avoidance.set_ports([entry.constraint for entry in app.constraints.entries.values()])
     model = app.robot.model
     data = model.createData()
     pin.computeJointJacobians(model, data, app.robots.loops[which].q if q is None else q)

@@ -83,9 +83,9 @@ def test_holes_on_both_arms_hold_while_both_gizmos_move(app, dual):
     q = app.robots.loops["main"].q.copy()
     data = dual.model.createData()
     pin.framesForwardKinematics(dual.model, data, q)
-    ids = [app.add_constraint("hole", distance=0.08, link=link) for link in dual.constrained_links]
+    ids = [app.constraints.add("hole", distance=0.08, link=link) for link in dual.constrained_links]
     for hole_id, link in zip(ids, dual.constrained_links):
-        hole = app.entries[hole_id].constraint
+        hole = app.constraints.entries[hole_id].constraint
         assert hole.link == link
         expected = data.oMf[dual.model.getFrameId(link)].act(0.08 * dual.link_axes[link])
         np.testing.assert_allclose(hole.position, expected, atol=1e-12)  # on that arm's axis
@@ -101,7 +101,7 @@ def test_holes_on_both_arms_hold_while_both_gizmos_move(app, dual):
         data_now = model.createData()
         pin.framesForwardKinematics(model, data_now, loop.q)
         for hole_id in ids:  # measured here, each hole against its own link
-            hole = app.entries[hole_id].constraint
+            hole = app.constraints.entries[hole_id].constraint
             error = hole.violation(data_now.oMf[model.getFrameId(hole.link)])
             worst["hole"] = max(worst["hole"], error)
 
@@ -128,15 +128,15 @@ def test_a_hole_or_lock_goes_on_the_chosen_arm_and_is_checked_against_that_arm(a
     reach = np.linalg.norm(link.actInv(data.oMf[dual.model.getFrameId(dual.ee_frames[1])].translation))
     with pytest.raises(ValueError, match=f"hole distance must be between 0 and {reach:.3f} m "
                                          f"\\(from the joint of {right} to the tool tip\\)"):
-        app.add_constraint("hole", distance=reach + 0.01, link=right)
+        app.constraints.add("hole", distance=reach + 0.01, link=right)
     with pytest.raises(ValueError, match="a hole goes on a constrained link: one of"):
-        app.add_constraint("hole", distance=0.05, link="torso_link_b1")
-    lock_id = app.add_constraint("point_lock", distance=0.05, link=right)
-    lock = app.entries[lock_id].constraint
+        app.constraints.add("hole", distance=0.05, link="torso_link_b1")
+    lock_id = app.constraints.add("point_lock", distance=0.05, link=right)
+    lock = app.constraints.entries[lock_id].constraint
     assert lock.link == right
     np.testing.assert_allclose(lock.position, link.act(0.05 * dual.link_axes[right]), atol=1e-12)
-    hole_id = app.add_constraint("hole", distance=0.08)  # default: the first arm
-    assert app.entries[hole_id].constraint.link == dual.constrained_links[0]
+    hole_id = app.constraints.add("hole", distance=0.08)  # default: the first arm
+    assert app.constraints.entries[hole_id].constraint.link == dual.constrained_links[0]
     snapshot = app.snapshot()
     drawn = {entry["id"]: entry for entry in snapshot["constraints"]}
     for entry_id, on in ((lock_id, right), (hole_id, dual.constrained_links[0])):
@@ -159,7 +159,7 @@ def test_nudges_home_and_gizmo_to_target_act_on_one_ee(app, dual):
         with pytest.raises(ValueError, match="no end effector"):
             app.nudge_target([0.0, 0.0, 0.01], ee=bad)
     app.nudge_target([0.01, 0.0, 0.0], ee=0)
-    app.add_constraint("hole", distance=0.08, link=dual.constrained_links[1])
+    app.constraints.add("hole", distance=0.08, link=dual.constrained_links[1])
     run(app, 0.3)
     app.home(ee=0)  # one EE's target home; the other keeps its own
     data = dual.model.createData()
@@ -173,7 +173,7 @@ def test_nudges_home_and_gizmo_to_target_act_on_one_ee(app, dual):
     while app.homing.active:
         app.step()
     assert all(app.inputs[k].target.isApprox(home[k], 1e-12) for k in (0, 1))
-    assert len(app.entries) == 1
+    assert len(app.constraints.entries) == 1
 
 
 def test_clutch_and_motion_scale_act_on_every_gizmo(app):
@@ -194,7 +194,7 @@ def test_clutch_and_motion_scale_act_on_every_gizmo(app):
 
 def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path):
     for link in dual.constrained_links:
-        app.add_constraint("hole", distance=0.08, link=link)
+        app.constraints.add("hole", distance=0.08, link=link)
     app.nudge_target([0.0, 0.005, 0.0], ee=1)
     run(app, 0.2)
     path = app.save_scene("two.json")
@@ -209,7 +209,7 @@ def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path)
     for k in (0, 1):
         assert other.inputs[k].target.isApprox(app.inputs[k].target, 1e-12)
         assert other.inputs[k].gizmo.isApprox(app.inputs[k].target, 1e-12)
-    assert [e.constraint.link for e in other.entries.values()] == list(dual.constrained_links)
+    assert [e.constraint.link for e in other.constraints.entries.values()] == list(dual.constrained_links)
     np.testing.assert_array_equal(other.robots.loops["main"].q, app.robots.loops["main"].q)
     run(other, 0.2)
     assert other.robots.last_records["main"].constraint_error <= HOLE_TOLERANCE
@@ -246,16 +246,17 @@ def test_the_mobile_base_drives_and_a_wall_on_it_holds(mobile, tmp_path):
     forward, beyond where the arms alone would take them: the base drives up to the wall
     and never through it."""
     app = TeleopApp(mobile, controller="cjm", record_dir=tmp_path)
-    assert app.moving_links[:2] == mobile.constrained_links and "mobile_base" in app.moving_links
+    links = app.constraints.moving_links
+    assert links[:2] == mobile.constrained_links and "mobile_base" in links
     front = [0.4, 0.0, 0.15]  # the middle of the base's front face, base coordinates
     with pytest.raises(ValueError, match="mobile_base has no instrument axis"):
-        app.add_constraint("barrier", distance=0.1, normal=[-1.0, 0.0, 0.0], link="mobile_base")
+        app.constraints.add("barrier", distance=0.1, normal=[-1.0, 0.0, 0.0], link="mobile_base")
     with pytest.raises(ValueError, match="link point must be within 2 m"):
-        app.add_constraint("plane", link_point=[5.0, 0.0, 0.0], normal=[-1.0, 0.0, 0.0],
+        app.constraints.add("plane", link_point=[5.0, 0.0, 0.0], normal=[-1.0, 0.0, 0.0],
                            link="mobile_base")
-    wall_id = app.add_constraint("barrier", link_point=front, normal=[-1.0, 0.0, 0.0],
+    wall_id = app.constraints.add("barrier", link_point=front, normal=[-1.0, 0.0, 0.0],
                                  offset=0.05, link="mobile_base")
-    wall = app.entries[wall_id].constraint
+    wall = app.constraints.entries[wall_id].constraint
     np.testing.assert_allclose(wall.position, [0.45, 0.0, 0.15], atol=1e-12)
     base = mobile.model.getFrameId("mobile_base")
     data = mobile.model.createData()
@@ -339,12 +340,12 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
 
 def test_each_arms_hole_is_drawn_around_its_own_link(server, app, dual):
     ui = make_ui(server, app)
-    ids = [app.add_constraint("hole", distance=0.08, link=link) for link in dual.constrained_links]
+    ids = [app.constraints.add("hole", distance=0.08, link=link) for link in dual.constrained_links]
     snapshot = app.snapshot()
     ui._draw(snapshot)
     for hole_id, link in zip(ids, dual.constrained_links):
         ring = ui.constraint_markers.nodes[hole_id]["shape"].points
-        centre = app.entries[hole_id].position
+        centre = app.constraints.entries[hole_id].position
         radii = np.linalg.norm(ring.reshape(-1, 3) - centre, axis=1)
         radius = ui.constraint_drawer.ring_radius_at(
             snapshot["robots"]["main"]["constraints"][hole_id])
@@ -376,12 +377,12 @@ def test_the_mobile_base_is_drawn_where_the_planar_joint_puts_it_and_a_wall_span
         np.testing.assert_allclose(handle.position, geometry.oMg[index].translation, atol=1e-6)
         np.testing.assert_allclose(np.abs(pin.Quaternion(geometry.oMg[index].rotation).coeffs()
                                           [[3, 0, 1, 2]] @ handle.wxyz), 1.0, atol=1e-6)
-    wall_id = app.add_constraint("barrier", link_point=[0.4, 0.0, 0.15],
+    wall_id = app.constraints.add("barrier", link_point=[0.4, 0.0, 0.15],
                                  normal=[-1.0, 0.0, 0.0], offset=0.05, link="mobile_base")
     ui._draw(app.snapshot())
     plane = ui.constraint_markers.nodes[wall_id]["shape"]
     assert plane.dimensions[0] == pytest.approx(1.6)  # twice the base's 0.8 m length
-    np.testing.assert_allclose(plane.position, app.entries[wall_id].position, atol=1e-9)
+    np.testing.assert_allclose(plane.position, app.constraints.entries[wall_id].position, atol=1e-9)
 
 
 def test_a_recorded_session_holds_both_targets_and_replays(app, dual, tmp_path):
@@ -389,7 +390,7 @@ def test_a_recorded_session_holds_both_targets_and_replays(app, dual, tmp_path):
     from teleop.experiments.sessions import load_session, session_plan
 
     for link in dual.constrained_links:
-        app.add_constraint("hole", distance=0.08, link=link)
+        app.constraints.add("hole", distance=0.08, link=link)
     path = app.start_recording("two.jsonl")
     app.nudge_target([0.0, 0.004, 0.0], ee=0)
     run(app, 0.2)
@@ -417,7 +418,7 @@ def test_a_lower_orientation_weight_lets_the_dragged_tip_reach_its_target(dual, 
         # the full poses: with the holes the default asks for position and roll, which
         # both tips meet at either weight (7.2e-11 m measured)
         app.robots.set_task_mode("pose")
-        ids = [app.add_constraint("hole", distance=0.08, link=link)
+        ids = [app.constraints.add("hole", distance=0.08, link=link)
                for link in dual.constrained_links]
         app.robots.set_orientation_weight(weight)
         assert app.robots.orientation_weight == weight
@@ -430,7 +431,7 @@ def test_a_lower_orientation_weight_lets_the_dragged_tip_reach_its_target(dual, 
         model, data = dual.model, dual.model.createData()
         pin.framesForwardKinematics(model, data, app.robots.loops["main"].q)
         for hole_id in ids:
-            hole = app.entries[hole_id].constraint
+            hole = app.constraints.entries[hole_id].constraint
             assert hole.violation(data.oMf[model.getFrameId(hole.link)]) <= HOLE_TOLERANCE
         if weight == 0.0:
             assert np.linalg.norm(end[1] - start[1]) < 1e-4, "the other tip moved"

@@ -17,7 +17,7 @@ LIMIT = 1000.0  # rad/s^3
 def commanded_jerk(app: TeleopApp, seconds: float, offset: np.ndarray) -> float:
     """The largest |qd_k - 2 qd_k-1 + qd_k-2| / dt^2 over the main loop's commands while
     the target jumps by ``offset`` (a drag of the gizmo) with a hole in place."""
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     target = app.target
     quaternion = pin.Quaternion(target.rotation)
     app.set_target(target.translation + offset,

@@ -90,7 +90,7 @@ def test_each_loop_runs_its_own_simulated_robot(app):
 
 
 def test_a_moved_target_pushes_the_instrument_on_the_wall_and_the_view_says_how_hard(app):
-    hole_id = app.add_constraint("hole", distance=0.08)
+    hole_id = app.constraints.add("hole", distance=0.08)
     run(app, 0.1)
     ports = app.snapshot()["robots"]["main"]["ports"]
     assert [port.id for port in ports] == [hole_id]
@@ -151,7 +151,7 @@ def test_the_port_force_is_the_wall_stiffness_times_the_offset(sda10f, tmp_path,
     across /= np.linalg.norm(across)
     across = math.cos(angle) * across + math.sin(angle) * np.cross(axis, across)
     hole.center = hole.center + lateral * across
-    hole_id = app.add_constraint(hole)
+    hole_id = app.constraints.add(hole)
     stiffness = 1000.0 if wall_stiffness is None else wall_stiffness
     assert hole.tissue_stiffness == stiffness
     run(app, 1.0)  # the arm gives a little under the push, then rests
@@ -167,19 +167,19 @@ def test_the_port_force_is_the_wall_stiffness_times_the_offset(sda10f, tmp_path,
 
 def test_the_session_wall_stiffness_reaches_a_scenes_holes(sda10f, tmp_path):
     saved = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path, scene_dir=tmp_path)
-    saved.add_constraint("hole", distance=0.08)
+    saved.constraints.add("hole", distance=0.08)
     path = saved.save_scene("wall.json")
     stiff = TeleopApp(sda10f, plant="mujoco", wall_stiffness=3000.0, record_dir=tmp_path,
                       scene_dir=tmp_path)
     stiff.load_scene(path.name)
-    (entry,) = stiff.entries.values()
+    (entry,) = stiff.constraints.entries.values()
     assert entry.constraint.tissue_stiffness == 3000.0
     run(stiff, 0.05)
     assert [port.id for port in stiff.snapshot()["robots"]["main"]["ports"]] == [entry.id]
     # and the scene's own stiffness without one
     own = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path, scene_dir=tmp_path)
     own.load_scene(path.name)
-    assert next(iter(own.entries.values())).constraint.tissue_stiffness == 1000.0
+    assert next(iter(own.constraints.entries.values())).constraint.tissue_stiffness == 1000.0
 
 
 def test_home_resets_the_simulated_robot(app):
@@ -209,7 +209,7 @@ def test_bad_plant_choices_are_refused_naming_the_field(sda10f, tmp_path, kwargs
 def test_the_control_thread_runs_the_plant(app):
     """A generous no-starvation guard (2 shared cores): the thread runs the simulated
     robot period after period, without error, and counts its ticks on time."""
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     control = ControlThread(app)
     control.start()
     try:
@@ -240,7 +240,7 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
     server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
     try:
         ui = TeleopUI(server, app, ControlThread(app))
-        hole_id = app.add_constraint("hole", distance=0.08)
+        hole_id = app.constraints.add("hole", distance=0.08)
         run(app, 0.1)
         nudge(app, [0.012, 0.0, 0.0])
         run(app, 0.02)  # setting off: the wall pushes
@@ -271,7 +271,7 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         assert largest > 1e-3  # the drag's start, sampled (the last periods are not yet)
         assert f"; the largest in the last 10 s {1e3 * largest:.2f} mN (arrow" in \
             ui.status_panel.summary.content
-        link = app.entries[hole_id].constraint.link
+        link = app.constraints.entries[hole_id].constraint.link
         assert f"placed: {hole_id} on `{link}`" in ui.status_panel.summary.content
         label = ui.constraint_markers.nodes[hole_id]["label"]  # and in the scene, above the hole
         assert label.text == f"{hole_id} on {link}"
@@ -290,7 +290,7 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         app.robots.set_ghost(None)
         ui._draw(app.snapshot())
         assert "ghost" not in ui._port_arrows
-        app.remove_constraint(hole_id)
+        app.constraints.remove(hole_id)
         run(app, 0.01)
         ui._draw(app.snapshot())
         assert ui._port_arrows["main"] == {}

@@ -217,9 +217,9 @@ def held_along_a_drag(robot, tmp_path, distance: float, direction, nudge) -> Non
     every step meets the constraint's rows at velocity level, and the point stays within
     the drift-feedback bound of the line."""
     app = TeleopApp(robot, record_dir=tmp_path / "sessions", scene_dir=tmp_path / "scenes")
-    entry_id = app.add_constraint("point_on_line", distance=distance, direction=direction)
+    entry_id = app.constraints.add("point_on_line", distance=distance, direction=direction)
     assert entry_id == "point_on_line-1"
-    line = app.entries[entry_id].constraint
+    line = app.constraints.entries[entry_id].constraint
     np.testing.assert_allclose(line.direction, np.asarray(direction) / np.linalg.norm(direction),
                                atol=1e-15)
     q0 = app.robots.loops["main"].q.copy()
@@ -287,14 +287,14 @@ def test_a_registered_kind_holds_for_any_line_and_drag(sda10f, tmp_path_factory,
 def test_a_registered_kind_refuses_bad_fields_naming_them(registered, sda10f, tmp_path):
     app = TeleopApp(sda10f, record_dir=tmp_path / "sessions", scene_dir=tmp_path / "scenes")
     with pytest.raises(ValueError, match="the point on line direction must be a non-zero"):
-        app.add_constraint("point_on_line", direction=[0.0, 0.0, 0.0])
+        app.constraints.add("point_on_line", direction=[0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="point on line distance must be between 0 and"):
-        app.add_constraint("point_on_line", distance=5.0)
+        app.constraints.add("point_on_line", distance=5.0)
     with pytest.raises(ValueError, match="unknown field 'normal' for a point on line"):
-        app.add_constraint("point_on_line", normal=[0.0, 0.0, 1.0])
+        app.constraints.add("point_on_line", normal=[0.0, 0.0, 1.0])
     with pytest.raises(ValueError, match="unknown constraint kind 'line'"):
-        app.add_constraint("line")
-    assert not app.entries
+        app.constraints.add("line")
+    assert not app.constraints.entries
 
 
 def test_a_registered_kind_gets_its_inputs_and_is_drawn_from_its_geometry(registered, sda10f,
@@ -312,7 +312,7 @@ def test_a_registered_kind_gets_its_inputs_and_is_drawn_from_its_geometry(regist
         inputs["distance"].value = 0.05
         inputs["direction"].value = (0.0, 1.0, 0.0)
         entry_id = ui.constraint_panel.add("point_on_line")  # what its "Add" button does
-        line = app.entries[entry_id].constraint
+        line = app.constraints.entries[entry_id].constraint
         np.testing.assert_allclose(line.direction, [0.0, 1.0, 0.0])
         np.testing.assert_allclose(line.link_point, 0.05 * np.asarray(sda10f.link_axis),
                                    atol=1e-15)

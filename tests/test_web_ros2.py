@@ -64,7 +64,7 @@ def hold_the_hole(app: TeleopApp) -> tuple[float, float]:
     """A hole placed where the instrument is, the target moved 2 cm sideways then 1 cm
     down: the hole's largest error over the motion and the tip's distance to its target
     at the end (m)."""
-    app.add_constraint("hole", distance=0.20)
+    app.constraints.add("hole", distance=0.20)
     errors = []
     for offset in ([0.0, 0.02, 0.0], [0.0, 0.0, -0.01]):
         app.nudge_target(offset)
@@ -325,7 +325,7 @@ def test_the_page_holds_a_hole_on_the_mujoco_robot_as_in_process(robot, domain, 
     import json
 
     saved = TeleopApp(robot, rate=RATE, record_dir=tmp_path, scene_dir=tmp_path)
-    saved.add_constraint("hole", distance=0.08)
+    saved.constraints.add("hole", distance=0.08)
     scene = saved.scene()
     path = tmp_path / "hole.json"
     path.write_text(json.dumps(scene))

@@ -32,7 +32,7 @@ SAME = 1e-12
 def app(sda10f, tmp_path):
     app = TeleopApp(sda10f, record_dir=tmp_path / "sessions", scene_dir=tmp_path / "scenes",
                     ghost="qp:daqp")
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     tip = app.robots.loops["main"].ee_placements()[0]  # a sphere 2 cm in front of the tip
     app.collisions.add("sphere", radius=0.03, center=tip.translation + 0.05 * tip.rotation[:, 2])
     return app
@@ -63,7 +63,7 @@ def lock_free(app) -> bool:
 def independent_rows(app, q: np.ndarray):
     """The rows of a new avoidance with the app's settings and obstacles at ``q``."""
     avoidance = CollisionAvoidance.from_dict(app.robot, app.collisions.avoidance.to_dict())
-    avoidance.set_ports([entry.constraint for entry in app.entries.values()])
+    avoidance.set_ports([entry.constraint for entry in app.constraints.entries.values()])
     data = app.robot.model.createData()
     pin.computeJointJacobians(app.robot.model, data, q)
     return avoidance.rows(app.robot.model, data)

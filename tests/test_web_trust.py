@@ -159,7 +159,7 @@ def test_a_symlink_loop_is_refused_like_any_name_leading_out(app, tmp_path):
     (lambda app: app.robots.set_gain("abc"), "gain must be a number"),
     (lambda app: app.robots.set_rate(1e12), "rate must be between 50 and 5000 Hz"),
     (lambda app: app.robots.set_rate(True), "rate must be a number"),
-    (lambda app: app.move_constraint(app.add_constraint("hole", distance=0.08), [1e300, 0, 0]),
+    (lambda app: app.constraints.move(app.constraints.add("hole", distance=0.08), [1e300, 0, 0]),
      "constraint position refused"),
 ])
 def test_a_target_or_setting_out_of_range_is_refused_naming_it(app, action, message):
@@ -238,7 +238,7 @@ def test_a_flood_of_10000_events_in_5_s_does_not_starve_the_control_loop(app):
     Asserted: no starvation, at least one tick per 10 ms on average over the flood (the
     old behaviour, a rebuild per event under the lock, fell to 4-14 Hz). The achieved rate
     is printed (docs/design.md section 5.3 has the measure)."""
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     inbox = Inbox(lambda context, error: None)
     control = ControlThread(app)
     control.start()

@@ -65,7 +65,7 @@ def test_the_grid_is_at_the_robots_base(ui, ur5_instrument):
 
 def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
     app = ui.app
-    hole_id = app.add_constraint("hole", distance=0.08)
+    hole_id = app.constraints.add("hole", distance=0.08)
     app.robots.set_ghost("qp:daqp")
     nudge(app, [0.0, 0.01, 0.0])
     run(app, 0.1)
@@ -100,13 +100,13 @@ def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
 
 def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_side(ui):
     app = ui.app
-    barrier_id = app.add_constraint("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
+    barrier_id = app.constraints.add("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     run(app, 0.05)
     draw(ui)
     markers = ui.constraint_markers.nodes[barrier_id]
     assert markers["error"].visible is False  # was a 1 m magenta line
     arrow = np.asarray(markers["arrow"].points)
-    anchor = app.entries[barrier_id].position
+    anchor = app.constraints.entries[barrier_id].position
     np.testing.assert_allclose(arrow[0, 0], anchor, atol=1e-6)  # viser keeps float32
     np.testing.assert_allclose(arrow[0, 1] - anchor, [0.0, 0.0, 0.08], atol=1e-6)  # +n, 8 cm
     assert ui.constraint_panel.inputs["plane"]["normal"].label == "plane normal (world)"
@@ -115,8 +115,8 @@ def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_sid
 
 def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
     app = ui.app
-    hole_id = app.add_constraint("hole", distance=0.08)
-    lock_id = app.add_constraint("point_lock", distance=0.05)
+    hole_id = app.constraints.add("hole", distance=0.08)
+    lock_id = app.constraints.add("point_lock", distance=0.05)
     draw(ui)
     frame = app.robot.model.getFrameId(app.robot.constrained_link)
     link_radius = max(g.geometry.radius for g in app.robot.visual_model.geometryObjects
@@ -135,7 +135,7 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
 def test_the_ee_target_line_takes_the_step_status_colour(ui):
     app = ui.app
     app.robots.set_task_mode("pose")  # position and roll reach this target (the default with a hole)
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     draw(ui)
     assert ui.reach_line.visible is False  # on target: nothing to show
     assert ui.target_marker.visible is False  # the target is at the gizmo
@@ -154,7 +154,7 @@ def test_the_ee_target_line_takes_the_step_status_colour(ui):
 
 def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
     app = ui.app
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     nudge(app, [0.004, 0.0, 0.0])
     run(app, 0.3)
     draw(ui, plot=True)
@@ -186,7 +186,7 @@ def test_plots_are_finite_with_units_and_follow_the_ghost(ui):
 
 def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app = ui.app
-    app.add_constraint("hole", distance=0.08)
+    app.constraints.add("hole", distance=0.08)
     app.robots.set_gain(60.0)
     app.set_motion_scale(0.5)
     app.robots.set_ghost("qp:daqp")
@@ -199,9 +199,9 @@ def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app.set_motion_scale(1.0)
     app.robots.set_ghost(None)
     app.robots.set_task_mode("auto")
-    app.clear_constraints()
+    app.constraints.clear()
     ui.settings_panel.load_scene()
-    assert list(app.entries) == ["hole-1"] and app.robots.gain == 60.0
+    assert list(app.constraints.entries) == ["hole-1"] and app.robots.gain == 60.0
     assert app.robots.task_mode == "position" and ui.teleop_panel.task_mode_menu.value == "position only"
     assert app.robots.loops["main"].task_modes == app.robots.loops["ghost"].task_modes == ("position",)
     assert ui.settings_panel.gain_slider.value == 60.0
@@ -288,7 +288,7 @@ def test_the_pandas_hole_ring_is_outside_its_link_mesh(server, tmp_path):
                        link_axis=(-0.0825, 0.384, 0.0))
     app = TeleopApp(panda, record_dir=tmp_path)
     ui = TeleopUI(server, app, ControlThread(app))
-    hole_id = app.add_constraint("hole", distance=0.08)
+    hole_id = app.constraints.add("hole", distance=0.08)
     snapshot = draw(ui)
     ring = np.asarray(ui.constraint_markers.nodes[hole_id]["shape"].points).reshape(-1, 3)
     geometry = snapshot["robots"]["main"]["constraints"][hole_id]["geometry"]
@@ -321,12 +321,12 @@ def test_every_kind_is_added_from_its_inputs_as_they_start(ui):
     (before the declarations, "Add plane" took the barrier's offset and was refused)."""
     app = ui.app
     added = {kind: ui.constraint_panel.add(kind) for kind in ui.constraint_panel.inputs}
-    assert set(added) == set(CONSTRAINT_TYPES) and len(app.entries) == len(CONSTRAINT_TYPES)
+    assert set(added) == set(CONSTRAINT_TYPES) and len(app.constraints.entries) == len(CONSTRAINT_TYPES)
     data = app.robot.model.createData()
     pin.framesForwardKinematics(app.robot.model, data, app.robots.loops["main"].q)
     link = data.oMf[app.robot.model.getFrameId(app.robot.constrained_link)]
     for kind, entry_id in added.items():
-        constraint = app.entries[entry_id].constraint
+        constraint = app.constraints.entries[entry_id].constraint
         inputs = ui.constraint_panel.inputs[kind]
         point = link.act(inputs["distance"].value * np.asarray(app.robot.link_axis))
         np.testing.assert_allclose(constraint.point_world(link), point, atol=1e-12)

@@ -28,6 +28,7 @@ from teleop.inputs import followed_pose
 from teleop.robots import Robot
 
 from .robots import Robots
+from .editing import ConstraintEditing
 from .end_effectors import ee_index
 from .limits import MAX_MOTION_SCALE, MAX_TARGET_DISTANCE
 from .ros2_robot import Ros2Robot
@@ -70,7 +71,7 @@ class Console:
     inputs: list[EEInput]
     clutch: bool
     motion_scale: float
-    entries: dict
+    constraints: ConstraintEditing
     ros2: Ros2Robot | None
     _lock: threading.RLock
     _view_data: pin.Data
@@ -208,7 +209,7 @@ class Console:
                 t = loop.t
                 loop.reset()  # zeros, the watchdog's stop cleared, a fresh state awaited
                 loop.t, loop.q = t, self.ros2.state(loop.config.dt)
-        if ee is None and (self.entries or self.ros2 is not None):
+        if ee is None and (self.constraints.entries or self.ros2 is not None):
             with self._lock:
                 loop = self.robots.loops["main"]
                 for index in indices:  # from where the robot is: no jump when it starts

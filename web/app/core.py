@@ -17,7 +17,6 @@ Threading (docs/design.md section 5.3): :class:`web.app.ControlThread` calls
 
 from __future__ import annotations
 
-import itertools
 from functools import partial
 import threading
 from pathlib import Path
@@ -34,7 +33,7 @@ from ..folders import Folder
 from .collisions import CollisionScene, CollisionSession
 from .console import Console, EEInput
 from .devices import InputDevices
-from .editing import ConstraintEntry, Editing
+from .editing import ConstraintEditing, EditingSession
 from .force_control import ForceControl
 from .homing import WayHome
 from .limits import DEFAULT_SMOOTHING, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, checked_rate
@@ -47,7 +46,7 @@ from .tick import Tick
 from .view import View
 
 
-class TeleopApp(Console, Editing, Scenes, Tick, View):
+class TeleopApp(Console, Scenes, Tick, View):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
 
@@ -104,22 +103,24 @@ class TeleopApp(Console, Editing, Scenes, Tick, View):
         self.recordings = Folder(record_dir, "recording", ".jsonl")
         self.scenes = Folder(scene_dir, "scene", ".json")
         self.record_dir, self.scene_dir = self.recordings.root, self.scenes.root
-        self.entries: dict[str, ConstraintEntry] = {}
-        self._ids = itertools.count(1)
+        self.recorder = SessionRecording(self.recordings, lambda: self.now, robot.ee_frames)
+        self.constraints = ConstraintEditing(robot, self._lock, self.plant.wall_stiffness,
+                                             self.recorder, EditingSession(
+            configuration=lambda: self.robots.loops["main"].q, gain=lambda: self.robots.gain,
+            changed=lambda: self.robots.sync_constraints()))
         self.collisions = CollisionScene(
             robot, config.dt, collisions, dict(collision_settings or {}), self._lock,
             CollisionSession(
                 controllers=lambda: [loop.controller for loop in self.robots.loops.values()],
-                constraints=self._placed, tips=lambda: self.robots.loops["main"].ee_placements(),
+                constraints=self.constraints.placed, tips=lambda: self.robots.loops["main"].ee_placements(),
                 period=lambda: self.robots.config.dt))
         # before the first loop: it makes their plants
         self.force = ForceControl(robot, self.plant, self._lock, lambda: self.robots.loops,
                                   partial(session_plant, self.plant, robot, self.ros2),
                                   lambda: self.robots.rebuild(dict(self.robots.specs)))
-        self.recorder = SessionRecording(self.recordings, lambda: self.now, robot.ee_frames)
         self.robots = Robots(robot, self._lock, config, controller,
                              None if self.ros2 is None else self.ros2.state(config.dt),
-                             self._placed, self.collisions, self.force, self.homing,
+                             self.constraints.placed, self.collisions, self.force, self.homing,
                              self.recorder, self.ros2, acceleration_limits,
                              None if jerk_limit is None else JERK_LIMIT.check(jerk_limit))
         if ghost:
@@ -141,7 +142,7 @@ class TeleopApp(Console, Editing, Scenes, Tick, View):
         with self._lock:
             return self.recorder.start(
                 name, self.robot, self.robots.loops["main"].q, self.robots.config,
-                [(entry.id, entry.constraint) for entry in self.entries.values()],
+                [(entry.id, entry.constraint) for entry in self.constraints.entries.values()],
                 self.robots.loops["main"].task_modes, [hand.target for hand in self.inputs])
 
     def stop_recording(self) -> Path:

@@ -1,14 +1,16 @@
 """Editing the constraints: placing one (any registered kind, from its declaration, or a
-built one), moving its geometry, removing it (docs/design.md section 5.5)."""
+built one), moving its geometry, removing it (docs/design.md section 5.5); the placed
+ones are what every loop holds (:class:`.robots.Robots` reads them)."""
 
 from __future__ import annotations
 
 import itertools
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import pinocchio as pin
+import numpy as np
 
 from constraints import CONSTRAINT_TYPES, Constraint
 from constraints.kinematics import frame_placement
@@ -16,11 +18,11 @@ from constraints.registry import constraint_type
 from constraints.validation import as_vector, short_repr
 from teleop.robots import Robot
 
-from .robots import Robots
 from .limits import MAX_TARGET_DISTANCE
 from .placed import PlacedEntry
 from .placing import Placement, moving_links
-from .plant import PlantChoice, apply_wall
+from .plant import apply_wall
+from .recording import SessionRecording
 
 
 @dataclass
@@ -35,25 +37,49 @@ class ConstraintEntry(PlacedEntry):
         return self.constraint
 
 
-class Editing:
-    """The constraint editing of :class:`web.app.TeleopApp` (its state: ``entries`` by id
-    and the counter of new ids)."""
+@dataclass(frozen=True)
+class EditingSession:
+    """What :class:`ConstraintEditing` reads of the rest of the session (under its lock)."""
 
-    robots: Robots
-    robot: Robot
-    plant: PlantChoice
-    entries: dict[str, ConstraintEntry]
-    _ids: itertools.count
-    _lock: threading.RLock
-    _view_data: pin.Data
+    #: the main robot's configuration now (a constraint is placed where the robot is)
+    configuration: Callable[[], np.ndarray]
+    #: the constraints' gain now (1/s; a new constraint takes it)
+    gain: Callable[[], float]
+    #: every loop takes the placed constraints (``ValueError`` when a controller
+    #: refuses them, and then nothing changed)
+    changed: Callable[[], None]
 
-    def _placed(self) -> list[Constraint]:
+
+class ConstraintEditing:
+    """The constraints the operator placed (``app.constraints``), a component of
+    :class:`web.app.TeleopApp` that owns them: :attr:`entries` by id and the counter of new
+    ids. Its actions take the session's lock; the control tick reads :attr:`entries`
+    holding it.
+
+    Parameters
+    ----------
+    robot : the session's robot.
+    lock : the session's lock.
+    wall_stiffness : the abdominal wall's stiffness (N/m) at every port, or None: each
+        port's own (:func:`.plant.apply_wall`).
+    recorder : the session's recording (it gets every change).
+    session : what it reads of the rest of the session (:class:`EditingSession`).
+    """
+
+    def __init__(self, robot: Robot, lock: threading.RLock, wall_stiffness: float | None,
+                 recorder: SessionRecording, session: EditingSession) -> None:
+        self.robot = robot
+        self._lock = lock
+        self._wall_stiffness = wall_stiffness
+        self._recorder = recorder
+        self._session = session
+        self.entries: dict[str, ConstraintEntry] = {}
+        self._ids = itertools.count(1)
+        self._data = robot.model.createData()  # for the placements, under the lock
+
+    def placed(self) -> list[Constraint]:
         """The placed constraints (caller holds the lock)."""
         return [entry.constraint for entry in self.entries.values()]
-
-    def _link_placement(self, link: str, which: str = "main") -> pin.SE3:
-        """World placement of ``link`` on robot ``which`` now (caller holds the lock)."""
-        return frame_placement(self.robot.model, self.robots.loops[which].q, link, self._view_data)
 
     @property
     def moving_links(self) -> tuple[str, ...]:
@@ -61,22 +87,24 @@ class Editing:
         (one per arm) first, then every other link that moves (a mobile base...)."""
         return moving_links(self.robot)
 
-    def add_constraint(self, constraint: str | Constraint, **fields) -> str:
+    def add(self, constraint: str | Constraint, **fields) -> str:
         """Place a constraint; its id (``"<kind>-<n>"``).
 
         ``constraint`` is a kind name of :data:`constraints.CONSTRAINT_TYPES` with the
-        values of that type's ``placement`` fields (``add_constraint(kind, distance=0.08)``;
-        a field left out takes its declared default, a link its first choice): the
-        constraint goes where the main robot is now. Or it is a built constraint, placed
-        as it is. Either takes the app's drift gain. A bad value, or a constraint the
+        values of that type's ``placement`` fields (``add(kind, distance=0.08)``; a field
+        left out takes its declared default, a link its first choice): the constraint
+        goes where the main robot is now. Or it is a built constraint, placed as it is.
+        Either takes the session's drift gain. A bad value, or a constraint the
         controllers refuse (unknown link, gain unstable at this rate), raises
         ``ValueError`` and places nothing.
         """
         if isinstance(constraint, str):
             kind_type = constraint_type(constraint)
             with self._lock:
-                values = Placement(kind_type, self.robot, self._link_placement).values(fields)
-                return self._place(kind_type.place(self.robot, self.robots.loops["main"].q, **values))
+                q = self._session.configuration()
+                values = Placement(kind_type, self.robot, lambda link: frame_placement(
+                    self.robot.model, q, link, self._data)).values(fields)
+                return self._place(kind_type.place(self.robot, q, **values))
         if not isinstance(constraint, Constraint):
             raise ValueError(f"expected a constraint or a constraint kind "
                              f"({', '.join(CONSTRAINT_TYPES)}), got {short_repr(constraint)}")
@@ -86,25 +114,25 @@ class Editing:
         return self._place(constraint)
 
     def _place(self, constraint: Constraint) -> str:
-        """Add ``constraint`` at its position with the app's gain; its new id."""
+        """Add ``constraint`` at its position with the session's gain; its new id."""
         with self._lock:
-            constraint.gain = self.robots.gain
-            apply_wall(constraint, self.plant.wall_stiffness)
+            constraint.gain = self._session.gain()
+            apply_wall(constraint, self._wall_stiffness)
             entry_id = f"{constraint.kind}-{next(self._ids)}"
             if entry_id in self.entries:
                 raise ValueError(f"a constraint {entry_id!r} is already placed")
             self.entries[entry_id] = ConstraintEntry(entry_id, constraint.position,
                                                      constraint=constraint)
             try:
-                self.robots.sync_constraints()
+                self._session.changed()
             except ValueError:
                 del self.entries[entry_id]
-                self.robots.sync_constraints()
+                self._session.changed()
                 raise
-            self.recorder.add(entry_id, constraint)
+            self._recorder.add(entry_id, constraint)
             return entry_id
 
-    def move_constraint(self, entry_id: str, position) -> None:
+    def move(self, entry_id: str, position) -> None:
         """Move a constraint's geometry (its world reference point): the robot follows it."""
         position = as_vector(position, 3, "constraint position")
         with self._lock:
@@ -118,17 +146,26 @@ class Editing:
             entry.goal = position.copy()
             entry.settled = False
 
-    def remove_constraint(self, entry_id: str) -> None:
+    def remove(self, entry_id: str) -> None:
+        """Remove the constraint ``entry_id``."""
         with self._lock:
             if self.entries.pop(entry_id, None) is None:
                 raise ValueError(f"no constraint {entry_id!r}")
-            self.robots.sync_constraints()
-            self.recorder.remove(entry_id)
+            self._session.changed()
+            self._recorder.remove(entry_id)
 
-    def clear_constraints(self) -> int:
+    def clear(self) -> int:
         """Remove every constraint; how many there were."""
         with self._lock:
             ids = list(self.entries)
             for entry_id in ids:
-                self.remove_constraint(entry_id)
+                self.remove(entry_id)
             return len(ids)
+
+    def restore(self, entries: dict[str, ConstraintEntry]) -> None:
+        """A scene's constraints (caller holds the lock; the loops already hold them); the
+        next ids follow theirs."""
+        self.entries = entries
+        numbers = [int(entry_id.rsplit("-", 1)[1]) for entry_id in entries
+                   if entry_id.rsplit("-", 1)[-1].isdigit()]
+        self._ids = itertools.count(max(numbers, default=0) + 1)

@@ -5,7 +5,6 @@ controllers, settings, collision avoidance and obstacles) saved to and loaded fr
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 import threading
 from datetime import datetime
@@ -32,7 +31,7 @@ from ..scene import (
 )
 from .collisions import CollisionScene, ObstacleEntry
 from .console import EEInput, pose_from
-from .editing import ConstraintEntry
+from .editing import ConstraintEditing, ConstraintEntry
 from .limits import (
     MAX_DAMPING,
     MAX_GHOST_OFFSET,
@@ -60,12 +59,11 @@ class Scenes:
     plant: PlantChoice
     motion_scale: float
     clutch: bool
-    entries: dict[str, ConstraintEntry]
+    constraints: ConstraintEditing
     collisions: CollisionScene
     inputs: list[EEInput]
     joint_names: list[str]
     scenes: Folder
-    _ids: itertools.count
     _next_history: float
     ros2: Ros2Robot | None
     _lock: threading.RLock
@@ -93,7 +91,7 @@ class Scenes:
                 "target": targets[0], **several,
                 "constraints": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                  "constraint": e.constraint.to_dict()}
-                                for e in self.entries.values()],
+                                for e in self.constraints.entries.values()],
                 "collisions": {"on": self.collisions.on, **settings},
                 "obstacles": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                "obstacle": e.obstacle.to_dict()}
@@ -169,13 +167,9 @@ class Scenes:
                 force.history.clear()  # the plot starts with the scene's tissue
             self.robots.restore(loops, specs, config, scene.gain, scene.damping,
                                 scene.orientation_weight, scene.task_mode)
-            self.entries = {}
-            for placed in scene.constraints:
-                self.entries[placed.id] = ConstraintEntry(
-                    placed.id, placed.goal.copy(), constraint=placed.constraint).restored()
-            numbers = [int(p.id.rsplit("-", 1)[1]) for p in scene.constraints
-                       if p.id.rsplit("-", 1)[-1].isdigit()]
-            self._ids = itertools.count(max(numbers, default=0) + 1)
+            self.constraints.restore({placed.id: ConstraintEntry(
+                placed.id, placed.goal.copy(), constraint=placed.constraint).restored()
+                for placed in scene.constraints})
             self.collisions.restore(avoidance, collisions_on, {placed.id: ObstacleEntry(
                 placed.id, placed.goal.copy(), obstacle=placed.obstacle).restored()
                 for placed in scene.obstacles})

@@ -21,7 +21,7 @@ from .robots import Robots
 from .collisions import CollisionScene, ObstacleEntry
 from .console import EEInput
 from .devices import InputDevices
-from .editing import ConstraintEntry
+from .editing import ConstraintEditing, ConstraintEntry
 from .force_control import ForceControl
 from .limits import HISTORY_RATE
 from .homing import WayHome
@@ -36,7 +36,7 @@ class Tick:
     next history sample is due)."""
 
     robots: Robots
-    entries: dict[str, ConstraintEntry]
+    constraints: ConstraintEditing
     inputs: list[EEInput]
     devices: InputDevices
     recorder: SessionRecording
@@ -67,7 +67,8 @@ class Tick:
         """
         with self._lock:
             dt = self.robots.config.dt
-            moving = [entry for entry in (*self.entries.values(), *self.collisions.obstacles.values())
+            moving = [entry for entry in (*self.constraints.entries.values(),
+                                          *self.collisions.obstacles.values())
                       if not entry.settled]
             if moving:
                 self._steer(moving, dt)

@@ -17,7 +17,7 @@ from .robots import Robots
 from ..constraint_drawing import constraint_geometry
 from .collisions import CollisionScene
 from .console import EEInput
-from .editing import ConstraintEntry
+from .editing import ConstraintEditing
 from .force_control import ForceControl
 from .plant import PlantChoice, port_readings
 from .shortfall import asked_angle, explained, ports_on_chain, shortfall_words
@@ -31,7 +31,7 @@ class View:
 
     robots: Robots
     robot: Robot
-    entries: dict[str, ConstraintEntry]
+    constraints: ConstraintEditing
     collisions: CollisionScene
     inputs: list[EEInput]
     joint_names: list[str]
@@ -54,7 +54,7 @@ class View:
     def _limitation(self, which: str, placement: pin.SE3, ee: int) -> Limitation:
         loop = self.robots.loops[which]
         target = self.inputs[ee].target
-        constraints = {entry.id: entry.constraint for entry in self.entries.values()}
+        constraints = {entry.id: entry.constraint for entry in self.constraints.entries.values()}
         return self._described(loop.controller.info, self.robots.last_records.get(which), placement,
                                target, loop.refused or self._stopped(), ee, loop.task_modes[ee],
                                constraints, self.homing.words_at(self.now))
@@ -83,7 +83,7 @@ class View:
         equalities now (from its step's :class:`controllers.SolveInfo`)."""
         with self._lock:
             controller = self.robots.loops[which].controller
-            ids = {id(e.constraint): e.id for e in self.entries.values()}
+            ids = {id(e.constraint): e.id for e in self.constraints.entries.values()}
             constraints = controller.constraints
             return [ids.get(id(constraints[i]), f"#{i}") for i in controller.info.active_barriers
                     if i < len(constraints)]
@@ -98,10 +98,10 @@ class View:
         for them (docs/design.md section 5.3)."""
         with self._lock:
             constraints = {entry.id: copy.copy(entry.constraint)
-                           for entry in self.entries.values()}
+                           for entry in self.constraints.entries.values()}
             states = {which: self._robot_state(which, loop, history)
                       for which, loop in self.robots.loops.items()}
-            goals = {entry.id: (entry.kind, entry.goal.copy()) for entry in self.entries.values()}
+            goals = {entry.id: (entry.kind, entry.goal.copy()) for entry in self.constraints.entries.values()}
             targets = [hand.target.copy() for hand in self.inputs]
             snapshot = {"ee_frames": self.robot.ee_frames, "targets": targets,
                         "gizmos": [hand.gizmo.copy() for hand in self.inputs],
@@ -152,8 +152,8 @@ class View:
         pin.framesForwardKinematics(model, self._view_data, q)
         placements = self._view_data.oMf
         links = {entry.id: placements[model.getFrameId(entry.constraint.link)].copy()
-                 for entry in self.entries.values()}
-        ids = {id(entry.constraint): entry.id for entry in self.entries.values()}
+                 for entry in self.constraints.entries.values()}
+        ids = {id(entry.constraint): entry.id for entry in self.constraints.entries.values()}
         return {"spec": self.robots.specs[which], "q": q, "t": loop.t,
                 "ees": [placements[frame].copy() for frame in self.robot.ee_frame_ids],
                 "links": links, "record": self.robots.last_records.get(which),

@@ -122,8 +122,8 @@ class TeleopUI(SceneView, PortForces):
         self._ghost_seen: float | None = None  # when the view first saw the ghost
         robot = app.robot
         #: where each link's geometry is around its axis: rings and collars go outside it
-        self.profiles = {link: LinkProfile.of(robot, link) for link in app.moving_links}
-        self.square_sizes = {link: square_size(robot, link) for link in app.moving_links}
+        self.profiles = {link: LinkProfile.of(robot, link) for link in app.constraints.moving_links}
+        self.square_sizes = {link: square_size(robot, link) for link in app.constraints.moving_links}
         self.ee_names = short_names(robot.ee_frames)  # what the operator reads per EE
         self.floor = floor_height(app.robot)
         self.notes = list(notes)
@@ -133,7 +133,7 @@ class TeleopUI(SceneView, PortForces):
                                                   self.square_sizes, labelled=True)
         self.constraint_markers = PlacedMarkers(
             server, "/constraints", self.constraint_drawer,
-            Gizmos(app.move_constraint, self._guarded, "constraint"))
+            Gizmos(app.constraints.move, self._guarded, "constraint"))
         self.ghost_markers = PlacedMarkers(server, "/ghost/constraints", ConstraintDrawer(
             server, robot, self.profiles, self.square_sizes, labelled=False))
         self.obstacle_markers = PlacedMarkers(
@@ -202,8 +202,8 @@ class TeleopUI(SceneView, PortForces):
             self.constraint_panel = PlacedPanel(
                 gui, {kind: ConstraintForm(kind_type, app.robot)
                       for kind, kind_type in CONSTRAINT_TYPES.items() if kind_type.placement},
-                PlacedActions(lambda kind, values: app.add_constraint(kind, **values),
-                              app.remove_constraint, app.clear_constraints),
+                PlacedActions(lambda kind, values: app.constraints.add(kind, **values),
+                              app.constraints.remove, app.constraints.clear),
                 PlacedWords("placed", "Remove", "Clear constraints"), self._guarded)
         with self.tabs.add_tab("Collisions"):
             self.collision_settings = CollisionSettingsPanel(gui, app.collisions, self._guarded)
