@@ -175,7 +175,7 @@ def drive_with_the_control_thread(app: TeleopApp, drag: bool) -> tuple[float, fl
     kept (the lock's wait included), then 1 s to settle when ``drag``; else the target
     nudged 2 cm and 2 s. The hole's largest error sampled every step, the tip's distance
     to its target at the end (m), the calls' durations (s)."""
-    app.add_constraint("hole", distance=0.20)
+    app.constraints.add("hole", distance=0.20)
     control = ControlThread(app)
     control.start()
     errors, calls = [], []
@@ -197,7 +197,7 @@ def drive_with_the_control_thread(app: TeleopApp, drag: bool) -> tuple[float, fl
         assert control.error is None, control.error
     finally:
         control.stop()
-    distance = float(np.linalg.norm(app.loops["main"].ee_placements()[0].translation
+    distance = float(np.linalg.norm(app.robots.loops["main"].ee_placements()[0].translation
                                     - app.target.translation))
     return max(errors), distance, calls
 
@@ -213,7 +213,7 @@ def test_the_control_thread_is_paced_by_the_robot_and_holds_the_hole(robot, doma
                     record_dir=tmp_path, scene_dir=tmp_path)
     try:
         error, distance, _ = drive_with_the_control_thread(app, drag=False)
-        assert app.loops["main"].plant.measures().stopped == ""
+        assert app.robots.loops["main"].plant.measures().stopped == ""
     finally:
         (app.ros2 or pytest.fail("no ROS 2 robot")).close()
     print(f"hole error {error * 1e6:.3f} um, tip {distance * 1e3:.2f} mm from the target")
