@@ -13,9 +13,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from teleop.controller_specs import make_controller
 from teleop.experiments.bench_loop import scenario_loop
 from teleop.experiments.scenarios import load_scenario
-from teleop.loop import StepRecord
+from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.plants.imperfect import Imperfections
 
 
 def reference_command_measures(loop, step) -> tuple[float, np.ndarray, np.ndarray, float]:
@@ -128,3 +130,34 @@ def test_the_measures_taken_after_the_run_are_those_taken_at_once(scenario, comp
         records_equal(later.measure_later(period), record)
     moved = [period.end.constraints[0].position for period in periods]
     assert (len({tuple(position) for position in moved}) > 1) == (scenario == "moving-trocar")
+
+
+def paper_hole_on_a_plant(imperfections: Imperfections) -> tuple[TeleopLoop, list]:
+    """``paper-hole`` (0.15 s) on the imperfect plant of ``imperfections``, the measures
+    on its true kinematics."""
+    plan = load_scenario("paper-hole")
+    config = LoopConfig()
+    controller = make_controller("cjm", plan.robot, plan.make_constraints(), dt=config.dt)
+    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config,
+                      plant=imperfections.plant(plan.robot.model, config.dt),
+                      true_model=imperfections.true_model(plan.robot.model))
+    return loop, [plan.target((i + 1) * config.dt) for i in range(150)]
+
+
+@pytest.mark.parametrize("calibration_error", [0.0, 1e-3])
+def test_the_measures_after_the_run_on_a_plant_are_those_taken_at_once(calibration_error):
+    """On a noisy, delayed plant the command's measures are at the true configuration before
+    the period with the velocity the plant applied: kept, they give ``tick``'s records bit
+    for bit; with a calibration error (the true kinematics register each constraint where
+    first met) the measures are taken at once, the same records."""
+    imperfections = Imperfections(encoder_noise=1e-4, latency=2, seed=3,
+                                  calibration_position_std=calibration_error,
+                                  calibration_rotation_std=2 * calibration_error)
+    (at_once, targets), (later, _) = (paper_hole_on_a_plant(imperfections) for _ in range(2))
+    assert later.measures_later == (calibration_error == 0.0)
+    expected = [at_once.tick(target) for target in targets]
+    periods = [later.tick_measured_later(target) for target in targets]
+    assert all((period.record is None) == later.measures_later for period in periods)
+    for period, record in zip(periods, expected):
+        records_equal(later.measure_later(period), record)
+    assert max(record.constraint_error for record in expected) > 0.0
