@@ -77,7 +77,7 @@ def main() -> None:
             for ee, side in ((0, -1.0), (1, 1.0)):
                 for _ in range(int(CROSSING / 0.02)):
                     app.nudge_target([0.0, 0.02 * side, 0.0], ee)
-            ui._move_gizmo_handles()
+            ui.scene.move_gizmos()
 
             def held() -> bool:
                 rows = app.collision_rows.get("main")
@@ -90,7 +90,7 @@ def main() -> None:
             wait_until(held, "the arms to be held apart")
             rows = app.collision_rows["main"]
             wait_until(lambda: rows.closest_pair in ui.pair_highlights.pair_nodes, "the pair highlighted")
-            for handle in (*ui.target_gizmos, *ui.target_markers, *ui.reach_lines):
+            for handle in (*ui.scene.target_gizmos, *ui.scene.target_markers, *ui.scene.reach_lines):
                 handle.visible = False
             for button in page.locator("[class*='Notification'] button").all():
                 button.click()  # "software WebGL" and the like

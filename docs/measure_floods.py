@@ -181,7 +181,7 @@ def main() -> None:
         baseline, baseline_worst = sampler.rates(time.perf_counter() - args.baseline,
                                                  time.perf_counter())
         results["baseline"] = {"mean_hz": baseline, "worst_1s_hz": baseline_worst}
-        gizmo = ui.target_gizmo
+        gizmo = ui.scene.target_gizmo
         goal = [*gizmo.position, *gizmo.wxyz]
         floods = {
             "gui": lambda: [child(GUI_FLOOD, url, origin, args.events, *goal)],

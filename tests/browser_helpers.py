@@ -458,7 +458,7 @@ def look_at_target(web, distance: float | None = None) -> None:
     2.5 gizmo sizes away (the gizmo then spans the same part of the view whatever its
     size)."""
     if distance is None:
-        distance = 2.5 * web.ui.target_gizmo.scale
+        distance = 2.5 * web.ui.scene.target_gizmo.scale
     target = web.app.target.translation.copy()
     direction = np.array([0.55, -0.65, 0.45])
     set_camera(web.client, target + distance * direction / np.linalg.norm(direction), target)
@@ -479,12 +479,12 @@ def plan_drag(web, distance: float, steps: int, prefer_sign: float = 1.0, ee: in
     right = pin.Quaternion(*camera.wxyz).normalized().matrix()[:, 0]  # camera x, in the world
     avoid = []  # the constraints' own gizmos: circles on screen
     others = [markers["gizmo"] for markers in list(web.ui.constraint_markers.nodes.values())]
-    others += [handle for k, handle in enumerate(web.ui.target_gizmos) if k != ee]
+    others += [handle for k, handle in enumerate(web.ui.scene.target_gizmos) if k != ee]
     for handle in others:
         position, scale = np.asarray(handle.position), handle.scale
         centre, edge = project(camera, box, [position, position + scale * right])
         avoid.append((centre, 1.2 * np.linalg.norm(edge - centre) + 10.0))
-    gizmo = web.ui.target_gizmos[ee]
+    gizmo = web.ui.scene.target_gizmos[ee]
     origin = np.asarray(gizmo.position, dtype=float)
     w, x, y, z = gizmo.wxyz
     rotation = pin.Quaternion(w, x, y, z).normalized().matrix()

@@ -102,7 +102,7 @@ def test_page_loads_and_the_browser_registers_as_a_client(web):
 
 
 def test_robot_is_in_the_scene(web):
-    visualiser = web.ui._visualisers["main"]
+    visualiser = web.ui.scene.views["main"]
     visual = [g.name for g in web.robot.visual_model.geometryObjects]
     assert visual, "the robot has no visual geometry"
     for name in visual:
@@ -211,7 +211,7 @@ def test_real_mouse_drag_moves_the_ee_while_the_hole_holds(web):
     assert abs(dragged @ result.plan.direction - 0.012) < 0.003
     assert np.linalg.norm(np.cross(dragged, result.plan.direction)) < 0.002
     # the gizmo the page moved is where the app's target is
-    np.testing.assert_allclose(web.ui.target_gizmo.position, result.target1, atol=1e-6)
+    np.testing.assert_allclose(web.ui.scene.target_gizmo.position, result.target1, atol=1e-6)
     unit = dragged / np.linalg.norm(dragged)
     assert (result.ee1 - result.ee0) @ unit > 0.005, "the EE did not follow the target"
     assert np.linalg.norm(result.ee1 - result.target1) < 1e-3
@@ -304,7 +304,7 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
         time.sleep(0.3)
     wait_until(lambda: np.linalg.norm(app.target.translation - target0 - [0, 0.015, -0.01]) < 1e-9,
                WAIT, "the target nudged by (0, 15, -10) mm")
-    wait_until(lambda: np.linalg.norm(np.asarray(web.ui.target_gizmo.position)
+    wait_until(lambda: np.linalg.norm(np.asarray(web.ui.scene.target_gizmo.position)
                                       - app.target.translation) < 1e-6, WAIT,
                "the gizmo on the nudged target")
     np.testing.assert_allclose(app.gizmo.translation, app.target.translation, atol=1e-12)
@@ -312,7 +312,7 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
     time.sleep(2.0)
 
     # the README's screenshot: the hole, CJM and QP as two robots side by side, the plots
-    wait_until(lambda: "ghost" in ui._views, WAIT, "the ghost drawn")
+    wait_until(lambda: "ghost" in ui.scene.views, WAIT, "the ghost drawn")
     offset = app.robots.ghost_offset
     model = app.robot.model
     data = model.createData()

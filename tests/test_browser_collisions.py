@@ -64,7 +64,7 @@ def web(tmp_path_factory):
 def z_arrow_drag(web, distance: float, steps: int) -> SimpleNamespace:
     """The screen path of a drag of the target gizmo's z arrow (the tool's z axis) by
     ``distance`` m, grabbed near its tip, with the camera beside it."""
-    gizmo = web.ui.target_gizmos[0]
+    gizmo = web.ui.scene.target_gizmos[0]
     origin = np.asarray(gizmo.position, dtype=float)
     rotation = pin.Quaternion(*gizmo.wxyz).normalized().matrix()
     axis = rotation[:, 2]

@@ -104,13 +104,13 @@ def test_the_ghost_is_drawn_beside_the_robot_at_its_offset(web):
     # both images settled: a frame caught while the camera or the main robot still moves
     # changes pixels everywhere, and their centre says nothing about the ghost
     shown = wait_for_still_canvas(web, WAIT)
-    ui._views["ghost"].displayVisuals(False)
+    ui.scene.views["ghost"].displayVisuals(False)
     try:
         wait_for_pixels(web, lambda p: changed_fraction(p, shown) > 0.005, WAIT,
                         "the canvas to change when the ghost is hidden")
         hidden = wait_for_still_canvas(web, WAIT)
     finally:
-        ui._views["ghost"].displayVisuals(True)
+        ui.scene.views["ghost"].displayVisuals(True)
     # only the pixels around the two robots: the panel and the toasts overlay the canvas in a
     # screenshot, and their text changes on its own (a "control loop behind" notice on a
     # loaded machine moved the centre of all changed pixels halfway to the panel)
@@ -138,7 +138,7 @@ def test_clutch_engaged_a_real_drag_does_not_move_the_robot_and_release_does_not
     expect(page.get_by_role("button", name="Release clutch")).to_be_visible()
     time.sleep(0.5)
     target0, ee0 = app.target.copy(), ee_position(app)
-    gizmo0 = np.asarray(ui.target_gizmo.position).copy()
+    gizmo0 = np.asarray(ui.scene.target_gizmo.position).copy()
     look_at_target(web)
     plan = plan_drag(web, distance=0.01, steps=10)
     drag(web, plan)  # the real mouse, on the gizmo's arrow
@@ -148,7 +148,7 @@ def test_clutch_engaged_a_real_drag_does_not_move_the_robot_and_release_does_not
     time.sleep(0.5)
     assert app.target.isApprox(target0, 1e-12), "the target moved with the clutch engaged"
     assert np.linalg.norm(ee_position(app) - ee0) < 1e-6, "the robot moved"
-    assert ui.target_marker.visible  # the target drawn apart from the gizmo
+    assert ui.scene.target_marker.visible  # the target drawn apart from the gizmo
     page.get_by_role("button", name="Release clutch").click()
     wait_until(lambda: not app.clutch, WAIT, "the clutch to release")
     assert app.target.isApprox(target0, 1e-12), "the target jumped on release"

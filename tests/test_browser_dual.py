@@ -61,7 +61,7 @@ def look_at_tool(web, ee: int) -> None:
     target = web.app.targets[ee].translation
     outward = np.sign(target[1]) or 1.0
     direction = np.array([0.75, 0.25 * outward, 0.6])
-    distance = 2.5 * web.ui.target_gizmos[ee].scale
+    distance = 2.5 * web.ui.scene.target_gizmos[ee].scale
     set_camera(web.client, target + distance * direction / np.linalg.norm(direction), target)
 
 
@@ -97,7 +97,7 @@ def drag_gizmo(web, ee: int, distance: float, steps: int):
 
 def test_dragging_each_gizmo_moves_its_own_ee(web):
     app = web.app
-    assert len(web.ui.target_gizmos) == 2
+    assert len(web.ui.scene.target_gizmos) == 2
     for ee in (0, 1):
         other = 1 - ee
         targets0, ees0, ees1, moved, _ = drag_gizmo(web, ee, distance=0.02, steps=20)
@@ -110,7 +110,7 @@ def test_dragging_each_gizmo_moves_its_own_ee(web):
               f"{1e9 * np.linalg.norm(ees1[other] - ees0[other]):.1f} nm")
         np.testing.assert_allclose(ees1[ee] - ees0[ee], moved, atol=1e-4)
         assert np.linalg.norm(ees1[other] - ees0[other]) < 1e-6
-        np.testing.assert_allclose(web.ui.target_gizmos[ee].position,
+        np.testing.assert_allclose(web.ui.scene.target_gizmos[ee].position,
                                    app.targets[ee].translation, atol=1e-6)
     assert web.page_errors == [], web.page_errors
 

@@ -29,7 +29,7 @@ def test_the_panda_opens_with_its_meshes(tmp_path):
     panda = load_robot(PANDA, ee_frame="panda_hand", constrained_link="panda_link4",
                        link_axis=(-0.0825, 0.384, 0.0))
     with open_web(panda, tmp_path) as web:
-        view = web.ui._views["main"]
+        view = web.ui.scene.views["main"]
         assert view.problems == [] and web.ui.notes == []
         names = [g.name for g in panda.visual_model.geometryObjects]
         assert len(names) == 11

@@ -59,7 +59,7 @@ def web(tmp_path_factory):
         served.forces = []  # (loop time, largest port force) of every control period
         served.arrows = []  # (reading, arrow points, visible) of every arrow drawn
         app, ui = served.app, served.ui
-        step, draw_ports = app.step, ui._draw_ports
+        step, draw_ports = app.step, ui.port_arrows.draw
 
         def step_and_read() -> float:
             solve_us = step()
@@ -67,15 +67,15 @@ def web(tmp_path_factory):
             served.forces.append((app.now, measures.port_force))
             return solve_us
 
-        def draw_and_read(robots: dict) -> None:
-            draw_ports(robots)
+        def draw_and_read(robots: dict, views) -> None:
+            draw_ports(robots, views)
             for reading in robots["main"]["ports"]:
-                handle = ui._port_arrows["main"].get(reading.id)
+                handle = ui.port_arrows.arrows["main"].get(reading.id)
                 if handle is not None:
                     served.arrows.append((reading, np.asarray(handle.points, dtype=float),
                                           handle.visible))
 
-        app.step, ui._draw_ports = step_and_read, draw_and_read
+        app.step, ui.port_arrows.draw = step_and_read, draw_and_read
         yield served
 
 
@@ -180,7 +180,7 @@ def test_a_force_held_on_the_wall_is_drawn_in_red_at_the_port(web, tmp_path):
     look_at_target(web)
 
     paced_drag(web, distance=0.012, steps=12, prefer_sign=-1.0)
-    arrow = wait_until(lambda: (handle := ui._port_arrows["main"].get(hole_id)) is not None
+    arrow = wait_until(lambda: (handle := ui.port_arrows.arrows["main"].get(hole_id)) is not None
                        and handle.visible and handle, WAIT,
                        "an arrow held at the port after the drag")
     reading = app.snapshot(history=False)["robots"]["main"]["ports"][0]

@@ -302,14 +302,14 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
     from web.ui import STATUS_COLORS
 
     ui = make_ui(server, app)
-    assert len(ui.target_gizmos) == 2 and ui.ee_names == {"arm_left_link_tool0": "left",
+    assert len(ui.scene.target_gizmos) == 2 and ui.ee_names == {"arm_left_link_tool0": "left",
                                                           "arm_right_link_tool0": "right"}
     assert ui.teleop_panel.active_arm.visible and ui.teleop_panel.active_arm.options == ("left", "right")
-    for gizmo, target in zip(ui.target_gizmos, app.targets):
+    for gizmo, target in zip(ui.scene.target_gizmos, app.targets):
         np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
-    right = ui.target_gizmos[1]  # what the right gizmo's drag does: the right target only
+    right = ui.scene.target_gizmos[1]  # what the right gizmo's drag does: the right target only
     right.position = np.asarray(right.position) + [0.0, -0.01, 0.0]
-    ui._gizmo_moved(right, 1)(SimpleNamespace(client=None, client_id=None, phase="update"))
+    ui.scene._gizmo_moved(right, 1)(SimpleNamespace(client=None, client_id=None, phase="update"))
     ui.inbox.start()  # the action went to the inbox: applied there
     try:
         assert ui.inbox.drain(10.0)
@@ -321,10 +321,10 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
         app.step()
     snapshot = app.snapshot()
     ui._draw(snapshot)
-    assert not ui.reach_lines[0].visible and ui.reach_lines[1].visible
-    np.testing.assert_allclose(ui.reach_lines[1].points[0],
+    assert not ui.scene.reach_lines[0].visible and ui.scene.reach_lines[1].visible
+    np.testing.assert_allclose(ui.scene.reach_lines[1].points[0],
                                [ee_positions(app)[1], app.inputs[1].target.translation], atol=1e-9)
-    np.testing.assert_allclose(ui.reach_lines[1].colors[0, 0], STATUS_COLORS["ok"])
+    np.testing.assert_allclose(ui.scene.reach_lines[1].colors[0, 0], STATUS_COLORS["ok"])
     details = ui.status_panel.details.content
     assert "*left* on target" in details and "*right* moving to the target" in details
     ui.teleop_panel.active_arm.value = "right"  # the nudges act on the active arm
@@ -334,7 +334,7 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
     np.testing.assert_allclose(app.inputs[1].target.translation - before[1].translation,
                                [0, 0, 0.005], atol=1e-15)
     ui.teleop_panel.home()
-    for gizmo, target in zip(ui.target_gizmos, app.targets):
+    for gizmo, target in zip(ui.scene.target_gizmos, app.targets):
         np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
 
 
@@ -366,7 +366,7 @@ def test_the_mobile_base_is_drawn_where_the_planar_joint_puts_it_and_a_wall_span
     q[:4] = [0.3, -0.2, np.cos(0.5), np.sin(0.5)]  # x, y, heading 0.5 rad
     app.robots.loops["main"].q = q
     ui._draw(app.snapshot())
-    view = ui._views["main"]
+    view = ui.scene.views["main"]
     geometry = pin.GeometryData(mobile.visual_model)
     pin.updateGeometryPlacements(mobile.model, mobile.model.createData(), mobile.visual_model,
                                  geometry, q)

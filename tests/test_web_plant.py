@@ -249,7 +249,7 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         ui.plots.draw(snapshot)
         (port,) = snapshot["robots"]["main"]["ports"]
         assert port.magnitude > 1e-2
-        arrow = ui._port_arrows["main"][hole_id]
+        arrow = ui.port_arrows.arrows["main"][hole_id]
         assert arrow.name == f"/ports/{hole_id}" and arrow.visible
         segments = np.asarray(arrow.points, dtype=float)
         # viser holds float32 points: a few float32 round-offs of coordinates under 1 m
@@ -284,16 +284,16 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         # a ghost gets its own arrows, under its own root; without it they go
         app.robots.set_ghost("qp:daqp")
         run(app, 0.05)
-        ui._ghost_seen = -1e9  # drawn at once (no plots to wait for here)
+        ui.scene.ghost_seen = -1e9  # drawn at once (no plots to wait for here)
         ui._draw(app.snapshot())
-        assert ui._port_arrows["ghost"][hole_id].name == f"/ghost/ports/{hole_id}"
+        assert ui.port_arrows.arrows["ghost"][hole_id].name == f"/ghost/ports/{hole_id}"
         app.robots.set_ghost(None)
         ui._draw(app.snapshot())
-        assert "ghost" not in ui._port_arrows
+        assert "ghost" not in ui.port_arrows.arrows
         app.constraints.remove(hole_id)
         run(app, 0.01)
         ui._draw(app.snapshot())
-        assert ui._port_arrows["main"] == {}
+        assert ui.port_arrows.arrows["main"] == {}
     finally:
         server.stop()
 

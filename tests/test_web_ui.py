@@ -57,7 +57,7 @@ def nudge(app, offset):
 
 def test_the_grid_is_at_the_robots_base(ui, ur5_instrument):
     assert ui.floor == pytest.approx(-0.1)  # the sda10f's base cylinder reaches 0.1 m down
-    np.testing.assert_allclose(ui.grid.position, [0.0, 0.0, -0.1])
+    np.testing.assert_allclose(ui.scene.grid.position, [0.0, 0.0, -0.1])
     assert floor_height(ur5_instrument) == pytest.approx(-0.01)
     panda = load_robot(PANDA)
     assert floor_height(panda) == pytest.approx(0.0, abs=1e-6)  # link0's mesh stands on z = 0
@@ -70,16 +70,16 @@ def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
     nudge(app, [0.0, 0.01, 0.0])
     run(app, 0.1)
     draw(ui)
-    assert "ghost" not in ui._views  # the plots show a new ghost first (then its meshes)
+    assert "ghost" not in ui.scene.views  # the plots show a new ghost first (then its meshes)
     draw(ui, plot=True)
     draw(ui)
     offset = app.robots.ghost_offset
-    np.testing.assert_allclose(ui._ghost_root.position, offset)
-    assert ui._ghost_root.name == "/ghost"
-    ghost = ui._views["ghost"]
+    np.testing.assert_allclose(ui.scene.ghost_root.position, offset)
+    assert ui.scene.ghost_root.name == "/ghost"
+    ghost = ui.scene.views["ghost"]
     names = [g.name for g in app.robot.visual_model.geometryObjects]
     assert all(f"/ghost/robot/visual/{name}" in ghost.frames for name in names)
-    assert ui._ghost_style == (0.45, 0.7, 1.0, 0.8)  # beside: nearly opaque
+    assert ui.scene.ghost_style == (0.45, 0.7, 1.0, 0.8)  # beside: nearly opaque
     # its own hole drawing, under the offset node, at its own link
     markers = ui.ghost_markers.nodes[hole_id]
     assert markers["shape"].name == f"/ghost/constraints/{hole_id}/ring"
@@ -88,14 +88,14 @@ def test_the_ghost_is_drawn_at_its_offset_with_its_own_constraints(ui):
     # moved the ghost: the whole subtree goes with it
     app.robots.set_ghost_offset([0.0, -1.0, 0.0])
     draw(ui)
-    np.testing.assert_allclose(ui._ghost_root.position, [0.0, -1.0, 0.0])
+    np.testing.assert_allclose(ui.scene.ghost_root.position, [0.0, -1.0, 0.0])
     app.robots.set_ghost_offset([0.0, 0.0, 0.0])  # overlay: redrawn see-through
     draw(ui)
-    assert ui._ghost_style[3] < 0.5
-    np.testing.assert_allclose(ui._ghost_root.position, [0.0, 0.0, 0.0])
+    assert ui.scene.ghost_style[3] < 0.5
+    np.testing.assert_allclose(ui.scene.ghost_root.position, [0.0, 0.0, 0.0])
     app.robots.set_ghost(None)
     draw(ui)
-    assert "ghost" not in ui._views and not ui.ghost_markers.nodes
+    assert "ghost" not in ui.scene.views and not ui.ghost_markers.nodes
 
 
 def test_a_satisfied_barrier_draws_no_error_line_and_an_arrow_to_its_allowed_side(ui):
@@ -137,18 +137,18 @@ def test_the_ee_target_line_takes_the_step_status_colour(ui):
     app.robots.set_task_mode("pose")  # position and roll reach this target (the default with a hole)
     app.constraints.add("hole", distance=0.08)
     draw(ui)
-    assert ui.reach_line.visible is False  # on target: nothing to show
-    assert ui.target_marker.visible is False  # the target is at the gizmo
+    assert ui.scene.reach_line.visible is False  # on target: nothing to show
+    assert ui.scene.target_marker.visible is False  # the target is at the gizmo
     nudge(app, [0.5, 0.0, 0.0])  # out of reach through the hole
     run(app, 6.0)
     snapshot = draw(ui)
     limitation = snapshot["robots"]["main"]["limitation"]
     assert limitation.status == "least_squares" and "target out of reach" in limitation.details
     assert "short of the target" in limitation.words  # the part, the cause, the action
-    assert ui.reach_line.visible is True
-    np.testing.assert_allclose(ui.reach_line.points[0, 1], app.target.translation, atol=1e-6)
-    np.testing.assert_allclose(ui.reach_line.colors[0, 0], STATUS_COLORS["least_squares"])
-    assert ui.target_marker.visible is True  # drawn apart from the gizmo
+    assert ui.scene.reach_line.visible is True
+    np.testing.assert_allclose(ui.scene.reach_line.points[0, 1], app.target.translation, atol=1e-6)
+    np.testing.assert_allclose(ui.scene.reach_line.colors[0, 0], STATUS_COLORS["least_squares"])
+    assert ui.scene.target_marker.visible is True  # drawn apart from the gizmo
     assert "short of the target" in ui.status_panel.details.content
 
 
@@ -230,7 +230,7 @@ def test_a_mesh_that_cannot_be_read_falls_back_and_says_so(server, monkeypatch, 
     panda = load_robot(PANDA, ee_frame="panda_hand")
     app = TeleopApp(panda, record_dir=tmp_path)
     ui = TeleopUI(server, app, ControlThread(app))
-    view = ui._views["main"]
+    view = ui.scene.views["main"]
     assert len(view.problems) == len(panda.visual_model.geometryObjects)
     assert view.problems[0] == ("link0.dae: missing `pip install pycollada`; drawn from the "
                                 "mesh Pinocchio read, without its materials")
@@ -261,8 +261,8 @@ def test_a_drag_ended_by_a_lost_browser_holds_the_target_where_the_ee_is(ui):
     from types import SimpleNamespace
 
     app = ui.app
-    gizmo = ui.target_gizmos[0]
-    moved = ui._gizmo_moved(gizmo, 0)
+    gizmo = ui.scene.target_gizmos[0]
+    moved = ui.scene._gizmo_moved(gizmo, 0)
     gone = 12345  # a client id the server does not list
     assert gone not in ui.server.get_clients()
     start = app.target.translation.copy()
@@ -348,7 +348,7 @@ def test_every_drawn_robot_has_its_contact_arrow_and_tissue(sda10f, server, tmp_
     run(app, 3.0)  # 2 mm at 1 cm/s, then the force loop settles
     draw(ui, plot=True)
     snapshot = draw(ui)
-    assert set(ui._views) == {"main", "ghost"}
+    assert set(ui.scene.views) == {"main", "ghost"}
     contacts = snapshot["force"]["contacts"]
     panel = ui.force_panel
     assert set(panel.arrows) == set(panel.tissues) == {"main", "ghost"}

@@ -1,14 +1,15 @@
-"""The viser front end: a thin layer over :class:`web.app.TeleopApp`, one module per part.
+"""The viser front end: a thin layer over :class:`web.app.TeleopApp`, one component per
+part, each owning its own viser handles (:class:`TeleopUI` holds them; no mixin).
 
 * scene (:mod:`.scene_view`): the robot (:class:`web.robot_view.RobotView`: any URDF,
   meshes or fallbacks; a mobile base moves with its planar root joint), an optional ghost
   robot drawn beside it (``ghost_offset``; zero overlays them), the grid at the robot's
   base; per end effector an input gizmo and, where it differs, the target itself; per
   robot and EE a line from the EE to its target coloured by the step status;
-* constraints (:mod:`.markers`), each drawn from its own ``geometry()``;
-* obstacles, each from its own ``geometry()`` with a gizmo, and the main robot's pairs
-  closer than the detection distance highlighted with their witness segments
-  (:mod:`.collision_view`);
+* the placed items, constraints and obstacles alike (:mod:`.placed_markers`: each with
+  a gizmo that moves it), each drawn from its own geometry (:mod:`.markers`,
+  :mod:`.obstacle_drawer`); the main robot's pairs closer than the detection distance
+  highlighted with their witness segments (:mod:`.collision_view`);
 * on a physics plant, the wall's force on the instrument at each port, an arrow scaled in
   newtons (:mod:`.port_forces`); a tissue under the tool, force control on it and the
   contact force's arrow and plot (the Force tab, :mod:`.force_panel`);
@@ -16,12 +17,12 @@
   browser whose camera moved last; their state in the status; the feedback force plotted;
 * panels: a status (:mod:`.status_view`: rate, lateness, what limits each robot's EEs in
   words, the one-sided constraints held), then tabs: Teleop (controllers, side by side,
-  clutch, motion scale, the active arm's nudges, home) and Settings (gain, damping, rate,
-  scenes, recording) (:mod:`.panels`), Constraints, built from the registry's
-  declarations (:mod:`.constraint_form`), Collisions (the avoidance's settings,
-  :mod:`.collision_panel`, and the obstacles, from the obstacle registry,
-  :mod:`.obstacle_form`): both placed items, one panel (:mod:`.placed_panel`), Plots (:mod:`.plots`,
-  uPlot).
+  clutch, motion scale, the active arm's nudges, home, :mod:`.teleop_panel`) and
+  Settings (gain, damping, rate, scenes, recording, :mod:`.settings_panel`),
+  Constraints, built from the registry's declarations (:mod:`.constraint_form`),
+  Collisions (the avoidance's settings, :mod:`.collision_panel`, and the obstacles, from
+  the obstacle registry, :mod:`.obstacle_form`): both placed items, one panel
+  (:mod:`.placed_panel`), Plots (:mod:`.plots`, uPlot).
 
 A robot with several end effectors (docs/design.md section 11) gets a gizmo on each: each
 drives its own EE's target; the clutch and the motion scale act on all of them; the nudge
@@ -41,15 +42,20 @@ from __future__ import annotations
 import os
 import threading
 import time
+from collections.abc import Callable
+from typing import Any, Literal
 
 import viser
 
 from constraints import CONSTRAINT_TYPES
+from constraints.registry import constraint_type
 from constraints.collision import OBSTACLE_TYPES
 
+from ..access import Access
 from ..app import ControlThread, TeleopApp
 from ..inbox import Inbox
-from ..robot_view import RobotView, floor_height
+from ..pacing import Tally
+from ..robot_view import floor_height
 from .collision_panel import CollisionSettingsPanel
 from .collision_view import PairHighlights
 from .constraint_form import ConstraintForm
@@ -61,13 +67,15 @@ from .obstacle_form import ObstacleForm
 from .placed_markers import Gizmos, PlacedMarkers
 from .placed_panel import PlacedActions, PlacedPanel, PlacedWords
 from .plots import LivePlots
-from .port_forces import PortForces
+from .port_forces import PortArrows
 from .scene_view import SceneView
 from .settings_panel import SettingsPanel
 from .shapes import LinkProfile, square_size
 from .status_view import StatusPanel
 from .teleop_panel import TeleopPanel
 
+#: the colours a notification takes here
+NotificationColor = Literal["red", "yellow"]
 VIEW_RATE = 30.0  # Hz: robot poses, markers, status
 PLOT_RATE = 10.0  # Hz: live plots
 STATUS_RATE = 5.0  # Hz: the status text (readable, and light on the browser)
@@ -94,7 +102,7 @@ def short_names(frames: tuple[str, ...]) -> dict[str, str]:
     return names
 
 
-class TeleopUI(SceneView, PortForces):
+class TeleopUI:
     """Builds the scene and panels on ``server`` and keeps them in sync with ``app``.
 
     ``notes`` are what the caller wants the operator told on connecting (e.g. the
@@ -109,17 +117,10 @@ class TeleopUI(SceneView, PortForces):
         self._stop = threading.Event()
         #: every operator action goes through it (web/inbox.py), never straight to the app
         self.inbox = Inbox(self._failed)
-        self._gone: set[int] = set()  # browsers that disconnected mid-drag
-        self._views: dict[str, RobotView] = {}
-        self._port_arrows: dict[str, dict] = {}  # robot -> port id -> its force arrow
-        self._ghost_root = None
-        self._ghost_style: tuple | None = None
         #: ``active`` while this thread sets widgets from the app: the callbacks viser runs
         #: synchronously for those assignments do nothing (a thread-local flag, so that an
         #: operator's click, handled on viser's threads meanwhile, is never dropped)
         self._syncing = threading.local()
-        self._line_colors: dict[tuple[str, int], tuple] = {}  # (robot, EE) -> its line colour
-        self._ghost_seen: float | None = None  # when the view first saw the ghost
         robot = app.robot
         #: where each link's geometry is around its axis: rings and collars go outside it
         self.profiles = {link: LinkProfile.of(robot, link) for link in app.constraints.moving_links}
@@ -127,7 +128,12 @@ class TeleopUI(SceneView, PortForces):
         self.ee_names = short_names(robot.ee_frames)  # what the operator reads per EE
         self.floor = floor_height(app.robot)
         self.notes = list(notes)
-        self._build_scene()
+        #: what :func:`web.ui.server.run_server` puts in front of the server: the token and
+        #: origin check (:mod:`web.access`), the messages' pacing (:mod:`web.pacing`)
+        self.access: Access | None = None
+        self.pacing: Tally | None = None
+        self.scene = SceneView(server, app, self.inbox, self._guarded, self.floor,
+                               self._ghost_removed)
         #: the placed items' nodes (constraints: the main robot's, the ghost's; obstacles)
         self.constraint_drawer = ConstraintDrawer(server, robot, self.profiles,
                                                   self.square_sizes, labelled=True)
@@ -140,19 +146,21 @@ class TeleopUI(SceneView, PortForces):
             server, "/obstacles", ObstacleDrawer(server),
             Gizmos(app.collisions.move, self._guarded, "obstacle", scale=0.08))
         self.pair_highlights = PairHighlights(server, robot)
-        self.notes += self._views["main"].problems
+        self.port_arrows = PortArrows(server, self.constraint_drawer.ring_radius_at)
+        self.notes += self.scene.views["main"].problems
         self._build_panels()
         server.on_client_connect(self._greet)
         self._thread = threading.Thread(target=self._view_loop, name="view", daemon=True)
 
-    @property
-    def _visualisers(self) -> dict[str, RobotView]:
-        """The robots' views by name ("main", "ghost")."""
-        return self._views
+    def _ghost_removed(self) -> None:
+        """The ghost's nodes went with its root: what was drawn under it is forgotten."""
+        self.ghost_markers.forget()
+        self.port_arrows.arrows.pop("ghost", None)
 
     # -- panels --------------------------------------------------------------------------
 
-    def _guarded(self, event, action, key: object = None, throttled: bool = False) -> None:
+    def _guarded(self, event: object, action: Callable[[], object], key: object = None,
+                 throttled: bool = False) -> None:
         """Post an operator action to the inbox (:mod:`web.inbox`: applied in order on its
         own thread; with a ``key``, the latest wins; ``throttled``, at most 10 a second);
         an impossible one becomes a notification, not a traceback."""
@@ -160,14 +168,18 @@ class TeleopUI(SceneView, PortForces):
             return
         self.inbox.post(action, key=key, context=event, throttled=throttled)
 
-    def _failed(self, event, error: Exception) -> None:
-        """An action from ``event`` could not be done: tell its browser why."""
+    def _failed(self, event: Any, error: Exception) -> None:
+        """An action from ``event`` (a GUI or scene event; None: none) could not be done:
+        tell its browser why."""
         if isinstance(error, ValueError):
             self.notify(event, "Not possible", str(error))
         else:
             self.notify(event, "Error", f"{type(error).__name__}: {error}")
 
-    def notify(self, event, title: str, body: str, color: str = "red") -> None:
+    def notify(self, event: Any, title: str, body: str,
+               color: NotificationColor = "red") -> None:
+        """Tell the browser of ``event`` (a GUI or scene event; None: every browser)
+        ``title`` and ``body``."""
         clients = [event.client] if event is not None and event.client is not None else \
             list(self.server.get_clients().values())
         for client in clients:
@@ -195,13 +207,13 @@ class TeleopUI(SceneView, PortForces):
         self.tabs = gui.add_tab_group()
         with self.tabs.add_tab("Teleop"):
             self.teleop_panel = TeleopPanel(gui, self.app, self.ee_names, self._guarded,
-                                            self._sync, self._move_gizmo_handle, self.notify)
+                                            self._sync, self.scene.move_gizmo, self.notify)
             self.device_panel = DevicePanel(self.server, self.app, self.ee_names, self._guarded)
         app = self.app
         with self.tabs.add_tab("Constraints"):
             self.constraint_panel = PlacedPanel(
-                gui, {kind: ConstraintForm(kind_type, app.robot)
-                      for kind, kind_type in CONSTRAINT_TYPES.items() if kind_type.placement},
+                gui, {kind: ConstraintForm(constraint_type(kind), app.robot)
+                      for kind in CONSTRAINT_TYPES if constraint_type(kind).placement},
                 PlacedActions(lambda kind, values: app.constraints.add(kind, **values),
                               app.constraints.remove, app.constraints.clear),
                 PlacedWords("placed", "Remove", "Clear constraints"), self._guarded)
@@ -236,7 +248,7 @@ class TeleopUI(SceneView, PortForces):
         self._sync(self.settings_panel.from_app)
         self._sync(self.collision_settings.from_app)
         self.obstacle_markers.remove()
-        self._move_gizmo_handles()
+        self.scene.move_gizmos()
 
     def _sync(self, action) -> None:
         """Set widgets from the app without their callbacks acting."""
@@ -281,28 +293,16 @@ class TeleopUI(SceneView, PortForces):
 
     def _draw(self, snapshot: dict, status: bool = True) -> None:
         robots = snapshot["robots"]
-        if "ghost" in robots:
-            if "ghost" in self._views and self._ghost_style != self._ghost_rgba():
-                self._remove_ghost()  # overlay <-> beside: see-through or not
-            if "ghost" not in self._views and self._ghost_due():
-                self._add_ghost(snapshot["ghost_offset"])
-            if self._ghost_root is not None:
-                self._ghost_root.position = snapshot["ghost_offset"]
-        else:
-            self._ghost_seen = None
-            if "ghost" in self._views:
-                self._remove_ghost()
-        for which, view in self._views.items():
-            view.display(robots[which]["q"])
-        self._draw_target(snapshot)
+        self.scene.draw(snapshot, self.plots.plotted)
+        views = self.scene.views
         placed = {entry["id"]: entry for entry in snapshot["constraints"]}
         goals = {entry_id: entry["goal"] for entry_id, entry in placed.items()}
         self.constraint_markers.draw(placed, goals)
-        if "ghost" in self._views:
+        if "ghost" in views:
             self.ghost_markers.draw(robots["ghost"]["constraints"], goals)
         self.constraint_panel.show_placed(tuple(placed))
-        self._draw_ports(robots)
-        self.force_panel.draw(snapshot["force"], self._views)
+        self.port_arrows.draw(robots, views)
+        self.force_panel.draw(snapshot["force"], views)
         obstacles = {entry["id"]: entry for entry in snapshot["collisions"]["obstacles"]}
         self.obstacle_markers.draw(obstacles, {entry_id: entry["goal"]
                                                for entry_id, entry in obstacles.items()})

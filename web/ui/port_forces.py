@@ -14,13 +14,12 @@ forces or run to metres at its peaks."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Collection
 
 import numpy as np
 import viser
 
 from ..app.plant import PortReading
-from ..robot_view import RobotView
-from .markers import ConstraintDrawer
 from .shapes import arrow_segments
 
 #: the arrow's length per tenfold force (m): 2 cm
@@ -53,24 +52,28 @@ def force_arrow(reading: PortReading, clearance: float = 0.0) -> np.ndarray:
     return arrow_segments(tail, direction, length)
 
 
-class PortForces:
-    """The port-force arrows of :class:`web.ui.TeleopUI`: robot -> port id -> its line
-    segments (the ghost's under its own root, moved with it)."""
+class PortArrows:
+    """The port-force arrows of :class:`web.ui.TeleopUI`, a component owning them:
+    :attr:`arrows` maps a robot to its ports' line segments by port id (the ghost's under
+    its own root, moved with it). An arrow's tip is on its port's ring,
+    ``ring_radius_at(drawing)`` from the port
+    (:meth:`web.ui.markers.ConstraintDrawer.ring_radius_at`)."""
 
-    server: viser.ViserServer
-    _views: dict[str, RobotView]
-    constraint_drawer: ConstraintDrawer
-    _port_arrows: dict[str, dict[str, viser.LineSegmentsHandle]]
+    def __init__(self, server: viser.ViserServer,
+                 ring_radius_at: Callable[[dict], float]) -> None:
+        self.server = server
+        self._ring_radius_at = ring_radius_at
+        self.arrows: dict[str, dict[str, viser.LineSegmentsHandle]] = {}
 
-    def _draw_ports(self, robots: dict) -> None:
-        """Each drawn robot's arrows from ``snapshot["robots"]``: one per port its plant
-        measured, its tip on the port's ring, hidden below :data:`MIN_DRAWN_FORCE`; none
-        without a physics plant."""
-        for which in list(self._port_arrows):
-            if which not in self._views:  # the ghost went, and its root with its arrows
-                self._port_arrows.pop(which)
-        for which in self._views:
-            arrows = self._port_arrows.setdefault(which, {})
+    def draw(self, robots: dict, views: Collection[str]) -> None:
+        """The arrows of each robot of ``views`` (those drawn) from ``snapshot["robots"]``:
+        one per port its plant measured, its tip on the port's ring, hidden below
+        :data:`MIN_DRAWN_FORCE`; none without a physics plant."""
+        for which in list(self.arrows):
+            if which not in views:  # the ghost went, and its root with its arrows
+                self.arrows.pop(which)
+        for which in views:
+            arrows = self.arrows.setdefault(which, {})
             readings = {reading.id: reading for reading in robots[which]["ports"]}
             for port in [port for port in arrows if port not in readings]:
                 arrows.pop(port).remove()
@@ -83,7 +86,7 @@ class PortForces:
                     if handle is not None and handle.visible:
                         handle.visible = False
                     continue
-                clearance = self.constraint_drawer.ring_radius_at(drawings[port])
+                clearance = self._ring_radius_at(drawings[port])
                 segments = force_arrow(reading, clearance)
                 if handle is None:
                     arrows[port] = self.server.scene.add_line_segments(

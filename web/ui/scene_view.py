@@ -5,6 +5,8 @@ mid-drag holds its target where the robot is (docs/design.md section 5.3)."""
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Collection
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -13,8 +15,6 @@ import viser
 from ..app import TeleopApp, default_ghost_offset
 from ..inbox import Inbox
 from ..robot_view import RobotView
-from .placed_markers import PlacedMarkers
-from .plots import LivePlots
 from .shapes import wxyz_of
 
 #: the target gizmo's size (m): its handles large enough to grab from the first view
@@ -32,32 +32,50 @@ STATUS_COLORS = {"ok": (30, 160, 70), "scaled": (230, 170, 0), "least_squares": 
 
 
 class SceneView:
-    """The robots, gizmos and targets of :class:`web.ui.TeleopUI`."""
+    """The robots, gizmos and targets of :class:`web.ui.TeleopUI`, a component owning
+    their nodes: :attr:`views` (the robots' views by name, "main" and, while drawn,
+    "ghost"), per EE :attr:`target_gizmos`, :attr:`target_markers`, :attr:`reach_lines`
+    (the first EE's also as :attr:`target_gizmo`, :attr:`target_marker`,
+    :attr:`reach_line`) and the ghost's root, targets and lines.
 
-    server: viser.ViserServer
-    app: TeleopApp
-    inbox: Inbox
-    floor: float
-    _views: dict[str, RobotView]
-    _ghost_root: object
-    _ghost_style: tuple | None
-    _ghost_seen: float | None
-    ghost_markers: PlacedMarkers
-    _line_colors: dict[tuple[str, int], tuple]
-    _port_arrows: dict[str, dict]
-    _gone: set[int]
-    plots: LivePlots
+    Parameters
+    ----------
+    server : the viser server.
+    app : the session (its robot, targets, gizmos and ghost).
+    inbox : where the hold of a browser lost mid-drag is posted.
+    guarded : posts an operator action (:meth:`web.ui.TeleopUI._guarded`).
+    floor : the grid's height (m).
+    ghost_removed : called when the ghost's nodes went (with its root: what is drawn under
+        it forgets them).
+    """
 
-    def _build_scene(self) -> None:
-        scene = self.server.scene
+    def __init__(self, server: viser.ViserServer, app: TeleopApp, inbox: Inbox,
+                 guarded: Callable[..., None], floor: float,
+                 ghost_removed: Callable[[], None]) -> None:
+        self.server = server
+        self.app = app
+        self.inbox = inbox
+        self._guarded = guarded
+        self._ghost_removed = ghost_removed
+        self._gone: set[int] = set()  # browsers that disconnected mid-drag
+        self.views: dict[str, RobotView] = {"main": RobotView(app.robot, server, "/main")}
+        self.ghost_root: viser.FrameHandle | None = None
+        self.ghost_style: tuple[float, float, float, float] | None = None
+        self.ghost_seen: float | None = None  # when the view first saw the ghost
+        self.ghost_targets: list[viser.FrameHandle] = []
+        self.ghost_reaches: list[viser.LineSegmentsHandle] = []
+        #: (robot, EE) -> its EE-target line's colour
+        self._line_colors: dict[tuple[str, int], tuple[int, int, int]] = {}
+        scene = server.scene
         self.grid = scene.add_grid("/grid", width=4.0, height=4.0, cell_size=0.1,
-                                   section_size=0.5, position=(0.0, 0.0, self.floor))
-        self._views["main"] = RobotView(self.app.robot, self.server, "/main")
+                                   section_size=0.5, position=(0.0, 0.0, floor))
         # per EE: its gizmo, its target (drawn where it is apart from the gizmo), the line
         # from the EE to the target; the first EE's keep the single-EE names
-        self.target_gizmos, self.target_markers, self.reach_lines = [], [], []
-        size = GIZMO_SCALE if len(self.app.targets) == 1 else GIZMO_SCALE_SEVERAL
-        for index, target in enumerate(self.app.targets):
+        self.target_gizmos: list[viser.TransformControlsHandle] = []
+        self.target_markers: list[viser.FrameHandle] = []
+        self.reach_lines: list[viser.LineSegmentsHandle] = []
+        size = GIZMO_SCALE if len(app.targets) == 1 else GIZMO_SCALE_SEVERAL
+        for index, target in enumerate(app.targets):
             suffix = "" if index == 0 else f"_{index}"
             gizmo = scene.add_transform_controls(
                 f"/gizmo{suffix}", scale=size, line_width=4.0,
@@ -75,23 +93,24 @@ class SceneView:
         self.reach_line = self.reach_lines[0]
         # every new browser looks at the tools from the front (where the arms reach), the
         # ghost to the left of the main robot (clear of the control panel, on the right)
-        side = default_ghost_offset(self.app.robot)
+        side = default_ghost_offset(app.robot)
         side /= np.linalg.norm(side)
         front = np.cross([0.0, 0.0, 1.0], side)
-        look_at = np.mean([target.translation for target in self.app.targets], axis=0)
+        look_at = np.mean([target.translation for target in app.targets], axis=0)
         distance = 1.0
-        if "ghost" in self.app.robots.loops:
-            look_at += 0.5 * self.app.robots.ghost_offset
-            distance += 0.8 * float(np.linalg.norm(self.app.robots.ghost_offset))
+        if "ghost" in app.robots.loops:
+            look_at += 0.5 * app.robots.ghost_offset
+            distance += 0.8 * float(np.linalg.norm(app.robots.ghost_offset))
         direction = 0.8 * front + 0.3 * side + np.array([0.0, 0.0, 0.5])
-        self.server.initial_camera.position = look_at + distance * direction / np.linalg.norm(direction)
-        self.server.initial_camera.look_at = look_at
+        server.initial_camera.position = look_at + distance * direction / np.linalg.norm(direction)
+        server.initial_camera.look_at = look_at
 
-    def _gizmo_moved(self, gizmo, index: int):
+    def _gizmo_moved(self, gizmo: viser.TransformControlsHandle,
+                     index: int) -> Callable[[viser.TransformControlsEvent], None]:
         """The callback of EE ``index``'s gizmo: the app moves that EE's target, the
         latest pose winning. A drag that viser ends because its browser went away holds
         the target where the robot is (:meth:`TeleopApp.hold_where_the_robot_is`)."""
-        def moved(event) -> None:
+        def moved(event: viser.TransformControlsEvent) -> None:
             client = event.client_id
             if client is not None and client not in self.server.get_clients():
                 if event.phase == "end":
@@ -110,19 +129,19 @@ class SceneView:
 
         def hold() -> None:
             self.app.hold_where_the_robot_is(index)
-            self._move_gizmo_handle(self.app.inputs[index].gizmo, index)
+            self.move_gizmo(self.app.inputs[index].gizmo, index)
 
         self.inbox.post(hold, key=("hold", index))
 
-    def _move_gizmo_handle(self, pose: pin.SE3, ee: int = 0) -> None:
+    def move_gizmo(self, pose: pin.SE3, ee: int = 0) -> None:
         """EE ``ee``'s gizmo handle put at ``pose`` (for every browser)."""
         self.target_gizmos[ee].position = pose.translation
         self.target_gizmos[ee].wxyz = wxyz_of(pose.rotation)
 
-    def _move_gizmo_handles(self) -> None:
+    def move_gizmos(self) -> None:
         """Every gizmo handle where the app's gizmo is."""
         for index, hand in enumerate(self.app.inputs):
-            self._move_gizmo_handle(hand.gizmo, index)
+            self.move_gizmo(hand.gizmo, index)
 
     def _ghost_rgba(self) -> tuple[float, float, float, float]:
         overlay = float(np.linalg.norm(self.app.robots.ghost_offset)) < 1e-9
@@ -130,10 +149,10 @@ class SceneView:
 
     def _add_ghost(self, offset: np.ndarray) -> None:
         scene = self.server.scene
-        self._ghost_root = scene.add_frame("/ghost", show_axes=False, position=offset)
+        self.ghost_root = scene.add_frame("/ghost", show_axes=False, position=offset)
         rgba = self._ghost_rgba()
-        self._views["ghost"] = RobotView(self.app.robot, self.server, "/ghost/robot", color=rgba)
-        self._ghost_style = rgba
+        self.views["ghost"] = RobotView(self.app.robot, self.server, "/ghost/robot", color=rgba)
+        self.ghost_style = rgba
         self.ghost_targets, self.ghost_reaches = [], []
         for index in range(len(self.app.robot.ee_frames)):
             suffix = "" if index == 0 else f"_{index}"
@@ -148,26 +167,45 @@ class SceneView:
     def _remove_ghost(self) -> None:
         for key in [key for key in self._line_colors if key[0] == "ghost"]:
             self._line_colors.pop(key)
-        if self._ghost_root is not None:
-            self._ghost_root.remove()  # and every node under /ghost
-        self._ghost_root = None
-        self._views.pop("ghost", None)
-        self.ghost_markers.forget()  # its nodes removed with the root
-        self._port_arrows.pop("ghost", None)  # removed with the root
+        if self.ghost_root is not None:
+            self.ghost_root.remove()  # and every node under /ghost
+        self.ghost_root = None
+        self.views.pop("ghost", None)
+        self._ghost_removed()
 
-    def _ghost_due(self) -> bool:
+    def _ghost_due(self, plotted: Collection[str]) -> bool:
         """Whether to draw a ghost that just joined: once the plots show it (or after
         GHOST_PLOTS_FIRST s). A browser compiles the shaders of new meshes on their first
         frame, which holds a software-rendered page for seconds: the plots go first."""
         now = time.perf_counter()
-        if self._ghost_seen is None:
-            self._ghost_seen = now
-        return ("ghost" in self.plots.plotted or now - self._ghost_seen > GHOST_PLOTS_FIRST)
+        if self.ghost_seen is None:
+            self.ghost_seen = now
+        return "ghost" in plotted or now - self.ghost_seen > GHOST_PLOTS_FIRST
 
-    def _draw_target(self, snapshot: dict) -> None:
+    def draw(self, snapshot: dict[str, Any], plotted: Collection[str]) -> None:
+        """The robots of ``snapshot`` (a ghost drawn once due, ``plotted`` naming the robots
+        the plots show; redrawn when it goes from overlaid to beside or back), the targets
+        and the EE-target lines."""
+        robots = snapshot["robots"]
+        if "ghost" in robots:
+            if "ghost" in self.views and self.ghost_style != self._ghost_rgba():
+                self._remove_ghost()  # overlay <-> beside: see-through or not
+            if "ghost" not in self.views and self._ghost_due(plotted):
+                self._add_ghost(snapshot["ghost_offset"])
+            if self.ghost_root is not None:
+                self.ghost_root.position = snapshot["ghost_offset"]
+        else:
+            self.ghost_seen = None
+            if "ghost" in self.views:
+                self._remove_ghost()
+        for which, view in self.views.items():
+            view.display(robots[which]["q"])
+        self._draw_target(snapshot)
+
+    def _draw_target(self, snapshot: dict[str, Any]) -> None:
         """Per EE: its target (where apart from its gizmo, or clutched) and, per robot, the
         line from the EE to it in the step status's colour."""
-        ghost = "ghost" in self._views
+        ghost = "ghost" in self.views
         for index, (target, gizmo) in enumerate(zip(snapshot["targets"], snapshot["gizmos"])):
             apart = (np.linalg.norm(target.translation - gizmo.translation) > 1e-3
                      or np.linalg.norm(pin.log3(gizmo.rotation.T @ target.rotation)) > 1e-2)
