@@ -6,7 +6,7 @@ Either glides to where the operator put it, its velocity fed forward
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import numpy as np
 
@@ -19,6 +19,9 @@ class Placeable(Protocol):
 
     @property
     def position(self) -> np.ndarray: ...
+
+
+Entry = TypeVar("Entry", bound="PlacedEntry")
 
 
 @dataclass
@@ -46,7 +49,7 @@ class PlacedEntry:
         """Where the item is now (world reference point, a copy)."""
         return self.moved.position
 
-    def restored(self) -> PlacedEntry:
+    def restored(self: Entry) -> Entry:
         """This entry settled if its item is at its goal (read from a scene file)."""
         self.settled = bool(np.array_equal(self.goal, self.position))
         return self
