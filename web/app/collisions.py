@@ -32,7 +32,7 @@ from teleop.robots import Robot
 
 from .end_effectors import ee_index
 from .limits import MAX_TARGET_DISTANCE
-from .placed import PlacedEntry
+from .placed import PlacedEntry, remove_every
 
 #: a new obstacle's surface is this far (m) in front of the tip it is placed at
 FRONT_GAP = 0.1
@@ -291,10 +291,7 @@ class CollisionScene:
     def clear(self) -> int:
         """Remove every obstacle; how many there were."""
         with self._lock:
-            ids = list(self.obstacles)
-            for entry_id in ids:
-                self.remove(entry_id)
-            return len(ids)
+            return remove_every(self.obstacles, self.remove)
 
     def restore(self, avoidance: CollisionAvoidance, on: bool,
                 obstacles: dict[str, ObstacleEntry]) -> None:

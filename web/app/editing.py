@@ -19,7 +19,7 @@ from constraints.validation import as_vector, short_repr
 from teleop.robots import Robot
 
 from .limits import MAX_TARGET_DISTANCE
-from .placed import PlacedEntry
+from .placed import PlacedEntry, remove_every
 from .placing import Placement, moving_links
 from .plant import apply_wall
 from .recording import SessionRecording
@@ -157,10 +157,7 @@ class ConstraintEditing:
     def clear(self) -> int:
         """Remove every constraint; how many there were."""
         with self._lock:
-            ids = list(self.entries)
-            for entry_id in ids:
-                self.remove(entry_id)
-            return len(ids)
+            return remove_every(self.entries, self.remove)
 
     def restore(self, entries: dict[str, ConstraintEntry]) -> None:
         """A scene's constraints (caller holds the lock; the loops already hold them); the

@@ -5,6 +5,7 @@ Either glides to where the operator put it, its velocity fed forward
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Protocol, TypeVar
 
@@ -53,3 +54,12 @@ class PlacedEntry:
         """This entry settled if its item is at its goal (read from a scene file)."""
         self.settled = bool(np.array_equal(self.goal, self.position))
         return self
+
+
+def remove_every(ids: Iterable[str], remove: Callable[[str], object]) -> int:
+    """``remove`` each of ``ids`` (listed first: ``remove`` may change where they come
+    from); how many there were."""
+    listed = list(ids)
+    for entry_id in listed:
+        remove(entry_id)
+    return len(listed)

@@ -132,8 +132,7 @@ class TeleopUI:
         #: origin check (:mod:`web.access`), the messages' pacing (:mod:`web.pacing`)
         self.access: Access | None = None
         self.pacing: Tally | None = None
-        self.scene = SceneView(server, app, self.inbox, self._guarded, self.floor,
-                               self._ghost_removed)
+        self.scene = SceneView(server, app, self._guarded, self.floor, self._ghost_removed)
         #: the placed items' nodes (constraints: the main robot's, the ghost's; obstacles)
         self.constraint_drawer = ConstraintDrawer(server, robot, self.profiles,
                                                   self.square_sizes, labelled=True)

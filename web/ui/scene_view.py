@@ -13,7 +13,6 @@ import pinocchio as pin
 import viser
 
 from ..app import TeleopApp, default_ghost_offset
-from ..inbox import Inbox
 from ..robot_view import RobotView
 from .shapes import wxyz_of
 
@@ -42,19 +41,18 @@ class SceneView:
     ----------
     server : the viser server.
     app : the session (its robot, targets, gizmos and ghost).
-    inbox : where the hold of a browser lost mid-drag is posted.
-    guarded : posts an operator action (:meth:`web.ui.TeleopUI._guarded`).
+    guarded : posts an operator action (:meth:`web.ui.TeleopUI._guarded`), the hold of a
+        browser lost mid-drag among them.
     floor : the grid's height (m).
     ghost_removed : called when the ghost's nodes went (with its root: what is drawn under
         it forgets them).
     """
 
-    def __init__(self, server: viser.ViserServer, app: TeleopApp, inbox: Inbox,
+    def __init__(self, server: viser.ViserServer, app: TeleopApp,
                  guarded: Callable[..., None], floor: float,
                  ghost_removed: Callable[[], None]) -> None:
         self.server = server
         self.app = app
-        self.inbox = inbox
         self._guarded = guarded
         self._ghost_removed = ghost_removed
         self._gone: set[int] = set()  # browsers that disconnected mid-drag
@@ -131,7 +129,7 @@ class SceneView:
             self.app.hold_where_the_robot_is(index)
             self.move_gizmo(self.app.inputs[index].gizmo, index)
 
-        self.inbox.post(hold, key=("hold", index))
+        self._guarded(None, hold, key=("hold", index))
 
     def move_gizmo(self, pose: pin.SE3, ee: int = 0) -> None:
         """EE ``ee``'s gizmo handle put at ``pose`` (for every browser)."""
