@@ -22,6 +22,7 @@ contacts (docs/design.md section 18.6).
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -131,8 +132,10 @@ class MujocoPlant:
     seed : the sensor noise's seed.
     compiled_walls : apply the ports' walls inside ``mj_step`` by the compiled callback
         where it is available (:mod:`teleop.plants.compiled_wall`; without tissues): a
-        period is then one call. False: from Python, each physics step split (the
-        reference the compiled walls are tested against).
+        period is then one call, and with a perfect interface, no collision pairs and the
+        same coordinates in both models the whole period is C
+        (:mod:`teleop.plants.compiled_period`). False: from Python, each physics step split
+        (the reference the compiled walls are tested against).
     """
 
     #: the plant measures the wrench at the tool (the kinematic plant does not)
@@ -212,10 +215,8 @@ class MujocoPlant:
             and self.interface.mode == "off" and not self.tissues
             and self.contact_pairs is None and self.joints.identity else None)
         #: the constraints with walls and their walls' versions last given to the compiled
-        #: period, their ids (:meth:`_follow_ports`), whether every wall there has a
-        #: compiled form
+        #: period (:meth:`_follow_ports`), whether every wall there has a compiled form
         self._port_objects: list[object] = []
-        self._port_identities: list[int] = []
         self._ports_compiled = True
 
     # -- the model -----------------------------------------------------------------------
@@ -443,23 +444,23 @@ class MujocoPlant:
     def _follow_ports(self, constraints: Sequence[Constraint]) -> bool:
         """Give the compiled period the walls of ``constraints``, read again when a
         constraint or an object of its wall's
-        :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's (by
-        identity: the objects are kept, so no other can take their ids); whether every
-        wall has a compiled form."""
+        :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's (``is``:
+        a replaced object is read again even when it holds the same numbers); whether
+        every wall has a compiled form."""
         objects: list[object] = []
         for constraint in constraints:
             wall = wall_of(constraint)
             if wall is not None:
                 objects.append(constraint)
                 objects += wall.compiled_version(constraint)
-        identities = list(map(id, objects))
-        if identities != self._port_identities:
+        cached = self._port_objects
+        if len(objects) != len(cached) or not all(map(operator.is_, objects, cached)):
             rows = self._compiled_ports([(constraint, wall) for constraint in constraints
                                          if (wall := wall_of(constraint)) is not None])
             self._ports_compiled = rows is not None
             if rows is not None and self._period is not None:
                 self._period.set_ports(rows)
-            self._port_objects, self._port_identities = objects, identities
+            self._port_objects = objects
         return self._ports_compiled
 
     # -- the tissue and the force/torque sensor ------------------------------------------
