@@ -139,7 +139,8 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
                       true_model=imperfections.true_model(plan.robot.model))
     drive = Drive()
     records, failures = drive.records, drive.failures
-    periods: list[MeasuredLater] = []  # measured after the run (docs/design.md 5.1)
+    #: the periods, measured after the run (docs/design.md 5.1)
+    periods: collections.deque[MeasuredLater] = collections.deque()
     edits_at_measure: list[list[Constraint]] = []
 
     def advance_geometry(now: float) -> None:
@@ -171,7 +172,8 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
             failures.append(f"t={period.t:.3f}s: {period.message}")
         if on_step is not None:
             on_step(i)
-    records.extend(map(loop.measure_later, periods))
+    while periods:  # each period let go once measured: the run's memory stays the records'
+        records.append(loop.measure_later(periods.popleft()))
     return drive
 
 
