@@ -15,12 +15,21 @@ one call and one copy out.
 from __future__ import annotations
 
 import ctypes
+import operator
+from collections.abc import Callable, Sequence
 from typing import Any, cast
 
 import mujoco
 import numpy as np
 
+from constraints import Constraint
+
 from .compiled_wall import PORT_FIELDS, wall_library
+from .walls import Wall, wall_of
+
+#: the plant's rows of its ports from the constraints with walls (None: a wall has no
+#: compiled form)
+PortRows = Callable[[Sequence[tuple[Constraint, Wall]]], np.ndarray | None]
 
 _POINTER = ctypes.c_void_p
 #: the summary's entries (plant_period.c's enum)
@@ -51,12 +60,20 @@ class CompiledPeriod:
     actuator_dofs : (nu,) each actuator's degree of freedom.
     effort_limit : (nv,) each dof's effort limit (``inf``: none).
     dt : the control period (s); ``nstep`` physics steps of it.
+    port_rows : the ports' rows (MuJoCo body and site, then the wall's
+        ``compiled_parameters``) of the constraints with walls, None when one has no
+        compiled form.
     """
 
     def __init__(self, library: ctypes.CDLL, model: mujoco.MjModel, data: mujoco.MjData,
                  actuator_dofs: np.ndarray, effort_limit: np.ndarray, dt: float,
-                 nstep: int) -> None:
+                 nstep: int, port_rows: PortRows) -> None:
         self._run = library.cjm_plant_period
+        self._port_rows = port_rows
+        #: the constraints with walls and their walls' versions the ports were read from,
+        #: and whether every wall there has a compiled form
+        self._port_objects: list[object] = []
+        self._ports_compiled = True
         self._model, self._data = model, data
         #: the command and the configuration the period starts from, copied in
         self.command, self.q = np.zeros(model.nv), np.zeros(model.nq)
@@ -87,8 +104,29 @@ class CompiledPeriod:
             self._block.port_count = ports.shape[0]
         self.ports[:, :ports.shape[1]] = ports
 
-    def run(self, command: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """One period under ``command`` from ``q``; the velocity moved (a new array)."""
+    def run(self, command: np.ndarray, q: np.ndarray,
+            constraints: Sequence[Constraint]) -> np.ndarray | None:
+        """One period under ``command`` from ``q`` with the walls of ``constraints``; the
+        velocity moved (a new array), or None (nothing run) when a wall has no compiled
+        form. The ports are read again when a constraint or an object of its wall's
+        :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's
+        (``is``: a replaced object is read again even when it holds the same numbers)."""
+        objects: list[object] = []
+        for constraint in constraints:
+            wall = wall_of(constraint)
+            if wall is not None:
+                objects.append(constraint)
+                objects += wall.compiled_version(constraint)
+        cached = self._port_objects
+        if len(objects) != len(cached) or not all(map(operator.is_, objects, cached)):
+            rows = self._port_rows([(constraint, wall) for constraint in constraints
+                                    if (wall := wall_of(constraint)) is not None])
+            self._ports_compiled = rows is not None
+            if rows is not None:
+                self.set_ports(rows)
+            self._port_objects = objects
+        if not self._ports_compiled:
+            return None
         try:  # copied through their buffers (float64 vectors of the right size: the loop's)
             self._command_buffer[:] = command
             self._q_buffer[:] = q
@@ -100,8 +138,10 @@ class CompiledPeriod:
 
 
 def compiled_period(model: mujoco.MjModel, data: mujoco.MjData, actuator_dofs: np.ndarray,
-                    effort_limit: np.ndarray, dt: float, nstep: int) -> CompiledPeriod | None:
+                    effort_limit: np.ndarray, dt: float, nstep: int,
+                    port_rows: PortRows) -> CompiledPeriod | None:
     """The compiled period of a plant, or None where the library is not available."""
     library = wall_library()
     return (None if library is None else
-            CompiledPeriod(library, model, data, actuator_dofs, effort_limit, dt, nstep))
+            CompiledPeriod(library, model, data, actuator_dofs, effort_limit, dt, nstep,
+                           port_rows))

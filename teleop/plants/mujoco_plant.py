@@ -22,7 +22,6 @@ contacts (docs/design.md section 18.6).
 from __future__ import annotations
 
 import math
-import operator
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -210,14 +209,10 @@ class MujocoPlant:
         #: the same coordinates in both models); None: :meth:`actuate` in Python
         self._period: CompiledPeriod | None = (
             compiled_period(self.mj_model, self.mj_data, self._actuator_dofs,
-                            self.effort_limit, self.dt, self.substeps)
+                            self.effort_limit, self.dt, self.substeps, self._compiled_ports)
             if self._compiled_walls is not None and self.shaping is None
             and self.interface.mode == "off" and not self.tissues
             and self.contact_pairs is None and self.joints.identity else None)
-        #: the constraints with walls and their walls' versions last given to the compiled
-        #: period (:meth:`_follow_ports`), whether every wall there has a compiled form
-        self._port_objects: list[object] = []
-        self._ports_compiled = True
 
     # -- the model -----------------------------------------------------------------------
 
@@ -372,11 +367,12 @@ class MujocoPlant:
         one. With the compiled period (:mod:`teleop.plants.compiled_period`) the
         physics, the torque ratio, the contacts and the returned velocity are one C call
         with the same arithmetic, the measures made when read (:meth:`measures`)."""
-        period = self._period
-        if period is not None and self._follow_ports(constraints):
+        if self._period is not None:
             # (the interface is off: it passes the command on, checks and counts nothing)
-            self._last = None
-            return period.run(qd, q)
+            moved = self._period.run(qd, q, constraints)
+            if moved is not None:
+                self._last = None
+                return moved
         model, data = self.mj_model, self.mj_data
         arrived = qd if self.shaping is None else self.shaping.delay(qd)
         accepted, fault = self.interface.receive(arrived)
@@ -441,28 +437,6 @@ class MujocoPlant:
                              summary[PENETRATION], None, self.interface.stopped,
                              self._read_sensors(), np.zeros((0, 3)), np.zeros(0))
 
-    def _follow_ports(self, constraints: Sequence[Constraint]) -> bool:
-        """Give the compiled period the walls of ``constraints``, read again when a
-        constraint or an object of its wall's
-        :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's (``is``:
-        a replaced object is read again even when it holds the same numbers); whether
-        every wall has a compiled form."""
-        objects: list[object] = []
-        for constraint in constraints:
-            wall = wall_of(constraint)
-            if wall is not None:
-                objects.append(constraint)
-                objects += wall.compiled_version(constraint)
-        cached = self._port_objects
-        if len(objects) != len(cached) or not all(map(operator.is_, objects, cached)):
-            rows = self._compiled_ports([(constraint, wall) for constraint in constraints
-                                         if (wall := wall_of(constraint)) is not None])
-            self._ports_compiled = rows is not None
-            if rows is not None and self._period is not None:
-                self._period.set_ports(rows)
-            self._port_objects = objects
-        return self._ports_compiled
-
     # -- the tissue and the force/torque sensor ------------------------------------------
 
     def _press(self, ee: int) -> tuple[np.ndarray, float]:
@@ -509,9 +483,9 @@ class MujocoPlant:
     # -- the abdominal wall ----------------------------------------------------------------
 
     def _compiled_ports(self, holes: Sequence[tuple[Constraint, Wall]]) -> np.ndarray | None:
-        """One row per hole for :class:`~teleop.plants.compiled_wall.CompiledPorts`: its
-        link's MuJoCo body and site, then its wall's compiled parameters; None when a wall
-        has none."""
+        """One row per hole for :class:`~teleop.plants.compiled_wall.CompiledPorts` and
+        :class:`~teleop.plants.compiled_period.CompiledPeriod`: its link's MuJoCo body and
+        site, then its wall's compiled parameters; None when a wall has none."""
         rows = np.empty((len(holes), 13))
         for row, (hole, wall) in zip(rows, holes):
             parameters = wall.compiled_parameters(hole)
