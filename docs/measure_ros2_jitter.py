@@ -68,19 +68,24 @@ def main() -> None:
               f"{result.metrics()['constraint_error_max_m'] * 1e6:.3f} um", flush=True)
     where = (["--plant", "mujoco", "--scenario", "trocar-circle"] if args.plant == "mujoco"
              else ["--q0", ",".join(repr(float(v)) for v in plan.q0)])
+    # this process's topics: another ROS 2 program on the same domain never mixes in
+    topics = {"joint_states": f"/run{os.getpid()}/joint_states",
+              "command_topic": f"/run{os.getpid()}/forward_velocity_controller/commands"}
     for run in range(args.runs):
         domain = (args.domain + run) % 233
         sim = subprocess.Popen([sys.executable, "-m", "teleop", "sim", "--ros2", "--rate",
                                 str(RATE), "--ros-domain", str(domain), "--lockstep",
                                 str(args.lockstep), "--realtime-priority",
-                                str(args.realtime_priority), *where],
+                                str(args.realtime_priority), "--joint-states",
+                                topics["joint_states"], "--command-topic",
+                                topics["command_topic"], *where],
                                cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
                                stderr=subprocess.PIPE, text=True)
         try:
             start = time.monotonic()
             settings = Ros2Settings(domain=domain, start_timeout=60.0, stale_after=1.0,
                                     command_latency=args.command_latency,
-                                    realtime_priority=args.realtime_priority)
+                                    realtime_priority=args.realtime_priority, **topics)
             result = run_plan(plan, "cjm", config, args.duration,
                               plant=PlantChoice("ros2", ros2=settings))
             wall = time.monotonic() - start

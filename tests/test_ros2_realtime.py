@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from teleop import load_robot
-from teleop.plants.ros2.realtime import make_realtime, started_realtime
+from teleop.plants.ros2.realtime import (hold_realtime, make_realtime, release_realtime,
+                                         started_realtime)
 from teleop.plants.ros2.ros2_plant import Ros2Plant
 from teleop.plants.ros2.settings import Ros2Settings
 
@@ -104,6 +105,28 @@ def test_threads_started_real_time_inherit_it_and_the_caller_is_restored():
             thread.join()
     (_, words), _ = in_new_thread(lambda: started_realtime(PRIORITY, lambda: None))
     assert words == "no thread started (those already running unchanged)"
+
+
+def test_a_thread_held_real_time_twice_stays_so_until_the_last_release():
+    """Two plants actuating from one thread (runs one after the other in a process): the
+    first one's release leaves the thread real-time for the second; the last gives it its
+    scheduling from before the first hold."""
+    def holds() -> list[tuple[int, int]]:
+        seen = []
+        first, words = hold_realtime(PRIORITY)
+        second, again = hold_realtime(PRIORITY)
+        assert first == second == threading.get_native_id()
+        assert words == again == expected_words(PRIORITY)
+        seen.append(scheduling_of(first))
+        release_realtime(first)
+        seen.append(scheduling_of(first))
+        release_realtime(second)
+        seen.append(scheduling_of(first))
+        return seen
+
+    seen, _ = in_new_thread(holds)
+    fifo = (os.SCHED_FIFO, PRIORITY) if granted(PRIORITY) else (os.SCHED_OTHER, 0)
+    assert seen == [fifo, fifo, (os.SCHED_OTHER, 0)]
 
 
 @pytest.mark.parametrize("priority", [-1, 100, 1.5, True, "50"])

@@ -85,6 +85,34 @@ class ThreadScheduling:
             pass
 
 
+#: the threads :func:`hold_realtime` made real-time: their scheduling before the first
+#: hold and how many holds are on them (two plants may actuate from one thread)
+_holds: dict[int, tuple[ThreadScheduling, int]] = {}
+_holds_lock = threading.Lock()
+
+
+def hold_realtime(priority: int) -> tuple[int, str]:
+    """The calling thread made real-time (:func:`make_realtime`) for one more holder;
+    returns its id (for :func:`release_realtime`) and the words."""
+    thread_id = threading.get_native_id()
+    with _holds_lock:
+        before, holders = _holds.get(thread_id, (ThreadScheduling.of_calling_thread(), 0))
+        words = make_realtime(priority)
+        _holds[thread_id] = (before, holders + 1)
+    return thread_id, words
+
+
+def release_realtime(thread_id: int) -> None:
+    """One hold of :func:`hold_realtime` on ``thread_id`` released: with the last, the
+    thread is scheduled as before the first (another holder's hold stays in force)."""
+    with _holds_lock:
+        before, holders = _holds.pop(thread_id)
+        if holders > 1:
+            _holds[thread_id] = (before, holders - 1)
+        else:
+            before.restore()
+
+
 def started_realtime(priority: int, start: Callable[[], T]) -> tuple[T, str]:
     """``start()`` called with the calling thread ``SCHED_FIFO`` at ``priority``, so the
     threads it starts inherit it; after it, the calling thread is scheduled as before.
