@@ -63,6 +63,12 @@ PROXQP_RHO = 1e-4
 #: against a collision pair it stops 1e-5 m/s from the optimum (docs/design.md 18.7).
 PROXQP_CAPPED_RHO = 1e-8
 
+#: How many times its outer iteration cap a last proxqp solve of a stage still at its caps
+#: after :data:`PROXQP_CAPPED_RHO` gets, on a fresh object (its preconditioner computed
+#: for that problem, not kept from the first problem of its shape), to the same
+#: tolerances: the collision fuzz's failed steps 0.88 % -> 0.18 % (docs/design.md 18.7).
+PROXQP_FALLBACK_ITERATIONS = 10
+
 #: proxqp's threshold for certifying primal infeasibility (its ``eps_primal_inf``, a
 #: field of the persistent objects' settings, which ``proxqp.dense.solve`` through
 #: qpsolvers does not take). With the small ``rho`` of a redundant robot

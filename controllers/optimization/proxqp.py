@@ -5,7 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 from ..base import SolverError
-from ..numerics import PROXQP_CAPPED_RHO, PROXQP_PRIMAL_INFEASIBILITY, PROXQP_RHO
+from ..numerics import (PROXQP_CAPPED_RHO, PROXQP_FALLBACK_ITERATIONS,
+                        PROXQP_PRIMAL_INFEASIBILITY, PROXQP_RHO)
 from .budget import StepBudget
 from .problem import QPSolution, QuadraticProgram
 
@@ -43,7 +44,10 @@ class ProxQPSolver:
     independent configurations. With a warm start chosen, a step that does not reach
     ``PROXQP_SOLVED`` is solved again from the equality-constrained guess before it is
     reported as a failure. A solve that runs to its caps with ``rho`` set from the
-    curvature is solved once more with ``PROXQP_CAPPED_RHO`` in its place.
+    curvature is solved once more with ``PROXQP_CAPPED_RHO`` in its place; one still at
+    its caps is solved a last time the same two ways on a fresh object (its own
+    preconditioner) with ``PROXQP_FALLBACK_ITERATIONS`` times the outer cap, while the
+    step's deadline leaves time: an answer from there meets the same tolerances as any.
     """
 
     def __init__(self, settings: dict, tuned: frozenset[str]) -> None:
@@ -77,6 +81,33 @@ class ProxQPSolver:
     def reset(self) -> None:
         self.solvers.clear()
 
+    def _fresh(self, problem: QuadraticProgram, arguments: tuple, proximal: dict) -> Any:
+        """A new dense QP of ``problem``'s shape with the settings, initialised on it."""
+        qp = self._proxqp.dense.QP(*problem.shape[:3], box_constraints=problem.shape[3])
+        for key, value in self.settings.items():
+            setattr(qp.settings, key, value)
+        qp.settings.initial_guess = self.initial_guess
+        if "eps_abs" in self.tuned:
+            qp.settings.eps_abs = problem.tolerance()
+        qp.init(*arguments, **self.init_arguments, **proximal)
+        return qp
+
+    def _run(self, qp: Any, problem: QuadraticProgram) -> Any:
+        """Solve ``qp`` as loaded: from the equality-constrained guess again if a warm start
+        failed, with :data:`PROXQP_CAPPED_RHO` again if it ran to its caps; its status."""
+        qp.solve()
+        status = qp.results.info.status
+        if status != self.solved and self.initial_guess != self.fallback_guess:
+            qp.settings.initial_guess = self.fallback_guess
+            qp.solve()
+            qp.settings.initial_guess = self.initial_guess
+            status = qp.results.info.status
+        if status == self.capped and "rho" in self.tuned:
+            qp.update(rho=min(1e-6, PROXQP_CAPPED_RHO * problem.curvature), **self.penalties(qp))
+            qp.solve()
+            status = qp.results.info.status
+        return status
+
     def penalties(self, qp: Any) -> dict[str, float]:
         """The initial ``mu_eq``, ``mu_in`` of ``qp`` (the user's, else proxqp's)."""
         return {"mu_eq": self.init_arguments.get("mu_eq", qp.settings.default_mu_eq),
@@ -93,29 +124,19 @@ class ProxQPSolver:
                     if "rho" in self.tuned else {})
         qp = self.solvers.get(shape)
         if qp is None:
-            qp = self._proxqp.dense.QP(*shape[:3], box_constraints=boxed)
-            for key, value in self.settings.items():
-                setattr(qp.settings, key, value)
-            qp.settings.initial_guess = self.initial_guess
-            if "eps_abs" in self.tuned:
-                qp.settings.eps_abs = problem.tolerance()
-            qp.init(*arguments, **self.init_arguments, **proximal)
+            qp = self._fresh(problem, arguments, proximal)
             self.solvers[shape] = qp
         else:
             if "eps_abs" in self.tuned:
                 qp.settings.eps_abs = problem.tolerance()
             qp.update(*arguments, **proximal, **self.penalties(qp))
-        qp.solve()
-        status = qp.results.info.status
-        if status != self.solved and self.initial_guess != self.fallback_guess:
-            qp.settings.initial_guess = self.fallback_guess
-            qp.solve()
-            qp.settings.initial_guess = self.initial_guess
-            status = qp.results.info.status
-        if status == self.capped and "rho" in self.tuned:
-            qp.update(rho=min(1e-6, PROXQP_CAPPED_RHO * problem.curvature), **self.penalties(qp))
-            qp.solve()
-            status = qp.results.info.status
+        status = self._run(qp, problem)
+        if status == self.capped:
+            budget.remaining("proxqp")
+            last = self._fresh(problem, arguments, proximal)
+            last.settings.max_iter *= PROXQP_FALLBACK_ITERATIONS
+            if self._run(last, problem) == self.solved:
+                qp, status = last, self.solved
         if status != self.solved:
             self.reset()
             if status == self.capped:
