@@ -14,6 +14,8 @@ from typing import Callable
 import numpy as np
 import pytest
 
+from test_ros2_wire import domain, loopback
+
 from teleop import load_robot
 from teleop.plants.ros2.realtime import (hold_realtime, make_realtime, release_realtime,
                                          started_realtime)
@@ -24,11 +26,9 @@ PRIORITY = 20
 DT = 0.002
 CAP_SYS_NICE = 23  # linux/capability.h
 
-#: Cyclone on the loopback interface only (as tests/test_ros2_wire.py)
-LOOPBACK = ("<General><Interfaces><NetworkInterface name='lo'/></Interfaces></General>"
-            "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
-            "<MaxAutoParticipantIndex>40</MaxAutoParticipantIndex>"
-            "<Peers><Peer address='127.0.0.1'/></Peers></Discovery>")
+#: the fixtures of test_ros2_wire used here (one domain counter for every ROS 2 test file:
+#: a domain no other participant of this process joined, whose threads the plant starts)
+__all__ = ["domain", "loopback"]
 
 
 def granted(priority: int) -> bool:
@@ -138,14 +138,12 @@ def test_a_priority_out_of_range_is_refused_by_name(priority):
 
 
 @pytest.mark.parametrize("priority", [0, PRIORITY])
-def test_the_plants_threads_run_as_its_measures_say(monkeypatch, priority):
+def test_the_plants_threads_run_as_its_measures_say(domain, priority):
     """The plant's DDS threads and watchdog (started with it, the first participant of its
     domain in this process) are SCHED_FIFO at the settings' priority; the thread that
     actuates is from its first call until it stops calling for ``stale_after``, and again
     at its next call until the plant closes; the constructing thread is left as it was."""
-    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
     robot = load_robot("ur5_instrument")
-    domain = 170 + os.getpid() % 30 + priority
     before = set(os.listdir("/proc/self/task"))
     caller = scheduling_of(threading.get_native_id())
     settings = Ros2Settings(domain=domain, realtime_priority=priority, stale_after=0.5)
