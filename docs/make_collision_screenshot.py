@@ -76,7 +76,7 @@ def main() -> None:
             # the tips point at each other (along y): their targets cross
             for ee, side in ((0, -1.0), (1, 1.0)):
                 for _ in range(int(CROSSING / 0.02)):
-                    app.nudge_target([0.0, 0.02 * side, 0.0], ee)
+                    app.console.nudge_target([0.0, 0.02 * side, 0.0], ee)
             ui.scene.move_gizmos()
 
             def held() -> bool:

@@ -74,7 +74,7 @@ def main() -> None:
     try:
         with sync_playwright() as playwright:
             browser, page, client = open_page(playwright, server, port, height=1000)
-            target = app.targets[0].translation
+            target = app.console.targets[0].translation
             # from behind-left: the circle in this view keeps the arm away from the
             # singularity a front-right view drives it into
             client.camera.position = target + [-0.95, 1.0, 0.5]

@@ -202,7 +202,7 @@ def main() -> None:
                 time.sleep(2.0)
             if name in ("gui", "both"):  # until the server has applied the last drag
                 wait = time.monotonic() + 300.0
-                while np.linalg.norm(app.inputs[0].gizmo.translation - last) > 1e-9:
+                while np.linalg.norm(app.console.inputs[0].gizmo.translation - last) > 1e-9:
                     if time.monotonic() > wait:
                         raise SystemExit("the last drag never reached the app")
                     time.sleep(0.01)

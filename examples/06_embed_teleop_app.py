@@ -42,7 +42,7 @@ def nudge_up() -> None:
     """Move the shared target 1 cm up (world z): the robot and its ghost follow."""
     target = app.snapshot()["target"]
     x, y, z, w = pin.Quaternion(target.rotation).coeffs()
-    app.set_target(target.translation + np.array([0.0, 0.0, 0.01]), (w, x, y, z))
+    app.console.set_target(target.translation + np.array([0.0, 0.0, 0.01]), (w, x, y, z))
 
 
 nudge.on_click(lambda event: nudge_up())

@@ -229,7 +229,7 @@ class Sampler:
             record = app.robots.last_records.get("main")
             error = math.nan if record is None else max(record.constraint_error,
                                                         record.barrier_penetration)
-            self.samples.append(Sample(time.perf_counter(), app.target.translation.copy(),
+            self.samples.append(Sample(time.perf_counter(), app.console.target.translation.copy(),
                                        ee_position(app), error))
             time.sleep(self.period)
 
@@ -459,7 +459,7 @@ def look_at_target(web, distance: float | None = None) -> None:
     size)."""
     if distance is None:
         distance = 2.5 * web.ui.scene.target_gizmo.scale
-    target = web.app.target.translation.copy()
+    target = web.app.console.target.translation.copy()
     direction = np.array([0.55, -0.65, 0.45])
     set_camera(web.client, target + distance * direction / np.linalg.norm(direction), target)
 
@@ -529,15 +529,15 @@ def measured_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
     """Plan and do a drag of the target gizmo while sampling the server; the measures."""
     app = web.app
     plan = plan_drag(web, distance, steps, prefer_sign)
-    target0, ee0 = app.target.translation.copy(), ee_position(app)
+    target0, ee0 = app.console.target.translation.copy(), ee_position(app)
     with Sampler(app) as sampler:
         times = drag(web, plan)
         moved = wait_until(
-            lambda: np.linalg.norm(app.target.translation - target0) > 0.5 * distance, WAIT,
+            lambda: np.linalg.norm(app.console.target.translation - target0) > 0.5 * distance, WAIT,
             "the server-side target to follow the drag (did the mouse grab the gizmo?)")
-        target1 = app.target.translation.copy()
+        target1 = app.console.target.translation.copy()
         unit = (target1 - target0) / np.linalg.norm(target1 - target0)
-        wait_until(lambda: np.linalg.norm(ee_position(app) - app.target.translation) < 1e-4,
+        wait_until(lambda: np.linalg.norm(ee_position(app) - app.console.target.translation) < 1e-4,
                    WAIT, "the EE to reach the dragged target")
         settled = time.perf_counter()
         time.sleep(0.2)

@@ -298,16 +298,16 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
     # the nudge buttons move the target by the step, the gizmo following (on the target,
     # none drawn apart); both robots follow, and the plots show how
     open_tab(web, "Teleop")
-    target0 = app.target.translation.copy()
+    target0 = app.console.target.translation.copy()
     for label in ("+y", "+y", "+y", "-z", "-z"):
         page.get_by_role("button", name=label, exact=True).click()
         time.sleep(0.3)
-    wait_until(lambda: np.linalg.norm(app.target.translation - target0 - [0, 0.015, -0.01]) < 1e-9,
+    wait_until(lambda: np.linalg.norm(app.console.target.translation - target0 - [0, 0.015, -0.01]) < 1e-9,
                WAIT, "the target nudged by (0, 15, -10) mm")
     wait_until(lambda: np.linalg.norm(np.asarray(web.ui.scene.target_gizmo.position)
-                                      - app.target.translation) < 1e-6, WAIT,
+                                      - app.console.target.translation) < 1e-6, WAIT,
                "the gizmo on the nudged target")
-    np.testing.assert_allclose(app.gizmo.translation, app.target.translation, atol=1e-12)
+    np.testing.assert_allclose(app.console.gizmo.translation, app.console.target.translation, atol=1e-12)
     open_tab(web, "Plots")
     time.sleep(2.0)
 

@@ -94,7 +94,7 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     safety = avoidance.safety_distance
 
     plan = z_arrow_drag(web, DRAG, STEPS)
-    target0 = app.target.translation.copy()
+    target0 = app.console.target.translation.copy()
     mouse = page.mouse
     started = time.perf_counter()
     mouse.move(*plan.screen[0])
@@ -104,9 +104,9 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
             mouse.move(float(u), float(v))
     finally:
         mouse.up()
-    wait_until(lambda: (app.target.translation - target0) @ plan.direction > 0.8 * DRAG, WAIT,
+    wait_until(lambda: (app.console.target.translation - target0) @ plan.direction > 0.8 * DRAG, WAIT,
                "the server-side target to follow the drag into the sphere")
-    dragged = float((app.target.translation - target0) @ plan.direction)
+    dragged = float((app.console.target.translation - target0) @ plan.direction)
 
     model, data = app.robot.model, app.robot.model.createData()
 
@@ -139,7 +139,7 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     assert safety - MARGIN <= final <= safety + 1e-3, "the link is not held at d_s"
     # the target is inside the sphere: the robot did not reach it
     tip = app.robots.loops["main"].ee_placements()[0]
-    assert np.linalg.norm(app.target.translation - tip.translation) > 0.01
+    assert np.linalg.norm(app.console.target.translation - tip.translation) > 0.01
 
     # the pair highlighted: its witness segment and its link named after it
     rows = wait_until(lambda: app.collisions.rows.get("main"), WAIT, "measured rows")

@@ -134,36 +134,36 @@ def test_clutch_engaged_a_real_drag_does_not_move_the_robot_and_release_does_not
     app, page, ui = web.app, web.page, web.ui
     open_tab(web, "Teleop")
     page.get_by_role("button", name="Clutch", exact=True).click()
-    wait_until(lambda: app.clutch, WAIT, "the clutch to engage")
+    wait_until(lambda: app.console.clutch, WAIT, "the clutch to engage")
     expect(page.get_by_role("button", name="Release clutch")).to_be_visible()
     time.sleep(0.5)
-    target0, ee0 = app.target.copy(), ee_position(app)
+    target0, ee0 = app.console.target.copy(), ee_position(app)
     gizmo0 = np.asarray(ui.scene.target_gizmo.position).copy()
     look_at_target(web)
     plan = plan_drag(web, distance=0.01, steps=10)
     drag(web, plan)  # the real mouse, on the gizmo's arrow
-    moved = wait_until(lambda: np.linalg.norm(app.gizmo.translation - gizmo0) > 0.005, WAIT,
+    moved = wait_until(lambda: np.linalg.norm(app.console.gizmo.translation - gizmo0) > 0.005, WAIT,
                        "the gizmo to follow the mouse")
     assert moved
     time.sleep(0.5)
-    assert app.target.isApprox(target0, 1e-12), "the target moved with the clutch engaged"
+    assert app.console.target.isApprox(target0, 1e-12), "the target moved with the clutch engaged"
     assert np.linalg.norm(ee_position(app) - ee0) < 1e-6, "the robot moved"
     assert ui.scene.target_marker.visible  # the target drawn apart from the gizmo
     page.get_by_role("button", name="Release clutch").click()
-    wait_until(lambda: not app.clutch, WAIT, "the clutch to release")
-    assert app.target.isApprox(target0, 1e-12), "the target jumped on release"
+    wait_until(lambda: not app.console.clutch, WAIT, "the clutch to release")
+    assert app.console.target.isApprox(target0, 1e-12), "the target jumped on release"
     time.sleep(0.3)
     assert np.linalg.norm(ee_position(app) - ee0) < 1e-6
     # a drag after the release moves the target by the drag, from where the target was
-    gizmo1 = app.gizmo.translation.copy()
+    gizmo1 = app.console.gizmo.translation.copy()
     plan = plan_drag(web, distance=0.006, steps=6, prefer_sign=-1.0)
     drag(web, plan)
-    wait_until(lambda: np.linalg.norm(app.target.translation - target0.translation) > 0.003,
+    wait_until(lambda: np.linalg.norm(app.console.target.translation - target0.translation) > 0.003,
                WAIT, "the target to follow the drag after the release")
     time.sleep(0.3)
-    np.testing.assert_allclose(app.target.translation - target0.translation,
-                               app.gizmo.translation - gizmo1, atol=1e-9)
-    wait_until(lambda: np.linalg.norm(ee_position(app) - app.target.translation) < 1e-4, WAIT,
+    np.testing.assert_allclose(app.console.target.translation - target0.translation,
+                               app.console.gizmo.translation - gizmo1, atol=1e-9)
+    wait_until(lambda: np.linalg.norm(ee_position(app) - app.console.target.translation) < 1e-4, WAIT,
                "the EE to reach the target")
 
 
@@ -183,7 +183,7 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
     wait_until(lambda: app.robots.config.rate == 500.0, WAIT, "the rate to change")
     open_tab(web, "Teleop")
     input_of(page, "motion scale").fill("0.2")
-    wait_until(lambda: app.motion_scale == 0.2, WAIT, "the motion scale to change")
+    wait_until(lambda: app.console.motion_scale == 0.2, WAIT, "the motion scale to change")
     open_tab(web, "Constraints")
     page.get_by_role("button", name="Clear constraints").click()
     wait_until(lambda: not app.constraints.entries, WAIT, "the constraints to be cleared")
@@ -191,7 +191,7 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
     page.get_by_role("button", name="Load scene").click()
     wait_until(lambda: hole_id in app.constraints.entries, WAIT, "the scene's hole")
     np.testing.assert_allclose(app.constraints.entries[hole_id].goal, goal, atol=1e-12)
-    assert app.robots.config.rate == 1000.0 and app.motion_scale == 1.0
+    assert app.robots.config.rate == 1000.0 and app.console.motion_scale == 1.0
     assert app.robots.specs == {"main": "cjm", "ghost": "qp:daqp"}
     expect(input_of(page, "rate (Hz)")).to_have_value("1000")
     open_tab(web, "Constraints")

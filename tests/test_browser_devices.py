@@ -67,14 +67,14 @@ def move_device_x(console, to: float) -> np.ndarray:
     """Slide the device's x to ``to`` over 0.4 s; the target's displacement, once the
     commands up to the last have been applied."""
     web, master, streamer = console
-    before = web.app.targets[0].translation.copy()
+    before = web.app.console.targets[0].translation.copy()
     start = streamer.position[0]
     for fraction in np.linspace(0.0, 1.0, 81)[1:]:
         streamer.position = np.array([start + fraction * (to - start), 0.0, 0.0])
         time.sleep(0.005)
     sent = streamer.client.sequence
     wait_until(lambda: master.applied_sequence > sent + 2, WAIT, "the last move applied")
-    return web.app.targets[0].translation - before
+    return web.app.console.targets[0].translation - before
 
 
 def view_of(web, position, look_at) -> np.ndarray:
@@ -91,7 +91,7 @@ def test_device_x_moves_the_tool_along_the_views_right_and_turns_with_the_view(c
     web, master, streamer = console
     wait_until(lambda: master.counts["applied"] > 10, WAIT, "the master's first commands")
     assert not np.allclose(web.app.devices.view_rotation, DEFAULT_VIEW)  # a browser has reported
-    look_at = web.app.targets[0].translation.copy()
+    look_at = web.app.console.targets[0].translation.copy()
     eye = look_at + np.array([1.2, -0.8, 0.5])
     right = view_of(web, eye, look_at)
     first = move_device_x(console, STEP)

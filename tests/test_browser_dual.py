@@ -58,7 +58,7 @@ def ee_positions(app) -> np.ndarray:
 def look_at_tool(web, ee: int) -> None:
     """From 2.5 gizmo sizes in front of EE ``ee``'s target (0.3 m), a little outwards and
     above: its gizmo large on the canvas, the other arm's off to the side."""
-    target = web.app.targets[ee].translation
+    target = web.app.console.targets[ee].translation
     outward = np.sign(target[1]) or 1.0
     direction = np.array([0.75, 0.25 * outward, 0.6])
     distance = 2.5 * web.ui.scene.target_gizmos[ee].scale
@@ -83,13 +83,13 @@ def drag_gizmo(web, ee: int, distance: float, steps: int):
     look_at_tool(web, ee)
     plan = plan_drag(web, distance, steps, ee=ee)
     settled(app)  # the EEs at rest before (with acceleration limits they take longer)
-    targets0, ees0, t0 = app.targets, ee_positions(app), app.now
+    targets0, ees0, t0 = app.console.targets, ee_positions(app), app.now
     drag(web, plan)
-    wait_until(lambda: np.linalg.norm(app.targets[ee].translation
+    wait_until(lambda: np.linalg.norm(app.console.targets[ee].translation
                                       - targets0[ee].translation) > 0.5 * distance, WAIT,
                f"EE {ee}'s target to follow the drag (did the mouse grab its gizmo?)")
     settled(app)  # the robot converges (or settles where the holes let it)
-    moved = app.targets[ee].translation - targets0[ee].translation
+    moved = app.console.targets[ee].translation - targets0[ee].translation
     trace = app.snapshot()["robots"]["main"]["trace"]
     errors = trace["constraint_error"][trace["t"] >= t0]
     return targets0, ees0, ee_positions(app), moved, float(np.max(errors, initial=0.0))
@@ -101,8 +101,8 @@ def test_dragging_each_gizmo_moves_its_own_ee(web):
     for ee in (0, 1):
         other = 1 - ee
         targets0, ees0, ees1, moved, _ = drag_gizmo(web, ee, distance=0.02, steps=20)
-        assert app.targets[other].isApprox(targets0[other], 1e-12), "the other target moved"
-        wait_until(lambda: np.linalg.norm(ee_positions(app)[ee] - app.targets[ee].translation)
+        assert app.console.targets[other].isApprox(targets0[other], 1e-12), "the other target moved"
+        wait_until(lambda: np.linalg.norm(ee_positions(app)[ee] - app.console.targets[ee].translation)
                    < 1e-4, WAIT, f"EE {ee} to reach its dragged target")
         ees1 = ee_positions(app)
         print(f"\n[browser dual] gizmo {ee} dragged {1e3 * np.linalg.norm(moved):.1f} mm: EE {ee} "
@@ -111,7 +111,7 @@ def test_dragging_each_gizmo_moves_its_own_ee(web):
         np.testing.assert_allclose(ees1[ee] - ees0[ee], moved, atol=1e-4)
         assert np.linalg.norm(ees1[other] - ees0[other]) < 1e-6
         np.testing.assert_allclose(web.ui.scene.target_gizmos[ee].position,
-                                   app.targets[ee].translation, atol=1e-6)
+                                   app.console.targets[ee].translation, atol=1e-6)
     assert web.page_errors == [], web.page_errors
 
 

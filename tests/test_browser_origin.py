@@ -98,7 +98,7 @@ def probe(browser, page_address: str, socket_address: str) -> dict:
 
 def test_a_page_from_another_origin_gets_nothing_and_moves_nothing(ui, foreign_site, browser):
     server, app, view, token, port = ui
-    ee_before, target_before = ee_position(app), app.target.translation.copy()
+    ee_before, target_before = ee_position(app), app.console.target.translation.copy()
     refused_before = view.access.refused
     for socket_address in (f"ws://127.0.0.1:{port}/?token={token}",  # even with the token
                            f"ws://localhost:{port}/?token={token}", f"ws://127.0.0.1:{port}/"):
@@ -109,7 +109,7 @@ def test_a_page_from_another_origin_gets_nothing_and_moves_nothing(ui, foreign_s
     assert len(server.get_clients()) == 0
     moved = np.linalg.norm(ee_position(app) - ee_before)
     print(f"[origin] EE moved {1e3 * moved:.2e} mm")
-    assert moved < 1e-9 and np.array_equal(app.target.translation, target_before)  # round-off
+    assert moved < 1e-9 and np.array_equal(app.console.target.translation, target_before)  # round-off
 
 
 def test_the_ui_s_own_origin_with_its_token_gets_the_scene(ui, browser):

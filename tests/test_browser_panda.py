@@ -35,7 +35,7 @@ def test_the_panda_opens_with_its_meshes(tmp_path):
         assert len(names) == 11
         for name in names:  # each .dae drawn as a glTF with its materials
             assert type(view.frames[f"/main/visual/{name}"]).__name__ == "GlbHandle"
-        target = web.app.target.translation
+        target = web.app.console.target.translation
         set_camera(web.client, target + np.array([0.9, -0.9, 0.3]), target - [0.0, 0.0, 0.3])
         shown = wait_for_pixels(web, lambda p: distinct_colours(p) > 100, WAIT, "the Panda")
         view.displayVisuals(False)

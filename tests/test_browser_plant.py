@@ -91,13 +91,13 @@ def paced_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
     an operator's gentle drag, the same on a fast or a slow machine. The plan."""
     app, mouse = web.app, web.page.mouse
     plan = plan_drag(web, distance, steps, prefer_sign)
-    target0 = app.target.translation.copy()
+    target0 = app.console.target.translation.copy()
     mouse.move(*plan.screen[0])
     mouse.down()
     try:
         for k, (u, v) in enumerate(plan.screen[1:], start=1):
             mouse.move(float(u), float(v))
-            wait_until(lambda: (app.target.translation - target0) @ plan.direction
+            wait_until(lambda: (app.console.target.translation - target0) @ plan.direction
                        >= distance * k / steps - 0.4e-3, WAIT, f"the server to get mouse step {k}")
             arrived = app.now
             wait_until(lambda: app.now >= arrived + STEP_SETTLE, WAIT, "the robot to settle")
@@ -130,12 +130,12 @@ def test_a_gentle_drag_pushes_on_the_wall_and_the_page_shows_how_hard(web):
     since = web.hole_time
     look_at_target(web)
     drawn_before = len(web.arrows)
-    target0 = app.target.translation.copy()
+    target0 = app.console.target.translation.copy()
     plan = paced_drag(web, distance=0.012, steps=12)
-    dragged = app.target.translation - target0
+    dragged = app.console.target.translation - target0
     assert np.linalg.norm(dragged) > 0.01, "the target moved less than 1 cm"
     assert abs(dragged @ plan.direction - 0.012) < 0.003
-    wait_until(lambda: np.linalg.norm(ee_position(app) - app.target.translation) < 1e-4,
+    wait_until(lambda: np.linalg.norm(ee_position(app) - app.console.target.translation) < 1e-4,
                WAIT, "the EE to reach the dragged target")
 
     # every control period's force since the hole: felt, and below the target
@@ -263,15 +263,15 @@ def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
     plan = plan_drag(web, DRAG, DRAG_STEPS)
     shown = []  # (loop time, the force the status line showed)
     mouse = page.mouse
-    target0 = app.target.translation.copy()
+    target0 = app.console.target.translation.copy()
     mouse.move(*plan.screen[0])
     mouse.down()
     try:
         for k, (u, v) in enumerate(plan.screen[1:], start=1):
             mouse.move(float(u), float(v))
-            wait_until(lambda: (app.target.translation - target0) @ plan.direction
+            wait_until(lambda: (app.console.target.translation - target0) @ plan.direction
                        >= DRAG * k / DRAG_STEPS - 0.4e-3, WAIT, f"the server to get mouse step {k} "
-                       f"(the target moved {1e3 * (app.target.translation - target0)} mm, the "
+                       f"(the target moved {1e3 * (app.console.target.translation - target0)} mm, the "
                        f"drag along {plan.direction}, {plan.pixels:.0f} px)")
             arrived = app.now
             while app.now < arrived + STEP_SETTLE:
@@ -281,7 +281,7 @@ def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
                 time.sleep(0.05)
     finally:
         mouse.up()
-    wait_until(lambda: np.linalg.norm(ee_position(app) - app.target.translation) < 1e-4,
+    wait_until(lambda: np.linalg.norm(ee_position(app) - app.console.target.translation) < 1e-4,
                WAIT, "the EE to reach the dragged target")
     measured = max(force for t, force in list(web.forces) if t >= since)
     seen = max(force for _, force in shown)

@@ -222,13 +222,13 @@ def test_the_network_master_example_drives_a_running_page(tmp_path: Path):
     app.devices.attach(master)
     control = ControlThread(app)
     control.start()
-    start = app.target.translation.copy()
+    start = app.console.target.translation.copy()
     farthest = [0.0]
     done = threading.Event()
 
     def watch() -> None:  # the target's farthest from where it started
         while not done.is_set():
-            farthest[0] = max(farthest[0], float(np.linalg.norm(app.target.translation - start)))
+            farthest[0] = max(farthest[0], float(np.linalg.norm(app.console.target.translation - start)))
             time.sleep(0.002)
 
     watcher = threading.Thread(target=watch, daemon=True)

@@ -129,7 +129,7 @@ def console():
 
 def test_a_flood_while_the_master_streams_moves_nothing_and_releases_nothing(console):
     app, master, streamer = console
-    bound, target = master.master, app.targets[0].translation.copy()
+    bound, target = master.master, app.console.targets[0].translation.copy()
     ee_start = ee_position(app)
     moved = []
     sampling = threading.Event()
@@ -149,7 +149,7 @@ def test_a_flood_while_the_master_streams_moves_nothing_and_releases_nothing(con
     print(f"[flood] EE moved at most {1e3 * max(moved):.2e} mm over {len(moved)} samples; "
           f"counts {dict(sorted(counts.items()))}")
     assert max(moved) < 1e-9  # round-off: the master holds still
-    assert np.array_equal(app.targets[0].translation, target)
+    assert np.array_equal(app.console.targets[0].translation, target)
     assert counts.get("releases", 0) == 0 and master.master == bound
     assert app.devices[0].state == FeedbackState.FOLLOWING
     assert counts["accepted"] > accepted  # the master kept streaming through it
@@ -166,7 +166,7 @@ def test_a_flood_while_the_master_streams_moves_nothing_and_releases_nothing(con
 
 def test_senders_in_a_pause_of_the_master_cannot_take_it_and_it_resumes(console):
     app, master, streamer = console
-    bound, target = master.master, app.targets[0].translation.copy()
+    bound, target = master.master, app.console.targets[0].translation.copy()
     ee_start = ee_position(app)
     streamer.running.clear()  # the master pauses: the watchdog releases it
     wait_for(lambda: app.devices[0].state == FeedbackState.HELD, "the watchdog")
@@ -176,7 +176,7 @@ def test_senders_in_a_pause_of_the_master_cannot_take_it_and_it_resumes(console)
     moved = float(np.linalg.norm(ee_position(app) - ee_start))
     print(f"[pause] EE moved {1e3 * moved:.2e} mm; counts {dict(sorted(counts.items()))}")
     assert counts["accepted"] == accepted and master.master == bound
-    assert moved < 1e-6 and np.linalg.norm(app.targets[0].translation - target) < 1e-6
+    assert moved < 1e-6 and np.linalg.norm(app.console.targets[0].translation - target) < 1e-6
     assert (counts["unauthenticated"] + counts["foreign"] + counts["version"]
             + counts.get("overflow", 0)) >= 10_000
     streamer.running.set()  # the master resumes its own stream, and is followed

@@ -128,25 +128,25 @@ def pose_sample(position, sequence, buttons=0, arrival=None) -> InputSample:
 def test_a_pose_source_moves_its_target_through_the_clutch_and_a_new_scale_without_jumps(app):
     source = InputSource("test")
     app.devices.attach(source)
-    start = app.targets[0].translation.copy()
+    start = app.console.targets[0].translation.copy()
     source.offer(pose_sample((0.3, 0.2, 0.1), 1))  # the first sample only anchors
     app.step()
-    assert app.targets[0].translation == pytest.approx(start, abs=0.0)
+    assert app.console.targets[0].translation == pytest.approx(start, abs=0.0)
     source.offer(pose_sample((0.31, 0.2, 0.1), 2))
     app.step()
     moved = start + DEFAULT_VIEW @ np.array([0.01, 0.0, 0.0])
-    assert app.targets[0].translation == pytest.approx(moved, abs=1e-12)
+    assert app.console.targets[0].translation == pytest.approx(moved, abs=1e-12)
     source.offer(pose_sample((0.33, 0.2, 0.1), 3, buttons=CLUTCH))  # the device's clutch
     app.step()
-    assert app.targets[0].translation == pytest.approx(moved, abs=1e-12)
+    assert app.console.targets[0].translation == pytest.approx(moved, abs=1e-12)
     assert app.devices[0].state == FeedbackState.CLUTCHED
-    app.set_motion_scale(0.5)  # while the device is clutched: no jump on coupling
+    app.console.set_motion_scale(0.5)  # while the device is clutched: no jump on coupling
     source.offer(pose_sample((0.33, 0.2, 0.1), 4))
     app.step()
-    assert app.targets[0].translation == pytest.approx(moved, abs=1e-12)
+    assert app.console.targets[0].translation == pytest.approx(moved, abs=1e-12)
     source.offer(pose_sample((0.33, 0.22, 0.1), 5))
     app.step()
-    assert app.targets[0].translation == pytest.approx(
+    assert app.console.targets[0].translation == pytest.approx(
         moved + 0.5 * DEFAULT_VIEW @ np.array([0.0, 0.02, 0.0]), abs=1e-12)
     assert source.counts["applied"] == 5 and source.latencies.count == 5
 
@@ -155,15 +155,15 @@ def test_a_twist_source_integrates_its_rate_command_each_period(app):
     source = InputSource("rate")
     source.watchdog = False
     app.devices.attach(source)
-    start = app.targets[0].translation.copy()
+    start = app.console.targets[0].translation.copy()
     source.offer(InputSample("twist", (0.02, 0.0, -0.01, 0.0, 0.0, 0.0), 0, 1, 0.0))
     for _ in range(100):
         app.step()
     expected = start + 100 * 1e-3 * DEFAULT_VIEW @ np.array([0.02, 0.0, -0.01])
-    assert app.targets[0].translation == pytest.approx(expected, abs=1e-12)
-    app.set_clutch(True)  # the console's clutch stops it
+    assert app.console.targets[0].translation == pytest.approx(expected, abs=1e-12)
+    app.console.set_clutch(True)  # the console's clutch stops it
     app.step()
-    assert app.targets[0].translation == pytest.approx(expected, abs=1e-12)
+    assert app.console.targets[0].translation == pytest.approx(expected, abs=1e-12)
 
 
 
@@ -199,7 +199,7 @@ def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(accel
     if not acceleration_limits:
         app.step()
         assert np.max(np.abs(app.robots.loops["main"].last_qd)) < 1e-3
-        assert app.targets[0].translation == pytest.approx(ee.translation, abs=1e-4)
+        assert app.console.targets[0].translation == pytest.approx(ee.translation, abs=1e-4)
     else:  # braked at the limits, past the held target by the braking distance, then back
         speeds = np.abs(app.robots.loops["main"].last_qd)
         braking = int(np.max(np.ceil(speeds / (app.robot.acceleration_limit * 1e-3)))) + 2
@@ -212,10 +212,10 @@ def test_the_watchdog_releases_a_silent_source_and_the_robot_stops_at_once(accel
             periods += 1
         assert periods < 500  # at rest within 0.5 s
     # the next stream starts where the target is: its first sample only anchors
-    held = app.targets[0].translation.copy()
+    held = app.console.targets[0].translation.copy()
     source.offer(pose_sample((5.0, 5.0, 5.0), 1, arrival=time.perf_counter()))
     app.step()
-    assert app.targets[0].translation == pytest.approx(held, abs=0.0)
+    assert app.console.targets[0].translation == pytest.approx(held, abs=0.0)
     assert app.devices[0].state == FeedbackState.FOLLOWING
 
 
@@ -237,7 +237,7 @@ def test_a_recording_gets_each_sources_counts_and_latencies(tmp_path):
     assert all(line["latency_ms"]["p99"] >= line["latency_ms"]["p50"] > 0 for line in lines)
     targets = [event for event in session.events if event["type"] == "target"]
     assert 100 <= len(targets) <= 160  # at most one per 10 periods, not one per command
-    assert targets[-1]["position"] == pytest.approx(app.targets[0].translation, abs=1e-12)
+    assert targets[-1]["position"] == pytest.approx(app.console.targets[0].translation, abs=1e-12)
 
 
 def test_a_second_source_on_the_same_ee_or_one_on_no_ee_is_refused(app):
@@ -261,17 +261,17 @@ def test_a_gizmo_drag_after_a_release_moves_the_target_by_the_drag_only(app):
     source.last_arrival = time.perf_counter() - 1.0
     app.step()
     assert app.devices[0].state == FeedbackState.HELD
-    before = app.targets[0].translation.copy()
-    handle = app.gizmo.copy()  # where the page's handle still is
-    app.move_gizmo(handle.translation + [0.0, 0.0, 1e-3], (1.0, 0.0, 0.0, 0.0))
-    assert app.targets[0].translation - before == pytest.approx([0.0, 0.0, 1e-3], abs=1e-12)
+    before = app.console.targets[0].translation.copy()
+    handle = app.console.gizmo.copy()  # where the page's handle still is
+    app.console.move_gizmo(handle.translation + [0.0, 0.0, 1e-3], (1.0, 0.0, 0.0, 0.0))
+    assert app.console.targets[0].translation - before == pytest.approx([0.0, 0.0, 1e-3], abs=1e-12)
 
 
 def test_absolute_orientation_follows_only_once_the_device_agrees_with_the_tool(app):
     source = InputSource("test")
     app.devices.attach(source)
     app.devices.set_orientation_mode(True)
-    target = app.targets[0].copy()
+    target = app.console.targets[0].copy()
     turned = pin.exp3(np.array([0.0, 0.0, math.pi / 2])) @ DEFAULT_VIEW.T @ target.rotation
     quaternion = pin.Quaternion(turned)
     source.offer(InputSample("pose", (0.0, 0.0, 0.0, quaternion.w, quaternion.x, quaternion.y,
@@ -279,21 +279,21 @@ def test_absolute_orientation_follows_only_once_the_device_agrees_with_the_tool(
     app.step()
     assert app.devices[0].state == FeedbackState.CLUTCHED
     assert "align the device with the tool: 90 deg apart" in app.devices[0].reason
-    assert app.targets[0].rotation == pytest.approx(target.rotation, abs=1e-12)
+    assert app.console.targets[0].rotation == pytest.approx(target.rotation, abs=1e-12)
     aligned = pin.Quaternion(DEFAULT_VIEW.T @ target.rotation)  # the tool's, in the view
     for k, x in ((2, 0.0), (3, 0.01)):
         source.offer(InputSample("pose", (x, 0.0, 0.0, aligned.w, aligned.x, aligned.y,
                                           aligned.z), 0, k, time.perf_counter()))
         app.step()
     assert app.devices[0].state == FeedbackState.FOLLOWING
-    assert app.targets[0].translation == pytest.approx(
+    assert app.console.targets[0].translation == pytest.approx(
         target.translation + DEFAULT_VIEW @ [0.01, 0.0, 0.0], abs=1e-9)
     app.devices.set_view((1.0, 0.0, 0.0, 0.0))  # another view: align again before moving
     source.offer(InputSample("pose", (0.02, 0.0, 0.0, aligned.w, aligned.x, aligned.y,
                                       aligned.z), 0, 4, time.perf_counter()))
     app.step()
     assert app.devices[0].state == FeedbackState.CLUTCHED
-    assert app.targets[0].translation == pytest.approx(
+    assert app.console.targets[0].translation == pytest.approx(
         target.translation + DEFAULT_VIEW @ [0.01, 0.0, 0.0], abs=1e-9)
 
 
@@ -304,12 +304,12 @@ def test_a_rate_command_does_not_wind_the_target_up_ahead_of_the_robot(app):
     source = InputSource("rate")
     source.watchdog = False
     app.devices.attach(source)
-    app.set_motion_scale(10.0)
+    app.console.set_motion_scale(10.0)
     source.offer(InputSample("twist", (0.05, 0.0, 0.0, 0.0, 0.0, 0.0), 0, 1, 0.0))
     for _ in range(500):
         app.step()
         ee = app.robots.loops["main"].ee_placements()[0].translation
-        assert np.linalg.norm(app.targets[0].translation - ee) <= RATE_LEAD + 0.5 * 1e-3
+        assert np.linalg.norm(app.console.targets[0].translation - ee) <= RATE_LEAD + 0.5 * 1e-3
     assert source.counts["held_back"] > 100
     assert app.limitation().distance > 0.5 * RATE_LEAD  # it was pushing all along
 

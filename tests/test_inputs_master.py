@@ -100,7 +100,7 @@ def session() -> Session:
             time.sleep(0.01)
             with app._lock:  # the target and the command it came from, together
                 snapshots.append((master.applied_sequence,
-                                  app.inputs[0].target.translation.copy(),
+                                  app.console.inputs[0].target.translation.copy(),
                                   app.devices[0].state == FeedbackState.FOLLOWING,
                                   decoupled(master)))
             if time.monotonic() - began > 0.5:  # past the start of the motion
@@ -118,11 +118,11 @@ def session() -> Session:
             assert time.monotonic() < deadline, "the robot did not stop within 10 s"
             time.sleep(0.0005)
         stopped = time.perf_counter() - last
-        held = app.targets[0].translation.copy()
+        held = app.console.targets[0].translation.copy()
         time.sleep(0.2)  # held: the target stays and the robot with it
         return Session(snapshots, errors, holes, sent, feedback, releases_streaming, stopped,
                        app.devices.input_timeout, app.devices[0].reason,
-                       float(np.max(np.abs(app.targets[0].translation - held))),
+                       float(np.max(np.abs(app.console.targets[0].translation - held))),
                        float(np.max(np.abs(app.robots.loops["main"].last_qd))), master.statistics())
     finally:
         process.kill()

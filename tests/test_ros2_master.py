@@ -41,7 +41,7 @@ def test_the_page_follows_a_ros2_master_and_sends_it_the_feedback(domain, tmp_pa
                               stdout=subprocess.PIPE, text=True,
                               env={**os.environ, "PYTHONPATH": str(ROOT)})
     source = Ros2Master(NAMESPACE, domain=domain)
-    start = app.target.translation.copy()
+    start = app.console.target.translation.copy()
     # not a test of the watchdog: a stall of the loaded machine (CI saw 0.0074 m moved for
     # 0.02 when a release re-anchored the master mid-motion) never releases the master
     app.devices.set_input_timeout(MAX_INPUT_TIMEOUT_S)
@@ -63,10 +63,10 @@ def test_the_page_follows_a_ros2_master_and_sends_it_the_feedback(domain, tmp_pa
         output, _ = master.communicate(timeout=60)
     report = json.loads(output)
     assert source.counts_now().get("releases", 0) == 0
-    moved = float(np.linalg.norm(app.target.translation - start))
+    moved = float(np.linalg.norm(app.console.target.translation - start))
     assert moved == pytest.approx(0.02, abs=1e-7)  # the target's smoothing: e^-(1 s / tau)
     ee = app.robots.loops["main"].ee_placements()[0].translation
-    assert float(np.linalg.norm(ee - app.target.translation)) < 1e-3
+    assert float(np.linalg.norm(ee - app.console.target.translation)) < 1e-3
     assert report["received"] > 100 and report["largest"] > 0.0
     # the last two wrenches the master got: the page's last tick's, then close's zeros
     assert report["previous"] == sent.tolist() and report["last"] == [0.0] * 6

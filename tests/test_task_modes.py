@@ -214,12 +214,12 @@ def test_the_way_home_keeps_the_hole_and_ends_at_home(sda10f):
 
 def test_home_says_why_it_cannot_be_reached(sda10f, tmp_path):
     app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path / "scenes")
-    nudge_to = app.target.translation + [0.0, 0.0, -0.03]
-    app.set_target(nudge_to, pin.Quaternion(app.target.rotation).coeffs()[[3, 0, 1, 2]])
+    nudge_to = app.console.target.translation + [0.0, 0.0, -0.03]
+    app.console.set_target(nudge_to, pin.Quaternion(app.console.target.rotation).coeffs()[[3, 0, 1, 2]])
     for _ in range(1500):
         app.step()
     app.constraints.add("hole", distance=0.08)  # placed where the link is, not at home
-    words = app.home()
+    words = app.console.home()
     assert words.startswith("home is off hole 1 (arm_link_5_r) by ")
     assert words.endswith("remove it to go home")
     for _ in range(200):
@@ -236,10 +236,10 @@ def test_a_5_cm_drag_through_a_hole_on_link_6_reaches_the_target_and_home(
     app.constraints.add("hole")
     assert app.robots.loops["main"].task_modes == app.robots.loops["ghost"].task_modes == ("position_roll",)
     offset = 0.05 * np.asarray(direction) / np.linalg.norm(direction)
-    gizmo = app.gizmo.copy()
+    gizmo = app.console.gizmo.copy()
     wxyz = pin.Quaternion(gizmo.rotation).coeffs()[[3, 0, 1, 2]]
     for k in range(1, 21):  # a drag: the gizmo across 5 cm in 1 s
-        app.move_gizmo(gizmo.translation + offset * k / 20, wxyz)
+        app.console.move_gizmo(gizmo.translation + offset * k / 20, wxyz)
         for _ in range(50):
             app.step()
     for _ in range(3000):
@@ -248,7 +248,7 @@ def test_a_5_cm_drag_through_a_hole_on_link_6_reaches_the_target_and_home(
         reached = app.limitation(which)
         assert reached.distance < 1e-3 and "short of the target" not in reached.words, which
     assert app.limitation().details == ""  # the step's words are not needed: nothing short
-    assert app.home() == ""
+    assert app.console.home() == ""
     while app.homing.active:
         app.step()
     for _ in range(1000):

@@ -32,9 +32,10 @@ def run(app, seconds):
 
 
 def nudge(app, offset):
-    target = app.target
+    target = app.console.target
     quaternion = pin.Quaternion(target.rotation)
-    app.set_target(target.translation + offset, [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
+    app.console.set_target(target.translation + offset,
+                           [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
 
 
 def test_target_moves_the_robot_and_the_hole_holds(app):
@@ -152,7 +153,7 @@ def test_planes_and_barriers_and_removal(app):
     (lambda app: app.constraints.add("plane", distance=0.08, normal=[0.0, 0.0, 0.0]), "non-zero"),
     (lambda app: app.constraints.add("barrier", distance=0.08, normal=[0.0, 0.0, 1.0],
                                     offset=-0.05), "wrong side"),
-    (lambda app: app.set_target([np.nan, 0, 0], [1, 0, 0, 0]), "finite"),
+    (lambda app: app.console.set_target([np.nan, 0, 0], [1, 0, 0, 0]), "finite"),
     (lambda app: app.robots.set_rate(10.0), "between 50 and 5000"),
     (lambda app: app.robots.set_gain(5000.0), "gain must be in"),
     (lambda app: app.constraints.add("hole", distance=1e6), "hole distance must be between 0 and"),
@@ -175,25 +176,25 @@ def test_home_keeps_the_constraints_and_clear_removes_them(app):
     run(app, 0.2)
     start = ee_position(app).copy()
     # with a constraint: a joint path home that keeps it, its EE poses followed in full pose
-    assert app.home() == ""
+    assert app.console.home() == ""
     assert list(app.constraints.entries) == [hole_id] and app.homing.active
     assert app.robots.loops["main"].task_modes == ("pose",)
     assert app.limitation().words.startswith("going home through the constraints")
-    np.testing.assert_allclose(app.target.translation, start, atol=1e-12)  # from where it is
-    np.testing.assert_allclose(app.gizmo.translation, start, atol=1e-12)
+    np.testing.assert_allclose(app.console.target.translation, start, atol=1e-12)  # from where it is
+    np.testing.assert_allclose(app.console.gizmo.translation, start, atol=1e-12)
     home = app.robots.loops["main"].ee_placement(app.robot.q_home)
     run(app, app.homing.run.times[-1] + 0.6)
     assert not app.homing.active and app.robots.loops["main"].task_modes == ("position_roll",)
-    np.testing.assert_allclose(app.target.translation, home.translation, atol=1e-9)
+    np.testing.assert_allclose(app.console.target.translation, home.translation, atol=1e-9)
     assert np.linalg.norm(ee_position(app) - home.translation) < 1e-4
     assert np.max(np.abs(app.robots.loops["main"].q - app.robot.q_home)) < 1e-3
     assert max(app.robots.traces["main"].constraint_error) < 1e-6  # held on the way
     assert app.constraints.clear() == 1 and not app.constraints.entries
     nudge(app, [0.01, 0.0, 0.0])
     run(app, 0.1)
-    app.home()  # without constraints: a reset, at once
+    app.console.home()  # without constraints: a reset, at once
     np.testing.assert_array_equal(app.robots.loops["main"].q, app.robot.q_home)
-    np.testing.assert_allclose(app.target.translation, ee_position(app))
+    np.testing.assert_allclose(app.console.target.translation, ee_position(app))
 
 
 def test_recording_writes_a_session_that_replay_accepts(app, tmp_path):
@@ -311,65 +312,65 @@ def test_ghost_offset_is_beside_the_robot_and_checked(app):
 
 
 def move_gizmo_by(app, displacement):
-    gizmo = app.gizmo
+    gizmo = app.console.gizmo
     quaternion = pin.Quaternion(gizmo.rotation)
-    app.move_gizmo(gizmo.translation + displacement,
+    app.console.move_gizmo(gizmo.translation + displacement,
                    [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
 
 
 def test_motion_scaling_moves_the_target_by_scale_times_the_gizmo(app):
-    start = app.target.translation.copy()
-    app.set_motion_scale(0.2)
+    start = app.console.target.translation.copy()
+    app.console.set_motion_scale(0.2)
     move_gizmo_by(app, [0.10, 0.0, 0.0])  # a 10 cm gizmo move ...
-    np.testing.assert_allclose(app.target.translation - start, [0.02, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(app.console.target.translation - start, [0.02, 0.0, 0.0], atol=1e-12)
     move_gizmo_by(app, [0.0, -0.05, 0.0])  # ... displacement since the last clutch, scaled
-    np.testing.assert_allclose(app.target.translation - start, [0.02, -0.01, 0.0], atol=1e-12)
-    app.set_motion_scale(1.0)  # a new scale does not move the target
-    np.testing.assert_allclose(app.target.translation - start, [0.02, -0.01, 0.0], atol=1e-12)
+    np.testing.assert_allclose(app.console.target.translation - start, [0.02, -0.01, 0.0], atol=1e-12)
+    app.console.set_motion_scale(1.0)  # a new scale does not move the target
+    np.testing.assert_allclose(app.console.target.translation - start, [0.02, -0.01, 0.0], atol=1e-12)
     move_gizmo_by(app, [0.0, 0.0, 0.01])
-    np.testing.assert_allclose(app.target.translation - start, [0.02, -0.01, 0.01], atol=1e-12)
+    np.testing.assert_allclose(app.console.target.translation - start, [0.02, -0.01, 0.01], atol=1e-12)
     for bad in (0.0, -1.0, 11.0, np.nan, None):
         with pytest.raises(ValueError, match="motion scale"):
-            app.set_motion_scale(bad)
+            app.console.set_motion_scale(bad)
 
 
 def test_clutch_decouples_the_gizmo_and_release_does_not_jump(app):
-    start = app.target.copy()
-    app.set_clutch(True)
+    start = app.console.target.copy()
+    app.console.set_clutch(True)
     move_gizmo_by(app, [0.05, 0.03, -0.02])  # repositioning the hand, the target holds
-    assert app.target.isApprox(start)
+    assert app.console.target.isApprox(start)
     run(app, 0.2)
     np.testing.assert_allclose(ee_position(app), start.translation, atol=1e-9)
-    app.set_clutch(False)
-    assert app.target.isApprox(start)  # no jump on release
+    app.console.set_clutch(False)
+    assert app.console.target.isApprox(start)  # no jump on release
     move_gizmo_by(app, [0.0, 0.0, 0.01])  # then it continues from where it was
-    np.testing.assert_allclose(app.target.translation, start.translation + [0, 0, 0.01], atol=1e-12)
+    np.testing.assert_allclose(app.console.target.translation, start.translation + [0, 0, 0.01], atol=1e-12)
     # the gizmo's own rotation since the release turns the target by as much
-    app.set_clutch(True)
-    app.set_clutch(False)
+    app.console.set_clutch(True)
+    app.console.set_clutch(False)
     turn = pin.exp3(np.array([0.0, 0.0, 0.3]))
-    gizmo = app.gizmo
+    gizmo = app.console.gizmo
     quaternion = pin.Quaternion(turn @ gizmo.rotation)
-    app.move_gizmo(gizmo.translation, [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
+    app.console.move_gizmo(gizmo.translation, [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
     before = start.rotation
-    np.testing.assert_allclose(app.target.rotation, turn @ before, atol=1e-9)
+    np.testing.assert_allclose(app.console.target.rotation, turn @ before, atol=1e-9)
     with pytest.raises(ValueError, match="engaged"):
-        app.set_clutch("yes")
+        app.console.set_clutch("yes")
 
 
 def test_nudges_and_gizmo_to_target(app):
-    start = app.target.translation.copy()
-    app.nudge_target([0.0, 0.0, 0.005])
-    np.testing.assert_allclose(app.target.translation, start + [0, 0, 0.005], atol=1e-12)
-    np.testing.assert_allclose(app.gizmo.translation, start, atol=1e-12)  # the gizmo stays
+    start = app.console.target.translation.copy()
+    app.console.nudge_target([0.0, 0.0, 0.005])
+    np.testing.assert_allclose(app.console.target.translation, start + [0, 0, 0.005], atol=1e-12)
+    np.testing.assert_allclose(app.console.gizmo.translation, start, atol=1e-12)  # the gizmo stays
     run(app, 0.5)
-    np.testing.assert_allclose(ee_position(app), app.target.translation, atol=1e-4)
+    np.testing.assert_allclose(ee_position(app), app.console.target.translation, atol=1e-4)
     with pytest.raises(ValueError, match="at most 0.1 m"):
-        app.nudge_target([0.0, 0.2, 0.0])
-    pose = app.gizmo_to_target()
-    np.testing.assert_allclose(pose.translation, app.target.translation)
+        app.console.nudge_target([0.0, 0.2, 0.0])
+    pose = app.console.gizmo_to_target()
+    np.testing.assert_allclose(pose.translation, app.console.target.translation)
     move_gizmo_by(app, [0.01, 0.0, 0.0])
-    np.testing.assert_allclose(app.target.translation, start + [0.01, 0, 0.005], atol=1e-12)
+    np.testing.assert_allclose(app.console.target.translation, start + [0.01, 0, 0.005], atol=1e-12)
 
 
 # -- what limits the robot, in words ------------------------------------------------------------
@@ -470,7 +471,7 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     app.robots.set_gain(80.0)
     app.robots.set_damping(0.01)
     app.robots.set_rate(500.0)
-    app.set_motion_scale(0.2)
+    app.console.set_motion_scale(0.2)
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.3)
     app.constraints.move(hole_id, app.constraints.entries[hole_id].goal + [0.0, 0.0, 0.002])
@@ -481,15 +482,15 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     assert [c["id"] for c in scene["constraints"]] == [hole_id, barrier_id]
     q_saved = app.robots.loops["main"].q.copy()
     goals = {i: e.goal.copy() for i, e in app.constraints.entries.items()}
-    target = app.target.copy()
+    target = app.console.target.copy()
 
     # change everything, then load
     app.constraints.clear()
     app.robots.set_ghost(None)
     app.robots.set_rate(1000.0)
     app.robots.set_gain(100.0)
-    app.set_motion_scale(1.0)
-    app.home()
+    app.console.set_motion_scale(1.0)
+    app.console.home()
     run(app, 0.1)
     app.load_scene("a.json")
     assert list(app.constraints.entries) == [hole_id, barrier_id]
@@ -498,10 +499,10 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
         np.testing.assert_allclose(app.constraints.entries[entry_id].goal, goal, atol=1e-12)
     assert app.robots.specs == {"main": "cjm", "ghost": "qp:daqp"}
     assert (app.robots.gain, app.robots.damping, app.robots.config.rate,
-            app.motion_scale) == (80.0, 0.01, 500.0, 0.2)
+            app.console.motion_scale) == (80.0, 0.01, 500.0, 0.2)
     np.testing.assert_allclose(app.robots.ghost_offset, [0.0, -0.7, 0.0])
     np.testing.assert_allclose(app.robots.loops["main"].q, q_saved, atol=1e-12)
-    assert app.target.isApprox(target, 1e-9)
+    assert app.console.target.isApprox(target, 1e-9)
     assert all(e.constraint.gain == 80.0 for e in app.constraints.entries.values())
     assert app.constraints.add("hole", distance=0.1) == "hole-3"  # new ids after the loaded ones
     run(app, 0.3)

@@ -289,7 +289,7 @@ def test_the_status_and_highlights_are_the_controllers_rows(app, server):
     """The view shows the rows the main controller held on the measured tick, at the
     configuration its command was computed from (not computed again for the view)."""
     near_obstacle(app)
-    app.nudge_target([0.0, 0.0, 0.01])
+    app.console.nudge_target([0.0, 0.0, 0.01])
     run(app, 0.3)
     q = run_to_measure(app)
     snapshot = app.snapshot()
@@ -354,7 +354,7 @@ def test_the_dual_arms_pairs_are_the_controllers_rows(dual_app):
     app = dual_app
     for ee, side in ((0, -1.0), (1, 1.0)):
         for _ in range(8):
-            app.nudge_target([0.0, 0.01 * side, 0.0], ee)
+            app.console.nudge_target([0.0, 0.01 * side, 0.0], ee)
             run(app, 0.25)
     q = run_to_measure(app)
     shown = app.snapshot()["robots"]["main"]["collision_rows"]

@@ -44,8 +44,8 @@ def drag(app, ee: int, displacement, steps: int, ticks_per_step: int, check=None
     """Move EE ``ee``'s gizmo by ``displacement`` in ``steps`` equal moves, the control
     loop ticking ``ticks_per_step`` times after each (``check()`` after every tick)."""
     for _ in range(steps):
-        gizmo = app.inputs[ee].gizmo
-        app.move_gizmo(gizmo.translation + np.asarray(displacement) / steps, wxyz(gizmo), ee)
+        gizmo = app.console.inputs[ee].gizmo
+        app.console.move_gizmo(gizmo.translation + np.asarray(displacement) / steps, wxyz(gizmo), ee)
         for _ in range(ticks_per_step):
             app.step()
             if check is not None:
@@ -63,15 +63,15 @@ def test_each_gizmo_moves_its_own_ee_only(app):
     for ee, displacement in ((0, [0.02, -0.01, 0.015]), (1, [-0.015, -0.02, 0.01])):
         start = ee_positions(app)
         other = 1 - ee
-        other_target = app.inputs[other].target.copy()
+        other_target = app.console.inputs[other].target.copy()
         drag(app, ee, displacement, steps=20, ticks_per_step=20)
         run(app, 0.5)
         end = ee_positions(app)
-        np.testing.assert_allclose(app.inputs[ee].target.translation,
+        np.testing.assert_allclose(app.console.inputs[ee].target.translation,
                                    start[ee] + displacement, atol=1e-6)
         assert np.linalg.norm(end[ee] - (start[ee] + displacement)) < 1e-4
         assert np.linalg.norm(end[other] - start[other]) < 1e-6, "the other EE moved"
-        assert app.inputs[other].target.isApprox(other_target, 1e-12)
+        assert app.console.inputs[other].target.isApprox(other_target, 1e-12)
         limitations = app.snapshot()["robots"]["main"]["limitations"]
         assert [each.status for each in limitations] == ["ok", "ok"]
         assert all(each.distance < 1e-4 for each in limitations)
@@ -147,55 +147,55 @@ def test_a_hole_or_lock_goes_on_the_chosen_arm_and_is_checked_against_that_arm(a
 
 
 def test_nudges_home_and_gizmo_to_target_act_on_one_ee(app, dual):
-    targets = app.targets
-    app.nudge_target([0.0, 0.0, 0.01], ee=1)
-    np.testing.assert_allclose(app.inputs[1].target.translation,
+    targets = app.console.targets
+    app.console.nudge_target([0.0, 0.0, 0.01], ee=1)
+    np.testing.assert_allclose(app.console.inputs[1].target.translation,
                                targets[1].translation + [0, 0, 0.01], atol=1e-15)
-    assert app.inputs[0].target.isApprox(targets[0], 1e-15)
-    assert app.inputs[1].gizmo.isApprox(targets[1], 1e-15)  # the gizmo stayed
-    app.gizmo_to_target("arm_right_link_tool0")  # by name as well
-    assert app.inputs[1].gizmo.isApprox(app.inputs[1].target, 1e-15)
+    assert app.console.inputs[0].target.isApprox(targets[0], 1e-15)
+    assert app.console.inputs[1].gizmo.isApprox(targets[1], 1e-15)  # the gizmo stayed
+    app.console.gizmo_to_target("arm_right_link_tool0")  # by name as well
+    assert app.console.inputs[1].gizmo.isApprox(app.console.inputs[1].target, 1e-15)
     for bad in (2, -1, "tool0", True, 0.5):
         with pytest.raises(ValueError, match="no end effector"):
-            app.nudge_target([0.0, 0.0, 0.01], ee=bad)
-    app.nudge_target([0.01, 0.0, 0.0], ee=0)
+            app.console.nudge_target([0.0, 0.0, 0.01], ee=bad)
+    app.console.nudge_target([0.01, 0.0, 0.0], ee=0)
     app.constraints.add("hole", distance=0.08, link=dual.constrained_links[1])
     run(app, 0.3)
-    app.home(ee=0)  # one EE's target home; the other keeps its own
+    app.console.home(ee=0)  # one EE's target home; the other keeps its own
     data = dual.model.createData()
     pin.framesForwardKinematics(dual.model, data, dual.q_home)
     home = [data.oMf[frame].copy() for frame in dual.ee_frame_ids]
-    assert app.inputs[0].target.isApprox(home[0], 1e-12)
-    np.testing.assert_allclose(app.inputs[1].target.translation,
+    assert app.console.inputs[0].target.isApprox(home[0], 1e-12)
+    np.testing.assert_allclose(app.console.inputs[1].target.translation,
                                home[1].translation + [0, 0, 0.01], atol=1e-12)
     # every EE, the constraint stays: the robot goes home on a path that keeps it
-    assert app.home() == "" and app.homing.active
+    assert app.console.home() == "" and app.homing.active
     while app.homing.active:
         app.step()
-    assert all(app.inputs[k].target.isApprox(home[k], 1e-12) for k in (0, 1))
+    assert all(app.console.inputs[k].target.isApprox(home[k], 1e-12) for k in (0, 1))
     assert len(app.constraints.entries) == 1
 
 
 def test_clutch_and_motion_scale_act_on_every_gizmo(app):
-    app.set_motion_scale(0.5)
-    starts = app.targets
-    app.set_clutch(True)
+    app.console.set_motion_scale(0.5)
+    starts = app.console.targets
+    app.console.set_clutch(True)
     for ee in (0, 1):  # repositioning both hands: no target moves
-        gizmo = app.inputs[ee].gizmo
-        app.move_gizmo(gizmo.translation + [0.05, 0.0, 0.0], wxyz(gizmo), ee)
-    assert all(app.inputs[k].target.isApprox(starts[k], 1e-15) for k in (0, 1))
-    app.set_clutch(False)
+        gizmo = app.console.inputs[ee].gizmo
+        app.console.move_gizmo(gizmo.translation + [0.05, 0.0, 0.0], wxyz(gizmo), ee)
+    assert all(app.console.inputs[k].target.isApprox(starts[k], 1e-15) for k in (0, 1))
+    app.console.set_clutch(False)
     for ee, step in ((0, [0.0, 0.02, 0.0]), (1, [0.0, 0.0, -0.04])):
-        gizmo = app.inputs[ee].gizmo
-        app.move_gizmo(gizmo.translation + step, wxyz(gizmo), ee)
-        np.testing.assert_allclose(app.inputs[ee].target.translation,
+        gizmo = app.console.inputs[ee].gizmo
+        app.console.move_gizmo(gizmo.translation + step, wxyz(gizmo), ee)
+        np.testing.assert_allclose(app.console.inputs[ee].target.translation,
                                    starts[ee].translation + 0.5 * np.asarray(step), atol=1e-12)
 
 
 def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path):
     for link in dual.constrained_links:
         app.constraints.add("hole", distance=0.08, link=link)
-    app.nudge_target([0.0, 0.005, 0.0], ee=1)
+    app.console.nudge_target([0.0, 0.005, 0.0], ee=1)
     run(app, 0.2)
     path = app.save_scene("two.json")
     data = json.loads(path.read_text())
@@ -207,8 +207,8 @@ def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path)
     other = TeleopApp(again, record_dir=tmp_path, scene_dir=path.parent)
     other.load_scene(path.name)
     for k in (0, 1):
-        assert other.inputs[k].target.isApprox(app.inputs[k].target, 1e-12)
-        assert other.inputs[k].gizmo.isApprox(app.inputs[k].target, 1e-12)
+        assert other.console.inputs[k].target.isApprox(app.console.inputs[k].target, 1e-12)
+        assert other.console.inputs[k].gizmo.isApprox(app.console.inputs[k].target, 1e-12)
     assert [e.constraint.link for e in other.constraints.entries.values()] == list(dual.constrained_links)
     np.testing.assert_array_equal(other.robots.loops["main"].q, app.robots.loops["main"].q)
     run(other, 0.2)
@@ -263,7 +263,7 @@ def test_the_mobile_base_drives_and_a_wall_on_it_holds(mobile, tmp_path):
     penetration = 0.0
     for _ in range(60):  # 30 cm in 3 s, both targets
         for ee in (0, 1):
-            app.nudge_target([0.005, 0.0, 0.0], ee)
+            app.console.nudge_target([0.005, 0.0, 0.0], ee)
         for _ in range(50):
             app.step()
             pin.framesForwardKinematics(mobile.model, data, app.robots.loops["main"].q)
@@ -305,7 +305,7 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
     assert len(ui.scene.target_gizmos) == 2 and ui.ee_names == {"arm_left_link_tool0": "left",
                                                           "arm_right_link_tool0": "right"}
     assert ui.teleop_panel.active_arm.visible and ui.teleop_panel.active_arm.options == ("left", "right")
-    for gizmo, target in zip(ui.scene.target_gizmos, app.targets):
+    for gizmo, target in zip(ui.scene.target_gizmos, app.console.targets):
         np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
     right = ui.scene.target_gizmos[1]  # what the right gizmo's drag does: the right target only
     right.position = np.asarray(right.position) + [0.0, -0.01, 0.0]
@@ -315,26 +315,26 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
         assert ui.inbox.drain(10.0)
     finally:
         ui.inbox.stop()
-    np.testing.assert_allclose(app.inputs[1].target.translation, right.position, atol=1e-12)
-    assert app.inputs[0].target.isApprox(app.inputs[0].gizmo, 1e-15)
+    np.testing.assert_allclose(app.console.inputs[1].target.translation, right.position, atol=1e-12)
+    assert app.console.inputs[0].target.isApprox(app.console.inputs[0].gizmo, 1e-15)
     for _ in range(20):
         app.step()
     snapshot = app.snapshot()
     ui._draw(snapshot)
     assert not ui.scene.reach_lines[0].visible and ui.scene.reach_lines[1].visible
     np.testing.assert_allclose(ui.scene.reach_lines[1].points[0],
-                               [ee_positions(app)[1], app.inputs[1].target.translation], atol=1e-9)
+                               [ee_positions(app)[1], app.console.inputs[1].target.translation], atol=1e-9)
     np.testing.assert_allclose(ui.scene.reach_lines[1].colors[0, 0], STATUS_COLORS["ok"])
     details = ui.status_panel.details.content
     assert "*left* on target" in details and "*right* moving to the target" in details
     ui.teleop_panel.active_arm.value = "right"  # the nudges act on the active arm
     ui.teleop_panel.nudge_buttons.value = "+z"
-    before = app.targets
-    app.nudge_target(0.005 * np.array([0.0, 0.0, 1.0]), ui.teleop_panel.active_ee())
-    np.testing.assert_allclose(app.inputs[1].target.translation - before[1].translation,
+    before = app.console.targets
+    app.console.nudge_target(0.005 * np.array([0.0, 0.0, 1.0]), ui.teleop_panel.active_ee())
+    np.testing.assert_allclose(app.console.inputs[1].target.translation - before[1].translation,
                                [0, 0, 0.005], atol=1e-15)
     ui.teleop_panel.home()
-    for gizmo, target in zip(ui.scene.target_gizmos, app.targets):
+    for gizmo, target in zip(ui.scene.target_gizmos, app.console.targets):
         np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
 
 
@@ -392,9 +392,9 @@ def test_a_recorded_session_holds_both_targets_and_replays(app, dual, tmp_path):
     for link in dual.constrained_links:
         app.constraints.add("hole", distance=0.08, link=link)
     path = app.start_recording("two.jsonl")
-    app.nudge_target([0.0, 0.004, 0.0], ee=0)
+    app.console.nudge_target([0.0, 0.004, 0.0], ee=0)
     run(app, 0.2)
-    app.nudge_target([0.0, 0.0, -0.004], ee=1)
+    app.console.nudge_target([0.0, 0.0, -0.004], ee=1)
     run(app, 0.2)
     app.stop_recording()
     session = load_session(path)

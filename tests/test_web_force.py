@@ -190,7 +190,7 @@ def test_the_status_leaves_the_force_axes_to_the_law(app):
     for _ in range(4000):
         app.step()
     placement = app.robots.loops["main"].ee_placements()[0]
-    error = app.inputs[0].target.translation - placement.translation
+    error = app.console.inputs[0].target.translation - placement.translation
     along_tool = placement.rotation.T @ error
     assert abs(along_tool[2]) > 0.01  # the tissue holds the tip off its target
     limitation = app.limitation("main")

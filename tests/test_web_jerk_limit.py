@@ -18,9 +18,9 @@ def commanded_jerk(app: TeleopApp, seconds: float, offset: np.ndarray) -> float:
     """The largest |qd_k - 2 qd_k-1 + qd_k-2| / dt^2 over the main loop's commands while
     the target jumps by ``offset`` (a drag of the gizmo) with a hole in place."""
     app.constraints.add("hole", distance=0.08)
-    target = app.target
+    target = app.console.target
     quaternion = pin.Quaternion(target.rotation)
-    app.set_target(target.translation + offset,
+    app.console.set_target(target.translation + offset,
                    [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
     commands = []
     for _ in range(int(seconds * app.robots.config.rate)):

@@ -41,9 +41,9 @@ def run(app: TeleopApp, seconds: float) -> None:
 
 
 def nudge(app: TeleopApp, offset) -> None:
-    target = app.target
+    target = app.console.target
     quaternion = pin.Quaternion(target.rotation)
-    app.set_target(target.translation + np.asarray(offset),
+    app.console.set_target(target.translation + np.asarray(offset),
                    [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
 
 
@@ -185,7 +185,7 @@ def test_the_session_wall_stiffness_reaches_a_scenes_holes(sda10f, tmp_path):
 def test_home_resets_the_simulated_robot(app):
     nudge(app, [0.0, 0.0, 0.02])
     run(app, 0.3)
-    app.home()  # no constraint: a reset
+    app.console.home()  # no constraint: a reset
     loop = app.robots.loops["main"]
     np.testing.assert_allclose(loop.q, app.robot.q_home)
     q_sim = np.empty(app.robot.model.nq)

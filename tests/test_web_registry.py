@@ -230,7 +230,7 @@ def held_along_a_drag(robot, tmp_path, distance: float, direction, nudge) -> Non
     np.testing.assert_allclose(line.line_point, expected, atol=1e-12)
     across = perpendicular_basis(line.direction)
 
-    app.nudge_target(nudge)
+    app.console.nudge_target(nudge)
     dt, gain, h = app.robots.config.dt, app.robots.gain, 1e-6
     eps = np.finfo(float).eps
     lever = lever_bound(robot, line.link, line.link_point)

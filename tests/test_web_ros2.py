@@ -67,12 +67,12 @@ def hold_the_hole(app: TeleopApp) -> tuple[float, float]:
     app.constraints.add("hole", distance=0.20)
     errors = []
     for offset in ([0.0, 0.02, 0.0], [0.0, 0.0, -0.01]):
-        app.nudge_target(offset)
+        app.console.nudge_target(offset)
         for _ in range(int(RATE)):  # one second each
             app.step()
             errors.append(hole_error(app))
     distance = float(np.linalg.norm(app.robots.loops["main"].ee_placements()[0].translation
-                                    - app.target.translation))
+                                    - app.console.target.translation))
     return max(errors), distance
 
 
@@ -81,7 +81,7 @@ def in_process(robot, tmp_path: Path) -> float:
     the sim's start."""
     app = TeleopApp(robot, rate=RATE, record_dir=tmp_path, scene_dir=tmp_path)
     app.robots.loops["main"].q = Q0.copy()
-    app.inputs[0].target = app.robots.loops["main"].ee_placements()[0]
+    app.console.inputs[0].target = app.robots.loops["main"].ee_placements()[0]
     return hold_the_hole(app)[0]
 
 
@@ -134,7 +134,7 @@ def test_the_status_says_why_the_robot_stopped(robot, domain, robot_process, tmp
                     ros2_settings=settings_for(domain, stale_after=0.3),
                     record_dir=tmp_path, scene_dir=tmp_path)
     try:
-        app.nudge_target([0.0, 0.01, 0.0])
+        app.console.nudge_target([0.0, 0.01, 0.0])
         for _ in range(100):
             app.step()
         assert "stopped" not in app.limitation().words
@@ -180,16 +180,16 @@ def drive_with_the_control_thread(app: TeleopApp, drag: bool) -> tuple[float, fl
     control.start()
     errors, calls = [], []
     try:
-        start = app.inputs[0].target.translation.copy()
+        start = app.console.inputs[0].target.translation.copy()
         for i in range(1, 201) if drag else ():
             began = time.perf_counter()
-            app.move_gizmo(start + [0.0, 1e-4 * i, 0.0], [1.0, 0.0, 0.0, 0.0])
+            app.console.move_gizmo(start + [0.0, 1e-4 * i, 0.0], [1.0, 0.0, 0.0, 0.0])
             calls.append(time.perf_counter() - began)
             time.sleep(0.01)
             with app._lock:
                 errors.append(hole_error(app))
         if not drag:
-            app.nudge_target([0.0, 0.02, 0.0])
+            app.console.nudge_target([0.0, 0.02, 0.0])
         for _ in range(100 if drag else 200):
             time.sleep(0.01)
             with app._lock:
@@ -198,7 +198,7 @@ def drive_with_the_control_thread(app: TeleopApp, drag: bool) -> tuple[float, fl
     finally:
         control.stop()
     distance = float(np.linalg.norm(app.robots.loops["main"].ee_placements()[0].translation
-                                    - app.target.translation))
+                                    - app.console.target.translation))
     return max(errors), distance, calls
 
 
@@ -306,7 +306,7 @@ def test_teleop_web_plant_ros2_refuses_a_ghost_and_a_silent_robot(domain):
 def nudged_hole_error(app: TeleopApp, seconds: float) -> float:
     """The largest error of the page's one hole (Pinocchio, at the robot's configuration
     each period) while the target moves 2 cm sideways."""
-    app.nudge_target([0.0, 0.02, 0.0])
+    app.console.nudge_target([0.0, 0.02, 0.0])
     errors = []
     for _ in range(int(seconds * RATE)):
         app.step()

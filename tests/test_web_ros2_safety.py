@@ -44,7 +44,7 @@ def test_a_scene_from_elsewhere_is_refused_and_one_from_here_moves_nothing(
         here = app.scene()
         here["target"]["position"] = [float(x) for x in start + [0.0, 0.05, 0.0]]
         app.apply_scene(here)
-        np.testing.assert_allclose(app.target.translation, tip(app), atol=1e-9)
+        np.testing.assert_allclose(app.console.target.translation, tip(app), atol=1e-9)
         for _ in range(int(RATE / 2)):
             app.step()
         assert np.linalg.norm(tip(app) - start) < 1e-4
@@ -61,8 +61,8 @@ def test_home_takes_the_robot_home_on_a_path_and_never_jumps(robot, domain, robo
     try:
         assert np.max(np.abs(app.robots.loops["main"].q - Q0)) < 1e-3  # it starts where it is
         start = tip(app)
-        assert app.home() == ""
-        np.testing.assert_allclose(app.target.translation, start, atol=1e-6)
+        assert app.console.home() == ""
+        np.testing.assert_allclose(app.console.target.translation, start, atol=1e-6)
         cap = app.robots.config.max_linear_speed
         window = int(RATE / 10)  # states arrive in bursts: the speed over 0.1 s
         previous = start

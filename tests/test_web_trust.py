@@ -147,12 +147,12 @@ def test_a_symlink_loop_is_refused_like_any_name_leading_out(app, tmp_path):
 
 
 @pytest.mark.parametrize("action, message", [
-    (lambda app: app.set_target([1e300, 0, 0], [1, 0, 0, 0]), "target refused: .* more than 2 m"),
-    (lambda app: app.set_target([np.nan, 0, 0], [1, 0, 0, 0]), "target position must be finite"),
-    (lambda app: app.set_target(app.target.translation + [0, 0, 2.5], [1, 0, 0, 0]),
+    (lambda app: app.console.set_target([1e300, 0, 0], [1, 0, 0, 0]), "target refused: .* more than 2 m"),
+    (lambda app: app.console.set_target([np.nan, 0, 0], [1, 0, 0, 0]), "target position must be finite"),
+    (lambda app: app.console.set_target(app.console.target.translation + [0, 0, 2.5], [1, 0, 0, 0]),
      "target refused"),
-    (lambda app: app.move_gizmo([0, 1e300, 0], [1, 0, 0, 0]), "gizmo's target refused"),
-    (lambda app: app.move_gizmo([0, np.inf, 0], [1, 0, 0, 0]), "gizmo position must be finite"),
+    (lambda app: app.console.move_gizmo([0, 1e300, 0], [1, 0, 0, 0]), "gizmo's target refused"),
+    (lambda app: app.console.move_gizmo([0, np.inf, 0], [1, 0, 0, 0]), "gizmo position must be finite"),
     (lambda app: app.robots.set_damping(1e300), "damping must be <= 1"),
     (lambda app: app.robots.set_damping(np.nan), "damping must be finite"),
     (lambda app: app.robots.set_gain(1e300), "gain must be in"),
@@ -163,11 +163,11 @@ def test_a_symlink_loop_is_refused_like_any_name_leading_out(app, tmp_path):
      "constraint position refused"),
 ])
 def test_a_target_or_setting_out_of_range_is_refused_naming_it(app, action, message):
-    target, gizmo = app.target.copy(), app.gizmo.copy()
+    target, gizmo = app.console.target.copy(), app.console.gizmo.copy()
     settings = (app.robots.gain, app.robots.damping, app.robots.config.rate)
     with pytest.raises(ValueError, match=message):
         action(app)
-    assert app.target.isApprox(target, 0.0) and app.gizmo.isApprox(gizmo, 0.0)
+    assert app.console.target.isApprox(target, 0.0) and app.console.gizmo.isApprox(gizmo, 0.0)
     assert (app.robots.gain, app.robots.damping, app.robots.config.rate) == settings
     run(app, 0.01)
     assert np.isfinite(app.robots.loops["main"].q).all()
@@ -176,8 +176,8 @@ def test_a_target_or_setting_out_of_range_is_refused_naming_it(app, action, mess
 def test_targets_within_the_maximum_distance_are_taken(app):
     ee = app.robots.loops["main"].ee_placement()
     inside = ee.translation + [0.0, 0.0, 0.99 * MAX_TARGET_DISTANCE]
-    app.set_target(inside, [1, 0, 0, 0])
-    np.testing.assert_array_equal(app.target.translation, inside)
+    app.console.set_target(inside, [1, 0, 0, 0])
+    np.testing.assert_array_equal(app.console.target.translation, inside)
     app.robots.set_damping(MAX_DAMPING)
     assert app.robots.damping == MAX_DAMPING
 
@@ -262,7 +262,7 @@ def test_a_flood_of_10000_events_in_5_s_does_not_starve_the_control_loop(app):
                            key="rate", throttled=True)
             else:
                 position = ee.translation + 0.01 * np.array([np.sin(k / 300), 0.0, 0.0])
-                inbox.post(lambda p=position: app.move_gizmo(p, [wxyz.w, wxyz.x, wxyz.y, wxyz.z]),
+                inbox.post(lambda p=position: app.console.move_gizmo(p, [wxyz.w, wxyz.x, wxyz.y, wxyz.z]),
                            key="gizmo")
             time.sleep(max(0.0, start + 5e-4 * (k + 1) - time.monotonic()))
         flood = time.monotonic() - start
@@ -292,16 +292,16 @@ def test_a_target_held_where_the_robot_is_lets_it_settle(app):
     ee = app.robots.loops["main"].ee_placement()
     wxyz = pin.Quaternion(ee.rotation)
     far = ee.translation + [0.6, 0.3, -0.4]  # out of reach: the joints run to their limits
-    app.set_target(far, [wxyz.w, wxyz.x, wxyz.y, wxyz.z])
+    app.console.set_target(far, [wxyz.w, wxyz.x, wxyz.y, wxyz.z])
     run(app, 3.0)
     left = TeleopApp(robot, record_dir=app.record_dir, scene_dir=app.scene_dir)
     with left._lock, app._lock:
         left.robots.loops["main"].q = app.robots.loops["main"].q.copy()
-        left.inputs[0].target = app.target.copy()
-    app.hold_where_the_robot_is(0)
+        left.console.inputs[0].target = app.console.target.copy()
+    app.console.hold_where_the_robot_is(0)
     held_at = app.robots.loops["main"].ee_placement().translation
-    np.testing.assert_allclose(app.target.translation, held_at, atol=1e-12)
-    np.testing.assert_allclose(app.gizmo.translation, held_at, atol=1e-12)
+    np.testing.assert_allclose(app.console.target.translation, held_at, atol=1e-12)
+    np.testing.assert_allclose(app.console.gizmo.translation, held_at, atol=1e-12)
     run(app, 1.0)
     run(left, 1.0)
     q_held, q_left = app.robots.loops["main"].q.copy(), left.robots.loops["main"].q.copy()

@@ -49,9 +49,9 @@ def draw(ui, plot=False):
 
 
 def nudge(app, offset):
-    target = app.target
+    target = app.console.target
     quaternion = pin.Quaternion(target.rotation)
-    app.set_target(target.translation + offset,
+    app.console.set_target(target.translation + offset,
                    [quaternion.w, quaternion.x, quaternion.y, quaternion.z])
 
 
@@ -146,7 +146,7 @@ def test_the_ee_target_line_takes_the_step_status_colour(ui):
     assert limitation.status == "least_squares" and "target out of reach" in limitation.details
     assert "short of the target" in limitation.words  # the part, the cause, the action
     assert ui.scene.reach_line.visible is True
-    np.testing.assert_allclose(ui.scene.reach_line.points[0, 1], app.target.translation, atol=1e-6)
+    np.testing.assert_allclose(ui.scene.reach_line.points[0, 1], app.console.target.translation, atol=1e-6)
     np.testing.assert_allclose(ui.scene.reach_line.colors[0, 0], STATUS_COLORS["least_squares"])
     assert ui.scene.target_marker.visible is True  # drawn apart from the gizmo
     assert "short of the target" in ui.status_panel.details.content
@@ -188,7 +188,7 @@ def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     app = ui.app
     app.constraints.add("hole", distance=0.08)
     app.robots.set_gain(60.0)
-    app.set_motion_scale(0.5)
+    app.console.set_motion_scale(0.5)
     app.robots.set_ghost("qp:daqp")
     app.robots.set_task_mode("position")
     ui.settings_panel.scene_path.value = "s.json"
@@ -196,7 +196,7 @@ def test_loading_a_scene_sets_the_widgets(ui, tmp_path):
     assert ui.settings_panel.scene_status.content == "saved `s.json`"
     assert (tmp_path / "scenes" / "s.json").is_file()
     app.robots.set_gain(100.0)
-    app.set_motion_scale(1.0)
+    app.console.set_motion_scale(1.0)
     app.robots.set_ghost(None)
     app.robots.set_task_mode("auto")
     app.constraints.clear()
@@ -265,8 +265,8 @@ def test_a_drag_ended_by_a_lost_browser_holds_the_target_where_the_ee_is(ui):
     moved = ui.scene._gizmo_moved(gizmo, 0)
     gone = 12345  # a client id the server does not list
     assert gone not in ui.server.get_clients()
-    start = app.target.translation.copy()
-    ui.inbox.post(lambda: app.set_target(start + [0.0, 0.0, 0.02], [1, 0, 0, 0]))
+    start = app.console.target.translation.copy()
+    ui.inbox.post(lambda: app.console.set_target(start + [0.0, 0.0, 0.02], [1, 0, 0, 0]))
     gizmo.position = np.asarray(gizmo.position) + [0.0, 0.0, 0.05]
     moved(SimpleNamespace(client=None, client_id=gone, phase="update"))  # ignored: gone
     moved(SimpleNamespace(client=None, client_id=gone, phase="end"))
@@ -276,7 +276,7 @@ def test_a_drag_ended_by_a_lost_browser_holds_the_target_where_the_ee_is(ui):
     finally:
         ui.inbox.stop()
     ee = app.robots.loops["main"].ee_placement()
-    np.testing.assert_allclose(app.target.translation, ee.translation, atol=1e-12)
+    np.testing.assert_allclose(app.console.target.translation, ee.translation, atol=1e-12)
     np.testing.assert_allclose(gizmo.position, ee.translation, atol=1e-6)  # float32
 
 

@@ -27,10 +27,12 @@ from constraints.validation import as_number, as_vector
 from teleop.inputs import followed_pose
 from teleop.robots import Robot
 
-from .robots import Robots
 from .editing import ConstraintEditing
 from .end_effectors import ee_index
 from .limits import MAX_MOTION_SCALE, MAX_TARGET_DISTANCE
+from .homing import WayHome
+from .recording import SessionRecording
+from .robots import Robots
 from .ros2_robot import Ros2Robot
 
 #: a nudge moves a target by at most this much (m)
@@ -63,18 +65,39 @@ def pose_from(position, wxyz, what: str) -> pin.SE3:
 
 
 class Console:
-    """The operator's console of :class:`web.app.TeleopApp` (its state: ``inputs``,
-    ``clutch``, ``motion_scale``; it reads the main robot's loop)."""
+    """The operator's console of :class:`web.app.TeleopApp` (``app.console``), a component
+    that owns it: per EE the target and the gizmo (:attr:`inputs`), the :attr:`clutch`
+    and the :attr:`motion_scale`. Its actions take the session's lock; the control tick
+    reads :attr:`inputs` holding it.
 
-    robots: Robots
-    robot: Robot
-    inputs: list[EEInput]
-    clutch: bool
-    motion_scale: float
-    constraints: ConstraintEditing
-    ros2: Ros2Robot | None
-    _lock: threading.RLock
-    _view_data: pin.Data
+    Parameters
+    ----------
+    robot : the session's robot.
+    lock : the session's lock.
+    robots : the session's robots (the targets are checked against the main one's EEs;
+        "Home" resets their loops).
+    constraints : the placed constraints (with some, "Home" follows a joint path).
+    homing : the way home.
+    recorder : the session's recording (it gets every target).
+    ros2 : the robot over ROS 2 (it cannot jump home), or None.
+    """
+
+    def __init__(self, robot: Robot, lock: threading.RLock, robots: Robots,
+                 constraints: ConstraintEditing, homing: WayHome, recorder: SessionRecording,
+                 ros2: Ros2Robot | None) -> None:
+        self.robot = robot
+        self._lock = lock
+        self._robots = robots
+        self._constraints = constraints
+        self._homing = homing
+        self._recorder = recorder
+        self._ros2 = ros2
+        self._data = robot.model.createData()  # for the home poses, under the lock
+        # the input mapping, per EE: gizmo -> target (clutch, motion scale)
+        self.inputs = [EEInput.at(frame, pose) for frame, pose in
+                       zip(robot.ee_frames, robots.loops["main"].ee_placements())]
+        self.motion_scale = 1.0
+        self.clutch = False
 
     @property
     def target(self) -> pin.SE3:
@@ -92,14 +115,10 @@ class Console:
         with self._lock:
             return [hand.target.copy() for hand in self.inputs]
 
-    def ee_index(self, ee) -> int:
-        """``ee`` (an index or a name of ``robot.ee_frames``) as an index; else ``ValueError``."""
-        return ee_index(self.robot, ee)
-
     def _check_target(self, target: pin.SE3, ee: int, what: str = "target") -> None:
         """``ValueError`` when ``target`` is farther than :data:`MAX_TARGET_DISTANCE` from
         where EE ``ee`` of the main robot is now (caller holds the lock)."""
-        ee_now = self.robots.loops["main"].ee_placements()[ee].translation
+        ee_now = self._robots.loops["main"].ee_placements()[ee].translation
         distance = math.hypot(*(target.translation - ee_now))  # no overflow at 1e300
         if not distance <= MAX_TARGET_DISTANCE:
             raise ValueError(f"{what} refused: {distance:.3g} m from the end effector "
@@ -109,16 +128,16 @@ class Console:
         """EE ``ee``'s target pose (caller holds the lock); recorded when recording. It
         ends a way home being followed, where it is, and forgets why the last one
         stopped short (:mod:`.homing`)."""
-        if self.homing.end():
-            self.robots.apply_task_modes()
-        self.homing.forget()
+        if self._homing.end():
+            self._robots.apply_task_modes()
+        self._homing.forget()
         self.inputs[ee].target = target
-        self.recorder.target(ee, target)
+        self._recorder.target(ee, target)
 
     def set_target(self, position, wxyz, ee=0) -> None:
         """The operator's target pose of EE ``ee`` directly (world position, quaternion
         w, x, y, z). Its gizmo's later motion continues from this target."""
-        ee = self.ee_index(ee)
+        ee = ee_index(self.robot, ee)
         target = pose_from(position, wxyz, "target")
         with self._lock:
             self._check_target(target, ee)
@@ -128,7 +147,7 @@ class Console:
         """EE ``ee``'s input gizmo pose. Unless the clutch is engaged, its target moves by
         ``motion_scale`` times the gizmo's displacement since its previous pose (and turns
         with the gizmo's rotation since then); the other targets stay."""
-        ee = self.ee_index(ee)
+        ee = ee_index(self.robot, ee)
         gizmo = pose_from(position, wxyz, "gizmo")
         with self._lock:
             hand = self.inputs[ee]
@@ -163,7 +182,7 @@ class Console:
     def nudge_target(self, displacement, ee=0) -> None:
         """Move EE ``ee``'s target by ``displacement`` (world, m), its gizmo staying where
         it is."""
-        ee = self.ee_index(ee)
+        ee = ee_index(self.robot, ee)
         displacement = as_vector(displacement, 3, "nudge")
         if np.linalg.norm(displacement) > MAX_NUDGE:
             raise ValueError(f"a nudge moves the target by at most {MAX_NUDGE:g} m")
@@ -178,16 +197,16 @@ class Console:
         browser lost mid-drag leaves behind (docs/design.md section 5.3). The robot then
         settles where it is instead of going on towards the last point of the drag,
         which may lie past a joint limit."""
-        indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
+        indices = range(len(self.inputs)) if ee is None else [ee_index(self.robot, ee)]
         with self._lock:
-            placements = self.robots.loops["main"].ee_placements()
+            placements = self._robots.loops["main"].ee_placements()
             for index in indices:
                 self._put_hand(index, placements[index].copy())
 
     def gizmo_to_target(self, ee=0) -> pin.SE3:
         """Put EE ``ee``'s gizmo on its target (the UI moves its handle there); returns
         the pose."""
-        ee = self.ee_index(ee)
+        ee = ee_index(self.robot, ee)
         with self._lock:
             hand = self.inputs[ee]
             hand.gizmo = hand.target.copy()
@@ -195,44 +214,44 @@ class Console:
 
     def home(self, ee=None) -> str:
         """Every target and gizmo (or only EE ``ee``'s) on its home EE pose. The
-        constraints stay (:meth:`clear_constraints` removes them). Every EE with
+        constraints stay (:meth:`.editing.ConstraintEditing.clear` removes them). Every EE with
         constraints placed: the robot goes home through them, on a joint path whose
         steps keep their rows (:mod:`.homing`, docs/design.md section 20.3); the words
         say why it cannot reach home (``""`` when it can). Every EE with no constraint
         placed: the robots back at ``q_home`` at once (a reset). A real robot (the ros2
         plant) cannot jump: its loop is reset where it is (a stop cleared, its state read
         again), then it goes home on the joint path as with constraints."""
-        indices = range(len(self.inputs)) if ee is None else [self.ee_index(ee)]
-        if ee is None and self.ros2 is not None:
+        indices = range(len(self.inputs)) if ee is None else [ee_index(self.robot, ee)]
+        if ee is None and self._ros2 is not None:
             with self._lock:
-                loop = self.robots.loops["main"]
+                loop = self._robots.loops["main"]
                 t = loop.t
                 loop.reset()  # zeros, the watchdog's stop cleared, a fresh state awaited
-                loop.t, loop.q = t, self.ros2.state(loop.config.dt)
-        if ee is None and (self.constraints.entries or self.ros2 is not None):
+                loop.t, loop.q = t, self._ros2.state(loop.config.dt)
+        if ee is None and (self._constraints.entries or self._ros2 is not None):
             with self._lock:
-                loop = self.robots.loops["main"]
+                loop = self._robots.loops["main"]
                 for index in indices:  # from where the robot is: no jump when it starts
                     self._put_hand(index, loop.ee_placements()[index])
                 q, frames = loop.q.copy(), list(loop.controller.constraint_frames)
                 constraints = [copy.copy(constraint) for constraint in loop.constraints]
-                caps = self.robots.config.max_linear_speed, self.robots.config.max_angular_speed
+                caps = self._robots.config.max_linear_speed, self._robots.config.max_angular_speed
             # outside the lock (milliseconds to tens of them) while the robot holds its targets
-            run = self.homing.plan(q, constraints, frames, caps)
+            run = self._homing.plan(q, constraints, frames, caps)
             with self._lock:
-                words = self.homing.follow(run, self.now)
-                self.robots.apply_task_modes()  # the loops in full pose while it runs
+                words = self._homing.follow(run, self._robots.now)
+                self._robots.apply_task_modes()  # the loops in full pose while it runs
             return words
         with self._lock:
             if ee is None:
-                for loop in self.robots.loops.values():
+                for loop in self._robots.loops.values():
                     t = loop.t
                     loop.reset()
                     loop.t = t
-            pin.framesForwardKinematics(self.robot.model, self._view_data, self.robot.q_home)
+            pin.framesForwardKinematics(self.robot.model, self._data, self.robot.q_home)
             for index in indices:
                 self._put_hand(index,
-                               self._view_data.oMf[self.robot.ee_frame_ids[index]].copy())
+                               self._data.oMf[self.robot.ee_frame_ids[index]].copy())
         return ""
 
     def _put_hand(self, ee: int, pose: pin.SE3) -> None:
@@ -240,3 +259,11 @@ class Console:
         hand = self.inputs[ee]
         self._set_target(pose, ee)
         hand.gizmo = hand.target.copy()
+
+    def restore(self, motion_scale: float, targets: list[pin.SE3]) -> None:
+        """A scene's motion scale and targets, each gizmo on its target, the clutch
+        released (caller holds the lock)."""
+        self.motion_scale = motion_scale
+        self.clutch = False
+        for ee, target in enumerate(targets):
+            self._put_hand(ee, target)

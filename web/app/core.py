@@ -31,7 +31,7 @@ from teleop.robots import Robot
 
 from ..folders import Folder
 from .collisions import CollisionScene, CollisionSession
-from .console import Console, EEInput
+from .console import Console
 from .devices import InputDevices
 from .editing import ConstraintEditing, EditingSession
 from .force_control import ForceControl
@@ -46,7 +46,7 @@ from .tick import Tick
 from .view import View
 
 
-class TeleopApp(Console, Scenes, Tick, View):
+class TeleopApp(Scenes, Tick, View):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
 
@@ -125,11 +125,8 @@ class TeleopApp(Console, Scenes, Tick, View):
                              None if jerk_limit is None else JERK_LIMIT.check(jerk_limit))
         if ghost:
             self.robots.set_ghost(ghost)
-        # the input mapping, per EE: gizmo -> target (clutch, motion scale)
-        self.inputs = [EEInput.at(frame, pose) for frame, pose in
-                       zip(robot.ee_frames, self.robots.loops["main"].ee_placements())]
-        self.motion_scale = 1.0
-        self.clutch = False
+        self.console = Console(robot, self._lock, self.robots, self.constraints, self.homing,
+                               self.recorder, self.ros2)
         self.devices = InputDevices(self.recorder, self._lock, len(robot.ee_frames))
         self._next_history = 0.0
         self.ticks = 0
@@ -143,7 +140,7 @@ class TeleopApp(Console, Scenes, Tick, View):
             return self.recorder.start(
                 name, self.robot, self.robots.loops["main"].q, self.robots.config,
                 [(entry.id, entry.constraint) for entry in self.constraints.entries.values()],
-                self.robots.loops["main"].task_modes, [hand.target for hand in self.inputs])
+                self.robots.loops["main"].task_modes, [hand.target for hand in self.console.inputs])
 
     def stop_recording(self) -> Path:
         """Close the recording; its path."""

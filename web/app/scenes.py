@@ -30,7 +30,7 @@ from ..scene import (
     write_scene_file,
 )
 from .collisions import CollisionScene, ObstacleEntry
-from .console import EEInput, pose_from
+from .console import Console, pose_from
 from .editing import ConstraintEditing, ConstraintEntry
 from .limits import (
     MAX_DAMPING,
@@ -55,13 +55,11 @@ class Scenes:
     """Saving and loading the scene of :class:`web.app.TeleopApp`."""
 
     robots: Robots
+    console: Console
     robot: Robot
     plant: PlantChoice
-    motion_scale: float
-    clutch: bool
     constraints: ConstraintEditing
     collisions: CollisionScene
-    inputs: list[EEInput]
     joint_names: list[str]
     scenes: Folder
     _next_history: float
@@ -71,9 +69,9 @@ class Scenes:
     def scene(self) -> dict:
         """The scene as a JSON-ready dict (format in :mod:`web.scene`)."""
         with self._lock:
-            targets = [pose_to_dict(hand.target) for hand in self.inputs]
+            targets = [pose_to_dict(hand.target) for hand in self.console.inputs]
             several = {} if len(targets) == 1 else {"targets": [
-                {"frame": hand.frame, **pose} for hand, pose in zip(self.inputs, targets)]}
+                {"frame": hand.frame, **pose} for hand, pose in zip(self.console.inputs, targets)]}
             settings = self.collisions.avoidance.to_dict()
             del settings["obstacles"]  # with their ids and goals, below
             return {
@@ -85,7 +83,7 @@ class Scenes:
                 "rate": self.robots.config.rate,
                 "orientation_weight": self.robots.orientation_weight,
                 "task_mode": self.robots.task_mode,
-                "motion_scale": self.motion_scale,
+                "motion_scale": self.console.motion_scale,
                 "ghost_offset": [float(x) for x in self.robots.ghost_offset],
                 "q": {which: [float(x) for x in loop.q] for which, loop in self.robots.loops.items()},
                 "target": targets[0], **several,
@@ -174,11 +172,8 @@ class Scenes:
                 placed.id, placed.goal.copy(), obstacle=placed.obstacle).restored()
                 for placed in scene.obstacles})
             self.robots.set_ghost_offset(scene.ghost_offset.copy())
-            self.motion_scale = scene.motion_scale
-            self.clutch = False
-            for index, (position, wxyz) in enumerate(scene.targets):
-                self._set_target(pose_from(position, wxyz, "target"), index)
-                self.inputs[index].gizmo = self.inputs[index].target.copy()
+            self.console.restore(scene.motion_scale, [pose_from(position, wxyz, "target")
+                                                      for position, wxyz in scene.targets])
             self._next_history = t
 
     def _scene_where_the_robot_is(self, scene: Scene) -> Scene:

@@ -19,7 +19,7 @@ from teleop.loop.moving_geometry import advance, steer
 
 from .robots import Robots
 from .collisions import CollisionScene, ObstacleEntry
-from .console import EEInput
+from .console import Console
 from .devices import InputDevices
 from .editing import ConstraintEditing, ConstraintEntry
 from .force_control import ForceControl
@@ -36,8 +36,8 @@ class Tick:
     next history sample is due)."""
 
     robots: Robots
+    console: Console
     constraints: ConstraintEditing
-    inputs: list[EEInput]
     devices: InputDevices
     recorder: SessionRecording
     homing: WayHome
@@ -73,11 +73,11 @@ class Tick:
             if moving:
                 self._steer(moving, dt)
             if self.devices:
-                self.devices.apply(dt, self.inputs, self.robots.loops, self.clutch,
-                                   self.motion_scale)
+                self.devices.apply(dt, self.console.inputs, self.robots.loops, self.console.clutch,
+                                   self.console.motion_scale)
             if self.homing.active:
                 self._follow_homing()
-            targets, start = [hand.target for hand in self.inputs], self.now
+            targets, start = [hand.target for hand in self.console.inputs], self.now
             self.force.feed(self.robots.loops)  # each force law's sensor reading
             held: dict[str, CollisionRows] = {}
             pending = {which: self._advance(which, loop, targets, held)
@@ -89,7 +89,7 @@ class Tick:
             self.collisions.keep(held)
             history = start >= self._next_history - 0.5 * dt
             if self.devices:
-                self.devices.commanded(history, self.ticks, self.inputs, self.robots.loops["main"],
+                self.devices.commanded(history, self.ticks, self.console.inputs, self.robots.loops["main"],
                                        self.collisions.rows.get("main"),
                                        self.collisions.avoidance.detection_distance)
             if history:
@@ -109,7 +109,7 @@ class Tick:
         targets stay there and the session's task mode returns (:mod:`.homing`)."""
         poses, over = self.homing.targets(self.now, self.robots.loops["main"].q)
         for ee, pose in enumerate(poses):
-            self.inputs[ee].target = pose
+            self.console.inputs[ee].target = pose
             self.recorder.target(ee, pose)
         if over:
             self.homing.end()

@@ -16,8 +16,9 @@ from teleop.robots import Robot
 from .robots import Robots
 from ..constraint_drawing import constraint_geometry
 from .collisions import CollisionScene
-from .console import EEInput
+from .console import Console
 from .editing import ConstraintEditing
+from .end_effectors import ee_index
 from .force_control import ForceControl
 from .plant import PlantChoice, port_readings
 from .shortfall import asked_angle, explained, ports_on_chain, shortfall_words
@@ -30,10 +31,10 @@ class View:
     """The view's reading of :class:`web.app.TeleopApp`."""
 
     robots: Robots
+    console: Console
     robot: Robot
     constraints: ConstraintEditing
     collisions: CollisionScene
-    inputs: list[EEInput]
     joint_names: list[str]
     plant: PlantChoice
     ros2: Ros2Robot | None
@@ -44,7 +45,7 @@ class View:
     def limitation(self, which: str = "main", ee=0) -> Limitation:
         """What keeps EE ``ee`` of robot ``which`` from its target now, in words
         (:func:`web.app.status.describe_limitation`)."""
-        ee = self.ee_index(ee)
+        ee = ee_index(self.robot, ee)
         with self._lock:
             loop = self.robots.loops[which]
             placement = frame_placement(self.robot.model, loop.q, self.robot.ee_frame_ids[ee],
@@ -53,7 +54,7 @@ class View:
 
     def _limitation(self, which: str, placement: pin.SE3, ee: int) -> Limitation:
         loop = self.robots.loops[which]
-        target = self.inputs[ee].target
+        target = self.console.inputs[ee].target
         constraints = {entry.id: entry.constraint for entry in self.constraints.entries.values()}
         return self._described(loop.controller.info, self.robots.last_records.get(which), placement,
                                target, loop.refused or self._stopped(), ee, loop.task_modes[ee],
@@ -102,11 +103,11 @@ class View:
             states = {which: self._robot_state(which, loop, history)
                       for which, loop in self.robots.loops.items()}
             goals = {entry.id: (entry.kind, entry.goal.copy()) for entry in self.constraints.entries.values()}
-            targets = [hand.target.copy() for hand in self.inputs]
+            targets = [hand.target.copy() for hand in self.console.inputs]
             snapshot = {"ee_frames": self.robot.ee_frames, "targets": targets,
-                        "gizmos": [hand.gizmo.copy() for hand in self.inputs],
-                        "target": targets[0].copy(), "gizmo": self.gizmo.copy(),
-                        "clutch": self.clutch, "motion_scale": self.motion_scale,
+                        "gizmos": [hand.gizmo.copy() for hand in self.console.inputs],
+                        "target": targets[0].copy(), "gizmo": self.console.gizmo.copy(),
+                        "clutch": self.console.clutch, "motion_scale": self.console.motion_scale,
                         "ghost_offset": self.robots.ghost_offset.copy(),
                         "recording": self.recorder.active,
                         "config": self.robots.config, "gain": self.robots.gain,

@@ -72,8 +72,8 @@ class SceneView:
         self.target_gizmos: list[viser.TransformControlsHandle] = []
         self.target_markers: list[viser.FrameHandle] = []
         self.reach_lines: list[viser.LineSegmentsHandle] = []
-        size = GIZMO_SCALE if len(app.targets) == 1 else GIZMO_SCALE_SEVERAL
-        for index, target in enumerate(app.targets):
+        size = GIZMO_SCALE if len(app.console.targets) == 1 else GIZMO_SCALE_SEVERAL
+        for index, target in enumerate(app.console.targets):
             suffix = "" if index == 0 else f"_{index}"
             gizmo = scene.add_transform_controls(
                 f"/gizmo{suffix}", scale=size, line_width=4.0,
@@ -94,7 +94,7 @@ class SceneView:
         side = default_ghost_offset(app.robot)
         side /= np.linalg.norm(side)
         front = np.cross([0.0, 0.0, 1.0], side)
-        look_at = np.mean([target.translation for target in app.targets], axis=0)
+        look_at = np.mean([target.translation for target in app.console.targets], axis=0)
         distance = 1.0
         if "ghost" in app.robots.loops:
             look_at += 0.5 * app.robots.ghost_offset
@@ -107,7 +107,7 @@ class SceneView:
                      index: int) -> Callable[[viser.TransformControlsEvent], None]:
         """The callback of EE ``index``'s gizmo: the app moves that EE's target, the
         latest pose winning. A drag that viser ends because its browser went away holds
-        the target where the robot is (:meth:`TeleopApp.hold_where_the_robot_is`)."""
+        the target where the robot is (:meth:`web.app.console.Console.hold_where_the_robot_is`)."""
         def moved(event: viser.TransformControlsEvent) -> None:
             client = event.client_id
             if client is not None and client not in self.server.get_clients():
@@ -116,7 +116,7 @@ class SceneView:
                 return
             position, wxyz = np.array(gizmo.position), np.array(gizmo.wxyz)
             self._guarded(event, lambda: None if client in self._gone else
-                          self.app.move_gizmo(position, wxyz, index), key=("gizmo", index))
+                          self.app.console.move_gizmo(position, wxyz, index), key=("gizmo", index))
         return moved
 
     def _lost_mid_drag(self, client: int, index: int) -> None:
@@ -126,8 +126,8 @@ class SceneView:
         self._gone.add(client)
 
         def hold() -> None:
-            self.app.hold_where_the_robot_is(index)
-            self.move_gizmo(self.app.inputs[index].gizmo, index)
+            self.app.console.hold_where_the_robot_is(index)
+            self.move_gizmo(self.app.console.inputs[index].gizmo, index)
 
         self._guarded(None, hold, key=("hold", index))
 
@@ -138,7 +138,7 @@ class SceneView:
 
     def move_gizmos(self) -> None:
         """Every gizmo handle where the app's gizmo is."""
-        for index, hand in enumerate(self.app.inputs):
+        for index, hand in enumerate(self.app.console.inputs):
             self.move_gizmo(hand.gizmo, index)
 
     def _ghost_rgba(self) -> tuple[float, float, float, float]:

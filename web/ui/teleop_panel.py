@@ -62,7 +62,7 @@ class TeleopPanel:
         self.clutch_button = gui.add_button("Clutch", hint="engaged: moving the gizmo does not "
                                             "move the target; released: the target continues "
                                             "from where it is")
-        self.motion_scale = gui.add_number("motion scale", app.motion_scale, min=0.01,
+        self.motion_scale = gui.add_number("motion scale", app.console.motion_scale, min=0.01,
                                            max=10.0, step=0.05,
                                            hint="target displacement per gizmo displacement")
         names = tuple(ee_names.values())
@@ -96,9 +96,9 @@ class TeleopPanel:
         self.overlay.on_update(lambda event: guarded(event, self._overlay_changed,
                                                      key="ghost offset"))
         self.clutch_button.on_click(lambda event: guarded(
-            event, lambda: app.set_clutch(not app.clutch)))
+            event, lambda: app.console.set_clutch(not app.console.clutch)))
         self.motion_scale.on_update(lambda event: guarded(
-            event, lambda: app.set_motion_scale(self.motion_scale.value), key="motion scale"))
+            event, lambda: app.console.set_motion_scale(self.motion_scale.value), key="motion scale"))
         self.nudge_buttons.on_click(lambda event: guarded(event, self.nudge))
         self.gizmo_button.on_click(lambda event: guarded(event, self.gizmo_to_target))
         self.home_button.on_click(lambda event: guarded(event, self.home))
@@ -112,8 +112,8 @@ class TeleopPanel:
 
     def home(self) -> None:
         """Every EE home through the constraints, the gizmos following; why not, if not."""
-        words = self.app.home()
-        for index, hand in enumerate(self.app.inputs):
+        words = self.app.console.home()
+        for index, hand in enumerate(self.app.console.inputs):
             self._move_gizmo(hand.gizmo, index)
         if words:  # home cannot be reached through the constraints: say why
             self._notify(None, "Home not reachable", words, color="yellow")
@@ -122,14 +122,14 @@ class TeleopPanel:
         """The active arm's target moved by the nudge step along the button's axis, its
         gizmo following (on the target: the next drag starts where the nudge left it)."""
         ee = self.active_ee()
-        self.app.nudge_target(
+        self.app.console.nudge_target(
             self.nudge_step.value * np.asarray(NUDGES[self.nudge_buttons.value], dtype=float), ee)
-        self._move_gizmo(self.app.gizmo_to_target(ee), ee)
+        self._move_gizmo(self.app.console.gizmo_to_target(ee), ee)
 
     def gizmo_to_target(self) -> None:
         """The active arm's gizmo put on its target."""
         ee = self.active_ee()
-        self._move_gizmo(self.app.gizmo_to_target(ee), ee)
+        self._move_gizmo(self.app.console.gizmo_to_target(ee), ee)
 
     def _offset_changed(self) -> None:
         self.app.robots.set_ghost_offset(np.asarray(self.ghost_offset.value, dtype=float))
@@ -169,5 +169,5 @@ class TeleopPanel:
         assign(self.overlay, bool(np.linalg.norm(offset) < 1e-9))
         if not self.overlay.value:
             self._saved_offset = offset.copy()
-        assign(self.motion_scale, app.motion_scale)
+        assign(self.motion_scale, app.console.motion_scale)
         assign(self.task_mode_menu, task_mode_label(app.robots.task_mode))
