@@ -35,12 +35,12 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
-from constraints.base import evaluated_rows
 from constraints.collision import CollisionAvoidance
 from constraints.kinematics import frame_placement
 from constraints.validation import as_vector
 from controllers.step_message import StepMessage
 
+from .constraint_measures import constraint_errors, constraint_velocity, norm
 from .distance_meter import DistanceMeter
 from .loop_config import LoopConfig
 from .measured_later import Geometry, MeasuredLater, geometry_copy
@@ -56,14 +56,6 @@ from .true_kinematics import TrueKinematics
 #: the message of a period whose command came out non-finite (the loop stops instead)
 NON_FINITE_STOP = StepMessage.worded("non-finite command replaced by a stop")
 
-#: float64's machine epsilon (the round-off floor's unit, :meth:`TeleopLoop._constraint_velocity`)
-EPSILON = float(np.finfo(float).eps)
-
-
-def norm(vector: np.ndarray) -> float:
-    """The Euclidean norm of a short vector, as ``np.linalg.norm`` computes it
-    (``sqrt(x . x)``) without its checks, which cost more than the sum on 3 entries."""
-    return math.sqrt(vector @ vector)
 
 class TeleopLoop:
     """State and one-tick logic of the closed loop; no threads, no I/O.
@@ -493,13 +485,13 @@ class TeleopLoop:
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, step.sensed)  # the frames: where they are read
         step.residual, step.constraint_velocity, step.drift_velocity, step.floor = \
-            self._constraint_velocity(step.qd, model, data, constraints, frames)
+            constraint_velocity(step.qd, model, data, constraints, frames)
         if self.plant is not None or self.true_kinematics is not None:
             model, data, constraints = self._measured_kinematics(step.q_before, constraints,
                                                                  frames)
             pin.computeJointJacobians(model, data, step.q_before)
             _, step.constraint_velocity, step.drift_velocity, step.floor = \
-                self._constraint_velocity(step.moved, model, data, constraints, frames)
+                constraint_velocity(step.moved, model, data, constraints, frames)
         step.actual_linear_velocities = np.array([
             pin.updateFramePlacement(model, data, frame).rotation
             @ (pin.getFrameJacobian(model, data, frame, pin.LOCAL)[:3] @ step.moved)
@@ -529,7 +521,7 @@ class TeleopLoop:
         model, data, constraints = self._measured_kinematics(q, constraints, frames)
         pin.forwardKinematics(model, data, q)  # the frames read below, not every frame
         placements = [pin.updateFramePlacement(model, data, frame) for frame in self.ee_frame_ids]
-        errors, error, penetration = self._constraint_errors(model, data, constraints, frames)
+        errors, error, penetration = constraint_errors(model, data, constraints, frames)
         position_errors = np.array([norm(ee.translation - target)
                                     for ee, target in zip(placements, step.target_translations)])
         orientation_errors = np.array([norm(pin.log3(ee.rotation.T @ target))
@@ -582,48 +574,3 @@ class TeleopLoop:
         if true is None:
             return self.model, self.data, constraints
         return true.model, true.data, true.constraints(constraints, frames, q)
-
-    def _constraint_velocity(self, qd: np.ndarray, model: pin.Model, data: pin.Data,
-                             constraints: Sequence[Constraint], frames: Sequence[int],
-                             ) -> tuple[float, np.ndarray, np.ndarray, float]:
-        """At the kinematics in ``data``: ``max |A qd - b|`` over the equalities, every
-        equality row's ``C v_c - C v_geom`` (the point's velocity relative to its moving
-        geometry), its drift correction ``-K e``, and the round-off floor of those
-        velocities, ``eps max (sum_j |A_ij qd_j| + K |x|)`` with ``x`` the point's world
-        position, from which ``e`` is computed (m/s; docs/design.md section 15.2)."""
-        residual, floor = 0.0, 0.0
-        velocity, drift = [], []
-        speeds = np.abs(qd)
-        for constraint, frame in zip(constraints, frames):
-            if not constraint.is_equality:
-                continue
-            A, state, placement = evaluated_rows(constraint, model, data, frame)
-            achieved = A @ qd
-            residual = max(residual, *map(abs, (achieved - state.rhs).tolist()))
-            correction = -constraint.gain * state.error
-            velocity.append(achieved - (state.rhs - correction))
-            drift.append(correction)
-            point = placement.act(state.p)
-            floor = max(floor, max((np.abs(A) @ speeds).tolist())
-                        + constraint.gain * norm(point))
-        if not velocity:
-            return 0.0, np.zeros(0), np.zeros(0), 0.0
-        return (residual, np.concatenate(velocity), np.concatenate(drift),
-                floor * EPSILON)
-
-    def _constraint_errors(self, model: pin.Model, data: pin.Data,
-                           constraints: Sequence[Constraint], frames: Sequence[int],
-                           ) -> tuple[np.ndarray, float, float]:
-        """After integration, at the true configuration on ``model`` (its joints' placements
-        in ``data``), ``constraints`` on ``frames``: each constraint's own ``violation``,
-        then the max |e| over equalities and the max inequality (barrier) penetration."""
-        error, penetration = 0.0, 0.0
-        violations = []
-        for constraint, frame in zip(constraints, frames):
-            violation = constraint.violation(pin.updateFramePlacement(model, data, frame))
-            violations.append(violation)
-            if constraint.is_equality:
-                error = max(error, violation)
-            else:
-                penetration = max(penetration, violation)
-        return np.array(violations), error, penetration

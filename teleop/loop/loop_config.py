@@ -11,7 +11,7 @@ from constraints.validation import as_number
 from teleop.limits import MAX_POSE_GAIN, MAX_RATE_HZ, MAX_TIME_CONSTANT_S
 
 from .state_observer import StateObserverConfig
-from .supervisor import SupervisorConfig
+from .supervisor_config import SupervisorConfig
 
 
 @dataclass(frozen=True)

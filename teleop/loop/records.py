@@ -54,7 +54,7 @@ class StepRecord:
     failed: bool
     step_time_us: float  # the controller's solve (the compiled tick: its C++ step alone)
     tick_time_us: float  # the period's hot path, the solve included (the measures are not)
-    constraint_velocity_floor: float  # float64 round-off of C v_c (m/s, _constraint_velocity)
+    constraint_velocity_floor: float  # float64 round-off of C v_c (m/s, constraint_measures)
     twist_saturated: bool  # the speed caps scaled some EE's commanded twist down
     constraint_velocity: np.ndarray = field(repr=False)  # C v_c - C v_geom, every equality row
     constraint_velocity_labels: tuple[str, ...] = field(repr=False)  # one per row (row_labels)

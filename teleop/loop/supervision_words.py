@@ -11,13 +11,12 @@ readers that ask (a record's message, the UI's status line), not on the hot path
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 from constraints import Constraint
 from teleop.plants.walls import has_wall
 
-if TYPE_CHECKING:
-    from .supervisor import SupervisorConfig
+from .supervisor_config import SupervisorConfig
 
 
 class SupervisionWords:
