@@ -20,20 +20,48 @@ from teleop.plants.ros2.node import Ros2Node
 __all__ = ["domain", "loopback"]
 
 
-@pytest.mark.parametrize("signum", TERMINATIONS, ids=lambda signum: signum.name)
-def test_a_termination_interrupts_the_block_and_the_handler_comes_back(signum):
+SIGNALS = (signal.SIGINT, *TERMINATIONS)
+
+
+@pytest.mark.parametrize("signum", SIGNALS, ids=lambda signum: signum.name)
+def test_the_first_signal_interrupts_the_block_a_second_one_not_its_cleanup(signum):
+    """The first signal raises ``KeyboardInterrupt`` naming it; the same signal again
+    while the cleanup runs (Ctrl-C twice) is ignored, the cleanup finishes; the handlers
+    from before the block come back."""
     received = []
+    cleaned = []
 
     def before(number: int, frame: object) -> None:  # were the block's not installed
         received.append(number)
 
-    previous = signal.signal(signum, before)
+    previous = {number: signal.signal(number, before) for number in SIGNALS}
     try:
-        with pytest.raises(KeyboardInterrupt, match=signum.name):
+        with pytest.raises(KeyboardInterrupt, match=f"^{signum.name}$"):
             with terminations_interrupt():
-                os.kill(os.getpid(), signum)
-                time.sleep(5.0)  # the handler runs at the next bytecode: never this long
-        assert signal.getsignal(signum) is before and received == []
+                try:
+                    os.kill(os.getpid(), signum)
+                    time.sleep(5.0)  # the handler runs at the next bytecode: never this long
+                finally:  # the cleanup, and a second signal in its middle
+                    os.kill(os.getpid(), signum)
+                    time.sleep(0.05)
+                    cleaned.append(True)
+        assert cleaned == [True] and received == []
+        assert all(signal.getsignal(number) is before for number in SIGNALS)
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+@pytest.mark.parametrize("signum", SIGNALS, ids=lambda signum: signum.name)
+def test_a_signal_ignored_on_entry_stays_ignored(signum):
+    """``nohup`` (SIGHUP) or a background job (SIGINT): the command keeps ignoring it."""
+    previous = signal.signal(signum, signal.SIG_IGN)
+    try:
+        with terminations_interrupt():
+            assert signal.getsignal(signum) is signal.SIG_IGN
+            os.kill(os.getpid(), signum)
+            time.sleep(0.05)
+        assert signal.getsignal(signum) is signal.SIG_IGN
     finally:
         signal.signal(signum, previous)
 

@@ -342,12 +342,12 @@ def run(args: argparse.Namespace, prog: str) -> int:
             time.sleep(1.0)
     except KeyboardInterrupt:
         pass
-    finally:
-        ui.stop()
+    finally:  # the robot first: its one commander stopped, then zeros on the wire
         control.stop()
-        app.devices.close()
         if app.ros2 is not None:
-            app.ros2.close()  # zeros on the wire
+            app.ros2.close()
+        ui.stop()
+        app.devices.close()
         server.stop()
     return 0
 

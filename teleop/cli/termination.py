@@ -5,12 +5,13 @@ commands' ``finally`` blocks and ``atexit``: a ROS 2 robot gets its zeros
 (:meth:`teleop.plants.ros2.ros2_plant.Ros2Plant.close`), a recording its last lines. A
 service manager, ``kill`` or a closed terminal sends SIGTERM or SIGHUP instead, whose
 default ends the process at once: none of that runs, and a ros2_control velocity
-controller holds the last command. :func:`terminations_interrupt` makes both unwind as
-Ctrl-C does.
+controller holds the last command. :func:`terminations_interrupt` makes them unwind as
+Ctrl-C does, once: a second signal while the cleanup runs (Ctrl-C pressed twice, a
+hang-up then a TERM) is ignored, so it never cuts the zeros short.
 
-A SIGINT the command was started with ignored (a background job of a shell without job
-control, ``nohup``) stays ignored, as Python leaves it: such a job is meant to outlive the
-terminal's Ctrl-C, and SIGTERM is how it is stopped.
+A signal the command was started with ignored stays ignored, as Python leaves an ignored
+SIGINT: a background job of a shell without job control ignores SIGINT and one under
+``nohup`` SIGHUP, both meant to outlive the terminal; SIGTERM stops them.
 """
 
 from __future__ import annotations
@@ -25,20 +26,29 @@ from types import FrameType
 TERMINATIONS = (signal.SIGTERM, signal.SIGHUP)
 
 
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt(signal.Signals(signum).name)
-
-
 @contextmanager
 def terminations_interrupt() -> Iterator[None]:
-    """Within the block, SIGTERM and SIGHUP raise ``KeyboardInterrupt`` in the main
-    thread; the previous handlers come back after it. Outside the main thread (a command
-    run from a test's or an application's thread) nothing changes: Python lets only the
-    main thread set handlers."""
+    """Within the block, the first of SIGINT, SIGTERM and SIGHUP raises
+    ``KeyboardInterrupt`` (its argument the signal's name) in the main thread and the
+    later ones are ignored; a signal ignored on entry stays ignored. The previous
+    handlers come back after the block. Outside the main thread (a command run from a
+    test's or an application's thread) nothing changes: Python lets only the main thread
+    set handlers."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {signum: signal.signal(signum, _interrupt) for signum in TERMINATIONS}
+    interrupted = False
+
+    def interrupt(signum: int, frame: FrameType | None) -> None:
+        nonlocal interrupted
+        if interrupted:  # the cleanup of the first is running: let it finish
+            return
+        interrupted = True
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    previous = {signum: signal.signal(signum, interrupt)
+                for signum in (signal.SIGINT, *TERMINATIONS)
+                if signal.getsignal(signum) is not signal.SIG_IGN}
     try:
         yield
     finally:
