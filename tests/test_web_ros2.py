@@ -350,3 +350,26 @@ def test_the_page_holds_a_hole_on_the_mujoco_robot_as_in_process(robot, domain, 
     print(f"hole error over DDS {over_dds * 1e6:.2f} um, in-process MuJoCo "
           f"{reference * 1e6:.2f} um ({over_dds / reference:.2f}x)")
     assert 0.0 < over_dds <= 2.0 * reference
+
+
+def test_a_failing_pace_is_the_control_threads_error_not_its_silent_end(robot, domain,
+                                                                       robot_process, tmp_path):
+    """The robot's plant closed under the running control thread: its :meth:`pace` raises
+    (the node is gone), and the thread says so (``error``) and keeps running (the page
+    shows why rather than freezing)."""
+    app = TeleopApp(robot, rate=RATE, plant="ros2", ros2_settings=settings_for(domain),
+                    record_dir=tmp_path, scene_dir=tmp_path)
+    ros2 = app.ros2 or pytest.fail("no ROS 2 robot")
+    control = ControlThread(app)
+    control.start()
+    try:
+        ros2.close()
+        for _ in range(500):
+            if control.error is not None:
+                break
+            time.sleep(0.01)
+        assert control.error is not None
+        assert control.alive
+    finally:
+        control.stop()
+        ros2.close()

@@ -140,11 +140,12 @@ class ControlThread:
             if self.app.robots.config.dt != period:  # a new rate: a new measuring window
                 period = self.app.robots.config.dt
                 window_start, window_ticks = clock(), 0
-            if self.app.ros2 is not None:  # the robot's clock paces the ticks: its next
-                self.app.ros2.pace()        # state awaited here, outside the app's lock
             start = clock()
             solve_us = advance_us = 0.0
             try:
+                if self.app.ros2 is not None:  # the robot's clock paces the ticks: its next
+                    self.app.ros2.pace()        # state awaited here, outside the app's lock
+                    start = clock()
                 solve_us = self.app.step()
                 advance_us = self.app.advance_us
             except Exception as error:  # keep the robot still and say why
