@@ -40,14 +40,14 @@ with server.gui.add_folder("My example"):
 
 def nudge_up() -> None:
     """Move the shared target 1 cm up (world z): the robot and its ghost follow."""
-    target = app.snapshot()["target"]
+    target = app.view.snapshot()["target"]
     x, y, z, w = pin.Quaternion(target.rotation).coeffs()
     app.console.set_target(target.translation + np.array([0.0, 0.0, 0.01]), (w, x, y, z))
 
 
 nudge.on_click(lambda event: nudge_up())
 
-z0 = app.snapshot()["target"].translation[2]
+z0 = app.view.snapshot()["target"].translation[2]
 nudge_at = 0.5  # press our button once ourselves, so a short run moves the robot
 start = time.monotonic()
 try:
@@ -56,14 +56,14 @@ try:
         if nudge_at is not None and time.monotonic() - start >= nudge_at:
             nudge_up()
             nudge_at = None
-        robots = app.snapshot()["robots"]  # traces: the last 10 s at 50 Hz
+        robots = app.view.snapshot()["robots"]  # traces: the last 10 s at 50 Hz
         readout.content = "  \n".join(
             f"**{which}** hole error max {state['trace']['constraint_error'].max(initial=0):.1e} m"
             for which, state in robots.items())
 except KeyboardInterrupt:
     pass
 finally:
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     ui.stop()
     control.stop()
     server.stop()

@@ -77,7 +77,7 @@ start = time.perf_counter()
 for k in range(int(RATE * SECONDS) + 1):
     client.send_pose(circle(k))
     if k % 10 == 0 and k > 500:  # after the first half second, every 10 ms
-        errors.append(app.limitation().distance)
+        errors.append(app.view.limitation().distance)
         record = app.robots.last_records["main"]
         holes.append(record.constraint_error if record is not None else 0.0)
     feedback = client.feedback()

@@ -198,7 +198,7 @@ def ee_position(app) -> np.ndarray:
 
 def trace_since(app, t0: float) -> dict[str, np.ndarray]:
     """The main robot's plotted history (50 samples/s) from loop time ``t0`` on."""
-    trace = app.snapshot()["robots"]["main"]["trace"]
+    trace = app.view.snapshot()["robots"]["main"]["trace"]
     keep = trace["t"] >= t0
     return {key: value[keep] for key, value in trace.items()}
 

@@ -184,7 +184,7 @@ def test_add_hole_button_creates_a_hole_and_its_ring(web):
     ring = np.asarray(markers["shape"].points)
     assert ring.shape[1:] == (2, 3)
     radius = np.linalg.norm(ring.reshape(-1, 3) - entry.goal, axis=1)
-    drawing = app.snapshot()["robots"]["main"]["constraints"][hole_id]
+    drawing = app.view.snapshot()["robots"]["main"]["constraints"][hole_id]
     assert np.allclose(radius, web.ui.constraint_drawer.ring_radius_at(drawing), atol=1e-6)
     # around the link, not hidden inside it
     link_radius = max(g.geometry.radius for g in robot.visual_model.geometryObjects

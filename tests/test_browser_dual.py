@@ -90,7 +90,7 @@ def drag_gizmo(web, ee: int, distance: float, steps: int):
                f"EE {ee}'s target to follow the drag (did the mouse grab its gizmo?)")
     settled(app)  # the robot converges (or settles where the holes let it)
     moved = app.console.targets[ee].translation - targets0[ee].translation
-    trace = app.snapshot()["robots"]["main"]["trace"]
+    trace = app.view.snapshot()["robots"]["main"]["trace"]
     errors = trace["constraint_error"][trace["t"] >= t0]
     return targets0, ees0, ee_positions(app), moved, float(np.max(errors, initial=0.0))
 

@@ -67,7 +67,7 @@ def test_a_setpoint_set_in_the_page_presses_the_tissue_and_the_arrow_shows_it(tm
         # the tip presses the tissue at the setpoint (2 mm at 1 cm/s, then the force loop)
         wait_until(lambda: abs(_pressed(app) - SETPOINT) < 0.01 * SETPOINT, WAIT,
                    "the tissue to be pressed at the setpoint")
-        state = app.snapshot(history=False)["force"]
+        state = app.view.snapshot(history=False)["force"]
         force = float(np.linalg.norm(state["contact"]))
         print(f"\n[force] pressed at {force:.4f} N (setpoint {SETPOINT} N), stiffness x "
               f"penetration {_pressed(app):.4f} N")
@@ -79,7 +79,7 @@ def test_a_setpoint_set_in_the_page_presses_the_tissue_and_the_arrow_shows_it(tm
             if arrow is None or not arrow.visible:
                 return None
             points = np.asarray(arrow.points, dtype=float)
-            now = app.snapshot(history=False)["force"]
+            now = app.view.snapshot(history=False)["force"]
             expected = CONTACT_ARROW_PER_NEWTON * now["contact"]
             close = np.allclose(points[0, 1] - points[0, 0], expected, atol=1e-4)
             return (points, now) if close and np.allclose(points[0, 1], now["tip"],

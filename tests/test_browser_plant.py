@@ -183,7 +183,7 @@ def test_a_force_held_on_the_wall_is_drawn_in_red_at_the_port(web, tmp_path):
     arrow = wait_until(lambda: (handle := ui.port_arrows.arrows["main"].get(hole_id)) is not None
                        and handle.visible and handle, WAIT,
                        "an arrow held at the port after the drag")
-    reading = app.snapshot(history=False)["robots"]["main"]["ports"][0]
+    reading = app.view.snapshot(history=False)["robots"]["main"]["ports"][0]
     print(f"\n[plant] force held at the port with no drift gain: {reading.magnitude:.4f} N "
           f"({1e3 * reading.displacement:.3f} mm of tissue)")
     points = np.asarray(arrow.points, dtype=float)

@@ -310,7 +310,7 @@ def test_a_point_lock_is_added_moved_and_recorded_through_the_app(app):
     entry = app.constraints.entries[lock_id]
     assert lock_id.startswith("point_lock-") and entry.kind == "point_lock"
     start = entry.position
-    snapshot = app.snapshot()["constraints"]
+    snapshot = app.view.snapshot()["constraints"]
     assert [e["geometry"].shape for e in snapshot] == ["point"]
     np.testing.assert_allclose(snapshot[0]["geometry"].anchor, start)
     app.constraints.move(lock_id, start + [0.0, 0.0, 0.003])
@@ -318,7 +318,7 @@ def test_a_point_lock_is_added_moved_and_recorded_through_the_app(app):
     np.testing.assert_allclose(entry.position, start + [0.0, 0.0, 0.003], atol=1e-5)
     record = app.robots.last_records["main"]
     assert not record.failed and record.constraint_error < 1e-5
-    geometry = app.snapshot()["constraints"][0]["geometry"]
+    geometry = app.view.snapshot()["constraints"][0]["geometry"]
     assert np.linalg.norm(geometry.error) < 1e-5
     app.robots.set_gain(50.0)
     assert entry.constraint.gain == 50.0
@@ -373,7 +373,7 @@ def test_the_ui_draws_every_kind_from_its_geometry(app):
     server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
     try:
         ui = TeleopUI(server, app, ControlThread(app))
-        ui._draw(app.snapshot())
+        ui._draw(app.view.snapshot())
         names = {kind: ui.constraint_markers.nodes[entry_id]["shape"].name for kind, entry_id in ids.items()}
         assert names == {"hole": f"/constraints/{ids['hole']}/ring",
                          "plane": f"/constraints/{ids['plane']}/plane",
@@ -382,7 +382,7 @@ def test_the_ui_draws_every_kind_from_its_geometry(app):
         assert not ui.constraint_markers.nodes[ids["barrier"]]["error"].visible  # allowed side: no 1 m line
         assert ui.constraint_markers.nodes[ids["point_lock"]]["error"].visible
         app.constraints.remove(ids["hole"])
-        ui._draw(app.snapshot())
+        ui._draw(app.view.snapshot())
         assert ids["hole"] not in ui.constraint_markers.nodes
     finally:
         server.stop()

@@ -311,7 +311,7 @@ def test_a_rate_command_does_not_wind_the_target_up_ahead_of_the_robot(app):
         ee = app.robots.loops["main"].ee_placements()[0].translation
         assert np.linalg.norm(app.console.targets[0].translation - ee) <= RATE_LEAD + 0.5 * 1e-3
     assert source.counts["held_back"] > 100
-    assert app.limitation().distance > 0.5 * RATE_LEAD  # it was pushing all along
+    assert app.view.limitation().distance > 0.5 * RATE_LEAD  # it was pushing all along
 
 
 def test_the_contact_force_at_the_tool_is_felt_scaled_and_bounded():

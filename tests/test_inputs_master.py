@@ -104,7 +104,7 @@ def session() -> Session:
                                   app.devices[0].state == FeedbackState.FOLLOWING,
                                   decoupled(master)))
             if time.monotonic() - began > 0.5:  # past the start of the motion
-                errors.append(app.limitation().distance)
+                errors.append(app.view.limitation().distance)
                 holes.append(app.robots.last_records["main"].constraint_error)
         sent, feedback = (int(word) for word in process.stdout.readline().split()[1::2])
         releases_streaming = master.counts_now().get("releases", 0)

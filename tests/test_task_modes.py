@@ -224,7 +224,7 @@ def test_home_says_why_it_cannot_be_reached(sda10f, tmp_path):
     assert words.endswith("remove it to go home")
     for _ in range(200):
         app.step()
-    assert not app.homing.active and app.limitation().words == f"home not reached: {words}"
+    assert not app.homing.active and app.view.limitation().words == f"home not reached: {words}"
 
 
 @pytest.mark.parametrize("direction", [(-1.0, -1.0, 0.0), (0.0, 1.0, 1.0), (1.0, 1.0, 0.0)])
@@ -245,9 +245,9 @@ def test_a_5_cm_drag_through_a_hole_on_link_6_reaches_the_target_and_home(
     for _ in range(3000):
         app.step()
     for which in ("main", "ghost"):
-        reached = app.limitation(which)
+        reached = app.view.limitation(which)
         assert reached.distance < 1e-3 and "short of the target" not in reached.words, which
-    assert app.limitation().details == ""  # the step's words are not needed: nothing short
+    assert app.view.limitation().details == ""  # the step's words are not needed: nothing short
     assert app.console.home() == ""
     while app.homing.active:
         app.step()

@@ -55,11 +55,11 @@ def test_side_by_side_robots_follow_the_same_target(app):
     nudge(app, [0.0, 0.01, 0.0])
     run(app, 0.3)
     np.testing.assert_allclose(ee_position(app, "ghost"), ee_position(app, "main"), atol=1e-6)
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     assert set(snapshot["robots"]) == {"main", "ghost"}
     assert snapshot["robots"]["ghost"]["spec"] == "qp:daqp"
     app.robots.set_ghost(None)
-    assert set(app.snapshot()["robots"]) == {"main"}
+    assert set(app.view.snapshot()["robots"]) == {"main"}
 
 
 def test_switching_controller_keeps_the_state(app):
@@ -141,7 +141,7 @@ def test_planes_and_barriers_and_removal(app):
     assert app.constraints.entries[plane_id].constraint.normal.tolist() == [0.0, 1.0, 0.0]
     assert app.constraints.entries[barrier_id].kind == "barrier"
     run(app, 0.05)
-    kinds = {e["kind"] for e in app.snapshot()["constraints"]}
+    kinds = {e["kind"] for e in app.view.snapshot()["constraints"]}
     assert kinds == {"plane", "barrier"}
     app.constraints.remove(plane_id)
     assert list(app.constraints.entries) == [barrier_id]
@@ -179,7 +179,7 @@ def test_home_keeps_the_constraints_and_clear_removes_them(app):
     assert app.console.home() == ""
     assert list(app.constraints.entries) == [hole_id] and app.homing.active
     assert app.robots.loops["main"].task_modes == ("pose",)
-    assert app.limitation().words.startswith("going home through the constraints")
+    assert app.view.limitation().words.startswith("going home through the constraints")
     np.testing.assert_allclose(app.console.target.translation, start, atol=1e-12)  # from where it is
     np.testing.assert_allclose(app.console.gizmo.translation, start, atol=1e-12)
     home = app.robots.loops["main"].ee_placement(app.robot.q_home)
@@ -249,7 +249,7 @@ def test_plot_history_is_finite_and_the_ghost_turned_on_later_fills_its_own(app)
     app.constraints.add("hole", distance=0.08)
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.5)
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     for spec in PLOTS:
         t, series = plot_series(snapshot, spec)
         if spec.ghost_only:
@@ -261,7 +261,7 @@ def test_plot_history_is_finite_and_the_ghost_turned_on_later_fills_its_own(app)
     assert app.robots.loops["ghost"].t == app.now
     nudge(app, [0.0, 0.005, 0.0])
     run(app, 0.3)
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     main, ghost = snapshot["robots"]["main"]["trace"], snapshot["robots"]["ghost"]["trace"]
     assert ghost["t"].size == 15  # its own samples since it joined, at the main's times
     np.testing.assert_array_equal(ghost["t"], main["t"][-15:])
@@ -379,14 +379,14 @@ def test_nudges_and_gizmo_to_target(app):
 def test_an_unreachable_target_is_said_in_words(app):
     app.robots.set_task_mode("pose")  # position and roll reach this target (the default with a hole)
     app.constraints.add("hole", distance=0.08)
-    assert app.limitation().words == "on target" and app.limitation().status == "ok"
+    assert app.view.limitation().words == "on target" and app.view.limitation().status == "ok"
     nudge(app, [0.5, 0.0, 0.0])  # half a metre ahead, through a hole: not reachable
     run(app, 0.2)
-    moving = app.limitation()
+    moving = app.view.limitation()
     assert moving.distance > 0.4 and "moving to the target" in moving.words or \
         "at its limit" in moving.words
     run(app, 8.0)
-    stuck = app.limitation()
+    stuck = app.view.limitation()
     print(f"unreachable target: {stuck.status}: {stuck.words} ({1e3 * stuck.distance:.1f} mm)")
     assert stuck.distance > 0.05
     assert "target out of reach" in stuck.details
@@ -429,19 +429,19 @@ def test_a_joint_at_its_limit_is_named():
 
 def test_active_barriers_are_listed(app):
     barrier_id = app.constraints.add("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.002)
-    assert app.active_inequalities() == []
+    assert app.view.active_inequalities() == []
     nudge(app, [0.0, 0.0, -0.05])  # down, into the barrier
     run(app, 1.0)
-    assert app.active_inequalities() == [barrier_id]
+    assert app.view.active_inequalities() == [barrier_id]
     assert app.robots.last_records["main"].barrier_penetration < 1e-6
-    geometry = app.snapshot()["constraints"][0]["geometry"]
+    geometry = app.view.snapshot()["constraints"][0]["geometry"]
     assert np.linalg.norm(geometry.error) < 1e-9  # held on the plane: no error to draw
 
 
 def test_a_satisfied_barrier_has_no_error_to_draw(app):
     app.constraints.add("barrier", distance=0.05, normal=[0.0, 0.0, 1.0], offset=0.01)
     run(app, 0.05)
-    (entry,) = app.snapshot()["constraints"]
+    (entry,) = app.view.snapshot()["constraints"]
     assert entry["kind"] == "barrier" and np.linalg.norm(entry["geometry"].error) == 0.0
     assert app.robots.last_records["main"].barrier_penetration == 0.0
 

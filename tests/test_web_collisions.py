@@ -195,7 +195,7 @@ def test_settings_and_the_switch_reach_every_controller(dual_app):
     app.collisions.set_on(False)
     assert all(loop.controller.collisions is None for loop in app.robots.loops.values())
     run(app, 0.05)
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     assert snapshot["robots"]["main"]["collision_rows"] is None and not snapshot["collisions"]["checking"]
     assert np.isnan(snapshot["robots"]["main"]["trace"]["minimum_distance"]).all()
     app.collisions.set_on(True)
@@ -207,10 +207,10 @@ def test_settings_and_the_switch_reach_every_controller(dual_app):
 def test_a_single_arm_checks_no_pair_without_an_obstacle(app):
     assert not app.collisions.avoidance.self_collision and app.collisions.avoidance.pairs == []
     run(app, 0.05)
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     assert plots_of(snapshot) == PLOTS
     app.collisions.add("sphere")
-    assert plots_of(app.snapshot()) == PLOTS + COLLISION_PLOTS
+    assert plots_of(app.view.snapshot()) == PLOTS + COLLISION_PLOTS
 
 
 # -- scenes ---------------------------------------------------------------------------------
@@ -292,7 +292,7 @@ def test_the_status_and_highlights_are_the_controllers_rows(app, server):
     app.console.nudge_target([0.0, 0.0, 0.01])
     run(app, 0.3)
     q = run_to_measure(app)
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     shown = snapshot["robots"]["main"]["collision_rows"]
     expected = independent_rows(app, q=q)
     assert expected.size >= 1 and shown.pairs == expected.pairs
@@ -357,7 +357,7 @@ def test_the_dual_arms_pairs_are_the_controllers_rows(dual_app):
             app.console.nudge_target([0.0, 0.01 * side, 0.0], ee)
             run(app, 0.25)
     q = run_to_measure(app)
-    shown = app.snapshot()["robots"]["main"]["collision_rows"]
+    shown = app.view.snapshot()["robots"]["main"]["collision_rows"]
     expected = independent_rows(app, q=q)
     assert shown.pairs == expected.pairs
     np.testing.assert_allclose(shown.distances, expected.distances, atol=SAME)
@@ -381,13 +381,13 @@ def test_the_collisions_tab_adds_an_obstacle_from_its_inputs(app, server):
     inputs["radius"].value = 0.025
     entry_id = ui.obstacle_panel.add("sphere")
     assert app.collisions.obstacles[entry_id].obstacle.radius == 0.025
-    ui._draw(app.snapshot())
+    ui._draw(app.view.snapshot())
     assert entry_id in ui.obstacle_markers.nodes and "gizmo" in ui.obstacle_markers.nodes[entry_id]
     ui.collision_settings.safety_number.value = 8.0
     ui.collision_settings.apply()
     assert app.collisions.avoidance.safety_distance == pytest.approx(0.008)
     app.collisions.remove(entry_id)
-    ui._draw(app.snapshot())
+    ui._draw(app.view.snapshot())
     assert entry_id not in ui.obstacle_markers.nodes
 
 

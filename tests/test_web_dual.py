@@ -72,7 +72,7 @@ def test_each_gizmo_moves_its_own_ee_only(app):
         assert np.linalg.norm(end[ee] - (start[ee] + displacement)) < 1e-4
         assert np.linalg.norm(end[other] - start[other]) < 1e-6, "the other EE moved"
         assert app.console.inputs[other].target.isApprox(other_target, 1e-12)
-        limitations = app.snapshot()["robots"]["main"]["limitations"]
+        limitations = app.view.snapshot()["robots"]["main"]["limitations"]
         assert [each.status for each in limitations] == ["ok", "ok"]
         assert all(each.distance < 1e-4 for each in limitations)
 
@@ -137,7 +137,7 @@ def test_a_hole_or_lock_goes_on_the_chosen_arm_and_is_checked_against_that_arm(a
     np.testing.assert_allclose(lock.position, link.act(0.05 * dual.link_axes[right]), atol=1e-12)
     hole_id = app.constraints.add("hole", distance=0.08)  # default: the first arm
     assert app.constraints.entries[hole_id].constraint.link == dual.constrained_links[0]
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     drawn = {entry["id"]: entry for entry in snapshot["constraints"]}
     for entry_id, on in ((lock_id, right), (hole_id, dual.constrained_links[0])):
         placement = data.oMf[dual.model.getFrameId(on)]
@@ -319,7 +319,7 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
     assert app.console.inputs[0].target.isApprox(app.console.inputs[0].gizmo, 1e-15)
     for _ in range(20):
         app.step()
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     ui._draw(snapshot)
     assert not ui.scene.reach_lines[0].visible and ui.scene.reach_lines[1].visible
     np.testing.assert_allclose(ui.scene.reach_lines[1].points[0],
@@ -341,7 +341,7 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
 def test_each_arms_hole_is_drawn_around_its_own_link(server, app, dual):
     ui = make_ui(server, app)
     ids = [app.constraints.add("hole", distance=0.08, link=link) for link in dual.constrained_links]
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     ui._draw(snapshot)
     for hole_id, link in zip(ids, dual.constrained_links):
         ring = ui.constraint_markers.nodes[hole_id]["shape"].points
@@ -365,7 +365,7 @@ def test_the_mobile_base_is_drawn_where_the_planar_joint_puts_it_and_a_wall_span
     q = app.robots.loops["main"].q.copy()
     q[:4] = [0.3, -0.2, np.cos(0.5), np.sin(0.5)]  # x, y, heading 0.5 rad
     app.robots.loops["main"].q = q
-    ui._draw(app.snapshot())
+    ui._draw(app.view.snapshot())
     view = ui.scene.views["main"]
     geometry = pin.GeometryData(mobile.visual_model)
     pin.updateGeometryPlacements(mobile.model, mobile.model.createData(), mobile.visual_model,
@@ -379,7 +379,7 @@ def test_the_mobile_base_is_drawn_where_the_planar_joint_puts_it_and_a_wall_span
                                           [[3, 0, 1, 2]] @ handle.wxyz), 1.0, atol=1e-6)
     wall_id = app.constraints.add("barrier", link_point=[0.4, 0.0, 0.15],
                                  normal=[-1.0, 0.0, 0.0], offset=0.05, link="mobile_base")
-    ui._draw(app.snapshot())
+    ui._draw(app.view.snapshot())
     plane = ui.constraint_markers.nodes[wall_id]["shape"]
     assert plane.dimensions[0] == pytest.approx(1.6)  # twice the base's 0.8 m length
     np.testing.assert_allclose(plane.position, app.constraints.entries[wall_id].position, atol=1e-9)

@@ -51,7 +51,7 @@ def test_force_control_presses_the_tissue_at_the_setpoint(app):
     expected, reported = _true_contact(app)
     assert expected == pytest.approx(1.0, abs=0.01) and reported == pytest.approx(expected,
                                                                                   rel=1e-3)
-    state = app.snapshot()["force"]
+    state = app.view.snapshot()["force"]
     assert state["enabled"] and state["history"].shape[0] > 100
     np.testing.assert_allclose(np.linalg.norm(state["contact"]), reported, rtol=1e-9)
     # the setpoint is taken at once by the running law
@@ -193,12 +193,12 @@ def test_the_status_leaves_the_force_axes_to_the_law(app):
     error = app.console.inputs[0].target.translation - placement.translation
     along_tool = placement.rotation.T @ error
     assert abs(along_tool[2]) > 0.01  # the tissue holds the tip off its target
-    limitation = app.limitation("main")
+    limitation = app.view.limitation("main")
     assert "short of the target" not in limitation.words
     assert limitation.distance == pytest.approx(float(np.linalg.norm(along_tool[:2])),
                                                 abs=1e-12)
     app.force.set_enabled(False)  # the target owns every axis again
-    assert app.limitation("main").distance == pytest.approx(float(np.linalg.norm(error)),
+    assert app.view.limitation("main").distance == pytest.approx(float(np.linalg.norm(error)),
                                                             abs=1e-3)
 
 

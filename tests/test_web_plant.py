@@ -85,14 +85,14 @@ def test_each_loop_runs_its_own_simulated_robot(app):
     # the kinematic app has no plant
     kinematic = TeleopApp(app.robot, record_dir=app.record_dir, scene_dir=app.scene_dir)
     assert kinematic.robots.loops["main"].plant is None
-    snapshot = kinematic.snapshot()
+    snapshot = kinematic.view.snapshot()
     assert snapshot["robots"]["main"]["ports"] == [] and plots_of(snapshot) == PLOTS
 
 
 def test_a_moved_target_pushes_the_instrument_on_the_wall_and_the_view_says_how_hard(app):
     hole_id = app.constraints.add("hole", distance=0.08)
     run(app, 0.1)
-    ports = app.snapshot()["robots"]["main"]["ports"]
+    ports = app.view.snapshot()["robots"]["main"]["ports"]
     assert [port.id for port in ports] == [hole_id]
     assert ports[0].magnitude < 1e-4  # at rest on the port: the wall hardly pushes
     nudge(app, [0.0, 0.02, 0.0])  # 2 cm sideways: the motion caps make it gentle
@@ -105,7 +105,7 @@ def test_a_moved_target_pushes_the_instrument_on_the_wall_and_the_view_says_how_
     assert 1e-3 < peak < GENTLE_FORCE, peak  # felt, and below the target
     # the plots' port-force trace: finite, in newtons, each sample the peak of the 20
     # periods since the one before (a 50 Hz sample of one period's force misses peaks)
-    snapshot = app.snapshot()
+    snapshot = app.view.snapshot()
     assert plots_of(snapshot) == PLOTS + PLANT_PLOTS
     t, series = plot_series(snapshot, PLANT_PLOTS[0])
     assert t.size == 55 and np.isfinite(series["main"]).all()  # 1.1 s at 50 Hz
@@ -155,7 +155,7 @@ def test_the_port_force_is_the_wall_stiffness_times_the_offset(sda10f, tmp_path,
     stiffness = 1000.0 if wall_stiffness is None else wall_stiffness
     assert hole.tissue_stiffness == stiffness
     run(app, 1.0)  # the arm gives a little under the push, then rests
-    (port,) = app.snapshot()["robots"]["main"]["ports"]
+    (port,) = app.view.snapshot()["robots"]["main"]["ports"]
     offset = port_offset(sda10f, app.robots.loops["main"].q, hole)
     assert 0.9 * lateral < np.linalg.norm(offset) < 1.1 * lateral
     expected = -stiffness * offset
@@ -175,7 +175,7 @@ def test_the_session_wall_stiffness_reaches_a_scenes_holes(sda10f, tmp_path):
     (entry,) = stiff.constraints.entries.values()
     assert entry.constraint.tissue_stiffness == 3000.0
     run(stiff, 0.05)
-    assert [port.id for port in stiff.snapshot()["robots"]["main"]["ports"]] == [entry.id]
+    assert [port.id for port in stiff.view.snapshot()["robots"]["main"]["ports"]] == [entry.id]
     # and the scene's own stiffness without one
     own = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path, scene_dir=tmp_path)
     own.load_scene(path.name)
@@ -244,7 +244,7 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         run(app, 0.1)
         nudge(app, [0.012, 0.0, 0.0])
         run(app, 0.02)  # setting off: the wall pushes
-        snapshot = app.snapshot()
+        snapshot = app.view.snapshot()
         ui._draw(snapshot)
         ui.plots.draw(snapshot)
         (port,) = snapshot["robots"]["main"]["ports"]
@@ -285,14 +285,14 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
         app.robots.set_ghost("qp:daqp")
         run(app, 0.05)
         ui.scene.ghost_seen = -1e9  # drawn at once (no plots to wait for here)
-        ui._draw(app.snapshot())
+        ui._draw(app.view.snapshot())
         assert ui.port_arrows.arrows["ghost"][hole_id].name == f"/ghost/ports/{hole_id}"
         app.robots.set_ghost(None)
-        ui._draw(app.snapshot())
+        ui._draw(app.view.snapshot())
         assert "ghost" not in ui.port_arrows.arrows
         app.constraints.remove(hole_id)
         run(app, 0.01)
-        ui._draw(app.snapshot())
+        ui._draw(app.view.snapshot())
         assert ui.port_arrows.arrows["main"] == {}
     finally:
         server.stop()

@@ -316,7 +316,7 @@ def test_a_registered_kind_gets_its_inputs_and_is_drawn_from_its_geometry(regist
         np.testing.assert_allclose(line.direction, [0.0, 1.0, 0.0])
         np.testing.assert_allclose(line.link_point, 0.05 * np.asarray(sda10f.link_axis),
                                    atol=1e-15)
-        ui._draw(app.snapshot())
+        ui._draw(app.view.snapshot())
         markers = ui.constraint_markers.nodes[entry_id]
         assert markers["shape"].name == f"/constraints/{entry_id}/anchor"
         np.testing.assert_allclose(markers["shape"].position, line.line_point, atol=1e-6)

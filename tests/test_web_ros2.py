@@ -112,7 +112,7 @@ def test_the_page_drives_the_simulated_robot_and_holds_the_hole(robot, domain, r
         error, distance = hold_the_hole(app)
         measures = plant.measures()
         assert measures.stopped == "" and measures.command_publishers == 1
-        assert app.limitation().words.find("stopped") < 0
+        assert app.view.limitation().words.find("stopped") < 0
     finally:
         (app.ros2 or pytest.fail("no ROS 2 robot")).close()
     reference = in_process(robot, tmp_path)
@@ -137,12 +137,12 @@ def test_the_status_says_why_the_robot_stopped(robot, domain, robot_process, tmp
         app.console.nudge_target([0.0, 0.01, 0.0])
         for _ in range(100):
             app.step()
-        assert "stopped" not in app.limitation().words
+        assert "stopped" not in app.view.limitation().words
         robot_process.send_signal(signal.SIGKILL)
         robot_process.wait()
         for _ in range(int(2 * RATE)):
             app.step()
-        words = app.limitation().words
+        words = app.view.limitation().words
         assert "the ROS 2 robot is stopped (joint states stale" in words, words
         assert log.poll() and not any(log.poll()[-1])  # zeros last
     finally:

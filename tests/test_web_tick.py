@@ -105,7 +105,7 @@ def test_the_control_thread_computes_no_collision_rows_for_the_view(app, monkeyp
     assert calls == {"controllers": ticks, "elsewhere": 0}
     # the rows the view reads are the last the controllers held, at the q they were given
     for which in app.robots.loops:
-        shown = app.snapshot()["robots"][which]["collision_rows"]
+        shown = app.view.snapshot()["robots"][which]["collision_rows"]
         expected = independent_rows(app, q[which])
         assert expected.size >= 1 and shown.pairs == expected.pairs
         np.testing.assert_allclose(shown.distances, expected.distances, atol=SAME)
@@ -137,7 +137,7 @@ def test_rows_a_controller_did_not_compute_are_measured_on_history_ticks_only(ap
             measured_at = q
     history = round(ticks * HISTORY_RATE * app.robots.config.dt)
     assert calls == {"controllers": ticks, "elsewhere": history}  # the CJM's rows: in C++
-    shown = app.snapshot()["robots"]["ghost"]["collision_rows"]
+    shown = app.view.snapshot()["robots"]["ghost"]["collision_rows"]
     expected = independent_rows(app, measured_at)
     assert expected.size >= 1 and shown.pairs == expected.pairs
     np.testing.assert_allclose(shown.distances, expected.distances, atol=SAME)

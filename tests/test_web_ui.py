@@ -41,7 +41,7 @@ def run(app, seconds):
 
 
 def draw(ui, plot=False):
-    snapshot = ui.app.snapshot()
+    snapshot = ui.app.view.snapshot()
     ui._draw(snapshot)
     if plot:
         ui.plots.draw(snapshot)
@@ -126,7 +126,7 @@ def test_constraint_points_and_gizmos_are_visible_outside_the_link(ui):
     for entry_id in (hole_id, lock_id):
         markers = ui.constraint_markers.nodes[entry_id]
         collar = np.asarray(markers["point"].points).reshape(-1, 3)
-        point = app.snapshot()["robots"]["main"]["constraints"][entry_id]["geometry"].point
+        point = app.view.snapshot()["robots"]["main"]["constraints"][entry_id]["geometry"].point
         radii = np.linalg.norm(collar - point, axis=1)
         assert radii.min() > link_radius + 0.005  # a collar around the link, not a dot inside
         assert markers["gizmo"].depth_test is False  # drawn over the link that hides its centre

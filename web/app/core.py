@@ -1,18 +1,21 @@
 """The browser session's core, without any browser: :class:`TeleopApp`.
 
 Everything the UI does goes through :class:`TeleopApp`, so it can be tested without
-viser. All public methods are thread-safe (one lock); actions that cannot be done raise
-``ValueError`` with a message meant for the operator (the UI shows it as a notification).
-Its parts, one module each: the operator's console (:mod:`.console`), constraint editing
-(:mod:`.editing`, from the registry's declarations, :mod:`.placing`), collision avoidance
-and the obstacles (:mod:`.collisions`), the robots and their
-controllers (:mod:`.robots`), settings (:mod:`.settings`), scenes (:mod:`.scenes`),
-recording (:mod:`.recording`), the control tick (:mod:`.tick`) and what the view reads
-(:mod:`.view`).
+viser: a small front over components that own their state, each given the session's one
+lock and the collaborators it reads at construction, and each taking the lock in its
+actions (which raise ``ValueError`` with a message meant for the operator; the UI shows it
+as a notification): ``app.robots`` (:mod:`.robots`: the loops, their controllers and
+settings), ``app.constraints`` (:mod:`.editing`, from the registry's declarations,
+:mod:`.placing`), ``app.console`` (:mod:`.console`: targets, gizmos, clutch, motion
+scale, home), ``app.collisions`` (:mod:`.collisions`: the avoidance and the obstacles),
+``app.devices`` (:mod:`.devices`), ``app.force`` (:mod:`.force_control`), ``app.homing``
+(:mod:`.homing`), ``app.recorder`` (:mod:`.recording`) and ``app.view`` (:mod:`.view`:
+what the view reads). The front keeps scenes (:mod:`.scenes`), the control tick
+(:mod:`.tick`) and starting and stopping a recording.
 
 Threading (docs/design.md section 5.3): :class:`web.app.ControlThread` calls
 :meth:`TeleopApp.step` at the control rate and never touches viser; the view thread reads
-:meth:`TeleopApp.snapshot`.
+:meth:`web.app.view.View.snapshot` (``app.view``).
 """
 
 from __future__ import annotations
@@ -46,7 +49,7 @@ from .tick import Tick
 from .view import View
 
 
-class TeleopApp(Scenes, Tick, View):
+class TeleopApp(Scenes, Tick):
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
 
@@ -95,7 +98,6 @@ class TeleopApp(Scenes, Tick, View):
             self.ros2.refuse_ghost(ghost)
         self.robot = robot
         self._lock = threading.RLock()
-        self._view_data = robot.model.createData()  # for geometry queries, under the lock
         self.joint_names = list(velocity_joint_names(robot.model))
         config = LoopConfig(rate=rate, kp=kp, target_time_constant=DEFAULT_SMOOTHING,
                             max_linear_speed=MAX_LINEAR_SPEED, max_angular_speed=MAX_ANGULAR_SPEED)
@@ -128,6 +130,9 @@ class TeleopApp(Scenes, Tick, View):
         self.console = Console(robot, self._lock, self.robots, self.constraints, self.homing,
                                self.recorder, self.ros2)
         self.devices = InputDevices(self.recorder, self._lock, len(robot.ee_frames))
+        self.view = View(robot, self._lock, self.robots, self.constraints, self.console,
+                         self.collisions, self.devices, self.recorder, self.force, self.homing,
+                         self.plant, self.ros2)
         self._next_history = 0.0
         self.ticks = 0
         self.advance_us = 0.0

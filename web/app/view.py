@@ -10,59 +10,88 @@ import pinocchio as pin
 
 from constraints import Constraint
 from constraints.kinematics import frame_placement
+from controllers.base import velocity_joint_names
 from teleop.loop import StepRecord, TeleopLoop
 from teleop.robots import Robot
 
-from .robots import Robots
 from ..constraint_drawing import constraint_geometry
 from .collisions import CollisionScene
 from .console import Console
 from .editing import ConstraintEditing
 from .end_effectors import ee_index
+from .devices import InputDevices
 from .force_control import ForceControl
+from .homing import WayHome
 from .plant import PlantChoice, port_readings
 from .shortfall import asked_angle, explained, ports_on_chain, shortfall_words
+from .recording import SessionRecording
+from .robots import Robots
 from .ros2_robot import Ros2Robot
 from .status import Limitation, describe_limitation, not_following
 from .trace import Trace
 
 
 class View:
-    """The view's reading of :class:`web.app.TeleopApp`."""
+    """What the view reads of :class:`web.app.TeleopApp` (``app.view``), a component that
+    owns nothing of the session but its own geometry workspace: it reads the other
+    components under the session's lock.
 
-    robots: Robots
-    console: Console
-    robot: Robot
-    constraints: ConstraintEditing
-    collisions: CollisionScene
-    joint_names: list[str]
-    plant: PlantChoice
-    ros2: Ros2Robot | None
-    force: ForceControl
-    _lock: threading.RLock
-    _view_data: pin.Data
+    Parameters
+    ----------
+    robot : the session's robot.
+    lock : the session's lock.
+    robots : the robots (their loops, traces, records, settings).
+    constraints : the placed constraints.
+    console : the operator's console (targets, gizmos, clutch, motion scale).
+    collisions : the collision avoidance and the obstacles.
+    devices : the input devices.
+    recorder : the session's recording (whether it records).
+    force : the force control.
+    homing : the way home (its words).
+    plant : the session's plant choice.
+    ros2 : the robot over ROS 2 (why it stopped), or None.
+    """
+
+    def __init__(self, robot: Robot, lock: threading.RLock, robots: Robots,
+                 constraints: ConstraintEditing, console: Console, collisions: CollisionScene,
+                 devices: InputDevices, recorder: SessionRecording, force: ForceControl,
+                 homing: WayHome, plant: PlantChoice, ros2: Ros2Robot | None) -> None:
+        self.robot = robot
+        self._lock = lock
+        self._robots = robots
+        self._constraints = constraints
+        self._console = console
+        self._collisions = collisions
+        self._devices = devices
+        self._recorder = recorder
+        self._force = force
+        self._homing = homing
+        self._plant = plant
+        self._ros2 = ros2
+        self.joint_names = list(velocity_joint_names(robot.model))
+        self._view_data = robot.model.createData()  # for geometry queries, under the lock
 
     def limitation(self, which: str = "main", ee=0) -> Limitation:
         """What keeps EE ``ee`` of robot ``which`` from its target now, in words
         (:func:`web.app.status.describe_limitation`)."""
         ee = ee_index(self.robot, ee)
         with self._lock:
-            loop = self.robots.loops[which]
+            loop = self._robots.loops[which]
             placement = frame_placement(self.robot.model, loop.q, self.robot.ee_frame_ids[ee],
                                         self._view_data)
             return self._limitation(which, placement, ee)
 
     def _limitation(self, which: str, placement: pin.SE3, ee: int) -> Limitation:
-        loop = self.robots.loops[which]
-        target = self.console.inputs[ee].target
-        constraints = {entry.id: entry.constraint for entry in self.constraints.entries.values()}
-        return self._described(loop.controller.info, self.robots.last_records.get(which), placement,
+        loop = self._robots.loops[which]
+        target = self._console.inputs[ee].target
+        constraints = {entry.id: entry.constraint for entry in self._constraints.entries.values()}
+        return self._described(loop.controller.info, self._robots.last_records.get(which), placement,
                                target, loop.refused or self._stopped(), ee, loop.task_modes[ee],
-                               constraints, self.homing.words_at(self.now))
+                               constraints, self._homing.words_at(self._robots.now))
 
     def _stopped(self) -> str:
         """Why the robot on the wire is stopped (:meth:`.ros2_robot.Ros2Robot.stopped`)."""
-        return "" if self.ros2 is None else self.ros2.stopped()
+        return "" if self._ros2 is None else self._ros2.stopped()
 
     def _described(self, info, record: StepRecord | None, placement: pin.SE3,
                    target: pin.SE3, refused: str, ee: int, mode: str,
@@ -71,7 +100,7 @@ class View:
         the step's words (:func:`describe_limitation`) said plainly
         (:func:`web.app.shortfall.explained`: what "Home" does, what part of the target
         is short, why, what helps)."""
-        distance = self.force.motion_distance(placement, target, ee)
+        distance = self._force.motion_distance(placement, target, ee)
         limitation = describe_limitation(info, record, distance, self.joint_names, refused, ee)
         stalled = record is not None and not_following(record, ee)
         ports = ports_on_chain(self.robot.model, self.robot.ee_frame_ids[ee], constraints)
@@ -83,8 +112,8 @@ class View:
         """Ids of the one-sided constraints robot ``which``'s controller holds as
         equalities now (from its step's :class:`controllers.SolveInfo`)."""
         with self._lock:
-            controller = self.robots.loops[which].controller
-            ids = {id(e.constraint): e.id for e in self.constraints.entries.values()}
+            controller = self._robots.loops[which].controller
+            ids = {id(e.constraint): e.id for e in self._constraints.entries.values()}
             constraints = controller.constraints
             return [ids.get(id(constraints[i]), f"#{i}") for i in controller.info.active_barriers
                     if i < len(constraints)]
@@ -99,23 +128,24 @@ class View:
         for them (docs/design.md section 5.3)."""
         with self._lock:
             constraints = {entry.id: copy.copy(entry.constraint)
-                           for entry in self.constraints.entries.values()}
+                           for entry in self._constraints.entries.values()}
             states = {which: self._robot_state(which, loop, history)
-                      for which, loop in self.robots.loops.items()}
-            goals = {entry.id: (entry.kind, entry.goal.copy()) for entry in self.constraints.entries.values()}
-            targets = [hand.target.copy() for hand in self.console.inputs]
+                      for which, loop in self._robots.loops.items()}
+            goals = {entry.id: (entry.kind, entry.goal.copy())
+                     for entry in self._constraints.entries.values()}
+            targets = [hand.target.copy() for hand in self._console.inputs]
             snapshot = {"ee_frames": self.robot.ee_frames, "targets": targets,
-                        "gizmos": [hand.gizmo.copy() for hand in self.console.inputs],
-                        "target": targets[0].copy(), "gizmo": self.console.gizmo.copy(),
-                        "clutch": self.console.clutch, "motion_scale": self.console.motion_scale,
-                        "ghost_offset": self.robots.ghost_offset.copy(),
-                        "recording": self.recorder.active,
-                        "config": self.robots.config, "gain": self.robots.gain,
-                        "damping": self.robots.damping,
-                        "plant": self.plant, "collisions": self._collisions_snapshot(),
-                        "devices": self.devices.snapshot(),
-                        "absolute_orientation": self.devices.absolute_orientation,
-                        "force": self.force.snapshot(self.robots.loops)}
+                        "gizmos": [hand.gizmo.copy() for hand in self._console.inputs],
+                        "target": targets[0].copy(), "gizmo": self._console.gizmo.copy(),
+                        "clutch": self._console.clutch, "motion_scale": self._console.motion_scale,
+                        "ghost_offset": self._robots.ghost_offset.copy(),
+                        "recording": self._recorder.active,
+                        "config": self._robots.config, "gain": self._robots.gain,
+                        "damping": self._robots.damping,
+                        "plant": self._plant, "collisions": self._collisions_snapshot(),
+                        "devices": self._devices.snapshot(),
+                        "absolute_orientation": self._devices.absolute_orientation,
+                        "force": self._force.snapshot(self._robots.loops)}
         robots = {which: self._robot_snapshot(state, constraints, targets)
                   for which, state in states.items()}
         entries = [{"id": entry_id, "kind": kind, "goal": goal,
@@ -129,18 +159,18 @@ class View:
         ``approach_speed``), ``checking`` (on, with pairs to check: self-collision or an
         obstacle) and each obstacle's drawing (``id``, ``goal``, ``geometry``:
         :class:`constraints.collision.ObstacleGeometry`)."""
-        settings = self.collisions.settings()
+        settings = self._collisions.settings()
         return {**settings,
-                "checking": settings["on"] and bool(settings["self_collision"] or self.collisions.obstacles),
+                "checking": settings["on"] and bool(settings["self_collision"] or self._collisions.obstacles),
                 "obstacles": [{"id": entry.id, "kind": entry.kind, "goal": entry.goal.copy(),
                                "geometry": entry.obstacle.geometry()}
-                              for entry in self.collisions.obstacles.values()]}
+                              for entry in self._collisions.obstacles.values()]}
 
     def active_pairs(self, which: str = "main") -> list[str]:
         """The collision pairs robot ``which``'s controller holds at their bound now (from
         its step's :class:`controllers.SolveInfo`)."""
         with self._lock:
-            return list(self.robots.loops[which].controller.info.active_pairs)
+            return list(self._robots.loops[which].controller.info.active_pairs)
 
     def _robot_state(self, which: str, loop: TeleopLoop, history: bool) -> dict:
         """What :meth:`_robot_snapshot` makes robot ``which``'s part of :meth:`snapshot`
@@ -153,18 +183,18 @@ class View:
         pin.framesForwardKinematics(model, self._view_data, q)
         placements = self._view_data.oMf
         links = {entry.id: placements[model.getFrameId(entry.constraint.link)].copy()
-                 for entry in self.constraints.entries.values()}
-        ids = {id(entry.constraint): entry.id for entry in self.constraints.entries.values()}
-        return {"spec": self.robots.specs[which], "q": q, "t": loop.t,
+                 for entry in self._constraints.entries.values()}
+        ids = {id(entry.constraint): entry.id for entry in self._constraints.entries.values()}
+        return {"spec": self._robots.specs[which], "q": q, "t": loop.t,
                 "ees": [placements[frame].copy() for frame in self.robot.ee_frame_ids],
-                "links": links, "record": self.robots.last_records.get(which),
-                "columns": self.robots.traces[which].columns() if history else None,
+                "links": links, "record": self._robots.last_records.get(which),
+                "columns": self._robots.traces[which].columns() if history else None,
                 "info": loop.controller.info, "refused": loop.refused,
-                "task_modes": loop.task_modes, "homing": self.homing.words_at(self.now),
+                "task_modes": loop.task_modes, "homing": self._homing.words_at(self._robots.now),
                 "active_inequalities": self.active_inequalities(which),
                 "active_pairs": self.active_pairs(which),
                 # the rows its controller computed last (immutable), or None
-                "collision_rows": self.collisions.rows.get(which),
+                "collision_rows": self._collisions.rows.get(which),
                 "ports": port_readings(loop, placements, ids, model),
                 # what the supervisor measured and did in the last period (immutable)
                 "supervision": loop.supervision}

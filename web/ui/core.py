@@ -275,7 +275,7 @@ class TeleopUI:
             try:
                 plot = start >= next_plot
                 status = start >= next_status
-                snapshot = self.app.snapshot(history=plot)
+                snapshot = self.app.view.snapshot(history=plot)
                 with self.server.atomic():
                     self._draw(snapshot, status=status)
                 if status:
