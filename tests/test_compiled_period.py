@@ -15,6 +15,7 @@ import pytest
 from constraints import Hole
 from teleop.plants import Imperfections, MujocoPlant, PlantSettings
 from teleop.plants.compiled_period import CompiledPeriod
+from teleop.plants.walls import PortWall, register_wall
 
 DT = 1e-3
 
@@ -104,6 +105,39 @@ def test_saturated_drives_under_a_payload(sda10f):
     runs = [run(plant, sda10f, [moving_hole(sda10f)], 2.0) for plant in (compiled, reference)]
     assert any(r[6] for r in runs[1])
     assert_same(*runs)
+
+
+class PythonWalledHole(Hole):
+    """A hole whose wall has no compiled form: its periods run split in Python."""
+
+
+class PythonPortWall(PortWall):
+    def compiled_parameters(self, hole: Hole) -> None:  # type: ignore[override]
+        return None
+
+
+register_wall(PythonWalledHole, PythonPortWall())
+
+
+def test_a_period_split_in_python_leaves_no_force_to_the_compiled_ones(sda10f):
+    """100 periods with a hole whose wall only Python applies (the physics split, the
+    forces in ``qfrc_applied``), then 100 with an ordinary hole (the compiled period):
+    bit for bit the plant that runs every period in Python, which clears the forces at
+    each period's start."""
+    compiled, reference = plants(sda10f, PlantSettings())
+    outcomes = []
+    for plant in (compiled, reference):
+        python_walled = moving_hole(sda10f)
+        python_walled.__class__ = PythonWalledHole
+        q, moved = sda10f.q_home.copy(), []
+        for k, qd in enumerate(commands(sda10f.model.nv, 200, 0.2)):
+            moved.append(plant.actuate(qd, q, [python_walled if k < 100 else moving_hole(sda10f)]))
+            q = pin.integrate(sda10f.model, q, moved[-1] * DT)
+        outcomes.append((moved, plant.mj_data.qpos.copy()))
+    assert np.abs(compiled.mj_data.qfrc_applied).max() == 0.0
+    for ours, theirs in zip(*(moved for moved, _ in outcomes)):
+        assert np.array_equal(ours, theirs)
+    assert np.array_equal(outcomes[0][1], outcomes[1][1])
 
 
 def test_no_compiled_period_where_python_stands_between(sda10f):

@@ -213,6 +213,9 @@ class MujocoPlant:
             if self._compiled_walls is not None and self.shaping is None
             and self.interface.mode == "off" and not self.tissues
             and self.contact_pairs is None and self.joints.identity else None)
+        #: a period split in Python (a wall without a compiled form) left its last
+        #: forces in ``qfrc_applied``, which the compiled period's steps would apply
+        self._forces_applied = False
 
     # -- the model -----------------------------------------------------------------------
 
@@ -369,6 +372,9 @@ class MujocoPlant:
         with the same arithmetic, the measures made when read (:meth:`measures`)."""
         if self._period is not None:
             # (the interface is off: it passes the command on, checks and counts nothing)
+            if self._forces_applied:  # a period split in Python left its last forces there
+                self._qfrc_applied.fill(0.0)
+                self._forces_applied = False
             moved = self._period.run(qd, q, constraints)
             if moved is not None:
                 self._last = None
@@ -400,6 +406,7 @@ class MujocoPlant:
                 for i in range(len(self._tools)):
                     contacts[i], depths[i] = self._press(i)
                 mujoco.mj_step2(model, data)
+            self._forces_applied = True
         else:  # one call: the physics steps without Python between them
             forces, displacements, springs = np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
             mujoco.mj_step(model, data, self.substeps)
