@@ -285,8 +285,8 @@ def test_the_loop_bench_times_every_period_of_both_paths():
 
 def test_the_measured_period_line_times_compare_s_periods():
     """``teleop bench``'s compare line: every period timed around ``tick_measured_later``
-    (so at least its compiled tick), the ratio the medians', the target marked when
-    missed, and the measures after the run beside it."""
+    (so at least its compiled tick), the target's ratio the period's with its measures
+    after the run (marked when missed), the hot path's beside it."""
     from teleop.experiments.bench_loop import (MeasuredPeriod, format_measured_period_line,
                                                time_measured_period)
 
@@ -296,7 +296,10 @@ def test_the_measured_period_line_times_compare_s_periods():
     assert period.period_median_us <= period.period_p99_us
     assert period.ratio == period.period_median_us / period.tick_median_us
     assert period.measures_after_us > 0.0
-    line = format_measured_period_line(MeasuredPeriod("paper-hole", 10, 30.0, 40.0, 10.0, 44.4))
-    assert "3.00x (target" in line and "after the run 44.4 us median" in line
+    assert period.total_ratio == ((period.period_median_us + period.measures_after_us)
+                                  / period.tick_median_us)
+    line = format_measured_period_line(MeasuredPeriod("paper-hole", 10, 12.0, 40.0, 10.0, 18.0))
+    assert "with its measures 30.0 us" in line and "3.00x (target" in line
+    assert "(p99 40.0, 1.20x)" in line and "after the run 18.0 us median" in line
     assert "3.10x* (target" in format_measured_period_line(
-        MeasuredPeriod("paper-hole", 10, 31.0, 40.0, 10.0, 44.4))
+        MeasuredPeriod("paper-hole", 10, 12.0, 40.0, 10.0, 19.0))

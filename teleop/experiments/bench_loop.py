@@ -157,8 +157,14 @@ class MeasuredPeriod:
 
     @property
     def ratio(self) -> float:
-        """The period's median over the tick's."""
+        """The hot path's median over the tick's."""
         return self.period_median_us / self.tick_median_us
+
+    @property
+    def total_ratio(self) -> float:
+        """The period with its measures (the hot path's median plus the measures' after
+        the run) over the tick's: what the target bounds, whenever the measures run."""
+        return (self.period_median_us + self.measures_after_us) / self.tick_median_us
 
 
 def time_measured_period(scenario: str = "paper-hole",
@@ -187,11 +193,14 @@ def time_measured_period(scenario: str = "paper-hole",
 
 
 def format_measured_period_line(period: MeasuredPeriod) -> str:
-    """compare's period's median and p99 against the tick's median and the target, and
-    the measures' cost after the run."""
-    missed = "*" if period.ratio > MEASURED_PERIOD_TARGET else ""
-    return (f"compare's period: {period.scenario}, the tick and what its measures read "
-            f"{period.period_median_us:.1f} us median (p99 {period.period_p99_us:.1f}), the "
-            f"compiled tick {period.tick_median_us:.1f} us: {period.ratio:.2f}x{missed} "
-            f"(target at most {MEASURED_PERIOD_TARGET}x); a period's measures after the run "
+    """compare's period with its measures against the tick's median and the target (the
+    measures counted wherever they run), then the hot path alone (the tick and what its
+    measures read) and the measures after the run."""
+    missed = "*" if period.total_ratio > MEASURED_PERIOD_TARGET else ""
+    total = period.period_median_us + period.measures_after_us
+    return (f"compare's period: {period.scenario}, with its measures {total:.1f} us, the "
+            f"compiled tick {period.tick_median_us:.1f} us: {period.total_ratio:.2f}x{missed} "
+            f"(target at most {MEASURED_PERIOD_TARGET}x); the hot path "
+            f"{period.period_median_us:.1f} us median (p99 {period.period_p99_us:.1f}, "
+            f"{period.ratio:.2f}x), a period's measures after the run "
             f"{period.measures_after_us:.1f} us median")
