@@ -17,8 +17,8 @@ import pytest
 from test_ros2_wire import domain, loopback
 
 from teleop import load_robot
-from teleop.plants.ros2.realtime import (hold_realtime, make_realtime, release_realtime,
-                                         started_realtime)
+from teleop.plants.ros2.realtime import (ThreadScheduling, hold_realtime, make_realtime,
+                                         release_realtime, started_realtime)
 from teleop.plants.ros2.ros2_plant import Ros2Plant
 from teleop.plants.ros2.settings import Ros2Settings
 
@@ -74,12 +74,50 @@ def expected_words(priority: int) -> str:
     return "ordinary scheduling"
 
 
+#: SCHED_FIFO as a thread made real-time holds it: its children do not inherit it
+FIFO_NOT_INHERITED = os.SCHED_FIFO | os.SCHED_RESET_ON_FORK
+
+
 @pytest.mark.parametrize("priority", [0, PRIORITY])
 def test_a_thread_is_made_real_time_as_its_words_say(priority):
     words, (policy, level) = in_new_thread(lambda: make_realtime(priority))
     assert words == expected_words(priority)
     fifo = priority > 0 and granted(priority)
-    assert (policy, level) == ((os.SCHED_FIFO, priority) if fifo else (os.SCHED_OTHER, 0))
+    assert (policy, level) == ((FIFO_NOT_INHERITED, priority) if fifo else (os.SCHED_OTHER, 0))
+
+
+def test_a_thread_made_real_time_starts_ordinary_threads():
+    """SCHED_RESET_ON_FORK with SCHED_FIFO: a thread the real-time thread starts is
+    ordinary (read by the kernel), while the real-time thread stays SCHED_FIFO."""
+    def child_of_a_real_time_thread() -> tuple[int, int]:
+        make_realtime(PRIORITY)
+        return in_new_thread(lambda: None)[1]
+    child, parent = in_new_thread(child_of_a_real_time_thread)
+    assert child == (os.SCHED_OTHER, 0)
+    assert parent == ((FIFO_NOT_INHERITED, PRIORITY) if granted(PRIORITY)
+                      else (os.SCHED_OTHER, 0))
+
+
+def test_an_ended_threads_scheduling_is_not_given_to_the_thread_now_at_its_id():
+    """A thread's scheduling kept, the thread ended, its kernel id another live thread's
+    (as the kernel may reuse it): restoring changes nothing (SCHED_BATCH, which needs no
+    privilege, would show on the live thread)."""
+    ended = threading.Thread(target=lambda: None)
+    ended.start()
+    ended.join()
+    release = threading.Event()
+    live = threading.Thread(target=release.wait)
+    live.start()
+    try:
+        assert live.native_id is not None
+        kept = ThreadScheduling(ended, live.native_id, os.SCHED_BATCH, 0)
+        assert not kept.restore()
+        assert scheduling_of(live.native_id) == (os.SCHED_OTHER, 0)
+        assert ThreadScheduling(live, live.native_id, os.SCHED_BATCH, 0).restore()
+        assert scheduling_of(live.native_id) == (os.SCHED_BATCH, 0)
+    finally:
+        release.set()
+        live.join()
 
 
 def test_threads_started_real_time_inherit_it_and_the_caller_is_restored():
@@ -125,7 +163,7 @@ def test_a_thread_held_real_time_twice_stays_so_until_the_last_release():
         return seen
 
     seen, _ = in_new_thread(holds)
-    fifo = (os.SCHED_FIFO, PRIORITY) if granted(PRIORITY) else (os.SCHED_OTHER, 0)
+    fifo = (FIFO_NOT_INHERITED, PRIORITY) if granted(PRIORITY) else (os.SCHED_OTHER, 0)
     assert seen == [fifo, fifo, (os.SCHED_OTHER, 0)]
 
 
@@ -148,6 +186,7 @@ def test_the_plants_threads_run_as_its_measures_say(domain, priority):
     caller = scheduling_of(threading.get_native_id())
     settings = Ros2Settings(domain=domain, realtime_priority=priority, stale_after=0.5)
     fifo = (os.SCHED_FIFO, priority) if priority and granted(priority) else (os.SCHED_OTHER, 0)
+    actuating = (FIFO_NOT_INHERITED, fifo[1]) if fifo[1] else fifo
     words = expected_words(priority)
     zeros = np.zeros(robot.model.nv)
     actuate, done, seen = threading.Event(), threading.Event(), []
@@ -171,13 +210,13 @@ def test_the_plants_threads_run_as_its_measures_say(domain, priority):
         actuate.set()
         assert wait_until(lambda: len(seen) == 1)
         np.testing.assert_array_equal(seen[0], zeros)  # no state yet: nothing moved
-        assert scheduling_of(thread.native_id) == fifo
+        assert scheduling_of(thread.native_id) == actuating
         assert plant.measures().realtime == f"{threads}; actuating: {words}"
         assert wait_until(lambda: plant.measures().realtime == threads)  # idle: given back
         assert scheduling_of(thread.native_id) == (os.SCHED_OTHER, 0)
         actuate.set()
         assert wait_until(lambda: len(seen) == 2)
-        assert scheduling_of(thread.native_id) == fifo
+        assert scheduling_of(thread.native_id) == actuating
     assert scheduling_of(thread.native_id) == (os.SCHED_OTHER, 0)  # closed: given back
     done.set()
     actuate.set()

@@ -40,22 +40,25 @@ def check_priority(priority: object) -> int:
 
 
 def scheduling_words() -> str:
-    """How the calling thread is scheduled, in words (``SCHED_FIFO 50``)."""
-    policy = os.sched_getscheduler(0)
+    """How the calling thread is scheduled, in words (``SCHED_FIFO 40``)."""
+    policy = os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK
     name = {os.SCHED_FIFO: "SCHED_FIFO", os.SCHED_RR: "SCHED_RR"}.get(policy)
     if name is None:
         return "ordinary scheduling"
     return f"{name} {os.sched_getparam(0).sched_priority}"
 
 
-def make_realtime(priority: int) -> str:
+def make_realtime(priority: int, reset_on_fork: bool = True) -> str:
     """The calling thread scheduled ``SCHED_FIFO`` at ``priority`` (1-99; 0: left as it
-    is). Returns how it is scheduled then, with the reason when the system refused
+    is), with ``SCHED_RESET_ON_FORK`` unless ``reset_on_fork`` is false: the threads and
+    processes it starts then run ordinary (none inherits ``SCHED_FIFO`` unawares).
+    Returns how it is scheduled then, with the reason when the system refused
     (``ValueError`` for a priority outside [0, 99])."""
     if check_priority(priority) == 0:
         return scheduling_words()
+    policy = os.SCHED_FIFO | (os.SCHED_RESET_ON_FORK if reset_on_fork else 0)
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(0, policy, os.sched_param(priority))
     except OSError as error:
         return (f"{scheduling_words()} (SCHED_FIFO {priority} refused: "
                 f"{error.strerror or error})")
@@ -65,8 +68,9 @@ def make_realtime(priority: int) -> str:
 @dataclass(frozen=True)
 class ThreadScheduling:
     """A thread's scheduling as it was, to give it back (:meth:`restore`, from any
-    thread)."""
+    thread while it is alive)."""
 
+    thread: threading.Thread
     thread_id: int
     policy: int
     priority: int
@@ -74,15 +78,24 @@ class ThreadScheduling:
     @classmethod
     def of_calling_thread(cls) -> "ThreadScheduling":
         """The calling thread's scheduling now."""
-        return cls(threading.get_native_id(), os.sched_getscheduler(0),
-                   os.sched_getparam(0).sched_priority)
+        return cls(threading.current_thread(), threading.get_native_id(),
+                   os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
 
-    def restore(self) -> None:
-        """The thread scheduled as it was (nothing when it has ended)."""
+    def restore(self) -> bool:
+        """The thread scheduled as it was, when it is still alive (whether it was): the
+        kernel's thread id of an ended thread may be another's by now, which is left
+        alone. The calling thread restores itself by no id."""
+        if self.thread is threading.current_thread():
+            thread_id = 0
+        elif self.thread.is_alive():
+            thread_id = self.thread_id
+        else:
+            return False
         try:
-            os.sched_setscheduler(self.thread_id, self.policy, os.sched_param(self.priority))
+            os.sched_setscheduler(thread_id, self.policy, os.sched_param(self.priority))
         except ProcessLookupError:
-            pass
+            return False
+        return True
 
 
 #: the threads :func:`hold_realtime` made real-time: their scheduling before the first
@@ -97,6 +110,8 @@ def hold_realtime(priority: int) -> tuple[int, str]:
     thread_id = threading.get_native_id()
     with _holds_lock:
         before, holders = _holds.get(thread_id, (ThreadScheduling.of_calling_thread(), 0))
+        if before.thread is not threading.current_thread():  # an ended thread's id
+            before, holders = ThreadScheduling.of_calling_thread(), 0
         words = make_realtime(priority)
         _holds[thread_id] = (before, holders + 1)
     return thread_id, words
@@ -114,13 +129,14 @@ def release_realtime(thread_id: int) -> None:
 
 
 def started_realtime(priority: int, start: Callable[[], T]) -> tuple[T, str]:
-    """``start()`` called with the calling thread ``SCHED_FIFO`` at ``priority``, so the
-    threads it starts inherit it; after it, the calling thread is scheduled as before.
+    """``start()`` called with the calling thread ``SCHED_FIFO`` at ``priority`` (without
+    ``SCHED_RESET_ON_FORK``, which would stop just that), so the threads it starts
+    inherit it; after it, the calling thread is scheduled as before.
     Returns what ``start`` returned and the words: the scheduling and how many threads
     started (``SCHED_FIFO 50, 5 threads started``)."""
     caller = ThreadScheduling.of_calling_thread()
     before = set(os.listdir("/proc/self/task"))
-    words = make_realtime(priority)
+    words = make_realtime(priority, reset_on_fork=False)
     try:
         result = start()
     finally:
