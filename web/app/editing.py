@@ -9,6 +9,7 @@ import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -28,6 +29,8 @@ from .recording import SessionRecording
 @dataclass
 class ConstraintEntry(PlacedEntry):
     """A constraint placed by the operator, with the geometry its gizmo drives."""
+
+    recorded: ClassVar[bool] = True
 
     constraint: Constraint = field(kw_only=True)
 

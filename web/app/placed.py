@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Protocol, TypeVar
+from typing import ClassVar, Protocol, TypeVar
 
 import numpy as np
 
@@ -30,6 +30,10 @@ class PlacedEntry:
     """An item placed by the operator: its ``id``, where the operator put it (``goal``,
     world, m) and whether it is there and at rest (``settled``: the tick leaves it
     alone). The item itself is the subclass's field, :attr:`moved`."""
+
+    #: whether a session recording replays the item's moves (a constraint's, not an
+    #: obstacle's: a session file records the constraints' edits)
+    recorded: ClassVar[bool] = False
 
     id: str
     goal: np.ndarray  # where the operator put it (the control loop moves it there)

@@ -140,7 +140,7 @@ class Tick:
                 entry.settled = True
                 continue
             steer(geometry, entry.goal, dt, smoothing=alpha)
-            if (self.recorder.active and isinstance(entry, ConstraintEntry)
+            if (self.recorder.active and entry.recorded
                     and self.ticks % RECORD_MOVES_EVERY == 0 and np.any(geometry.velocity)):
                 self.recorder.move(entry.id,
                                    geometry.position, geometry.velocity)
