@@ -14,12 +14,13 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from test_ros2_wire import domain, loopback
+from test_ros2_wire import COMMANDS, STATES, domain, fake, loopback, peer, robot
 
 from teleop import load_robot
 from teleop.plants.ros2.realtime import (ThreadScheduling, hold_realtime, make_realtime,
                                          release_realtime, started_realtime)
-from teleop.plants.ros2.ros2_plant import Ros2Plant
+from teleop.plants.ros2.joint_map import model_joint_names
+from teleop.plants.ros2.ros2_plant import OVERRUN_PERIODS, Ros2Plant
 from teleop.plants.ros2.settings import Ros2Settings
 
 PRIORITY = 20
@@ -28,7 +29,7 @@ CAP_SYS_NICE = 23  # linux/capability.h
 
 #: the fixtures of test_ros2_wire used here (one domain counter for every ROS 2 test file:
 #: a domain no other participant of this process joined, whose threads the plant starts)
-__all__ = ["domain", "loopback"]
+__all__ = ["domain", "fake", "loopback", "peer", "robot"]
 
 
 def granted(priority: int) -> bool:
@@ -230,3 +231,49 @@ def wait_until(condition: Callable[[], bool], periods: int = 2500) -> bool:
             return True
         time.sleep(DT)
     return condition()
+
+
+def test_a_loop_that_overruns_its_period_gives_up_real_time_until_the_reset(robot, domain,
+                                                                           fake):
+    """The reviewer's case: each tick longer than one and a half periods (3.5 ms at 2 ms:
+    the period never waits for the robot). After OVERRUN_PERIODS such periods in a row the
+    actuating thread is ordinary (read by the kernel) and the measures say why; up to then
+    it is real-time; after the plant's reset, real-time again at its next call. A loop on
+    time (no sleep between calls: every period waits for the robot's state) keeps it."""
+    names = model_joint_names(robot.model)
+    fake(names, list(robot.q_home))
+    settings = Ros2Settings(domain=domain, joint_states=STATES, command_topic=COMMANDS,
+                            realtime_priority=PRIORITY, stale_after=1.0, start_timeout=30.0)
+    fifo = (FIFO_NOT_INHERITED, PRIORITY) if granted(PRIORITY) else (os.SCHED_OTHER, 0)
+    zeros = np.zeros(robot.model.nv)
+
+    def run(plant: Ros2Plant) -> list[tuple[int, int]]:
+        """The scheduling after each call: OVERRUN_PERIODS on time, OVERRUN_PERIODS + 1
+        overrunning (3.5 ms sleeps), the plant reset, one more call."""
+        seen = []
+        for tick in range(3 * OVERRUN_PERIODS + 2):
+            if OVERRUN_PERIODS <= tick < 2 * OVERRUN_PERIODS + 1:
+                time.sleep(0.0035)
+            if tick == 2 * OVERRUN_PERIODS + 1:
+                seen.append(scheduling_of(threading.get_native_id()))
+                words.append(plant.measures().realtime)
+                plant.reset()
+            plant.actuate(zeros, robot.q_home, [])
+            seen.append(scheduling_of(threading.get_native_id()))
+        words.append(plant.measures().realtime)
+        return seen
+
+    words: list[str] = []
+    with Ros2Plant(robot, DT, settings) as plant:
+        plant.reset()
+        seen, _ = in_new_thread(lambda: run(plant))
+    assert isinstance(seen, list)
+    last = 2 * OVERRUN_PERIODS - 1  # the call that ended the N-th overrun in a row
+    assert seen[:last] == [fifo] * last  # on time, then overrunning fewer than N in a row
+    assert seen[last:last + 3] == [(os.SCHED_OTHER, 0)] * 3  # and so until the reset
+    assert words[0].endswith(
+        f"actuating: ordinary scheduling (SCHED_FIFO {PRIORITY} given up: {OVERRUN_PERIODS} "
+        f"periods in a row ended without waiting for the robot, the loop's tick overran "
+        f"them; again at the next reset)")
+    assert seen[last + 3:] == [fifo] * (OVERRUN_PERIODS + 1)  # reset: real-time again
+    assert words[1].endswith(f"actuating: {expected_words(PRIORITY)}")

@@ -31,8 +31,9 @@ def add_ros2_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup) 
     parser.add_argument("--realtime-priority", type=int, metavar="N",
                         help="SCHED_FIFO priority 1-99 of the threads on the wire, as "
                              "ros2_control's controller_manager runs; 0: ordinary scheduling "
-                             "(default: 50; without the privilege they stay ordinary and the "
-                             "measures say so)")
+                             "(default: 40, below the controller_manager's 50; teleop sim "
+                             "--ros2, which plays the robot: 50; without the privilege they "
+                             "stay ordinary and the measures say so)")
 
 
 def given_ros2_options(args: argparse.Namespace) -> list[str]:

@@ -4,6 +4,7 @@ robot") until Ctrl-C or ``--duration``."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import signal
 import sys
 
@@ -47,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from teleop.plants import MujocoPlant
+    from teleop.plants.ros2.realtime import ROBOT_PRIORITY
     from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
 
     robot, constraints, q0 = sim_ports(args)
@@ -58,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
         if q0.shape != (robot.model.nq,) or not np.all(np.isfinite(q0)):
             raise ValueError(f"--q0 needs {robot.model.nq} finite numbers, got {len(q0)}")
     settings = ros2_settings(args)
+    if args.realtime_priority is None:  # the sim plays the robot: its controller's priority
+        settings = dataclasses.replace(settings, realtime_priority=ROBOT_PRIORITY)
     plant = MujocoPlant(robot, 1.0 / args.rate) if args.plant == "mujoco" else None
     sim = SimulatedRos2Robot(robot, args.rate, settings, plant, q0, constraints,
                              args.port_forces, args.lockstep / 1e3)

@@ -27,6 +27,13 @@ T = TypeVar("T")
 
 #: SCHED_FIFO's highest priority on Linux (the lowest is 1)
 MAX_PRIORITY = 99
+#: ros2_control's ``controller_manager`` update thread's priority (its ``thread_priority``):
+#: the simulated robot (``teleop sim --ros2``) plays the robot and runs at it
+ROBOT_PRIORITY = 50
+#: the loop side's priority, strictly below the robot's: on the robot's own machine a
+#: loop thread that overran its period (it never sleeps) must not take a core from the
+#: robot's update thread (docs/ros2.md "Real-time threads")
+LOOP_PRIORITY = 40
 
 
 def check_priority(priority: object) -> int:

@@ -18,13 +18,16 @@ forever), when a state is not finite or lacks a joint, when a command is not fin
 holds until :meth:`reset` and :attr:`Ros2Measures.stopped` says why. Zeros go out once,
 too, when the loop stops actuating for ``stale_after`` (it may command again).
 
-The threads on the wire run real-time (``Ros2Settings.realtime_priority``, SCHED_FIFO 50
-by default, :mod:`teleop.plants.ros2.realtime`): DDS's threads and the watchdog, started
-real-time, and the thread that calls :meth:`Ros2Plant.actuate` (the loop's), made
-real-time at its first call and given its own scheduling back when it stops actuating
-for ``stale_after`` (with the idle stop) or the plant closes, so a command is not late for
-the robot's update because the machine is busy (docs/ros2.md "Real-time threads");
-:attr:`Ros2Measures.realtime` says how they run."""
+The threads on the wire run real-time (``Ros2Settings.realtime_priority``, SCHED_FIFO 40
+by default, below ros2_control's controller manager, :mod:`teleop.plants.ros2.realtime`):
+DDS's threads and the watchdog, started real-time, and the thread that calls
+:meth:`Ros2Plant.actuate` (the loop's), made real-time at its first call and given its own
+scheduling back when it stops actuating for ``stale_after`` (with the idle stop) or the
+plant closes, so a command is not late for the robot's update because the machine is busy
+(docs/ros2.md "Real-time threads"). A loop that overruns its period never waits for the
+robot, so its real-time thread would never sleep: after :data:`OVERRUN_PERIODS` periods
+in a row that ended without waiting, the actuating thread is given its own scheduling
+back until :meth:`Ros2Plant.reset`. :attr:`Ros2Measures.realtime` says how they run."""
 
 from __future__ import annotations
 
@@ -50,6 +53,10 @@ from .node import Ros2Node
 from .realtime import hold_realtime, release_realtime, started_realtime
 from .settings import Ros2Settings
 
+#: periods in a row that ended without waiting for the robot (the loop's tick overran
+#: them) after which the actuating thread runs ordinary until :meth:`Ros2Plant.reset`
+OVERRUN_PERIODS = 10
+
 
 @dataclass
 class Ros2Measures:
@@ -65,7 +72,8 @@ class Ros2Measures:
     operating_state : CRTK's last ``operating_state.state`` (empty: none or not CRTK).
     idle_stops : zeros published because the loop stopped actuating for ``stale_after``.
     realtime : how the threads on the wire are scheduled (``DDS and watchdog: SCHED_FIFO
-        50; actuating: SCHED_FIFO 50``), with the reason when the system refused.
+        40; actuating: SCHED_FIFO 40``), with the reason when the system refused or the
+        actuating thread gave it up for overruns.
     port_forces : (0, 3): the wall's force is not measured over ROS 2.
     port_displacements : (0,).
     """
@@ -136,6 +144,8 @@ class Ros2Plant:
         self._period_start = 0.0  # time.monotonic() when the last period ended
         self._period_fresh = 0  # self._fresh when the last period ended
         self._paced = False  # :meth:`pace` ended the period: the next actuate does not wait
+        self._overruns = 0  # periods in a row that ended without waiting
+        self._gave_up = False  # real-time given up for overruns, until the next reset
         #: how the threads on the wire run; the actuating thread's added at its first call
         self._scheduling = f"DDS: {dds_threads}; watchdog: "
         #: the id of the thread held real-time while it actuates (:func:`hold_realtime`)
@@ -281,6 +291,8 @@ class Ros2Plant:
             self._q = None  # a fresh state is awaited, its names checked again
             self._in_flight.clear()
             self._state_names = []
+            self._overruns = 0
+            self._gave_up = False
         gc.collect()
         gc.freeze()
         self.wait_for_state()
@@ -307,9 +319,10 @@ class Ros2Plant:
         one and a half: a late robot does not hold the loop up, the watchdog judges it),
         the mean velocity from ``q`` to the state then received returned. The calling
         thread is made real-time at its first call (``settings.realtime_priority``) until
-        it stops actuating for ``stale_after`` or the plant closes."""
+        it stops actuating for ``stale_after``, the plant closes, or :data:`OVERRUN_PERIODS`
+        periods in a row ended without waiting (then until :meth:`reset`)."""
         with self._lock:
-            if self._actuating != threading.get_native_id():
+            if not self._gave_up and self._actuating != threading.get_native_id():
                 self._release_actuating()
                 self._actuating, words = hold_realtime(self.settings.realtime_priority)
                 self.last_measures.realtime = f"{self._scheduling}; actuating: {words}"
@@ -329,6 +342,9 @@ class Ros2Plant:
                 self._paced = False
             else:
                 self._end_period(fresh)
+            if (self._overruns >= OVERRUN_PERIODS and self._actuating is not None
+                    and self.settings.realtime_priority > 0):
+                self._give_up_realtime()
             if self._q is None:
                 return np.zeros(self.model.nv)
             return pin.difference(self.model, q, self._q) / self.dt
@@ -336,16 +352,33 @@ class Ros2Plant:
     def _end_period(self, fresh: int) -> None:
         """Waits for a state newer than the ``fresh``-th, not ending the period sooner
         than half a period after the last one ended nor later than one and a half (caller
-        holds the lock; the wait releases it)."""
+        holds the lock; the wait releases it); counts the periods in a row that ended
+        without waiting."""
         earliest = self._period_start + 0.5 * self.dt
         latest = self._period_start + 1.5 * self.dt
         now = time.monotonic()
+        waited = False
         while now < latest and (self._fresh == fresh or now < earliest):
             self._lock.wait(timeout=(earliest if self._fresh > fresh else latest) - now)
             self._take_states()
             now = time.monotonic()
+            waited = True
+        self._overruns = 0 if waited else self._overruns + 1
         self._period_start = now
         self._period_fresh = self._fresh
+
+    def _give_up_realtime(self) -> None:
+        """The actuating thread (the caller) given its own scheduling back for overruns,
+        until :meth:`reset` (caller holds the lock): a ``SCHED_FIFO`` thread that never
+        sleeps holds its core against every ordinary thread, and against a robot's
+        controller of a priority not above it (docs/ros2.md "Real-time threads")."""
+        self._release_actuating()
+        self._gave_up = True
+        self.last_measures.realtime = (
+            f"{self._scheduling}; actuating: ordinary scheduling (SCHED_FIFO "
+            f"{self.settings.realtime_priority} given up: {self._overruns} periods in a row "
+            f"ended without waiting for the robot, the loop's tick overran them; again "
+            f"at the next reset)")
 
     def pace(self) -> None:
         """The period ended here rather than in :meth:`actuate`: the robot's next state

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, fields
 from constraints.validation import short_repr
 
 from .names import dds_topic, domain_id
-from .realtime import check_priority
+from .realtime import LOOP_PRIORITY, check_priority
 
 #: the most control periods :attr:`Ros2Settings.command_latency` predicts over
 MAX_COMMAND_LATENCY = 10
@@ -37,8 +37,9 @@ class Ros2Settings:
         for the controller's next update); :meth:`Ros2Plant.sense` moves the state on by
         the commands in flight (0: the state as received).
     realtime_priority : the ``SCHED_FIFO`` priority (1-99) of the threads on the wire
-        (the thread that actuates, the watchdog, DDS's own), as ros2_control's
-        ``controller_manager`` runs its update thread at 50; 0: ordinary scheduling
+        (the thread that actuates, the watchdog, DDS's own), 40 by default: below
+        ros2_control's ``controller_manager``, whose update thread runs at 50 (the
+        simulated robot's default, as it plays the robot); 0: ordinary scheduling
         (:mod:`teleop.plants.ros2.realtime`).
     """
 
@@ -50,7 +51,7 @@ class Ros2Settings:
     stale_after: float = 0.05
     start_timeout: float = 5.0
     command_latency: int = 1
-    realtime_priority: int = 50
+    realtime_priority: int = LOOP_PRIORITY
 
     def __post_init__(self) -> None:
         """``ValueError`` naming the field: a topic ROS 2 refuses, a domain outside
