@@ -609,3 +609,68 @@ def test_a_lockstep_robot_applies_the_answer_to_each_state_in_its_period(robot, 
     finally:
         running = False
         sim.close()
+
+
+class ReplyingRobot:
+    """A robot played by the test's participant that answers each command: ``q +=
+    c dt`` (``pin.integrate``) and its new state published at once; its first state
+    published until the first command arrives (so the plant's reset finds it)."""
+
+    def __init__(self, node: Ros2Node, robot, dt: float) -> None:
+        self.model, self.dt, self.q = robot.model, dt, robot.q_home.copy()
+        self.names = model_joint_names(robot.model)
+        self.writer = node.writer(STATES, JointState)
+        self.commands = CommandLog(node)
+        self._running = True
+        self._thread = threading.Thread(target=self._answer, daemon=True)
+        self._thread.start()
+
+    def _answer(self) -> None:
+        make_realtime(50)  # a robot's controller (refused without the privilege: ordinary)
+        answered, idle = 0, 0.0
+        while self._running:
+            commands = self.commands.poll()
+            for command in commands[answered:]:
+                self.q = pin.integrate(self.model, self.q, np.array(command) * self.dt)
+                self.writer.write(JointState(name=self.names, position=list(self.q)))
+            if not commands and time.monotonic() - idle > 0.1:
+                self.writer.write(JointState(name=self.names, position=list(self.q)))
+                idle = time.monotonic()
+            answered = len(commands)
+            time.sleep(0.0005)
+
+    def close(self) -> None:
+        self._running = False
+        self._thread.join()
+
+
+@pytest.mark.parametrize("paced", [False, True])
+def test_a_velocity_step_shows_one_period_later_when_paced(robot, domain, peer, paced):
+    """The lag of :meth:`Ros2Plant.actuate`'s returned velocity, on a robot that answers
+    each command with its new state (well within a period of 50 ms): unpaced, the period
+    ends with the answer to this period's command, so a step commanded at tick 4 is
+    returned at tick 4; paced (:meth:`Ros2Plant.pace` then ``actuate``, as the page's
+    control thread), the period ended before the publish, so it is returned at tick 5,
+    one period later (the loop's ``q`` trails the robot by that period; the controller's
+    input, :meth:`Ros2Plant.sense`, does not: docs/ros2.md "The page over ROS 2")."""
+    dt, step = 0.05, 4
+    other = ReplyingRobot(peer, robot, dt)
+    settings = settings_for(domain, stale_after=1.0, command_latency=0)
+    velocity = np.linspace(0.1, 0.2, robot.model.nv)
+    returned = []
+    try:
+        with Ros2Plant(robot, dt, settings) as plant:
+            plant.reset()
+            q = plant.sense(robot.q_home)
+            for tick in range(step + 4):
+                if paced:
+                    plant.pace()
+                v = plant.actuate(velocity if tick >= step else 0 * velocity, q, [])
+                q = pin.integrate(robot.model, q, v * dt)
+                returned.append(v)
+    finally:
+        other.close()
+    shows = step + paced
+    np.testing.assert_allclose(returned[:shows], 0.0, atol=1e-9)
+    np.testing.assert_allclose(returned[shows:], [velocity] * (len(returned) - shows),
+                               rtol=1e-9)

@@ -384,7 +384,11 @@ class Ros2Plant:
         """The period ended here rather than in :meth:`actuate`: the robot's next state
         awaited as :meth:`actuate` would (a state newer than the last period's end, within
         half to one and a half periods), and the next :meth:`actuate` publishes and
-        returns at once. The page calls it between its ticks, outside its lock, so the
+        returns at once, with the mean velocity to the state received here, before its
+        publish: the loop's ``q`` trails the robot by one period more than unpaced (a
+        velocity step commanded at tick k returned at tick k+1; :meth:`sense`, the
+        controller's input, is the same newest state in both; docs/ros2.md "The page
+        over ROS 2"). The page calls it between its ticks, outside its lock, so the
         operator's input is not held up while the robot's clock paces the loop
         (docs/ros2.md "The page over ROS 2")."""
         with self._lock:
