@@ -350,5 +350,13 @@ def test_an_unstable_damper_and_another_robot_are_refused(dual):
     avoidance = CollisionAvoidance(dual, approach_speed=10.0, detection_distance=0.01)
     with pytest.raises(ValueError, match="unstable at 1000 Hz"):
         avoidance.check(dual.model, 1e-3)
+    # the rate with the response time: 1 / (0.005 / 10 + 0.0004) = 1111 1/s
+    late = CollisionAvoidance(dual, approach_speed=10.0, detection_distance=0.01,
+                              response_time=4e-4)
+    with pytest.raises(ValueError, match=r"rate K = xi / \(d_i - d_s \+ xi tau\) = 1111.11 1/s "
+                       r"\(tau = response_time 0.0004 s\) is unstable at 1000 Hz"):
+        late.check(dual.model, 1e-3)
+    CollisionAvoidance(dual, approach_speed=10.0, detection_distance=0.01,
+                       response_time=6e-4).check(dual.model, 1e-3)  # 1 / 1.1 ms: stable
     with pytest.raises(ValueError, match="another robot"):
         CollisionAvoidance(dual).check(load_robot("sda10f").model, 1e-3)

@@ -7,7 +7,9 @@ here, independently, at the configuration the controller computed its own from.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -23,7 +25,9 @@ from hypothesis import strategies as st
 
 from constraints.collision import CollisionAvoidance
 from constraints.collision.geometry import shape_distance
+from teleop.experiments.scenarios import load_scenario
 from teleop.loop.moving_geometry import MAX_GEOMETRY_SPEED
+from teleop.plants.choice import PlantChoice
 from web.app import ControlThread, TeleopApp
 from web.app.collisions import FRONT_GAP
 from web.ui import COLLISION_PLOTS, PLOTS, TeleopUI, distance_color, node_name, plots_of
@@ -241,6 +245,50 @@ def test_a_scene_keeps_the_obstacles_and_the_settings(dual_app, dual, tmp_path):
     assert other.collisions.add("sphere") == "sphere-4"  # ids go on after the scene's
     other.collisions.set_on(True)
     assert other.robots.loops["main"].controller.collisions is other.collisions.avoidance
+
+
+def test_the_damper_counts_on_the_plants_response_time_as_compare_does(sda10f, tmp_path):
+    """On the physics plant the session's damper counts on the servos' time constant, as
+    ``teleop compare --plant mujoco`` does (``Plan.with_response_time`` of the same
+    ``PlantChoice``), ``1 / K = (d_i - d_s) / xi + tau`` written here; it keeps it when the
+    operator changes a setting, writes it in its scenes, and a scene opened on another
+    plant takes that plant's."""
+    app = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path / "s1",
+                    scene_dir=tmp_path / "scenes")
+    tau = 1.0 / (2.0 * math.pi * 20.0)  # the default 20 Hz servos
+    settings = {key: value for key, value in app.collisions.avoidance.to_dict().items()
+                if key != "response_time"}
+    plan = dataclasses.replace(load_scenario("obstacle", sda10f), collisions=settings)
+    compared = plan.with_response_time(PlantChoice("mujoco").response_time).make_collisions()
+    avoidance = app.collisions.avoidance
+    assert avoidance.response_time == pytest.approx(tau, rel=1e-15)
+    assert avoidance.gain == compared.gain
+    xi, d_i, d_s = 0.5, 0.05, 0.005  # the defaults, written out
+    assert (avoidance.approach_speed, avoidance.detection_distance,
+            avoidance.safety_distance) == (xi, d_i, d_s)
+    assert avoidance.gain == pytest.approx(1.0 / ((d_i - d_s) / xi + tau), rel=1e-12)  # 10.22
+    assert app.robots.loops["main"].controller.collisions is avoidance
+
+    app.collisions.configure(safety_distance=0.008, approach_speed=0.3)
+    avoidance = app.collisions.avoidance
+    assert avoidance.response_time == pytest.approx(tau, rel=1e-15)
+    assert avoidance.gain == pytest.approx(1.0 / ((d_i - 0.008) / 0.3 + tau), rel=1e-12)
+    assert app.robots.loops["main"].controller.collisions is avoidance
+    saved = json.loads(app.save_scene("late.json").read_text())
+    assert saved["collisions"]["response_time"] == pytest.approx(tau, rel=1e-15)
+
+    again = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path / "s2",
+                      scene_dir=tmp_path / "scenes")
+    again.load_scene("late.json")
+    assert again.collisions.avoidance.to_dict() == avoidance.to_dict()
+    kinematic = TeleopApp(sda10f, record_dir=tmp_path / "s3", scene_dir=tmp_path / "scenes")
+    kinematic.load_scene("late.json")
+    assert kinematic.collisions.avoidance.response_time == 0.0
+    assert kinematic.collisions.avoidance.gain == 0.3 / (d_i - 0.008)
+    assert "response_time" not in kinematic.scene()["collisions"]
+    with pytest.raises(ValueError, match=r"^scene collisions: response_time"):
+        kinematic.apply_scene({**saved, "collisions": {**saved["collisions"],
+                                                       "response_time": -1.0}})
 
 
 def test_a_version_1_scene_still_loads_without_obstacles(sda10f, tmp_path):

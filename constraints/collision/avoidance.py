@@ -164,15 +164,17 @@ class CollisionAvoidance:
 
     def check(self, model: pin.Model, dt: float) -> None:
         """Refuse (``ValueError``) a controller whose model is not this robot's, or a
-        damper unstable at period ``dt`` (``gain dt >= 1``)."""
+        damper unstable at period ``dt`` (``gain dt >= 1``, :attr:`gain` with the response
+        time)."""
         if model is not self.model and (model.nq != self.model.nq
                                         or list(model.names) != list(self.model.names)):
             raise ValueError("this collision avoidance was built for another robot model")
         if not self.gain * dt < 1.0:
             raise ValueError(
-                f"the collision damper's rate xi / (d_i - d_s) = {self.gain:g} 1/s is unstable "
-                f"at {1.0 / dt:g} Hz (needs < {1.0 / dt:g} 1/s): lower approach_speed or "
-                "widen the detection distance")
+                f"the collision damper's rate K = xi / (d_i - d_s + xi tau) = {self.gain:g} 1/s "
+                f"(tau = response_time {self.response_time:g} s) is unstable at {1.0 / dt:g} Hz "
+                f"(needs < {1.0 / dt:g} 1/s): lower approach_speed or widen the detection "
+                "distance")
 
     # -- the obstacles and the pairs -----------------------------------------------------------
 

@@ -25,7 +25,8 @@ import numpy as np
 import pinocchio as pin
 
 from constraints.collision import OBSTACLE_TYPES, CollisionAvoidance, CollisionRows, Obstacle
-from constraints.validation import as_vector, short_repr
+from constraints.limits import MAX_RESPONSE_TIME_S
+from constraints.validation import as_number, as_vector, short_repr
 from constraints import Constraint
 from controllers.base import Controller
 from teleop.robots import Robot
@@ -141,10 +142,15 @@ class CollisionScene:
         a robot with several arms).
     lock : the session's lock.
     session : what it reads of the rest of the session (:class:`CollisionSession`).
+    response_time : ``tau`` (s), how late the session's robot follows a command
+        (:attr:`teleop.plants.PlantChoice.response_time`): every avoidance built here
+        counts on it (``1 / K = (d_i - d_s) / xi + tau``, docs/design.md 18.3, 18.6),
+        whatever the operator's settings or a scene say.
     """
 
     def __init__(self, robot: Robot, dt: float, on: bool, settings: dict,
-                 lock: threading.RLock, session: CollisionSession) -> None:
+                 lock: threading.RLock, session: CollisionSession,
+                 response_time: float = 0.0) -> None:
         unknown = sorted(set(settings) - set(SETTINGS))
         if unknown:
             raise ValueError(f"unknown collision setting {unknown[0]!r} ({', '.join(SETTINGS)})")
@@ -153,8 +159,11 @@ class CollisionScene:
         self.robot = robot
         self._lock = lock
         self._session = session
+        #: ``tau`` (s): the response time every avoidance of the session counts on
+        self.response_time = as_number(response_time, "response_time", 0.0,
+                                       maximum=MAX_RESPONSE_TIME_S)
         settings = {"self_collision": default_self_collision(robot), **settings}
-        self.avoidance = CollisionAvoidance(robot, **settings)
+        self.avoidance = CollisionAvoidance(robot, **settings, response_time=self.response_time)
         self.avoidance.check(robot.model, dt)
         self.on = bool(on)
         self.obstacles: dict[str, ObstacleEntry] = {}
@@ -214,9 +223,10 @@ class CollisionScene:
                     **{name: getattr(self.avoidance, name) for name in SETTINGS}}
 
     def rebuilt(self, current: dict, settings: dict, dt: float) -> CollisionAvoidance:
-        """A new avoidance with ``settings`` over the ``current`` ones (:meth:`settings`)
-        and this one's pairs, checked at ``dt``, without the obstacles (tens of ms with
-        self-collision: called outside the lock); ``ValueError`` naming a bad setting."""
+        """A new avoidance with ``settings`` over the ``current`` ones (:meth:`settings`),
+        this one's pairs and the session's :attr:`response_time`, checked at ``dt``,
+        without the obstacles (tens of ms with self-collision: called outside the lock);
+        ``ValueError`` naming a bad setting."""
         unknown = sorted(set(settings) - set(SETTINGS))
         if unknown:
             raise ValueError(f"unknown collision setting {unknown[0]!r} ({', '.join(SETTINGS)})")
@@ -224,7 +234,8 @@ class CollisionScene:
         current = {name: value for name, value in current.items() if name in SETTINGS}
         avoidance = CollisionAvoidance(self.robot, **{**current, **settings},
                                        disabled_pairs=old.disabled_pairs,
-                                       extra_pairs=old.extra_pairs)
+                                       extra_pairs=old.extra_pairs,
+                                       response_time=self.response_time)
         avoidance.check(self.robot.model, dt)
         return avoidance
 
@@ -307,9 +318,11 @@ class CollisionScene:
                   constraints: list[Constraint], dt: float) -> tuple[CollisionAvoidance, bool]:
         """The avoidance a scene asks for (its ``collisions`` settings and ``on``; None, a
         version 1 scene: this one's settings, no obstacle), with its ``obstacles`` and the
-        ports of its ``constraints``, checked at ``dt``, and whether the controllers hold
-        it; ``ValueError`` naming the field for settings it cannot take. Nothing of this
-        one changes (:meth:`restore` takes it)."""
+        ports of its ``constraints``, counting on the session's :attr:`response_time` (the
+        scene's ``response_time``, what the damper counted on where it was saved, is
+        checked, not taken: the robot here is this session's), checked at ``dt``, and
+        whether the controllers hold it; ``ValueError`` naming the field for settings it
+        cannot take. Nothing of this one changes (:meth:`restore` takes it)."""
         if collisions is None:
             settings, on = self.avoidance.to_dict(), self.on
         else:
@@ -317,6 +330,9 @@ class CollisionScene:
             on = collisions["on"]
         settings["obstacles"] = []
         try:
+            as_number(settings.get("response_time", 0.0), "response_time", 0.0,
+                      maximum=MAX_RESPONSE_TIME_S)
+            settings["response_time"] = self.response_time
             avoidance = CollisionAvoidance.from_dict(self.robot, settings)
             avoidance.check(self.robot.model, dt)
         except ValueError as error:

@@ -73,7 +73,9 @@ class TeleopApp(Scenes, Tick):
     collisions : whether the controllers keep the robot's link pairs and the obstacles
         apart (docs/design.md section 18; :mod:`.collisions`); ``collision_settings``
         the avoidance's ``self_collision`` (default: on for a robot with several arms),
-        ``safety_distance``, ``detection_distance``, ``approach_speed``.
+        ``safety_distance``, ``detection_distance``, ``approach_speed``; its damper counts
+        on the plant's response time (``PlantChoice.response_time``, as ``teleop
+        compare`` does: docs/design.md 18.6).
     acceleration_limits : whether the controllers keep the robot's joint acceleration
         limits (docs/design.md section 8.4; on by default).
     jerk_limit : a jerk limit (rad/s^3) every controller keeps on every joint
@@ -115,7 +117,7 @@ class TeleopApp(Scenes, Tick):
             CollisionSession(
                 controllers=lambda: [loop.controller for loop in self.robots.loops.values()],
                 constraints=self.constraints.placed, tips=lambda: self.robots.loops["main"].ee_placements(),
-                period=lambda: self.robots.config.dt))
+                period=lambda: self.robots.config.dt), self.plant.response_time)
         # before the first loop: it makes their plants
         self.force = ForceControl(robot, self.plant, self._lock, lambda: self.robots.loops,
                                   partial(session_plant, self.plant, robot, self.ros2),
