@@ -25,6 +25,7 @@ from teleop.plants.ros2.realtime import (ROBOT_PRIORITY, ThreadScheduling, hold_
 from teleop.plants.ros2.joint_map import model_joint_names
 from teleop.plants.ros2.ros2_plant import OVERRUN_PERIODS, Ros2Plant
 from teleop.plants.ros2.settings import Ros2Settings
+from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
 
 PRIORITY = 20
 ROOT = Path(__file__).resolve().parents[1]
@@ -281,6 +282,36 @@ def test_a_loop_that_overruns_its_period_gives_up_real_time_until_the_reset(robo
         f"them; again at the next reset)")
     assert seen[last + 3:] == [fifo] * (OVERRUN_PERIODS + 1)  # reset: real-time again
     assert words[1].endswith(f"actuating: {expected_words(PRIORITY)}")
+
+
+def test_a_simulated_robot_slower_than_the_wall_clock_gives_up_real_time(robot, domain):
+    """Each period's physics 1.5 periods long: the periods' thread never sleeps, so after
+    OVERRUN_PERIODS periods in a row it runs ordinary (the kernel's word, read in each
+    period) and says so; a thread that was never real-time says nothing of it."""
+    settings = Ros2Settings(domain=domain, joint_states=STATES, command_topic=COMMANDS,
+                            realtime_priority=PRIORITY)
+    sim = SimulatedRos2Robot(robot, 1.0 / DT, settings)
+    policies = []
+    step = sim.step
+
+    def slow_step() -> None:
+        step()
+        time.sleep(1.5 * DT)
+        policies.append(os.sched_getscheduler(0))
+
+    sim.step = slow_step  # type: ignore[method-assign]
+    try:
+        in_new_thread(lambda: sim.run(duration=200 * DT))
+    finally:
+        sim.close()
+    assert len(policies) > OVERRUN_PERIODS
+    if granted(PRIORITY):
+        assert policies[:OVERRUN_PERIODS] == [FIFO_NOT_INHERITED] * OVERRUN_PERIODS
+        assert set(policies[OVERRUN_PERIODS:]) == {os.SCHED_OTHER}
+        assert f"(SCHED_FIFO {PRIORITY} given up: {OVERRUN_PERIODS} periods in a row" \
+            in sim.realtime
+    else:
+        assert set(policies) == {os.SCHED_OTHER} and "given up" not in sim.realtime
 
 
 @pytest.mark.parametrize("option, priority",

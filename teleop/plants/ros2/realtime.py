@@ -25,6 +25,11 @@ from typing import Callable, TypeVar
 
 T = TypeVar("T")
 
+#: periods in a row with no time left to sleep (the loop's tick, or the simulated robot's
+#: physics, overran them) after which a real-time thread goes back to ordinary scheduling:
+#: one that never sleeps would hold its core against every ordinary thread
+OVERRUN_PERIODS = 10
+
 #: SCHED_FIFO's highest priority on Linux (the lowest is 1)
 MAX_PRIORITY = 99
 #: ros2_control's ``controller_manager`` update thread's priority (its ``thread_priority``):

@@ -50,13 +50,8 @@ from constraints import Constraint
 from .joint_map import indices, model_joint_names
 from .messages import Float64MultiArray, JointState, OperatingState
 from .node import Ros2Node
-from .realtime import hold_realtime, release_realtime, started_realtime
+from .realtime import OVERRUN_PERIODS, hold_realtime, release_realtime, started_realtime
 from .settings import Ros2Settings
-
-#: periods in a row that ended without waiting for the robot (the loop's tick overran
-#: them) after which the actuating thread runs ordinary until :meth:`Ros2Plant.reset`
-OVERRUN_PERIODS = 10
-
 
 @dataclass
 class Ros2Measures:

@@ -36,7 +36,8 @@ from .joint_map import indices, model_joint_names
 from .messages import (Float64MultiArray, Header, JointState, OperatingState, Time, Vector3,
                        Wrench, WrenchStamped)
 from .node import Ros2Node
-from .realtime import make_realtime, started_realtime
+from .realtime import (OVERRUN_PERIODS, ThreadScheduling, make_realtime, scheduling_words,
+                       started_realtime)
 from .names import dds_topic
 from .settings import Ros2Settings
 
@@ -156,18 +157,31 @@ class SimulatedRos2Robot:
 
     def run(self, duration: float | None = None) -> None:
         """Periods on the wall clock until :meth:`stop` (or ``duration`` seconds), the
-        calling thread made real-time (``settings.realtime_priority``)."""
-        self.realtime = (f"DDS: {self._dds_scheduling}; periods: "
-                         f"{make_realtime(self.settings.realtime_priority)}")
+        calling thread made real-time (``settings.realtime_priority``). A physics slower
+        than the wall clock never sleeps: after
+        :data:`~teleop.plants.ros2.realtime.OVERRUN_PERIODS` periods in a row with no
+        time left the thread goes back to its own scheduling for the rest of the run, as
+        the loop's does, and :attr:`realtime` says so."""
+        before, ordinary = ThreadScheduling.of_calling_thread(), scheduling_words()
+        periods = make_realtime(self.settings.realtime_priority)
+        self.realtime = f"DDS: {self._dds_scheduling}; periods: {periods}"
         start = time.monotonic()
         deadline = start
+        overruns = 0
         while not self._stop.is_set():
             if duration is not None and time.monotonic() - start >= duration:
                 return
             self.late += time.monotonic() - deadline > 0.5 * self.dt
             self.step()
             deadline = max(deadline + self.dt, time.monotonic())
-            self._stop.wait(max(0.0, deadline - time.monotonic()))
+            left = deadline - time.monotonic()
+            overruns = 0 if left > 0.0 else overruns + 1
+            if (overruns == OVERRUN_PERIODS and scheduling_words() != ordinary
+                    and before.restore()):
+                self.realtime = (f"DDS: {self._dds_scheduling}; periods: {scheduling_words()} "
+                                 f"({periods} given up: {overruns} periods in a row with no "
+                                 f"time left, the physics slower than the wall clock)")
+            self._stop.wait(max(0.0, left))
 
     def jitter_words(self) -> str:
         """The jitter counts in one line."""
