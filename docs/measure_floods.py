@@ -116,7 +116,7 @@ class TickSampler:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            self.samples.append((time.perf_counter(), self.app.ticks))
+            self.samples.append((time.perf_counter(), self.app.ticker.ticks))
             time.sleep(0.05)
 
     def stop(self) -> None:

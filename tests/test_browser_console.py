@@ -171,7 +171,7 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
     app, page = web.app, web.page
     hole_id = click_add_hole(web)
     goal = app.constraints.entries[hole_id].goal.copy()
-    path = web.app.scenes.root / "my scene.json"
+    path = web.app.scene_dir / "my scene.json"
     open_tab(web, "Settings")
     input_of(page, "scene name").fill(path.name)
     wait_until(lambda: web.ui.settings_panel.scene_path.value == path.name, WAIT, "the scene name")

@@ -69,8 +69,8 @@ def settled(app, periods: int = 200, still: float = 1e-7) -> None:
     """Wait until no EE moves by more than ``still`` (m) over ``periods`` control periods:
     counted in the loop's periods, not the wall clock's, so a loaded machine waits longer."""
     def at_rest() -> bool:
-        ticks, before = app.ticks, ee_positions(app)
-        wait_until(lambda: app.ticks - ticks >= periods, WAIT, f"{periods} control periods")
+        ticks, before = app.ticker.ticks, ee_positions(app)
+        wait_until(lambda: app.ticker.ticks - ticks >= periods, WAIT, f"{periods} control periods")
         return bool(np.max(np.abs(ee_positions(app) - before)) <= still)
 
     wait_until(at_rest, 4 * WAIT, "the EEs at rest", interval=0.0)

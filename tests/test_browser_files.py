@@ -59,9 +59,9 @@ def test_scene_names_leading_out_of_the_scene_folder_are_refused(web):
     app, page, root = web.app, web.page, web.root
     outside = root / "outside"
     outside.mkdir()
-    app.scenes.root.mkdir(parents=True, exist_ok=True)
-    (app.scenes.root / "linked.json").symlink_to(outside, target_is_directory=True)
-    (app.scenes.root / "linked").symlink_to(outside, target_is_directory=True)
+    app.scene_dir.mkdir(parents=True, exist_ok=True)
+    (app.scene_dir / "linked.json").symlink_to(outside, target_is_directory=True)
+    (app.scene_dir / "linked").symlink_to(outside, target_is_directory=True)
     before = files_under(root)
     open_tab(web, "Settings")
     names = ["../x.json", str(outside / "x.json"), "linked/x.json", "linked.json"]
@@ -81,6 +81,6 @@ def test_scene_names_leading_out_of_the_scene_folder_are_refused(web):
     input_of(page, "scene name").fill("inside.json")  # and a plain name is saved inside
     wait_until(lambda: web.ui.settings_panel.scene_path.value == "inside.json", WAIT, "the scene name")
     page.get_by_role("button", name="Save scene").click()
-    wait_until((app.scenes.root / "inside.json").is_file, WAIT, "the scene file")
+    wait_until((app.scene_dir / "inside.json").is_file, WAIT, "the scene file")
     assert files_under(root) - before == {"scenes/inside.json"}
     assert web.page_errors == [], web.page_errors

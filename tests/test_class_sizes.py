@@ -11,10 +11,12 @@ import pkgutil
 
 import web
 
-#: The largest classes' methods now: ``web.app.robots.Robots`` 19; ``TeleopApp`` 15 (100
-#: with 12 mixins before the recording, the way home, the collision scene and the input devices left it as
-#: components; 76 before the devices' actions went to
-#: :class:`web.app.devices.InputDevices`, the obstacles' and collision settings' to
+#: The largest classes' methods now: ``web.app.robots.Robots`` 19; ``TeleopApp`` 6, no
+#: mixin (15 with the scenes' and the tick's mixins before they became the components
+#: ``app.scenes`` and ``app.ticker``; 100 with 12 mixins before the recording, the way
+#: home, the collision scene and the input devices left it as components; 76
+#: before the devices' actions went to :class:`web.app.devices.InputDevices`, the
+#: obstacles' and collision settings' to
 #: :class:`web.app.collisions.CollisionScene`, the loops and their settings to
 #: :class:`web.app.robots.Robots`, the placed constraints to
 #: :class:`web.app.editing.ConstraintEditing`, the console to

@@ -11,7 +11,7 @@ setting, session header and spec, crossed with the bad values of its type (wrong
 null, NaN, infinities, an integer of 400 digits, values beyond the table's bounds). Each
 row goes through the public entry point: a session is loaded and its plan started (the
 constraint edits of time 0 applied, as a replay does), a scene applied to a running app
-(``TeleopApp.apply_scene``, without a browser), a spec loaded from its file.
+(``TeleopApp.scenes.apply``, without a browser), a spec loaded from its file.
 """
 
 from __future__ import annotations
@@ -285,7 +285,7 @@ def scene(constraints=(), collision_changes=None, obstacles=()) -> dict:
 
 
 def test_the_valid_scene_and_session_of_the_tables_are_taken(app, tmp_path):
-    app.apply_scene(scene(list(constraint_dicts().values())[:1], {"self_collision": True},
+    app.scenes.apply(scene(list(constraint_dicts().values())[:1], {"self_collision": True},
                           list(OBSTACLES.values())))
     assert len(app.collisions.obstacles) == len(OBSTACLES)
     path = tmp_path / "session.jsonl"
@@ -314,7 +314,7 @@ SCENE_CASES = list(scene_cases())
                                          for name, data, field in SCENE_CASES])
 def test_a_bad_scene_number_is_one_line_naming_the_field(app, data, field):
     with pytest.raises(ValueError) as error:
-        app.apply_scene(data)
+        app.scenes.apply(data)
     assert_names(error.value, field)
 
 

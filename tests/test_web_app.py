@@ -234,7 +234,7 @@ def test_control_thread_runs_and_reports_its_rate(app):
         time.sleep(1.5)
         assert control.alive and control.error is None
         assert control.achieved_rate > 0
-        assert app.ticks > 100
+        assert app.ticker.ticks > 100
     finally:
         control.stop()
     assert not control.alive
@@ -475,7 +475,7 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     nudge(app, [0.005, 0.0, 0.0])
     run(app, 0.3)
     app.constraints.move(hole_id, app.constraints.entries[hole_id].goal + [0.0, 0.0, 0.002])
-    saved = app.save_scene("a.json")
+    saved = app.scenes.save("a.json")
     assert saved == tmp_path / "scenes" / "a.json"
     scene = json.loads(saved.read_text())
     assert scene["format"] == "cjm-teleop-scene" and scene["robot"]["source"] == "sda10f"
@@ -492,7 +492,7 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
     app.console.set_motion_scale(1.0)
     app.console.home()
     run(app, 0.1)
-    app.load_scene("a.json")
+    app.scenes.load("a.json")
     assert list(app.constraints.entries) == [hole_id, barrier_id]
     assert [e.kind for e in app.constraints.entries.values()] == ["hole", "barrier"]
     for entry_id, goal in goals.items():
@@ -523,27 +523,27 @@ def test_a_scene_saved_and_loaded_restores_constraints_and_settings(sda10f, tmp_
 ])
 def test_a_bad_scene_is_refused_and_changes_nothing(app, change, message):
     app.constraints.add("hole", distance=0.08)
-    scene = app.scene()
+    scene = app.scenes.scene()
     change(scene)
     app.constraints.clear()
     app.robots.set_gain(50.0)
     with pytest.raises(ValueError, match=message):
-        app.apply_scene(scene)
+        app.scenes.apply(scene)
     assert not app.constraints.entries and app.robots.gain == 50.0 and app.robots.specs == {"main": "cjm"}
     run(app, 0.01)
 
 
 def test_scene_files_that_cannot_be_read(app, tmp_path):
     with pytest.raises(ValueError, match="no scene 'none.json' in the scene folder"):
-        app.load_scene("none.json")
+        app.scenes.load("none.json")
     scenes = tmp_path / "scenes"
     scenes.mkdir()
     (scenes / "bad.json").write_text("{nope")
     with pytest.raises(ValueError, match="not JSON"):
-        app.load_scene("bad.json")
+        app.scenes.load("bad.json")
     (scenes / "dir.json").mkdir()
     with pytest.raises(ValueError, match="'dir.json' in the scene folder is not a file"):
-        app.save_scene("dir.json")
+        app.scenes.save("dir.json")
 
 
 # -- the light tick ---------------------------------------------------------------------------

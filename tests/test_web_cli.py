@@ -63,7 +63,7 @@ def test_a_scene_opens_with_its_robot(sda10f, tmp_path):
     app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path)
     app.constraints.add("hole", distance=0.08)
     app.robots.set_ghost("qp:daqp")
-    path = app.save_scene("scene.json")
+    path = app.scenes.save("scene.json")
     args = web_cli.build_parser().parse_args(["--scene", str(path)])
     robot, scene = web_cli._load(args)
     assert robot.name == "sda10f" and scene["constraints"][0]["id"] == "hole-1"
@@ -85,7 +85,7 @@ def test_locked_joints_are_frozen_out_of_the_robot(tmp_path):
     robot, scene = web_cli._load(args)
     assert robot.nv == 14 and dict(robot.locked_joints) == {"torso_joint_b1": (0.0,)}
     app = TeleopApp(robot, record_dir=tmp_path)  # and a scene of it names the locked joint
-    assert app.scene()["robot"]["locked_joints"] == {"torso_joint_b1": [0.0]}
+    assert app.scenes.scene()["robot"]["locked_joints"] == {"torso_joint_b1": [0.0]}
 
 
 @pytest.mark.parametrize("args, message", [

@@ -173,11 +173,11 @@ def test_obstacles_are_added_moved_with_feed_forward_and_removed(app):
 ])
 def test_what_cannot_be_done_is_a_value_error_and_changes_nothing(app, call, pattern):
     app.collisions.add("sphere")
-    before = app.scene()
+    before = app.scenes.scene()
     avoidance = app.collisions.avoidance
     with pytest.raises(ValueError, match=pattern):
         call(app)
-    after = app.scene()
+    after = app.scenes.scene()
     assert {**after, "created": None} == {**before, "created": None}
     assert app.collisions.avoidance is avoidance
     assert app.robots.loops["main"].controller.collisions is avoidance
@@ -228,15 +228,15 @@ def test_a_scene_keeps_the_obstacles_and_the_settings(dual_app, dual, tmp_path):
     run(app, 0.1)  # mid-move: a velocity to keep
     app.collisions.configure(safety_distance=0.008, approach_speed=0.3)
     app.collisions.set_on(False)
-    path = app.save_scene("obstacles.json")
+    path = app.scenes.save("obstacles.json")
     saved = json.loads(path.read_text())
     assert saved["version"] == 3 and saved["collisions"]["on"] is False
     assert [o["id"] for o in saved["obstacles"]] == ["sphere-1", "capsule-2", "halfspace-3"]
 
     other = TeleopApp(dual, record_dir=tmp_path / "s2", scene_dir=tmp_path / "scenes")
-    other.load_scene("obstacles.json")
+    other.scenes.load("obstacles.json")
     for key in ("collisions", "obstacles", "constraints", "q"):
-        assert other.scene()[key] == app.scene()[key]
+        assert other.scenes.scene()[key] == app.scenes.scene()[key]
     assert other.collisions.avoidance.to_dict() == app.collisions.avoidance.to_dict()
     assert all(loop.controller.collisions is None for loop in other.robots.loops.values())
     assert not other.collisions.obstacles[moving].settled
@@ -297,7 +297,7 @@ def test_a_version_1_scene_still_loads_without_obstacles(sda10f, tmp_path):
     app = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path)
     app.collisions.add("sphere")
     app.collisions.configure(safety_distance=0.007)
-    app.apply_scene(old)
+    app.scenes.apply(old)
     assert app.collisions.obstacles == {} and app.collisions.avoidance.obstacles == []
     assert app.collisions.avoidance.safety_distance == 0.007 and app.collisions.on  # the session's
     np.testing.assert_array_equal(app.robots.loops["main"].q, old["q"]["main"])
@@ -316,11 +316,11 @@ def test_a_version_1_scene_still_loads_without_obstacles(sda10f, tmp_path):
 ])
 def test_a_bad_scene_names_the_collision_field_and_changes_nothing(app, change, pattern):
     app.collisions.add("sphere")
-    scene = {**app.scene(), **change}
-    before = app.scene()
+    scene = {**app.scenes.scene(), **change}
+    before = app.scenes.scene()
     with pytest.raises(ValueError, match=pattern):
-        app.apply_scene(scene)
-    assert {**app.scene(), "created": None} == {**before, "created": None}
+        app.scenes.apply(scene)
+    assert {**app.scenes.scene(), "created": None} == {**before, "created": None}
 
 
 # -- what the view shows ----------------------------------------------------------------------

@@ -197,7 +197,7 @@ def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path)
         app.constraints.add("hole", distance=0.08, link=link)
     app.console.nudge_target([0.0, 0.005, 0.0], ee=1)
     run(app, 0.2)
-    path = app.save_scene("two.json")
+    path = app.scenes.save("two.json")
     data = json.loads(path.read_text())
     assert [t["frame"] for t in data["targets"]] == list(dual.ee_frames)
     assert data["robot"]["ee_frames"] == list(dual.ee_frames)
@@ -205,7 +205,7 @@ def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path)
     again = robot_from_dict(data["robot"])
     assert again.ee_frames == dual.ee_frames and again.constrained_links == dual.constrained_links
     other = TeleopApp(again, record_dir=tmp_path, scene_dir=path.parent)
-    other.load_scene(path.name)
+    other.scenes.load(path.name)
     for k in (0, 1):
         assert other.console.inputs[k].target.isApprox(app.console.inputs[k].target, 1e-12)
         assert other.console.inputs[k].gizmo.isApprox(app.console.inputs[k].target, 1e-12)
@@ -227,7 +227,7 @@ def test_a_scene_with_two_targets_and_two_holes_round_trips(app, dual, tmp_path)
 def test_a_single_ee_scene_names_no_several_frames(sda10f, tmp_path):
     description = robot_to_dict(sda10f)
     assert not {"ee_frames", "constrained_links", "root_joint", "locked_joints"} & set(description)
-    scene = TeleopApp(sda10f, record_dir=tmp_path).scene()
+    scene = TeleopApp(sda10f, record_dir=tmp_path).scenes.scene()
     assert "targets" not in scene
 
 
@@ -445,9 +445,9 @@ def test_orientation_weight_is_checked_and_kept_in_scenes(app, tmp_path):
             app.robots.set_orientation_weight(bad)
     assert app.robots.orientation_weight == 1.0
     app.robots.set_orientation_weight(0.25)
-    path = app.save_scene("scene.json")
+    path = app.scenes.save("scene.json")
     assert json.loads(path.read_text())["orientation_weight"] == 0.25
     app.robots.set_orientation_weight(1.0)
-    app.load_scene("scene.json")
+    app.scenes.load("scene.json")
     assert app.robots.orientation_weight == 0.25
     assert np.allclose(app.robots.loops["main"].controller.twist_weight, [1, 1, 1, 0.25, 0.25, 0.25] * 2)

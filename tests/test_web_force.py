@@ -117,11 +117,11 @@ def test_a_scene_keeps_the_tissue_and_the_law_settings(app, sda10f, tmp_path):
     app.force.place_tissue()
     app.force.set_setpoint([0.5, 0.0, 1.5])
     app.force.set_axes([True, False, True])
-    path = app.save_scene("pressed.json")
+    path = app.scenes.save("pressed.json")
     saved = app.force.tissue
     other = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path,
                       scene_dir=tmp_path / "scenes")
-    other.load_scene(path.name)
+    other.scenes.load(path.name)
     tissue = other.force.tissue
     assert tissue is not None and tissue.to_dict() == saved.to_dict()
     np.testing.assert_array_equal(tissue.point, saved.point)
@@ -139,7 +139,7 @@ def test_a_scene_keeps_the_tissue_and_the_law_settings(app, sda10f, tmp_path):
     # a scene saved before a tissue was placed takes it away, and force control with it
     bare = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path,
                      scene_dir=tmp_path / "scenes")
-    other.apply_scene(bare.scene())
+    other.scenes.apply(bare.scenes.scene())
     assert other.force.tissue is None and not other.force.enabled
     assert other.robots.loops["main"].plant.tissues == ()
 
@@ -158,11 +158,11 @@ def test_a_scene_keeps_the_tissue_and_the_law_settings(app, sda10f, tmp_path):
 def test_a_bad_force_entry_in_a_scene_is_refused_by_name_and_changes_nothing(app, change,
                                                                              message):
     app.force.place_tissue()
-    scene = app.scene()
+    scene = app.scenes.scene()
     change(scene["force"])
     before = app.force.tissue
     with pytest.raises(ValueError, match=message):
-        app.apply_scene(scene)
+        app.scenes.apply(scene)
     assert app.force.tissue is before
 
 
@@ -170,14 +170,14 @@ def test_a_tissue_in_a_scene_needs_the_physics_plant(app, sda10f, tmp_path):
     app.force.place_tissue()
     kinematic = TeleopApp(sda10f, record_dir=tmp_path, scene_dir=tmp_path / "scenes")
     with pytest.raises(ValueError, match="a tissue needs the mujoco plant"):
-        kinematic.apply_scene(app.scene())
+        kinematic.scenes.apply(app.scenes.scene())
     assert kinematic.force.tissue is None
-    old = app.scene()
+    old = app.scenes.scene()
     old["version"] = 2
     with pytest.raises(ValueError, match="scene 'force' needs version 3"):
-        app.apply_scene(old)
+        app.scenes.apply(old)
     del old["force"]
-    app.apply_scene(old)  # a version 2 scene leaves the page's force control as it is
+    app.scenes.apply(old)  # a version 2 scene leaves the page's force control as it is
     assert app.force.tissue is not None
 
 
@@ -212,12 +212,12 @@ def test_a_scene_whose_loops_cannot_be_built_leaves_the_force_control_as_it_was(
         app.step()
     kept = (app.force.tissue, app.force.setpoint.copy(), app.force.axes, app.force.enabled,
             len(app.force.history), app.robots.loops["main"])
-    scene = app.scene()
+    scene = app.scenes.scene()
     scene["force"]["tissue"]["point"][2] += 0.01
     scene["force"]["setpoint"] = [0.0, 0.0, 2.0]
     scene["controllers"]["main"] = "qp:no-such-solver"
     with pytest.raises(ValueError, match="no-such-solver"):
-        app.apply_scene(scene)
+        app.scenes.apply(scene)
     assert app.force.tissue is kept[0] and app.force.setpoint.tolist() == kept[1].tolist()
     assert (app.force.axes, app.force.enabled, len(app.force.history),
             app.robots.loops["main"]) == kept[2:]

@@ -97,7 +97,7 @@ def test_a_moved_target_pushes_the_instrument_on_the_wall_and_the_view_says_how_
     assert ports[0].magnitude < 1e-4  # at rest on the port: the wall hardly pushes
     nudge(app, [0.0, 0.02, 0.0])  # 2 cm sideways: the motion caps make it gentle
     forces = []  # every control period's largest port force, read from the plant here
-    first = app.ticks  # ticks 0, 20, 40... take the history samples (50 Hz at 1 kHz)
+    first = app.ticker.ticks  # ticks 0, 20, 40... take the history samples (50 Hz at 1 kHz)
     for _ in range(1000):
         app.step()
         forces.append(np.linalg.norm(app.robots.loops["main"].plant.measures().port_forces, axis=1).max())
@@ -168,17 +168,17 @@ def test_the_port_force_is_the_wall_stiffness_times_the_offset(sda10f, tmp_path,
 def test_the_session_wall_stiffness_reaches_a_scenes_holes(sda10f, tmp_path):
     saved = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path, scene_dir=tmp_path)
     saved.constraints.add("hole", distance=0.08)
-    path = saved.save_scene("wall.json")
+    path = saved.scenes.save("wall.json")
     stiff = TeleopApp(sda10f, plant="mujoco", wall_stiffness=3000.0, record_dir=tmp_path,
                       scene_dir=tmp_path)
-    stiff.load_scene(path.name)
+    stiff.scenes.load(path.name)
     (entry,) = stiff.constraints.entries.values()
     assert entry.constraint.tissue_stiffness == 3000.0
     run(stiff, 0.05)
     assert [port.id for port in stiff.view.snapshot()["robots"]["main"]["ports"]] == [entry.id]
     # and the scene's own stiffness without one
     own = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path, scene_dir=tmp_path)
-    own.load_scene(path.name)
+    own.scenes.load(path.name)
     assert next(iter(own.constraints.entries.values())).constraint.tissue_stiffness == 1000.0
 
 

@@ -326,7 +326,7 @@ def test_the_page_holds_a_hole_on_the_mujoco_robot_as_in_process(robot, domain, 
 
     saved = TeleopApp(robot, rate=RATE, record_dir=tmp_path, scene_dir=tmp_path)
     saved.constraints.add("hole", distance=0.08)
-    scene = saved.scene()
+    scene = saved.scenes.scene()
     path = tmp_path / "hole.json"
     path.write_text(json.dumps(scene))
     process = sim(domain, "--plant", "mujoco", "--scene", str(path), "--rate", str(RATE))
@@ -335,7 +335,7 @@ def test_the_page_holds_a_hole_on_the_mujoco_robot_as_in_process(robot, domain, 
                         ros2_settings=settings_for(domain, stale_after=0.25),
                         record_dir=tmp_path, scene_dir=tmp_path)
         try:
-            app.apply_scene(scene)
+            app.scenes.apply(scene)
             over_dds = nudged_hole_error(app, 1.0)
             assert app.robots.loops["main"].plant.measures().stopped == ""
         finally:
@@ -345,7 +345,7 @@ def test_the_page_holds_a_hole_on_the_mujoco_robot_as_in_process(robot, domain, 
         process.wait()
     in_process = TeleopApp(robot, rate=RATE, plant="mujoco", record_dir=tmp_path,
                            scene_dir=tmp_path)
-    in_process.apply_scene(scene)
+    in_process.scenes.apply(scene)
     reference = nudged_hole_error(in_process, 1.0)
     print(f"hole error over DDS {over_dds * 1e6:.2f} um, in-process MuJoCo "
           f"{reference * 1e6:.2f} um ({over_dds / reference:.2f}x)")

@@ -35,15 +35,15 @@ def test_a_scene_from_elsewhere_is_refused_and_one_from_here_moves_nothing(
     app = page(robot, domain, tmp_path)
     try:
         start = tip(app)
-        elsewhere = app.scene()
+        elsewhere = app.scenes.scene()
         elsewhere["q"]["main"] = [float(x) for x in robot.q_home]
         before = app.robots.loops["main"]
         with pytest.raises(ValueError, match="a real robot cannot jump there"):
-            app.apply_scene(elsewhere)
+            app.scenes.apply(elsewhere)
         assert app.robots.loops["main"] is before
-        here = app.scene()
+        here = app.scenes.scene()
         here["target"]["position"] = [float(x) for x in start + [0.0, 0.05, 0.0]]
-        app.apply_scene(here)
+        app.scenes.apply(here)
         np.testing.assert_allclose(app.console.target.translation, tip(app), atol=1e-9)
         for _ in range(int(RATE / 2)):
             app.step()

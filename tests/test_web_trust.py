@@ -64,16 +64,16 @@ def test_scenes_are_read_and_written_only_in_the_scene_folder(app, tmp_path):
     before = files_under(tmp_path)
     for name in names:
         with pytest.raises(ValueError, match="scene name .* refused") as refused:
-            app.save_scene(name) if name.strip() else app.scenes.writable(name)
+            app.scenes.save(name) if name.strip() else app.scenes.folder.writable(name)
         assert "secret" not in str(refused.value) or "secret" in name
         with pytest.raises(ValueError, match="scene name .* refused"):
-            app.load_scene(name)
+            app.scenes.load(name)
     assert files_under(tmp_path) == before  # nothing written anywhere
     assert not (tmp_path / "outside" / "new.json").exists()
     assert not (tmp_path / "x.json").exists()
-    saved = app.save_scene("mine.json")  # a plain name goes in the folder
+    saved = app.scenes.save("mine.json")  # a plain name goes in the folder
     assert saved == tmp_path / "scenes" / "mine.json" and saved.is_file()
-    app.load_scene("mine.json")
+    app.scenes.load("mine.json")
 
 
 def test_saving_over_a_hard_link_in_the_scene_folder_leaves_the_file_outside_untouched(app,
@@ -83,13 +83,13 @@ def test_saving_over_a_hard_link_in_the_scene_folder_leaves_the_file_outside_unt
     scene, and no scratch file is left behind."""
     outside = tmp_path / "outside.json"
     outside.write_text('{"mine": true}\n')
-    app.scenes.root.mkdir(parents=True, exist_ok=True)
-    os.link(outside, app.scenes.root / "linked.json")
-    saved = app.save_scene("linked.json")
+    app.scene_dir.mkdir(parents=True, exist_ok=True)
+    os.link(outside, app.scene_dir / "linked.json")
+    saved = app.scenes.save("linked.json")
     assert outside.read_text() == '{"mine": true}\n'
     assert os.stat(outside).st_nlink == 1 and not os.path.samefile(saved, outside)
-    assert json.loads(saved.read_text()) == json.loads(json.dumps(app.scene()))
-    assert sorted(p.name for p in app.scenes.root.iterdir()) == ["linked.json"]
+    assert json.loads(saved.read_text()) == json.loads(json.dumps(app.scenes.scene()))
+    assert sorted(p.name for p in app.scene_dir.iterdir()) == ["linked.json"]
 
 
 def test_a_refusal_says_nothing_about_what_is_outside(app, tmp_path):
@@ -99,7 +99,7 @@ def test_a_refusal_says_nothing_about_what_is_outside(app, tmp_path):
     for name in ("../notjson.json", "../missing.json", str(tmp_path / "notjson.json"),
                  str(tmp_path / "missing.json")):
         with pytest.raises(ValueError) as refused:
-            app.load_scene(name)
+            app.scenes.load(name)
         messages.append(str(refused.value).replace(name, "NAME"))
     assert len(set(messages[:2])) == 1 and len(set(messages[2:])) == 1, messages
     assert not any("JSON" in m or "no scene" in m for m in messages)
@@ -137,7 +137,7 @@ def test_a_symlink_loop_is_refused_like_any_name_leading_out(app, tmp_path):
     folder = tmp_path / "scenes"
     folder.mkdir(exist_ok=True)
     (folder / "loop.json").symlink_to(folder / "loop.json")
-    for action in (app.load_scene, app.save_scene):
+    for action in (app.scenes.load, app.scenes.save):
         with pytest.raises(ValueError, match=r"scene name 'loop.json' refused") as refused:
             action("loop.json")
         assert str(tmp_path) not in str(refused.value)
@@ -253,7 +253,7 @@ def test_a_flood_of_10000_events_in_5_s_does_not_starve_the_control_loop(app):
     app.robots.make_loop = counted
     try:
         time.sleep(1.0)
-        ticks0, start = app.ticks, time.monotonic()
+        ticks0, start = app.ticker.ticks, time.monotonic()
         ee = app.robots.loops["main"].ee_placement()
         wxyz = pin.Quaternion(ee.rotation)
         for k in range(10_000):
@@ -266,7 +266,7 @@ def test_a_flood_of_10000_events_in_5_s_does_not_starve_the_control_loop(app):
                            key="gizmo")
             time.sleep(max(0.0, start + 5e-4 * (k + 1) - time.monotonic()))
         flood = time.monotonic() - start
-        ticks = app.ticks - ticks0
+        ticks = app.ticker.ticks - ticks0
         assert inbox.drain(10.0)
     finally:
         app.robots.make_loop = original

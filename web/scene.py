@@ -50,7 +50,7 @@ coordinates it is held at). A single-EE scene has none of these keys.
 
 :func:`parse_scene` checks a scene and turns it into a :class:`Scene`; anything wrong raises
 ``ValueError`` naming the field (the UI shows it as a notification, the CLI as one line).
-Applying a scene to a running app is :meth:`web.app.TeleopApp.apply_scene`.
+Applying a scene to a running app is :meth:`web.app.scenes.Scenes.apply` (``app.scenes``).
 """
 
 from __future__ import annotations

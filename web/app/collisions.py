@@ -350,7 +350,7 @@ class CollisionScene:
     def measure(self, configurations: dict[str, np.ndarray]) -> None:
         """The avoidance's rows at each given robot's configuration, for the view (the
         control thread): for a robot whose controller computed none in its step
-        (:meth:`Tick._advance`); none while collisions are off."""
+        (:meth:`.tick.Ticker._advance`); none while collisions are off."""
         if not self.on:
             self.rows = {}
             return

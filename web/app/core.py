@@ -9,9 +9,10 @@ settings), ``app.constraints`` (:mod:`.editing`, from the registry's declaration
 :mod:`.placing`), ``app.console`` (:mod:`.console`: targets, gizmos, clutch, motion
 scale, home), ``app.collisions`` (:mod:`.collisions`: the avoidance and the obstacles),
 ``app.devices`` (:mod:`.devices`), ``app.force`` (:mod:`.force_control`), ``app.homing``
-(:mod:`.homing`), ``app.recorder`` (:mod:`.recording`) and ``app.view`` (:mod:`.view`:
-what the view reads). The front keeps scenes (:mod:`.scenes`), the control tick
-(:mod:`.tick`) and starting and stopping a recording.
+(:mod:`.homing`), ``app.recorder`` (:mod:`.recording`), ``app.view`` (:mod:`.view`:
+what the view reads), ``app.scenes`` (:mod:`.scenes`: saving, loading and applying a
+scene) and ``app.ticker`` (:mod:`.tick`: the control tick). The front keeps the tick's
+call (:meth:`TeleopApp.step`), the session's time and starting and stopping a recording.
 
 Threading (docs/design.md section 5.3): :class:`web.app.ControlThread` calls
 :meth:`TeleopApp.step` at the control rate and never touches viser; the view thread reads
@@ -45,11 +46,11 @@ from .recording import SessionRecording
 from .robots import Robots
 from .ros2_robot import Ros2Robot
 from .scenes import Scenes
-from .tick import Tick
+from .tick import Ticker
 from .view import View
 
 
-class TeleopApp(Scenes, Tick):
+class TeleopApp:
     """One robot (plus an optional ghost) teleoperated from one shared set of targets, one
     per end effector.
 
@@ -105,8 +106,8 @@ class TeleopApp(Scenes, Tick):
                             max_linear_speed=MAX_LINEAR_SPEED, max_angular_speed=MAX_ANGULAR_SPEED)
         self.homing = WayHome(robot)  # the way home followed now (:mod:`.homing`)
         self.recordings = Folder(record_dir, "recording", ".jsonl")
-        self.scenes = Folder(scene_dir, "scene", ".json")
-        self.record_dir, self.scene_dir = self.recordings.root, self.scenes.root
+        scenes = Folder(scene_dir, "scene", ".json")
+        self.record_dir, self.scene_dir = self.recordings.root, scenes.root
         self.recorder = SessionRecording(self.recordings, lambda: self.now, robot.ee_frames)
         self.constraints = ConstraintEditing(robot, self._lock, self.plant.wall_stiffness,
                                              self.recorder, EditingSession(
@@ -135,9 +136,26 @@ class TeleopApp(Scenes, Tick):
         self.view = View(robot, self._lock, self.robots, self.constraints, self.console,
                          self.collisions, self.devices, self.recorder, self.force, self.homing,
                          self.plant, self.ros2)
-        self._next_history = 0.0
-        self.ticks = 0
-        self.advance_us = 0.0
+        self.ticker = Ticker(self._lock, self.robots, self.console, self.constraints,
+                             self.collisions, self.devices, self.homing, self.recorder, self.force)
+        self.scenes = Scenes(robot, self._lock, self.plant, self.ros2, scenes, self.robots,
+                             self.console, self.constraints, self.collisions, self.force,
+                             self.ticker.restart_history)
+
+    @property
+    def now(self) -> float:
+        """The app's time (s): the main robot's loop time."""
+        return self.robots.now
+
+    def step(self) -> float:
+        """One control period for every robot (called by the control thread); the time the
+        controllers took (us) (:meth:`.tick.Ticker.step`)."""
+        return self.ticker.step()
+
+    @property
+    def advance_us(self) -> float:
+        """The loops' hot path in the last tick (us) (:attr:`.tick.Ticker.advance_us`)."""
+        return self.ticker.advance_us
 
     def start_recording(self, name: str | None = None) -> Path:
         """Record the session to file ``name`` of the recording folder (default: a new

@@ -1,12 +1,14 @@
 """Scenes: the whole state of a session (robots' configurations, constraints, targets,
 controllers, settings, collision avoidance and obstacles) saved to and loaded from the scene folder (format in
-:mod:`web.scene`)."""
+:mod:`web.scene`): :class:`Scenes`, the component ``app.scenes`` of
+:class:`web.app.TeleopApp`."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
 import threading
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 
@@ -14,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints.kinematics import frame_placement
+from controllers.base import velocity_joint_names
 from teleop.robots import Robot
 
 from .robots import Robots
@@ -40,6 +43,7 @@ from .limits import (
     ROS2_SCENE_TOLERANCE,
     checked_rate,
 )
+from .force_control import ForceControl
 from .plant import PlantChoice, apply_wall
 from .ros2_robot import Ros2Robot
 
@@ -52,64 +56,71 @@ def pose_to_dict(pose: pin.SE3) -> dict:
 
 
 class Scenes:
-    """Saving and loading the scene of :class:`web.app.TeleopApp`."""
+    """Saving and loading the scene of :class:`web.app.TeleopApp` (``app.scenes``): reads
+    every component a scene holds and, applying one, restores each of them (all or
+    nothing); the scene files are those of :attr:`folder`."""
 
-    robots: Robots
-    console: Console
-    robot: Robot
-    plant: PlantChoice
-    constraints: ConstraintEditing
-    collisions: CollisionScene
-    joint_names: list[str]
-    scenes: Folder
-    _next_history: float
-    ros2: Ros2Robot | None
-    _lock: threading.RLock
+    def __init__(self, robot: Robot, lock: threading.RLock, plant: PlantChoice,
+                 ros2: Ros2Robot | None, folder: Folder, robots: Robots, console: Console,
+                 constraints: ConstraintEditing, collisions: CollisionScene,
+                 force: ForceControl, restart_history: Callable[[float], None]) -> None:
+        self.robot = robot
+        self.folder = folder  # the scene folder: scenes are read and written there only
+        self.joint_names = list(velocity_joint_names(robot.model))
+        self._lock = lock
+        self._plant = plant
+        self._ros2 = ros2
+        self._robots = robots
+        self._console = console
+        self._constraints = constraints
+        self._collisions = collisions
+        self._force = force
+        self._restart_history = restart_history  # the history's next sample at a time (s)
 
     def scene(self) -> dict:
         """The scene as a JSON-ready dict (format in :mod:`web.scene`)."""
         with self._lock:
-            targets = [pose_to_dict(hand.target) for hand in self.console.inputs]
+            targets = [pose_to_dict(hand.target) for hand in self._console.inputs]
             several = {} if len(targets) == 1 else {"targets": [
-                {"frame": hand.frame, **pose} for hand, pose in zip(self.console.inputs, targets)]}
-            settings = self.collisions.avoidance.to_dict()
+                {"frame": hand.frame, **pose} for hand, pose in zip(self._console.inputs, targets)]}
+            settings = self._collisions.avoidance.to_dict()
             del settings["obstacles"]  # with their ids and goals, below
             return {
                 "format": SCENE_FORMAT, "version": SCENE_VERSION,
                 "created": datetime.now().isoformat(timespec="seconds"),
                 "robot": robot_to_dict(self.robot),
-                "controllers": {"main": self.robots.specs["main"], "ghost": self.robots.specs.get("ghost")},
-                "gain": self.robots.gain, "damping": self.robots.damping,
-                "rate": self.robots.config.rate,
-                "orientation_weight": self.robots.orientation_weight,
-                "task_mode": self.robots.task_mode,
-                "motion_scale": self.console.motion_scale,
-                "ghost_offset": [float(x) for x in self.robots.ghost_offset],
-                "q": {which: [float(x) for x in loop.q] for which, loop in self.robots.loops.items()},
+                "controllers": {"main": self._robots.specs["main"], "ghost": self._robots.specs.get("ghost")},
+                "gain": self._robots.gain, "damping": self._robots.damping,
+                "rate": self._robots.config.rate,
+                "orientation_weight": self._robots.orientation_weight,
+                "task_mode": self._robots.task_mode,
+                "motion_scale": self._console.motion_scale,
+                "ghost_offset": [float(x) for x in self._robots.ghost_offset],
+                "q": {which: [float(x) for x in loop.q] for which, loop in self._robots.loops.items()},
                 "target": targets[0], **several,
                 "constraints": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                  "constraint": e.constraint.to_dict()}
-                                for e in self.constraints.entries.values()],
-                "collisions": {"on": self.collisions.on, **settings},
+                                for e in self._constraints.entries.values()],
+                "collisions": {"on": self._collisions.on, **settings},
                 "obstacles": [{"id": e.id, "goal": [float(x) for x in e.goal],
                                "obstacle": e.obstacle.to_dict()}
-                              for e in self.collisions.obstacles.values()],
-                "force": self.force.setup(),
+                              for e in self._collisions.obstacles.values()],
+                "force": self._force.setup(),
             }
 
-    def save_scene(self, name: str | None = None) -> Path:
+    def save(self, name: str | None = None) -> Path:
         """Write the scene as file ``name`` of the scene folder (default: a new name);
         its path. A name that is not a plain file name of that folder is refused
         (:class:`web.folders.Folder`)."""
         if name is None or isinstance(name, str) and not name.strip():
-            name = self.scenes.unused_name(f"scene-{datetime.now():%Y%m%d-%H%M%S}")
-        return write_scene_file(self.scenes.writable(name), self.scene())
+            name = self.folder.unused_name(f"scene-{datetime.now():%Y%m%d-%H%M%S}")
+        return write_scene_file(self.folder.writable(name), self.scene())
 
-    def load_scene(self, name: str) -> None:
-        """Read file ``name`` of the scene folder and apply it (:meth:`apply_scene`)."""
-        self.apply_scene(read_scene_file(self.scenes.existing(name)))
+    def load(self, name: str) -> None:
+        """Read file ``name`` of the scene folder and apply it (:meth:`apply`)."""
+        self.apply(read_scene_file(self.folder.existing(name)))
 
-    def apply_scene(self, data: dict) -> None:
+    def apply(self, data: dict) -> None:
         """Put the app in the state a scene describes: robots' configurations, constraints,
         target, controllers, gain, damping, rate, motion scale, ghost offset, collision
         avoidance and obstacles (a version 1 scene: no obstacles, the session's collision
@@ -123,24 +134,24 @@ class Scenes:
                              f"runs {robot_source(self.robot)!r}: start "
                              "`teleop web --scene FILE` to open it with its robot")
         self._check_scene(scene)
-        if self.ros2 is not None:
-            self.ros2.refuse_ghost(scene.ghost)
+        if self._ros2 is not None:
+            self._ros2.refuse_ghost(scene.ghost)
             scene = self._scene_where_the_robot_is(scene)
         if scene.force is not None:
-            self.force.check_tissue()
+            self._force.check_tissue()
         constraints = [placed.constraint for placed in scene.constraints]
         for constraint in constraints:
             constraint.gain = scene.gain
-            apply_wall(constraint, self.plant.wall_stiffness)
-        config = dataclasses.replace(self.robots.config, rate=scene.rate)
-        avoidance, collisions_on = self.collisions.for_scene(
+            apply_wall(constraint, self._plant.wall_stiffness)
+        config = dataclasses.replace(self._robots.config, rate=scene.rate)
+        avoidance, collisions_on = self._collisions.for_scene(
             scene.collisions, [placed.obstacle for placed in scene.obstacles], constraints,
             config.dt)
         with self._lock:
-            t = self.now
+            t = self._robots.now
             specs = {"main": scene.main, **({"ghost": scene.ghost} if scene.ghost else {})}
             loops = {}
-            force = self.force
+            force = self._force
             previous = None
             if not scene.keep_force:  # the loops' plants and laws take the scene's
                 setup = scene.force
@@ -149,7 +160,7 @@ class Scenes:
                                             force.axes if setup is None else setup.axes)
             try:
                 for which, spec in specs.items():  # raises ValueError: nothing changed yet
-                    loop = self.robots.make_loop(spec, q=scene.q[which], constraints=constraints,
+                    loop = self._robots.make_loop(spec, q=scene.q[which], constraints=constraints,
                                            config=config,
                                            orientation_weight=scene.orientation_weight,
                                            task_mode=scene.task_mode,
@@ -163,18 +174,18 @@ class Scenes:
                 raise
             if previous is not None:
                 force.history.clear()  # the plot starts with the scene's tissue
-            self.robots.restore(loops, specs, config, scene.gain, scene.damping,
+            self._robots.restore(loops, specs, config, scene.gain, scene.damping,
                                 scene.orientation_weight, scene.task_mode)
-            self.constraints.restore({placed.id: ConstraintEntry(
+            self._constraints.restore({placed.id: ConstraintEntry(
                 placed.id, placed.goal.copy(), constraint=placed.constraint).restored()
                 for placed in scene.constraints})
-            self.collisions.restore(avoidance, collisions_on, {placed.id: ObstacleEntry(
+            self._collisions.restore(avoidance, collisions_on, {placed.id: ObstacleEntry(
                 placed.id, placed.goal.copy(), obstacle=placed.obstacle).restored()
                 for placed in scene.obstacles})
-            self.robots.set_ghost_offset(scene.ghost_offset.copy())
-            self.console.restore(scene.motion_scale, [pose_from(position, wxyz, "target")
+            self._robots.set_ghost_offset(scene.ghost_offset.copy())
+            self._console.restore(scene.motion_scale, [pose_from(position, wxyz, "target")
                                                       for position, wxyz in scene.targets])
-            self._next_history = t
+            self._restart_history(t)
 
     def _scene_where_the_robot_is(self, scene: Scene) -> Scene:
         """A scene for the real robot (the ros2 plant), which cannot jump: refused unless
@@ -182,7 +193,7 @@ class Scenes:
         every joint: its constraints were placed there), then taken from where the robot
         is, every target on its end effector (opening a scene never moves the robot)."""
         with self._lock:
-            q = self.robots.loops["main"].q.copy()
+            q = self._robots.loops["main"].q.copy()
         gap = np.abs(scene.q["main"] - q)
         if float(gap.max()) > ROS2_SCENE_TOLERANCE:
             joint = self.joint_names[int(np.argmax(gap))]
@@ -196,7 +207,7 @@ class Scenes:
         return dataclasses.replace(scene, q={"main": q}, targets=targets,
                                    target_position=targets[0][0], target_wxyz=targets[0][1])
 
-    def _check_scene(self, scene) -> None:
+    def _check_scene(self, scene: Scene) -> None:
         """``ValueError`` for a parsed scene this app cannot take: a configuration outside
         the joint limits, a setting out of its bounds, a target out of reach."""
         model = self.robot.model

@@ -2,7 +2,8 @@
 (docs/design.md section 5.3). Every tick computes what the controllers need; the measures
 of the live plots and the status are taken on the history ticks only. The collision rows
 the view draws are those the controllers computed for their own step (no second
-computation on the control thread)."""
+computation on the control thread). :class:`Ticker` is the component ``app.ticker`` of
+:class:`web.app.TeleopApp`."""
 
 from __future__ import annotations
 
@@ -31,29 +32,36 @@ from .recording import SessionRecording
 RECORD_MOVES_EVERY = 10
 
 
-class Tick:
-    """The control tick of :class:`web.app.TeleopApp` (its state: ``ticks`` and when the
-    next history sample is due)."""
+class Ticker:
+    """The control tick of :class:`web.app.TeleopApp` (``app.ticker``): its state is how
+    many ticks ran (:attr:`ticks`), the loops' hot path in the last one
+    (:attr:`advance_us`) and when the next history sample is due; it reads and advances
+    the components given at construction, under the session's lock."""
 
-    robots: Robots
-    console: Console
-    constraints: ConstraintEditing
-    devices: InputDevices
-    recorder: SessionRecording
-    homing: WayHome
-    collisions: CollisionScene
-    force: ForceControl
-    ticks: int
-    #: the loops' hot path in the last tick (us): every robot's ``TeleopLoop.advance``,
-    #: the controllers' steps included (the control thread's status splits the tick by it)
-    advance_us: float
-    _next_history: float
-    _lock: threading.RLock
+    def __init__(self, lock: threading.RLock, robots: Robots, console: Console,
+                 constraints: ConstraintEditing, collisions: CollisionScene,
+                 devices: InputDevices, homing: WayHome, recorder: SessionRecording,
+                 force: ForceControl) -> None:
+        self._lock = lock
+        self._robots = robots
+        self._console = console
+        self._constraints = constraints
+        self._collisions = collisions
+        self._devices = devices
+        self._homing = homing
+        self._recorder = recorder
+        self._force = force
+        self.ticks = 0
+        #: the loops' hot path in the last tick (us): every robot's ``TeleopLoop.advance``,
+        #: the controllers' steps included (the control thread's status splits the tick by it)
+        self.advance_us = 0.0
+        self._next_history = 0.0
 
-    @property
-    def now(self) -> float:
-        """The app's time (s): the main robot's loop time."""
-        return self.robots.loops["main"].t
+    def restart_history(self, t: float) -> None:
+        """The next history sample is due at time ``t`` (s): a scene just applied starts
+        its history there (:mod:`.scenes`)."""
+        with self._lock:
+            self._next_history = t
 
     def step(self) -> float:
         """One control period for every robot (called by the control thread), the input
@@ -66,32 +74,32 @@ class Tick:
         (:data:`HISTORY_RATE`).
         """
         with self._lock:
-            dt = self.robots.config.dt
-            moving = [entry for entry in (*self.constraints.entries.values(),
-                                          *self.collisions.obstacles.values())
+            dt = self._robots.config.dt
+            moving = [entry for entry in (*self._constraints.entries.values(),
+                                          *self._collisions.obstacles.values())
                       if not entry.settled]
             if moving:
                 self._steer(moving, dt)
-            if self.devices:
-                self.devices.apply(dt, self.console.inputs, self.robots.loops, self.console.clutch,
-                                   self.console.motion_scale)
-            if self.homing.active:
+            if self._devices:
+                self._devices.apply(dt, self._console.inputs, self._robots.loops, self._console.clutch,
+                                   self._console.motion_scale)
+            if self._homing.active:
                 self._follow_homing()
-            targets, start = [hand.target for hand in self.console.inputs], self.now
-            self.force.feed(self.robots.loops)  # each force law's sensor reading
+            targets, start = [hand.target for hand in self._console.inputs], self._robots.now
+            self._force.feed(self._robots.loops)  # each force law's sensor reading
             held: dict[str, CollisionRows] = {}
             pending = {which: self._advance(which, loop, targets, held)
-                       for which, loop in self.robots.loops.items()}
-            for which, loop in self.robots.loops.items():  # every period's port force, for its peak
+                       for which, loop in self._robots.loops.items()}
+            for which, loop in self._robots.loops.items():  # every period's port force, for its peak
                 measures = None if loop.plant is None else loop.plant.measures()
                 if measures is not None:
-                    self.robots.traces[which].feel_port_forces(measures.port_forces)
-            self.collisions.keep(held)
+                    self._robots.traces[which].feel_port_forces(measures.port_forces)
+            self._collisions.keep(held)
             history = start >= self._next_history - 0.5 * dt
-            if self.devices:
-                self.devices.commanded(history, self.ticks, self.console.inputs, self.robots.loops["main"],
-                                       self.collisions.rows.get("main"),
-                                       self.collisions.avoidance.detection_distance)
+            if self._devices:
+                self._devices.commanded(history, self.ticks, self._console.inputs, self._robots.loops["main"],
+                                       self._collisions.rows.get("main"),
+                                       self._collisions.avoidance.detection_distance)
             if history:
                 self._measure(pending, moving, dt, held)
                 self._next_history = start + 1.0 / HISTORY_RATE
@@ -104,16 +112,16 @@ class Tick:
 
     def _follow_homing(self) -> None:
         """The targets on the way home at the app's time (caller holds the lock, once a
-        period before the loops advance, while :attr:`homing` is active; the gizmos stay,
+        period before the loops advance, while :attr:`_homing` is active; the gizmos stay,
         whose next motion moves the targets from there); once the run is over, the
         targets stay there and the session's task mode returns (:mod:`.homing`)."""
-        poses, over = self.homing.targets(self.now, self.robots.loops["main"].q)
+        poses, over = self._homing.targets(self._robots.now, self._robots.loops["main"].q)
         for ee, pose in enumerate(poses):
-            self.console.inputs[ee].target = pose
-            self.recorder.target(ee, pose)
+            self._console.inputs[ee].target = pose
+            self._recorder.target(ee, pose)
         if over:
-            self.homing.end()
-            self.robots.apply_task_modes()
+            self._homing.end()
+            self._robots.apply_task_modes()
 
     def _advance(self, which: str, loop: TeleopLoop, targets: list[pin.SE3],
                  held: dict[str, CollisionRows]) -> PendingStep:
@@ -122,9 +130,9 @@ class Tick:
         configuration the command was computed from) go into ``held``: the view reads
         them (:attr:`collision_rows`, immutable) instead of the control thread computing
         them again."""
-        before = self.collisions.avoidance.last_rows
+        before = self._collisions.avoidance.last_rows
         step = loop.advance(targets)
-        rows = self.collisions.avoidance.last_rows
+        rows = self._collisions.avoidance.last_rows
         if rows is not before and rows is not None:
             held[which] = rows
         return step
@@ -132,7 +140,7 @@ class Tick:
     def _steer(self, moving: list[ConstraintEntry | ObstacleEntry], dt: float) -> None:
         """Moved geometry (a constraint's, an obstacle) glides towards its goal, with
         feed-forward; settles there. A recording gets the constraints' moves."""
-        alpha = 1.0 - math.exp(-dt / self.robots.config.target_time_constant)
+        alpha = 1.0 - math.exp(-dt / self._robots.config.target_time_constant)
         for entry in moving:
             geometry = entry.moved
             if float(np.linalg.norm(entry.goal - geometry.position)) < 1e-12:
@@ -140,9 +148,9 @@ class Tick:
                 entry.settled = True
                 continue
             steer(geometry, entry.goal, dt, smoothing=alpha)
-            if (self.recorder.active and entry.recorded
+            if (self._recorder.active and entry.recorded
                     and self.ticks % RECORD_MOVES_EVERY == 0 and np.any(geometry.velocity)):
-                self.recorder.move(entry.id,
+                self._recorder.move(entry.id,
                                    geometry.position, geometry.velocity)
 
     def _measure(self, pending: dict[str, PendingStep],
@@ -153,16 +161,16 @@ class Tick:
         collision rows of a robot whose controller computed none this tick (not in
         ``held``) are measured here, where its command was computed from
         (:meth:`.collisions.CollisionScene.measure`)."""
-        for which, loop in self.robots.loops.items():  # before the geometry moves on
+        for which, loop in self._robots.loops.items():  # before the geometry moves on
             loop.measure_command(pending[which])
-        self.collisions.measure({which: step.sensed for which, step in pending.items()
+        self._collisions.measure({which: step.sensed for which, step in pending.items()
                                   if which not in held})
         for entry in moving:
             advance(entry.moved, dt)
-        main_qd = self.robots.loops["main"].last_qd
-        for which, loop in self.robots.loops.items():
+        main_qd = self._robots.loops["main"].last_qd
+        for which, loop in self._robots.loops.items():
             record = loop.measure(pending[which])
-            self.robots.last_records[which] = record
+            self._robots.last_records[which] = record
             deviation = 0.0 if which == "main" else float(np.linalg.norm(loop.last_qd - main_qd))
-            self.robots.traces[which].add(record, deviation, self.collisions.traced_distance(which))
-        self.force.measure(self.robots.loops["main"])
+            self._robots.traces[which].add(record, deviation, self._collisions.traced_distance(which))
+        self._force.measure(self._robots.loops["main"])

@@ -54,7 +54,7 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                     ros2_settings=ros2_settings)
     app.robots.set_task_mode(task_mode)
     if scene is not None:
-        app.apply_scene(scene)
+        app.scenes.apply(scene)
     if input_timeout is not None:
         app.devices.set_input_timeout(input_timeout)
     for source in inputs:

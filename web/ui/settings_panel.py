@@ -30,7 +30,7 @@ class SettingsPanel:
         self.rate_number = gui.add_number("rate (Hz)", app.robots.config.rate, min=50, max=5000, step=50)
         self.scene_path = gui.add_text(
             "scene name", "scene.json",
-            hint=f"a file name in the scene folder ({app.scenes.root.name}/, set by `teleop "
+            hint=f"a file name in the scene folder ({app.scene_dir.name}/, set by `teleop "
                  "web --scene-dir`): no folders, nothing outside it")
         self.save_scene_button = gui.add_button("Save scene")
         self.load_scene_button = gui.add_button("Load scene")
@@ -55,15 +55,15 @@ class SettingsPanel:
 
     def save_scene(self) -> None:
         """The scene saved under the name typed."""
-        path = self.app.save_scene(self.scene_path.value)
+        path = self.app.scenes.save(self.scene_path.value)
         self.scene_status.content = f"saved `{path.name}`"
 
     def load_scene(self) -> None:
         """The scene of the name typed loaded, the page set from it."""
         name = self.scene_path.value
-        self.app.load_scene(name)
+        self.app.scenes.load(name)
         self._loaded()
-        self.scene_status.content = f"loaded `{self.app.scenes.name_of(name)}`"
+        self.scene_status.content = f"loaded `{self.app.scenes.folder.name_of(name)}`"
 
     def from_app(self) -> None:
         """The inputs as the app has them (after loading a scene)."""
