@@ -10,9 +10,10 @@ it once the period has passed, before the tick's measures are taken.
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Protocol
 
-from constraints import Constraint
+import numpy as np
+from numpy.typing import ArrayLike
 
 #: Fastest a hole, plane or lock target moves (m/s). A hole moving across the shaft at
 #: this speed swings the sda10f's link 6 at about 0.4 rad/s per 5 cm of lever: inside the
@@ -20,13 +21,25 @@ from constraints import Constraint
 MAX_GEOMETRY_SPEED = 0.02
 
 
-def advance(constraint: Constraint, elapsed: float) -> None:
+class MovingGeometry(Protocol):
+    """What moves here: a world reference point (m) and its velocity (m/s), both set by
+    :meth:`move_to` (a constraint's geometry, an obstacle)."""
+
+    velocity: np.ndarray
+
+    @property
+    def position(self) -> np.ndarray: ...
+
+    def move_to(self, position: np.ndarray, velocity: ArrayLike) -> None: ...
+
+
+def advance(constraint: MovingGeometry, elapsed: float) -> None:
     """The geometry after ``elapsed`` s at its current velocity (velocity kept)."""
     if elapsed > 0.0 and np.any(constraint.velocity):
         constraint.move_to(constraint.position + constraint.velocity * elapsed, constraint.velocity)
 
 
-def steer(constraint: Constraint, goal: np.ndarray, dt: float, smoothing: float = 1.0,
+def steer(constraint: MovingGeometry, goal: np.ndarray, dt: float, smoothing: float = 1.0,
           max_speed: float = MAX_GEOMETRY_SPEED) -> None:
     """Set the velocity that moves the geometry towards ``goal`` (world, m) over ``dt``.
 

@@ -11,15 +11,15 @@ from typing import ClassVar, Protocol, TypeVar
 
 import numpy as np
 
+from teleop.loop.moving_geometry import MovingGeometry
 
-class Placeable(Protocol):
-    """What a placed item is to its entry: a kind and a world reference point."""
+
+class Placeable(MovingGeometry, Protocol):
+    """What a placed item is to its entry: a kind and a world reference point, moved by
+    the tick (:mod:`teleop.loop.moving_geometry`)."""
 
     @property
     def kind(self) -> str: ...
-
-    @property
-    def position(self) -> np.ndarray: ...
 
 
 Entry = TypeVar("Entry", bound="PlacedEntry")

@@ -19,13 +19,14 @@ from teleop.loop import PendingStep
 from teleop.loop.moving_geometry import advance, steer
 
 from .robots import Robots
-from .collisions import CollisionScene, ObstacleEntry
+from .collisions import CollisionScene
 from .console import Console
 from .devices import InputDevices
-from .editing import ConstraintEditing, ConstraintEntry
+from .editing import ConstraintEditing
 from .force_control import ForceControl
 from .limits import HISTORY_RATE
 from .homing import WayHome
+from .placed import PlacedEntry
 from .recording import SessionRecording
 
 #: moved geometry is written to a recording every this many ticks while it moves
@@ -92,8 +93,9 @@ class Ticker:
                        for which, loop in self._robots.loops.items()}
             for which, loop in self._robots.loops.items():  # every period's port force, for its peak
                 measures = None if loop.plant is None else loop.plant.measures()
-                if measures is not None:
-                    self._robots.traces[which].feel_port_forces(measures.port_forces)
+                forces = getattr(measures, "port_forces", None)  # a plant's own measures
+                if forces is not None:
+                    self._robots.traces[which].feel_port_forces(forces)
             self._collisions.keep(held)
             history = start >= self._next_history - 0.5 * dt
             if self._devices:
@@ -137,7 +139,7 @@ class Ticker:
             held[which] = rows
         return step
 
-    def _steer(self, moving: list[ConstraintEntry | ObstacleEntry], dt: float) -> None:
+    def _steer(self, moving: list[PlacedEntry], dt: float) -> None:
         """Moved geometry (a constraint's, an obstacle) glides towards its goal, with
         feed-forward; settles there. A recording gets the constraints' moves."""
         alpha = 1.0 - math.exp(-dt / self._robots.config.target_time_constant)
@@ -154,7 +156,7 @@ class Ticker:
                                    geometry.position, geometry.velocity)
 
     def _measure(self, pending: dict[str, PendingStep],
-                 moving: list[ConstraintEntry | ObstacleEntry], dt: float,
+                 moving: list[PlacedEntry], dt: float,
                  held: dict[str, CollisionRows]) -> None:
         """The measures of the tick just advanced (``pending``), appended to the history:
         the command's, then, once the geometry has moved on, the end of the period's. The
