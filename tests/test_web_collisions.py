@@ -274,20 +274,20 @@ def test_the_damper_counts_on_the_plants_response_time_as_compare_does(sda10f, t
     assert avoidance.response_time == pytest.approx(tau, rel=1e-15)
     assert avoidance.gain == pytest.approx(1.0 / ((d_i - 0.008) / 0.3 + tau), rel=1e-12)
     assert app.robots.loops["main"].controller.collisions is avoidance
-    saved = json.loads(app.save_scene("late.json").read_text())
+    saved = json.loads(app.scenes.save("late.json").read_text())
     assert saved["collisions"]["response_time"] == pytest.approx(tau, rel=1e-15)
 
     again = TeleopApp(sda10f, plant="mujoco", record_dir=tmp_path / "s2",
                       scene_dir=tmp_path / "scenes")
-    again.load_scene("late.json")
+    again.scenes.load("late.json")
     assert again.collisions.avoidance.to_dict() == avoidance.to_dict()
     kinematic = TeleopApp(sda10f, record_dir=tmp_path / "s3", scene_dir=tmp_path / "scenes")
-    kinematic.load_scene("late.json")
+    kinematic.scenes.load("late.json")
     assert kinematic.collisions.avoidance.response_time == 0.0
     assert kinematic.collisions.avoidance.gain == 0.3 / (d_i - 0.008)
-    assert "response_time" not in kinematic.scene()["collisions"]
+    assert "response_time" not in kinematic.scenes.scene()["collisions"]
     with pytest.raises(ValueError, match=r"^scene collisions: response_time"):
-        kinematic.apply_scene({**saved, "collisions": {**saved["collisions"],
+        kinematic.scenes.apply({**saved, "collisions": {**saved["collisions"],
                                                        "response_time": -1.0}})
 
 
