@@ -39,9 +39,11 @@ def direct(problem: QuadraticProgram, max_iter: int, eps_abs: float):
     return qp.results
 
 
-def solver(max_iter: int) -> ProxQPSolver:
+def solver(max_iter: int, users: bool = False) -> ProxQPSolver:
+    """The controller's proxqp with an outer cap of ``max_iter``: the project's (the last
+    solve may exceed it), or the user's (``users``: never exceeded)."""
     return ProxQPSolver({**SOLVER_SETTINGS["proxqp"], "max_iter": max_iter, "max_iter_in": 50},
-                        frozenset({"eps_abs", "rho"}))
+                        frozenset({"eps_abs", "rho", *(() if users else ("max_iter",))}))
 
 
 @pytest.mark.parametrize("seed", [3, 4, 5])
@@ -71,3 +73,16 @@ def test_a_stage_out_of_iterations_after_the_last_solve_still_fails():
     with pytest.raises(BudgetExceeded, match=r"iteration limit \(0 x 50"):
         solver(0).solve(problem, budget)
     assert issubclass(BudgetExceeded, SolverError)
+
+
+def test_a_cap_the_user_set_is_never_exceeded():
+    """The problem the first test solves past its cap, with that cap the user's: the step
+    fails at it, naming it (tests/test_errors.py: one iteration asked, nothing found)."""
+    problem = semidefinite_problem(3)
+    reference = direct(problem, 10_000, 1e-13)
+    cap = max(1, (reference.info.iter_ext - 1) // 2)
+    budget = StepBudget(None, 1e-3)
+    budget.start()
+    with pytest.raises(BudgetExceeded, match=rf"iteration limit \({cap} x 50"):
+        solver(cap, users=True).solve(problem, budget)
+

@@ -50,11 +50,12 @@ class MinkBackend:
                                   and "rho" not in (solver_settings or {}))
         self._proxqp = self._least_residual_proxqp = None
         if solver == "proxqp" and ProxQPSolver.accepts(self.settings):
-            self._proxqp = ProxQPSolver(self.settings, frozenset(
+            ours = frozenset(() if "max_iter" in self._user_caps else ("max_iter",))
+            self._proxqp = ProxQPSolver(self.settings, ours | frozenset(
                 {"rho"} if self._proxqp_rho_tuned else ()))
             self._least_residual_proxqp = ProxQPSolver(
                 {**SOLVER_SETTINGS["proxqp"], **ITERATION_CAPS["proxqp"], **self._user_caps},
-                frozenset({"eps_abs", "rho"}))
+                ours | {"eps_abs", "rho"})
         self._posture_curvature = 1.0  # c^2, the curvature the posture task gives mink's QP
 
     def set_posture_cost(self, cost: float) -> None:

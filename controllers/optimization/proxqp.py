@@ -20,8 +20,10 @@ class ProxQPSolver:
     ``update`` + ``solve`` after. Used by the QP controller and, for its proxqp solves, by
     the mink peer.
 
-    ``tuned`` names the settings set from each problem's curvature: ``"eps_abs"``
-    (:meth:`QuadraticProgram.tolerance`) and ``"rho"`` (``PROXQP_RHO`` times it).
+    ``tuned`` names the settings this class may choose per solve, the user having set
+    none of them: ``"eps_abs"`` (:meth:`QuadraticProgram.tolerance`) and ``"rho"``
+    (``PROXQP_RHO`` times it), from each problem's curvature, and ``"max_iter"`` (the last
+    solve's larger cap below; a cap the user set is never exceeded).
 
     The task stage and the posture stage have different shapes, so each gets its own
     object (keyed by :attr:`QuadraticProgram.shape`). The joint bounds go in proxsuite's
@@ -47,7 +49,8 @@ class ProxQPSolver:
     curvature is solved once more with ``PROXQP_CAPPED_RHO`` in its place; one still at
     its caps is solved a last time the same two ways on a fresh object (its own
     preconditioner) with ``PROXQP_FALLBACK_ITERATIONS`` times the outer cap, while the
-    step's deadline leaves time: an answer from there meets the same tolerances as any.
+    step's deadline leaves time and the cap is not the user's: an answer from there
+    meets the same tolerances as any.
     """
 
     def __init__(self, settings: dict, tuned: frozenset[str]) -> None:
@@ -67,7 +70,7 @@ class ProxQPSolver:
         self.fallback_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
         self.solved = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
         self.capped = proxsuite.proxqp.QPSolverOutput.PROXQP_MAX_ITER_REACHED
-        self.tuned = tuned  # of "eps_abs", "rho": set from the curvature, per solve
+        self.tuned = tuned  # of "eps_abs", "rho", "max_iter": chosen here, per solve
         self.solvers: dict[tuple[int, int, int, bool], Any] = {}  # proxsuite's dense QPs
 
     @staticmethod
@@ -131,7 +134,7 @@ class ProxQPSolver:
                 qp.settings.eps_abs = problem.tolerance()
             qp.update(*arguments, **proximal, **self.penalties(qp))
         status = self._run(qp, problem)
-        if status == self.capped:
+        if status == self.capped and "max_iter" in self.tuned:
             budget.remaining("proxqp")
             last = self._fresh(problem, arguments, proximal)
             last.settings.max_iter *= PROXQP_FALLBACK_ITERATIONS

@@ -178,7 +178,8 @@ class QPController(GuardedController):
         # the other backends through qpsolvers. Settings a direct call cannot apply
         # send proxqp and daqp back through qpsolvers as well.
         self._proxqp = (ProxQPSolver(self.settings,
-                                     frozenset({"eps_abs", "rho"} - set(user_settings)))
+                                     frozenset({"eps_abs", "rho", "max_iter"}
+                                               - set(user_settings)))
                         if solver == "proxqp" and ProxQPSolver.accepts(self.settings) else None)
         self._direct_daqp = (DirectDAQP(self.settings, user_settings)
                       if solver == "daqp" and DirectDAQP.accepts(self.settings) else None)
