@@ -12,7 +12,8 @@ superseded in their period, late periods).
 
 Run:  OPENBLAS_NUM_THREADS=1 python docs/measure_ros2_jitter.py [--plant kinematic|mujoco]
       [--runs 3] [--duration 3] [--command-latency 1] [--lockstep MS] [--domain 150]
-      [--realtime-priority 50]  (0: both processes' threads ordinary)
+      [--realtime-priority N]  (0: both processes' threads ordinary; default: each
+      side's own, the loop 40 below the robot's 50)
 (the machine's other work moves these figures: the jitter counts say by how much)
 """
 
@@ -46,8 +47,9 @@ def main() -> None:
     parser.add_argument("--domain", type=int, default=150)
     parser.add_argument("--lockstep", type=float, default=0.0,
                         help="teleop sim --lockstep MS (0: the robot does not wait)")
-    parser.add_argument("--realtime-priority", type=int, default=50,
-                        help="SCHED_FIFO priority of both sides' threads (0: ordinary)")
+    parser.add_argument("--realtime-priority", type=int, default=None,
+                        help="SCHED_FIFO priority of both sides' threads (0: ordinary; "
+                             "default: each side's own, the loop 40, the robot 50)")
     args = parser.parse_args()
     os.environ.setdefault("CYCLONEDDS_URI", LOOPBACK)
 
@@ -71,12 +73,15 @@ def main() -> None:
     # this process's topics: another ROS 2 program on the same domain never mixes in
     topics = {"joint_states": f"/run{os.getpid()}/joint_states",
               "command_topic": f"/run{os.getpid()}/forward_velocity_controller/commands"}
+    priority = ([] if args.realtime_priority is None
+                else ["--realtime-priority", str(args.realtime_priority)])
+    loop_priority = ({} if args.realtime_priority is None
+                     else {"realtime_priority": args.realtime_priority})
     for run in range(args.runs):
         domain = (args.domain + run) % 233
         sim = subprocess.Popen([sys.executable, "-m", "teleop", "sim", "--ros2", "--rate",
                                 str(RATE), "--ros-domain", str(domain), "--lockstep",
-                                str(args.lockstep), "--realtime-priority",
-                                str(args.realtime_priority), "--joint-states",
+                                str(args.lockstep), *priority, "--joint-states",
                                 topics["joint_states"], "--command-topic",
                                 topics["command_topic"], *where],
                                cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
@@ -85,7 +90,7 @@ def main() -> None:
             start = time.monotonic()
             settings = Ros2Settings(domain=domain, start_timeout=60.0, stale_after=1.0,
                                     command_latency=args.command_latency,
-                                    realtime_priority=args.realtime_priority, **topics)
+                                    **loop_priority, **topics)
             result = run_plan(plan, "cjm", config, args.duration,
                               plant=PlantChoice("ros2", ros2=settings))
             wall = time.monotonic() - start
@@ -94,7 +99,8 @@ def main() -> None:
             _, err = sim.communicate()
         counts = err.strip().splitlines()[-1] if err.strip() else "(the sim printed nothing)"
         print(f"over DDS {args.plant}, command_latency {args.command_latency}, lockstep "
-              f"{args.lockstep:g} ms, realtime priority {args.realtime_priority}, run {run}: "
+              f"{args.lockstep:g} ms, realtime priority "
+              f"{settings.realtime_priority if priority else 'default'}, run {run}: "
               f"{result.metrics()['constraint_error_max_m'] * 1e6:.3f} um in {wall:.2f} s; "
               f"{counts}", flush=True)
 
