@@ -61,10 +61,12 @@ PANDA = Path(pin.__file__).resolve().parents[4] / "share/example-robot-data/robo
 
 
 def answer_ctrl_c() -> None:
-    """A child's ``preexec_fn``: SIGINT at its default, so the child's Python turns it into
-    ``KeyboardInterrupt`` even when this test run was started with SIGINT ignored (a
-    background job of a shell without job control, which its children inherit)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    """A child's ``preexec_fn``: SIGINT, SIGTERM and SIGHUP at their defaults, so the
+    child answers them as the tests send them even when this test run was started with
+    one ignored (SIGINT for a background job of a shell without job control, SIGHUP under
+    ``nohup``), which its children would inherit and keep ignoring."""
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, signal.SIG_DFL)
 
 
 def free_port() -> int:

@@ -25,6 +25,8 @@ def test_a_solver_out_of_iterations_is_named_and_counted_in_the_report(monkeypat
     # a capped solve is solved again with PROXQP_CAPPED_RHO, which finishes these stages in
     # one iteration; with the first rho again it runs out a second time
     monkeypatch.setattr(proxqp_backend, "PROXQP_CAPPED_RHO", PROXQP_RHO)
+    # and the last solve on a fresh object keeps that one iteration (not ten times it)
+    monkeypatch.setattr(proxqp_backend, "PROXQP_FALLBACK_ITERATIONS", 1)
     plan = load_scenario("joint-limits")
     results = compare(plan, ["qp:proxqp"], duration=0.5, progress=False)
     result = results["qp:proxqp"]

@@ -426,10 +426,13 @@ def test_settings_the_direct_calls_cannot_take_go_through_qpsolvers(sda10f):
     np.testing.assert_allclose(daqp_direct.solve(q, twist), daqp_through.solve(q, twist), atol=1e-12)
 
 
-def test_proxqp_recovers_after_a_failed_step(sda10f):
+def test_proxqp_recovers_after_a_failed_step(sda10f, monkeypatch):
     """A failed solve drops the persistent object; the next feasible step solves. (The
     conflicting locks alone no longer fail, docs/design.md 10.7: the solves of that step
-    are capped at one iteration.)"""
+    are capped at one iteration, the last solve on a fresh object too.)"""
+    from controllers.optimization import proxqp as proxqp_backend
+
+    monkeypatch.setattr(proxqp_backend, "PROXQP_FALLBACK_ITERATIONS", 1)
     q = sda10f.q_home.copy()
     lock = PointLock.on_link(sda10f, q, distance=0.05)
     other = PointLock(lock.link, lock.link_point, lock.target + [0.01, 0.0, 0.0])
