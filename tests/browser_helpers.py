@@ -69,6 +69,18 @@ def answer_ctrl_c() -> None:
         signal.signal(signum, signal.SIG_DFL)
 
 
+def close_notifications(page) -> None:
+    """Close the page's notifications (e.g. the WebGL notice); one that closes itself
+    meanwhile is skipped (CI saw a click wait 60 s for a notification already gone)."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
+
+    for close in page.locator(".mantine-Notification-closeButton").all():
+        try:
+            close.click(timeout=2000)
+        except PlaywrightTimeoutError:
+            pass
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -30,6 +30,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    close_notifications,
     WAIT,
     VIEWPORT,
     canvas_pixels,
@@ -324,8 +325,7 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
     # the two robots left of the control panel (on the right): look right of their centre
     look = centre - 0.3 * side
     set_camera(web.client, look + 1.3 * front - 0.2 * side + np.array([0.0, 0.0, 0.6]), look)
-    for close in page.locator(".mantine-Notification-closeButton").all():  # e.g. WebGL notice
-        close.click()
+    close_notifications(page)
     if page.get_by_text("lateness p99", exact=False).is_visible():  # the status line alone
         page.get_by_text("Details", exact=True).click()
     time.sleep(1.0)

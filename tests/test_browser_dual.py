@@ -18,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    close_notifications,
     WAIT,
     VIEWPORT,
     distinct_colours,
@@ -156,8 +157,7 @@ def test_two_trocars_hold_while_each_gizmo_is_dragged_and_the_readme_screenshot(
     rings = np.array([app.constraints.entries[i].position for i in ids])
     centre = 0.5 * (rings.mean(axis=0) + ee_positions(app).mean(axis=0)) + [-0.05, 0.0, 0.05]
     set_camera(web.client, centre + np.array([0.8, -0.45, 0.5]), centre)
-    for close in web.page.locator(".mantine-Notification-closeButton").all():
-        close.click()
+    close_notifications(web.page)
     time.sleep(1.5)
     png = web.page.screenshot(timeout=1e3 * WAIT)
     SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
