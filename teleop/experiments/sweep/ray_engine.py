@@ -224,8 +224,13 @@ class RayEngine:
                             "reason": f"time limit {time_limit:g} s exceeded and no answer "
                                       f"{self.grace:g} s later: its task was cancelled"}, 1)
         finally:
-            for ref in in_flight:
-                ray.cancel(ref, force=True)
+            # a cluster outlives this run: its tasks are cancelled. A local instance is not:
+            # its shutdown ends their workers, and a cancel racing a task's completion makes
+            # Ray's core worker end this process with exit 1 (Ray's check "Tried to complete
+            # task that was not pending", ray-project/ray#54798)
+            if not self.started_instance:
+                for ref in in_flight:
+                    ray.cancel(ref, force=True)
 
     def _finished(self, ray, ref, cell: Cell, submitted: float,
                   last_end: dict[str, float]) -> Finished:
