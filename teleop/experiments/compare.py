@@ -149,29 +149,33 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
         if changed is not None:
             edits_at_measure.append(changed)
 
-    for i in range(steps):
-        t = i * config.dt
-        changed = plan.update(t, constraints, loop.q)
-        if changed is None and edits_at_measure:
-            changed = edits_at_measure.pop()
-        edits_at_measure.clear()
-        if changed is not None:
-            constraints = changed
-            plant.apply_wall(constraints)
-            loop.set_constraints(constraints)
-        modes = plan.task_modes(t)
-        if modes is not None and modes != loop.task_modes:
-            loop.set_task_modes(modes)
-        period = loop.tick_measured_later(plan.target(t + config.dt), advance_geometry)
-        periods.append(period)
-        drive.commands.append(loop.last_qd.copy())
-        end = period.end
-        drive.ports.append(tuple(name for name, constraint in zip(end.names, end.constraints)
-                                 if has_wall(constraint)))
-        if period.failed and len(failures) < 10:
-            failures.append(f"t={period.t:.3f}s: {period.message}")
-        if on_step is not None:
-            on_step(i)
+    try:
+        for i in range(steps):
+            t = i * config.dt
+            changed = plan.update(t, constraints, loop.q)
+            if changed is None and edits_at_measure:
+                changed = edits_at_measure.pop()
+            edits_at_measure.clear()
+            if changed is not None:
+                constraints = changed
+                plant.apply_wall(constraints)
+                loop.set_constraints(constraints)
+            modes = plan.task_modes(t)
+            if modes is not None and modes != loop.task_modes:
+                loop.set_task_modes(modes)
+            period = loop.tick_measured_later(plan.target(t + config.dt), advance_geometry)
+            periods.append(period)
+            drive.commands.append(loop.last_qd.copy())
+            end = period.end
+            drive.ports.append(tuple(name for name, constraint in zip(end.names, end.constraints)
+                                     if has_wall(constraint)))
+            if period.failed and len(failures) < 10:
+                failures.append(f"t={period.t:.3f}s: {period.message}")
+            if on_step is not None:
+                on_step(i)
+    finally:  # a robot on the wire gets its zeros when the run ends, not at exit
+        if loop.plant is not None:
+            loop.plant.close()
     while periods:  # each period let go once measured: the run's memory stays the records'
         records.append(loop.measure_later(periods.popleft()))
     return drive

@@ -30,3 +30,7 @@ class Plant(Protocol):
 
     def measures(self) -> object | None:
         """What the plant measured over the last period (its own type), or None."""
+
+    def close(self) -> None:
+        """Let go of what the plant holds (a robot on the wire: zeros published, its node
+        closed); nothing for a simulated robot. Called once, when the loop's run ends."""

@@ -203,5 +203,8 @@ class ImperfectPlant:
         self._velocity = command + (start - command) * self._decay
         return command + (start - command) * self._mean_gain
 
+    def close(self) -> None:
+        """Nothing to let go: the robot is this process's integrator."""
+
     def measures(self) -> None:
         """Nothing measured beyond the loop's own figures."""

@@ -426,6 +426,9 @@ class MujocoPlant:
         self.joints.q_to_pinocchio(self._qpos, self._q_pin)
         return pin.difference(self.model, q, self._q_pin) / self.dt
 
+    def close(self) -> None:
+        """Nothing to let go: the simulation lives in this process's memory."""
+
     def measures(self) -> PlantMeasures:
         """The last period's :class:`PlantMeasures`."""
         if self._last is None:
