@@ -6,6 +6,7 @@ by the ``timing`` tests at the end)."""
 
 from __future__ import annotations
 
+import gc
 import itertools
 import json
 import os
@@ -125,6 +126,7 @@ def test_commands_drive_the_simulated_robot_and_its_loss_stops_them(robot, domai
     log = CommandLog(peer)
     with Ros2Plant(robot, DT, settings) as plant:
         plant.reset()
+        assert gc.get_freeze_count() > 0  # the heap at the reset, out of the collector's passes
         q_start = plant.sense(robot.q_home)
         command = np.linspace(0.05, 0.2, robot.model.nv)  # a different speed on each joint
         q = q_start
@@ -150,6 +152,7 @@ def test_commands_drive_the_simulated_robot_and_its_loss_stops_them(robot, domai
             plant.actuate(command, q, [])  # refused: zeros until reset
         assert wait_for(lambda: len(log.poll()) >= sent + 5)
         assert all(c == [0.0] * robot.model.nv for c in log.poll()[sent:])
+    assert gc.get_freeze_count() == 0  # back to the collector when the plant closes
 
 
 def test_a_crtk_robot_is_driven_on_servo_jv(robot, domain):

@@ -277,7 +277,8 @@ class Ros2Plant:
         them. A pass over a large heap stops the loop's thread for tens of milliseconds
         (a 39 ms pass seen in a run), while the robot's controller holds the last command
         and the robot moves on with it (21 um of hole error on the MuJoCo sim for 1.5 um
-        without the pause; docs/ros2.md "Real-time threads")."""
+        without the pause; docs/ros2.md "Real-time threads"). :meth:`close` unfreezes
+        them: a cycle among them that died meanwhile is collected then."""
         with self._lock:
             self._stop("reset")
             self.last_measures = Ros2Measures(states=self.last_measures.states,
@@ -417,6 +418,7 @@ class Ros2Plant:
         self._watchdog.join(timeout=1.0)
         atexit.unregister(self.close)
         self.node.close()
+        gc.unfreeze()
 
     def __enter__(self) -> "Ros2Plant":
         return self
