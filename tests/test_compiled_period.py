@@ -140,6 +140,31 @@ def test_a_period_split_in_python_leaves_no_force_to_the_compiled_ones(sda10f):
     assert np.array_equal(outcomes[0][1], outcomes[1][1])
 
 
+class LateWalledHole(Hole):
+    """A hole whose type is given a wall of its own after its periods began."""
+
+
+def test_a_wall_registered_between_periods_takes_over(sda10f):
+    """100 periods with the wall LateWalledHole inherits (compiled), then its own wall,
+    registered then, without a compiled form (the periods split in Python): bit for bit
+    the plant that runs every period in Python, which looks the wall up each period."""
+    compiled, reference = plants(sda10f, PlantSettings())
+    hole = moving_hole(sda10f)
+    hole.__class__ = LateWalledHole
+    runs: list[list[np.ndarray]] = [[], []]
+    q = [sda10f.q_home.copy(), sda10f.q_home.copy()]
+    for k, qd in enumerate(commands(sda10f.model.nv, 200, 0.2)):
+        if k == 100:
+            register_wall(LateWalledHole, PythonPortWall())
+        for i, plant in enumerate((compiled, reference)):
+            moved = plant.actuate(qd, q[i], [hole])
+            q[i] = pin.integrate(sda10f.model, q[i], moved * DT)
+            runs[i] += [moved, plant.mj_data.qpos.copy(), plant.measures().port_forces]
+    assert compiled._forces_applied  # the last periods were split in Python
+    for ours, theirs in zip(*runs):
+        assert np.array_equal(ours, theirs)
+
+
 def test_no_compiled_period_where_python_stands_between(sda10f):
     """An interface that checks, or imperfections: the period stays in Python."""
     assert MujocoPlant(sda10f, DT, PlantSettings(interface_limits="count"))._period is None

@@ -7,23 +7,33 @@ walls attached, the torque ratio, the contacts, and the velocity that takes the 
 configuration to the simulated one, ``(qpos - q) / dt`` (``pin.difference`` of 1-dof
 joints). It serves a robot whose Pinocchio and MuJoCo coordinates are the same
 (``JointMap.identity``); the buffers it reads and writes are arrays made once, their
-addresses given to the C side in one block (:class:`PeriodBlock`), so a period is two
-copies in (through the buffer protocol: numpy's ``copyto`` costs 0.2 us more a vector),
-one call and one copy out.
+addresses given to the C side in one block (:class:`PeriodBlock`). Python calls it through
+``period_call.c``, a CPython module compiled as the walls' library is
+(:func:`~teleop.plants.cached_build.cached_build`, against Python's and numpy's headers):
+one vectorcall copies the command and the configuration in through their buffers, runs the
+period without the GIL and returns the velocity as a new array (a ctypes call and the
+copies around it cost about 0.8 us more).
 """
 
 from __future__ import annotations
 
 import ctypes
+import functools
+import importlib.machinery
+import importlib.util
 import operator
+import sys
+import sysconfig
 from collections.abc import Callable, Sequence
-from typing import Any, cast
+from pathlib import Path
+from types import ModuleType
 
 import mujoco
 import numpy as np
 
 from constraints import Constraint
 
+from .cached_build import cached_build
 from .compiled_wall import PORT_FIELDS, wall_library
 from .walls import Wall, wall_of
 
@@ -32,17 +42,22 @@ from .walls import Wall, wall_of
 PortRows = Callable[[Sequence[tuple[Constraint, Wall]]], np.ndarray | None]
 
 _POINTER = ctypes.c_void_p
+#: the call's sources (its module's name is ``cjm_period_call``)
+CALL_SOURCES = tuple(Path(__file__).with_name(name)
+                     for name in ("period_call.c", "plant_period.h"))
 #: the summary's entries (plant_period.c's enum)
 RATIO, CONTACTS, PENETRATION = 0, 1, 2
 
 
 class PeriodBlock(ctypes.Structure):
-    """plant_period.c's ``Period``: the model, the data and the buffers' addresses."""
+    """plant_period.h's ``PlantPeriod``: the model, the data, the buffers' addresses, the
+    period's function and its sizes."""
 
     _fields_ = [("model", _POINTER), ("data", _POINTER), ("command", _POINTER), ("q", _POINTER),
                 ("actuator_dofs", _POINTER), ("effort_limit", _POINTER), ("ports", _POINTER),
-                ("moved", _POINTER), ("summary", _POINTER), ("dt", ctypes.c_double),
-                ("nstep", ctypes.c_int), ("port_count", ctypes.c_int)]
+                ("moved", _POINTER), ("summary", _POINTER), ("run", _POINTER),
+                ("dt", ctypes.c_double), ("nstep", ctypes.c_int), ("port_count", ctypes.c_int),
+                ("nv", ctypes.c_int), ("nq", ctypes.c_int)]
 
 
 def _address(array: np.ndarray) -> int:
@@ -56,6 +71,7 @@ class CompiledPeriod:
     Parameters
     ----------
     library : :func:`~teleop.plants.compiled_wall.wall_library`'s.
+    call : :func:`period_call`'s module.
     model, data : the plant's MuJoCo model and data (kept alive here).
     actuator_dofs : (nu,) each actuator's degree of freedom.
     effort_limit : (nv,) each dof's effort limit (``inf``: none).
@@ -65,21 +81,18 @@ class CompiledPeriod:
         compiled form.
     """
 
-    def __init__(self, library: ctypes.CDLL, model: mujoco.MjModel, data: mujoco.MjData,
-                 actuator_dofs: np.ndarray, effort_limit: np.ndarray, dt: float,
-                 nstep: int, port_rows: PortRows) -> None:
-        self._run = library.cjm_plant_period
+    def __init__(self, library: ctypes.CDLL, call: ModuleType, model: mujoco.MjModel,
+                 data: mujoco.MjData, actuator_dofs: np.ndarray, effort_limit: np.ndarray,
+                 dt: float, nstep: int, port_rows: PortRows) -> None:
+        self._run = call.run
         self._port_rows = port_rows
-        #: the constraints with walls and their walls' versions the ports were read from,
+        #: the constraints with walls, their walls and versions the ports were read from,
         #: and whether every wall there has a compiled form
         self._port_objects: list[object] = []
         self._ports_compiled = True
         self._model, self._data = model, data
         #: the command and the configuration the period starts from, copied in
         self.command, self.q = np.zeros(model.nv), np.zeros(model.nq)
-        # (numpy's stubs here do not declare ndarray a Buffer)
-        self._command_buffer: Any = memoryview(cast(Any, self.command))
-        self._q_buffer: Any = memoryview(cast(Any, self.q))
         self._actuator_dofs = np.ascontiguousarray(actuator_dofs, dtype=np.intc)
         self._effort_limit = np.ascontiguousarray(effort_limit, dtype=float)
         #: the velocity ``(qpos - q) / dt`` (rad/s), written by each period
@@ -91,9 +104,11 @@ class CompiledPeriod:
         self._block = PeriodBlock(model._address, data._address, _address(self.command),
                                   _address(self.q), _address(self._actuator_dofs),
                                   _address(self._effort_limit), _address(self.ports),
-                                  _address(self.moved), _address(self.summary), float(dt),
-                                  int(nstep), 0)
-        self._pointer = ctypes.c_void_p(ctypes.addressof(self._block))
+                                  _address(self.moved), _address(self.summary),
+                                  ctypes.cast(library.cjm_plant_period, _POINTER).value,
+                                  float(dt), int(nstep), 0, model.nv, model.nq)
+        #: the block's address, as :func:`period_call`'s ``run`` takes it
+        self._address = ctypes.addressof(self._block)
 
     def set_ports(self, ports: np.ndarray) -> None:
         """The ports of the next periods: one row per port, its MuJoCo body and site ids then
@@ -108,15 +123,14 @@ class CompiledPeriod:
             constraints: Sequence[Constraint]) -> np.ndarray | None:
         """One period under ``command`` from ``q`` with the walls of ``constraints``; the
         velocity moved (a new array), or None (nothing run) when a wall has no compiled
-        form. The ports are read again when a constraint or an object of its wall's
-        :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's
+        form. The ports are read again when a constraint, its wall or an object of the
+        wall's :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's
         (``is``: a replaced object is read again even when it holds the same numbers)."""
         objects: list[object] = []
         for constraint in constraints:
             wall = wall_of(constraint)
             if wall is not None:
-                objects.append(constraint)
-                objects += wall.compiled_version(constraint)
+                objects += (constraint, wall, *wall.compiled_version(constraint))
         cached = self._port_objects
         if len(objects) != len(cached) or not all(map(operator.is_, objects, cached)):
             rows = self._port_rows([(constraint, wall) for constraint in constraints
@@ -128,20 +142,41 @@ class CompiledPeriod:
         if not self._ports_compiled:
             return None
         try:  # copied through their buffers (float64 vectors of the right size: the loop's)
-            self._command_buffer[:] = command
-            self._q_buffer[:] = q
-        except (ValueError, TypeError):  # another type or shape: numpy's copy and checks
+            moved: np.ndarray = self._run(self._address, command, q)
+        except TypeError:  # another type, layout or shape: numpy's copy and checks
             np.copyto(self.command, command)
             np.copyto(self.q, q)
-        self._run(self._pointer)
-        return self.moved.copy()
+            moved = self._run(self._address, self.command, self.q)
+        return moved
 
 
 def compiled_period(model: mujoco.MjModel, data: mujoco.MjData, actuator_dofs: np.ndarray,
                     effort_limit: np.ndarray, dt: float, nstep: int,
                     port_rows: PortRows) -> CompiledPeriod | None:
-    """The compiled period of a plant, or None where the library is not available."""
-    library = wall_library()
-    return (None if library is None else
-            CompiledPeriod(library, model, data, actuator_dofs, effort_limit, dt, nstep,
+    """The compiled period of a plant, or None where the library or the call is not
+    available."""
+    library, call = wall_library(), period_call()
+    return (None if library is None or call is None else
+            CompiledPeriod(library, call, model, data, actuator_dofs, effort_limit, dt, nstep,
                            port_rows))
+
+
+@functools.cache
+def period_call() -> ModuleType | None:
+    """``period_call.c`` built (once, kept in the cache) against this Python's and numpy's
+    headers and imported; None where that is not possible."""
+    target = cached_build("period_call", CALL_SOURCES,
+                          [f"-I{sysconfig.get_path('include')}", f"-I{np.get_include()}"],
+                          f"{sys.version} {np.__version__}")
+    if target is None:
+        return None
+    loader = importlib.machinery.ExtensionFileLoader("cjm_period_call", str(target))
+    spec = importlib.util.spec_from_loader("cjm_period_call", loader)
+    if spec is None:
+        return None
+    try:
+        module = importlib.util.module_from_spec(spec)
+        loader.exec_module(module)
+    except (ImportError, OSError):
+        return None
+    return module

@@ -3,8 +3,8 @@
 ``port_wall.c`` is MuJoCo's passive-force callback (``mjcb_passive``) with the math of
 :class:`teleop.plants.walls.PortWall`. It is compiled once with the machine's C compiler
 against the ``mujoco`` wheel's headers and library, kept under the user's cache directory
-(``$XDG_CACHE_HOME/cjm-teleop``, as the bench's allocation counter) by a hash of its
-sources, the compiler (``sysconfig``'s ``CC``) and MuJoCo's version, loaded by ctypes and installed
+by a hash of its sources, the compiler and MuJoCo's version
+(:func:`~teleop.plants.cached_build.cached_build`), loaded by ctypes and installed
 as the process's callback (a C function pointer: MuJoCo calls it without the GIL). A
 plant attaches its MjData and its ports' parameters for one ``mj_step(m, d, nstep)`` call
 (:meth:`CompiledPorts.step`), so a period with holes is one call, as one without. The
@@ -21,21 +21,18 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import hashlib
-import os
-import shlex
-import subprocess
 import sys
-import sysconfig
-import tempfile
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
+from .cached_build import cached_build
+
 #: the library's sources: the walls' callback, and the plant's period around ``mj_step``
 #: (``plant_period.c``, :mod:`teleop.plants.compiled_period`)
-SOURCES = (Path(__file__).with_name("port_wall.c"), Path(__file__).with_name("plant_period.c"))
+SOURCES = tuple(Path(__file__).with_name(name)
+                for name in ("port_wall.c", "plant_period.c", "plant_period.h"))
 #: one port's block of doubles (port_wall.c's enum): body and site ids, then
 #: PortWall.compiled_parameters (link axis, centre, centre velocity, stiffness, damping),
 #: then what the callback writes (force, spring part, displacement)
@@ -100,25 +97,11 @@ def wall_library() -> ctypes.CDLL | None:
     libraries = sorted(package.glob("libmujoco.so*"))
     if not libraries or not (package / "include" / "mujoco" / "mujoco.h").is_file():
         return None
-    compiler = shlex.split(sysconfig.get_config_var("CC") or "cc")
-    digest = hashlib.sha256(b"\0".join(source.read_bytes() for source in SOURCES)
-                            + "\0".join(compiler).encode()
-                            + mujoco.__version__.encode())
-    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "cjm-teleop"
-    target = cache / f"port_wall-{digest.hexdigest()[:16]}.so"
-    if not target.is_file():
-        try:
-            target.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
-                built = Path(scratch) / target.name
-                subprocess.run([*compiler, "-shared", "-fPIC", "-O2", "-o", str(built),
-                                *(str(source) for source in SOURCES),
-                                f"-I{package / 'include'}", str(libraries[0]),
-                                f"-Wl,-rpath,{package}", "-lm"],
-                               check=True, capture_output=True, timeout=120)
-                built.replace(target)
-        except (OSError, subprocess.SubprocessError):
-            return None
+    target = cached_build("port_wall", SOURCES,
+                          [f"-I{package / 'include'}", str(libraries[0]),
+                           f"-Wl,-rpath,{package}", "-lm"], mujoco.__version__)
+    if target is None:
+        return None
     try:
         library = ctypes.CDLL(str(target))
     except OSError:
@@ -127,8 +110,6 @@ def wall_library() -> ctypes.CDLL | None:
     library.cjm_wall_attach.restype = None
     library.cjm_wall_detach.argtypes = [ctypes.c_void_p]
     library.cjm_wall_detach.restype = None
-    library.cjm_plant_period.argtypes = [ctypes.c_void_p]
-    library.cjm_plant_period.restype = None
     mujoco.set_mjcb_passive(library.cjm_wall_passive)
     return library
 

@@ -14,29 +14,15 @@
 #include <mujoco/mujoco.h>
 #include <math.h>
 
+#include "plant_period.h"
+
 void cjm_wall_attach(const mjData* data, double* ports, int count);
 void cjm_wall_detach(const mjData* data);
-
-// what one period reads and writes (teleop/plants/compiled_period.py's PeriodBlock)
-typedef struct {
-  const mjModel* model;
-  mjData* data;
-  const double* command;      // nv: the joint velocity command
-  const double* q;            // nq: the loop's configuration the period starts from
-  const int* actuator_dofs;   // nu: each actuator's degree of freedom
-  const double* effort_limit; // nv: each dof's effort limit (inf: none)
-  double* ports;              // port_count blocks of port_wall.c's kPortSize doubles
-  double* moved;              // nv, out: the velocity that takes q to the simulated qpos
-  double* summary;            // out: torque ratio, contact count, deepest penetration
-  double dt;
-  int nstep;
-  int port_count;
-} Period;
 
 enum { kRatio, kContacts, kPenetration };
 
 //! Run ``period``.
-void cjm_plant_period(const Period* period) {
+void cjm_plant_period(const PlantPeriod* period) {
   const mjModel* m = period->model;
   mjData* d = period->data;
   for (int a = 0; a < m->nu; ++a) d->ctrl[a] = period->command[period->actuator_dofs[a]];

@@ -105,22 +105,28 @@ class PortWall:
 
 #: constraint type -> its wall; a type not here (nor any of its bases) has none
 WALLS: dict[type[Constraint], Wall[Any]] = {}
+#: every constraint type :func:`wall_of` was asked about -> its wall (or None), emptied
+#: whenever a wall is registered
+_WALL_OF_TYPE: dict[type, Wall[Any] | None] = {}
 
 
 def register_wall(constraint_type: type[C], wall: Wall[C]) -> None:
     """Put ``wall`` wherever a constraint of ``constraint_type`` (or of a subclass without
     its own) is, on a physics plant."""
     WALLS[constraint_type] = wall
+    _WALL_OF_TYPE.clear()
 
 
 def wall_of(constraint: Constraint) -> Wall[Any] | None:
     """The wall a physics plant puts at ``constraint``, or None (the type's nearest
-    registered base decides)."""
-    for kind in type(constraint).__mro__:
-        wall = WALLS.get(kind)
-        if wall is not None:
-            return wall
-    return None
+    registered base decides; looked up once a type, a plant asks every period)."""
+    kind = type(constraint)
+    try:
+        return _WALL_OF_TYPE[kind]
+    except KeyError:
+        wall = next((WALLS[base] for base in kind.__mro__ if base in WALLS), None)
+        _WALL_OF_TYPE[kind] = wall
+        return wall
 
 
 def has_wall(constraint: Constraint) -> bool:
