@@ -5,6 +5,8 @@ Waits are counted in control periods; no wall-clock figure is asserted here."""
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import signal
 import subprocess
@@ -21,6 +23,7 @@ from test_web_cli import serve
 from test_ros2_wire import COMMANDS, LOOPBACK, STATES, CommandLog, domain, loopback, robot, sim
 
 from teleop import load_robot
+from teleop.plants.choice import PlantChoice
 from teleop.plants.ros2.node import Ros2Node
 from teleop.plants.ros2.ros2_plant import Ros2Plant
 from teleop.plants.ros2.settings import Ros2Settings
@@ -275,7 +278,8 @@ def test_teleop_web_plant_ros2_serves_the_robot_and_stops_it_at_exit(domain, rob
                                "--command-topic", COMMANDS, stop=stop)
         assert code == 0, err
         assert (f"(controller cjm), on the ROS 2 robot ({STATES} -> {COMMANDS}, domain "
-                f"{domain}, stopped when the state is 50 ms old); Ctrl-C stops") in out, out
+                f"{domain}, stopped when the state is 50 ms old, response time 7.96 ms); "
+                "Ctrl-C stops") in out, out
         assert "Traceback" not in err, err
         for _ in range(500):
             if log.poll() and not any(log.poll()[-1]):
@@ -373,3 +377,66 @@ def test_a_failing_pace_is_the_control_threads_error_not_its_silent_end(robot, d
     finally:
         control.stop()
         ros2.close()
+
+
+def test_the_damper_counts_on_the_ros2_robots_response_time(robot, domain, robot_process,
+                                                            tmp_path):
+    """Over real DDS, the page's collision damper counts on ``--response-time``
+    (``Ros2Settings.response_time``, docs/ros2.md) as on the MuJoCo plant's servos: every
+    row of a sphere 2.5 cm in front of the tip holds the gap ``tau`` ahead,
+    ``d_dot >= -(xi / (d_i - d_s)) (d - d_s + tau d_dot)`` (written here), the controller's
+    damper is that one while the robot is driven, and a saved scene keeps ``tau``."""
+    tau = 0.03
+    app = TeleopApp(robot, rate=RATE, plant="ros2",
+                    ros2_settings=settings_for(domain, stale_after=1.0, response_time=tau),
+                    record_dir=tmp_path, scene_dir=tmp_path)
+    try:
+        tip = app.robots.loops["main"].ee_placements()[0]
+        app.collisions.add("sphere", center=tip.translation + 0.065 * tip.rotation[:, 2])
+        app.collisions.set_on(True)
+        for _ in range(int(RATE) // 10):
+            app.step()
+        avoidance = app.collisions.avoidance
+        assert app.robots.loops["main"].controller.collisions is avoidance
+        assert app.robots.loops["main"].plant.measures().stopped == ""
+        q = app.robots.loops["main"].q.copy()
+    finally:
+        (app.ros2 or pytest.fail("no ROS 2 robot")).close()
+    xi, d_i, d_s = 0.5, 0.05, 0.005  # the defaults, written out
+    assert (avoidance.approach_speed, avoidance.detection_distance,
+            avoidance.safety_distance) == (xi, d_i, d_s)
+    assert avoidance.response_time == tau
+    assert avoidance.gain == pytest.approx(1.0 / ((d_i - d_s) / xi + tau), rel=1e-12)
+    model, data = robot.model, robot.model.createData()
+    pin.computeJointJacobians(model, data, q)
+    rows = avoidance.rows(model, data)
+    assert rows.size >= 1
+    held_ahead = -(xi / (d_i - d_s)) * (rows.distances - d_s + tau * rows.lower)
+    np.testing.assert_allclose(rows.lower, held_ahead, rtol=1e-12, atol=1e-18)
+    saved = json.loads(app.scenes.save("late.json").read_text())
+    assert saved["collisions"]["response_time"] == tau
+
+
+def test_a_ros2_plants_response_time_is_the_options_else_a_20_hz_servos():
+    """``--response-time`` sets the ROS 2 plant's ``tau`` wherever a plant is parsed (the
+    ``teleop`` commands' plant options, ``teleop web``'s); left out, a 20 Hz servo's time
+    constant (written here), the MuJoCo plant's default; refused by name out of range."""
+    from teleop.cli.main import build_parser
+    from teleop.cli.plant_options import plant_choice
+    from web import cli as web_cli
+
+    compare = ["compare", "--scenario", "paper-hole", "--plant", "ros2"]
+    parser = build_parser()
+    assert plant_choice(parser.parse_args([*compare, "--response-time", "0.02"])
+                        ).response_time == 0.02
+    servo = 1.0 / (2.0 * math.pi * 20.0)
+    assert plant_choice(parser.parse_args(compare)).response_time == pytest.approx(servo,
+                                                                                   rel=1e-15)
+    assert PlantChoice("ros2").response_time == PlantChoice("mujoco").response_time
+    web = web_cli._plant(web_cli.build_parser().parse_args(["--plant", "ros2",
+                                                             "--response-time", "0"]))
+    assert web["ros2_settings"].response_time == 0.0
+    with pytest.raises(ValueError, match="response_time must be"):
+        Ros2Settings(response_time=-0.1)
+    with pytest.raises(ValueError, match="response_time must be"):
+        Ros2Settings.from_dict({"response_time": float("nan")})

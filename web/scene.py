@@ -25,9 +25,10 @@ Version 2 added ``"collisions"`` (whether the controllers keep the pairs apart, 
 :class:`constraints.collision.CollisionAvoidance` settings, docs/design.md section 18) and
 ``"obstacles"`` (each its ``Obstacle.to_dict()`` with its id and where its gizmo was put).
 A version 1 scene still loads: it has no obstacles and keeps the session's collision
-settings. A session on the physics plant also writes the damper's ``"response_time"``
-(``tau``, s: its servos' time constant, docs/design.md 18.6); a scene opened takes the
-opening session's (its plant's, 0 on the kinematic one), whatever it says.
+settings. A session on the physics plant or a robot over ROS 2 also writes the damper's
+``"response_time"`` (``tau``, s: its servos' time constant, docs/design.md 18.6; over ROS 2
+``--response-time``, docs/ros2.md); a scene opened takes the opening session's (its
+plant's, 0 on the kinematic one), whatever it says.
 
 Version 3 added ``"force"``: the page's force control (docs/design.md section 21.6), the
 tissue placed under the tool and the force law's settings, or null when no tissue is

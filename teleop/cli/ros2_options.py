@@ -5,16 +5,22 @@ from __future__ import annotations
 
 import argparse
 
-from teleop.plants.ros2.settings import Ros2Settings
+from teleop.limits import MAX_RESPONSE_TIME_S
+from teleop.plants.ros2.settings import DEFAULT_RESPONSE_TIME, Ros2Settings
+
+from .arguments import bounded
 
 #: (option, attribute) of the ROS 2 options.
 ROS2_OPTIONS = (("--joint-states", "joint_states"), ("--command-topic", "command_topic"),
                 ("--command-joints", "command_joints"), ("--crtk", "crtk"),
-                ("--ros-domain", "ros_domain"), ("--realtime-priority", "realtime_priority"))
+                ("--ros-domain", "ros_domain"), ("--realtime-priority", "realtime_priority"),
+                ("--response-time", "response_time"))
 
 
-def add_ros2_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
-    """The options of :data:`ROS2_OPTIONS` on ``parser``."""
+def add_ros2_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+                     driven: bool = True) -> None:
+    """The options of :data:`ROS2_OPTIONS` on ``parser``; without ``driven`` (``teleop
+    sim --ros2``, which plays the robot) not ``--response-time``, the driven robot's."""
     parser.add_argument("--joint-states", metavar="TOPIC",
                         help="the robot's sensor_msgs/JointState topic (default: /joint_states)")
     parser.add_argument("--command-topic", metavar="TOPIC",
@@ -34,6 +40,13 @@ def add_ros2_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup) 
                              "(default: 40, below the controller_manager's 50; teleop sim "
                              "--ros2, which plays the robot: 50; without the privilege they "
                              "stay ordinary and the measures say so)")
+    if driven:
+        parser.add_argument("--response-time", type=bounded(float, 0.0, MAX_RESPONSE_TIME_S,
+                                                            unit="s"), metavar="S",
+                            help="how late the robot follows a velocity command (its servos' "
+                                 "time constant), what the collision damper counts on, as "
+                                 "1/(2 pi servo bandwidth) on the mujoco plant (default: "
+                                 f"{DEFAULT_RESPONSE_TIME:.4g}, a 20 Hz servo's)")
 
 
 def given_ros2_options(args: argparse.Namespace) -> list[str]:
@@ -46,6 +59,7 @@ def ros2_settings(args: argparse.Namespace) -> Ros2Settings:
     settings = {"joint_states": args.joint_states, "command_topic": args.command_topic,
                 "crtk": args.crtk, "domain": args.ros_domain,
                 "realtime_priority": args.realtime_priority,
+                "response_time": getattr(args, "response_time", None),
                 "command_joints": (None if args.command_joints is None else
                                    tuple(n.strip() for n in args.command_joints.split(",")
                                          if n.strip()))}

@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=bounded(float, 0.0, 1e6, unit="s"),
                         help="seconds to run (default: until Ctrl-C)")
     add_port_options(parser.add_argument_group("ports"))
-    add_ros2_options(parser.add_argument_group("ROS 2 (docs/ros2.md)"))
+    add_ros2_options(parser.add_argument_group("ROS 2 (docs/ros2.md)"), driven=False)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -75,8 +75,11 @@ class PlantChoice:
     def response_time(self) -> float:
         """How late the robot follows a command (s), what the collision damper counts on
         (docs/design.md 18.6): the physics plant's servos' time constant
-        (:attr:`PlantSettings.response_time`); 0 for the kinematic plant (as commanded,
-        its imperfections aside) and a robot over ROS 2 (unknown)."""
+        (:attr:`PlantSettings.response_time`), a robot over ROS 2's as its settings say
+        (:attr:`Ros2Settings.response_time`, ``--response-time``); 0 for the kinematic
+        plant (as commanded, its imperfections aside)."""
+        if self.kind == "ros2":
+            return (self.ros2 or Ros2Settings()).response_time
         return self.settings.response_time if self.physical else 0.0
 
     def make(self, robot, dt: float, imperfections: Imperfections | None = None,

@@ -7,13 +7,20 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, fields
 
-from constraints.validation import short_repr
+from constraints.limits import MAX_RESPONSE_TIME_S
+from constraints.validation import as_number, short_repr
 
 from .names import dds_topic, domain_id
 from .realtime import LOOP_PRIORITY, check_priority
 
 #: the most control periods :attr:`Ros2Settings.command_latency` predicts over
 MAX_COMMAND_LATENCY = 10
+
+#: :attr:`Ros2Settings.response_time` left out (s): the time constant ``1 / (2 pi 20 Hz)``
+#: of a 20 Hz joint servo, the MuJoCo plant's default (``PlantSettings().response_time``),
+#: so a robot over ROS 2 and the simulated one the damper counts on alike until the user
+#: gives the robot's own (docs/ros2.md, "The collision damper's response time")
+DEFAULT_RESPONSE_TIME = 1.0 / (2.0 * math.pi * 20.0)
 
 
 @dataclass(frozen=True)
@@ -41,6 +48,11 @@ class Ros2Settings:
         ros2_control's ``controller_manager``, whose update thread runs at 50 (the
         simulated robot's default, as it plays the robot); 0: ordinary scheduling
         (:mod:`teleop.plants.ros2.realtime`).
+    response_time : ``tau`` (s), how late the robot follows a velocity command (its
+        servos' time constant), in [0, :data:`~constraints.limits.MAX_RESPONSE_TIME_S`]:
+        what the collision damper counts on, ``1 / K = (d_i - d_s) / xi + tau``
+        (docs/design.md 18.6), as the MuJoCo plant's ``1 / (2 pi servo_bandwidth)``;
+        :data:`DEFAULT_RESPONSE_TIME` by default.
     """
 
     joint_states: str = "/joint_states"
@@ -52,6 +64,7 @@ class Ros2Settings:
     start_timeout: float = 5.0
     command_latency: int = 1
     realtime_priority: int = LOOP_PRIORITY
+    response_time: float = DEFAULT_RESPONSE_TIME
 
     def __post_init__(self) -> None:
         """``ValueError`` naming the field: a topic ROS 2 refuses, a domain outside
@@ -71,6 +84,8 @@ class Ros2Settings:
             raise ValueError(f"command_latency must be a whole number of periods in [0, "
                              f"{MAX_COMMAND_LATENCY}], got {self.command_latency!r}")
         check_priority(self.realtime_priority)
+        object.__setattr__(self, "response_time", as_number(
+            self.response_time, "response_time", 0.0, maximum=MAX_RESPONSE_TIME_S))
         joints = tuple(self.command_joints)
         if len(set(joints)) != len(joints):
             raise ValueError(f"command_joints names a joint twice: {list(joints)}")
@@ -115,4 +130,5 @@ class Ros2Settings:
                  else f"{self.joint_states} -> {self.command_topic}")
         domain = "ROS_DOMAIN_ID" if self.domain is None else str(self.domain)
         return (f"ROS 2 robot ({where}, domain {domain}, stopped when the state is "
-                f"{self.stale_after * 1000:g} ms old)")
+                f"{self.stale_after * 1000:g} ms old, response time "
+                f"{self.response_time * 1000:.3g} ms)")
