@@ -3,10 +3,10 @@
 Each constraint computes, at a configuration, its structure matrix ``S`` (the paper's
 reparametrisation of the twist of ``F_a``), its joint-space rows ``A qd = b`` with drift
 feedback, and its position error. See ``base.Constraint``. Each also describes itself
-(``kind``, ``to_dict`` / ``Constraint.from_dict``, ``position`` / ``move_to``,
-``placement`` / ``place``); ``registry.CONSTRAINT_TYPES`` lists the kinds. What each other
-layer does with a type (drawing it, the plant's wall, sliding it, the CJM's affine form) is
-a piece that layer registers by type.
+(``kind``, ``to_dict`` / ``Constraint.from_dict``, ``position`` / ``move_to``);
+``registry.CONSTRAINT_TYPES`` lists the kinds. What each other layer does with a type
+(drawing and placing it on the page, the plant's wall, sliding it, the CJM's affine form)
+is a piece that layer registers by type.
 """
 
 from .barrier import DEFAULT_BARRIER_GAIN, Barrier
@@ -22,7 +22,6 @@ from .base import (
 )
 from .hole import Hole
 from .plane import Plane
-from .placement import PlacementField
 from .point_lock import PointLock
 from .registry import CONSTRAINT_TYPES, register
 
@@ -39,7 +38,6 @@ __all__ = [
     "Constraint",
     "ConstraintPoint",
     "Parametrisation",
-    "PlacementField",
     "DEFAULT_BARRIER_GAIN",
     "DEFAULT_GAIN",
     "Hole",

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
 
 import pinocchio as pin
 
-from .placement import PlacementField
 from .plane import Plane
 
 #: Default barrier gain (1/s): the point may approach the plane at most at ``K d`` m/s.
@@ -32,11 +30,6 @@ class Barrier(Plane):
     default_gain = DEFAULT_BARRIER_GAIN
     kind = "barrier"
     label = "barrier"
-    placement: ClassVar[tuple[PlacementField, ...]] = (
-        *Plane.placement,
-        PlacementField("offset", "number", "offset (m)", default=0.01, step=0.005,
-                       hint="how far the barrier lies behind the point, along the normal "
-                            "(the point starts on its allowed side)"))
     #: ``K dt < 1`` (exclusive, like every gain bound here): the point never crosses
     #: the plane in discrete time
     max_gain_period = 1.0

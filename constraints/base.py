@@ -29,7 +29,6 @@ import pinocchio as pin
 from .compiled_form import CompiledForm
 from .kinematics import frame_placement, resolve_frame
 from .limits import MAX_CONSTRAINT_GAIN, MAX_POSITION_M, MAX_SPEED_M_S
-from .placement import PlacementField
 from .registry import constraint_type
 from .validation import as_number, as_unit_vector, as_vector, short_repr
 
@@ -214,13 +213,13 @@ class Constraint(CompiledForm, ABC):
 
     A constraint also describes itself: its ``kind`` name and ``label``, :meth:`to_dict` /
     :meth:`from_dict` (the constructor's arguments; the kinds are listed in
-    :mod:`constraints.registry`), the world reference point of its geometry
-    (:attr:`position`, moved by :meth:`move_to`), and what placing it on a robot as the
-    robot is now takes (:attr:`placement`, :meth:`place`). A new type sets the class
-    attributes below and is registered (:func:`constraints.registry.register`). What the
-    other layers do with a type is a piece each registers by type, looked up along the
-    type's bases (no layer branches on a type): the page's drawing
-    (``web/constraint_drawing.py``), a physics plant's wall (``teleop/plants/walls.py``),
+    :mod:`constraints.registry`), and the world reference point of its geometry
+    (:attr:`position`, moved by :meth:`move_to`). A new type sets the class attributes
+    below and is registered (:func:`constraints.registry.register`). What the other
+    layers do with a type is a piece each registers by type, looked up along the type's
+    bases (no layer branches on a type): the page's drawing
+    (``web/constraint_drawing.py``) and placement (``web/constraint_placement.py``), a
+    physics plant's wall (``teleop/plants/walls.py``),
     a port the collision avoidance leaves alone (:mod:`constraints.collision.ports`),
     sliding along its link (``teleop/experiments/sliding.py``), the analytical CJM's
     affine form (``controllers/cjm/affine_forms.py``). The compiled CJM step's declaration
@@ -251,9 +250,6 @@ class Constraint(CompiledForm, ABC):
     omitted_at_default: ClassVar[tuple[str, ...]] = ()
     #: what the operator reads of the type ("point lock"): names and messages
     label: ClassVar[str] = "constraint"
-    #: what :meth:`place` takes, one field per keyword (:mod:`constraints.placement`);
-    #: empty: the type is not placed from a user interface
-    placement: ClassVar[tuple[PlacementField, ...]] = ()
     #: world velocity (m/s) of the reference point, fed forward (set by :meth:`move_to`)
     velocity: np.ndarray
 
@@ -403,15 +399,6 @@ class Constraint(CompiledForm, ABC):
         ``|error|``, as ``np.linalg.norm`` computes it (``sqrt(e . e)``) without its checks."""
         error = self.error(placement)
         return math.sqrt(error @ error)
-
-    # -- placing it on a robot as the robot is now -------------------------------------------
-
-    @classmethod
-    def place(cls, robot: RobotLike, q: np.ndarray, **fields) -> "Constraint":
-        """A constraint of this type where the robot is at ``q``, from the values of its
-        :attr:`placement` fields (checked by field type by the caller: a link, a distance
-        along it or a link point, a unit world direction, numbers)."""
-        raise NotImplementedError(f"{cls.__name__} declares no placement")
 
     # -- description: to and from a JSON-ready dict ----------------------------------------
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -19,7 +18,6 @@ from .base import (
     link_axis_of,
     perpendicular_basis,
 )
-from .placement import ALONG_LINK, ON_ARM, PlacementField
 from .limits import MAX_POSITION_M, MAX_SPEED_M_S, MAX_TISSUE_DAMPING, MAX_TISSUE_STIFFNESS
 from .validation import as_number
 
@@ -62,7 +60,6 @@ class Hole(Constraint):
     kind = "hole"
     position_attribute = "center"
     label = "hole"
-    placement: ClassVar[tuple[PlacementField, ...]] = (ON_ARM, ALONG_LINK)
     omitted_at_default = ("tissue_stiffness", "tissue_damping")
     compiled_kind = "hole"
     compiled_fields = ("_anchor", "_link_axis", "_gain")
@@ -108,12 +105,6 @@ class Hole(Constraint):
         placement = frame_placement(robot.model, q, link)
         center = placement.act(distance * axis)
         return cls(link, center, link_axis=axis, gain=gain)
-
-    @classmethod
-    def place(  # type: ignore[override]  # the type's own placement fields
-            cls, robot: RobotLike, q: np.ndarray, link: str, distance: float) -> "Hole":
-        """:meth:`on_link`: a hole ``distance`` m along ``link``'s axis, where it is at ``q``."""
-        return cls.on_link(robot, q, distance, link=link)
 
     @classmethod
     def at(

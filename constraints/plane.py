@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -16,7 +15,6 @@ from .base import (
     link_point_at,
     perpendicular_basis,
 )
-from .placement import ALONG_LINK, ON_ANY_LINK, ON_LINK_POINT, PlacementField
 from .limits import MAX_POSITION_M, MAX_SPEED_M_S
 from .validation import as_number
 
@@ -49,11 +47,6 @@ class Plane(Constraint):
     compiled_kind = "plane"
     compiled_fields = ("link_point", "plane_point", "normal", "velocity", "_gain")
     label = "plane"
-    placement: ClassVar[tuple[PlacementField, ...]] = (
-        ON_ANY_LINK, ALONG_LINK, ON_LINK_POINT,
-        PlacementField("normal", "direction", "normal (world)", default=(0.0, 1.0, 0.0),
-                       step=0.1, hint="in world coordinates; a barrier keeps the point on "
-                                      "the side the normal points to"))
 
     def __init__(
         self,
@@ -82,35 +75,26 @@ class Plane(Constraint):
         gain: float | None = None,
         tolerance: float = DEFAULT_PLANE_TOLERANCE,
         plane_point=None,
+        offset: float = 0.0,
     ) -> "Plane":
         """A plane through a link point as it is at ``q``, with a world ``normal``.
 
         Give the point either as ``link_point`` (link coordinates) or as ``distance``
         metres along the robot's ``link_axis``. With ``plane_point`` given, the plane
-        passes there instead, and a link point farther than ``tolerance`` from it raises
-        ``ValueError`` saying how far.
+        passes there instead; with ``offset``, ``offset`` m behind the point along the
+        unit ``normal``. A link point farther than ``tolerance`` from the plane raises
+        ``ValueError`` saying how far (a barrier's: behind it).
         """
         link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
         point_world = placement.act(link_point)
+        offset = as_number(offset, f"{cls.label} offset")
         if plane_point is None:
             plane_point = point_world
+            if offset != 0.0:
+                plane_point = point_world - offset * as_unit_vector(normal, f"{cls.label} normal")
         plane = cls(link, link_point, plane_point, normal, gain=gain)
         plane._check_start(plane.signed_distance(placement), as_number(tolerance, "tolerance", 0.0))
         return plane
-
-    @classmethod
-    def place(  # type: ignore[override]  # the type's own placement fields
-            cls, robot: RobotLike, q: np.ndarray, link: str, normal, distance=None,
-            link_point=None, offset: float = 0.0) -> "Plane":
-        """Through a point of ``link`` as it is at ``q`` (``distance`` m along its axis, or
-        ``link_point`` in its coordinates), moved ``offset`` m against the unit world
-        ``normal`` (:meth:`through_link_point`: the point must then satisfy the type's
-        start check, on the plane or on a barrier's allowed side)."""
-        link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
-        normal = as_unit_vector(normal, f"{cls.label} normal")
-        plane_point = placement.act(link_point) - as_number(offset, f"{cls.label} offset") * normal
-        return cls.through_link_point(robot, q, normal, link_point=link_point, link=link,
-                                      plane_point=plane_point)
 
     def _check_start(self, signed_distance: float, tolerance: float) -> None:
         if abs(signed_distance) > tolerance:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -15,7 +14,6 @@ from .base import (
     link_point_at,
 )
 from .limits import MAX_POSITION_M, MAX_SPEED_M_S
-from .placement import ALONG_LINK, ON_ARM, PlacementField
 
 
 class PointLock(Constraint):
@@ -39,7 +37,6 @@ class PointLock(Constraint):
     compiled_kind = "point_lock"
     compiled_fields = ("link_point", "target", "velocity", "_gain")
     label = "point lock"
-    placement: ClassVar[tuple[PlacementField, ...]] = (ON_ARM, ALONG_LINK)
 
     def __init__(self, link: str, link_point, target, gain: float = DEFAULT_GAIN,
                  velocity=(0.0, 0.0, 0.0)) -> None:
@@ -55,12 +52,6 @@ class PointLock(Constraint):
         """Lock a link point where it is at ``q`` (``link_point`` or ``distance`` on the axis)."""
         link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
         return cls(link, link_point, placement.act(link_point), gain=gain)
-
-    @classmethod
-    def place(  # type: ignore[override]  # the type's own placement fields
-            cls, robot: RobotLike, q: np.ndarray, link: str, distance: float) -> "PointLock":
-        """:meth:`on_link`: the point ``distance`` m along ``link``'s axis, where it is at ``q``."""
-        return cls.on_link(robot, q, distance=distance, link=link)
 
     def compiled_values(self) -> np.ndarray:
         """``[link_point, target, velocity, gain]`` (10,)."""

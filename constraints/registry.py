@@ -5,8 +5,9 @@ The table sits below every constraint module (it imports none of them), so
 :mod:`constraints.base` reads it without an import circle; :mod:`constraints` fills it
 with the built-in kinds. Adding a constraint type is one new module (a
 :class:`~constraints.base.Constraint` subclass that sets ``kind``, ``dim``,
-``position_attribute``, ``label`` and its ``placement`` declaration, and keeps
-each constructor argument as an attribute of the same name) plus :func:`register`.
+``position_attribute`` and ``label``, and keeps each constructor argument as an attribute
+of the same name) plus :func:`register`; what another layer does with it (the page's
+placement and drawing...) that layer registers.
 """
 
 from __future__ import annotations

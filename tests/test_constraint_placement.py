@@ -1,5 +1,5 @@
-"""Each constraint type's placement declaration and ``place``; the registry's ``register``;
-the gain rule written once.
+"""Each built-in constraint type's placement on the page (``web.constraint_placement``)
+and its ``place``; the registry's ``register``; the gain rule written once.
 
 The reference for ``place`` is Pinocchio's forward kinematics at the configuration: the
 point a declaration's distance names is ``distance`` m along the robot's link axis from
@@ -17,31 +17,41 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from constraints import (
-    BUILTIN_TYPES,
-    CONSTRAINT_TYPES,
-    Barrier,
-    Constraint,
-    Hole,
-    PlacementField,
-    register,
-)
-from constraints.placement import FIELD_TYPES
+from constraints import BUILTIN_TYPES, CONSTRAINT_TYPES, Barrier, Constraint, Hole, register
+from web.constraint_placement import place, placement_of
+from web.placement_fields import FIELD_TYPES, PlacementField
 
 directions = st.tuples(*[st.floats(-1.0, 1.0)] * 3).filter(lambda v: np.linalg.norm(v) > 0.1)
 
 
 @pytest.mark.parametrize("kind_type", BUILTIN_TYPES, ids=lambda t: t.kind)
 def test_every_declared_field_is_a_keyword_of_place(kind_type):
-    keywords = inspect.signature(kind_type.place).parameters
-    names = [field.name for field in kind_type.placement]
+    placement = placement_of(kind_type)
+    keywords = list(inspect.signature(placement.place).parameters)
+    assert keywords[:3] == [keywords[0], "robot", "q"]  # the type, then robot and q
+    names = [field.name for field in placement.fields]
     assert len(set(names)) == len(names)
-    assert set(names) <= set(keywords) - {"robot", "q"}
-    required = {name for name, parameter in keywords.items()
-                if parameter.default is inspect.Parameter.empty} - {"robot", "q"}
+    assert set(names) <= set(keywords[3:])
+    required = {name for name, parameter in inspect.signature(placement.place).parameters.items()
+                if parameter.default is inspect.Parameter.empty} - set(keywords[:3])
     assert required <= set(names)  # a caller can always fill every required keyword
-    assert [field.type for field in kind_type.placement].count("link") == 1
-    assert all(field.type in FIELD_TYPES for field in kind_type.placement)
+    assert [field.type for field in placement.fields].count("link") == 1
+    assert all(field.type in FIELD_TYPES for field in placement.fields)
+
+
+def test_a_subclass_is_placed_as_its_base_and_a_type_registered_nowhere_is_not():
+    class LongHole(Hole):
+        pass
+
+    class Fixed(Constraint):
+        kind = "fixed"
+        label = "fixed point"
+
+    assert placement_of(LongHole) is placement_of(Hole)
+    assert placement_of(Barrier) is not placement_of(Barrier.__mro__[1])  # its own: an offset
+    assert placement_of(Fixed) is None
+    with pytest.raises(ValueError, match="a fixed point is not placed from the UI"):
+        place(Fixed, None, None)
 
 
 def test_a_field_of_an_unknown_type_or_link_choice_is_refused_naming_it():
@@ -54,7 +64,7 @@ def test_a_field_of_an_unknown_type_or_link_choice_is_refused_naming_it():
 def values_for(kind_type, robot, distance: float, normal, offset: float) -> dict:
     given = {"link": robot.constrained_link, "distance": distance, "normal": normal,
              "offset": offset}
-    return {field.name: given[field.name] for field in kind_type.placement
+    return {field.name: given[field.name] for field in placement_of(kind_type).fields
             if field.type != "link_point"}  # the constrained link has an axis: a distance
 
 
@@ -68,8 +78,9 @@ def test_place_puts_the_constraint_where_the_link_point_is_and_it_holds_there(
     q = np.clip(sda10f.q_home + np.resize(joints, model.nq),
                 model.lowerPositionLimit, model.upperPositionLimit)
     unit = np.asarray(normal) / np.linalg.norm(normal)
-    constraint = kind_type.place(sda10f, q, **values_for(kind_type, sda10f, distance, unit,
-                                                          offset))
+    constraint = place(kind_type, sda10f, q, **values_for(kind_type, sda10f, distance, unit,
+                                                           offset))
+    assert type(constraint) is kind_type
     data = model.createData()
     pin.framesForwardKinematics(model, data, q)
     link = data.oMf[model.getFrameId(sda10f.constrained_link)]
@@ -85,8 +96,8 @@ def test_place_puts_the_constraint_where_the_link_point_is_and_it_holds_there(
 
 def test_a_barrier_placed_behind_its_point_is_refused(sda10f):
     with pytest.raises(ValueError, match="wrong side of the barrier"):
-        Barrier.place(sda10f, sda10f.q_home, sda10f.constrained_link, [0.0, 0.0, 1.0],
-                      distance=0.05, offset=-0.01)
+        place(Barrier, sda10f, sda10f.q_home, link=sda10f.constrained_link,
+              normal=[0.0, 0.0, 1.0], distance=0.05, offset=-0.01)
 
 
 def test_register_refuses_a_type_without_a_kind_or_a_kind_taken(monkeypatch):

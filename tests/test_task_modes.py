@@ -301,8 +301,8 @@ def test_home_behind_a_barrier_is_not_planned_and_says_so(sda10f):
     for _ in range(1500):  # 3 cm down: the instrument slides in through the hole
         loop.tick(pin.SE3(start.rotation, start.translation + [0.0, 0.0, -0.03]))
     # a barrier 1 mm above a point of the link, the allowed side below: home is above it
-    barrier = Barrier.place(sda10f, loop.q, link=hole.link, normal=[0.0, 0.0, -1.0],
-                            distance=0.04, offset=0.001)
+    barrier = Barrier.through_link_point(sda10f, loop.q, [0.0, 0.0, -1.0], link=hole.link,
+                                         distance=0.04, offset=0.001)
     frames = [sda10f.model.getFrameId(hole.link)] * 2
     data = sda10f.model.createData()
     pin.framesForwardKinematics(sda10f.model, data, sda10f.q_home)

@@ -1,10 +1,11 @@
-"""The UI is built from the constraint registry: it names no constraint kind, and a kind
-defined here, registered, is placed, drawn and offered by the UI without touching web/.
+"""The UI is built from the registries: it names no constraint kind outside the files that
+register the built-in kinds' pieces, and a kind defined here, registered with its
+placement and drawing, is placed, drawn and offered by the UI without touching web/.
 
 The kind: a point of the link kept on a world line (two equalities), written here with
-its own directions, error and placement. The reference is independent of the controllers:
-the point's world velocity by central finite differences of Pinocchio's forward
-kinematics, and its distance from the line by forward kinematics.
+its own directions and error, and the page's placement of it. The reference is
+independent of the controllers: the point's world velocity by central finite differences
+of Pinocchio's forward kinematics, and its distance from the line by forward kinematics.
 """
 
 from __future__ import annotations
@@ -21,12 +22,13 @@ from browser_helpers import free_port
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from constraints import CONSTRAINT_TYPES, Constraint, PlacementField
+from constraints import CONSTRAINT_TYPES, Constraint
 from constraints.base import DEFAULT_GAIN, link_point_at, perpendicular_basis
-from constraints.placement import ALONG_LINK, ON_ARM
 from constraints.validation import as_unit_vector, as_vector
 from web.app import ControlThread, TeleopApp
 from web.constraint_drawing import DRAWINGS, SHAPES, ConstraintDrawing
+from web.constraint_placement import PLACEMENTS, ConstraintPlacement
+from web.placement_fields import ALONG_LINK, ON_ARM, PlacementField
 from web.ui import TeleopUI
 
 WEB = Path(__file__).resolve().parent.parent / "web"
@@ -51,10 +53,6 @@ class PointOnLine(Constraint):
     kind = "point_on_line"
     position_attribute = "line_point"
     label = "point on line"
-    placement = (ON_ARM, ALONG_LINK,
-                 PlacementField("direction", "direction", "direction (world)",
-                                default=(1.0, 0.0, 0.0), step=0.1,
-                                hint="the line's direction, world coordinates"))
 
     def __init__(self, link: str, link_point, line_point, direction,
                  gain: float = DEFAULT_GAIN, velocity=(0.0, 0.0, 0.0)) -> None:
@@ -64,11 +62,6 @@ class PointOnLine(Constraint):
         self.direction = as_unit_vector(direction, "line direction")
         self.velocity = as_vector(velocity, 3, "line velocity")
         self._across = perpendicular_basis(self.direction)
-
-    @classmethod
-    def place(cls, robot, q, link: str, distance: float, direction) -> "PointOnLine":
-        link, link_point, placement = link_point_at(robot, q, link, distance=distance)
-        return cls(link, link_point, placement.act(link_point), direction)
 
     def point(self, placement: pin.SE3) -> np.ndarray:
         return self.link_point
@@ -83,11 +76,28 @@ class PointOnLine(Constraint):
         return self._across @ self.velocity
 
 
+def line_through_link_point(line_type: type[PointOnLine], robot, q, link: str,
+                            distance: float, direction) -> PointOnLine:
+    """The page's ``place`` of a PointOnLine: the line through the point ``distance`` m
+    along ``link``'s axis, where it is at ``q``."""
+    link, link_point, placement = link_point_at(robot, q, link, distance=distance)
+    return line_type(link, link_point, placement.act(link_point), direction)
+
+
+#: the page's placement of a PointOnLine: an arm, a distance and the line's direction
+LINE_PLACEMENT = ConstraintPlacement(
+    (ON_ARM, ALONG_LINK, PlacementField("direction", "direction", "direction (world)",
+                                        default=(1.0, 0.0, 0.0), step=0.1,
+                                        hint="the line's direction, world coordinates")),
+    line_through_link_point)
+
+
 @pytest.fixture()
 def registered(monkeypatch):
-    """PointOnLine in the registry for one test, drawn as a magenta point (both removed
-    after it)."""
+    """PointOnLine in the registry for one test, placed by the page and drawn as a magenta
+    point (all removed after it)."""
     monkeypatch.setitem(CONSTRAINT_TYPES, PointOnLine.kind, PointOnLine)
+    monkeypatch.setitem(PLACEMENTS, PointOnLine, LINE_PLACEMENT)
     monkeypatch.setitem(DRAWINGS, PointOnLine, ConstraintDrawing("point", (200, 0, 200)))
 
 
@@ -167,8 +177,8 @@ def test_the_scan_finds_a_kind_named_in_code_or_prose():
 
 
 #: the files under web/ that register the per-type pieces of the built-in kinds (their
-#: drawing): the one place web names them
-REGISTRATIONS = {WEB / "constraint_drawing.py"}
+#: drawing and placement): the places web names them
+REGISTRATIONS = {WEB / "constraint_drawing.py", WEB / "constraint_placement.py"}
 
 
 def test_no_file_under_web_names_a_constraint_kind():
@@ -280,6 +290,7 @@ def test_a_registered_kind_holds_for_any_line_and_drag(sda10f, tmp_path_factory,
                                                         direction, nudge):
     with pytest.MonkeyPatch.context() as patch:
         patch.setitem(CONSTRAINT_TYPES, PointOnLine.kind, PointOnLine)
+        patch.setitem(PLACEMENTS, PointOnLine, LINE_PLACEMENT)
         held_along_a_drag(sda10f, tmp_path_factory.mktemp("line"), distance, direction,
                           nudge)
 

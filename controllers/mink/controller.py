@@ -81,9 +81,9 @@ class MinkController(GuardedController):
     The default cost is about as small as mink's solve still resolves the posture with:
     docs/design.md section 10 gives the deviation from the CJM that remains.
 
-    **Equalities.** Every equality (``Hole``, ``Plane``, ``PointLock``) is a
-    :class:`ConstraintTask` in ``solve_ik(..., constraints=...)`` and barriers are
-    :class:`BarrierLimit` rows; both evaluate the constraints' own ``rows`` with
+    **Equalities.** Every equality constraint (``is_equality``: a hole, a plane, a point
+    lock) is a :class:`ConstraintTask` in ``solve_ik(..., constraints=...)`` and every
+    one-sided one (a barrier) is :class:`BarrierLimit` rows; both evaluate the constraints' own ``rows`` with
     Pinocchio at mink's configuration (joints mapped by name). After the solve the rows
     are checked: ``info.equality_residual = max |A qd - b|``, and a residual above
     ``equality_tolerance`` (infeasible equalities that a backend answered in the least
@@ -123,8 +123,8 @@ class MinkController(GuardedController):
         limits through ``dt`` with ``limit_gain``, on Pinocchio's velocity, a planar base's
         in its own frame; docs/design.md 10.7),
         else a sequence of ``mink.Limit`` instances or factories ``f(mj_model) -> Limit``
-        (``mink.ConfigurationLimit`` itself is one); ``()`` for none. Barrier limits
-        are always added.
+        (``mink.ConfigurationLimit`` itself is one); ``()`` for none. The one-sided
+        constraints' limits are always added.
     limit_gain : ``g`` of the joint box (:class:`controllers.joint_limits.JointBounds`).
     equality_tolerance : largest ``|A qd - b|`` (m/s) accepted from the backend.
     solver_settings : backend keyword arguments, passed as they are (they override the

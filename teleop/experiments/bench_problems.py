@@ -205,13 +205,14 @@ def bench_constraints(robot: Robot, kind: str) -> list[Constraint]:
     link = robot.constrained_links[0]
     distance = DEFAULT_HOLE_DISTANCE.get(robot.name, 0.1)
     if kind == "lock":
-        return [PointLock.place(robot, robot.q_home, link, distance)]
+        return [PointLock.on_link(robot, robot.q_home, distance=distance, link=link)]
     normal = motion_across_link(robot, link)
     if kind == "plane":
-        return [Plane.place(robot, robot.q_home, link, normal, distance=distance)]
+        return [Plane.through_link_point(robot, robot.q_home, normal, distance=distance,
+                                         link=link)]
     if kind == "barrier":
-        return [Barrier.place(robot, robot.q_home, link, -normal, distance=distance,
-                              offset=BARRIER_OFFSET)]
+        return [Barrier.through_link_point(robot, robot.q_home, -normal, distance=distance,
+                                           link=link, offset=BARRIER_OFFSET)]
     raise ValueError(f"unknown constraint problem {kind!r}: hole, plane, lock or barrier")
 
 

@@ -19,6 +19,7 @@ from constraints.registry import constraint_type
 from constraints.validation import as_vector, short_repr
 from teleop.robots import Robot
 
+from ..constraint_placement import place
 from .limits import MAX_TARGET_DISTANCE
 from .placed import PlacedEntry, remove_every
 from .placing import Placement, moving_links
@@ -94,12 +95,12 @@ class ConstraintEditing:
         """Place a constraint; its id (``"<kind>-<n>"``).
 
         ``constraint`` is a kind name of :data:`constraints.CONSTRAINT_TYPES` with the
-        values of that type's ``placement`` fields (``add(kind, distance=0.08)``; a field
-        left out takes its declared default, a link its first choice): the constraint
-        goes where the main robot is now. Or it is a built constraint, placed as it is.
-        Either takes the session's drift gain. A bad value, or a constraint the
-        controllers refuse (unknown link, gain unstable at this rate), raises
-        ``ValueError`` and places nothing.
+        values of that type's placement fields (:mod:`web.constraint_placement`:
+        ``add(kind, distance=0.08)``; a field left out takes its declared default, a link
+        its first choice): the constraint goes where the main robot is now. Or it is a
+        built constraint, placed as it is. Either takes the session's drift gain. A bad
+        value, or a constraint the controllers refuse (unknown link, gain unstable at this
+        rate), raises ``ValueError`` and places nothing.
         """
         if isinstance(constraint, str):
             kind_type = constraint_type(constraint)
@@ -107,7 +108,7 @@ class ConstraintEditing:
                 q = self._session.configuration()
                 values = Placement(kind_type, self.robot, lambda link: frame_placement(
                     self.robot.model, q, link, self._data)).values(fields)
-                return self._place(kind_type.place(self.robot, q, **values))
+                return self._place(place(kind_type, self.robot, q, **values))
         if not isinstance(constraint, Constraint):
             raise ValueError(f"expected a constraint or a constraint kind "
                              f"({', '.join(CONSTRAINT_TYPES)}), got {short_repr(constraint)}")

@@ -1,6 +1,7 @@
-"""Placing a constraint from its type's declaration: the operator's values, checked by
-field type (:mod:`constraints.placement`), become the keywords of the type's ``place``
-(docs/design.md section 5.5). Nothing here knows a constraint kind."""
+"""Placing a constraint from its type's registered placement: the operator's values,
+checked by field type (:mod:`web.placement_fields`), become the keywords of the placement's
+``place`` (:mod:`web.constraint_placement`, docs/design.md section 5.5). Nothing here
+knows a constraint kind."""
 
 from __future__ import annotations
 
@@ -9,10 +10,12 @@ from collections.abc import Callable, Mapping
 import numpy as np
 import pinocchio as pin
 
-from constraints import Constraint, PlacementField
+from constraints import Constraint
 from constraints.validation import as_number, as_vector
 from teleop.robots import Robot
 
+from ..constraint_placement import placement_of
+from ..placement_fields import PlacementField
 from .limits import MAX_LINK_POINT
 
 #: the field types that say where on the link the constrained point is
@@ -67,10 +70,11 @@ class Placement:
     def values(self, given: Mapping) -> dict:
         """The keywords of ``place`` from the operator's ``given`` values: a field not
         given takes its declared default; a bad value raises ``ValueError`` naming it."""
-        declared = {field.name: field for field in self.type.placement}
-        if not declared:
-            raise ValueError(f"a {self.label} is not placed from the UI: its type declares "
+        placement = placement_of(self.type)
+        if placement is None:
+            raise ValueError(f"a {self.label} is not placed from the UI: its type registers "
                              "no placement")
+        declared = {field.name: field for field in placement.fields}
         for name in given:
             if name not in declared:
                 raise ValueError(f"unknown field {name!r} for a {self.label} (its fields: "

@@ -1,7 +1,7 @@
 """A constraint type's form in the Constraints tab, built from its registered declaration
-(docs/design.md section 5.5): an input per ``placement`` field
-(:mod:`constraints.placement`), those that do not apply on the chosen link hidden. No
-kind is named here: a new constraint type appears in the tab by being registered."""
+(docs/design.md section 5.5): an input per field of its placement
+(:mod:`web.constraint_placement`), those that do not apply on the chosen link hidden. No
+kind is named here: a new constraint type appears in the tab by registering its placement."""
 
 from __future__ import annotations
 
@@ -10,16 +10,19 @@ from typing import Any
 import numpy as np
 import viser
 
-from constraints import Constraint, PlacementField
+from constraints import Constraint
 from teleop.robots import Robot
 
 from ..app.placing import field_applies, link_choices
+from ..constraint_placement import placement_of
+from ..placement_fields import PlacementField
 from .placed_panel import NONE
 
 
 class ConstraintForm:
     """The inputs of ``kind_type``'s placement fields on ``robot`` (a
-    :class:`web.ui.placed_panel.KindForm`), labelled "<type label> <field label>"."""
+    :class:`web.ui.placed_panel.KindForm`), labelled "<type label> <field label>"; the
+    type has a registered placement (:func:`web.constraint_placement.placement_of`)."""
 
     expanded: bool = True
     hint: str | None = None
@@ -29,11 +32,17 @@ class ConstraintForm:
         self.robot = robot
         self.label = self.folder = kind_type.label
         self.inputs: dict[str, viser.GuiInputHandle[Any]] = {}
-        links = [field for field in kind_type.placement if field.type == "link"]
+        placement = placement_of(kind_type)
+        if placement is None:
+            raise ValueError(f"a {kind_type.label} is not placed from the UI: its type "
+                             "registers no placement")
+        #: the placement's fields, one input each
+        self.fields = placement.fields
+        links = [field for field in self.fields if field.type == "link"]
         self._link_field = links[0] if links else None
 
     def build(self, gui: viser.GuiApi) -> None:
-        self.inputs = {field.name: self._input(gui, field) for field in self.type.placement}
+        self.inputs = {field.name: self._input(gui, field) for field in self.fields}
         if self._link_field is not None:
             self.inputs[self._link_field.name].on_update(lambda _: self._show_applicable())
         self._show_applicable()
@@ -75,7 +84,7 @@ class ConstraintForm:
         """On the chosen link, show the inputs that apply (a distance on a link with an
         instrument axis, a point in link coordinates on one without)."""
         link = self._placed_on()
-        for field in self.type.placement:
+        for field in self.fields:
             if field.type in ("distance", "link_point"):
                 self.inputs[field.name].visible = field_applies(field, self.robot, link)
 
@@ -84,7 +93,7 @@ class ConstraintForm:
         None when there is none to choose)."""
         chosen, link = self._chosen_link(), self._placed_on()
         values: dict[str, object] = {}
-        for field in self.type.placement:
+        for field in self.fields:
             if field.type == "link":
                 values[field.name] = chosen
             elif field_applies(field, self.robot, link):

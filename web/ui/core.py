@@ -53,6 +53,7 @@ from constraints.collision import OBSTACLE_TYPES
 
 from ..access import Access
 from ..app import ControlThread, TeleopApp
+from ..constraint_placement import placement_of
 from ..inbox import Inbox
 from ..pacing import Tally
 from ..robot_view import floor_height
@@ -212,7 +213,8 @@ class TeleopUI:
         with self.tabs.add_tab("Constraints"):
             self.constraint_panel = PlacedPanel(
                 gui, {kind: ConstraintForm(constraint_type(kind), app.robot)
-                      for kind in CONSTRAINT_TYPES if constraint_type(kind).placement},
+                      for kind in CONSTRAINT_TYPES
+                      if placement_of(constraint_type(kind)) is not None},
                 PlacedActions(lambda kind, values: app.constraints.add(kind, **values),
                               app.constraints.remove, app.constraints.clear),
                 PlacedWords("placed", "Remove", "Clear constraints"), self._guarded)

@@ -1,9 +1,10 @@
-"""What a constraint type asks for when it is placed on a robot as the robot is now.
+"""The inputs of placing a constraint on a robot as the robot is now.
 
-Each constraint type declares its ``placement``: a tuple of :class:`PlacementField`, one
-per keyword of its :meth:`~constraints.base.Constraint.place`. A user interface builds its
-inputs from these declarations and checks the values by field type (the few types below),
-so it never names a constraint kind (docs/design.md section 5.5).
+Each constraint type the page places registers a
+:class:`web.constraint_placement.ConstraintPlacement`: a tuple of :class:`PlacementField`,
+one per keyword of its ``place``. The page builds its inputs from these declarations and
+checks the values by field type (the few types below), so it names no constraint kind
+outside the registrations (docs/design.md section 5.5).
 
 Field types:
 
@@ -30,14 +31,14 @@ FIELD_TYPES: tuple[str, ...] = ("link", "distance", "link_point", "direction", "
 
 @dataclass(frozen=True)
 class PlacementField:
-    """One input of a constraint type's :meth:`~constraints.base.Constraint.place`.
+    """One input of a constraint type's ``place`` (:mod:`web.constraint_placement`).
 
     Attributes
     ----------
     name : the keyword of ``place``.
     type : one of :data:`FIELD_TYPES` (the module docstring says what each holds).
-    label : what the operator reads after the type's own label (``"at (m)"`` on a hole
-        reads "hole at (m)").
+    label : what the operator reads after the type's own label (``"at (m)"`` reads
+        "<type label> at (m)").
     default : the value an input starts at (a tuple for a vector; None for a link: the
         first of its choices).
     minimum, maximum : inclusive bounds of a ``"number"`` (None: unbounded).
