@@ -104,18 +104,44 @@ sys.stdin.read()
 """
 
 
+def thread_times() -> dict[str, tuple[float, float]]:
+    """Every thread of this process by name (its kernel name where Python's is not known,
+    numbered when two share one): the seconds it ran on a CPU and the seconds it waited,
+    runnable, for one (``/proc/self/task/ID/schedstat``)."""
+    names = {thread.native_id: thread.name for thread in threading.enumerate()}
+    times: dict[str, tuple[float, float]] = {}
+    for task in os.listdir("/proc/self/task"):
+        try:
+            with open(f"/proc/self/task/{task}/schedstat") as file:
+                ran, waited = (int(field) * 1e-9 for field in file.read().split()[:2])
+            if int(task) not in names:
+                with open(f"/proc/self/task/{task}/comm") as file:
+                    names[int(task)] = file.read().strip()
+        except (OSError, ValueError):  # the thread ended meanwhile
+            continue
+        name, k = names[int(task)], 1
+        while name in times:
+            k += 1
+            name = f"{names[int(task)]} {k}"
+        times[name] = (ran, waited)
+    return times
+
+
 class TickSampler:
-    """The control thread's tick count every 50 ms, from a thread of its own."""
+    """The control thread's tick count and every thread's CPU time every 50 ms, from a
+    thread of its own."""
 
     def __init__(self, app) -> None:
         self.app = app
         self.samples: list[tuple[float, int]] = []
+        self.threads: list[dict[str, tuple[float, float]]] = []
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread = threading.Thread(target=self._run, name="sampler", daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
         while not self._stop.is_set():
+            self.threads.append(thread_times())
             self.samples.append((time.perf_counter(), self.app.ticker.ticks))
             time.sleep(0.05)
 
@@ -123,18 +149,35 @@ class TickSampler:
         self._stop.set()
         self._thread.join()
 
-    def rates(self, start: float, end: float) -> tuple[float, float]:
-        """The mean rate over [start, end] and the worst over its 1 s windows (Hz)."""
+    def rates(self, start: float, end: float) -> tuple[float, float, str]:
+        """The mean rate over [start, end] and the worst over its 1 s windows (Hz), and
+        where the threads' time went in the worst window (the control thread's on a CPU
+        and waiting for one, the busiest others' on a CPU; ms per s)."""
         times, ticks = (np.array(column, dtype=float) for column in zip(*self.samples))
-        inside = (times >= start) & (times <= end)
+        inside = np.flatnonzero((times >= start) & (times <= end))
         t, n = times[inside], ticks[inside]
         mean = (n[-1] - n[0]) / (t[-1] - t[0])
-        worst = mean
+        worst, window = mean, (inside[0], inside[-1])
         for i in range(len(t)):
             j = np.searchsorted(t, t[i] + 1.0)
-            if j < len(t):
-                worst = min(worst, (n[j] - n[i]) / (t[j] - t[i]))
-        return float(mean), float(worst)
+            if j < len(t) and (n[j] - n[i]) / (t[j] - t[i]) < worst:
+                worst = (n[j] - n[i]) / (t[j] - t[i])
+                window = (inside[i], inside[j])
+        return float(mean), float(worst), self.where(*window)
+
+    def where(self, first: int, last: int) -> str:
+        """The threads' time between samples ``first`` and ``last`` (ms per s)."""
+        seconds = self.samples[last][0] - self.samples[first][0]
+        before, after = self.threads[first], self.threads[last]
+        spent = {name: tuple(1e3 * (now - then) / seconds for now, then in
+                             zip(after[name], before[name])) for name in after if name in before}
+        ran, waited = spent.pop("control", (float("nan"), float("nan")))
+        others = sorted(spent.items(), key=lambda item: -sum(item[1]))
+        busiest = ", ".join(f"{name} {cpu:.0f}/{wait:.0f}" for name, (cpu, wait) in others[:4])
+        total = [sum(column) for column in zip(*spent.values())]
+        return (f"control thread on a CPU {ran:.0f}, waiting for one {waited:.0f}; the "
+                f"others on a CPU/waiting for one {total[0]:.0f}/{total[1]:.0f} ({busiest}) "
+                "ms/s")
 
 
 def child(script: str, *args: object) -> subprocess.Popen:
@@ -178,9 +221,10 @@ def main() -> None:
     results: dict[str, dict] = {}
     try:
         time.sleep(args.baseline)
-        baseline, baseline_worst = sampler.rates(time.perf_counter() - args.baseline,
-                                                 time.perf_counter())
-        results["baseline"] = {"mean_hz": baseline, "worst_1s_hz": baseline_worst}
+        baseline, baseline_worst, quiet = sampler.rates(time.perf_counter() - args.baseline,
+                                                        time.perf_counter())
+        results["baseline"] = {"mean_hz": baseline, "worst_1s_hz": baseline_worst,
+                               "worst_1s_threads": quiet}
         gizmo = ui.scene.target_gizmo
         goal = [*gizmo.position, *gizmo.wxyz]
         floods = {
@@ -209,14 +253,14 @@ def main() -> None:
             end = time.perf_counter()
             for process in processes:
                 finish(process, f"{name} flood")
-            mean, worst = sampler.rates(start, end)
+            mean, worst, spent = sampler.rates(start, end)
             counts = master.counts_now()
             delta = {key: counts.get(key, 0) - before.get(key, 0) for key in counts
                      if counts.get(key, 0) != before.get(key, 0)}
             result = results[f"{name} {run + 1}"] = {
                 "seconds": end - start, "mean_hz": mean, "worst_1s_hz": worst,
                 "mean_fraction": mean / baseline, "worst_fraction": worst / baseline,
-                "flooder": said, "udp_counts": delta,
+                "worst_1s_threads": spent, "flooder": said, "udp_counts": delta,
                 "inbox_coalesced": ui.inbox.coalesced - coalesced,
                 "inbox_applied": ui.inbox.applied - applied,
                 "paced_read_coalesced_delivered": [
@@ -227,10 +271,11 @@ def main() -> None:
                   f"{'; '.join(said)}; releases {delta.get('releases', 0)}; "
                   f"counts {delta}; inbox coalesced {result['inbox_coalesced']}, "
                   f"applied {result['inbox_applied']}; messages read, coalesced, "
-                  f"handed to viser {result['paced_read_coalesced_delivered']}",
+                  f"handed to viser {result['paced_read_coalesced_delivered']}; worst 1 s: "
+                  f"{spent}",
                   flush=True)
             time.sleep(2.0)  # quiet between floods
-        print(f"baseline: mean {baseline:.0f} Hz, worst 1 s {baseline_worst:.0f} Hz")
+        print(f"baseline: mean {baseline:.0f} Hz, worst 1 s {baseline_worst:.0f} Hz: {quiet}")
         for name in floods:
             runs = [results[f"{name} {run + 1}"] for run in range(args.repeat)]
             print(f"{name}: mean " + ", ".join(f"{r['mean_fraction']:.3f}" for r in runs)

@@ -1,5 +1,5 @@
 """The control thread: :meth:`web.app.TeleopApp.step` at the control rate, its timing
-measured (docs/design.md section 5.3). It never touches viser."""
+measured, scheduled real-time (docs/design.md section 5.3). It never touches viser."""
 
 from __future__ import annotations
 
@@ -10,6 +10,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+
+from teleop.plants.ros2.realtime import (OVERRUN_PERIODS, check_priority, hold_realtime,
+                                        release_realtime, scheduling_words)
 
 from .core import TeleopApp
 from .status import behind_words
@@ -67,10 +70,26 @@ class ControlThread:
     deadline misses (a tick that started later than one period after it was due). Sleeps
     between ticks; when it falls behind it does not try to catch up by bursting (the robot
     would see a jump), it resynchronises.
+
+    It runs ``SCHED_FIFO`` at ``realtime_priority`` (1-99; 0: ordinary scheduling), as a
+    robot's control loop does: on a loaded machine an ordinary thread waits for a CPU
+    behind every other process, most of a second at a time (docs/inputs.md, "Floods").
+    A thread that never sleeps would hold its core against every ordinary one: after
+    :data:`OVERRUN_PERIODS` ticks in a row with no time left to sleep it goes back to
+    ordinary scheduling, until the rate changes. Over ROS 2 the plant makes the thread
+    real-time as it actuates (:class:`teleop.plants.ros2.ros2_plant.Ros2Plant`, at its
+    settings' priority) and this thread takes no hold of its own. Without the privilege
+    it stays ordinary; :attr:`scheduling` says how it runs and why.
     """
 
-    def __init__(self, app: TeleopApp) -> None:
+    def __init__(self, app: TeleopApp, realtime_priority: int = 0) -> None:
         self.app = app
+        self.realtime_priority = check_priority(realtime_priority)
+        #: how the thread is scheduled, in words (``SCHED_FIFO 40``; why not, when not)
+        self.scheduling = "not started"
+        #: how the server's other threads are scheduled, in words ("": as they were;
+        #: :mod:`web.shared_priority`)
+        self.shared_scheduling = ""
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="control", daemon=True)
         self.deadline_misses = 0
@@ -96,6 +115,11 @@ class ControlThread:
         if self._switch_interval is not None:
             sys.setswitchinterval(self._switch_interval)
             self._switch_interval = None
+
+    @property
+    def thread(self) -> threading.Thread:
+        """The thread that ticks."""
+        return self._thread
 
     @property
     def alive(self) -> bool:
@@ -132,6 +156,26 @@ class ControlThread:
             solve_p50_us=solve_50, loop_p50_us=loop_50, ui_p50_us=ui_50)
 
     def _run(self) -> None:
+        held: int | None = None  # the thread's id while this thread holds it real-time
+        try:
+            held = self._loop()
+        finally:
+            if held is not None:
+                release_realtime(held)
+
+    def _hold(self) -> int | None:
+        """The calling thread made real-time at :attr:`realtime_priority` (not over ROS 2,
+        whose plant does it); the id to release, None when it took no hold."""
+        if self.realtime_priority == 0 or self.app.ros2 is not None:
+            self.scheduling = scheduling_words()
+            return None
+        held, self.scheduling = hold_realtime(self.realtime_priority)
+        return held
+
+    def _loop(self) -> int | None:
+        """Ticks until stopped; the thread's real-time hold still in force (its id), if any."""
+        held = self._hold()
+        overruns = 0
         clock = time.perf_counter
         next_tick = clock()
         window_start, window_ticks = clock(), 0
@@ -140,6 +184,9 @@ class ControlThread:
             if self.app.robots.config.dt != period:  # a new rate: a new measuring window
                 period = self.app.robots.config.dt
                 window_start, window_ticks = clock(), 0
+                if held is None and overruns >= OVERRUN_PERIODS:  # real-time again
+                    held = self._hold()
+                overruns = 0
             start = clock()
             solve_us = advance_us = 0.0
             try:
@@ -166,8 +213,17 @@ class ControlThread:
                 window_start, window_ticks = end, 0
             next_tick += period
             delay = next_tick - clock()
+            overruns = 0 if delay > 0 else overruns + 1
+            if held is not None and overruns >= OVERRUN_PERIODS:
+                release_realtime(held)
+                held = None
+                self.scheduling = (
+                    f"{scheduling_words()} (SCHED_FIFO {self.realtime_priority} given up: "
+                    f"{overruns} ticks in a row left no time to sleep; again at the next "
+                    "rate)")
             if delay > 0 and self.app.ros2 is None:
                 time.sleep(delay)
             elif delay < -period:
                 self.deadline_misses += 1
                 next_tick = clock()
+        return held

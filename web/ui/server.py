@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 from typing import Sequence
 
@@ -9,11 +10,13 @@ import viser
 
 from teleop.inputs import InputSource
 from teleop.plants import PlantSettings
+from teleop.plants.ros2.realtime import LOOP_PRIORITY
 from teleop.plants.ros2.settings import Ros2Settings
 from teleop.robots import Robot
 
 from ..access import make_token, require_access
 from ..pacing import pace_messages
+from ..shared_priority import share_priority
 from ..app import ControlThread, TeleopApp
 from .core import TeleopUI
 
@@ -28,7 +31,8 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
                collision_settings: dict | None = None,
                inputs: Sequence[InputSource] = (), input_timeout: float | None = None,
                acceleration_limits: bool = True, jerk_limit: float | None = None,
-               task_mode: str = "auto", ros2_settings: Ros2Settings | None = None
+               task_mode: str = "auto", ros2_settings: Ros2Settings | None = None,
+               realtime_priority: int = LOOP_PRIORITY
                ) -> tuple[viser.ViserServer, TeleopApp, ControlThread, TeleopUI]:
     """Start the app: server bound to ``host`` (loopback by default), control and view
     threads. ``scene`` (a scene dict for this robot) is applied before anything runs.
@@ -45,7 +49,11 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     (:meth:`TeleopApp.set_task_mode`, docs/design.md section 20; a scene's own wins);
     ``inputs``: the devices that drive the EEs, each its own (docs/design.md section 19),
     released after ``input_timeout`` s of silence (default 0.1 s); the caller closes them
-    (:meth:`web.app.devices.InputDevices.close`)."""
+    (:meth:`web.app.devices.InputDevices.close`); ``realtime_priority``: the control
+    thread's ``SCHED_FIFO`` priority (0: ordinary scheduling; over ROS 2 the plant's
+    settings choose, :class:`web.app.ControlThread`); unless 0, the threads started here
+    besides run ``SCHED_FIFO`` below it (:mod:`web.shared_priority`)."""
+    before = set(threading.enumerate())
     app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
                     scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
                     wall_stiffness=wall_stiffness, collisions=collisions,
@@ -65,10 +73,15 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     # a page that connected before the check was in place (nothing is served yet)
     # reconnects, and is checked
     server._websock_server.disconnect_all_clients()
-    control = ControlThread(app)
+    control = ControlThread(app, realtime_priority)
     ui = TeleopUI(server, app, control, notes=notes)
     ui.access, ui.pacing = access, pacing
     control.start()
     ui.start()
+    if realtime_priority > 0:
+        control.shared_scheduling = share_priority(
+            [thread for thread in threading.enumerate()
+             if thread not in before and thread is not control.thread],
+            [server._thread_executor])
     return server, app, control, ui
 

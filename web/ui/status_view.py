@@ -122,7 +122,9 @@ class StatusPanel:
                    f"controllers{', physics included' if snapshot['plant'].physical else ''}; "
                    f"medians: controllers {timing.solve_p50_us:.0f} us, loop "
                    f"{timing.loop_p50_us:.0f} us, UI {timing.ui_p50_us:.0f} us), "
-                   f"{timing.deadline_misses} deadline misses")
+                   f"{timing.deadline_misses} deadline misses; {self.control.scheduling}"
+                   f"{'; the other threads ' if self.control.shared_scheduling else ''}"
+                   f"{self.control.shared_scheduling}")
         lines = [control]
         if snapshot["plant"].physical:
             lines.append(f"**plant** {snapshot['plant'].describe()}")

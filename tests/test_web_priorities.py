@@ -1,0 +1,150 @@
+"""How the server's threads are scheduled (docs/design.md section 5.3, "Priorities"): the
+control thread ``SCHED_FIFO`` at its priority, given back to ordinary scheduling when its
+ticks leave no time to sleep and taken again at the next rate; the server's other threads
+``SCHED_FIFO`` at the lowest priority, what they start ordinary; nothing real-time at
+priority 0. (This machine runs the tests as root: the system grants the priorities.)"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from teleop.inputs import UdpMaster
+from web.app import ControlThread, TeleopApp
+from web.shared_priority import SHARED_PRIORITY, make_shared_realtime
+from web.ui import run_server
+
+
+def scheduling(thread_id: int) -> tuple[int, bool, int]:
+    """The policy of kernel thread ``thread_id`` (without the flag), whether it is set
+    ``SCHED_RESET_ON_FORK``, and its real-time priority."""
+    policy = os.sched_getscheduler(thread_id)
+    return (policy & ~os.SCHED_RESET_ON_FORK, bool(policy & os.SCHED_RESET_ON_FORK),
+            os.sched_getparam(thread_id).sched_priority)
+
+
+def wait_for(predicate, timeout: float):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.01)
+    raise AssertionError(f"timed out after {timeout:g} s")
+
+
+@pytest.fixture()
+def app(sda10f, tmp_path):
+    return TeleopApp(sda10f, controller="cjm", rate=250.0, record_dir=tmp_path,
+                     scene_dir=tmp_path / "scenes")
+
+
+def test_the_control_thread_runs_fifo_gives_it_up_when_it_never_sleeps_and_takes_it_again(
+        app, monkeypatch):
+    step = app.step
+    control = ControlThread(app, realtime_priority=40)
+    control.start()
+    try:
+        wait_for(lambda: app.ticker.ticks > 20, 10.0)
+        assert scheduling(control.thread.native_id) == (os.SCHED_FIFO, True, 40)
+        assert control.scheduling == "SCHED_FIFO 40"
+
+        def overrunning_step():  # 6 ms a tick at 250 Hz (4 ms): never time to sleep
+            time.sleep(6e-3)
+            return step()
+
+        monkeypatch.setattr(app, "step", overrunning_step)
+        words = wait_for(lambda: "given up" in control.scheduling and control.scheduling, 10.0)
+        assert words.startswith("ordinary scheduling (SCHED_FIFO 40 given up: 10 ticks in a row")
+        assert scheduling(control.thread.native_id) == (os.SCHED_OTHER, False, 0)
+        monkeypatch.setattr(app, "step", step)
+        app.robots.set_rate(200.0)  # a new rate: real-time again
+        wait_for(lambda: control.scheduling == "SCHED_FIFO 40", 10.0)
+        assert scheduling(control.thread.native_id) == (os.SCHED_FIFO, True, 40)
+    finally:
+        control.stop()
+    assert not control.alive
+
+
+def test_priority_zero_leaves_the_control_thread_ordinary(app):
+    control = ControlThread(app)  # 0 unless asked
+    control.start()
+    try:
+        wait_for(lambda: app.ticker.ticks > 5, 10.0)
+        assert scheduling(control.thread.native_id) == (os.SCHED_OTHER, False, 0)
+        assert control.scheduling == "ordinary scheduling"
+    finally:
+        control.stop()
+
+
+def test_a_priority_outside_0_to_99_is_refused_by_name(app):
+    for priority in (-1, 100, 1.5, True):
+        with pytest.raises(ValueError, match="realtime_priority must be a whole number"):
+            ControlThread(app, realtime_priority=priority)
+
+
+def test_a_thread_that_is_gone_is_not_scheduled_and_says_why():
+    ended = threading.Thread(target=lambda: None)
+    ended.start()
+    thread_id = ended.native_id
+    ended.join()
+    words = make_shared_realtime(thread_id)
+    assert words == "" or words == "No such process"  # its id may be another's by now
+
+
+def ordinary_child() -> int:
+    """The policy of a process started from the calling thread."""
+    done = subprocess.run([sys.executable, "-c", "import os; print(os.sched_getscheduler(0))"],
+                          capture_output=True, text=True, timeout=60, check=True)
+    return int(done.stdout)
+
+
+def thread_started_here() -> tuple[int, bool, int]:
+    """The scheduling of a thread started from the calling thread."""
+    seen: list[tuple[int, bool, int]] = []
+    child = threading.Thread(target=lambda: seen.append(scheduling(0)))
+    child.start()
+    child.join()
+    return seen[0]
+
+
+@pytest.mark.parametrize("priority", [40, 0])
+def test_the_servers_other_threads_run_fifo_below_the_control_thread(sda10f, tmp_path,
+                                                                     priority):
+    master = UdpMaster(port=0)
+    server, app, control, ui = run_server(sda10f, port=0, rate=250.0, record_dir=tmp_path,
+                                          scene_dir=tmp_path / "scenes", inputs=[master],
+                                          realtime_priority=priority)
+    try:
+        wait_for(lambda: app.ticker.ticks > 20, 20.0)
+        others = {thread.name: thread for thread in threading.enumerate()}
+        threads = [others["view"], others["inbox"], others[f"input {master.name}"],
+                   server._websock_server._server_thread]
+        pool = server._thread_executor
+        in_pool = pool.submit(lambda: (scheduling(0), thread_started_here(), ordinary_child()))
+        worker, started, child = in_pool.result(timeout=60)
+        if priority:
+            assert scheduling(control.thread.native_id) == (os.SCHED_FIFO, True, priority)
+            for thread in threads:
+                assert scheduling(thread.native_id) == (os.SCHED_FIFO, True, SHARED_PRIORITY), \
+                    thread.name
+            assert worker == (os.SCHED_FIFO, True, SHARED_PRIORITY)
+            assert control.shared_scheduling.startswith(f"SCHED_FIFO {SHARED_PRIORITY}: ")
+        else:
+            for thread in [control.thread, *threads]:
+                assert scheduling(thread.native_id) == (os.SCHED_OTHER, False, 0), thread.name
+            assert worker == (os.SCHED_OTHER, False, 0)
+            assert control.shared_scheduling == ""
+        assert started == (os.SCHED_OTHER, False, 0)  # what they start runs ordinary
+        assert child == os.SCHED_OTHER
+        assert scheduling(0) == (os.SCHED_OTHER, False, 0)  # the caller's own untouched
+    finally:
+        ui.stop()
+        control.stop()
+        app.devices.close()
+        server.stop()
