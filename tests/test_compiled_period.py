@@ -37,9 +37,10 @@ def moving_hole(robot, link: str | None = None) -> Hole:
 
 
 def run(plant: MujocoPlant, robot, holes: list[Hole], amplitude: float) -> list[tuple]:
-    """Each period's returned velocity, simulated joints and measures, while the holes
-    change: from period 100 each centre moves 0.2 mm, from 200 each wall stiffens, from 300
-    the last hole is gone."""
+    """Each period's returned velocity, the configuration it reaches (Pinocchio's
+    integration of it, to the last bit), the simulated joints and the measures, while the
+    holes change: from period 100 each centre moves 0.2 mm, from 200 each wall stiffens,
+    from 300 the last hole is gone."""
     q = robot.q_home.copy()
     out = []
     given = list(holes)
@@ -52,10 +53,12 @@ def run(plant: MujocoPlant, robot, holes: list[Hole], amplitude: float) -> list[
                 hole.tissue_stiffness = 4500.0
         if k == 300:
             given = given[:-1]
-        moved = plant.actuate(qd, q, given)
-        q = pin.integrate(robot.model, q, moved * DT)
+        moved, reached = plant.advance(qd, q, given, DT)
+        assert np.array_equal(reached, pin.integrate(robot.model, q, moved * DT)), k
+        q = reached
         m = plant.measures()
-        out.append((moved, plant.mj_data.qpos.copy(), m.port_forces, m.port_spring_forces,
+        out.append((moved, reached, plant.mj_data.qpos.copy(), m.port_forces,
+                    m.port_spring_forces,
                     m.port_displacements, m.torque_ratio, m.saturated, m.contacts,
                     m.contact_depth, m.interface_fault, m.interface_stopped,
                     m.tool_wrenches.shape, m.contact_forces.shape, m.contact_depths.shape))
@@ -85,8 +88,8 @@ def test_one_hole_moving_stiffening_then_gone(robot_name, request):
     robot = request.getfixturevalue(robot_name)
     compiled, reference = plants(robot, PlantSettings())
     runs = [run(plant, robot, [moving_hole(robot)], 0.2) for plant in (compiled, reference)]
-    assert max(np.max(np.abs(r[2]), initial=0.0) for r in runs[1]) > 1.0  # the wall pushes (N)
-    assert any(r[2].shape == (0, 3) for r in runs[1])  # and is gone at the end
+    assert max(np.max(np.abs(r[3]), initial=0.0) for r in runs[1]) > 1.0  # the wall pushes (N)
+    assert any(r[3].shape == (0, 3) for r in runs[1])  # and is gone at the end
     assert_same(*runs)
 
 
@@ -94,7 +97,7 @@ def test_two_holes_on_the_dual_robot(dual):
     compiled, reference = plants(dual, PlantSettings())
     runs = [run(plant, dual, [moving_hole(dual, link) for link in dual.constrained_links], 0.2)
             for plant in (compiled, reference)]
-    assert runs[1][0][2].shape == (2, 3) and runs[1][-1][2].shape == (1, 3)
+    assert runs[1][0][3].shape == (2, 3) and runs[1][-1][3].shape == (1, 3)
     assert_same(*runs)
 
 
@@ -103,7 +106,7 @@ def test_saturated_drives_under_a_payload(sda10f):
     settings = PlantSettings(payload=3.0, servo_bandwidth=40.0)
     compiled, reference = plants(sda10f, settings)
     runs = [run(plant, sda10f, [moving_hole(sda10f)], 2.0) for plant in (compiled, reference)]
-    assert any(r[6] for r in runs[1])
+    assert any(r[7] for r in runs[1])
     assert_same(*runs)
 
 

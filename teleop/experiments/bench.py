@@ -178,8 +178,9 @@ def bench_ticks(robot: Robot, holes: Sequence[Constraint], spec: str, configurat
                 plant: PlantChoice, dt: float = 1e-3) -> tuple[float, float]:
     """Medians (us) over ``configurations`` of a control period's tick on the kinematic
     plant (``solve``, then ``pin.integrate``) and on ``plant`` (``solve``, then the plant's
-    ``actuate``, then ``pin.integrate`` of the velocity it returns), each configuration
-    timed both ways in turn; the plant starts at home and keeps its own state."""
+    ``advance``: its period and the integration of its velocity, as the loop's), each
+    configuration timed both ways in turn; the plant starts at home and keeps its own
+    state."""
     controller = make_controller(spec, robot, holes, dt=dt, acceleration_limit=None)
     plant.apply_wall(holes)
     simulated = plant.make(robot, dt)
@@ -192,8 +193,10 @@ def bench_ticks(robot: Robot, holes: Sequence[Constraint], spec: str, configurat
         pin.integrate(model, q, controller.solve(q, twist) * dt)
         middle = clock()
         command = controller.solve(q, twist)
-        moved = command if simulated is None else simulated.actuate(command, q, holes)
-        pin.integrate(model, q, moved * dt)
+        if simulated is None:
+            pin.integrate(model, q, command * dt)
+        else:  # as the loop's period: the plant's velocity and the configuration reached
+            simulated.advance(command, q, holes, dt)
         kinematic[i], physical[i] = (middle - start) * 1e-3, (clock() - middle) * 1e-3
     return float(np.median(kinematic)), float(np.median(physical))
 

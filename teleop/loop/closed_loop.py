@@ -451,13 +451,16 @@ class TeleopLoop:
               message: StepMessage,
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, str, StepMessage]:
         """Never a non-finite command (a stop instead); the plant moves the robot, or the
-        command itself; ``q <- integrate(q, moved dt)``. Returns the configuration
+        command itself; ``q <- integrate(q, moved dt)`` (the plant's :meth:`Plant.advance`
+        gives both). Returns the configuration
         before, the command, the velocity moved with, the status and the message."""
         if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
             qd, status, message = self._stop(sensed), "failed", NON_FINITE_STOP
-        moved = qd if self.plant is None else self.plant.actuate(qd, self.q, self.constraints)
         q_before = self.q
-        self.q = pin.integrate(self.model, q_before, moved * self.config.dt)
+        if self.plant is None:
+            moved, self.q = qd, pin.integrate(self.model, q_before, qd * self.config.dt)
+        else:
+            moved, self.q = self.plant.advance(qd, q_before, self.constraints, self.config.dt)
         self.last_qd = qd
         self.t += self.config.dt
         return q_before, qd, moved, status, message

@@ -13,7 +13,7 @@ from constraints import Constraint
 class Plant(Protocol):
     """What stands between the controller and the robot's true joints (docs/design.md
     sections 15.1, 17): the loop reads the configuration through :meth:`sense` and moves
-    the robot with what :meth:`actuate` returns. A plant whose encoders are noisy also
+    the robot with what :meth:`advance` returns. A plant whose encoders are noisy also
     says so in ``encoder_noise`` (rad, its std; the loop's state observer, docs/design.md
     5.6, takes 0 from a plant without it)."""
 
@@ -24,6 +24,12 @@ class Plant(Protocol):
                 constraints: Sequence[Constraint]) -> np.ndarray:
         """The mean joint velocity over the coming period, given this period's command,
         the true configuration ``q`` and the constraints in the scene."""
+
+    def advance(self, qd: np.ndarray, q: np.ndarray, constraints: Sequence[Constraint],
+                dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`actuate`'s velocity ``moved`` and the configuration it takes ``q`` to
+        over ``dt``, ``pin.integrate(model, q, moved dt)`` to the last bit (the MuJoCo plant
+        computes it in its compiled period, docs/design.md 17.5)."""
 
     def reset(self, q: np.ndarray | None = None) -> None:
         """Back to rest (at ``q``, when the plant keeps a configuration of its own)."""

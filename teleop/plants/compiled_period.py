@@ -1,18 +1,19 @@
 """A control period of the MuJoCo plant in one compiled call (docs/design.md section 17.5).
 
 ``plant_period.c``, in the library of the ports' walls (:mod:`teleop.plants.compiled_wall`),
-does what :meth:`teleop.plants.MujocoPlant.actuate` does around ``mj_step`` with the same
+does what :meth:`teleop.plants.MujocoPlant.advance` does around ``mj_step`` with the same
 arithmetic: each actuator's control from the command, the physics steps with the ports'
-walls attached, the torque ratio, the contacts, and the velocity that takes the loop's
-configuration to the simulated one, ``(qpos - q) / dt`` (``pin.difference`` of 1-dof
-joints). It serves a robot whose Pinocchio and MuJoCo coordinates are the same
+walls attached, the torque ratio, the contacts, the velocity that takes the loop's
+configuration to the simulated one, ``moved = (qpos - q) / dt`` (``pin.difference`` of
+1-dof joints), and the loop's next configuration ``q + moved dt`` (``pin.integrate`` of
+them). It serves a robot whose Pinocchio and MuJoCo coordinates are the same
 (``JointMap.identity``); the buffers it reads and writes are arrays made once, their
 addresses given to the C side in one block (:class:`PeriodBlock`). Python calls it through
 ``period_call.c``, a CPython module compiled as the walls' library is
 (:func:`~teleop.plants.cached_build.cached_build`, against Python's and numpy's headers):
 one vectorcall copies the command and the configuration in through their buffers, runs the
-period without the GIL and returns the velocity as a new array (a ctypes call and the
-copies around it cost about 0.8 us more).
+period without the GIL and returns the two vectors as new arrays (a ctypes call and the
+copies around it cost about 0.5 us more).
 """
 
 from __future__ import annotations
@@ -55,7 +56,8 @@ class PeriodBlock(ctypes.Structure):
 
     _fields_ = [("model", _POINTER), ("data", _POINTER), ("command", _POINTER), ("q", _POINTER),
                 ("actuator_dofs", _POINTER), ("effort_limit", _POINTER), ("ports", _POINTER),
-                ("moved", _POINTER), ("summary", _POINTER), ("run", _POINTER),
+                ("moved", _POINTER), ("reached", _POINTER), ("summary", _POINTER),
+                ("run", _POINTER),
                 ("dt", ctypes.c_double), ("nstep", ctypes.c_int), ("port_count", ctypes.c_int),
                 ("nv", ctypes.c_int), ("nq", ctypes.c_int)]
 
@@ -95,8 +97,9 @@ class CompiledPeriod:
         self.command, self.q = np.zeros(model.nv), np.zeros(model.nq)
         self._actuator_dofs = np.ascontiguousarray(actuator_dofs, dtype=np.intc)
         self._effort_limit = np.ascontiguousarray(effort_limit, dtype=float)
-        #: the velocity ``(qpos - q) / dt`` (rad/s), written by each period
-        self.moved = np.zeros(model.nv)
+        #: the velocity ``(qpos - q) / dt`` (rad/s) and the configuration ``q + moved dt``
+        #: it takes ``q`` to (``pin.integrate`` of 1-dof joints), written by each period
+        self.moved, self.reached = np.zeros(model.nv), np.zeros(model.nq)
         #: the torque ratio, the contact count and the deepest penetration (m)
         self.summary = np.zeros(3)
         #: the ports' blocks (port_wall.c's layout), their results written by the callback
@@ -104,7 +107,8 @@ class CompiledPeriod:
         self._block = PeriodBlock(model._address, data._address, _address(self.command),
                                   _address(self.q), _address(self._actuator_dofs),
                                   _address(self._effort_limit), _address(self.ports),
-                                  _address(self.moved), _address(self.summary),
+                                  _address(self.moved), _address(self.reached),
+                                  _address(self.summary),
                                   ctypes.cast(library.cjm_plant_period, _POINTER).value,
                                   float(dt), int(nstep), 0, model.nv, model.nq)
         #: the block's address, as :func:`period_call`'s ``run`` takes it
@@ -120,12 +124,13 @@ class CompiledPeriod:
         self.ports[:, :ports.shape[1]] = ports
 
     def run(self, command: np.ndarray, q: np.ndarray,
-            constraints: Sequence[Constraint]) -> np.ndarray | None:
+            constraints: Sequence[Constraint]) -> tuple[np.ndarray, np.ndarray] | None:
         """One period under ``command`` from ``q`` with the walls of ``constraints``; the
-        velocity moved (a new array), or None (nothing run) when a wall has no compiled
-        form. The ports are read again when a constraint, its wall or an object of the
-        wall's :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's
-        (``is``: a replaced object is read again even when it holds the same numbers)."""
+        velocity moved and the configuration it takes ``q`` to over the period (new
+        arrays), or None (nothing run) when a wall has no compiled form. The ports are read
+        again when a constraint, its wall or an object of the wall's
+        :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's (``is``:
+        a replaced object is read again even when it holds the same numbers)."""
         objects: list[object] = []
         for constraint in constraints:
             wall = wall_of(constraint)
@@ -142,12 +147,12 @@ class CompiledPeriod:
         if not self._ports_compiled:
             return None
         try:  # copied through their buffers (float64 vectors of the right size: the loop's)
-            moved: np.ndarray = self._run(self._address, command, q)
+            ran: tuple[np.ndarray, np.ndarray] = self._run(self._address, command, q)
         except TypeError:  # another type, layout or shape: numpy's copy and checks
             np.copyto(self.command, command)
             np.copyto(self.q, q)
-            moved = self._run(self._address, self.command, self.q)
-        return moved
+            ran = self._run(self._address, self.command, self.q)
+        return ran
 
 
 def compiled_period(model: mujoco.MjModel, data: mujoco.MjData, actuator_dofs: np.ndarray,

@@ -99,7 +99,8 @@ def wall_library() -> ctypes.CDLL | None:
         return None
     target = cached_build("port_wall", SOURCES,
                           [f"-I{package / 'include'}", str(libraries[0]),
-                           f"-Wl,-rpath,{package}", "-lm"], mujoco.__version__)
+                           f"-Wl,-rpath,{package}", "-lm", "-ffp-contract=off"],
+                          mujoco.__version__)
     if target is None:
         return None
     try:

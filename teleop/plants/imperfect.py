@@ -190,6 +190,13 @@ class ImperfectPlant:
         configuration and the constraints do not change it."""
         return self.respond(self.delay(qd))
 
+    def advance(self, qd: np.ndarray, q: np.ndarray, constraints: Sequence[Constraint],
+                dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`actuate`, and the configuration its velocity takes ``q`` to over ``dt``
+        (``pin.integrate``)."""
+        moved = self.actuate(qd, q, constraints)
+        return moved, pin.integrate(self.model, q, moved * dt)
+
     def delay(self, qd: np.ndarray) -> np.ndarray:
         """The command that reaches the robot this period: ``qd`` of ``latency`` periods
         ago (zero before the first arrives)."""

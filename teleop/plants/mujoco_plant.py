@@ -370,15 +370,42 @@ class MujocoPlant:
         one. With the compiled period (:mod:`teleop.plants.compiled_period`) the
         physics, the torque ratio, the contacts and the returned velocity are one C call
         with the same arithmetic, the measures made when read (:meth:`measures`)."""
-        if self._period is not None:
-            # (the interface is off: it passes the command on, checks and counts nothing)
-            if self._forces_applied:  # a period split in Python left its last forces there
-                self._qfrc_applied.fill(0.0)
-                self._forces_applied = False
-            moved = self._period.run(qd, q, constraints)
-            if moved is not None:
-                self._last = None
-                return moved
+        ran = self._compiled_period(qd, q, constraints)
+        return ran[0] if ran is not None else self._python_period(qd, q, constraints)
+
+    def advance(self, qd: np.ndarray, q: np.ndarray, constraints: Sequence[Constraint],
+                dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`actuate`, and the configuration its velocity takes ``q`` to over ``dt``,
+        ``pin.integrate(q, moved dt)``: computed by the compiled period in the same call
+        (``q + moved dt``, the same bits for the 1-dof joints it serves) when ``dt`` is the
+        plant's period."""
+        ran = self._compiled_period(qd, q, constraints)
+        if ran is not None and dt == self.dt:
+            return ran
+        moved = ran[0] if ran is not None else self._python_period(qd, q, constraints)
+        return moved, pin.integrate(self.model, q, moved * dt)
+
+    def _compiled_period(self, qd: np.ndarray, q: np.ndarray,
+                         constraints: Sequence[Constraint],
+                         ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The period in C (:class:`~teleop.plants.compiled_period.CompiledPeriod`): the
+        velocity moved and the configuration reached, or None (nothing run: no compiled
+        period, or a wall without a compiled form)."""
+        if self._period is None:
+            return None
+        # (the interface is off: it passes the command on, checks and counts nothing)
+        if self._forces_applied:  # a period split in Python left its last forces there
+            self._qfrc_applied.fill(0.0)
+            self._forces_applied = False
+        ran = self._period.run(qd, q, constraints)
+        if ran is not None:
+            self._last = None
+        return ran
+
+    def _python_period(self, qd: np.ndarray, q: np.ndarray,
+                       constraints: Sequence[Constraint]) -> np.ndarray:
+        """The period in Python around ``mj_step`` (the compiled period's reference):
+        :meth:`actuate`'s velocity."""
         model, data = self.mj_model, self.mj_data
         arrived = qd if self.shaping is None else self.shaping.delay(qd)
         accepted, fault = self.interface.receive(arrived)

@@ -2,11 +2,11 @@
 // cjm_period_call, whose one function takes the period's block (plant_period.h) by address
 // and the command and the configuration as buffers:
 //
-//     moved = run(block, command, q)
+//     moved, reached = run(block, command, q)
 //
 // copies the command (nv float64) and q (nq float64) into the block's buffers, runs the
 // period with the GIL released (as ctypes would: MuJoCo's step needs no Python) and returns
-// the velocity moved as a new float64 array. A vectorcall on two buffers costs a tenth of a
+// the velocity moved and the configuration it takes q to as new float64 arrays. A vectorcall on two buffers costs a tenth of a
 // ctypes call and the copies around it (teleop/plants/compiled_period.py). Anything but a
 // C-contiguous float64 vector of the right length is a TypeError, which the Python side
 // answers with numpy's conversions and checks.
@@ -51,19 +51,34 @@ static PyObject* run(PyObject* module, PyObject* const* args, Py_ssize_t nargs) 
   if (copy_vector(args[1], period->command, period->nv, "command") != 0 ||
       copy_vector(args[2], period->q, period->nq, "q") != 0)
     return NULL;
-  npy_intp size = period->nv;
-  PyObject* moved = PyArray_SimpleNew(1, &size, NPY_DOUBLE);
-  if (moved == NULL) return NULL;
+  npy_intp nv = period->nv, nq = period->nq;
+  PyObject* moved = PyArray_SimpleNew(1, &nv, NPY_DOUBLE);
+  PyObject* reached = PyArray_SimpleNew(1, &nq, NPY_DOUBLE);
+  if (moved == NULL || reached == NULL) {
+    Py_XDECREF(moved);
+    Py_XDECREF(reached);
+    return NULL;
+  }
   Py_BEGIN_ALLOW_THREADS
   period->run(period);
   Py_END_ALLOW_THREADS
-  memcpy(PyArray_DATA((PyArrayObject*)moved), period->moved, sizeof(double) * (size_t)size);
-  return moved;
+  memcpy(PyArray_DATA((PyArrayObject*)moved), period->moved, sizeof(double) * (size_t)nv);
+  memcpy(PyArray_DATA((PyArrayObject*)reached), period->reached, sizeof(double) * (size_t)nq);
+  PyObject* both = PyTuple_New(2);
+  if (both == NULL) {
+    Py_DECREF(moved);
+    Py_DECREF(reached);
+    return NULL;
+  }
+  PyTuple_SET_ITEM(both, 0, moved);
+  PyTuple_SET_ITEM(both, 1, reached);
+  return both;
 }
 
 static PyMethodDef methods[] = {
     {"run", (PyCFunction)(void (*)(void))run, METH_FASTCALL,
-     "run(block, command, q): one period of the block at this address; the velocity moved."},
+     "run(block, command, q): one period of the block at this address; the velocity moved "
+     "and the configuration reached."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef definition = {PyModuleDef_HEAD_INIT, "cjm_period_call",

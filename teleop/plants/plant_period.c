@@ -7,10 +7,11 @@
 //     mj_step(m, d) nstep times, the ports' walls attached (port_wall.c)
 //     ratio = max_j |qfrc_actuator_j| / effort_j    (NaN when one of them is NaN)
 //     moved = (qpos - q) / dt                       (pin.difference of 1-dof joints, / dt)
+//     reached = q + moved dt                        (pin.integrate(q, moved dt) of them)
 //
 // with the contacts' count and the deepest penetration max(0, -min(0, dist)) for the
 // period's measures. Each line is the Python path's arithmetic in the same order, so the
-// two give the same bits.
+// two give the same bits (built with -ffp-contract=off: no fused multiply-add).
 #include <mujoco/mujoco.h>
 #include <math.h>
 
@@ -46,5 +47,9 @@ void cjm_plant_period(const PlantPeriod* period) {
   const double penetration = -deepest;
   period->summary[kContacts] = d->ncon;
   period->summary[kPenetration] = penetration > 0.0 ? penetration : 0.0;
-  for (int i = 0; i < m->nq; ++i) period->moved[i] = (d->qpos[i] - period->q[i]) / period->dt;
+  for (int i = 0; i < m->nq; ++i) {
+    period->moved[i] = (d->qpos[i] - period->q[i]) / period->dt;
+    const double step = period->moved[i] * period->dt;
+    period->reached[i] = period->q[i] + step;
+  }
 }

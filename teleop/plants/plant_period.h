@@ -19,6 +19,7 @@ struct PlantPeriod {
   const double* effort_limit; // nv: each dof's effort limit (inf: none)
   double* ports;              // port_count blocks of port_wall.c's kPortSize doubles
   double* moved;              // nv, out: the velocity that takes q to the simulated qpos
+  double* reached;            // nq, out: q + moved dt, where moved takes q over the period
   double* summary;            // out: torque ratio, contact count, deepest penetration
   void (*run)(const PlantPeriod* period); // cjm_plant_period (period_call.c calls it)
   double dt;

@@ -345,6 +345,13 @@ class Ros2Plant:
                 return np.zeros(self.model.nv)
             return pin.difference(self.model, q, self._q) / self.dt
 
+    def advance(self, qd: np.ndarray, q: np.ndarray, constraints: Sequence[Constraint],
+                dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`actuate`, and the configuration its velocity takes ``q`` to over ``dt``
+        (``pin.integrate``)."""
+        moved = self.actuate(qd, q, constraints)
+        return moved, pin.integrate(self.model, q, moved * dt)
+
     def _end_period(self, fresh: int) -> None:
         """Waits for a state newer than the ``fresh``-th, not ending the period sooner
         than half a period after the last one ended nor later than one and a half (caller
