@@ -69,6 +69,15 @@ PROXQP_CAPPED_RHO = 1e-8
 #: tolerances: the collision fuzz's failed steps 0.88 % -> 0.18 % (docs/design.md 18.7).
 PROXQP_FALLBACK_ITERATIONS = 10
 
+#: proxqp's ``rho`` for the last solve of a stage still at its caps after the fresh one,
+#: relative to the stage's tolerance (:meth:`QuadraticProgram.tolerance`): its optimum lies
+#: far along directions the Hessian does not see, where the proximal term is the only
+#: curvature, and a tolerance-sized one lets them travel there within a few iterations (the
+#: collision fuzz's stuck task stage: 17-20 iterations, against over 100,000 at the
+#: others). proxqp's "solved" at so small a ``rho`` is taken only with its KKT residual
+#: within the tolerance (:mod:`controllers.optimization.kkt`; docs/design.md 18.7).
+PROXQP_FLAT_RHO = 1.0
+
 #: proxqp's threshold for certifying primal infeasibility (its ``eps_primal_inf``, a
 #: field of the persistent objects' settings, which ``proxqp.dense.solve`` through
 #: qpsolvers does not take). With the small ``rho`` of a redundant robot

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers.numerics import PROXQP_RHO
+from controllers.numerics import PROXQP_RHO, TASK_ACCURACY
 from controllers.optimization import proxqp as proxqp_backend
 from controllers.optimization.budget import ITERATION_CAPS
 from teleop.experiments.compare import compare, metrics_document
@@ -27,6 +27,10 @@ def test_a_solver_out_of_iterations_is_named_and_counted_in_the_report(monkeypat
     monkeypatch.setattr(proxqp_backend, "PROXQP_CAPPED_RHO", PROXQP_RHO)
     # and the last solve on a fresh object keeps that one iteration (not ten times it)
     monkeypatch.setattr(proxqp_backend, "PROXQP_FALLBACK_ITERATIONS", 1)
+    # and the flat stage's solve after it, whose tolerance-sized rho finishes them in one
+    # iteration too, has the first rho again (rho = PROXQP_FLAT_RHO times the tolerance,
+    # TASK_ACCURACY times the curvature)
+    monkeypatch.setattr(proxqp_backend, "PROXQP_FLAT_RHO", PROXQP_RHO / TASK_ACCURACY)
     plan = load_scenario("joint-limits")
     results = compare(plan, ["qp:proxqp"], duration=0.5, progress=False)
     result = results["qp:proxqp"]

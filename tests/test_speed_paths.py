@@ -430,9 +430,13 @@ def test_proxqp_recovers_after_a_failed_step(sda10f, monkeypatch):
     """A failed solve drops the persistent object; the next feasible step solves. (The
     conflicting locks alone no longer fail, docs/design.md 10.7: the solves of that step
     are capped at one iteration, the last solve on a fresh object too.)"""
+    from controllers.numerics import PROXQP_RHO, TASK_ACCURACY
     from controllers.optimization import proxqp as proxqp_backend
 
     monkeypatch.setattr(proxqp_backend, "PROXQP_FALLBACK_ITERATIONS", 1)
+    # the flat stage's solve with the first rho (PROXQP_FLAT_RHO times the tolerance,
+    # TASK_ACCURACY times the curvature), not the tolerance-sized one that finishes it
+    monkeypatch.setattr(proxqp_backend, "PROXQP_FLAT_RHO", PROXQP_RHO / TASK_ACCURACY)
     q = sda10f.q_home.copy()
     lock = PointLock.on_link(sda10f, q, distance=0.05)
     other = PointLock(lock.link, lock.link_point, lock.target + [0.01, 0.0, 0.0])

@@ -5,9 +5,10 @@ from __future__ import annotations
 from typing import Any
 
 from ..base import SolverError
-from ..numerics import (PROXQP_CAPPED_RHO, PROXQP_FALLBACK_ITERATIONS,
+from ..numerics import (PROXQP_CAPPED_RHO, PROXQP_FALLBACK_ITERATIONS, PROXQP_FLAT_RHO,
                         PROXQP_PRIMAL_INFEASIBILITY, PROXQP_RHO)
 from .budget import StepBudget
+from .kkt import kkt_residual
 from .problem import QPSolution, QuadraticProgram
 
 #: proxqp settings that are arguments of ``init`` rather than fields of ``settings``.
@@ -50,7 +51,16 @@ class ProxQPSolver:
     its caps is solved a last time the same two ways on a fresh object (its own
     preconditioner) with ``PROXQP_FALLBACK_ITERATIONS`` times the outer cap, while the
     step's deadline leaves time and the cap is not the user's: an answer from there
-    meets the same tolerances as any.
+    meets the same tolerances as any. A stage still at its caps then is one whose optimum
+    lies far along directions its Hessian does not see, pushed there by a force of the
+    order of the tolerance (the collision fuzz's stuck task stages: wrist rolls driven to
+    their velocity limits by 3e-8 through a held collision row), where the proximal term
+    is the only curvature and each outer iteration moves them by about ``force / rho``:
+    it is solved once more on a fresh object with ``rho`` at the stage's own tolerance
+    (:data:`PROXQP_FLAT_RHO`), and
+    its answer taken only if its KKT residual (:func:`kkt_residual`, complementarity
+    included, which proxqp's "solved" does not check) is within that tolerance
+    (docs/design.md 18.7).
     """
 
     def __init__(self, settings: dict, tuned: frozenset[str]) -> None:
@@ -116,6 +126,23 @@ class ProxQPSolver:
         return {"mu_eq": self.init_arguments.get("mu_eq", qp.settings.default_mu_eq),
                 "mu_in": self.init_arguments.get("mu_in", qp.settings.default_mu_in)}
 
+    def _flat(self, problem: QuadraticProgram, arguments: tuple, qp: Any,
+              status: Any) -> tuple[Any, Any]:
+        """The last solve with ``rho`` at :data:`PROXQP_FLAT_RHO` times the stage's
+        tolerance, on a fresh object with
+        :data:`PROXQP_FALLBACK_ITERATIONS` times the outer cap; its object and status if
+        its answer is certified within its ``eps_abs``, else ``qp`` and ``status``."""
+        flat = self._fresh(problem, arguments, {"rho": PROXQP_FLAT_RHO * problem.tolerance()})
+        flat.settings.max_iter *= PROXQP_FALLBACK_ITERATIONS
+        flat.solve()
+        if flat.results.info.status != self.solved:
+            return qp, status
+        n_rows, boxed = problem.shape[2:]
+        results = flat.results
+        residual = kkt_residual(problem, results.x, results.y, results.z[:n_rows],
+                                results.z[n_rows:] if boxed else None)
+        return (flat, self.solved) if residual <= flat.settings.eps_abs else (qp, status)
+
     def solve(self, problem: QuadraticProgram, budget: StepBudget) -> QPSolution:
         budget.remaining("proxqp")
         shape = problem.shape
@@ -140,6 +167,9 @@ class ProxQPSolver:
             last.settings.max_iter *= PROXQP_FALLBACK_ITERATIONS
             if self._run(last, problem) == self.solved:
                 qp, status = last, self.solved
+            elif "rho" in self.tuned:
+                budget.remaining("proxqp")
+                qp, status = self._flat(problem, arguments, qp, status)
         if status != self.solved:
             self.reset()
             if status == self.capped:
