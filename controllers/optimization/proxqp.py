@@ -53,8 +53,9 @@ class ProxQPSolver:
     step's deadline leaves time and the cap is not the user's: an answer from there
     meets the same tolerances as any. A stage still at its caps then is one whose optimum
     lies far along directions its Hessian does not see, pushed there by a force of the
-    order of the tolerance (the collision fuzz's stuck task stages: wrist rolls driven to
-    their velocity limits by 3e-8 through a held collision row), where the proximal term
+    order of the tolerance (the collision fuzz's stuck task stage: three wrist joints
+    driven to their velocity limits by box multipliers of at most 3e-8, through a held
+    collision row), where the proximal term
     is the only curvature and each outer iteration moves them by about ``force / rho``:
     it is solved once more on a fresh object with ``rho`` at the stage's own tolerance
     (:data:`PROXQP_FLAT_RHO`), and
