@@ -101,6 +101,18 @@ def test_two_holes_on_the_dual_robot(dual):
     assert_same(*runs)
 
 
+def test_two_holes_on_the_mobile_robot(mobile):
+    """A planar base (MuJoCo's x, y, heading against Pinocchio's x, y, cos, sin) while it
+    drives and turns: the command mapped in and ``qpos`` mapped out around the call."""
+    compiled, reference = plants(mobile, PlantSettings())
+    runs = [run(plant, mobile, [moving_hole(mobile, link) for link in mobile.constrained_links],
+                0.2) for plant in (compiled, reference)]
+    assert runs[1][0][3].shape == (2, 3) and runs[1][-1][3].shape == (1, 3)
+    headings = [np.arctan2(r[1][3], r[1][2]) for r in runs[1]]
+    assert max(headings) - min(headings) > 0.01  # the base turned (rad)
+    assert_same(*runs)
+
+
 def test_saturated_drives_under_a_payload(sda10f):
     """A fast sweep with 3 kg at the EE and weak drives: the torque ratio reaches 1."""
     settings = PlantSettings(payload=3.0, servo_bandwidth=40.0)

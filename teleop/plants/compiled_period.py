@@ -6,8 +6,9 @@ arithmetic: each actuator's control from the command, the physics steps with the
 walls attached, the torque ratio, the contacts, the velocity that takes the loop's
 configuration to the simulated one, ``moved = (qpos - q) / dt`` (``pin.difference`` of
 1-dof joints), and the loop's next configuration ``q + moved dt`` (``pin.integrate`` of
-them). It serves a robot whose Pinocchio and MuJoCo coordinates are the same
-(``JointMap.identity``); the buffers it reads and writes are arrays made once, their
+them) where the Pinocchio and MuJoCo coordinates are the same (``JointMap.identity``;
+elsewhere, a planar base or a continuous joint, Python maps the command in and ``qpos``
+out around the call); the buffers it reads and writes are arrays made once, their
 addresses given to the C side in one block (:class:`PeriodBlock`). Python calls it through
 ``period_call.c``, a CPython module compiled as the walls' library is
 (:func:`~teleop.plants.cached_build.cached_build`, against Python's and numpy's headers):
@@ -59,7 +60,7 @@ class PeriodBlock(ctypes.Structure):
                 ("moved", _POINTER), ("reached", _POINTER), ("summary", _POINTER),
                 ("run", _POINTER),
                 ("dt", ctypes.c_double), ("nstep", ctypes.c_int), ("port_count", ctypes.c_int),
-                ("nv", ctypes.c_int), ("nq", ctypes.c_int)]
+                ("nv", ctypes.c_int), ("nq", ctypes.c_int), ("identity", ctypes.c_int)]
 
 
 def _address(array: np.ndarray) -> int:
@@ -81,12 +82,14 @@ class CompiledPeriod:
     port_rows : the ports' rows (MuJoCo body and site, then the wall's
         ``compiled_parameters``) of the constraints with walls, None when one has no
         compiled form.
+    identity : the loop's coordinates are MuJoCo's (:meth:`run`); False: the caller maps
+        the command to MuJoCo's dofs and ``qpos`` back (:meth:`run_mapped`).
     """
 
     def __init__(self, library: ctypes.CDLL, call: ModuleType, model: mujoco.MjModel,
                  data: mujoco.MjData, actuator_dofs: np.ndarray, effort_limit: np.ndarray,
-                 dt: float, nstep: int, port_rows: PortRows) -> None:
-        self._run = call.run
+                 dt: float, nstep: int, port_rows: PortRows, identity: bool) -> None:
+        self._run, self._run_mapped = call.run, call.run_mapped
         self._port_rows = port_rows
         #: the constraints with walls, their walls and versions the ports were read from,
         #: and whether every wall there has a compiled form
@@ -110,7 +113,8 @@ class CompiledPeriod:
                                   _address(self.moved), _address(self.reached),
                                   _address(self.summary),
                                   ctypes.cast(library.cjm_plant_period, _POINTER).value,
-                                  float(dt), int(nstep), 0, model.nv, model.nq)
+                                  float(dt), int(nstep), 0, model.nv, model.nq,
+                                  int(identity))
         #: the block's address, as :func:`period_call`'s ``run`` takes it
         self._address = ctypes.addressof(self._block)
 
@@ -127,10 +131,32 @@ class CompiledPeriod:
             constraints: Sequence[Constraint]) -> tuple[np.ndarray, np.ndarray] | None:
         """One period under ``command`` from ``q`` with the walls of ``constraints``; the
         velocity moved and the configuration it takes ``q`` to over the period (new
-        arrays), or None (nothing run) when a wall has no compiled form. The ports are read
-        again when a constraint, its wall or an object of the wall's
-        :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's (``is``:
-        a replaced object is read again even when it holds the same numbers)."""
+        arrays), or None (nothing run) when a wall has no compiled form (:meth:`ports_ready`).
+        Only with ``identity``."""
+        if not self.ports_ready(constraints):
+            return None
+        try:  # copied through their buffers (float64 vectors of the right size: the loop's)
+            ran: tuple[np.ndarray, np.ndarray] = self._run(self._address, command, q)
+        except TypeError:  # another type, layout or shape: numpy's copy and checks
+            np.copyto(self.command, command)
+            np.copyto(self.q, q)
+            ran = self._run(self._address, self.command, self.q)
+        return ran
+
+    def run_mapped(self, command: np.ndarray, constraints: Sequence[Constraint]) -> bool:
+        """One period under ``command`` (MuJoCo's dofs, float64) with the walls of
+        ``constraints``, the caller reading ``qpos``; False (nothing run) when a wall has no
+        compiled form."""
+        if not self.ports_ready(constraints):
+            return False
+        self._run_mapped(self._address, command)
+        return True
+
+    def ports_ready(self, constraints: Sequence[Constraint]) -> bool:
+        """The ports of ``constraints``' walls in the block, False when a wall has no
+        compiled form. They are read again when a constraint, its wall or an object of the
+        wall's :meth:`~teleop.plants.walls.Wall.compiled_version` is not the last period's
+        (``is``: a replaced object is read again even when it holds the same numbers)."""
         objects: list[object] = []
         for constraint in constraints:
             wall = wall_of(constraint)
@@ -144,26 +170,18 @@ class CompiledPeriod:
             if rows is not None:
                 self.set_ports(rows)
             self._port_objects = objects
-        if not self._ports_compiled:
-            return None
-        try:  # copied through their buffers (float64 vectors of the right size: the loop's)
-            ran: tuple[np.ndarray, np.ndarray] = self._run(self._address, command, q)
-        except TypeError:  # another type, layout or shape: numpy's copy and checks
-            np.copyto(self.command, command)
-            np.copyto(self.q, q)
-            ran = self._run(self._address, self.command, self.q)
-        return ran
+        return self._ports_compiled
 
 
 def compiled_period(model: mujoco.MjModel, data: mujoco.MjData, actuator_dofs: np.ndarray,
                     effort_limit: np.ndarray, dt: float, nstep: int,
-                    port_rows: PortRows) -> CompiledPeriod | None:
+                    port_rows: PortRows, identity: bool) -> CompiledPeriod | None:
     """The compiled period of a plant, or None where the library or the call is not
     available."""
     library, call = wall_library(), period_call()
     return (None if library is None or call is None else
             CompiledPeriod(library, call, model, data, actuator_dofs, effort_limit, dt, nstep,
-                           port_rows))
+                           port_rows, identity))
 
 
 @functools.cache

@@ -205,14 +205,16 @@ class MujocoPlant:
         self._compiled_walls = compiled_ports(self.mj_data) if compiled_walls else None
         self.reset(robot.q_home)
         #: the whole period in one compiled call, where nothing between the loop and
-        #: MuJoCo needs Python (a perfect interface, no tissue, no contact pairs to follow,
-        #: the same coordinates in both models); None: :meth:`actuate` in Python
+        #: MuJoCo needs Python (a perfect interface, no tissue, no contact pairs to follow;
+        #: the coordinates mapped around it when the models' differ); None:
+        #: :meth:`actuate` in Python
         self._period: CompiledPeriod | None = (
             compiled_period(self.mj_model, self.mj_data, self._actuator_dofs,
-                            self.effort_limit, self.dt, self.substeps, self._compiled_ports)
+                            self.effort_limit, self.dt, self.substeps, self._compiled_ports,
+                            self.joints.identity)
             if self._compiled_walls is not None and self.shaping is None
             and self.interface.mode == "off" and not self.tissues
-            and self.contact_pairs is None and self.joints.identity else None)
+            and self.contact_pairs is None else None)
         #: a period split in Python (a wall without a compiled form) left its last
         #: forces in ``qfrc_applied``, which the compiled period's steps would apply
         self._forces_applied = False
@@ -377,30 +379,40 @@ class MujocoPlant:
                 dt: float) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`actuate`, and the configuration its velocity takes ``q`` to over ``dt``,
         ``pin.integrate(q, moved dt)``: computed by the compiled period in the same call
-        (``q + moved dt``, the same bits for the 1-dof joints it serves) when ``dt`` is the
-        plant's period."""
+        (``q + moved dt``, the same bits for the 1-dof joints it serves, where the models'
+        coordinates are the same) when ``dt`` is the plant's period."""
         ran = self._compiled_period(qd, q, constraints)
-        if ran is not None and dt == self.dt:
-            return ran
+        if ran is not None and ran[1] is not None and dt == self.dt:
+            return ran[0], ran[1]
         moved = ran[0] if ran is not None else self._python_period(qd, q, constraints)
         return moved, pin.integrate(self.model, q, moved * dt)
 
     def _compiled_period(self, qd: np.ndarray, q: np.ndarray,
                          constraints: Sequence[Constraint],
-                         ) -> tuple[np.ndarray, np.ndarray] | None:
+                         ) -> tuple[np.ndarray, np.ndarray | None] | None:
         """The period in C (:class:`~teleop.plants.compiled_period.CompiledPeriod`): the
-        velocity moved and the configuration reached, or None (nothing run: no compiled
-        period, or a wall without a compiled form)."""
-        if self._period is None:
+        velocity moved and the configuration reached (None where the models' coordinates
+        differ: the command mapped to MuJoCo's, the velocity from ``qpos`` mapped back as
+        the Python period does), or None (nothing run: no compiled period, or a wall
+        without a compiled form)."""
+        period = self._period
+        if period is None:
             return None
         # (the interface is off: it passes the command on, checks and counts nothing)
         if self._forces_applied:  # a period split in Python left its last forces there
             self._qfrc_applied.fill(0.0)
             self._forces_applied = False
-        ran = self._period.run(qd, q, constraints)
-        if ran is not None:
+        if self.joints.identity:
+            ran = period.run(qd, q, constraints)
+            if ran is None:
+                return None
             self._last = None
-        return ran
+            return ran
+        if not period.run_mapped(self.joints.v_to_mujoco(qd, self._qpos), constraints):
+            return None
+        self._last = None
+        self.joints.q_to_pinocchio(self._qpos, self._q_pin)
+        return pin.difference(self.model, q, self._q_pin) / self.dt, None
 
     def _python_period(self, qd: np.ndarray, q: np.ndarray,
                        constraints: Sequence[Constraint]) -> np.ndarray:

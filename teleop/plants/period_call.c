@@ -6,7 +6,12 @@
 //
 // copies the command (nv float64) and q (nq float64) into the block's buffers, runs the
 // period with the GIL released (as ctypes would: MuJoCo's step needs no Python) and returns
-// the velocity moved and the configuration it takes q to as new float64 arrays. A vectorcall on two buffers costs a tenth of a
+// the velocity moved and the configuration it takes q to as new float64 arrays; for a robot
+// whose coordinates MuJoCo's are not (a planar base, a continuous joint)
+//
+//     run_mapped(block, command)
+//
+// runs it from the command in MuJoCo's dofs, the caller mapping qpos to its coordinates. A vectorcall on two buffers costs a tenth of a
 // ctypes call and the copies around it (teleop/plants/compiled_period.py). Anything but a
 // C-contiguous float64 vector of the right length is a TypeError, which the Python side
 // answers with numpy's conversions and checks.
@@ -75,10 +80,31 @@ static PyObject* run(PyObject* module, PyObject* const* args, Py_ssize_t nargs) 
   return both;
 }
 
+static PyObject* run_mapped(PyObject* module, PyObject* const* args, Py_ssize_t nargs) {
+  (void)module;
+  if (nargs != 2) {
+    PyErr_SetString(PyExc_TypeError, "run_mapped(block, command) takes 2 arguments");
+    return NULL;
+  }
+  PlantPeriod* period = (PlantPeriod*)PyLong_AsVoidPtr(args[0]);
+  if (period == NULL) {
+    if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "the block's address is 0");
+    return NULL;
+  }
+  if (copy_vector(args[1], period->command, period->nv, "command") != 0) return NULL;
+  Py_BEGIN_ALLOW_THREADS
+  period->run(period);
+  Py_END_ALLOW_THREADS
+  Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"run", (PyCFunction)(void (*)(void))run, METH_FASTCALL,
      "run(block, command, q): one period of the block at this address; the velocity moved "
      "and the configuration reached."},
+    {"run_mapped", (PyCFunction)(void (*)(void))run_mapped, METH_FASTCALL,
+     "run_mapped(block, command): one period of the block at this address from a command "
+     "in MuJoCo's dofs."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef definition = {PyModuleDef_HEAD_INIT, "cjm_period_call",

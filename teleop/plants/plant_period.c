@@ -1,7 +1,8 @@
 // One control period of the MuJoCo plant in one call (docs/design.md section 17.5): what
-// teleop/plants/mujoco_plant.py's MujocoPlant.actuate does around mj_step, for a robot
-// whose Pinocchio and MuJoCo coordinates are the same (JointMap.identity: 1-dof joints in
-// the same order, q and v alike) on a perfect interface:
+// teleop/plants/mujoco_plant.py's MujocoPlant.advance does around mj_step on a perfect
+// interface, the command given in MuJoCo's dofs; the last two lines only for a robot whose
+// Pinocchio and MuJoCo coordinates are the same (JointMap.identity: 1-dof joints in the
+// same order, q and v alike; otherwise the caller maps qpos to its own coordinates):
 //
 //     ctrl[a] = v_cmd[dof(a)]                      (each dof's reference and feed-forward)
 //     mj_step(m, d) nstep times, the ports' walls attached (port_wall.c)
@@ -47,6 +48,7 @@ void cjm_plant_period(const PlantPeriod* period) {
   const double penetration = -deepest;
   period->summary[kContacts] = d->ncon;
   period->summary[kPenetration] = penetration > 0.0 ? penetration : 0.0;
+  if (!period->identity) return;  // the caller maps qpos to its coordinates
   for (int i = 0; i < m->nq; ++i) {
     period->moved[i] = (d->qpos[i] - period->q[i]) / period->dt;
     const double step = period->moved[i] * period->dt;
