@@ -260,7 +260,8 @@ def main() -> None:
             result = results[f"{name} {run + 1}"] = {
                 "seconds": end - start, "mean_hz": mean, "worst_1s_hz": worst,
                 "mean_fraction": mean / baseline, "worst_fraction": worst / baseline,
-                "worst_1s_threads": spent, "flooder": said, "udp_counts": delta,
+                "worst_1s_threads": spent, "scheduling": control.scheduling,
+                "flooder": said, "udp_counts": delta,
                 "inbox_coalesced": ui.inbox.coalesced - coalesced,
                 "inbox_applied": ui.inbox.applied - applied,
                 "paced_read_coalesced_delivered": [
@@ -272,7 +273,8 @@ def main() -> None:
                   f"counts {delta}; inbox coalesced {result['inbox_coalesced']}, "
                   f"applied {result['inbox_applied']}; messages read, coalesced, "
                   f"handed to viser {result['paced_read_coalesced_delivered']}; worst 1 s: "
-                  f"{spent}",
+                  f"{spent}; the control thread {control.scheduling}, the others "
+                  f"{control.shared_scheduling or 'as they were'}",
                   flush=True)
             time.sleep(2.0)  # quiet between floods
         print(f"baseline: mean {baseline:.0f} Hz, worst 1 s {baseline_worst:.0f} Hz: {quiet}")

@@ -1,6 +1,6 @@
 """How the server's threads are scheduled (docs/design.md section 5.3, "Priorities"): the
 control thread ``SCHED_FIFO`` at its priority, given back to ordinary scheduling when its
-ticks leave no time to sleep and taken again at the next rate; the server's other threads
+ticks hold a CPU (not when they wait) and taken again at the next rate; the server's other threads
 ``SCHED_FIFO`` at the lowest priority, what they start ordinary; nothing real-time at
 priority 0. (This machine runs the tests as root: the system grants the priorities.)"""
 
@@ -16,6 +16,7 @@ import pytest
 
 from teleop.inputs import UdpMaster
 from web.app import ControlThread, TeleopApp
+from web.app.control_thread import HOG_SHARE, HOG_WINDOW
 from web.shared_priority import SHARED_PRIORITY, make_shared_realtime
 from web.ui import run_server
 
@@ -54,13 +55,25 @@ def test_the_control_thread_runs_fifo_gives_it_up_when_it_never_sleeps_and_takes
         assert scheduling(control.thread.native_id) == (os.SCHED_FIFO, True, 40)
         assert control.scheduling == "SCHED_FIFO 40"
 
-        def overrunning_step():  # 6 ms a tick at 250 Hz (4 ms): never time to sleep
+        def waiting_step():  # 6 ms a tick at 250 Hz (4 ms), waiting: no CPU taken
             time.sleep(6e-3)
             return step()
 
-        monkeypatch.setattr(app, "step", overrunning_step)
+        monkeypatch.setattr(app, "step", waiting_step)
+        ticks = app.ticker.ticks
+        wait_for(lambda: app.ticker.ticks > ticks + 3 * HOG_WINDOW / 6e-3, 10.0)
+        assert control.scheduling == "SCHED_FIFO 40"  # three windows late, but sleeping
+
+        def hogging_step():  # 6 ms a tick on the CPU: never time to sleep
+            until = time.thread_time() + 6e-3
+            while time.thread_time() < until:
+                pass
+            return step()
+
+        monkeypatch.setattr(app, "step", hogging_step)
         words = wait_for(lambda: "given up" in control.scheduling and control.scheduling, 10.0)
-        assert words.startswith("ordinary scheduling (SCHED_FIFO 40 given up: 10 ticks in a row")
+        assert words.startswith("ordinary scheduling (SCHED_FIFO 40 given up: the ticks took ")
+        assert float(words.split("took ")[1].split(" %")[0]) > 100 * HOG_SHARE
         assert scheduling(control.thread.native_id) == (os.SCHED_OTHER, False, 0)
         monkeypatch.setattr(app, "step", step)
         app.robots.set_rate(200.0)  # a new rate: real-time again

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from teleop.plants.ros2.realtime import (OVERRUN_PERIODS, check_priority, hold_realtime,
-                                        release_realtime, scheduling_words)
+from teleop.plants.ros2.realtime import (check_priority, hold_realtime, release_realtime,
+                                        scheduling_words)
 
 from .core import TeleopApp
 from .status import behind_words
@@ -23,6 +23,11 @@ TIMING_WINDOW = 4096
 #: waking for its deadline waits at most about this long for the others (Python's default
 #: 5 ms would make the 1 kHz loop late by up to 5 periods whenever the view thread works)
 SWITCH_INTERVAL = 2e-4
+#: the real-time control thread's CPU time is checked over windows of this length (s)...
+HOG_WINDOW = 0.25
+#: ... and above this share of one CPU it goes back to ordinary scheduling: it would hold
+#: its core against every ordinary thread (time waiting for the GIL or the lock is no CPU)
+HOG_SHARE = 0.9
 
 
 def percentiles(columns: np.ndarray, q: float) -> np.ndarray:
@@ -74,8 +79,8 @@ class ControlThread:
     It runs ``SCHED_FIFO`` at ``realtime_priority`` (1-99; 0: ordinary scheduling), as a
     robot's control loop does: on a loaded machine an ordinary thread waits for a CPU
     behind every other process, most of a second at a time (docs/inputs.md, "Floods").
-    A thread that never sleeps would hold its core against every ordinary one: after
-    :data:`OVERRUN_PERIODS` ticks in a row with no time left to sleep it goes back to
+    A thread that never sleeps would hold its core against every ordinary one: when it
+    ran more than :data:`HOG_SHARE` of a :data:`HOG_WINDOW` on a CPU it goes back to
     ordinary scheduling, until the rate changes. Over ROS 2 the plant makes the thread
     real-time as it actuates (:class:`teleop.plants.ros2.ros2_plant.Ros2Plant`, at its
     settings' priority) and this thread takes no hold of its own. Without the privilege
@@ -175,18 +180,19 @@ class ControlThread:
     def _loop(self) -> int | None:
         """Ticks until stopped; the thread's real-time hold still in force (its id), if any."""
         held = self._hold()
-        overruns = 0
+        gave_up = False
         clock = time.perf_counter
         next_tick = clock()
         window_start, window_ticks = clock(), 0
+        hog_start, hog_cpu = clock(), time.thread_time()
         period = self.app.robots.config.dt
         while not self._stop.is_set():
             if self.app.robots.config.dt != period:  # a new rate: a new measuring window
                 period = self.app.robots.config.dt
                 window_start, window_ticks = clock(), 0
-                if held is None and overruns >= OVERRUN_PERIODS:  # real-time again
-                    held = self._hold()
-                overruns = 0
+                if gave_up:  # real-time again
+                    held, gave_up = self._hold(), False
+                hog_start, hog_cpu = clock(), time.thread_time()
             start = clock()
             solve_us = advance_us = 0.0
             try:
@@ -211,16 +217,18 @@ class ControlThread:
                 self.achieved_rate = window_ticks / (end - window_start)
                 self._measured_rate = 1.0 / period
                 window_start, window_ticks = end, 0
+            if end - hog_start >= HOG_WINDOW:
+                share = (time.thread_time() - hog_cpu) / (end - hog_start)
+                if held is not None and share > HOG_SHARE:
+                    release_realtime(held)
+                    held, gave_up = None, True
+                    self.scheduling = (
+                        f"{scheduling_words()} (SCHED_FIFO {self.realtime_priority} given "
+                        f"up: the ticks took {100 * share:.0f} % of a CPU; again at the next "
+                        "rate)")
+                hog_start, hog_cpu = end, time.thread_time()
             next_tick += period
             delay = next_tick - clock()
-            overruns = 0 if delay > 0 else overruns + 1
-            if held is not None and overruns >= OVERRUN_PERIODS:
-                release_realtime(held)
-                held = None
-                self.scheduling = (
-                    f"{scheduling_words()} (SCHED_FIFO {self.realtime_priority} given up: "
-                    f"{overruns} ticks in a row left no time to sleep; again at the next "
-                    "rate)")
             if delay > 0 and self.app.ros2 is None:
                 time.sleep(delay)
             elif delay < -period:
