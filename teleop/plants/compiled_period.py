@@ -23,7 +23,6 @@ import ctypes
 import functools
 import importlib.machinery
 import importlib.util
-import operator
 import sys
 import sysconfig
 from collections.abc import Callable, Sequence
@@ -89,7 +88,7 @@ class CompiledPeriod:
     def __init__(self, library: ctypes.CDLL, call: ModuleType, model: mujoco.MjModel,
                  data: mujoco.MjData, actuator_dofs: np.ndarray, effort_limit: np.ndarray,
                  dt: float, nstep: int, port_rows: PortRows, identity: bool) -> None:
-        self._run, self._run_mapped = call.run, call.run_mapped
+        self._run, self._run_mapped, self._identical = call.run, call.run_mapped, call.identical
         self._port_rows = port_rows
         #: the constraints with walls, their walls and versions the ports were read from,
         #: and whether every wall there has a compiled form
@@ -162,8 +161,7 @@ class CompiledPeriod:
             wall = wall_of(constraint)
             if wall is not None:
                 objects += (constraint, wall, *wall.compiled_version(constraint))
-        cached = self._port_objects
-        if len(objects) != len(cached) or not all(map(operator.is_, objects, cached)):
+        if not self._identical(objects, self._port_objects):
             rows = self._port_rows([(constraint, wall) for constraint in constraints
                                     if (wall := wall_of(constraint)) is not None])
             self._ports_compiled = rows is not None
