@@ -22,6 +22,7 @@ import numpy as np
 from teleop.controller_specs import ROBOT, make_controller
 from teleop.loop import LoopConfig, TeleopLoop
 
+from .compare import MEASURED_TOGETHER
 from .scenarios import load_scenario
 
 #: the loop time target of a 10 s run (s) on a machine whose hole step is REFERENCE_STEP_US
@@ -145,8 +146,8 @@ def format_acceleration_line(without: LoopTiming, limited: LoopTiming) -> str:
 class MeasuredPeriod:
     """``teleop compare``'s periods: :meth:`TeleopLoop.tick_measured_later` (the compiled
     tick and what the measures read, kept) timed around the call, the compiled tick alone
-    in the same periods, and the median of each period's measures taken after the run
-    (:meth:`TeleopLoop.measure_later`) (us)."""
+    in the same periods, and a period's measures taken after the run, as compare takes
+    them (:meth:`TeleopLoop.measure_all_later`) (us)."""
 
     scenario: str
     ticks: int
@@ -170,8 +171,10 @@ class MeasuredPeriod:
 def time_measured_period(scenario: str = "paper-hole",
                          duration: float | None = None) -> MeasuredPeriod:
     """``scenario`` as ``teleop compare`` runs it: each period through
-    :meth:`TeleopLoop.tick_measured_later` timed around the call, then each period's
-    measures after the run (:meth:`TeleopLoop.measure_later`), timed around the call."""
+    :meth:`TeleopLoop.tick_measured_later` timed around the call, then the measures after
+    the run, :data:`~teleop.experiments.compare.MEASURED_TOGETHER` periods at a time
+    (:meth:`TeleopLoop.measure_all_later`), each batch timed around the call: a period's
+    measures, the median over the batches of their time per period."""
     loop, targets = scenario_loop(scenario, True, duration)
     clock = time.perf_counter_ns
     periods, ticks = np.empty(len(targets)), np.empty(len(targets))
@@ -182,11 +185,12 @@ def time_measured_period(scenario: str = "paper-hole",
         periods[i] = (clock() - start) * 1e-3
         ticks[i] = period.step.tick_time_us
         kept.append(period)
-    measures = np.empty(len(kept))
-    for i, period in enumerate(kept):
+    measures = []
+    for first in range(0, len(kept), MEASURED_TOGETHER):
+        batch = kept[first:first + MEASURED_TOGETHER]
         start = clock()
-        loop.measure_later(period)
-        measures[i] = (clock() - start) * 1e-3
+        loop.measure_all_later(batch)
+        measures.append((clock() - start) * 1e-3 / len(batch))
     return MeasuredPeriod(scenario, len(targets), float(np.median(periods)),
                           float(np.percentile(periods, 99)), float(np.median(ticks)),
                           float(np.median(measures)))
@@ -203,4 +207,4 @@ def format_measured_period_line(period: MeasuredPeriod) -> str:
             f"(target at most {MEASURED_PERIOD_TARGET}x); the hot path "
             f"{period.period_median_us:.1f} us median (p99 {period.period_p99_us:.1f}, "
             f"{period.ratio:.2f}x), a period's measures after the run "
-            f"{period.measures_after_us:.1f} us median")
+            f"{period.measures_after_us:.1f} us ({MEASURED_TOGETHER} measured together)")

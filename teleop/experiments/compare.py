@@ -32,6 +32,10 @@ from .solver_output import SolverOutputCapture
 
 SCHEMA_VERSION = 9
 
+#: the periods measured together after a run (:meth:`TeleopLoop.measure_all_later`: numpy's
+#: cost per call shared by them; their kinematics a few hundred kB)
+MEASURED_TOGETHER = 1000
+
 
 def _steps(plan: Plan, config: LoopConfig, duration: float | None) -> int:
     """Control periods in ``duration`` s (default: the plan's): ``ValueError`` unless the
@@ -176,8 +180,9 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
     finally:  # a robot on the wire gets its zeros when the run ends, not at exit
         if loop.plant is not None:
             loop.plant.close()
-    while periods:  # each period let go once measured: the run's memory stays the records'
-        records.append(loop.measure_later(periods.popleft()))
+    while periods:  # each batch let go once measured: the run's memory stays the records'
+        batch = [periods.popleft() for _ in range(min(MEASURED_TOGETHER, len(periods)))]
+        records.extend(loop.measure_all_later(batch))
     return drive
 
 

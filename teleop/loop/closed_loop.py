@@ -43,6 +43,7 @@ from controllers.step_message import StepMessage
 from .constraint_measures import constraint_errors, constraint_velocity, norm
 from .distance_meter import DistanceMeter
 from .loop_config import LoopConfig
+from .measured_in_batches import Kinematics, measure_periods
 from .measured_later import Geometry, MeasuredLater, geometry_copy
 from .naming import constraint_names, row_labels
 from .plant import Plant
@@ -311,15 +312,21 @@ class TeleopLoop:
                              None if self.plant is None else self.plant.measures())
 
     def measure_later(self, period: MeasuredLater) -> StepRecord:
-        """The record of a period of :meth:`tick_measured_later`: its measures, by
-        :meth:`measure_command` and :meth:`measure`'s code at what the period kept (the
-        one taken then, where they could not wait)."""
-        if period.record is not None:
-            return period.record
-        step, command, end = period.step, period.command, period.end
-        self._measure_command(step, command.constraints, command.frames, command.labels)
-        return self._measure_end(step, period.q, period.t, end.constraints, end.frames,
-                                 end.names, period.plant)
+        """The record of a period of :meth:`tick_measured_later` (:meth:`measure_all_later`
+        of that period alone)."""
+        return self.measure_all_later([period])[0]
+
+    def measure_all_later(self, periods: Sequence[MeasuredLater]) -> list[StepRecord]:
+        """The records of periods of :meth:`tick_measured_later`, in their order: the
+        measures of :meth:`measure_command` and :meth:`measure` at what each period kept,
+        taken over all of them at once (:mod:`teleop.loop.measured_in_batches`), or the
+        record taken then, where they could not wait."""
+        pending = [period for period in periods if period.record is None]
+        kinematics = Kinematics(self.model, self.data, self.ee_frame_ids, self.config.dt,
+                                self.plant is not None)
+        measured = iter(measure_periods(kinematics, pending))
+        return [next(measured) if period.record is None else period.record
+                for period in periods]
 
     def _geometry(self) -> Geometry:
         """The constraints as they are now (:class:`Geometry`)."""

@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from controllers.cjm.pose_rows import (PERIOD_PLACEMENT, PERIOD_PREVIOUS, PERIOD_TARGET,
-                                       PERIOD_TWIST, row_pose, row_views)
+                                       PERIOD_TWIST, pose_rows, row_pose, row_views)
 from controllers.step_message import NO_MESSAGE, StepMessage
 
 from .supervisor import Supervision
@@ -165,6 +165,21 @@ class PendingStep:
         """Each EE's filtered target orientation (world, 3 x 3)."""
         return [target.rotation for target in self.targets]
 
+    @property
+    def has_previous(self) -> bool:
+        """Whether the period before's targets are known (not the first period)."""
+        return self.previous_targets is not None
+
+    @property
+    def period_rows(self) -> np.ndarray:
+        """The period as the compiled tick keeps it (:mod:`controllers.cjm.pose_rows`),
+        one row per EE: the filtered target, the previous one (zeros at the start), the
+        EE placement, each a pose row, then the commanded twist."""
+        count = len(self.targets)
+        return np.hstack([pose_rows(self.targets, count),
+                          pose_rows(self.previous_targets, count),
+                          pose_rows(self.placements, count), np.array(self.twists)])
+
 
 #: the measures' defaults of a compiled period (replaced, never written in place)
 NO_ROWS = np.zeros(0)
@@ -188,11 +203,19 @@ class CompiledPendingStep(PendingStep):
                  q_before: np.ndarray, qd: np.ndarray, moved: np.ndarray, tick_time_us: float,
                  step_time_us: float, status: str, step_message: StepMessage,
                  twist_saturated: bool) -> None:
-        self.period, self.has_previous = period, has_previous
+        self.period, self._has_previous = period, has_previous
         self.sensed, self.q_before, self.qd, self.moved = sensed, q_before, qd, moved
         self.tick_time_us, self.step_time_us = tick_time_us, step_time_us
         self.status, self.step_message = status, step_message
         self.twist_saturated = twist_saturated
+
+    @property
+    def has_previous(self) -> bool:
+        return self._has_previous
+
+    @property
+    def period_rows(self) -> np.ndarray:
+        return self.period
 
     @functools.cached_property
     def targets(self) -> list[pin.SE3]:
