@@ -202,3 +202,16 @@ def test_commands_of_any_layout_or_dtype_are_copied_in(sda10f):
         assert all(np.array_equal(m, moved[0]) for m in moved[1:])
         q = pin.integrate(sda10f.model, q, moved[0] * DT)
     assert np.max(np.abs(moved[0])) > 0.1
+
+
+def test_a_loop_period_other_than_the_plants_integrates_over_its_own(sda10f):
+    """``advance`` over a ``dt`` that is not the plant's: the velocity is the plant's
+    period's, the configuration Pinocchio's integration of it over the ``dt`` given."""
+    compiled, reference = plants(sda10f, PlantSettings())
+    q, dt = sda10f.q_home.copy(), 2.5 * DT
+    for qd in commands(sda10f.model.nv, 20, 0.5):
+        moved, reached = compiled.advance(qd, q, [], dt)
+        assert np.array_equal(moved, reference.actuate(qd, q, []))
+        assert np.array_equal(reached, pin.integrate(sda10f.model, q, moved * dt))
+        assert not np.array_equal(reached, pin.integrate(sda10f.model, q, moved * DT))
+        q = reached
