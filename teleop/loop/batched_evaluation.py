@@ -13,6 +13,7 @@ without one (nor any base with one) is evaluated period by period
 
 from __future__ import annotations
 
+import operator
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, Sequence, TypeVar
 
@@ -86,6 +87,20 @@ def times(matrices: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     return np.matmul(matrices, vectors[..., None])[..., 0]
 
 
+#: what :class:`HoleForm` reads of each hole (its geometry of that period)
+ANCHOR, CENTER, LINK_AXIS, GAIN = (operator.attrgetter(name)
+                                   for name in ("anchor", "center", "link_axis", "gain"))
+
+
+def directions_of(hole: Hole) -> np.ndarray:
+    """The hole's ``C`` (2 x 3), the same at every placement."""
+    return hole.directions(IDENTITY)
+
+
+#: a placement where a constraint's directions do not depend on it
+IDENTITY = pin.SE3.Identity()
+
+
 class HoleForm:
     """:meth:`Hole.evaluate` (docs/design.md section 3, the hole): with ``x = R^T (c - t)``
     the centre and ``f = R^T v_c`` its velocity in ``F_a``, ``p = (e . x) e``,
@@ -93,10 +108,10 @@ class HoleForm:
 
     def evaluate(self, constraints: Sequence[Hole], rotations: np.ndarray,
                  translations: np.ndarray) -> BatchedPoint:
-        anchors = np.array([hole.anchor for hole in constraints])
-        axes = np.array([hole.link_axis for hole in constraints])
-        directions = np.array([hole.directions(pin.SE3.Identity()) for hole in constraints])
-        gains = np.array([hole.gain for hole in constraints])
+        anchors = np.array(list(map(ANCHOR, constraints)))
+        axes = np.array(list(map(LINK_AXIS, constraints)))
+        directions = np.array(list(map(directions_of, constraints)))
+        gains = np.array(list(map(GAIN, constraints)))
         centers = transposed_times(rotations, anchors[:, :3] - translations)
         error = times(-directions, centers)
         rhs = -gains[:, None] * error
@@ -110,8 +125,8 @@ class HoleForm:
     def violation(self, constraints: Sequence[Hole], rotations: np.ndarray,
                   translations: np.ndarray) -> np.ndarray:
         """``|error|`` (:meth:`Constraint.violation`), ``error = -C R^T (c - t)``."""
-        centers = np.array([hole.center for hole in constraints])
-        directions = np.array([hole.directions(pin.SE3.Identity()) for hole in constraints])
+        centers = np.array(list(map(CENTER, constraints)))
+        directions = np.array(list(map(directions_of, constraints)))
         error = times(-directions, transposed_times(rotations, centers - translations))
         return np.sqrt((error * error).sum(axis=1))
 

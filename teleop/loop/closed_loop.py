@@ -295,8 +295,9 @@ class TeleopLoop:
         """:meth:`tick`'s period with its measures left for :meth:`measure_later`, which
         gives the same record (docs/design.md 5.1, :mod:`teleop.loop.measured_later`):
         the hot path, then what the measures read, kept: the geometry at the command and,
-        once ``advance_geometry(t)`` has moved it, at the end. Where the measures cannot
-        wait (:attr:`measures_later`), they are taken now and kept."""
+        once ``advance_geometry(t)`` has moved it, at the end (the command's when there is
+        none: nothing moves it in between). Where the measures cannot wait
+        (:attr:`measures_later`), they are taken now and kept."""
         step = self.advance(target)
         if not self.measures_later:
             self.measure_command(step)
@@ -305,10 +306,11 @@ class TeleopLoop:
             record = self.measure(step)
             geometry = self._geometry()
             return MeasuredLater(step, geometry, geometry, self.q, self.t, record.plant, record)
-        command = self._geometry()
+        command = end = self._geometry()
         if advance_geometry is not None:
             advance_geometry(self.t)
-        return MeasuredLater(step, command, self._geometry(), self.q, self.t,
+            end = self._geometry()
+        return MeasuredLater(step, command, end, self.q, self.t,
                              None if self.plant is None else self.plant.measures())
 
     def measure_later(self, period: MeasuredLater) -> StepRecord:

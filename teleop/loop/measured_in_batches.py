@@ -50,15 +50,20 @@ def placements_and_jacobians(kinematics: Kinematics, configurations: Sequence[np
     """At each configuration, each frame's world placement (N, F, 4, 4) and ``LOCAL``
     Jacobian (N, F, 6, nv), from ``computeJointJacobians``."""
     model, data = kinematics.model, kinematics.data
-    placements, jacobians = [], []
+    placements: list[np.ndarray] = []
+    jacobians: list[np.ndarray] = []
+    jacobians_at, placement_of, jacobian_of = (pin.computeJointJacobians,
+                                               pin.updateFramePlacement, pin.getFrameJacobian)
     for q in configurations:
-        pin.computeJointJacobians(model, data, q)
+        jacobians_at(model, data, q)
         for frame in frames:
-            placements.append(pin.updateFramePlacement(model, data, frame).homogeneous)
-            jacobians.append(pin.getFrameJacobian(model, data, frame, pin.LOCAL))
+            placements.append(placement_of(model, data, frame).homogeneous)
+            jacobians.append(jacobian_of(model, data, frame, pin.LOCAL))
     count = len(configurations), len(frames)
-    return (np.array(placements).reshape(*count, 4, 4),
-            np.array(jacobians).reshape(*count, 6, model.nv))
+    if not frames:
+        return np.zeros((*count, 4, 4)), np.zeros((*count, 6, model.nv))
+    return (np.concatenate(placements).reshape(*count, 4, 4),
+            np.concatenate(jacobians).reshape(*count, 6, model.nv))
 
 
 def placements_at(kinematics: Kinematics, configurations: Sequence[np.ndarray],
@@ -66,12 +71,13 @@ def placements_at(kinematics: Kinematics, configurations: Sequence[np.ndarray],
     """At each configuration, each frame's world placement (N, F, 4, 4), from
     ``forwardKinematics``."""
     model, data = kinematics.model, kinematics.data
-    placements = []
+    placements: list[np.ndarray] = []
+    kinematics_at, placement_of = pin.forwardKinematics, pin.updateFramePlacement
     for q in configurations:
-        pin.forwardKinematics(model, data, q)
+        kinematics_at(model, data, q)
         for frame in frames:
-            placements.append(pin.updateFramePlacement(model, data, frame).homogeneous)
-    return np.array(placements).reshape(len(configurations), len(frames), 4, 4)
+            placements.append(placement_of(model, data, frame).homogeneous)
+    return np.concatenate(placements).reshape(len(configurations), len(frames), 4, 4)
 
 
 def column_major(matrices: np.ndarray) -> np.ndarray:
@@ -260,20 +266,23 @@ def measure_periods(kinematics: Kinematics, periods: Sequence[MeasuredLater],
     limits = np.maximum(0.0, np.maximum((q - model.upperPositionLimit).max(axis=1),
                                         (model.lowerPositionLimit - q).max(axis=1)))
     records = []
-    for i, period in enumerate(periods):
+    for (period, error_i, residual_i, penetration_i, positions_i, orientations_i, limit_i,
+         floor_i, velocity_i, drift_i, operator_i, commanded_i, actual_i, violations_i) in zip(
+            periods, error.tolist(), residual.tolist(), penetration.tolist(), list(positions),
+            list(orientations), limits.tolist(), floor.tolist(), velocity, drift,
+            list(operator), list(commanded), list(actual), violations):
         step, supervision = period.step, period.step.supervision
         assert supervision is not None  # every period the loop ran was supervised
         records.append(StepRecord(
-            t=period.t, constraint_error=float(error[i]),
-            constraint_velocity_residual=float(residual[i]),
-            barrier_penetration=float(penetration[i]), ee_position_errors=positions[i],
-            ee_orientation_errors=orientations[i], joint_limit_violation=float(limits[i]),
+            t=period.t, constraint_error=error_i, constraint_velocity_residual=residual_i,
+            barrier_penetration=penetration_i, ee_position_errors=positions_i,
+            ee_orientation_errors=orientations_i, joint_limit_violation=limit_i,
             failed=step.status == "failed", step_time_us=step.step_time_us,
-            tick_time_us=step.tick_time_us, constraint_velocity_floor=float(floor[i]),
-            twist_saturated=step.twist_saturated, constraint_velocity=velocity[i],
-            constraint_velocity_labels=period.command.labels, drift_velocity=drift[i],
-            operator_linear_velocities=operator[i], commanded_linear_velocities=commanded[i],
-            actual_linear_velocities=actual[i], constraint_errors=violations[i],
+            tick_time_us=step.tick_time_us, constraint_velocity_floor=floor_i,
+            twist_saturated=step.twist_saturated, constraint_velocity=velocity_i,
+            constraint_velocity_labels=period.command.labels, drift_velocity=drift_i,
+            operator_linear_velocities=operator_i, commanded_linear_velocities=commanded_i,
+            actual_linear_velocities=actual_i, constraint_errors=violations_i,
             constraint_names=period.end.names, status=step.status,
             step_message=step.step_message, controller_status=step.controller_status,
             measured_constraint_error=supervision.error,
