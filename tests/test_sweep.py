@@ -12,6 +12,7 @@ import subprocess
 import sys
 import tempfile
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -386,6 +387,65 @@ def test_interrupt_and_resume_run_no_cell_twice_and_lose_none(tmp_path):
         assert after[key] == row  # untouched: not run again
 
 
+def test_an_interrupted_sweep_returns_130_to_a_caller_and_ends_only_the_program(tmp_path,
+                                                                                capsys):
+    """``main`` given its arguments (a caller in its own process, as here) returns 130
+    from a stopped sweep, its database closed; the program itself (``python -m teleop``,
+    the subprocess tests above and below) ends at once instead (``end_process``). SIGTERM
+    here, as Ctrl-C, since a test run in the background ignores SIGINT."""
+    out = tmp_path / "sweep"
+    stop = threading.Event()
+
+    def terminate_after_the_first_cell() -> None:
+        deadline = time.monotonic() + 600
+        while time.monotonic() < deadline and not stop.is_set():
+            if (out / DATABASE_NAME).exists() and _keys(out):
+                os.kill(os.getpid(), signal.SIGTERM)
+                return
+            time.sleep(0.1)
+
+    sender = threading.Thread(target=terminate_after_the_first_cell)
+    sender.start()
+    try:
+        code = main(["sweep", "--scenarios", "paper-hole", "--controllers", "cjm,qp:daqp",
+                     "--seeds", "10", "--duration", "2.0", "--workers", "2", "--reports", "0",
+                     "--quiet", "--out", str(out)])
+    finally:
+        stop.set()
+        sender.join()
+    error = capsys.readouterr().err
+    assert code == 130, error
+    assert "the same command resumes" in error and "stopped (SIGTERM)" in error
+    assert 1 <= len(rows_by_key(out)) < 20  # closed: readable, the cells written kept
+
+
+def test_a_worker_past_its_deadline_is_ended_even_holding_the_interpreter():
+    """:func:`ended_past`: a process stuck in one C call that holds the interpreter (no
+    Python handler could run) is ended by the kernel at the deadline, SIGALRM its end; a
+    block that ends in time leaves no timer and the handler it found."""
+    stuck = subprocess.run([sys.executable, "-c", textwrap.dedent("""
+        from teleop.experiments.sweep.worker_deadline import ended_past
+        with ended_past(0.5) as armed:
+            assert armed
+            sum(range(10**13))  # hours in one C call
+        """)], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert stuck.returncode == -signal.SIGALRM, stuck.stderr
+    in_time = subprocess.run([sys.executable, "-c", textwrap.dedent("""
+        import signal, time
+        from teleop.experiments.sweep.worker_deadline import ended_past
+        def mine(signum, frame):
+            raise SystemExit("my handler ran")
+        signal.signal(signal.SIGALRM, mine)
+        with ended_past(0.3):
+            pass
+        assert signal.getsignal(signal.SIGALRM) is mine
+        assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+        time.sleep(0.6)
+        print("alive")
+        """)], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert in_time.returncode == 0 and in_time.stdout.strip() == "alive", in_time.stderr
+
+
 def _keys(folder: Path) -> set[str]:
     with ResultsDatabase(folder / DATABASE_NAME) as database:
         return database.keys()
@@ -450,6 +510,25 @@ def test_a_ray_worker_killed_mid_sweep_loses_no_cell(tmp_path, ray_instance):
     keys = [f.cell.key for f in finished]
     assert sorted(keys) == sorted(c.key for c in spec.cells())  # every cell once
     assert all(f.outcome["status"] == DONE for f in finished)
+
+
+def test_a_ray_cell_past_its_deadline_ends_its_worker_and_the_instance_goes_on(ray_instance):
+    """A task still running ``grace`` past its cell's time limit ends its own worker
+    (:mod:`teleop.experiments.sweep.worker_deadline`; its deadline here 2 ms after it
+    starts, inside the cell's setup): the cell failed saying so, at its first attempt (not
+    run again, as the pool does with a stuck cell), no task cancelled; then the same
+    instance runs cells to the end."""
+    from teleop.experiments.sweep.ray_engine import RayEngine
+
+    cells = build_spec({**SMALL, "seeds": 1, "controllers": ["cjm"]}).cells()
+    engine = RayEngine(workers=2, retries=2, grace=1e-3)
+    stuck = list(engine.run(cells, time_limit=1e-3))
+    assert sorted(f.cell.key for f in stuck) == sorted(c.key for c in cells)
+    for finished in stuck:
+        assert finished.outcome["status"] == FAILED and finished.attempts == 1
+        assert "its worker ended itself" in finished.outcome["reason"], finished.outcome
+    again = list(RayEngine(workers=2, retries=2).run(cells, time_limit=300))
+    assert [f.outcome["status"] for f in again] == [DONE] * len(cells)
 
 
 def test_a_local_ray_instance_writes_only_under_the_sweep_folder(tmp_path):

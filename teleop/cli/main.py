@@ -33,7 +33,7 @@ from .state_observer_options import add_state_observer_option
 from .supervisor_options import add_supervisor_options, supervisor_choice
 from .sweep import add_arguments as add_sweep_arguments
 from .sweep import run as run_sweep_command
-from .termination import terminations_interrupt
+from .termination import CleanedUpInterrupt, end_process, terminations_interrupt
 
 PACKAGE = "cjm-teleop"
 DEFAULT_CONTROLLERS = ", ".join(default_specs("compare"))
@@ -288,6 +288,11 @@ BUILT_IN = ("compare", "replay", "record", "scenarios", "robots", "bench", "sim"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The ``teleop`` program: its exit code. Without ``argv`` it is the program itself
+    (the ``teleop`` script, ``python -m teleop``: ``sys.argv``), and a command stopped
+    after its cleanup ran to the end (:class:`~.termination.CleanedUpInterrupt`) ends the
+    process there; with ``argv`` (a test, a script) every command returns its code."""
+    program = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser(registered=not argv or argv[0] not in BUILT_IN).parse_args(argv)
     try:
@@ -298,6 +303,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt as interrupt:  # Ctrl-C, SIGTERM or SIGHUP: stopped, cleaned up
         print(f"teleop {args.command}: stopped ({str(interrupt) or 'SIGINT'})", file=sys.stderr)
+        if program and isinstance(interrupt, CleanedUpInterrupt):
+            end_process(130)  # nothing left open: the interpreter's teardown skipped
         return 130
 
 

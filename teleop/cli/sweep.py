@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 from teleop.limits import MAX_CELLS_UNCONFIRMED
 
 from .arguments import csv_list, numbers
 from .robot_options import add_robot_arguments, robot_options_given, robot_settings
+from .termination import CleanedUpInterrupt
 
 
 def _ints(text: str) -> list[int]:
@@ -139,6 +139,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_grid(args: argparse.Namespace) -> int:
+    """Run the grid the options ask for, then the summary and the reports (exit code 0).
+    Interrupted (Ctrl-C, SIGTERM, SIGHUP): the resume note, then
+    :class:`~.termination.CleanedUpInterrupt` once the database is closed and the engine
+    stopped."""
     from teleop.experiments.sweep import build_spec, load_spec, run_sweep
     from teleop.experiments.sweep.driver import default_workers, make_engine, sweep_folder
     options = options_document(args)
@@ -158,16 +162,12 @@ def run_grid(args: argparse.Namespace) -> int:
     try:
         outcome = run_sweep(spec, folder, args.engine, workers, args.retries, args.address,
                             args.retry_failed, progress=not args.quiet)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as interrupt:
         print("sweep: interrupted; every finished cell is written, the same command resumes",
               file=sys.stderr)
-        if args.engine == "ray":
-            # everything is written and Ray is shut down; the interpreter's teardown of
-            # Ray's extension would take 1-3 s more (docs/sweep.md): end here
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(130)
-        return 130
+        # the database is closed, the workers and a local Ray instance stopped: the
+        # program may end without the interpreter's teardown (docs/sweep.md)
+        raise CleanedUpInterrupt(*interrupt.args) from None
     print(outcome.throughput_line(workers))
     if outcome.skipped:
         print(f"skipped {outcome.skipped} cells the database held")

@@ -154,7 +154,10 @@ class LocalPool:
                             worker, queue, f"time limit {time_limit:g} s exceeded and no "
                             f"answer {self.grace:g} s later: its worker was killed",
                             retry=False)
-        finally:
+        finally:  # every worker killed first, then each awaited: their ends overlap
+            for worker in self._pool:
+                if worker.process.is_alive():
+                    worker.process.kill()
             for worker in self._pool:
                 self._stop(worker)
             self._pool = []

@@ -1,11 +1,12 @@
 """The Ray engine: each cell a Ray task (docs/sweep.md).
 
 On a local instance (started here: as many CPUs as workers, no dashboard) or an existing
-cluster (``address``; every node needs this package installed). A task whose worker dies
-is retried by Ray (``max_retries``); a task still running ``grace`` seconds past the cell's
-time limit is cancelled (``ray.cancel(force=True)`` kills its worker) and the cell failed.
-As many tasks are in flight as there are workers, so a task starts when it is submitted
-and its clock is the cell's.
+cluster (``address``; every node needs this package installed). A cell whose worker dies
+is run again by the driver, up to ``retries`` more times (as the local pool does; Ray's
+own ``max_retries`` is 0); a task still running ``grace`` seconds past the cell's time
+limit ends its own worker (:mod:`.worker_deadline`: no cancel, which can race the task's
+end and crash the driver) and the cell is failed. As many tasks are in flight as there
+are workers, so a task starts when it is submitted and its clock is the cell's.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from typing import Any, Callable, Iterator
 from .cell import FAILED, run_cell
 from .pool import GRACE_S, SINGLE_THREADED, Finished
 from .spec import Cell
+from .worker_deadline import ended_past
 
 
 #: Set before Ray is imported: Ray's switch for its cluster mode (on by default on Linux);
@@ -115,38 +117,65 @@ def _import_ray(local: bool):
     return ray
 
 
-def run_cell_task(key: str, inputs: dict[str, Any], time_limit: float) -> tuple[str, dict, float]:
-    """A Ray task: the cell's outcome and the time it started (the worker's clock)."""
+def run_cell_task(key: str, inputs: dict[str, Any], time_limit: float,
+                  grace: float) -> tuple[str, dict, float]:
+    """A Ray task: the cell's outcome and the time it started (the worker's clock); its
+    worker's process ended by the kernel ``grace`` seconds past the time limit
+    (:func:`.worker_deadline.ended_past`)."""
     started = time.time()
-    return key, run_cell(inputs, time_limit), started
+    with ended_past(time_limit + grace):
+        outcome = run_cell(inputs, time_limit)
+    return key, outcome, started
+
+
+#: How long past a task's own deadline (the cell's time limit and the grace) the driver
+#: waits for it to end before failing its cell without an answer (s): a worker that did
+#: not end itself (stopped, say) is cancelled on a cluster, left to the shutdown of the
+#: local instance this engine started (its CPU stays taken until then).
+DEADLINE_MARGIN_S = 30.0
 
 
 #: Ray's processes left running by :func:`_terminate_together`: the GCS (``ray.shutdown``
 #: disconnects from it first, and waits 5 s for a dead one) and the reaper (last, by Ray).
 KEPT_UNTIL_SHUTDOWN = ("gcs_server", "reaper")
 
+#: Ray's processes :func:`_terminate_together` kills at once: the autoscaler's monitor,
+#: asleep between its updates, outlives a SIGTERM by about 1 s (0.98 s measured at load
+#: 14, where the raylet, the dashboard and the log monitor ended within 70 ms), and a
+#: local instance's monitor holds nothing to save.
+KILLED_AT_ONCE = ("monitor",)
+
 
 def _terminate_together(ray) -> None:
     """Stop every process of the local instance but :data:`KEPT_UNTIL_SHUTDOWN` at once:
-    SIGTERM to all, a wait of at most :data:`TERMINATE_WAIT_S` for them together, SIGKILL to
-    those left (Ray's monitor outlives a SIGTERM by more than 1 s). ``ray.shutdown`` then
-    finds them gone, where it sends each its SIGTERM and waits up to 1 s for it in turn."""
+    SIGKILL to those of :data:`KILLED_AT_ONCE`, SIGTERM to the others, a wait of at most
+    :data:`TERMINATE_WAIT_S` for them together, SIGKILL to those left. ``ray.shutdown``
+    then finds them gone, where it sends each its SIGTERM and waits up to 1 s for it in
+    turn."""
     node = getattr(ray._private.worker, "_global_node", None)
     if node is None:
         return
-    processes = [info.process for kind, infos in node.all_processes.items()
+    processes = [(kind, info.process) for kind, infos in node.all_processes.items()
                  if kind not in KEPT_UNTIL_SHUTDOWN for info in infos]
-    for process in processes:
+    for kind, process in processes:
         if process.poll() is None:
-            process.terminate()
+            if kind in KILLED_AT_ONCE:
+                process.kill()
+            else:
+                process.terminate()
     deadline = time.monotonic() + TERMINATE_WAIT_S
-    for process in processes:
+    for _, process in processes:
         try:
             process.wait(max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait()
 
+
+#: The longest wait of the driver in ``ray.wait`` (s): Python runs a signal's handler only
+#: once the call returns (Ray's wait does not look at signals), so a Ctrl-C stops the
+#: sweep up to this late (it was 1 s: half of the 1 s a stop took at load 12).
+WAIT_S = 0.05
 
 #: How long :func:`_terminate_together` waits for Ray's processes to end on SIGTERM (s).
 TERMINATE_WAIT_S = 0.2
@@ -181,6 +210,9 @@ class RayEngine:
         except (ConnectionError, RuntimeError, ValueError) as error:
             where = f"the Ray cluster at {self.address}" if self.address else "a local Ray instance"
             raise ValueError(f"cannot start or reach {where}: {' '.join(str(error).split())}") from None
+        # ``ray.shutdown`` imports this first (to stop compiled graphs, which a sweep has
+        # none of): 0.18 s of a Ctrl-C's stop at load 14, paid here instead
+        importlib.import_module("ray.dag.compiled_dag_node")
         return ray
 
     def shutdown(self) -> None:
@@ -197,32 +229,38 @@ class RayEngine:
             on_start: Callable[[Cell], None] | None = None) -> Iterator[Finished]:
         """Run ``cells``; yields each one's :class:`Finished` in the order they end."""
         ray = self.connect()
-        task = ray.remote(num_cpus=1, max_retries=self.retries, retry_exceptions=False)(
-            run_cell_task)
-        queue = deque(cells)
-        in_flight: dict[Any, tuple[Cell, float]] = {}
+        task = ray.remote(num_cpus=1, max_retries=0, retry_exceptions=False)(run_cell_task)
+        queue: deque[tuple[Cell, int]] = deque((cell, 0) for cell in cells)
+        in_flight: dict[Any, tuple[Cell, float, int]] = {}
         last_end: dict[str, float] = {}
         try:
             while queue or in_flight:
                 while queue and len(in_flight) < self.workers:
-                    cell = queue.popleft()
-                    in_flight[task.remote(cell.key, cell.inputs, time_limit)] = (
-                        cell, time.monotonic())
+                    cell, attempts = queue.popleft()
+                    in_flight[task.remote(cell.key, cell.inputs, time_limit, self.grace)] = (
+                        cell, time.monotonic(), attempts + 1)
                     if on_start is not None:
                         on_start(cell)
-                ready, _ = ray.wait(list(in_flight), num_returns=1, timeout=1.0)
+                ready, _ = ray.wait(list(in_flight), num_returns=1, timeout=WAIT_S)
                 for ref in ready:
-                    cell, submitted = in_flight.pop(ref)
-                    yield self._finished(ray, ref, cell, submitted, last_end)
+                    cell, submitted, attempts = in_flight.pop(ref)
+                    finished = self._finished(ray, ref, cell, submitted, attempts, time_limit,
+                                              last_end)
+                    if finished is None:
+                        queue.appendleft((cell, attempts))
+                    else:
+                        yield finished
                 now = time.monotonic()
-                for ref, (cell, submitted) in list(in_flight.items()):
-                    if now > submitted + time_limit + self.grace:
-                        ray.cancel(ref, force=True)
+                for ref, (cell, submitted, attempts) in list(in_flight.items()):
+                    if now > submitted + time_limit + self.grace + DEADLINE_MARGIN_S:
                         del in_flight[ref]
+                        if not self.started_instance:
+                            ray.cancel(ref, force=True)
                         yield Finished(cell, {
                             "status": FAILED, "metrics": None, "elapsed_s": now - submitted,
                             "reason": f"time limit {time_limit:g} s exceeded and no answer "
-                                      f"{self.grace:g} s later: its task was cancelled"}, 1)
+                                      f"{self.grace + DEADLINE_MARGIN_S:g} s later: its "
+                                      "worker did not end itself"}, attempts)
         finally:
             # a cluster outlives this run: its tasks are cancelled. A local instance is not:
             # its shutdown ends their workers, and a cancel racing a task's completion makes
@@ -232,17 +270,31 @@ class RayEngine:
                 for ref in in_flight:
                     ray.cancel(ref, force=True)
 
-    def _finished(self, ray, ref, cell: Cell, submitted: float,
-                  last_end: dict[str, float]) -> Finished:
+    def _finished(self, ray, ref, cell: Cell, submitted: float, attempts: int,
+                  time_limit: float, last_end: dict[str, float]) -> Finished | None:
+        """The cell's end, or None when its worker died and it runs again."""
         try:
             _, outcome, started = ray.get(ref)
-        except ray.exceptions.RayError as error:  # its worker died more than retries times
-            reason = " ".join(str(error).split())[:300]
-            return Finished(cell, {"status": FAILED, "metrics": None,
-                                   "elapsed_s": time.monotonic() - submitted,
-                                   "reason": f"{type(error).__name__}: {reason}"},
-                            self.retries + 1)
+        except ray.exceptions.RayTaskError as error:  # the task's own code raised
+            return self._failed(cell, submitted, attempts,
+                                f"{type(error).__name__}: {' '.join(str(error).split())}")
+        except ray.exceptions.RayError as error:  # its worker or its node died
+            elapsed = time.monotonic() - submitted
+            if elapsed >= time_limit + self.grace:  # it ended itself: stuck, not run again
+                return self._failed(cell, submitted, attempts,
+                                    f"time limit {time_limit:g} s exceeded and no answer "
+                                    f"{self.grace:g} s later: its worker ended itself")
+            if attempts <= self.retries:
+                return None
+            return self._failed(cell, submitted, attempts,
+                                f"{type(error).__name__}: {' '.join(str(error).split())}")
         worker = outcome.get("worker", "")
         gap = None if worker not in last_end else started - last_end[worker]
         last_end[worker] = started + outcome.get("elapsed_s", 0.0)
-        return Finished(cell, outcome, 1, gap)
+        return Finished(cell, outcome, attempts, gap)
+
+    def _failed(self, cell: Cell, submitted: float, attempts: int, reason: str) -> Finished:
+        return Finished(cell, {"status": FAILED, "metrics": None,
+                               "elapsed_s": time.monotonic() - submitted,
+                               "reason": f"{reason[:300]} (attempt {attempts} of "
+                                         f"{self.retries + 1})"}, attempts)
