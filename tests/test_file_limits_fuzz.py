@@ -395,6 +395,7 @@ def cli_options() -> list[tuple[str, str, int]]:
 
     from teleop.cli.arguments import csv_list
     from teleop.cli.main import build_parser
+    from teleop.options import Names, Text
 
     commands = next(action for action in build_parser()._actions
                     if isinstance(action, argparse._SubParsersAction)).choices
@@ -402,7 +403,8 @@ def cli_options() -> list[tuple[str, str, int]]:
              action.nargs if isinstance(action.nargs, int) else 1)
             for command in CLI_REQUIRED for action in commands[command]._actions
             if action.option_strings and action.nargs != 0 and not action.choices
-            and action.type not in (None, str, csv_list)]
+            and action.type not in (None, str, csv_list)
+            and not isinstance(getattr(action.type, "__self__", None), (Text, Names))]
 
 
 #: a robot's link axis is a direction of any length: 1e308 1e308 1e308 is (1, 1, 1) (it

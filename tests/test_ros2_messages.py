@@ -175,7 +175,8 @@ def test_settings_refusals_name_the_field() -> None:
 
 @pytest.mark.parametrize("argv, message", [
     (["sim", "--ros2", "--q0", "1,2"], "teleop sim: --q0 needs 8 finite numbers, got 2"),
-    (["sim", "--ros2", "--ros-domain", "999"], "ROS_DOMAIN_ID must be in [0, 232], got 999"),
+    (["sim", "--ros2", "--ros-domain", "999"],
+     "argument --ros-domain: must be in [0, 232], got 999"),
     (["sim", "--ros2", "--command-joints", "a,b"], "does not carry the joints"),
     (["compare", "--scenario", "paper-hole", "--crtk", "/PSM1"], "--crtk needs --plant ros2"),
 ])

@@ -303,9 +303,10 @@ def test_the_view_draws_the_force_arrow_the_status_figure_and_the_plot(app):
 
 @pytest.mark.parametrize("args, message", [
     (["--plant", "bullet"], "argument --plant: invalid choice: 'bullet'"),
-    (["--wall-stiffness", "2"], "--wall-stiffness needs --plant mujoco"),
-    (["--payload", "1", "--wall-stiffness", "2"],
-     "--wall-stiffness and --payload need --plant mujoco"),
+    (["--wall-stiffness", "2"], "--wall-stiffness needs --plant mujoco or ros2"),
+    (["--payload", "1", "--wall-stiffness", "2", "--coulomb-friction", "1"],
+     "--wall-stiffness needs --plant mujoco or ros2; --payload, --coulomb-friction need "
+     "--plant mujoco"),
     (["--plant", "mujoco", "--wall-stiffness=-1"],
      "argument --wall-stiffness: must be in [0, 100] N/mm, got -1"),
     (["--plant", "mujoco", "--wall-stiffness", "1000"],

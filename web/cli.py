@@ -21,14 +21,13 @@ from typing import Sequence
 
 from teleop.cli.arguments import add_damper_options, bounded, damper_settings, one_line
 from teleop.cli.commands import Command
-from teleop.cli.ros2_options import add_ros2_options, given_ros2_options, ros2_settings
+from teleop.cli.plant_options import add_plant_options, plant_choice
 from teleop.cli.robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
 from teleop.cli.termination import terminations_interrupt
 from teleop.limits import MAX_INPUT_TIMEOUT_S, MIN_INPUT_TIMEOUT_S
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.loop.task_modes import AUTO, TASK_MODES
-from teleop.options import (ACCELERATION_LIMITS_HELP, JERK_LIMIT, PAYLOAD, PLANT_KINDS,
-                            RATE, WALL_STIFFNESS)
+from teleop.options import ACCELERATION_LIMITS_HELP, JERK_LIMIT, RATE, WEB
 
 from .access import MIN_TOKEN, check_bind, check_port, is_loopback, make_token, page_url, \
     resolve_host
@@ -80,15 +79,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                          default=True, help=ACCELERATION_LIMITS_HELP)
     JERK_LIMIT.add_to(control, left_out="none")
 
-    plant = parser.add_argument_group("plant (docs/design.md section 17)")
-    plant.add_argument("--plant", choices=PLANT_KINDS, default="kinematic",
-                       help="what the loops run on: the ideal integrator (q += qd dt) or the "
-                            "robot simulated in MuJoCo, the abdominal wall at each port, or "
-                            "one robot over ROS 2, the main one (no ghost), its options "
-                            "below (docs/ros2.md) (default: kinematic)")
-    add_ros2_options(plant)
-    WALL_STIFFNESS.add_to(plant, left_out="each port's own, 1 N/mm")
-    PAYLOAD.add_to(plant, left_out="0")
+    add_plant_options(parser.add_argument_group(
+        "plant (docs/design.md section 17)", "what the loops run on; a robot over ROS 2 is "
+        "the main one (no ghost)"), WEB, "kinematic")
 
     collisions = parser.add_argument_group("collision avoidance (docs/design.md section 18)")
     collisions.add_argument("--collisions", action=argparse.BooleanOptionalAction, default=None,
@@ -178,30 +171,11 @@ def _address(args: argparse.Namespace, prog: str) -> tuple[int, str | None]:
 
 def _plant(args: argparse.Namespace) -> dict:
     """The plant keywords of :func:`web.ui.run_server` the options ask for (each value
-    checked as it is parsed, :mod:`teleop.options`); ``ValueError`` naming the option for
-    a physics option without the plant."""
-    given = [f"--{name.replace('_', '-')}" for name in ("wall_stiffness", "payload")
-             if getattr(args, name) is not None]
-    ros2_given = given_ros2_options(args)
-    if args.plant != "ros2" and ros2_given:
-        raise ValueError(f"{', '.join(ros2_given)} need{'s' * (len(ros2_given) == 1)} "
-                         "--plant ros2")
-    if args.plant == "ros2":
-        if args.payload is not None:
-            raise ValueError("--payload needs --plant mujoco (the ros2 robot carries its own)")
-        stiffness = None if args.wall_stiffness is None else 1e3 * args.wall_stiffness  # N/m
-        return {"plant": "ros2", "ros2_settings": ros2_settings(args),
-                "wall_stiffness": stiffness}
-    if args.plant == "kinematic":
-        if given:
-            raise ValueError(f"{' and '.join(given)} need{'s' * (len(given) == 1)} "
-                             "--plant mujoco")
-        return {}
-    from teleop.plants import PlantSettings
-
-    stiffness = None if args.wall_stiffness is None else 1e3 * args.wall_stiffness  # N/m
-    settings = PlantSettings(payload=0.0 if args.payload is None else args.payload)
-    return {"plant": args.plant, "plant_settings": settings, "wall_stiffness": stiffness}
+    checked by its option's validator, :mod:`teleop.plants.options`); ``ValueError``
+    naming an option the plant does not take."""
+    choice = plant_choice(args)
+    return {"plant": choice.kind, "plant_settings": choice.settings,
+            "wall_stiffness": choice.wall_stiffness, "ros2_settings": choice.ros2}
 
 
 def _collisions(args: argparse.Namespace) -> dict:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from teleop.plants.options import PLANT_OPTIONS
+
 from .arguments import bounded
 
 #: The largest sensor noise the command takes (N, standard deviation).
@@ -19,12 +21,12 @@ MAX_FORCE_FILTER_HZ = 1000.0
 sensor_noise = bounded(float, 0.0, MAX_SENSOR_NOISE_N, unit="N")
 force_filter = bounded(float, 0.0, MAX_FORCE_FILTER_HZ, inclusive_minimum=False, unit="Hz")
 
-#: The compare options a contact scenario uses (argparse destinations).
+#: The compare options a contact scenario uses (argparse destinations): its own, the
+#: run's and every option of the mujoco plant (:data:`PLANT_OPTIONS`).
 CONTACT_USES = frozenset({
     "command", "run_command", "scenario", "controllers", "rate", "duration", "out", "no_plots",
-    "quiet", "acceleration_limits", "jerk_limit", "seed", "plant", "wall_stiffness",
-    "payload", "coulomb_friction", "viscous_friction", "physics_rate", "servo_bandwidth",
-    "interface_limits", "interface_jerk_limit", "sensor_noise", "force_filter"})
+    "quiet", "acceleration_limits", "jerk_limit", "seed", "plant", "sensor_noise",
+    "force_filter", *(option.name for option in PLANT_OPTIONS if "mujoco" in option.plants)})
 
 
 def add_contact_options(parser: argparse.ArgumentParser) -> None:

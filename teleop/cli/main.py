@@ -16,7 +16,8 @@ from teleop.limits import (
     MAX_CALIBRATION_ROTATION_STD_RAD,
 )
 from teleop.experiments.bench_problems import DEFAULT_PROBLEMS
-from teleop.options import (ACCELERATION_LIMITS_HELP, CALIBRATION_POSITION,
+from teleop.options import (ACCELERATION_LIMITS_HELP, BENCH, CALIBRATION_POSITION, COMPARE,
+                            RECORD, REPLAY,
                             CALIBRATION_ROTATION, CONSTRAINT_GAIN, DURATION, ENCODER_NOISE,
                             JERK_LIMIT, JOINT_TIME_CONSTANT, KP, LATENCY, PATH_AMPLITUDE, RATE,
                             SEED, TROCAR_SHIFT)
@@ -26,7 +27,7 @@ from .arguments import (ArgumentParser, HelpFormatter, add_damper_options, bound
 from .commands import Command, registered_commands
 from .contact_options import add_contact_options, run_contact_compare
 from .robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
-from .plant_options import add_plant_options, plant_choice
+from .plant_options import add_plant_group, plant_choice
 from .sim import add_arguments as add_sim_arguments
 from .sim import run as run_sim
 from .state_observer_options import add_state_observer_option
@@ -137,8 +138,9 @@ def _add_run_options(parser: argparse.ArgumentParser, source: str) -> None:
                        "(default: 0,0)")
     SEED.add_to(robot, 0)
     _add_variation_options(parser, source)
-    add_plant_options(parser, "the session's plant (its header), else the defaults"
-                       if source == "session" else "its default")
+    add_plant_group(parser, REPLAY if source == "session" else COMPARE,
+                    "the session's plant (its header), else the defaults"
+                    if source == "session" else "its default")
     _add_collision_options(parser, source)
     add_supervisor_options(parser)
     add_state_observer_option(parser)
@@ -233,8 +235,8 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     RATE.add_to(record, 1000.0)
     DURATION.add_to(record, left_out="the whole scenario")
     record.add_argument("file", help="session file to write")
-    add_plant_options(record, "its default; the plant is written in the session's header "
-                       "for 'teleop replay'")
+    add_plant_group(record, RECORD, "its default; the plant is written in the session's "
+                    "header for 'teleop replay'")
     _add_collision_options(record, "scenario")
 
     _add_command(commands, "scenarios", "list the scripted scenarios", _scenarios)
@@ -265,8 +267,8 @@ def build_parser(registered: bool = True) -> argparse.ArgumentParser:
     bench.add_argument("--json", metavar="FILE",
                        help="also write the results, their ratios and the targets as JSON to "
                             "FILE (default: no JSON)")
-    add_plant_options(bench, "its default; with --plant, each control period's tick is "
-                       "timed on the kinematic plant and on this one (the built-in robots)")
+    add_plant_group(bench, BENCH, "its default; with --plant, each control period's tick is "
+                    "timed on the kinematic plant and on this one (the built-in robots)")
 
     sim = _add_command(commands, "sim", "serve a simulated robot on ROS 2 as ros2_control "
                        "or CRTK would (docs/ros2.md)", run_sim)

@@ -9,10 +9,10 @@ import signal
 import sys
 
 from teleop.limits import MAX_RATE_HZ
-from teleop.options import SIMULATED_PLANT_KINDS
+from teleop.options import SIM, SIMULATED_PLANT_KINDS
 
 from .arguments import bounded, csv_list
-from .ros2_options import add_ros2_options, ros2_settings
+from .plant_options import add_plant_options, given_plant_options
 from .sim_ports import DEFAULT_ROBOT, add_port_options, sim_ports
 
 
@@ -40,14 +40,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=bounded(float, 0.0, 1e6, unit="s"),
                         help="seconds to run (default: until Ctrl-C)")
     add_port_options(parser.add_argument_group("ports"))
-    add_ros2_options(parser.add_argument_group("ROS 2 (docs/ros2.md)"), driven=False)
+    add_plant_options(parser.add_argument_group("ROS 2 (docs/ros2.md)"), SIM)
 
 
 def run(args: argparse.Namespace) -> int:
     """Serve the robot; its node closed on any exit."""
     import numpy as np
 
-    from teleop.plants import MujocoPlant
+    from teleop.plants import MujocoPlant, PlantChoice
     from teleop.plants.ros2.realtime import ROBOT_PRIORITY
     from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
 
@@ -59,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--q0 must be numbers, got {','.join(args.q0)}") from None
         if q0.shape != (robot.model.nq,) or not np.all(np.isfinite(q0)):
             raise ValueError(f"--q0 needs {robot.model.nq} finite numbers, got {len(q0)}")
-    settings = ros2_settings(args)
+    settings = PlantChoice.with_options(given_plant_options(args), "ros2").ros2
+    assert settings is not None  # the ros2 plant has its settings
     if args.realtime_priority is None:  # the sim plays the robot: its controller's priority
         settings = dataclasses.replace(settings, realtime_priority=ROBOT_PRIORITY)
     plant = MujocoPlant(robot, 1.0 / args.rate) if args.plant == "mujoco" else None

@@ -8,8 +8,8 @@ of a UI session); each run or loop builds its own plant from it (:meth:`PlantCho
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Mapping, Sequence
 
 from constraints import Constraint
 from constraints.validation import as_number, short_repr
@@ -18,10 +18,15 @@ from teleop.options import PLANT_KINDS
 
 from .imperfect import Imperfections
 from .mujoco_plant import MujocoPlant
+from .options import PLANT, PLANT_OPTIONS, PLANT_OPTIONS_BY_NAME
 from .ros2.settings import Ros2Settings
 from .settings import SETTINGS_KEYS, PlantSettings
 from .walls import wall_of
 
+
+def _option(name: str) -> str:
+    """A plant option as a command line spells it (``--payload``)."""
+    return "--" + name.replace("_", "-")
 
 
 @dataclass(frozen=True)
@@ -65,6 +70,42 @@ class PlantChoice:
             object.__setattr__(self, "wall_stiffness",
                                as_number(self.wall_stiffness, "wall_stiffness", 0.0,
                                          maximum=MAX_WALL_STIFFNESS))
+
+    @classmethod
+    def with_options(cls, values: Mapping[str, Any], kind: str | None = None,
+                     base: "PlantChoice | None" = None,
+                     spell: Callable[[str], str] = _option) -> "PlantChoice":
+        """The plant ``kind`` (None: ``base``'s) with the plant options ``values`` (name ->
+        value, :data:`~teleop.plants.options.PLANT_OPTIONS`) over ``base`` (None: the
+        defaults): each value checked by its option's one validator, each replacing
+        ``base``'s field; a plant of another kind than ``base`` starts from its own
+        defaults (``--plant kinematic`` drops a session's physics). ``ValueError`` for an
+        unknown option, a bad value, or an option the plant does not take, named as
+        ``spell`` writes it (``--payload needs --plant mujoco``)."""
+        base = base or cls()
+        kind = base.kind if kind is None else PLANT.check(kind, spell("plant"))
+        unknown = sorted(set(values) - set(PLANT_OPTIONS_BY_NAME))
+        if unknown:
+            raise ValueError(f"unknown plant option {spell(unknown[0])}")
+        given = [option for option in PLANT_OPTIONS if option.name in values]
+        refused: dict[tuple[str, ...], list[str]] = {}
+        for option in given:
+            if kind not in option.plants:
+                refused.setdefault(option.plants, []).append(spell(option.name))
+        if refused:
+            raise ValueError("; ".join(
+                f"{', '.join(names)} need{'s' * (len(names) == 1)} {spell('plant')} "
+                f"{' or '.join(plants)}" for plants, names in refused.items()))
+        fields: dict[str, dict[str, Any]] = {"plant": {}, "physics": {}, "ros2": {}}
+        for option in given:
+            value = option.option.check(values[option.name], spell(option.name))
+            fields[option.holder][option.field] = (
+                value if option.scale == 1.0 else value * option.scale)
+        physics = base.settings if kind == base.kind else PlantSettings()
+        ros2 = (base.ros2 if kind == base.kind and base.ros2 is not None else Ros2Settings())
+        return cls(kind, replace(physics, **fields["physics"]),
+                   fields["plant"].get("wall_stiffness", base.wall_stiffness),
+                   replace(ros2, **fields["ros2"]) if kind == "ros2" else None)
 
     @property
     def physical(self) -> bool:

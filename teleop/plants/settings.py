@@ -6,10 +6,9 @@ import math
 from dataclasses import dataclass
 
 from constraints.validation import as_number
-from teleop.limits import (MAX_INTERFACE_JERK, MAX_JOINT_FRICTION, MAX_PAYLOAD_KG,
-                           MAX_PHYSICS_RATE_HZ, MAX_SERVO_BANDWIDTH_HZ, MIN_PHYSICS_RATE_HZ)
+from teleop.limits import MAX_JOINT_FRICTION, MIN_PHYSICS_RATE_HZ
 
-from .interface import INTERFACE_MODES
+from .options import holder_options
 
 
 #: :meth:`PlantSettings.to_dict`'s keys (units in the names) -> the settings' fields.
@@ -65,24 +64,19 @@ class PlantSettings:
     interface_jerk_limit: float | None = None
 
     def __post_init__(self) -> None:
-        """Every field a finite number in its range (``ValueError`` naming it)."""
-        as_number(self.physics_rate, "physics_rate", MIN_PHYSICS_RATE_HZ,
-                  maximum=MAX_PHYSICS_RATE_HZ)
-        as_number(self.servo_bandwidth, "servo_bandwidth", positive=True,
-                  maximum=MAX_SERVO_BANDWIDTH_HZ)
+        """Every field a finite number in its range (``ValueError`` naming it); the fields
+        a command line sets checked by their option's one validator
+        (:data:`teleop.plants.options.PLANT_OPTIONS`), the others here."""
+        for option in holder_options("physics"):
+            value = getattr(self, option.field)
+            if value is not None or getattr(PlantSettings, option.field) is not None:
+                option.option.check(value, option.field)
         as_number(self.servo_damping_ratio, "servo_damping_ratio", positive=True, maximum=10.0)
         as_number(self.armature, "armature", positive=True, maximum=1e3)
-        for name in ("joint_damping", "coulomb_friction", "viscous_friction"):
-            as_number(getattr(self, name), name, 0.0, maximum=MAX_JOINT_FRICTION)
-        as_number(self.payload, "payload", 0.0, maximum=MAX_PAYLOAD_KG)
+        as_number(self.joint_damping, "joint_damping", 0.0, maximum=MAX_JOINT_FRICTION)
         if not isinstance(self.gravity, bool):
             raise ValueError(f"gravity must be True or False, got {self.gravity!r}")
-        if self.interface_limits not in INTERFACE_MODES:
-            raise ValueError(f"interface_limits must be one of {', '.join(INTERFACE_MODES)}, "
-                             f"got {self.interface_limits!r}")
         if self.interface_jerk_limit is not None:
-            as_number(self.interface_jerk_limit, "interface_jerk_limit", positive=True,
-                      maximum=MAX_INTERFACE_JERK)
             if self.interface_limits == "off":
                 raise ValueError("interface_jerk_limit needs interface_limits count or strict "
                                  "(interface_limits is off)")

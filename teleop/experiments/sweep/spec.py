@@ -23,8 +23,9 @@ from teleop.json_text import parse_json
 from teleop.limits import MAX_CELLS, MAX_SPEC_BYTES
 from teleop.options import (ACCELERATION_LIMITS_HELP, CALIBRATION_POSITION, CALIBRATION_ROTATION,
                             CONSTRAINT_GAIN, DURATION, ENCODER_NOISE, JERK_LIMIT,
-                            JOINT_TIME_CONSTANT, KP, LATENCY, PATH_AMPLITUDE, PAYLOAD, RATE, SEED,
+                            JOINT_TIME_CONSTANT, KP, LATENCY, PATH_AMPLITUDE, RATE, SEED,
                             SIMULATED_PLANT_KINDS, TROCAR_SHIFT)
+from teleop.plants.options import PLANT_OPTIONS_BY_NAME
 
 #: Hex digits of a cell's key (80 bits: no collision in any sweep of this world).
 KEY_DIGITS = 20
@@ -92,7 +93,8 @@ def _cell_fields() -> tuple[CellField, ...]:
         CellField("jerk_limit", None, _optional(JERK_LIMIT.check), "--jerk-limit",
                   help="rad/s^3 on every joint of every controller (default: none; with the "
                        "acceleration limits, docs/design.md 8.5)"),
-        CellField("payload", 0.0, PAYLOAD.check, "--payload", help="kg at each EE (mujoco)"),
+        CellField("payload", 0.0, PLANT_OPTIONS_BY_NAME["payload"].option.check, "--payload",
+                  help="kg at each EE (mujoco)"),
         CellField("kp", 20.0, KP.check, "--kp", help="pose-error gain (1/s)"),
         CellField("constraint_gain", None, _optional(CONSTRAINT_GAIN.check),
                   "--constraint-gain",
