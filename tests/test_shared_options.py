@@ -56,7 +56,7 @@ BAD = {
     "crtk": ("", "must be a non-empty text, got ''"),
     "ros_domain": ("233", "must be in [0, 232], got 233"),
     "realtime_priority": ("100", "must be in [0, 99], got 100"),
-    "response_time": ("1.5", "must be in [0, 1] s, got 1.5"),
+    "response_time": ("61", "must be in [0, 60] s, got 61"),
 }
 
 #: a bad value in a file, and its words, where a file's differ from the command line's
