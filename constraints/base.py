@@ -26,10 +26,10 @@ from typing import ClassVar, Literal, Protocol
 import numpy as np
 import pinocchio as pin
 
-from .compiled_form import CompiledForm
 from .kinematics import frame_placement, resolve_frame
 from .limits import MAX_CONSTRAINT_GAIN, MAX_POSITION_M, MAX_SPEED_M_S
 from .registry import constraint_type
+from .revision import ReadOnlyFields
 from .validation import as_number, as_unit_vector, as_vector, short_repr
 
 #: Default drift-feedback gain (1/s). Stable at a control period dt when 0 < K dt < 2;
@@ -204,7 +204,7 @@ def structure_of(state: ConstraintPoint, parametrisation: Parametrisation = "nul
 # ----------------------------------------------------------------------------- base
 
 
-class Constraint(CompiledForm, ABC):
+class Constraint(ReadOnlyFields, ABC):
     """A constraint on one point of one link of the chain.
 
     Subclasses say where the point is and which directions are constrained; this base
@@ -219,12 +219,13 @@ class Constraint(CompiledForm, ABC):
     layers do with a type is a piece each registers by type, looked up along the type's
     bases (no layer branches on a type): the page's drawing
     (``web/constraint_drawing.py``) and placement (``web/constraint_placement.py``), a
-    physics plant's wall (``teleop/plants/walls.py``),
-    a port the collision avoidance leaves alone (:mod:`constraints.collision.ports`),
-    sliding along its link (``teleop/experiments/sliding.py``), the analytical CJM's
-    affine form (``controllers/cjm/affine_forms.py``). The compiled CJM step's declaration
-    (:class:`~constraints.compiled_form.CompiledForm`) stays here: the extension reads it
-    off the constraint.
+    physics plant's wall (``teleop/plants/walls.py``), a port the collision avoidance
+    leaves alone (:mod:`constraints.collision.ports`), sliding along its link
+    (``teleop/experiments/sliding.py``), the analytical CJM's affine form
+    (``controllers/cjm/affine_forms.py``) and the compiled CJM step's form
+    (``controllers/cjm/compiled_forms.py``). Its fields are read-only and change by
+    assignment only, each assignment replacing its ``revision``
+    (:mod:`constraints.revision`): how the compiled readers see a change.
 
     Parameters
     ----------

@@ -61,8 +61,6 @@ class Hole(Constraint):
     position_attribute = "center"
     label = "hole"
     omitted_at_default = ("tissue_stiffness", "tissue_damping")
-    compiled_kind = "hole"
-    compiled_fields = ("_anchor", "_link_axis", "_gain")
 
     def __init__(
         self,
@@ -170,10 +168,6 @@ class Hole(Constraint):
 
     def _set_anchor(self, center: np.ndarray, velocity: np.ndarray) -> None:
         self._anchor = np.concatenate([center, velocity])  # read-only: a new array per change
-
-    def compiled_values(self) -> np.ndarray:
-        """``[center, velocity, link_axis, gain]`` (10,), world frame but the axis."""
-        return np.concatenate([self._anchor, self._link_axis, [self._gain]])
 
     def _center_local(self, placement: pin.SE3) -> np.ndarray:
         return placement.actInv(self.center)

@@ -44,8 +44,6 @@ class Plane(Constraint):
     kind = "plane"
     position_attribute = "plane_point"
     world_directions = ("normal", "velocity")
-    compiled_kind = "plane"
-    compiled_fields = ("link_point", "plane_point", "normal", "velocity", "_gain")
     label = "plane"
 
     def __init__(
@@ -102,12 +100,6 @@ class Plane(Constraint):
                 f"link point is {abs(signed_distance):.4g} m from the plane "
                 f"(tolerance {tolerance:g} m): the point must lie on the plane"
             )
-
-    def compiled_values(self) -> np.ndarray:
-        """``[link_point, plane_point, normal, velocity, gain]`` (13,); a barrier declares
-        the same (its rows are inequalities)."""
-        return np.concatenate([self.link_point, self.plane_point, self.normal, self.velocity,
-                               [self._gain]])
 
     # ``plane.move_to(plane_point, velocity)`` (inherited) moves the plane (a world point
     # on it, m) and sets its velocity (m/s).

@@ -34,8 +34,6 @@ class PointLock(Constraint):
     dim = 3
     kind = "point_lock"
     position_attribute = "target"
-    compiled_kind = "point_lock"
-    compiled_fields = ("link_point", "target", "velocity", "_gain")
     label = "point lock"
 
     def __init__(self, link: str, link_point, target, gain: float = DEFAULT_GAIN,
@@ -52,10 +50,6 @@ class PointLock(Constraint):
         """Lock a link point where it is at ``q`` (``link_point`` or ``distance`` on the axis)."""
         link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
         return cls(link, link_point, placement.act(link_point), gain=gain)
-
-    def compiled_values(self) -> np.ndarray:
-        """``[link_point, target, velocity, gain]`` (10,)."""
-        return np.concatenate([self.link_point, self.target, self.velocity, [self._gain]])
 
     # ``lock.move_to(target, velocity)`` (inherited) moves the lock point (world, m) and
     # sets its velocity (m/s).

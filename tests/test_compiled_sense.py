@@ -12,6 +12,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from constraints import Hole
+from controllers.cjm import compiled_forms
+from controllers.cjm.compiled_forms import CompiledForm
 from teleop.controller_specs import make_controller
 from teleop.experiments.bench_problems import bench_problem_named
 from teleop.loop import TeleopLoop
@@ -84,20 +87,39 @@ def test_the_step_recomputes_what_another_configuration_left(between: str) -> No
         reference.q = checked.q = expected[2]
 
 
-def test_a_refused_declaration_stops_as_the_python_path() -> None:
-    """A constraint whose declared parameters the extension refuses (here 3 entries where
-    a hole declares 10): the compiled loop measures in Python and takes the same
-    controlled stop as the loop's Python path, no exception out of ``advance``."""
+class CutHole(Hole):
+    """A hole whose compiled parameters are cut to 3 entries once ``cut`` is set."""
+
+    cut: bool = False
+
+
+def cut_hole_values(hole: CutHole) -> np.ndarray:
+    values = compiled_forms.hole_values(hole)
+    return values[:3] if hole.cut else values
+
+
+def test_a_refused_declaration_stops_as_the_python_path(monkeypatch) -> None:
+    """A constraint whose compiled parameters the extension refuses at a step (here 3
+    entries where a hole declares 10, taken again as an assignment replaced its revision):
+    the compiled loop measures in Python and takes the same controlled stop as the loop's
+    Python path, no exception out of ``advance``."""
+    monkeypatch.setattr(compiled_forms, "COMPILED_FORMS",
+                        {**compiled_forms.COMPILED_FORMS,
+                         CutHole: CompiledForm("hole", cut_hole_values)})
+    compiled_forms.form_of_type.cache_clear()
     steps = []
     for compiled in (True, False):
         problem = bench_problem_named("sda10f")
-        constraints = list(problem.constraints)
+        first = problem.constraints[0].to_dict()
+        del first["kind"]
+        constraints = [CutHole(**first), *problem.constraints[1:]]
         controller = make_controller("cjm", problem.robot, constraints, dt=1e-3)
         loop = TeleopLoop(problem.robot, controller, q0=problem.base, compiled_tick=compiled)
         target = loop.ee_placement().copy()
         loop.advance(target)
-        object.__setattr__(constraints[0], "compiled_parameters", np.zeros(3))
+        constraints[0].cut = True
         steps.append(loop.advance(target))
+    compiled_forms.form_of_type.cache_clear()
     for step in steps:
         assert step.status == "failed"
         assert "needs 10 entries, got 3" in step.message

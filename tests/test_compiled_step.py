@@ -28,6 +28,8 @@ from hypothesis import strategies as st
 from constraints import Barrier, Constraint, Hole, Plane, PointLock
 from controllers import CJMController, StepStatus
 from controllers.cjm import _step  # noqa: F401  (an ImportError here fails the suite)
+from controllers.cjm import compiled_forms
+from controllers.cjm.compiled_forms import CompiledForm, compiled_form_of
 from controllers.cjm.report import Event, StepReport
 from controllers.linalg import RANK_TOLERANCE
 from teleop.robots import load_robot
@@ -469,80 +471,102 @@ def test_the_paper_form_undefined_and_defined_again_after_move_to(sda10f):
     assert not compiled.report.events
 
 
-class _BadPlane(Plane):
-    """A plane whose declaration is wrong in one way, set per test."""
+@pytest.fixture()
+def register_form(monkeypatch):
+    """:func:`register_compiled_form` for one test: the registry as it was after it."""
+    monkeypatch.setattr(compiled_forms, "COMPILED_FORMS", dict(compiled_forms.COMPILED_FORMS))
+    compiled_forms.form_of_type.cache_clear()
+    yield compiled_forms.register_compiled_form
+    compiled_forms.form_of_type.cache_clear()
+
+
+def bad_plane_values(plane: Plane) -> np.ndarray:
+    """A plane's parameters made wrong as its ``bad`` says (none while it is "")."""
+    values = compiled_forms.plane_values(plane)
+    if plane.bad == "normal":
+        values[6:9] *= 2.0
+    elif plane.bad == "size":
+        values = values[:12]
+    elif plane.bad == "dtype":
+        values = values.astype(np.float32)
+    elif plane.bad == "gain":
+        values[12] = -1.0
+    elif plane.bad == "plane_point":
+        values[4] = np.nan
+    return values
+
+
+class BadPlane(Plane):
+    """A plane whose compiled parameters are wrong in the way ``bad`` says."""
 
     bad: str = ""
-
-    def compiled_values(self) -> np.ndarray:
-        values = super().compiled_values()
-        if self.bad == "normal":
-            values[6:9] *= 2.0
-        elif self.bad == "size":
-            values = values[:12]
-        elif self.bad == "dtype":
-            values = values.astype(np.float32)
-        elif self.bad == "gain":
-            values[12] = -1.0
-        return values
 
 
 @pytest.mark.parametrize("bad, field", [("normal", "normal must be a unit vector"),
                                         ("size", "needs 13 entries, got 12"),
                                         ("dtype", "float64"), ("gain", "gain must be >= 0")])
-def test_bad_declarations_raise_value_error_naming_the_field(sda10f, bad, field):
-    plane = type("BadPlane", (_BadPlane,), {"bad": bad}).through_link_point(
-        sda10f, sda10f.q_home, [0.0, 0.0, 1.0], distance=0.05)
+def test_bad_declarations_raise_value_error_naming_the_field(sda10f, register_form, bad, field):
+    register_form(BadPlane, CompiledForm("plane", bad_plane_values))
+    plane = BadPlane.through_link_point(sda10f, sda10f.q_home, [0.0, 0.0, 1.0], distance=0.05)
+    plane.bad = bad
     with pytest.raises(ValueError, match=field):
         CJMController(sda10f, [plane], backend="compiled")
 
 
-def test_a_bad_declaration_between_steps_raises_naming_the_field(sda10f):
-    """A parameter array replaced by a bad one after the build (a non-finite plane point)
-    is refused at the next step, naming the field; the unknown kind at the build."""
-    plane = Plane.through_link_point(sda10f, sda10f.q_home, [0.0, 0.0, 1.0], distance=0.05)
+def test_a_bad_declaration_between_steps_raises_naming_the_field(sda10f, register_form):
+    """Parameters that turn bad after the build (a non-finite plane point, taken again as
+    the assignment replaced the revision) are refused at the next step, naming the field;
+    the unknown kind at the build."""
+    register_form(BadPlane, CompiledForm("plane", bad_plane_values))
+    plane = BadPlane.through_link_point(sda10f, sda10f.q_home, [0.0, 0.0, 1.0], distance=0.05)
     controller = CJMController(sda10f, [plane], backend="compiled")
     controller.solve(sda10f.q_home, np.zeros(6))
-    bad = plane.compiled_parameters.copy()
-    bad[4] = np.nan
-    object.__setattr__(plane, "compiled_parameters", bad)
+    plane.bad = "plane_point"
     with pytest.raises(ValueError, match="plane_point must be finite"):
         controller.solve(sda10f.q_home, np.zeros(6))
-    torus = type("Torus", (Plane,), {"compiled_kind": "torus"}).through_link_point(
-        sda10f, sda10f.q_home, [0.0, 0.0, 1.0], distance=0.05)
+    torus_type = type("Torus", (Plane,), {})
+    register_form(torus_type, CompiledForm("torus", compiled_forms.plane_values))
+    torus = torus_type.through_link_point(sda10f, sda10f.q_home, [0.0, 0.0, 1.0],
+                                          distance=0.05)
     with pytest.raises(ValueError, match="unknown kind 'torus'"):
         CJMController(sda10f, [torus], backend="compiled")
 
 
-def test_the_declarations_carry_the_fields_and_are_replaced_on_change(sda10f):
-    """Each type declares its kind and fields (a barrier: a plane; its rows inequalities);
-    the array is read-only and replaced, never edited, when a field changes."""
+def test_the_forms_carry_the_fields_and_any_assignment_replaces_the_revision(sda10f):
+    """Each type's form gives its kind and fields (a barrier: a plane; its rows
+    inequalities); the fields are read-only, and assigning one replaces the revision the
+    compiled step watches, after which the values are the new ones."""
     q = sda10f.q_home
     hole = Hole("arm_link_5_r", [0.1, 0.2, 0.3], link_axis=[0.0, 1.0, 0.0], gain=5.0,
                 velocity=[0.0, 0.0, 0.1])
+    np.testing.assert_array_equal(compiled_form_of(hole).values(hole),
+                                  [0.1, 0.2, 0.3, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 5.0])
     plane = Plane.through_link_point(sda10f, q, [0.0, 0.0, 1.0], distance=0.05)
     barrier = Barrier.through_link_point(sda10f, q, [0.0, 1.0, 0.0], distance=0.05)
     lock = PointLock.on_link(sda10f, q, distance=0.05)
-    kind, values = hole.compiled_form()
-    assert kind == "hole"
-    np.testing.assert_array_equal(values, [0.1, 0.2, 0.3, 0.0, 0.0, 0.1, 0.0, 1.0, 0.0, 5.0])
     for constraint, kind, fields in (
+            (hole, "hole", ("center", "velocity", "link_axis")),
             (plane, "plane", ("link_point", "plane_point", "normal", "velocity")),
             (barrier, "plane", ("link_point", "plane_point", "normal", "velocity")),
             (lock, "point_lock", ("link_point", "target", "velocity"))):
-        declared_kind, values = constraint.compiled_form()
-        assert declared_kind == kind
-        np.testing.assert_array_equal(
-            values, np.concatenate([*(getattr(constraint, f) for f in fields), [constraint.gain]]))
-    for constraint in (hole, plane, lock):
-        values = constraint.compiled_parameters
-        with pytest.raises(ValueError, match="read-only"):
-            values[0] = 1.0
+        form = compiled_form_of(constraint)
+        assert form.kind == kind
+
+        def expected() -> np.ndarray:
+            return np.concatenate([*(getattr(constraint, f) for f in fields), [constraint.gain]])
+
+        np.testing.assert_array_equal(form.values(constraint), expected())
+        revision = constraint.revision
         with pytest.raises(ValueError, match="read-only"):
             constraint.velocity[0] = 1.0
+        assert constraint.revision is revision
         constraint.gain = 7.0
-        assert constraint.compiled_parameters is not values
-        assert constraint.compiled_parameters[-1] == 7.0
+        assert constraint.revision is not revision
+        revision = constraint.revision
+        constraint.move_to(constraint.position + 0.01, velocity=[0.0, 0.0, 0.2])
+        assert constraint.revision is not revision
+        np.testing.assert_array_equal(form.values(constraint), expected())
+        assert constraint.gain == 7.0 and constraint.velocity[2] == 0.2
 
 
 def test_a_user_type_without_a_compiled_form_runs_through_python_terms(sda10f):
@@ -557,7 +581,7 @@ def test_a_user_type_without_a_compiled_form_runs_through_python_terms(sda10f):
     q = sda10f.q_home.copy()
     plane = HalfErrorPlane.through_link_point(sda10f, q, [0.0, 0.0, 1.0], distance=0.05)
     plane.move_to(plane.position + [0.0, 0.0, 3e-3])
-    assert plane.compiled_form() is None
+    assert compiled_form_of(plane) is None
     hole = Hole.on_link(sda10f, q, distance=0.08)  # declared: computed in C++ beside it
     python = CJMController(sda10f, [hole, plane], backend="python")
     compiled = CJMController(sda10f, [hole, plane], backend="compiled")

@@ -5,9 +5,10 @@ to ``controllers.cjm._step`` once (the tolerances included), and then runs
 ``solve(q, twist) -> (qd, report)`` as the Python reference
 (:class:`~controllers.cjm.python_step.PythonStep`) does: one C++ call a step for any mix of
 holes (both parametrisations), planes, barriers and point locks, whose terms the C++ side
-computes from what each declares (:meth:`constraints.Constraint.compiled_form`, read again
-only when its parameter array is replaced). A constraint type that declares no compiled
-form (a user's own) has its terms written by Python between two calls.
+computes from its type's registered form (:mod:`controllers.cjm.compiled_forms`, its
+parameters taken again only when the constraint's ``revision`` is replaced). A constraint
+type without a compiled form (a user's own) has its terms written by Python between two
+calls.
 tests/test_compiled_step.py and tests/test_cjm_backends_fuzz.py hold the two equal.
 
 With collision avoidance (docs/design.md section 18.4) the C++ pipeline measures the
@@ -27,12 +28,12 @@ import numpy as np
 import pinocchio as pin
 
 from constraints.collision import CollisionRows
-from constraints.compiled_form import UNIT_TOLERANCE
 
 from ..base import StepStatus, checked_inputs
 from ..joint_acceleration import DAMPER_BRAKING_SHARE, braked_pairs
 from ._step import EVENTS, REPORT_FIELDS as CPP_REPORT_FIELDS, JointBox, Pipeline, Step, Tolerances
 from ._step import ConstraintPlan as CompiledPlan
+from .compiled_forms import UNIT_TOLERANCE, compiled_form_of
 from .analytical import TermsWriter, terms_size
 from .compiled_collisions import CompiledCollisions
 from .python_step import paper_form_defined
@@ -166,8 +167,10 @@ class CompiledStep:
         self._in_python: list[tuple[int, TermsWriter, np.ndarray, np.ndarray, np.ndarray]] = []
         for i, plan in enumerate(plans):
             constraint = plan.constraint
-            if constraint.compiled_form() is not None:
-                pipeline.declare(i, constraint, self._paper, PAPER_FORM_MIN_A, UNIT_TOLERANCE)
+            form = compiled_form_of(constraint)
+            if form is not None:
+                pipeline.declare(i, constraint, form.kind, form.values, self._paper,
+                                 PAPER_FORM_MIN_A, UNIT_TOLERANCE)
             else:
                 row = placements[len(setup.ee_frame_ids) + i]
                 writer = TermsWriter(constraint, "paper" if self._paper else "nullspace")

@@ -98,9 +98,9 @@ class PortWall:
                                [hole.tissue_stiffness, hole.tissue_damping]])
 
     def compiled_version(self, hole: Hole) -> tuple[object, ...]:
-        """The hole's declared parameters (replaced whenever the axis, the centre or its
-        velocity is assigned, :mod:`constraints.compiled_form`), ``k`` and ``c_d``."""
-        return hole.compiled_parameters, hole.tissue_stiffness, hole.tissue_damping
+        """The hole's ``revision``: replaced whenever one of its fields (the axis, the
+        centre, its velocity, ``k``, ``c_d``...) is assigned, :mod:`constraints.revision`."""
+        return (hole.revision,)
 
 
 #: constraint type -> its wall; a type not here (nor any of its bases) has none

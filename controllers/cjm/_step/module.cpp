@@ -47,64 +47,65 @@ bool load_vector(py::handle source, cjm::Vector& target) {
   return target.allFinite();
 }
 
-//! A Pipeline that also holds the constraints that declare a compiled form
-//! (Constraint.compiled_form: a kind and a read-only float64 array of parameters,
-//! replaced by a new array whenever the constraint changes). Before every step it reads
-//! each one's ``compiled_parameters`` attribute and copies the values only when the array
-//! object changed: the constraints' data read each step, with no Python loop and no
-//! method call (docs/design.md section 16).
+//! A Pipeline that also holds the constraints with a compiled form
+//! (controllers/cjm/compiled_forms.py: a kind and a function giving a float64 array of
+//! parameters from the constraint's fields). Before every step it reads each one's
+//! ``revision`` attribute (replaced by every assignment to the constraint,
+//! constraints/revision.py) and takes the parameters again only when that object
+//! changed: the constraints' data read each step, with no Python loop and no method call
+//! while they stay as they are (docs/design.md section 16).
 struct BoundPipeline : cjm::Pipeline {
   using cjm::Pipeline::Pipeline;
 
   struct Source {
     Index index;
-    double unit_tolerance;              // of a declared axis or normal
-    py::object constraint, parameters;  // the constraint and the array last copied
+    double unit_tolerance;  // of a declared axis or normal
+    py::object constraint, values;  // the constraint and its form's parameters function
+    py::object revision;            // the constraint's revision when last taken
   };
   std::vector<Source> sources;
-  py::str parameters_name{"compiled_parameters"};
+  py::str revision_name{"revision"};
 
-  //! Constraint ``index`` computes its terms here from its declaration.
-  void declare(Index index, py::object constraint, bool paper, double paper_min_a,
-               double unit_tolerance) {
-    const py::object form = constraint.attr("compiled_form")();
-    if (form.is_none())
-      throw std::invalid_argument("the constraint declares no compiled form");
-    const auto declared = form.cast<std::tuple<std::string, py::object>>();
-    set_form(index, cjm::terms_kind(std::get<0>(declared)), paper, paper_min_a);
-    Source source{index, unit_tolerance, std::move(constraint), py::none()};
-    load(source, std::get<1>(declared));
+  //! Constraint ``index`` computes its terms here: terms of ``kind``, parameters
+  //! ``values(constraint)``.
+  void declare(Index index, py::object constraint, const std::string& kind, py::object values,
+               bool paper, double paper_min_a, double unit_tolerance) {
+    set_form(index, cjm::terms_kind(kind), paper, paper_min_a);
+    Source source{index, unit_tolerance, std::move(constraint), std::move(values), py::none()};
+    load(source, source.constraint.attr(revision_name));
     sources.push_back(std::move(source));
   }
 
-  //! Copies ``parameters`` in after checking them (ValueError naming the field).
-  void load(Source& source, py::handle parameters) {
+  //! Copies the parameters of ``source`` at ``revision`` in after checking them
+  //! (ValueError naming the field).
+  void load(Source& source, py::object revision) {
     const char* kind = cjm::kind_name(this->kind(source.index));
+    const py::object parameters = source.values(source.constraint);
     if (!py::isinstance<py::array_t<double>>(parameters))
       throw std::invalid_argument(std::string(kind) +
-                                  " compiled_parameters must be a float64 array");
+                                  " compiled parameters must be a float64 array");
     const auto array = py::reinterpret_borrow<py::array_t<double>>(parameters);
     if (array.ndim() != 1)
-      throw std::invalid_argument(std::string(kind) + " compiled_parameters must be 1-D");
+      throw std::invalid_argument(std::string(kind) + " compiled parameters must be 1-D");
     const auto entries = array.unchecked<1>();
     const Index size = entries.shape(0);
     double values[cjm::kMaxParameters];
     for (Index i = 0; i < std::min(size, cjm::kMaxParameters); ++i) values[i] = entries(i);
     cjm::load_parameters(this->kind(source.index), values, size, source.unit_tolerance,
                          this->parameters(source.index));
-    source.parameters = py::reinterpret_borrow<py::object>(parameters);
+    source.revision = std::move(revision);
   }
 
-  //! Each declared constraint's parameters, copied when their array was replaced (and the
-  //! obstacles' centres and velocities); whether any was.
+  //! Each declared constraint's parameters, taken again when its revision was replaced
+  //! (and the obstacles' centres and velocities); whether any was.
   bool read_sources() {
     bool changed = false;
     for (Source& source : sources) {
-      PyObject* current = PyObject_GetAttr(source.constraint.ptr(), parameters_name.ptr());
+      PyObject* current = PyObject_GetAttr(source.constraint.ptr(), revision_name.ptr());
       if (current == nullptr) throw py::error_already_set();
-      const py::object held = py::reinterpret_steal<py::object>(current);
-      if (current != source.parameters.ptr()) {
-        load(source, held);
+      py::object held = py::reinterpret_steal<py::object>(current);
+      if (current != source.revision.ptr()) {
+        load(source, std::move(held));
         changed = true;
       }
     }
@@ -365,9 +366,10 @@ PYBIND11_MODULE(_step, module) {
            "universe; ``frames``: (parent joint, placement 4x4), the EE frames then one per "
            "constraint; ``step`` is copied.")
       .def("declare", &BoundPipeline::declare, py::arg("index"), py::arg("constraint"),
-           py::arg("paper"), py::arg("paper_min_a"), py::arg("unit_tolerance"),
-           "Constraint ``index``'s terms computed here from its compiled_form() (the "
-           "parameters read again whenever its ``compiled_parameters`` array is replaced); "
+           py::arg("kind"), py::arg("values"), py::arg("paper"), py::arg("paper_min_a"),
+           py::arg("unit_tolerance"),
+           "Constraint ``index``'s terms of ``kind`` computed here from the parameters "
+           "``values(constraint)`` (taken again whenever its ``revision`` is replaced); "
            "``paper``: a hole's structure matrix in the paper's parametrisation where "
            "|p| >= ``paper_min_a``; a declared axis or normal within ``unit_tolerance`` of "
            "unit norm. ValueError for a bad declaration, naming the field.")

@@ -3,7 +3,7 @@
 // (terms.hpp), then the dense step (step.hpp), on buffers allocated once.
 //
 // A step from Python is one call when every constraint declares a compiled form
-// (Constraint.compiled_form: holes, planes, barriers, point locks); a constraint type
+// (controllers/cjm/compiled_forms.py: holes, planes, barriers, point locks); a constraint type
 // that declares none has its terms written by Python from the placements between
 // prepare() and finish().
 #pragma once

@@ -163,7 +163,7 @@ TermsKind terms_kind(const std::string& name) {
   if (name == "hole") return TermsKind::hole;
   if (name == "plane") return TermsKind::plane;
   if (name == "point_lock") return TermsKind::point_lock;
-  throw std::invalid_argument("compiled_form: unknown kind '" + name +
+  throw std::invalid_argument("compiled form: unknown kind '" + name +
                               "' (the extension computes 'hole', 'plane', 'point_lock')");
 }
 
@@ -196,7 +196,7 @@ Index kind_rows(TermsKind kind) {
 
 void load_parameters(TermsKind kind, const double* values, Index size, double unit_tolerance,
                      Parameters& parameters) {
-  const std::string prefix = std::string(kind_name(kind)) + " compiled_parameters: ";
+  const std::string prefix = std::string(kind_name(kind)) + " compiled parameters: ";
   if (size != parameter_count(kind))
     throw std::invalid_argument(prefix + "needs " + std::to_string(parameter_count(kind)) +
                                 " entries, got " + std::to_string(size));

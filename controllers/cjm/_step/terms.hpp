@@ -1,5 +1,5 @@
 // Each constraint's per-step terms, computed from what it declares
-// (Constraint.compiled_form, docs/design.md section 16): one function per kind, the same
+// (controllers/cjm/compiled_forms.py, docs/design.md section 16): one function per kind, the same
 // math and the same choices as the Python reference (constraints/*.py evaluate,
 // constraints.base.structure_nullspace / structure_paper / perpendicular_basis,
 // controllers.cjm.analytical.write_terms).
@@ -21,7 +21,7 @@ namespace cjm {
 //! The kinds of terms the extension computes, by their declared names.
 enum class TermsKind : int { hole = 0, plane, point_lock };
 
-//! The declared parameters of one constraint (Constraint.compiled_parameters), by kind:
+//! The declared parameters of one constraint (controllers/cjm/compiled_forms.py), by kind:
 //!   hole:       center (3, world), velocity (3, world), link_axis (3, link), gain
 //!   plane:      link_point (3, link), plane_point (3, world), normal (3, world),
 //!               velocity (3, world), gain  (a barrier: the same, its plan an inequality)
@@ -42,7 +42,7 @@ double declared_gain(TermsKind kind, const Parameters& parameters);
 //! Checks ``values`` (``size`` entries) against ``kind``'s declaration and copies them to
 //! ``parameters``: std::invalid_argument naming the field for a wrong size, a non-finite
 //! entry, an axis or normal whose norm is more than ``unit_tolerance`` from 1
-//! (constraints.compiled_form.UNIT_TOLERANCE), or a negative gain.
+//! (controllers.cjm.compiled_forms.UNIT_TOLERANCE), or a negative gain.
 void load_parameters(TermsKind kind, const double* values, Index size, double unit_tolerance,
                      Parameters& parameters);
 
