@@ -17,6 +17,7 @@ those of the period-by-period code bit for bit, but the floor's world point
 
 from __future__ import annotations
 
+import operator
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -30,6 +31,13 @@ from .batched_evaluation import batched_form, times
 from .constraint_measures import EPSILON
 from .measured_later import Geometry, MeasuredLater
 from .records import StepRecord
+
+
+#: what the measures read of each period and its step (C-level reads: once per period)
+STEP, COMMAND, END, TRUE_Q, CONSTRAINTS = map(operator.attrgetter,
+                                              ("step", "command", "end", "q", "constraints"))
+SENSED, COMMANDED, MOVED, BEFORE, ROWS, HAS_PREVIOUS = map(
+    operator.attrgetter, ("sensed", "qd", "moved", "q_before", "period_rows", "has_previous"))
 
 
 @dataclass(frozen=True)
@@ -118,7 +126,7 @@ def constraint_velocity(geometries: Sequence[Geometry], placements: np.ndarray,
     equalities = [j for j, constraint in enumerate(geometries[0].constraints)
                   if constraint.is_equality]
     for slot, j in enumerate(equalities):
-        constraints: list[Constraint] = [geometry.constraints[j] for geometry in geometries]
+        constraints: list[Constraint] = list(map(operator.itemgetter(j), map(CONSTRAINTS, geometries)))
         rotations, translations = placements[:, slot, :3, :3], placements[:, slot, :3, 3]
         point = batched_form(type(constraints[0])).evaluate(constraints, rotations,
                                                             translations)
@@ -168,19 +176,20 @@ def measure_commands(kinematics: Kinematics, periods: Sequence[MeasuredLater],
     the rows at the sensed configuration with the command; with a plant, but the
     residual, again at the true configuration before the period with the joint
     velocities the plant applied; the EE velocities where the rows are last measured."""
-    geometries = [period.command for period in periods]
+    geometries = list(map(COMMAND, periods))
+    steps = list(map(STEP, periods))
     frames = equality_frames(geometries[0])
     ees = list(kinematics.ee_frames)
-    sensed = [period.step.sensed for period in periods]
-    commands = np.array([period.step.qd for period in periods])
+    sensed = list(map(SENSED, steps))
+    commands = np.array(list(map(COMMANDED, steps)))
     placements, jacobians = placements_and_jacobians(
         kinematics, sensed, frames if kinematics.plant else frames + ees)
     rows = constraint_velocity(geometries, placements, jacobians, commands)
     moved = commands
     if kinematics.plant:
-        moved = np.array([period.step.moved for period in periods])
+        moved = np.array(list(map(MOVED, steps)))
         placements, jacobians = placements_and_jacobians(
-            kinematics, [period.step.q_before for period in periods], frames + ees)
+            kinematics, list(map(BEFORE, steps)), frames + ees)
         at_true = constraint_velocity(geometries, placements, jacobians, moved)
         rows = RowMeasures(rows.residual, at_true.velocity, at_true.drift, at_true.floor)
     ee_rotations = column_major(placements[:, len(frames):, :3, :3])
@@ -206,14 +215,14 @@ def measure_ends(kinematics: Kinematics, periods: Sequence[MeasuredLater],
     """The end-of-period errors of ``periods`` (one constraint set on the same frames) at
     their true configurations, against each EE's filtered target (the period rows'
     targets, ``targets`` (N, EEs, 12))."""
-    geometries = [period.end for period in periods]
+    geometries = list(map(END, periods))
     count, ees = len(periods), len(kinematics.ee_frames)
-    placements = placements_at(kinematics, [period.q for period in periods],
+    placements = placements_at(kinematics, list(map(TRUE_Q, periods)),
                                list(kinematics.ee_frames) + list(geometries[0].frames))
     error, penetration = np.zeros(count), np.zeros(count)
     violations = [np.zeros((count, 0))]
     for j, constraint in enumerate(geometries[0].constraints):
-        constraints = [geometry.constraints[j] for geometry in geometries]
+        constraints = list(map(operator.itemgetter(j), map(CONSTRAINTS, geometries)))
         violation = batched_form(type(constraint)).violation(
             constraints, placements[:, ees + j, :3, :3], placements[:, ees + j, :3, 3])
         violations.append(violation[:, None])
@@ -237,11 +246,12 @@ def measure_periods(kinematics: Kinematics, periods: Sequence[MeasuredLater],
     if not periods:
         return []
     model = kinematics.model
-    rows = np.array([period.step.period_rows for period in periods])
+    steps = list(map(STEP, periods))
+    rows = np.array(list(map(ROWS, steps)))
     count = len(periods)
     commanded = times(column_major(rows[..., PERIOD_PLACEMENT][..., :9].reshape(count, -1, 3, 3)),
                       rows[..., PERIOD_TWIST][..., :3])
-    previous = np.array([period.step.has_previous for period in periods])
+    previous = np.array(list(map(HAS_PREVIOUS, steps)))
     operator = np.where(previous[:, None, None],
                         (rows[..., PERIOD_TARGET][..., 9:12]
                          - rows[..., PERIOD_PREVIOUS][..., 9:12]) / kinematics.dt, 0.0)
@@ -249,20 +259,20 @@ def measure_periods(kinematics: Kinematics, periods: Sequence[MeasuredLater],
     velocity: list[np.ndarray] = [np.zeros(0)] * count
     drift: list[np.ndarray] = [np.zeros(0)] * count
     actual = np.empty_like(commanded)
-    for run in runs([period.command for period in periods]):
+    for run in runs(list(map(COMMAND, periods))):
         measured = measure_commands(kinematics, periods[run])
         residual[run], floor[run] = measured.rows.residual, measured.rows.floor
         velocity[run], drift[run] = list(measured.rows.velocity), list(measured.rows.drift)
         actual[run] = measured.actual
     ends: list[EndMeasures] = []
-    for run in runs([period.end for period in periods]):
+    for run in runs(list(map(END, periods))):
         ends.append(measure_ends(kinematics, periods[run], rows[run][..., PERIOD_TARGET]))
     error = np.concatenate([end.error for end in ends])
     penetration = np.concatenate([end.penetration for end in ends])
     positions = np.concatenate([end.positions for end in ends])
     orientations = np.concatenate([end.orientations for end in ends])
     violations = [row for end in ends for row in end.violations]
-    q = np.array([period.q for period in periods])
+    q = np.array(list(map(TRUE_Q, periods)))
     limits = np.maximum(0.0, np.maximum((q - model.upperPositionLimit).max(axis=1),
                                         (model.lowerPositionLimit - q).max(axis=1)))
     records = []
