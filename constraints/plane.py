@@ -39,7 +39,7 @@ class Plane(Constraint):
     """
 
     dim = 1
-    #: drift-feedback gain used when none is given (the Barrier overrides it)
+    #: drift-feedback gain used when none is given (a subclass may set its own)
     default_gain: float = DEFAULT_GAIN
     kind = "plane"
     position_attribute = "plane_point"
