@@ -37,6 +37,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from teleop import load_robot  # noqa: E402
 from teleop.inputs import UdpMaster  # noqa: E402
+from web.shared_priority import make_shared_realtime  # noqa: E402
 from web.ui.server import run_server  # noqa: E402
 
 KEY = bytes(range(32))
@@ -140,7 +141,8 @@ class TickSampler:
         self._thread.start()
 
     def _run(self) -> None:
-        while not self._stop.is_set():
+        make_shared_realtime()  # as the server's threads: an ordinary thread of the process
+        while not self._stop.is_set():  # preempted while it holds the GIL holds the loop
             self.threads.append(thread_times())
             self.samples.append((time.perf_counter(), self.app.ticker.ticks))
             time.sleep(0.05)
@@ -217,7 +219,8 @@ def main() -> None:
     streamer = child(MASTER, master.port, KEY.hex())
     assert streamer.stdout is not None and "streaming" in streamer.stdout.readline()
     time.sleep(2.0)  # the loop settles, the master binds
-    sampler = TickSampler(app)
+    make_shared_realtime()  # this thread too polls the app while the floods run (the
+    sampler = TickSampler(app)  # processes it starts run ordinary)
     results: dict[str, dict] = {}
     try:
         time.sleep(args.baseline)
