@@ -213,3 +213,47 @@ def test_the_loop_integrates_a_planar_base_on_its_manifold():
     assert loop.q.shape == (19,)
     assert np.hypot(loop.q[2], loop.q[3]) == pytest.approx(1.0, abs=1e-12)
     assert record.ee_position_error < 1e-4
+
+
+class HalfSpeedPlant:
+    """A plant written to the first protocol (sense, actuate, reset, measures): the
+    joints move at half the command."""
+
+    def __init__(self) -> None:
+        self.asked: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def sense(self, q: np.ndarray) -> np.ndarray:
+        return q.copy()
+
+    def actuate(self, qd: np.ndarray, q: np.ndarray, constraints) -> np.ndarray:
+        self.asked.append((qd.copy(), q.copy()))
+        return 0.5 * qd
+
+    def reset(self, q: np.ndarray | None = None) -> None:
+        self.asked.clear()
+
+    def measures(self) -> None:
+        return None
+
+
+def test_a_plant_without_advance_or_close_still_drives_the_loop(ur5_instrument):
+    """The loop moves a plant that has no ``advance`` with its ``actuate`` and
+    ``pin.integrate``, to the bit; closing it at a run's end is a no-op."""
+    from constraints import Hole
+    from teleop.loop.plant import close_plant
+
+    robot = ur5_instrument
+    plant = HalfSpeedPlant()
+    loop = TeleopLoop(robot, CJMController(robot, [Hole.on_link(robot, robot.q_home, 0.2)]),
+                      plant=plant)
+    target = loop.ee_placement() * pin.exp6(np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    for _ in range(20):
+        before = loop.q.copy()
+        loop.tick(target)
+        qd, q = plant.asked[-1]
+        np.testing.assert_array_equal(q, before)
+        assert np.any(qd != 0.0)
+        np.testing.assert_array_equal(loop.q, pin.integrate(robot.model, before,
+                                                            0.5 * qd * loop.config.dt))
+    assert len(plant.asked) == 20
+    close_plant(plant)

@@ -20,6 +20,7 @@ from controllers.step_message import StepMessage
 from teleop.controller_specs import ROBOT, make_controller
 from teleop.limits import MAX_DURATION_S, MAX_STEPS
 from teleop.loop import RECORD_FIELDS, LoopConfig, MeasuredLater, StepRecord, TeleopLoop
+from teleop.loop.plant import close_plant
 
 from teleop.plants.imperfect import Imperfections
 from teleop.plants.walls import has_wall
@@ -179,7 +180,7 @@ def _drive(plan: Plan, controller, constraints: list[Constraint], config: LoopCo
                 on_step(i)
     finally:  # a robot on the wire gets its zeros when the run ends, not at exit
         if loop.plant is not None:
-            loop.plant.close()
+            close_plant(loop.plant)
     while periods:  # each batch let go once measured: the run's memory stays the records'
         batch = [periods.popleft() for _ in range(min(MEASURED_TOGETHER, len(periods)))]
         records.extend(loop.measure_all_later(batch))

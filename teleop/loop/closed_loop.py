@@ -46,7 +46,7 @@ from .loop_config import LoopConfig
 from .measured_in_batches import Kinematics, measure_periods
 from .measured_later import Geometry, MeasuredLater, geometry_copy
 from .naming import constraint_names, row_labels
-from .plant import Plant
+from .plant import Advance, Plant, advance_of
 from .records import CompiledPendingStep, PendingStep, StepRecord
 from .state_observer import StateObserver
 from .supervisor import Supervision, Supervisor
@@ -160,6 +160,16 @@ class TeleopLoop:
         if self._history_in_tick:
             return self.compiled.history()[1]
         return self._previous_targets
+
+    @property
+    def plant(self) -> Plant | None:
+        """What stands between the loop and the true joints (None: the perfect robot)."""
+        return self._plant
+
+    @plant.setter
+    def plant(self, plant: Plant | None) -> None:
+        self._plant = plant
+        self._advance: Advance | None = None if plant is None else advance_of(plant, self.model)
 
     @property
     def constraints(self) -> list[Constraint]:
@@ -466,10 +476,10 @@ class TeleopLoop:
         if not math.isfinite(sum(qd.tolist())):  # never integrate a non-finite command
             qd, status, message = self._stop(sensed), "failed", NON_FINITE_STOP
         q_before = self.q
-        if self.plant is None:
+        if self._advance is None:
             moved, self.q = qd, pin.integrate(self.model, q_before, qd * self.config.dt)
         else:
-            moved, self.q = self.plant.advance(qd, q_before, self.constraints, self.config.dt)
+            moved, self.q = self._advance(qd, q_before, self.constraints, self.config.dt)
         self.last_qd = qd
         self.t += self.config.dt
         return q_before, qd, moved, status, message

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 import numpy as np
+import pinocchio as pin
 
 from constraints import Constraint
 
@@ -15,7 +16,8 @@ class Plant(Protocol):
     sections 15.1, 17): the loop reads the configuration through :meth:`sense` and moves
     the robot with what :meth:`advance` returns. A plant whose encoders are noisy also
     says so in ``encoder_noise`` (rad, its std; the loop's state observer, docs/design.md
-    5.6, takes 0 from a plant without it)."""
+    5.6, takes 0 from a plant without it). :meth:`advance` and :meth:`close` came later:
+    a plant without them still runs (:func:`advance_of`, :func:`close_plant`)."""
 
     def sense(self, q: np.ndarray) -> np.ndarray:
         """The configuration the loop measures when the robot's true one is ``q``."""
@@ -40,3 +42,32 @@ class Plant(Protocol):
     def close(self) -> None:
         """Let go of what the plant holds (a robot on the wire: zeros published, its node
         closed); nothing for a simulated robot. Called once, when the loop's run ends."""
+
+
+#: A plant's :meth:`Plant.advance`: ``(qd, q, constraints, dt) -> (moved, q_next)``.
+Advance = Callable[[np.ndarray, np.ndarray, Sequence[Constraint], float],
+                   tuple[np.ndarray, np.ndarray]]
+
+
+def advance_of(plant: Plant, model: pin.Model) -> Advance:
+    """``plant``'s :meth:`Plant.advance`; for a plant written before it (sense, actuate,
+    reset, measures), its :meth:`Plant.actuate` then ``pin.integrate`` on ``model``."""
+    advance = getattr(plant, "advance", None)
+    if advance is not None:
+        return advance
+
+    def actuate_then_integrate(qd: np.ndarray, q: np.ndarray,
+                               constraints: Sequence[Constraint],
+                               dt: float) -> tuple[np.ndarray, np.ndarray]:
+        moved = plant.actuate(qd, q, constraints)
+        return moved, pin.integrate(model, q, moved * dt)
+
+    return actuate_then_integrate
+
+
+def close_plant(plant: Plant) -> None:
+    """:meth:`Plant.close`, when ``plant`` has one (a plant written before it holds
+    nothing to let go)."""
+    close = getattr(plant, "close", None)
+    if close is not None:
+        close()

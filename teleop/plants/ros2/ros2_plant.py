@@ -32,7 +32,6 @@ back until :meth:`Ros2Plant.reset`. :attr:`Ros2Measures.realtime` says how they 
 from __future__ import annotations
 
 import atexit
-import gc
 from collections import deque
 import math
 import threading
@@ -47,6 +46,7 @@ from cyclonedds.util import duration
 
 from constraints import Constraint
 
+from .heap_freeze import freeze_heap, release_heap
 from .joint_map import indices, model_joint_names
 from .messages import Float64MultiArray, JointState, OperatingState
 from .node import Ros2Node
@@ -278,7 +278,8 @@ class Ros2Plant:
         (a 39 ms pass seen in a run), while the robot's controller holds the last command
         and the robot moves on with it (21 um of hole error on the MuJoCo sim for 1.5 um
         without the pause; docs/ros2.md "Real-time threads"). :meth:`close` unfreezes
-        them: a cycle among them that died meanwhile is collected then."""
+        them, unless another plant still holds the freeze (:mod:`.heap_freeze`): a cycle
+        among them that died meanwhile is collected then."""
         with self._lock:
             self._stop("reset")
             self.last_measures = Ros2Measures(states=self.last_measures.states,
@@ -289,8 +290,7 @@ class Ros2Plant:
             self._state_names = []
             self._overruns = 0
             self._gave_up = False
-        gc.collect()
-        gc.freeze()
+        freeze_heap(self)
         self.wait_for_state()
         self._period_start = time.monotonic()
 
@@ -425,7 +425,7 @@ class Ros2Plant:
         self._watchdog.join(timeout=1.0)
         atexit.unregister(self.close)
         self.node.close()
-        gc.unfreeze()
+        release_heap(self)
 
     def __enter__(self) -> "Ros2Plant":
         return self
