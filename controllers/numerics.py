@@ -78,6 +78,15 @@ PROXQP_FALLBACK_ITERATIONS = 10
 #: within the tolerance (:mod:`controllers.optimization.kkt`; docs/design.md 18.7).
 PROXQP_FLAT_RHO = 1.0
 
+#: Settings of OSQP's second and third solves of a stage that ran to its project cap, each
+#: answer taken only with its KKT residual within ``eps_abs``
+#: (:mod:`controllers.optimization.kkt`): a fixed ADMM ``rho``, where the adaptive one
+#: stalled on the collision fuzz's flat task stages (5 stuck states, still at the cap after
+#: 400,000 iterations; 1e-2 finishes 4 of them, 0.1 the fifth; at 1e-3 OSQP said "solved"
+#: of one with a KKT residual of 0.11, its polishing failed; docs/design.md 18.7).
+OSQP_CAPPED_SETTINGS: tuple[dict, ...] = ({"adaptive_rho": False, "rho": 1e-2},
+                                          {"adaptive_rho": False, "rho": 0.1})
+
 #: proxqp's threshold for certifying primal infeasibility (its ``eps_primal_inf``, a
 #: field of the persistent objects' settings, which ``proxqp.dense.solve`` through
 #: qpsolvers does not take). With the small ``rho`` of a redundant robot

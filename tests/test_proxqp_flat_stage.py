@@ -1,7 +1,8 @@
-"""proxqp on a task stage whose optimum lies far along directions its Hessian does not see
-(docs/design.md 18.7): the collision fuzz's one stuck state, pinned, solved by the last
-solve with ``rho`` at the stage's tolerance and checked against daqp; and the KKT
-certificate that solve is taken under, against answers written in the test."""
+"""proxqp and OSQP on task stages whose optimum lies far along directions their Hessian
+does not see (docs/design.md 18.7): the collision fuzz's stuck states, pinned, solved by
+proxqp's last solve with ``rho`` at the stage's tolerance and by OSQP's solves with a fixed
+rho, checked against daqp; and the KKT certificate those solves are taken under, against
+answers written in the test."""
 
 from __future__ import annotations
 
@@ -11,12 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.numerics import INFINITE_BOUND, SOLVER_SETTINGS
-from controllers.optimization.budget import ITERATION_CAPS, StepBudget
+from controllers.numerics import INFINITE_BOUND, OSQP_CAPPED_SETTINGS, SOLVER_SETTINGS
+from controllers.optimization.budget import ITERATION_CAPS, BudgetExceeded, StepBudget
 from controllers.optimization.kkt import kkt_residual
 from controllers.optimization.problem import QuadraticProgram
 from controllers.optimization.proxqp import ProxQPSolver
 from controllers.qp.daqp_direct import DirectDAQP
+from controllers.qp.qpsolvers_path import solve_with_qpsolvers
 
 DATA = Path(__file__).parent / "data"
 
@@ -102,3 +104,29 @@ def test_the_certificate_sees_every_kind_of_miss():
     # upper bounds), balanced by y: stationarity and the primal hold, the optimum is missed
     assert kkt_residual(problem, x, y - 1e-3, z, np.array([1e-3, 1e-3, 0.0])) \
         == pytest.approx(0.75e-3)
+
+
+def osqp_stages() -> list[QuadraticProgram]:
+    """The task stages of the 403 failed steps of
+    ``python -m tests.collision_fuzz --runs 60 --controllers qp:osqp`` (seed 0)."""
+    stages = json.loads((DATA / "osqp-flat-task-stages.json").read_text())["stages"]
+    return [QuadraticProgram(**{key: np.array(value) if isinstance(value, list) else value
+                                for key, value in stage.items()}) for stage in stages]
+
+
+@pytest.mark.parametrize("index", range(5))
+def test_osqp_finishes_the_flat_stages_it_stalled_on_and_agrees_with_daqp(index):
+    """Each stalls at OSQP's cap with the adaptive rho; the certified solves with a fixed
+    one finish it, to daqp's objective within OSQP's own accuracy (eps_abs 1e-7)."""
+    problem = osqp_stages()[index]
+    settings = {**SOLVER_SETTINGS["osqp"], **ITERATION_CAPS["osqp"]}
+    with pytest.raises(BudgetExceeded, match="maximum iterations"):
+        solve_with_qpsolvers(problem, "osqp", settings, started_budget())
+    x = solve_with_qpsolvers(problem, "osqp", settings, started_budget(),
+                             OSQP_CAPPED_SETTINGS).x
+    assert np.abs(problem.equality_matrix @ x - problem.equality_rhs).max() <= 1e-7
+    assert (problem.rows @ x - problem.rows_upper).max() <= 1e-7
+    assert np.all(x >= problem.lower - 1e-7) and np.all(x <= problem.upper + 1e-7)
+    daqp = DirectDAQP({**SOLVER_SETTINGS["daqp"], **ITERATION_CAPS["daqp"]}, {})
+    reference = daqp.solve(problem, started_budget()).x
+    assert objective(problem, x) == pytest.approx(objective(problem, reference), abs=1e-7)

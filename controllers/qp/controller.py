@@ -30,7 +30,7 @@ from ..base import EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverErro
 from ..joint_acceleration import braked_lower, braked_pairs
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
-from ..numerics import INFINITE_BOUND, SOLVER_SETTINGS
+from ..numerics import INFINITE_BOUND, OSQP_CAPPED_SETTINGS, SOLVER_SETTINGS
 from ..optimization.budget import ITERATION_CAPS, BudgetExceeded, StepBudget, TimeBudget
 from ..optimization.collision_report import (AT_BOUND, pair_list, pair_names, record_distances,
                                              report_conflict, report_held_back, rows_at_bound)
@@ -186,6 +186,10 @@ class QPController(GuardedController):
         #: what goes through qpsolvers: its proxqp path takes no inner cap (``max_iter_in``)
         self._qpsolvers_settings = {k: v for k, v in self.settings.items()
                                     if not (solver == "proxqp" and k == "max_iter_in")}
+        #: OSQP's certified solves past its cap, when the cap and rho are the project's
+        self._capped_settings = (OSQP_CAPPED_SETTINGS if solver == "osqp" and not
+                                 {"max_iter", "rho", "adaptive_rho"} & set(user_settings)
+                                 else ())
         self.set_constraints(constraints)
 
     def _prepare(self) -> None:
@@ -361,4 +365,5 @@ class QPController(GuardedController):
             return self._proxqp.solve(problem, self.budget)
         if self._direct_daqp is not None:
             return self._direct_daqp.solve(problem, self.budget)
-        return solve_with_qpsolvers(problem, self.solver, self._qpsolvers_settings, self.budget)
+        return solve_with_qpsolvers(problem, self.solver, self._qpsolvers_settings, self.budget,
+                                    self._capped_settings)
