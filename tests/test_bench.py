@@ -300,6 +300,7 @@ def test_the_measured_period_line_times_compare_s_periods():
                                   / period.tick_median_us)
     line = format_measured_period_line(MeasuredPeriod("paper-hole", 10, 12.0, 40.0, 10.0, 18.0))
     assert "with its measures 30.0 us" in line and "3.00x (target" in line
-    assert "(p99 40.0, 1.20x)" in line and "after the run 18.0 us median" in line
+    assert "(p99 40.0, 1.20x)" in line
+    assert "after the run 18.0 us (CPU time, 1000 measured together)" in line
     assert "3.10x* (target" in format_measured_period_line(
         MeasuredPeriod("paper-hole", 10, 12.0, 40.0, 10.0, 19.0))
