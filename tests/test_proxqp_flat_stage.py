@@ -106,6 +106,34 @@ def test_the_certificate_sees_every_kind_of_miss():
         == pytest.approx(0.75e-3)
 
 
+@pytest.mark.parametrize("poisoned", ["x", "equalities", "rows", "box"])
+def test_the_certificate_of_anything_not_finite_is_infinite(poisoned):
+    """A NaN anywhere certifies nothing (numpy's max and Python's would have passed over
+    it: a NaN box multiplier beside a far-from-optimal x gave 0)."""
+    problem = box_problem()
+    given = {"x": np.array([0.75, 0.25, 0.25]), "equalities": np.array([-0.25]),
+             "rows": np.array([1.5]), "box": np.zeros(3)}
+    assert kkt_residual(problem, *given.values()) == pytest.approx(0.0, abs=1e-15)
+    given[poisoned] = given[poisoned].copy()
+    given[poisoned][0] = np.nan
+    assert kkt_residual(problem, *given.values()) == float("inf")
+
+
+def test_the_pinned_stage_is_solved_within_the_default_step_budget():
+    """The flat solve comes before the larger cap's (about 28 ms of CPU), so the stage is
+    solved within the step's default budget (ten 1 ms periods of CPU), not only without one."""
+    problem = pinned_stage()
+    solver = ProxQPSolver({**SOLVER_SETTINGS["proxqp"], **ITERATION_CAPS["proxqp"]},
+                          frozenset({"eps_abs", "rho", "max_iter"}))
+    budget = StepBudget("periods", 1e-3)
+    budget.start()
+    answer = solver.solve(problem, budget)
+    daqp = DirectDAQP({**SOLVER_SETTINGS["daqp"], **ITERATION_CAPS["daqp"]}, {})
+    reference = daqp.solve(problem, started_budget()).x
+    assert objective(problem, answer.x) == pytest.approx(objective(problem, reference),
+                                                         abs=1e-10)
+
+
 def osqp_stages() -> list[QuadraticProgram]:
     """The task stages of the 403 failed steps of
     ``python -m tests.collision_fuzz --runs 60 --controllers qp:osqp`` (seed 0)."""

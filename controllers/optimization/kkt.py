@@ -36,7 +36,20 @@ def _complementarity(multipliers: np.ndarray, values: np.ndarray, lower: np.ndar
 def kkt_residual(problem: QuadraticProgram, x: np.ndarray, equality_multipliers: np.ndarray,
                  row_multipliers: np.ndarray, box_multipliers: np.ndarray | None) -> float:
     """The largest primal, stationarity and complementarity residual of ``x`` and its
-    multipliers for ``problem`` (module docstring); 0 for an exact optimum."""
+    multipliers for ``problem`` (module docstring); 0 for an exact optimum, inf when any
+    of them is not finite (nothing certified)."""
+    given = [x, equality_multipliers, row_multipliers,
+             *(() if box_multipliers is None else (box_multipliers,))]
+    if not all(np.all(np.isfinite(values)) for values in given):
+        return float("inf")
+    residual = _kkt_residual(problem, x, equality_multipliers, row_multipliers,
+                             box_multipliers)
+    return residual if np.isfinite(residual) else float("inf")
+
+
+def _kkt_residual(problem: QuadraticProgram, x: np.ndarray, equality_multipliers: np.ndarray,
+                  row_multipliers: np.ndarray, box_multipliers: np.ndarray | None) -> float:
+    """:func:`kkt_residual` of finite values."""
     stationarity = problem.hessian @ x + problem.gradient
     primal, complementarity = 0.0, 0.0
     if problem.equality_matrix is not None and problem.equality_matrix.shape[0]:
