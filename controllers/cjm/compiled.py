@@ -47,7 +47,7 @@ STATUSES = tuple(StepStatus)
 #: the C++ report's entries, in the order CompiledStep unpacks them
 REPORT_FIELDS = ("status", "method", "sigma_min", "damping", "scale", "equality_residual",
                  "saturated_count", "active_barrier_count", "event_count",
-                 "saturation_joint_count")
+                 "saturation_joint_count", "dropped_event_count")
 if (tuple(sorted(CPP_REPORT_FIELDS, key=CPP_REPORT_FIELDS.get)) != REPORT_FIELDS
         or any(Event[name.upper()] != code for name, code in EVENTS.items())):
     raise ImportError("controllers.cjm._step reports other fields: rebuild it (pip install -e .)")
@@ -107,12 +107,16 @@ class CompiledStep:
     allocated once. Raises :class:`KinematicsMismatch` when the C++ copy of the model
     does not reproduce Pinocchio's kinematics. ``data``: the controller's, where the
     collision rows are measured (needed with ``setup.collisions`` only);
-    ``pair_capacity``: the collision rows the C++ step can take (default: every pair)."""
+    ``pair_capacity``: the collision rows the C++ step can take (default: every pair);
+    ``event_capacity``: the events a step records (default: eight per constraint, 16 more
+    and one per collision row), those past it counted in the report's
+    ``dropped_events``."""
 
     def __init__(self, setup: StepSetup, data: pin.Data | None = None,
-                 pair_capacity: int | None = None) -> None:
+                 pair_capacity: int | None = None, event_capacity: int | None = None) -> None:
         self.setup = setup
         self.data = data
+        self._event_capacity = event_capacity
         self._collisions = setup.collisions
         if self._collisions is not None and data is None:
             raise ValueError("a compiled step with collision avoidance needs the controller's data")
@@ -139,7 +143,8 @@ class CompiledStep:
             box=joint_box(setup), posture_gain=setup.posture_gain,
             posture_target=setup.posture if one_coordinate and self._use_posture else np.zeros(0),
             tolerances=Tolerances(**dataclasses.asdict(setup.tolerances)),
-            pair_capacity=pair_capacity)
+            pair_capacity=pair_capacity,
+            event_capacity=-1 if event_capacity is None else event_capacity)
         frames = [*setup.ee_frame_ids, *(plan.frame_id for plan in plans)]
         task_entries = (np.arange(setup.task_size) if setup.task_entries is None
                         else setup.task_entries)
@@ -281,7 +286,7 @@ class CompiledStep:
         """Build the C++ step again with room for ``pair_capacity`` collision rows, from
         the command last sent."""
         previous, change = self.previous.copy(), self.previous_change.copy()
-        CompiledStep.__init__(self, self.setup, self.data, pair_capacity)
+        CompiledStep.__init__(self, self.setup, self.data, pair_capacity, self._event_capacity)
         self.previous[:] = previous
         self.previous_change[:] = change
 
@@ -310,9 +315,9 @@ class CompiledStep:
     def _step_report(self, report: list[float], paper_form: bool) -> StepReport:
         """The C++ report (its entries, :data:`REPORT_FIELDS`) as a :class:`StepReport`
         with its lists and events (the paper's form undefined: its event first, as the
-        Python step records it)."""
+        Python step records it; ``dropped_events``: the events past the C++ record)."""
         (status, method, sigma_min, damping, scale, equality_residual, saturated, barriers,
-         events, saturation_joints) = report
+         events, saturation_joints, dropped) = report
         recorded = [] if paper_form else [(Event.PAPER_FORM_UNDEFINED, 0.0, 0.0, 0.0)]
         if events:
             recorded += [(EVENT_BY_CODE[int(code)], a, b, c)
@@ -324,7 +329,8 @@ class CompiledStep:
             tuple(self._active_barriers[:int(barriers)].tolist()) if barriers else (),
             tuple(recorded),
             (tuple(self._saturation_joints[:int(saturation_joints)].tolist())
-             if saturation_joints else ()))
+             if saturation_joints else ()),
+            dropped_events=int(dropped))
 
     def time_steps(self, configurations: np.ndarray, twists: np.ndarray) -> np.ndarray | None:
         """The C++ floor (docs/design.md section 16): per-step nanoseconds of this step in
@@ -377,6 +383,7 @@ class CompiledStep:
         report = self._report.tolist()
         if self._collisions is not None:
             return self._report_with_pairs(report, paper_form, self.collision_rows.rows())
-        if paper_form and not (report[6] or report[7] or report[8]):  # no list, no event
+        # no list, no event (so none dropped: the record holds at least one)
+        if paper_form and not (report[6] or report[7] or report[8]):
             return StepReport(STATUSES[int(report[0])], METHODS[int(report[1])], *report[2:6])
         return self._step_report(report, paper_form)

@@ -63,7 +63,9 @@ class StepReport:
     limit when it missed the task (the ``TASK_MISSED`` event names them); ``error``: the
     text of a ``LINEAR_ALGEBRA_ERROR``. With collision avoidance, ``collision`` holds the
     step's :class:`~constraints.collision.CollisionRows` and ``active_pairs`` the indices
-    of its rows held at their bound (else None and ()).
+    of its rows held at their bound (else None and ()). ``dropped_events``: the events
+    the compiled step's fixed record had no room for (past its last row; a failure takes
+    that row): the message says how many; the status never depends on the record.
     """
 
     status: StepStatus = StepStatus.OK
@@ -79,6 +81,7 @@ class StepReport:
     error: str = ""
     collision: CollisionRows | None = None
     active_pairs: tuple[int, ...] = ()
+    dropped_events: int = 0
 
     def event(self, event: Event, status: StepStatus = StepStatus.OK, a: float = 0.0,
               b: float = 0.0, c: float = 0.0) -> None:
@@ -152,7 +155,14 @@ def report_message(report: StepReport, joint_names: Sequence[str]) -> str:
             message = report.error
     if active_pairs and report.status in (StepStatus.LEAST_SQUARES, StepStatus.SCALED):
         message = with_note(message, held_back_note(collision, active_pairs))
+    if report.dropped_events:
+        message = with_note(message, dropped_events_note(report.dropped_events))
     return message
+
+
+def dropped_events_note(count: int) -> str:
+    """The events a step had no room to record (its message lacks their words)."""
+    return f"{count} more event{'s' if count > 1 else ''} not recorded (the step's record is full)"
 
 
 def pair_conflict_note(pair: str, shortfall: float) -> str:

@@ -284,16 +284,17 @@ PYBIND11_MODULE(_step, module) {
                        double max_damping, bool general_only,
                        std::vector<cjm::ConstraintPlan> constraints, cjm::JointBox box,
                        double posture_gain, cjm::Vector posture_target,
-                       cjm::Tolerances tolerances, Index pair_capacity) {
+                       cjm::Tolerances tolerances, Index pair_capacity, Index event_capacity) {
              return new cjm::Step(nq, nv, task_rows, cjm::DampingPolicy{damping, threshold, max_damping},
                                   general_only, std::move(constraints), std::move(box),
                                   posture_gain, std::move(posture_target), tolerances,
-                                  pair_capacity);
+                                  pair_capacity, event_capacity);
            }),
            py::arg("nq"), py::arg("nv"), py::arg("task_rows"), py::arg("damping"),
            py::arg("threshold"), py::arg("max_damping"), py::arg("general_only"),
            py::arg("constraints"), py::arg("box"), py::arg("posture_gain"),
-           py::arg("posture_target"), py::arg("tolerances"), py::arg("pair_capacity") = 0)
+           py::arg("posture_target"), py::arg("tolerances"), py::arg("pair_capacity") = 0,
+           py::arg("event_capacity") = -1)
       .def_property_readonly("report", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.report().data(), {step.report().size()}, self);
@@ -565,6 +566,7 @@ PYBIND11_MODULE(_step, module) {
   fields["active_barrier_count"] = static_cast<int>(cjm::kActiveBarrierCount);
   fields["event_count"] = static_cast<int>(cjm::kEventCount);
   fields["saturation_joint_count"] = static_cast<int>(cjm::kSaturationJointCount);
+  fields["dropped_event_count"] = static_cast<int>(cjm::kDroppedEventCount);
   module.attr("REPORT_FIELDS") = fields;
 
   py::dict events;

@@ -16,7 +16,8 @@ Index terms_size_of(Index k) { return 6 * (7 - k) + 7 * k; }
 
 Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool general_only,
            std::vector<ConstraintPlan> constraints, JointBox box, double posture_gain,
-           Vector posture_target, Tolerances tolerances, Index pair_capacity)
+           Vector posture_target, Tolerances tolerances, Index pair_capacity,
+           Index event_capacity)
     : nq_(nq), nv_(nv), task_rows_(task_rows), policy_(policy), tol_(tolerances),
       general_only_(general_only),
       constraints_(std::move(constraints)), box_(std::move(box)), posture_gain_(posture_gain),
@@ -71,7 +72,11 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   active_.reserve(n_constraints);
   waiting_.reserve(n_constraints);
   report_ = Vector::Zero(kReportSize);
-  events_ = RowMatrix::Zero(kEventsPerConstraint * (n_constraints + 2) + pair_capacity, 4);
+  if (event_capacity == 0 || event_capacity < -1)
+    throw std::invalid_argument("event_capacity must be positive (or -1: the default)");
+  events_ = RowMatrix::Zero(
+      event_capacity > 0 ? event_capacity : kEventsPerConstraint * (n_constraints + 2) + pair_capacity,
+      4);
   pair_rows_ = RowMatrix::Zero(pair_capacity, nv);
   pair_lower_ = Vector::Zero(pair_capacity);
   pair_rhs_ = Vector::Zero(pair_capacity);
@@ -161,7 +166,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
   damping_ = 0.0;
   scale_ = 1.0;
   equality_residual_ = 0.0;
-  saturated_count_ = event_count_ = saturation_joint_count_ = 0;
+  saturated_count_ = event_count_ = saturation_joint_count_ = dropped_event_count_ = 0;
   rows_ready_ = false;
   active_.assign(equalities_.begin(), equalities_.end());
   active_pairs_.clear();
@@ -427,8 +432,13 @@ void Step::report(Status status) {
 }
 
 void Step::event(Event event, double a, double b, double c) {
-  if (event_count_ >= events_.rows()) return;
-  events_.row(event_count_++) << static_cast<double>(event), a, b, c;
+  if (event_count_ < events_.rows()) {
+    events_.row(event_count_++) << static_cast<double>(event), a, b, c;
+    return;
+  }
+  ++dropped_event_count_;
+  if (event == Event::no_convergence || event == Event::non_finite)
+    events_.row(event_count_ - 1) << static_cast<double>(event), a, b, c;
 }
 
 void Step::report_task_solution(const ConstMatrixRef& matrix, const ConstVectorRef& rhs,
@@ -462,6 +472,7 @@ void Step::write_report() {
   report_(kActiveBarrierCount) = static_cast<double>(barrier_count);
   report_(kEventCount) = static_cast<double>(event_count_);
   report_(kSaturationJointCount) = static_cast<double>(saturation_joint_count_);
+  report_(kDroppedEventCount) = static_cast<double>(dropped_event_count_);
 }
 
 }  // namespace cjm

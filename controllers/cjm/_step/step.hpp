@@ -81,17 +81,20 @@ struct JointBox {
 //! Positions in report(): SolveInfo's numbers.
 enum ReportField : int {
   kStatus = 0, kMethod, kSigmaMin, kDamping, kScale, kEqualityResidual,
-  kSaturatedCount, kActiveBarrierCount, kEventCount, kSaturationJointCount, kReportSize
+  kSaturatedCount, kActiveBarrierCount, kEventCount, kSaturationJointCount,
+  kDroppedEventCount, kReportSize
 };
 
 class Step {
  public:
   //! ``posture_target`` (nq) non-empty: every joint has one coordinate, so the posture
   //! velocity is ``posture_gain (posture_target - q)`` (pin.difference) and is computed
-  //! here; empty: Python passes it to solve().
+  //! here; empty: Python passes it to solve(). ``event_capacity``: the rows of events();
+  //! -1: kEventsPerConstraint per constraint (two more) and one per collision row.
   Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool general_only,
        std::vector<ConstraintPlan> constraints, JointBox box, double posture_gain,
-       Vector posture_target, Tolerances tolerances, Index pair_capacity = 0);
+       Vector posture_target, Tolerances tolerances, Index pair_capacity = 0,
+       Index event_capacity = -1);
 
   Index nq() const { return nq_; }
   Index nv() const { return nv_; }
@@ -183,6 +186,9 @@ class Step {
   void stop(const ConstVectorRef& q, VectorRef qd);
   void clip(VectorRef qd);
   void report(Status status);
+  //! ``event`` recorded in events(); past its last row it is counted as dropped (the
+  //! status never depends on the record), and a failure, whose words replace the
+  //! message, takes the last row.
   void event(Event event, double a = 0.0, double b = 0.0, double c = 0.0);
   void report_task_solution(const ConstMatrixRef& matrix, const ConstVectorRef& rhs,
                             const ConstVectorRef& x);
@@ -251,6 +257,7 @@ class Step {
   Method method_ = Method::none;
   double sigma_min_ = 0.0, damping_ = 0.0, scale_ = 1.0, equality_residual_ = 0.0;
   Index saturated_count_ = 0, event_count_ = 0, saturation_joint_count_ = 0;
+  Index dropped_event_count_ = 0;  // events past the last row of events_
   std::vector<Index> active_, waiting_, active_pairs_;
   Vector report_;
   RowMatrix events_;
