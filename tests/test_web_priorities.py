@@ -16,7 +16,7 @@ import pytest
 
 from teleop.inputs import UdpMaster
 from web.app import ControlThread, TeleopApp
-from web.app.control_thread import HOG_SHARE, HOG_WINDOW
+from web.app.control_thread import HOG_SHARE, HOG_WINDOW, QUIET_RETAKE
 from web.shared_priority import SHARED_PRIORITY, make_shared_realtime
 from web.ui import run_server
 
@@ -152,11 +152,107 @@ def test_the_servers_other_threads_run_fifo_below_the_control_thread(sda10f, tmp
             for thread in [control.thread, *threads]:
                 assert scheduling(thread.native_id) == (os.SCHED_OTHER, False, 0), thread.name
             assert worker == (os.SCHED_OTHER, False, 0)
-            assert control.shared_scheduling == ""
+            assert control.shared_scheduling == (
+                "ordinary scheduling (the control thread is not real-time)")
         assert started == (os.SCHED_OTHER, False, 0)  # what they start runs ordinary
         assert child == os.SCHED_OTHER
         assert scheduling(0) == (os.SCHED_OTHER, False, 0)  # the caller's own untouched
     finally:
+        ui.stop()
+        control.stop()
+        app.devices.close()
+        server.stop()
+
+
+def hog_cpu_then(step):
+    """``step`` after 6 ms on the CPU: at 250 Hz (4 ms) never time to sleep."""
+    def hogging_step():
+        until = time.thread_time() + 6e-3
+        while time.thread_time() < until:
+            pass
+        return step()
+    return hogging_step
+
+
+def test_the_other_threads_are_real_time_only_while_the_control_thread_is(sda10f, tmp_path,
+                                                                           monkeypatch):
+    """Given up, the control thread would run below FIFO 1 threads: they go ordinary with
+    it and come back with it, when its ticks ran QUIET_RETAKE s under the share (no rate
+    change)."""
+    master = UdpMaster(port=0)
+    server, app, control, ui = run_server(sda10f, port=0, rate=250.0, record_dir=tmp_path,
+                                          scene_dir=tmp_path / "scenes", inputs=[master])
+    try:
+        wait_for(lambda: app.ticker.ticks > 20, 20.0)
+        others = {thread.name: thread for thread in threading.enumerate()}
+        threads = [others["view"], others["inbox"], others[f"input {master.name}"],
+                   server._websock_server._server_thread]
+        worker = server._thread_executor.submit(lambda: threading.current_thread()).result(60)
+        threads.append(worker)
+        for thread in threads:
+            assert scheduling(thread.native_id) == (os.SCHED_FIFO, True, SHARED_PRIORITY), \
+                thread.name
+        step = app.step
+        monkeypatch.setattr(app, "step", hog_cpu_then(step))
+        wait_for(lambda: "given up" in control.scheduling, 10.0)
+        wait_for(lambda: control.shared_scheduling.startswith("ordinary"), 2 * HOG_WINDOW + 1)
+        assert scheduling(control.thread.native_id) == (os.SCHED_OTHER, False, 0)
+        for thread in threads:
+            assert scheduling(thread.native_id) == (os.SCHED_OTHER, False, 0), thread.name
+        monkeypatch.setattr(app, "step", step)
+        retaken = time.monotonic()
+        wait_for(lambda: control.scheduling == "SCHED_FIFO 40", QUIET_RETAKE + 10.0)
+        assert time.monotonic() - retaken >= QUIET_RETAKE - HOG_WINDOW
+        wait_for(lambda: control.shared_scheduling.startswith("SCHED_FIFO"), 2 * HOG_WINDOW + 1)
+        assert scheduling(control.thread.native_id) == (os.SCHED_FIFO, True, 40)
+        for thread in threads:
+            assert scheduling(thread.native_id) == (os.SCHED_FIFO, True, SHARED_PRIORITY), \
+                thread.name
+    finally:
+        ui.stop()
+        control.stop()
+        app.devices.close()
+        server.stop()
+
+
+class MasterWithLibraryThreads(UdpMaster):
+    """A UDP master whose start also starts two threads the server does not own: a
+    library's (ordinary) and a watchdog that made itself SCHED_FIFO 40 (as the ROS 2
+    plant's does)."""
+
+    def start(self) -> None:
+        super().start()
+        self.stop_threads = threading.Event()
+        ready = threading.Barrier(3)
+
+        def library() -> None:
+            ready.wait()
+            self.stop_threads.wait()
+
+        def watchdog() -> None:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(40))
+            ready.wait()
+            self.stop_threads.wait()
+
+        self.library = threading.Thread(target=library, name="library", daemon=True)
+        self.watchdog = threading.Thread(target=watchdog, name="watchdog", daemon=True)
+        self.library.start()
+        self.watchdog.start()
+        ready.wait()
+
+
+def test_only_the_servers_own_threads_are_raised_and_none_already_real_time_is_lowered(
+        sda10f, tmp_path):
+    master = MasterWithLibraryThreads(port=0)
+    server, app, control, ui = run_server(sda10f, port=0, rate=250.0, record_dir=tmp_path,
+                                          scene_dir=tmp_path / "scenes", inputs=[master])
+    try:
+        wait_for(lambda: app.ticker.ticks > 20, 20.0)
+        assert control.shared_scheduling.startswith(f"SCHED_FIFO {SHARED_PRIORITY}: ")
+        assert scheduling(master.library.native_id) == (os.SCHED_OTHER, False, 0)
+        assert scheduling(master.watchdog.native_id) == (os.SCHED_FIFO, False, 40)
+    finally:
+        master.stop_threads.set()
         ui.stop()
         control.stop()
         app.devices.close()

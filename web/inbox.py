@@ -80,6 +80,11 @@ class Inbox:
                                               "waiting): this one was dropped"))
         return not refused
 
+    @property
+    def thread(self) -> threading.Thread:
+        """The thread this runs on."""
+        return self._thread
+
     def start(self) -> None:
         self._thread.start()
 

@@ -15,6 +15,13 @@ bounded batches, the page's messages are paced, the view draws at 30 Hz, the inb
 coalesces and throttles), and all of them together hold at most the one interpreter.
 They are set ``SCHED_RESET_ON_FORK``: a process or thread they start (a compiler, a
 lookup) runs ordinary.
+
+They are real-time only while the control thread is (:class:`SharedPriority`, followed by
+the control thread itself): when it gives ``SCHED_FIFO`` up, runs at priority 0, or was
+refused, FIFO 1 threads would run ahead of it, so they go back to ordinary scheduling with
+it and are raised again when it retakes. Only the server's own threads are taken (the
+view, the inbox, the inputs' receivers, viser's event loop, the callback pool), and never
+one already real-time (a plant's watchdog at its own priority stays there).
 """
 
 from __future__ import annotations
@@ -26,6 +33,19 @@ from concurrent.futures import ThreadPoolExecutor
 
 #: ``SCHED_FIFO``'s lowest priority: the server's threads other than the control thread
 SHARED_PRIORITY = 1
+
+#: the real-time policies (what a thread that is "already real-time" runs)
+REALTIME_POLICIES = (os.SCHED_FIFO, os.SCHED_RR)
+
+
+def is_realtime(thread_id: int = 0) -> bool:
+    """Whether kernel thread ``thread_id`` (0: the calling thread) runs a real-time policy
+    (False when it has ended)."""
+    try:
+        policy = os.sched_getscheduler(thread_id) & ~os.SCHED_RESET_ON_FORK
+    except OSError:
+        return False
+    return policy in REALTIME_POLICIES
 
 
 def make_shared_realtime(thread_id: int = 0) -> str:
@@ -40,22 +60,72 @@ def make_shared_realtime(thread_id: int = 0) -> str:
     return ""
 
 
-def _worker_started() -> None:
-    """A pool's new worker (the calling thread) scheduled as the server's other threads."""
-    make_shared_realtime()
+def make_ordinary(thread_id: int = 0) -> None:
+    """The thread ``thread_id`` (0: the calling thread) back to ordinary scheduling (an
+    ended one is left alone)."""
+    try:
+        os.sched_setscheduler(thread_id, os.SCHED_OTHER, os.sched_param(0))
+    except OSError:
+        pass
 
 
-def share_priority(threads: Iterable[threading.Thread],
-                   pools: Iterable[ThreadPoolExecutor] = ()) -> str:
-    """``threads`` (running) and every worker ``pools`` start from now on scheduled by
-    :func:`make_shared_realtime`; in words, how (``SCHED_FIFO 1: 5 threads``, or why
-    not)."""
-    threads, pools = [thread for thread in threads if thread.is_alive()], list(pools)
-    refusals = {make_shared_realtime(thread.native_id or 0) for thread in threads} - {""}
-    for pool in pools:  # its workers are started as callbacks come: each sets itself
-        pool._initializer = _worker_started
-    if refusals:
-        return (f"ordinary scheduling (SCHED_FIFO {SHARED_PRIORITY} refused: "
-                f"{', '.join(sorted(refusals))})")
-    return (f"SCHED_FIFO {SHARED_PRIORITY}: {len(threads)} thread{'s' * (len(threads) != 1)}"
-            f"{' and the callback pool' if pools else ''}")
+class SharedPriority:
+    """The server's own ``threads`` and the workers of its ``pools``, real-time at
+    :data:`SHARED_PRIORITY` exactly while the control thread is (:meth:`follow`).
+
+    A thread already real-time when it is raised (another part's, at its own priority)
+    is never touched; only those raised here are lowered. :attr:`words` says how they run.
+    """
+
+    def __init__(self, threads: Iterable[threading.Thread],
+                 pools: Iterable[ThreadPoolExecutor] = ()) -> None:
+        self._threads = list(threads)
+        self._pools = list(pools)
+        #: the threads this made real-time (lowered again by :meth:`follow`)
+        self._raised: set[threading.Thread] = set()
+        self._lock = threading.Lock()
+        #: whether the threads are to run real-time now (the control thread's state)
+        self.realtime = False
+        #: how the threads run, in words ("": as they were, nothing followed yet)
+        self.words = ""
+        for pool in self._pools:  # its workers start as callbacks come: each sets itself
+            pool._initializer = self._worker_started
+
+    def _members(self) -> list[threading.Thread]:
+        workers = [worker for pool in self._pools for worker in list(pool._threads)]
+        return [thread for thread in [*self._threads, *workers] if thread.is_alive()]
+
+    def _worker_started(self) -> None:
+        """A pool's new worker (the calling thread) scheduled as the others are now."""
+        with self._lock:
+            if self.realtime and not is_realtime() and make_shared_realtime() == "":
+                self._raised.add(threading.current_thread())
+
+    def follow(self, realtime: bool) -> None:
+        """The threads real-time (``realtime``: the control thread is) or ordinary."""
+        with self._lock:
+            if realtime == self.realtime and self.words:
+                return
+            self.realtime = realtime
+            if not realtime:
+                for thread in self._raised:
+                    if thread.is_alive():
+                        make_ordinary(thread.native_id or 0)
+                self._raised.clear()
+                self.words = "ordinary scheduling (the control thread is not real-time)"
+                return
+            refusals: set[str] = set()
+            for thread in self._members():
+                if thread in self._raised or is_realtime(thread.native_id or 0):
+                    continue
+                refusal = make_shared_realtime(thread.native_id or 0)
+                if refusal:
+                    refusals.add(refusal)
+                else:
+                    self._raised.add(thread)
+            count = len(self._raised)
+            self.words = (
+                f"ordinary scheduling (SCHED_FIFO {SHARED_PRIORITY} refused: "
+                f"{', '.join(sorted(refusals))})" if refusals else
+                f"SCHED_FIFO {SHARED_PRIORITY}: {count} thread{'s' * (count != 1)}"
+                f"{' and the callback pool' if self._pools else ''}")

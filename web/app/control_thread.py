@@ -15,6 +15,7 @@ import numpy as np
 from teleop.plants.ros2.realtime import (check_priority, hold_realtime, release_realtime,
                                         scheduling_words)
 
+from ..shared_priority import SharedPriority, is_realtime
 from .core import TeleopApp
 from .status import behind_words
 
@@ -29,6 +30,8 @@ HOG_WINDOW = 0.25
 #: ... and above this share of one CPU it goes back to ordinary scheduling: it would hold
 #: its core against every ordinary thread (time waiting for the GIL or the lock is no CPU)
 HOG_SHARE = 0.9
+#: ... and retakes it after this long (s) of windows under that share
+QUIET_RETAKE = 2.0
 
 
 def percentiles(columns: np.ndarray, q: float) -> np.ndarray:
@@ -82,7 +85,9 @@ class ControlThread:
     behind every other process, most of a second at a time (docs/inputs.md, "Floods").
     A thread that never sleeps would hold its core against every ordinary one: when it
     ran more than :data:`HOG_SHARE` of a :data:`HOG_WINDOW` on a CPU it goes back to
-    ordinary scheduling, until the rate changes. Over ROS 2 the plant makes the thread
+    ordinary scheduling, until the rate changes or its ticks ran :data:`QUIET_RETAKE` s
+    under that share. The server's other threads (:attr:`shared`) are real-time exactly
+    while this thread is: it makes them follow at every window. Over ROS 2 the plant makes the thread
     real-time as it actuates (:class:`teleop.plants.ros2.ros2_plant.Ros2Plant`, at its
     settings' priority) and this thread takes no hold of its own. Without the privilege
     it stays ordinary; :attr:`scheduling` says how it runs and why.
@@ -93,9 +98,8 @@ class ControlThread:
         self.realtime_priority = check_priority(realtime_priority)
         #: how the thread is scheduled, in words (``SCHED_FIFO 40``; why not, when not)
         self.scheduling = "not started"
-        #: how the server's other threads are scheduled, in words ("": as they were;
-        #: :mod:`web.shared_priority`)
-        self.shared_scheduling = ""
+        #: the server's other threads, real-time while this one is (None: none given)
+        self.shared: SharedPriority | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="control", daemon=True)
         self.deadline_misses = 0
@@ -130,6 +134,17 @@ class ControlThread:
             sys.setswitchinterval(self._switch_interval)
             self._switch_interval = None
             gc.unfreeze()
+
+    @property
+    def shared_scheduling(self) -> str:
+        """How the server's other threads are scheduled, in words ("": as they were;
+        :mod:`web.shared_priority`)."""
+        return "" if self.shared is None else self.shared.words
+
+    def _follow(self) -> None:
+        """The server's other threads real-time exactly while this (calling) one is."""
+        if self.shared is not None:
+            self.shared.follow(is_realtime())
 
     @property
     def thread(self) -> threading.Thread:
@@ -190,7 +205,9 @@ class ControlThread:
     def _loop(self) -> int | None:
         """Ticks until stopped; the thread's real-time hold still in force (its id), if any."""
         held = self._hold()
+        self._follow()
         gave_up = False
+        quiet = 0.0  # how long the ticks have run under the share since it was given up
         clock = time.perf_counter
         next_tick = clock()
         window_start, window_ticks = clock(), 0
@@ -202,6 +219,7 @@ class ControlThread:
                 window_start, window_ticks = clock(), 0
                 if gave_up:  # real-time again
                     held, gave_up = self._hold(), False
+                    self._follow()
                 hog_start, hog_cpu = clock(), time.thread_time()
             start = clock()
             solve_us = advance_us = 0.0
@@ -231,11 +249,17 @@ class ControlThread:
                 share = (time.thread_time() - hog_cpu) / (end - hog_start)
                 if held is not None and share > HOG_SHARE:
                     release_realtime(held)
-                    held, gave_up = None, True
+                    held, gave_up, quiet = None, True, 0.0
                     self.scheduling = (
                         f"{scheduling_words()} (SCHED_FIFO {self.realtime_priority} given "
-                        f"up: the ticks took {100 * share:.0f} % of a CPU; again at the next "
+                        f"up: the ticks took {100 * share:.0f} % of a CPU; again after "
+                        f"{QUIET_RETAKE:g} s under {100 * HOG_SHARE:.0f} % or at the next "
                         "rate)")
+                elif gave_up:
+                    quiet = quiet + (end - hog_start) if share <= HOG_SHARE else 0.0
+                    if quiet >= QUIET_RETAKE:
+                        held, gave_up = self._hold(), False
+                self._follow()
                 hog_start, hog_cpu = end, time.thread_time()
             next_tick += period
             delay = next_tick - clock()

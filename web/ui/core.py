@@ -261,6 +261,11 @@ class TeleopUI:
 
     # -- the view thread -------------------------------------------------------------------
 
+    @property
+    def thread(self) -> threading.Thread:
+        """The thread this runs on."""
+        return self._thread
+
     def start(self) -> None:
         self.inbox.start()
         self._thread.start()

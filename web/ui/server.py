@@ -16,7 +16,7 @@ from teleop.robots import Robot
 
 from ..access import make_token, require_access
 from ..pacing import pace_messages
-from ..shared_priority import share_priority
+from ..shared_priority import SharedPriority, is_realtime
 from ..app import ControlThread, TeleopApp
 from .core import TeleopUI
 
@@ -51,8 +51,9 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     released after ``input_timeout`` s of silence (default 0.1 s); the caller closes them
     (:meth:`web.app.devices.InputDevices.close`); ``realtime_priority``: the control
     thread's ``SCHED_FIFO`` priority (0: ordinary scheduling; over ROS 2 the plant's
-    settings choose, :class:`web.app.ControlThread`); unless 0, the threads started here
-    besides run ``SCHED_FIFO`` below it (:mod:`web.shared_priority`)."""
+    settings choose, :class:`web.app.ControlThread`); while the control thread runs
+    real-time, the server's own threads besides run ``SCHED_FIFO`` below it
+    (:mod:`web.shared_priority`)."""
     before = set(threading.enumerate())
     app = TeleopApp(robot, controller=controller, ghost=ghost, rate=rate, record_dir=record_dir,
                     scene_dir=scene_dir, plant=plant, plant_settings=plant_settings,
@@ -78,10 +79,12 @@ def run_server(robot: Robot, host: str = "127.0.0.1", port: int = 8080,
     ui.access, ui.pacing = access, pacing
     control.start()
     ui.start()
-    if realtime_priority > 0:
-        control.shared_scheduling = share_priority(
-            [thread for thread in threading.enumerate()
-             if thread not in before and thread is not control.thread],
-            [server._thread_executor])
+    receivers = ({f"input {source.name}" for source in inputs}
+                 | {source.name for source in inputs})
+    owned = [ui.thread, ui.inbox.thread, server._websock_server._server_thread,
+             *(thread for thread in threading.enumerate()
+               if thread not in before and thread.name in receivers)]
+    control.shared = SharedPriority(owned, [server._thread_executor])
+    control.shared.follow(is_realtime(control.thread.native_id or 0))
     return server, app, control, ui
 
