@@ -74,6 +74,8 @@ def test_events_past_a_full_record_are_counted_and_said(crowded):
         assert event is reference
         np.testing.assert_allclose(figures, reference_figures, rtol=1e-6, atol=1e-9)
     assert report.dropped_events == len(expected.events) - SMALL_CAPACITY
+    bound = small.pipeline.step.report  # the C++ report, read by name
+    assert (bound.event_count, bound.dropped_event_count) == (SMALL_CAPACITY, report.dropped_events)
     assert report.status is expected.status
     message = report_message(report, python.joint_names)
     assert message.endswith(dropped_events_note(report.dropped_events))

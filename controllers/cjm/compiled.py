@@ -31,7 +31,7 @@ from constraints.collision import CollisionRows
 
 from ..base import StepStatus, checked_inputs
 from ..joint_acceleration import DAMPER_BRAKING_SHARE, braked_pairs
-from ._step import EVENTS, REPORT_FIELDS as CPP_REPORT_FIELDS, JointBox, Pipeline, Step, Tolerances
+from ._step import EVENTS, JointBox, Pipeline, Report, Step, Tolerances
 from ._step import ConstraintPlan as CompiledPlan
 from .compiled_forms import UNIT_TOLERANCE, compiled_form_of
 from .analytical import TermsWriter, terms_size
@@ -44,13 +44,8 @@ from .tolerances import PAPER_FORM_MIN_A
 
 #: StepStatus by the C++ code (the enum's order, best to worst)
 STATUSES = tuple(StepStatus)
-#: the C++ report's entries, in the order CompiledStep unpacks them
-REPORT_FIELDS = ("status", "method", "sigma_min", "damping", "scale", "equality_residual",
-                 "saturated_count", "active_barrier_count", "event_count",
-                 "saturation_joint_count", "dropped_event_count")
-if (tuple(sorted(CPP_REPORT_FIELDS, key=CPP_REPORT_FIELDS.get)) != REPORT_FIELDS
-        or any(Event[name.upper()] != code for name, code in EVENTS.items())):
-    raise ImportError("controllers.cjm._step reports other fields: rebuild it (pip install -e .)")
+if any(Event[name.upper()] != code for name, code in EVENTS.items()):
+    raise ImportError("controllers.cjm._step reports other events: rebuild it (pip install -e .)")
 
 #: largest difference (m, or 1 for rotations and Jacobians) the copy of the model may
 #: show against Pinocchio's Python kinematics when it is built
@@ -156,7 +151,6 @@ class CompiledStep:
             step=step, ee_count=len(setup.ee_frame_ids), task_entries=task_entries.tolist(),
             task_scale=setup.task_scale)
         step = pipeline.step
-        self._report = step.report
         self._events = step.events
         self._saturated = step.saturated_joints
         self._active_barriers = step.active_barriers
@@ -253,9 +247,9 @@ class CompiledStep:
         qd, paper_form = self._run(q, twist)
         if pairs is None:
             pairs = collisions.rows()
-        return qd, self._report_with_pairs(self._report.tolist(), paper_form, pairs)
+        return qd, self._report_with_pairs(self._step.report, paper_form, pairs)
 
-    def _report_with_pairs(self, report: list[float], paper_form: bool,
+    def _report_with_pairs(self, report: Report, paper_form: bool,
                            pairs: CollisionRows) -> StepReport:
         """:meth:`_step_report` with the step's collision rows and the pairs it held."""
         count = self._step.active_pair_count
@@ -312,25 +306,26 @@ class CompiledStep:
             self.pipeline.posture[:] = setup.posture_velocity(self.pipeline.q)
         return paper_form
 
-    def _step_report(self, report: list[float], paper_form: bool) -> StepReport:
-        """The C++ report (its entries, :data:`REPORT_FIELDS`) as a :class:`StepReport`
-        with its lists and events (the paper's form undefined: its event first, as the
-        Python step records it; ``dropped_events``: the events past the C++ record)."""
-        (status, method, sigma_min, damping, scale, equality_residual, saturated, barriers,
-         events, saturation_joints, dropped) = report
+    def _step_report(self, report: Report, paper_form: bool) -> StepReport:
+        """The C++ report as a :class:`StepReport` with its lists and events (the paper's
+        form undefined: its event first, as the Python step records it;
+        ``dropped_events``: the events past the C++ record)."""
         recorded = [] if paper_form else [(Event.PAPER_FORM_UNDEFINED, 0.0, 0.0, 0.0)]
-        if events:
+        if report.event_count:
             recorded += [(EVENT_BY_CODE[int(code)], a, b, c)
-                         for code, a, b, c in self._events[:int(events)].tolist()]
-        return StepReport(
-            STATUSES[int(status)], METHODS[int(method)], sigma_min, damping, scale,
-            equality_residual,
-            tuple(self._saturated[:int(saturated)].tolist()) if saturated else (),
-            tuple(self._active_barriers[:int(barriers)].tolist()) if barriers else (),
+                         for code, a, b, c in self._events[:report.event_count].tolist()]
+        saturated, barriers = report.saturated_count, report.active_barrier_count
+        saturation_joints = report.saturation_joint_count
+        step_report = StepReport(
+            STATUSES[report.status], METHODS[report.method], report.sigma_min, report.damping,
+            report.scale, report.equality_residual,
+            tuple(self._saturated[:saturated].tolist()) if saturated else (),
+            tuple(self._active_barriers[:barriers].tolist()) if barriers else (),
             tuple(recorded),
-            (tuple(self._saturation_joints[:int(saturation_joints)].tolist())
-             if saturation_joints else ()),
-            dropped_events=int(dropped))
+            tuple(self._saturation_joints[:saturation_joints].tolist()) if saturation_joints else ())
+        if report.dropped_event_count:  # rare: no keyword argument on the common path
+            step_report.dropped_events = report.dropped_event_count
+        return step_report
 
     def time_steps(self, configurations: np.ndarray, twists: np.ndarray) -> np.ndarray | None:
         """The C++ floor (docs/design.md section 16): per-step nanoseconds of this step in
@@ -380,10 +375,12 @@ class CompiledStep:
 
     def last_report(self, paper_form: bool) -> StepReport:
         """The report of the step the pipeline has just run, as :meth:`solve` gives it."""
-        report = self._report.tolist()
+        report = self._step.report
         if self._collisions is not None:
             return self._report_with_pairs(report, paper_form, self.collision_rows.rows())
         # no list, no event (so none dropped: the record holds at least one)
-        if paper_form and not (report[6] or report[7] or report[8]):
-            return StepReport(STATUSES[int(report[0])], METHODS[int(report[1])], *report[2:6])
+        if paper_form and not (report.saturated_count or report.active_barrier_count
+                               or report.event_count):
+            return StepReport(STATUSES[report.status], METHODS[report.method], report.sigma_min,
+                              report.damping, report.scale, report.equality_residual)
         return self._step_report(report, paper_form)

@@ -49,7 +49,7 @@ bool Step::square_pre_chain(const Inputs& in, Index index, VectorRef qd) {
     const double bound = 1.0 / lu_cjm_.inverse().norm();  // <= sigma_min
     if (bound >= policy_.threshold && bound >= tol_.fast_path_min_sigma) {
       free = lu_cjm_.solve(cjm_rhs_);
-      sigma_min_ = bound;
+      report_.sigma_min = bound;
       solved = true;
     }
   }
@@ -71,8 +71,8 @@ void Step::record_pre_chain_residual(const Inputs& in, Index index, Index k) {
       in.terms.data() + terms_offset_[index] + 6 * (7 - k), k, 7);
   auto residual = scratch_rows_.head(k);
   residual.noalias() = residual_rows * twist_a_with_one_;
-  equality_residual_ = residual.cwiseAbs().maxCoeff();
-  method_ = Method::analytical;
+  report_.equality_residual = residual.cwiseAbs().maxCoeff();
+  report_.method = Method::analytical;
 }
 
 void Step::closest_to_posture(const Inputs& in, Index n_columns, bool use_posture) {

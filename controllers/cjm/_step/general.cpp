@@ -67,8 +67,8 @@ void Step::general(const Inputs& in, VectorRef qd) {
     report(Status::least_squares);
     event(Event::no_free_joint);
   }
-  equality_residual_ = residual_of(rows, qd, rhs, scratch_rows_.head(m));
-  method_ = Method::general;
+  report_.equality_residual = residual_of(rows, qd, rhs, scratch_rows_.head(m));
+  report_.method = Method::general;
 }
 
 void Step::hold_pairs_below() {

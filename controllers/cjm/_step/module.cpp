@@ -14,6 +14,7 @@
 #include "collision_bindings.hpp"
 #include "damped.hpp"
 #include "pipeline.hpp"
+#include "report_bindings.hpp"
 #include "tick.hpp"
 
 namespace py = pybind11;
@@ -295,10 +296,9 @@ PYBIND11_MODULE(_step, module) {
            py::arg("constraints"), py::arg("box"), py::arg("posture_gain"),
            py::arg("posture_target"), py::arg("tolerances"), py::arg("pair_capacity") = 0,
            py::arg("event_capacity") = -1)
-      .def_property_readonly("report", [](py::object self) {
-        auto& step = self.cast<cjm::Step&>();
-        return view(step.report().data(), {step.report().size()}, self);
-      })
+      .def_property_readonly(
+          "report", [](const cjm::Step& step) { return cjm_report::report_of(step.report()); },
+          "The last step's Report (its fields: report.hpp's CJM_STEP_REPORT).")
       .def_property_readonly("events", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();
         return view(step.events().data(), {step.events().rows(), step.events().cols()}, self);
@@ -555,19 +555,8 @@ PYBIND11_MODULE(_step, module) {
   module.attr("TICK_REFUSED") = static_cast<int>(kTickRefused);
   module.attr("TICK_NOT_FINITE") = static_cast<int>(kTickNotFinite);
 
-  py::dict fields;
-  fields["status"] = static_cast<int>(cjm::kStatus);
-  fields["method"] = static_cast<int>(cjm::kMethod);
-  fields["sigma_min"] = static_cast<int>(cjm::kSigmaMin);
-  fields["damping"] = static_cast<int>(cjm::kDamping);
-  fields["scale"] = static_cast<int>(cjm::kScale);
-  fields["equality_residual"] = static_cast<int>(cjm::kEqualityResidual);
-  fields["saturated_count"] = static_cast<int>(cjm::kSaturatedCount);
-  fields["active_barrier_count"] = static_cast<int>(cjm::kActiveBarrierCount);
-  fields["event_count"] = static_cast<int>(cjm::kEventCount);
-  fields["saturation_joint_count"] = static_cast<int>(cjm::kSaturationJointCount);
-  fields["dropped_event_count"] = static_cast<int>(cjm::kDroppedEventCount);
-  module.attr("REPORT_FIELDS") = fields;
+  module.attr("Report") = py::reinterpret_borrow<py::object>(
+      reinterpret_cast<PyObject*>(cjm_report::report_type()));
 
   py::dict events;
   events["pre_chain_singular"] = static_cast<int>(cjm::Event::pre_chain_singular);

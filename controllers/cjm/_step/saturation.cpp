@@ -28,31 +28,31 @@ void Step::saturate(const Inputs& in, VectorRef qd) {
     if (!activate_worst(sns_qd_)) break;
   }
   qd = sns_qd_;
-  method_ = Method::saturated;
-  scale_ = sns_task_scale_;
+  report_.method = Method::saturated;
+  report_.scale = sns_task_scale_;
   if (!std::isnan(sns_sigma_min_)) {  // the task's DLS that gave this command
-    sigma_min_ = sns_sigma_min_;
-    damping_ = sns_damping_;
+    report_.sigma_min = sns_sigma_min_;
+    report_.damping = sns_damping_;
   }
-  saturated_count_ = 0;
+  report_.saturated_count = 0;
   for (Index j = 0; j < nv_; ++j)
-    if (!free_(j)) saturated_(saturated_count_++) = j;
+    if (!free_(j)) saturated_(report_.saturated_count++) = j;
   const Index m = row_count_;
   if (m > 0) {
     auto residual = rows_scratch_.head(m);
     residual.noalias() = rows_.topRows(m) * qd;
     residual -= rhs_.head(m);
-    equality_residual_ = residual.cwiseAbs().maxCoeff();
+    report_.equality_residual = residual.cwiseAbs().maxCoeff();
   } else {
-    equality_residual_ = 0.0;
+    report_.equality_residual = 0.0;
   }
   if (sns_rows_scale_ < 1.0) {
     report(Status::constraint_degraded);
     event(Event::rows_scaled, sns_rows_scale_);
   } else if (sns_missed_) {
     report(Status::least_squares);
-    saturation_joint_count_ = saturated_count_;
-    saturation_joints_.head(saturated_count_) = saturated_.head(saturated_count_);
+    report_.saturation_joint_count = report_.saturated_count;
+    saturation_joints_.head(report_.saturated_count) = saturated_.head(report_.saturated_count);
     event(Event::task_missed, sns_sigma_min_, sns_damping_);
   } else if (sns_task_scale_ < 1.0) {
     report(Status::scaled);

@@ -71,7 +71,6 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   damper_gains_ = Vector::Zero(n_constraints);
   active_.reserve(n_constraints);
   waiting_.reserve(n_constraints);
-  report_ = Vector::Zero(kReportSize);
   if (event_capacity == 0 || event_capacity < -1)
     throw std::invalid_argument("event_capacity must be positive (or -1: the default)");
   events_ = RowMatrix::Zero(
@@ -160,13 +159,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
   const Inputs in{q, twist, ee_jacobian, frame_jacobians, terms, posture_used, use_posture,
                   analytical_allowed};
   check_sizes(in, qd);
-  status_ = Status::ok;
-  method_ = Method::none;
-  sigma_min_ = std::numeric_limits<double>::quiet_NaN();
-  damping_ = 0.0;
-  scale_ = 1.0;
-  equality_residual_ = 0.0;
-  saturated_count_ = event_count_ = saturation_joint_count_ = dropped_event_count_ = 0;
+  report_ = Report();
   rows_ready_ = false;
   active_.assign(equalities_.begin(), equalities_.end());
   active_pairs_.clear();
@@ -175,7 +168,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
     solve_rows(in, qd);
     if (!barriers_.empty() || pair_count_ > 0) activate(in, qd);
     if (!qd.allFinite()) {
-      status_ = Status::failed;
+      report_.status = Status::failed;
       event(Event::non_finite);
       stop(q, qd);
     } else if (!box_contains(q, qd)) {
@@ -183,21 +176,21 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
       saturate(in, qd);
       clip(qd);
       if (!qd.allFinite()) {  // clipping passes a NaN through
-        status_ = Status::failed;
+        report_.status = Status::failed;
         event(Event::non_finite);
         stop(q, qd);
       }
     }
   } catch (const NoConvergence&) {
-    status_ = Status::failed;
+    report_.status = Status::failed;
     event(Event::no_convergence);
     stop(q, qd);
   }
   previous_change_ = qd - previous_;
   previous_ = qd;
-  if (status_ != Status::failed && equality_residual_ > tol_.equality) {
+  if (report_.status != Status::failed && report_.equality_residual > tol_.equality) {
     report(Status::constraint_degraded);
-    event(Event::residual, equality_residual_);
+    event(Event::residual, report_.equality_residual);
   }
   write_report();
 }
@@ -413,7 +406,7 @@ void Step::clip(VectorRef qd) {
     report(Status::constraint_degraded);
     event(Event::clipped, change);
     saturated_.head(clipped) = clip_joints_.head(clipped);
-    saturated_count_ = clipped;
+    report_.saturated_count = clipped;
     Index m = 0;
     for (Index i : equalities_) {
       const Index k = constraints_[i].rows;
@@ -421,30 +414,30 @@ void Step::clip(VectorRef qd) {
       scratch_rows_.segment(m, k) -= all_rhs_.segment(row_offset_[i], k);
       m += k;
     }
-    if (m > 0) equality_residual_ = scratch_rows_.head(m).cwiseAbs().maxCoeff();
+    if (m > 0) report_.equality_residual = scratch_rows_.head(m).cwiseAbs().maxCoeff();
   }
 }
 
 // -- the report -------------------------------------------------------------------------
 
 void Step::report(Status status) {
-  if (static_cast<int>(status) > static_cast<int>(status_)) status_ = status;
+  if (static_cast<int>(status) > static_cast<int>(report_.status)) report_.status = status;
 }
 
 void Step::event(Event event, double a, double b, double c) {
-  if (event_count_ < events_.rows()) {
-    events_.row(event_count_++) << static_cast<double>(event), a, b, c;
+  if (report_.event_count < events_.rows()) {
+    events_.row(report_.event_count++) << static_cast<double>(event), a, b, c;
     return;
   }
-  ++dropped_event_count_;
+  ++report_.dropped_event_count;
   if (event == Event::no_convergence || event == Event::non_finite)
-    events_.row(event_count_ - 1) << static_cast<double>(event), a, b, c;
+    events_.row(report_.event_count - 1) << static_cast<double>(event), a, b, c;
 }
 
 void Step::report_task_solution(const ConstMatrixRef& matrix, const ConstVectorRef& rhs,
                                 const ConstVectorRef& x) {
-  sigma_min_ = dls_.sigma_min();
-  damping_ = dls_.damping();
+  report_.sigma_min = dls_.sigma_min();
+  report_.damping = dls_.damping();
   if (dls_.exact()) return;
   auto achieved = scratch_rows_.head(matrix.rows());
   achieved.noalias() = matrix * x;
@@ -453,26 +446,16 @@ void Step::report_task_solution(const ConstMatrixRef& matrix, const ConstVectorR
   const double scale = rhs.size() ? rhs.cwiseAbs().maxCoeff() : 0.0;
   if (residual > tol_.twist * (1.0 + scale)) {
     report(Status::least_squares);
-    event(Event::task_residual, damping_, residual);
+    event(Event::task_residual, report_.damping, residual);
   }
 }
 
 void Step::write_report() {
-  report_(kStatus) = static_cast<double>(status_);
-  report_(kMethod) = static_cast<double>(method_);
-  report_(kSigmaMin) = sigma_min_;
-  report_(kDamping) = damping_;
-  report_(kScale) = scale_;
-  report_(kEqualityResidual) = equality_residual_;
-  report_(kSaturatedCount) = static_cast<double>(saturated_count_);
   for (size_t i = 0; i < active_pairs_.size(); ++i) active_pair_out_(i) = active_pairs_[i];
   Index barrier_count = 0;
   for (Index i : active_)
     if (!constraints_[i].equality) active_barriers_(barrier_count++) = i;
-  report_(kActiveBarrierCount) = static_cast<double>(barrier_count);
-  report_(kEventCount) = static_cast<double>(event_count_);
-  report_(kSaturationJointCount) = static_cast<double>(saturation_joint_count_);
-  report_(kDroppedEventCount) = static_cast<double>(dropped_event_count_);
+  report_.active_barrier_count = barrier_count;
 }
 
 }  // namespace cjm

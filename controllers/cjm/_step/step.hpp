@@ -15,30 +15,9 @@
 #include "damped.hpp"
 #include "dense.hpp"
 #include "nullspace.hpp"
+#include "report.hpp"
 
 namespace cjm {
-
-//! controllers.base.StepStatus, best to worst.
-enum class Status : int { ok = 0, scaled, least_squares, constraint_degraded, failed };
-
-//! SolveInfo.method.
-enum class Method : int { none = 0, analytical, general, saturated };
-
-//! What happened in a step, in order; Python words them into SolveInfo.message.
-enum class Event : int {
-  pre_chain_singular = 1,  // the note replaces the message, as in the Python
-  task_residual,           // a: damping, b: twist residual
-  conflict,                // a: rank, b: rows, c: least-squares residual
-  no_free_joint,
-  rows_scaled,             // a: the rows' scale
-  task_missed,             // a: sigma_min, b: damping; the joints: saturation_joints()
-  task_scaled,             // a: limiting joint, b: task scale
-  clipped,                 // a: largest change; the joints: saturated_joints()
-  residual,                // a: equality residual
-  no_convergence,          // failed
-  non_finite,              // failed
-  pair_conflict = 14,      // a: collision row, b: shortfall below the rows before it
-};
 
 //! Every tolerance the step decides with: controllers.cjm.tolerances.StepTolerances,
 //! given by Python when the step is built (no copy of the numbers here).
@@ -78,13 +57,6 @@ struct JointBox {
   Vector jerk_step;
 };
 
-//! Positions in report(): SolveInfo's numbers.
-enum ReportField : int {
-  kStatus = 0, kMethod, kSigmaMin, kDamping, kScale, kEqualityResidual,
-  kSaturatedCount, kActiveBarrierCount, kEventCount, kSaturationJointCount,
-  kDroppedEventCount, kReportSize
-};
-
 class Step {
  public:
   //! ``posture_target`` (nq) non-empty: every joint has one coordinate, so the posture
@@ -109,7 +81,8 @@ class Step {
              const ConstVectorRef& posture, bool use_posture, bool analytical_allowed,
              VectorRef qd);
 
-  Vector& report() { return report_; }
+  //! The last step's report (its lists: the first counts of the arrays below).
+  const Report& report() const { return report_; }
   RowMatrix& events() { return events_; }
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& saturated_joints() { return saturated_; }
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& active_barriers() { return active_barriers_; }
@@ -252,14 +225,9 @@ class Step {
   double posture_gain_;
   Vector posture_target_, posture_velocity_;
 
-  // the step's state, mirroring SolveInfo
-  Status status_ = Status::ok;
-  Method method_ = Method::none;
-  double sigma_min_ = 0.0, damping_ = 0.0, scale_ = 1.0, equality_residual_ = 0.0;
-  Index saturated_count_ = 0, event_count_ = 0, saturation_joint_count_ = 0;
-  Index dropped_event_count_ = 0;  // events past the last row of events_
+  // the step's state: its report and the lists the report counts
+  Report report_;
   std::vector<Index> active_, waiting_, active_pairs_;
-  Vector report_;
   RowMatrix events_;
   Eigen::Matrix<Index, Eigen::Dynamic, 1> saturated_, active_barriers_, saturation_joints_, clip_joints_;
 

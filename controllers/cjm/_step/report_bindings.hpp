@@ -1,0 +1,50 @@
+// The Python type of the compiled step's report (report.hpp), for module.cpp: a named
+// tuple whose fields are CJM_STEP_REPORT's, and a step's report as one.
+#pragma once
+
+#include <pybind11/pybind11.h>
+
+#include <iterator>
+
+#include "report.hpp"
+
+namespace cjm_report {
+
+//! Python's type of a step's report: a named tuple (a C struct sequence) whose fields are
+//! CJM_STEP_REPORT's, made once. Reading a field by name costs what a tuple's item does.
+inline PyTypeObject* report_type() {
+  static PyStructSequence_Field fields[] = {
+#define CJM_REPORT_FIELD(type, name, initial, doc) {#name, doc},
+      CJM_STEP_REPORT(CJM_REPORT_FIELD)
+#undef CJM_REPORT_FIELD
+      {nullptr, nullptr}};
+  static PyStructSequence_Desc description{
+      "controllers.cjm._step.Report", "What one compiled step reports (report.hpp).", fields,
+      static_cast<int>(std::size(fields) - 1)};
+  static PyTypeObject* const type = PyStructSequence_NewType(&description);
+  if (type == nullptr) throw pybind11::error_already_set();
+  return type;
+}
+
+inline PyObject* to_python(double value) { return PyFloat_FromDouble(value); }
+inline PyObject* to_python(cjm::Index value) { return PyLong_FromSsize_t(value); }
+inline PyObject* to_python(cjm::Status value) { return PyLong_FromLong(static_cast<long>(value)); }
+inline PyObject* to_python(cjm::Method value) { return PyLong_FromLong(static_cast<long>(value)); }
+
+//! ``report`` as a new Report (report_type()).
+inline pybind11::object report_of(const cjm::Report& report) {
+  auto result = pybind11::reinterpret_steal<pybind11::object>(PyStructSequence_New(report_type()));
+  if (!result) throw pybind11::error_already_set();
+  Py_ssize_t index = 0;
+#define CJM_REPORT_ITEM(type, name, initial, doc)                 \
+  if (PyObject* item = to_python(report.name)) {                  \
+    PyStructSequence_SetItem(result.ptr(), index++, item);        \
+  } else {                                                        \
+    throw pybind11::error_already_set();                          \
+  }
+  CJM_STEP_REPORT(CJM_REPORT_ITEM)
+#undef CJM_REPORT_ITEM
+  return result;
+}
+
+}  // namespace cjm_report
