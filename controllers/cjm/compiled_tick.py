@@ -19,11 +19,20 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 import pinocchio as pin
 
+from . import _step
 from ._step import TICK_REFUSED, Tick
-from .pose_rows import pose_rows, row_pose
+from .pose_rows import (PERIOD_PLACEMENT, PERIOD_PREVIOUS, PERIOD_TARGET, PERIOD_TWIST, POSE_ROW,
+                        POSE_TRANSLATION, pose_rows, row_pose)
 
 if TYPE_CHECKING:
     from .compiled import CompiledStep
+
+# the layouts of the C++ side (_step/pose_row.hpp) are the ones pose_rows.py describes
+if ((_step.POSE_ROW, _step.POSE_TRANSLATION, _step.PERIOD_TARGET, _step.PERIOD_PREVIOUS,
+     _step.PERIOD_PLACEMENT, _step.PERIOD_TWIST, _step.PERIOD_ROW)
+        != (POSE_ROW, POSE_TRANSLATION, PERIOD_TARGET.start, PERIOD_PREVIOUS.start,
+            PERIOD_PLACEMENT.start, PERIOD_TWIST.start, PERIOD_TWIST.stop)):
+    raise ImportError("controllers.cjm._step holds poses in other rows: rebuild it (pip install -e .)")
 
 #: What :meth:`CompiledTick.run` gives back: the outcome (``_step.TICK_STEPPED``,
 #: ``TICK_REFUSED``: the twist was not finite and no step ran, ``TICK_NOT_FINITE``: the

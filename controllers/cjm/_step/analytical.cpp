@@ -1,6 +1,7 @@
 // The analytical CJM (controllers/cjm/analytical.py, docs/design.md sections 4.2-4.4):
 // one equality row set, at least 6 joints before its link, one 6-row task.
 #include "step.hpp"
+#include "terms_layout.hpp"
 
 namespace cjm {
 
@@ -29,7 +30,7 @@ bool Step::square_pre_chain(const Inputs& in, Index index, VectorRef qd) {
     return false;
   }
   // qd = joint_map [1; v_m]: J_a^-1 [V_a0, S] on the pre rows, the identity on the post rows
-  const Eigen::Map<const Matrix> pre_rhs(in.terms.data() + terms_offset_[index], 6, 7 - k);
+  const auto pre_rhs = pre_rhs_of(in.terms.data() + terms_offset_[index], k);
   auto joint_map = joint_map_.topLeftCorner(nv_, n_columns + 1);
   joint_map.setZero();
   const Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, 7> pre_solution = lu_pre_.solve(pre_rhs);
@@ -67,8 +68,7 @@ bool Step::square_pre_chain(const Inputs& in, Index index, VectorRef qd) {
 
 void Step::record_pre_chain_residual(const Inputs& in, Index index, Index k) {
   twist_a_with_one_(0) = 1.0;
-  const Eigen::Map<const RowMatrix> residual_rows(
-      in.terms.data() + terms_offset_[index] + 6 * (7 - k), k, 7);
+  const auto residual_rows = residual_rows_of(in.terms.data() + terms_offset_[index], k);
   auto residual = scratch_rows_.head(k);
   residual.noalias() = residual_rows * twist_a_with_one_;
   report_.equality_residual = residual.cwiseAbs().maxCoeff();
@@ -125,7 +125,7 @@ bool Step::redundant_pre_chain(const Inputs& in, Index index, VectorRef qd) {
   for (Index j = 0; j < n_pre; ++j) ee_pre.col(j) = in.ee_jacobian.col(plan.pre[j]);
   ad_cjm_.noalias() = ee_pre * pre_inverse;
   // Jbar = [Ad_ea S, J_post] (eq 24), rhs V_e - Ad_ea V_a0
-  const Eigen::Map<const Matrix> pre_rhs(in.terms.data() + terms_offset_[index], 6, 7 - k);
+  const auto pre_rhs = pre_rhs_of(in.terms.data() + terms_offset_[index], k);
   auto cjm = cjm_.topLeftCorner(6, n_columns);
   cjm.leftCols(n_free).noalias() = ad_cjm_ * pre_rhs.rightCols(n_free);
   for (Index j = 0; j < n_post; ++j) cjm.col(n_free + j) = in.ee_jacobian.col(plan.post[j]);

@@ -1,5 +1,6 @@
 // Pinocchio's kinematics for the compiled step; see kinematics.hpp.
 #include "kinematics.hpp"
+#include "pose_row.hpp"
 
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
@@ -86,7 +87,7 @@ Kinematics::Kinematics(const std::vector<JointSpec>& joints, const std::vector<F
   pinocchio_->data = pin::Data(model);
   pinocchio_->jacobian = pin::Data::Matrix6x::Zero(6, model.nv);
   jacobians_ = RowMatrix::Zero(6 * static_cast<Index>(frames.size()), model.nv);
-  placements_ = RowMatrix::Zero(static_cast<Index>(frames.size()), 12);
+  placements_ = RowMatrix::Zero(static_cast<Index>(frames.size()), kPoseRow);
 }
 
 std::vector<std::string> joint_kinds() {
@@ -136,9 +137,8 @@ void Kinematics::compute(const ConstVectorRef& q) {
     pinocchio_->jacobian.setZero();  // getFrameJacobian writes the supporting columns only
     pin::getFrameJacobian(model, data, frame, pin::LOCAL, pinocchio_->jacobian);
     jacobians_.middleRows(6 * static_cast<Index>(i), 6) = pinocchio_->jacobian;
-    auto row = placements_.row(static_cast<Index>(i));
-    for (Index r = 0; r < 3; ++r) row.segment(3 * r, 3) = placement.rotation().row(r);
-    row.tail(3) = placement.translation().transpose();
+    write_pose_row(placement.rotation(), placement.translation(),
+                   placements_.row(static_cast<Index>(i)).data());
   }
 }
 

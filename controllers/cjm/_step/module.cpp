@@ -14,6 +14,7 @@
 #include "collision_bindings.hpp"
 #include "damped.hpp"
 #include "pipeline.hpp"
+#include "pose_row.hpp"
 #include "report_bindings.hpp"
 #include "tick.hpp"
 
@@ -551,6 +552,14 @@ PYBIND11_MODULE(_step, module) {
       .def_property_readonly("has_previous", &BoundTick::has_previous)
       .def("set_history", &BoundTick::set_history, py::arg("has_filtered"), py::arg("has_previous"),
            "Which of filtered and previous hold poses (after writing them).");
+  // the pose rows and the tick's period row (pose_row.hpp), for controllers/cjm/pose_rows.py
+  module.attr("POSE_ROW") = cjm::kPoseRow;
+  module.attr("POSE_TRANSLATION") = cjm::kPoseTranslation;
+  module.attr("PERIOD_TARGET") = cjm::kPeriodTarget;
+  module.attr("PERIOD_PREVIOUS") = cjm::kPeriodPrevious;
+  module.attr("PERIOD_PLACEMENT") = cjm::kPeriodPlacement;
+  module.attr("PERIOD_TWIST") = cjm::kPeriodTwist;
+  module.attr("PERIOD_ROW") = cjm::kPeriodRow;
   module.attr("TICK_STEPPED") = static_cast<int>(kTickStepped);
   module.attr("TICK_REFUSED") = static_cast<int>(kTickRefused);
   module.attr("TICK_NOT_FINITE") = static_cast<int>(kTickNotFinite);

@@ -1,5 +1,6 @@
 // One CJM step from q; see pipeline.hpp.
 #include "pipeline.hpp"
+#include "terms_layout.hpp"
 
 #include <algorithm>
 #include <limits>
@@ -39,7 +40,7 @@ Pipeline::Pipeline(Kinematics kinematics, Step step, Index ee_count,
 void Pipeline::set_form(Index index, TermsKind kind, bool paper, double paper_min_a) {
   if (index < 0 || index >= static_cast<Index>(forms_.size()))
     throw std::invalid_argument("constraint index out of range");
-  if (terms_size_[index] != 6 * (7 - kind_rows(kind)) + 7 * kind_rows(kind))
+  if (terms_size_[index] != terms_size(kind_rows(kind)))
     throw std::invalid_argument(std::string("a ") + kind_name(kind) + " has " +
                                 std::to_string(kind_rows(kind)) +
                                 " rows: the step was built with another number");
@@ -84,8 +85,8 @@ void Pipeline::compute_constraint_terms() {
     const Form& form = forms_[i];
     if (!form.declared) continue;
     const double* placement = placements.row(ee_count_ + i).data();
-    const Rotation rotation(placement);
-    const Translation translation(placement + 9);
+    const Rotation rotation = row_rotation(placement);
+    const Translation translation = row_translation(placement);
     double& gap = step_.damper_gaps()(i);
     double error_norm = 0.0;
     paper_form_ &= write_terms(form.kind, form.parameters, rotation, translation, form.paper,

@@ -3,6 +3,8 @@
 // (controllers/joint_limits.py), the status (docs/design.md sections 8, 12 and 16).
 #include "step.hpp"
 
+#include "terms_layout.hpp"
+
 #include <stdexcept>
 #include <string>
 
@@ -10,8 +12,6 @@ namespace cjm {
 
 namespace {
 constexpr Index kEventsPerConstraint = 8;
-
-Index terms_size_of(Index k) { return 6 * (7 - k) + 7 * k; }
 }  // namespace
 
 Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool general_only,
@@ -33,7 +33,7 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
     row_offset_.push_back(total_rows_);
     terms_offset_.push_back(terms_size_);
     total_rows_ += plan.rows;
-    terms_size_ += terms_size_of(plan.rows);
+    terms_size_ += cjm::terms_size(plan.rows);
     (plan.equality ? equalities_ : barriers_).push_back(i);
     for (Index j : plan.pre) if (j < 0 || j >= nv) throw std::invalid_argument("pre index out of range");
     for (Index j : plan.post) if (j < 0 || j >= nv) throw std::invalid_argument("post index out of range");
@@ -251,9 +251,7 @@ void Step::ensure_rows(const Inputs& in) {
   if (rows_ready_) return;
   for (Index i = 0; i < static_cast<Index>(constraints_.size()); ++i) {
     const Index k = constraints_[i].rows;
-    // residual_rows = [-b, C [I, -hat(p)]] (k x 7, row-major) after the 6 x (7 - k) pre_rhs
-    const Eigen::Map<const RowMatrix> residual_rows(
-        in.terms.data() + terms_offset_[i] + 6 * (7 - k), k, 7);
+    const auto residual_rows = residual_rows_of(in.terms.data() + terms_offset_[i], k);
     all_rows_.middleRows(row_offset_[i], k).noalias() =
         residual_rows.rightCols(6) * in.frame_jacobians.middleRows(6 * i, 6);
     all_rhs_.segment(row_offset_[i], k) = -residual_rows.col(0);

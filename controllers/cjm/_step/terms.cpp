@@ -1,5 +1,6 @@
 // Each constraint's per-step terms; see terms.hpp.
 #include "terms.hpp"
+#include "terms_layout.hpp"
 
 #include <cmath>
 #include <stdexcept>
@@ -139,10 +140,10 @@ void write_paper_structure(const Point& point, double a, Eigen::Map<Matrix, 0, E
 //! controllers.cjm.analytical.write_terms, the structure matrix chosen by the caller.
 void write_point(const Point& point, double* terms) {
   const Index k = point.C.rows();
-  Eigen::Map<Matrix, 0, Eigen::OuterStride<6>> V_a0(terms, 6, 1, Eigen::OuterStride<6>(6));
-  V_a0.topRows(3).noalias() = point.C.transpose() * point.rhs;
-  V_a0.bottomRows(3).setZero();
-  Eigen::Map<RowMatrix> residual_rows(terms + 6 * (7 - k), k, 7);
+  auto V_a0 = pre_rhs_of(terms, k).col(0);
+  V_a0.head(3).noalias() = point.C.transpose() * point.rhs;
+  V_a0.tail(3).setZero();
+  auto residual_rows = residual_rows_of(terms, k);
   residual_rows.col(0) = -point.rhs;
   residual_rows.middleCols(1, 3) = point.C;
   residual_rows.rightCols(3).noalias() = -(point.C * hat(point.p));
@@ -232,7 +233,9 @@ bool write_terms(TermsKind kind, const Parameters& parameters, const Rotation& r
   gap = point.first_error;
   error_norm = point.error_norm;
   write_point(point, terms);
-  Eigen::Map<Matrix, 0, Eigen::OuterStride<6>> S(terms + 6, 6, 6 - k, Eigen::OuterStride<6>(6));
+  // S: pre_rhs's columns after V_a0 (terms_layout.hpp)
+  Eigen::Map<Matrix, 0, Eigen::OuterStride<6>> S(pre_rhs_of(terms, k).col(1).data(), 6, 6 - k,
+                                                Eigen::OuterStride<6>(6));
   const double a = point.p.norm();
   const bool paper_defined = paper && a >= paper_min_a;
   if (paper_defined)

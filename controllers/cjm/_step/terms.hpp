@@ -4,9 +4,7 @@
 // constraints.base.structure_nullspace / structure_paper / perpendicular_basis,
 // controllers.cjm.analytical.write_terms).
 //
-// A constraint's flat terms buffer (controllers.cjm.analytical.terms_views) is
-// ``pre_rhs = [V_a0, S]`` (6 x (7 - k), column-major) then
-// ``residual_rows = [-b, C [I, -hat(p)]]`` (k x 7, row-major).
+// A constraint's flat terms buffer: terms_layout.hpp.
 #pragma once
 
 #include <Eigen/Core>
@@ -15,6 +13,7 @@
 #include <string>
 
 #include "dense.hpp"
+#include "pose_row.hpp"
 
 namespace cjm {
 
@@ -46,12 +45,8 @@ double declared_gain(TermsKind kind, const Parameters& parameters);
 void load_parameters(TermsKind kind, const double* values, Index size, double unit_tolerance,
                      Parameters& parameters);
 
-//! The link's world placement (rotation, translation), a row of Kinematics::placements.
-using Rotation = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
-using Translation = Eigen::Map<const Eigen::Vector3d>;
-
-//! Writes one constraint's terms at its link's placement into ``terms`` (terms_size(k)
-//! entries). ``paper``: the hole's structure matrix in the paper's parametrisation (eqs
+//! Writes one constraint's terms at its link's placement (a pose row of
+//! Kinematics::placements) into ``terms`` (terms_size(k) entries, terms_layout.hpp). ``paper``: the hole's structure matrix in the paper's parametrisation (eqs
 //! 11-13) where it is defined (``|p| >= paper_min_a``); returns false when it is not
 //! (the null-space one written instead, as controllers.cjm.compiled falls back).
 //! ``gap``: the first row's error ``e``, an inequality's damper gap (docs/design.md 12);

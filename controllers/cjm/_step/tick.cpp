@@ -1,6 +1,8 @@
 // The closed loop's hot path in one call; see tick.hpp.
 #include "tick.hpp"
 
+#include "pose_row.hpp"
+
 #include <pinocchio/spatial.hpp>
 
 #include <chrono>
@@ -13,21 +15,18 @@ namespace pin = pinocchio;
 
 namespace {
 
-using RowRotation = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
 using Twist = Eigen::Matrix<double, 6, 1>;
 
-//! The pose in a row of 12 (rotation row-major, then translation).
+//! The pose in a pose row (pose_row.hpp).
 template <typename Row>
 pin::SE3 pose_of(const Row& row) {
-  const Eigen::Map<const RowRotation> rotation(row.data());
-  return pin::SE3(Eigen::Matrix3d(rotation), Eigen::Map<const Eigen::Vector3d>(row.data() + 9));
+  return pin::SE3(Eigen::Matrix3d(row_rotation(row.data())), row_translation(row.data()));
 }
 
-//! ``pose`` into a row of 12.
+//! ``pose`` into a pose row.
 template <typename Row>
 void write_pose(const pin::SE3& pose, Row&& row) {
-  Eigen::Map<RowRotation>(row.data()) = pose.rotation();
-  row.template tail<3>() = pose.translation().transpose();
+  write_pose_row(pose.rotation(), pose.translation(), row.data());
 }
 
 //! teleop.loop.saturate_twist: ``twist`` scaled uniformly so that ``|v| <= max_linear``
@@ -56,10 +55,10 @@ Tick::Tick(Index ee_count, TickSettings settings) : ee_count_(ee_count), setting
   if (ee_count_ < 1) throw std::invalid_argument("a tick needs at least one end effector");
   if (!(settings_.dt > 0.0) || !(settings_.smoothing > 0.0 && settings_.smoothing <= 1.0))
     throw std::invalid_argument("a tick needs dt > 0 and a smoothing in (0, 1]");
-  operator_targets_ = RowMatrix::Zero(ee_count_, 12);
-  filtered_ = RowMatrix::Zero(ee_count_, 12);
-  previous_ = RowMatrix::Zero(ee_count_, 12);
-  period_ = RowMatrix::Zero(ee_count_, 42);
+  operator_targets_ = RowMatrix::Zero(ee_count_, kPoseRow);
+  filtered_ = RowMatrix::Zero(ee_count_, kPoseRow);
+  previous_ = RowMatrix::Zero(ee_count_, kPoseRow);
+  period_ = RowMatrix::Zero(ee_count_, kPeriodRow);
 }
 
 void Tick::attach(Pipeline& pipeline) {
@@ -124,10 +123,10 @@ void Tick::begin() {
     twist_saturated_ |= saturate(command, settings_.max_linear, settings_.max_angular);
     twist.segment<6>(6 * i) = command;
     auto period = period_.row(i);
-    period.head<12>() = filtered_.row(i);
-    period.segment<12>(12) = previous_.row(i);  // read when period_has_previous()
-    period.segment<12>(24) = placements.row(i);
-    period.tail<6>() = command.transpose();
+    period.segment<kPoseRow>(kPeriodTarget) = filtered_.row(i);
+    period.segment<kPoseRow>(kPeriodPrevious) = previous_.row(i);  // read when period_has_previous()
+    period.segment<kPoseRow>(kPeriodPlacement) = placements.row(i);
+    period.segment<6>(kPeriodTwist) = command.transpose();
   }
   previous_ = filtered_;
   has_previous_ = true;
