@@ -250,13 +250,21 @@ class SharedOption:
     the option ``--rate``), what its value is (``range``: a :class:`NumberRange`,
     :class:`Choice`, :class:`Text` or :class:`Names`), its placeholder, what it is
     (``help``, without its range or default, which :meth:`help_text` adds) and the
-    ``commands`` that take it (:data:`COMMANDS`; a test checks each parser against it)."""
+    ``commands`` that take it (:data:`COMMANDS`; a test checks each parser against it).
+    ``default``: the value a run takes when nothing gives one (a sweep's cell leaves it out
+    of its key); None: ``left_out`` says what the run does instead."""
 
     name: str
     range: ValueKind
     metavar: str | None
     help: str
     commands: frozenset[str] = field(default=frozenset())
+    default: Any = None
+    left_out: str = ""
+
+    def default_words(self) -> str:
+        """What leaving the option out means, in words (``"1000"``, ``"none"``)."""
+        return self.left_out if self.default is None else f"{self.default:g}"
 
     @property
     def option(self) -> str:
@@ -295,49 +303,51 @@ def _positive(maximum: float, unit: str) -> NumberRange:
 
 
 RATE = SharedOption("rate", _positive(MAX_RATE_HZ, "Hz"), "HZ", "control rate",
-                    frozenset((COMPARE, REPLAY, RECORD, WEB, SWEEP)))
+                    frozenset((COMPARE, REPLAY, RECORD, WEB, SWEEP)), 1000.0)
 DURATION = SharedOption("duration", _positive(MAX_DURATION_S, "s"), "S", "seconds to run",
-                        frozenset((COMPARE, REPLAY, RECORD, SWEEP)))
+                        frozenset((COMPARE, REPLAY, RECORD, SWEEP)),
+                        left_out="each scenario's or session's")
 SEED = SharedOption("seed", NumberRange(int, 0, MAX_SEED), "SEED",
                     "seed of the encoder noise, the calibration error and the random "
                     "variations (each its own stream)",
-                    frozenset((COMPARE, REPLAY)))  # a sweep takes seeds: a count or a list
+                    frozenset((COMPARE, REPLAY)), 0)  # a sweep takes seeds: a count or a list
 #: the options of a run's controllers and its imperfect robot: compare, replay and sweep
 CONTROLLED = frozenset((COMPARE, REPLAY, SWEEP))
 KP = SharedOption("kp", _positive(MAX_POSE_GAIN, "1/s"), "K", "pose-error gain K_p of the loop",
-                  CONTROLLED)
+                  CONTROLLED, 20.0)
 CONSTRAINT_GAIN = SharedOption(
     "constraint_gain", NumberRange(float, 0.0, MAX_CONSTRAINT_GAIN, unit="1/s"), "K",
-    "drift-feedback gain of every constraint, K dt < 2 (1 for a barrier)", CONTROLLED)
+    "drift-feedback gain of every constraint, K dt < 2 (1 for a barrier)", CONTROLLED,
+    left_out="each constraint's own")
 JERK_LIMIT = SharedOption(
     "jerk_limit", _positive(MAX_JERK, "rad/s^3"), "RAD_PER_S3",
     "a jerk limit every controller keeps on every joint (docs/design.md section 8.5; with "
     "the acceleration limits); a Franka's joints refuse 3750-10000",
-    frozenset((COMPARE, REPLAY, WEB, SWEEP)))
+    frozenset((COMPARE, REPLAY, WEB, SWEEP)), left_out="none")
 ENCODER_NOISE = SharedOption(
     "encoder_noise", NumberRange(float, 0.0, MAX_ENCODER_NOISE_RAD, unit="rad"), "RAD",
-    "std of the Gaussian noise on each measured joint, every period", CONTROLLED)
+    "std of the Gaussian noise on each measured joint, every period", CONTROLLED, 0.0)
 LATENCY = SharedOption("latency", NumberRange(int, 0, MAX_LATENCY_PERIODS), "PERIODS",
-                       "control periods between a command and the joints", CONTROLLED)
+                       "control periods between a command and the joints", CONTROLLED, 0)
 JOINT_TIME_CONSTANT = SharedOption(
     "joint_time_constant", NumberRange(float, 0.0, MAX_TIME_CONSTANT_S, unit="s"), "S",
-    "first-order response of the joint velocities to their command", CONTROLLED)
+    "first-order response of the joint velocities to their command", CONTROLLED, 0.0)
 CALIBRATION_POSITION = SharedOption(
     "calibration_error_mm", NumberRange(float, 0.0, MAX_CALIBRATION_POSITION_STD_M * 1e3,
                                         unit="mm"),
-    "MM", "std of each joint placement's translation error")
+    "MM", "std of each joint placement's translation error", default=0.0)
 CALIBRATION_ROTATION = SharedOption(
     "calibration_error_mrad", NumberRange(float, 0.0, MAX_CALIBRATION_ROTATION_STD_RAD * 1e3,
                                           unit="mrad"),
-    "MRAD", "std of each joint placement's rotation error")
+    "MRAD", "std of each joint placement's rotation error", default=0.0)
 TROCAR_SHIFT = SharedOption(
     "trocar_shift", NumberRange(float, 0.0, MAX_TROCAR_SHIFT_M, unit="m"), "M",
     "slide each constraint along its link by U(-M, M) m, still holding where it starts",
-    CONTROLLED)
+    CONTROLLED, 0.0)
 PATH_AMPLITUDE = SharedOption(
     "path_amplitude", NumberRange(float, 0.0, MAX_PATH_AMPLITUDE_M, unit="m"), "M",
     "add to each EE target a smooth random path (three sinusoids, 0.05-0.5 Hz, from rest) "
-    "of at most M m", CONTROLLED)
+    "of at most M m", CONTROLLED, 0.0)
 
 #: What ``--acceleration-limits`` / ``--no-acceleration-limits`` (a sweep's
 #: ``acceleration_limits``) say.

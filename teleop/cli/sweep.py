@@ -7,6 +7,9 @@ import sys
 
 from teleop.limits import MAX_CELLS_UNCONFIRMED
 
+from teleop.experiments.sweep.spec import CELL_FIELDS, CellField
+from teleop.options import SWEEP
+
 from .arguments import csv_list, numbers
 from .robot_options import add_robot_arguments, robot_options_given, robot_settings
 from .termination import CleanedUpInterrupt
@@ -32,29 +35,45 @@ def _pair(text: str) -> list[float]:
     return values
 
 
-#: The grid options: (option, spec field, parser of its text, metavar, help).
-GRID_OPTIONS = (
+def _numbers(text: str) -> list[int | float]:
+    """``"500, 1e3"`` -> ``[500, 1000.0]``: each number as written, an integer or a float
+    (argparse type); the spec's validator of the field then checks each (its words)."""
+    values: list[int | float] = []
+    for item in csv_list(text):
+        try:
+            values.append(int(item))
+        except ValueError:
+            try:
+                values.append(float(item))
+            except ValueError:
+                raise argparse.ArgumentTypeError(
+                    f"expected comma-separated numbers, got {text!r}") from None
+    return values
+
+
+#: The sweep's own grid options: (option, spec field, parser of its text, metavar, help).
+OWN_GRID_OPTIONS = (
     ("--scenarios", "scenarios", csv_list, "NAMES", "comma-separated scenarios (default: the spec's)"),
     ("--controllers", "controllers", csv_list, "SPECS", "comma-separated controllers (default: the spec's)"),
     ("--seeds", "seeds", _seeds, "N|S1,S2", "a count N (seeds 0 to N-1) or a list (default: 1, seed 0)"),
-    ("--duration", "duration", numbers, "S", "seconds per cell (default: each scenario's)"),
-    ("--rate", "rate", numbers, "HZ", "control rates in Hz (default: 1000)"),
     ("--plants", "plants", csv_list, "KINDS", "kinematic, mujoco (default: kinematic)"),
-    ("--payload", "payload", numbers, "KG", "payload at each EE, mujoco only (default: 0)"),
-    ("--kp", "kp", numbers, "K", "pose-error gains in 1/s (default: 20)"),
-    ("--constraint-gain", "constraint_gain", numbers, "K",
-     "constraints' drift gains (default: their own)"),
-    ("--encoder-noise", "encoder_noise", numbers, "RAD", "encoder noise stds in rad (default: 0)"),
-    ("--latency", "latency", _ints, "PERIODS", "command latencies in control periods (default: 0)"),
-    ("--joint-time-constant", "joint_time_constant", numbers, "S",
-     "joint lag time constants in s (default: 0)"),
-    ("--trocar-shift", "trocar_shift", numbers, "M",
-     "half-width in m of each trocar's random slide along its link (default: 0)"),
-    ("--path-amplitude", "path_amplitude", numbers, "M",
-     "bound in m of the random motion added to each EE target (default: 0)"),
-    ("--jerk-limit", "jerk_limit", numbers, "RAD_PER_S3",
-     "jerk limits in rad/s^3 on every joint (default: none; with the acceleration limits)"),
 )
+
+
+def _declared_fields() -> list[CellField]:
+    """The cell fields of the options declared for ``teleop sweep`` (:data:`SWEEP` in
+    their ``commands``): each a grid option of its own."""
+    return [field for field in CELL_FIELDS
+            if field.declared is not None and SWEEP in field.declared.commands]
+
+
+#: The grid options: the sweep's own, then one per declared field (comma-separated values,
+#: each checked by the field's validator: the words of every other front end).
+GRID_OPTIONS = OWN_GRID_OPTIONS + tuple(
+    (field.declared.option, field.name, _numbers, field.declared.metavar,
+     f"{field.declared.help_text()}; comma-separated values (default: "
+     f"{field.default_words()})")
+    for field in _declared_fields() if field.declared is not None)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -107,9 +126,7 @@ def options_document(args: argparse.Namespace) -> dict:
     """The grid options given, as spec fields."""
     given = {name: getattr(args, name) for _, name, *_ in GRID_OPTIONS
              if getattr(args, name) is not None}
-    for name in ("duration", "rate", "payload", "kp", "constraint_gain", "encoder_noise",
-                 "latency", "joint_time_constant", "trocar_shift", "path_amplitude",
-                 "jerk_limit"):
+    for name in (field.name for field in _declared_fields()):
         if name in given and len(given[name]) == 1:
             given[name] = given[name][0]
     if args.calibration_error is not None:

@@ -24,8 +24,12 @@ from teleop.limits import MAX_CELLS, MAX_SPEC_BYTES
 from teleop.options import (ACCELERATION_LIMITS_HELP, CALIBRATION_POSITION, CALIBRATION_ROTATION,
                             CONSTRAINT_GAIN, DURATION, ENCODER_NOISE, JERK_LIMIT,
                             JOINT_TIME_CONSTANT, KP, LATENCY, PATH_AMPLITUDE, RATE, SEED,
-                            SIMULATED_PLANT_KINDS, TROCAR_SHIFT)
+                            SIMULATED_PLANT_KINDS, TROCAR_SHIFT, SharedOption)
 from teleop.plants.options import PLANT_OPTIONS_BY_NAME
+from teleop.plants.settings import PlantSettings
+
+#: The physics plant's payload, a grid field.
+PAYLOAD = PLANT_OPTIONS_BY_NAME["payload"]
 
 #: Hex digits of a cell's key (80 bits: no collision in any sweep of this world).
 KEY_DIGITS = 20
@@ -61,7 +65,8 @@ def _optional(check: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
 class CellField:
     """One input of a cell: its name, its default (left out of the key when equal), how a
     value is checked and normalised, the ``teleop compare`` option that sets it (None: the
-    command has a form of its own for it) and the spec table it may be written in."""
+    command has a form of its own for it), the spec table it may be written in, and the
+    option it is declared by (``declared``, :mod:`teleop.options`; None: the sweep's own)."""
 
     name: str
     default: Any
@@ -69,11 +74,30 @@ class CellField:
     option: str | None = None
     group: str | None = None
     help: str = ""
+    declared: SharedOption | None = None
+
+    def default_words(self) -> str:
+        """What leaving a declared number field out means, in words (``"1000"``)."""
+        if self.default is None and self.declared is not None:
+            return self.declared.left_out
+        return f"{self.default:g}"
+
+
+def _declared(option: SharedOption, default: Any = None, group: str | None = None,
+              on_compare: bool = True) -> CellField:
+    """The field of a declared option: its name, default (``option.default`` unless
+    given), validator, command-line option (unless ``on_compare`` is False: compare
+    writes it otherwise) and help."""
+    default = option.default if default is None else default
+    return CellField(option.name, default,
+                     option.check if default is not None else _optional(option.check),
+                     option.option if on_compare else None, group, option.help_text(), option)
 
 
 def _cell_fields() -> tuple[CellField, ...]:
-    """The fields; those ``teleop compare`` shares with the other front ends checked by
-    their :class:`teleop.options.SharedOption` (the same words as the command lines)."""
+    """The fields; those ``teleop compare`` shares with the other front ends from their
+    declaration (:class:`teleop.options.SharedOption`: the same validator and words as
+    the command lines)."""
     return (
         CellField("scenario", None, _text, "--scenario", help="scenario names"),
         CellField("controller", None, _text, "--controllers", help="controller specs"),
@@ -82,36 +106,22 @@ def _cell_fields() -> tuple[CellField, ...]:
                        "table of robot (a built-in name, a URDF path or an example-robot-data "
                        "name), ee_frame, constrained_link, link_axis, locked_joints, "
                        "package_dirs, q_home, as teleop compare's options"),
-        CellField("seed", 0, SEED.check, "--seed",
-                  help="seeds the encoder noise, the calibration error and the random "
-                       "trocar and path"),
-        CellField("duration", None, _optional(DURATION.check),
-                  "--duration", help="seconds (default: each scenario's)"),
-        CellField("rate", 1000.0, RATE.check, "--rate", help="control rate (Hz)"),
+        _declared(SEED),
+        _declared(DURATION),
+        _declared(RATE),
         CellField("plant", "kinematic", _plant_kind, "--plant", help="kinematic or mujoco"),
         CellField("acceleration_limits", True, _boolean, None, help=ACCELERATION_LIMITS_HELP),
-        CellField("jerk_limit", None, _optional(JERK_LIMIT.check), "--jerk-limit",
-                  help="rad/s^3 on every joint of every controller (default: none; with the "
-                       "acceleration limits, docs/design.md 8.5)"),
-        CellField("payload", 0.0, PLANT_OPTIONS_BY_NAME["payload"].option.check, "--payload",
-                  help="kg at each EE (mujoco)"),
-        CellField("kp", 20.0, KP.check, "--kp", help="pose-error gain (1/s)"),
-        CellField("constraint_gain", None, _optional(CONSTRAINT_GAIN.check),
-                  "--constraint-gain",
-                  help="every constraint's drift gain (default: their own)"),
-        CellField("encoder_noise", 0.0, ENCODER_NOISE.check, "--encoder-noise",
-                  "imperfections", "rad"),
-        CellField("latency", 0, LATENCY.check, "--latency", "imperfections", "control periods"),
-        CellField("joint_time_constant", 0.0, JOINT_TIME_CONSTANT.check,
-                  "--joint-time-constant", "imperfections", "s"),
-        CellField("calibration_error_mm", 0.0, CALIBRATION_POSITION.check, None,
-                  "imperfections", "std of each joint placement's translation error (mm)"),
-        CellField("calibration_error_mrad", 0.0, CALIBRATION_ROTATION.check, None,
-                  "imperfections", "std of each joint placement's rotation error (mrad)"),
-        CellField("trocar_shift", 0.0, TROCAR_SHIFT.check, "--trocar-shift", "variations",
-                  "half-width (m) of each trocar's uniform slide along its link"),
-        CellField("path_amplitude", 0.0, PATH_AMPLITUDE.check, "--path-amplitude",
-                  "variations", "bound (m) of the smooth random motion added to each EE target"),
+        _declared(JERK_LIMIT),
+        _declared(PAYLOAD.option, PlantSettings().payload / PAYLOAD.scale),
+        _declared(KP),
+        _declared(CONSTRAINT_GAIN),
+        _declared(ENCODER_NOISE, group="imperfections"),
+        _declared(LATENCY, group="imperfections"),
+        _declared(JOINT_TIME_CONSTANT, group="imperfections"),
+        _declared(CALIBRATION_POSITION, group="imperfections", on_compare=False),
+        _declared(CALIBRATION_ROTATION, group="imperfections", on_compare=False),
+        _declared(TROCAR_SHIFT, group="variations"),
+        _declared(PATH_AMPLITUDE, group="variations"),
     )
 
 
