@@ -1,10 +1,10 @@
-"""The heap's freeze shared by the plants that hold it (teleop/plants/ros2/heap_freeze.py)."""
+"""The heap's freeze shared by the plants that hold it (teleop/heap_freeze.py)."""
 
 from __future__ import annotations
 
 import gc
 
-from teleop.plants.ros2.heap_freeze import freeze_heap, release_heap
+from teleop.heap_freeze import freeze_heap, release_heap
 
 
 class Holder:

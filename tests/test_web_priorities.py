@@ -276,3 +276,23 @@ def test_the_heap_built_before_the_loop_starts_is_frozen_while_it_runs(app):
         control.stop()
     assert gc.get_freeze_count() == 0
     assert len(gc.get_objects()) >= 0.9 * tracked
+
+
+def test_the_control_thread_lets_its_heap_freeze_go_without_unfreezing_another_holders(app):
+    """gc.freeze is the process's: a plant that froze the heap keeps it frozen after the
+    control thread stops (teleop.heap_freeze); unfrozen when the plant lets go."""
+    import gc
+
+    from teleop.heap_freeze import freeze_heap, release_heap
+
+    plant = object()
+    freeze_heap(plant)
+    try:
+        control = ControlThread(app)
+        control.start()
+        wait_for(lambda: app.ticker.ticks > 5, 10.0)
+        control.stop()
+        assert gc.get_freeze_count() > 0
+    finally:
+        release_heap(plant)
+    assert gc.get_freeze_count() == 0

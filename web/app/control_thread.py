@@ -3,7 +3,6 @@ measured, scheduled real-time (docs/design.md section 5.3). It never touches vis
 
 from __future__ import annotations
 
-import gc
 import math
 import sys
 import threading
@@ -12,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from teleop.heap_freeze import freeze_heap, release_heap
 from teleop.plants.ros2.realtime import (check_priority, hold_realtime, release_realtime,
                                         scheduling_words)
 
@@ -119,12 +119,11 @@ class ControlThread:
         server) is collected once and frozen (``gc.freeze``): Python's full collection
         holds the GIL while it scans every tracked object, 72 ms for the page's server
         (135,000 objects), which the control thread waited out; frozen, the collections
-        scan only what came after. :meth:`stop` unfreezes them (a frozen object is never
-        collected)."""
+        scan only what came after. :meth:`stop` lets its freeze go (:mod:`teleop.heap_freeze`:
+        the heap is unfrozen when no other holder, such as a ROS 2 plant, keeps it)."""
         self._switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(min(self._switch_interval, SWITCH_INTERVAL))
-        gc.collect()
-        gc.freeze()
+        freeze_heap(self)
         self._thread.start()
 
     def stop(self, timeout: float = 2.0) -> None:
@@ -133,7 +132,7 @@ class ControlThread:
         if self._switch_interval is not None:
             sys.setswitchinterval(self._switch_interval)
             self._switch_interval = None
-            gc.unfreeze()
+            release_heap(self)
 
     @property
     def shared_scheduling(self) -> str:

@@ -46,7 +46,7 @@ from cyclonedds.util import duration
 
 from constraints import Constraint
 
-from .heap_freeze import freeze_heap, release_heap
+from teleop.heap_freeze import freeze_heap, release_heap
 from .joint_map import indices, model_joint_names
 from .messages import Float64MultiArray, JointState, OperatingState
 from .node import Ros2Node
