@@ -206,6 +206,11 @@ class CompiledStep:
                     f"the compiled step's kinematics differ from Pinocchio's by {difference:.3g} "
                     f"at frame {model.frames[frame].name!r}: use backend='python'")
 
+    def solved_configuration(self) -> np.ndarray:
+        """The configuration the pipeline last loaded (its kinematics are on its own copy
+        of the model, not in the controller's ``data``)."""
+        return self.pipeline.q.copy()
+
     def solve(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         """``qd`` for the stacked EE twist at ``q`` and the step's report (section 8.3);
         bad input raises ``ValueError`` as the Python step does."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 from functools import partial
-from typing import TYPE_CHECKING, Iterable, Literal
+from typing import TYPE_CHECKING, Iterable, Literal, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -13,8 +13,8 @@ from constraints import Constraint, Parametrisation, RobotLike
 from constraints.collision import CollisionAvoidance
 from constraints.validation import as_number, as_vector
 
-from ..base import (Controller, SolveInfo, SolverError, StepStatus, as_twist_weight,
-                    velocity_joint_names)
+from ..base import (Controller, Kinematics, SolveInfo, SolverError, StepStatus,
+                    as_twist_weight, velocity_joint_names)
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from ..step_message import StepMessage
@@ -190,6 +190,9 @@ class CJMController(Controller):
         self._splits: dict[int, ChainSplit | None] = {}
         #: the last step's :class:`StepReport` (``info`` is its wording)
         self.report = StepReport()
+        #: whether a step ran since ``self.data`` last had kinematics (the compiled step
+        #: computes its own and leaves ``self.data`` as it was)
+        self._data_behind = False
         #: joint name per velocity index (a multi-dof joint repeats its name)
         self.joint_names = velocity_joint_names(self.model)
         self.set_constraints(constraints)
@@ -320,6 +323,7 @@ class CJMController(Controller):
         read (``SolverError`` for a failed step when ``strict``)."""
         self.report = report
         self._info: SolveInfo | None = None
+        self._data_behind = True
         if self.strict and report.status is StepStatus.FAILED:
             raise SolverError(self.info.message)
 
@@ -360,6 +364,23 @@ class CJMController(Controller):
         return CompiledTick(self, dt, kp, max_linear_speed, max_angular_speed,
                             target_time_constant, feed_forward)
 
+    def _kinematics(self, q: np.ndarray) -> Kinematics:
+        self._data_behind = False
+        return super()._kinematics(q)
+
+    def constraint_rows(
+        self, indices: Sequence[int] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`Controller.constraint_rows` at the configuration of the last step (the
+        compiled step computes its kinematics on its own copy of the model, and ``self.data``
+        is brought to that configuration first), or at the kinematics last computed here."""
+        if self._data_behind:
+            solved = self.step.solved_configuration()
+            if solved is not None:
+                self._kinematics(solved)
+            self._data_behind = False
+        return super().constraint_rows(indices)
+
     # -- chain structure ---------------------------------------------------------------
 
     def split(self, frame_id: int) -> ChainSplit | None:
@@ -372,7 +393,7 @@ class CJMController(Controller):
         """The CJM ``Jbar = [Ad_ea S, J_post]`` of constraint ``index`` at ``q`` (eq 24), for
         the first end effector."""
         q = as_vector(q, self.model.nq, "q")
-        super()._kinematics(q)
+        self._kinematics(q)
         frame_id = self.constraint_frames[index]
         split = self.split(frame_id)
         if split is None:

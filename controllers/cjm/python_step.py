@@ -67,6 +67,11 @@ class PythonStep:
 
     # -- the step template (controllers.base.GuardedController.solve) ------------------
 
+    def solved_configuration(self) -> None:
+        """None: this step computes its kinematics in the controller's ``data``, which is
+        therefore at the configuration it last solved."""
+        return None
+
     def solve(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         """``qd`` for the stacked EE twist at ``q`` and the step's report. Bad input
         raises ``ValueError``; a failed step gives the stop command (zero without
