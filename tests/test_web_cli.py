@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from browser_helpers import PANDA, answer_ctrl_c, free_port
@@ -151,3 +153,62 @@ def test_the_help_says_what_the_server_exposes(capsys):
     for words in ("--scene-dir", "--record-dir", "--token", "SSH tunnel",
                   "can move the robot, and read and write scene files"):
         assert words in text, words
+
+
+def fifo_threads(pid: int) -> list[str]:
+    """The threads of process ``pid`` scheduled SCHED_FIFO (policy 1 in ``/proc``'s sched)."""
+    names = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            sched = (task / "sched").read_text()
+        except OSError:  # the thread ended meanwhile
+            continue
+        policy = next(line for line in sched.splitlines() if line.startswith("policy"))
+        if int(policy.split(":")[1]) == os.SCHED_FIFO:
+            names.append((task / "comm").read_text().strip())
+    return names
+
+
+def may_run_realtime() -> bool:
+    """Whether this user may schedule SCHED_FIFO (root, CAP_SYS_NICE or ``ulimit -r``)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+    except PermissionError:
+        return False
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    return True
+
+
+@pytest.mark.parametrize("priority", [None, "0"])
+def test_loop_priority_0_keeps_every_thread_of_the_server_ordinary(priority):
+    """``--loop-priority 0``: no thread of the running server is SCHED_FIFO; the default
+    makes the control thread real-time and the server's own threads with it, where this
+    user may (docs/design.md 5.3)."""
+    given = [] if priority is None else ["--loop-priority", priority]
+    process = subprocess.Popen([sys.executable, "-m", "web", "--port", str(free_port()), *given],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=answer_ctrl_c)
+    try:
+        deadline = time.monotonic() + 90.0
+        while time.monotonic() < deadline and "Ctrl-C stops" not in process.stdout.readline():
+            assert process.poll() is None, process.communicate()
+        time.sleep(1.0)  # the control thread's checks (every 0.25 s) have run
+        real_time = fifo_threads(process.pid)
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=30)
+        assert process.returncode == 0, err
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    if priority is None and may_run_realtime():
+        assert len(real_time) >= 2, real_time  # the control thread and the server's own
+    else:
+        assert real_time == []
+
+
+def test_a_loop_priority_out_of_range_is_refused_by_name():
+    result = subprocess.run([sys.executable, "-m", "web", "--loop-priority", "100"],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert "argument --loop-priority: must be in [0, 99], got 100" in result.stderr

@@ -25,6 +25,7 @@ from teleop.cli.plant_options import add_plant_options, plant_choice
 from teleop.cli.robot_options import add_robot_arguments, robot_from_arguments, robot_options_given
 from teleop.cli.termination import terminations_interrupt
 from teleop.limits import MAX_INPUT_TIMEOUT_S, MIN_INPUT_TIMEOUT_S
+from teleop.plants.ros2.realtime import LOOP_PRIORITY, MAX_PRIORITY
 from teleop.controller_specs import CONTROLLER_HELP
 from teleop.loop.task_modes import AUTO, TASK_MODES
 from teleop.options import ACCELERATION_LIMITS_HELP, JERK_LIMIT, RATE, WEB
@@ -51,6 +52,7 @@ Network masters (--input udp:PORT) must tag every datagram with the key printed 
 
 #: ``--input-timeout``: milliseconds within the table's bounds
 INPUT_TIMEOUT_MS = bounded(float, 1e3 * MIN_INPUT_TIMEOUT_S, 1e3 * MAX_INPUT_TIMEOUT_S, unit="ms")
+LOOP_PRIORITY_TYPE = bounded(int, 0, MAX_PRIORITY)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -124,6 +126,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "by default. Any other address (0.0.0.0: every interface) "
                              "needs --token and prints a warning")
     server.add_argument("--port", default="8080", help="port to serve the UI on (1-65535)")
+    server.add_argument("--loop-priority", type=LOOP_PRIORITY_TYPE, default=LOOP_PRIORITY,
+                        metavar="N",
+                        help="SCHED_FIFO priority of the control thread, the server's own "
+                             "threads at 1 while it holds it (docs/design.md 5.3); 0: "
+                             "ordinary scheduling; without the privilege (root, CAP_SYS_NICE, "
+                             "ulimit -r) they stay ordinary and the status says so; over ROS 2 "
+                             "the plant's --realtime-priority decides "
+                             f"(default: {LOOP_PRIORITY})")
     server.add_argument("--token", metavar="TOKEN",
                         help=f"secret every page must present (at least {MIN_TOKEN} characters "
                              "of A-Z a-z 0-9 _ - . ~, or 'auto' for a random one); required "
@@ -295,7 +305,8 @@ def run(args: argparse.Namespace, prog: str) -> int:
                                                   jerk_limit=args.jerk_limit,
                                                   task_mode=args.task_mode,
                                                   **collisions, inputs=inputs,
-                                                  input_timeout=args.input_timeout / 1e3)
+                                                  input_timeout=args.input_timeout / 1e3,
+                                                  realtime_priority=args.loop_priority)
         except BaseException:
             for source in inputs:
                 source.close()
