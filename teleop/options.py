@@ -151,47 +151,14 @@ def _checked(kind: ValueKind, value: Any, name: str) -> None:
         raise ValueError(f"{name} {problem}")
 
 
-@dataclass(frozen=True)
-class Choice:
-    """One of ``values`` (names)."""
+class _Word:
+    """A text value taken as it is: no bounds to name, checked by its ``problem``."""
 
-    values: tuple[str, ...]
+    def problem(self, value: Any) -> str | None:
+        raise NotImplementedError
 
     def bounds(self) -> str:
         return ""
-
-    def problem(self, value: Any) -> str | None:
-        if isinstance(value, str) and value in self.values:
-            return None
-        return f"must be one of {', '.join(self.values)}, got {short_repr(value)}"
-
-    def check(self, value: Any, name: str) -> str:
-        _checked(self, value, name)
-        return value
-
-    def parse(self, text: str) -> str:
-        problem = self.problem(text)
-        if problem is not None:
-            raise argparse.ArgumentTypeError(problem)
-        return text
-
-    def argparse_keywords(self) -> dict[str, Any]:
-        """argparse's own ``choices`` (its message lists them)."""
-        return {"choices": self.values}
-
-
-@dataclass(frozen=True)
-class Text:
-    """A non-empty text without spaces at its ends (a topic, a namespace): what it means
-    is checked where it is used (a ROS 2 topic by :mod:`teleop.plants.ros2.names`)."""
-
-    def bounds(self) -> str:
-        return ""
-
-    def problem(self, value: Any) -> str | None:
-        if isinstance(value, str) and value.strip() and value == value.strip():
-            return None
-        return f"must be a non-empty text, got {short_repr(value)}"
 
     def check(self, value: Any, name: str) -> str:
         _checked(self, value, name)
@@ -205,6 +172,33 @@ class Text:
 
     def argparse_keywords(self) -> dict[str, Any]:
         return {"type": self.parse}
+
+
+@dataclass(frozen=True)
+class Choice(_Word):
+    """One of ``values`` (names)."""
+
+    values: tuple[str, ...]
+
+    def problem(self, value: Any) -> str | None:
+        if isinstance(value, str) and value in self.values:
+            return None
+        return f"must be one of {', '.join(self.values)}, got {short_repr(value)}"
+
+    def argparse_keywords(self) -> dict[str, Any]:
+        """argparse's own ``choices`` (its message lists them)."""
+        return {"choices": self.values}
+
+
+@dataclass(frozen=True)
+class Text(_Word):
+    """A non-empty text without spaces at its ends (a topic, a namespace): what it means
+    is checked where it is used (a ROS 2 topic by :mod:`teleop.plants.ros2.names`)."""
+
+    def problem(self, value: Any) -> str | None:
+        if isinstance(value, str) and value.strip() and value == value.strip():
+            return None
+        return f"must be a non-empty text, got {short_repr(value)}"
 
 
 @dataclass(frozen=True)
