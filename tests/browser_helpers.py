@@ -595,3 +595,15 @@ def report_drag(label: str, result, control) -> None:
           f"({len(result.samples)} samples)")
     print(f"[{label}] control rate {control.achieved_rate:.0f} Hz achieved (target "
           f"{1.0 / control.app.robots.config.dt:.0f} Hz), {control.deadline_misses} deadline misses")
+
+
+def wait_for(predicate, timeout: float):
+    """``predicate()``'s first true value, polled every 10 ms; ``AssertionError`` after
+    ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.01)
+    raise AssertionError(f"timed out after {timeout:g} s")

@@ -13,6 +13,7 @@ import threading
 import time
 
 import pytest
+from browser_helpers import wait_for
 
 from teleop.inputs import UdpMaster
 from web.app import ControlThread, TeleopApp
@@ -27,16 +28,6 @@ def scheduling(thread_id: int) -> tuple[int, bool, int]:
     policy = os.sched_getscheduler(thread_id)
     return (policy & ~os.SCHED_RESET_ON_FORK, bool(policy & os.SCHED_RESET_ON_FORK),
             os.sched_getparam(thread_id).sched_priority)
-
-
-def wait_for(predicate, timeout: float):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.01)
-    raise AssertionError(f"timed out after {timeout:g} s")
 
 
 @pytest.fixture()

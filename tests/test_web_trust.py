@@ -11,6 +11,7 @@ import time
 import numpy as np
 import pinocchio as pin
 import pytest
+from browser_helpers import wait_for
 
 from web.app import (
     BEHIND_FRACTION,
@@ -349,11 +350,3 @@ def test_a_control_thread_that_cannot_keep_its_rate_says_so(app, monkeypatch):
     assert words.startswith("control loop behind:") and "of the 1000 Hz" in words
 
 
-def wait_for(predicate, timeout: float):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError(f"timed out after {timeout:g} s")
