@@ -106,6 +106,24 @@ def test_the_certificate_sees_every_kind_of_miss():
         == pytest.approx(0.75e-3)
 
 
+def test_the_certificate_sees_a_miss_beside_an_infinite_bound():
+    """A row with no lower bound given as -inf, its multiplier 0: the row names no bound
+    (``0 * inf`` would be NaN and numpy's max of the products NaN, which Python's max then
+    passed over: the box's complementarity miss of 0.75e-3 was certified 1e-16)."""
+    c = np.array([2.0, 0.0, -1.25])
+    problem = QuadraticProgram(np.eye(3), -c, np.array([[1.0, 1.0, 0.0]]), np.array([1.0]),
+                               np.array([[1.0, 0.0, -1.0], [0.0, 0.0, 1.0]]),
+                               np.array([-np.inf, -np.inf]), np.array([0.5, 10.0]),
+                               -np.ones(3), np.ones(3))
+    x, y, z = np.array([0.75, 0.25, 0.25]), np.array([-0.25]), np.array([1.5, 0.0])
+    assert kkt_residual(problem, x, y, z, np.zeros(3)) == pytest.approx(0.0, abs=1e-15)
+    assert kkt_residual(problem, x, y - 1e-3, z, np.array([1e-3, 1e-3, 0.0])) \
+        == pytest.approx(0.75e-3)
+    # a multiplier naming the missing bound: nothing certified
+    assert kkt_residual(problem, x, y, np.array([1.5, -1e-3]), np.array([0.0, 0.0, 1e-3])) \
+        == float("inf")
+
+
 @pytest.mark.parametrize("poisoned", ["x", "equalities", "rows", "box"])
 def test_the_certificate_of_anything_not_finite_is_infinite(poisoned):
     """A NaN anywhere certifies nothing (numpy's max and Python's would have passed over

@@ -26,11 +26,11 @@ from .problem import QuadraticProgram
 
 def _complementarity(multipliers: np.ndarray, values: np.ndarray, lower: np.ndarray,
                      upper: np.ndarray) -> float:
-    """The largest ``|multiplier| * slack`` to the bound its sign names."""
-    if multipliers.size == 0:
-        return 0.0
-    slack = np.where(multipliers > 0.0, upper - values, values - lower)
-    return float(np.max(np.abs(multipliers) * np.maximum(slack, 0.0)))
+    """The largest ``|multiplier| * slack`` to the bound its sign names; a zero multiplier
+    names no bound (its product with an infinite slack would be NaN, not 0)."""
+    named = multipliers != 0.0
+    slack = np.where(multipliers > 0.0, upper - values, values - lower)[named]
+    return float(np.max(np.abs(multipliers[named]) * np.maximum(slack, 0.0), initial=0.0))
 
 
 def kkt_residual(problem: QuadraticProgram, x: np.ndarray, equality_multipliers: np.ndarray,
@@ -68,4 +68,5 @@ def _kkt_residual(problem: QuadraticProgram, x: np.ndarray, equality_multipliers
                      float(np.max(problem.lower - x)))
         complementarity = max(complementarity, _complementarity(
             box_multipliers, x, problem.lower, problem.upper))
-    return max(primal, float(np.max(np.abs(stationarity))), complementarity)
+    # numpy's max, which keeps a NaN (Python's passes over one): not certified
+    return float(np.max([primal, float(np.max(np.abs(stationarity))), complementarity]))
