@@ -80,12 +80,15 @@ class Plane(Constraint):
         Give the point either as ``link_point`` (link coordinates) or as ``distance``
         metres along the robot's ``link_axis``. With ``plane_point`` given, the plane
         passes there instead; with ``offset``, ``offset`` m behind the point along the
-        unit ``normal``. A link point farther than ``tolerance`` from the plane raises
-        ``ValueError`` saying how far (a barrier's: behind it).
+        unit ``normal`` (not both: ``ValueError``). A link point farther than ``tolerance``
+        from the plane raises ``ValueError`` saying how far (a barrier's: behind it).
         """
         link, link_point, placement = link_point_at(robot, q, link, link_point, distance)
         point_world = placement.act(link_point)
         offset = as_number(offset, f"{cls.label} offset")
+        if plane_point is not None and offset != 0.0:
+            raise ValueError(f"give {cls.label} plane_point or offset, not both (the offset "
+                             "moves the plane from the link point, plane_point places it)")
         if plane_point is None:
             plane_point = point_world
             if offset != 0.0:

@@ -85,6 +85,9 @@ API = [
         robot(), robot().q_home, [0, 0, 1], distance=0.08), -1), r"^gain must be >= 0"),
     ("barrier.gain=[1]", lambda tmp: set_gain(Barrier.through_link_point(
         robot(), robot().q_home, [0, 0, 1], distance=0.08), [1.0]), r"^gain must be a number"),
+    ("plane_point and offset", lambda tmp: Plane.through_link_point(
+        robot(), robot().q_home, [0, 0, 1], distance=0.08, plane_point=[0.0, 0.0, 0.5],
+        offset=0.01), r"^give plane plane_point or offset, not both"),
     ("point_lock.gain=inf", lambda tmp: set_gain(PointLock.on_link(
         robot(), robot().q_home, distance=0.08), float("inf")), r"^gain must be finite"),
     ("Hole(gain=-500)", lambda tmp: hole(-500.0), r"^gain must be >= 0"),
