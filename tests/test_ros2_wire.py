@@ -563,7 +563,9 @@ def test_a_command_latency_out_of_range_is_refused_by_name(latency):
 
 def test_the_simulated_robot_counts_the_wires_jitter(robot, domain, peer):
     """Two commands in one period: the newest acts, one superseded; a period with none:
-    the last held; the counts as the sim reports them."""
+    the last held, counted once another command came (periods without one after the
+    last command are the loop's end, not the wire's jitter); the counts as the sim
+    reports them."""
     from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
 
     sim = SimulatedRos2Robot(robot, 500.0, settings_for(domain))
@@ -577,12 +579,48 @@ def test_the_simulated_robot_counts_the_wires_jitter(robot, domain, peer):
         q = sim.q.copy()
         sim.step()
         sim.step()
-        assert (sim.periods, sim.commands, sim.superseded, sim.held) == (2, 2, 1, 1)
+        assert (sim.periods, sim.commands, sim.superseded, sim.held) == (2, 2, 1, 0)
         np.testing.assert_allclose(sim.q, pin.integrate(robot.model, q, 2 * second / 500.0),
                                    rtol=0.0, atol=1e-15)
-        assert sim.jitter_words().startswith("2 periods, 2 commands: 1 periods held")
+        third = np.full(robot.model.nv, -0.3)
+        writer.write(Float64MultiArray(data=list(third)))
+        assert wait_for(lambda: len(sim._commands.read(64)) == 1)
+        sim.step()
+        assert (sim.periods, sim.commands, sim.superseded, sim.held) == (3, 3, 1, 1)
+        np.testing.assert_allclose(
+            sim.q, pin.integrate(robot.model, q, (2 * second + third) / 500.0),
+            rtol=0.0, atol=1e-15)
+        sim.step()
+        assert sim.jitter_words().startswith("4 periods, 3 commands: 1 periods held")
     finally:
         sim.close()
+
+
+@pytest.mark.timing
+def test_the_simulated_robots_periods_keep_to_absolute_deadlines(robot, domain):
+    """Each period's work half a period long: the periods start at ``start + k dt`` (the
+    thread sleeps to the deadline, not "one period" after its work, which would make
+    them 1.5 periods apart), so a run of 200 periods' time runs about 200 periods; and
+    the lateness the sim reports is of the periods it timed. Timing: a starved thread
+    overruns its deadlines (then the count restarts from the overrun's end)."""
+    from teleop.plants.ros2.simulated_robot import SimulatedRos2Robot
+
+    dt = 0.002
+    sim = SimulatedRos2Robot(robot, 1.0 / dt, settings_for(domain))
+    step = sim.step
+
+    def half_period_step() -> None:
+        step()
+        time.sleep(0.5 * dt)
+
+    sim.step = half_period_step  # type: ignore[method-assign]
+    try:
+        sim.run(duration=200 * dt)
+    finally:
+        sim.close()
+    print(f"{sim.periods} periods in 200 periods' time; {sim.lateness_words()}")
+    assert sim.periods >= 180  # "sleep dt" after the work: at most 134
+    assert sim.lateness_words().startswith("started after their deadlines by p50 ")
 
 
 def test_a_lockstep_robot_applies_the_answer_to_each_state_in_its_period(robot, domain, peer):

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
              if sim.port_force_writers else "")
     print(f"teleop sim: {robot.name} on ROS 2 domain {sim.node.domain}: "
           f"{settings.state_topic} at {args.rate:g} Hz, commands on {settings.commands}"
-          f"{ports}", file=sys.stderr, flush=True)
+          f"{ports}; threads {sim.realtime}", file=sys.stderr, flush=True)
     try:
         sim.run(args.duration)
     except KeyboardInterrupt:

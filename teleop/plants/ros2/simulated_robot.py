@@ -31,6 +31,7 @@ from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
 from cyclonedds.util import duration
 
 from teleop.plants.walls import wall_of
+from teleop.sleep_until import sleep_until
 
 from .joint_map import indices, model_joint_names
 from .messages import (Float64MultiArray, Header, JointState, OperatingState, Time, Vector3,
@@ -40,6 +41,11 @@ from .realtime import (OVERRUN_PERIODS, ThreadScheduling, make_realtime, schedul
                        started_realtime)
 from .names import dds_topic
 from .settings import Ros2Settings
+
+
+#: periods whose start lateness :meth:`SimulatedRos2Robot.lateness_words` sums up (the
+#: last 2 min at 500 Hz)
+LATENESS_KEPT = 1 << 16
 
 
 def port_force_topic(base: str, index: int) -> str:
@@ -92,13 +98,19 @@ class SimulatedRos2Robot:
         self.command = np.zeros(self.model.nv)  # model order, held
         self.commands = 0
         #: the wire's jitter as the robot sees it (docs/ros2.md "Measured"): periods run;
-        #: periods after the first command with no new one (the last held, acting twice);
+        #: periods between the first command and the last with no new one (the last held,
+        #: acting twice; those after the last command are the loop's end, not jitter);
         #: commands another arrived after within the same period (never acting); periods
         #: that started more than half a period late on the robot's own clock
         self.periods = 0
         self.held = 0
         self.superseded = 0
         self.late = 0
+        self._holding = 0  # periods with no new command since the last one
+        #: how late each period :meth:`run` started began after its deadline (s), the last
+        #: LATENESS_KEPT, and how many it started
+        self._lateness = np.zeros(LATENESS_KEPT)
+        self._timed = 0
         self.node, self._dds_scheduling = started_realtime(
             self.settings.realtime_priority, lambda: Ros2Node(self.settings.domain))
         #: how its threads run (the periods' thread's added by :meth:`run`)
@@ -131,7 +143,11 @@ class SimulatedRos2Robot:
                 self.commands += 1
                 taken += 1
         self.superseded += max(0, taken - 1)
-        self.held += taken == 0 and self.commands > 0
+        if taken:
+            self.held += self._holding
+            self._holding = 0
+        else:
+            self._holding += self.commands > 0
 
     def step(self) -> None:
         """One period: the state published, the newest command taken, the robot moved."""
@@ -157,8 +173,13 @@ class SimulatedRos2Robot:
 
     def run(self, duration: float | None = None) -> None:
         """Periods on the wall clock until :meth:`stop` (or ``duration`` seconds), the
-        calling thread made real-time (``settings.realtime_priority``). A physics slower
-        than the wall clock never sleeps: after
+        calling thread made real-time (``settings.realtime_priority``). Period ``k``
+        starts at ``start + k dt``: the thread sleeps to that absolute deadline
+        (:func:`~teleop.sleep_until.sleep_until`), as a ``controller_manager`` does, so
+        neither the period's work nor a late wake-up shifts the next; a period that
+        overran its deadline starts the count again from its end (no burst of periods
+        to catch up: the robot would see them as one jump). A physics slower than the
+        wall clock never sleeps: after
         :data:`~teleop.plants.ros2.realtime.OVERRUN_PERIODS` periods in a row with no
         time left the thread goes back to its own scheduling for the rest of the run, as
         the loop's does, and :attr:`realtime` says so."""
@@ -169,26 +190,43 @@ class SimulatedRos2Robot:
         deadline = start
         overruns = 0
         while not self._stop.is_set():
-            if duration is not None and time.monotonic() - start >= duration:
+            now = time.monotonic()
+            if duration is not None and now - start >= duration:
                 return
-            self.late += time.monotonic() - deadline > 0.5 * self.dt
+            lateness = now - deadline
+            self._lateness[self._timed % LATENESS_KEPT] = lateness
+            self._timed += 1
+            self.late += lateness > 0.5 * self.dt
             self.step()
-            deadline = max(deadline + self.dt, time.monotonic())
-            left = deadline - time.monotonic()
-            overruns = 0 if left > 0.0 else overruns + 1
+            deadline += self.dt
+            now = time.monotonic()
+            if deadline > now:
+                overruns = 0
+            else:
+                deadline, overruns = now, overruns + 1
             if (overruns == OVERRUN_PERIODS and scheduling_words() != ordinary
                     and before.restore()):
                 self.realtime = (f"DDS: {self._dds_scheduling}; periods: {scheduling_words()} "
                                  f"({periods} given up: {overruns} periods in a row with no "
                                  f"time left, the physics slower than the wall clock)")
-            self._stop.wait(max(0.0, left))
+            sleep_until(deadline)
+
+    def lateness_words(self) -> str:
+        """How late the periods started after their deadlines (the last
+        :data:`LATENESS_KEPT`): p50, p99 and the worst, in microseconds."""
+        kept = self._lateness[:min(self._timed, LATENESS_KEPT)]
+        if not kept.size:
+            return "no period timed"
+        p50, p99 = np.percentile(kept, (50, 99)) * 1e6
+        return (f"started after their deadlines by p50 {p50:.0f} us, p99 {p99:.0f} us, worst "
+                f"{kept.max() * 1e6:.0f} us")
 
     def jitter_words(self) -> str:
         """The jitter counts in one line."""
         return (f"{self.periods} periods, {self.commands} commands: {self.held} periods held "
                 f"the last command (none new), {self.superseded} commands superseded in "
-                f"their period, {self.late} periods started over half a period late "
-                f"(threads {self.realtime})")
+                f"their period, {self.late} periods started over half a period late, "
+                f"{self.lateness_words()} (threads {self.realtime})")
 
     def stop(self) -> None:
         """:meth:`run` returns after its period."""
