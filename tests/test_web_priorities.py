@@ -17,7 +17,7 @@ from browser_helpers import wait_for
 
 from teleop.inputs import UdpMaster
 from web.app import ControlThread, TeleopApp
-from web.app.control_thread import HOG_SHARE, HOG_WINDOW, QUIET_RETAKE
+from teleop.cpu_guard import QUIET_RETAKE, SHARE as HOG_SHARE, WINDOW as HOG_WINDOW
 from web.shared_priority import SHARED_PRIORITY, make_shared_realtime
 from web.ui import run_server
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from teleop.cpu_guard import QUIET_RETAKE, SHARE, CpuGuard, Verdict
 from teleop.heap_freeze import freeze_heap, release_heap
 from teleop.plants.ros2.realtime import (check_priority, hold_realtime, release_realtime,
                                         scheduling_words)
@@ -25,13 +26,6 @@ TIMING_WINDOW = 4096
 #: waking for its deadline waits at most about this long for the others (Python's default
 #: 5 ms would make the 1 kHz loop late by up to 5 periods whenever the view thread works)
 SWITCH_INTERVAL = 2e-4
-#: the real-time control thread's CPU time is checked over windows of this length (s)...
-HOG_WINDOW = 0.25
-#: ... and above this share of one CPU it goes back to ordinary scheduling: it would hold
-#: its core against every ordinary thread (time waiting for the GIL or the lock is no CPU)
-HOG_SHARE = 0.9
-#: ... and retakes it after this long (s) of windows under that share
-QUIET_RETAKE = 2.0
 
 
 def percentiles(columns: np.ndarray, q: float) -> np.ndarray:
@@ -83,14 +77,15 @@ class ControlThread:
     It runs ``SCHED_FIFO`` at ``realtime_priority`` (1-99; 0: ordinary scheduling), as a
     robot's control loop does: on a loaded machine an ordinary thread waits for a CPU
     behind every other process, most of a second at a time (docs/inputs.md, "Floods").
-    A thread that never sleeps would hold its core against every ordinary one: when it
-    ran more than :data:`HOG_SHARE` of a :data:`HOG_WINDOW` on a CPU it goes back to
-    ordinary scheduling, until the rate changes or its ticks ran :data:`QUIET_RETAKE` s
-    under that share. The server's other threads (:attr:`shared`) are real-time exactly
-    while this thread is: it makes them follow at every window. Over ROS 2 the plant makes the thread
-    real-time as it actuates (:class:`teleop.plants.ros2.ros2_plant.Ros2Plant`, at its
-    settings' priority) and this thread takes no hold of its own. Without the privilege
-    it stays ordinary; :attr:`scheduling` says how it runs and why.
+    A thread that never sleeps would hold its core against every ordinary one: its
+    :class:`~teleop.cpu_guard.CpuGuard` gives real-time up when its ticks took more than
+    :data:`~teleop.cpu_guard.SHARE` of a CPU over a window, until the rate changes or its
+    ticks ran :data:`~teleop.cpu_guard.QUIET_RETAKE` s under that share. The server's
+    other threads (:attr:`shared`) are real-time exactly while this thread is: it makes
+    them follow at every window. Over ROS 2 the plant makes the thread real-time as it
+    actuates (:class:`teleop.plants.ros2.ros2_plant.Ros2Plant`, at its settings'
+    priority) and this thread takes no hold of its own. Without the privilege it stays
+    ordinary; :attr:`scheduling` says how it runs and why.
     """
 
     def __init__(self, app: TeleopApp, realtime_priority: int = 0) -> None:
@@ -205,21 +200,20 @@ class ControlThread:
         """Ticks until stopped; the thread's real-time hold still in force (its id), if any."""
         held = self._hold()
         self._follow()
-        gave_up = False
-        quiet = 0.0  # how long the ticks have run under the share since it was given up
+        guard = CpuGuard()
         clock = time.perf_counter
         next_tick = clock()
         window_start, window_ticks = clock(), 0
-        hog_start, hog_cpu = clock(), time.thread_time()
         period = self.app.robots.config.dt
         while not self._stop.is_set():
             if self.app.robots.config.dt != period:  # a new rate: a new measuring window
                 period = self.app.robots.config.dt
                 window_start, window_ticks = clock(), 0
-                if gave_up:  # real-time again
-                    held, gave_up = self._hold(), False
+                if guard.given_up:  # real-time again
+                    held = self._hold()
+                    guard.taken_again()
                     self._follow()
-                hog_start, hog_cpu = clock(), time.thread_time()
+                guard.restart()
             start = clock()
             solve_us = advance_us = 0.0
             try:
@@ -244,22 +238,18 @@ class ControlThread:
                 self.achieved_rate = window_ticks / (end - window_start)
                 self._measured_rate = 1.0 / period
                 window_start, window_ticks = end, 0
-            if end - hog_start >= HOG_WINDOW:
-                share = (time.thread_time() - hog_cpu) / (end - hog_start)
-                if held is not None and share > HOG_SHARE:
-                    release_realtime(held)
-                    held, gave_up, quiet = None, True, 0.0
-                    self.scheduling = (
-                        f"{scheduling_words()} (SCHED_FIFO {self.realtime_priority} given "
-                        f"up: the ticks took {100 * share:.0f} % of a CPU; again after "
-                        f"{QUIET_RETAKE:g} s under {100 * HOG_SHARE:.0f} % or at the next "
-                        "rate)")
-                elif gave_up:
-                    quiet = quiet + (end - hog_start) if share <= HOG_SHARE else 0.0
-                    if quiet >= QUIET_RETAKE:
-                        held, gave_up = self._hold(), False
+            verdict = guard.check(held is not None)
+            if verdict is Verdict.GIVE_UP and held is not None:
+                release_realtime(held)
+                held = None
+                self.scheduling = (
+                    f"{scheduling_words()} (SCHED_FIFO {self.realtime_priority} given "
+                    f"up: the ticks took {100 * guard.share:.0f} % of a CPU; again after "
+                    f"{QUIET_RETAKE:g} s under {100 * SHARE:.0f} % or at the next rate)")
+            elif verdict is Verdict.RETAKE:
+                held = self._hold()
+            if verdict is not Verdict.MID_WINDOW:
                 self._follow()
-                hog_start, hog_cpu = end, time.thread_time()
             next_tick += period
             delay = next_tick - clock()
             if delay > 0 and self.app.ros2 is None:

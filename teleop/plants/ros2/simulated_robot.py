@@ -30,6 +30,7 @@ import pinocchio as pin
 from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
 from cyclonedds.util import duration
 
+from teleop.cpu_guard import QUIET_RETAKE, SHARE, CpuGuard, Verdict
 from teleop.plants.walls import wall_of
 from teleop.sleep_until import sleep_until
 
@@ -182,13 +183,20 @@ class SimulatedRos2Robot:
         wall clock never sleeps: after
         :data:`~teleop.plants.ros2.realtime.OVERRUN_PERIODS` periods in a row with no
         time left the thread goes back to its own scheduling for the rest of the run, as
-        the loop's does, and :attr:`realtime` says so."""
+        the loop's does. One that sleeps too little holds its core as well: the
+        :class:`~teleop.cpu_guard.CpuGuard` of the page's control thread gives real-time
+        up while the periods take more than :data:`~teleop.cpu_guard.SHARE` of a CPU,
+        until they ran :data:`~teleop.cpu_guard.QUIET_RETAKE` s under it. :attr:`realtime`
+        says how the thread runs and why."""
         before, ordinary = ThreadScheduling.of_calling_thread(), scheduling_words()
         periods = make_realtime(self.settings.realtime_priority)
+        holding = scheduling_words() != ordinary  # real-time by this call
         self.realtime = f"DDS: {self._dds_scheduling}; periods: {periods}"
+        guard = CpuGuard()
         start = time.monotonic()
         deadline = start
         overruns = 0
+        overran = False  # given up for overruns: ordinary for the rest of the run
         while not self._stop.is_set():
             now = time.monotonic()
             if duration is not None and now - start >= duration:
@@ -206,9 +214,21 @@ class SimulatedRos2Robot:
                 deadline, overruns = now, overruns + 1
             if (overruns == OVERRUN_PERIODS and scheduling_words() != ordinary
                     and before.restore()):
+                holding, overran = False, True
                 self.realtime = (f"DDS: {self._dds_scheduling}; periods: {scheduling_words()} "
                                  f"({periods} given up: {overruns} periods in a row with no "
                                  f"time left, the physics slower than the wall clock)")
+            verdict = Verdict.MID_WINDOW if overran else guard.check(holding)
+            if verdict is Verdict.GIVE_UP and before.restore():
+                holding = False
+                self.realtime = (f"DDS: {self._dds_scheduling}; periods: {scheduling_words()} "
+                                 f"({periods} given up: the periods took "
+                                 f"{100 * guard.share:.0f} % of a CPU; again after "
+                                 f"{QUIET_RETAKE:g} s under {100 * SHARE:.0f} %)")
+            elif verdict is Verdict.RETAKE:
+                periods = make_realtime(self.settings.realtime_priority)
+                holding = scheduling_words() != ordinary
+                self.realtime = f"DDS: {self._dds_scheduling}; periods: {periods}"
             sleep_until(deadline)
 
     def lateness_words(self) -> str:
