@@ -586,3 +586,33 @@ def test_a_user_type_without_a_compiled_form_runs_through_python_terms(sda10f):
     python = CJMController(sda10f, [hole, plane], backend="python")
     compiled = CJMController(sda10f, [hole, plane], backend="compiled")
     assert_same_step(python, compiled, q, np.array([0.01, 0.0, 0.0, 0.0, 0.01, 0.0]))
+
+
+class OffsetHole(Hole):
+    """A user's hole whose centre sits 2 mm off in the link's frame: its own
+    ``evaluate_local``, which ``Hole.evaluate`` calls."""
+
+    def evaluate_local(self, x: np.ndarray, f: np.ndarray | None):
+        return super().evaluate_local(x + np.array([1e-3, 2e-3, 0.0]), f)
+
+
+class OffsetPlane(Plane):
+    """A user's plane 2 mm off: its own ``signed_distance``, which ``Plane.error`` calls."""
+
+    def signed_distance(self, placement: pin.SE3) -> float:
+        return super().signed_distance(placement) + 2e-3
+
+
+def test_a_user_type_overriding_a_helper_of_the_kinds_math_runs_through_python_terms(sda10f):
+    """A subclass that overrides a method the kind's math calls (a hole's
+    ``evaluate_local``, a plane's ``signed_distance``) has no compiled form either: the
+    compiled step computed the hole's or the plane's terms for them, a command 1.6 rad/s
+    off the Python step's on ur5_instrument."""
+    q = sda10f.q_home.copy()
+    hole = OffsetHole.on_link(sda10f, q, distance=0.08)
+    plane = OffsetPlane.through_link_point(sda10f, q, [0.0, 0.0, 1.0], distance=0.05,
+                                           tolerance=5e-3)
+    assert compiled_form_of(hole) is None and compiled_form_of(plane) is None
+    python = CJMController(sda10f, [hole, plane], backend="python")
+    compiled = CJMController(sda10f, [hole, plane], backend="compiled")
+    assert_same_step(python, compiled, q, np.array([0.01, 0.0, 0.0, 0.0, 0.01, 0.0]))

@@ -25,9 +25,11 @@ from constraints import Constraint, Hole, Plane, PointLock
 #: :func:`constraints.validation.as_unit_vector` accepts it); the compiled step checks it
 UNIT_TOLERANCE = 1e-6
 
-#: the methods whose math a compiled kind repeats: a subclass overriding one of them has
-#: no compiled form (its own math runs in Python)
-COMPILED_MATH = ("point", "directions", "free_directions", "error", "feed_forward", "evaluate")
+#: the methods whose math a compiled kind repeats, and those the built-in types' own call
+#: (a hole's ``evaluate_local``, a plane's ``signed_distance``): a subclass overriding one
+#: of them has no compiled form (its own math runs in Python)
+COMPILED_MATH = ("point", "directions", "free_directions", "error", "feed_forward", "evaluate",
+                 "evaluate_local", "signed_distance")
 
 #: the constraint type a compiled form is registered for
 C = TypeVar("C", bound=Constraint)
@@ -64,8 +66,8 @@ def form_of_type(constraint_type: type[Constraint]) -> CompiledForm[Any] | None:
     """The compiled form of ``constraint_type``: its nearest registered base's, when the
     type keeps that base's :data:`COMPILED_MATH`; else None."""
     declaring = next((kind for kind in constraint_type.__mro__ if kind in COMPILED_FORMS), None)
-    if declaring is None or any(getattr(constraint_type, name) is not getattr(declaring, name)
-                                for name in COMPILED_MATH):
+    if declaring is None or any(getattr(constraint_type, name, None)
+                                is not getattr(declaring, name, None) for name in COMPILED_MATH):
         return None
     return COMPILED_FORMS[declaring]
 
