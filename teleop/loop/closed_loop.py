@@ -9,8 +9,10 @@ One tick (docs/design.md section 5), for every end effector ``i`` of ``robot.ee_
     qd      = controller.solve(q, [V_e,1; V_e,2; ...])   stacked, 6 per EE (section 11)
     q      <- pin.integrate(model, q, qd dt)             nq != nv on a mobile base
 
-and every tick records the measures of docs/design.md section 7, computed here from Pinocchio
-and the constraints themselves, not taken from the controller's own report.
+(the smoothing, the twists and their caps are the :class:`PoseServo`'s,
+:mod:`teleop.loop.pose_servo`), and every tick records the measures of docs/design.md
+section 7, computed here from Pinocchio and the constraints themselves, not taken from the
+controller's own report.
 
 A controller that can run that hot path in C++ offers it (``controller.loop_tick``, the
 CJM's compiled backend); the loop then runs a period in one call and keeps the Python
@@ -50,7 +52,8 @@ from .plant import Advance, Plant, advance_of
 from .records import CompiledPendingStep, PendingStep, StepRecord
 from .state_observer import StateObserver
 from .supervisor import Supervision, Supervisor
-from .targets import Targets, saturate_twist, target_poses
+from .pose_servo import PoseServo
+from .targets import Targets, target_poses
 from .task_modes import fit_target, task_modes as checked_task_modes, task_weight
 from .true_kinematics import TrueKinematics
 
@@ -125,14 +128,15 @@ class TeleopLoop:
         self.observer: StateObserver = self.config.state_observer.observer(
             self.model, float(getattr(plant, "encoder_noise", 0.0)), self.config.dt)
         self.t = 0.0
-        self._filtered_targets: list[pin.SE3] | None = None
-        self._previous_targets: list[pin.SE3] | None = None
+        #: the targets to the EE twists: filter, law, caps and the filter's state
+        #: (:class:`PoseServo`, docs/design.md 5.1)
+        self.servo = PoseServo(self.config, len(self.ee_frame_ids))
         #: the hot path compiled around the controller's step, when it offers one and
-        #: ``compiled_tick`` (docs/design.md 5.1); None: the Python path below
-        self.compiled = (None if not compiled_tick else self._loop_tick(controller))
+        #: ``compiled_tick`` (docs/design.md 5.1): the servo's kernel; None: the Python
+        #: path below
+        self.compiled = self.servo.attach_kernel(controller) if compiled_tick else None
         #: the supervisor reads the compiled tick's measures: its kinematics are this model's
         self._sensed_compiled = getattr(controller, "model", None) is self.model
-        self._history_in_tick = False  # the filter's state lives in self.compiled
         self.last_qd = np.zeros(self.model.nv)
         self.refused = ""  # why the controller refused the last input (ValueError), if it did
         self._labels_key: tuple[int, ...] = ()
@@ -141,25 +145,12 @@ class TeleopLoop:
         if self.distance_meter is not None:
             self.distance_meter.set_constraints(self.constraints)
 
-    def _loop_tick(self, controller):
-        """``controller.loop_tick`` for this loop's settings, or None: also when the tick
-        is another object's (a wrapper handing its attributes on, whose own ``solve`` the
-        loop must call)."""
-        loop_tick = getattr(controller, "loop_tick", None)
-        config = self.config
-        tick = None if loop_tick is None else loop_tick(
-            config.dt, config.kp, config.max_linear_speed, config.max_angular_speed,
-            config.target_time_constant, config.feed_forward)
-        return tick if tick is not None and tick.controller is controller else None
-
     # -- state -------------------------------------------------------------------------
 
     @property
     def previous_targets(self) -> list[pin.SE3] | None:
         """The filtered targets of the last period (their feed-forward), None at the start."""
-        if self._history_in_tick:
-            return self.compiled.history()[1]
-        return self._previous_targets
+        return self.servo.previous
 
     @property
     def plant(self) -> Plant | None:
@@ -206,9 +197,7 @@ class TeleopLoop:
         self.controller.reset()
         self.q = np.array(self.robot.q_home if q0 is None else q0, dtype=float)
         self.t = 0.0
-        self._filtered_targets = None
-        self._previous_targets = None
-        self._history_in_tick = False
+        self.servo.reset()
         self.last_qd = np.zeros(self.model.nv)
         self.supervisor.reset()
         self.supervision = None
@@ -221,14 +210,8 @@ class TeleopLoop:
     def hold(self, ee: int, pose: pin.SE3) -> None:
         """EE ``ee``'s filtered target and its feed-forward at ``pose``: the next command
         asks it no motion but towards ``pose`` (a watchdog's stop, docs/design.md 19.2)."""
-        if self._history_in_tick:
-            self._filtered_targets, self._previous_targets = self.compiled.history()
-        for history in (self._filtered_targets, self._previous_targets):
-            if history is not None:
-                history[ee] = pose.copy()
+        self.servo.hold(ee, pose)
         self.supervisor.hold(ee, pose)
-        if self._history_in_tick:
-            self.compiled.set_history(self._filtered_targets, self._previous_targets)
 
     # -- one tick ----------------------------------------------------------------------
 
@@ -242,38 +225,6 @@ class TeleopLoop:
             raise ValueError(f"expected {len(self.ee_frame_ids)} target poses, one per EE frame "
                              f"{list(self.robot.ee_frames)}, got {len(poses)}")
         return poses
-
-    def filter_targets(self, target: Targets) -> list[pin.SE3]:
-        """First-order smoothing on SE(3) of each EE's target (identity when
-        ``target_time_constant == 0``)."""
-        poses = self.targets(target)
-        tau = self.config.target_time_constant
-        if self._filtered_targets is None or tau == 0.0:
-            self._filtered_targets = [pose.copy() for pose in poses]
-        else:
-            alpha = 1.0 - math.exp(-self.config.dt / tau)
-            self._filtered_targets = [
-                filtered * pin.exp6(pin.log6(filtered.actInv(pose)).vector * alpha)
-                for filtered, pose in zip(self._filtered_targets, poses)]
-        return self._filtered_targets
-
-    def _pose_twists(self, placements: Sequence[pin.SE3],
-                     targets: Sequence[pin.SE3]) -> list[np.ndarray]:
-        """Each EE's body twist ``K_p log6(T_e,i^-1 T*_i) + Ad_(T_e,i^-1 T*_i) V_ff,i``
-        before the speed caps, fed forward from :attr:`previous_targets`."""
-        previous = self._previous_targets
-        twists = []
-        for i, (ee, target) in enumerate(zip(placements, targets)):
-            error = ee.actInv(target)
-            twist = self.config.kp * pin.log6(error).vector
-            if self.config.feed_forward and previous is not None:
-                target_twist = pin.log6(previous[i].actInv(target)).vector / self.config.dt
-                twist += error.action @ target_twist
-            twists.append(twist)
-        return twists
-
-    def _saturate(self, twist: np.ndarray) -> np.ndarray:
-        return saturate_twist(twist, self.config.max_linear_speed, self.config.max_angular_speed)
 
     def tick(self, target: Targets,
              advance_geometry: Callable[[float], None] | None = None) -> StepRecord:
@@ -369,19 +320,13 @@ class TeleopLoop:
             poses = [fit_target(mode, pose, pin.updateFramePlacement(self.model, self.data, frame))
                      for mode, pose, frame in zip(self.task_modes, poses, self.ee_frame_ids)]
         if ready:
-            if not self._history_in_tick:
-                compiled.set_history(self._filtered_targets, self._previous_targets)
-                self._history_in_tick = True
             try:
-                result = compiled.run(poses, sensed, self.plant is None)
+                result = self.servo.run_kernel(poses, sensed, self.plant is None)
             except ValueError:  # a declaration refused: the Python path's controlled stop
                 result = None
             if result is not None:
                 return self._supervised(self._advance_compiled(result, sensed, tick_start),
                                         supervision)
-        if self._history_in_tick:
-            self._filtered_targets, self._previous_targets = compiled.history()
-            self._history_in_tick = False
         return self._supervised(self._advance_python(poses, sensed, tick_start), supervision)
 
     def supervise(self, sensed: np.ndarray, operator_targets: list[pin.SE3],
@@ -411,22 +356,17 @@ class TeleopLoop:
         """The period in Python (the reference): Pinocchio's kinematics for the EE poses,
         the twists, the solve, ``pin.integrate``."""
         model, data = self.model, self.data
-        targets = self.filter_targets(poses)
         pin.forwardKinematics(model, data, sensed)
         placements = [pin.updateFramePlacement(model, data, frame).copy()
                       for frame in self.ee_frame_ids]
-        requested = self._pose_twists(placements, targets)
-        twists = [self._saturate(twist) for twist in requested]
-        saturated = any(capped is not twist for capped, twist in zip(twists, requested))
-        # filter_targets makes a new list of new poses every period: no copy needed
-        previous, self._previous_targets = self._previous_targets, targets
-        qd, status, message, step_time = self._solve(sensed, np.concatenate(twists))
+        servo = self.servo.period(poses, placements)
+        qd, status, message, step_time = self._solve(sensed, np.concatenate(servo.twists))
         q_before, qd, moved, status, message = self._move(sensed, qd, status, message)
         return PendingStep(
-            targets=targets, previous_targets=previous, placements=placements, twists=twists,
-            sensed=sensed, q_before=q_before, qd=qd, moved=moved,
+            targets=servo.targets, previous_targets=servo.previous, placements=placements,
+            twists=servo.twists, sensed=sensed, q_before=q_before, qd=qd, moved=moved,
             tick_time_us=(time.perf_counter_ns() - tick_start) * 1e-3, step_time_us=step_time,
-            status=status, step_message=message, twist_saturated=saturated)
+            status=status, step_message=message, twist_saturated=servo.saturated)
 
     def _advance_compiled(self, result: tuple, sensed: np.ndarray,
                           tick_start: int) -> PendingStep:
