@@ -15,10 +15,14 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from hypothesis.extra.numpy import arrays
 
+from constraints import Hole
+from constraints.base import ConstraintPoint
+from controllers import CJMController
 from teleop.controller_specs import make_controller
 from teleop.experiments.bench_loop import scenario_loop
 from teleop.experiments.scenarios import load_scenario
 from teleop.loop import LoopConfig, StepRecord, TeleopLoop
+from teleop.loop.batched_evaluation import PER_PERIOD, batched_form
 from teleop.plants.imperfect import Imperfections
 
 
@@ -197,4 +201,39 @@ def test_the_batched_measures_are_the_per_period_ones(scenario, count, split, of
     records = later.measure_all_later(periods[:split]) + later.measure_all_later(periods[split:])
     assert len(records) == count
     for record, wanted in zip(records, expected):
+        records_equal(record, wanted)
+
+
+class StiffHole(Hole):
+    """A user's hole with its own math: twice the hole's error (and its drift)."""
+
+    def evaluate(self, placement: pin.SE3) -> ConstraintPoint:
+        point = super().evaluate(placement)
+        return ConstraintPoint(point.p, point.C, point.C_perp, 2.0 * point.error,
+                               point.rhs - self.gain * point.error)
+
+    def error(self, placement: pin.SE3) -> np.ndarray:
+        return 2.0 * super().error(placement)
+
+
+@pytest.mark.parametrize("compiled_tick", [True, False])
+def test_a_subclass_with_its_own_math_is_measured_by_it_after_the_run(ur5_instrument,
+                                                                      compiled_tick):
+    """The hole's batched form is the hole's math: a subclass with its own is measured
+    period by period, and the records equal ``tick``'s (with the hole's form its constraint
+    error was half the true one)."""
+    assert batched_form(StiffHole) is PER_PERIOD and batched_form(Hole) is not PER_PERIOD
+    records = []
+    for later in (False, True):
+        hole = StiffHole.on_link(ur5_instrument, ur5_instrument.q_home, distance=0.2)
+        loop = TeleopLoop(ur5_instrument, CJMController(ur5_instrument, [hole]),
+                          compiled_tick=compiled_tick)
+        target = loop.ee_placement() * pin.exp6(np.array([0.02, -0.01, 0.01, 0.0, 0.0, 0.1]))
+        if later:
+            records.append(loop.measure_all_later([loop.tick_measured_later(target)
+                                                   for _ in range(30)]))
+        else:
+            records.append([loop.tick(target) for _ in range(30)])
+    assert records[0][-1].constraint_error > 1e-6
+    for record, wanted in zip(*reversed(records)):
         records_equal(record, wanted)
