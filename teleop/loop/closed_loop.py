@@ -49,10 +49,10 @@ from .measured_in_batches import Kinematics, measure_periods
 from .measured_later import Geometry, MeasuredLater, geometry_copy
 from .naming import constraint_names, row_labels
 from .plant import Advance, Plant, advance_of
-from .records import CompiledPendingStep, PendingStep, StepRecord
+from .pose_servo import PoseServo
+from .records import CompiledPendingStep, PendingStep, StepRecord, step_record
 from .state_observer import StateObserver
 from .supervisor import Supervision, Supervisor
-from .pose_servo import PoseServo
 from .targets import Targets, target_poses
 from .task_modes import fit_target, task_modes as checked_task_modes, task_weight
 from .true_kinematics import TrueKinematics
@@ -492,30 +492,10 @@ class TeleopLoop:
                         *(model.lowerPositionLimit - q).tolist())
         distance = (None if self.distance_meter is None
                     else self.distance_meter.measure(model, data, q))
-        return StepRecord(
-            t=t, constraint_error=error, constraint_velocity_residual=step.residual,
-            barrier_penetration=penetration, ee_position_errors=position_errors,
-            ee_orientation_errors=orientation_errors, joint_limit_violation=violation,
-            failed=step.status == "failed", step_time_us=step.step_time_us,
-            tick_time_us=step.tick_time_us,
-            constraint_velocity_floor=step.floor, twist_saturated=step.twist_saturated,
-            constraint_velocity=step.constraint_velocity,
-            constraint_velocity_labels=step.labels, drift_velocity=step.drift_velocity,
-            operator_linear_velocities=step.operator_linear_velocities,
-            commanded_linear_velocities=step.commanded_linear_velocities,
-            actual_linear_velocities=step.actual_linear_velocities,
-            constraint_errors=errors, constraint_names=names,
-            status=step.status, step_message=step.step_message,
-            controller_status=step.controller_status,
-            measured_constraint_error=step.supervision.error,
-            measured_port_force=step.supervision.port_force,
-            supervisor_scale=step.supervision.scale, supervisor_action=step.supervision.action,
-            supervisor_target_offset=step.supervision.target_offset,
-            supervisor_target_offset_angle=step.supervision.target_offset_angle,
-            plant=plant,
-            minimum_distance=math.inf if distance is None else distance.minimum_distance,
-            closest_pair="" if distance is None else distance.closest_pair,
-        )
+        return step_record(
+            step, t, error, penetration, position_errors, orientation_errors, violation, errors,
+            names, plant, math.inf if distance is None else distance.minimum_distance,
+            "" if distance is None else distance.closest_pair)
 
     def _row_labels(self) -> tuple[str, ...]:
         """:func:`row_labels` of the current constraints, recomputed when the set changes."""

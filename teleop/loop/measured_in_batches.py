@@ -30,7 +30,7 @@ from controllers.cjm.pose_rows import PERIOD_PLACEMENT, PERIOD_PREVIOUS, PERIOD_
 from .batched_evaluation import batched_form, times
 from .constraint_measures import EPSILON
 from .measured_later import Geometry, MeasuredLater
-from .records import StepRecord
+from .records import StepRecord, step_record
 
 
 #: what the measures read of each period and its step (C-level reads: once per period)
@@ -281,24 +281,12 @@ def measure_periods(kinematics: Kinematics, periods: Sequence[MeasuredLater],
             periods, error.tolist(), residual.tolist(), penetration.tolist(), list(positions),
             list(orientations), limits.tolist(), floor.tolist(), velocity, drift,
             list(operator), list(commanded), list(actual), violations):
-        step, supervision = period.step, period.step.supervision
-        assert supervision is not None  # every period the loop ran was supervised
-        records.append(StepRecord(
-            t=period.t, constraint_error=error_i, constraint_velocity_residual=residual_i,
-            barrier_penetration=penetration_i, ee_position_errors=positions_i,
-            ee_orientation_errors=orientations_i, joint_limit_violation=limit_i,
-            failed=step.status == "failed", step_time_us=step.step_time_us,
-            tick_time_us=step.tick_time_us, constraint_velocity_floor=floor_i,
-            twist_saturated=step.twist_saturated, constraint_velocity=velocity_i,
-            constraint_velocity_labels=period.command.labels, drift_velocity=drift_i,
-            operator_linear_velocities=operator_i, commanded_linear_velocities=commanded_i,
-            actual_linear_velocities=actual_i, constraint_errors=violations_i,
-            constraint_names=period.end.names, status=step.status,
-            step_message=step.step_message, controller_status=step.controller_status,
-            measured_constraint_error=supervision.error,
-            measured_port_force=supervision.port_force, supervisor_scale=supervision.scale,
-            supervisor_action=supervision.action,
-            supervisor_target_offset=supervision.target_offset,
-            supervisor_target_offset_angle=supervision.target_offset_angle,
-            plant=period.plant))
+        step = period.step  # the command's measures, into it (as TeleopLoop.measure_command)
+        step.residual, step.floor, step.labels = residual_i, floor_i, period.command.labels
+        step.constraint_velocity, step.drift_velocity = velocity_i, drift_i
+        step.operator_linear_velocities = operator_i
+        step.commanded_linear_velocities, step.actual_linear_velocities = commanded_i, actual_i
+        records.append(step_record(step, period.t, error_i, penetration_i, positions_i,
+                                   orientations_i, limit_i, violations_i, period.end.names,
+                                   period.plant))
     return records

@@ -115,6 +115,40 @@ class StepRecord:
         return self.actual_linear_velocities[0]
 
 
+def step_record(step: PendingStep, t: float, constraint_error: float,
+                barrier_penetration: float, ee_position_errors: np.ndarray,
+                ee_orientation_errors: np.ndarray, joint_limit_violation: float,
+                constraint_errors: np.ndarray, constraint_names: tuple[str, ...],
+                plant: object | None, minimum_distance: float = math.inf,
+                closest_pair: str = "") -> StepRecord:
+    """The record of ``step``, a supervised period with its command's measures in it
+    (:meth:`TeleopLoop.measure_command`, or the batch's), at time ``t`` with the measures
+    at the end of the period (:class:`StepRecord`'s fields of the same names; ``plant``:
+    the plant's own measures). The one place a record is made of a step."""
+    supervision = step.supervision
+    assert supervision is not None  # every period the loop ran was supervised
+    return StepRecord(
+        t=t, constraint_error=constraint_error,
+        constraint_velocity_residual=step.residual, barrier_penetration=barrier_penetration,
+        ee_position_errors=ee_position_errors, ee_orientation_errors=ee_orientation_errors,
+        joint_limit_violation=joint_limit_violation, failed=step.status == "failed",
+        step_time_us=step.step_time_us, tick_time_us=step.tick_time_us,
+        constraint_velocity_floor=step.floor, twist_saturated=step.twist_saturated,
+        constraint_velocity=step.constraint_velocity, constraint_velocity_labels=step.labels,
+        drift_velocity=step.drift_velocity,
+        operator_linear_velocities=step.operator_linear_velocities,
+        commanded_linear_velocities=step.commanded_linear_velocities,
+        actual_linear_velocities=step.actual_linear_velocities,
+        constraint_errors=constraint_errors, constraint_names=constraint_names,
+        status=step.status, step_message=step.step_message,
+        controller_status=step.controller_status,
+        measured_constraint_error=supervision.error, measured_port_force=supervision.port_force,
+        supervisor_scale=supervision.scale, supervisor_action=supervision.action,
+        supervisor_target_offset=supervision.target_offset,
+        supervisor_target_offset_angle=supervision.target_offset_angle, plant=plant,
+        minimum_distance=minimum_distance, closest_pair=closest_pair)
+
+
 @dataclass
 class PendingStep:
     """One period as :meth:`TeleopLoop.advance` ran it (the hot path), then its command's
