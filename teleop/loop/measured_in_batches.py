@@ -223,7 +223,8 @@ def measure_ends(kinematics: Kinematics, periods: Sequence[MeasuredLater],
     violations = [np.zeros((count, 0))]
     for j, constraint in enumerate(geometries[0].constraints):
         constraints = list(map(operator.itemgetter(j), map(CONSTRAINTS, geometries)))
-        violation = batched_form(type(constraint)).violation(
+        kind: type[Constraint] = type(constraint)
+        violation = batched_form(kind).violation(
             constraints, placements[:, ees + j, :3, :3], placements[:, ees + j, :3, 3])
         violations.append(violation[:, None])
         if constraint.is_equality:
