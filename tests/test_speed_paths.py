@@ -74,6 +74,40 @@ def test_hole_rows_equal_the_generic_rows(robot):
         hole.move_to(hole.center)
 
 
+#: where a user's hole reads its centre, off the true one in its link's frame (m)
+SHIFT = np.array([1e-3, 2e-3, 0.0])
+
+
+class ShiftedHole(Hole):
+    """A user's hole with its own ``evaluate``: its centre read :data:`SHIFT` off in the
+    link's frame."""
+
+    def evaluate(self, placement: pin.SE3):
+        return self.evaluate_local(placement.actInv(self.center) + SHIFT, None)
+
+    def error(self, placement: pin.SE3) -> np.ndarray:
+        return self.evaluate(placement).error
+
+
+@pytest.mark.parametrize("backend", ["python", "compiled"])
+def test_a_subclass_with_its_own_evaluate_is_held_by_it(ur5_instrument, backend):
+    """No affine form for a subclass with its own math: its command is the one for a plain
+    hole whose centre is where the subclass reads it (the hole's affine form evaluated it
+    as a plain hole at its own centre, ignoring its evaluate: both backends' commands
+    1.57 rad/s off this one)."""
+    robot, q = ur5_instrument, ur5_instrument.q_home
+    shifted = ShiftedHole.on_link(robot, q, distance=0.2)
+    assert affine_form_of(shifted) is None
+    data = kinematics(robot, q)
+    placement = data.oMf[robot.model.getFrameId(shifted.link)]
+    plain = Hole(shifted.link, placement.act(placement.actInv(shifted.center) + SHIFT),
+                 link_axis=shifted.link_axis, gain=shifted.gain)
+    twist = np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0])
+    expected = CJMController(robot, [plain], backend="python").solve(q, twist)
+    actual = CJMController(robot, [shifted], backend=backend).solve(q, twist)
+    np.testing.assert_allclose(actual, expected, rtol=0.0, atol=1e-9)
+
+
 def test_changing_the_gain_after_a_solve_is_seen(sda10f):
     q = near_home(sda10f, np.random.default_rng(2))
     hole = Hole.on_link(sda10f, q, distance=0.08)

@@ -6,7 +6,9 @@ A type registers an :class:`AffineForm` here (:func:`register_affine_form`): its
 ``anchor`` ``[x_w; f_w]`` (6,), a world point and its world velocity, and its evaluation as
 a function of ``x = T_a^-1 x_w`` and ``f = R_a^T f_w`` (``p``, ``error`` and ``rhs`` affine
 in ``(x, f)`` at a fixed gain, ``C`` and ``C_perp`` constant). The lookup walks the type's
-bases; a type without one is evaluated at every step.
+bases, and a subclass that overrides a method of its base's math
+(:func:`constraints.math_methods.keeps_math`) has no form, as a type without one: it is
+evaluated at every step, by its own math.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint, ConstraintPoint, Hole
+from constraints.math_methods import keeps_math
 
 #: the constraint type an affine form is registered for
 C = TypeVar("C", bound=Constraint, contravariant=True)
@@ -54,17 +57,19 @@ AFFINE_FORMS: dict[type[Constraint], AffineForm[Any]] = {}
 
 
 def register_affine_form(constraint_type: type[C], form: AffineForm[C]) -> None:
-    """Precompute the terms of ``constraint_type`` (and of its subclasses) through ``form``."""
+    """Precompute the terms of ``constraint_type`` (and of its subclasses that keep its
+    math) through ``form``."""
     AFFINE_FORMS[constraint_type] = form
 
 
 def affine_form_of(constraint: Constraint) -> AffineForm[Any] | None:
-    """The affine form of ``constraint``'s type, or None."""
-    for kind in type(constraint).__mro__:
-        form = AFFINE_FORMS.get(kind)
-        if form is not None:
-            return form
-    return None
+    """The affine form of ``constraint``'s type (its nearest registered base's, when the
+    type keeps that base's math), or None."""
+    kind = type(constraint)
+    declaring = next((base for base in kind.__mro__ if base in AFFINE_FORMS), None)
+    if declaring is None or not keeps_math(kind, declaring):
+        return None
+    return AFFINE_FORMS[declaring]
 
 
 def affine_inputs(form: AffineForm[Any], constraint: Constraint,

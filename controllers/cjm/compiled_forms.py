@@ -6,9 +6,9 @@ registers a :class:`CompiledForm` (:func:`register_compiled_form`): the extensio
 its terms and its parameters as one float64 array taken from its fields (each kind's
 layout in ``controllers/cjm/_step/terms.hpp``). The step takes the parameters again
 whenever the constraint's ``revision`` is replaced (:mod:`constraints.revision`). The
-lookup walks the type's bases; a subclass that overrides a method of
-:data:`COMPILED_MATH` gets no form (the kind's math would not be its math: Python writes
-its terms), nor does a type registered nowhere.
+lookup walks the type's bases; a subclass that overrides a method of its math
+(:func:`constraints.math_methods.keeps_math`) gets no form (the kind's math would not be
+its math: Python writes its terms), nor does a type registered nowhere.
 """
 
 from __future__ import annotations
@@ -20,16 +20,11 @@ from typing import Any, Callable, Generic, TypeVar
 import numpy as np
 
 from constraints import Constraint, Hole, Plane, PointLock
+from constraints.math_methods import keeps_math
 
 #: how far from 1 the norm of a declared axis or normal may be (as
 #: :func:`constraints.validation.as_unit_vector` accepts it); the compiled step checks it
 UNIT_TOLERANCE = 1e-6
-
-#: the methods whose math a compiled kind repeats, and those the built-in types' own call
-#: (a hole's ``evaluate_local``, a plane's ``signed_distance``): a subclass overriding one
-#: of them has no compiled form (its own math runs in Python)
-COMPILED_MATH = ("point", "directions", "free_directions", "error", "feed_forward", "evaluate",
-                 "evaluate_local", "signed_distance")
 
 #: the constraint type a compiled form is registered for
 C = TypeVar("C", bound=Constraint)
@@ -64,10 +59,9 @@ def register_compiled_form(constraint_type: type[C], form: CompiledForm[C]) -> N
 @cache
 def form_of_type(constraint_type: type[Constraint]) -> CompiledForm[Any] | None:
     """The compiled form of ``constraint_type``: its nearest registered base's, when the
-    type keeps that base's :data:`COMPILED_MATH`; else None."""
+    type keeps that base's math (:func:`~constraints.math_methods.keeps_math`); else None."""
     declaring = next((kind for kind in constraint_type.__mro__ if kind in COMPILED_FORMS), None)
-    if declaring is None or any(getattr(constraint_type, name, None)
-                                is not getattr(declaring, name, None) for name in COMPILED_MATH):
+    if declaring is None or not keeps_math(constraint_type, declaring):
         return None
     return COMPILED_FORMS[declaring]
 

@@ -8,21 +8,21 @@ A type registers its :class:`BatchedForm` here (:func:`register_batched_form`): 
 arithmetic as its ``evaluate`` and ``violation``, one numpy call over every period instead of
 one per period, the same numbers bit for bit (``tests/test_loop_measures.py``). A type
 without one (nor any base with one), or one overriding a method of that base's math
-(:data:`BATCHED_MATH`), is evaluated period by period (:data:`PER_PERIOD`), the same
-numbers at Python's cost per call.
+(:func:`constraints.math_methods.keeps_math`, ``violation`` too), is evaluated period by
+period (:data:`PER_PERIOD`), the same numbers at Python's cost per call.
 """
 
 from __future__ import annotations
 
 import operator
 from dataclasses import dataclass
-from functools import cache
 from typing import Any, Generic, Protocol, Sequence, TypeVar
 
 import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint, Hole
+from constraints.math_methods import keeps_math
 
 C = TypeVar("C", bound=Constraint)
 C_contra = TypeVar("C_contra", bound=Constraint, contravariant=True)
@@ -137,27 +137,22 @@ class HoleForm:
 BATCHED_FORMS: dict[type[Constraint], BatchedForm[Any]] = {}
 PER_PERIOD: PerPeriod[Constraint] = PerPeriod()
 
-#: the methods whose math a batched form repeats, and those the built-in types' own call
-#: (a hole's ``evaluate_local``, a plane's ``signed_distance``): a subclass overriding one
-#: of them is evaluated period by period, by its own math
-BATCHED_MATH = ("point", "directions", "free_directions", "error", "feed_forward", "evaluate",
-                "evaluate_local", "signed_distance", "violation")
+#: what a batched form repeats beyond a constraint's evaluation: its ``violation``
+BATCHED_MATH = ("violation",)
 
 
 def register_batched_form(constraint_type: type[C], form: BatchedForm[C]) -> None:
     """Evaluate the constraints of ``constraint_type`` (or of a subclass without its own
     form or math) over many periods with ``form``."""
     BATCHED_FORMS[constraint_type] = form
-    batched_form.cache_clear()
 
 
-@cache
 def batched_form(constraint_type: type[Constraint]) -> BatchedForm[Any]:
     """The batched form of ``constraint_type``: its nearest registered base's, when the
-    type keeps that base's :data:`BATCHED_MATH`; else :data:`PER_PERIOD`."""
+    type keeps that base's math (:func:`~constraints.math_methods.keeps_math`) and
+    :data:`BATCHED_MATH`; else :data:`PER_PERIOD`."""
     declaring = next((kind for kind in constraint_type.__mro__ if kind in BATCHED_FORMS), None)
-    if declaring is None or any(getattr(constraint_type, name, None)
-                                is not getattr(declaring, name, None) for name in BATCHED_MATH):
+    if declaring is None or not keeps_math(constraint_type, declaring, BATCHED_MATH):
         return PER_PERIOD
     return BATCHED_FORMS[declaring]
 
