@@ -14,7 +14,7 @@ from example_robots import EXAMPLE_ARMS, bounded_margins, singular_values
 from constraints import Hole
 from controllers import CJMController, QPController
 from teleop import load_robot
-from teleop.loop.closed_loop import LoopConfig, TeleopLoop, saturate_twist
+from teleop.loop import LoopConfig, TeleopLoop, saturate_twist
 from teleop.robots.catalog import example_robot_data_share
 
 EXACT = dict(singular_threshold=0.0, velocity_limits=False, position_limits=False)
