@@ -31,21 +31,26 @@ from constraints.collision import CollisionRows
 
 from ..base import StepStatus, checked_inputs
 from ..joint_acceleration import DAMPER_BRAKING_SHARE, braked_pairs
-from ._step import EVENTS, JointBox, Pipeline, Report, Step, Tolerances
+from . import _step
+from ._step import JointBox, Pipeline, Report, Step, Tolerances
 from ._step import ConstraintPlan as CompiledPlan
 from .compiled_forms import UNIT_TOLERANCE, compiled_form_of
 from .analytical import TermsWriter, terms_size
 from .compiled_collisions import CompiledCollisions
 from .python_step import paper_form_defined
 from .pose_rows import row_views
-from .report import EVENT_BY_CODE, METHODS, Event, StepReport
+from .report import EVENT_BY_CODE, METHODS, Event, StepReport, code_mismatches
 from .step_setup import StepSetup
 from .tolerances import PAPER_FORM_MIN_A
 
 #: StepStatus by the C++ code (the enum's order, best to worst)
 STATUSES = tuple(StepStatus)
-if any(Event[name.upper()] != code for name, code in EVENTS.items()):
-    raise ImportError("controllers.cjm._step reports other events: rebuild it (pip install -e .)")
+# the C++ codes (_step/report.hpp) are the ones controllers.cjm.report reads
+_MISMATCHES = code_mismatches(*(getattr(_step, name, {}) for name in
+                                ("EVENTS", "STATUSES", "METHODS")))
+if _MISMATCHES:
+    raise ImportError("controllers.cjm._step's codes are not controllers.cjm.report's: "
+                      f"{'; '.join(_MISMATCHES)} (rebuild it: pip install -e .)")
 
 #: largest difference (m, or 1 for rotations and Jacobians) the copy of the model may
 #: show against Pinocchio's Python kinematics when it is built

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 from constraints.collision import CollisionRows
 
@@ -22,8 +22,9 @@ from ..linalg import RANK_TOLERANCE
 
 class Event(IntEnum):
     """What happened in a step and the figures it carries as ``(a, b, c)``; the C++
-    ``cjm::Event`` has the same codes up to ``NON_FINITE`` (the last two are recorded by
-    Python alone)."""
+    ``cjm::Event`` (``_step/report.hpp``'s ``CJM_EVENTS``) has the same names and codes but
+    ``PAPER_FORM_UNDEFINED`` and ``LINEAR_ALGEBRA_ERROR``, which Python alone records
+    (:func:`code_mismatches` compares them when the extension is imported)."""
 
     PRE_CHAIN_SINGULAR = 1  # the analytical form handed over to the general form
     TASK_RESIDUAL = 2       # a: damping, b: twist residual
@@ -43,8 +44,10 @@ class Event(IntEnum):
 
 #: Event by its code (the C++ report's event log holds codes)
 EVENT_BY_CODE = {event.value: event for event in Event}
-#: SolveInfo.method by its code in the C++ report (0: none yet)
+#: SolveInfo.method by its code in the C++ report (0: none yet, the C++ ``none``)
 METHODS = ("", "analytical", "general", "saturated")
+#: the C++ name of METHODS[0], the step that has not chosen a method yet
+NO_METHOD = "none"
 
 PRE_CHAIN_SINGULAR_NOTE = "pre-constraint chain singular: general form used"
 NO_FREE_JOINT_NOTE = "the constraints leave no joint free for the task"
@@ -94,6 +97,27 @@ class StepReport:
         """The step failed (its command is zero)."""
         self.status, self.error = StepStatus.FAILED, error
         self.events += ((event, 0.0, 0.0, 0.0),)
+
+
+def code_mismatches(events: Mapping[str, int], statuses: Mapping[str, int],
+                    methods: Mapping[str, int]) -> list[str]:
+    """How the compiled step's codes (``controllers.cjm._step``'s ``EVENTS``, ``STATUSES``
+    and ``METHODS``: name -> code, from ``_step/report.hpp``) differ from this module's:
+    every C++ event is an :class:`Event` of the same name (upper case) and code, the
+    statuses are :class:`~controllers.base.StepStatus`'s values by its order, the methods
+    :data:`METHODS` by index (:data:`NO_METHOD` for ``""``). Empty when they agree."""
+    mismatches = []
+    for name, code in events.items():
+        event = Event.__members__.get(name.upper())
+        if event is None or event.value != code:
+            python = "no such event" if event is None else f"{event.name} = {event.value}"
+            mismatches.append(f"event {name} = {code} in C++, {python} in Python")
+    for kind, compiled, python_codes in (
+            ("status", statuses, {status.value: code for code, status in enumerate(StepStatus)}),
+            ("method", methods, {method or NO_METHOD: code for code, method in enumerate(METHODS)})):
+        if dict(compiled) != python_codes:
+            mismatches.append(f"{kind} codes {dict(compiled)} in C++, {python_codes} in Python")
+    return mismatches
 
 
 def solve_info(report: StepReport, joint_names: Sequence[str]) -> SolveInfo:

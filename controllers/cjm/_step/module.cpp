@@ -564,23 +564,7 @@ PYBIND11_MODULE(_step, module) {
   module.attr("TICK_REFUSED") = static_cast<int>(kTickRefused);
   module.attr("TICK_NOT_FINITE") = static_cast<int>(kTickNotFinite);
 
-  module.attr("Report") = py::reinterpret_borrow<py::object>(
-      reinterpret_cast<PyObject*>(cjm_report::report_type()));
-
-  py::dict events;
-  events["pre_chain_singular"] = static_cast<int>(cjm::Event::pre_chain_singular);
-  events["task_residual"] = static_cast<int>(cjm::Event::task_residual);
-  events["conflict"] = static_cast<int>(cjm::Event::conflict);
-  events["no_free_joint"] = static_cast<int>(cjm::Event::no_free_joint);
-  events["rows_scaled"] = static_cast<int>(cjm::Event::rows_scaled);
-  events["task_missed"] = static_cast<int>(cjm::Event::task_missed);
-  events["task_scaled"] = static_cast<int>(cjm::Event::task_scaled);
-  events["clipped"] = static_cast<int>(cjm::Event::clipped);
-  events["residual"] = static_cast<int>(cjm::Event::residual);
-  events["no_convergence"] = static_cast<int>(cjm::Event::no_convergence);
-  events["non_finite"] = static_cast<int>(cjm::Event::non_finite);
-  events["pair_conflict"] = static_cast<int>(cjm::Event::pair_conflict);
-  module.attr("EVENTS") = events;
+  cjm_report::bind(module);
   module.attr("JOINT_KINDS") = cjm::joint_kinds();
   cjm_collision::bind(module);
 }

@@ -11,28 +11,38 @@
 
 namespace cjm {
 
-//! controllers.base.StepStatus, best to worst.
-enum class Status : int { ok = 0, scaled, least_squares, constraint_degraded, failed };
+//! The codes Python reads (report_bindings.hpp binds each list as a dict name -> code, and
+//! controllers/cjm/compiled.py checks them against controllers.cjm.report at import): each
+//! name and code is written once, here.
+//! controllers.base.StepStatus by its order, best to worst: STATUS(name), codes from 0.
+#define CJM_STATUSES(STATUS) \
+  STATUS(ok) STATUS(scaled) STATUS(least_squares) STATUS(constraint_degraded) STATUS(failed)
+//! SolveInfo.method (controllers.cjm.report.METHODS by code; none: ""): METHOD(name), from 0.
+#define CJM_METHODS(METHOD) METHOD(none) METHOD(analytical) METHOD(general) METHOD(saturated)
+//! What happened in a step, in order: EVENT(name, code); Python words them into
+//! SolveInfo.message (controllers.cjm.report.Event has the same names and codes, and two
+//! codes of its own, 12 and 13, that the Python step alone records).
+#define CJM_EVENTS(EVENT)                                                                   \
+  EVENT(pre_chain_singular, 1) /* the note replaces the message, as in the Python */        \
+  EVENT(task_residual, 2)      /* a: damping, b: twist residual */                          \
+  EVENT(conflict, 3)           /* a: rank, b: rows, c: least-squares residual */            \
+  EVENT(no_free_joint, 4)                                                                   \
+  EVENT(rows_scaled, 5)        /* a: the rows' scale */                                     \
+  EVENT(task_missed, 6)        /* a: sigma_min, b: damping; joints: saturation_joints() */  \
+  EVENT(task_scaled, 7)        /* a: limiting joint, b: task scale */                       \
+  EVENT(clipped, 8)            /* a: largest change; the joints: saturated_joints() */      \
+  EVENT(residual, 9)           /* a: equality residual */                                   \
+  EVENT(no_convergence, 10)    /* failed */                                                 \
+  EVENT(non_finite, 11)        /* failed */                                                 \
+  EVENT(pair_conflict, 14)     /* a: collision row, b: shortfall below the rows before it */
 
-//! SolveInfo.method (controllers.cjm.report.METHODS by code).
-enum class Method : int { none = 0, analytical, general, saturated };
-
-//! What happened in a step, in order; Python words them into SolveInfo.message
-//! (controllers.cjm.report.Event has the same codes).
-enum class Event : int {
-  pre_chain_singular = 1,  // the note replaces the message, as in the Python
-  task_residual,           // a: damping, b: twist residual
-  conflict,                // a: rank, b: rows, c: least-squares residual
-  no_free_joint,
-  rows_scaled,             // a: the rows' scale
-  task_missed,             // a: sigma_min, b: damping; the joints: saturation_joints()
-  task_scaled,             // a: limiting joint, b: task scale
-  clipped,                 // a: largest change; the joints: saturated_joints()
-  residual,                // a: equality residual
-  no_convergence,          // failed
-  non_finite,              // failed
-  pair_conflict = 14,      // a: collision row, b: shortfall below the rows before it
-};
+#define CJM_ENUMERATOR(name) name,
+#define CJM_CODED_ENUMERATOR(name, code) name = code,
+enum class Status : int { CJM_STATUSES(CJM_ENUMERATOR) };
+enum class Method : int { CJM_METHODS(CJM_ENUMERATOR) };
+enum class Event : int { CJM_EVENTS(CJM_CODED_ENUMERATOR) };
+#undef CJM_CODED_ENUMERATOR
+#undef CJM_ENUMERATOR
 
 //! The report's fields, each once: FIELD(type, name, value before a step, what it holds).
 #define CJM_STEP_REPORT(FIELD)                                                              \

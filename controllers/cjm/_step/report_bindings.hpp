@@ -1,5 +1,6 @@
 // The Python type of the compiled step's report (report.hpp), for module.cpp: a named
-// tuple whose fields are CJM_STEP_REPORT's, and a step's report as one.
+// tuple whose fields are CJM_STEP_REPORT's, a step's report as one, and the codes of its
+// statuses, methods and events (CJM_STATUSES, CJM_METHODS, CJM_EVENTS) as dicts.
 #pragma once
 
 #include <pybind11/pybind11.h>
@@ -45,6 +46,26 @@ inline pybind11::object report_of(const cjm::Report& report) {
   CJM_STEP_REPORT(CJM_REPORT_ITEM)
 #undef CJM_REPORT_ITEM
   return result;
+}
+
+//! Binds Report (report_type()) and the codes from report.hpp's lists, each a dict name ->
+//! code: STATUSES, METHODS and EVENTS (controllers/cjm/compiled.py checks them at import).
+inline void bind(pybind11::module_& module) {
+  module.attr("Report") = pybind11::reinterpret_borrow<pybind11::object>(
+      reinterpret_cast<PyObject*>(report_type()));
+  pybind11::dict statuses, methods, events;
+#define CJM_STATUS_CODE(name) statuses[#name] = static_cast<int>(cjm::Status::name);
+#define CJM_METHOD_CODE(name) methods[#name] = static_cast<int>(cjm::Method::name);
+#define CJM_EVENT_CODE(name, code) events[#name] = static_cast<int>(cjm::Event::name);
+  CJM_STATUSES(CJM_STATUS_CODE)
+  CJM_METHODS(CJM_METHOD_CODE)
+  CJM_EVENTS(CJM_EVENT_CODE)
+#undef CJM_EVENT_CODE
+#undef CJM_METHOD_CODE
+#undef CJM_STATUS_CODE
+  module.attr("STATUSES") = statuses;
+  module.attr("METHODS") = methods;
+  module.attr("EVENTS") = events;
 }
 
 }  // namespace cjm_report
