@@ -20,7 +20,7 @@ from constraints import Constraint
 from constraints.validation import as_number
 from teleop.limits import MAX_PATH_AMPLITUDE_M, MAX_TROCAR_SHIFT_M
 from teleop.loop import Targets
-from teleop.loop.closed_loop import target_poses
+from teleop.loop.targets import target_poses
 from teleop.robots import Robot
 from teleop.seeds import stream
 

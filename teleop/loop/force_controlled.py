@@ -8,7 +8,7 @@ last reading handed to :meth:`ForceControlled.sense` (tool frame), and calls the
 controller it wraps. Everything else (``info``, ``constraints``, ``twist_weight``, the
 damping policy...) is the wrapped controller's, read and written through. Its
 ``loop_tick`` belongs to the wrapped controller, so the loop takes the Python path (the
-compiled hot path would skip the law; :meth:`TeleopLoop._loop_tick`).
+compiled hot path would skip the law; :meth:`PoseServo.attach_kernel`).
 """
 
 from __future__ import annotations
