@@ -4,7 +4,9 @@ log6/exp6, its hold, its state handed to and from the compiled tick, and bad inp
 
 from __future__ import annotations
 
+import ast
 import math
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -159,3 +161,19 @@ def test_bad_input_is_a_value_error() -> None:
     with pytest.raises(ValueError, match="no kernel"):
         servo.run_kernel(one * 2, np.zeros(6), True)
     assert servo.filtered is None and servo.previous is None  # nothing ran
+
+
+def test_the_servo_alone_hands_the_state_to_and_from_the_kernel() -> None:
+    """No module but the servo calls the kernel's ``history()`` or ``set_history``: the
+    filter's state has one keeper (docs/design.md 5.1)."""
+    root = Path(__file__).resolve().parent.parent
+    callers = set()
+    for package in ("constraints", "controllers", "teleop", "web"):
+        for path in (root / package).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                        and (node.func.attr == "set_history"
+                             or node.func.attr == "history" and not node.args)):
+                    callers.add(path.relative_to(root).as_posix())
+    # the compiled tick's own set_history hands the flags on to the C++ Tick
+    assert callers == {"teleop/loop/pose_servo.py", "controllers/cjm/compiled_tick.py"}

@@ -123,7 +123,8 @@ class CompiledTick:
             self.controller.take_report(step.last_report(paper_form))
         return result
 
-    # -- the filter's state, handed over to and from the loop's Python path -----------
+    # -- the filter's state, handed over to and from the loop's Python path by its pose
+    # -- servo (teleop.loop.pose_servo.PoseServo), the one caller of these two --------
 
     def history(self) -> tuple[list[pin.SE3] | None, list[pin.SE3] | None]:
         """The filtered targets and the previous period's, as poses (None: none yet)."""
