@@ -20,6 +20,10 @@ walking from ``qd_prev`` (brought into the box) and never leaving the box:
    that point is reached release a held joint whose reduced gradient points into its
    box. It ends at the box's optimum of the damped task, the QP's first stage.
 
+Only a joint that can move is released: one with room in its box beyond rounding and, at
+level 2, whose column of the rows the free joints' columns give (:func:`column_outside`);
+releasing another held it again at once, a cycle to the iteration cap.
+
 Every iterate of level 2 is a convex combination of points that hold the rows and lies in
 the box, and the result moves continuously with ``q``, the twist and the box.
 """
@@ -30,6 +34,7 @@ import numpy as np
 
 from ..base import TWIST_TOLERANCE
 from ..linalg import DampingPolicy, nullspace
+from ..numerics import RANK_TOLERANCE
 from ..optimization.task_damping import task_damping
 from .saturation import Saturation, gap_to_bound, solve_over_free
 from .tolerances import (AT_BOUND, BOX_MARGIN, RELEASE_TOLERANCE, ROWS_TOLERANCE,
@@ -123,18 +128,41 @@ def _task_wrong_side(rows: np.ndarray, task: np.ndarray, task_rhs: np.ndarray,
     gradient is ``g_i + a_i^T mu = g_i - (A_F^+ a_i)^T g_F``."""
     gradient = task.T @ (task @ point - task_rhs)
     reduced = gradient.copy()
-    if rows.shape[0] and free.any():
-        _, rows_pinv, _ = nullspace(rows[:, free])
-        reduced -= (rows_pinv @ rows).T @ gradient[free]
+    if rows.shape[0]:
+        weights = np.zeros((int(free.sum()), rows.shape[1]))  # A_F^+ a_i, per joint i
+        if free.any():
+            _, rows_pinv, _ = nullspace(rows[:, free])
+            weights = rows_pinv @ rows
+        reduced -= weights.T @ gradient[free]
+        reduced[column_outside(rows, weights, free)] = 0.0
     tolerance = RELEASE_TOLERANCE * (1.0 + float(np.max(np.abs(gradient))))
     return _inward(reduced, point, lower, upper, free, tolerance)
+
+
+def column_outside(rows: np.ndarray, weights: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """The joints whose column ``a_i`` of the rows the free joints' columns cannot give:
+    ``|A_F A_F^+ a_i - a_i| > RANK_TOLERANCE (1 + max |A|)`` (``weights = A_F^+ A``). Such a
+    joint cannot move alone while the rows hold: no direction of the walk releases it, and
+    its reduced gradient is not defined (the rows' multipliers are not unique along the
+    component), so releasing it would hold it again at once, a cycle (docs/design.md 9.1)."""
+    reached = rows[:, free] @ weights
+    tolerance = RANK_TOLERANCE * (1.0 + float(np.max(np.abs(rows), initial=0.0)))
+    return np.max(np.abs(reached - rows), axis=0, initial=0.0) > tolerance
 
 
 def _inward(gradient: np.ndarray, point: np.ndarray, lower: np.ndarray, upper: np.ndarray,
             free: np.ndarray, tolerance: float) -> int:
     """The held joint at a bound whose ``-gradient`` points into its box the most, beyond
-    ``tolerance`` (-1: none)."""
-    inward = np.where(point >= upper, gradient, np.where(point <= lower, -gradient, -np.inf))
+    ``tolerance`` (-1: none). A joint without room in its box beyond rounding (a window of
+    width zero, :func:`controllers.cjm.saturation.gap_to_bound`) is never released: the
+    walk would hold it again at once, a cycle to the iteration cap."""
+    noise = float(np.max(np.abs(point), initial=0.0))
+    room_down = np.array([gap_to_bound(bound, value, noise) < 0.0
+                          for bound, value in zip(lower.tolist(), point.tolist())])
+    room_up = np.array([gap_to_bound(bound, value, noise) > 0.0
+                        for bound, value in zip(upper.tolist(), point.tolist())])
+    inward = np.where((point >= upper) & room_down, gradient,
+                      np.where((point <= lower) & room_up, -gradient, -np.inf))
     inward[free] = -np.inf
     joint = int(np.argmax(inward))
     return joint if inward[joint] > tolerance else -1
@@ -164,15 +192,18 @@ def _walk(point: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndar
 def _walk_result(qd: np.ndarray, rows_scale: float, free: np.ndarray, limiting_joint: int,
                  jacobian: np.ndarray, twist: np.ndarray, sigma_min: float,
                  damping: float) -> Saturation:
-    """The walk's command and what it gives of the twist: the scale ``s`` of the twist
-    along which ``J qd`` lies when it does (``scaled``), else a least-squares task."""
+    """The walk's command and what it gives of the twist: all of it when ``J qd`` meets
+    the twist to the twist tolerance (``s = 1``), else the scale ``s`` of the twist along
+    which ``J qd`` lies when it does (``scaled``), else a least-squares task. The share
+    ``J qd . V / |V|^2`` of a met twist is 1 only up to rounding: the status must not
+    depend on it (docs/design.md 9.1)."""
     achieved = jacobian @ qd
-    twist_norm = float(twist @ twist)
-    if twist_norm > 0.0:
-        task_scale = min(max(float(achieved @ twist) / twist_norm, 0.0), 1.0)
-    else:
-        task_scale = 1.0
     tolerance = TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(twist), initial=0.0)))
+    twist_norm = float(twist @ twist)
+    if float(np.max(np.abs(achieved - twist), initial=0.0)) <= tolerance or twist_norm == 0.0:
+        task_scale = 1.0
+    else:
+        task_scale = min(max(float(achieved @ twist) / twist_norm, 0.0), 1.0)
     missed = float(np.max(np.abs(achieved - task_scale * twist), initial=0.0)) > tolerance
     return Saturation(qd, task_scale, rows_scale, tuple(np.flatnonzero(~free).tolist()),
                       limiting_joint, missed, sigma_min, damping)

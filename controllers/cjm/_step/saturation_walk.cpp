@@ -91,26 +91,41 @@ Index Step::task_wrong_side(const Eigen::Ref<const RowMatrix>& task,
     columns_.col(n_free).head(m) = rows_.col(j).head(m);
     gradient_free_(n_free++) = gradient_(j);
   }
-  if (m > 0 && n_free > 0) {  // g_i + a_i^T mu = g_i - (A_F^+ a_i)^T g_F
+  if (m > 0) {  // g_i + a_i^T mu = g_i - (A_F^+ a_i)^T g_F
+    // a column the free ones cannot give (|A_F A_F^+ a_i - a_i| beyond the rank's
+    // tolerance): the joint cannot move alone while the rows hold, its reduced gradient
+    // is not defined and releasing it would hold it again at once, a cycle
+    // (controllers.cjm.saturation_walk.column_outside)
+    const double outside = tol_.rank * (1.0 + rows_.topRows(m).cwiseAbs().maxCoeff());
     auto weights = free_x_.head(n_free);
+    auto reached = rows_scratch_.head(m);
     for (Index j = 0; j < nv_; ++j) {
       if (free_(j)) continue;
-      null_.pseudo_solve(rows_.col(j).head(m), weights);
-      reduced_(j) -= weights.dot(gradient_free_.head(n_free));
+      reached.setZero();
+      if (n_free > 0) {
+        null_.pseudo_solve(rows_.col(j).head(m), weights);
+        reduced_(j) -= weights.dot(gradient_free_.head(n_free));
+        reached.noalias() = columns_.topLeftCorner(m, n_free) * weights;
+      }
+      reached -= rows_.col(j).head(m);
+      if (reached.cwiseAbs().maxCoeff() > outside) reduced_(j) = 0.0;
     }
   }
   return inward(reduced_, tol_.release_tolerance * (1.0 + gradient_.cwiseAbs().maxCoeff()));
 }
 
 Index Step::inward(const ConstVectorRef& gradient, double tolerance) const {
+  // a joint without room in its box beyond rounding is never released: the walk would
+  // hold it again at once (controllers.cjm.saturation_walk._inward)
   Index best = -1;
   double best_inward = tolerance;
+  const double noise = walk_point_.cwiseAbs().maxCoeff();
   for (Index j = 0; j < nv_; ++j) {
     if (free_(j)) continue;
     double inward_slope = -std::numeric_limits<double>::infinity();
-    if (walk_point_(j) >= upper_(j)) {
+    if (walk_point_(j) >= upper_(j) && gap_to_bound(lower_(j), walk_point_(j), noise) < 0.0) {
       inward_slope = gradient(j);
-    } else if (walk_point_(j) <= lower_(j)) {
+    } else if (walk_point_(j) <= lower_(j) && gap_to_bound(upper_(j), walk_point_(j), noise) > 0.0) {
       inward_slope = -gradient(j);
     }
     if (inward_slope > best_inward) {
@@ -193,15 +208,17 @@ Index Step::walk() {
 }
 
 void Step::walk_result(const Inputs& in, double rows_scale, Index limiting_joint) {
+  // controllers.cjm.saturation_walk._walk_result: a met twist is s = 1, not its share
+  // J qd . V / |V|^2, which is 1 only up to rounding
   auto achieved = scratch_rows_.head(task_rows_);
   achieved.noalias() = in.ee_jacobian * sns_qd_;
+  const double tolerance = tol_.twist * (1.0 + in.twist.cwiseAbs().maxCoeff());
   const double twist_norm = in.twist.squaredNorm();
   double task_scale = 1.0;
-  if (twist_norm > 0.0) {
+  if ((achieved - in.twist).cwiseAbs().maxCoeff() > tolerance && twist_norm > 0.0) {
     task_scale = std::min(std::max(achieved.dot(in.twist) / twist_norm, 0.0), 1.0);
   }
   achieved -= task_scale * in.twist;
-  const double tolerance = tol_.twist * (1.0 + in.twist.cwiseAbs().maxCoeff());
   sns_missed_ = achieved.cwiseAbs().maxCoeff() > tolerance;
   sns_task_scale_ = task_scale;
   sns_rows_scale_ = rows_scale;
