@@ -153,9 +153,11 @@ def column_outside(rows: np.ndarray, weights: np.ndarray, free: np.ndarray) -> n
 def _inward(gradient: np.ndarray, point: np.ndarray, lower: np.ndarray, upper: np.ndarray,
             free: np.ndarray, tolerance: float) -> int:
     """The held joint at a bound whose ``-gradient`` points into its box the most, beyond
-    ``tolerance`` (-1: none). A joint without room in its box beyond rounding (a window of
-    width zero, :func:`controllers.cjm.saturation.gap_to_bound`) is never released: the
-    walk would hold it again at once, a cycle to the iteration cap."""
+    ``tolerance`` (-1: none); of joints within ``tolerance`` of the most (joints that move
+    alike, as two with one axis), the first, whatever the last bits of their gradients. A
+    joint without room in its box beyond rounding (a window of width zero,
+    :func:`controllers.cjm.saturation.gap_to_bound`) is never released: the walk would hold
+    it again at once, a cycle to the iteration cap."""
     noise = float(np.max(np.abs(point), initial=0.0))
     room_down = np.array([gap_to_bound(bound, value, noise) < 0.0
                           for bound, value in zip(lower.tolist(), point.tolist())])
@@ -164,8 +166,10 @@ def _inward(gradient: np.ndarray, point: np.ndarray, lower: np.ndarray, upper: n
     inward = np.where((point >= upper) & room_down, gradient,
                       np.where((point <= lower) & room_up, -gradient, -np.inf))
     inward[free] = -np.inf
-    joint = int(np.argmax(inward))
-    return joint if inward[joint] > tolerance else -1
+    most = float(np.max(inward))
+    if not most > tolerance:
+        return -1
+    return int(np.flatnonzero(inward >= most - tolerance)[0])
 
 
 def _walk(point: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
@@ -173,16 +177,25 @@ def _walk(point: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndar
     """``point + t (goal - point)`` with the largest ``t`` in [0, 1] that keeps the free
     joints in the box (the ratio test), and the joint that stops it, placed exactly on
     the bound it reaches (-1: the goal reached). A joint at its bound up to rounding
-    (:func:`controllers.cjm.saturation.gap_to_bound`) stops the walk at once."""
+    (:func:`controllers.cjm.saturation.gap_to_bound`) stops the walk at once; of joints
+    whose reaches tie to :data:`AT_BOUND` (joints that move alike, as two with one axis),
+    the first stops it, whatever the last bits of their reaches (the others end on their
+    bounds by the final clip)."""
     move = goal - point
     noise = float(np.max(np.abs(point), initial=0.0))
     still = max(STILL_DIRECTION, AT_BOUND * float(np.max(np.abs(move), initial=0.0)))
-    fraction, joint, bound = 1.0, -1, 0.0
+    reaches: dict[int, float] = {}
     for i in np.flatnonzero(free & (np.abs(move) > still)).tolist():
         side = upper[i] if move[i] > 0.0 else lower[i]
         reach = max(gap_to_bound(side, point[i], noise) / move[i], 0.0)
-        if reach < fraction:
-            fraction, joint, bound = reach, i, side
+        if reach < 1.0:
+            reaches[i] = reach
+    fraction, joint, bound = 1.0, -1, 0.0
+    if reaches:
+        smallest = min(reaches.values())
+        joint = next(i for i, reach in reaches.items() if reach <= smallest + AT_BOUND)
+        fraction = reaches[joint]
+        bound = upper[joint] if move[joint] > 0.0 else lower[joint]
     moved = np.where(free, point + fraction * move, point)
     if joint >= 0:
         moved[joint] = bound

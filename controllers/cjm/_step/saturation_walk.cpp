@@ -116,24 +116,23 @@ Index Step::task_wrong_side(const Eigen::Ref<const RowMatrix>& task,
 
 Index Step::inward(const ConstVectorRef& gradient, double tolerance) const {
   // a joint without room in its box beyond rounding is never released: the walk would
-  // hold it again at once (controllers.cjm.saturation_walk._inward)
-  Index best = -1;
-  double best_inward = tolerance;
+  // hold it again at once; of joints within the tolerance of the most, the first
+  // (controllers.cjm.saturation_walk._inward)
   const double noise = walk_point_.cwiseAbs().maxCoeff();
-  for (Index j = 0; j < nv_; ++j) {
-    if (free_(j)) continue;
-    double inward_slope = -std::numeric_limits<double>::infinity();
-    if (walk_point_(j) >= upper_(j) && gap_to_bound(lower_(j), walk_point_(j), noise) < 0.0) {
-      inward_slope = gradient(j);
-    } else if (walk_point_(j) <= lower_(j) && gap_to_bound(upper_(j), walk_point_(j), noise) > 0.0) {
-      inward_slope = -gradient(j);
-    }
-    if (inward_slope > best_inward) {
-      best_inward = inward_slope;
-      best = j;
-    }
-  }
-  return best;
+  auto slope = [&](Index j) {
+    if (free_(j)) return -std::numeric_limits<double>::infinity();
+    if (walk_point_(j) >= upper_(j) && gap_to_bound(lower_(j), walk_point_(j), noise) < 0.0)
+      return gradient(j);
+    if (walk_point_(j) <= lower_(j) && gap_to_bound(upper_(j), walk_point_(j), noise) > 0.0)
+      return -gradient(j);
+    return -std::numeric_limits<double>::infinity();
+  };
+  double most = -std::numeric_limits<double>::infinity();
+  for (Index j = 0; j < nv_; ++j) most = std::max(most, slope(j));
+  if (!(most > tolerance)) return -1;
+  for (Index j = 0; j < nv_; ++j)
+    if (slope(j) >= most - tolerance) return j;
+  return -1;
 }
 
 double Step::walk_to_rows() {
@@ -184,20 +183,26 @@ Index Step::wrong_side(const ConstVectorRef& residual) {
 }
 
 Index Step::walk() {
+  // of joints whose reaches tie to at_bound, the first stops the walk
+  // (controllers.cjm.saturation_walk._walk)
   walk_move_ = walk_goal_ - walk_point_;
   const double noise = walk_point_.cwiseAbs().maxCoeff();
   const double still = std::max(tol_.still_direction, tol_.at_bound * walk_move_.cwiseAbs().maxCoeff());
-  double fraction = 1.0, bound = 0.0;
-  Index joint = -1;
-  for (Index j = 0; j < nv_; ++j) {
+  auto reach = [&](Index j) {
     const double move = walk_move_(j);
-    if (!free_(j) || !(std::abs(move) > still)) continue;
+    if (!free_(j) || !(std::abs(move) > still)) return std::numeric_limits<double>::infinity();
     const double side = move > 0.0 ? upper_(j) : lower_(j);
-    const double reach = std::max(gap_to_bound(side, walk_point_(j), noise) / move, 0.0);
-    if (reach < fraction) {
-      fraction = reach;
+    return std::max(gap_to_bound(side, walk_point_(j), noise) / move, 0.0);
+  };
+  double smallest = 1.0, fraction = 1.0, bound = 0.0;
+  Index joint = -1;
+  for (Index j = 0; j < nv_; ++j) smallest = std::min(smallest, reach(j));
+  for (Index j = 0; j < nv_ && joint < 0; ++j) {
+    const double r = reach(j);
+    if (r < 1.0 && r <= smallest + tol_.at_bound) {
+      fraction = r;
       joint = j;
-      bound = side;
+      bound = walk_move_(j) > 0.0 ? upper_(j) : lower_(j);
     }
   }
   for (Index j = 0; j < nv_; ++j)
