@@ -19,6 +19,7 @@ on with one warning line, and ``CJMController(backend="auto")`` runs the Python 
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -31,8 +32,21 @@ from setuptools import setup
 from setuptools.command.build_ext import build_ext
 from setuptools.errors import CCompilerError, ExecError, PlatformError
 
+
+def load_extension_sources():
+    """controllers/cjm/extension_sources.py, loaded by path (the package's dependencies
+    are not installed yet): the digest of the sources the extension is built from."""
+    spec = importlib.util.spec_from_file_location(
+        "extension_sources", Path("controllers/cjm/extension_sources.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 SOURCES = sorted(str(path) for path in Path("controllers/cjm/_step").glob("*.cpp"))
 HEADERS = sorted(str(path) for path in Path("controllers/cjm/_step").glob("*.hpp"))
+#: compiled in as ``_step.SOURCES_DIGEST``: an extension of other sources is stale
+SOURCES_DIGEST = load_extension_sources().sources_digest(Path("controllers/cjm/_step"))
 #: the build requirements the compiled code depends on (pyproject.toml's [build-system])
 BUILD_REQUIREMENTS = ("pybind11", "cmeel-eigen", "libpinocchio", "cmeel-boost")
 #: where the builds are kept, one file per hash (pip builds in a temporary directory)
@@ -114,7 +128,8 @@ def step_extension() -> Pybind11Extension:
     """The compiled CJM step, ``controllers.cjm._step``."""
     return Pybind11Extension(
         "controllers.cjm._step", SOURCES, include_dirs=INCLUDE_DIRS, cxx_std=17,
-        define_macros=PINOCCHIO_MACROS, extra_compile_args=["-g0"], depends=HEADERS,
+        define_macros=[*PINOCCHIO_MACROS, ("CJM_SOURCES_DIGEST", f'"{SOURCES_DIGEST}"')],
+        extra_compile_args=["-g0"], depends=HEADERS,
         optional=True)  # setuptools then copies it in place only when it was built
 
 

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import os
-from functools import partial
+import warnings
+from functools import cache, partial
 from typing import TYPE_CHECKING, Iterable, Literal, Sequence
 
 import numpy as np
@@ -19,6 +20,7 @@ from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
 from ..step_message import StepMessage
 from .analytical import ChainSplit, chain_split
+from .extension_sources import stale_extension_reason
 from .python_step import PythonStep
 from .report import StepReport, report_message, solve_info
 from .step_setup import ConstraintPlan, Form, StepSetup
@@ -45,13 +47,27 @@ def python_step_forced() -> bool:
     return value == "python"
 
 
-def compiled_step_available() -> bool:
-    """Whether the C++ extension of the compiled step (section 16) is built here."""
+@cache
+def compiled_step_problem() -> str | None:
+    """Why the C++ extension of the compiled step (section 16) cannot run here, or None:
+    not built, or built from other sources than those beside the package (stale: warned
+    once, as ``backend="auto"`` then runs the Python step)."""
     try:
         from ._step import JOINT_KINDS, SHAPE_KINDS, Pipeline, Tick, Tolerances  # noqa: F401  (an older build lacks them)
-    except ImportError:
-        return False
-    return True
+        from ._step import SOURCES_DIGEST
+    except ImportError as error:
+        return (f"the compiled CJM step (controllers.cjm._step) is not built or is too old "
+                f"({error}): reinstall with pip install -e . (it needs a C++17 compiler)")
+    stale = stale_extension_reason(SOURCES_DIGEST)
+    if stale is not None:
+        warnings.warn(f"{stale}; until then the CJM runs its Python step", RuntimeWarning,
+                      stacklevel=2)
+    return stale
+
+
+def compiled_step_available() -> bool:
+    """Whether the C++ extension of the compiled step (section 16) can run here."""
+    return compiled_step_problem() is None
 
 
 def read_only(array: np.ndarray) -> np.ndarray:
@@ -164,8 +180,7 @@ class CJMController(Controller):
             raise ValueError(f"unknown backend {backend!r}: 'auto', 'compiled' or 'python'")
         available = compiled_step_available()
         if backend == "compiled" and not available:
-            raise ImportError("the compiled CJM step (controllers.cjm._step) is not built: "
-                              "reinstall with pip install -e . (it needs a C++17 compiler)")
+            raise ImportError(compiled_step_problem())
         unsupported = unsupported_joint_kinds(self.model) if available else []
         if backend == "compiled" and unsupported:
             raise ValueError(f"the compiled CJM step does not cover joints of kind "

@@ -202,8 +202,13 @@ struct BoundTick : cjm::Tick {
 
 }  // namespace
 
+#ifndef CJM_SOURCES_DIGEST  // setup.py defines it: controllers/cjm/extension_sources.py
+#define CJM_SOURCES_DIGEST ""
+#endif
+
 PYBIND11_MODULE(_step, module) {
   module.doc() = "The compiled CJM step (docs/design.md section 16).";
+  module.attr("SOURCES_DIGEST") = CJM_SOURCES_DIGEST;
 
   module.def(
       "damped_least_squares",
