@@ -22,6 +22,29 @@ settings.register_profile("pinned", derandomize=True, database=None, print_blob=
 settings.register_profile("explore", derandomize=False, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "pinned"))
 
+
+def draw_no_project_constants() -> bool:
+    """Keep the pinned examples independent of which test files run.
+
+    Hypothesis (6.131 and later) sometimes draws a literal found in the project's modules
+    imported so far, so the same test drew other examples alone than with every file
+    collected (a fast-tier run could fail where the full run passed). The pool has no
+    public switch: its private reader is replaced by an empty pool. False when this
+    Hypothesis has no such reader (tests/test_hypothesis_pinned.py then fails, saying so).
+    """
+    from hypothesis.internal.conjecture import providers
+
+    if not callable(getattr(providers, "_get_local_constants", None)):
+        return False
+    no_constants = providers.Constants()
+    providers._get_local_constants = lambda: no_constants
+    return True
+
+
+#: whether the pinned profile's examples are the same in any selection of test files
+PROJECT_CONSTANTS_OFF = (os.environ.get("HYPOTHESIS_PROFILE", "pinned") == "pinned"
+                         and draw_no_project_constants())
+
 #: the tiers (CONTRIBUTING.md): the markers each test file's tests carry, by file name
 #: (a test may also carry one itself, e.g. ``timing``); a new file that drives the
 #: browser, runs MuJoCo, fuzzes or takes more than about 10 s is added here

@@ -47,10 +47,14 @@ def test_hole_affine_terms_equal_the_generic_terms(center, axis, velocity, gain,
     AffineTerms(hole, form).write(*affine_inputs(form, hole, placement), fast)
     state = hole.evaluate(placement)
     write_terms(state, hole.structure(placement), generic)  # evaluate + structure
-    np.testing.assert_allclose(fast, generic, atol=1e-12)
+    # the two round differently: a few ulps of the geometry, times the gain in the terms
+    # holding gain x error (up to 2.7e-12 at gain 191 and |center| 1.2)
+    magnitude = 1.0 + np.linalg.norm(center) + np.linalg.norm(velocity)
+    tolerance = max(1e-12, 1e-14 * (1.0 + gain) * magnitude)
+    np.testing.assert_allclose(fast, generic, atol=tolerance)
     B, R = terms_views(fast, 2)
-    np.testing.assert_allclose(R[:, 1:] @ B[:, 1:], 0.0, atol=1e-12)  # C v_c = 0 on S
-    np.testing.assert_allclose(R[:, 1:] @ B[:, 0], state.rhs, atol=1e-12)  # V_a0 gives b
+    np.testing.assert_allclose(R[:, 1:] @ B[:, 1:], 0.0, atol=tolerance)  # C v_c = 0 on S
+    np.testing.assert_allclose(R[:, 1:] @ B[:, 0], state.rhs, atol=tolerance)  # V_a0 gives b
 
 
 def test_hole_rows_equal_the_generic_rows(robot):
