@@ -317,10 +317,11 @@ def test_the_closed_loop_holds_the_trocar_over_dds(robot, domain):
     """trocar-circle at 500 Hz through a simulated robot in another process: the trocar's
     error stays within 0.2 mm (measured 3 um on a loaded machine, in-process 0.1 um: the
     difference is the two processes' period jitter, docs/ros2.md "Measured"), and no step
-    failed. The run's end closes the plant: zeros on the wire when the run returns, well
-    before the idle stop (``stale_after``, 5 s here) would send them."""
+    failed. The run's end closes the plant: zeros on the wire after the last motion, with
+    the idle stop (``stale_after``) an hour away, so that only the close can send them (no
+    clock read: the bound holds on any machine)."""
     plan = load_scenario("trocar-circle")
-    stale_after = 5.0
+    stale_after = 3600.0
     process = sim(domain, "--q0", ",".join(repr(float(v)) for v in plan.q0), "--rate", "500")
     peer = Ros2Node(domain)
     try:
@@ -328,11 +329,9 @@ def test_the_closed_loop_holds_the_trocar_over_dds(robot, domain):
         settings = settings_for(domain, start_timeout=30.0, stale_after=stale_after)
         result = run_plan(plan, "cjm", LoopConfig(rate=500), 2.0,
                           plant=PlantChoice("ros2", ros2=settings))
-        returned = time.perf_counter()
         assert wait_for(lambda: bool(commands.arrivals)
                         and not any(commands.arrivals[-1][1]))
         moving = [at for at, command in commands.arrivals if any(command)]
-        stopped_at = next(at for at, command in commands.arrivals if at > moving[-1])
     finally:
         peer.close()
         process.terminate()
@@ -340,8 +339,7 @@ def test_the_closed_loop_holds_the_trocar_over_dds(robot, domain):
     metrics = result.metrics()
     assert 0 < metrics["constraint_error_max_m"] < 2e-4
     assert metrics["failed_steps"] == 0
-    assert stopped_at - moving[-1] < stale_after / 2
-    assert stopped_at - returned < stale_after / 2
+    assert moving and any(at > moving[-1] for at, command in commands.arrivals)
 
 
 class TimedCommands:
