@@ -141,13 +141,19 @@ def _task_wrong_side(rows: np.ndarray, task: np.ndarray, task_rhs: np.ndarray,
 
 def column_outside(rows: np.ndarray, weights: np.ndarray, free: np.ndarray) -> np.ndarray:
     """The joints whose column ``a_i`` of the rows the free joints' columns cannot give:
-    ``|A_F A_F^+ a_i - a_i| > RANK_TOLERANCE (1 + max |A|)`` (``weights = A_F^+ A``). Such a
-    joint cannot move alone while the rows hold: no direction of the walk releases it, and
-    its reduced gradient is not defined (the rows' multipliers are not unique along the
-    component), so releasing it would hold it again at once, a cycle (docs/design.md 9.1)."""
+    ``|A_F A_F^+ a_i - a_i|_2`` above the rank cut of ``[A_F a_i]``,
+    ``RANK_TOLERANCE max(1, |a_j|_2)`` over its columns (at most the cut of
+    :func:`controllers.linalg.nullspace`, ``RANK_TOLERANCE max(1, sigma_max)``: a column
+    the solve over ``F + i`` would count is never taken for one it would not), with
+    ``weights = A_F^+ A``. Such a joint cannot move alone while the rows hold: no direction
+    of the walk releases it, and its reduced gradient is not defined (the rows'
+    multipliers are not unique along the component), so releasing it would hold it again
+    at once, or leave it free and fixed by the rows (docs/design.md 9.1)."""
     reached = rows[:, free] @ weights
-    tolerance = RANK_TOLERANCE * (1.0 + float(np.max(np.abs(rows), initial=0.0)))
-    return np.max(np.abs(reached - rows), axis=0, initial=0.0) > tolerance
+    norms = np.linalg.norm(rows, axis=0)
+    largest = np.maximum(float(np.max(norms[free], initial=0.0)), norms)
+    tolerance = RANK_TOLERANCE * np.maximum(1.0, largest)
+    return np.linalg.norm(reached - rows, axis=0) > tolerance
 
 
 def _inward(gradient: np.ndarray, point: np.ndarray, lower: np.ndarray, upper: np.ndarray,

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 from ..base import EQUALITY_TOLERANCE, TWIST_TOLERANCE
 from ..numerics import RANK_TOLERANCE
 
-#: A barrier row is violated when the solution undercuts it by more than this (m/s).
+#: A barrier row is violated when the solution undercuts it by more than this (m/s),
+#: times ``1 + |a| . |qd|`` (the rounding of the product grows with the command).
 BARRIER_TOLERANCE = 1e-12
 
 #: Below this ratio of the smallest to the largest LU pivot of a square ``J_a``, ``F_a``

@@ -92,11 +92,13 @@ Index Step::task_wrong_side(const Eigen::Ref<const RowMatrix>& task,
     gradient_free_(n_free++) = gradient_(j);
   }
   if (m > 0) {  // g_i + a_i^T mu = g_i - (A_F^+ a_i)^T g_F
-    // a column the free ones cannot give (|A_F A_F^+ a_i - a_i| beyond the rank's
-    // tolerance): the joint cannot move alone while the rows hold, its reduced gradient
-    // is not defined and releasing it would hold it again at once, a cycle
+    // a column the free ones cannot give (|A_F A_F^+ a_i - a_i|_2 above the rank cut of
+    // [A_F a_i], rank max(1, |a_j|_2)): the joint cannot move alone while the rows hold,
+    // its reduced gradient is not defined and releasing it would hold it again at once
     // (controllers.cjm.saturation_walk.column_outside)
-    const double outside = tol_.rank * (1.0 + rows_.topRows(m).cwiseAbs().maxCoeff());
+    double free_largest = 0.0;
+    for (Index f = 0; f < n_free; ++f)
+      free_largest = std::max(free_largest, columns_.col(f).head(m).norm());
     auto weights = free_x_.head(n_free);
     auto reached = rows_scratch_.head(m);
     for (Index j = 0; j < nv_; ++j) {
@@ -107,8 +109,9 @@ Index Step::task_wrong_side(const Eigen::Ref<const RowMatrix>& task,
         reduced_(j) -= weights.dot(gradient_free_.head(n_free));
         reached.noalias() = columns_.topLeftCorner(m, n_free) * weights;
       }
+      const double largest = std::max(free_largest, rows_.col(j).head(m).norm());
       reached -= rows_.col(j).head(m);
-      if (reached.cwiseAbs().maxCoeff() > outside) reduced_(j) = 0.0;
+      if (reached.norm() > tol_.rank * std::max(1.0, largest)) reduced_(j) = 0.0;
     }
   }
   return inward(reduced_, tol_.release_tolerance * (1.0 + gradient_.cwiseAbs().maxCoeff()));

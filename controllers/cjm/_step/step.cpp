@@ -227,20 +227,21 @@ bool Step::activate_worst(const ConstVectorRef& qd) {
       worst = i;
     }
   }
-  if (worst >= 0 && worst_violation > tol_.barrier) {
+  if (worst >= 0 && worst_violation > 0.0) {
     active_.push_back(worst);
     return true;
   }
   worst = -1;
   for (Index i = 0; i < pair_count_; ++i) {
     if (std::find(active_pairs_.begin(), active_pairs_.end(), i) != active_pairs_.end()) continue;
-    const double violation = pair_lower_(i) - pair_rows_.row(i).dot(qd);
+    const double violation = pair_lower_(i) - pair_rows_.row(i).dot(qd) -
+                             tol_.barrier * (1.0 + pair_rows_.row(i).cwiseAbs().dot(qd.cwiseAbs()));
     if (violation > worst_violation || worst < 0) {
       worst_violation = violation;
       worst = i;
     }
   }
-  if (worst >= 0 && worst_violation > tol_.barrier) {
+  if (worst >= 0 && worst_violation > 0.0) {
     active_pairs_.push_back(worst);
     return true;
   }
@@ -279,8 +280,10 @@ void Step::gather_active_rows() {
 }
 
 double Step::barrier_violation(Index index, const ConstVectorRef& qd) const {
+  // beyond the rounding of the product (python_step.PythonStep._barrier_violation)
   const Index row = row_offset_[index];
-  return all_rhs_(row) - all_rows_.row(row).dot(qd);
+  const double scale = 1.0 + all_rows_.row(row).cwiseAbs().dot(qd.cwiseAbs());
+  return all_rhs_(row) - all_rows_.row(row).dot(qd) - tol_.barrier * scale;
 }
 
 // -- the joint box ----------------------------------------------------------------------
