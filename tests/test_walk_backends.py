@@ -215,7 +215,7 @@ def scenes_near_the_limits(draw):
     return robot, constraints, jerk_limit, previous, change, q, twist
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(scene=scenes_near_the_limits())
 def test_both_backends_saturate_alike_near_the_limits(scene):
     """Three steps from each drawn state (the constraints as drawn, the configuration
