@@ -1,6 +1,6 @@
 """Does the loop's status describe the robot? (docs/design.md 5.2, issue 32 item 4)
 
-    python docs/audit_supervisor.py PLANT [--acceleration-limits] [--encoder-noise RAD]
+    python docs/audit_supervisor.py PLANT [--no-acceleration-limits] [--encoder-noise RAD]
                                     [--scenarios A,B] [--controllers cjm,qp:proxqp,mink:daqp]
 
 One JSON line per scenario x controller on PLANT (``kinematic`` or ``mujoco``), the whole
@@ -69,7 +69,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("plant", choices=("kinematic", "mujoco"))
-    parser.add_argument("--acceleration-limits", action="store_true")
+    parser.add_argument("--acceleration-limits", action=argparse.BooleanOptionalAction,
+                        default=True, help="the robots' acceleration limits, on as in every "
+                        "command of the project (default: on)")
     parser.add_argument("--encoder-noise", type=float, default=0.0)
     parser.add_argument("--scenarios", default=",".join(SCENARIOS))
     parser.add_argument("--controllers", default="cjm,qp:proxqp,mink:daqp")
