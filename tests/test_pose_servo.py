@@ -177,3 +177,19 @@ def test_the_servo_alone_hands_the_state_to_and_from_the_kernel() -> None:
                     callers.add(path.relative_to(root).as_posix())
     # the compiled tick's own set_history hands the flags on to the C++ Tick
     assert callers == {"teleop/loop/pose_servo.py", "controllers/cjm/compiled_tick.py"}
+
+
+def test_a_hold_of_no_such_ee_is_a_value_error() -> None:
+    """hold(ee, pose) with ``ee`` outside ``range(ee_count)`` (-1 included, which the
+    supervisor's list would take as the last EE) is a ValueError and changes nothing: it
+    held no EE at all, silently, while the loop's supervisor held another."""
+    servo = PoseServo(LoopConfig(target_time_constant=0.05), 2)
+    targets = [pin.SE3.Identity(), pin.SE3.Identity()]
+    first = servo.period(targets, targets)
+    held = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.05]))
+    for ee in (2, -1, 1.0, True, np.int64(2)):
+        with pytest.raises(ValueError, match="ee must be an EE index in range\\(2\\)"):
+            servo.hold(ee, held)  # type: ignore[arg-type]
+    assert servo.filtered is first.targets and servo.previous is first.targets
+    servo.hold(np.int64(1), held)  # an index numpy gives is an index
+    assert servo.filtered[1] == held and servo.previous[1] == held

@@ -118,7 +118,11 @@ class PoseServo:
     def hold(self, ee: int, pose: pin.SE3) -> None:
         """EE ``ee``'s filtered target and its feed-forward at ``pose``: the next period
         asks it no motion but towards ``pose`` (docs/design.md 19.2). The lists the earlier
-        periods returned are not changed."""
+        periods returned are not changed. ``ValueError`` (nothing changed) unless ``ee`` is
+        in ``range(ee_count)``."""
+        if isinstance(ee, bool) or not isinstance(ee, (int, np.integer)) \
+                or not 0 <= ee < self.ee_count:
+            raise ValueError(f"ee must be an EE index in range({self.ee_count}), got {ee!r}")
         holder = self._holder
         self._take_back()
         filtered, previous = self._filtered, self._previous
