@@ -141,15 +141,22 @@ def check_step(controllers: dict[str, CJMController], q: np.ndarray,
     return commands
 
 
-@pytest.mark.parametrize("pinned", REGRESSIONS, ids=lambda pinned: pinned["name"])
-def test_the_steps_where_the_backends_parted(pinned):
+def replay_pinned(pinned: dict) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                         dict]:
+    """A pinned fuzz state's step on both backends, checked by :func:`check_step`:
+    the controllers, ``q``, the twist, the joint box and the commands."""
     robot = ROBOTS[pinned["robot"]]
     constraints = [constraint_from(entry) for entry in pinned["constraints"]]
     controllers = both_backends(robot, constraints, pinned["jerk_limit"],
                                 np.array(pinned["previous"]), np.array(pinned["previous_change"]))
     q, twist = np.array(pinned["q"]), np.array(pinned["twist"])
     lower, upper = controllers["python"].bounds(q)
-    commands = check_step(controllers, q, twist)
+    return controllers, q, twist, lower, upper, check_step(controllers, q, twist)
+
+
+@pytest.mark.parametrize("pinned", REGRESSIONS, ids=lambda pinned: pinned["name"])
+def test_the_steps_where_the_backends_parted(pinned):
+    controllers, q, twist, lower, upper, commands = replay_pinned(pinned)
     for backend, cjm in controllers.items():
         assert cjm.info.method == "saturated", backend
         if cjm.info.status is StepStatus.OK:  # the twist met, to its tolerance
@@ -245,13 +252,7 @@ def test_a_column_at_the_rank_cut_is_not_released_in_either_backend():
     the same KKT violation."""
     pinned = json.loads((Path(__file__).parent / "data" / "walk_backends_short_of_optimum.json")
                         .read_text())
-    robot = ROBOTS[pinned["robot"]]
-    constraints = [constraint_from(entry) for entry in pinned["constraints"]]
-    controllers = both_backends(robot, constraints, pinned["jerk_limit"],
-                                np.array(pinned["previous"]), np.array(pinned["previous_change"]))
-    q, twist = np.array(pinned["q"]), np.array(pinned["twist"])
-    lower, upper = controllers["python"].bounds(q)
-    commands = check_step(controllers, q, twist)
+    controllers, q, twist, lower, upper, commands = replay_pinned(pinned)
     violations = [kkt_violation(cjm, q, twist, commands[backend], lower, upper)
                   for backend, cjm in controllers.items()]
     assert controllers["python"].info.status is StepStatus.CONSTRAINT_DEGRADED
