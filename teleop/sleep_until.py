@@ -23,6 +23,9 @@ from typing import Callable
 #: Linux's CLOCK_MONOTONIC (time.monotonic's clock) and TIMER_ABSTIME
 CLOCK_MONOTONIC = 1
 TIMER_ABSTIME = 1
+#: the seconds a C ``long`` (``struct timespec``'s ``tv_sec``) holds: a deadline at or
+#: beyond it would wrap (2**63 s to a past one, 1.9e19 s to 5.5e17 s away)
+LATEST = float(2 ** (8 * ctypes.sizeof(ctypes.c_long) - 1))
 
 
 class _Timespec(ctypes.Structure):
@@ -49,10 +52,12 @@ _CLOCK_NANOSLEEP = _clock_nanosleep()
 def sleep_until(deadline: float) -> None:
     """The calling thread asleep until ``time.monotonic()`` reaches ``deadline`` (s);
     returns at once when it already has. ``ValueError`` for a deadline that is not a
-    finite number."""
+    finite number of seconds below :data:`LATEST` (a ``struct timespec``'s ``tv_sec``
+    would wrap)."""
     if isinstance(deadline, bool) or not isinstance(deadline, (int, float)) \
-            or not math.isfinite(deadline):
-        raise ValueError(f"deadline must be a finite number of seconds, got {deadline!r}")
+            or not math.isfinite(deadline) or abs(deadline) >= LATEST:
+        raise ValueError(f"deadline must be a finite number of seconds under {LATEST:.3g}, "
+                         f"got {deadline!r}")
     if _CLOCK_NANOSLEEP is None:
         time.sleep(max(0.0, deadline - time.monotonic()))
         return

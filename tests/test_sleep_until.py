@@ -48,3 +48,11 @@ def test_a_signal_during_the_sleep_is_handled_and_the_sleep_goes_on_to_its_deadl
 def test_a_deadline_that_is_not_a_finite_number_is_refused_by_name(deadline):
     with pytest.raises(ValueError, match="deadline must be a finite number of seconds"):
         sleep_until(deadline)
+
+
+@pytest.mark.parametrize("deadline", [2.0**63, 1.9e19, 1e300])
+def test_a_deadline_past_the_timespec_range_is_refused_by_name(deadline):
+    """A deadline whose seconds do not fit the C ``long`` of ``struct timespec`` wrapped:
+    2**63 s returned at once (before its deadline), 1.9e19 s slept 5.5e17 s (a hang)."""
+    with pytest.raises(ValueError, match="deadline must be a finite number of seconds"):
+        sleep_until(deadline)
