@@ -306,6 +306,10 @@ def test_a_simulated_robot_slower_than_the_wall_clock_gives_up_real_time(robot, 
     finally:
         sim.close()
     assert len(policies) > OVERRUN_PERIODS
+    # every period overran (1.5 periods of work): the report says so, though each next
+    # period, counted from the overrun's end, started on time
+    assert sim.overran == sim.periods == len(policies)
+    assert f"{sim.periods} periods overran their deadline" in sim.jitter_words()
     if granted(PRIORITY):
         assert policies[:OVERRUN_PERIODS] == [FIFO_NOT_INHERITED] * OVERRUN_PERIODS
         assert set(policies[OVERRUN_PERIODS:]) == {os.SCHED_OTHER}

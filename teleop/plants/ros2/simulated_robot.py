@@ -102,11 +102,14 @@ class SimulatedRos2Robot:
         #: periods between the first command and the last with no new one (the last held,
         #: acting twice; those after the last command are the loop's end, not jitter);
         #: commands another arrived after within the same period (never acting); periods
-        #: that started more than half a period late on the robot's own clock
+        #: that started more than half a period late on the robot's own clock; periods whose
+        #: work ran past the next one's deadline (the next counted from its end, so neither
+        #: late nor in the lateness: a physics slower than the wall clock shows here)
         self.periods = 0
         self.held = 0
         self.superseded = 0
         self.late = 0
+        self.overran = 0
         self._holding = 0  # periods with no new command since the last one
         #: how late each period :meth:`run` started began after its deadline (s), the last
         #: LATENESS_KEPT, and how many it started
@@ -212,6 +215,7 @@ class SimulatedRos2Robot:
                 overruns = 0
             else:
                 deadline, overruns = now, overruns + 1
+                self.overran += 1
             if (overruns == OVERRUN_PERIODS and scheduling_words() != ordinary
                     and before.restore()):
                 holding, overran = False, True
@@ -246,6 +250,7 @@ class SimulatedRos2Robot:
         return (f"{self.periods} periods, {self.commands} commands: {self.held} periods held "
                 f"the last command (none new), {self.superseded} commands superseded in "
                 f"their period, {self.late} periods started over half a period late, "
+                f"{self.overran} periods overran their deadline, "
                 f"{self.lateness_words()} (threads {self.realtime})")
 
     def stop(self) -> None:
