@@ -193,3 +193,32 @@ def test_a_hold_of_no_such_ee_is_a_value_error() -> None:
     assert servo.filtered is first.targets and servo.previous is first.targets
     servo.hold(np.int64(1), held)  # an index numpy gives is an index
     assert servo.filtered[1] == held and servo.previous[1] == held
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled tick", "python path"])
+def test_a_target_that_is_not_finite_fails_its_period_and_the_servo_starts_over(compiled):
+    """One NaN target: that period is ``failed`` with a finite command; the filter does not
+    keep it, so the next finite target's period is a first one (the target itself, no
+    feed-forward: the law written in this file), and the periods after it are not failed
+    (review: a NaN target used to poison the filter until reset())."""
+    plan = load_scenario("paper-hole")
+    config = LoopConfig(target_time_constant=0.05)
+    controller = make_controller("cjm", plan.robot, plan.make_constraints(), dt=config.dt,
+                                 time_budget=None)
+    loop = TeleopLoop(plan.robot, controller, q0=plan.q0, config=config, compiled_tick=compiled)
+    home = loop.ee_placement()
+    moved = pin.SE3(home.rotation, home.translation + np.array([0.0, 0.005, 0.0]))
+    for _ in range(10):
+        assert loop.advance(moved).status != "failed"
+    refused = loop.advance(pin.SE3(home.rotation, np.array([np.nan, 0.0, 0.0])))
+    assert refused.status == "failed" and np.all(np.isfinite(refused.qd))
+    ee = loop.ee_placement()
+    after = loop.advance(moved)
+    assert after.status != "failed"
+    assert after.targets[0].isApprox(moved, 1e-14) and after.previous_targets is None
+    twist, scale = reference_twist(config, ee, moved, None)
+    np.testing.assert_allclose(after.twists[0], scale * twist, rtol=0.0,
+                               atol=twist_tolerance(config, 1.0))
+    for _ in range(20):
+        step = loop.advance(moved)
+        assert step.status != "failed" and np.all(np.isfinite(step.qd))

@@ -394,7 +394,9 @@ class TeleopLoop:
                twist: np.ndarray) -> tuple[np.ndarray, str, StepMessage, float]:
         """``controller.solve``: the command, its status and message (worded when read,
         ``controller.step_outcome``), its time (us); a refused input (``ValueError``)
-        gives the controlled stop, ``failed`` and why."""
+        gives the controlled stop, ``failed`` and why, and the pose servo starts over (a
+        target that was not finite would stay in its filter: the next finite target is
+        then a first one, docs/design.md 5.1)."""
         solve_start = time.perf_counter_ns()
         try:
             qd = self.controller.solve(sensed, twist)
@@ -404,6 +406,7 @@ class TeleopLoop:
         except ValueError as error:  # refused input: a controlled stop, say why
             qd, status, self.refused = self._stop(sensed), "failed", str(error)
             message = StepMessage.worded(self.refused)
+            self.servo.reset()
         return qd, status, message, (time.perf_counter_ns() - solve_start) * 1e-3
 
     def _move(self, sensed: np.ndarray, qd: np.ndarray, status: str,
