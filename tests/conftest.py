@@ -62,11 +62,21 @@ FILE_MARKERS = {
 }
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark each test by its file (``FILE_MARKERS``), then leave the ``timing`` tests out
+    of any run whose ``-m`` does not name ``timing``: a ``-m`` on the command line replaces
+    the ``-m 'not timing'`` of ``addopts``, so the fast tier's ``-m "not slow and ..."``
+    (or ``-m slow``) ran the real-time figures that only an idle machine keeps."""
     for item in items:
         for marker, patterns in FILE_MARKERS.items():
             if any(fnmatch(item.path.name, pattern) for pattern in patterns):
                 item.add_marker(marker)
+    if "timing" in config.getoption("markexpr"):
+        return
+    timing = [item for item in items if item.get_closest_marker("timing") is not None]
+    if timing:
+        config.hook.pytest_deselected(items=timing)
+        items[:] = [item for item in items if item.get_closest_marker("timing") is None]
 
 #: hole distance along the constrained link for each built-in robot (m)
 HOLE_DISTANCE = {"sda10f": 0.08, "ur5_instrument": 0.20}
