@@ -359,6 +359,62 @@ def open_status_details(web) -> None:
     expect(details).to_be_visible()
 
 
+#: counts, in the page, the clicks the document sees on each button (by its id, the
+#: uuid viser gives the button's handle), in the capture phase: before any handler
+_COUNT_CLICKS = """() => {
+    if (window.__teleopClicks) return;
+    window.__teleopClicks = {};
+    document.addEventListener('click', event => {
+        const button = event.target.closest('button');
+        if (button && button.id)
+            window.__teleopClicks[button.id] = (window.__teleopClicks[button.id] || 0) + 1;
+    }, true);
+}"""
+
+
+def press(web, name: str, handle, effect: Callable[[], object], what: str):
+    """Click the page's button ``name`` (whose server-side handle is ``handle``) and
+    return ``effect()``'s first true value (``what`` it waits for).
+
+    A click is a message from the page to the server, which stamps the button's handle
+    when it handles one (``handle.update_timestamp``): a click the server got and whose
+    effect does not come is the app's failure, said so. A click the server did not get
+    in :data:`WAIT` s was lost between the page and the server: the failure says whether
+    the page saw the click and whether the page is still the server's client, and the
+    button is clicked once more (the click provably not delivered, the effect cannot
+    have come twice); a second loss fails.
+    """
+    page = web.page
+    button = page.get_by_role("button", name=name, exact=True)
+    expect(button).to_be_enabled()
+    page.evaluate(_COUNT_CLICKS)
+    element_id = button.get_attribute("id")
+    for attempt in (1, 2):
+        stamp = handle.update_timestamp
+        seen = page.evaluate("id => window.__teleopClicks[id] || 0", element_id)
+        button.click()
+        try:
+            wait_until(lambda: handle.update_timestamp != stamp, WAIT,
+                       f"the server to get the click on {name!r}")
+        except AssertionError:
+            clicks = page.evaluate("id => window.__teleopClicks[id] || 0", element_id)
+            connected = web.client.client_id in web.server.get_clients()
+            where = (f"the page saw {clicks - seen} click(s) on it; the page is "
+                     f"{'still' if connected else 'no longer'} the server's client "
+                     f"{web.client.client_id} (clients: {list(web.server.get_clients())})")
+            if attempt == 2:
+                raise AssertionError(f"the click on {name!r} never reached the server, "
+                                     f"twice ({where})") from None
+            print(f"\n[browser] the click on {name!r} never reached the server in "
+                  f"{WAIT:g} s ({where}); clicking once more")
+            continue
+        try:
+            return wait_until(effect, WAIT, what)
+        except AssertionError as error:
+            raise AssertionError(f"{error} (the server got the click on {name!r}: the app "
+                                 "did not act on it)") from None
+
+
 def input_of(page, label: str):
     """The (first) input of the panel row labelled ``label``."""
     text = page.get_by_text(label, exact=True)
@@ -417,8 +473,8 @@ def click_add_hole(web) -> str:
     """Press the page's "Add hole" button; the id of the hole it created."""
     before = set(holes(web.app))
     open_tab(web, "Constraints")
-    web.page.get_by_role("button", name="Add hole").click()
-    new = wait_until(lambda: set(holes(web.app)) - before, WAIT, "the app to get a new hole")
+    new = press(web, "Add hole", web.ui.constraint_panel.add_buttons["hole"],
+                lambda: set(holes(web.app)) - before, "the app to get a new hole")
     (hole_id,) = new
     web.hole_time = web.app.now  # loop time from which the hole is in force
     return hole_id

@@ -25,6 +25,7 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
     open_status_details,
     open_tab,
     open_web,
+    press,
     project,
     scene_canvas,
     set_camera,
@@ -86,8 +87,8 @@ def test_the_tip_dragged_into_an_obstacle_stops_at_the_safety_distance(web):
     app, page, ui = web.app, web.page, web.ui
     open_tab(web, "Collisions")
     page.get_by_text("sphere obstacle", exact=True).click()  # its folder opens
-    page.get_by_role("button", name="Add sphere", exact=True).click()
-    (sphere_id,) = wait_until(lambda: list(app.collisions.obstacles), WAIT, "the app to get the sphere")
+    (sphere_id,) = press(web, "Add sphere", ui.obstacle_panel.add_buttons["sphere"],
+                         lambda: list(app.collisions.obstacles), "the app to get the sphere")
     wait_until(lambda: sphere_id in ui.obstacle_markers.nodes, WAIT, "the sphere drawn")
     since = len(web.configurations)
     avoidance = CollisionAvoidance.from_dict(app.robot, app.collisions.avoidance.to_dict())

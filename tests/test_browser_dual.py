@@ -27,6 +27,7 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
     open_tab,
     open_web,
     plan_drag,
+    press,
     png_pixels,
     set_camera,
     wait_until,
@@ -125,8 +126,8 @@ def add_hole_on(web, link: str) -> str:
     menu = web.ui.constraint_panel.inputs["hole"]["link"]
     wait_until(lambda: menu.value == link, WAIT, f"the arm menu to read {link}")
     before = set(holes(web.app))
-    page.get_by_role("button", name="Add hole").click()
-    (hole_id,) = wait_until(lambda: set(holes(web.app)) - before, WAIT, "a new hole")
+    (hole_id,) = press(web, "Add hole", web.ui.constraint_panel.add_buttons["hole"],
+                       lambda: set(holes(web.app)) - before, "a new hole")
     return hole_id
 
 

@@ -70,11 +70,13 @@ class PlacedPanel:
         def adder(kind: str) -> Callable[[viser.GuiEvent], None]:
             return lambda event: guarded(event, lambda: self.add(kind))
 
+        #: each kind's "Add <label>" button
+        self.add_buttons: dict[str, viser.GuiButtonHandle] = {}
         for kind, form in self.forms.items():
             with gui.add_folder(form.folder, expand_by_default=form.expanded):
                 form.build(gui)
-                button = gui.add_button(f"Add {form.label}", hint=form.hint)
-            button.on_click(adder(kind))
+                self.add_buttons[kind] = gui.add_button(f"Add {form.label}", hint=form.hint)
+            self.add_buttons[kind].on_click(adder(kind))
         self.menu = gui.add_dropdown(words.menu, (NONE,))
         self.remove_button = gui.add_button(words.remove)
         self.clear_button = gui.add_button(words.clear)
