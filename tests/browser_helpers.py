@@ -29,6 +29,7 @@ from types import SimpleNamespace
 import numpy as np
 import pinocchio as pin
 import pytest
+import viser
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 from playwright.sync_api import expect
 
@@ -372,7 +373,8 @@ _COUNT_CLICKS = """() => {
 }"""
 
 
-def press(web, name: str, handle, effect: Callable[[], object], what: str):
+def press(web, name: str, handle: viser.GuiButtonHandle, effect: Callable[[], object],
+          what: str):
     """Click the page's button ``name`` (whose server-side handle is ``handle``) and
     return ``effect()``'s first true value (``what`` it waits for).
 
@@ -411,8 +413,10 @@ def press(web, name: str, handle, effect: Callable[[], object], what: str):
         try:
             return wait_until(effect, WAIT, what)
         except AssertionError as error:
-            raise AssertionError(f"{error} (the server got the click on {name!r}: the app "
-                                 "did not act on it)") from None
+            raise AssertionError(f"{error} (viser got the click on {name!r} and stamped its "
+                                 f"handle: the app did not act on it; inbox: "
+                                 f"{web.ui.inbox.applied} applied, {web.ui.inbox.refused} "
+                                 "refused)") from None
 
 
 def input_of(page, label: str):
