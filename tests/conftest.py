@@ -63,7 +63,8 @@ FILE_MARKERS = {
              "test_bench.py", "test_web_trust.py", "test_scenarios_any_robot.py",
              "test_ros2_wire.py", "test_plant_encoder_noise.py", "test_web_ros2.py",
              "test_web_ros2_safety.py", "test_ros2_master.py", "test_ros2_realtime.py",
-             "test_walk_backends.py", "test_variations.py"),
+             "test_walk_backends.py", "test_variations.py", "test_inputs_authentication.py",
+             "test_web_priorities.py", "test_web_ui.py"),
 }
 
 
