@@ -50,8 +50,9 @@ def test_a_report_keeps_a_field_read_only():
 
 
 def test_the_compiled_step_reads_its_report_by_name_specialized(sda10f):
-    """After a few steps on one hole (the fast path: no list, no event), every read of a
-    field in ``CompiledStep.last_report`` is the interpreter's slot read."""
+    """After a few steps on one hole whose report is read (the fast path: no list, no
+    event; a report nobody reads is not built), every read of a field in
+    ``CompiledStep.last_report`` is the interpreter's slot read."""
     if sys.version_info < (3, 11):
         cannot_check("CPython specializes attribute reads from 3.11 on")
     if sys.gettrace() is not None:
@@ -62,7 +63,7 @@ def test_the_compiled_step_reads_its_report_by_name_specialized(sda10f):
     for _ in range(64):
         controller.solve(sda10f.q_home + rng.uniform(-1e-3, 1e-3, sda10f.model.nq),
                          np.array([0.001, -0.002, 0.0015, 0.005, -0.003, 0.002]))
-    assert controller.report.events == ()
+        assert controller.report.events == ()
     reads = field_reads(CompiledStep.last_report)
     assert reads
     assert {read.opname for read in reads} == {"LOAD_ATTR_SLOT"}

@@ -189,6 +189,9 @@ class CompiledStep:
         #: the collision rows measured in C++ (None without collision avoidance)
         self.collision_rows = (None if self._collisions is None
                                else CompiledCollisions(pipeline, self._collisions))
+        #: the last :meth:`run`'s report, None until :meth:`run_report` builds it
+        self._run_report: StepReport | None = StepReport()
+        self._run_paper_form = True
 
     def _check_kinematics(self, frames: list[int]) -> None:
         """The copy of the model against Pinocchio, once, at the posture: a joint it
@@ -219,10 +222,31 @@ class CompiledStep:
     def solve(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         """``qd`` for the stacked EE twist at ``q`` and the step's report (section 8.3);
         bad input raises ``ValueError`` as the Python step does."""
+        self.run_report()
         if self._collisions is not None:
             return self._solve_with_pairs(q, twist)
         qd, paper_form = self._run(q, twist)
         return qd, self.last_report(paper_form)
+
+    def run(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """:meth:`solve`'s ``qd``, its report built by :meth:`run_report` when read
+        (docs/design.md 16: a report nobody reads costs nothing; with collision avoidance
+        it is built now, around the rows of the step)."""
+        if self._collisions is not None:
+            qd, self._run_report = self._solve_with_pairs(q, twist)
+            return qd
+        qd, self._run_paper_form = self._run(q, twist)
+        self._run_report = None
+        return qd
+
+    def run_report(self) -> StepReport:
+        """The report of the last :meth:`run` (an ``ok`` one before any), built from the
+        C++ report on the first read; a call that runs the pipeline otherwise
+        (:meth:`solve`, :meth:`time_steps`) builds it first."""
+        report = self._run_report
+        if report is None:
+            report = self._run_report = self.last_report(self._run_paper_form)
+        return report
 
     def _run(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, bool]:
         """The pipeline's step at ``q``: one C++ call, or two around the terms Python
@@ -345,6 +369,7 @@ class CompiledStep:
         velocity or collision rows between two calls)."""
         if not self._one_call:
             return None
+        self.run_report()
         if self._collisions is not None:
             if self.collision_rows.stale():  # describe the pairs (the first step does)
                 self.solve(configurations[0], twists[0])

@@ -203,8 +203,8 @@ class CJMController(Controller):
         self._posture = read_only(pin.neutral(self.model) if posture is None
                                   else as_vector(posture, self.model.nq, "posture"))
         self._splits: dict[int, ChainSplit | None] = {}
-        #: the last step's :class:`StepReport` (``info`` is its wording)
-        self.report = StepReport()
+        #: the last step's :class:`StepReport` (:attr:`report`), None until read
+        self._report: StepReport | None = StepReport()
         #: whether a step ran since ``self.data`` last had kinematics (the compiled step
         #: computes its own and leaves ``self.data`` as it was)
         self._data_behind = False
@@ -287,6 +287,7 @@ class CJMController(Controller):
                 self.backend = "python"
         previous = getattr(self, "step", None)
         if previous is not None:  # a rebuilt step goes on from the command last sent
+            self._report = self.report
             step.previous[:] = previous.previous
             step.previous_change[:] = previous.previous_change
         #: everything the step needs (:class:`controllers.cjm.step_setup.StepSetup`)
@@ -328,19 +329,33 @@ class CJMController(Controller):
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """:meth:`Controller.solve`, by the backend's step (docs/design.md section 16):
-        its report kept in :attr:`report` and worded into :attr:`info`."""
-        qd, report = self.step.solve(q, twist)
-        self.take_report(report)
+        its report, built when :attr:`report` is read, worded into :attr:`info`."""
+        qd = self.step.run(q, twist)
+        self._took_report(None)
         return qd
 
     def take_report(self, report: StepReport) -> None:
         """A step's report kept in :attr:`report`, worded into :attr:`info` when that is
         read (``SolverError`` for a failed step when ``strict``)."""
-        self.report = report
+        self._took_report(report)
+
+    def _took_report(self, report: StepReport | None) -> None:
+        """A step ran: ``report`` (None: the step's :meth:`run_report`, built when read)."""
+        self._report = report
         self._info: SolveInfo | None = None
         self._data_behind = True
-        if self.strict and report.status is StepStatus.FAILED:
+        if self.strict and self.report.status is StepStatus.FAILED:
             raise SolverError(self.info.message)
+
+    @property
+    def report(self) -> StepReport:
+        """The last step's :class:`~controllers.cjm.report.StepReport`, built from the
+        backend's on the first read after the step (a step nobody asks about costs no
+        report: docs/design.md 16)."""
+        report = self._report
+        if report is None:
+            report = self._report = self.step.run_report()
+        return report
 
     @property
     def info(self) -> SolveInfo:

@@ -64,6 +64,7 @@ class PythonStep:
         self._change = None if setup.bounds.jerk_step is None else self.previous_change
         #: the acceleration limits the dampers brake with (None: none; docs/design.md 12)
         self._acceleration_limit = setup.bounds.acceleration_limit
+        self._run_report = StepReport()
 
     # -- the step template (controllers.base.GuardedController.solve) ------------------
 
@@ -81,6 +82,15 @@ class PythonStep:
         np.subtract(qd, self.previous, out=self.previous_change)
         self.previous[:] = qd
         return qd, report
+
+    def run(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """:meth:`solve`'s ``qd``; its report is :meth:`run_report`'s."""
+        qd, self._run_report = self.solve(q, twist)
+        return qd
+
+    def run_report(self) -> StepReport:
+        """The report of the last :meth:`run` (an ``ok`` one before any)."""
+        return self._run_report
 
     def _step(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, StepReport]:
         setup = self.setup

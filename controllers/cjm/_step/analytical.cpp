@@ -55,7 +55,7 @@ bool Step::square_pre_chain(const Inputs& in, Index index, VectorRef qd) {
     }
   }
   if (!solved) {  // the SVD DLS (eq 35)
-    dls_.factor(cjm, policy_);
+    factor_task(cjm, policy_);
     dls_.solve(cjm_rhs_, free);
     report_task_solution(cjm, cjm_rhs_, free);
     if (dls_.rank() < n_columns) closest_to_posture(in, n_columns, n_columns != 6 && in.use_posture);
@@ -131,7 +131,7 @@ bool Step::redundant_pre_chain(const Inputs& in, Index index, VectorRef qd) {
   for (Index j = 0; j < n_post; ++j) cjm.col(n_free + j) = in.ee_jacobian.col(plan.post[j]);
   cjm_rhs_ = in.twist;
   cjm_rhs_.noalias() -= ad_cjm_ * pre_rhs.col(0);
-  dls_.factor(cjm, policy_);
+  factor_task(cjm, policy_);
   auto free = free_with_one_.head(n_columns);
   dls_.solve(cjm_rhs_, free);
   twist_a_ = pre_rhs.col(0);

@@ -134,6 +134,9 @@ class DampedLeastSquares {
     decide();
     return damping_;
   }
+  //! Whether sigma_min() is still to compute and nothing decided needs it (the undamped
+  //! QR solve): it can wait until it is read.
+  bool sigma_min_deferrable() const { return decision_ == Decision::undamped && !sigma_known_; }
   Index rank() const { return rank_; }
   bool exact() {
     decide();

@@ -46,7 +46,7 @@ void Step::general(const Inputs& in, VectorRef qd) {
     auto task_rhs = task_rhs_.col(0).head(task_rows_);
     task_rhs = in.twist;
     task_rhs.noalias() -= in.ee_jacobian * qd;
-    dls_.factor(task_null, policy_);
+    factor_task(task_null, policy_);
     auto y = task_x_.col(0).head(d);
     dls_.solve(task_rhs, y);
     null_.from_null(y, delta_);
@@ -164,7 +164,7 @@ Step::Split Step::solve_over_free(const ConstVectorRef& rows_rhs,
     task_rhs.col(0) = twist;
     task_rhs.col(1).noalias() = task * base_;
     task_rhs.col(1) = -task_rhs.col(1);
-    dls_.factor(task_null, policy);
+    factor_task(task_null, policy);
     auto x = task_x_.topLeftCorner(d, 2);
     dls_.solve(task_rhs, x);
     auto delta = delta_.head(n_free);

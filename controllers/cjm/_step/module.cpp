@@ -303,7 +303,7 @@ PYBIND11_MODULE(_step, module) {
            py::arg("posture_target"), py::arg("tolerances"), py::arg("pair_capacity") = 0,
            py::arg("event_capacity") = -1)
       .def_property_readonly(
-          "report", [](const cjm::Step& step) { return cjm_report::report_of(step.report()); },
+          "report", [](cjm::Step& step) { return cjm_report::report_of(step.report()); },
           "The last step's Report (its fields: report.hpp's CJM_STEP_REPORT).")
       .def_property_readonly("events", [](py::object self) {
         auto& step = self.cast<cjm::Step&>();

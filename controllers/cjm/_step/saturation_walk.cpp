@@ -65,7 +65,7 @@ Index Step::task_damping_rows(const Inputs& in) {
   null_.to_null(task_t, task_null_t);
   auto task_null = task_null_.topLeftCorner(task_rows_, d);
   task_null = task_null_t.transpose();
-  dls_.factor(task_null, policy_);
+  factor_task(task_null, policy_);
   walk_sigma_min_ = dls_.sigma_min();
   walk_damping_ = dls_.damping();
   if (walk_damping_ == 0.0) return 0;

@@ -160,6 +160,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
                   analytical_allowed};
   check_sizes(in, qd);
   report_ = Report();
+  sigma_min_pending_ = false;
   rows_ready_ = false;
   active_.assign(equalities_.begin(), equalities_.end());
   active_pairs_.clear();
@@ -437,8 +438,12 @@ void Step::event(Event event, double a, double b, double c) {
 
 void Step::report_task_solution(const ConstMatrixRef& matrix, const ConstVectorRef& rhs,
                                 const ConstVectorRef& x) {
-  report_.sigma_min = dls_.sigma_min();
   report_.damping = dls_.damping();
+  if (dls_.sigma_min_deferrable()) {
+    sigma_min_pending_ = true;
+  } else {
+    report_.sigma_min = dls_.sigma_min();
+  }
   if (dls_.exact()) return;
   auto achieved = scratch_rows_.head(matrix.rows());
   achieved.noalias() = matrix * x;

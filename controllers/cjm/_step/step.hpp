@@ -81,8 +81,12 @@ class Step {
              const ConstVectorRef& posture, bool use_posture, bool analytical_allowed,
              VectorRef qd);
 
-  //! The last step's report (its lists: the first counts of the arrays below).
-  const Report& report() const { return report_; }
+  //! The last step's report (its lists: the first counts of the arrays below), its
+  //! sigma_min computed now if the step left it to the first read (settle_sigma_min).
+  const Report& report() {
+    settle_sigma_min();
+    return report_;
+  }
   RowMatrix& events() { return events_; }
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& saturated_joints() { return saturated_; }
   Eigen::Matrix<Index, Eigen::Dynamic, 1>& active_barriers() { return active_barriers_; }
@@ -165,6 +169,19 @@ class Step {
   void event(Event event, double a = 0.0, double b = 0.0, double c = 0.0);
   void report_task_solution(const ConstMatrixRef& matrix, const ConstVectorRef& rhs,
                             const ConstVectorRef& x);
+  //! The report's sigma_min from dls_ if report_task_solution left it to the first read
+  //! (an undamped QR solve decides without it; its power iteration was a quarter of the
+  //! dual robot's step: docs/design.md 16). Called before dls_ factors again and by report().
+  void settle_sigma_min() {
+    if (!sigma_min_pending_) return;
+    report_.sigma_min = dls_.sigma_min();
+    sigma_min_pending_ = false;
+  }
+  //! dls_.factor, the report's pending sigma_min settled first.
+  void factor_task(const ConstMatrixRef& matrix, const DampingPolicy& policy) {
+    settle_sigma_min();
+    dls_.factor(matrix, policy);
+  }
   void write_report();
 
   // analytical.cpp
@@ -246,6 +263,8 @@ class Step {
   bool rows_ready_ = false;
   NullSpace null_;
   DampedLeastSquares dls_;
+  //! whether report_.sigma_min is still dls_'s to compute (settle_sigma_min)
+  bool sigma_min_pending_ = false;
   Matrix task_t_, task_null_t_, task_null_, task_rhs_, task_x_;  // (J N)^T and its solves
   bool accelerating_ = false;  // acceleration limits on
   Vector previous_;  // the acceleration limits' reference
