@@ -20,6 +20,7 @@ import shutil
 import signal
 import socket
 import threading
+import warnings
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -373,6 +374,11 @@ _COUNT_CLICKS = """() => {
 }"""
 
 
+class LostClick(UserWarning):
+    """A click the page sent and the server never got, clicked once more by :func:`press`:
+    shown in the run's warnings summary, so that a green run still says it happened."""
+
+
 def press(web, name: str, handle: viser.GuiButtonHandle, effect: Callable[[], object],
           what: str):
     """Click the page's button ``name`` (whose server-side handle is ``handle``) and
@@ -384,7 +390,7 @@ def press(web, name: str, handle: viser.GuiButtonHandle, effect: Callable[[], ob
     in :data:`WAIT` s was lost between the page and the server: the failure says whether
     the page saw the click and whether the page is still the server's client, and the
     button is clicked once more (the click provably not delivered, the effect cannot
-    have come twice); a second loss fails.
+    have come twice), with a :class:`LostClick` warning; a second loss fails.
     """
     page = web.page
     button = page.get_by_role("button", name=name, exact=True)
@@ -407,8 +413,8 @@ def press(web, name: str, handle: viser.GuiButtonHandle, effect: Callable[[], ob
             if attempt == 2:
                 raise AssertionError(f"the click on {name!r} never reached the server, "
                                      f"twice ({where})") from None
-            print(f"\n[browser] the click on {name!r} never reached the server in "
-                  f"{WAIT:g} s ({where}); clicking once more")
+            warnings.warn(f"the click on {name!r} never reached the server in {WAIT:g} s "
+                          f"({where}); clicking once more", LostClick, stacklevel=2)
             continue
         try:
             return wait_until(effect, WAIT, what)
