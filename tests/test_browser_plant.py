@@ -233,6 +233,10 @@ STATUS_FORCE = (r"port force {} ([0-9.]+) mN(?:; the largest in the last 10 s ([
                 r"\(arrow 2 cm at 0\.1 mN")
 #: the drag (m) and its mouse steps
 DRAG, DRAG_STEPS = 0.012, 6
+#: the status line's readings taken after each mouse step, at least, whatever the page's
+#: speed (a loaded machine's page answered one read in 0.3-1.5 s: 10 readings over the
+#: drag, where the loop time's window alone gives ~8 a step on an idle one)
+READINGS_PER_STEP = 2
 
 
 def status_line_forces(page, hole_id: str) -> tuple[float, float | None] | None:
@@ -273,11 +277,15 @@ def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
                        >= DRAG * k / DRAG_STEPS - 0.4e-3, WAIT, f"the server to get mouse step {k} "
                        f"(the target moved {1e3 * (app.console.target.translation - target0)} mm, the "
                        f"drag along {plan.direction}, {plan.pixels:.0f} px)")
-            arrived = app.now
-            while app.now < arrived + STEP_SETTLE:
+            arrived, taken = app.now, 0
+            deadline = time.monotonic() + WAIT
+            while app.now < arrived + STEP_SETTLE or taken < READINGS_PER_STEP:
+                assert time.monotonic() < deadline, (
+                    f"the status line showed no port force for {WAIT:g} s after mouse step {k}")
                 forces = status_line_forces(page, hole_id)
                 if forces is not None:
                     shown.append((app.now, forces[0]))
+                    taken += 1
                 time.sleep(0.05)
     finally:
         mouse.up()
