@@ -102,7 +102,16 @@ class PlantMeasures:
     @property
     def port_force(self) -> float:
         """The largest port force's magnitude (N); 0 without a hole."""
-        return float(np.max(np.linalg.norm(self.port_forces, axis=1), initial=0.0))
+        return largest_force(self.port_forces)
+
+
+def largest_force(forces: np.ndarray) -> float:
+    """The largest magnitude (N) of ``forces`` (n, 3), ``sqrt(max_i f_i . f_i)``; 0 for none,
+    NaN if one is. The one arithmetic of a port force's magnitude: the UI's plot of the
+    largest per sample (web/app/trace.py) is held to the plant's measures bit for bit."""
+    if not forces.size:
+        return 0.0
+    return math.sqrt(float(np.max(np.einsum("ij,ij->i", forces, forces))))
 
 
 class MujocoPlant:

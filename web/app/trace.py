@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from teleop.loop import StepRecord
+from teleop.plants import largest_force
 
 from .limits import HISTORY_RATE, HISTORY_SECONDS
 
@@ -49,7 +50,7 @@ class Trace:
         """One control period's port forces ``(ports, 3)`` (N), kept until the next sample
         if they are the largest since the last."""
         if forces.size:
-            largest = math.sqrt(float(np.max(np.einsum("ij,ij->i", forces, forces))))
+            largest = largest_force(forces)
             if not largest <= self._port_peak:  # NaN: the first since the last sample
                 self._port_peak = largest
 
