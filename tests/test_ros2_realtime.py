@@ -320,7 +320,6 @@ def test_a_simulated_robot_slower_than_the_wall_clock_gives_up_real_time(robot, 
 
 
 @pytest.mark.timing
-@pytest.mark.skipif(not granted(PRIORITY), reason="SCHED_FIFO not granted to this process")
 def test_a_simulated_robot_that_holds_its_cpu_gives_up_real_time_and_takes_it_again(
         robot, domain):
     """Each period's work 93 % of a 10 ms period on the CPU (it still sleeps, so the
@@ -328,6 +327,10 @@ def test_a_simulated_robot_that_holds_its_cpu_gives_up_real_time_and_takes_it_ag
     the share (the kernel's word, read in each period), and the periods take it again
     once their work is light for QUIET_RETAKE s. Timing: a real-time thread of a higher
     priority (another suite's) taking the core leaves this one's share under 90 %."""
+    if not granted(PRIORITY):  # a skip in CI would hide a machine that cannot run it
+        if os.environ.get("CI"):
+            pytest.fail("CI must run this test: SCHED_FIFO is not granted to this process")
+        pytest.skip("SCHED_FIFO not granted to this process")
     dt = 0.01
     settings = Ros2Settings(domain=domain, joint_states=STATES, command_topic=COMMANDS,
                             realtime_priority=PRIORITY)
