@@ -325,9 +325,9 @@ class TeleopLoop:
             except ValueError:  # a declaration refused: the Python path's controlled stop
                 result = None
             if result is not None:
-                return self._supervised(self._advance_compiled(result, sensed, tick_start),
-                                        supervision)
-        return self._supervised(self._advance_python(poses, sensed, tick_start), supervision)
+                return self._advance_compiled(result, sensed, tick_start).supervised_by(
+                    supervision)
+        return self._advance_python(poses, sensed, tick_start).supervised_by(supervision)
 
     def supervise(self, sensed: np.ndarray, operator_targets: list[pin.SE3],
                   errors: list[float] | None = None) -> Supervision:
@@ -343,13 +343,6 @@ class TeleopLoop:
             sensed, operator_targets, self.constraints, self.controller.constraint_frames,
             self._names, getattr(measures, "port_forces", None), errors)
         return self.supervision
-
-    @staticmethod
-    def _supervised(step: PendingStep, supervision: Supervision) -> PendingStep:
-        """``step`` with the loop's status (:meth:`Supervision.status_of`)."""
-        step.controller_status, step.supervision = step.status, supervision
-        step.status, step.step_message = supervision.status_of(step.status, step.step_message)
-        return step
 
     def _advance_python(self, poses: list[pin.SE3], sensed: np.ndarray,
                         tick_start: int) -> PendingStep:
@@ -440,13 +433,8 @@ class TeleopLoop:
         its geometry, the drift ``-K e``, the EE velocities), with the true kinematics when
         they differ (:meth:`_measured_kinematics`); the operator's and the commanded EE
         velocities (world)."""
-        self._measure_command(step, self.constraints, self.controller.constraint_frames,
-                              self._row_labels())
-
-    def _measure_command(self, step: PendingStep, constraints: Sequence[Constraint],
-                         frames: Sequence[int], labels: tuple[str, ...]) -> None:
-        """:meth:`measure_command` against ``constraints`` on ``frames``, whose rows are
-        ``labels``."""
+        constraints: Sequence[Constraint] = self.constraints
+        frames = self.controller.constraint_frames
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, step.sensed)  # the frames: where they are read
         step.residual, step.constraint_velocity, step.drift_velocity, step.floor = \
@@ -468,22 +456,14 @@ class TeleopLoop:
         step.operator_linear_velocities = (np.zeros((len(now), 3)) if before is None
                                            else np.array([(position - previous) / dt
                                                           for position, previous in zip(now, before)]))
-        step.labels = labels
+        step.labels = self._row_labels()
 
     def measure(self, step: PendingStep) -> StepRecord:
         """The end of the period's measures (after :meth:`measure_command`), at the true
         configuration with the true kinematics (:meth:`_measured_kinematics`)."""
         self._row_labels()  # the names, when the set changed
-        return self._measure_end(step, self.q, self.t, self.constraints,
-                                 self.controller.constraint_frames, self._names,
-                                 None if self.plant is None else self.plant.measures())
-
-    def _measure_end(self, step: PendingStep, q: np.ndarray, t: float,
-                     constraints: Sequence[Constraint], frames: Sequence[int],
-                     names: tuple[str, ...], plant: object | None) -> StepRecord:
-        """:meth:`measure` at the true configuration ``q`` of time ``t``, against
-        ``constraints`` on ``frames`` named ``names``, with the plant's measures ``plant``."""
-        model, data, constraints = self._measured_kinematics(q, constraints, frames)
+        q, frames = self.q, self.controller.constraint_frames
+        model, data, constraints = self._measured_kinematics(q, self.constraints, frames)
         pin.forwardKinematics(model, data, q)  # the frames read below, not every frame
         placements = [pin.updateFramePlacement(model, data, frame) for frame in self.ee_frame_ids]
         errors, error, penetration = constraint_errors(model, data, constraints, frames)
@@ -495,9 +475,10 @@ class TeleopLoop:
                         *(model.lowerPositionLimit - q).tolist())
         distance = (None if self.distance_meter is None
                     else self.distance_meter.measure(model, data, q))
+        plant = None if self.plant is None else self.plant.measures()
         return step_record(
-            step, t, error, penetration, position_errors, orientation_errors, violation, errors,
-            names, plant, math.inf if distance is None else distance.minimum_distance,
+            step, self.t, error, penetration, position_errors, orientation_errors, violation,
+            errors, self._names, plant, math.inf if distance is None else distance.minimum_distance,
             "" if distance is None else distance.closest_pair)
 
     def _row_labels(self) -> tuple[str, ...]:

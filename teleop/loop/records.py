@@ -164,7 +164,7 @@ class PendingStep:
     moved: np.ndarray  # the joint velocities the robot moved with (the plant's)
     tick_time_us: float  # the hot path: filter, kinematics, command, solve, integration
     step_time_us: float
-    status: str  # the controller's, then the loop's (TeleopLoop._supervised)
+    status: str  # the controller's, then the loop's (:meth:`supervised_by`)
     step_message: StepMessage  # its message, worded when read (:attr:`message`)
     twist_saturated: bool
     controller_status: str = "ok"
@@ -182,6 +182,13 @@ class PendingStep:
     def message(self) -> str:
         """The status's message in words."""
         return self.step_message.text
+
+    def supervised_by(self, supervision: Supervision) -> PendingStep:
+        """This step with the loop's status (:meth:`Supervision.status_of`); the
+        controller's kept in ``controller_status``."""
+        self.controller_status, self.supervision = self.status, supervision
+        self.status, self.step_message = supervision.status_of(self.status, self.step_message)
+        return self
 
     @property
     def target_translations(self) -> list[np.ndarray]:
