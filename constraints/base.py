@@ -16,7 +16,6 @@ position error in metres along ``C`` (drift feedback, docs/design.md section 3).
 from __future__ import annotations
 
 import inspect
-import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -28,6 +27,7 @@ import pinocchio as pin
 
 from .kinematics import frame_placement, resolve_frame
 from .limits import MAX_CONSTRAINT_GAIN, MAX_POSITION_M, MAX_SPEED_M_S
+from .norms import norm
 from .registry import constraint_type
 from .revision import ReadOnlyFields
 from .validation import as_number, as_unit_vector, as_vector, short_repr
@@ -397,9 +397,9 @@ class Constraint(ReadOnlyFields, ABC):
 
     def violation(self, placement: pin.SE3) -> float:
         """How far (m) the point is from satisfying the constraint (0 when it does):
-        ``|error|``, as ``np.linalg.norm`` computes it (``sqrt(e . e)``) without its checks."""
-        error = self.error(placement)
-        return math.sqrt(error @ error)
+        ``|error|`` (:func:`constraints.norms.norm`: the loop's measures of many periods at
+        once round it the same, on any CPU)."""
+        return norm(self.error(placement))
 
     # -- description: to and from a JSON-ready dict ----------------------------------------
 

@@ -42,7 +42,8 @@ from constraints.kinematics import frame_placement
 from constraints.validation import as_vector
 from controllers.step_message import StepMessage
 
-from .constraint_measures import constraint_errors, constraint_velocity, norm
+from .constraint_measures import (constraint_errors, constraint_velocity, norm,
+                                  relative_rotations)
 from .distance_meter import DistanceMeter
 from .loop_config import LoopConfig
 from .measured_in_batches import Kinematics, measure_periods
@@ -469,7 +470,7 @@ class TeleopLoop:
         errors, error, penetration = constraint_errors(model, data, constraints, frames)
         position_errors = np.array([norm(ee.translation - target)
                                     for ee, target in zip(placements, step.target_translations)])
-        orientation_errors = np.array([norm(pin.log3(ee.rotation.T @ target))
+        orientation_errors = np.array([norm(pin.log3(relative_rotations(ee.rotation, target)))
                                        for ee, target in zip(placements, step.target_rotations)])
         violation = max(0.0, *(q - model.upperPositionLimit).tolist(),
                         *(model.lowerPositionLimit - q).tolist())

@@ -10,9 +10,11 @@ has the same constraint types on the same frames: each constraint's evaluation b
 type's batched form (:mod:`teleop.loop.batched_evaluation`), its rows
 ``A = C (J_v - [p]x J_w)`` (section 3), ``A qd``, the residual, the drift ``-K e``, the
 round-off floor (section 15.2), the EE velocities, the errors at the end. A stacked
-``matmul`` multiplies each period's pair as the single product does, so the numbers are
-those of the period-by-period code bit for bit, but the floor's world point
-``R p + t`` (Pinocchio's ``act`` rounds it otherwise, within 1e-13 relative).
+``matmul`` multiplies each period's pair as the single product does, and what BLAS would
+round by the CPU's kernel (the norms, ``R^T R*``) is element-wise, the same function for
+one period and a stack (:mod:`constraints.norms`), so the numbers are those of the
+period-by-period code bit for bit on any CPU, but the floor's world point ``R p + t``
+(Pinocchio's ``act`` rounds it otherwise, within 1e-13 relative).
 """
 
 from __future__ import annotations
@@ -25,10 +27,11 @@ import numpy as np
 import pinocchio as pin
 
 from constraints import Constraint
+from constraints.norms import row_norms
 from controllers.cjm.pose_rows import PERIOD_PLACEMENT, PERIOD_PREVIOUS, PERIOD_TARGET, PERIOD_TWIST
 
 from .batched_evaluation import batched_form, times
-from .constraint_measures import EPSILON
+from .constraint_measures import EPSILON, relative_rotations
 from .measured_later import Geometry, MeasuredLater
 from .records import StepRecord, step_record
 
@@ -140,7 +143,7 @@ def constraint_velocity(geometries: Sequence[Geometry], placements: np.ndarray,
         drift.append(correction)
         world = times(rotations, point.p) + translations
         floor = np.maximum(floor, times(np.abs(A), speeds).max(axis=1)
-                           + gains * np.sqrt((world * world).sum(axis=1)))
+                           + gains * row_norms(world))
     return RowMeasures(residual, np.concatenate(velocity, axis=1),
                        np.concatenate(drift, axis=1), floor * EPSILON)
 
@@ -232,12 +235,11 @@ def measure_ends(kinematics: Kinematics, periods: Sequence[MeasuredLater],
         else:
             penetration = np.maximum(penetration, violation)
     offsets = placements[:, :ees, :3, 3] - targets[..., 9:12]
-    rotations = np.matmul(placements[:, :ees, :3, :3].transpose(0, 1, 3, 2),
-                          targets[..., :9].reshape(count, ees, 3, 3))
+    rotations = relative_rotations(placements[:, :ees, :3, :3],
+                                   targets[..., :9].reshape(count, ees, 3, 3))
     logs = np.array([pin.log3(rotation) for rotation in rotations.reshape(-1, 3, 3)])
     return EndMeasures(np.concatenate(violations, axis=1), error, penetration,
-                       np.sqrt((offsets * offsets).sum(axis=2)),
-                       np.sqrt((logs * logs).sum(axis=1)).reshape(count, ees))
+                       row_norms(offsets), row_norms(logs).reshape(count, ees))
 
 
 def measure_periods(kinematics: Kinematics, periods: Sequence[MeasuredLater],
