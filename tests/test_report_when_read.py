@@ -89,3 +89,33 @@ def test_the_dual_robot_s_undamped_steps_leave_sigma_min_to_the_read():
         assert math.isfinite(report.sigma_min)
         assert report.sigma_min == pytest.approx(python.report.sigma_min, rel=1e-9)
     assert undamped >= 30
+
+
+def test_the_walk_s_undamped_steps_leave_sigma_min_to_the_read():
+    """With acceleration limits the saturation around the previous command decides its
+    damping rows on ``J N`` (docs/design.md 9.1): undamped by the QR, their sigma_min is
+    left to the report's read too. On ``fast-lateral``'s periods, where the box binds most
+    steps, each report read late is the eager twin's field by field and its sigma_min the
+    Python backend's SVD's."""
+    from teleop.controller_specs import ROBOT, make_controller
+    from teleop.experiments.bench_loop import ACCELERATION_SCENARIO, scenario_periods
+    from teleop.experiments.scenarios import load_scenario
+
+    plan = load_scenario(ACCELERATION_SCENARIO)
+    configurations, twists = scenario_periods(ACCELERATION_SCENARIO, 0.4, acceleration_limits=True)
+    lazy, eager, python = (make_controller(spec, plan.robot, plan.make_constraints(), dt=1e-3,
+                                           acceleration_limit=ROBOT)
+                           for spec in ("cjm", "cjm", "cjm:python"))
+    assert isinstance(lazy, CJMController) and isinstance(eager, CJMController)
+    assert lazy.backend == "compiled"
+    undamped_walks = 0
+    for q, twist in zip(configurations, twists):
+        lazy.solve(q, twist)
+        _, eager_report = eager.step.solve(q, twist)
+        python.solve(q, twist)
+        report = lazy.report
+        same_report(report, eager_report)
+        assert report.status is python.report.status
+        undamped_walks += report.method == "saturated" and report.damping == 0.0
+        assert report.sigma_min == pytest.approx(python.report.sigma_min, rel=1e-9, abs=1e-12)
+    assert undamped_walks >= len(configurations) // 3  # 196 of the first 400

@@ -30,7 +30,10 @@ void Step::saturate(const Inputs& in, VectorRef qd) {
   qd = sns_qd_;
   report_.method = Method::saturated;
   report_.scale = sns_task_scale_;
-  if (!std::isnan(sns_sigma_min_)) {  // the task's DLS that gave this command
+  if (sns_sigma_deferred_) {  // the walk's undamped DLS: its sigma_min when the report is read
+    report_.damping = sns_damping_;
+    sigma_min_source_ = &walk_dls_;
+  } else if (!std::isnan(sns_sigma_min_)) {  // the task's DLS that gave this command
     report_.sigma_min = sns_sigma_min_;
     report_.damping = sns_damping_;
   }
@@ -53,7 +56,8 @@ void Step::saturate(const Inputs& in, VectorRef qd) {
     report(Status::least_squares);
     report_.saturation_joint_count = report_.saturated_count;
     saturation_joints_.head(report_.saturated_count) = saturated_.head(report_.saturated_count);
-    event(Event::task_missed, sns_sigma_min_, sns_damping_);
+    if (sns_sigma_deferred_) settle_sigma_min();
+    event(Event::task_missed, sns_sigma_deferred_ ? report_.sigma_min : sns_sigma_min_, sns_damping_);
   } else if (sns_task_scale_ < 1.0) {
     report(Status::scaled);
     event(Event::task_scaled, static_cast<double>(sns_limiting_), sns_task_scale_);
@@ -163,6 +167,7 @@ void Step::saturation_result(const Inputs& in, double task_scale, double rows_sc
   // the split is the last one solved: dls_ holds its task's DLS
   sns_sigma_min_ = split.task_solved ? dls_.sigma_min() : std::numeric_limits<double>::quiet_NaN();
   sns_damping_ = split.task_solved ? dls_.damping() : 0.0;
+  sns_sigma_deferred_ = false;
   auto achieved = scratch_rows_.head(task_rows_);
   achieved.noalias() = in.ee_jacobian * sns_qd_;
   achieved -= task_scale * in.twist;

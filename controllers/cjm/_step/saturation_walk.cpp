@@ -57,6 +57,7 @@ Index Step::task_damping_rows(const Inputs& in) {
   null_.factor(rows_.topRows(m));
   const Index d = null_.dimension();
   walk_sigma_min_ = std::numeric_limits<double>::quiet_NaN();
+  walk_sigma_deferred_ = false;
   walk_damping_ = 0.0;
   if (d == 0) return 0;
   auto task_t = task_t_.topLeftCorner(nv_, task_rows_);
@@ -65,13 +66,15 @@ Index Step::task_damping_rows(const Inputs& in) {
   null_.to_null(task_t, task_null_t);
   auto task_null = task_null_.topLeftCorner(task_rows_, d);
   task_null = task_null_t.transpose();
-  factor_task(task_null, policy_);
-  walk_sigma_min_ = dls_.sigma_min();
-  walk_damping_ = dls_.damping();
+  if (sigma_min_source_ == &walk_dls_) settle_sigma_min();
+  walk_dls_.factor(task_null, policy_);
+  walk_damping_ = walk_dls_.damping();
+  walk_sigma_deferred_ = walk_dls_.sigma_min_deferrable();
+  if (!walk_sigma_deferred_) walk_sigma_min_ = walk_dls_.sigma_min();
   if (walk_damping_ == 0.0) return 0;
-  const Index rank = dls_.rank();
+  const Index rank = walk_dls_.rank();
   for (Index k = 0; k < rank; ++k) {  // D = lambda V_r^T N^T, one row per kept direction
-    null_.from_null(dls_.row_space().col(k), delta_);
+    null_.from_null(walk_dls_.row_space().col(k), delta_);
     walk_task_.row(task_rows_ + k) = walk_damping_ * delta_.transpose();
   }
   return rank;
@@ -232,6 +235,7 @@ void Step::walk_result(const Inputs& in, double rows_scale, Index limiting_joint
   sns_rows_scale_ = rows_scale;
   sns_limiting_ = limiting_joint;
   sns_sigma_min_ = walk_sigma_min_;
+  sns_sigma_deferred_ = walk_sigma_deferred_;
   sns_damping_ = walk_damping_;
 }
 

@@ -23,7 +23,7 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
       constraints_(std::move(constraints)), box_(std::move(box)), posture_gain_(posture_gain),
       posture_target_(std::move(posture_target)),
       null_first_(0, 0, tolerances.rank), null_second_(0, 0, tolerances.rank),
-      null_(0, 0, tolerances.rank), dls_(0, 0, tolerances.rank), pre_svd_(6, std::max<Index>(nv, 6)), closest_svd_(nv, nv + 7) {
+      null_(0, 0, tolerances.rank), dls_(0, 0, tolerances.rank), walk_dls_(0, 0, tolerances.rank), pre_svd_(6, std::max<Index>(nv, 6)), closest_svd_(nv, nv + 7) {
   if (nq < 1 || nv < 1 || task_rows < 1)
     throw std::invalid_argument("nq, nv and the task rows must be positive");
   for (Index i = 0; i < static_cast<Index>(constraints_.size()); ++i) {
@@ -101,6 +101,7 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   null_ = NullSpace(m, nv, tol_.rank);
   // the saturation around the previous command solves [J_e; D] (at most 2 task_rows rows)
   dls_ = DampedLeastSquares(2 * task_rows, std::max<Index>(nv + 7, 8), tol_.rank);
+  walk_dls_ = DampedLeastSquares(task_rows, std::max<Index>(nv, 1), tol_.rank);
   task_t_.resize(nv, 2 * task_rows);
   task_null_t_.resize(nv, 2 * task_rows);
   task_null_.resize(2 * task_rows, nv);
@@ -160,7 +161,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
                   analytical_allowed};
   check_sizes(in, qd);
   report_ = Report();
-  sigma_min_pending_ = false;
+  sigma_min_source_ = nullptr;
   rows_ready_ = false;
   active_.assign(equalities_.begin(), equalities_.end());
   active_pairs_.clear();
@@ -440,7 +441,7 @@ void Step::report_task_solution(const ConstMatrixRef& matrix, const ConstVectorR
                                 const ConstVectorRef& x) {
   report_.damping = dls_.damping();
   if (dls_.sigma_min_deferrable()) {
-    sigma_min_pending_ = true;
+    sigma_min_source_ = &dls_;
   } else {
     report_.sigma_min = dls_.sigma_min();
   }

@@ -169,17 +169,19 @@ class Step {
   void event(Event event, double a = 0.0, double b = 0.0, double c = 0.0);
   void report_task_solution(const ConstMatrixRef& matrix, const ConstVectorRef& rhs,
                             const ConstVectorRef& x);
-  //! The report's sigma_min from dls_ if report_task_solution left it to the first read
-  //! (an undamped QR solve decides without it; its power iteration was a quarter of the
-  //! dual robot's step: docs/design.md 16). Called before dls_ factors again and by report().
+  //! The report's sigma_min from the DLS that left it to the first read (an undamped QR
+  //! solve decides without it; its power iteration was a quarter of the dual robot's step
+  //! and a fifth of the saturation around the previous command: docs/design.md 16): dls_
+  //! (report_task_solution) or walk_dls_ (saturate). Called before that DLS factors again
+  //! and by report().
   void settle_sigma_min() {
-    if (!sigma_min_pending_) return;
-    report_.sigma_min = dls_.sigma_min();
-    sigma_min_pending_ = false;
+    if (sigma_min_source_ == nullptr) return;
+    report_.sigma_min = sigma_min_source_->sigma_min();
+    sigma_min_source_ = nullptr;
   }
-  //! dls_.factor, the report's pending sigma_min settled first.
+  //! dls_.factor, the report's sigma_min settled first if dls_ still owes it.
   void factor_task(const ConstMatrixRef& matrix, const DampingPolicy& policy) {
-    settle_sigma_min();
+    if (sigma_min_source_ == &dls_) settle_sigma_min();
     dls_.factor(matrix, policy);
   }
   void write_report();
@@ -217,7 +219,9 @@ class Step {
   //! The held joint whose release reduces the rows' residual (-1: none).
   Index wrong_side(const ConstVectorRef& residual);
   //! controllers.optimization.task_damping: the damping rows D of the whole problem in
-  //! damping_rows_ (their count), walk_sigma_min_ and walk_damping_.
+  //! walk_task_ below the task (their count), walk_damping_, and walk_sigma_min_ unless
+  //! walk_dls_ decided undamped by its QR (walk_sigma_deferred_: the report's read
+  //! computes it).
   Index task_damping_rows(const Inputs& in);
   //! The held joint whose release reduces the damped task's error under the rows (-1:
   //! none). ``null_`` holds the factor of the free joints' rows: solve_over_free's, the
@@ -263,8 +267,8 @@ class Step {
   bool rows_ready_ = false;
   NullSpace null_;
   DampedLeastSquares dls_;
-  //! whether report_.sigma_min is still dls_'s to compute (settle_sigma_min)
-  bool sigma_min_pending_ = false;
+  //! the DLS whose sigma_min report_.sigma_min still is (settle_sigma_min); null: none
+  DampedLeastSquares* sigma_min_source_ = nullptr;
   Matrix task_t_, task_null_t_, task_null_, task_rhs_, task_x_;  // (J N)^T and its solves
   bool accelerating_ = false;  // acceleration limits on
   Vector previous_;  // the acceleration limits' reference
@@ -280,9 +284,13 @@ class Step {
   Vector walk_point_, walk_goal_, walk_move_, walk_rhs_, walk_residual_, gradient_, reduced_,
       gradient_free_, walk_rows_rhs_;
   RowMatrix walk_task_;  // [J_e; D]
+  //! the DLS of J_e N that decides D, apart from dls_ so that its sigma_min can wait
+  DampedLeastSquares walk_dls_;
   double walk_sigma_min_ = 0.0, walk_damping_ = 0.0;
+  bool walk_sigma_deferred_ = false;  // walk_sigma_min_ is walk_dls_'s, computed when read
   double sns_task_scale_ = 1.0, sns_rows_scale_ = 1.0;
   double sns_sigma_min_ = 0.0, sns_damping_ = 0.0;  // of the task's DLS that gave sns_qd_
+  bool sns_sigma_deferred_ = false;  // sns_sigma_min_ is walk_dls_'s, computed when read
   Index sns_limiting_ = -1;
   bool sns_missed_ = false;
   // analytical
