@@ -283,6 +283,25 @@ def test_the_loop_bench_times_every_period_of_both_paths():
         assert timing.tick_median_us <= timing.tick_p99_us
 
 
+def test_the_acceleration_step_line_times_the_compiled_step_with_and_without_limits():
+    """``teleop bench``'s issue 32 line: the compiled step alone at every period of the
+    scenario, with and without the robot's acceleration limits; the ratio the two
+    medians', marked when above the target."""
+    from teleop.experiments.bench_loop import (ACCELERATION_COST_TARGET, AccelerationStepCost,
+                                               format_acceleration_step_line,
+                                               time_acceleration_steps)
+
+    cost = time_acceleration_steps(duration=0.1, repeats=1)
+    assert cost is not None  # the compiled step, as the loop's compiled tick above
+    assert cost.steps == 100
+    assert cost.limited_us > 0.0 and cost.without_us > 0.0
+    assert cost.ratio == cost.limited_us / cost.without_us
+    above = AccelerationStepCost("fast-lateral", 100, 1.0, 1.0 + ACCELERATION_COST_TARGET)
+    assert f"{1.0 + ACCELERATION_COST_TARGET:.2f}x*" in format_acceleration_step_line(above)
+    below = AccelerationStepCost("fast-lateral", 100, 1.0, ACCELERATION_COST_TARGET)
+    assert f"{ACCELERATION_COST_TARGET:.2f}x (" in format_acceleration_step_line(below)
+
+
 def test_the_measured_period_line_times_compare_s_periods():
     """``teleop bench``'s compare line: every period timed around ``tick_measured_later``
     (so at least its compiled tick), the target's ratio the period's with its measures

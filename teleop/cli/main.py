@@ -472,10 +472,11 @@ def _robots(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     from teleop.experiments.bench import (check_json_path, format_table, run_bench, run_scaling,
                                           write_json)
-    from teleop.experiments.bench_loop import (format_acceleration_line, format_loop_table,
+    from teleop.experiments.bench_loop import (format_acceleration_line,
+                                               format_acceleration_step_line, format_loop_table,
                                                format_measured_period_line,
                                                run_acceleration_bench, run_loop_bench,
-                                               time_measured_period)
+                                               time_acceleration_steps, time_measured_period)
 
     iterations = 20 if args.quick else args.iterations
     plant = plant_choice(args)  # checked even when --plant is left out
@@ -495,6 +496,8 @@ def _bench(args: argparse.Namespace) -> int:
         print()
         print(format_loop_table(loop_timings, step_us))
         print(format_acceleration_line(*run_acceleration_bench(
+            duration=1.0 if args.quick else None)))
+        print(format_acceleration_step_line(time_acceleration_steps(
             duration=1.0 if args.quick else None)))
         print(format_measured_period_line(time_measured_period(
             duration=1.0 if args.quick else None)))

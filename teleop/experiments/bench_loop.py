@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.cjm import CJMController
 from teleop.controller_specs import ROBOT, make_controller
 from teleop.loop import LoopConfig, TeleopLoop
 
@@ -32,8 +33,10 @@ REFERENCE_STEP_US = 4.5
 BEYOND_STEP_TARGET = 0.5
 #: a scenario whose commands the acceleration box binds most of the time (docs/design.md 9.1)
 ACCELERATION_SCENARIO = "fast-lateral"
-#: the compiled tick with acceleration limits, at most this times the tick without
+#: the compiled step (and tick) with acceleration limits, at most this times without (issue 32)
 ACCELERATION_COST_TARGET = 1.5
+#: runs of the step's timing with and without the limits, interleaved
+ACCELERATION_STEP_REPEATS = 5
 #: ``teleop compare``'s period (the tick and its measures), at most this times the tick
 MEASURED_PERIOD_TARGET = 3.0
 
@@ -140,6 +143,73 @@ def format_acceleration_line(without: LoopTiming, limited: LoopTiming) -> str:
             f"{without.tick_median_us:.1f} us (p99 {without.tick_p99_us:.1f}) without: "
             f"{ratio:.2f}x{'*' if ratio > ACCELERATION_COST_TARGET else ''} "
             f"(target at most {ACCELERATION_COST_TARGET}x)")
+
+
+@dataclass(frozen=True)
+class AccelerationStepCost:
+    """The compiled CJM step alone (``CompiledStep.time_steps``: the C++ step in a C++
+    loop, no Python between the steps) at one scenario's periods, without and with the
+    robot's acceleration limits: each the median over the runs of a run's median (us)."""
+
+    scenario: str
+    steps: int
+    without_us: float
+    limited_us: float
+
+    @property
+    def ratio(self) -> float:
+        """The step with the limits over the step without: issue 32's figure."""
+        return self.limited_us / self.without_us
+
+
+def scenario_periods(scenario: str, duration: float | None,
+                     acceleration_limits: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The configurations (steps x nq) and stacked twists of ``scenario``'s periods,
+    from a run through the loop with the compiled tick."""
+    loop, targets = scenario_loop(scenario, True, duration, acceleration_limits)
+    configurations, twists = [], []
+    for target in targets:
+        configurations.append(loop.q.copy())
+        twists.append(np.concatenate(loop.advance(target).twists))
+    return np.array(configurations), np.array(twists)
+
+
+def time_acceleration_steps(duration: float | None = None,
+                            repeats: int = ACCELERATION_STEP_REPEATS
+                            ) -> AccelerationStepCost | None:
+    """The compiled step on :data:`ACCELERATION_SCENARIO`'s periods without, then with,
+    the robot's acceleration limits, ``repeats`` runs each, interleaved; each run a fresh
+    controller from rest, so the limits' box follows the same previous commands as in the
+    loop. None when the step is not the compiled one-call step (nothing to time in C++)."""
+    plan = load_scenario(ACCELERATION_SCENARIO)
+    dt = LoopConfig().dt
+    periods = {limits: scenario_periods(ACCELERATION_SCENARIO, duration, limits)
+               for limits in (False, True)}
+    medians: dict[bool, list[float]] = {False: [], True: []}
+    for _ in range(repeats):
+        for limits, (configurations, twists) in periods.items():
+            controller = make_controller("cjm", plan.robot, plan.make_constraints(), dt=dt,
+                                         acceleration_limit=ROBOT if limits else None)
+            step = controller.step if isinstance(controller, CJMController) else None
+            time_steps = getattr(step, "time_steps", None)  # the compiled step's only
+            nanoseconds = None if time_steps is None else time_steps(configurations, twists)
+            if nanoseconds is None:
+                return None
+            medians[limits].append(float(np.median(nanoseconds)) * 1e-3)
+    return AccelerationStepCost(ACCELERATION_SCENARIO, len(periods[True][0]),
+                                float(np.median(medians[False])), float(np.median(medians[True])))
+
+
+def format_acceleration_step_line(cost: AccelerationStepCost | None) -> str:
+    """The step's medians with and without the limits and their ratio, against the target."""
+    if cost is None:
+        return ("acceleration limits: the compiled step alone not timed (the CJM's step is "
+                "not the compiled one-call step here)")
+    return (f"acceleration limits: {cost.scenario}, the compiled step alone (time_steps, "
+            f"{cost.steps} periods, median of {ACCELERATION_STEP_REPEATS} runs' medians) "
+            f"{cost.limited_us:.2f} us with them, {cost.without_us:.2f} us without: "
+            f"{cost.ratio:.2f}x{'*' if cost.ratio > ACCELERATION_COST_TARGET else ''} "
+            f"(issue 32's target at most {ACCELERATION_COST_TARGET}x)")
 
 
 @dataclass(frozen=True)
