@@ -137,6 +137,9 @@ class DampedLeastSquares {
   //! Whether sigma_min() is still to compute and nothing decided needs it (the undamped
   //! QR solve): it can wait until it is read.
   bool sigma_min_deferrable() const { return decision_ == Decision::undamped && !sigma_known_; }
+  //! Whether lambda is 0 with the QR's rank decision (the solve R's triangular one,
+  //! whatever the policy's threshold): a policy without damping factors to the same solve.
+  bool undamped_by_qr() const { return decision_ == Decision::undamped; }
   Index rank() const { return rank_; }
   bool exact() {
     decide();

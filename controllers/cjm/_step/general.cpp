@@ -124,7 +124,8 @@ void Step::hold_pairs_below() {
 
 Step::Split Step::solve_over_free(const ConstVectorRef& rows_rhs,
                                   const Eigen::Ref<const RowMatrix>& task,
-                                  const ConstVectorRef& twist, const DampingPolicy& policy) {
+                                  const ConstVectorRef& twist, const DampingPolicy& policy,
+                                  DampedLeastSquares* factored) {
   // rows exactly over the free joints, held ones moved to the right-hand side
   const Index m = row_count_, p = task.rows();
   Index n_free = 0;
@@ -138,7 +139,7 @@ Step::Split Step::solve_over_free(const ConstVectorRef& rows_rhs,
   rhs = rows_rhs;
   rhs.noalias() -= rows_.topRows(m) * held_;
   const auto rows_free = columns_.topLeftCorner(m, n_free);
-  null_.factor(rows_free);
+  if (factored == nullptr) null_.factor(rows_free);
   auto x0 = free_x_.head(n_free);
   null_.pseudo_solve(rhs, x0);
   Split split;
@@ -154,19 +155,22 @@ Step::Split Step::solve_over_free(const ConstVectorRef& rows_rhs,
   if (d > 0) {
     for (Index j = 0, f = 0; j < nv_; ++j)
       if (free_(j)) base_(j) = x0(f++);
-    auto task_t = task_t_.topLeftCorner(n_free, p);
-    task_t = task_columns_.topLeftCorner(p, n_free).transpose();
-    auto task_null_t = task_null_t_.topLeftCorner(d, p);
-    null_.to_null(task_t, task_null_t);
-    auto task_null = task_null_.topLeftCorner(p, d);
-    task_null = task_null_t.transpose();
+    if (factored == nullptr) {
+      auto task_t = task_t_.topLeftCorner(n_free, p);
+      task_t = task_columns_.topLeftCorner(p, n_free).transpose();
+      auto task_null_t = task_null_t_.topLeftCorner(d, p);
+      null_.to_null(task_t, task_null_t);
+      auto task_null = task_null_.topLeftCorner(p, d);
+      task_null = task_null_t.transpose();
+      factor_task(task_null, policy);
+    }
+    DampedLeastSquares& task_dls = factored != nullptr ? *factored : dls_;
     auto task_rhs = task_rhs_.topRows(p);
     task_rhs.col(0) = twist;
     task_rhs.col(1).noalias() = task * base_;
     task_rhs.col(1) = -task_rhs.col(1);
-    factor_task(task_null, policy);
     auto x = task_x_.topLeftCorner(d, 2);
-    dls_.solve(task_rhs, x);
+    task_dls.solve(task_rhs, x);
     auto delta = delta_.head(n_free);
     null_.from_null(x.col(1), delta);
     for (Index j = 0, f = 0; j < nv_; ++j)
@@ -174,7 +178,7 @@ Step::Split Step::solve_over_free(const ConstVectorRef& rows_rhs,
     null_.from_null(x.col(0), delta);
     for (Index j = 0, f = 0; j < nv_; ++j)
       if (free_(j)) direction_(j) = delta(f++);
-    split.task_rank = dls_.rank();
+    split.task_rank = task_dls.rank();
     split.task_solved = true;
   } else {
     for (Index j = 0, f = 0; j < nv_; ++j)

@@ -56,8 +56,9 @@ void Step::saturate(const Inputs& in, VectorRef qd) {
     report(Status::least_squares);
     report_.saturation_joint_count = report_.saturated_count;
     saturation_joints_.head(report_.saturated_count) = saturated_.head(report_.saturated_count);
-    if (sns_sigma_deferred_) settle_sigma_min();
-    event(Event::task_missed, sns_sigma_deferred_ ? report_.sigma_min : sns_sigma_min_, sns_damping_);
+    const Index recorded = report_.event_count;
+    event(Event::task_missed, sns_sigma_min_, sns_damping_);  // deferred: written when settled
+    if (sns_sigma_deferred_ && report_.event_count > recorded) sigma_min_event_ = recorded;
   } else if (sns_task_scale_ < 1.0) {
     report(Status::scaled);
     event(Event::task_scaled, static_cast<double>(sns_limiting_), sns_task_scale_);

@@ -162,6 +162,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
   check_sizes(in, qd);
   report_ = Report();
   sigma_min_source_ = nullptr;
+  sigma_min_event_ = -1;
   rows_ready_ = false;
   active_.assign(equalities_.begin(), equalities_.end());
   active_pairs_.clear();

@@ -178,6 +178,9 @@ class Step {
     if (sigma_min_source_ == nullptr) return;
     report_.sigma_min = sigma_min_source_->sigma_min();
     sigma_min_source_ = nullptr;
+    if (sigma_min_event_ >= 0 && events_(sigma_min_event_, 0) == static_cast<double>(Event::task_missed))
+      events_(sigma_min_event_, 1) = report_.sigma_min;  // not overwritten by a failure
+    sigma_min_event_ = -1;
   }
   //! dls_.factor, the report's sigma_min settled first if dls_ still owes it.
   void factor_task(const ConstMatrixRef& matrix, const DampingPolicy& policy) {
@@ -198,8 +201,12 @@ class Step {
   // general.cpp
   void general(const Inputs& in, VectorRef qd);
   //! The rows ``rows_ qd = rows_rhs`` exactly over the free joints, then ``task qd ~ twist``.
+  //! ``factored``: every joint free, the task J_e alone, null_ holding the rows' factor,
+  //! task_null_ J_e N and ``factored`` its DLS undamped by the QR (task_damping_rows's):
+  //! the factors this call would compute, taken as they are.
   Split solve_over_free(const ConstVectorRef& rows_rhs, const Eigen::Ref<const RowMatrix>& task,
-                        const ConstVectorRef& twist, const DampingPolicy& policy);
+                        const ConstVectorRef& twist, const DampingPolicy& policy,
+                        DampedLeastSquares* factored = nullptr);
 
   // saturation.cpp
   void saturate(const Inputs& in, VectorRef qd);
@@ -269,6 +276,8 @@ class Step {
   DampedLeastSquares dls_;
   //! the DLS whose sigma_min report_.sigma_min still is (settle_sigma_min); null: none
   DampedLeastSquares* sigma_min_source_ = nullptr;
+  //! the events_ row (task_missed) whose sigma_min settle_sigma_min writes; -1: none
+  Index sigma_min_event_ = -1;
   Matrix task_t_, task_null_t_, task_null_, task_rhs_, task_x_;  // (J N)^T and its solves
   bool accelerating_ = false;  // acceleration limits on
   Vector previous_;  // the acceleration limits' reference
