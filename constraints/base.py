@@ -398,7 +398,7 @@ class Constraint(ReadOnlyFields, ABC):
     def violation(self, placement: pin.SE3) -> float:
         """How far (m) the point is from satisfying the constraint (0 when it does):
         ``|error|`` (:func:`constraints.norms.norm`: the loop's measures of many periods at
-        once round it the same, on any CPU)."""
+        once round it the same, whatever BLAS kernel the CPU selects)."""
         return norm(self.error(placement))
 
     # -- description: to and from a JSON-ready dict ----------------------------------------

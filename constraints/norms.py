@@ -1,9 +1,10 @@
-"""Euclidean norms whose rounding is the same on every CPU and for one vector as for a
-stack of them (docs/design.md section 7): the squares summed in index order,
-``sqrt((x_0^2 + x_1^2) + x_2^2 ...)``, in element-wise operations. A dot product or
-``np.linalg.norm`` calls BLAS, whose kernel the CPU selects (with AVX-512 OpenBLAS fuses
-the products), so the same vector's norm could differ in its last bit between the loop's
-measures taken period by period and taken over many periods at once.
+"""Euclidean norms whose rounding is the same for one vector as for a stack of them, and
+does not depend on the BLAS kernel the CPU selects (docs/design.md section 7): the squares
+summed in index order, ``sqrt((x_0^2 + x_1^2) + x_2^2 ...)``, in element-wise numpy
+operations, which never fuse a multiply and an add. A dot product or ``np.linalg.norm``
+calls BLAS (with AVX-512 OpenBLAS fuses the products), so the same vector's norm could
+differ in its last bit between the loop's measures taken period by period and taken over
+many periods at once.
 """
 
 from __future__ import annotations

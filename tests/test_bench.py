@@ -296,6 +296,7 @@ def test_the_acceleration_step_line_times_the_compiled_step_with_and_without_lim
     assert cost.steps == 100
     assert cost.limited_us > 0.0 and cost.without_us > 0.0
     assert cost.ratio == cost.limited_us / cost.without_us
+    assert cost.repeats == 1 and "median of 1 runs' medians" in format_acceleration_step_line(cost)
     above = AccelerationStepCost("fast-lateral", 100, 1.0, 1.0 + ACCELERATION_COST_TARGET)
     assert f"{1.0 + ACCELERATION_COST_TARGET:.2f}x*" in format_acceleration_step_line(above)
     below = AccelerationStepCost("fast-lateral", 100, 1.0, ACCELERATION_COST_TARGET)

@@ -155,6 +155,7 @@ class AccelerationStepCost:
     steps: int
     without_us: float
     limited_us: float
+    repeats: int = ACCELERATION_STEP_REPEATS
 
     @property
     def ratio(self) -> float:
@@ -197,7 +198,8 @@ def time_acceleration_steps(duration: float | None = None,
                 return None
             medians[limits].append(float(np.median(nanoseconds)) * 1e-3)
     return AccelerationStepCost(ACCELERATION_SCENARIO, len(periods[True][0]),
-                                float(np.median(medians[False])), float(np.median(medians[True])))
+                                float(np.median(medians[False])), float(np.median(medians[True])),
+                                repeats)
 
 
 def format_acceleration_step_line(cost: AccelerationStepCost | None) -> str:
@@ -206,7 +208,7 @@ def format_acceleration_step_line(cost: AccelerationStepCost | None) -> str:
         return ("acceleration limits: the compiled step alone not timed (the CJM's step is "
                 "not the compiled one-call step here)")
     return (f"acceleration limits: {cost.scenario}, the compiled step alone (time_steps, "
-            f"{cost.steps} periods, median of {ACCELERATION_STEP_REPEATS} runs' medians) "
+            f"{cost.steps} periods, median of {cost.repeats} runs' medians) "
             f"{cost.limited_us:.2f} us with them, {cost.without_us:.2f} us without: "
             f"{cost.ratio:.2f}x{'*' if cost.ratio > ACCELERATION_COST_TARGET else ''} "
             f"(issue 32's target at most {ACCELERATION_COST_TARGET}x)")

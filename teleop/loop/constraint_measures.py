@@ -21,7 +21,7 @@ EPSILON = float(np.finfo(float).eps)
 def relative_rotations(rotations: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """``R_i^T R*_i`` of each pair of rotation matrices (..., 3, 3), entry ``(a, b)``
     ``(R_0a R*_0b + R_1a R*_1b) + R_2a R*_2b`` in element-wise operations: the same bits for
-    one pair as for a stack, on any CPU (:mod:`constraints.norms`)."""
+    one pair as for a stack, whatever BLAS kernel the CPU selects (:mod:`constraints.norms`)."""
     return (rotations[..., 0, :, None] * targets[..., 0, None, :]
             + rotations[..., 1, :, None] * targets[..., 1, None, :]
             + rotations[..., 2, :, None] * targets[..., 2, None, :])

@@ -13,8 +13,8 @@ round-off floor (section 15.2), the EE velocities, the errors at the end. A stac
 ``matmul`` multiplies each period's pair as the single product does, and what BLAS would
 round by the CPU's kernel (the norms, ``R^T R*``) is element-wise, the same function for
 one period and a stack (:mod:`constraints.norms`), so the numbers are those of the
-period-by-period code bit for bit on any CPU, but the floor's world point ``R p + t``
-(Pinocchio's ``act`` rounds it otherwise, within 1e-13 relative).
+period-by-period code bit for bit whatever BLAS kernel the CPU selects, but the floor's
+world point ``R p + t`` (Pinocchio's ``act`` rounds it otherwise, within 1e-13 relative).
 """
 
 from __future__ import annotations
