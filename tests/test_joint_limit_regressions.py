@@ -10,10 +10,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import scipy.linalg
+import scipy.optimize
 from conftest import HOLE_DISTANCE, kinematics
-from test_joint_limits import ROWS_HELD, UNLIMITED, limit_violations, residuals, robot_named
+from test_joint_limits import (ROWS_HELD, UNLIMITED, ee_jacobian, limit_violations, residuals,
+                               robot_named, rows_of, twist_error)
 
-from constraints import Barrier, Hole, PointLock
+from constraints import Barrier, Hole, Plane, PointLock
 from controllers import CJMController, QPController, StepStatus
 from teleop import load_robot
 
@@ -117,6 +119,76 @@ def test_daqp_solves_a_feasible_hole_and_barrier_step():
     qp = QPController(robot, [barrier, hole], solver="daqp")
     qp.solve(q, twist)
     assert qp.info.success, qp.info.message
+
+
+def plane_at_the_box_corner():
+    """ur5_instrument with every joint at a position limit (Hypothesis 6.170.17's draw of
+    test_with_limits_active_cjm_and_qp_stay_inside_and_the_qp_tracks_no_worse): a plane on
+    the shaft whose row, at this singular configuration, is ``[-0.817, 1.1e-8, 1.1e-8,
+    1.1e-8, -3.4e-8, ~0, 0, 0]``, nearly the bound of joint 0 (at its upper limit)."""
+    robot = robot_named("ur5_instrument")
+    model = robot.model
+    q = model.lowerPositionLimit.copy()
+    q[0] = model.upperPositionLimit[0]
+    plane = Plane("instrument_shaft", [0.0, 0.0, 0.2], [-0.81725, -0.39145, -0.005491],
+                  [1.19e-7, 1.0, 0.0], gain=100.0)
+    return robot, q, [plane], np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+def least_squares_reference(robot, q, constraints, twist, lower, upper) -> np.ndarray:
+    """``argmin |J qd - V|`` under the plane's row and the box, by SciPy's SLSQP: the row
+    solved for its largest entry's joint ``k``, whose bounds become one normalised row on
+    the other joints."""
+    (A, b), _, data = rows_of(robot, q, constraints)
+    J = ee_jacobian(robot, data)
+    nv = robot.model.nv
+    k = int(np.argmax(np.abs(A[0])))
+    rest = [i for i in range(nv) if i != k]
+    lift = np.zeros((nv, nv - 1))  # qd = lift y + offset
+    lift[rest, range(nv - 1)] = 1.0
+    lift[k] = -A[0, rest] / A[0, k]
+    offset = np.zeros(nv)
+    offset[k] = b[0] / A[0, k]
+    size = np.linalg.norm(lift[k])
+    row = lift[k] / size
+    bounds_k = [{"type": "ineq", "fun": lambda y: (upper[k] - offset[k]) / size - row @ y,
+                 "jac": lambda y: -row},
+                {"type": "ineq", "fun": lambda y: row @ y - (lower[k] - offset[k]) / size,
+                 "jac": lambda y: row}]
+    result = scipy.optimize.minimize(
+        lambda y: 0.5 * float(np.sum((J @ (lift @ y + offset) - twist) ** 2)), np.zeros(nv - 1),
+        jac=lambda y: (J @ lift).T @ (J @ (lift @ y + offset) - twist), method="SLSQP",
+        bounds=list(zip(lower[rest], upper[rest])), constraints=bounds_k,
+        options={"ftol": 1e-15, "maxiter": 1000})
+    assert result.success, result.message
+    return lift @ result.x + offset
+
+
+@pytest.mark.parametrize("solver", ["daqp", "proxqp", "osqp"])
+def test_qp_tracks_as_the_cjm_where_a_row_nearly_is_a_joint_bound(solver):
+    """The task stage where the plane's row and joint 0's bound are 4e-8 rad apart: daqp
+    declared it infeasible (the least-residual command, twist error 1.0), proxqp failed,
+    OSQP broke the row (``constraint_degraded``). Over ``null(A)`` (docs/design.md 10.2)
+    every backend tracks as the CJM and SciPy's reference, rows held."""
+    robot, q, constraints, twist = plane_at_the_box_corner()
+    cjm = CJMController(robot, constraints)
+    qd_cjm = cjm.solve(q, twist)
+    require(cjm.info.method == "saturated", "a limit binds the CJM")
+    reference = least_squares_reference(robot, q, constraints, twist, *cjm.bounds(q))
+    require(not limit_violations(cjm, q, reference), "the reference is inside the box")
+    require(max(residuals(robot, q, constraints, reference)) <= ROWS_HELD,
+            "the reference holds the plane")
+    error_reference = twist_error(robot, q, reference, twist)
+    error_cjm = twist_error(robot, q, qd_cjm, twist)
+    assert error_cjm == pytest.approx(0.99980010073829, abs=1e-9)
+    assert error_reference == pytest.approx(error_cjm, abs=1e-9)
+    qp = QPController(robot, constraints, solver=solver, singular_threshold=0.0,
+                      time_budget=None)  # the premise is the QP, not the clock
+    qd = qp.solve(q, twist)
+    assert not limit_violations(qp, q, qd), qp.info.status
+    assert max(residuals(robot, q, constraints, qd)) <= ROWS_HELD
+    assert qp.info.status is StepStatus.LEAST_SQUARES, qp.info.message  # rows held, twist not
+    assert twist_error(robot, q, qd, twist) <= error_reference + 1e-9
 
 
 # ------------------------------------------------------------------ what the message says

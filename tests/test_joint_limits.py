@@ -34,7 +34,7 @@ import pinocchio as pin
 import pytest
 import scipy.linalg
 from conftest import HOLE_DISTANCE, kinematics
-from hypothesis import HealthCheck, assume, event, given, settings
+from hypothesis import HealthCheck, assume, event, example, given, settings
 from hypothesis import note as hypothesis_note
 from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
@@ -336,6 +336,12 @@ def twist_error(robot, q, qd, twist) -> float:
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 @given(case=cases(q_strategy=functools.partial(configurations, near_limits=0.8),
                   kinds=("hole", "plane", "lock", "barrier"), twist_exponents=(-1.0, 1.0)))
+# Hypothesis 6.170.17's draw: every joint at a limit, the plane's row nearly joint 0's
+# bound (daqp said infeasible; tests/test_joint_limit_regressions.py, docs/design.md 10.2)
+@example(case=("ur5_instrument", np.array([2 * np.pi] + [-2 * np.pi] * 5 + [-1.4, -1.4]),
+               [Plane("instrument_shaft", [0.0, 0.0, 0.2], [-0.81725, -0.39145, -0.005491],
+                      [1.19e-7, 1.0, 0.0], gain=100.0)],
+               np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])))
 def test_with_limits_active_cjm_and_qp_stay_inside_and_the_qp_tracks_no_worse(case):
     robot, q, constraints, twist = unpack(case)
     cjm = CJMController(robot, constraints)

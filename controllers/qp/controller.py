@@ -37,11 +37,12 @@ from ..optimization.collision_report import (AT_BOUND, pair_list, pair_names, re
 from ..optimization.least_residual import HeldRows, held_note, held_rows, least_residual_problem
 from ..optimization.problem import QPSolution, QuadraticProgram
 from ..optimization.proxqp import ProxQPSolver
-from ..optimization.task_damping import task_damping
+from ..optimization.task_damping import TaskDamping, task_damping
 from .assembly import TaskAssembly, bounded_box
 from .daqp_direct import DirectDAQP
 from .geometry import task_geometry
 from .posture_stage import posture_stage
+from .reduced import eliminated, nearly_fixed, restored
 from .qpsolvers_path import solve_with_qpsolvers
 
 Priorities = Literal["lexicographic", "weighted"]
@@ -238,7 +239,7 @@ class QPController(GuardedController):
         damping = task_damping(A, weighted_jacobian[self._weighted_rows], self.policy)
         self.info.sigma_min, self.info.damping = damping.sigma_min, damping.damping
         try:
-            qd = self._prioritised(kinematics.q, weighted_jacobian, twist, damping.rows,
+            qd = self._prioritised(kinematics.q, weighted_jacobian, twist, damping,
                                    A, b, barrier_rows, barrier_bound, lower, upper)
         except SolverError as error:  # infeasible, or out of iterations (proxqp's sign of it)
             if A is None and barrier_rows is None:
@@ -258,7 +259,7 @@ class QPController(GuardedController):
             # construction, and the stages run again under them (a stage out of iterations
             # or time still fails the step)
             try:
-                qd = self._prioritised(kinematics.q, weighted_jacobian, twist, damping.rows,
+                qd = self._prioritised(kinematics.q, weighted_jacobian, twist, damping,
                                        held.rows, held.rhs, barrier_rows, held.barrier_bound,
                                        lower, upper)
             except BudgetExceeded:
@@ -311,28 +312,30 @@ class QPController(GuardedController):
         return np.vstack(blocks), np.concatenate(bounds)
 
     def _prioritised(self, q: np.ndarray, weighted_jacobian: np.ndarray, twist: np.ndarray,
-                     damping_rows: np.ndarray, A: np.ndarray | None, b: np.ndarray | None,
+                     damping: TaskDamping, A: np.ndarray | None, b: np.ndarray | None,
                      barrier_rows: np.ndarray | None, barrier_bound: np.ndarray | None,
                      lower: np.ndarray | None, upper: np.ndarray | None) -> np.ndarray:
         """The lexicographic (or weighted) solve under the rows ``A qd = b``, the barriers
-        ``barrier_rows qd <= barrier_bound`` and the box (docs/design.md section 10)."""
+        ``barrier_rows qd <= barrier_bound`` and the box (docs/design.md section 10).
+        ``damping`` carries the damping rows and ``null(A)`` (the same for the rows held by
+        the least-residual stage, which span the rows' row space)."""
         nv = self.model.nv
         stacked, stacked_target, hessian, gradient = self._assembly.assemble(
             weighted_jacobian, twist if self._unit_weight else self._twist_scale * twist,
-            A, b, damping_rows)
+            A, b, damping.rows)
         barrier_lower = None if barrier_rows is None else np.full(barrier_rows.shape[0],
                                                                    -INFINITE_BOUND)
         if self.priorities == "weighted":
             hessian.flat[::nv + 1] += self.mu  # + mu I
             gradient -= self.mu * self.posture_velocity(q)
-            return self._solve_qp(QuadraticProgram(
+            return self._solve_stage(QuadraticProgram(
                 hessian, gradient, A, b, barrier_rows, barrier_lower, barrier_bound,
-                lower, upper, curvature=self.mu)).x
+                lower, upper, curvature=self.mu), damping.null_basis).x
         geometry = task_geometry(stacked, hessian)
         spare = geometry.null_basis.shape[1] > 0
         task = QuadraticProgram(hessian, gradient, A, b, barrier_rows, barrier_lower,
                                 barrier_bound, lower, upper, geometry.curvature, spare)
-        stage_1 = self._solve_qp(task)
+        stage_1 = self._solve_stage(task, damping.null_basis)
         if not spare:
             return stage_1.x
         return posture_stage(stage_1, geometry.null_basis, self.posture_velocity(q), task,
@@ -357,6 +360,17 @@ class QPController(GuardedController):
         return held_rows(solution.x, A, b, barrier_rows, barrier_bound, lower, upper)
 
     # -- backends ----------------------------------------------------------------------
+
+    def _solve_stage(self, problem: QuadraticProgram, null_basis: np.ndarray) -> QPSolution:
+        """A stage under the equality rows ``A`` of ``problem`` (``null_basis`` is
+        ``null(A)``): over ``null(A)`` where a bounded joint is nearly fixed by them
+        (:mod:`controllers.qp.reduced`, docs/design.md 10.2), else as it is."""
+        if not nearly_fixed(problem, null_basis):
+            return self._solve_qp(problem)
+        stage = eliminated(problem, null_basis)
+        if not null_basis.shape[1]:  # the rows fix every joint: x_p, checked against the box
+            return restored(stage, QPSolution(np.zeros(0), None, None))
+        return restored(stage, self._solve_qp(stage.problem))
 
     def _solve_qp(self, problem: QuadraticProgram) -> QPSolution:
         """``problem`` by the backend: persistent proxqp objects, ``daqp.solve`` directly,
