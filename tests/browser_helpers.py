@@ -39,6 +39,9 @@ from playwright.sync_api import expect
 WAIT = 60.0
 expect.set_options(timeout=1e3 * WAIT)
 
+#: where the browser tests leave what they saw (screenshots; kept out of git)
+ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
+
 CHROMIUM = os.environ.get("TELEOP_TEST_CHROMIUM", "/usr/bin/chromium")
 #: software WebGL (SwiftShader) in a headless, sandbox-less, quiet Chromium
 CHROMIUM_ARGS = ("--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
@@ -225,6 +228,8 @@ class Sample:
     target: np.ndarray
     ee: np.ndarray
     constraint_error: float
+    t: float = math.nan  # the last record's loop time (s)
+    status: str = ""  # the last record's status and the controller's own
 
 
 @dataclass
@@ -245,8 +250,10 @@ class Sampler:
             record = app.robots.last_records.get("main")
             error = math.nan if record is None else max(record.constraint_error,
                                                         record.barrier_penetration)
-            self.samples.append(Sample(time.perf_counter(), app.console.target.translation.copy(),
-                                       ee_position(app), error))
+            self.samples.append(Sample(
+                time.perf_counter(), app.console.target.translation.copy(), ee_position(app),
+                error, math.nan if record is None else record.t,
+                "" if record is None else f"{record.status}/{record.controller_status}"))
             time.sleep(self.period)
 
     def __enter__(self) -> "Sampler":
@@ -345,9 +352,14 @@ def open_web(robot, record_dir, token: str | None = "auto", **server_options):
 
 
 def open_tab(web, name: str) -> None:
-    """Show one tab of the control panel (Teleop, Constraints, Settings, Plots)."""
+    """Show one tab of the control panel (Teleop, Constraints, Settings, Plots), selected
+    from the keyboard (the tab focused, Enter), which viser's tab strip offers beside the
+    mouse. A press of the mouse on a tab arms the strip's drag gesture (a move of 3 px
+    before the release reorders the tabs, the pressed tab following the pointer): on a
+    page starved by software rendering, a click left the Plots tab following the pointer
+    over the Teleop tab, and every later click there hit the Plots tab for 60 s."""
     tab = web.page.get_by_role("tab", name=name, exact=True)
-    tab.click()
+    tab.press("Enter")
     expect(tab).to_have_attribute("aria-selected", "true")
 
 
@@ -529,8 +541,44 @@ def wait_for_still_canvas(web, timeout: float) -> np.ndarray:
         if changed_fraction(pixels, previous) < STILL:
             return pixels
         if time.perf_counter() > deadline:
-            raise AssertionError(f"the canvas did not hold still within {timeout:g} s")
+            raise AssertionError(f"the canvas did not hold still within {timeout:g} s: "
+                                 f"{still_failure(previous, pixels)}")
         previous = pixels
+
+
+def record_failed_page(web, name: str) -> str:
+    """A screenshot of the whole page and its text, saved to :data:`ARTIFACTS` as
+    ``failed-<name>.png`` and ``.txt``, with the app's status and the control rate;
+    where they are (or why they could not be taken), in a line."""
+    ARTIFACTS.mkdir(exist_ok=True)
+    stem = ARTIFACTS / f"failed-{name}"
+    try:
+        web.page.screenshot(path=f"{stem}.png", timeout=1e3 * WAIT)
+        text = web.page.inner_text("body", timeout=1e3 * WAIT)
+    except Exception as error:  # the page may be what failed: say so, never mask the failure
+        return f"no screenshot of the page: {type(error).__name__}: {error}"
+    timing = web.control.timing()
+    Path(f"{stem}.txt").write_text(
+        f"{text}\n\n-- the control thread: {timing.achieved_rate:.0f} Hz achieved, "
+        f"{timing.deadline_misses} deadline misses; its error: {web.control.error}\n")
+    return f"the page: {stem}.png and .txt"
+
+
+def still_failure(previous: np.ndarray, pixels: np.ndarray) -> str:
+    """What changed between the last two screenshots of a canvas that did not hold still,
+    both saved (with the changed pixels in white) to :data:`ARTIFACTS` to be looked at."""
+    from PIL import Image
+
+    changed = np.abs(pixels - previous).max(axis=2) > 24
+    rows, cols = np.nonzero(changed)
+    ARTIFACTS.mkdir(exist_ok=True)
+    stamp = time.strftime("%H%M%S")
+    for label, image in (("before", previous), ("after", pixels),
+                         ("changed", np.repeat(255 * changed[..., None], 3, axis=2))):
+        Image.fromarray(image.astype(np.uint8)).save(ARTIFACTS / f"unsteady-{stamp}-{label}.png")
+    return (f"{100 * changed.mean():.2f} % of the pixels changed, within columns "
+            f"{cols.min()}-{cols.max()} and rows {rows.min()}-{rows.max()} "
+            f"({ARTIFACTS}/unsteady-{stamp}-*.png)")
 
 
 def look_at_target(web, distance: float | None = None) -> None:
@@ -638,8 +686,28 @@ def measured_drag(web, distance: float, steps: int, prefer_sign: float = 1.0):
         target_latency=target_changed.wall - times.first,
         ee_latency=ee_moved.wall - times.first,
         per_move=np.array(per_move), handled=times.handled, moves=len(times.moves),
-        settle_after_up=settled - times.up,
+        settle_after_up=settled - times.up, moves_wall=times.moves, up_wall=times.up,
         max_sampled_error=float(np.nanmax([s.constraint_error for s in samples])))
+
+
+def worst_of_trace(trace: dict[str, np.ndarray], since: float, result) -> str:
+    """Where the largest constraint error of ``trace`` (:func:`trace_since` ``since``)
+    lies in loop time against a drag's (``result``, :func:`measured_drag`) first mouse
+    move and release, and the statuses sampled around it: what a failure says."""
+    worst = int(np.argmax(trace["constraint_error"]))
+    at = float(trace["t"][worst])
+
+    def loop_time(wall: float) -> float:
+        after = [s.t for s in result.samples if s.wall >= wall and np.isfinite(s.t)]
+        return after[0] - since if after else math.nan
+
+    near = sorted({s.status for s in result.samples if abs(s.t - at) <= 0.05})
+    return (f"{trace['constraint_error'][worst]:.3g} m at {at - since:.3f} s (loop time since "
+            f"{since:.3f} s; the drag's first move reached the loop by "
+            f"{loop_time(result.moves_wall[0]):.3f} s, its release by "
+            f"{loop_time(result.up_wall):.3f} s); EE error {trace['ee_error'][worst]:.3g} m, "
+            f"constraint velocity {trace['constraint_velocity'][worst]:.3g} m/s; statuses "
+            f"sampled within 50 ms: {near or 'none'}")
 
 
 def report_drag(label: str, result, control) -> None:

@@ -137,3 +137,16 @@ def kinematics(robot, q: np.ndarray) -> pin.Data:
 def ee_jacobian(robot, q: np.ndarray) -> np.ndarray:
     data = kinematics(robot, q)
     return pin.getFrameJacobian(robot.model, data, robot.model.getFrameId(robot.ee_frame), pin.LOCAL)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> pytest.TestReport:
+    """A browser test that fails leaves the page as it was (a screenshot) and its text in
+    tests/artifacts, and says so in its report: what a run on a loaded CI machine saw."""
+    report = yield
+    served = getattr(item, "funcargs", {}).get("web")
+    if report.when == "call" and report.failed and served is not None:
+        from browser_helpers import record_failed_page
+
+        report.sections.append(("page at the failure", record_failed_page(served, item.name)))
+    return report

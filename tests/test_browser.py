@@ -24,12 +24,12 @@ Every wait is bounded. Run with ``-s`` to see the measured control rate and late
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    ARTIFACTS,
     close_notifications,
     WAIT,
     VIEWPORT,
@@ -55,6 +55,7 @@ from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
     wait_for_still_canvas,
     wait_until,
     watchdog,
+    worst_of_trace,
 )
 from playwright.sync_api import expect
 
@@ -62,7 +63,6 @@ from teleop import load_robot
 from web.ui import GHOST_COLOR, MAIN_COLOR
 
 HOLE_TOLERANCE = 1e-6  # m
-ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
 PLOT_DEADLINE = WAIT  # s: the live plots draw their lines (measured and printed)
 
 
@@ -246,7 +246,7 @@ def test_switching_controller_in_the_page_keeps_the_hole(web):
     assert (result.ee1 - result.ee0) @ unit > 0.003
     assert result.max_sampled_error <= HOLE_TOLERANCE
     trace = trace_since(app, switched)
-    assert trace["constraint_error"].max() <= HOLE_TOLERANCE, trace["constraint_error"].max()
+    assert trace["constraint_error"].max() <= HOLE_TOLERANCE, worst_of_trace(trace, switched, result)
     assert app.robots.last_records["main"] is not None and not app.robots.last_records["main"].failed
 
 

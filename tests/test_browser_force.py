@@ -12,11 +12,11 @@ Every wait is bounded.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    ARTIFACTS,
     WAIT,
     open_tab,
     open_web,
@@ -33,7 +33,6 @@ from teleop import load_robot
 from web.ui.force_panel import CONTACT_ARROW_PER_NEWTON, CONTACT_COLOR
 
 SETPOINT = 1.5
-ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
 #: viser holds the arrow's points as float32
 FLOAT32 = 4 * float(np.finfo(np.float32).eps)
 

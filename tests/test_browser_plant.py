@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import re
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    ARTIFACTS,
     WAIT,
     click_add_hole,
     ee_position,
@@ -48,7 +48,6 @@ from web.ui.port_forces import FORCE_COLOR, MIN_DRAWN_FORCE
 GENTLE_FORCE = 0.2
 #: viser holds the arrow's points as float32: a few round-offs of coordinates under 1 m
 FLOAT32 = 4 * float(np.finfo(np.float32).eps)
-ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
 
 
 @pytest.fixture(scope="module")
