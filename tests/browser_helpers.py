@@ -363,6 +363,29 @@ def open_tab(web, name: str) -> None:
     expect(tab).to_have_attribute("aria-selected", "true")
 
 
+def choose(web, label: str, option: str) -> None:
+    """Choose ``option`` in the page's menu ``label`` (viser's dropdown, a searchable
+    select) from the keyboard, as :func:`open_tab` does tabs: its name typed, which leaves
+    the options that contain it, then Arrow Down to the one named exactly and Enter. The
+    page then shows it (the server's side is the caller's to wait for)."""
+    menu = web.page.get_by_label(label, exact=True)
+    if menu.input_value() == option:
+        return
+    menu.fill(option)
+    listed = web.page.get_by_role("option")
+    expect(web.page.get_by_role("option", name=option, exact=True)).to_be_visible()
+    for _ in range(listed.count()):
+        menu.press("ArrowDown")
+        highlighted = web.page.locator("[data-combobox-selected]")
+        expect(highlighted).to_have_count(1)
+        if highlighted.inner_text() == option:
+            break
+    else:
+        raise AssertionError(f"{option!r} is not among the options of the menu {label!r}")
+    menu.press("Enter")
+    expect(menu).to_have_value(option)
+
+
 def open_status_details(web) -> None:
     """Open the status's "Details" folder (closed by default: the status line shows a
     few plain words), where the control rate, the controller's words and the collision

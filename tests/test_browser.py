@@ -29,6 +29,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    choose,
     ARTIFACTS,
     close_notifications,
     WAIT,
@@ -230,8 +231,7 @@ def test_switching_controller_in_the_page_keeps_the_hole(web):
     assert app.robots.specs["main"] == "cjm"
     open_tab(web, "Teleop")
     menu = page.get_by_label("main", exact=True)
-    menu.click()
-    page.get_by_role("option", name="qp:daqp", exact=True).click()
+    choose(web, "main", "qp:daqp")
     wait_until(lambda: app.robots.specs["main"] == "qp:daqp", WAIT, "the app to switch to qp:daqp")
     expect(menu).to_have_value("qp:daqp")
     switched = app.now
@@ -277,10 +277,8 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
     app, page, ui = web.app, web.page, web.ui
     ensure_hole(web)
     open_tab(web, "Teleop")
-    menu = page.get_by_label("main", exact=True)
     if app.robots.specs["main"] != "cjm":  # CJM beside the QP
-        menu.click()
-        page.get_by_role("option", name="cjm", exact=True).click()
+        choose(web, "main", "cjm")
         wait_until(lambda: app.robots.specs["main"] == "cjm", WAIT, "the app to switch to cjm")
     checkbox = page.get_by_label("side by side")
     started = time.perf_counter()

@@ -18,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    choose,
     close_notifications,
     WAIT,
     VIEWPORT,
@@ -119,10 +120,8 @@ def test_dragging_each_gizmo_moves_its_own_ee(web):
 
 def add_hole_on(web, link: str) -> str:
     """Choose ``link`` in the page's "arm" menu and press "Add hole"; the new hole's id."""
-    page = web.page
     open_tab(web, "Constraints")
-    page.get_by_label("hole arm", exact=True).click()
-    page.get_by_role("option", name=link, exact=True).click()
+    choose(web, "hole arm", link)
     menu = web.ui.constraint_panel.inputs["hole"]["link"]
     wait_until(lambda: menu.value == link, WAIT, f"the arm menu to read {link}")
     before = set(holes(web.app))
