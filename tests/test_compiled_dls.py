@@ -118,15 +118,12 @@ def test_the_qr_path_is_taken_where_the_certificate_holds(problem):
     matrix, rhs, s, policy = problem
     by_qr = _step.damped_least_squares(matrix, rhs, policy.damping, policy.threshold,
                                        policy.max_damping, RANK_TOLERANCE)[-1]
-    t = min(matrix.shape)
-    sigma_min, sigma_max = float(np.min(s)), float(np.max(s))
-    # 1/||R^-1||_F >= sigma_min / sqrt(t) and ||R||_F ||R^-1||_F <= t kappa: the certificate
-    # holds with a margin for the rounding of R
-    certain = (sigma_min / np.sqrt(t) > policy.threshold * (1.0 + 1e-6)
-               and t * sigma_max / sigma_min < MAX_CONDITION_BOUND * (1.0 - 1e-6))
-    if policy.damping > 0.0 or t > MAX_QR_SIZE or sigma_min < policy.threshold * (1.0 - 1e-6):
+    # below the damping threshold too: a solve first takes lambda from the certified
+    # sigma_min and solves the damped problem on the QR (DampedLeastSquares::damped_by_qr)
+    rank_lost = np.min(s) <= RANK_TOLERANCE * max(1.0, float(np.max(s)))
+    if policy.damping > 0.0 or min(matrix.shape) > MAX_QR_SIZE or rank_lost:
         assert not by_qr
-    elif certain:
+    elif certified(s):
         assert by_qr
 
 

@@ -43,10 +43,10 @@ struct DampingPolicy {
 //! computed when asked for. If the bound is also at least the policy's threshold,
 //! ``lambda = 0`` whatever sigma_min: ``x = R^-1 (Q^T r)_head`` (tall J: its least
 //! squares) or ``x = Q [R^-T r; 0]`` (wide J: its minimum norm). Below the threshold
-//! lambda follows sigma_min (eq 35): asked for first (the damping rows of the saturation
-//! around the previous command, docs/design.md 9.1), it comes from that sigma_min and a
-//! later solve finishes the SVD for its gains; a solve first decides on the SVD, as when
-//! the bound fails: the Jacobi SVD of R finishes the thin SVD and decides everything.
+//! lambda follows sigma_min (eq 35), whether sigma_min is asked for first (the damping rows
+//! of the saturation around the previous command, docs/design.md 9.1) or a solve is: that
+//! solve is the damped least squares on R (damped_by_qr), no SVD. When the bound fails the
+//! Jacobi SVD of R finishes the thin SVD and decides everything.
 class DampedLeastSquares {
  public:
   //! Largest ``min(p, q)`` the QR path takes (its ``R^-1`` and Gram are fixed-size).
@@ -91,7 +91,7 @@ class DampedLeastSquares {
   //! lambda is 0 after the QR alone, else ``V diag(gains) U^T rhs`` after the SVD.
   void solve(const ConstMatrixRef& rhs, MatrixRef x) {
     const Index t = svd_.size();
-    if (decision_ == Decision::open) finish_svd();  // decided on the SVD, as without the QR
+    decide();  // an open decision on the certified sigma_min, as when it is asked for first
     if (decision_ == Decision::undamped) {
       const auto r = svd_.qr().topRows(t).triangularView<Eigen::Upper>();
       if (svd_.tall()) {  // J = Q [R; 0]: x = R^-1 (Q^T r)_head
@@ -108,11 +108,9 @@ class DampedLeastSquares {
       }
       return;
     }
-    if (!svd_ready_) {  // damped by the certified sigma_min: every value kept
-      svd_.finish();
-      svd_ready_ = true;
-      const double lam2 = damping_ * damping_;
-      for (Index j = 0; j < t; ++j) gains_(j) = svd_.s()(j) / (svd_.s()(j) * svd_.s()(j) + lam2);
+    if (decision_ == Decision::damped) {
+      damped_by_qr(rhs, x);
+      return;
     }
     auto projected = projected_.topLeftCorner(t, rhs.cols());
     projected.noalias() = svd_.u().transpose() * rhs;
@@ -192,6 +190,85 @@ class DampedLeastSquares {
     damping_ = std::sqrt(lam2);
     exact_ = lam2 == 0.0 && rank_ == rows_;
     decision_ = lam2 == 0.0 ? Decision::undamped : Decision::damped;
+  }
+
+  //! The damped solve on the QR alone (full rank certified, lambda > 0): ``x`` minimises
+  //! ``|J x - r|^2 + lambda^2 |x|^2``, which is ``V diag(s / (s^2 + lambda^2)) U^T r``
+  //! (docs/design.md 4.2) without the SVD. Tall J (``J = Q1 R``): ``x = u``; wide J
+  //! (``J = R^T Q1^T``): ``x = Q [u; 0]``; ``u`` solves ``(M^T M + lambda^2 I) u = M^T y``
+  //! with ``M = R, y = Q1^T r`` (tall) or ``M = R^T, y = r`` (wide). ``M^T M + lambda^2 I
+  //! = R2^T R2``, R2 the triangle of the Householder QR of ``[M; lambda I]``; the
+  //! semi-normal equations on R2 and one step of refinement on their residual (Bjorck's
+  //! corrected semi-normal equations: within about ``eps kappa`` of the SVD's gains, where
+  //! the plain QR of the stack loses ``eps kappa^2 |residual| / |x|`` when the residual
+  //! dominates, as it does damped). Saves the Jacobi SVD of each damped general step
+  //! (issue 32: fast-lateral with acceleration limits).
+  void damped_by_qr(const ConstMatrixRef& rhs, MatrixRef x) {
+    const Index t = svd_.size(), c = rhs.cols();
+    const bool tall = svd_.tall();
+    const auto& qr = svd_.qr();
+    auto m = [&](Index i, Index j) {  // M(i, j): R's upper triangle, transposed when wide
+      const Index row = tall ? i : j, col = tall ? j : i;
+      return row <= col ? qr(row, col) : 0.0;
+    };
+    auto stack = stack_.topLeftCorner(2 * t, t);
+    stack.setZero();
+    for (Index j = 0; j < t; ++j) {
+      for (Index i = 0; i < t; ++i) stack(i, j) = m(i, j);
+      stack(t + j, j) = damping_;
+    }
+    householder_qr(stack, stack_tau_.head(t));  // its upper triangle: R2
+    auto y = stack_rhs_.topLeftCorner(t, c);
+    if (tall) {
+      auto projected = projected_.topLeftCorner(rows_, c);
+      projected = rhs;
+      apply_qt(qr, svd_.tau(), projected);
+      y = projected.topRows(t);
+    } else {
+      y = rhs;
+    }
+    auto u = x.topRows(t);
+    auto normal = normal_rhs_.topLeftCorner(t, c);
+    auto residual = residual_.topLeftCorner(t, c);
+    for (Index k = 0; k < c; ++k)  // M^T y
+      for (Index j = 0; j < t; ++j) {
+        double sum = 0.0;
+        for (Index i = 0; i < t; ++i) sum += m(i, j) * y(i, k);
+        normal(j, k) = sum;
+      }
+    normal_solve(stack, normal);
+    u = normal;
+    for (Index k = 0; k < c; ++k) {  // the refinement: M^T (y - M u) - lambda^2 u
+      for (Index i = 0; i < t; ++i) {
+        double sum = y(i, k);
+        for (Index j = 0; j < t; ++j) sum -= m(i, j) * u(j, k);
+        residual(i, k) = sum;
+      }
+      for (Index j = 0; j < t; ++j) {
+        double sum = -damping_ * damping_ * u(j, k);
+        for (Index i = 0; i < t; ++i) sum += m(i, j) * residual(i, k);
+        normal(j, k) = sum;
+      }
+    }
+    normal_solve(stack, normal);
+    u += normal;
+    if (!tall) {
+      x.bottomRows(cols_ - t).setZero();
+      apply_q(qr, svd_.tau(), x);
+    }
+  }
+
+  //! ``b <- (R2^T R2)^-1 b`` for the upper triangle R2 of ``factored``'s leading block.
+  template <typename Factored, typename Rhs>
+  static void normal_solve(const Factored& factored, Rhs& b) {
+    const Index t = b.rows();
+    for (Index k = 0; k < b.cols(); ++k)  // R2^T z = b, forward
+      for (Index i = 0; i < t; ++i) {
+        double sum = b(i, k);
+        for (Index j = 0; j < i; ++j) sum -= factored(j, i) * b(j, k);
+        b(i, k) = sum / factored(i, i);
+      }
+    upper_solve(factored, b);
   }
 
   //! The Jacobi SVD of R finishes the thin SVD and decides every figure.
@@ -276,6 +353,10 @@ class DampedLeastSquares {
   ThinSvd svd_;
   Vector gains_;
   Matrix projected_, row_space_;
+  Matrix stack_ = Matrix(2 * kMaxQrSize, kMaxQrSize);  // damped_by_qr's [M; lambda I], y, its work
+  Matrix stack_rhs_ = Matrix(2 * kMaxQrSize, 2);
+  Matrix normal_rhs_ = Matrix(kMaxQrSize, 2), residual_ = Matrix(kMaxQrSize, 2);
+  Vector stack_tau_ = Vector(kMaxQrSize);
   SmallMatrix inverse_, gram_;
   Eigen::SelfAdjointEigenSolver<SmallMatrix> eigen_{kMaxQrSize};
   Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxQrSize, 1> power_vector_{kMaxQrSize},
