@@ -25,6 +25,8 @@ from constraints import Constraint, Hole
 from constraints.math_methods import keeps_math
 from constraints.norms import row_norms
 
+from .constraint_measures import relative_rotations
+
 C = TypeVar("C", bound=Constraint)
 C_contra = TypeVar("C_contra", bound=Constraint, contravariant=True)
 
@@ -75,11 +77,11 @@ class PerPeriod(Generic[C]):
 
 def transposed_times(rotations: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     """``R_i^T v_i`` at every period (N, 3): the arithmetic of ``pin.SE3.actInv``'s rotation
-    (Eigen's, compiled: each entry ``(R_0i v_0 + R_1i v_1) + R_2i v_2``), bit for bit, in
-    element-wise operations: a ``matmul`` would round by the BLAS kernel the CPU selects
-    (with AVX-512 OpenBLAS fuses the products, Eigen does not)."""
-    return (rotations[:, 0, :] * vectors[:, 0, None] + rotations[:, 1, :] * vectors[:, 1, None]
-            + rotations[:, 2, :] * vectors[:, 2, None])
+    (Eigen's, compiled: each entry ``(R_0i v_0 + R_1i v_1) + R_2i v_2``), bit for bit:
+    :func:`relative_rotations` with each vector as a column (a ``matmul`` would round by
+    the BLAS kernel the CPU selects; with AVX-512 OpenBLAS fuses the products, Eigen does
+    not)."""
+    return relative_rotations(rotations, vectors[:, :, None])[:, :, 0]
 
 
 def transposed(rotations: np.ndarray) -> np.ndarray:
