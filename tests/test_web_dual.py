@@ -7,6 +7,8 @@ configuration, never from the app's report of it.
 
 from __future__ import annotations
 
+import asyncio
+import inspect
 import json
 from types import SimpleNamespace
 
@@ -336,6 +338,33 @@ def test_a_gizmo_line_and_target_per_ee(server, app):
     ui.teleop_panel.home()
     for gizmo, target in zip(ui.scene.target_gizmos, app.console.targets):
         np.testing.assert_allclose(gizmo.position, target.translation, atol=1e-9)
+
+
+def test_each_nudge_is_the_one_clicked_however_late_the_inbox_applies_it(server, app):
+    """Three clicks on the nudge buttons reach viser before the inbox applies the first (a
+    busy machine): each nudge is its own button, step and arm, read as viser got the click.
+    Read when the inbox applied them, all three were the last: +x by 2 mm on the right arm."""
+    ui = make_ui(server, app)
+    panel = ui.teleop_panel
+    assert inspect.iscoroutinefunction(panel.nudge_clicked)  # awaited in viser's event loop
+    before = [target.translation.copy() for target in app.console.targets]
+    click = SimpleNamespace(client=None, client_id=None)
+    for arm, label, step in (("left", "+y", 0.005), ("left", "-z", 0.005), ("right", "+x", 0.002)):
+        panel.active_arm.value, panel.nudge_step.value = arm, step
+        # what viser's handler of a click's message does: the group's value set (its state;
+        # the public setter runs the callbacks itself), then the coroutine awaited
+        panel.nudge_buttons._impl.value = label
+        asyncio.run(panel.nudge_clicked(click))
+    ui.inbox.start()
+    try:
+        assert ui.inbox.drain(10.0)
+    finally:
+        ui.inbox.stop()
+    after = [target.translation for target in app.console.targets]
+    np.testing.assert_allclose(after[0] - before[0], [0.0, 0.005, -0.005], atol=1e-15)
+    np.testing.assert_allclose(after[1] - before[1], [0.002, 0.0, 0.0], atol=1e-15)
+    for gizmo, target in zip(ui.scene.target_gizmos, after):  # each gizmo on its target
+        np.testing.assert_allclose(gizmo.position, target, atol=1e-9)
 
 
 def test_each_arms_hole_is_drawn_around_its_own_link(server, app, dual):

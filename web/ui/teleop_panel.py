@@ -99,7 +99,8 @@ class TeleopPanel:
             event, lambda: app.console.set_clutch(not app.console.clutch)))
         self.motion_scale.on_update(lambda event: guarded(
             event, lambda: app.console.set_motion_scale(self.motion_scale.value), key="motion scale"))
-        self.nudge_buttons.on_click(lambda event: guarded(event, self.nudge))
+        self._guarded = guarded
+        self.nudge_buttons.on_click(self.nudge_clicked)
         self.gizmo_button.on_click(lambda event: guarded(event, self.gizmo_to_target))
         self.home_button.on_click(lambda event: guarded(event, self.home))
         self.task_mode_menu.on_update(lambda event: guarded(
@@ -118,12 +119,19 @@ class TeleopPanel:
         if words:  # home cannot be reached through the constraints: say why
             self._notify(None, "Home not reachable", words, color="yellow")
 
-    def nudge(self) -> None:
-        """The active arm's target moved by the nudge step along the button's axis, its
-        gizmo following (on the target: the next drag starts where the nudge left it)."""
-        ee = self.active_ee()
-        self.app.console.nudge_target(
-            self.nudge_step.value * np.asarray(NUDGES[self.nudge_buttons.value], dtype=float), ee)
+    async def nudge_clicked(self, event: viser.GuiEvent) -> None:
+        """A click on a nudge button: the nudge it asks for (its button, the step and the
+        active arm, read now) posted to the inbox. A coroutine, which viser awaits in its
+        event loop as the click's message arrives: a plain callback runs later on viser's
+        thread pool, and the inbox later still, when a second click may have changed the
+        group's value (on a busy machine "+y" then "-z" nudged -z twice)."""
+        nudge = (NUDGES[self.nudge_buttons.value], self.nudge_step.value, self.active_ee())
+        self._guarded(event, lambda: self.nudge(*nudge))
+
+    def nudge(self, direction: tuple[int, int, int], step: float, ee: int) -> None:
+        """EE ``ee``'s target moved by ``step`` (m) along ``direction``, its gizmo following
+        (on the target: the next drag starts where the nudge left it)."""
+        self.app.console.nudge_target(step * np.asarray(direction, dtype=float), ee)
         self._move_gizmo(self.app.console.gizmo_to_target(ee), ee)
 
     def gizmo_to_target(self) -> None:
