@@ -530,10 +530,21 @@ def ensure_hole(web) -> str:
     return existing[0] if existing else click_add_hole(web)
 
 
+#: what a screenshot of the 3D view paints over in black: the control panel and the
+#: notifications, the page's own, whose text changes on its own (the status line each
+#: second on a loaded machine, a notification coming: a still scene never looked still)
+OVER_THE_SCENE = ("[data-floating-window]", ".mantine-Notification-root")
+
+
 def canvas_pixels(web) -> np.ndarray:
-    box = scene_canvas(web.page)
-    png = web.page.screenshot(clip={"x": box.x, "y": box.y, "width": box.width,
-                                    "height": box.height}, timeout=1e3 * WAIT)
+    """What the 3D view draws: a screenshot of its canvas, the page's panel and
+    notifications over it painted black (:data:`OVER_THE_SCENE`)."""
+    page = web.page
+    box = scene_canvas(page)
+    png = page.screenshot(clip={"x": box.x, "y": box.y, "width": box.width,
+                                "height": box.height}, timeout=1e3 * WAIT,
+                          mask=[page.locator(selector) for selector in OVER_THE_SCENE],
+                          mask_color="#000000")
     return png_pixels(png)
 
 

@@ -8,6 +8,7 @@ banner while the control loop falls behind (docs/design.md section 5.3)."""
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 
 import viser
@@ -18,6 +19,10 @@ from ..app import HISTORY_SECONDS, ControlThread, port_words, summary_words, sup
 from .port_forces import FORCE_ARROW_WORDS
 
 BEHIND_COLOR = "#b91c1c"  # the banner of a control loop falling behind
+#: at most one "control loop behind" notification in this long (s): the banner says it as
+#: long as it lasts, and a rate hovering about the threshold on a busy machine raised a
+#: notification every few seconds, stacked over the scene
+BEHIND_NOTICE_INTERVAL = 60.0
 
 
 def collision_words(rows: CollisionRows | None, active_pairs: list[str]) -> str:
@@ -61,6 +66,7 @@ class StatusPanel:
         self._device_lines = device_lines
         self._notify = notify
         self._behind = ""  # the warning shown while the control loop falls behind
+        self._behind_noticed = -math.inf  # when the last notification of it was raised (s)
         self.banner = gui.add_html("", visible=False)
         self.summary = gui.add_markdown("starting...")
         with gui.add_folder("Details", expand_by_default=False):
@@ -71,12 +77,15 @@ class StatusPanel:
         self.summary.content = self.details.content = words
 
     def _warn_behind(self) -> None:
-        """A red banner above the status (and a notification when it starts) while the
-        control loop achieves less than 95 % of its rate (``ControlThread.behind``)."""
+        """A red banner above the status while the control loop achieves less than 95 % of
+        its rate (``ControlThread.behind``), and a notification when it starts, at most
+        one per :data:`BEHIND_NOTICE_INTERVAL`."""
         behind = self.control.behind()
         if bool(behind) != bool(self._behind):
-            if behind:
+            now = time.monotonic()
+            if behind and now - self._behind_noticed >= BEHIND_NOTICE_INTERVAL:
                 self._notify(None, "Control loop behind", behind, color="red")
+                self._behind_noticed = now
             self.banner.visible = bool(behind)
         if behind and behind != self._behind:
             self.banner.content = (f'<div style="background:{BEHIND_COLOR};color:white;'
