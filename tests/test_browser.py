@@ -29,6 +29,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    press,
     choose,
     ARTIFACTS,
     close_notifications,
@@ -62,6 +63,7 @@ from playwright.sync_api import expect
 
 from teleop import load_robot
 from web.ui import GHOST_COLOR, MAIN_COLOR
+from web.ui.teleop_panel import NUDGES
 
 HOLE_TOLERANCE = 1e-6  # m
 PLOT_DEADLINE = WAIT  # s: the live plots draw their lines (measured and printed)
@@ -262,7 +264,9 @@ def test_impossible_action_shows_a_notification(web):
     normal = ui.constraint_panel.inputs["plane"]["normal"]
     wait_until(lambda: tuple(normal.value) == (0.0, 0.0, 0.0), WAIT,
                "the plane normal (0, 0, 0) to reach the server")
-    page.get_by_role("button", name="Add plane").click()
+    applied = ui.inbox.applied
+    press(web, "Add plane", ui.constraint_panel.add_buttons["plane"],
+          lambda: ui.inbox.applied > applied, "the plane to be refused")
     expect(page.get_by_text("the plane normal must be a non-zero 3-vector").first).to_be_visible()
     expect(page.get_by_text("Not possible", exact=True).first).to_be_visible()
     assert "Traceback" not in page.inner_text("body")
@@ -299,8 +303,11 @@ def test_ghost_from_the_checkbox_draws_its_plot_lines_and_the_readme_screenshot(
     open_tab(web, "Teleop")
     target0 = app.console.target.translation.copy()
     for label in ("+y", "+y", "+y", "-z", "-z"):
-        page.get_by_role("button", name=label, exact=True).click()
-        time.sleep(0.3)
+        before = app.console.target.translation.copy()
+        step = 0.005 * np.array(NUDGES[label], dtype=float)
+        press(web, label, ui.teleop_panel.nudge_buttons,
+              lambda: np.linalg.norm(app.console.target.translation - before - step) < 1e-9,
+              f"the target nudged {label}")
     wait_until(lambda: np.linalg.norm(app.console.target.translation - target0 - [0, 0.015, -0.01]) < 1e-9,
                WAIT, "the target nudged by (0, 15, -10) mm")
     wait_until(lambda: np.linalg.norm(np.asarray(web.ui.scene.target_gizmo.position)

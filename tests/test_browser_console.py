@@ -16,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    press,
     WAIT,
     canvas_pixels,
     changed_fraction,
@@ -133,8 +134,8 @@ def test_the_ghost_is_drawn_beside_the_robot_at_its_offset(web):
 def test_clutch_engaged_a_real_drag_does_not_move_the_robot_and_release_does_not_jump(web):
     app, page, ui = web.app, web.page, web.ui
     open_tab(web, "Teleop")
-    page.get_by_role("button", name="Clutch", exact=True).click()
-    wait_until(lambda: app.console.clutch, WAIT, "the clutch to engage")
+    press(web, "Clutch", ui.teleop_panel.clutch_button, lambda: app.console.clutch,
+          "the clutch to engage")
     expect(page.get_by_role("button", name="Release clutch")).to_be_visible()
     time.sleep(0.5)
     target0, ee0 = app.console.target.copy(), ee_position(app)
@@ -149,8 +150,8 @@ def test_clutch_engaged_a_real_drag_does_not_move_the_robot_and_release_does_not
     assert app.console.target.isApprox(target0, 1e-12), "the target moved with the clutch engaged"
     assert np.linalg.norm(ee_position(app) - ee0) < 1e-6, "the robot moved"
     assert ui.scene.target_marker.visible  # the target drawn apart from the gizmo
-    page.get_by_role("button", name="Release clutch").click()
-    wait_until(lambda: not app.console.clutch, WAIT, "the clutch to release")
+    press(web, "Release clutch", ui.teleop_panel.clutch_button, lambda: not app.console.clutch,
+          "the clutch to release")
     assert app.console.target.isApprox(target0, 1e-12), "the target jumped on release"
     time.sleep(0.3)
     assert np.linalg.norm(ee_position(app) - ee0) < 1e-6
@@ -175,8 +176,7 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
     open_tab(web, "Settings")
     input_of(page, "scene name").fill(path.name)
     wait_until(lambda: web.ui.settings_panel.scene_path.value == path.name, WAIT, "the scene name")
-    page.get_by_role("button", name="Save scene").click()
-    wait_until(path.exists, WAIT, "the scene file")
+    press(web, "Save scene", web.ui.settings_panel.save_scene_button, path.exists, "the scene file")
     expect(page.get_by_text("saved", exact=False).first).to_be_visible()
     # change things from the page: the rate, the motion scale, the constraints
     input_of(page, "rate (Hz)").fill("500")
@@ -185,11 +185,11 @@ def test_a_scene_saved_and_loaded_in_the_page_restores_constraints_and_settings(
     input_of(page, "motion scale").fill("0.2")
     wait_until(lambda: app.console.motion_scale == 0.2, WAIT, "the motion scale to change")
     open_tab(web, "Constraints")
-    page.get_by_role("button", name="Clear constraints").click()
-    wait_until(lambda: not app.constraints.entries, WAIT, "the constraints to be cleared")
+    press(web, "Clear constraints", web.ui.constraint_panel.clear_button,
+          lambda: not app.constraints.entries, "the constraints to be cleared")
     open_tab(web, "Settings")
-    page.get_by_role("button", name="Load scene").click()
-    wait_until(lambda: hole_id in app.constraints.entries, WAIT, "the scene's hole")
+    press(web, "Load scene", web.ui.settings_panel.load_scene_button,
+          lambda: hole_id in app.constraints.entries, "the scene's hole")
     np.testing.assert_allclose(app.constraints.entries[hole_id].goal, goal, atol=1e-12)
     assert app.robots.config.rate == 1000.0 and app.console.motion_scale == 1.0
     assert app.robots.specs == {"main": "cjm", "ghost": "qp:daqp"}
@@ -208,7 +208,9 @@ def test_an_out_of_range_hole_distance_shows_a_notification(web):
     input_of(page, "hole at (m)").fill("5")
     distance = web.ui.constraint_panel.inputs["hole"]["distance"]
     wait_until(lambda: distance.value == 5.0, WAIT, "the distance 5 m")
-    page.get_by_role("button", name="Add hole").click()
+    applied = web.ui.inbox.applied
+    press(web, "Add hole", web.ui.constraint_panel.add_buttons["hole"],
+          lambda: web.ui.inbox.applied > applied, "the hole to be refused")
     expect(page.get_by_text("hole distance must be between 0 and", exact=False).first
            ).to_be_visible()
     assert "Traceback" not in page.inner_text("body")

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 from browser_helpers import (  # noqa: F401 (watchdog: an autouse fixture)
+    press,
     ARTIFACTS,
     WAIT,
     open_tab,
@@ -51,8 +52,8 @@ def test_a_setpoint_set_in_the_page_presses_the_tissue_and_the_arrow_shows_it(tm
     with open_web(load_robot("sda10f"), tmp_path / "sessions", plant="mujoco") as web:
         app, page, ui = web.app, web.page, web.ui
         open_tab(web, "Force")
-        page.get_by_role("button", name="Place tissue under the tool").click()
-        wait_until(lambda: app.force.tissue is not None, WAIT, "the tissue to be placed")
+        press(web, "Place tissue under the tool", ui.force_panel.place,
+              lambda: app.force.tissue is not None, "the tissue to be placed")
         label = page.get_by_text("Setpoint (N, tool)", exact=True)
         row = page.locator("div").filter(has=label).filter(has=page.locator("input")).last
         inputs = row.locator("input")
