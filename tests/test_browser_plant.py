@@ -253,8 +253,11 @@ def status_line_forces(page, hole_id: str) -> tuple[float, float | None] | None:
 def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
     """A hole placed, a 12 mm drag with the real mouse in 2 mm steps: the status line (not
     its details) names the link the hole is on, shows the port force in mN while the wall
-    pushes (seen above 1 mN, never above what the plant measured in any control period),
-    and says in a few words that the EE reached the target once it has."""
+    pushes and the largest of the last 10 s (that one seen above 1 mN during the drag;
+    neither ever above what the plant measured in any control period), and says in a few
+    words that the EE reached the target once it has. The force now is read at the page's
+    pace, which on a loaded machine is after the EE has caught up (clone N read 0.11 mN at
+    each of 12 readings against a 178 mN peak): only the largest is bound from below."""
     app, page = web.app, web.page
     app.robots.set_task_mode("auto")  # what the page starts with: what the port allows
     hole_id = ensure_hole(web)
@@ -264,7 +267,7 @@ def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
     look_at_target(web)
     since = app.now
     plan = plan_drag(web, DRAG, DRAG_STEPS)
-    shown = []  # (loop time, the force the status line showed)
+    shown = []  # (loop time, the force the status line showed, the largest of the last 10 s)
     mouse = page.mouse
     target0 = app.console.target.translation.copy()
     mouse.move(*plan.screen[0])
@@ -283,7 +286,7 @@ def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
                     f"the status line showed no port force for {WAIT:g} s after mouse step {k}")
                 forces = status_line_forces(page, hole_id)
                 if forces is not None:
-                    shown.append((app.now, forces[0]))
+                    shown.append((app.now, *forces))
                     taken += 1
                 time.sleep(0.05)
     finally:
@@ -291,18 +294,21 @@ def test_a_drag_through_a_placed_hole_reads_in_the_status_line(web):
     wait_until(lambda: np.linalg.norm(ee_position(app) - app.console.target.translation) < 1e-4,
                WAIT, "the EE to reach the dragged target")
     measured = max(force for t, force in list(web.forces) if t >= since)
-    seen = max(force for _, force in shown)
+    seen = max(force for _, force, _ in shown)
+    seen_largest = max((largest for _, _, largest in shown if largest is not None), default=0.0)
     print(f"\n[plant] the status line over a {1e3 * DRAG:.0f} mm drag: {len(shown)} readings, the largest "
-          f"{1e3 * seen:.2f} mN (the plant's largest over every period: {1e3 * measured:.2f} mN)")
+          f"force now {1e3 * seen:.2f} mN, the largest 'largest of the last 10 s' "
+          f"{1e3 * seen_largest:.2f} mN (the plant's largest over every period: {1e3 * measured:.2f} mN)")
     assert len(shown) > 10
-    assert 1e-3 < seen <= measured + 0.005e-3  # shown to 0.01 mN
-    # and the largest of the last 10 s, from the plots' peaks of every period
+    assert 0.0 < seen <= measured + 0.005e-3  # shown to 0.01 mN
+    assert 1e-3 < seen_largest <= measured + 0.005e-3
+    # and the largest of the last 10 s after the drag, from the plots' peaks of every period
     largest = wait_until(lambda: (forces := status_line_forces(page, hole_id)) and forces[1],
                          WAIT, "the largest port force in the status line")
     read = app.now  # the plots' window ends before it (the view lags by a few frames)
     recent = max(force for t, force in list(web.forces) if t >= read - 12.0)
     print(f"[plant] the status line's largest of the last 10 s: {1e3 * largest:.2f} mN "
           f"(the plant's largest over the periods of the last 12 s: {1e3 * recent:.2f} mN)")
-    assert 1e-3 < largest <= recent + 0.005e-3
+    assert largest <= recent + 0.005e-3
     expect(page.get_by_text("main on target", exact=False).first).to_be_visible()
     assert web.control.error is None and web.page_errors == [], web.page_errors
