@@ -91,6 +91,16 @@ def damped_least_squares(
                           exact=exact)
 
 
+def nullspace_basis(matrix: np.ndarray, rank_tolerance: float = RANK_TOLERANCE) -> np.ndarray:
+    """An orthonormal basis ``N`` of ``null(A)``, shape ``(n, n - rank)``: :func:`nullspace`
+    without the pseudo-inverse (whose three NumPy calls its callers would throw away)."""
+    m, n = matrix.shape
+    if m == 0:
+        return np.eye(n)
+    _, s, vt = svd(matrix, full_matrices=True)
+    return vt[numerical_rank(s, rank_tolerance):].T
+
+
 def nullspace(matrix: np.ndarray,
               rank_tolerance: float = RANK_TOLERANCE) -> tuple[np.ndarray, np.ndarray, int]:
     """An orthonormal basis ``N`` of ``null(A)``, the pseudo-inverse ``A^+`` and the rank.

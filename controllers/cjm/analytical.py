@@ -24,7 +24,7 @@ import pinocchio as pin
 from constraints import Constraint, ConstraintPoint, Parametrisation, structure_of
 
 from ..base import TWIST_TOLERANCE, StepStatus
-from ..linalg import DampedSolution, DampingPolicy, damped_least_squares, nullspace
+from ..linalg import DampedSolution, DampingPolicy, damped_least_squares, nullspace_basis
 from .affine_forms import AffineForm, affine_form_of, affine_inputs
 from .report import Event, StepReport
 from .tolerances import (
@@ -237,7 +237,7 @@ class SquarePreChain:
 
     def _closest_to_posture(self, cjm: np.ndarray, posture_velocity: np.ndarray | None) -> None:
         """Move the free variables within ``null(Jbar)`` to the ``qd`` closest to the posture."""
-        null_basis, _, _ = nullspace(cjm)
+        null_basis = nullspace_basis(cjm)
         qd = self.joint_map @ self.free_with_one
         goal = -qd if posture_velocity is None else posture_velocity - qd
         step, *_ = np.linalg.lstsq(self.joint_map[:, 1:] @ null_basis, goal, rcond=LEAST_SQUARES_RCOND)

@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..linalg import DampingPolicy, nullspace
+from ..linalg import DampingPolicy, nullspace_basis
 from ..numerics import numerical_rank, svd
 
 
@@ -45,7 +45,7 @@ def task_damping(constraint_rows: np.ndarray | None, task_jacobian: np.ndarray,
     weight, ``W^1/2`` applied) under the equality rows ``constraint_rows`` (None: none)."""
     nv = task_jacobian.shape[1]
     null_basis = (np.eye(nv) if constraint_rows is None
-                  else nullspace(constraint_rows)[0])
+                  else nullspace_basis(constraint_rows))
     if not null_basis.shape[1] or not task_jacobian.shape[0]:
         return TaskDamping(np.zeros((0, nv)), float("nan"), 0.0, null_basis)
     _, values, right_vectors = svd(task_jacobian @ null_basis)

@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..base import EQUALITY_TOLERANCE, SolverError
-from ..linalg import nullspace
+from ..linalg import nullspace, nullspace_basis
 from ..numerics import INFINITE_BOUND, RANK_TOLERANCE
 from ..optimization.problem import QPSolution, QuadraticProgram
 
@@ -108,7 +108,7 @@ def polish_on_face(stage_1: QPSolution, held_joints: np.ndarray, held_rows: np.n
     qd_1 = stage_1.x
     held = ([np.eye(qd_1.size)[held_joints]] if held_joints.any() else []) + (
         [task.rows[held_rows]] if held_rows.any() else [])
-    narrowed = null_basis @ nullspace(np.vstack(held) @ null_basis, RANK_TOLERANCE)[0]
+    narrowed = null_basis @ nullspace_basis(np.vstack(held) @ null_basis, RANK_TOLERANCE)
     on_joints, on_rows = held_joints.copy(), held_rows.copy()
     face_rows: list[np.ndarray] = []
     face_targets: list[np.ndarray] = []

@@ -21,7 +21,7 @@ import pinocchio as pin
 
 from constraints import Hole
 from constraints.base import RobotLike as ConstraintRobot
-from controllers.linalg import DampingPolicy, nullspace
+from controllers.linalg import DampingPolicy, nullspace_basis
 
 __all__ = ["HOME_MARGIN", "HOLE_DISTANCE", "SINGULAR_BELOW", "Conditioning", "HomeMeasure",
            "HomeWarning", "JointBox", "check_home", "default_home", "joint_box",
@@ -203,7 +203,7 @@ class HomeMeasure:
                  for link in self.links]
         rows = (np.vstack([hole.rows(model, data)[0] for hole in holes]) if holes
                 else np.zeros((0, model.nv)))
-        null_basis = nullspace(rows)[0]
+        null_basis = nullspace_basis(rows)
         return ee, rows, ee @ null_basis
 
     def __call__(self, q: np.ndarray) -> Conditioning:
