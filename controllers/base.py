@@ -348,7 +348,8 @@ class Controller(ABC):
     def _remember(self, command: np.ndarray) -> None:
         """``command`` sent: the reference of the next step's acceleration and jerk box."""
         previous = self._previous_command()
-        np.subtract(command, previous, out=self._previous_change())
+        if self.joint_bounds.jerk_step is not None:  # the jerk box's reference, only there
+            np.subtract(command, previous, out=self._previous_change())
         previous[:] = command
 
     def reset(self) -> None:

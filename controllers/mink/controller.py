@@ -244,8 +244,10 @@ class MinkController(GuardedController):
         self._twist_scale = np.sqrt(weight)  # W^1/2: each frame task's costs
         self._twist_rows = self._twist_scale[:, None]  # W^1/2, to scale the rows of J_e
         self._unit_weight = bool(np.all(weight == 1.0))
-        #: the task rows the damping sees: those of non-zero weight, as the CJM's
-        self._weighted_rows = np.flatnonzero(weight > 0.0)
+        #: the task rows the damping sees: those of non-zero weight, as the CJM's (every
+        #: row: a slice, whose view saves the 11k-instruction copy of a fancy index)
+        self._weighted_rows: slice | np.ndarray = (
+            slice(None) if bool(np.all(weight > 0.0)) else np.flatnonzero(weight > 0.0))
         for i, task in enumerate(self.ee_tasks):
             task.set_position_cost(self._twist_scale[6 * i:6 * i + 3])
             task.set_orientation_cost(self._twist_scale[6 * i + 3:6 * i + 6])
