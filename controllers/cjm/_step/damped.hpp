@@ -207,10 +207,12 @@ class DampedLeastSquares {
     const Index t = svd_.size(), c = rhs.cols();
     const bool tall = svd_.tall();
     const auto& qr = svd_.qr();
-    auto m = [&](Index i, Index j) {  // M(i, j): R's upper triangle, transposed when wide
-      const Index row = tall ? i : j, col = tall ? j : i;
-      return row <= col ? qr(row, col) : 0.0;
-    };
+    auto m = triangle_.topLeftCorner(t, t);  // M: R's upper triangle, transposed when wide
+    for (Index j = 0; j < t; ++j)
+      for (Index i = 0; i < t; ++i) {
+        const Index row = tall ? i : j, col = tall ? j : i;
+        m(i, j) = row <= col ? qr(row, col) : 0.0;
+      }
     auto stack = stack_.topLeftCorner(2 * t, t);
     stack.setZero();
     for (Index j = 0; j < t; ++j) {
@@ -354,6 +356,9 @@ class DampedLeastSquares {
   Vector gains_;
   Matrix projected_, row_space_;
   Matrix stack_ = Matrix(2 * kMaxQrSize, kMaxQrSize);  // damped_by_qr's [M; lambda I], y, its work
+  //! damped_by_qr's M (t x t), read some 250 times a solve: stored once, not selected
+  //! from the QR at each read
+  Eigen::Matrix<double, kMaxQrSize, kMaxQrSize> triangle_;
   Matrix stack_rhs_ = Matrix(2 * kMaxQrSize, 2);
   Matrix normal_rhs_ = Matrix(kMaxQrSize, 2), residual_ = Matrix(kMaxQrSize, 2);
   Vector stack_tau_ = Vector(kMaxQrSize);

@@ -170,7 +170,9 @@ Step::Split Step::solve_over_free(const ConstVectorRef& rows_rhs,
     task_rhs.col(1).noalias() = task * base_;
     task_rhs.col(1) = -task_rhs.col(1);
     auto x = task_x_.topLeftCorner(d, 2);
-    task_dls.solve(task_rhs, x);
+    // ``factored`` solves J_e N's rows: the damping rows' right-hand sides are 0 and
+    // -D base = -lambda V_r^T N^T A^+ b, 0 but for rounding (A^+ b is in A's row space)
+    task_dls.solve(task_rhs.topRows(factored != nullptr ? task_rows_ : p), x);
     auto delta = delta_.head(n_free);
     null_.from_null(x.col(1), delta);
     for (Index j = 0, f = 0; j < nv_; ++j)

@@ -21,9 +21,11 @@ void Step::saturate_around_previous(const Inputs& in) {
     rows_rhs = rhs_.head(m);
   }
   const Index damping_count = task_damping_rows(in);
-  // undamped by the QR, the first solve over every joint is task_damping_rows's own
-  // factors (null_, task_null_, walk_dls_): taken, not computed again (a fifth of the walk)
-  const bool factored = damping_count == 0 && null_.dimension() > 0 && walk_dls_.undamped_by_qr();
+  // the first solve over every joint is task_damping_rows's own problem: [J_e N; D N] is
+  // J_e N alone, or (D N = lambda V_r^T) J_e N damped by lambda (4.2), whose DLS
+  // walk_dls_ holds when its QR decided it (full rank): taken with null_, not factored
+  // again (a fifth of the walk undamped; damped, the QR of the stacked rows and more)
+  const bool factored = null_.dimension() > 0 && walk_dls_.by_qr();
   Index limiting_joint = -1;
   {
     const Index p = task_rows_ + damping_count;
@@ -59,7 +61,7 @@ void Step::saturate_around_previous(const Inputs& in) {
 
 Index Step::task_damping_rows(const Inputs& in) {
   const Index m = row_count_;
-  null_.factor(rows_.topRows(m));
+  if (!null_holds_rows_) null_.factor(rows_.topRows(m));  // else walk_to_rows's, bit for bit
   const Index d = null_.dimension();
   walk_sigma_min_ = std::numeric_limits<double>::quiet_NaN();
   walk_sigma_deferred_ = false;
@@ -148,6 +150,7 @@ Index Step::inward(const ConstVectorRef& gradient, double tolerance) const {
 
 double Step::walk_to_rows() {
   const Index m = row_count_;
+  null_holds_rows_ = false;
   if (m == 0) return 1.0;
   auto residual = rows_scratch_.head(m);
   auto reduction = scratch_rows_.head(m);
@@ -164,6 +167,7 @@ double Step::walk_to_rows() {
       if (free_(j)) columns_.col(n_free++).head(m) = rows_.col(j).head(m);
     if (n_free > 0) {
       null_.factor(columns_.topLeftCorner(m, n_free));
+      null_holds_rows_ = n_free == nv_;
       auto correction = free_x_.head(n_free);
       null_.pseudo_solve(residual, correction);
       for (Index j = 0, f = 0; j < nv_; ++j)
@@ -207,9 +211,12 @@ Index Step::walk() {
   };
   double smallest = 1.0, fraction = 1.0, bound = 0.0;
   Index joint = -1;
-  for (Index j = 0; j < nv_; ++j) smallest = std::min(smallest, reach(j));
+  for (Index j = 0; j < nv_; ++j) {
+    walk_reach_(j) = reach(j);
+    smallest = std::min(smallest, walk_reach_(j));
+  }
   for (Index j = 0; j < nv_ && joint < 0; ++j) {
-    const double r = reach(j);
+    const double r = walk_reach_(j);
     if (r < 1.0 && r <= smallest + tol_.at_bound) {
       fraction = r;
       joint = j;

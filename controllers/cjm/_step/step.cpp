@@ -113,7 +113,8 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   task_x_.resize(nv + 7, 2);
   for (Vector* v : {&qd0_, &delta_, &lower_, &upper_, &box_lower_, &box_upper_, &free_x_,
                     &posture_null_, &held_, &best_held_, &base_, &direction_, &sns_qd_,
-                    &walk_point_, &walk_goal_, &walk_move_, &gradient_, &reduced_, &gradient_free_})
+                    &walk_point_, &walk_goal_, &walk_move_, &walk_reach_, &gradient_, &reduced_,
+                    &gradient_free_})
     v->resize(nv);
   stacked_.resize(std::max<Index>(box_.box_test.rows(), 1));
   scratch_rows_.resize(std::max(m, task_rows));

@@ -201,9 +201,10 @@ class Step {
   // general.cpp
   void general(const Inputs& in, VectorRef qd);
   //! The rows ``rows_ qd = rows_rhs`` exactly over the free joints, then ``task qd ~ twist``.
-  //! ``factored``: every joint free, the task J_e alone, null_ holding the rows' factor,
-  //! task_null_ J_e N and ``factored`` its DLS undamped by the QR (task_damping_rows's):
-  //! the factors this call would compute, taken as they are.
+  //! ``factored``: every joint free, the task J_e and the damping rows D of
+  //! task_damping_rows, null_ holding the rows' factor and ``factored`` the DLS of J_e N
+  //! decided by its QR (full rank): [J_e N; D N] is J_e N undamped (D empty) or damped by
+  //! its lambda (D N = lambda V_r^T), so that DLS solves this call's problem.
   Split solve_over_free(const ConstVectorRef& rows_rhs, const Eigen::Ref<const RowMatrix>& task,
                         const ConstVectorRef& twist, const DampingPolicy& policy,
                         DampedLeastSquares* factored = nullptr);
@@ -292,7 +293,10 @@ class Step {
   // saturation around the previous command
   Vector walk_point_, walk_goal_, walk_move_, walk_rhs_, walk_residual_, gradient_, reduced_,
       gradient_free_, walk_rows_rhs_;
+  Vector walk_reach_;  // walk()'s ratio test per joint, computed once
   RowMatrix walk_task_;  // [J_e; D]
+  //! null_ holds walk_to_rows's factor of the rows over every joint (task_damping_rows's)
+  bool null_holds_rows_ = false;
   //! the DLS of J_e N that decides D, apart from dls_ so that its sigma_min can wait
   DampedLeastSquares walk_dls_;
   double walk_sigma_min_ = 0.0, walk_damping_ = 0.0;
