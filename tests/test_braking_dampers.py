@@ -112,6 +112,7 @@ def forward_push(robot, q: np.ndarray, speed: float) -> np.ndarray:
     return np.concatenate(twists)
 
 
+@pytest.mark.slow
 @settings(max_examples=14, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(spec=st.sampled_from(SPECS), gap=st.floats(0.0, 0.3), fraction=st.floats(0.5, 1.0),

@@ -185,6 +185,7 @@ def test_primitive_distances_and_witness_points_equal_coal(first, second, first_
         assert normal @ (on_first - on_second) <= distance + 1e-12 or second[0] == "halfspace"
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(first=shapes(BODY_KINDS), second=shapes((*BODY_KINDS, "halfspace")),
        first_pose=poses(), second_pose=poses())

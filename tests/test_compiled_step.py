@@ -138,6 +138,7 @@ def assert_same_report(a: StepReport, b: StepReport) -> None:
 
 # 11,000 random problems (the explore profile) found only the conflicting rows below,
 # inside their rounding
+@pytest.mark.slow
 @settings(max_examples=400, deadline=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(problem=problems())
@@ -375,6 +376,7 @@ def changing_problems(draw):
     return robot, constraints, q, twist, options, changes, draw(st.integers(0, 2**32 - 1))
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(drawn=changing_problems())

@@ -61,6 +61,9 @@ METRIC_TOLERANCE = 1e-9
 #: Pinocchio's integrate in C++), each with the seconds run
 SCENARIOS = {"paper-hole": 10.0, "paper-plane": 3.0, "barrier": 3.0, "bimanual-trocars": 3.0,
              "mobile-wall": 2.0}
+#: the scenarios above, the two-arm one (seconds a run) in the slow tier (CONTRIBUTING.md)
+SCENARIO_CASES = [pytest.param(name, marks=pytest.mark.slow) if name == "bimanual-trocars" else name
+                  for name in sorted(SCENARIOS)]
 
 
 def make_loop(plan, compiled: bool, config: LoopConfig | None = None,
@@ -92,7 +95,7 @@ def test_the_loop_ticks_compiled_where_offered() -> None:
     assert TeleopLoop(plan.robot, Wrapper(cjm), q0=plan.q0).compiled is None
 
 
-@pytest.mark.parametrize("name", sorted(SCENARIOS))
+@pytest.mark.parametrize("name", SCENARIO_CASES)
 def test_per_tick_equal_over_a_scenario(name: str) -> None:
     """Two loops in lockstep over the scenario (its geometry moving, its constraint set
     changing): q and qd equal within the tolerances every tick, the same statuses."""
@@ -144,7 +147,8 @@ def flat(metrics: dict, prefix: str = "") -> dict:
     return out
 
 
-@pytest.mark.parametrize("name", ["paper-hole", "paper-plane", "bimanual-trocars"])
+@pytest.mark.parametrize("name", ["paper-hole", "paper-plane",
+                                  pytest.param("bimanual-trocars", marks=pytest.mark.slow)])
 def test_metrics_equal_over_a_scenario(name: str, monkeypatch) -> None:
     """The issue's test: the compiled tick equals the Python tick over a whole scenario,
     every metric of ``teleop compare`` within METRIC_TOLERANCE (counts exactly)."""

@@ -89,6 +89,7 @@ def test_bad_filters_are_refused_by_name(options, match):
         low_pass(np.full(6, np.inf))
 
 
+@pytest.mark.slow
 def test_the_filter_takes_the_sensor_noise_out_of_the_jerk():
     """0.01 N of sensor noise: unfiltered, the force loop passes it to the command (jerk
     6.3e5 rad/s^3); through the 20 Hz two-section filter the jerk is below a fiftieth of

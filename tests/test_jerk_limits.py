@@ -44,6 +44,7 @@ def test_the_jerk_box_lies_in_the_box_and_in_the_window_wherever_they_meet(bound
     np.testing.assert_array_equal(cut_upper[~meet], nearest[~meet])
 
 
+@pytest.mark.slow
 @settings(deadline=None)
 @given(start=st.floats(-0.9, 0.9), change=st.floats(-0.05, 0.05), step=st.floats(1e-4, 0.01),
        sign=st.sampled_from([-1.0, 1.0]))

@@ -289,6 +289,7 @@ def test_one_constraint_near_a_limit_with_posture_off_and_on(case, posture_gain)
         assert_status_is_honest(controller, robot, q, constraints, qd)
 
 
+@pytest.mark.slow
 @PROPERTY
 @given(case=cases(q_strategy=near_home, kinds=("hole", "plane", "lock"), largest_offset=1e-3,
                   twist_exponents=(-3.0, -1.0)),

@@ -25,6 +25,9 @@ from teleop.loop import LoopConfig, StepRecord, TeleopLoop
 from teleop.loop.batched_evaluation import PER_PERIOD, batched_form
 from teleop.plants.imperfect import Imperfections
 
+#: the two-arm scenario, seconds a run: its cases are the slow tier's (CONTRIBUTING.md)
+TWO_ARMS = pytest.param("bimanual-trocars", marks=pytest.mark.slow)
+
 
 def reference_command_measures(loop, step) -> tuple[float, np.ndarray, np.ndarray, float]:
     """``max |A qd - b|``, ``A qd - (b + K e)``, ``-K e`` and the round-off floor at the
@@ -64,7 +67,7 @@ def transposed_product(rotation: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("scenario", ["paper-hole", "multi", "moving-trocar", "barrier",
-                                      "bimanual-trocars", "joint-limits"])
+                                      TWO_ARMS, "joint-limits"])
 @pytest.mark.parametrize("compiled_tick", [True, False])
 def test_the_measures_equal_the_reference_formulas(scenario, compiled_tick):
     """Every period of a short run, on the compiled tick and on the Python path: the
@@ -131,7 +134,7 @@ def records_equal(record: StepRecord, expected: StepRecord) -> None:
 
 
 @pytest.mark.parametrize("scenario", ["paper-hole", "moving-trocar", "barrier",
-                                      "bimanual-trocars", "joint-limits"])
+                                      TWO_ARMS, "joint-limits"])
 @pytest.mark.parametrize("compiled_tick", [True, False])
 def test_the_measures_taken_after_the_run_are_those_taken_at_once(scenario, compiled_tick):
     """A run through ``tick_measured_later`` measured after it gives the records of the
@@ -195,6 +198,7 @@ def moved_by(target, offset: np.ndarray):
     return [moved_by(pose, offset) for pose in target]
 
 
+@pytest.mark.slow
 @settings(max_examples=10, deadline=None)
 @given(scenario=st.sampled_from(["paper-hole", "moving-trocar", "barrier", "bimanual-trocars",
                                  "joint-limits"]),

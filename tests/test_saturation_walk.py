@@ -95,7 +95,7 @@ def test_a_previous_command_outside_the_box_is_brought_back_towards_the_rows():
     assert np.linalg.norm(rows @ qd - rhs) <= np.linalg.norm(rows @ best.x - rhs) + 1e-10
 
 
-@pytest.mark.parametrize("spec", ["cjm", "cjm:python"])
+@pytest.mark.parametrize("spec", ["cjm", pytest.param("cjm:python", marks=pytest.mark.slow)])
 def test_fast_lateral_with_acceleration_limits_does_not_run_away(spec):
     """The runaway of issue 32: on the ideal integrator with the robot's acceleration limits
     the CJM's EE stays within 40 mm of the target (it reached 250 mm and coasted on at

@@ -71,6 +71,7 @@ def joint_path(model: pin.Model, steps: int, dt: float) -> tuple[np.ndarray, np.
     return np.array(q), velocities
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["sda10f", "sda10f_dual_mobile"])
 def test_the_estimate_variance_is_the_first_order_filters(name):
     """Encoder noise alone (the command exact), 40,000 periods: at the fixed gain, the
@@ -180,6 +181,7 @@ def run_compare(tmp_path, *options: str) -> subprocess.CompletedProcess:
         capture_output=True, text=True, env={**os.environ, "PYTHONPATH": os.getcwd()})
 
 
+@pytest.mark.slow
 def test_the_command_line_chooses_the_observer(tmp_path):
     """``--state-filter off`` takes the encoders raw: a larger hole error than the
     default Kalman observer on the same noise draw; a bad value is refused by name."""

@@ -149,6 +149,7 @@ def test_the_filter_is_what_makes_a_stiff_contact_unstable():
     assert filtered_admittance_radius(0.5, 40.0, 200.0, 5000.0, 10.0, 2) > 1.0
 
 
+@pytest.mark.slow
 @settings(deadline=None)  # up to 0.2 s of Python steps per example on a loaded machine
 @given(st.floats(0.2, 2.0), st.floats(20.0, 100.0), st.floats(100.0, 500.0),
        st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3))

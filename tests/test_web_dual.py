@@ -435,7 +435,7 @@ def test_a_recorded_session_holds_both_targets_and_replays(app, dual, tmp_path):
     assert metrics["failed_steps"] == 0 and metrics["constraint_error_max_m"] < 1e-5
 
 
-@pytest.mark.parametrize("spec", ["cjm", "qp:daqp"])
+@pytest.mark.parametrize("spec", ["cjm", pytest.param("qp:daqp", marks=pytest.mark.slow)])
 def test_a_lower_orientation_weight_lets_the_dragged_tip_reach_its_target(dual, tmp_path, spec):
     """Two trocars leave 11 joint directions for two full poses (12): at orientation weight
     1 the dragged tip stops short (least squares); at 0 only the tips' positions are asked

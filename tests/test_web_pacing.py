@@ -148,6 +148,7 @@ def server():
     server.stop()
 
 
+@pytest.mark.slow
 def test_a_flood_of_drags_reaches_the_app_paced_and_the_newest_last(server):
     gizmo = server.scene.add_transform_controls("/gizmo")
     seen: list[float] = []

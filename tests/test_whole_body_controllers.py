@@ -186,6 +186,7 @@ def test_mobile_jacobians_and_rows_match_finite_differences(mobile, seed, headin
     np.testing.assert_allclose(rows @ qd, (errors_plus - errors_minus) / (2 * step), atol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_barrier_on_the_base_is_never_crossed(mobile):
     """Both EEs asked to drive through a wall for 3 s: the base's corner stops at the wall
     and slides along it while the base turns. The barrier row holds at every step; the
