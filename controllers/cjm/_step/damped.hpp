@@ -196,65 +196,87 @@ class DampedLeastSquares {
   //! ``|J x - r|^2 + lambda^2 |x|^2``, which is ``V diag(s / (s^2 + lambda^2)) U^T r``
   //! (docs/design.md 4.2) without the SVD. Tall J (``J = Q1 R``): ``x = u``; wide J
   //! (``J = R^T Q1^T``): ``x = Q [u; 0]``; ``u`` solves ``(M^T M + lambda^2 I) u = M^T y``
-  //! with ``M = R, y = Q1^T r`` (tall) or ``M = R^T, y = r`` (wide). ``M^T M + lambda^2 I
-  //! = R2^T R2``, R2 the triangle of the Householder QR of ``[M; lambda I]``; the
-  //! semi-normal equations on R2 and one step of refinement on their residual (Bjorck's
-  //! corrected semi-normal equations: within about ``eps kappa`` of the SVD's gains, where
-  //! the plain QR of the stack loses ``eps kappa^2 |residual| / |x|`` when the residual
-  //! dominates, as it does damped). Saves the Jacobi SVD of each damped general step
-  //! (issue 32: fast-lateral with acceleration limits).
+  //! with ``M = R, y = Q1^T r`` (tall) or ``M = R^T, y = r`` (wide). It is solved in the
+  //! order-reversed coordinates when wide (``P`` reverses the order: ``P R^T P`` is upper
+  //! triangular, and ``u = P u~`` with ``(M~^T M~ + lambda^2 I) u~ = M~^T P y``), so ``M~``
+  //! is upper triangular either way. ``M~^T M~ + lambda^2 I = R2^T R2``, R2 the triangle of
+  //! the QR of ``[M~; lambda I]``, each row of ``lambda I`` rotated into ``M~`` by Givens
+  //! rotations (the structure of MINPACK's qrsolv: t (t + 1) / 2 rotations, no work on the
+  //! zeros that a Householder QR of the stack, 8.3k instructions a solve, spent most of
+  //! its arithmetic on); the semi-normal equations on R2 and one step of refinement on their
+  //! residual (Bjorck's corrected semi-normal equations: within about ``eps kappa`` of the
+  //! SVD's gains, where the plain QR of the stack loses ``eps kappa^2 |residual| / |x|``
+  //! when the residual dominates, as it does damped). Saves the Jacobi SVD of each damped
+  //! general step (issue 32: fast-lateral with acceleration limits).
   void damped_by_qr(const ConstMatrixRef& rhs, MatrixRef x) {
     const Index t = svd_.size(), c = rhs.cols();
     const bool tall = svd_.tall();
     const auto& qr = svd_.qr();
-    auto m = triangle_.topLeftCorner(t, t);  // M: R's upper triangle, transposed when wide
+    auto& m = triangle_;  // M~, its upper triangle only
     for (Index j = 0; j < t; ++j)
-      for (Index i = 0; i < t; ++i) {
-        const Index row = tall ? i : j, col = tall ? j : i;
-        m(i, j) = row <= col ? qr(row, col) : 0.0;
+      for (Index i = 0; i <= j; ++i) m(i, j) = tall ? qr(i, j) : qr(t - 1 - j, t - 1 - i);
+    auto& r2 = damped_triangle_;
+    for (Index j = 0; j < t; ++j)
+      for (Index i = 0; i <= j; ++i) r2(i, j) = m(i, j);
+    auto& row = rotated_row_;
+    for (Index k = 0; k < t; ++k) {  // the row lambda e_k^T, rotated into R2 from column k on
+      row(k) = damping_;
+      for (Index l = k + 1; l < t; ++l) row(l) = 0.0;
+      for (Index j = k; j < t; ++j) {
+        const double lower = row(j);
+        if (lower == 0.0) continue;
+        // no hypot: R2's diagonal is at least sigma_min(R), certified above the rank cut,
+        // and lambda at most max_damping: the squares neither overflow nor underflow
+        const double upper = r2(j, j), length = std::sqrt(upper * upper + lower * lower);
+        const double cosine = upper / length, sine = lower / length;
+        r2(j, j) = length;
+        for (Index l = j + 1; l < t; ++l) {
+          const double above = r2(j, l), below = row(l);
+          r2(j, l) = cosine * above + sine * below;
+          row(l) = cosine * below - sine * above;
+        }
       }
-    auto stack = stack_.topLeftCorner(2 * t, t);
-    stack.setZero();
-    for (Index j = 0; j < t; ++j) {
-      for (Index i = 0; i < t; ++i) stack(i, j) = m(i, j);
-      stack(t + j, j) = damping_;
     }
-    householder_qr(stack, stack_tau_.head(t));  // its upper triangle: R2
-    auto y = stack_rhs_.topLeftCorner(t, c);
+    auto y = small_rhs_.topLeftCorner(t, c);
     if (tall) {
       auto projected = projected_.topLeftCorner(rows_, c);
       projected = rhs;
       apply_qt(qr, svd_.tau(), projected);
       y = projected.topRows(t);
     } else {
-      y = rhs;
+      for (Index k = 0; k < c; ++k)
+        for (Index i = 0; i < t; ++i) y(i, k) = rhs(t - 1 - i, k);
     }
-    auto u = x.topRows(t);
+    auto u = solution_.topLeftCorner(t, c);
     auto normal = normal_rhs_.topLeftCorner(t, c);
     auto residual = residual_.topLeftCorner(t, c);
-    for (Index k = 0; k < c; ++k)  // M^T y
+    for (Index k = 0; k < c; ++k)  // M~^T y
       for (Index j = 0; j < t; ++j) {
         double sum = 0.0;
-        for (Index i = 0; i < t; ++i) sum += m(i, j) * y(i, k);
+        for (Index i = 0; i <= j; ++i) sum += m(i, j) * y(i, k);
         normal(j, k) = sum;
       }
-    normal_solve(stack, normal);
+    normal_solve(r2, normal);
     u = normal;
-    for (Index k = 0; k < c; ++k) {  // the refinement: M^T (y - M u) - lambda^2 u
+    for (Index k = 0; k < c; ++k) {  // the refinement: M~^T (y - M~ u) - lambda^2 u
       for (Index i = 0; i < t; ++i) {
         double sum = y(i, k);
-        for (Index j = 0; j < t; ++j) sum -= m(i, j) * u(j, k);
+        for (Index j = i; j < t; ++j) sum -= m(i, j) * u(j, k);
         residual(i, k) = sum;
       }
       for (Index j = 0; j < t; ++j) {
         double sum = -damping_ * damping_ * u(j, k);
-        for (Index i = 0; i < t; ++i) sum += m(i, j) * residual(i, k);
+        for (Index i = 0; i <= j; ++i) sum += m(i, j) * residual(i, k);
         normal(j, k) = sum;
       }
     }
-    normal_solve(stack, normal);
+    normal_solve(r2, normal);
     u += normal;
-    if (!tall) {
+    if (tall) {
+      x.topRows(t) = u;
+    } else {
+      for (Index k = 0; k < c; ++k)
+        for (Index i = 0; i < t; ++i) x(i, k) = u(t - 1 - i, k);
       x.bottomRows(cols_ - t).setZero();
       apply_q(qr, svd_.tau(), x);
     }
@@ -355,13 +377,12 @@ class DampedLeastSquares {
   ThinSvd svd_;
   Vector gains_;
   Matrix projected_, row_space_;
-  Matrix stack_ = Matrix(2 * kMaxQrSize, kMaxQrSize);  // damped_by_qr's [M; lambda I], y, its work
-  //! damped_by_qr's M (t x t), read some 250 times a solve: stored once, not selected
-  //! from the QR at each read
-  Eigen::Matrix<double, kMaxQrSize, kMaxQrSize> triangle_;
-  Matrix stack_rhs_ = Matrix(2 * kMaxQrSize, 2);
-  Matrix normal_rhs_ = Matrix(kMaxQrSize, 2), residual_ = Matrix(kMaxQrSize, 2);
-  Vector stack_tau_ = Vector(kMaxQrSize);
+  //! damped_by_qr's M~ and R2 (t x t, upper triangles), read some 250 times a solve:
+  //! fixed-size storage, not selected from the QR at each read
+  Eigen::Matrix<double, kMaxQrSize, kMaxQrSize> triangle_, damped_triangle_;
+  Eigen::Matrix<double, kMaxQrSize, 1> rotated_row_;  // a row of lambda I being rotated in
+  //! damped_by_qr's y, u, its normal equations' right-hand side and residual (t x c)
+  Eigen::Matrix<double, kMaxQrSize, 2> small_rhs_, solution_, normal_rhs_, residual_;
   SmallMatrix inverse_, gram_;
   Eigen::SelfAdjointEigenSolver<SmallMatrix> eigen_{kMaxQrSize};
   Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxQrSize, 1> power_vector_{kMaxQrSize},
