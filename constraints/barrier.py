@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pinocchio as pin
 
+from .gain_rule import GainRule
 from .plane import Plane
 
 #: Default barrier gain (1/s): the point may approach the plane at most at ``K d`` m/s.
@@ -32,7 +33,7 @@ class Barrier(Plane):
     label = "barrier"
     #: ``K dt < 1`` (exclusive, like every gain bound here): the point never crosses
     #: the plane in discrete time
-    max_gain_period = 1.0
+    gain_rule = GainRule(max_gain_period=1.0)
 
     # ``Barrier.through_link_point(robot, q, normal, ..., plane_point=...)`` (inherited):
     # the point must be on the allowed side at ``q``; more than ``tolerance`` m behind the

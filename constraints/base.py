@@ -25,6 +25,7 @@ from typing import ClassVar, Literal, Protocol
 import numpy as np
 import pinocchio as pin
 
+from .gain_rule import GainRule
 from .kinematics import frame_placement, resolve_frame
 from .limits import MAX_CONSTRAINT_GAIN, MAX_POSITION_M, MAX_SPEED_M_S
 from .norms import norm
@@ -263,9 +264,9 @@ class Constraint(ReadOnlyFields, ABC):
         self._checked_period: float | None = None
         self.gain = gain
 
-    #: the largest stable ``K dt`` (exclusive): drift feedback ``e+ = (1 - K dt) e``
-    #: converges for ``0 <= K dt < 2`` (docs/design.md section 3)
-    max_gain_period: float = 2.0
+    #: the gains stable at a period: drift feedback ``e+ = (1 - K dt) e`` converges for
+    #: ``0 <= K dt < 2`` (docs/design.md section 3)
+    gain_rule: ClassVar[GainRule] = GainRule(max_gain_period=2.0)
 
     @property
     def gain(self) -> float:
@@ -283,36 +284,17 @@ class Constraint(ReadOnlyFields, ABC):
     def gain(self, value: float) -> None:
         gain = as_number(value, "gain", 0.0, maximum=MAX_CONSTRAINT_GAIN)
         if self._checked_period is not None:
-            problem = self._instability(gain, self._checked_period)
+            problem = self.gain_rule.instability(type(self).__name__, gain,
+                                                 self._checked_period)
             if problem is not None:
                 raise ValueError(problem)
         self._gain = gain
-
-    @classmethod
-    def gain_is_stable(cls, gain: float, dt: float) -> bool:
-        """The gain rule, the one place it is written: drift feedback at gain ``K`` (1/s)
-        and control period ``dt`` (s) is stable when ``0 <= K dt <`` :attr:`max_gain_period`
-        (docs/design.md section 3.4)."""
-        return 0.0 <= gain * dt < cls.max_gain_period
-
-    @classmethod
-    def stable_gain_bound(cls, dt: float) -> float:
-        """The exclusive upper bound of a stable gain (1/s) at period ``dt``."""
-        return cls.max_gain_period / dt
-
-    def _instability(self, gain: float, dt: float) -> str | None:
-        """Why ``gain`` is unstable at control period ``dt``, or None when it is stable."""
-        if self.gain_is_stable(gain, dt):
-            return None
-        return (f"{type(self).__name__} gain {gain:g} 1/s is unstable at {1.0 / dt:g} Hz "
-                f"(K dt = {gain * dt:g}, needs < {self.max_gain_period:g}): lower the gain "
-                f"below {self.stable_gain_bound(dt):g} 1/s or raise the rate")
 
     def check_gain(self, dt: float) -> None:
         """Refuse a gain that is unstable at control period ``dt`` (``ValueError``);
         a controller calls it when it takes the constraint, and the gain setter checks
         against the last ``dt`` accepted here."""
-        problem = self._instability(self._gain, dt)
+        problem = self.gain_rule.instability(type(self).__name__, self._gain, dt)
         if problem is not None:
             raise ValueError(problem)
         self._checked_period = dt

@@ -16,6 +16,7 @@ from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.kinematics import resolve_frame
 from constraints.validation import as_vector
 
+from .command_box import CommandBox
 from .joint_limits import DEFAULT_LIMIT_GAIN, BoxTest, JointBounds
 from .linalg import DampingPolicy
 from .step_message import StepMessage
@@ -155,6 +156,23 @@ class SolveInfo:
         self.message = with_note(self.message, note)
 
 
+def report_twist_error(info: SolveInfo, jacobian: np.ndarray, qd: np.ndarray,
+                       twist: np.ndarray, weight_root: np.ndarray | None = None) -> bool:
+    """``least_squares`` in ``info`` when ``J_e qd`` misses the twist (optimisers trade it
+    off), each entry's miss scaled by ``W^1/2`` (``weight_root``) when the task is weighted;
+    returns whether it missed."""
+    miss = jacobian @ qd - twist
+    if weight_root is not None:
+        miss *= weight_root
+    error = float(np.max(np.abs(miss)))
+    if error > TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(twist)))):
+        info.report(StepStatus.LEAST_SQUARES,
+                    f"twist not met exactly (error {error:.2e}): limits, barriers, "
+                    "constraints or a singularity")
+        return True
+    return False
+
+
 class Kinematics:
     """Kinematic quantities at one configuration, computed once per step.
 
@@ -255,7 +273,7 @@ class Controller(ABC):
     strict : raise ``SolverError`` instead of returning the fallback (a controlled stop).
     acceleration_limit : (nv,) per joint (rad/s^2, m/s^2 for prismatic and base
         translations; ``inf`` for none), or None for no acceleration limit. The reference
-        is the previous command (:attr:`reference`, zero after :meth:`reset`); the box of a
+        is the previous command (:attr:`command_box`, zero after :meth:`reset`); the box of a
         step is then the intersection of the velocity, braking-aware position and
         acceleration bounds (docs/design.md section 8.4).
     jerk_limit : (nv,) per joint (rad/s^3, m/s^3; ``inf`` for none), or None: the
@@ -286,10 +304,8 @@ class Controller(ABC):
         self.info = SolveInfo()
         self.joint_bounds = JointBounds(self.model, dt, limit_gain, position_limits,
                                         velocity_limits, acceleration_limit, jerk_limit)
-        #: the previous command, the acceleration limits' reference (zero at rest)
-        self._reference = np.zeros(self.model.nv)
-        #: the previous command minus the one before, the jerk limits' reference
-        self._reference_change = np.zeros(self.model.nv)
+        #: the box of each step and the commands it counts from
+        self.command_box = CommandBox(self.joint_bounds, self.model.nv)
         self.velocity_limit = self.joint_bounds.velocity_limit
         self._box_test = BoxTest(self.joint_bounds, self.model.nq, self.model.nv)
         self.constraints: list[Constraint] = []
@@ -309,78 +325,21 @@ class Controller(ABC):
         """Control period (s)."""
         return self.joint_bounds.dt
 
-    @property
-    def limit_gain(self) -> float:
-        return self.joint_bounds.limit_gain
-
-    @property
-    def position_limits(self) -> bool:
-        return self.joint_bounds.position_limits
-
-    @property
-    def velocity_limits(self) -> bool:
-        return self.joint_bounds.velocity_limits
-
-    @property
-    def acceleration_limit(self) -> np.ndarray | None:
-        """(nv,) acceleration limits (inf where none), or None."""
-        return self.joint_bounds.acceleration_limit
-
-    @property
-    def reference(self) -> np.ndarray:
-        """The command the acceleration limits count from: the previous one (a copy)."""
-        return self._previous_command().copy()
-
-    @property
-    def jerk_limit(self) -> np.ndarray | None:
-        """(nv,) jerk limits (inf where none), or None."""
-        return self.joint_bounds.jerk_limit
-
-    def _previous_command(self) -> np.ndarray:
-        """The array holding the previous command (the CJM's lives in its step)."""
-        return self._reference
-
-    def _previous_change(self) -> np.ndarray:
-        """The array holding the previous command minus the one before (the CJM's lives in
-        its step)."""
-        return self._reference_change
-
-    def _remember(self, command: np.ndarray) -> None:
-        """``command`` sent: the reference of the next step's acceleration and jerk box."""
-        previous = self._previous_command()
-        if self.joint_bounds.jerk_step is not None:  # the jerk box's reference, only there
-            np.subtract(command, previous, out=self._previous_change())
-        previous[:] = command
+    def bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The joint box ``lower <= qd <= upper`` of the next step at ``q``
+        (:meth:`CommandBox.box`)."""
+        return self.command_box.box(q)
 
     def reset(self) -> None:
-        """Forget the previous command: the next step starts from rest."""
-        self._previous_command()[:] = 0.0
-        self._previous_change()[:] = 0.0
-
-    def _jerk_reference(self) -> np.ndarray | None:
-        """:meth:`_previous_change` when there are jerk limits, else None."""
-        return None if self.joint_bounds.jerk_step is None else self._previous_change()
-
-    def bounds(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The joint box ``lower <= qd <= upper`` at ``q`` (:class:`JointBounds`), for the
-        next step (around the previous command when there are acceleration limits, and its
-        change when there are jerk limits)."""
-        return self.joint_bounds.box(q, self._previous_command(), self._jerk_reference())
-
-    def stop_command(self, q: np.ndarray) -> np.ndarray:
-        """The fallback of a failed step: the command nearest zero inside the box
-        (docs/design.md 8.2-8.4): zero, unless a joint past its position limit must come
-        back (its box excludes zero) or the acceleration limits cannot stop at once (a
-        controlled stop)."""
-        lower, upper = self.bounds(q)
-        return np.clip(0.0, lower, upper)
+        """Forget the commands sent: the next step starts from rest."""
+        self.command_box.reset()
 
     def stop(self, q: np.ndarray) -> np.ndarray:
-        """:meth:`stop_command` sent in place of a step (the loop's answer to an input the
-        controller refused): it becomes the previous command the next step's acceleration
-        box counts from."""
-        command = self.stop_command(q)
-        self._remember(command)
+        """:meth:`CommandBox.stop_command` sent in place of a step (the loop's answer to an
+        input the controller refused): it becomes the previous command the next step's
+        acceleration box counts from."""
+        command = self.command_box.stop_command(q)
+        self.command_box.remember(command)
         return command
 
     def loop_tick(self, dt: float, kp: float, max_linear_speed: float, max_angular_speed: float,
@@ -389,12 +348,6 @@ class Controller(ABC):
         one (the CJM's compiled backend: docs/design.md 5.1); None: the loop runs its
         Python reference."""
         return None
-
-    def posture_difference(self, q: np.ndarray, posture: np.ndarray) -> np.ndarray:
-        """``posture (-) q`` (nv,, ``pin.difference``) with a mobile base's entries zero:
-        the posture shapes the joints; the base stands where it is unless the task or a
-        constraint moves it (docs/design.md section 11.3)."""
-        return posture_difference(self.model, q, posture, self._base_velocity)
 
     # -- constraints -------------------------------------------------------------------
 
@@ -453,7 +406,7 @@ class Controller(ABC):
         6 entries per end effector in ``robot.ee_frames`` order (docs/design.md section 11).
 
         Bad input (wrong size, NaN or inf) raises ``ValueError``. A numerical failure
-        returns :meth:`stop_command` (zeros without acceleration limits) with
+        returns :meth:`CommandBox.stop_command` (zeros without acceleration limits) with
         ``self.info.status == "failed"`` (or raises ``SolverError``
         when the controller is ``strict``): never a non-finite command, never one
         outside the joint box.
@@ -466,30 +419,25 @@ class Controller(ABC):
         info = self.info
         return info.status, StepMessage.worded(info.message)
 
-    def _checked_inputs(self, q: np.ndarray, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`checked_inputs` for this controller's model and task."""
-        return checked_inputs(q, twist, self.model.nq, self.task_size)
-
     def _fail(self, message: str, q: np.ndarray) -> np.ndarray:
         self.info.status = StepStatus.FAILED
         self.info.message = message
         if self.strict:
             raise SolverError(message)
-        return self.stop_command(q)
+        return self.command_box.stop_command(q)
 
     def _kinematics(self, q: np.ndarray) -> Kinematics:
+        """Joint Jacobians and frame placements at ``q`` in ``self.data``, and the EE
+        frames' ``LOCAL`` Jacobians, stacked (6 n, nv)."""
         model, data = self.model, self.data
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
-        return Kinematics(q, self._ee_jacobian(), data, self.ee_frame_id)
-
-    def _ee_jacobian(self) -> np.ndarray:
-        """The EE frames' ``LOCAL`` Jacobians, stacked (6 n, nv), from the joint
-        Jacobians in ``self.data``."""
         if len(self.ee_frame_ids) == 1:
-            return pin.getFrameJacobian(self.model, self.data, self.ee_frame_id, pin.LOCAL)
-        return np.vstack([pin.getFrameJacobian(self.model, self.data, frame, pin.LOCAL)
-                          for frame in self.ee_frame_ids])
+            ee_jacobian = pin.getFrameJacobian(model, data, self.ee_frame_id, pin.LOCAL)
+        else:
+            ee_jacobian = np.vstack([pin.getFrameJacobian(model, data, frame, pin.LOCAL)
+                                     for frame in self.ee_frame_ids])
+        return Kinematics(q, ee_jacobian, data, self.ee_frame_id)
 
     # -- shared pieces -----------------------------------------------------------------
 
@@ -520,71 +468,48 @@ class GuardedController(Controller):
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """:meth:`Controller.solve`: the kinematics at ``q``, :meth:`_solve`, then the
         guards (a non-finite command fails; one outside the box goes through
-        :meth:`_saturate` and :meth:`_clip`; an equality residual above
-        ``EQUALITY_TOLERANCE`` degrades the step)."""
-        q, twist = self._checked_inputs(q, twist)
+        :meth:`_clip`; an equality residual above ``EQUALITY_TOLERANCE`` degrades the
+        step)."""
+        q, twist = checked_inputs(q, twist, self.model.nq, self.task_size)
         self.info = SolveInfo()
-        qd = self._guarded_step(q, twist)
-        self._remember(qd)
-        return qd
-
-    def _guarded_step(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         kinematics = self._kinematics(q)
         try:
             qd = self._solve(kinematics, twist)
         except (np.linalg.LinAlgError, SolverError) as error:
-            return self._fail(f"{type(error).__name__}: {error}", q)
-        if not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
-            return self._fail(NON_FINITE_NOTE, q)
-        previous = self._reference if self.joint_bounds.acceleration_step is not None else None
-        change = self._jerk_reference()
+            qd = self._fail(f"{type(error).__name__}: {error}", q)
+        else:
+            if not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
+                qd = self._fail(NON_FINITE_NOTE, q)
+            else:
+                qd = self._clip(q, qd)
+        self.command_box.remember(qd)
+        return qd
+
+    def _clip(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """The last guard: ``qd`` clipped to the box at ``q`` (a change beyond rounding
+        degrades the step, as does an equality residual above ``EQUALITY_TOLERANCE``)."""
+        box = self.command_box
+        previous = box.previous_command if self.joint_bounds.acceleration_step is not None else None
+        change = box.jerk_reference
         if not self._box_test.contains(q, qd, previous, change):
             lower, upper = self.joint_bounds.box(q, previous, change)
-            try:
-                qd = self._saturate(kinematics, twist, qd, lower, upper)
-            except np.linalg.LinAlgError as error:
-                return self._fail(f"{type(error).__name__} while saturating: {error}", q)
-            qd = self._clip(qd, lower, upper)
-            if not math.isfinite(sum(qd.tolist())):  # clipping passes a NaN through
+            clipped = np.clip(qd, lower, upper)
+            if not math.isfinite(sum(clipped.tolist())):  # clipping passes a NaN through
                 return self._fail(NON_FINITE_NOTE, q)
+            moved = float(np.max(np.abs(clipped - qd), initial=0.0))
+            if moved > EQUALITY_TOLERANCE * (1.0 + float(np.max(np.abs(qd), initial=0.0))):
+                joints = np.flatnonzero(clipped != qd).tolist()
+                self.info.report(StepStatus.CONSTRAINT_DEGRADED, clipped_note(joints, moved))
+                self.info.saturated_joints = tuple(joints)
+                A, b = self.constraint_rows([i for i, c in enumerate(self.constraints)
+                                             if c.is_equality])
+                if A.shape[0]:
+                    self.info.equality_residual = float(np.max(np.abs(A @ clipped - b)))
+            qd = clipped
         if self.info.equality_residual > EQUALITY_TOLERANCE:
             self.info.report(StepStatus.CONSTRAINT_DEGRADED,
                              residual_note(self.info.equality_residual))
         return qd
-
-    def _saturate(self, kinematics: Kinematics, twist: np.ndarray, qd: np.ndarray,
-                  lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-        """``qd`` brought inside ``[lower, upper]`` (default: clipped, see :meth:`_clip`)."""
-        return qd
-
-    def _clip(self, qd: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-        """The last guard: clip to the box; a change beyond rounding degrades the step."""
-        clipped = np.clip(qd, lower, upper)
-        change = float(np.max(np.abs(clipped - qd), initial=0.0))
-        if change > EQUALITY_TOLERANCE * (1.0 + float(np.max(np.abs(qd), initial=0.0))):
-            joints = np.flatnonzero(clipped != qd).tolist()
-            self.info.report(StepStatus.CONSTRAINT_DEGRADED, clipped_note(joints, change))
-            self.info.saturated_joints = tuple(joints)
-            A, b = self.constraint_rows([i for i, c in enumerate(self.constraints) if c.is_equality])
-            if A.shape[0]:
-                self.info.equality_residual = float(np.max(np.abs(A @ clipped - b)))
-        return clipped
-
-    def _report_twist_error(self, jacobian: np.ndarray, qd: np.ndarray, twist: np.ndarray,
-                            weight_root: np.ndarray | None = None) -> bool:
-        """``least_squares`` when ``J_e qd`` misses the twist (optimisers trade it off),
-        each entry's miss scaled by ``W^1/2`` (``weight_root``) when the task is weighted;
-        returns whether it missed."""
-        miss = jacobian @ qd - twist
-        if weight_root is not None:
-            miss *= weight_root
-        error = float(np.max(np.abs(miss)))
-        if error > TWIST_TOLERANCE * (1.0 + float(np.max(np.abs(twist)))):
-            self.info.report(StepStatus.LEAST_SQUARES,
-                             f"twist not met exactly (error {error:.2e}): limits, barriers, "
-                             "constraints or a singularity")
-            return True
-        return False
 
     @abstractmethod
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:

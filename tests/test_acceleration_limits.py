@@ -154,11 +154,11 @@ def test_no_command_leaves_an_acceleration_velocity_or_position_limit(
                    for link in robot.constrained_links] if with_hole else []
     controller = make_controller(spec, robot, constraints, time_budget=None,
                                  acceleration_limit=ROBOT)
-    assert controller.acceleration_limit is not None
+    assert controller.joint_bounds.acceleration_limit is not None
     for k in range(40):
         if k % 10 == 0:  # a new random target direction every 10 ms
             twist = speed * rng.uniform(-1.0, 1.0, controller.task_size)
-        previous = controller.reference
+        previous = controller.command_box.previous_command.copy()
         qd = controller.solve(q, twist)
         q_next = integrate(model, q, qd, controller.dt)
         check_step(controller, model, q, qd, previous, q_next)
@@ -216,7 +216,7 @@ def test_the_cjm_walks_past_the_scaled_null_space_solution_written_here(backend)
     assert cjm.info.status is StepStatus.LEAST_SQUARES
     assert cjm.info.scale == pytest.approx(float(J @ qd @ twist) / float(twist @ twist), rel=1e-9)
     assert cjm.info.scale > s
-    np.testing.assert_allclose(cjm.reference, qd)
+    np.testing.assert_allclose(cjm.command_box.previous_command.copy(), qd)
 
 
 @settings(max_examples=25, deadline=None)
@@ -251,7 +251,7 @@ def test_a_binding_acceleration_limit_is_never_ok(spec):
                                  time_budget=None, acceleration_limit=ROBOT)
     controller.solve(q, np.array([0.2, 0.0, 0.1, 0.0, 0.3, 0.0]))  # from rest
     assert controller.info.status in (StepStatus.SCALED, StepStatus.LEAST_SQUARES), spec
-    assert hole_is_held(controller, q, controller.reference)
+    assert hole_is_held(controller, q, controller.command_box.previous_command.copy())
 
 
 @pytest.mark.parametrize("spec", SPECS)
@@ -277,8 +277,8 @@ def test_the_stop_command_is_the_command_nearest_zero_in_the_box(spec):
     q = robot.q_home.copy()
     controller = make_controller(spec, robot, [], time_budget=None, acceleration_limit=ROBOT)
     moving = np.linspace(-1.0, 1.0, robot.nv)
-    controller._previous_command()[:] = moving
-    stop = controller.stop_command(q)
+    controller.command_box.previous_command[:] = moving
+    stop = controller.command_box.stop_command(q)
     step = controller.joint_bounds.acceleration_step
     np.testing.assert_allclose(stop, moving - np.sign(moving) * np.minimum(step, np.abs(moving)))
     lower, upper = controller.bounds(q)
@@ -292,9 +292,9 @@ def test_the_loop_reset_resets_the_controller():
     controller = make_controller("cjm", robot, [], acceleration_limit=ROBOT)
     loop = TeleopLoop(robot, controller)
     controller.solve(robot.q_home, np.array([0.1, 0, 0, 0, 0, 0]))
-    assert np.abs(controller.reference).max() > 0.0
+    assert np.abs(controller.command_box.previous_command.copy()).max() > 0.0
     loop.reset()
-    np.testing.assert_array_equal(controller.reference, 0.0)
+    np.testing.assert_array_equal(controller.command_box.previous_command.copy(), 0.0)
 
 
 def test_the_robots_have_acceleration_limits():
@@ -341,7 +341,7 @@ def test_without_acceleration_limits_nothing_changes():
     robot = load_robot("sda10f")
     q = robot.q_home.copy()
     plain = CJMController(robot, [Hole.on_link(robot, q, distance=0.05)])
-    assert plain.acceleration_limit is None
+    assert plain.joint_bounds.acceleration_limit is None
     twist = np.array([0.3, 0, 0, 0, 0, 0])
     first = plain.solve(q, twist)
     np.testing.assert_array_equal(plain.solve(q, twist), first)
@@ -357,7 +357,7 @@ def test_without_acceleration_limits_the_stop_brings_a_joint_past_its_limit_back
     q[2] = robot.model.lowerPositionLimit[2] - 0.03  # joint 2 below its lower limit
     controller = make_controller(spec, robot, [], time_budget=None)
     lower, upper = controller.joint_bounds.box(q)
-    stop = controller.stop_command(q)
+    stop = controller.command_box.stop_command(q)
     np.testing.assert_array_equal(stop, np.clip(0.0, lower, upper))
     assert lower[2] > 0 and stop[2] == lower[2]  # back towards the limit
     assert np.count_nonzero(stop) == 1

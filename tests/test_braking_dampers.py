@@ -95,7 +95,7 @@ def top_speed(controller, barrier: Barrier, q: np.ndarray) -> float:
     frame = model.getFrameId(barrier.link)
     rows, rhs = barrier.rows(model, data, frame)
     braked = braked_lower(rows, rhs, barrier.error(data.oMf[frame]), np.array([barrier.gain]),
-                          controller.acceleration_limit, controller.dt)
+                          controller.joint_bounds.acceleration_limit, controller.dt)
     forward = -rows[0, 0]  # the point's approach per unit of the base's forward speed
     return min(float(model.velocityLimit[0]), -float(braked[0]) / forward)
 
@@ -127,7 +127,7 @@ def test_a_base_at_its_top_speed_never_crosses_the_wall(mobile, spec, gap, fract
     barrier = front_barrier(mobile, q, gap)
     controller = make_controller(spec, mobile, [barrier], dt=DT, time_budget=None,
                                  acceleration_limit=ROBOT)
-    controller._previous_command()[0] = fraction * top_speed(controller, barrier, q)
+    controller.command_box.previous_command[0] = fraction * top_speed(controller, barrier, q)
     twist = forward_push(mobile, q, push)
     data = model.createData()
     base = model.getFrameId("mobile_base")

@@ -121,5 +121,5 @@ def test_register_refuses_a_type_without_a_kind_or_a_kind_taken(monkeypatch):
 def test_the_gain_rule_is_k_dt_below_each_types_bound(gain, rate):
     dt = 1.0 / rate
     for kind_type, bound in ((Constraint, 2.0), (Hole, 2.0), (Barrier, 1.0)):
-        assert kind_type.gain_is_stable(gain, dt) == (0.0 <= gain * dt < bound)
-        assert kind_type.stable_gain_bound(dt) == bound / dt
+        assert kind_type.gain_rule.is_stable(gain, dt) == (0.0 <= gain * dt < bound)
+        assert kind_type.gain_rule.bound(dt) == bound / dt

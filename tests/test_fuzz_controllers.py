@@ -160,7 +160,7 @@ def test_every_controller_keeps_its_acceleration_box_over_a_sequence(robots, pro
     step = np.full(model.nv, np.inf) if step is None else step
     for _ in range(steps):
         lower, upper = controller.bounds(q)  # this step's box, around the previous command
-        previous = controller.reference
+        previous = controller.command_box.previous_command.copy()
         qd = controller.solve(q, twist)
         assert np.all(np.isfinite(qd)), spec
         assert np.all(qd >= lower - slack) and np.all(qd <= upper + slack), (spec, controller.info.message)

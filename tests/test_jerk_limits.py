@@ -130,9 +130,10 @@ def test_the_compiled_and_python_steps_agree_with_a_jerk_limit(fast_lateral):
     model = robot.model
     binding = 0
     for k in range(600):
-        previous, change = python.reference, python._previous_change().copy()
-        compiled._previous_command()[:] = previous
-        compiled._previous_change()[:] = change
+        box = python.command_box
+        previous, change = box.previous_command.copy(), box.previous_change.copy()
+        compiled.command_box.previous_command[:] = previous
+        compiled.command_box.previous_change[:] = change
         t = (k + 1) * 1e-3
         twist = np.concatenate([[0.0, 0.6 * np.cos(6.0 * t), 0.0], np.zeros(3)])
         qd_python = python.solve(q, twist)

@@ -301,12 +301,12 @@ def reference_bounds(controller: QPController, q: np.ndarray) -> tuple[np.ndarra
     model = controller.model
     lower, upper = np.full(model.nv, -np.inf), np.full(model.nv, np.inf)
     limit = np.full(model.nv, np.inf)
-    if controller.velocity_limits:
+    if controller.joint_bounds.velocity_limits:
         limit = np.asarray(model.velocityLimit, dtype=float)
         limit = np.where(np.isfinite(limit) & (limit > 0), limit, np.inf)
         lower, upper = -limit, limit.copy()
-    if controller.position_limits:
-        scale = controller.limit_gain / controller.dt
+    if controller.joint_bounds.position_limits:
+        scale = controller.joint_bounds.limit_gain / controller.dt
         for j in range(1, model.njoints):
             if model.nqs[j] == 1 and model.nvs[j] == 1:
                 iq, iv = model.idx_qs[j], model.idx_vs[j]

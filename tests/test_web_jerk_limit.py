@@ -43,9 +43,9 @@ def test_the_jerk_limit_reaches_the_ghost_and_a_switched_controller(sda10f, tmp_
     app = TeleopApp(sda10f, ghost="qp:daqp", record_dir=tmp_path,
                     scene_dir=tmp_path / "scenes", jerk_limit=LIMIT)
     for loop in app.robots.loops.values():
-        np.testing.assert_array_equal(loop.controller.jerk_limit, LIMIT)
+        np.testing.assert_array_equal(loop.controller.joint_bounds.jerk_limit, LIMIT)
     app.robots.set_controller("qp:proxqp")
-    np.testing.assert_array_equal(app.robots.loops["main"].controller.jerk_limit, LIMIT)
+    np.testing.assert_array_equal(app.robots.loops["main"].controller.joint_bounds.jerk_limit, LIMIT)
 
 
 def test_a_jerk_limit_without_acceleration_limits_or_out_of_range_is_refused(sda10f, tmp_path):

@@ -285,11 +285,14 @@ class CJMController(Controller):
                 if not self._python_if_needed:
                     raise
                 self.backend = "python"
-        previous = getattr(self, "step", None)
-        if previous is not None:  # a rebuilt step goes on from the command last sent
+        if getattr(self, "step", None) is not None:
             self._report = self.report
-            step.previous[:] = previous.previous
-            step.previous_change[:] = previous.previous_change
+        # the box counts from the step's own arrays; a rebuilt step goes on from the
+        # command last sent
+        box = self.command_box
+        step.previous[:] = box.previous_command
+        step.previous_change[:] = box.previous_change
+        box.previous_command, box.previous_change = step.previous, step.previous_change
         #: everything the step needs (:class:`controllers.cjm.step_setup.StepSetup`)
         self.setup = setup
         #: the backend's step (PythonStep or CompiledStep): ``step.solve(q, twist) -> (qd, report)``
@@ -318,14 +321,6 @@ class CJMController(Controller):
             collisions=self.collisions)
 
     # -- the step ----------------------------------------------------------------------
-
-    def _previous_command(self) -> np.ndarray:
-        """The step's own array of the previous command (:attr:`Controller.reference`)."""
-        return self.step.previous
-
-    def _previous_change(self) -> np.ndarray:
-        """The step's own array of the previous command minus the one before."""
-        return self.step.previous_change
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """:meth:`Controller.solve`, by the backend's step (docs/design.md section 16):

@@ -87,7 +87,7 @@ class PostureTask(mink.Task):
     ``mink.PostureTask`` has ``e = q (-) q_posture`` (``mj_differentiatePos``) and
     ``J = I``, so ``J dq = -gain e`` asks for ``dq = gain (q_posture (-) q)``. This one
     takes the difference with Pinocchio, ``e = -map(posture_difference(q, q_posture))``
-    (``JointMap.v_to_mujoco``, ``Controller.posture_difference``: ``pin.difference``
+    (``JointMap.v_to_mujoco``, ``controllers.base.posture_difference``: ``pin.difference``
     without a mobile base's entries), as the CJM's ``qd_posture`` does. For 1-dof joints the
     two are the same numbers; on a planar base MuJoCo's difference is the world-frame
     ``(dx, dy, dth)`` while Pinocchio's is the SE(2) logarithm in the base frame, and
@@ -100,7 +100,7 @@ class PostureTask(mink.Task):
         super().__init__(cost=np.full(model.nv, cost), gain=gain, lm_damping=0.0)
         self.joints = joints
         self.posture = posture
-        self.difference = difference  # the controller's posture_difference
+        self.difference = difference  # posture_difference on the controller's model
         self._q_pin = np.empty(model.nq)
         self._identity = np.eye(model.nv)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
@@ -16,7 +17,8 @@ from constraints import Constraint
 from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.validation import as_number, as_vector
 
-from ..base import EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus, as_twist_weight
+from ..base import (EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus,
+                    as_twist_weight, posture_difference, report_twist_error)
 from ..joint_acceleration import braked_lower, braked_pairs
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
@@ -209,7 +211,8 @@ class MinkController(GuardedController):
                            if limits is None else None)
         #: the acceleration box (None without acceleration limits), whatever ``limits``
         self.acceleration_box = (AccelerationLimit(self.joint_bounds, self.joints, model.nq,
-                                                   self._reference, self._jerk_reference())
+                                                   self.command_box.previous_command,
+                                                   self.command_box.jerk_reference)
                                  if self.joint_bounds.acceleration_step is not None else None)
         #: the limits that bound mink's variable directly (their 1-dof joints' part)
         self._variable_bounds = tuple(limit for limit in (self._joint_box, self.acceleration_box)
@@ -222,7 +225,9 @@ class MinkController(GuardedController):
         self.posture = as_vector(posture, model.nq, "posture")
         self.posture_task = PostureTask(model, self.joints, self.posture, cost=self.posture_cost,
                                         gain=self.posture_gain * self.dt,
-                                        difference=self.posture_difference)
+                                        difference=functools.partial(
+                                            posture_difference, model,
+                                            free=self._base_velocity))
         self._tasks = [*self.ee_tasks, self.posture_task] if self.posture_cost else self.ee_tasks
         self.damping_task = DampingTask(self.task_size, self.mj_model.nv)
         self._equality_caches: list[RowsCache] = []
@@ -267,7 +272,7 @@ class MinkController(GuardedController):
         self._q_mj = np.empty(self.mj_model.nq)
         self.collision_limit = (None if self._scene is None
                                 else self._scene.limit(self.mj_model, self.dt))
-        if self.collision_limit is not None and self.acceleration_limit is not None:
+        if self.collision_limit is not None and self.joint_bounds.acceleration_limit is not None:
             self.collision_limit.braking = self._braked_collision_bound
 
     def _rebuild_mujoco(self) -> None:
@@ -287,17 +292,12 @@ class MinkController(GuardedController):
                 raise TypeError(f"limits: expected mink.Limit or a factory of one, got {limit!r}")
         return made
 
-    @property
-    def ee_task(self) -> mink.FrameTask:
-        """The first end effector's frame task (the only one of a single-EE robot)."""
-        return self.ee_tasks[0]
-
     def _prepare(self) -> None:
         if (self._scene is None) != (self.collisions is None) or (
                 self._scene is not None and self._scene.collisions is not self.collisions):
             self._rebuild_mujoco()
         rows = PinocchioRows(self.model, self.data, self.joints, self.mj_model.nq,
-                             self.acceleration_limit, self.dt)
+                             self.joint_bounds.acceleration_limit, self.dt)
         self._rows = rows
         caches = [RowsCache(c, f, rows) for c, f in zip(self.constraints, self.constraint_frames)]
         self._equality_caches = [c for c in caches if c.constraint.is_equality]
@@ -320,7 +320,7 @@ class MinkController(GuardedController):
         collisions = self.collision_rows()
         if collisions is not None:  # measured whatever the solve does
             record_distances(self.info, collisions)
-            collisions = braked_pairs(collisions, self.collisions, self.acceleration_limit,
+            collisions = braked_pairs(collisions, self.collisions, self.joint_bounds.acceleration_limit,
                                       self.dt)
         configuration = self.configuration
         q_mj = self.joints.q_to_mujoco(kinematics.q, out=self._q_mj)
@@ -386,7 +386,7 @@ class MinkController(GuardedController):
                 if np.any(rows.A_pin @ qd - rows.b < 1e-9):
                     active.append(index)
             self.info.active_barriers = tuple(active)
-        missed = self._report_twist_error(kinematics.ee_jacobian, qd, twist,
+        missed = report_twist_error(self.info, kinematics.ee_jacobian, qd, twist,
                                           None if self._unit_weight else self._twist_scale)
         if collisions is not None:
             names = self._held_pairs(qd, q_mj)
@@ -408,7 +408,7 @@ class MinkController(GuardedController):
         rows = -G[near] @ to_mujoco
         braked = h.copy()
         braked[near] = -dt * braked_lower(rows, -h[near] / dt, h[near] / (rate * dt),
-                                          np.full(near.size, rate), self.acceleration_limit, dt)
+                                          np.full(near.size, rate), self.joint_bounds.acceleration_limit, dt)
         return braked
 
     def _held_pairs(self, qd: np.ndarray, q_mj: np.ndarray) -> tuple[str, ...]:
@@ -456,7 +456,7 @@ class MinkController(GuardedController):
         """The rows as close to ``b`` as the box, the barriers and the avoidance's
         collision rows allow (:mod:`controllers.optimization.least_residual`), solved
         with this controller's backend."""
-        lower, upper = self.bounds(q)
+        lower, upper = self.command_box.box(q)
         lower = np.where(np.isfinite(lower), lower, -INFINITE_BOUND)
         upper = np.where(np.isfinite(upper), upper, INFINITE_BOUND)
         blocks, bounds = [], []

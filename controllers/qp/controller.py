@@ -26,7 +26,8 @@ from constraints import Constraint
 from constraints.collision import CollisionAvoidance, CollisionRows
 from constraints.validation import as_number, as_vector
 
-from ..base import EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus, as_twist_weight
+from ..base import (EQUALITY_TOLERANCE, GuardedController, Kinematics, SolverError, StepStatus,
+                    as_twist_weight, posture_difference, report_twist_error)
 from ..joint_acceleration import braked_lower, braked_pairs
 from ..joint_limits import DEFAULT_LIMIT_GAIN
 from ..linalg import DampingPolicy
@@ -223,7 +224,8 @@ class QPController(GuardedController):
         """``posture_gain * (posture (-) q)`` (nv,): the CJM's posture velocity."""
         if self.posture_gain == 0.0:
             return np.zeros(self.model.nv)
-        return self.posture_gain * self.posture_difference(q, self.posture)
+        return self.posture_gain * posture_difference(self.model, q, self.posture,
+                                                       self._base_velocity)
 
     def _solve(self, kinematics: Kinematics, twist: np.ndarray) -> np.ndarray:
         self.budget.start()
@@ -233,10 +235,10 @@ class QPController(GuardedController):
         collisions = self.collision_rows()
         if collisions is not None:  # measured whatever the solve does
             record_distances(self.info, collisions)
-            collisions = braked_pairs(collisions, self.collisions, self.acceleration_limit,
+            collisions = braked_pairs(collisions, self.collisions, self.joint_bounds.acceleration_limit,
                                       self.dt)
         barrier_rows, barrier_bound = self._inequality_rows(collisions)
-        lower, upper = bounded_box(*self.bounds(kinematics.q))
+        lower, upper = bounded_box(*self.command_box.box(kinematics.q))
         weighted_jacobian = jacobian if self._unit_weight else self._twist_rows * jacobian
         damping = task_damping(A, weighted_jacobian[self._weighted_rows], self.policy)
         self.info.sigma_min, self.info.damping = damping.sigma_min, damping.damping
@@ -278,7 +280,7 @@ class QPController(GuardedController):
             held_barriers = np.flatnonzero(barrier_rows[:count] @ qd - barrier_bound[:count]
                                            > -1e-9)
             self.info.active_barriers = tuple(self._barriers[i] for i in held_barriers)
-        missed = self._report_twist_error(jacobian, qd, twist,
+        missed = report_twist_error(self.info, jacobian, qd, twist,
                                           None if self._unit_weight else self._twist_scale)
         if collisions is not None:
             held_pairs = rows_at_bound(collisions, qd, self._at_bound)
@@ -296,12 +298,12 @@ class QPController(GuardedController):
         blocks, bounds = [], []
         if self._barriers:
             rows, rhs = self.constraint_rows(self._barriers)
-            if self.acceleration_limit is not None:
+            if self.joint_bounds.acceleration_limit is not None:
                 barriers = [self.constraints[i] for i in self._barriers]
                 gaps = np.concatenate([c.error(self.data.oMf[self.constraint_frames[i]])
                                        for c, i in zip(barriers, self._barriers)])
                 rhs = braked_lower(rows, rhs, gaps, np.array([c.gain for c in barriers]),
-                                   self.acceleration_limit, self.dt)
+                                   self.joint_bounds.acceleration_limit, self.dt)
             blocks.append(-rows)  # A qd >= b as -A qd <= -b
             bounds.append(-rhs)
         if collisions is not None and collisions.size:

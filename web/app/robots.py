@@ -291,14 +291,14 @@ class Robots:
     def set_gain(self, gain: float) -> None:
         """Gain K (1/s) of every constraint: the drift feedback of the equalities, the
         approach rate of the one-sided constraints, stable at this rate by
-        :meth:`constraints.Constraint.gain_is_stable`. A gain some placed constraint
+        :attr:`constraints.Constraint.gain_rule`. A gain some placed constraint
         cannot take at this rate raises ``ValueError`` naming the gain and changes
         nothing."""
         gain = as_number(gain, "gain")
         with self._lock:
             dt = self.config.dt
-            if not Constraint.gain_is_stable(gain, dt):
-                raise ValueError(f"gain must be in [0, {Constraint.stable_gain_bound(dt):g}) "
+            if not Constraint.gain_rule.is_stable(gain, dt):
+                raise ValueError(f"gain must be in [0, {Constraint.gain_rule.bound(dt):g}) "
                                  f"1/s at this rate, got {gain:g}")
             previous = self.gain
             constraints = self._constraints()
