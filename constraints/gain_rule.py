@@ -14,17 +14,18 @@ class GainRule:
     max_gain_period: float
 
     def is_stable(self, gain: float, dt: float) -> bool:
+        """Whether gain ``K`` (1/s) is stable at period ``dt`` (s)."""
         return 0.0 <= gain * dt < self.max_gain_period
 
     def bound(self, dt: float) -> float:
         """The exclusive upper bound of a stable gain (1/s) at period ``dt``."""
         return self.max_gain_period / dt
 
-    def instability(self, kind: str, gain: float, dt: float) -> str | None:
-        """Why ``gain`` is unstable at ``dt`` for a constraint of type ``kind``, or None
-        when it is stable."""
+    def instability(self, type_name: str, gain: float, dt: float) -> str | None:
+        """Why ``gain`` is unstable at ``dt`` for a constraint of the class ``type_name``,
+        or None when it is stable."""
         if self.is_stable(gain, dt):
             return None
-        return (f"{kind} gain {gain:g} 1/s is unstable at {1.0 / dt:g} Hz "
+        return (f"{type_name} gain {gain:g} 1/s is unstable at {1.0 / dt:g} Hz "
                 f"(K dt = {gain * dt:g}, needs < {self.max_gain_period:g}): lower the gain "
                 f"below {self.bound(dt):g} 1/s or raise the rate")

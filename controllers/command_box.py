@@ -2,9 +2,28 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Protocol
+
 import numpy as np
 
 from .joint_limits import JointBounds
+
+
+class HoldsCommands(Protocol):
+    """Where the commands sent are kept: ``previous`` (the previous command) and
+    ``previous_change`` (it minus the one before), (nv,) arrays written in place."""
+
+    previous: np.ndarray
+    previous_change: np.ndarray
+
+
+@dataclass
+class CommandHistory:
+    """The commands sent, kept by the box itself (the QP's and mink's)."""
+
+    previous: np.ndarray
+    previous_change: np.ndarray
 
 
 class CommandBox:
@@ -14,19 +33,27 @@ class CommandBox:
     (docs/design.md 8.2-8.3). With them it is also the window ``|qd - qd_prev| <= a dt``
     around the previous command (8.4), and with jerk limits the window
     ``|(qd - qd_prev) - (qd_prev - qd_prev2)| <= j dt^2`` around the previous change (8.5).
-    This object keeps those two references: :meth:`remember` each command sent,
-    :meth:`reset` to start from rest.
+    :meth:`remember` each command sent; :meth:`reset` to start from rest.
 
-    ``previous_command`` and ``previous_change`` are the arrays the box reads; a controller
-    whose step keeps them itself (the CJM's backends) points them at its step's arrays.
+    The two references are read from :attr:`history` at every use: a controller whose step
+    keeps them itself (the CJM's backends, whose compiled step moves them when it grows)
+    hands its step over as the history.
     """
 
     def __init__(self, joint_bounds: JointBounds, nv: int) -> None:
         self.joint_bounds = joint_bounds
-        #: the previous command, the acceleration window's centre (zero at rest)
-        self.previous_command = np.zeros(nv)
-        #: the previous command minus the one before, the jerk window's centre
-        self.previous_change = np.zeros(nv)
+        #: the commands sent (:class:`HoldsCommands`); zero at rest
+        self.history: HoldsCommands = CommandHistory(np.zeros(nv), np.zeros(nv))
+
+    @property
+    def previous_command(self) -> np.ndarray:
+        """The previous command, the acceleration window's centre (the history's array)."""
+        return self.history.previous
+
+    @property
+    def previous_change(self) -> np.ndarray:
+        """The previous command minus the one before, the jerk window's centre."""
+        return self.history.previous_change
 
     @property
     def jerk_reference(self) -> np.ndarray | None:

@@ -64,8 +64,9 @@ FILE_MARKERS = {
              "test_ros2_wire.py", "test_plant_encoder_noise.py", "test_web_ros2.py",
              "test_web_ros2_safety.py", "test_ros2_master.py", "test_ros2_realtime.py",
              "test_walk_backends.py", "test_variations.py", "test_inputs_authentication.py",
-             "test_web_priorities.py", "test_web_ui.py", "test_hypothesis_pinned.py",
-             "test_timing_tier.py"),
+             "test_web_priorities.py", "test_web_ui.py",
+             # pytest run in subprocesses, seconds each: the tiers' own checks
+             "test_hypothesis_pinned.py", "test_timing_tier.py"),
 }
 
 

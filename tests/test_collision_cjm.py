@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from constraints import Hole, PointLock
-from constraints.collision import CollisionAvoidance, HalfSpace
+from constraints.collision import CollisionAvoidance, HalfSpace, Sphere
 from controllers import CJMController, StepStatus
 from controllers.cjm.report import Event
 from teleop.robots import load_robot
@@ -322,6 +322,32 @@ def test_collisions_can_be_set_and_removed(dual, apart):
     assert controller.info.minimum_distance < controller.collisions.detection_distance
     controller.set_collisions(None)
     np.testing.assert_array_equal(controller.solve(apart, twist), without)
+
+
+def test_the_command_box_reads_the_grown_steps_commands(dual, apart):
+    """An obstacle added after the build gives more pairs than the compiled step's buffer
+    holds: the step is built again and its arrays move. The controller's box still counts
+    from them: a stop within ``a dt`` of the last command, the next command within
+    ``a dt`` of the stop, and a reset that zeroes what the step counts from."""
+    collisions = CollisionAvoidance(dual)
+    q = drive(dual, apart, 7)
+    cjm = CJMController(dual, backend="compiled", collisions=collisions, twist_weight=TRANSLATION,
+                        acceleration_limit=dual.acceleration_limit)
+    twist = push_together(dual, q, 0.5)
+    cjm.solve(q, twist)
+    capacity = cjm.step.pair_capacity
+    for tip in tips(dual, q):
+        collisions.add_obstacle(Sphere(tip.translation - [0.0, 0.0, 0.03], 0.01))
+    last = cjm.solve(q, twist)
+    assert cjm.step.pair_capacity > capacity  # grown: the case under test
+    window = dual.acceleration_limit * cjm.dt * (1.0 + 1e-9)
+    stop = cjm.stop(q)
+    assert np.all(np.abs(stop - last) <= window) and np.abs(stop - last).max() > 0.0
+    np.testing.assert_array_equal(cjm.step.previous, stop)
+    assert np.all(np.abs(cjm.solve(q, twist) - stop) <= window)
+    cjm.reset()
+    np.testing.assert_array_equal(cjm.step.previous, 0.0)
+    np.testing.assert_array_equal(cjm.step.previous_change, 0.0)
 
 
 def test_the_compiled_step_grows_its_buffer_for_more_collision_rows(dual, apart):

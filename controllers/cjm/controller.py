@@ -287,15 +287,11 @@ class CJMController(Controller):
                 self.backend = "python"
         if getattr(self, "step", None) is not None:
             self._report = self.report
-        # the box counts from the step's own arrays; a rebuilt step goes on from the
-        # command last sent
-        box = self.command_box
-        step.previous[:] = box.previous_command
-        step.previous_change[:] = box.previous_change
-        box.previous_command, box.previous_change = step.previous, step.previous_change
+        # a rebuilt step goes on from the command last sent
+        step.previous[:] = self.command_box.previous_command
+        step.previous_change[:] = self.command_box.previous_change
         #: everything the step needs (:class:`controllers.cjm.step_setup.StepSetup`)
         self.setup = setup
-        #: the backend's step (PythonStep or CompiledStep): ``step.solve(q, twist) -> (qd, report)``
         self.step = step
 
     def _step_setup(self) -> StepSetup:
@@ -321,6 +317,18 @@ class CJMController(Controller):
             collisions=self.collisions)
 
     # -- the step ----------------------------------------------------------------------
+
+    @property
+    def step(self) -> PythonStep | CompiledStep:
+        """The backend's step (PythonStep or CompiledStep): ``step.run(q, twist) -> qd``.
+        It keeps the commands sent; :attr:`command_box` reads them from it, wherever it
+        keeps them (a compiled step that grows for more collision rows moves them)."""
+        return self._step
+
+    @step.setter
+    def step(self, step: PythonStep | CompiledStep) -> None:
+        self._step = step
+        self.command_box.history = step
 
     def solve(self, q: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """:meth:`Controller.solve`, by the backend's step (docs/design.md section 16):

@@ -86,7 +86,8 @@ class PostureTask(mink.Task):
 
     ``mink.PostureTask`` has ``e = q (-) q_posture`` (``mj_differentiatePos``) and
     ``J = I``, so ``J dq = -gain e`` asks for ``dq = gain (q_posture (-) q)``. This one
-    takes the difference with Pinocchio, ``e = -map(posture_difference(q, q_posture))``
+    takes the difference with Pinocchio,
+    ``e = -map(posture_difference(model, q, q_posture, free))``
     (``JointMap.v_to_mujoco``, ``controllers.base.posture_difference``: ``pin.difference``
     without a mobile base's entries), as the CJM's ``qd_posture`` does. For 1-dof joints the
     two are the same numbers; on a planar base MuJoCo's difference is the world-frame

@@ -320,8 +320,8 @@ class MinkController(GuardedController):
         collisions = self.collision_rows()
         if collisions is not None:  # measured whatever the solve does
             record_distances(self.info, collisions)
-            collisions = braked_pairs(collisions, self.collisions, self.joint_bounds.acceleration_limit,
-                                      self.dt)
+            collisions = braked_pairs(collisions, self.collisions,
+                                      self.joint_bounds.acceleration_limit, self.dt)
         configuration = self.configuration
         q_mj = self.joints.q_to_mujoco(kinematics.q, out=self._q_mj)
         configuration.update(q_mj)
@@ -387,7 +387,7 @@ class MinkController(GuardedController):
                     active.append(index)
             self.info.active_barriers = tuple(active)
         missed = report_twist_error(self.info, kinematics.ee_jacobian, qd, twist,
-                                          None if self._unit_weight else self._twist_scale)
+                                    None if self._unit_weight else self._twist_scale)
         if collisions is not None:
             names = self._held_pairs(qd, q_mj)
             report_held_back(self.info, names, ", ".join(
@@ -408,7 +408,8 @@ class MinkController(GuardedController):
         rows = -G[near] @ to_mujoco
         braked = h.copy()
         braked[near] = -dt * braked_lower(rows, -h[near] / dt, h[near] / (rate * dt),
-                                          np.full(near.size, rate), self.joint_bounds.acceleration_limit, dt)
+                                          np.full(near.size, rate),
+                                          self.joint_bounds.acceleration_limit, dt)
         return braked
 
     def _held_pairs(self, qd: np.ndarray, q_mj: np.ndarray) -> tuple[str, ...]:
@@ -456,7 +457,7 @@ class MinkController(GuardedController):
         """The rows as close to ``b`` as the box, the barriers and the avoidance's
         collision rows allow (:mod:`controllers.optimization.least_residual`), solved
         with this controller's backend."""
-        lower, upper = self.command_box.box(q)
+        lower, upper = self.bounds(q)
         lower = np.where(np.isfinite(lower), lower, -INFINITE_BOUND)
         upper = np.where(np.isfinite(upper), upper, INFINITE_BOUND)
         blocks, bounds = [], []

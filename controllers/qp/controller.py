@@ -235,10 +235,10 @@ class QPController(GuardedController):
         collisions = self.collision_rows()
         if collisions is not None:  # measured whatever the solve does
             record_distances(self.info, collisions)
-            collisions = braked_pairs(collisions, self.collisions, self.joint_bounds.acceleration_limit,
-                                      self.dt)
+            collisions = braked_pairs(collisions, self.collisions,
+                                      self.joint_bounds.acceleration_limit, self.dt)
         barrier_rows, barrier_bound = self._inequality_rows(collisions)
-        lower, upper = bounded_box(*self.command_box.box(kinematics.q))
+        lower, upper = bounded_box(*self.bounds(kinematics.q))
         weighted_jacobian = jacobian if self._unit_weight else self._twist_rows * jacobian
         damping = task_damping(A, weighted_jacobian[self._weighted_rows], self.policy)
         self.info.sigma_min, self.info.damping = damping.sigma_min, damping.damping
@@ -281,7 +281,7 @@ class QPController(GuardedController):
                                            > -1e-9)
             self.info.active_barriers = tuple(self._barriers[i] for i in held_barriers)
         missed = report_twist_error(self.info, jacobian, qd, twist,
-                                          None if self._unit_weight else self._twist_scale)
+                                    None if self._unit_weight else self._twist_scale)
         if collisions is not None:
             held_pairs = rows_at_bound(collisions, qd, self._at_bound)
             report_held_back(self.info, pair_names(collisions, held_pairs),
