@@ -69,8 +69,9 @@ PROXQP_CAPPED_RHO = 1e-8
 #: tolerances: the collision fuzz's failed steps 0.88 % -> 0.18 % (docs/design.md 18.7).
 PROXQP_FALLBACK_ITERATIONS = 10
 
-#: proxqp's ``rho`` for the last solve of a stage still at its caps after the fresh one,
-#: relative to the stage's tolerance (:meth:`QuadraticProgram.tolerance`): its optimum lies
+#: proxqp's ``rho`` for the certified flat solve, relative to the stage's tolerance
+#: (:meth:`QuadraticProgram.tolerance`): the first solve of a semidefinite stage, the solve
+#: after :data:`PROXQP_CAPPED_RHO` of another still at its caps. The stuck one's optimum lies
 #: far along directions the Hessian does not see, where the proximal term is the only
 #: curvature, and a tolerance-sized one lets them travel there within a few iterations (the
 #: collision fuzz's stuck task stage: 17-20 iterations, against over 100,000 at the
