@@ -22,8 +22,8 @@ from ..joint_acceleration import braked_lower, braked_pairs
 from .analytical import SquarePreChain, solve_redundant_pre_chain
 from .general import solve_general
 from .report import Event, StepReport
-from .saturation import saturate_in_null_space
-from .saturation_walk import saturate_around_previous
+from .saturation import Saturation, saturate_in_null_space
+from .saturation_walk import held_sides, saturate_around_previous, saturate_from_held
 from .step_setup import StepSetup
 from .tolerances import BARRIER_TOLERANCE, EQUALITY_TOLERANCE, PAPER_FORM_MIN_A, StepTolerances
 
@@ -64,6 +64,13 @@ class PythonStep:
         self._change = None if setup.bounds.jerk_step is None else self.previous_change
         #: the acceleration limits the dampers brake with (None: none; docs/design.md 12)
         self._acceleration_limit = setup.bounds.acceleration_limit
+        #: the warm start of the saturation around the previous command (docs/design.md
+        #: 9.1): the last period's held joints' sides, its limiting joint, whether it was
+        #: undamped and the command sent (None: none); this period's until it is sent
+        self._held: tuple[np.ndarray, int, bool, np.ndarray] | None = None
+        self._held_now: tuple[np.ndarray, int, bool] | None = None
+        #: whether this period decided on the warm start already
+        self._warm_tried = False
         self._run_report = StepReport()
 
     # -- the step template (controllers.base.GuardedController.solve) ------------------
@@ -78,7 +85,9 @@ class PythonStep:
         raises ``ValueError``; a failed step gives the stop command (zero without
         acceleration limits, else the command nearest zero in the box)."""
         q, twist = checked_inputs(q, twist, self._nq, self._task_size)
+        self._held_now, self._warm_tried = None, False
         qd, report = self._step(q, twist)
+        self._held = None if self._held_now is None else (*self._held_now, qd.copy())
         np.subtract(qd, self.previous, out=self.previous_change)
         self.previous[:] = qd
         return qd, report
@@ -103,12 +112,17 @@ class PythonStep:
             self._pair_rhs = self._pairs.lower.copy()
         task = self._task(twist)
         try:
-            qd = self._solve(q, ee_jacobian, task, report)
+            warm = self._saturate_before_the_form(q, ee_jacobian, task, report)
+            qd = warm[0] if warm is not None else self._solve(q, ee_jacobian, task, report)
         except np.linalg.LinAlgError as error:
             return self._fail(q, report, f"{type(error).__name__}: {error}")
-        if not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
+        if warm is not None:
+            qd = self._clip(qd, warm[1], warm[2], report)
+            if not math.isfinite(sum(qd.tolist())):  # clipping passes a NaN through
+                return self._fail(q, report, "", Event.NON_FINITE)
+        elif not math.isfinite(sum(qd.tolist())):  # any NaN/inf (or overflow) poisons the sum
             return self._fail(q, report, "", Event.NON_FINITE)
-        if not setup.box_test.contains(q, qd, self._reference, self._change):
+        elif not setup.box_test.contains(q, qd, self._reference, self._change):
             lower, upper = setup.bounds.box(q, self._reference, self._change)
             try:
                 qd = self._saturate(q, ee_jacobian, task, lower, upper, report)
@@ -125,6 +139,7 @@ class PythonStep:
     def _fail(self, q: np.ndarray, report: StepReport, error: str,
               event: Event = Event.LINEAR_ALGEBRA_ERROR) -> tuple[np.ndarray, StepReport]:
         report.fail(event, error)
+        self._held_now = None
         return self.stop_command(q), report
 
     def stop_command(self, q: np.ndarray) -> np.ndarray:
@@ -321,11 +336,63 @@ class PythonStep:
                 result = saturate_in_null_space(rows, rows_rhs, ee_jacobian, twist, lower,
                                                 upper, setup.bounds.velocity_limit, setup.policy)
             else:
-                result = saturate_around_previous(rows, rows_rhs, ee_jacobian, twist, lower,
-                                                  upper, setup.policy, self._reference)
+                warm = (None if self._warm_tried or not self._warm_start_applies() else
+                        self._saturate_from_held(rows, rows_rhs, ee_jacobian, twist, lower,
+                                                 upper, undamped_only=False))
+                result = warm if warm is not None else saturate_around_previous(
+                    rows, rows_rhs, ee_jacobian, twist, lower, upper, setup.policy,
+                    self._reference)
             if not self._activate_worst(result.qd):
                 break
         report.active_barriers = tuple(i for i in self._active if i in barriers)
+        return self._report_saturation(result, rows, rows_rhs, lower, upper, report)
+
+    def _warm_start_applies(self) -> bool:
+        """Whether the last period left a warm start this period may take: the previous
+        command still the one it sent, the equalities alone as the rows (no barrier, no
+        collision row)."""
+        return (self._held is not None and not self._barriers and not self._pairs.size
+                and np.array_equal(self.previous, self._held[3]))
+
+    def _saturate_before_the_form(self, q: np.ndarray, ee_jacobian: np.ndarray,
+                                  twist: np.ndarray, report: StepReport
+                                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The warm start in place of the unsaturated form (docs/design.md 9.1): where the
+        last period's saturation held a joint and was undamped, and this period's is
+        undamped too; the command and the box, or None."""
+        held = self._held
+        if held is None or not held[0].any() or not held[2] or not self._warm_start_applies():
+            return None
+        self._active, self._active_pairs = list(self._equalities), []
+        lower, upper = self.setup.bounds.box(q, self._reference, self._change)
+        rows, rows_rhs = self._held_rows(self._active)
+        result = self._saturate_from_held(rows, rows_rhs, ee_jacobian, twist, lower, upper,
+                                          undamped_only=True)
+        if result is None:
+            return None
+        return self._report_saturation(result, rows, rows_rhs, lower, upper, report), lower, upper
+
+    def _saturate_from_held(self, rows: np.ndarray, rows_rhs: np.ndarray,
+                            ee_jacobian: np.ndarray, twist: np.ndarray, lower: np.ndarray,
+                            upper: np.ndarray, undamped_only: bool) -> Saturation | None:
+        """:func:`controllers.cjm.saturation_walk.saturate_from_held` with the last
+        period's held joints; whether it decided is kept for the rest of the period."""
+        assert self._held is not None
+        sides, limiting_joint = self._held[:2]
+        result, decided = saturate_from_held(rows, rows_rhs, ee_jacobian, twist, lower, upper,
+                                             self.setup.policy, sides, limiting_joint,
+                                             undamped_only)
+        self._warm_tried = self._warm_tried or decided
+        return result
+
+    def _report_saturation(self, result: Saturation, rows: np.ndarray, rows_rhs: np.ndarray,
+                           lower: np.ndarray, upper: np.ndarray, report: StepReport) -> np.ndarray:
+        """``result``'s command and its report; around the previous command, its held
+        joints kept for the next period's warm start."""
+        if self._reference is not None:
+            sides = held_sides(result, lower, upper)
+            self._held_now = (None if sides is None else
+                              (sides, result.limiting_joint, result.damping == 0.0))
         report.method = "saturated"
         report.scale = result.task_scale
         report.saturated_joints = result.saturated

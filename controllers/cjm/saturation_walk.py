@@ -26,6 +26,16 @@ releasing another held it again at once, a cycle to the iteration cap.
 
 Every iterate of level 2 is a convex combination of points that hold the rows and lies in
 the box, and the result moves continuously with ``q``, the twist and the box.
+
+**Warm start** (:func:`saturate_from_held`). After a period this saturation gave with the
+rows held, the next period may first hold the same joints at the same sides of its own box
+and solve the rows and the damped task over the others: where that point has the free
+joints inside the box and no held joint's reduced gradient pointing into its box (the
+optimum's conditions) and the optimum is unique (``[J N; D N]`` of full column rank), it
+is the point level 2 ends at, and level 1 and the walk are not run. Where the last
+period held a joint and neither period damps, it is tried before the unsaturated form,
+which it then replaces too (docs/design.md 9.1 says why that is the same command).
+The rows are the equalities alone: with barriers or collision rows the step runs as above.
 """
 
 from __future__ import annotations
@@ -35,7 +45,7 @@ import numpy as np
 from ..base import TWIST_TOLERANCE
 from ..linalg import DampingPolicy, nullspace
 from ..numerics import RANK_TOLERANCE
-from ..optimization.task_damping import task_damping
+from ..optimization.task_damping import TaskDamping, task_damping
 from .saturation import Saturation, gap_to_bound, solve_over_free
 from .tolerances import (AT_BOUND, BOX_MARGIN, RELEASE_TOLERANCE, ROWS_TOLERANCE,
                          STILL_DIRECTION)
@@ -57,8 +67,7 @@ def saturate_around_previous(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: n
     if rows_scale < 1.0:  # the task keeps the rows' least residual (the QP's recovery, 10.7)
         rows_rhs = rows @ point
     damping = task_damping(rows, jacobian, policy)
-    task = np.vstack([jacobian, damping.rows])
-    task_rhs = np.concatenate([twist, np.zeros(damping.rows.shape[0])])
+    task, task_rhs = _walk_task(jacobian, twist, damping)
     limiting_joint = -1
     for _ in range(3 * nv + 1):
         if free.any():
@@ -77,6 +86,59 @@ def saturate_around_previous(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: n
         free[joint] = True
     return _walk_result(point, rows_scale, free, limiting_joint, jacobian, twist,
                         damping.sigma_min, damping.damping)
+
+
+def saturate_from_held(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndarray,
+                       twist: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                       policy: DampingPolicy, sides: np.ndarray, limiting_joint: int,
+                       undamped_only: bool = False) -> tuple[Saturation | None, bool]:
+    """The warm start: the joints of ``sides`` (-1: at the lower bound, +1: the upper,
+    0: free; the previous period's) held at those sides of this box, the rows exactly and
+    the damped task over the others. That point is level 2's end when it satisfies the
+    optimum's conditions (the free joints in the box, no held joint's reduced gradient
+    pointing into its box) and the optimum is unique (``[J N; D N]`` of full column rank):
+    the saturation and True; else None, and the walk runs (docs/design.md 9.1), with
+    whether the conditions were decided (False: the optimum not unique, or
+    ``undamped_only`` and lambda positive). ``limiting_joint`` (the previous period's) is
+    reported while it is held, else the first held joint."""
+    damping = task_damping(rows, jacobian, policy)
+    if not damping.null_basis.shape[1] or damping.rank < damping.null_basis.shape[1]:
+        return None, False  # not unique: the walk's path decides
+    if undamped_only and damping.damping > 0.0:
+        return None, False
+    free = sides == 0
+    held = np.where(sides < 0, lower, np.where(sides > 0, upper, 0.0))
+    task, task_rhs = _walk_task(jacobian, twist, damping)
+    split = solve_over_free(rows, rows_rhs, task, task_rhs, free, held, UNDAMPED)
+    if split.rows_residual > ROWS_TOLERANCE:
+        return None, True
+    point = split.base + split.direction
+    if not np.all((point[free] >= lower[free]) & (point[free] <= upper[free])):
+        return None, True
+    if _task_wrong_side(rows, task, task_rhs, point, lower, upper, free) >= 0:
+        return None, True
+    if limiting_joint < 0 or free[limiting_joint]:
+        limiting_joint = int(np.flatnonzero(~free)[0]) if not free.all() else -1
+    return _walk_result(point, 1.0, free, limiting_joint, jacobian, twist,
+                        damping.sigma_min, damping.damping), True
+
+
+def held_sides(saturation: Saturation, lower: np.ndarray, upper: np.ndarray) -> np.ndarray | None:
+    """The warm start's sides of ``saturation``'s held joints (-1 nearer the lower bound,
+    +1 the upper, 0 free); None when it is no start (the rows degraded, or no joint free)."""
+    if saturation.rows_scale < 1.0 or len(saturation.saturated) == lower.size:
+        return None
+    sides = np.zeros(lower.size, dtype=int)
+    for joint in saturation.saturated:
+        sides[joint] = -1 if saturation.qd[joint] - lower[joint] <= upper[joint] - saturation.qd[joint] else 1
+    return sides
+
+
+def _walk_task(jacobian: np.ndarray, twist: np.ndarray,
+               damping: TaskDamping) -> tuple[np.ndarray, np.ndarray]:
+    """Level 2's least squares ``[J; D] qd ~ [V; 0]``."""
+    return (np.vstack([jacobian, damping.rows]),
+            np.concatenate([twist, np.zeros(damping.rows.shape[0])]))
 
 
 def walk_to_rows(rows: np.ndarray, rows_rhs: np.ndarray, lower: np.ndarray,

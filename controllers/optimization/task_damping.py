@@ -31,12 +31,14 @@ from ..numerics import numerical_rank, svd
 class TaskDamping(NamedTuple):
     """``rows`` (r, nv) such that the damping term is ``|rows qd|^2`` (zero rows when the
     CJM does not damp), the smallest non-zero singular value ``sigma_min`` of ``J N``
-    (0 when ``J N`` is zero), the ``lambda`` used and ``N = null(A)`` itself."""
+    (0 when ``J N`` is zero), the ``lambda`` used, ``N = null(A)`` itself and the rank of
+    ``J N`` (that of ``[J N; D N]``: ``D`` adds rows in its row space)."""
 
     rows: np.ndarray
     sigma_min: float
     damping: float
     null_basis: np.ndarray
+    rank: int
 
 
 def task_damping(constraint_rows: np.ndarray | None, task_jacobian: np.ndarray,
@@ -47,15 +49,15 @@ def task_damping(constraint_rows: np.ndarray | None, task_jacobian: np.ndarray,
     null_basis = (np.eye(nv) if constraint_rows is None
                   else nullspace_basis(constraint_rows))
     if not null_basis.shape[1] or not task_jacobian.shape[0]:
-        return TaskDamping(np.zeros((0, nv)), float("nan"), 0.0, null_basis)
+        return TaskDamping(np.zeros((0, nv)), float("nan"), 0.0, null_basis, 0)
     _, values, right_vectors = svd(task_jacobian @ null_basis)
     rank = numerical_rank(values)
     if not rank:
-        return TaskDamping(np.zeros((0, nv)), 0.0, 0.0, null_basis)
+        return TaskDamping(np.zeros((0, nv)), 0.0, 0.0, null_basis, 0)
     sigma_min = float(values[rank - 1])
     damping_squared = policy.lambda_squared(sigma_min)
     if damping_squared == 0.0:
-        return TaskDamping(np.zeros((0, nv)), sigma_min, 0.0, null_basis)
+        return TaskDamping(np.zeros((0, nv)), sigma_min, 0.0, null_basis, rank)
     damping = damping_squared ** 0.5
     return TaskDamping(damping * (right_vectors[:rank] @ null_basis.T), sigma_min, damping,
-                       null_basis)
+                       null_basis, rank)

@@ -71,6 +71,7 @@ class DampedLeastSquares {
     policy_ = policy;
     svd_.factor_qr(matrix);
     svd_ready_ = false;
+    damped_triangle_ready_ = false;
     if (policy.damping == 0.0 && certified_full_rank()) {
       row_space_ready_ = false;
       rank_ = svd_.size();
@@ -159,6 +160,42 @@ class DampedLeastSquares {
     return row_space_.topLeftCorner(cols_, rank_);
   }
 
+  //! ``b <- (J^T J + lambda^2 I)^-1 b`` for each column (at most kMaxQrSize), J tall
+  //! (``J = Q1 R``) with the figures decided on the QR: the normal equations on ``R``
+  //! undamped, on damped_by_qr's ``R2`` damped, and one step of refinement on their
+  //! residual (they lose ``eps kappa^2``, kappa up to kMaxConditionBound here). False,
+  //! ``b`` untouched, for a wide J, after the SVD, or for more columns.
+  bool gram_solve(MatrixRef b) {
+    decide();
+    const Index t = svd_.size(), c = b.cols();
+    if (!svd_.tall() || decision_ == Decision::svd || c > kMaxQrSize) return false;
+    const bool damped = decision_ == Decision::damped;
+    if (damped) build_damped_triangle();
+    const auto& r = svd_.qr();  // R in its upper triangle
+    auto solution = gram_solution_.topLeftCorner(t, c);
+    auto residual = gram_residual_.topLeftCorner(t, c);
+    solution = b;
+    if (damped) normal_solve(damped_triangle_, solution);
+    else normal_solve(r, solution);
+    auto product = gram_product_.head(t);
+    for (Index k = 0; k < c; ++k) {  // b - (R^T R + lambda^2 I) x
+      for (Index i = 0; i < t; ++i) {
+        double sum = 0.0;
+        for (Index j = i; j < t; ++j) sum += r(i, j) * solution(j, k);
+        product(i) = sum;
+      }
+      for (Index j = 0; j < t; ++j) {
+        double sum = b(j, k) - damping_ * damping_ * solution(j, k);
+        for (Index i = 0; i <= j; ++i) sum -= r(i, j) * product(i);
+        residual(j, k) = sum;
+      }
+    }
+    if (damped) normal_solve(damped_triangle_, residual);
+    else normal_solve(r, residual);
+    b = solution + residual;
+    return true;
+  }
+
  private:
   using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxQrSize, kMaxQrSize>;
 
@@ -212,31 +249,9 @@ class DampedLeastSquares {
     const Index t = svd_.size(), c = rhs.cols();
     const bool tall = svd_.tall();
     const auto& qr = svd_.qr();
-    auto& m = triangle_;  // M~, its upper triangle only
-    for (Index j = 0; j < t; ++j)
-      for (Index i = 0; i <= j; ++i) m(i, j) = tall ? qr(i, j) : qr(t - 1 - j, t - 1 - i);
-    auto& r2 = damped_triangle_;
-    for (Index j = 0; j < t; ++j)
-      for (Index i = 0; i <= j; ++i) r2(i, j) = m(i, j);
-    auto& row = rotated_row_;
-    for (Index k = 0; k < t; ++k) {  // the row lambda e_k^T, rotated into R2 from column k on
-      row(k) = damping_;
-      for (Index l = k + 1; l < t; ++l) row(l) = 0.0;
-      for (Index j = k; j < t; ++j) {
-        const double lower = row(j);
-        if (lower == 0.0) continue;
-        // no hypot: R2's diagonal is at least sigma_min(R), certified above the rank cut,
-        // and lambda at most max_damping: the squares neither overflow nor underflow
-        const double upper = r2(j, j), length = std::sqrt(upper * upper + lower * lower);
-        const double cosine = upper / length, sine = lower / length;
-        r2(j, j) = length;
-        for (Index l = j + 1; l < t; ++l) {
-          const double above = r2(j, l), below = row(l);
-          r2(j, l) = cosine * above + sine * below;
-          row(l) = cosine * below - sine * above;
-        }
-      }
-    }
+    const auto& m = triangle_;
+    const auto& r2 = damped_triangle_;
+    build_damped_triangle();
     auto y = small_rhs_.topLeftCorner(t, c);
     if (tall) {
       auto projected = projected_.topLeftCorner(rows_, c);
@@ -279,6 +294,40 @@ class DampedLeastSquares {
         for (Index i = 0; i < t; ++i) x(i, k) = u(t - 1 - i, k);
       x.bottomRows(cols_ - t).setZero();
       apply_q(qr, svd_.tau(), x);
+    }
+  }
+
+  //! damped_by_qr's M~ and R2, once a factorisation.
+  void build_damped_triangle() {
+    if (damped_triangle_ready_) return;
+    damped_triangle_ready_ = true;
+    const Index t = svd_.size();
+    const bool tall = svd_.tall();
+    const auto& qr = svd_.qr();
+    auto& m = triangle_;  // M~, its upper triangle only
+    for (Index j = 0; j < t; ++j)
+      for (Index i = 0; i <= j; ++i) m(i, j) = tall ? qr(i, j) : qr(t - 1 - j, t - 1 - i);
+    auto& r2 = damped_triangle_;
+    for (Index j = 0; j < t; ++j)
+      for (Index i = 0; i <= j; ++i) r2(i, j) = m(i, j);
+    auto& row = rotated_row_;
+    for (Index k = 0; k < t; ++k) {  // the row lambda e_k^T, rotated into R2 from column k on
+      row(k) = damping_;
+      for (Index l = k + 1; l < t; ++l) row(l) = 0.0;
+      for (Index j = k; j < t; ++j) {
+        const double lower = row(j);
+        if (lower == 0.0) continue;
+        // no hypot: R2's diagonal is at least sigma_min(R), certified above the rank cut,
+        // and lambda at most max_damping: the squares neither overflow nor underflow
+        const double upper = r2(j, j), length = std::sqrt(upper * upper + lower * lower);
+        const double cosine = upper / length, sine = lower / length;
+        r2(j, j) = length;
+        for (Index l = j + 1; l < t; ++l) {
+          const double above = r2(j, l), below = row(l);
+          r2(j, l) = cosine * above + sine * below;
+          row(l) = cosine * below - sine * above;
+        }
+      }
     }
   }
 
@@ -383,6 +432,9 @@ class DampedLeastSquares {
   Eigen::Matrix<double, kMaxQrSize, 1> rotated_row_;  // a row of lambda I being rotated in
   //! damped_by_qr's y, u, its normal equations' right-hand side and residual (t x c)
   Eigen::Matrix<double, kMaxQrSize, 2> small_rhs_, solution_, normal_rhs_, residual_;
+  //! gram_solve's solution and residual (t x c) and R x (a column)
+  Eigen::Matrix<double, kMaxQrSize, kMaxQrSize> gram_solution_, gram_residual_;
+  Eigen::Matrix<double, kMaxQrSize, 1> gram_product_;
   SmallMatrix inverse_, gram_;
   Eigen::SelfAdjointEigenSolver<SmallMatrix> eigen_{kMaxQrSize};
   Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxQrSize, 1> power_vector_{kMaxQrSize},
@@ -392,6 +444,7 @@ class DampedLeastSquares {
   double inverse_norm_ = 0.0, bound_ = 0.0;  // ||R^-1||_F and 1 / ||R^-1||_F
   Decision decision_ = Decision::svd;
   bool exact_ = false, svd_ready_ = false, row_space_ready_ = true, sigma_known_ = true;
+  bool damped_triangle_ready_ = false;  // triangle_ and damped_triangle_ of this factorisation
 };
 
 }  // namespace cjm

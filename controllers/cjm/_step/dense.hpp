@@ -236,4 +236,59 @@ class ThinSvd {
   Index rows_ = 0, cols_ = 0;
 };
 
+//! The Cholesky factor ``L`` of the symmetric positive definite ``matrix`` (its lower
+//! triangle read) in place of its lower triangle; false at a pivot that is not positive
+//! and finite. The matrices here are a few rows: no blocking, no allocation.
+template <typename Square>
+inline bool cholesky_in_place(Square&& matrix) {
+  const Index n = matrix.rows();
+  for (Index j = 0; j < n; ++j) {
+    double pivot = matrix(j, j);
+    for (Index k = 0; k < j; ++k) pivot -= matrix(j, k) * matrix(j, k);
+    if (!(pivot > 0.0) || !std::isfinite(pivot)) return false;
+    const double diagonal = std::sqrt(pivot);
+    matrix(j, j) = diagonal;
+    for (Index i = j + 1; i < n; ++i) {
+      double sum = matrix(i, j);
+      for (Index k = 0; k < j; ++k) sum -= matrix(i, k) * matrix(j, k);
+      matrix(i, j) = sum / diagonal;
+    }
+  }
+  return true;
+}
+
+//! ``b <- (L L^T)^-1 b`` for the lower triangle ``L`` of ``factor`` (cholesky_in_place).
+template <typename Factor, typename Rhs>
+inline void cholesky_solve(const Factor& factor, Rhs&& b) {
+  const Index n = b.rows();
+  for (Index i = 0; i < n; ++i) {  // L z = b
+    double sum = b(i);
+    for (Index k = 0; k < i; ++k) sum -= factor(i, k) * b(k);
+    b(i) = sum / factor(i, i);
+  }
+  for (Index i = n - 1; i >= 0; --i) {  // L^T x = z
+    double sum = b(i);
+    for (Index k = i + 1; k < n; ++k) sum -= factor(k, i) * b(k);
+    b(i) = sum / factor(i, i);
+  }
+}
+
+//! ``|L^-1|_F^2`` for the lower triangle ``L`` of ``factor`` (cholesky_in_place), its
+//! inverse's columns built in ``scratch`` (n x n): ``1 /`` it is at most the smallest
+//! eigenvalue of ``L L^T``.
+template <typename Factor, typename Scratch>
+inline double lower_inverse_norm2(const Factor& factor, Scratch&& scratch) {
+  const Index n = factor.rows();
+  double sum = 0.0;
+  for (Index k = 0; k < n; ++k) {
+    for (Index i = k; i < n; ++i) {
+      double value = i == k ? 1.0 : 0.0;
+      for (Index j = k; j < i; ++j) value -= factor(i, j) * scratch(j, k);
+      scratch(i, k) = value / factor(i, i);
+      sum += scratch(i, k) * scratch(i, k);
+    }
+  }
+  return sum;
+}
+
 }  // namespace cjm

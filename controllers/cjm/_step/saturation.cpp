@@ -27,6 +27,10 @@ void Step::saturate(const Inputs& in, VectorRef qd) {
     }
     if (!activate_worst(sns_qd_)) break;
   }
+  report_saturation(qd);
+}
+
+void Step::report_saturation(VectorRef qd) {
   qd = sns_qd_;
   report_.method = Method::saturated;
   report_.scale = sns_task_scale_;

@@ -8,6 +8,7 @@
 namespace cjm {
 
 void Step::saturate_around_previous(const Inputs& in) {
+  if (!warm_tried_ && warm_start_applies() && saturate_from_held(in, false)) return;
   walk_point_ = previous_.cwiseMax(lower_).cwiseMin(upper_);
   for (Index j = 0; j < nv_; ++j)  // outside beyond rounding: held at its bound (step 0)
     free_(j) = previous_(j) >= lower_(j) - tol_.box_margin * (1.0 + std::abs(lower_(j))) &&
@@ -20,7 +21,7 @@ void Step::saturate_around_previous(const Inputs& in) {
   } else {
     rows_rhs = rhs_.head(m);
   }
-  const Index damping_count = task_damping_rows(in);
+  const Index p = stack_walk_task(in);
   // the first solve over every joint is task_damping_rows's own problem: [J_e N; D N] is
   // J_e N alone, or (D N = lambda V_r^T) J_e N damped by lambda (4.2), whose DLS
   // walk_dls_ holds when its QR decided it (full rank): taken with null_, not factored
@@ -28,10 +29,6 @@ void Step::saturate_around_previous(const Inputs& in) {
   const bool factored = null_.dimension() > 0 && walk_dls_.by_qr();
   Index limiting_joint = -1;
   {
-    const Index p = task_rows_ + damping_count;
-    walk_task_.topRows(task_rows_) = in.ee_jacobian;
-    walk_rhs_.head(task_rows_) = in.twist;
-    walk_rhs_.segment(task_rows_, damping_count).setZero();
     const auto task = walk_task_.topRows(p);
     const auto task_rhs = walk_rhs_.head(p);
     const DampingPolicy undamped{0.0, 0.0, 0.0};  // the damping is in the task's rows
@@ -57,6 +54,147 @@ void Step::saturate_around_previous(const Inputs& in) {
   }
   sns_qd_ = walk_point_;
   walk_result(in, rows_scale, limiting_joint);
+}
+
+bool Step::warm_start_applies() const {
+  return warm_start_ && barriers_.empty() && pair_count_ == 0 &&
+         (previous_.array() == held_command_.array()).all();
+}
+
+bool Step::saturate_before_the_form(const Inputs& in) {
+  // only where the walk's point is the unsaturated form's when that fits the box: a held
+  // joint (with none, the walk's end is the general form's, which the analytical form's
+  // damping need not be) and lambda = 0 (the analytical form's command is then the
+  // general form's, where the analytical form is undamped too: section 9.1)
+  if (!warm_start_applies() || held_count_ == 0 || !held_undamped_) return false;
+  ensure_rows(in);
+  gather_active_rows();
+  compute_box(in.q);
+  return saturate_from_held(in, true);
+}
+
+bool Step::saturate_from_held(const Inputs& in, bool undamped_only) {
+  null_holds_rows_ = false;
+  const Index p = stack_walk_task(in);
+  const Index d = null_.dimension();
+  if (d == 0 || walk_dls_.rank() < d) return false;  // not unique: the walk's path decides
+  if (undamped_only && walk_damping_ > 0.0) return false;
+  warm_tried_ = true;
+  for (Index j = 0; j < nv_; ++j) {
+    free_(j) = held_side_(j) == 0;
+    held_(j) = held_side_(j) < 0 ? lower_(j) : held_side_(j) > 0 ? upper_(j) : 0.0;
+  }
+  const Decided decided = held_optimum_on_triangle(in);
+  if (decided == Decided::refused) return false;
+  if (decided == Decided::undecided) {  // the reference's solve over the free joints
+    const auto task = walk_task_.topRows(p);
+    const auto task_rhs = walk_rhs_.head(p);
+    const DampingPolicy undamped{0.0, 0.0, 0.0};  // the damping is in the task's rows
+    const Split split = solve_over_free(rhs_.head(row_count_), task, task_rhs, undamped);
+    if (split.rows_residual > tol_.rows) return false;
+    walk_goal_ = base_ + direction_;
+    if (!free_in_box(walk_goal_)) return false;
+    walk_point_ = walk_goal_;
+    if (task_wrong_side(task, task_rhs) >= 0) return false;  // null_: the free columns' factor
+  }
+  sns_qd_ = walk_point_;
+  Index limiting_joint = held_limiting_;  // the previous period's while it is held
+  if (limiting_joint >= 0 && free_(limiting_joint)) limiting_joint = -1;
+  for (Index j = 0; j < nv_ && limiting_joint < 0; ++j)  // else the first held
+    if (!free_(j)) limiting_joint = j;
+  walk_result(in, 1.0, limiting_joint);
+  return true;
+}
+
+Step::Decided Step::held_optimum_on_triangle(const Inputs& in) {
+  // With qd = qd_0 + N y (qd_0 = A^+ b), the task is |J_e N y - r|^2 + lambda^2 |y|^2
+  // (r = V - J_e qd_0; D N = lambda V^T with V square, J_e N of full column rank), whose
+  // Gram matrix M = R^T R + lambda^2 I comes from walk_dls_'s QR; the held joints are the
+  // rows N_H y = beta_H - qd_0,H. So y = y_0 - M^-1 N_H^T w with y_0 walk_dls_'s solve and
+  // (N_H M^-1 N_H^T) w = N_H y_0 - (beta_H - qd_0,H), and N^T g = -N_H^T w makes -w the
+  // held joints' reduced gradients (g = J_e^T (J_e qd - V) + D^T D qd)
+  const Index m = row_count_, d = null_.dimension();
+  Index h = 0;
+  for (Index j = 0; j < nv_; ++j)
+    if (!free_(j)) held_joints_(h++) = j;
+  if (null_.rank() < m || h > d) return Decided::undecided;
+  null_.pseudo_solve(rhs_.head(m), qd0_);
+  auto residual = walk_residual_.head(task_rows_);
+  residual = in.twist;
+  residual.noalias() -= in.ee_jacobian * qd0_;
+  auto y = task_x_.topLeftCorner(d, 1);
+  walk_dls_.solve(residual, y);
+  auto multipliers = held_multipliers_.head(h);
+  if (h > 0) {
+    auto unit_columns = held_unit_.topLeftCorner(nv_, h);  // E_H, overwritten by to_null
+    unit_columns.setZero();
+    for (Index k = 0; k < h; ++k) unit_columns(held_joints_(k), k) = 1.0;
+    auto held_null_t = held_null_t_.topLeftCorner(d, h);  // N_H^T
+    null_.to_null(unit_columns, held_null_t);
+    auto weighted = held_weighted_.topLeftCorner(d, h);  // M^-1 N_H^T
+    weighted = held_null_t;
+    if (!walk_dls_.gram_solve(weighted)) return Decided::undecided;
+    auto gram = held_gram_.topLeftCorner(h, h);
+    gram.noalias() = held_null_t.transpose() * weighted;
+    // N_H of full row rank (no held column outside the free ones': column_outside): the
+    // Gram matrix's lambda_min, at least 1 / |L^-1|_F^2, above the rank cut of its trace
+    const double trace = gram.trace();
+    if (!cholesky_in_place(gram) ||
+        !(1.0 / lower_inverse_norm2(gram, held_unit_.topLeftCorner(h, h)) > tol_.rank * trace))
+      return Decided::undecided;
+    multipliers.noalias() = held_null_t.transpose() * y;
+    for (Index k = 0; k < h; ++k) multipliers(k) -= held_(held_joints_(k)) - qd0_(held_joints_(k));
+    cholesky_solve(gram, multipliers);
+    y.noalias() -= weighted * multipliers;
+  }
+  null_.from_null(y.col(0), delta_);
+  walk_point_ = qd0_ + delta_;
+  for (Index k = 0; k < h; ++k) walk_point_(held_joints_(k)) = held_(held_joints_(k));
+  if (!free_in_box(walk_point_)) return Decided::refused;
+  if (m > 0) {  // the held entries set to their bounds: the rows to their tolerance
+    auto rows_residual = rows_scratch_.head(m);
+    rows_residual.noalias() = rows_.topRows(m) * walk_point_;
+    rows_residual -= rhs_.head(m);
+    if (rows_residual.cwiseAbs().maxCoeff() > tol_.rows) return Decided::undecided;
+  }
+  if (h == 0) return Decided::accepted;
+  residual.noalias() = in.ee_jacobian * walk_point_;
+  residual -= in.twist;
+  gradient_.noalias() = in.ee_jacobian.transpose() * residual;
+  // D^T D qd = lambda^2 N V V^T N^T qd = lambda^2 N y (V square, N^T qd_0 = 0)
+  gradient_ += (walk_damping_ * walk_damping_) * delta_;
+  reduced_.setZero();
+  for (Index k = 0; k < h; ++k) reduced_(held_joints_(k)) = -multipliers(k);
+  const double tolerance = tol_.release_tolerance * (1.0 + gradient_.cwiseAbs().maxCoeff());
+  return inward(reduced_, tolerance) < 0 ? Decided::accepted : Decided::refused;
+}
+
+bool Step::free_in_box(const ConstVectorRef& point) const {
+  for (Index j = 0; j < nv_; ++j)
+    if (free_(j) && !(point(j) >= lower_(j) && point(j) <= upper_(j))) return false;
+  return true;
+}
+
+void Step::remember_held(const ConstVectorRef& qd) {
+  warm_start_ = accelerating_ && report_.method == Method::saturated &&
+                report_.status != Status::failed && sns_rows_scale_ >= 1.0 && free_.any();
+  if (!warm_start_) return;
+  held_count_ = 0;
+  for (Index j = 0; j < nv_; ++j) {
+    held_side_(j) = free_(j) ? 0 : sns_qd_(j) - lower_(j) <= upper_(j) - sns_qd_(j) ? -1 : 1;
+    held_count_ += held_side_(j) != 0;
+  }
+  held_limiting_ = sns_limiting_;
+  held_undamped_ = sns_damping_ == 0.0;
+  held_command_ = qd;
+}
+
+Index Step::stack_walk_task(const Inputs& in) {
+  const Index damping_count = task_damping_rows(in);
+  walk_task_.topRows(task_rows_) = in.ee_jacobian;
+  walk_rhs_.head(task_rows_) = in.twist;
+  walk_rhs_.segment(task_rows_, damping_count).setZero();
+  return task_rows_ + damping_count;
 }
 
 Index Step::task_damping_rows(const Inputs& in) {

@@ -123,6 +123,14 @@ Step::Step(Index nq, Index nv, Index task_rows, DampingPolicy policy, bool gener
   columns_.resize(m, nv);
   task_columns_.resize(2 * task_rows, nv);
   free_.resize(nv);
+  held_side_ = Eigen::Matrix<Index, Eigen::Dynamic, 1>::Zero(nv);
+  held_joints_.resize(nv);
+  held_command_.resize(nv);
+  held_unit_.resize(nv, nv);
+  held_null_t_.resize(nv, nv);
+  held_weighted_.resize(nv, nv);
+  held_gram_.resize(nv, nv);
+  held_multipliers_.resize(nv);
   best_free_.resize(nv);
   pre_jacobian_.resize(6, nv);
   joint_map_.resize(nv, nv + 7);
@@ -168,21 +176,22 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
   active_.assign(equalities_.begin(), equalities_.end());
   active_pairs_.clear();
   pair_rhs_.head(pair_count_) = pair_lower_.head(pair_count_);
+  warm_tried_ = false;
   try {
-    solve_rows(in, qd);
-    if (!barriers_.empty() || pair_count_ > 0) activate(in, qd);
-    if (!qd.allFinite()) {
-      report_.status = Status::failed;
-      event(Event::non_finite);
-      stop(q, qd);
-    } else if (!box_contains(q, qd)) {
-      if (!accelerating_) compute_box(q);  // with acceleration limits box_contains computed it
-      saturate(in, qd);
-      clip(qd);
-      if (!qd.allFinite()) {  // clipping passes a NaN through
+    if (saturate_before_the_form(in)) {
+      report_saturation(qd);
+      clip_finite(q, qd);
+    } else {
+      solve_rows(in, qd);
+      if (!barriers_.empty() || pair_count_ > 0) activate(in, qd);
+      if (!qd.allFinite()) {
         report_.status = Status::failed;
         event(Event::non_finite);
         stop(q, qd);
+      } else if (!box_contains(q, qd)) {
+        if (!accelerating_) compute_box(q);  // with acceleration limits box_contains computed it
+        saturate(in, qd);
+        clip_finite(q, qd);
       }
     }
   } catch (const NoConvergence&) {
@@ -190,6 +199,7 @@ void Step::solve(const ConstVectorRef& q, const ConstVectorRef& twist,
     event(Event::no_convergence);
     stop(q, qd);
   }
+  remember_held(qd);
   previous_change_ = qd - previous_;
   previous_ = qd;
   if (report_.status != Status::failed && report_.equality_residual > tol_.equality) {
@@ -395,6 +405,15 @@ void Step::stop(const ConstVectorRef& q, VectorRef qd) {
   // come back, or the acceleration limits cannot stop at once
   compute_box(q);
   for (Index i = 0; i < nv_; ++i) qd(i) = std::min(std::max(0.0, lower_(i)), upper_(i));
+}
+
+void Step::clip_finite(const ConstVectorRef& q, VectorRef qd) {
+  clip(qd);
+  if (!qd.allFinite()) {  // clipping passes a NaN through
+    report_.status = Status::failed;
+    event(Event::non_finite);
+    stop(q, qd);
+  }
 }
 
 void Step::clip(VectorRef qd) {

@@ -162,6 +162,8 @@ class Step {
   //! nearest zero inside the box.
   void stop(const ConstVectorRef& q, VectorRef qd);
   void clip(VectorRef qd);
+  //! clip(), then the stop command if that left a non-finite entry.
+  void clip_finite(const ConstVectorRef& q, VectorRef qd);
   void report(Status status);
   //! ``event`` recorded in events(); past its last row it is counted as dropped (the
   //! status never depends on the record), and a failure, whose words replace the
@@ -211,6 +213,8 @@ class Step {
 
   // saturation.cpp
   void saturate(const Inputs& in, VectorRef qd);
+  //! ``qd`` = sns_qd_ and the report of the saturation that gave it.
+  void report_saturation(VectorRef qd);
   void saturate_in_null_space(const Inputs& in);
   double task_scale_limit(const ConstVectorRef& base, const ConstVectorRef& direction,
                           Index& critical) const;
@@ -221,6 +225,33 @@ class Step {
 
   // saturation_walk.cpp: with acceleration limits (docs/design.md section 9.1)
   void saturate_around_previous(const Inputs& in);
+  //! Whether the last period left a warm start that this period may take: the previous
+  //! command still the one it sent, the equalities alone as the rows (no barrier, no
+  //! collision row).
+  bool warm_start_applies() const;
+  //! The warm start in place of the unsaturated form (docs/design.md 9.1): where the last
+  //! period's saturation held joints and was undamped, the rows and the box of this
+  //! period built and saturate_from_held taken if it is undamped too; true when accepted.
+  bool saturate_before_the_form(const Inputs& in);
+  //! The warm start: the last period's held joints held again at the same sides of this
+  //! box and the rows-exact damped task solved over the others; true (sns_qd_ and the
+  //! walk's figures set) when that point satisfies level 2's end conditions and the
+  //! optimum is unique (``J_e N`` of full column rank). ``undamped_only``: not tried
+  //! where this period's lambda is positive.
+  bool saturate_from_held(const Inputs& in, bool undamped_only);
+  //! What held_optimum_on_triangle decided.
+  enum class Decided { accepted, refused, undecided };
+  //! saturate_from_held's point and its conditions on the QR of J_e N that walk_dls_
+  //! holds (docs/design.md 9.1), walk_point_ set when accepted; undecided where that QR
+  //! does not decide (the SVD took over, rows of deficient rank, held joints whose rows
+  //! of N are dependent beyond the rank cut): the reference's solve decides.
+  Decided held_optimum_on_triangle(const Inputs& in);
+  //! Whether every free joint of ``point`` is inside the box.
+  bool free_in_box(const ConstVectorRef& point) const;
+  //! The next period's warm start from this period's saturation around the previous
+  //! command and the command ``qd`` sent (none after any other step, a failed one, or
+  //! rows that did not hold).
+  void remember_held(const ConstVectorRef& qd);
   //! Level 1: walk_point_ moved in the box towards the rows; the fraction of the rows'
   //! starting residual removed (1: they hold).
   double walk_to_rows();
@@ -231,6 +262,8 @@ class Step {
   //! walk_dls_ decided undamped by its QR (walk_sigma_deferred_: the report's read
   //! computes it).
   Index task_damping_rows(const Inputs& in);
+  //! walk_task_ = [J_e; D] and walk_rhs_ = [V; 0]: their row count.
+  Index stack_walk_task(const Inputs& in);
   //! The held joint whose release reduces the damped task's error under the rows (-1:
   //! none). ``null_`` holds the factor of the free joints' rows: solve_over_free's, the
   //! walk having reached its goal over the same free joints.
@@ -305,6 +338,18 @@ class Step {
   double sns_sigma_min_ = 0.0, sns_damping_ = 0.0;  // of the task's DLS that gave sns_qd_
   bool sns_sigma_deferred_ = false;  // sns_sigma_min_ is walk_dls_'s, computed when read
   Index sns_limiting_ = -1;
+  //! the warm start (saturate_from_held): whether the last period left one, its held
+  //! joints (-1 at the lower bound, +1 the upper, 0 free) and the joint that limited the task
+  bool warm_start_ = false;
+  Eigen::Matrix<Index, Eigen::Dynamic, 1> held_side_, held_joints_;
+  Index held_limiting_ = -1, held_count_ = 0;
+  bool held_undamped_ = false;  // its lambda was 0
+  bool warm_tried_ = false;  // this period decided on the warm start already
+  Vector held_command_;  // the command sent with them: a previous command written since ends it
+  // held_optimum_on_triangle: E_H, N_H^T, M^-1 N_H^T, N_H M^-1 N_H^T (its Cholesky factor in
+  // place), w
+  Matrix held_unit_, held_null_t_, held_weighted_, held_gram_;
+  Vector held_multipliers_;
   bool sns_missed_ = false;
   // analytical
   Eigen::PartialPivLU<Eigen::Matrix<double, 6, 6>> lu_pre_, lu_cjm_;
