@@ -113,6 +113,9 @@ class PythonStep:
         task = self._task(twist)
         try:
             warm = self._saturate_before_the_form(q, ee_jacobian, task, report)
+        except np.linalg.LinAlgError as error:
+            return self._fail(q, report, f"{type(error).__name__} while saturating: {error}")
+        try:
             qd = warm[0] if warm is not None else self._solve(q, ee_jacobian, task, report)
         except np.linalg.LinAlgError as error:
             return self._fail(q, report, f"{type(error).__name__}: {error}")
@@ -370,6 +373,10 @@ class PythonStep:
                                           undamped_only=True)
         if result is None:
             return None
+        plans = self.setup.plans
+        if (self.setup.parametrisation == "paper" and len(plans) == 1 and self._analytical_task
+                and not paper_form_defined(plans[0].constraint, self.data.oMf[plans[0].frame_id])):
+            report.event(Event.PAPER_FORM_UNDEFINED)  # as the compiled step records it
         return self._report_saturation(result, rows, rows_rhs, lower, upper, report), lower, upper
 
     def _saturate_from_held(self, rows: np.ndarray, rows_rhs: np.ndarray,

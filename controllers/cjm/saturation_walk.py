@@ -99,16 +99,18 @@ def saturate_from_held(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndar
     pointing into its box) and the optimum is unique (``[J N; D N]`` of full column rank):
     the saturation and True; else None, and the walk runs (docs/design.md 9.1), with
     whether the conditions were decided (False: the optimum not unique, or
-    ``undamped_only`` and lambda positive). ``limiting_joint`` (the previous period's) is
+    ``undamped_only`` and lambda positive or the walk's unconstrained optimum, the general
+    form's command, inside the box). ``limiting_joint`` (the previous period's) is
     reported while it is held, else the first held joint."""
     damping = task_damping(rows, jacobian, policy)
     if not damping.null_basis.shape[1] or damping.rank < damping.null_basis.shape[1]:
         return None, False  # not unique: the walk's path decides
-    if undamped_only and damping.damping > 0.0:
+    task, task_rhs = _walk_task(jacobian, twist, damping)
+    if undamped_only and (damping.damping > 0.0 or _optimum_fits_box(
+            rows, rows_rhs, task, task_rhs, lower, upper)):
         return None, False
     free = sides == 0
     held = np.where(sides < 0, lower, np.where(sides > 0, upper, 0.0))
-    task, task_rhs = _walk_task(jacobian, twist, damping)
     split = solve_over_free(rows, rows_rhs, task, task_rhs, free, held, UNDAMPED)
     if split.rows_residual > ROWS_TOLERANCE:
         return None, True
@@ -123,14 +125,27 @@ def saturate_from_held(rows: np.ndarray, rows_rhs: np.ndarray, jacobian: np.ndar
                         damping.sigma_min, damping.damping), True
 
 
+def _optimum_fits_box(rows: np.ndarray, rows_rhs: np.ndarray, task: np.ndarray,
+                      task_rhs: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> bool:
+    """Whether level 2's unconstrained optimum (every joint free) holds the rows and fits
+    the box."""
+    every = np.ones(lower.size, dtype=bool)
+    split = solve_over_free(rows, rows_rhs, task, task_rhs, every, np.zeros(lower.size),
+                            UNDAMPED)
+    optimum = split.base + split.direction
+    return (split.rows_residual <= ROWS_TOLERANCE
+            and bool(np.all((optimum >= lower) & (optimum <= upper))))
+
+
 def held_sides(saturation: Saturation, lower: np.ndarray, upper: np.ndarray) -> np.ndarray | None:
     """The warm start's sides of ``saturation``'s held joints (-1 nearer the lower bound,
     +1 the upper, 0 free); None when it is no start (the rows degraded, or no joint free)."""
     if saturation.rows_scale < 1.0 or len(saturation.saturated) == lower.size:
         return None
     sides = np.zeros(lower.size, dtype=int)
+    qd = saturation.qd
     for joint in saturation.saturated:
-        sides[joint] = -1 if saturation.qd[joint] - lower[joint] <= upper[joint] - saturation.qd[joint] else 1
+        sides[joint] = -1 if qd[joint] - lower[joint] <= upper[joint] - qd[joint] else 1
     return sides
 
 

@@ -160,39 +160,19 @@ class DampedLeastSquares {
     return row_space_.topLeftCorner(cols_, rank_);
   }
 
-  //! ``b <- (J^T J + lambda^2 I)^-1 b`` for each column (at most kMaxQrSize), J tall
-  //! (``J = Q1 R``) with the figures decided on the QR: the normal equations on ``R``
-  //! undamped, on damped_by_qr's ``R2`` damped, and one step of refinement on their
-  //! residual (they lose ``eps kappa^2``, kappa up to kMaxConditionBound here). False,
-  //! ``b`` untouched, for a wide J, after the SVD, or for more columns.
+  //! ``b <- (J^T J + lambda^2 I)^-1 b`` for each column, J tall (``J = Q1 R``) with the
+  //! figures decided on the QR: the normal equations on ``R`` undamped, on damped_by_qr's
+  //! ``R2`` damped (their condition at most kMaxConditionBound squared). False, ``b``
+  //! untouched, for a wide J or after the SVD.
   bool gram_solve(MatrixRef b) {
     decide();
-    const Index t = svd_.size(), c = b.cols();
-    if (!svd_.tall() || decision_ == Decision::svd || c > kMaxQrSize) return false;
-    const bool damped = decision_ == Decision::damped;
-    if (damped) build_damped_triangle();
-    const auto& r = svd_.qr();  // R in its upper triangle
-    auto solution = gram_solution_.topLeftCorner(t, c);
-    auto residual = gram_residual_.topLeftCorner(t, c);
-    solution = b;
-    if (damped) normal_solve(damped_triangle_, solution);
-    else normal_solve(r, solution);
-    auto product = gram_product_.head(t);
-    for (Index k = 0; k < c; ++k) {  // b - (R^T R + lambda^2 I) x
-      for (Index i = 0; i < t; ++i) {
-        double sum = 0.0;
-        for (Index j = i; j < t; ++j) sum += r(i, j) * solution(j, k);
-        product(i) = sum;
-      }
-      for (Index j = 0; j < t; ++j) {
-        double sum = b(j, k) - damping_ * damping_ * solution(j, k);
-        for (Index i = 0; i <= j; ++i) sum -= r(i, j) * product(i);
-        residual(j, k) = sum;
-      }
+    if (!svd_.tall() || decision_ == Decision::svd) return false;
+    if (decision_ == Decision::damped) {
+      build_damped_triangle();
+      normal_solve(damped_triangle_, b);
+    } else {
+      normal_solve(svd_.qr(), b);
     }
-    if (damped) normal_solve(damped_triangle_, residual);
-    else normal_solve(r, residual);
-    b = solution + residual;
     return true;
   }
 
@@ -432,9 +412,6 @@ class DampedLeastSquares {
   Eigen::Matrix<double, kMaxQrSize, 1> rotated_row_;  // a row of lambda I being rotated in
   //! damped_by_qr's y, u, its normal equations' right-hand side and residual (t x c)
   Eigen::Matrix<double, kMaxQrSize, 2> small_rhs_, solution_, normal_rhs_, residual_;
-  //! gram_solve's solution and residual (t x c) and R x (a column)
-  Eigen::Matrix<double, kMaxQrSize, kMaxQrSize> gram_solution_, gram_residual_;
-  Eigen::Matrix<double, kMaxQrSize, 1> gram_product_;
   SmallMatrix inverse_, gram_;
   Eigen::SelfAdjointEigenSolver<SmallMatrix> eigen_{kMaxQrSize};
   Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxQrSize, 1> power_vector_{kMaxQrSize},

@@ -78,7 +78,7 @@ bool Step::saturate_from_held(const Inputs& in, bool undamped_only) {
   const Index p = stack_walk_task(in);
   const Index d = null_.dimension();
   if (d == 0 || walk_dls_.rank() < d) return false;  // not unique: the walk's path decides
-  if (undamped_only && walk_damping_ > 0.0) return false;
+  if (undamped_only && (walk_damping_ > 0.0 || walk_optimum_fits_box(in))) return false;
   warm_tried_ = true;
   for (Index j = 0; j < nv_; ++j) {
     free_(j) = held_side_(j) == 0;
@@ -136,11 +136,14 @@ Step::Decided Step::held_optimum_on_triangle(const Inputs& in) {
     if (!walk_dls_.gram_solve(weighted)) return Decided::undecided;
     auto gram = held_gram_.topLeftCorner(h, h);
     gram.noalias() = held_null_t.transpose() * weighted;
-    // N_H of full row rank (no held column outside the free ones': column_outside): the
-    // Gram matrix's lambda_min, at least 1 / |L^-1|_F^2, above the rank cut of its trace
+    // N_H of full row rank (no held column outside the free ones': column_outside) and w
+    // accurate: the Gram matrix's lambda_min, at least 1 / |L^-1|_F^2, at least its trace
+    // over the square of the DLS's condition bound (it is C^T C, C = R^-T N_H^T)
     const double trace = gram.trace();
+    constexpr double kGramConditionBound =
+        DampedLeastSquares::kMaxConditionBound * DampedLeastSquares::kMaxConditionBound;
     if (!cholesky_in_place(gram) ||
-        !(1.0 / lower_inverse_norm2(gram, held_unit_.topLeftCorner(h, h)) > tol_.rank * trace))
+        !(kGramConditionBound / lower_inverse_norm2(gram, held_unit_.topLeftCorner(h, h)) >= trace))
       return Decided::undecided;
     multipliers.noalias() = held_null_t.transpose() * y;
     for (Index k = 0; k < h; ++k) multipliers(k) -= held_(held_joints_(k)) - qd0_(held_joints_(k));
@@ -167,6 +170,20 @@ Step::Decided Step::held_optimum_on_triangle(const Inputs& in) {
   for (Index k = 0; k < h; ++k) reduced_(held_joints_(k)) = -multipliers(k);
   const double tolerance = tol_.release_tolerance * (1.0 + gradient_.cwiseAbs().maxCoeff());
   return inward(reduced_, tolerance) < 0 ? Decided::accepted : Decided::refused;
+}
+
+bool Step::walk_optimum_fits_box(const Inputs& in) {
+  const Index m = row_count_, d = null_.dimension();
+  if (null_.rank() < m) return false;
+  null_.pseudo_solve(rhs_.head(m), qd0_);
+  auto residual = walk_residual_.head(task_rows_);
+  residual = in.twist;
+  residual.noalias() -= in.ee_jacobian * qd0_;
+  auto y = task_x_.topLeftCorner(d, 1);
+  walk_dls_.solve(residual, y);
+  null_.from_null(y.col(0), delta_);
+  walk_goal_ = qd0_ + delta_;
+  return (walk_goal_.array() >= lower_.array()).all() && (walk_goal_.array() <= upper_.array()).all();
 }
 
 bool Step::free_in_box(const ConstVectorRef& point) const {

@@ -237,7 +237,7 @@ class Step {
   //! box and the rows-exact damped task solved over the others; true (sns_qd_ and the
   //! walk's figures set) when that point satisfies level 2's end conditions and the
   //! optimum is unique (``J_e N`` of full column rank). ``undamped_only``: not tried
-  //! where this period's lambda is positive.
+  //! where this period's lambda is positive or walk_optimum_fits_box.
   bool saturate_from_held(const Inputs& in, bool undamped_only);
   //! What held_optimum_on_triangle decided.
   enum class Decided { accepted, refused, undecided };
@@ -246,6 +246,10 @@ class Step {
   //! does not decide (the SVD took over, rows of deficient rank, held joints whose rows
   //! of N are dependent beyond the rank cut): the reference's solve decides.
   Decided held_optimum_on_triangle(const Inputs& in);
+  //! Whether the walk's unconstrained optimum ``qd_0 + N y`` (``y`` walk_dls_'s least
+  //! squares of J_e N y = V - J_e qd_0, the general form's command) fits the box, the rows
+  //! of full rank: then the unsaturated form runs first (docs/design.md 9.1).
+  bool walk_optimum_fits_box(const Inputs& in);
   //! Whether every free joint of ``point`` is inside the box.
   bool free_in_box(const ConstVectorRef& point) const;
   //! The next period's warm start from this period's saturation around the previous
