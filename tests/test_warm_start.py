@@ -18,6 +18,7 @@ from controllers.linalg import DampingPolicy
 from teleop import load_robot
 from teleop.experiments.bench_loop import ACCELERATION_SCENARIO, scenario_periods
 from teleop.experiments.scenarios import load_scenario
+from test_saturation_walk import hole_rows
 
 ROBOTS = {name: load_robot(name) for name in ("sda10f", "sda10f_dual")}
 
@@ -25,6 +26,22 @@ ROBOTS = {name: load_robot(name) for name in ("sda10f", "sda10f_dual")}
 def tolerance(qd: np.ndarray) -> float:
     """The backends' agreement (docs/design.md 16): 1e-8 (1 + |qd|)."""
     return 1e-8 * (1.0 + float(np.abs(qd).max()))
+
+
+def draw_period(robot, rng: np.random.Generator, moving: float, speed_exponent: float,
+                holdable: bool) -> tuple[np.ndarray, list[Hole], np.ndarray, np.ndarray]:
+    """A configuration, a hole on each constrained link there, a twist of about
+    ``10^speed_exponent`` and a previous command of up to ``moving`` times the velocity
+    limits, moved to hold the holes' rows when ``holdable`` (a warm start follows a
+    saturation only where they held)."""
+    q = robot.random_configuration(rng, margin=0.05)
+    holes = [Hole.on_link(robot, q, distance=0.05, link=link) for link in robot.constrained_links]
+    twist = 10.0 ** speed_exponent * rng.uniform(-1.0, 1.0, 6 * len(robot.ee_frames))
+    previous = moving * robot.model.velocityLimit * rng.uniform(-1.0, 1.0, robot.model.nv)
+    if holdable:
+        rows, rhs = hole_rows(robot, holes, q)
+        previous -= np.linalg.pinv(rows) @ (rows @ previous - rhs)
+    return q, holes, twist, previous
 
 
 @settings(max_examples=80, deadline=None)
@@ -41,14 +58,8 @@ def test_the_warm_start_gives_the_walks_command(name, seed, moving, speed_expone
     reference's solve (the SVD decides the DLS)."""
     robot = ROBOTS[name]
     rng = np.random.default_rng(seed)
-    q = robot.random_configuration(rng, margin=0.05)
-    holes = [Hole.on_link(robot, q, distance=0.05, link=link) for link in robot.constrained_links]
-    twist = 10.0 ** speed_exponent * rng.uniform(-1.0, 1.0, 6 * len(robot.ee_frames))
+    q, holes, twist, previous = draw_period(robot, rng, moving, speed_exponent, holdable)
     next_twist = twist * (1.0 + change * rng.uniform(-1.0, 1.0, twist.size))
-    previous = moving * robot.model.velocityLimit * rng.uniform(-1.0, 1.0, robot.model.nv)
-    if holdable:  # a previous command that holds the rows: a warm start follows a saturation
-        rows, rhs = hole_rows(robot, holes, q)
-        previous -= np.linalg.pinv(rows) @ (rows @ previous - rhs)
     seconds = {}
     for backend in ("python", "compiled"):
         warm = CJMController(robot, holes, backend=backend, damping=damping,
@@ -72,42 +83,28 @@ def test_the_warm_start_gives_the_walks_command(name, seed, moving, speed_expone
     assert seconds["compiled"][1] is seconds["python"][1]
 
 
-def hole_rows(robot, holes: list[Hole], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Every hole's rows ``A qd = b`` at ``q``, from Pinocchio."""
-    model = robot.model
-    data = model.createData()
-    pin.computeJointJacobians(model, data, q)
-    pin.updateFramePlacements(model, data)
-    pairs = [hole.rows(model, data, model.getFrameId(hole.link)) for hole in holes]
-    return np.vstack([rows for rows, _ in pairs]), np.concatenate([rhs for _, rhs in pairs])
-
-
 def test_the_warm_start_is_taken_in_most_second_periods(monkeypatch):
     """The property above's draws (rows held by the previous command, 40 seeds): the
     Python step accepts the warm start in most second periods, so that property compares
     it, not only the walk, with the walk."""
-    decided = []
+    accepted = []
 
     def counted(*args):
         result = saturate_from_held(*args)
-        decided.append(result[0] is not None)
+        accepted.append(result[0] is not None)
         return result
 
     monkeypatch.setattr(python_step, "saturate_from_held", counted)
     for seed in range(40):
         robot = ROBOTS[sorted(ROBOTS)[seed % 2]]
         rng = np.random.default_rng(seed)
-        q = robot.random_configuration(rng, margin=0.05)
-        holes = [Hole.on_link(robot, q, distance=0.05, link=link) for link in robot.constrained_links]
-        twist = 10.0 ** rng.uniform(-2.0, 3.0) * rng.uniform(-1.0, 1.0, 6 * len(robot.ee_frames))
-        previous = rng.uniform() * robot.model.velocityLimit * rng.uniform(-1.0, 1.0, robot.model.nv)
-        rows, rhs = hole_rows(robot, holes, q)
-        previous -= np.linalg.pinv(rows) @ (rows @ previous - rhs)
+        q, holes, twist, previous = draw_period(robot, rng, rng.uniform(), rng.uniform(-2.0, 3.0),
+                                                holdable=True)
         warm = CJMController(robot, holes, backend="python", acceleration_limit=robot.acceleration_limit)
         warm.step.previous[:] = previous
         first = warm.solve(q, twist)
         warm.solve(pin.integrate(robot.model, q, first * 1e-3), twist)
-    assert sum(decided) >= 20
+    assert sum(accepted) >= 20
 
 
 def test_a_previous_command_written_ends_the_warm_start(monkeypatch):

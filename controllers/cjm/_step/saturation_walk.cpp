@@ -118,12 +118,9 @@ Step::Decided Step::held_optimum_on_triangle(const Inputs& in) {
   for (Index j = 0; j < nv_; ++j)
     if (!free_(j)) held_joints_(h++) = j;
   if (null_.rank() < m || h > d) return Decided::undecided;
-  null_.pseudo_solve(rhs_.head(m), qd0_);
+  unconstrained_optimum(in);
   auto residual = walk_residual_.head(task_rows_);
-  residual = in.twist;
-  residual.noalias() -= in.ee_jacobian * qd0_;
   auto y = task_x_.topLeftCorner(d, 1);
-  walk_dls_.solve(residual, y);
   auto multipliers = held_multipliers_.head(h);
   if (h > 0) {
     auto unit_columns = held_unit_.topLeftCorner(nv_, h);  // E_H, overwritten by to_null
@@ -172,16 +169,18 @@ Step::Decided Step::held_optimum_on_triangle(const Inputs& in) {
   return inward(reduced_, tolerance) < 0 ? Decided::accepted : Decided::refused;
 }
 
-bool Step::walk_optimum_fits_box(const Inputs& in) {
-  const Index m = row_count_, d = null_.dimension();
-  if (null_.rank() < m) return false;
-  null_.pseudo_solve(rhs_.head(m), qd0_);
+void Step::unconstrained_optimum(const Inputs& in) {
+  null_.pseudo_solve(rhs_.head(row_count_), qd0_);
   auto residual = walk_residual_.head(task_rows_);
   residual = in.twist;
   residual.noalias() -= in.ee_jacobian * qd0_;
-  auto y = task_x_.topLeftCorner(d, 1);
-  walk_dls_.solve(residual, y);
-  null_.from_null(y.col(0), delta_);
+  walk_dls_.solve(residual, task_x_.topLeftCorner(null_.dimension(), 1));
+}
+
+bool Step::walk_optimum_fits_box(const Inputs& in) {
+  if (null_.rank() < row_count_) return false;
+  unconstrained_optimum(in);
+  null_.from_null(task_x_.col(0).head(null_.dimension()), delta_);
   walk_goal_ = qd0_ + delta_;
   return (walk_goal_.array() >= lower_.array()).all() && (walk_goal_.array() <= upper_.array()).all();
 }

@@ -246,6 +246,9 @@ class Step {
   //! does not decide (the SVD took over, rows of deficient rank, held joints whose rows
   //! of N are dependent beyond the rank cut): the reference's solve decides.
   Decided held_optimum_on_triangle(const Inputs& in);
+  //! qd0_ = A^+ b, walk_residual_ = V - J_e qd0_ (task_rows) and task_x_'s first column
+  //! y_0 = walk_dls_'s least squares of J_e N y = that residual (null_.dimension() rows).
+  void unconstrained_optimum(const Inputs& in);
   //! Whether the walk's unconstrained optimum ``qd_0 + N y`` (``y`` walk_dls_'s least
   //! squares of J_e N y = V - J_e qd_0, the general form's command) fits the box, the rows
   //! of full rank: then the unsaturated form runs first (docs/design.md 9.1).
