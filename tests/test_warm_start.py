@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+import pytest
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
@@ -83,18 +84,24 @@ def test_the_warm_start_gives_the_walks_command(name, seed, moving, speed_expone
     assert seconds["compiled"][1] is seconds["python"][1]
 
 
-def test_the_warm_start_is_taken_in_most_second_periods(monkeypatch):
-    """The property above's draws (rows held by the previous command, 40 seeds): the
-    Python step accepts the warm start in most second periods, so that property compares
-    it, not only the walk, with the walk."""
-    accepted = []
+@pytest.fixture
+def accepted(monkeypatch: pytest.MonkeyPatch) -> list[bool]:
+    """Whether each warm start the Python step decided on was accepted, in order."""
+    decisions: list[bool] = []
 
     def counted(*args):
         result = saturate_from_held(*args)
-        accepted.append(result[0] is not None)
+        decisions.append(result[0] is not None)
         return result
 
     monkeypatch.setattr(python_step, "saturate_from_held", counted)
+    return decisions
+
+
+def test_the_warm_start_is_taken_in_most_second_periods(accepted):
+    """The property above's draws (rows held by the previous command, 40 seeds): the
+    Python step accepts the warm start in most second periods, so that property compares
+    it, not only the walk, with the walk."""
     for seed in range(40):
         robot = ROBOTS[sorted(ROBOTS)[seed % 2]]
         rng = np.random.default_rng(seed)
@@ -129,18 +136,10 @@ def test_a_previous_command_written_ends_the_warm_start(monkeypatch):
         assert bool(calls) is not written
 
 
-def test_fast_lateral_takes_the_warm_start_and_the_backends_agree(monkeypatch):
+def test_fast_lateral_takes_the_warm_start_and_the_backends_agree(accepted):
     """fast-lateral's first 0.6 s with the acceleration limits: the Python step accepts the
     warm start in most of the periods it saturates, and the compiled step's commands and
     statuses are the Python step's, period by period."""
-    accepted = []
-
-    def counted(*args):
-        result = saturate_from_held(*args)
-        accepted.append(result[0] is not None)
-        return result
-
-    monkeypatch.setattr(python_step, "saturate_from_held", counted)
     plan = load_scenario(ACCELERATION_SCENARIO)
     configurations, twists = scenario_periods(ACCELERATION_SCENARIO, 0.6, acceleration_limits=True)
     steps = {backend: CJMController(plan.robot, plan.make_constraints(), backend=backend,
